@@ -1,0 +1,1 @@
+"""eelhost: what runs on the PC beside the tank."""

@@ -1,0 +1,1 @@
+"""eelsim: the digital twin of an anguilliform swimming robot."""

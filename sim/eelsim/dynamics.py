@@ -1,0 +1,280 @@
+"""Equations of motion of the N-link swimmer in water (spec section 2, the compact per-link form).
+
+State x = (theta, p, theta_dot, p_dot): N absolute link angles (from the global x axis, link 1 the
+tail), the centre of mass p = (p_x, p_y), and their rates: 2 N + 4 numbers, SI units.
+
+In the generalised coordinates q = (theta, p), with J_i the Jacobian of link centre i,
+
+    M(q) q_ddot = Q(q, q_dot, u, v_c)
+    M = sum_i J_i^T (m_i I + mu_i n_i n_i^T) J_i + diag(J_i + lambda_1,i ; 0, 0)
+    Q = sum_i J_i^T [f_drag,i + f_cur,i - (m_i I + mu_i n_i n_i^T) Jdot_i q_dot]
+        + (theta block) [-lambda_2 theta_dot - lambda_3 |theta_dot| theta_dot - D^T u]
+
+with Morison drag f_drag = -c_t (v_t + |v_t| v_t) t - c_n (v_n + |v_n| v_n) n on the velocity
+relative to the current, the added-mass current term f_cur = -mu theta_dot (t . v_c) n, and joint
+torques u (u_j acts +u_j on link j+1 and -u_j on link j). M is symmetric positive definite.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from eelsim.model import SwimmerModel
+
+FloatArray = NDArray[np.float64]
+
+
+def split_state(model: SwimmerModel, state: ArrayLike) -> tuple[FloatArray, ...]:
+    """Split a state vector into (theta, p, theta_dot, p_dot).
+
+    Parameters
+    ----------
+    model : SwimmerModel
+    state : array_like, shape (2 N + 4,)
+
+    Returns
+    -------
+    theta, p, theta_dot, p_dot : ndarray
+    """
+    x = np.asarray(state, dtype=float)
+    n = model.n_links
+    if x.shape != (2 * n + 4,):
+        raise ValueError(f"state must have shape ({2 * n + 4},) for N = {n}, got {x.shape}")
+    return x[:n], x[n : n + 2], x[n + 2 : 2 * n + 2], x[2 * n + 2 :]
+
+
+def make_state(
+    theta_rad: ArrayLike,
+    position_m: ArrayLike = (0.0, 0.0),
+    theta_dot_rad_s: ArrayLike | None = None,
+    velocity_m_s: ArrayLike = (0.0, 0.0),
+) -> FloatArray:
+    """Assemble a state vector (theta, p, theta_dot, p_dot).
+
+    Parameters
+    ----------
+    theta_rad : array_like, shape (N,)
+        Absolute link angles.
+    position_m : array_like, shape (2,)
+        Centre of mass.
+    theta_dot_rad_s : array_like, shape (N,), optional
+        Link angular rates (zero when omitted).
+    velocity_m_s : array_like, shape (2,)
+        Centre-of-mass velocity.
+
+    Returns
+    -------
+    ndarray, shape (2 N + 4,)
+    """
+    theta = np.asarray(theta_rad, dtype=float)
+    rates = np.zeros_like(theta) if theta_dot_rad_s is None else np.asarray(theta_dot_rad_s, float)
+    return np.concatenate([theta, np.asarray(position_m, float), rates, np.asarray(velocity_m_s, float)])
+
+
+def straight_state(model: SwimmerModel, heading_rad: float = 0.0, position_m: ArrayLike = (0, 0)):
+    """Return the state of a straight robot at rest, pointing along ``heading_rad``.
+
+    Parameters
+    ----------
+    model : SwimmerModel
+    heading_rad : float
+        Direction the head points to.
+    position_m : array_like, shape (2,)
+        Centre of mass.
+
+    Returns
+    -------
+    ndarray, shape (2 N + 4,)
+    """
+    return make_state(np.full(model.n_links, float(heading_rad)), position_m)
+
+
+def link_positions(model: SwimmerModel, state: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """Link centre positions (X, Y), each shape (N,), tail first."""
+    theta, p, _, _ = split_state(model, state)
+    g = model.geometry
+    return p[0] + g @ np.cos(theta), p[1] + g @ np.sin(theta)
+
+
+def link_velocities(model: SwimmerModel, state: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """Link centre velocities (Xdot, Ydot), each shape (N,)."""
+    theta, _, w, v = split_state(model, state)
+    g = model.geometry
+    return v[0] - g @ (np.sin(theta) * w), v[1] + g @ (np.cos(theta) * w)
+
+
+def joint_angles(theta_rad: ArrayLike) -> FloatArray:
+    """Joint angles phi_j = theta_{j+1} - theta_j (head-side minus tail-side), shape (N-1,)."""
+    return np.diff(np.asarray(theta_rad, dtype=float))
+
+
+def heading(theta_rad: ArrayLike) -> float:
+    """The robot's heading theta_bar, the mean of the link angles."""
+    return float(np.mean(theta_rad))
+
+
+@dataclass(frozen=True)
+class _LinkKinematics:
+    s: FloatArray
+    c: FloatArray
+    jx: FloatArray  # (N, N+2): d Xdot_i / d q_dot
+    jy: FloatArray
+    ax0: FloatArray  # Jdot q_dot, x components (centripetal part of the link acceleration)
+    ay0: FloatArray
+    vx: FloatArray  # link centre velocities
+    vy: FloatArray
+
+
+def _kinematics(model: SwimmerModel, theta: FloatArray, w: FloatArray, v: FloatArray):
+    n = model.n_links
+    g = model.geometry
+    s, c = np.sin(theta), np.cos(theta)
+    jx = np.zeros((n, n + 2))
+    jy = np.zeros((n, n + 2))
+    jx[:, :n] = -g * s[None, :]
+    jx[:, n] = 1.0
+    jy[:, :n] = g * c[None, :]
+    jy[:, n + 1] = 1.0
+    return _LinkKinematics(
+        s=s,
+        c=c,
+        jx=jx,
+        jy=jy,
+        ax0=-g @ (c * w**2),
+        ay0=-g @ (s * w**2),
+        vx=v[0] - g @ (s * w),
+        vy=v[1] + g @ (c * w),
+    )
+
+
+def fluid_link_forces(
+    model: SwimmerModel, state: ArrayLike, current_m_s: ArrayLike = (0.0, 0.0)
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Drag and added-mass current forces on each link (spec section 2).
+
+    Parameters
+    ----------
+    model : SwimmerModel
+    state : array_like, shape (2 N + 4,)
+    current_m_s : array_like, shape (2,)
+        Uniform steady current velocity v_c.
+
+    Returns
+    -------
+    drag_x, drag_y, current_x, current_y : ndarray, shape (N,)
+        f_drag,i and f_cur,i in global coordinates.
+    """
+    theta, _, w, v = split_state(model, state)
+    k = _kinematics(model, theta, w, v)
+    return _fluid_forces(model, k, w, np.asarray(current_m_s, dtype=float))
+
+
+def _fluid_forces(model: SwimmerModel, k: _LinkKinematics, w: FloatArray, vc: FloatArray):
+    f = model.fluid
+    rx, ry = k.vx - vc[0], k.vy - vc[1]
+    vt = k.c * rx + k.s * ry
+    vn = -k.s * rx + k.c * ry
+    ft = -f.c_t * (vt + np.abs(vt) * vt)
+    fn = -f.c_n * (vn + np.abs(vn) * vn)
+    drag_x = ft * k.c - fn * k.s
+    drag_y = ft * k.s + fn * k.c
+    cur_n = -f.mu_n * w * (k.c * vc[0] + k.s * vc[1])
+    return drag_x, drag_y, -cur_n * k.s, cur_n * k.c
+
+
+def mass_matrix(model: SwimmerModel, state: ArrayLike) -> FloatArray:
+    """The generalised mass matrix M(q), shape (N+2, N+2), including added mass and inertia."""
+    theta, _, w, v = split_state(model, state)
+    return _mass_matrix(model, _kinematics(model, theta, w, v))
+
+
+def _mass_matrix(model: SwimmerModel, k: _LinkKinematics) -> FloatArray:
+    m, mu = model.mass_kg, model.fluid.mu_n
+    mxx = m + mu * k.s**2
+    myy = m + mu * k.c**2
+    mxy = -mu * k.s * k.c
+    big = (
+        k.jx.T @ (mxx[:, None] * k.jx)
+        + k.jx.T @ (mxy[:, None] * k.jy)
+        + k.jy.T @ (mxy[:, None] * k.jx)
+        + k.jy.T @ (myy[:, None] * k.jy)
+    )
+    n = model.n_links
+    big[np.arange(n), np.arange(n)] += model.yaw_inertia_kg_m2 + model.fluid.lambda_1
+    return big
+
+
+def joint_torques_on_links(torques_nm: ArrayLike) -> FloatArray:
+    """Torque on each link from joint torques u: -D^T u (u_j: +u_j on link j+1, -u_j on link j)."""
+    u = np.asarray(torques_nm, dtype=float)
+    tau = np.zeros(u.size + 1)
+    tau[1:] += u
+    tau[:-1] -= u
+    return tau
+
+
+def accelerations(
+    model: SwimmerModel,
+    state: ArrayLike,
+    torques_nm: ArrayLike,
+    current_m_s: ArrayLike = (0.0, 0.0),
+) -> tuple[FloatArray, FloatArray]:
+    """Accelerations (theta_ddot, p_ddot) of the swimmer.
+
+    Parameters
+    ----------
+    model : SwimmerModel
+        The robot and its fluid coefficients.
+    state : array_like, shape (2 N + 4,)
+        (theta, p, theta_dot, p_dot).
+    torques_nm : array_like, shape (N-1,)
+        Joint torques u.
+    current_m_s : array_like, shape (2,)
+        Uniform steady current velocity v_c.
+
+    Returns
+    -------
+    theta_ddot : ndarray, shape (N,)
+    p_ddot : ndarray, shape (2,)
+    """
+    theta, _, w, v = split_state(model, state)
+    n = model.n_links
+    u = np.asarray(torques_nm, dtype=float)
+    if u.shape != (n - 1,):
+        raise ValueError(f"torques must have shape ({n - 1},) for N = {n}, got {u.shape}")
+    k = _kinematics(model, theta, w, v)
+    big_m = _mass_matrix(model, k)
+    drag_x, drag_y, cur_x, cur_y = _fluid_forces(model, k, w, np.asarray(current_m_s, float))
+    m, mu = model.mass_kg, model.fluid.mu_n
+    # Inertial forces of the centripetal link accelerations, (m I + mu n n^T) Jdot q_dot.
+    inert_x = (m + mu * k.s**2) * k.ax0 - mu * k.s * k.c * k.ay0
+    inert_y = -mu * k.s * k.c * k.ax0 + (m + mu * k.c**2) * k.ay0
+    q = k.jx.T @ (drag_x + cur_x - inert_x) + k.jy.T @ (drag_y + cur_y - inert_y)
+    f = model.fluid
+    q[:n] += -f.lambda_2 * w - f.lambda_3 * np.abs(w) * w + joint_torques_on_links(u)
+    chol = np.linalg.cholesky(big_m)
+    qdd = np.linalg.solve(chol.T, np.linalg.solve(chol, q))
+    return qdd[:n], qdd[n:]
+
+
+def state_derivative(
+    model: SwimmerModel,
+    state: ArrayLike,
+    torques_nm: ArrayLike,
+    current_m_s: ArrayLike = (0.0, 0.0),
+) -> FloatArray:
+    """Time derivative of the state, x_dot = (theta_dot, p_dot, theta_ddot, p_ddot).
+
+    Parameters are those of :func:`accelerations`.
+
+    Returns
+    -------
+    ndarray, shape (2 N + 4,)
+    """
+    x = np.asarray(state, dtype=float)
+    n = model.n_links
+    theta_ddot, p_ddot = accelerations(model, x, torques_nm, current_m_s)
+    return np.concatenate([x[n + 2 :], theta_ddot, p_ddot])

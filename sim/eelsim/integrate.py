@@ -1,0 +1,182 @@
+"""Time integration of the swimmer: fixed-step RK4 and an adaptive reference solver.
+
+RK4 at dt = 0.01 s is what the closed loop, estimation and planning use. The adaptive solver (scipy's
+``solve_ivp``, DOP853 with tight tolerances by default) exists to check RK4 and the physics.
+
+Joint torques are given as a function ``torques(t_s, state) -> u`` (so a PD law can act inside the
+RK4 stages), as a constant array, or as ``None`` for no torque.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.integrate import solve_ivp
+
+from eelsim.dynamics import state_derivative
+from eelsim.model import SwimmerModel
+
+FloatArray = NDArray[np.float64]
+TorqueInput = Callable[[float, FloatArray], ArrayLike] | ArrayLike | None
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """Sampled states of a run.
+
+    Attributes
+    ----------
+    t_s : ndarray, shape (K,)
+        Sample times.
+    states : ndarray, shape (K, 2 N + 4)
+        States (theta, p, theta_dot, p_dot) at those times.
+    """
+
+    t_s: FloatArray
+    states: FloatArray
+
+
+def _torque_function(model: SwimmerModel, torques: TorqueInput) -> Callable[[float, FloatArray], ArrayLike]:
+    if torques is None:
+        zero = np.zeros(model.n_links - 1)
+        return lambda _t, _x: zero
+    if callable(torques):
+        return torques
+    const = np.asarray(torques, dtype=float)
+    return lambda _t, _x: const
+
+
+def rk4_step(
+    f: Callable[[float, FloatArray], FloatArray], t_s: float, state: FloatArray, dt_s: float
+) -> FloatArray:
+    """Advance ``state`` by one classical fourth-order Runge-Kutta step.
+
+    Parameters
+    ----------
+    f : callable
+        Right-hand side f(t, x) -> x_dot.
+    t_s : float
+        Current time.
+    state : ndarray
+        Current state.
+    dt_s : float
+        Step.
+
+    Returns
+    -------
+    ndarray
+        The state at t_s + dt_s.
+    """
+    k1 = f(t_s, state)
+    k2 = f(t_s + 0.5 * dt_s, state + 0.5 * dt_s * k1)
+    k3 = f(t_s + 0.5 * dt_s, state + 0.5 * dt_s * k2)
+    k4 = f(t_s + dt_s, state + dt_s * k3)
+    return state + dt_s / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+
+
+def integrate_rk4(
+    model: SwimmerModel,
+    initial_state: ArrayLike,
+    duration_s: float,
+    dt_s: float = 0.01,
+    torques: TorqueInput = None,
+    current_m_s: ArrayLike = (0.0, 0.0),
+) -> Trajectory:
+    """Integrate the swimmer open loop with fixed-step RK4.
+
+    Parameters
+    ----------
+    model : SwimmerModel
+        The robot.
+    initial_state : array_like, shape (2 N + 4,)
+        State at t = 0.
+    duration_s : float
+        Length of the run; must be a whole number of steps.
+    dt_s : float
+        Step, 0.01 s by default.
+    torques : callable, array_like or None
+        Joint torques ``u(t, x)``, a constant, or none.
+    current_m_s : array_like, shape (2,)
+        Uniform current velocity.
+
+    Returns
+    -------
+    Trajectory
+        Every step, from t = 0 to ``duration_s`` inclusive.
+    """
+    steps = _whole_steps(duration_s, dt_s)
+    u = _torque_function(model, torques)
+    vc = np.asarray(current_m_s, dtype=float)
+
+    def f(t: float, x: FloatArray) -> FloatArray:
+        return state_derivative(model, x, u(t, x), vc)
+
+    states = np.empty((steps + 1, model.state_size))
+    states[0] = np.asarray(initial_state, dtype=float)
+    for k in range(steps):
+        states[k + 1] = rk4_step(f, k * dt_s, states[k], dt_s)
+    return Trajectory(t_s=np.arange(steps + 1) * dt_s, states=states)
+
+
+def integrate_reference(
+    model: SwimmerModel,
+    initial_state: ArrayLike,
+    duration_s: float,
+    torques: TorqueInput = None,
+    current_m_s: ArrayLike = (0.0, 0.0),
+    t_eval: ArrayLike | None = None,
+    rtol: float = 1e-11,
+    atol: float = 1e-13,
+    method: str = "DOP853",
+) -> Trajectory:
+    """Integrate the swimmer with an adaptive solver (``scipy.integrate.solve_ivp``) for checking.
+
+    Parameters
+    ----------
+    model, initial_state, duration_s, torques, current_m_s
+        As for :func:`integrate_rk4`.
+    t_eval : array_like, optional
+        Times at which to report the state (default: 101 evenly spaced samples).
+    rtol, atol : float
+        Solver tolerances.
+    method : str
+        Any ``solve_ivp`` method.
+
+    Returns
+    -------
+    Trajectory
+
+    Raises
+    ------
+    RuntimeError
+        When the solver fails.
+    """
+    u = _torque_function(model, torques)
+    vc = np.asarray(current_m_s, dtype=float)
+    times = np.linspace(0.0, duration_s, 101) if t_eval is None else np.asarray(t_eval, float)
+    sol = solve_ivp(
+        lambda t, x: state_derivative(model, x, u(t, x), vc),
+        (0.0, float(duration_s)),
+        np.asarray(initial_state, dtype=float),
+        method=method,
+        t_eval=times,
+        rtol=rtol,
+        atol=atol,
+    )
+    if not sol.success:
+        raise RuntimeError(f"reference solver failed: {sol.message}")
+    return Trajectory(t_s=sol.t, states=sol.y.T.copy())
+
+
+def _whole_steps(duration_s: float, dt_s: float) -> int:
+    if not (dt_s > 0.0 and np.isfinite(dt_s)):
+        raise ValueError(f"dt_s must be positive and finite, got {dt_s}")
+    steps = round(duration_s / dt_s)
+    if steps < 0 or abs(steps * dt_s - duration_s) > 1e-9 * max(1.0, duration_s):
+        raise ValueError(
+            f"duration_s = {duration_s} is not a whole number of steps of dt_s = {dt_s}"
+        )
+    return int(steps)

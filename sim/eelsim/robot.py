@@ -1,0 +1,246 @@
+"""Robot description: a TOML file, validated on load.
+
+A robot file gives the geometry and mass of the links (with optional head and tail overrides), the
+water density, the hydrodynamic coefficients e = (C_f, C_d, C_a, C_m), the joint gains and limits,
+and an ``[assumptions]`` table naming every value that was assumed rather than measured, with the
+reason. Unknown keys are refused at every level; every number must be finite. Errors name the file
+and the dotted key that is wrong.
+
+The bundled default, ``paper_robot.toml``, is the robot of Raj & Thakur (N = 6, BL about 0.64 m).
+"""
+
+from __future__ import annotations
+
+import tomllib
+from importlib import resources
+from pathlib import Path
+from typing import Annotated, Any
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
+PositiveFloat = Annotated[float, Field(gt=0.0, allow_inf_nan=False)]
+NonNegativeFloat = Annotated[float, Field(ge=0.0, allow_inf_nan=False)]
+
+DEFAULT_ROBOT = "paper_robot.toml"
+
+
+class RobotFileError(ValueError):
+    """A robot description that cannot be used; the message names the file and the key."""
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=False)
+
+
+class LinkSpec(_Strict):
+    """Geometry and mass of one link (an elliptic cylinder of length 2 l).
+
+    Attributes
+    ----------
+    half_length_m : float
+        l, half the link length.
+    half_axis_vertical_m : float
+        a, the major (vertical) half-axis of the elliptical cross-section.
+    half_axis_horizontal_m : float
+        b, the minor (horizontal) half-axis.
+    mass_kg : float
+        m, the link's mass; its yaw inertia is m l^2 / 3 unless ``yaw_inertia_kg_m2`` is given.
+    yaw_inertia_kg_m2 : float, optional
+        J, the link's yaw inertia about its centre.
+    """
+
+    half_length_m: PositiveFloat
+    half_axis_vertical_m: PositiveFloat
+    half_axis_horizontal_m: PositiveFloat
+    mass_kg: PositiveFloat
+    yaw_inertia_kg_m2: PositiveFloat | None = None
+
+
+class LinkOverride(_Strict):
+    """Per-link values that replace the body link's for the head or the tail (all optional)."""
+
+    half_length_m: PositiveFloat | None = None
+    half_axis_vertical_m: PositiveFloat | None = None
+    half_axis_horizontal_m: PositiveFloat | None = None
+    mass_kg: PositiveFloat | None = None
+    yaw_inertia_kg_m2: PositiveFloat | None = None
+
+
+class HydroCoefficients(_Strict):
+    """Hydrodynamic parameters e = (C_f, C_d, C_a, C_m), dimensionless.
+
+    Attributes
+    ----------
+    C_f : float
+        Tangential (longitudinal) drag coefficient.
+    C_d : float
+        Normal (transverse) drag coefficient.
+    C_a : float
+        Added mass coefficient (normal direction).
+    C_m : float
+        Added yaw inertia coefficient.
+    """
+
+    C_f: NonNegativeFloat
+    C_d: NonNegativeFloat
+    C_a: NonNegativeFloat
+    C_m: NonNegativeFloat
+
+    def as_array(self) -> np.ndarray:
+        """Return (C_f, C_d, C_a, C_m) as a float array."""
+        return np.array([self.C_f, self.C_d, self.C_a, self.C_m], dtype=float)
+
+    @classmethod
+    def from_array(cls, values: Any) -> HydroCoefficients:
+        """Build from a sequence (C_f, C_d, C_a, C_m)."""
+        v = [float(x) for x in values]
+        if len(v) != 4:
+            raise ValueError(f"expected 4 coefficients (C_f, C_d, C_a, C_m), got {len(v)}")
+        return cls(C_f=v[0], C_d=v[1], C_a=v[2], C_m=v[3])
+
+
+class JointSpec(_Strict):
+    """Joint control gains and limits.
+
+    Attributes
+    ----------
+    kp_nm_per_rad, kd_nms_per_rad : float
+        PD gains of the joint loop u = k_p (alpha - phi) + k_d (alpha_dot - phi_dot).
+    limit_rad : float
+        Mechanical limit of |phi_j|; references are clamped to it and exceeding it is a failure.
+    servo_max_torque_nm, servo_max_speed_rad_s : float
+        Hobby-servo limits (stall torque, no-load speed), used when the servo model is switched on.
+    """
+
+    kp_nm_per_rad: PositiveFloat
+    kd_nms_per_rad: NonNegativeFloat
+    limit_rad: PositiveFloat
+    servo_max_torque_nm: PositiveFloat = 1.26
+    servo_max_speed_rad_s: PositiveFloat = 8.0
+
+
+class Robot(_Strict):
+    """A whole robot description. See the module docstring and ``docs/model.md``."""
+
+    name: str
+    n_links: int = Field(ge=2, le=64)
+    water_density_kg_m3: PositiveFloat = 1000.0
+    link: LinkSpec
+    head: LinkOverride | None = None
+    tail: LinkOverride | None = None
+    hydrodynamics: HydroCoefficients
+    joints: JointSpec
+    assumptions: dict[str, str] = Field(default_factory=dict)
+
+    @model_validator(mode="after")
+    def _assumptions_name_real_keys(self) -> Robot:
+        for key in self.assumptions:
+            if not _has_key(self, key):
+                raise ValueError(f"assumptions: '{key}' names no key of the robot description")
+        return self
+
+    def links(self) -> list[LinkSpec]:
+        """Return the N links, tail (link 1) first, with the head/tail overrides applied."""
+        body = self.link.model_dump()
+        out: list[LinkSpec] = []
+        for i in range(self.n_links):
+            values = dict(body)
+            override = self.tail if i == 0 else self.head if i == self.n_links - 1 else None
+            if override is not None:
+                values.update({k: v for k, v in override.model_dump().items() if v is not None})
+            out.append(LinkSpec(**values))
+        return out
+
+    def body_length_m(self) -> float:
+        """Return BL, the total length of the robot (sum of the link lengths)."""
+        return float(sum(2.0 * lk.half_length_m for lk in self.links()))
+
+    def with_coefficients(self, coeffs: HydroCoefficients) -> Robot:
+        """Return a copy of this robot with other hydrodynamic coefficients."""
+        return self.model_copy(update={"hydrodynamics": coeffs})
+
+
+def _has_key(model: BaseModel, dotted: str) -> bool:
+    node: Any = model
+    for part in dotted.split("."):
+        if isinstance(node, BaseModel) and part in type(node).model_fields:
+            node = getattr(node, part)
+        else:
+            return False
+    return True
+
+
+def _format_errors(source: str, err: ValidationError) -> str:
+    lines = [f"{source}: invalid robot description:"]
+    for e in err.errors():
+        loc = ".".join(str(p) for p in e["loc"]) or "(top level)"
+        msg = e["msg"]
+        if e["type"] == "extra_forbidden":
+            msg = "unknown key (not part of the robot description)"
+        value = e.get("input")
+        shown = "" if isinstance(value, dict) or e["type"] == "missing" else f" (got {value!r})"
+        lines.append(f"  {loc}: {msg}{shown}")
+    return "\n".join(lines)
+
+
+def parse_robot(data: dict[str, Any], source: str = "<robot>") -> Robot:
+    """Validate a robot description given as a dictionary.
+
+    Parameters
+    ----------
+    data : dict
+        The parsed TOML content.
+    source : str
+        Where the data came from, used in error messages.
+
+    Returns
+    -------
+    Robot
+
+    Raises
+    ------
+    RobotFileError
+        When a key is unknown, missing, of the wrong type, out of range or not finite.
+    """
+    try:
+        return Robot.model_validate(data)
+    except ValidationError as err:
+        raise RobotFileError(_format_errors(source, err)) from None
+
+
+def load_robot(path: str | Path | None = None) -> Robot:
+    """Load and validate a robot TOML file; ``None`` loads the bundled paper robot.
+
+    Parameters
+    ----------
+    path : str or Path, optional
+        The robot file. ``None`` or the bare name ``paper_robot.toml`` selects the bundled default.
+
+    Returns
+    -------
+    Robot
+
+    Raises
+    ------
+    RobotFileError
+        When the file is missing, is not valid TOML, or fails validation; the message names the
+        file and the offending key.
+    """
+    if path is None or str(path) == DEFAULT_ROBOT:
+        text = resources.files("eelsim.data").joinpath(DEFAULT_ROBOT).read_text()
+        source = f"<bundled {DEFAULT_ROBOT}>"
+    else:
+        p = Path(path)
+        source = str(p)
+        try:
+            text = p.read_text()
+        except OSError as err:
+            raise RobotFileError(f"{source}: cannot read robot file: {err.strerror}") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as err:
+        raise RobotFileError(f"{source}: not valid TOML: {err}") from None
+    return parse_robot(data, source)
+
