@@ -1,10 +1,11 @@
 """The robot's control laws, written once as pure functions of time and state.
 
-The twin runs them inside its closed loop, the host's real-time loop calls the same functions, and the
-firmware's C++ core implements the gait and PD laws identically (its tests compare against these).
+The twin runs them inside its closed loop, the host's real-time loop calls the same functions, and
+the firmware's C++ core implements the gait and PD laws identically (its tests compare to these).
 Spec section 4 (`shared/spec/model.md`):
 
-- gait:  alpha_j(t) = A_j sin(omega t + beta_j) + gamma,  A_j = A (N - j)/(N + 1),  beta_j = (j-1) beta
+- gait:  alpha_j(t) = A_j sin(omega t + beta_j) + gamma,
+         A_j = A (N - j)/(N + 1),  beta_j = (j-1) beta
 - PD:    u_j = k_p (alpha_j - phi_j) + k_d (alpha_dot_j - phi_dot_j)
 - LOS:   theta_ref = atan2(y_g - p_y, x_g - p_x)
 - offset: gamma = k_theta * wrap(theta_ref - theta_bar), wrap to (-pi, pi]

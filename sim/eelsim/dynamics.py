@@ -71,7 +71,9 @@ def make_state(
     """
     theta = np.asarray(theta_rad, dtype=float)
     rates = np.zeros_like(theta) if theta_dot_rad_s is None else np.asarray(theta_dot_rad_s, float)
-    return np.concatenate([theta, np.asarray(position_m, float), rates, np.asarray(velocity_m_s, float)])
+    return np.concatenate(
+        [theta, np.asarray(position_m, float), rates, np.asarray(velocity_m_s, float)]
+    )
 
 
 def straight_state(model: SwimmerModel, heading_rad: float = 0.0, position_m: ArrayLike = (0, 0)):

@@ -1,7 +1,7 @@
 """Time integration of the swimmer: fixed-step RK4 and an adaptive reference solver.
 
-RK4 at dt = 0.01 s is what the closed loop, estimation and planning use. The adaptive solver (scipy's
-``solve_ivp``, DOP853 with tight tolerances by default) exists to check RK4 and the physics.
+RK4 at dt = 0.01 s is what the closed loop, estimation and planning use. The adaptive solver
+(scipy's ``solve_ivp``, DOP853 with tight tolerances by default) exists to check RK4 and physics.
 
 Joint torques are given as a function ``torques(t_s, state) -> u`` (so a PD law can act inside the
 RK4 stages), as a constant array, or as ``None`` for no torque.
@@ -39,7 +39,9 @@ class Trajectory:
     states: FloatArray
 
 
-def _torque_function(model: SwimmerModel, torques: TorqueInput) -> Callable[[float, FloatArray], ArrayLike]:
+def _torque_function(
+    model: SwimmerModel, torques: TorqueInput
+) -> Callable[[float, FloatArray], ArrayLike]:
     if torques is None:
         zero = np.zeros(model.n_links - 1)
         return lambda _t, _x: zero

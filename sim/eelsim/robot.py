@@ -109,7 +109,10 @@ class JointSpec(_Strict):
     kp_nm_per_rad, kd_nms_per_rad : float
         PD gains of the joint loop u = k_p (alpha - phi) + k_d (alpha_dot - phi_dot).
     limit_rad : float
-        Mechanical limit of |phi_j|; references are clamped to it and exceeding it is a failure.
+        Mechanical limit of |phi_j|; exceeding it is a failure (self-collision).
+    reference_limit_rad : float, optional
+        The joint references are clamped to +-this (default: ``limit_rad``); keep it below the
+        mechanical limit so that the PD loop's overshoot stays clear of the stop.
     servo_max_torque_nm, servo_max_speed_rad_s : float
         Hobby-servo limits (stall torque, no-load speed), used when the servo model is switched on.
     """
@@ -117,8 +120,20 @@ class JointSpec(_Strict):
     kp_nm_per_rad: PositiveFloat
     kd_nms_per_rad: NonNegativeFloat
     limit_rad: PositiveFloat
+    reference_limit_rad: PositiveFloat | None = None
     servo_max_torque_nm: PositiveFloat = 1.26
     servo_max_speed_rad_s: PositiveFloat = 8.0
+
+    @model_validator(mode="after")
+    def _reference_inside_mechanical_limit(self) -> JointSpec:
+        if self.reference_limit_rad is not None and self.reference_limit_rad > self.limit_rad:
+            raise ValueError("reference_limit_rad must not exceed limit_rad")
+        return self
+
+    @property
+    def command_limit_rad(self) -> float:
+        """The clamp applied to joint references."""
+        return self.reference_limit_rad if self.reference_limit_rad is not None else self.limit_rad
 
 
 class Robot(_Strict):
@@ -243,4 +258,3 @@ def load_robot(path: str | Path | None = None) -> Robot:
     except tomllib.TOMLDecodeError as err:
         raise RobotFileError(f"{source}: not valid TOML: {err}") from None
     return parse_robot(data, source)
-

@@ -34,15 +34,25 @@ def closed_form_accelerations(n, l, m, ct, cn, mu, lam1, lam2, lam3, state, u, v
     m11, m12, m21, m22 = Mp[0, 0], Mp[0, 1], Mp[1, 0], Mp[1, 1]
     A1 = S @ K @ S @ S + C @ K @ S @ C
     A2 = S @ K @ S @ C + C @ K @ C @ C
-    K1 = A1 + mu * A1 @ ee @ (m12 * S @ C - m11 * S @ S) - mu * A2 @ ee @ (m22 * S @ C - m21 * S @ S)
-    K2 = A2 - mu * A1 @ ee @ (m11 * S @ C - m12 * C @ C) + mu * A2 @ ee @ (m21 * S @ C - m22 * C @ C)
+    K1 = (
+        A1 + mu * A1 @ ee @ (m12 * S @ C - m11 * S @ S) - mu * A2 @ ee @ (m22 * S @ C - m21 * S @ S)
+    )
+    K2 = (
+        A2 - mu * A1 @ ee @ (m11 * S @ C - m12 * C @ C) + mu * A2 @ ee @ (m21 * S @ C - m22 * C @ C)
+    )
     M_theta = (
-        J * I + m * l**2 * S @ V @ S + m * l**2 * C @ V @ C + lam1 * I
-        + l**2 * mu * K1 @ K.T @ S + l**2 * mu * K2 @ K.T @ C
+        J * I
+        + m * l**2 * S @ V @ S
+        + m * l**2 * C @ V @ C
+        + lam1 * I
+        + l**2 * mu * K1 @ K.T @ S
+        + l**2 * mu * K2 @ K.T @ C
     )
     W_theta = (
-        m * l**2 * S @ V @ C - m * l**2 * C @ V @ S
-        + l**2 * mu * K1 @ K.T @ C - l**2 * mu * K2 @ K.T @ S
+        m * l**2 * S @ V @ C
+        - m * l**2 * C @ V @ S
+        + l**2 * mu * K1 @ K.T @ C
+        - l**2 * mu * K2 @ K.T @ S
     )
     Vx, Vy = vc[0] * I, vc[1] * I
     V_theta = lam2 * I - l * mu * K2 @ Vx - l * mu * K1 @ Vy
@@ -58,7 +68,14 @@ def closed_form_accelerations(n, l, m, ct, cn, mu, lam1, lam2, lam3, state, u, v
     fDx = -ct * (vt + np.abs(vt) * vt) * c + cn * (vn + np.abs(vn) * vn) * s
     fDy = -ct * (vt + np.abs(vt) * vt) * s - cn * (vn + np.abs(vn) * vn) * c
     u_paper = -np.asarray(u)
-    rhs = D.T @ u_paper - W_theta @ td**2 - V_theta @ td - lam3 * np.abs(td) * td - K_Dx @ fDx - K_Dy @ fDy
+    rhs = (
+        D.T @ u_paper
+        - W_theta @ td**2
+        - V_theta @ td
+        - lam3 * np.abs(td) * td
+        - K_Dx @ fDx
+        - K_Dy @ fDy
+    )
     tdd = np.linalg.solve(M_theta, rhs)
     # Centre of mass (paper eq. 6 as restated in spec section 3).
     fcur_n = -mu * td * (c * vc[0] + s * vc[1])

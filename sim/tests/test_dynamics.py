@@ -2,7 +2,6 @@ import numpy as np
 import pytest
 from closed_form_oracle import closed_form_accelerations
 from conftest import random_state
-
 from eelsim.dynamics import (
     accelerations,
     link_positions,
@@ -17,8 +16,18 @@ from eelsim.robot import HydroCoefficients
 def _oracle(model, x, u, vc):
     f = model.fluid
     return closed_form_accelerations(
-        model.n_links, model.half_length_m[0], model.mass_kg[0], f.c_t[0], f.c_n[0], f.mu_n[0],
-        f.lambda_1[0], f.lambda_2[0], f.lambda_3[0], x, u, vc,
+        model.n_links,
+        model.half_length_m[0],
+        model.mass_kg[0],
+        f.c_t[0],
+        f.c_n[0],
+        f.mu_n[0],
+        f.lambda_1[0],
+        f.lambda_2[0],
+        f.lambda_3[0],
+        x,
+        u,
+        vc,
     )
 
 

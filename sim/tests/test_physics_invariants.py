@@ -3,14 +3,19 @@
 import numpy as np
 import pytest
 from conftest import random_state
-from scipy.integrate import solve_ivp
-
 from eelsim.control import Gait, gait_reference, joint_pd_torque
-from eelsim.dynamics import link_positions, link_velocities, make_state, split_state, state_derivative
+from eelsim.dynamics import (
+    link_positions,
+    link_velocities,
+    make_state,
+    split_state,
+    state_derivative,
+)
 from eelsim.energy import kinetic_energy, power_balance
 from eelsim.integrate import integrate_reference, integrate_rk4
 from eelsim.model import SwimmerModel
 from eelsim.robot import HydroCoefficients
+from scipy.integrate import solve_ivp
 
 
 def wave_torques(n_joints, amp=0.15, omega=3.5, beta=1.0):
@@ -18,15 +23,24 @@ def wave_torques(n_joints, amp=0.15, omega=3.5, beta=1.0):
     return lambda t, _x: amp * np.sin(omega * t + phases)
 
 
-def gait_torques(model, robot, gait=Gait(0.87, 3.9)):
+FAST_GAIT = Gait(0.87, 3.9)
+
+
+def gait_torques(model, robot, gait=FAST_GAIT):
     """The gait tracked by the joint PD loop, as the robot does (smooth, bounded motion)."""
     n = model.n_links
 
     def u(t, x):
         alpha, alpha_dot = gait_reference(t, gait, 0.0, n)
         w = x[n + 2 : 2 * n + 2]
-        return joint_pd_torque(alpha, alpha_dot, np.diff(x[:n]), np.diff(w),
-                               robot.joints.kp_nm_per_rad, robot.joints.kd_nms_per_rad)
+        return joint_pd_torque(
+            alpha,
+            alpha_dot,
+            np.diff(x[:n]),
+            np.diff(w),
+            robot.joints.kp_nm_per_rad,
+            robot.joints.kd_nms_per_rad,
+        )
 
     return u
 
@@ -82,16 +96,27 @@ def _energy_run(model, x0, torque_fn, duration, current=(0.0, 0.0)):
         x = z[:size]
         u = torque_fn(t, x)
         pb = power_balance(model, x, u, current)
-        return np.concatenate([state_derivative(model, x, u, current), [pb.joint, pb.fluid, pb.added_mass]])
+        return np.concatenate(
+            [state_derivative(model, x, u, current), [pb.joint, pb.fluid, pb.added_mass]]
+        )
 
-    sol = solve_ivp(rhs, (0, duration), np.concatenate([x0, np.zeros(3)]), method="DOP853", rtol=1e-11, atol=1e-13)
+    sol = solve_ivp(
+        rhs,
+        (0, duration),
+        np.concatenate([x0, np.zeros(3)]),
+        method="DOP853",
+        rtol=1e-11,
+        atol=1e-13,
+    )
     assert sol.success
     z = sol.y[:, -1]
     return kinetic_energy(model, x0), kinetic_energy(model, z[:size]), z[size:]
 
 
 def test_kinetic_energy_change_equals_joint_work_minus_dissipation_when_added_mass_is_off(robot):
-    model = SwimmerModel.from_robot(robot, HydroCoefficients(C_f=0.008, C_d=0.776, C_a=0.0, C_m=0.007))
+    model = SwimmerModel.from_robot(
+        robot, HydroCoefficients(C_f=0.008, C_d=0.776, C_a=0.0, C_m=0.007)
+    )
     x0 = make_state(np.zeros(model.n_links))
     t0, t1, (w_joint, w_fluid, w_am) = _energy_run(model, x0, wave_torques(model.n_links - 1), 4.0)
     assert w_am == 0.0
@@ -114,7 +139,10 @@ def test_robot_at_rest_in_a_current_is_carried_towards_the_current_velocity(mode
     along = v @ current / np.linalg.norm(current)
     assert np.all(np.diff(along) > -1e-12)  # never slows down relative to the current
     assert np.linalg.norm(v[-1] - current) < 0.05 * np.linalg.norm(current)
-    moved = traj.states[-1, model.n_links : model.n_links + 2] - traj.states[0, model.n_links : model.n_links + 2]
+    moved = (
+        traj.states[-1, model.n_links : model.n_links + 2]
+        - traj.states[0, model.n_links : model.n_links + 2]
+    )
     assert moved @ current > 0
 
 
@@ -130,7 +158,9 @@ def test_mirrored_initial_state_and_torques_give_mirrored_trajectory(model):
     mirror[n + 2 : 2 * n + 2] = -1
     mirror[-1] = -1
     a = integrate_rk4(model, x0, 3.0, torques=fn, current_m_s=current)
-    b = integrate_rk4(model, mirror * x0, 3.0, torques=lambda t, x: -fn(t, x), current_m_s=current * [1, -1])
+    b = integrate_rk4(
+        model, mirror * x0, 3.0, torques=lambda t, x: -fn(t, x), current_m_s=current * [1, -1]
+    )
     assert np.abs(a.states * mirror - b.states).max() < 1e-12
 
 

@@ -3,7 +3,6 @@ import tomllib
 from importlib import resources
 
 import pytest
-
 from eelsim.robot import RobotFileError, load_robot
 
 
@@ -26,8 +25,13 @@ def test_bundled_paper_robot_has_six_links_and_a_body_length_near_064_m():
 
 def test_every_assumed_value_of_the_default_robot_is_marked_with_a_reason():
     robot = load_robot()
-    for key in ("link.half_axis_vertical_m", "link.half_axis_horizontal_m", "link.mass_kg",
-                "joints.kp_nm_per_rad", "joints.kd_nms_per_rad"):
+    for key in (
+        "link.half_axis_vertical_m",
+        "link.half_axis_horizontal_m",
+        "link.mass_kg",
+        "joints.kp_nm_per_rad",
+        "joints.kd_nms_per_rad",
+    ):
         assert robot.assumptions.get(key, "").strip(), key
 
 
@@ -72,6 +76,7 @@ def test_unreadable_and_malformed_files_are_refused_with_the_path(tmp_path):
 
 def _dump(data, prefix=""):
     """Tiny TOML writer for the test's edited dictionaries (floats incl. nan/inf)."""
+
     def val(v):
         if isinstance(v, str):
             return '"' + v + '"'

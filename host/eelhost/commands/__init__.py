@@ -1,0 +1,1 @@
+"""Subcommands of the eelbot command line, one module each."""

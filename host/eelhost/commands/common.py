@@ -1,0 +1,76 @@
+"""Options shared by several subcommands (robot, coefficients, loop timing)."""
+
+from __future__ import annotations
+
+import argparse
+
+from eelsim.camera import CameraModel
+from eelsim.closed_loop import LoopOptions
+from eelsim.robot import HydroCoefficients, Robot, load_robot
+from eelsim.timing import LoopTiming
+
+
+def floats(text: str, count: int | None = None, what: str = "value") -> list[float]:
+    """Parse "a,b,c" into floats, checking the count; errors name ``what``."""
+    try:
+        values = [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"{what}: expected comma-separated numbers, got {text!r}"
+        ) from None
+    if count is not None and len(values) != count:
+        raise argparse.ArgumentTypeError(
+            f"{what}: expected {count} numbers, got {len(values)} in {text!r}"
+        )
+    return values
+
+
+def add_robot_options(p: argparse.ArgumentParser) -> None:
+    """--robot and --coefficients."""
+    p.add_argument(
+        "--robot", metavar="FILE", help="robot TOML file (default: the bundled paper robot)"
+    )
+    p.add_argument(
+        "--coefficients",
+        metavar="Cf,Cd,Ca,Cm",
+        type=lambda s: floats(s, 4, "--coefficients"),
+        help="hydrodynamic coefficients (default: the robot file's)",
+    )
+
+
+def robot_and_coefficients(args: argparse.Namespace) -> tuple[Robot, HydroCoefficients]:
+    """Load the robot and the coefficients chosen on the command line."""
+    robot = load_robot(args.robot)
+    coeffs = (
+        HydroCoefficients.from_array(args.coefficients)
+        if args.coefficients
+        else robot.hydrodynamics
+    )
+    return robot, coeffs
+
+
+def add_loop_options(p: argparse.ArgumentParser) -> None:
+    """Timing, camera and servo options of the closed loop."""
+    g = p.add_argument_group("closed-loop timing")
+    g.add_argument("--dt", type=float, default=0.01, help="physics step, s (default 0.01)")
+    g.add_argument(
+        "--control-period", type=float, default=0.3, help="offset update period, s (0.3)"
+    )
+    g.add_argument("--delay", type=float, default=0.0, help="extra delay before an offset acts, s")
+    g.add_argument("--jitter", type=float, default=0.0, help="control period jitter, +- s")
+    g.add_argument("--fps", type=float, default=30.0, help="camera frame rate (30)")
+    g.add_argument("--pixel", type=float, default=0.0038, help="camera pixel size, m (0.0038)")
+    g.add_argument("--median", type=int, default=5, help="median filter length, frames (5)")
+    g.add_argument(
+        "--servo-limits", action="store_true", help="limit joints by the servos' torque-speed line"
+    )
+
+
+def loop_options(args: argparse.Namespace, stop_at_goal: bool = True) -> LoopOptions:
+    """Build :class:`LoopOptions` from the parsed options."""
+    return LoopOptions(
+        timing=LoopTiming(args.dt, args.control_period, args.delay, args.jitter),
+        camera=CameraModel(args.fps, args.pixel, args.median),
+        servo_limits=args.servo_limits,
+        stop_at_goal=stop_at_goal,
+    )

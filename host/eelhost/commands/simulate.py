@@ -1,0 +1,124 @@
+"""``eelbot simulate``: run a scenario in the twin and write its trajectory (and figures)."""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+
+from eelsim.closed_loop import simulate_closed_loop
+from eelsim.model import SwimmerModel
+from eelsim.record import write_run
+from eelsim.scenario import load_scenario
+from tqdm import tqdm
+
+from eelhost.commands.common import (
+    add_loop_options,
+    add_robot_options,
+    floats,
+    loop_options,
+    robot_and_coefficients,
+)
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    """Register the subcommand."""
+    p = sub.add_parser(
+        "simulate",
+        help="run a scenario in the twin and write its trajectory",
+        description="Run a named scenario (straight, turning, path1, path2, "
+        "straight_A0.61_w2.7, ...) "
+        "or a scenario TOML file in the closed-loop twin; write <out>.csv and <out>.json, and "
+        "optionally a PNG (--plot) and a GIF (--animate).",
+    )
+    p.add_argument("scenario", help="scenario name or .toml file")
+    add_robot_options(p)
+    g = p.add_argument_group("scenario overrides")
+    g.add_argument(
+        "--gait",
+        metavar="A,omega[,beta]",
+        type=lambda s: floats(s, None, "--gait"),
+        help="gait amplitude (rad), frequency (rad/s) and optionally phase shift (rad)",
+    )
+    g.add_argument("--k-theta", type=float, help="heading controller gain")
+    g.add_argument("--waypoints", metavar="x,y;x,y", help="waypoints, m")
+    g.add_argument(
+        "--current",
+        metavar="speed,direction_deg",
+        type=lambda s: floats(s, 2, "--current"),
+        help="current speed (m/s) and the direction it flows towards (deg)",
+    )
+    g.add_argument("--duration", type=float, help="T_max, s")
+    g.add_argument(
+        "--full", action="store_true", help="run until T_max even after the last waypoint"
+    )
+    add_loop_options(p)
+    p.add_argument("--seed", type=int, default=0, help="seed of jitter and noise (default 0)")
+    p.add_argument("--out", default="out/simulate/run", help="output path without extension")
+    p.add_argument(
+        "--plot", action="store_true", help="write <out>.png (path, x(t), y(t), heading)"
+    )
+    p.add_argument("--animate", action="store_true", help="write <out>.gif of the swimming robot")
+    p.set_defaults(run=run)
+
+
+def _overrides(args: argparse.Namespace) -> dict:
+    upd: dict = {}
+    if args.gait:
+        if len(args.gait) not in (2, 3):
+            raise ValueError("--gait: give A,omega or A,omega,beta")
+        upd["amplitude_rad"], upd["omega_rad_s"] = args.gait[:2]
+        if len(args.gait) == 3:
+            upd["beta_rad"] = args.gait[2]
+    if args.k_theta is not None:
+        upd["k_theta"] = args.k_theta
+    if args.waypoints:
+        upd["waypoints_m"] = [
+            tuple(floats(w, 2, "--waypoints")) for w in args.waypoints.split(";") if w.strip()
+        ]
+    if args.current:
+        upd["current_speed_m_s"], upd["current_direction_deg"] = args.current
+    if args.duration is not None:
+        upd["duration_s"] = args.duration
+    return upd
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the subcommand."""
+    robot, coeffs = robot_and_coefficients(args)
+    scenario = load_scenario(args.scenario)
+    upd = _overrides(args)
+    if upd:
+        scenario = type(scenario).model_validate({**scenario.model_dump(), **upd})
+    options = loop_options(args, stop_at_goal=not args.full)
+    total = int(math.floor(scenario.duration_s / options.timing.dt_s))
+    bar = tqdm(
+        total=total, unit="step", desc=scenario.name, disable=scenario.duration_s < 5.0, leave=False
+    )
+
+    def progress(step: int, _total: int) -> None:
+        bar.update(step - bar.n)
+
+    result = simulate_closed_loop(
+        robot, scenario, options, seed=args.seed, coefficients=coeffs, progress=progress
+    )
+    bar.close()
+    csv_path, json_path = write_run(result, robot, scenario, options, args.seed, args.out, coeffs)
+    outcome = "reached the last waypoint" if result.arrival_time_s is not None else "did not arrive"
+    print(
+        f"{scenario.name}: {outcome}; flag {result.failure.name}"
+        + (f" at t = {result.failure_time_s:.2f} s ({result.reason})" if result.reason else "")
+        + (f"; arrival {result.arrival_time_s:.2f} s" if result.arrival_time_s is not None else "")
+    )
+    print(f"wrote {csv_path} and {json_path}")
+    if args.plot or args.animate:
+        from eelhost.plots import animate_run, plot_run
+
+        model = SwimmerModel.from_robot(robot, coeffs)
+        if args.plot:
+            print(f"wrote {plot_run(result, model, scenario, Path(args.out).with_suffix('.png'))}")
+        if args.animate:
+            print(
+                f"wrote {animate_run(result, model, scenario, Path(args.out).with_suffix('.gif'))}"
+            )
+    return 0

@@ -1,0 +1,41 @@
+"""``eelbot speeds``: the steady speed of every gait of the paper's grid (calibration table)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+from eelsim.speeds import grid_speeds, speed_table_markdown
+
+from eelhost.commands.common import add_robot_options, robot_and_coefficients
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    """Register the subcommand."""
+    p = sub.add_parser(
+        "speeds",
+        help="steady speed of every gait of the 4 x 4 grid",
+        description="Simulate each gait of the paper's grid swimming straight and "
+        "print the steady speeds (m/s and BL/s) as a markdown table.",
+    )
+    add_robot_options(p)
+    p.add_argument("--duration", type=float, default=20.0, help="length of each run, s (20)")
+    p.add_argument("--write", metavar="FILE", help="also write the table to this markdown file")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the subcommand."""
+    robot, coeffs = robot_and_coefficients(args)
+    speeds = grid_speeds(robot, args.duration, coeffs)
+    table = speed_table_markdown(speeds, robot.body_length_m())
+    print(table)
+    print(
+        f"fastest {np.nanmax(speeds):.4f} m/s, slowest {np.nanmin(speeds):.4f} m/s; "
+        f"NaN = failed or swam backwards"
+    )
+    if args.write:
+        Path(args.write).write_text(table + "\n")
+        print(f"wrote {args.write}")
+    return 0

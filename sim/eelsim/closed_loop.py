@@ -1,0 +1,344 @@
+"""The twin swimming under the robot's own control stack (spec sections 4, 5 and 7).
+
+Per physics step (RK4, dt = 0.01 s by default):
+
+- the joints track the gait alpha_j(t) (with the held offset gamma) through the PD law, evaluated
+  inside every RK4 stage as the robot's fast joint loop does; optionally through a hobby-servo
+  torque-speed limit;
+- the camera takes its frames (30 fps) between steps, quantises positions to pixels and feeds the
+  moving median filter; a waypoint is reached when the filtered position is inside its acceptance
+  circle;
+- every control period (0.3 s, optionally jittered) the line-of-sight controller computes a new
+  offset from the latest filtered pose; it reaches the joints after the extra delay and is held;
+- the failure conditions are checked; a failed run stops and returns its flag, time and reason.
+
+This is the readable reference implementation; ``eelsim.batch`` runs the same physics fast.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from eelsim.camera import CameraModel, MedianFilter, hermite, quantise_position
+from eelsim.control import gait_reference, heading_offset, joint_pd_torque
+from eelsim.dynamics import link_positions, mass_matrix, state_derivative, straight_state
+from eelsim.flags import DIVERGENCE_RATE, ILL_CONDITION_THRESHOLD, Failure, penalty, self_collision
+from eelsim.integrate import rk4_step
+from eelsim.model import SwimmerModel
+from eelsim.robot import HydroCoefficients, Robot
+from eelsim.scenario import Scenario
+from eelsim.timing import LoopTiming
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class LoopOptions:
+    """How the loop is run (everything but the robot and the task).
+
+    Attributes
+    ----------
+    timing : LoopTiming
+        Physics step, control period, extra delay, jitter.
+    camera : CameraModel
+        Frame rate, pixel size, median filter.
+    servo_limits : bool
+        Limit joint torques by the servos' torque-speed line (stall torque, no-load speed).
+    stop_at_goal : bool
+        End the run when the last waypoint is reached (estimation runs the whole span instead).
+    """
+
+    timing: LoopTiming = field(default_factory=LoopTiming)
+    camera: CameraModel = field(default_factory=CameraModel)
+    servo_limits: bool = False
+    stop_at_goal: bool = True
+
+
+@dataclass
+class RunResult:
+    """What a closed-loop run produced.
+
+    Attributes
+    ----------
+    t_s : ndarray, shape (K,)
+        Times of the recorded steps.
+    states : ndarray, shape (K, 2 N + 4)
+        State at each recorded step.
+    offset_rad : ndarray, shape (K,)
+        Offset gamma acting on the joints.
+    alpha_rad : ndarray, shape (K, N-1)
+        Joint references.
+    target_index : ndarray, shape (K,)
+        Index of the waypoint being steered to.
+    camera_t_s : ndarray, shape (F,)
+        Times of the camera frames.
+    camera_pose : ndarray, shape (F, 3)
+        Filtered (x, y, heading) the controller saw.
+    failure : Failure
+        Flag (``Failure.NONE`` when the run succeeded).
+    failure_time_s : float or None
+        When the failure was detected.
+    reason : str
+        Human-readable explanation of the flag, empty when none.
+    arrival_time_s : float or None
+        When the last waypoint was reached.
+    distance_left_m : float
+        Path length left to the last waypoint at the end of the run.
+    """
+
+    t_s: FloatArray
+    states: FloatArray
+    offset_rad: FloatArray
+    alpha_rad: FloatArray
+    target_index: NDArray[np.int64]
+    camera_t_s: FloatArray
+    camera_pose: FloatArray
+    failure: Failure
+    failure_time_s: float | None
+    reason: str
+    arrival_time_s: float | None
+    distance_left_m: float
+
+    @property
+    def penalty(self) -> float:
+        """The paper's fitness value for this run's failure (0 if none)."""
+        return penalty(self.failure, self.distance_left_m)
+
+
+def servo_limited(
+    torque_nm: FloatArray, phi_dot_rad_s: FloatArray, stall_nm: float, no_load_rad_s: float
+) -> FloatArray:
+    """Clip joint torques to a DC servo's torque-speed line.
+
+    Driving torque falls linearly from the stall torque at rest to zero at the no-load speed;
+    braking torque is limited to the stall torque.
+
+    Parameters
+    ----------
+    torque_nm : ndarray
+        Requested torques.
+    phi_dot_rad_s : ndarray
+        Joint speeds.
+    stall_nm, no_load_rad_s : float
+        Servo stall torque and no-load speed.
+
+    Returns
+    -------
+    ndarray
+    """
+    r = phi_dot_rad_s / no_load_rad_s
+    upper = stall_nm * np.minimum(1.0, 1.0 - r)
+    lower = -stall_nm * np.minimum(1.0, 1.0 + r)
+    return np.clip(torque_nm, lower, upper)
+
+
+def _distance_left(p: FloatArray, waypoints: FloatArray, target: int) -> float:
+    if target >= len(waypoints):
+        return 0.0
+    d = float(np.linalg.norm(waypoints[target] - p))
+    if target + 1 < len(waypoints):
+        d += float(np.linalg.norm(np.diff(waypoints[target:], axis=0), axis=1).sum())
+    return d
+
+
+def simulate_closed_loop(
+    robot: Robot,
+    scenario: Scenario,
+    options: LoopOptions | None = None,
+    seed: int = 0,
+    coefficients: HydroCoefficients | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> RunResult:
+    """Run the twin under its control stack on a scenario.
+
+    Parameters
+    ----------
+    robot : Robot
+        The robot (geometry, gains, limits).
+    scenario : Scenario
+        Gait, waypoints, current, duration, start pose.
+    options : LoopOptions, optional
+        Timing, camera, servo limits, stopping rule.
+    seed : int
+        Seed of the period jitter and heading noise.
+    coefficients : HydroCoefficients, optional
+        Overrides the robot's hydrodynamic coefficients.
+    progress : callable, optional
+        Called as ``progress(step, total_steps)`` every 100 steps.
+
+    Returns
+    -------
+    RunResult
+        Never raises for a run that goes wrong: failures come back as flags.
+    """
+    opts = options or LoopOptions()
+    timing, cam = opts.timing, opts.camera
+    model = SwimmerModel.from_robot(robot, coefficients)
+    rng = np.random.default_rng(seed)
+    n = model.n_links
+    dt = timing.dt_s
+    total = int(np.floor(scenario.duration_s / dt + 1e-9))
+    gait = scenario.gait
+    kp, kd = robot.joints.kp_nm_per_rad, robot.joints.kd_nms_per_rad
+    limit = robot.joints.limit_rad
+    clamp = robot.joints.command_limit_rad
+    vc = np.asarray(scenario.current_m_s)
+    waypoints = np.asarray(scenario.waypoints_m, dtype=float)
+    radius = scenario.acceptance_radius_m
+
+    updates = set(timing.update_steps(total, rng).tolist())
+    frame_times = cam.frame_times(total * dt)
+    filt = MedianFilter(cam.median_window)
+
+    x = straight_state(model, np.radians(scenario.start_heading_deg), scenario.start_position_m)
+    gamma = 0.0
+    pending: list[tuple[int, float]] = []  # (step at which it acts, offset)
+    target = 0
+    arrival: float | None = None
+    filtered = np.array([*x[n : n + 2], np.mean(x[:n])])
+    failure, fail_t, reason = Failure.NONE, None, ""
+
+    rec_t, rec_x, rec_g, rec_a, rec_w = [], [], [], [], []
+    cam_t: list[float] = []
+    cam_pose: list[FloatArray] = []
+    next_frame = 0
+
+    def observe(t_frame: float, pose_true: FloatArray) -> None:
+        nonlocal filtered, target, arrival
+        pos = quantise_position(pose_true[:2], cam.pixel_m)
+        head = pose_true[2] + (
+            rng.normal(0.0, cam.heading_noise_rad) if cam.heading_noise_rad else 0.0
+        )
+        filtered = filt.push(pos[0], pos[1], head)
+        cam_t.append(t_frame)
+        cam_pose.append(filtered.copy())
+        if target < len(waypoints) and np.linalg.norm(filtered[:2] - waypoints[target]) < radius:
+            target += 1
+            if target == len(waypoints) and arrival is None:
+                arrival = t_frame
+
+    def pose_and_rate(state: FloatArray) -> tuple[FloatArray, FloatArray]:
+        return (
+            np.array([state[n], state[n + 1], np.mean(state[:n])]),
+            np.array([state[-2], state[-1], np.mean(state[n + 2 : 2 * n + 2])]),
+        )
+
+    def torques(t: float, state: FloatArray) -> FloatArray:
+        alpha, alpha_dot = gait_reference(t, gait, gamma, n)
+        alpha = np.clip(alpha, -clamp, clamp)
+        w = state[n + 2 : 2 * n + 2]
+        u = joint_pd_torque(alpha, alpha_dot, np.diff(state[:n]), np.diff(w), kp, kd)
+        if opts.servo_limits:
+            u = servo_limited(
+                u, np.diff(w), robot.joints.servo_max_torque_nm, robot.joints.servo_max_speed_rad_s
+            )
+        return u
+
+    def rhs(t: float, state: FloatArray) -> FloatArray:
+        return state_derivative(model, state, torques(t, state), vc)
+
+    # The frame at t = 0 sees the initial pose.
+    if frame_times.size and frame_times[0] <= 0.0:
+        observe(0.0, pose_and_rate(x)[0])
+        next_frame = 1
+
+    step = 0
+    with np.errstate(all="ignore"):
+        while True:
+            t = step * dt
+            if step in updates:
+                wp = waypoints[min(target, len(waypoints) - 1)]
+                pending.append(
+                    (
+                        step + timing.delay_steps,
+                        heading_offset(filtered[:2], filtered[2], wp, gait.k_theta),
+                    )
+                )
+            while pending and pending[0][0] <= step:
+                gamma = pending.pop(0)[1]
+
+            alpha_now = np.clip(gait_reference(t, gait, gamma, n)[0], -clamp, clamp)
+            rec_t.append(t)
+            rec_x.append(x.copy())
+            rec_g.append(gamma)
+            rec_a.append(alpha_now)
+            rec_w.append(target)
+
+            failure, reason = _check(model, x, limit, step in updates)
+            if failure != Failure.NONE:
+                fail_t = t
+                break
+            if (arrival is not None and opts.stop_at_goal) or step >= total:
+                break
+
+            try:
+                x_next = rk4_step(rhs, t, x, dt)
+            except np.linalg.LinAlgError:
+                failure, fail_t, reason = (
+                    Failure.ILL_CONDITIONED,
+                    t,
+                    "mass matrix is not positive definite",
+                )
+                break
+            if not np.all(np.isfinite(x_next)):
+                failure, fail_t = Failure.ILL_CONDITIONED, t + dt
+                reason = "state is not finite (the integration blew up)"
+                break
+            # Camera frames that fall in (t, t + dt] see the interpolated pose.
+            y0, dy0 = pose_and_rate(x)
+            y1, dy1 = pose_and_rate(x_next)
+            while next_frame < frame_times.size and frame_times[next_frame] <= t + dt + 1e-12:
+                s = (frame_times[next_frame] - t) / dt
+                observe(float(frame_times[next_frame]), hermite(y0, dy0, y1, dy1, dt, s))
+                next_frame += 1
+            x = x_next
+            step += 1
+            if progress is not None and step % 100 == 0:
+                progress(step, total)
+
+    if failure == Failure.NONE and arrival is None:
+        failure, fail_t = Failure.TOO_SLOW, rec_t[-1]
+        reason = (
+            f"reached {target} of {len(waypoints)} waypoints by T_max = {scenario.duration_s:g} s"
+        )
+    return RunResult(
+        t_s=np.array(rec_t),
+        states=np.array(rec_x),
+        offset_rad=np.array(rec_g),
+        alpha_rad=np.array(rec_a),
+        target_index=np.array(rec_w, dtype=np.int64),
+        camera_t_s=np.array(cam_t),
+        camera_pose=np.array(cam_pose).reshape(-1, 3),
+        failure=failure,
+        failure_time_s=fail_t,
+        reason=reason,
+        arrival_time_s=arrival,
+        distance_left_m=_distance_left(x[n : n + 2], waypoints, target),
+    )
+
+
+def _check(model: SwimmerModel, x: FloatArray, limit: float, check_condition: bool):
+    n = model.n_links
+    if not np.all(np.isfinite(x)):
+        return Failure.ILL_CONDITIONED, "state is not finite (the integration blew up)"
+    if np.abs(x[n + 2 :]).max() > DIVERGENCE_RATE:
+        return (
+            Failure.ILL_CONDITIONED,
+            "rates beyond any physical motion (the integration diverged)",
+        )
+    if check_condition:
+        cond = np.linalg.cond(mass_matrix(model, x))
+        if not cond < ILL_CONDITION_THRESHOLD:
+            return (
+                Failure.ILL_CONDITIONED,
+                f"mass matrix condition number {cond:.3g} is above {ILL_CONDITION_THRESHOLD:.0e}",
+            )
+    X, Y = link_positions(model, x)
+    why = self_collision(X, Y, x[:n], model.half_length_m, limit)
+    if why is not None:
+        return Failure.SELF_COLLISION, why
+    return Failure.NONE, ""
