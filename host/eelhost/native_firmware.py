@@ -1,0 +1,330 @@
+"""The robot's firmware compiled for this PC, driven in lockstep from Python.
+
+``firmware/build/native/libeelfw.so`` is the same C++ core as the Nano image with a native board
+layer: the caller owns time, the UART is two byte queues and the servos are an array. This module
+loads it with cffi in ABI mode and first runs ``make native`` (a no-op when the library is up to
+date; skipped when make is not installed and the library exists). Typical use, one physics step
+of the twin at a time::
+
+    fw = NativeFirmware(control_period_us=0)
+    fw.feed(protocol.encode_frame(protocol.Start(), seq=0))
+    out = fw.tick(t_us, phi_rad, phi_dot_rad_s)   # references, PD torques, servo pulses
+    frames = fw.read_frames()                     # Ack, Telemetry, ...
+"""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import threading
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from cffi import FFI
+from numpy.typing import ArrayLike, NDArray
+
+from eelhost import protocol
+
+FIRMWARE_DIR = Path(__file__).resolve().parents[2] / "firmware"
+LIBRARY_PATH = FIRMWARE_DIR / "build" / "native" / "libeelfw.so"
+N_JOINTS = 5
+ABI_VERSION = 1
+
+_CDEF = """
+typedef struct EelFw EelFw;
+typedef struct EelOutputs {
+  float alpha_rad[5];
+  float alpha_dot_rad_s[5];
+  float torque_nm[5];
+  uint16_t pulse_us[5];
+  uint8_t control_ran;
+} EelOutputs;
+typedef struct EelStatus {
+  uint8_t state;
+  float amplitude_rad, beta_rad, offset_rad, phase_rad;
+  float target_amplitude_rad, target_omega_rad_s, target_beta_rad, target_offset_rad;
+  float kp_nm_per_rad, kd_nms_per_rad, torque_limit_nm;
+  uint32_t last_valid_rx_us;
+  uint16_t frames_ok, bad_cobs, bad_short, bad_oversize, bad_crc, bad_schema, bad_unknown_id,
+      bad_length, duplicates, lost, tx_dropped, frames_bad;
+} EelStatus;
+uint32_t eel_abi_version(void);
+uint16_t eel_schema_hash(void);
+EelFw* eel_create(uint32_t now_us);
+void eel_destroy(EelFw* fw);
+void eel_reset(EelFw* fw, uint32_t now_us);
+void eel_set_control_period_us(EelFw* fw, uint32_t period_us);
+size_t eel_feed(EelFw* fw, const uint8_t* data, size_t n);
+size_t eel_take(EelFw* fw, uint8_t* out, size_t cap);
+void eel_tick(EelFw* fw, uint32_t now_us, const float* phi_rad, const float* phi_dot_rad_s,
+              EelOutputs* out);
+void eel_status(const EelFw* fw, EelStatus* out);
+"""
+
+_ffi = FFI()
+_ffi.cdef(_CDEF)
+_lib = None
+_lib_lock = threading.Lock()
+
+
+class NativeFirmwareError(RuntimeError):
+    """The native firmware library cannot be built, loaded, or does not match this module."""
+
+
+def build_library() -> Path:
+    """Build (or bring up to date) the native firmware library with ``make native``.
+
+    Returns
+    -------
+    Path
+        The library's path.
+
+    Raises
+    ------
+    NativeFirmwareError
+        When make fails (its output is in the message).
+    """
+    try:
+        proc = subprocess.run(
+            ["make", "-s", "-C", str(FIRMWARE_DIR), "native"],
+            capture_output=True,
+            text=True,
+            check=False,
+        )
+    except FileNotFoundError as err:
+        raise NativeFirmwareError("`make` is not installed; run scripts/setup.sh") from err
+    if proc.returncode != 0 or not LIBRARY_PATH.exists():
+        raise NativeFirmwareError(
+            f"building {LIBRARY_PATH} failed:\n{proc.stdout}{proc.stderr}".rstrip()
+        )
+    return LIBRARY_PATH
+
+
+def load_library(path: Path | None = None):
+    """Load the library once per process, building or updating it first with make.
+
+    Parameters
+    ----------
+    path : Path, optional
+        Another build of the library (default: ``firmware/build/native/libeelfw.so``).
+
+    Returns
+    -------
+    cffi library object
+
+    Raises
+    ------
+    NativeFirmwareError
+        When the library's ABI version or schema hash differ from this module's.
+    """
+    global _lib
+    with _lib_lock:
+        if _lib is not None and path is None:
+            return _lib
+        target = path or LIBRARY_PATH
+        # Bring the default library up to date (a no-op of ~20 ms when it is), so that Python
+        # never runs a stale build of edited C++; without make, use what is there.
+        if path is None and (shutil.which("make") or not target.exists()):
+            build_library()
+        lib = _ffi.dlopen(str(target))
+        if lib.eel_abi_version() != ABI_VERSION:
+            raise NativeFirmwareError(
+                f"{target}: ABI version {lib.eel_abi_version()}, this module needs {ABI_VERSION}"
+            )
+        if lib.eel_schema_hash() != protocol.SCHEMA_HASH:
+            raise NativeFirmwareError(
+                f"{target}: schema 0x{lib.eel_schema_hash():04X}, eelhost.protocol has "
+                f"0x{protocol.SCHEMA_HASH:04X}; rebuild with `make -C firmware native`"
+            )
+        if path is None:
+            _lib = lib
+        return lib
+
+
+@dataclass(frozen=True)
+class TickOutputs:
+    """What one tick of the firmware produced.
+
+    Attributes
+    ----------
+    alpha_rad : ndarray, shape (5,)
+        Joint references, joint 1 (tail) first, clamped to the joint limit.
+    alpha_dot_rad_s : ndarray, shape (5,)
+        Their rates.
+    torque_nm : ndarray, shape (5,)
+        Joint PD torques for the angles and rates passed to the tick.
+    pulse_us : ndarray, shape (5,)
+        Servo pulse widths the Nano would output.
+    control_ran : bool
+        Whether this tick ran a control update (else the references are held).
+    """
+
+    alpha_rad: NDArray[np.float32]
+    alpha_dot_rad_s: NDArray[np.float32]
+    torque_nm: NDArray[np.float32]
+    pulse_us: NDArray[np.uint16]
+    control_ran: bool
+
+
+class NativeFirmware:
+    """One instance of the robot's firmware, running natively, with time set by the caller.
+
+    Parameters
+    ----------
+    now_us : int
+        The firmware's clock at boot (any non-negative integer; taken modulo 2^32 like micros()).
+    control_period_us : int
+        Period of the control update: 10000 as on the robot; 0 runs one on every tick (lockstep
+        with a plant that calls :meth:`tick` at its own step).
+    library : Path, optional
+        Another build of the library (for example a sanitizer build).
+    """
+
+    def __init__(
+        self, now_us: int = 0, control_period_us: int = 10000, library: Path | None = None
+    ) -> None:
+        self._lib = load_library(library)
+        handle = self._lib.eel_create(_u32(now_us))
+        if handle == _ffi.NULL:
+            raise MemoryError("eel_create failed")
+        self._fw = _ffi.gc(handle, self._lib.eel_destroy)
+        self._out = _ffi.new("EelOutputs*")
+        self._status = _ffi.new("EelStatus*")
+        self._phi = _ffi.new("float[5]")
+        self._phi_dot = _ffi.new("float[5]")
+        self._reader = protocol.FrameReader()
+        self._period = control_period_us
+        self._lib.eel_set_control_period_us(self._fw, _u32(control_period_us))
+
+    def reset(self, now_us: int = 0) -> None:
+        """Return to the boot state (as after a power cycle), keeping the control period.
+
+        Parameters
+        ----------
+        now_us : int
+            The clock at the new boot.
+        """
+        self._lib.eel_reset(self._fw, _u32(now_us))
+        self._lib.eel_set_control_period_us(self._fw, _u32(self._period))
+        self._reader = protocol.FrameReader()
+
+    def feed(self, data: bytes) -> None:
+        """Deliver bytes to the firmware's UART, as if they came from the radio.
+
+        Parameters
+        ----------
+        data : bytes
+            Received bytes (frames, garbage, anything).
+
+        Raises
+        ------
+        BufferError
+            When the receive queue (4096 bytes) overflows: call :meth:`tick` more often.
+        """
+        n = self._lib.eel_feed(self._fw, data, len(data))
+        if n != len(data):
+            raise BufferError(f"UART receive queue full: {len(data) - n} of {len(data)} bytes lost")
+
+    def send(self, message: protocol.Message, seq: int) -> None:
+        """Encode a message as the host would and feed it.
+
+        Parameters
+        ----------
+        message : protocol.Message
+            Any message of :mod:`eelhost.protocol`.
+        seq : int
+            Its sequence number, 0..255.
+        """
+        self.feed(protocol.encode_frame(message, seq))
+
+    def take(self) -> bytes:
+        """Return every byte the firmware has transmitted since the last call."""
+        chunks = []
+        buf = _ffi.new("uint8_t[4096]")
+        while True:
+            n = self._lib.eel_take(self._fw, buf, 4096)
+            if n == 0:
+                return b"".join(chunks)
+            chunks.append(bytes(_ffi.buffer(buf, n)))
+
+    def read_frames(self) -> list[tuple[int, protocol.Message]]:
+        """Decode what the firmware has transmitted since the last call.
+
+        Returns
+        -------
+        list of (seq, message)
+            In the order sent; frames that fail to decode are counted in ``host_bad_frames``.
+        """
+        return self._reader.feed(self.take())
+
+    @property
+    def host_bad_frames(self) -> dict[str, int]:
+        """Frames from the firmware that this side could not decode, by kind (should stay empty)."""
+        return dict(self._reader.bad)
+
+    def tick(
+        self,
+        now_us: int,
+        phi_rad: ArrayLike | None = None,
+        phi_dot_rad_s: ArrayLike | None = None,
+    ) -> TickOutputs:
+        """Run one pass of the firmware's main loop at ``now_us``.
+
+        Parameters
+        ----------
+        now_us : int
+            The firmware's clock, microseconds (taken modulo 2^32: pass the plant's time in whole
+            microseconds and the wrap of micros() happens as on the robot).
+        phi_rad, phi_dot_rad_s : array_like, shape (5,), optional
+            Measured joint angles phi_j = theta_{j+1} - theta_j and their rates (default zeros).
+
+        Returns
+        -------
+        TickOutputs
+            References, PD torques, servo pulses.
+        """
+        phi = _ffi.NULL if phi_rad is None else self._fill(self._phi, phi_rad, "phi_rad")
+        phid = (
+            _ffi.NULL
+            if phi_dot_rad_s is None
+            else self._fill(self._phi_dot, phi_dot_rad_s, "phi_dot_rad_s")
+        )
+        self._lib.eel_tick(self._fw, _u32(now_us), phi, phid, self._out)
+        o = self._out
+        return TickOutputs(
+            alpha_rad=np.frombuffer(_ffi.buffer(o.alpha_rad), dtype=np.float32).copy(),
+            alpha_dot_rad_s=np.frombuffer(_ffi.buffer(o.alpha_dot_rad_s), dtype=np.float32).copy(),
+            torque_nm=np.frombuffer(_ffi.buffer(o.torque_nm), dtype=np.float32).copy(),
+            pulse_us=np.frombuffer(_ffi.buffer(o.pulse_us), dtype=np.uint16).copy(),
+            control_ran=bool(o.control_ran),
+        )
+
+    def status(self) -> dict[str, float | int]:
+        """Read the firmware's state, gait, gains and link counters.
+
+        Returns
+        -------
+        dict
+            Keys as in ``EelStatus`` of ``firmware/hal/native/eel_native.h``; ``state`` is a
+            :class:`eelhost.protocol.State`.
+        """
+        self._lib.eel_status(self._fw, self._status)
+        s = self._status
+        out = {name: getattr(s, name) for name, _ in _ffi.typeof("EelStatus").fields}
+        out["state"] = protocol.State(s.state)
+        return out
+
+    @staticmethod
+    def _fill(dest, values: ArrayLike, name: str):
+        a = np.asarray(values, dtype=np.float32)
+        if a.shape != (N_JOINTS,):
+            raise ValueError(f"{name} must have shape ({N_JOINTS},), got {a.shape}")
+        _ffi.memmove(dest, a.tobytes(), 4 * N_JOINTS)
+        return dest
+
+
+def _u32(now_us: int) -> int:
+    if now_us < 0:
+        raise ValueError(f"times are non-negative microseconds, got {now_us}")
+    return int(now_us) & 0xFFFFFFFF
