@@ -10,11 +10,10 @@ from __future__ import annotations
 import argparse
 import sys
 
+from eelhost.commands import simulate, speeds
 from eelsim.robot import RobotFileError
 from eelsim.scenario import ScenarioError
 from eelsim.timing import TimingError
-
-from eelhost.commands import simulate, speeds
 
 COMMANDS = (simulate, speeds)
 USER_ERRORS = (RobotFileError, ScenarioError, TimingError, ValueError, FileNotFoundError)

@@ -12,12 +12,13 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib import animation  # noqa: E402
+from matplotlib.patches import Circle, FancyArrow  # noqa: E402
+
 from eelsim.closed_loop import RunResult  # noqa: E402
 from eelsim.dynamics import link_positions  # noqa: E402
 from eelsim.model import SwimmerModel  # noqa: E402
 from eelsim.scenario import Scenario  # noqa: E402
-from matplotlib import animation  # noqa: E402
-from matplotlib.patches import Circle, FancyArrow  # noqa: E402
 
 
 def robot_outline(model: SwimmerModel, state: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

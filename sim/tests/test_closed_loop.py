@@ -2,6 +2,7 @@ import math
 
 import numpy as np
 import pytest
+
 from eelsim.camera import CameraModel, MedianFilter, hermite, quantise_position
 from eelsim.closed_loop import LoopOptions, servo_limited, simulate_closed_loop
 from eelsim.control import heading_offset, wrap_angle

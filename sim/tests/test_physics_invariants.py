@@ -3,6 +3,8 @@
 import numpy as np
 import pytest
 from conftest import random_state
+from scipy.integrate import solve_ivp
+
 from eelsim.control import Gait, gait_reference, joint_pd_torque
 from eelsim.dynamics import (
     link_positions,
@@ -15,7 +17,6 @@ from eelsim.energy import kinetic_energy, power_balance
 from eelsim.integrate import integrate_reference, integrate_rk4
 from eelsim.model import SwimmerModel
 from eelsim.robot import HydroCoefficients
-from scipy.integrate import solve_ivp
 
 
 def wave_torques(n_joints, amp=0.15, omega=3.5, beta=1.0):

@@ -3,6 +3,7 @@ import tomllib
 from importlib import resources
 
 import pytest
+
 from eelsim.robot import RobotFileError, load_robot
 
 

@@ -6,10 +6,6 @@ import argparse
 import math
 from pathlib import Path
 
-from eelsim.closed_loop import simulate_closed_loop
-from eelsim.model import SwimmerModel
-from eelsim.record import write_run
-from eelsim.scenario import load_scenario
 from tqdm import tqdm
 
 from eelhost.commands.common import (
@@ -19,6 +15,10 @@ from eelhost.commands.common import (
     loop_options,
     robot_and_coefficients,
 )
+from eelsim.closed_loop import simulate_closed_loop
+from eelsim.model import SwimmerModel
+from eelsim.record import write_run
+from eelsim.scenario import load_scenario
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:

@@ -6,9 +6,9 @@ import argparse
 from pathlib import Path
 
 import numpy as np
-from eelsim.speeds import grid_speeds, speed_table_markdown
 
 from eelhost.commands.common import add_robot_options, robot_and_coefficients
+from eelsim.speeds import grid_speeds, speed_table_markdown
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
