@@ -1,0 +1,1 @@
+"""Hydrodynamic parameter estimation: fitness, evaluation, optimisers, validation."""

@@ -1,0 +1,248 @@
+"""Simulating experiments for many candidate coefficient sets, and scoring them.
+
+An :class:`Evaluator` holds a set of experiments (training or test) prepared for simulation: the
+task from each experiment's metadata, run for T_max = ``tmax_factor`` times the recorded span so that
+a slightly slow candidate is not flagged too slow by the clock's noise, with the sample times of the
+fitness. ``simulate`` runs every (candidate, experiment) pair through a backend:
+
+- ``"reference"``: the readable closed loop (``eelsim.closed_loop``), spread over processes;
+- ``"batch"``: the fast batched kernel (``eelsim.batch``), the default when it is available.
+
+Both return the centre of mass at the sample times, the failure flag and the path left.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+
+import numpy as np
+
+from eelhost.estimation.fitness import (
+    N_SAMPLES_FIT,
+    VELOCITY_WEIGHT,
+    sample_times,
+    trajectory_error,
+)
+from eelhost.experiment import Experiment
+from eelsim.camera import CameraModel
+from eelsim.closed_loop import LoopOptions, simulate_closed_loop
+from eelsim.flags import Failure, penalty
+from eelsim.robot import HydroCoefficients, Robot
+from eelsim.scenario import Scenario
+from eelsim.timing import LoopTiming
+
+TMAX_FACTOR = 1.5
+
+
+@dataclass(frozen=True)
+class PreparedExperiment:
+    """One experiment ready to simulate.
+
+    Attributes
+    ----------
+    experiment : Experiment
+    scenario : Scenario
+        The task with duration T_max.
+    options : LoopOptions
+        Loop timing and camera as recorded (no jitter: its realisation is unknown).
+    times_s : ndarray
+        Sample times.
+    exp_positions_m : ndarray, shape (n, 2)
+        The experiment's centre of mass at the sample times.
+    """
+
+    experiment: Experiment
+    scenario: Scenario
+    options: LoopOptions
+    times_s: np.ndarray
+    exp_positions_m: np.ndarray
+
+
+def prepare(exp: Experiment, n_samples: int, dt_s: float = 0.01, tmax_factor: float = TMAX_FACTOR):
+    """Prepare an experiment for simulation with ``n_samples`` sample times."""
+    t0, t1 = exp.span_s
+    times = sample_times(t0, t1, n_samples, dt_s)
+    tmax = float(np.ceil(tmax_factor * t1 / dt_s)) * dt_s
+    cam = exp.camera
+    camera = CameraModel(
+        fps=float(cam.get("fps", 30.0)),
+        pixel_m=float(cam.get("pixel_m", 0.0038)),
+        median_window=int(cam.get("median_window", 5)),
+    )
+    timing = LoopTiming(
+        dt_s=dt_s,
+        control_period_s=float(exp.timing.get("control_period_s", 0.3)),
+        extra_delay_s=float(exp.timing.get("extra_delay_s", 0.0)),
+    )
+    return PreparedExperiment(
+        experiment=exp,
+        scenario=exp.scenario.model_copy(update={"duration_s": tmax}),
+        options=LoopOptions(timing=timing, camera=camera, stop_at_goal=False),
+        times_s=times,
+        exp_positions_m=exp.position_at(times),
+    )
+
+
+@dataclass
+class Simulated:
+    """Simulations of C candidates on E experiments.
+
+    Attributes
+    ----------
+    positions_m : ndarray, shape (C, E, n, 2)
+        Centre of mass at the sample times (NaN where a run failed before them).
+    failure : ndarray of int, shape (C, E)
+        :class:`eelsim.flags.Failure` codes.
+    distance_left_m : ndarray, shape (C, E)
+    """
+
+    positions_m: np.ndarray
+    failure: np.ndarray
+    distance_left_m: np.ndarray
+
+
+def _reference_job(args: tuple) -> tuple[np.ndarray, int, float]:
+    robot, prepared, coeffs = args
+    run = simulate_closed_loop(
+        robot, prepared.scenario, prepared.options, seed=0, coefficients=coeffs
+    )
+    n = robot.n_links
+    dt = prepared.options.timing.dt_s
+    idx = np.round(prepared.times_s / dt).astype(int)
+    pos = np.full((idx.size, 2), np.nan)
+    ok = idx < len(run.t_s)
+    pos[ok] = run.states[idx[ok], n : n + 2]
+    return pos, int(run.failure), float(run.distance_left_m)
+
+
+class Evaluator:
+    """Scores candidate coefficient sets on a set of experiments (the paper's protocol).
+
+    Parameters
+    ----------
+    robot : Robot
+        The robot model to fit (its coefficients are replaced by each candidate's).
+    experiments : sequence of Experiment
+    n_samples : int
+        Samples per experiment (7 for fitting, 35 for validation).
+    weight : float
+        Velocity weight w.
+    backend : {"auto", "batch", "reference"}
+    workers : int
+        Processes for the reference backend.
+    map_function : callable, optional
+        Replaces the local process pool (e.g. a Dask client's map) for the reference backend.
+    """
+
+    def __init__(
+        self,
+        robot: Robot,
+        experiments: Sequence[Experiment],
+        n_samples: int = N_SAMPLES_FIT,
+        weight: float = VELOCITY_WEIGHT,
+        backend: str = "auto",
+        workers: int = 2,
+        map_function: Callable | None = None,
+    ) -> None:
+        if not experiments:
+            raise ValueError("no experiments to evaluate on")
+        self.robot = robot
+        self.prepared = [prepare(e, n_samples) for e in experiments]
+        self.weight = weight
+        self.backend = _choose_backend(backend)
+        self.workers = workers
+        self.map_function = map_function
+        self.simulations = 0  # closed-loop runs done so far
+
+    def simulate(self, coefficients: np.ndarray) -> Simulated:
+        """Simulate every experiment for every candidate.
+
+        Parameters
+        ----------
+        coefficients : ndarray, shape (C, 4)
+            Candidates (C_f, C_d, C_a, C_m).
+
+        Returns
+        -------
+        Simulated
+        """
+        coeffs = np.atleast_2d(np.asarray(coefficients, dtype=float))
+        self.simulations += coeffs.shape[0] * len(self.prepared)
+        if self.backend == "batch":
+            from eelhost.estimation.batch_backend import simulate_batch
+
+            return simulate_batch(self.robot, self.prepared, coeffs)
+        jobs = [
+            (self.robot, p, HydroCoefficients.from_array(c)) for c in coeffs for p in self.prepared
+        ]
+        if self.map_function is not None:
+            results = list(self.map_function(_reference_job, jobs))
+        elif self.workers > 1 and len(jobs) > 1:
+            with ProcessPoolExecutor(max_workers=self.workers) as pool:
+                results = list(pool.map(_reference_job, jobs))
+        else:
+            results = [_reference_job(j) for j in jobs]
+        c, e = coeffs.shape[0], len(self.prepared)
+        n = self.prepared[0].times_s.size
+        pos = np.array([r[0] for r in results]).reshape(c, e, n, 2)
+        fail = np.array([r[1] for r in results], dtype=int).reshape(c, e)
+        left = np.array([r[2] for r in results]).reshape(c, e)
+        return Simulated(pos, fail, left)
+
+    def errors(self, coefficients: np.ndarray) -> np.ndarray:
+        """Per-experiment error (with the failure penalties), shape (C, E)."""
+        sim = self.simulate(coefficients)
+        return self.errors_of(sim)
+
+    def errors_of(self, sim: Simulated) -> np.ndarray:
+        """Per-experiment error of already simulated candidates, shape (C, E)."""
+        c, e = sim.failure.shape
+        out = np.empty((c, e))
+        for j, p in enumerate(self.prepared):
+            err = trajectory_error(p.times_s, p.exp_positions_m, sim.positions_m[:, j], self.weight)
+            for i in range(c):
+                f = Failure(int(sim.failure[i, j]))
+                out[i, j] = (
+                    err[i] if f == Failure.NONE else penalty(f, float(sim.distance_left_m[i, j]))
+                )
+        return out
+
+    def fitness(self, coefficients: np.ndarray) -> np.ndarray:
+        """Minimax fitness max_j error_j of each candidate, shape (C,)."""
+        return self.errors(coefficients).max(axis=1)
+
+    def residuals(self, coefficients: np.ndarray) -> np.ndarray:
+        """Stacked position and weighted velocity differences, shape (C, E * n * 4).
+
+        The least-squares form of the same data (failed runs give large constant residuals).
+        """
+        from eelhost.estimation.fitness import sampled_velocity
+
+        sim = self.simulate(coefficients)
+        blocks = []
+        for j, p in enumerate(self.prepared):
+            simp = sim.positions_m[:, j]
+            dp = simp - p.exp_positions_m
+            dv = sampled_velocity(p.times_s, simp) - sampled_velocity(p.times_s, p.exp_positions_m)
+            block = np.concatenate(
+                [dp.reshape(len(simp), -1), self.weight * dv.reshape(len(simp), -1)], axis=1
+            )
+            failed = sim.failure[:, j] != int(Failure.NONE)
+            block[failed] = 10.0  # far worse than any real trajectory error (metres)
+            blocks.append(np.nan_to_num(block, nan=10.0))
+        return np.concatenate(blocks, axis=1)
+
+
+def _choose_backend(backend: str) -> str:
+    if backend not in ("auto", "batch", "reference"):
+        raise ValueError(f"backend must be auto, batch or reference, got {backend!r}")
+    if backend != "auto":
+        return backend
+    try:
+        import eelsim.batch  # noqa: F401
+
+        return "batch"
+    except ImportError:
+        return "reference"

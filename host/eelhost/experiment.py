@@ -1,0 +1,449 @@
+"""Recorded experiments and datasets on disk (see ``docs/data.md``).
+
+One experiment is two files with the same stem:
+
+- ``<name>.csv``: a header line, then one row per camera frame. Required columns ``t_s, x_m, y_m``
+  (time since the gait started, centre of mass); optional ``heading_rad`` and the absolute link
+  angles ``theta_1 .. theta_N`` (link 1 = tail). Every value a finite number; time strictly
+  increasing.
+- ``<name>.json``: metadata: format tag, the task (gait, gain, waypoints, acceptance radius, current,
+  duration, start pose: the keys of :class:`eelsim.scenario.Scenario`), the motion type, the camera
+  and timing facts, and where the data came from.
+
+A dataset is a folder with ``manifest.toml`` naming the robot file, the training and testing
+experiments of each motion type, and the multi-waypoint paths used for validation.
+
+Every reader refuses malformed input with the file, line and column; writers write to a temporary
+file and rename it, so a crash never leaves half an experiment behind.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import tempfile
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from pydantic import ValidationError
+
+from eelsim.robot import HydroCoefficients, Robot, load_robot
+from eelsim.scenario import Scenario
+
+EXPERIMENT_FORMAT = "eelbot-experiment/1"
+DATASET_FORMAT = "eelbot-dataset/1"
+REQUIRED_COLUMNS = ("t_s", "x_m", "y_m")
+COLUMN_ALIASES = {"t": "t_s", "time": "t_s", "x": "x_m", "y": "y_m", "heading": "heading_rad"}
+
+
+class DataError(ValueError):
+    """A malformed experiment, CSV or dataset; the message says where (file, line, column)."""
+
+
+@dataclass
+class Experiment:
+    """One recorded run of the robot.
+
+    Attributes
+    ----------
+    name : str
+        Identifier (the file stem).
+    t_s : ndarray, shape (K,)
+        Frame times, s, strictly increasing.
+    position_m : ndarray, shape (K, 2)
+        Centre of mass per frame.
+    heading_rad : ndarray or None, shape (K,)
+        Heading per frame, if recorded.
+    link_angles_rad : ndarray or None, shape (K, N)
+        Absolute link angles per frame, if recorded.
+    scenario : Scenario
+        The task the robot was given (gait, gain, waypoints, current...).
+    motion : str
+        Motion type: "straight", "turning" or "path".
+    camera : dict
+        Camera facts: fps, pixel_m, median_window, timestamp_jitter_s.
+    timing : dict
+        Loop facts: control_period_s, extra_delay_s, jitter_s.
+    source : dict
+        Where the data came from (a virtual tank records its truth and seed here).
+    """
+
+    name: str
+    t_s: np.ndarray
+    position_m: np.ndarray
+    scenario: Scenario
+    motion: str = "straight"
+    heading_rad: np.ndarray | None = None
+    link_angles_rad: np.ndarray | None = None
+    camera: dict[str, Any] = field(default_factory=dict)
+    timing: dict[str, Any] = field(default_factory=dict)
+    source: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def span_s(self) -> tuple[float, float]:
+        """First and last frame times."""
+        return float(self.t_s[0]), float(self.t_s[-1])
+
+    def position_at(self, times_s: np.ndarray) -> np.ndarray:
+        """Centre of mass linearly interpolated at ``times_s`` (inside the recorded span)."""
+        t = np.asarray(times_s, dtype=float)
+        return np.column_stack(
+            [
+                np.interp(t, self.t_s, self.position_m[:, 0]),
+                np.interp(t, self.t_s, self.position_m[:, 1]),
+            ]
+        )
+
+
+def _atomic_write(path: Path, text: str) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w") as f:
+            f.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def experiment_csv_text(exp: Experiment) -> str:
+    """The CSV text of an experiment's frames."""
+    cols = ["t_s", "x_m", "y_m"]
+    data = [exp.t_s, exp.position_m[:, 0], exp.position_m[:, 1]]
+    if exp.heading_rad is not None:
+        cols.append("heading_rad")
+        data.append(exp.heading_rad)
+    if exp.link_angles_rad is not None:
+        cols += [f"theta_{i + 1}" for i in range(exp.link_angles_rad.shape[1])]
+        data += list(exp.link_angles_rad.T)
+    table = np.column_stack(data)
+    lines = [",".join(cols)] + [",".join(f"{v:.9g}" for v in row) for row in table]
+    return "\n".join(lines) + "\n"
+
+
+def write_experiment(exp: Experiment, folder: str | Path) -> tuple[Path, Path]:
+    """Write ``<folder>/<name>.csv`` and ``.json`` atomically; return both paths."""
+    folder = Path(folder)
+    csv_path, json_path = folder / f"{exp.name}.csv", folder / f"{exp.name}.json"
+    meta = {
+        "format": EXPERIMENT_FORMAT,
+        "name": exp.name,
+        "motion": exp.motion,
+        "scenario": exp.scenario.model_dump(),
+        "camera": exp.camera,
+        "timing": exp.timing,
+        "source": exp.source,
+    }
+    _atomic_write(csv_path, experiment_csv_text(exp))
+    _atomic_write(json_path, json.dumps(meta, indent=2) + "\n")
+    return csv_path, json_path
+
+
+@dataclass
+class FrameTable:
+    """Columns read from a tracker CSV."""
+
+    t_s: np.ndarray
+    position_m: np.ndarray
+    heading_rad: np.ndarray | None
+    link_angles_rad: np.ndarray | None
+
+
+def read_frames_csv(path: str | Path) -> FrameTable:
+    """Read and check a frames CSV (``t_s, x_m, y_m`` [, ``heading_rad``, ``theta_i``...]).
+
+    Column names may also be ``t``, ``time``, ``x``, ``y``, ``heading``. Unknown columns are refused.
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    FrameTable
+
+    Raises
+    ------
+    DataError
+        Naming the file, line and column of the first problem found.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as err:
+        raise DataError(f"{path}: cannot read: {err.strerror}") from None
+    rows = list(csv.reader(text.splitlines()))
+    if not rows or not any(c.strip() for c in rows[0]):
+        raise DataError(f"{path}:1: empty file: expected a header line with t_s,x_m,y_m")
+    header = [COLUMN_ALIASES.get(c.strip(), c.strip()) for c in rows[0]]
+    for col, name in enumerate(header, start=1):
+        known = name in (*REQUIRED_COLUMNS, "heading_rad") or (
+            name.startswith("theta_") and name[6:].isdigit()
+        )
+        if not known:
+            raise DataError(
+                f"{path}:1:{col}: unknown column {name!r} (expected t_s, x_m, y_m, heading_rad, theta_1..)"
+            )
+    for req in REQUIRED_COLUMNS:
+        if req not in header:
+            raise DataError(f"{path}:1: missing required column {req!r}")
+    if len(set(header)) != len(header):
+        raise DataError(f"{path}:1: a column name appears twice")
+    values = np.empty((len(rows) - 1, len(header)))
+    for i, row in enumerate(rows[1:]):
+        line = i + 2
+        if len(row) != len(header):
+            raise DataError(f"{path}:{line}: expected {len(header)} fields, found {len(row)}")
+        for col, cell in enumerate(row):
+            try:
+                v = float(cell)
+            except ValueError:
+                raise DataError(
+                    f"{path}:{line}:{col + 1}: {header[col]} is not a number: {cell!r}"
+                ) from None
+            if not math.isfinite(v):
+                raise DataError(f"{path}:{line}:{col + 1}: {header[col]} is not finite: {cell!r}")
+            values[i, col] = v
+    if values.shape[0] < 2:
+        raise DataError(f"{path}: needs at least two frames, found {values.shape[0]}")
+    t = values[:, header.index("t_s")]
+    bad = np.flatnonzero(np.diff(t) <= 0)
+    if bad.size:
+        line = int(bad[0]) + 3
+        raise DataError(
+            f"{path}:{line}:{header.index('t_s') + 1}: time does not increase ({t[bad[0] + 1]:g} after {t[bad[0]]:g})"
+        )
+    theta_cols = sorted((c for c in header if c.startswith("theta_")), key=lambda c: int(c[6:]))
+    return FrameTable(
+        t_s=t,
+        position_m=values[:, [header.index("x_m"), header.index("y_m")]],
+        heading_rad=values[:, header.index("heading_rad")] if "heading_rad" in header else None,
+        link_angles_rad=values[:, [header.index(c) for c in theta_cols]] if theta_cols else None,
+    )
+
+
+def read_experiment(csv_or_stem: str | Path) -> Experiment:
+    """Read an experiment from ``<stem>.csv`` and ``<stem>.json``.
+
+    Raises
+    ------
+    DataError
+        For a missing, malformed or inconsistent file, naming it (and the line and column).
+    """
+    # Names may contain dots (straight_A0.61_w2.7), so suffixes are added, never replaced.
+    stem = str(csv_or_stem)
+    for ext in (".csv", ".json"):
+        stem = stem.removesuffix(ext)
+    json_path = Path(stem + ".json")
+    frames = read_frames_csv(Path(stem + ".csv"))
+    try:
+        meta = json.loads(json_path.read_text())
+    except OSError as err:
+        raise DataError(f"{json_path}: cannot read: {err.strerror}") from None
+    except json.JSONDecodeError as err:
+        raise DataError(
+            f"{json_path}:{err.lineno}:{err.colno}: not valid JSON: {err.msg}"
+        ) from None
+    if not isinstance(meta, dict) or meta.get("format") != EXPERIMENT_FORMAT:
+        raise DataError(f"{json_path}: format: expected {EXPERIMENT_FORMAT!r}")
+    try:
+        scenario = Scenario.model_validate(meta.get("scenario"))
+    except ValidationError as err:
+        e = err.errors()[0]
+        loc = ".".join(str(p) for p in e["loc"])
+        raise DataError(f"{json_path}: scenario.{loc}: {e['msg']}") from None
+    motion = meta.get("motion", "straight")
+    if motion not in ("straight", "turning", "path"):
+        raise DataError(f"{json_path}: motion: expected straight, turning or path, got {motion!r}")
+    return Experiment(
+        name=meta.get("name", Path(stem).name),
+        t_s=frames.t_s,
+        position_m=frames.position_m,
+        heading_rad=frames.heading_rad,
+        link_angles_rad=frames.link_angles_rad,
+        scenario=scenario,
+        motion=motion,
+        camera=dict(meta.get("camera", {})),
+        timing=dict(meta.get("timing", {})),
+        source=dict(meta.get("source", {})),
+    )
+
+
+def import_tracker_csv(
+    csv_path: str | Path,
+    scenario: Scenario,
+    motion: str,
+    out_folder: str | Path,
+    name: str | None = None,
+    camera: dict[str, Any] | None = None,
+    timing: dict[str, Any] | None = None,
+) -> Experiment:
+    """Import a user's tracker CSV as an experiment (all checked before anything is written).
+
+    Parameters
+    ----------
+    csv_path : str or Path
+        Tracker output with columns t_s, x_m, y_m (or t, x, y) and optional heading and link angles.
+    scenario : Scenario
+        The task the robot was given in that run.
+    motion : str
+        "straight", "turning" or "path".
+    out_folder : str or Path
+        Where to write the experiment.
+    name : str, optional
+        Experiment name (default: the CSV's stem).
+    camera, timing : dict, optional
+        Camera and loop facts to record.
+
+    Returns
+    -------
+    Experiment
+    """
+    frames = read_frames_csv(csv_path)
+    exp = Experiment(
+        name=name or Path(csv_path).stem,
+        t_s=frames.t_s,
+        position_m=frames.position_m,
+        heading_rad=frames.heading_rad,
+        link_angles_rad=frames.link_angles_rad,
+        scenario=scenario,
+        motion=motion,
+        camera=camera or {},
+        timing=timing or {},
+        source={"imported_from": str(csv_path)},
+    )
+    write_experiment(exp, out_folder)
+    return exp
+
+
+@dataclass
+class Dataset:
+    """A folder of experiments with a manifest.
+
+    Attributes
+    ----------
+    folder : Path
+    robot : Robot
+        The robot the experiments were run with.
+    train, test : dict[str, list[Experiment]]
+        Per motion type ("straight", "turning").
+    paths : list[Experiment]
+        Multi-waypoint validation runs.
+    truth : dict[str, HydroCoefficients]
+        For virtual tanks: the coefficients the data was generated with, per motion type.
+    manifest : dict
+        The manifest as read.
+    """
+
+    folder: Path
+    robot: Robot
+    train: dict[str, list[Experiment]]
+    test: dict[str, list[Experiment]]
+    paths: list[Experiment]
+    truth: dict[str, HydroCoefficients]
+    manifest: dict[str, Any]
+
+
+def manifest_text(
+    robot_file: str,
+    motions: dict[str, dict[str, list[str]]],
+    paths: list[str],
+    truth: dict[str, HydroCoefficients] | None = None,
+    description: str = "",
+) -> str:
+    """Render a dataset manifest (TOML)."""
+
+    def names(xs: list[str]) -> str:
+        return "[" + ", ".join(f'"{x}"' for x in xs) + "]"
+
+    lines = [
+        f'format = "{DATASET_FORMAT}"',
+        f'description = "{description}"',
+        f'robot = "{robot_file}"',
+        "",
+    ]
+    for motion, split in motions.items():
+        lines += [
+            f"[motions.{motion}]",
+            f"train = {names(split['train'])}",
+            f"test = {names(split['test'])}",
+            "",
+        ]
+    lines += ["[validation]", f"paths = {names(paths)}", ""]
+    if truth:
+        lines.append("[truth]  # coefficients the data was generated with (C_f, C_d, C_a, C_m)")
+        for motion, c in truth.items():
+            lines.append(f"{motion} = [{c.C_f}, {c.C_d}, {c.C_a}, {c.C_m}]")
+    return "\n".join(lines) + "\n"
+
+
+def write_manifest(folder: str | Path, text: str) -> Path:
+    """Write ``manifest.toml`` atomically."""
+    path = Path(folder) / "manifest.toml"
+    _atomic_write(path, text)
+    return path
+
+
+def load_dataset(folder: str | Path) -> Dataset:
+    """Load a dataset folder: its manifest, robot and every experiment it names.
+
+    Raises
+    ------
+    DataError
+        For a missing or malformed manifest or experiment (naming the file and the key or line).
+    """
+    folder = Path(folder)
+    mpath = folder / "manifest.toml"
+    try:
+        manifest = tomllib.loads(mpath.read_text())
+    except OSError as err:
+        raise DataError(f"{mpath}: cannot read dataset manifest: {err.strerror}") from None
+    except tomllib.TOMLDecodeError as err:
+        raise DataError(f"{mpath}: not valid TOML: {err}") from None
+    if manifest.get("format") != DATASET_FORMAT:
+        raise DataError(f"{mpath}: format: expected {DATASET_FORMAT!r}")
+    allowed = {"format", "description", "robot", "motions", "validation", "truth"}
+    for key in manifest:
+        if key not in allowed:
+            raise DataError(f"{mpath}: {key}: unknown key")
+    robot_ref = manifest.get("robot", "paper_robot.toml")
+    robot_path = folder / robot_ref
+    robot = load_robot(robot_path if robot_path.exists() else robot_ref)
+    train: dict[str, list[Experiment]] = {}
+    test: dict[str, list[Experiment]] = {}
+    for motion, split in manifest.get("motions", {}).items():
+        if not isinstance(split, dict) or set(split) - {"train", "test"}:
+            raise DataError(f"{mpath}: motions.{motion}: expected only 'train' and 'test' lists")
+        train[motion] = [
+            _load_named(folder, n, mpath, f"motions.{motion}.train") for n in split.get("train", [])
+        ]
+        test[motion] = [
+            _load_named(folder, n, mpath, f"motions.{motion}.test") for n in split.get("test", [])
+        ]
+    paths = [
+        _load_named(folder, n, mpath, "validation.paths")
+        for n in manifest.get("validation", {}).get("paths", [])
+    ]
+    truth = {}
+    for motion, values in manifest.get("truth", {}).items():
+        try:
+            truth[motion] = HydroCoefficients.from_array(values)
+        except (ValueError, ValidationError):
+            raise DataError(
+                f"{mpath}: truth.{motion}: expected four non-negative numbers"
+            ) from None
+    return Dataset(folder, robot, train, test, paths, truth, manifest)
+
+
+def _load_named(folder: Path, name: str, mpath: Path, key: str) -> Experiment:
+    if not (folder / f"{name}.csv").exists():
+        raise DataError(
+            f"{mpath}: {key}: experiment {name!r} has no file {folder / (name + '.csv')}"
+        )
+    return read_experiment(folder / name)

@@ -1,0 +1,280 @@
+"""The virtual tank: the paper's experiments recorded from the twin instead of a real robot.
+
+Each experiment runs the closed-loop twin with a chosen *true* coefficient set and records what an
+overhead camera would: the median-filtered, pixel-quantised pose at 30 fps, with the time stamps'
+uncertainty (about 0.1 s in the paper) modelled as a per-experiment clock offset drawn uniformly
+from [-jitter, +jitter], and a jittered control period. The experiment ends when the robot reaches
+its last waypoint, as in the tank.
+
+Model-mismatch knobs make the data harder than the model that will be fitted to it:
+
+- ``head_tail``: the true robot has a bulkier head (battery, electronics) and a slim pointed tail,
+  while the dataset's robot file, used for fitting, keeps identical links;
+- ``servo_limits``: the true joints obey the servos' torque-speed line;
+- ``stray_current_m_s``: a weak current in a random (seeded) direction that the metadata does not
+  mention.
+
+Everything is deterministic for a seed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from eelhost.experiment import (
+    Experiment,
+    manifest_text,
+    write_experiment,
+    write_manifest,
+)
+from eelsim.camera import CameraModel
+from eelsim.closed_loop import LoopOptions, simulate_closed_loop
+from eelsim.robot import HydroCoefficients, Robot, load_robot
+from eelsim.scenario import TRAINING_CORNERS, Scenario, named_scenarios, paper_grid
+from eelsim.timing import LoopTiming
+
+TABLE3 = {
+    "straight": HydroCoefficients(C_f=0.008, C_d=0.776, C_a=0.618, C_m=0.007),
+    "turning": HydroCoefficients(C_f=0.009, C_d=0.978, C_a=1.169, C_m=0.001),
+}
+
+# The mismatched robot's head and tail (per-link overrides of the true robot only).
+MISMATCH_HEAD = {"half_axis_vertical_m": 0.032, "half_axis_horizontal_m": 0.026, "mass_kg": 0.33}
+MISMATCH_TAIL = {"half_axis_vertical_m": 0.014, "half_axis_horizontal_m": 0.008, "mass_kg": 0.15}
+
+
+@dataclass(frozen=True)
+class TankSettings:
+    """How the virtual tank records.
+
+    Attributes
+    ----------
+    timestamp_jitter_s : float
+        Half-width of the per-experiment clock offset.
+    control_jitter_s : float
+        Control-period jitter (whole physics steps).
+    head_tail, servo_limits : bool
+        Mismatch knobs (see the module docstring).
+    stray_current_m_s : float
+        Speed of the unmodelled current (0: none).
+    """
+
+    timestamp_jitter_s: float = 0.1
+    control_jitter_s: float = 0.03
+    head_tail: bool = False
+    servo_limits: bool = False
+    stray_current_m_s: float = 0.0
+
+
+def true_robot(robot: Robot, settings: TankSettings) -> Robot:
+    """The robot that generates the data (the fitted robot plus any head/tail mismatch)."""
+    if not settings.head_tail:
+        return robot
+    data = robot.model_dump()
+    data["head"] = MISMATCH_HEAD
+    data["tail"] = MISMATCH_TAIL
+    return Robot.model_validate(data)
+
+
+def paper_experiment_plan() -> list[tuple[str, str, Scenario]]:
+    """(motion, split, scenario) for the paper's 32 experiments and its two paths."""
+    plan = []
+    for motion in ("straight", "turning"):
+        for s in paper_grid(motion):
+            corner = (s.amplitude_rad, s.omega_rad_s) in TRAINING_CORNERS
+            plan.append((motion, "train" if corner else "test", s))
+    names = named_scenarios()
+    plan += [("path", "path", names["path1"]), ("path", "path", names["path2"])]
+    return plan
+
+
+def record_experiment(
+    robot: Robot,
+    scenario: Scenario,
+    motion: str,
+    truth: HydroCoefficients,
+    settings: TankSettings,
+    seed: int,
+) -> Experiment:
+    """Run one experiment in the virtual tank and return what the camera recorded.
+
+    Parameters
+    ----------
+    robot : Robot
+        The robot file of the dataset (the true robot adds the mismatch knobs).
+    scenario : Scenario
+        The task.
+    motion : str
+        "straight", "turning" or "path".
+    truth : HydroCoefficients
+        The true coefficients.
+    settings : TankSettings
+    seed : int
+        Seeds the control jitter, the clock offset and the stray current.
+
+    Returns
+    -------
+    Experiment
+    """
+    rng = np.random.default_rng(seed)
+    offset_s = float(rng.uniform(-settings.timestamp_jitter_s, settings.timestamp_jitter_s))
+    task = scenario
+    if settings.stray_current_m_s > 0:
+        stray = settings.stray_current_m_s * np.array(
+            [np.cos(a := rng.uniform(0, 2 * np.pi)), np.sin(a)]
+        )
+        vc = np.asarray(scenario.current_m_s) + stray
+        task = scenario.model_copy(
+            update={
+                "current_speed_m_s": float(np.hypot(*vc)),
+                "current_direction_deg": float(np.degrees(np.arctan2(vc[1], vc[0]))),
+            }
+        )
+    timing = LoopTiming(control_period_s=0.3, jitter_s=settings.control_jitter_s)
+    camera = CameraModel()
+    options = LoopOptions(timing=timing, camera=camera, servo_limits=settings.servo_limits)
+    run = simulate_closed_loop(
+        true_robot(robot, settings),
+        task,
+        options,
+        seed=int(rng.integers(2**31)),
+        coefficients=truth,
+    )
+    frames = run.camera_t_s <= (run.t_s[-1] + 1e-9)
+    return Experiment(
+        name=scenario.name,
+        t_s=run.camera_t_s[frames] + offset_s,
+        position_m=run.camera_pose[frames, :2],
+        heading_rad=run.camera_pose[frames, 2],
+        scenario=scenario,
+        motion=motion,
+        camera={
+            "fps": camera.fps,
+            "pixel_m": camera.pixel_m,
+            "median_window": camera.median_window,
+            "timestamp_jitter_s": settings.timestamp_jitter_s,
+        },
+        timing={
+            "control_period_s": timing.control_period_s,
+            "extra_delay_s": 0.0,
+            "jitter_s": timing.jitter_s,
+        },
+        source={
+            "virtual_tank": True,
+            "truth": truth.model_dump(),
+            "seed": seed,
+            "clock_offset_s": offset_s,
+            "outcome": run.failure.name,
+            "mismatch": {
+                "head_tail": settings.head_tail,
+                "servo_limits": settings.servo_limits,
+                "stray_current_m_s": settings.stray_current_m_s,
+            },
+        },
+    )
+
+
+def _record_job(args: tuple) -> Experiment:
+    return record_experiment(*args)
+
+
+def generate_dataset(
+    folder: str | Path,
+    robot: Robot | None = None,
+    truth: dict[str, HydroCoefficients] | None = None,
+    settings: TankSettings | None = None,
+    seed: int = 0,
+    workers: int = 2,
+    progress: Callable[[int, int], None] | None = None,
+) -> Path:
+    """Generate the paper's 32 experiments and two paths into a dataset folder.
+
+    Parameters
+    ----------
+    folder : str or Path
+        Output folder (created).
+    robot : Robot, optional
+        The dataset's robot (default: the bundled paper robot).
+    truth : dict, optional
+        True coefficients per motion type ("straight", "turning"; paths use "turning").
+        Default: the paper's table 3.
+    settings : TankSettings, optional
+    seed : int
+        Master seed; experiment i uses seed + i.
+    workers : int
+        Parallel processes.
+    progress : callable, optional
+        ``progress(done, total)``.
+
+    Returns
+    -------
+    Path
+        The manifest's path.
+    """
+    folder = Path(folder)
+    robot = robot or load_robot()
+    truth = truth or TABLE3
+    settings = settings or TankSettings()
+    plan = paper_experiment_plan()
+    jobs = [
+        (robot, s, motion, truth["turning" if motion == "path" else motion], settings, seed + i)
+        for i, (motion, _split, s) in enumerate(plan)
+    ]
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "robot.toml").write_text(_robot_file_text(robot))
+    done = 0
+    with ProcessPoolExecutor(max_workers=max(1, workers)) as pool:
+        for exp in pool.map(_record_job, jobs):
+            write_experiment(exp, folder)
+            done += 1
+            if progress:
+                progress(done, len(jobs))
+    motions: dict[str, dict[str, list[str]]] = {}
+    for motion, split, s in plan:
+        if motion != "path":
+            motions.setdefault(motion, {"train": [], "test": []})[split].append(s.name)
+    desc = (
+        f"virtual tank, seed {seed}, mismatch head_tail={settings.head_tail} "
+        f"servo_limits={settings.servo_limits} stray_current={settings.stray_current_m_s}"
+    )
+    return write_manifest(
+        folder,
+        manifest_text(
+            "robot.toml",
+            motions,
+            ["path1", "path2"],
+            {"straight": truth["straight"], "turning": truth["turning"]},
+            desc,
+        ),
+    )
+
+
+def _robot_file_text(robot: Robot) -> str:
+    """The robot as a TOML file (the bundled file when unchanged, so comments survive)."""
+    bundled = resources.files("eelsim.data").joinpath("paper_robot.toml").read_text()
+    if robot == load_robot():
+        return bundled
+    return _to_toml(robot.model_dump(exclude_none=True))
+
+
+def _to_toml(data: dict, prefix: str = "") -> str:
+    scalars = [(k, v) for k, v in data.items() if not isinstance(v, dict)]
+    tables = [(k, v) for k, v in data.items() if isinstance(v, dict)]
+    out = [f'"{k}" = {_toml_value(v)}' for k, v in scalars]
+    for k, v in tables:
+        out += ["", f"[{prefix}{k}]", _to_toml(v, f"{prefix}{k}.").strip()]
+    return "\n".join(out) + "\n"
+
+
+def _toml_value(v: object) -> str:
+    if isinstance(v, str):
+        return '"' + v.replace('"', '\\"') + '"'
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    return repr(v)
