@@ -1,0 +1,84 @@
+import numpy as np
+import pytest
+
+from eelhost.estimation.optimise import (
+    BOUNDS,
+    Checkpoint,
+    fit_cmaes,
+    fit_ga,
+    from_unit,
+    polish_least_squares,
+    to_unit,
+)
+from eelsim.robot import HydroCoefficients
+
+TARGET = np.array([0.008, 0.776, 0.618, 0.007])
+
+
+def bowl(c):
+    """A cheap stand-in objective with its minimum at TARGET (relative squared distance)."""
+    c = np.atleast_2d(c)
+    return (((c - TARGET) / (BOUNDS[:, 1] - BOUNDS[:, 0])) ** 2).sum(axis=1)
+
+
+class Killed(Exception):
+    pass
+
+
+def kill_after(generation):
+    def progress(gen, _best, _sims):
+        if gen == generation:
+            raise Killed
+
+    return progress
+
+
+def test_bounds_hold_the_papers_table_3_and_unit_mapping_round_trips():
+    for row in ([0.008, 0.776, 0.618, 0.007], [0.009, 0.978, 1.169, 0.001]):
+        u = to_unit(row)
+        assert np.all((u > 0) & (u < 1))
+        assert np.allclose(from_unit(u), row)
+
+
+@pytest.mark.parametrize("method", ["ga", "cmaes"])
+def test_resume_after_a_kill_gives_the_same_result_as_an_uninterrupted_run(tmp_path, method):
+    def run(checkpoint=None, resume=False, progress=None):
+        if method == "ga":
+            return fit_ga(bowl, seed=5, pop_size=12, generations=6, checkpoint=checkpoint, resume=resume, progress=progress)
+        return fit_cmaes(bowl, seed=5, max_evaluations=96, popsize=8, checkpoint=checkpoint, resume=resume, progress=progress)
+
+    straight = run()
+    settings = {"method": method, "seed": 5}
+    ck = Checkpoint(tmp_path / "ck.pkl", settings)
+    with pytest.raises(Killed):
+        run(checkpoint=ck, progress=kill_after(2))
+    np.random.seed(12345)  # noqa: NPY002 (a new process starts with other global random state)
+    resumed = run(checkpoint=Checkpoint(tmp_path / "ck.pkl", settings), resume=True)
+    assert resumed.fitness == straight.fitness
+    assert resumed.coefficients == straight.coefficients
+    assert [h[:2] for h in resumed.history] == [h[:2] for h in straight.history]
+
+
+def test_checkpoint_from_other_settings_is_refused(tmp_path):
+    Checkpoint(tmp_path / "ck.pkl", {"seed": 1}).save({"x": 1})
+    with pytest.raises(ValueError, match="other settings"):
+        Checkpoint(tmp_path / "ck.pkl", {"seed": 2}).load()
+
+
+def test_cmaes_and_ga_approach_the_minimum_of_a_simple_bowl():
+    ga = fit_ga(bowl, seed=1, pop_size=30, generations=25)
+    es = fit_cmaes(bowl, seed=1, max_evaluations=600, popsize=10)
+    assert es.fitness < 1e-6 and ga.fitness < 1e-2
+    assert es.fitness < ga.fitness  # CMA-ES is the better method on smooth problems
+    assert ga.history[-1][1] <= ga.history[0][1]
+
+
+def test_least_squares_polish_finds_a_linear_least_squares_minimum_and_never_worsens():
+    def residuals(c):
+        return (np.atleast_2d(c) - TARGET) / (BOUNDS[:, 1] - BOUNDS[:, 0])
+
+    start = HydroCoefficients.from_array([0.02, 1.2, 0.9, 0.05])
+    res = polish_least_squares(residuals, bowl, start, float(bowl(start.as_array())[0]))
+    assert np.allclose(res.coefficients.as_array(), TARGET, atol=1e-5)
+    worse = polish_least_squares(lambda c: np.ones((len(np.atleast_2d(c)), 3)), bowl, start, 0.0)
+    assert worse.coefficients == start  # a polish that does not improve the minimax is not taken
