@@ -10,13 +10,14 @@ from __future__ import annotations
 import argparse
 import sys
 
-from eelhost.commands import simulate, speeds
+from eelhost.commands import dataset, estimate, report, simulate, speeds, validate
+from eelhost.experiment import DataError
 from eelsim.robot import RobotFileError
 from eelsim.scenario import ScenarioError
 from eelsim.timing import TimingError
 
-COMMANDS = (simulate, speeds)
-USER_ERRORS = (RobotFileError, ScenarioError, TimingError, ValueError, FileNotFoundError)
+COMMANDS = (simulate, speeds, dataset, estimate, validate, report)
+USER_ERRORS = (RobotFileError, ScenarioError, TimingError, DataError, ValueError, FileNotFoundError)
 
 
 def build_parser() -> argparse.ArgumentParser:

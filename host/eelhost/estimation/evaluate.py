@@ -93,17 +93,20 @@ class Simulated:
     ----------
     positions_m : ndarray, shape (C, E, n, 2)
         Centre of mass at the sample times (NaN where a run failed before them).
+    heading_rad : ndarray, shape (C, E, n)
+        Heading at the sample times (NaN likewise).
     failure : ndarray of int, shape (C, E)
         :class:`eelsim.flags.Failure` codes.
     distance_left_m : ndarray, shape (C, E)
     """
 
     positions_m: np.ndarray
+    heading_rad: np.ndarray
     failure: np.ndarray
     distance_left_m: np.ndarray
 
 
-def _reference_job(args: tuple) -> tuple[np.ndarray, int, float]:
+def _reference_job(args: tuple) -> tuple[np.ndarray, np.ndarray, int, float]:
     robot, prepared, coeffs = args
     run = simulate_closed_loop(
         robot, prepared.scenario, prepared.options, seed=0, coefficients=coeffs
@@ -112,9 +115,11 @@ def _reference_job(args: tuple) -> tuple[np.ndarray, int, float]:
     dt = prepared.options.timing.dt_s
     idx = np.round(prepared.times_s / dt).astype(int)
     pos = np.full((idx.size, 2), np.nan)
+    heading = np.full(idx.size, np.nan)
     ok = idx < len(run.t_s)
     pos[ok] = run.states[idx[ok], n : n + 2]
-    return pos, int(run.failure), float(run.distance_left_m)
+    heading[ok] = run.states[idx[ok], :n].mean(axis=1)
+    return pos, heading, int(run.failure), float(run.distance_left_m)
 
 
 class Evaluator:
@@ -187,9 +192,10 @@ class Evaluator:
         c, e = coeffs.shape[0], len(self.prepared)
         n = self.prepared[0].times_s.size
         pos = np.array([r[0] for r in results]).reshape(c, e, n, 2)
-        fail = np.array([r[1] for r in results], dtype=int).reshape(c, e)
-        left = np.array([r[2] for r in results]).reshape(c, e)
-        return Simulated(pos, fail, left)
+        heading = np.array([r[1] for r in results]).reshape(c, e, n)
+        fail = np.array([r[2] for r in results], dtype=int).reshape(c, e)
+        left = np.array([r[3] for r in results]).reshape(c, e)
+        return Simulated(pos, heading, fail, left)
 
     def errors(self, coefficients: np.ndarray) -> np.ndarray:
         """Per-experiment error (with the failure penalties), shape (C, E)."""
@@ -241,7 +247,7 @@ def _choose_backend(backend: str) -> str:
     if backend != "auto":
         return backend
     try:
-        import eelsim.batch  # noqa: F401
+        import eelhost.estimation.batch_backend  # noqa: F401
 
         return "batch"
     except ImportError:

@@ -93,7 +93,9 @@ class Checkpoint:
 
     def __init__(self, path: str | Path, settings: dict[str, Any]) -> None:
         self.path = Path(path)
-        self.fingerprint = hashlib.sha256(json.dumps(settings, sort_keys=True, default=str).encode()).hexdigest()
+        self.fingerprint = hashlib.sha256(
+            json.dumps(settings, sort_keys=True, default=str).encode()
+        ).hexdigest()
 
     # numpy's legacy global generator is saved because pycma draws from it (NPY002 is about new
     # code choosing it; here we must follow what the libraries use).
@@ -215,7 +217,13 @@ def fit_ga(
         if progress:
             progress(*history[-1])
     best_x = from_unit(algo.opt.get("X")[0])
-    return FitResult("ga", HydroCoefficients.from_array(best_x), float(algo.opt.get("F").min()), history, evaluations)
+    return FitResult(
+        "ga",
+        HydroCoefficients.from_array(best_x),
+        float(algo.opt.get("F").min()),
+        history,
+        evaluations,
+    )
 
 
 def fit_cmaes(
@@ -260,8 +268,15 @@ def fit_cmaes(
         es = cma.CMAEvolutionStrategy(
             np.clip(x0, 0.0, 1.0).tolist(),
             sigma0,
-            {"bounds": [0.0, 1.0], "seed": seed + 1, "popsize": popsize, "verbose": -9,
-             "maxfevals": max_evaluations, "tolfun": 1e-9, "tolx": 1e-7},
+            {
+                "bounds": [0.0, 1.0],
+                "seed": seed + 1,
+                "popsize": popsize,
+                "verbose": -9,
+                "maxfevals": max_evaluations,
+                "tolfun": 1e-9,
+                "tolx": 1e-7,
+            },
         )
         history: list[tuple[int, float, int]] = []
         best_u, best_f, evaluations = None, np.inf, 0
@@ -278,10 +293,20 @@ def fit_cmaes(
             best_u, best_f = xs[i].copy(), float(f[i])
         history.append((len(history), best_f, simulations()))
         if checkpoint is not None:
-            checkpoint.save({"es": es, "history": history, "best_u": best_u, "best_f": best_f, "evaluations": evaluations})
+            checkpoint.save(
+                {
+                    "es": es,
+                    "history": history,
+                    "best_u": best_u,
+                    "best_f": best_f,
+                    "evaluations": evaluations,
+                }
+            )
         if progress:
             progress(*history[-1])
-    return FitResult("cmaes", HydroCoefficients.from_array(from_unit(best_u)), best_f, history, evaluations)
+    return FitResult(
+        "cmaes", HydroCoefficients.from_array(from_unit(best_u)), best_f, history, evaluations
+    )
 
 
 def polish_least_squares(

@@ -1,0 +1,88 @@
+"""``eelbot estimate``: fit the hydrodynamic coefficients to a dataset's training experiments."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from tqdm import tqdm
+
+from eelhost.estimation.pipeline import METHODS, FitSettings, fit_motion, write_coefficients
+from eelhost.experiment import load_dataset
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    """Register the subcommand."""
+    p = sub.add_parser(
+        "estimate",
+        help="fit C_f, C_d, C_a, C_m to a dataset",
+        description="Fit the coefficients to the training experiments (minimax of "
+        "position + 5 x velocity error at 7 samples, the paper's protocol).",
+    )
+    p.add_argument("dataset", help="dataset folder (with manifest.toml)")
+    p.add_argument(
+        "--motion",
+        choices=["straight", "turning", "both", "joint"],
+        default="both",
+        help="separate straight and turning fits (both, the paper's), one of them, or "
+        "one joint set for the robot",
+    )
+    p.add_argument(
+        "--method",
+        choices=METHODS,
+        default="cmaes",
+        help="cmaes (+ least-squares polish; default), ga (the paper's), lsq (polish only)",
+    )
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--budget", type=int, default=600, help="CMA-ES candidates (default 600)")
+    p.add_argument("--pop-size", type=int, default=150, help="GA population (150)")
+    p.add_argument("--generations", type=int, default=130, help="GA generations (130)")
+    p.add_argument("--backend", choices=["auto", "batch", "reference"], default="auto")
+    p.add_argument("--scheduler", metavar="ADDRESS", help="spread evaluation over a Dask cluster")
+    p.add_argument(
+        "--out", default="out/estimate", help="folder for coefficients.json and checkpoints"
+    )
+    p.add_argument("--resume", action="store_true", help="continue from the checkpoint in --out")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the subcommand."""
+    dataset = load_dataset(args.dataset)
+    settings = FitSettings(
+        args.method, args.seed, args.budget, args.pop_size, args.generations, backend=args.backend
+    )
+    motions = ("straight", "turning") if args.motion == "both" else (args.motion,)
+    map_function = None
+    if args.scheduler:
+        from eelhost.estimation.cluster import dask_map
+
+        map_function = dask_map(args.scheduler)
+    fits = {}
+    for motion in motions:
+        total = settings.generations if settings.method == "ga" else None
+        bar = tqdm(total=total, unit="gen", desc=f"{motion} ({settings.method})")
+
+        def progress(gen: int, best: float, sims: int, bar: tqdm = bar) -> None:
+            bar.update(1)
+            bar.set_postfix(best=f"{best:.4g}", sims=sims)
+
+        res, ev = fit_motion(
+            dataset,
+            motion,
+            settings,
+            Path(args.out),
+            args.resume,
+            progress,
+            map_function=map_function,
+        )
+        bar.close()
+        fits[motion] = res
+        print(
+            f"{motion}: fitness {res.fitness:.4f}, {ev.simulations} simulations, "
+            f"C_f {res.coefficients.C_f:.4g} C_d {res.coefficients.C_d:.4g} "
+            f"C_a {res.coefficients.C_a:.4g} C_m {res.coefficients.C_m:.4g}"
+        )
+    path = write_coefficients(Path(args.out) / "coefficients.json", fits)
+    print(f"wrote {path}")
+    return 0

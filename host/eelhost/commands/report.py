@@ -1,0 +1,58 @@
+"""``eelbot report``: the main job: fit, validate and report on a dataset (default: bundled)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from tqdm import tqdm
+
+from eelhost.estimation.pipeline import METHODS, FitSettings
+from eelhost.estimation.report import run_report
+from eelhost.experiment import load_dataset
+from eelhost.virtual_tank import generate_dataset
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    """Register the subcommand."""
+    p = sub.add_parser(
+        "report",
+        help="fit straight and turning, validate, write a report folder",
+        description="The whole estimation chain. Without DATASET it generates the "
+        "default virtual-tank dataset (truth = the paper's table 3) first.",
+    )
+    p.add_argument("dataset", nargs="?", help="dataset folder (default: generate out/dataset)")
+    p.add_argument("--out", default="out/report", help="report folder")
+    p.add_argument("--method", choices=METHODS, default="cmaes")
+    p.add_argument("--joint", action="store_true", help="also fit one joint set for the robot")
+    p.add_argument("--budget", type=int, default=600, help="CMA-ES candidates per fit")
+    p.add_argument("--bootstrap", type=int, default=8, help="bootstrap refits per fit (0: none)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--backend", choices=["auto", "batch", "reference"], default="auto")
+    p.add_argument("--resume", action="store_true", help="continue interrupted fits")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the subcommand."""
+    folder = Path(args.dataset) if args.dataset else Path("out/dataset")
+    if args.dataset is None and not (folder / "manifest.toml").exists():
+        print(f"generating the default virtual-tank dataset in {folder} ...")
+        generate_dataset(folder, seed=args.seed)
+    dataset = load_dataset(folder)
+    motions = ("straight", "turning") + (("joint",) if args.joint else ())
+    settings = FitSettings(args.method, args.seed, args.budget, backend=args.backend)
+
+    def factory(motion: str):
+        bar = tqdm(unit="gen", desc=f"fit {motion}", leave=False)
+
+        def progress(gen: int, best: float, sims: int) -> None:
+            bar.update(1)
+            bar.set_postfix(best=f"{best:.4g}", sims=sims)
+
+        return progress
+
+    run_report(
+        dataset, args.out, motions, settings, args.bootstrap, args.resume, progress_factory=factory
+    )
+    return 0

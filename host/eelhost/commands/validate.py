@@ -1,0 +1,49 @@
+"""``eelbot validate``: errors of fitted coefficients on a dataset's test experiments and paths."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from eelhost.estimation.figures import plot_paths, plot_time_series
+from eelhost.estimation.pipeline import read_coefficients
+from eelhost.estimation.validate import table_csv, table_markdown, validate
+from eelhost.experiment import load_dataset
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    """Register the subcommand."""
+    p = sub.add_parser(
+        "validate",
+        help="validate coefficients on held-out experiments",
+        description="E_x and E_v (paper's mean of norms and true RMS, BL and BL/s) for "
+        "every test experiment and path, as tables (markdown, CSV) and figures.",
+    )
+    p.add_argument("coefficients", help="coefficients.json from estimate, or Cf,Cd,Ca,Cm")
+    p.add_argument("dataset", help="dataset folder")
+    p.add_argument("--out", default="out/validate", help="folder for tables and figures")
+    p.add_argument("--backend", choices=["auto", "batch", "reference"], default="auto")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the subcommand."""
+    fitted = read_coefficients(args.coefficients)
+    dataset = load_dataset(args.dataset)
+    tests = [e for exps in dataset.test.values() for e in exps] + list(dataset.paths)
+    runs = validate(dataset.robot, fitted, tests, backend=args.backend)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    md = table_markdown([r.row for r in runs])
+    (out / "table4.md").write_text(md + "\n")
+    (out / "table4.csv").write_text(table_csv([r.row for r in runs]))
+    for motion in ("straight", "turning", "path"):
+        group = [r for r in runs if r.experiment.motion == motion]
+        if group:
+            plot_paths(group, out / f"paths_{motion}.png")
+    for r in runs:
+        if r.experiment.motion == "path":
+            plot_time_series(r, out / f"timeseries_{r.experiment.name}.png")
+    print(md)
+    print(f"wrote {out}/table4.md, table4.csv and figures")
+    return 0

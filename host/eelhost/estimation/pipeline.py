@@ -1,0 +1,198 @@
+"""The estimation chain: fit each motion type, validate, quantify uncertainty, write a report.
+
+Methods (``method``):
+
+- ``"cmaes"`` (default): CMA-ES from the middle of the bounds, then a least-squares polish;
+- ``"ga"``: the paper's genetic algorithm (population 150, 130 generations, uniform crossover);
+- ``"lsq"``: the least-squares polish alone, from ``start``.
+
+``motion`` is "straight" or "turning" (the paper's separate fits) or "joint" (one coefficient set
+for the robot, fitted on the training experiments of both motion types).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from eelhost.estimation.evaluate import Evaluator
+from eelhost.estimation.optimise import (
+    Checkpoint,
+    FitResult,
+    fit_cmaes,
+    fit_ga,
+    polish_least_squares,
+)
+from eelhost.experiment import Dataset, Experiment
+from eelsim.robot import HydroCoefficients
+
+METHODS = ("cmaes", "ga", "lsq")
+
+
+@dataclass(frozen=True)
+class FitSettings:
+    """How a fit is run.
+
+    Attributes
+    ----------
+    method : str
+        "cmaes", "ga" or "lsq".
+    seed : int
+    budget : int
+        Candidates for CMA-ES (the GA's is population x generations).
+    pop_size, generations : int
+        GA settings (the paper's 150 and 130).
+    polish_iterations : int
+        Least-squares iterations after CMA-ES (0: none).
+    backend : str
+        Evaluator backend ("auto", "batch", "reference").
+    """
+
+    method: str = "cmaes"
+    seed: int = 0
+    budget: int = 600
+    pop_size: int = 150
+    generations: int = 130
+    polish_iterations: int = 10
+    backend: str = "auto"
+
+
+def training_experiments(dataset: Dataset, motion: str) -> list[Experiment]:
+    """The training experiments of a motion type ("joint": of all motion types)."""
+    if motion == "joint":
+        return [e for exps in dataset.train.values() for e in exps]
+    if motion not in dataset.train:
+        raise ValueError(
+            f"dataset has no training experiments for motion {motion!r} (has {sorted(dataset.train)})"
+        )
+    return list(dataset.train[motion])
+
+
+def fit_motion(
+    dataset: Dataset,
+    motion: str,
+    settings: FitSettings,
+    checkpoint_dir: str | Path | None = None,
+    resume: bool = False,
+    progress: Callable[[int, float, int], None] | None = None,
+    start: HydroCoefficients | None = None,
+    map_function: Callable | None = None,
+) -> tuple[FitResult, Evaluator]:
+    """Fit the coefficients of one motion type.
+
+    Parameters
+    ----------
+    dataset : Dataset
+    motion : str
+        "straight", "turning" or "joint".
+    settings : FitSettings
+    checkpoint_dir : str or Path, optional
+        Where to keep the per-generation checkpoint.
+    resume : bool
+        Continue from a checkpoint.
+    progress : callable, optional
+        (generation, best fitness, simulations).
+    start : HydroCoefficients, optional
+        Start of the "lsq" method (default: the robot file's coefficients).
+    map_function : callable, optional
+        Spreads the evaluation (e.g. a Dask client's map).
+
+    Returns
+    -------
+    (FitResult, Evaluator)
+        The result (``evaluations`` counts candidates; the evaluator's ``simulations`` counts runs).
+    """
+    if settings.method not in METHODS:
+        raise ValueError(f"method must be one of {', '.join(METHODS)}, got {settings.method!r}")
+    ev = Evaluator(
+        dataset.robot,
+        training_experiments(dataset, motion),
+        backend=settings.backend,
+        map_function=map_function,
+    )
+    ck = None
+    if checkpoint_dir is not None:
+        ident = {"dataset": str(dataset.folder.resolve()), "motion": motion, **settings.__dict__}
+        ck = Checkpoint(Path(checkpoint_dir) / f"checkpoint_{motion}_{settings.method}.pkl", ident)
+    sims = lambda: ev.simulations  # noqa: E731
+    if settings.method == "ga":
+        res = fit_ga(
+            ev.fitness,
+            settings.seed,
+            settings.pop_size,
+            settings.generations,
+            ck,
+            resume,
+            progress,
+            sims,
+        )
+    elif settings.method == "cmaes":
+        res = fit_cmaes(
+            ev.fitness,
+            settings.seed,
+            settings.budget,
+            checkpoint=ck,
+            resume=resume,
+            progress=progress,
+            simulations=sims,
+        )
+        if settings.polish_iterations > 0:
+            pol = polish_least_squares(
+                ev.residuals, ev.fitness, res.coefficients, res.fitness, settings.polish_iterations
+            )
+            res = FitResult(
+                "cmaes+lsq",
+                pol.coefficients,
+                pol.fitness,
+                res.history + [(len(res.history), pol.fitness, ev.simulations)],
+                res.evaluations + pol.evaluations,
+            )
+    else:
+        begin = start or dataset.robot.hydrodynamics
+        f0 = float(ev.fitness(begin.as_array()[None, :])[0])
+        res = polish_least_squares(
+            ev.residuals, ev.fitness, begin, f0, max(1, settings.polish_iterations)
+        )
+    return res, ev
+
+
+def write_coefficients(
+    path: str | Path, fits: dict[str, FitResult], extra: dict | None = None
+) -> Path:
+    """Write fitted coefficients as JSON (readable by ``eelbot validate``)."""
+    data = {"format": "eelbot-coefficients/1", "fits": {m: r.to_json() for m, r in fits.items()}}
+    if extra:
+        data.update(extra)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(data, indent=2) + "\n")
+    return path
+
+
+def read_coefficients(spec: str) -> dict[str, HydroCoefficients]:
+    """Coefficients from a JSON file written by :func:`write_coefficients` or "Cf,Cd,Ca,Cm".
+
+    A single set applies to every motion type ("joint").
+    """
+    path = Path(spec)
+    if path.suffix == ".json":
+        try:
+            data = json.loads(path.read_text())
+        except (OSError, json.JSONDecodeError) as err:
+            raise ValueError(f"{path}: cannot read coefficients: {err}") from None
+        fits = data.get("fits")
+        if not isinstance(fits, dict) or not fits:
+            raise ValueError(f"{path}: fits: expected fitted coefficient sets")
+        try:
+            return {m: HydroCoefficients.model_validate(f["coefficients"]) for m, f in fits.items()}
+        except (KeyError, TypeError, ValueError) as err:
+            raise ValueError(f"{path}: fits: malformed coefficient set ({err})") from None
+    try:
+        values = [float(v) for v in spec.split(",")]
+        return {"joint": HydroCoefficients.from_array(values)}
+    except ValueError:
+        raise ValueError(
+            f"coefficients: expected a .json file or Cf,Cd,Ca,Cm, got {spec!r}"
+        ) from None
