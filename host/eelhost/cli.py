@@ -10,13 +10,13 @@ from __future__ import annotations
 import argparse
 import sys
 
-from eelhost.commands import dataset, estimate, report, simulate, speeds, validate
+from eelhost.commands import dataset, estimate, report, simulate, speeds, validate, vision_bench
 from eelhost.experiment import DataError
 from eelsim.robot import RobotFileError
 from eelsim.scenario import ScenarioError
 from eelsim.timing import TimingError
 
-COMMANDS = (simulate, speeds, dataset, estimate, validate, report)
+COMMANDS = (simulate, speeds, dataset, estimate, validate, report, vision_bench)
 USER_ERRORS = (RobotFileError, ScenarioError, TimingError, DataError, ValueError, FileNotFoundError)
 
 
