@@ -12,16 +12,19 @@ from eelhost.estimation.report import run_report
 from eelhost.experiment import load_dataset
 from eelhost.virtual_tank import generate_dataset
 
+# The repository's datasets/ folder (this file is host/eelhost/commands/report.py).
+BUNDLED_DATASET = Path(__file__).resolve().parents[3] / "datasets" / "paper_virtual_tank"
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register the subcommand."""
     p = sub.add_parser(
         "report",
         help="fit straight and turning, validate, write a report folder",
-        description="The whole estimation chain. Without DATASET it generates the "
-        "default virtual-tank dataset (truth = the paper's table 3) first.",
+        description="The whole estimation chain. Without DATASET it uses the bundled "
+        "virtual-tank dataset (truth = the paper's table 3).",
     )
-    p.add_argument("dataset", nargs="?", help="dataset folder (default: generate out/dataset)")
+    p.add_argument("dataset", nargs="?", help="dataset folder (default: the bundled virtual-tank dataset)")
     p.add_argument("--out", default="out/report", help="report folder")
     p.add_argument("--method", choices=METHODS, default="cmaes")
     p.add_argument("--joint", action="store_true", help="also fit one joint set for the robot")
@@ -35,9 +38,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
-    folder = Path(args.dataset) if args.dataset else Path("out/dataset")
+    folder = Path(args.dataset) if args.dataset else BUNDLED_DATASET
     if args.dataset is None and not (folder / "manifest.toml").exists():
-        print(f"generating the default virtual-tank dataset in {folder} ...")
+        folder = Path("out/dataset")
+        print(f"no bundled dataset here; generating the default virtual-tank dataset in {folder} ...")
         generate_dataset(folder, seed=args.seed)
     dataset = load_dataset(folder)
     motions = ("straight", "turning") + (("joint",) if args.joint else ())
