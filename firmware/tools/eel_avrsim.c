@@ -8,7 +8,12 @@
  *     failing (exit 1) when the longest exceeds --budget-us.
  *
  * Times are simulated microseconds from reset at --freq (16 MHz). Used by `make bench` and by the
- * tests; a later processor-in-the-loop rig can drive the same options from a plant simulation.
+ * tests.
+ *
+ * Built with -DEEL_AVRSIM_LIBRARY -shared (build/tools/libeelavrsim.so) the same code is a library
+ * for the processor-in-the-loop driver (host/eelhost/pil.py, through ctypes): the caller queues
+ * UART bytes at times, runs the AVR up to a time, and takes what it sent and the pulses it made
+ * (the eas_* functions below).
  */
 #include <inttypes.h>
 #include <stdarg.h>
@@ -23,32 +28,55 @@
 #include <sim_elf.h>
 
 #define MAX_PINS 8
-#define MAX_INPUT (1 << 16)
+
+struct EasSim;
 
 typedef struct {
+  struct EasSim* sim;
   char port;
   int bit;
+  int index;
   avr_cycle_count_t rise;
   int high;
 } pin_t;
 
-static avr_t* g_avr;
-static double g_cycles_per_us;
-static FILE* g_uart_out;
-static FILE* g_pulses_out;
-static pin_t g_pins[MAX_PINS];
-static int g_npins;
-static pin_t g_busy;
-static int g_have_busy;
-static uint64_t g_busy_n, g_busy_sum, g_busy_min = UINT64_MAX, g_busy_max;
-static uint64_t g_pulses_n, g_uart_out_n;
-static int g_xon;
-
-static struct {
+typedef struct {
   avr_cycle_count_t at;
   uint8_t byte;
-} g_input[MAX_INPUT];
-static size_t g_ninput, g_next_input;
+} timed_byte_t;
+
+typedef struct {
+  double rise_us, width_us;
+  int pin;
+} pulse_t;
+
+/* One emulated AVR with its observers. Outputs go to files (command line) or to buffers that the
+ * library caller drains (eas_take_*). */
+typedef struct EasSim {
+  avr_t* avr;
+  double cycles_per_us;
+  avr_irq_t* uart_input;
+  int xon;
+  int state;
+  pin_t pins[MAX_PINS];
+  int npins;
+  FILE* uart_out;
+  FILE* pulses_out;
+  uint64_t pulses_n, uart_out_n;
+  /* busy pin statistics (command line) */
+  pin_t busy;
+  int have_busy;
+  uint64_t busy_n, busy_sum, busy_min, busy_max;
+  /* UART input: bytes queued by time, delivered in order when the UART takes them (XON) */
+  timed_byte_t* in;
+  size_t nin, cap_in, next_in;
+  /* buffered outputs (library) */
+  int buffer_outputs;
+  timed_byte_t* out;
+  size_t nout, cap_out;
+  pulse_t* pulses;
+  size_t npulses, cap_pulses;
+} EasSim;
 
 // simavr logs to stdout; keep stdout for our report and pass on only errors, to stderr.
 static void quiet_logger(avr_t* avr, const int level, const char* format, va_list ap) {
@@ -56,12 +84,19 @@ static void quiet_logger(avr_t* avr, const int level, const char* format, va_lis
   if (level <= LOG_ERROR) vfprintf(stderr, format, ap);
 }
 
-static void die(const char* msg, const char* arg) {
-  fprintf(stderr, "eel_avrsim: %s%s%s\n", msg, arg ? ": " : "", arg ? arg : "");
-  exit(2);
+static double cycles_to_us(const EasSim* s, avr_cycle_count_t c) {
+  return (double)c / s->cycles_per_us;
 }
 
-static double cycles_to_us(avr_cycle_count_t c) { return (double)c / g_cycles_per_us; }
+static int grow(void** buf, size_t* cap, size_t n, size_t size) {
+  if (n < *cap) return 0;
+  size_t ncap = *cap ? 2 * *cap : 1024;
+  void* p = realloc(*buf, ncap * size);
+  if (!p) return -1;
+  *buf = p;
+  *cap = ncap;
+  return 0;
+}
 
 static int parse_pin(const char* s, pin_t* p) {
   if (strlen(s) < 2 || s[0] < 'A' || s[0] > 'L') return -1;
@@ -76,13 +111,16 @@ static int parse_pin(const char* s, pin_t* p) {
 static void on_pulse_pin(struct avr_irq_t* irq, uint32_t value, void* param) {
   (void)irq;
   pin_t* p = (pin_t*)param;
+  EasSim* s = p->sim;
   if (value && !p->high) {
-    p->rise = g_avr->cycle;
+    p->rise = s->avr->cycle;
   } else if (!value && p->high) {
-    ++g_pulses_n;
-    if (g_pulses_out) {
-      fprintf(g_pulses_out, "%.3f %c%d %.3f\n", cycles_to_us(p->rise), p->port, p->bit,
-              cycles_to_us(g_avr->cycle - p->rise));
+    ++s->pulses_n;
+    const double rise = cycles_to_us(s, p->rise), width = cycles_to_us(s, s->avr->cycle - p->rise);
+    if (s->pulses_out) fprintf(s->pulses_out, "%.3f %c%d %.3f\n", rise, p->port, p->bit, width);
+    if (s->buffer_outputs &&
+        grow((void**)&s->pulses, &s->cap_pulses, s->npulses, sizeof(pulse_t)) == 0) {
+      s->pulses[s->npulses++] = (pulse_t){rise, width, p->index};
     }
   }
   p->high = value != 0;
@@ -90,41 +128,178 @@ static void on_pulse_pin(struct avr_irq_t* irq, uint32_t value, void* param) {
 
 static void on_busy_pin(struct avr_irq_t* irq, uint32_t value, void* param) {
   (void)irq;
-  (void)param;
-  if (value && !g_busy.high) {
-    g_busy.rise = g_avr->cycle;
-  } else if (!value && g_busy.high) {
-    uint64_t d = g_avr->cycle - g_busy.rise;
-    ++g_busy_n;
-    g_busy_sum += d;
-    if (d < g_busy_min) g_busy_min = d;
-    if (d > g_busy_max) g_busy_max = d;
+  EasSim* s = (EasSim*)param;
+  if (value && !s->busy.high) {
+    s->busy.rise = s->avr->cycle;
+  } else if (!value && s->busy.high) {
+    uint64_t d = s->avr->cycle - s->busy.rise;
+    ++s->busy_n;
+    s->busy_sum += d;
+    if (d < s->busy_min) s->busy_min = d;
+    if (d > s->busy_max) s->busy_max = d;
   }
-  g_busy.high = value != 0;
+  s->busy.high = value != 0;
 }
 
 static void on_uart_out(struct avr_irq_t* irq, uint32_t value, void* param) {
   (void)irq;
-  (void)param;
-  ++g_uart_out_n;
-  if (g_uart_out) fprintf(g_uart_out, "%.3f %02x\n", cycles_to_us(g_avr->cycle), value & 0xFF);
+  EasSim* s = (EasSim*)param;
+  ++s->uart_out_n;
+  if (s->uart_out) fprintf(s->uart_out, "%.3f %02x\n", cycles_to_us(s, s->avr->cycle), value & 0xFF);
+  if (s->buffer_outputs &&
+      grow((void**)&s->out, &s->cap_out, s->nout, sizeof(timed_byte_t)) == 0) {
+    s->out[s->nout++] = (timed_byte_t){s->avr->cycle, (uint8_t)(value & 0xFF)};
+  }
 }
 
 static void on_xon(struct avr_irq_t* irq, uint32_t value, void* param) {
   (void)irq;
   (void)value;
-  (void)param;
-  g_xon = 1;
+  ((EasSim*)param)->xon = 1;
 }
 
 static void on_xoff(struct avr_irq_t* irq, uint32_t value, void* param) {
   (void)irq;
   (void)value;
-  (void)param;
-  g_xon = 0;
+  ((EasSim*)param)->xon = 0;
 }
 
-static void read_uart_input(const char* path) {
+/* ------------------------------------------------------------------ API (also used by main) */
+
+/* Load the ELF and reset the AVR; NULL (with a message on stderr) when that fails. */
+EasSim* eas_create(const char* elf, const char* mcu, unsigned long freq) {
+  if (!elf || !mcu || freq == 0) return NULL;
+  avr_global_logger_set(quiet_logger);
+  elf_firmware_t fw;
+  memset(&fw, 0, sizeof fw);
+  if (elf_read_firmware(elf, &fw) != 0) {
+    fprintf(stderr, "eel_avrsim: cannot read ELF: %s\n", elf);
+    return NULL;
+  }
+  snprintf(fw.mmcu, sizeof fw.mmcu, "%s", mcu);
+  fw.frequency = (uint32_t)freq;
+  avr_t* avr = avr_make_mcu_by_name(fw.mmcu);
+  if (!avr) {
+    fprintf(stderr, "eel_avrsim: unknown MCU: %s\n", mcu);
+    return NULL;
+  }
+  EasSim* s = (EasSim*)calloc(1, sizeof(EasSim));
+  if (!s) return NULL;
+  s->avr = avr;
+  s->cycles_per_us = (double)freq / 1e6;
+  s->busy_min = UINT64_MAX;
+  s->state = cpu_Running;
+  avr_init(avr);
+  avr_load_firmware(avr, &fw);
+  avr->log = LOG_ERROR;
+  uint32_t uart_flags = 0;
+  avr_ioctl(avr, AVR_IOCTL_UART_GET_FLAGS('0'), &uart_flags);
+  uart_flags &= ~(uint32_t)AVR_UART_FLAG_STDIO;  // we log the bytes ourselves
+  avr_ioctl(avr, AVR_IOCTL_UART_SET_FLAGS('0'), &uart_flags);
+  avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUTPUT),
+                          on_uart_out, s);
+  avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUT_XON), on_xon,
+                          s);
+  avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUT_XOFF),
+                          on_xoff, s);
+  s->uart_input = avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_INPUT);
+  return s;
+}
+
+void eas_destroy(EasSim* s) {
+  if (!s) return;
+  avr_terminate(s->avr);
+  free(s->in);
+  free(s->out);
+  free(s->pulses);
+  free(s);
+}
+
+/* Keep what the firmware sends and the pulses in buffers for eas_take_* (1) or not (0). */
+void eas_buffer_outputs(EasSim* s, int on) { s->buffer_outputs = on != 0; }
+
+/* Time the high pulses on a pin such as "D2"; returns the pin's index, -1 for a bad pin. */
+int eas_watch_pin(EasSim* s, const char* name) {
+  if (s->npins == MAX_PINS) return -1;
+  pin_t* p = &s->pins[s->npins];
+  if (parse_pin(name, p) != 0) return -1;
+  p->index = s->npins;
+  p->sim = s;
+  avr_irq_register_notify(avr_io_getirq(s->avr, AVR_IOCTL_IOPORT_GETIRQ(p->port), p->bit),
+                          on_pulse_pin, p);
+  return s->npins++;
+}
+
+/* Time the control updates on a busy pin (statistics only: eas_busy_stats). */
+int eas_watch_busy_pin(EasSim* s, const char* name) {
+  if (parse_pin(name, &s->busy) != 0) return -1;
+  s->have_busy = 1;
+  avr_irq_register_notify(avr_io_getirq(s->avr, AVR_IOCTL_IOPORT_GETIRQ(s->busy.port), s->busy.bit),
+                          on_busy_pin, s);
+  return 0;
+}
+
+/* Queue a byte for the UART at t_us (not before earlier ones); it enters the UART's receive FIFO
+ * at that time, or later while the FIFO is full. Returns -1 when out of memory. */
+int eas_uart_push(EasSim* s, double t_us, uint8_t byte) {
+  if (grow((void**)&s->in, &s->cap_in, s->nin, sizeof(timed_byte_t)) != 0) return -1;
+  s->in[s->nin].at = (avr_cycle_count_t)(t_us * s->cycles_per_us);
+  s->in[s->nin].byte = byte;
+  ++s->nin;
+  return 0;
+}
+
+/* Run until the simulated time reaches t_us. Returns 0, or 1 when the AVR crashed or stopped. */
+int eas_run_until(EasSim* s, double t_us) {
+  const avr_cycle_count_t end = (avr_cycle_count_t)(t_us * s->cycles_per_us);
+  while (s->avr->cycle < end && s->state != cpu_Done && s->state != cpu_Crashed) {
+    while (s->xon && s->next_in < s->nin && s->in[s->next_in].at <= s->avr->cycle) {
+      avr_raise_irq(s->uart_input, s->in[s->next_in++].byte);
+    }
+    s->state = avr_run(s->avr);
+  }
+  return s->state == cpu_Done || s->state == cpu_Crashed;
+}
+
+double eas_now_us(const EasSim* s) { return cycles_to_us(s, s->avr->cycle); }
+
+/* Bytes the firmware sent since the last call (up to cap), with their times. */
+size_t eas_take_uart(EasSim* s, double* t_us, uint8_t* bytes, size_t cap) {
+  size_t n = s->nout < cap ? s->nout : cap;
+  for (size_t i = 0; i < n; ++i) {
+    t_us[i] = cycles_to_us(s, s->out[i].at);
+    bytes[i] = s->out[i].byte;
+  }
+  memmove(s->out, s->out + n, (s->nout - n) * sizeof(timed_byte_t));
+  s->nout -= n;
+  return n;
+}
+
+/* Pulses completed since the last call (up to cap): rise time, width, index of the pin. */
+size_t eas_take_pulses(EasSim* s, double* rise_us, double* width_us, int32_t* pin, size_t cap) {
+  size_t n = s->npulses < cap ? s->npulses : cap;
+  for (size_t i = 0; i < n; ++i) {
+    rise_us[i] = s->pulses[i].rise_us;
+    width_us[i] = s->pulses[i].width_us;
+    pin[i] = s->pulses[i].pin;
+  }
+  memmove(s->pulses, s->pulses + n, (s->npulses - n) * sizeof(pulse_t));
+  s->npulses -= n;
+  return n;
+}
+
+/* UART input bytes delivered to the AVR so far. */
+size_t eas_uart_delivered(const EasSim* s) { return s->next_in; }
+
+/* ------------------------------------------------------------------ command line */
+#ifndef EEL_AVRSIM_LIBRARY
+
+static void die(const char* msg, const char* arg) {
+  fprintf(stderr, "eel_avrsim: %s%s%s\n", msg, arg ? ": " : "", arg ? arg : "");
+  exit(2);
+}
+
+static void read_uart_input(EasSim* sim, const char* path) {
   FILE* f = fopen(path, "r");
   if (!f) die("cannot open --uart-in", path);
   char line[8192];
@@ -150,10 +325,7 @@ static void read_uart_input(const char* path) {
         fprintf(stderr, "eel_avrsim: %s:%d: bad hex byte\n", path, lineno);
         exit(2);
       }
-      if (g_ninput == MAX_INPUT) die("too many input bytes", path);
-      g_input[g_ninput].at = (avr_cycle_count_t)(t_us * g_cycles_per_us);
-      g_input[g_ninput].byte = (uint8_t)v;
-      ++g_ninput;
+      if (eas_uart_push(sim, t_us, (uint8_t)v) != 0) die("out of memory reading", path);
       s += used;
     }
   }
@@ -190,102 +362,64 @@ int main(int argc, char** argv) {
     else usage();
   }
   if (!elf || freq == 0 || run_ms <= 0) usage();
-  g_cycles_per_us = (double)freq / 1e6;
 
-  avr_global_logger_set(quiet_logger);
-  elf_firmware_t fw;
-  memset(&fw, 0, sizeof fw);
-  if (elf_read_firmware(elf, &fw) != 0) die("cannot read ELF", elf);
-  snprintf(fw.mmcu, sizeof fw.mmcu, "%s", mcu);
-  fw.frequency = (uint32_t)freq;
-  g_avr = avr_make_mcu_by_name(fw.mmcu);
-  if (!g_avr) die("unknown MCU", mcu);
-  avr_init(g_avr);
-  avr_load_firmware(g_avr, &fw);
-  g_avr->log = LOG_ERROR;
-  uint32_t uart_flags = 0;
-  avr_ioctl(g_avr, AVR_IOCTL_UART_GET_FLAGS('0'), &uart_flags);
-  uart_flags &= ~(uint32_t)AVR_UART_FLAG_STDIO;  // we log the bytes ourselves
-  avr_ioctl(g_avr, AVR_IOCTL_UART_SET_FLAGS('0'), &uart_flags);
-
-  if (uart_in) read_uart_input(uart_in);
+  EasSim* sim = eas_create(elf, mcu, freq);
+  if (!sim) exit(2);
+  if (uart_in) read_uart_input(sim, uart_in);
   if (uart_out) {
-    g_uart_out = !strcmp(uart_out, "-") ? stdout : fopen(uart_out, "w");
-    if (!g_uart_out) die("cannot write --uart-out", uart_out);
+    sim->uart_out = !strcmp(uart_out, "-") ? stdout : fopen(uart_out, "w");
+    if (!sim->uart_out) die("cannot write --uart-out", uart_out);
   }
   if (pulses) {
-    g_pulses_out = fopen(pulses, "w");
-    if (!g_pulses_out) die("cannot write --pulses", pulses);
+    sim->pulses_out = fopen(pulses, "w");
+    if (!sim->pulses_out) die("cannot write --pulses", pulses);
   }
-  avr_irq_register_notify(avr_io_getirq(g_avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUTPUT),
-                          on_uart_out, NULL);
-  avr_irq_register_notify(avr_io_getirq(g_avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUT_XON),
-                          on_xon, NULL);
-  avr_irq_register_notify(avr_io_getirq(g_avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUT_XOFF),
-                          on_xoff, NULL);
-  avr_irq_t* uart_input = avr_io_getirq(g_avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_INPUT);
   if (pulse_pins) {
     char buf[256];
     snprintf(buf, sizeof buf, "%s", pulse_pins);
     for (char* tok = strtok(buf, ","); tok; tok = strtok(NULL, ",")) {
-      if (g_npins == MAX_PINS || parse_pin(tok, &g_pins[g_npins]) != 0) die("bad pin", tok);
-      avr_irq_register_notify(
-          avr_io_getirq(g_avr, AVR_IOCTL_IOPORT_GETIRQ(g_pins[g_npins].port), g_pins[g_npins].bit),
-          on_pulse_pin, &g_pins[g_npins]);
-      ++g_npins;
+      if (eas_watch_pin(sim, tok) < 0) die("bad pin", tok);
     }
   }
-  if (busy) {
-    if (parse_pin(busy, &g_busy) != 0) die("bad pin", busy);
-    g_have_busy = 1;
-    avr_irq_register_notify(avr_io_getirq(g_avr, AVR_IOCTL_IOPORT_GETIRQ(g_busy.port), g_busy.bit),
-                            on_busy_pin, NULL);
-  }
+  if (busy && eas_watch_busy_pin(sim, busy) != 0) die("bad pin", busy);
 
-  const avr_cycle_count_t end = (avr_cycle_count_t)(run_ms * 1000.0 * g_cycles_per_us);
   const clock_t cpu0 = clock();
-  int state = cpu_Running;
-  while (g_avr->cycle < end) {
-    while (g_xon && g_next_input < g_ninput && g_input[g_next_input].at <= g_avr->cycle) {
-      avr_raise_irq(uart_input, g_input[g_next_input++].byte);
-    }
-    state = avr_run(g_avr);
-    if (state == cpu_Done || state == cpu_Crashed) break;
-  }
+  eas_run_until(sim, run_ms * 1000.0);
   const double cpu_s = (double)(clock() - cpu0) / CLOCKS_PER_SEC;
 
   printf("elf: %s (%s at %lu Hz)\n", elf, mcu, freq);
   printf("simulated: %.1f ms (%" PRIu64 " cycles) in %.2f s of host CPU\n",
-         cycles_to_us(g_avr->cycle) / 1000.0, (uint64_t)g_avr->cycle, cpu_s);
-  printf("uart: %zu of %zu input bytes delivered, %" PRIu64 " output bytes\n", g_next_input,
-         g_ninput, g_uart_out_n);
-  if (g_npins) printf("pulses: %" PRIu64 " on %d pins\n", g_pulses_n, g_npins);
+         eas_now_us(sim) / 1000.0, (uint64_t)sim->avr->cycle, cpu_s);
+  printf("uart: %zu of %zu input bytes delivered, %" PRIu64 " output bytes\n", sim->next_in,
+         sim->nin, sim->uart_out_n);
+  if (sim->npins) printf("pulses: %" PRIu64 " on %d pins\n", sim->pulses_n, sim->npins);
   int status = 0;
-  if (state == cpu_Crashed) {
+  if (sim->state == cpu_Crashed) {
     printf("FAIL: the AVR crashed\n");
     status = 1;
   }
-  if (g_have_busy) {
-    if (g_busy_n == 0) {
-      printf("FAIL: no high pulse on busy pin %c%d\n", g_busy.port, g_busy.bit);
+  if (sim->have_busy) {
+    if (sim->busy_n == 0) {
+      printf("FAIL: no high pulse on busy pin %c%d\n", sim->busy.port, sim->busy.bit);
       status = 1;
     } else {
-      const double mean = (double)g_busy_sum / (double)g_busy_n;
+      const double mean = (double)sim->busy_sum / (double)sim->busy_n;
       printf("control update (busy pin %c%d high): n=%" PRIu64 " cycles min=%" PRIu64
              " mean=%.0f max=%" PRIu64 "\n",
-             g_busy.port, g_busy.bit, g_busy_n, g_busy_min, mean, g_busy_max);
+             sim->busy.port, sim->busy.bit, sim->busy_n, sim->busy_min, mean, sim->busy_max);
       printf("control update time: min=%.1f us mean=%.1f us max=%.1f us at %.0f MHz\n",
-             cycles_to_us(g_busy_min), mean / g_cycles_per_us, cycles_to_us(g_busy_max),
-             g_cycles_per_us);
+             cycles_to_us(sim, sim->busy_min), mean / sim->cycles_per_us,
+             cycles_to_us(sim, sim->busy_max), sim->cycles_per_us);
       if (budget_us > 0) {
-        const int ok = cycles_to_us(g_busy_max) <= budget_us;
+        const int ok = cycles_to_us(sim, sim->busy_max) <= budget_us;
         printf("budget: %.0f us: %s\n", budget_us, ok ? "OK" : "FAIL (over budget)");
         if (!ok) status = 1;
       }
     }
   }
-  if (g_uart_out && g_uart_out != stdout) fclose(g_uart_out);
-  if (g_pulses_out) fclose(g_pulses_out);
-  avr_terminate(g_avr);
+  if (sim->uart_out && sim->uart_out != stdout) fclose(sim->uart_out);
+  if (sim->pulses_out) fclose(sim->pulses_out);
+  eas_destroy(sim);
   return status;
 }
+#endif  // EEL_AVRSIM_LIBRARY

@@ -136,7 +136,8 @@ def servo_limited(
     return np.clip(torque_nm, lower, upper)
 
 
-def _distance_left(p: FloatArray, waypoints: FloatArray, target: int) -> float:
+def distance_left(p: FloatArray, waypoints: FloatArray, target: int) -> float:
+    """Path length from ``p`` through the waypoints not yet reached (index ``target`` on)."""
     if target >= len(waypoints):
         return 0.0
     d = float(np.linalg.norm(waypoints[target] - p))
@@ -268,7 +269,7 @@ def simulate_closed_loop(
             rec_a.append(alpha_now)
             rec_w.append(target)
 
-            failure, reason = _check(model, x, limit, step in updates)
+            failure, reason = check_failures(model, x, limit, step in updates)
             if failure != Failure.NONE:
                 fail_t = t
                 break
@@ -317,11 +318,30 @@ def simulate_closed_loop(
         failure_time_s=fail_t,
         reason=reason,
         arrival_time_s=arrival,
-        distance_left_m=_distance_left(x[n : n + 2], waypoints, target),
+        distance_left_m=distance_left(x[n : n + 2], waypoints, target),
     )
 
 
-def _check(model: SwimmerModel, x: FloatArray, limit: float, check_condition: bool):
+def check_failures(
+    model: SwimmerModel, x: FloatArray, limit: float, check_condition: bool
+) -> tuple[Failure, str]:
+    """The failure conditions of a state (non-finite or diverged, ill-conditioned, self-collision).
+
+    Parameters
+    ----------
+    model : SwimmerModel
+    x : ndarray
+        The state.
+    limit : float
+        Mechanical joint limit.
+    check_condition : bool
+        Also compute the mass matrix's condition number (done at control updates only).
+
+    Returns
+    -------
+    (Failure, str)
+        The flag and its reason (``Failure.NONE`` and an empty string when none).
+    """
     n = model.n_links
     if not np.all(np.isfinite(x)):
         return Failure.ILL_CONDITIONED, "state is not finite (the integration blew up)"

@@ -1,0 +1,159 @@
+"""The native firmware drives the twin in lockstep (eelhost.cosim), over a modelled radio link.
+
+Tolerances, from measurements (hil_tests/README.md):
+
+- float32: the firmware against the twin's own laws in float64, evaluated once per step and held
+  (eelhost.cosim.HeldTwinDriver), differ by 1.4e-7 m (straight) and 1.6e-7 m (turning) over the
+  whole run; we allow 1e-5 m.
+- torque hold: the twin evaluates its PD inside every RK4 stage, the firmware once per 10 ms step.
+  The held torques make the robot about 2 % slower: the twin and the held laws part by 2.7 cm
+  (straight, 16 s) and 3.7 cm (turning, 19 s), mostly along the path, and arrive 0.27-0.37 s
+  later. We allow 6 cm (a tenth of a body length) and 0.6 s.
+"""
+
+import numpy as np
+import pytest
+
+from eelhost import protocol as p
+from eelhost.cosim import CosimOptions, HeldTwinDriver, run_firmware_in_loop, run_lockstep
+from eelhost.radio import RadioModel
+from eelsim.closed_loop import LoopOptions, simulate_closed_loop
+from eelsim.flags import Failure
+from eelsim.robot import load_robot
+from eelsim.scenario import load_scenario
+
+pytestmark = pytest.mark.firmware_in_loop
+
+PATH_TOLERANCE_M = 0.06
+ARRIVAL_TOLERANCE_S = 0.6
+FLOAT32_TOLERANCE_M = 1e-5
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return load_robot()
+
+
+def path_deviation_m(a, b):
+    k = min(len(a.t_s), len(b.t_s))
+    return float(np.linalg.norm(a.states[:k, 6:8] - b.states[:k, 6:8], axis=1).max())
+
+
+@pytest.fixture(scope="module", params=["straight", "turning"])
+def runs(request, robot):
+    scenario = load_scenario(request.param)
+    twin = simulate_closed_loop(robot, scenario, seed=0)
+    native = run_firmware_in_loop(robot, scenario, seed=0)
+    held = run_lockstep(robot, scenario, HeldTwinDriver(6, robot.joints.command_limit_rad), seed=0)
+    return scenario, twin, native, held
+
+
+def test_native_firmware_reaches_the_waypoint(runs):
+    scenario, _, native, _ = runs
+    assert native.failure == Failure.NONE, native.reason
+    goal = np.array(scenario.waypoints_m[-1])
+    assert np.linalg.norm(native.states[-1, 6:8] - goal) < 2 * scenario.acceptance_radius_m
+    assert all(cmd.matches for cmd in native.executed)
+    assert native.host_bad_frames == {}
+
+
+def test_native_firmware_follows_the_twins_path_within_the_torque_hold_tolerance(runs):
+    _, twin, native, _ = runs
+    assert path_deviation_m(twin, native) < PATH_TOLERANCE_M
+    assert abs(native.arrival_time_s - twin.arrival_time_s) < ARRIVAL_TOLERANCE_S
+
+
+def test_native_firmware_equals_the_twins_laws_held_per_step_to_float32(runs):
+    _, _, native, held = runs
+    assert len(native.t_s) == len(held.t_s)
+    assert path_deviation_m(native, held) < FLOAT32_TOLERANCE_M
+    np.testing.assert_allclose(native.alpha_rad, held.alpha_rad, atol=1e-5)
+
+
+def test_link_drop_mid_run_makes_the_failsafe_stop_the_gait_within_1s_and_the_robot_coasts(robot):
+    drop_s = 5.0
+    scenario = load_scenario("straight").model_copy(update={"duration_s": 9.0})
+    radio = RadioModel.xbee(outages_us=((int(drop_s * 1e6), 10**12),))
+    res = run_firmware_in_loop(
+        robot, scenario, seed=3, radio=radio, options=CosimOptions(LoopOptions(stop_at_goal=False))
+    )
+    t, state = res.t_s, res.firmware_state
+    assert np.all(state[(t > 0.1) & (t < drop_s)] == p.State.RUNNING)
+    k_fs = int(np.argmax(state == p.State.FAILSAFE))
+    assert state[k_fs] == p.State.FAILSAFE and np.all(state[k_fs:] == p.State.FAILSAFE)
+    assert t[k_fs] - drop_s <= 1.0
+    # The gait stops at once (slew rates 0): straight references from then on.
+    assert np.all(res.alpha_rad[k_fs:] == 0.0)
+    assert np.abs(res.alpha_rad[k_fs - 20 : k_fs]).max() > 0.3
+    # The robot coasts: it straightens, keeps gliding forward and slows down.
+    x, vx = res.states[:, 6], res.states[:, -2]
+    phi_end = np.abs(np.diff(res.states[-1, :6])).max()
+    assert phi_end < 0.01
+    assert x[-1] - x[k_fs] > 0.05
+    assert 0.0 < vx[-1] < 0.8 * vx[k_fs]
+    assert res.uplink.lost > 0
+
+
+def test_one_percent_of_bytes_corrupted_never_executes_a_wrong_command_and_the_run_completes(
+    robot,
+):
+    scenario = load_scenario("straight")
+    radio = RadioModel.xbee(corruption_probability=0.01)
+    res = run_firmware_in_loop(robot, scenario, seed=1, radio=radio)
+    assert res.failure == Failure.NONE, res.reason
+    assert res.uplink.corrupted > 0 and res.downlink.corrupted > 0
+    assert res.firmware_counters["frames_bad"] > 0  # the firmware saw and dropped bad frames
+    assert sum(res.host_bad_frames.values()) > 0  # and so did the host
+    # Every command the firmware executed is one the host sent under that sequence number ...
+    assert res.executed and all(cmd.matches for cmd in res.executed)
+    assert res.refused == []
+    # ... and the firmware only ever held offsets, gains and gait the host sent.
+    sent_offsets = {np.float32(m.offset_rad) for _, _, m in res.sent if isinstance(m, p.SetOffset)}
+    assert set(np.float32(res.offset_rad).tolist()) <= sent_offsets | {0.0}
+    c = res.firmware_counters
+    assert c["kp_nm_per_rad"] == np.float32(robot.joints.kp_nm_per_rad)
+    assert c["kd_nms_per_rad"] == np.float32(robot.joints.kd_nms_per_rad)
+    assert c["target_amplitude_rad"] == np.float32(scenario.amplitude_rad)
+    assert c["target_omega_rad_s"] == np.float32(scenario.omega_rad_s)
+
+
+def test_a_lossy_run_is_the_same_for_the_same_seed(robot):
+    scenario = load_scenario("turning").model_copy(update={"duration_s": 2.0})
+    radio = RadioModel.xbee(loss_probability=0.02, corruption_probability=0.02)
+    a, b = (run_firmware_in_loop(robot, scenario, seed=5, radio=radio) for _ in range(2))
+    np.testing.assert_array_equal(a.states, b.states)
+    assert a.sent == b.sent and a.executed == b.executed
+    c = run_firmware_in_loop(robot, scenario, seed=6, radio=radio)
+    assert c.uplink != a.uplink or c.downlink != a.downlink
+
+
+def test_radio_delivers_bytes_at_the_baud_rate_after_the_latency():
+    link = RadioModel.xbee(baud=57600, latency_us=5000).channel(np.random.default_rng(0))
+    link.send(1000, bytes(range(1, 11)))
+    assert link.deliver(6000) == []
+    got = link.deliver(10**9)
+    assert [b for _, b in got] == list(range(1, 11))
+    times = [t for t, _ in got]
+    assert times[0] == 1000 + 174 + 5000 and times[-1] == 1000 + 1737 + 5000
+    link.send(1100, b"\x01")  # queues behind the first ten bytes
+    assert link.deliver(10**9)[0][0] == 2910 + 5000  # 1000 + 11 x 173.6 us, rounded up
+
+
+def test_radio_loses_and_corrupts_bytes_at_the_given_rates():
+    link = RadioModel(loss_probability=0.1, corruption_probability=0.05).channel(
+        np.random.default_rng(1)
+    )
+    data = bytes([0x55]) * 20000
+    link.send(0, data)
+    got = link.deliver_bytes(0)
+    assert len(got) == link.counters.delivered == 20000 - link.counters.lost
+    assert link.counters.lost == pytest.approx(2000, rel=0.1)
+    assert sum(b != 0x55 for b in got) == link.counters.corrupted
+    assert link.counters.corrupted == pytest.approx(0.05 * len(got), rel=0.1)
+
+
+def test_radio_outage_loses_everything_sent_inside_it():
+    link = RadioModel(outages_us=((100, 200),)).channel(np.random.default_rng(0))
+    for t in (50, 100, 199, 200):
+        link.send(t, bytes([t % 256]))
+    assert link.deliver_bytes(1000) == bytes([50, 200])
