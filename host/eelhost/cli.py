@@ -10,13 +10,22 @@ from __future__ import annotations
 import argparse
 import sys
 
-from eelhost.commands import dataset, estimate, report, simulate, speeds, validate, vision_bench
+from eelhost.commands import (
+    bench,
+    dataset,
+    estimate,
+    report,
+    simulate,
+    speeds,
+    validate,
+    vision_bench,
+)
 from eelhost.experiment import DataError
 from eelsim.robot import RobotFileError
 from eelsim.scenario import ScenarioError
 from eelsim.timing import TimingError
 
-COMMANDS = (simulate, speeds, dataset, estimate, validate, report, vision_bench)
+COMMANDS = (simulate, speeds, dataset, estimate, validate, report, vision_bench, bench)
 USER_ERRORS = (RobotFileError, ScenarioError, TimingError, DataError, ValueError, FileNotFoundError)
 
 

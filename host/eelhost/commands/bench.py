@@ -1,0 +1,239 @@
+"""``eelbot bench``: how fast the twin runs (single run, a GA generation, MuJoCo for comparison).
+
+Measures, in one process and one sitting:
+
+1. compile time of the batched kernel: cold (empty cache, in a subprocess) and cached;
+2. a single closed-loop run: simulated seconds per wall second (batched kernel and reference path);
+3. one generation of the paper's GA (150 candidates x 4 training experiments = 600 runs of 3,000
+   RK4 steps): RK4 steps per second on one thread and on all cores, and the implied time of the
+   whole GA (78,000 runs, 2.34e8 steps) for one motion type;
+4. the same robot in MuJoCo: ``mujoco.rollout`` with the built-in ellipsoid fluid model on all
+   cores, and our Morison drag through ``xfrc_applied`` from Python; printed as ratios.
+
+Prints a markdown report and writes it to ``docs/benchmarks.md`` (``--write`` to change).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from eelhost.commands.common import add_robot_options, robot_and_coefficients
+from eelsim.closed_loop import LoopOptions, simulate_closed_loop
+from eelsim.scenario import TRAINING_CORNERS, grid_scenario, load_scenario
+
+GA_RUNS = 150 * 130 * 4
+GA_STEPS = GA_RUNS * 3000
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    """Register the subcommand."""
+    p = sub.add_parser(
+        "bench",
+        help="speed of the twin: single run, one GA generation, MuJoCo comparison",
+        description="Benchmark the batched closed-loop kernel (and MuJoCo on the same robot) and "
+        "write docs/benchmarks.md. Run it on a quiet machine.",
+    )
+    add_robot_options(p)
+    p.add_argument("--runs", type=int, default=600, help="runs in the batch (600: one GA generation)")
+    p.add_argument("--steps", type=int, default=3000, help="RK4 steps per run (3000)")
+    p.add_argument("--threads", type=int, default=None, help="threads for 'all cores' (nproc)")
+    p.add_argument("--no-mujoco", action="store_true", help="skip the MuJoCo comparison")
+    p.add_argument("--no-cold-compile", action="store_true",
+                   help="skip the cold-compile measurement (it takes about a minute)")
+    p.add_argument("--note", default="", help="a remark for the report (e.g. other load)")
+    p.add_argument("--write", default="docs/benchmarks.md", metavar="FILE",
+                   help="markdown file to write ('' to skip)")
+    p.set_defaults(run=run)
+
+
+def _cpu_model() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown CPU"
+
+
+def _simd_flags() -> str:
+    try:
+        text = Path("/proc/cpuinfo").read_text()
+    except OSError:
+        return "unknown"
+    flags = next((ln.split(":", 1)[1].split() for ln in text.splitlines()
+                  if ln.startswith("flags")), [])
+    wanted = ("avx", "avx2", "fma", "avx512f")
+    return " ".join(f for f in wanted if f in flags) or "none of avx/avx2/fma/avx512f"
+
+
+def _load() -> str:
+    try:
+        return " ".join(Path("/proc/loadavg").read_text().split()[:3])
+    except OSError:
+        return "unknown"
+
+
+def _warm_up_in_subprocess(cache_dir: str | None) -> float:
+    """Seconds to compile (or load) the kernel in a fresh Python process."""
+    env = dict(os.environ)
+    if cache_dir is not None:
+        env["EELSIM_KERNEL_CACHE"] = cache_dir
+    code = "from eelsim.batch import warm_up; print(warm_up())"
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
+                         check=True)
+    return float(out.stdout.strip().splitlines()[-1])
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the subcommand."""
+    import numba
+
+    from eelsim import batch
+
+    robot, coeffs = robot_and_coefficients(args)
+    threads = args.threads or os.cpu_count() or 1
+    lines: list[str] = []
+
+    def say(text: str = "") -> None:
+        print(text, flush=True)
+        lines.append(text)
+
+    load_before = _load()
+    say("# Benchmarks of the twin")
+    say()
+    command = " ".join(["eelbot bench", *sys.argv[2:]])
+    say(f"Produced by `{command}` on {time.strftime('%Y-%m-%d %H:%M')}.")
+    say()
+    say("## Machine")
+    say()
+    say(f"- CPU: {_cpu_model()}; {os.cpu_count()} logical cores (nproc); SIMD: {_simd_flags()}")
+    say(f"- Python {platform.python_version()}, numpy {np.__version__}, numba {numba.__version__}"
+        f" (threading layer: {numba.config.THREADING_LAYER}, reported again after the runs)")
+    say(f"- load average before the benchmark: {load_before}")
+    if args.note:
+        say(f"- note: {args.note}")
+    say()
+
+    # 1. compile time
+    say(f"## Compile time of the batched kernel (N = {robot.n_links})")
+    say()
+    if not args.no_cold_compile:
+        with tempfile.TemporaryDirectory() as tmp:
+            cold = _warm_up_in_subprocess(tmp)
+        say(f"- cold (empty cache, fresh process): {cold:.1f} s")
+    batch.warm_up(robot.n_links)  # make sure the default cache is filled
+    cached = _warm_up_in_subprocess(None)
+    say(f"- cached (fresh process, numba's on-disk cache): {cached:.2f} s")
+    say()
+
+    # 2. a single run
+    say("## 1. A single closed-loop run")
+    say()
+    single = load_scenario("turning").model_copy(update={"duration_s": 60.0})
+    opts = LoopOptions(stop_at_goal=False)
+    batch.run_batch(robot, single, coeffs, opts, threads=1)  # warm
+    start = time.perf_counter()
+    one = batch.run_batch(robot, single, coeffs, opts, threads=1)
+    wall = time.perf_counter() - start
+    sim_s = float(one.final_step[0]) * opts.timing.dt_s
+    short = single.model_copy(update={"duration_s": 5.0})
+    start = time.perf_counter()
+    simulate_closed_loop(robot, short, opts, coefficients=coeffs)
+    ref_wall = time.perf_counter() - start
+    say("| path | simulated s per wall s |")
+    say("|---|---|")
+    say(f"| batched kernel, one run (60 s of 'turning', one thread) | {sim_s / wall:,.0f} |")
+    say(f"| reference `simulate_closed_loop` (5 s) | {5.0 / ref_wall:,.1f} |")
+    say()
+    lanes = batch.DEFAULT_LANES
+    say(f"A single run occupies one block of {lanes} lanes, so it runs at 1/{lanes} of the "
+        "batch rate.")
+    say()
+
+    # 3. a GA generation
+    say(f"## 2. One GA generation: {args.runs} runs x {args.steps} steps")
+    say()
+    corners = [grid_scenario("straight", a, w).model_copy(
+        update={"duration_s": args.steps * opts.timing.dt_s}) for a, w in TRAINING_CORNERS]
+    rng = np.random.default_rng(0)
+    base = coeffs.as_array()
+    candidates = base * rng.uniform(0.5, 1.5, size=(args.runs, 4))
+    start = time.perf_counter()
+    spec = batch.BatchSpec.build(robot, [corners[i % 4] for i in range(args.runs)], candidates,
+                                 opts, 0)
+    prep = time.perf_counter() - start
+    rates = {}
+    for n_threads in sorted({1, threads}):
+        batch.run_spec(spec, threads=n_threads)  # warm the threads
+        best = np.inf
+        for _ in range(2):
+            start = time.perf_counter()
+            res = batch.run_spec(spec, threads=n_threads)
+            best = min(best, time.perf_counter() - start)
+        rates[n_threads] = float(res.final_step.sum()) / best
+    flagged = int(np.count_nonzero(res.failure >= 2))
+    say("| threads | RK4 steps per second | per step and core |")
+    say("|---|---|---|")
+    for n_threads, rate in rates.items():
+        say(f"| {n_threads} | {rate / 1e6:.2f} million | {n_threads / rate * 1e9:.0f} ns |")
+    say()
+    ga = GA_STEPS / rates[threads]
+    say(f"- implied time of the paper's whole GA for one motion type (150 x 130 x 4 = {GA_RUNS:,}"
+        f" runs, {GA_STEPS:.3g} steps) on {threads} threads: **{ga:.0f} s**")
+    say(f"- preparing the batch in Python (BatchSpec.build): {prep * 1e3:.0f} ms; "
+        f"runs flagged ill-conditioned or self-colliding: {flagged} of {args.runs}")
+    say("- target of issue 4: 10 million steps/s on 2 cores (GA under 30 s)")
+    say()
+
+    # 4. MuJoCo
+    say("## 3. The same robot in MuJoCo")
+    say()
+    mj_rate = None
+    if args.no_mujoco:
+        say("Skipped (--no-mujoco).")
+    else:
+        from eelhost import bench_mujoco
+
+        try:
+            bench_mujoco.require_mujoco()
+        except bench_mujoco.MujocoMissing as err:
+            say(f"Skipped: {err}")
+        else:
+            import mujoco
+
+            roll = bench_mujoco.rollout_speed(robot, args.runs, args.steps, threads)
+            mj_rate = roll.steps_per_s
+            xf = bench_mujoco.morison_xfrc_speed(robot, coeffs, 2, args.steps)
+            say(f"mujoco {mujoco.__version__}; ellipsoid fluid model, implicitfast, dt = "
+                f"{opts.timing.dt_s} s, PD as position actuator + joint damping; open-loop gait.")
+            say()
+            say("| path | steps per second | our batched kernel is |")
+            say("|---|---|---|")
+            say(f"| `mujoco.rollout`, {args.runs} x {args.steps}, {threads} threads | "
+                f"{mj_rate / 1e6:.3f} million | {rates[threads] / mj_rate:.1f} x faster |")
+            say(f"| Morison drag via `xfrc_applied` from Python, 2 x {args.steps}, 1 thread | "
+                f"{xf.steps_per_s / 1e6:.4f} million | {rates[1] / xf.steps_per_s:.0f} x faster "
+                "(vs our 1 thread) |")
+            say()
+            say("- target of issue 4: at least 15 x MuJoCo's fastest batched path")
+    say()
+    say(f"- load average after the benchmark: {_load()}; numba threading layer used: "
+        f"{numba.threading_layer()}")
+    say()
+    say("Figures are wall-clock best-of-two; other processes running at the same time slow "
+        "them down (see the load averages above and the note).")
+    if args.write:
+        Path(args.write).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.write).write_text("\n".join(lines) + "\n")
+        print(f"wrote {args.write}")
+    return 0

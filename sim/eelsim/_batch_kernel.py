@@ -1,0 +1,628 @@
+"""The batched closed loop: template of the compiled kernel module (see ``eelsim.batch``).
+
+This file is valid Python and is read as text: ``eelsim.batch`` appends the per-N generated part
+(``_stage``, ``_screen`` and the row constants, from ``eelsim._batch_codegen``) and writes the
+result to a cache directory, where numba compiles and caches it. The placeholders below are
+replaced by those later definitions; importing this module on its own is useless.
+
+What runs here, for a block of ``LANES`` runs advancing in lock step (one physics step at a time,
+so the time, the camera frame schedule and the sample steps are shared; runs that stopped are
+still computed but never committed):
+
+1. control updates (offset gamma from the filtered pose, pending queue for the delay) - per lane;
+2. sampling of the state;
+3. RK4 stage 1 (vectorised), the self-collision screen, then the checks of
+   ``closed_loop._check`` in its order (non-finite, condition number at update steps, joint limit,
+   link intersection) - exact tests only for lanes the screen flags;
+4. the stop rules, RK4 stages 2-4 (vectorised), the pivot and finiteness checks of the new state;
+5. camera frames in (t, t + dt]: Hermite pose, pixel quantisation, heading noise, median filter,
+   waypoint switching and arrival - per lane.
+
+The order of these operations is that of ``eelsim.closed_loop.simulate_closed_loop``; the tests
+compare the two to 1e-9.
+"""
+
+import math
+
+import numba
+import numpy as np
+from llvmlite import ir as llvm_ir
+from numba.core import types
+from numba.extending import intrinsic
+
+# Floating-point contraction (FMA) only: no reassociation (it would undo the Cody-Waite range
+# reduction of the generated sin/cos) and no "no NaN / no inf" assumptions (the failure checks
+# rely on NaN and inf).
+_FASTMATH = {"contract"}
+
+# replaced by the values of eelsim.flags when batch.py writes the module
+ILL_CONDITION_THRESHOLD = 1e10
+DIVERGENCE_RATE = 1e3
+
+# Failure codes (eelsim.flags.Failure) and reason codes (eelsim.batch.Reason).
+FAIL_NONE, FAIL_TOO_SLOW, FAIL_ILL, FAIL_SELF = 0, 1, 2, 3
+REASON_NONE, REASON_TOO_SLOW, REASON_NOT_FINITE, REASON_NOT_PD = 0, 1, 2, 3
+REASON_CONDITION, REASON_JOINT_LIMIT, REASON_LINKS_INTERSECT, REASON_DIVERGED = 4, 5, 6, 7
+
+
+@intrinsic
+def _vsqrt(typingctx, x):
+    """Sqrt as the LLVM intrinsic: numba calls libm's sqrt, which stops loop vectorisation."""
+    sig = types.float64(types.float64)
+
+    def codegen(context, builder, signature, args):
+        fn = builder.module.declare_intrinsic("llvm.sqrt", [llvm_ir.DoubleType()])
+        return builder.call(fn, args)
+
+    return sig, codegen
+
+
+# ---- placeholders, redefined by the generated part appended to this text ----
+N_LINKS = 2
+LANES = 16
+WORK_ROWS = OUT_ROWS = 1
+W_Y = W_GAMMA = W_GEOMETRY = W_HALF_LENGTH = W_LIMIT = W_MASS = W_MU = W_INERTIA = 0
+O_K = O_BAD_PIVOT = O_SIN = O_COS = O_NEAR = 0
+
+
+def _stage(work, out, t_s):  # pragma: no cover - replaced
+    raise RuntimeError("eelsim._batch_kernel is a template; use eelsim.batch")
+
+
+def _screen(work, out):  # pragma: no cover - replaced
+    raise RuntimeError("eelsim._batch_kernel is a template; use eelsim.batch")
+
+
+# ---- scalar helpers (per lane, not in the hot loop) ----
+
+
+@numba.njit(cache=True)
+def _np_mod(a, b):
+    """numpy.mod for floats (sign of the divisor), as control.wrap_angle uses it."""
+    m = np.fmod(a, b)
+    if m != 0.0:
+        if (m < 0.0) != (b < 0.0):
+            m += b
+    else:
+        m = math.copysign(0.0, b)
+    return m
+
+
+@numba.njit(cache=True)
+def _heading_offset(px, py, heading, wx, wy, k_theta):
+    """control.heading_offset: k_theta * wrap(atan2(wy - py, wx - px) - heading)."""
+    a = math.atan2(wy - py, wx - px) - heading
+    return k_theta * (math.pi - _np_mod(math.pi - a, 2.0 * math.pi))
+
+
+@numba.njit(cache=True)
+def _median_of(values, count, tmp):
+    """np.median of the first ``count`` entries (mean of the middle two if even).
+
+    ``tmp`` is scratch space for the sorted copy: allocating it here, three times a frame, cost
+    more than the sort.
+    """
+    for i in range(count):
+        v = values[i]
+        j = i
+        while j > 0 and tmp[j - 1] > v:
+            tmp[j] = tmp[j - 1]
+            j -= 1
+        tmp[j] = v
+    if count % 2 == 1:
+        return tmp[count // 2]
+    return (tmp[count // 2 - 1] + tmp[count // 2]) / 2.0
+
+
+@numba.njit(cache=True)
+def _jacobi_condition(m):
+    """Condition number (max |eig| / min |eig|) of a symmetric matrix by cyclic Jacobi rotations.
+
+    Jacobi gets the small eigenvalues of an SPD matrix to high relative accuracy, so near the
+    threshold it agrees with numpy's SVD-based np.linalg.cond to far better than the threshold's
+    own meaning.
+    """
+    a = m.copy()
+    n = a.shape[0]
+    for _sweep in range(60):
+        off = 0.0
+        for p in range(n):
+            for q in range(p + 1, n):
+                off = max(off, abs(a[p, q]) / math.sqrt(abs(a[p, p] * a[q, q]) + 1e-300))
+        if off < 1e-17:
+            break
+        for p in range(n):
+            for q in range(p + 1, n):
+                if a[p, q] == 0.0:
+                    continue
+                theta = (a[q, q] - a[p, p]) / (2.0 * a[p, q])
+                t = math.copysign(1.0, theta) / (abs(theta) + math.sqrt(theta * theta + 1.0))
+                c = 1.0 / math.sqrt(t * t + 1.0)
+                s = t * c
+                for k in range(n):
+                    akp, akq = a[k, p], a[k, q]
+                    a[k, p] = c * akp - s * akq
+                    a[k, q] = s * akp + c * akq
+                for k in range(n):
+                    apk, aqk = a[p, k], a[q, k]
+                    a[p, k] = c * apk - s * aqk
+                    a[q, k] = s * apk + c * aqk
+    big, small = 0.0, np.inf
+    for i in range(n):
+        v = abs(a[i, i])
+        big = max(big, v)
+        small = min(small, v)
+    if small == 0.0:
+        return np.inf
+    return big / small
+
+
+@numba.njit(cache=True)
+def _mass_matrix_condition(x, par, n, m, lo, inv, s, c, jx, jy):
+    """Condition number of M(x) when it may be above the threshold, else a cheap upper bound.
+
+    For SPD M, cond(M) <= trace(M) trace(M^-1) <= (N+2)^2 cond(M), and trace(M^-1) is the squared
+    Frobenius norm of L^-1 from the Cholesky factor. When that bound is far below the threshold
+    (every physical state: cond is about 1e3-1e4) the run is fine and the bound is returned; only
+    otherwise are the eigenvalues computed. The array arguments after ``n`` are scratch space
+    (allocations here would cost more than the arithmetic).
+    """
+    nq = n + 2
+    m[:, :] = 0.0
+    lo[:, :] = 0.0
+    inv[:, :] = 0.0
+    for i in range(n):
+        s[i] = math.sin(x[i])
+        c[i] = math.cos(x[i])
+    # J_j^T (m_j I + mu_j n_j n_j^T) J_j, summed over links, as eelsim.dynamics.mass_matrix
+    for j in range(n):
+        mj = par[W_MASS - W_GEOMETRY + j]
+        muj = par[W_MU - W_GEOMETRY + j]
+        a11 = mj + muj * s[j] * s[j]
+        a22 = mj + muj * c[j] * c[j]
+        a12 = -muj * s[j] * c[j]
+        jx[:] = 0.0
+        jy[:] = 0.0
+        for i in range(n):
+            g = par[j * n + i]
+            jx[i] = -g * s[i]
+            jy[i] = g * c[i]
+        jx[n] = 1.0
+        jy[n + 1] = 1.0
+        for i in range(nq):
+            for k in range(nq):
+                m[i, k] += jx[i] * (a11 * jx[k] + a12 * jy[k]) + jy[i] * (a12 * jx[k] + a22 * jy[k])
+    for i in range(n):
+        m[i, i] += par[W_INERTIA - W_GEOMETRY + i]
+    trace = 0.0
+    for i in range(nq):
+        trace += m[i, i]
+    ok = True
+    for k in range(nq):
+        d = m[k, k]
+        for j in range(k):
+            d -= lo[k, j] * lo[k, j]
+        if not d > 0.0:
+            ok = False
+            break
+        lo[k, k] = math.sqrt(d)
+        for i in range(k + 1, nq):
+            v = m[i, k]
+            for j in range(k):
+                v -= lo[i, j] * lo[k, j]
+            lo[i, k] = v / lo[k, k]
+    if ok:
+        # L^-1 by forward substitution, column by column
+        for col in range(nq):
+            for i in range(col, nq):
+                v = 1.0 if i == col else 0.0
+                for j in range(col, i):
+                    v -= lo[i, j] * inv[j, col]
+                inv[i, col] = v / lo[i, i]
+        inv_trace = 0.0
+        for i in range(nq):
+            for j in range(nq):
+                inv_trace += inv[i, j] * inv[i, j]
+        bound = trace * inv_trace
+        if bound < 0.5 * ILL_CONDITION_THRESHOLD:
+            return bound
+    return _jacobi_condition(m)
+
+
+@numba.njit(cache=True)
+def _cross(ax, ay, bx, by):
+    return ax * by - ay * bx
+
+
+@numba.njit(cache=True)
+def _on_segment(ax, ay, bx, by, cx, cy, d):
+    return (d == 0.0 and min(ax, bx) <= cx <= max(ax, bx) and min(ay, by) <= cy <= max(ay, by))
+
+
+@numba.njit(cache=True)
+def _segments_intersect(p1x, p1y, p2x, p2y, q1x, q1y, q2x, q2y):
+    """flags.segments_intersect: closed segments p1-p2 and q1-q2 share a point."""
+    d1 = _cross(q2x - q1x, q2y - q1y, p1x - q1x, p1y - q1y)
+    d2 = _cross(q2x - q1x, q2y - q1y, p2x - q1x, p2y - q1y)
+    d3 = _cross(p2x - p1x, p2y - p1y, q1x - p1x, q1y - p1y)
+    d4 = _cross(p2x - p1x, p2y - p1y, q2x - p1x, q2y - p1y)
+    if ((d1 > 0 > d2) or (d1 < 0 < d2)) and ((d3 > 0 > d4) or (d3 < 0 < d4)):
+        return True
+    return (
+        _on_segment(q1x, q1y, q2x, q2y, p1x, p1y, d1)
+        or _on_segment(q1x, q1y, q2x, q2y, p2x, p2y, d2)
+        or _on_segment(p1x, p1y, p2x, p2y, q1x, q1y, d3)
+        or _on_segment(p1x, p1y, p2x, p2y, q2x, q2y, d4)
+    )
+
+
+@numba.njit(cache=True)
+def _self_collision(x, par, n, limit, info):
+    """flags.self_collision in its order; returns a reason code and fills ``info`` (i, k, value)."""
+    for j in range(n - 1):
+        phi = x[j + 1] - x[j]
+        if abs(phi) > limit:
+            info[0], info[1], info[2] = j, 0, phi
+            return REASON_JOINT_LIMIT
+    xs = np.empty(n)
+    ys = np.empty(n)
+    tx = np.empty(n)
+    ty = np.empty(n)
+    for i in range(n):
+        cx, cy = 0.0, 0.0
+        for k in range(n):
+            g = par[i * n + k]
+            cx += g * math.cos(x[k])
+            cy += g * math.sin(x[k])
+        xs[i] = x[n] + cx
+        ys[i] = x[n + 1] + cy
+        h = par[W_HALF_LENGTH - W_GEOMETRY + i]
+        tx[i] = h * math.cos(x[i])
+        ty[i] = h * math.sin(x[i])
+    for i in range(n):
+        for k in range(i + 2, n):
+            if _segments_intersect(xs[i] - tx[i], ys[i] - ty[i], xs[i] + tx[i], ys[i] + ty[i],
+                                   xs[k] - tx[k], ys[k] - ty[k], xs[k] + tx[k], ys[k] + ty[k]):
+                info[0], info[1], info[2] = i, k, 0.0
+                return REASON_LINKS_INTERSECT
+    return REASON_NONE
+
+
+@numba.njit(cache=True)
+def _distance_left(px, py, waypoints, n_waypoints, target):
+    """closed_loop._distance_left: to the current target, then along the remaining waypoints."""
+    if target >= n_waypoints:
+        return 0.0
+    d = math.sqrt((waypoints[target, 0] - px) ** 2 + (waypoints[target, 1] - py) ** 2)
+    for i in range(target, n_waypoints - 1):
+        d += math.sqrt((waypoints[i + 1, 0] - waypoints[i, 0]) ** 2
+                       + (waypoints[i + 1, 1] - waypoints[i, 1]) ** 2)
+    return d
+
+
+@numba.njit(cache=True)
+def _observe(r, run, frame, px, py, heading, noise, pixel, window, med, med_count, med_next,
+             last_heading, filtered, target, arrival, waypoints, n_waypoints, radius, frame_time,
+             scratch):
+    """One camera frame for one lane: quantise, add heading noise, median-filter, switch waypoint."""
+    if pixel > 0.0:
+        px = (np.floor(px / pixel) + 0.5) * pixel
+        py = (np.floor(py / pixel) + 0.5) * pixel
+    if noise.shape[1] > 0:
+        heading = heading + noise[run, frame]
+    else:
+        heading = heading + 0.0
+    if med_count[r] > 0:
+        d = heading - last_heading[r]
+        # MedianFilter unwraps with angle(exp(i d)) = atan2(sin d, cos d); that is d itself for
+        # |d| < pi up to an ulp, and frame-to-frame heading changes are far smaller
+        if abs(d) >= 1.0:
+            d = math.atan2(math.sin(d), math.cos(d))
+        heading = last_heading[r] + d
+    last_heading[r] = heading
+    slot = med_next[r]
+    med[r, slot, 0] = px
+    med[r, slot, 1] = py
+    med[r, slot, 2] = heading
+    med_next[r] = (slot + 1) % window
+    if med_count[r] < window:
+        med_count[r] += 1
+    count = med_count[r]
+    for ch in range(3):
+        filtered[r, ch] = _median_of(med[r, :, ch], count, scratch)
+    tgt = target[r]
+    if tgt < n_waypoints[run]:
+        dx = filtered[r, 0] - waypoints[run, tgt, 0]
+        dy = filtered[r, 1] - waypoints[run, tgt, 1]
+        if math.sqrt(dx * dx + dy * dy) < radius[run]:
+            target[r] = tgt + 1
+            if tgt + 1 == n_waypoints[run] and np.isnan(arrival[r]):
+                arrival[r] = frame_time
+
+
+@numba.njit(cache=True)
+def _pose(x, r, n):
+    """(p_x, p_y, mean theta) and their rates, as closed_loop's pose_and_rate."""
+    h = 0.0
+    hd = 0.0
+    for i in range(n):
+        h += x[i, r]
+        hd += x[n + 2 + i, r]
+    return x[n, r], x[n + 1, r], h / n, x[2 * n + 2, r], x[2 * n + 3, r], hd / n
+
+
+@numba.njit(cache=True)
+def _hermite(y0, dy0, y1, dy1, h, s):
+    """camera.hermite, same expression order."""
+    s2, s3 = s * s, s * s * s
+    return ((2 * s3 - 3 * s2 + 1) * y0 + (s3 - 2 * s2 + s) * h * dy0
+            + (-2 * s3 + 3 * s2) * y1 + (s3 - s2) * h * dy1)
+
+
+@numba.njit(cache=True)
+def _copy_y(work, src, off, scale, k, ns):
+    """Stage state y = src + scale * k (k = None-like when scale is 0: y = src exactly)."""
+    for row in range(ns):
+        for r in range(LANES):
+            work[(W_Y + row) * LANES + r] = src[row, r] + scale * k[(O_K + row) * LANES + r]
+
+
+@numba.njit(cache=True)
+def _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radius, k_theta,
+               delay_steps, update_steps, update_count, frame_step, frame_fraction, frame_time,
+               noise, pixel, window, stop_at_goal, pending_size, sample_steps, states_out,
+               record_full, full_out, arrival_out, failure_out, failure_time_out, reason_out,
+               reason_index_out, reason_value_out, final_state_out, final_step_out, target_out,
+               distance_out):
+    n = N_LINKS
+    ns = 2 * n + 4
+    n_runs = x0.shape[0]
+    n_par = params.shape[1]
+    first = block * LANES
+    work = np.zeros(WORK_ROWS * LANES)
+    out = np.zeros(OUT_ROWS * LANES)
+    x = np.empty((ns, LANES))
+    xn = np.empty((ns, LANES))
+    acc = np.empty((ns, LANES))
+    bad = np.zeros(LANES)
+    run_of = np.empty(LANES, np.int64)
+    alive = np.zeros(LANES, np.bool_)
+    is_update = np.zeros(LANES, np.bool_)
+    failure = np.zeros(LANES, np.int64)
+    fail_t = np.full(LANES, np.nan)
+    reason = np.zeros(LANES, np.int64)
+    reason_index = np.zeros((LANES, 2), np.int64)
+    reason_value = np.zeros(LANES)
+    info = np.zeros(3)
+    final_step = np.zeros(LANES, np.int64)
+    target = np.zeros(LANES, np.int64)
+    arrival = np.full(LANES, np.nan)
+    gamma = np.zeros(LANES)
+    next_update = np.zeros(LANES, np.int64)
+    pend_step = np.zeros((LANES, pending_size), np.int64)
+    pend_value = np.zeros((LANES, pending_size))
+    pend_head = np.zeros(LANES, np.int64)
+    pend_count = np.zeros(LANES, np.int64)
+    med = np.zeros((LANES, window, 3))
+    med_count = np.zeros(LANES, np.int64)
+    med_next = np.zeros(LANES, np.int64)
+    last_heading = np.zeros(LANES)
+    filtered = np.zeros((LANES, 3))
+    scratch = np.empty(window)
+    cm = np.empty((n + 2, n + 2))
+    clo = np.empty((n + 2, n + 2))
+    cinv = np.empty((n + 2, n + 2))
+    cs = np.empty(n)
+    cc = np.empty(n)
+    cjx = np.empty(n + 2)
+    cjy = np.empty(n + 2)
+    for r in range(LANES):
+        run = first + r
+        alive[r] = run < n_runs
+        run_of[r] = run if run < n_runs else first
+        for p in range(n_par):
+            work[(W_GEOMETRY + p) * LANES + r] = params[run_of[r], p]
+        for row in range(ns):
+            x[row, r] = x0[run_of[r], row]
+        if alive[r]:
+            p0, p1, h0, _, _, _ = _pose(x, r, n)
+            filtered[r, 0], filtered[r, 1], filtered[r, 2] = p0, p1, h0
+            # the frame at t = 0 sees the initial pose
+            _observe(r, run_of[r], 0, p0, p1, h0, noise, pixel, window, med, med_count, med_next,
+                     last_heading, filtered, target, arrival, waypoints, n_waypoints, radius,
+                     frame_time[0], scratch)
+    frame = 1
+    sample = 0
+    n_samples = sample_steps.shape[0]
+    n_frames = frame_step.shape[0]
+    half = 0.5 * dt
+    sixth = dt / 6.0
+    step = 0
+    while True:
+        t = step * dt
+        # 1. control updates; offsets act after the delay (pending queue, in order)
+        any_alive = False
+        for r in range(LANES):
+            if not alive[r]:
+                continue
+            any_alive = True
+            run = run_of[r]
+            k = next_update[r]
+            is_update[r] = k < update_count[run] and update_steps[run, k] == step
+            if is_update[r]:
+                next_update[r] = k + 1
+                w = min(target[r], n_waypoints[run] - 1)
+                offset = _heading_offset(filtered[r, 0], filtered[r, 1], filtered[r, 2],
+                                         waypoints[run, w, 0], waypoints[run, w, 1], k_theta[run])
+                slot = (pend_head[r] + pend_count[r]) % pending_size
+                pend_step[r, slot] = step + delay_steps[run]
+                pend_value[r, slot] = offset
+                pend_count[r] += 1
+            while pend_count[r] > 0 and pend_step[r, pend_head[r]] <= step:
+                gamma[r] = pend_value[r, pend_head[r]]
+                pend_head[r] = (pend_head[r] + 1) % pending_size
+                pend_count[r] -= 1
+            work[W_GAMMA * LANES + r] = gamma[r]
+        if not any_alive:
+            break
+        # 2. samples (the reference records every step before its checks)
+        while sample < n_samples and sample_steps[sample] < step:
+            sample += 1
+        if sample < n_samples and sample_steps[sample] == step:
+            for r in range(LANES):
+                if alive[r]:
+                    for row in range(ns):
+                        states_out[run_of[r], sample, row] = x[row, r]
+        if record_full:
+            for r in range(LANES):
+                if alive[r]:
+                    for row in range(ns):
+                        full_out[run_of[r], step, row] = x[row, r]
+        # 3. RK4 stage 1 at x (its sin/cos feed the collision screen), then closed_loop._check
+        for row in range(ns):
+            for r in range(LANES):
+                work[(W_Y + row) * LANES + r] = x[row, r]
+        _stage(work, out, t)
+        _screen(work, out)
+        for r in range(LANES):
+            if not alive[r]:
+                continue
+            run = run_of[r]
+            code = REASON_NONE
+            finite = True
+            fastest = 0.0
+            for row in range(ns):
+                if not np.isfinite(x[row, r]):
+                    finite = False
+                if row >= n + 2:
+                    fastest = max(fastest, abs(x[row, r]))
+            if not finite:
+                code = REASON_NOT_FINITE
+            elif fastest > DIVERGENCE_RATE:
+                code = REASON_DIVERGED
+            elif is_update[r]:
+                cond = _mass_matrix_condition(x[:, r], params[run], n, cm, clo, cinv, cs, cc,
+                                              cjx, cjy)
+                if not cond < ILL_CONDITION_THRESHOLD:
+                    code = REASON_CONDITION
+                    reason_value[r] = cond
+            if code == REASON_NONE and out[O_NEAR * LANES + r] != 0.0:
+                code = _self_collision(x[:, r], params[run], n,
+                                       work[W_LIMIT * LANES + r], info)
+                if code != REASON_NONE:
+                    reason_index[r, 0], reason_index[r, 1] = int(info[0]), int(info[1])
+                    reason_value[r] = info[2]
+            if code != REASON_NONE:
+                self_hit = code == REASON_JOINT_LIMIT or code == REASON_LINKS_INTERSECT
+                failure[r] = FAIL_SELF if self_hit else FAIL_ILL
+                reason[r] = code
+                fail_t[r] = t
+                alive[r] = False
+                final_step[r] = step
+            elif (stop_at_goal and not np.isnan(arrival[r])) or step >= total_steps[run]:
+                alive[r] = False
+                final_step[r] = step
+        # 4. RK4 stages 2-4 (same expression order as integrate.rk4_step)
+        for row in range(ns):
+            for r in range(LANES):
+                acc[row, r] = out[(O_K + row) * LANES + r]
+        for r in range(LANES):
+            bad[r] = out[O_BAD_PIVOT * LANES + r]
+        _copy_y(work, x, 0, half, out, ns)
+        _stage(work, out, t + half)
+        for row in range(ns):
+            for r in range(LANES):
+                acc[row, r] = acc[row, r] + 2.0 * out[(O_K + row) * LANES + r]
+        for r in range(LANES):
+            bad[r] += out[O_BAD_PIVOT * LANES + r]
+        _copy_y(work, x, 0, half, out, ns)
+        _stage(work, out, t + half)
+        for row in range(ns):
+            for r in range(LANES):
+                acc[row, r] = acc[row, r] + 2.0 * out[(O_K + row) * LANES + r]
+        for r in range(LANES):
+            bad[r] += out[O_BAD_PIVOT * LANES + r]
+        _copy_y(work, x, 0, dt, out, ns)
+        _stage(work, out, t + dt)
+        for row in range(ns):
+            for r in range(LANES):
+                acc[row, r] = acc[row, r] + out[(O_K + row) * LANES + r]
+                xn[row, r] = x[row, r] + sixth * acc[row, r]
+        for r in range(LANES):
+            bad[r] += out[O_BAD_PIVOT * LANES + r]
+        for r in range(LANES):
+            if not alive[r]:
+                continue
+            code = REASON_NONE
+            if bad[r] > 0.0:
+                code = REASON_NOT_PD
+                fail_t[r] = t
+            else:
+                for row in range(ns):
+                    if not np.isfinite(xn[row, r]):
+                        code = REASON_NOT_FINITE
+                        fail_t[r] = t + dt
+                        break
+            if code != REASON_NONE:
+                failure[r] = FAIL_ILL
+                reason[r] = code
+                alive[r] = False
+                final_step[r] = step
+        # 5. camera frames in (t, t + dt] see the Hermite-interpolated pose
+        while frame < n_frames and frame_step[frame] == step:
+            s = frame_fraction[frame]
+            for r in range(LANES):
+                if not alive[r]:
+                    continue
+                a0, a1, a2, da0, da1, da2 = _pose(x, r, n)
+                b0, b1, b2, db0, db1, db2 = _pose(xn, r, n)
+                _observe(r, run_of[r], frame, _hermite(a0, da0, b0, db0, dt, s),
+                         _hermite(a1, da1, b1, db1, dt, s), _hermite(a2, da2, b2, db2, dt, s),
+                         noise, pixel, window, med, med_count, med_next, last_heading, filtered,
+                         target, arrival, waypoints, n_waypoints, radius, frame_time[frame],
+                         scratch)
+            frame += 1
+        for r in range(LANES):
+            if alive[r]:
+                for row in range(ns):
+                    x[row, r] = xn[row, r]
+        step += 1
+    for r in range(LANES):
+        run = first + r
+        if run >= n_runs:
+            continue
+        if failure[r] == FAIL_NONE and np.isnan(arrival[r]):
+            failure[r] = FAIL_TOO_SLOW
+            reason[r] = REASON_TOO_SLOW
+            fail_t[r] = final_step[r] * dt
+            reason_index[r, 0] = target[r]
+        arrival_out[run] = arrival[r]
+        failure_out[run] = failure[r]
+        failure_time_out[run] = fail_t[r]
+        reason_out[run] = reason[r]
+        reason_index_out[run, 0] = reason_index[r, 0]
+        reason_index_out[run, 1] = reason_index[r, 1]
+        reason_value_out[run] = reason_value[r]
+        for row in range(ns):
+            final_state_out[run, row] = x[row, r]
+        final_step_out[run] = final_step[r]
+        target_out[run] = target[r]
+        distance_out[run] = _distance_left(x[n, r], x[n + 1, r], waypoints[run],
+                                           n_waypoints[run], target[r])
+
+
+@numba.njit(cache=True, parallel=True)
+def run_blocks(params, x0, total_steps, dt, waypoints, n_waypoints, radius, k_theta, delay_steps,
+               update_steps, update_count, frame_step, frame_fraction, frame_time, noise, pixel,
+               window, stop_at_goal, pending_size, sample_steps, states_out, record_full, full_out,
+               arrival_out, failure_out, failure_time_out, reason_out, reason_index_out,
+               reason_value_out, final_state_out, final_step_out, target_out, distance_out):
+    """Run every block of LANES runs; blocks are shared out over numba's threads."""
+    n_blocks = (x0.shape[0] + LANES - 1) // LANES
+    for block in numba.prange(n_blocks):
+        _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radius, k_theta,
+                   delay_steps, update_steps, update_count, frame_step, frame_fraction, frame_time,
+                   noise, pixel, window, stop_at_goal, pending_size, sample_steps, states_out,
+                   record_full, full_out, arrival_out, failure_out, failure_time_out, reason_out,
+                   reason_index_out, reason_value_out, final_state_out, final_step_out,
+                   target_out, distance_out)

@@ -1,0 +1,840 @@
+"""Fast batched closed-loop rollouts: many runs of the twin in one call, on all cores.
+
+This is the fast path of the physics and control stack whose readable reference is
+:func:`eelsim.closed_loop.simulate_closed_loop`; the tests (``sim/tests/test_batch.py``) check that
+both agree to 1e-9 (states at sample times, arrival times, flags, failure times).
+
+Use
+---
+>>> from eelsim.batch import run_batch
+>>> res = run_batch(robot, [scenario_a, scenario_b], coefficients=[[0.008, 0.776, 0.618, 0.007],
+...                 [0.009, 0.978, 1.169, 0.001]], sample_times_s=[0.0, 5.0, 10.0])
+>>> res.states.shape          # (runs, samples, 2 N + 4)
+>>> res.arrival_time_s, res.failure, res.reason(0)
+
+Every per-run input (robot, scenario, coefficients, seed) may be a single value, shared by all
+runs, or a sequence with one entry per run. Robots may differ in gains, limits and per-link values
+but must have the same number of links. Loop options (timing, camera, servo model, stopping rule)
+are shared by the batch.
+
+How it is fast
+--------------
+Runs are grouped in blocks of ``lanes`` runs that advance in lock step, with the per-run data laid
+out as structure of arrays (one row of ``lanes`` numbers per quantity). The right-hand side of the
+dynamics is generated as straight-line code for the robot's N (``eelsim._batch_codegen``) inside
+one loop over the lanes, which LLVM vectorises (4 runs per AVX2 instruction). Blocks are spread
+over the cores with numba's ``prange``. The kernel module is generated once per (N, lanes) and
+compiled once: numba caches it on disk (next to the package in ``__pycache__``, or in
+``$EELSIM_KERNEL_CACHE``) for every later process.
+
+Randomness follows the reference exactly: for each run, ``np.random.default_rng(seed)`` draws
+first the control update schedule (:meth:`eelsim.timing.LoopTiming.update_steps`), then one heading
+noise sample per camera frame when ``heading_noise_rad > 0``. These draws are made here in Python;
+the kernel is deterministic.
+
+Memory: per run, only the requested samples, the final state and the flags are kept; the full
+state history is stored only with ``record_full=True``.
+"""
+
+from __future__ import annotations
+
+import enum
+import importlib.util
+import math
+import os
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from eelsim import _batch_codegen
+from eelsim.closed_loop import LoopOptions
+from eelsim.flags import DIVERGENCE_RATE, ILL_CONDITION_THRESHOLD, Failure, penalty
+from eelsim.model import geometry_matrix
+from eelsim.robot import HydroCoefficients, Robot
+from eelsim.scenario import Scenario
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+DEFAULT_LANES = 16
+"""Runs per block. LLVM vectorises the lane loop only from 16 iterations up (shorter loops are
+left scalar because of the runtime alias check), and longer blocks waste more work on runs that
+stopped early while others in the block continue."""
+
+
+class Reason(enum.IntEnum):
+    """Why a run was flagged; :meth:`BatchResult.reason` turns it into the reference's text."""
+
+    NONE = 0
+    TOO_SLOW = 1
+    NOT_FINITE = 2
+    NOT_POSITIVE_DEFINITE = 3
+    CONDITION_NUMBER = 4
+    JOINT_LIMIT = 5
+    LINKS_INTERSECT = 6
+    DIVERGED = 7
+
+
+# ---------------------------------------------------------------------------------------------
+# the compiled kernel
+
+
+_KERNELS: dict[tuple[int, int], object] = {}
+
+
+def kernel_cache_dir() -> Path:
+    """Directory holding the generated kernel sources and numba's on-disk cache of them.
+
+    ``$EELSIM_KERNEL_CACHE`` when set, else ``__pycache__/batch_kernels`` beside this module (git
+    ignores ``__pycache__``), else ``~/.cache/eelsim/batch_kernels`` if the package is read-only.
+
+    Returns
+    -------
+    Path
+    """
+    env = os.environ.get("EELSIM_KERNEL_CACHE")
+    if env:
+        return Path(env)
+    here = Path(__file__).resolve().parent / "__pycache__" / "batch_kernels"
+    try:
+        here.mkdir(parents=True, exist_ok=True)
+        probe = here / ".writable"
+        probe.touch()
+        return here
+    except OSError:
+        return Path.home() / ".cache" / "eelsim" / "batch_kernels"
+
+
+def _kernel_source(n_links: int, lanes: int) -> str:
+    template = (Path(__file__).parent / "_batch_kernel.py").read_text()
+    for name, value in (
+        ("ILL_CONDITION_THRESHOLD = 1e10", ILL_CONDITION_THRESHOLD),
+        ("DIVERGENCE_RATE = 1e3", DIVERGENCE_RATE),
+    ):
+        if name not in template:
+            raise RuntimeError(f"kernel template lost its line {name!r}")
+        template = template.replace(name, f"{name.split(' = ')[0]} = {value!r}")
+    layout = _batch_codegen.make_layout(n_links, lanes)
+    return template + _batch_codegen.generate_stage_source(layout)
+
+
+def kernel_module(n_links: int, lanes: int = DEFAULT_LANES):
+    """Return the compiled-on-demand kernel module for N links and ``lanes`` runs per block.
+
+    The module's source is written to :func:`kernel_cache_dir` only when it changed, so numba's
+    cache (keyed on the file's time stamp) stays valid across processes.
+
+    Parameters
+    ----------
+    n_links : int
+        N.
+    lanes : int
+        Runs per block (16 or more, so that the lane loop vectorises).
+
+    Returns
+    -------
+    module
+    """
+    key = (n_links, lanes)
+    if key in _KERNELS:
+        return _KERNELS[key]
+    if lanes < 16:
+        raise ValueError(f"lanes must be at least 16 (vectorisation), got {lanes}")
+    name = f"eelsim_batch_kernel_n{n_links}_l{lanes}"
+    folder = kernel_cache_dir()
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / f"{name}.py"
+    source = _kernel_source(n_links, lanes)
+    if not path.exists() or path.read_text() != source:
+        tmp = path.with_suffix(f".tmp{os.getpid()}")
+        tmp.write_text(source)
+        os.replace(tmp, path)  # atomic: concurrent processes never see half a file
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    # numba's cache re-imports the module by name when it loads compiled code
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    _KERNELS[key] = module
+    return module
+
+
+def warm_up(n_links: int = 6, lanes: int = DEFAULT_LANES) -> float:
+    """Compile (or load from the disk cache) the kernel for N links; return the seconds it took.
+
+    Parameters
+    ----------
+    n_links : int
+        N.
+    lanes : int
+        Runs per block.
+
+    Returns
+    -------
+    float
+        Wall time of loading or compiling, s.
+    """
+    from eelsim.robot import load_robot
+    from eelsim.scenario import load_scenario
+
+    start = time.perf_counter()
+    robot = load_robot()
+    if robot.n_links != n_links:
+        robot = robot.model_copy(update={"n_links": n_links})
+    scenario = load_scenario("straight").model_copy(update={"duration_s": 0.05})
+    run_batch(robot, scenario, lanes=lanes, sample_steps=[0])
+    return time.perf_counter() - start
+
+
+# ---------------------------------------------------------------------------------------------
+# inputs
+
+
+@dataclass(frozen=True)
+class BatchSpec:
+    """Everything the kernel needs, as arrays with one row per run (R runs, N links).
+
+    Build it with :meth:`build`; :meth:`with_coefficients` swaps the hydrodynamic coefficients
+    cheaply (what estimation does generation after generation).
+
+    Attributes
+    ----------
+    n_links : int
+        N, shared by the batch.
+    params : ndarray, shape (R, P)
+        Per-run constants in the kernel's row order (geometry, fluid coefficients, gait, gains,
+        current; see ``eelsim._batch_codegen.make_layout``).
+    initial_state : ndarray, shape (R, 2 N + 4)
+        Straight robot at rest at the scenario's start pose.
+    total_steps : ndarray of int, shape (R,)
+        floor(T_max / dt).
+    waypoints_m : ndarray, shape (R, W, 2)
+        Waypoints, padded (repeating the last one) to the longest list.
+    n_waypoints : ndarray of int, shape (R,)
+    acceptance_radius_m, k_theta : ndarray, shape (R,)
+    delay_steps : ndarray of int, shape (R,)
+    update_steps : ndarray of int, shape (R, U)
+        Control update schedule of each run (from its seed), padded with -1.
+    update_count : ndarray of int, shape (R,)
+    heading_noise_rad : ndarray, shape (R, F) or (R, 0)
+        Heading noise of each camera frame (from the seed), empty without noise.
+    frame_step, frame_fraction, frame_time_s : ndarray, shape (F,)
+        Camera frames: the step k whose interval (t_k, t_k + dt] holds the frame, the fraction of
+        the step, and the frame's time (frame 0 is seen at t = 0 before the first step).
+    options : LoopOptions
+        The shared loop options.
+    half_length_m, half_axis_vertical_m, half_axis_horizontal_m, yaw_inertia_kg_m2 : ndarray
+        Per-run, per-link geometry and inertia, kept to recompute the fluid coefficients.
+    density_kg_m3 : ndarray, shape (R,)
+    coefficients : ndarray, shape (R, 4)
+        (C_f, C_d, C_a, C_m) of each run.
+    duration_s : ndarray, shape (R,)
+        T_max of each run (for messages).
+    joint_limit_rad : ndarray, shape (R,)
+    """
+
+    n_links: int
+    params: FloatArray
+    initial_state: FloatArray
+    total_steps: IntArray
+    waypoints_m: FloatArray
+    n_waypoints: IntArray
+    acceptance_radius_m: FloatArray
+    k_theta: FloatArray
+    delay_steps: IntArray
+    update_steps: IntArray
+    update_count: IntArray
+    heading_noise_rad: FloatArray
+    frame_step: IntArray
+    frame_fraction: FloatArray
+    frame_time_s: FloatArray
+    options: LoopOptions
+    half_length_m: FloatArray
+    half_axis_vertical_m: FloatArray
+    half_axis_horizontal_m: FloatArray
+    yaw_inertia_kg_m2: FloatArray
+    density_kg_m3: FloatArray
+    coefficients: FloatArray
+    duration_s: FloatArray
+    joint_limit_rad: FloatArray
+
+    @property
+    def n_runs(self) -> int:
+        """Number of runs R."""
+        return int(self.initial_state.shape[0])
+
+    @classmethod
+    def build(
+        cls,
+        robots: Robot | Sequence[Robot],
+        scenarios: Scenario | Sequence[Scenario],
+        coefficients: ArrayLike | HydroCoefficients | Sequence[HydroCoefficients] | None = None,
+        options: LoopOptions | None = None,
+        seeds: int | ArrayLike = 0,
+    ) -> BatchSpec:
+        """Lay out a batch of runs.
+
+        Parameters
+        ----------
+        robots : Robot or sequence of Robot
+            One robot for all runs, or one per run (same number of links).
+        scenarios : Scenario or sequence of Scenario
+            One scenario for all runs, or one per run.
+        coefficients : array_like (R, 4) or (4,), HydroCoefficients or a sequence of them, optional
+            (C_f, C_d, C_a, C_m) per run; default: each robot's own.
+        options : LoopOptions, optional
+            Shared by all runs.
+        seeds : int or array_like of int
+            Seed of each run's jitter and heading noise (as ``simulate_closed_loop``'s ``seed``).
+
+        Returns
+        -------
+        BatchSpec
+
+        Raises
+        ------
+        ValueError
+            When per-run sequences have different lengths or robots differ in N.
+        """
+        opts = options or LoopOptions()
+        robot_list = [robots] if isinstance(robots, Robot) else list(robots)
+        scen_list = [scenarios] if isinstance(scenarios, Scenario) else list(scenarios)
+        coeff_arr = _coefficient_array(coefficients)
+        seed_arr = np.atleast_1d(np.asarray(seeds, dtype=np.int64))
+        sizes = {len(robot_list), len(scen_list), seed_arr.shape[0]}
+        if coeff_arr is not None:
+            sizes.add(coeff_arr.shape[0])
+        sizes.discard(1)
+        if len(sizes) > 1:
+            raise ValueError(f"per-run inputs have different lengths: {sorted(sizes)}")
+        n_runs = sizes.pop() if sizes else 1
+        if not robot_list or not scen_list:
+            raise ValueError("a batch needs at least one robot and one scenario")
+        n = robot_list[0].n_links
+        if any(rb.n_links != n for rb in robot_list):
+            raise ValueError("all robots of a batch must have the same number of links")
+
+        robot_idx = _index(robot_list, n_runs)
+        scen_idx = _index(scen_list, n_runs)
+        seed_of = np.broadcast_to(seed_arr, (n_runs,))
+        timing, camera = opts.timing, opts.camera
+        dt = timing.dt_s
+
+        # -- robots: per-link geometry, gains (computed once per distinct robot)
+        rob = [_robot_arrays(rb, opts) for rb in robot_list]
+        per_robot = {k: np.stack([r[k] for r in rob]) for k in rob[0]}
+        rsel = {k: v[robot_idx] for k, v in per_robot.items()}
+        if coeff_arr is None:
+            coeff_arr = np.stack([rb.hydrodynamics.as_array() for rb in robot_list])[robot_idx]
+        coeff_arr = np.broadcast_to(coeff_arr, (n_runs, 4)).astype(float)
+
+        # -- scenarios
+        sc = [_scenario_arrays(s, n, dt) for s in scen_list]
+        n_wp_max = max(len(s.waypoints_m) for s in scen_list)
+        wp = np.stack([_pad_waypoints(s.waypoints_m, n_wp_max) for s in scen_list])[scen_idx]
+        ssel = {k: np.stack([d[k] for d in sc])[scen_idx] for k in sc[0]}
+        total = ssel["total_steps"].astype(np.int64)
+
+        # -- camera frames, shared by all runs (the same dt and fps), for the longest run
+        frame_step, frame_fraction, frame_time = _frame_table(int(total.max()), dt, camera.fps)
+
+        # -- random draws, per distinct (seed, total) as the reference makes them
+        updates, counts, noise = _random_draws(seed_of, total, timing, camera, frame_time.size)
+
+        layout = _batch_codegen.make_layout(n, DEFAULT_LANES)
+        params = np.zeros((n_runs, layout.work_rows - layout.work["geometry"]))
+        spec = cls(
+            n_links=n,
+            params=params,
+            initial_state=ssel["initial_state"],
+            total_steps=total,
+            waypoints_m=wp,
+            n_waypoints=ssel["n_waypoints"].astype(np.int64),
+            acceptance_radius_m=ssel["radius"],
+            k_theta=ssel["k_theta"],
+            delay_steps=np.full(n_runs, timing.delay_steps, dtype=np.int64),
+            update_steps=updates,
+            update_count=counts,
+            heading_noise_rad=noise,
+            frame_step=frame_step,
+            frame_fraction=frame_fraction,
+            frame_time_s=frame_time,
+            options=opts,
+            half_length_m=rsel["half"],
+            half_axis_vertical_m=rsel["a"],
+            half_axis_horizontal_m=rsel["b"],
+            yaw_inertia_kg_m2=rsel["inertia"],
+            density_kg_m3=rsel["rho"],
+            coefficients=coeff_arr,
+            duration_s=ssel["duration"],
+            joint_limit_rad=rsel["limit"],
+        )
+        _fill_params(params, layout, rsel, ssel, n)
+        _fill_fluid(params, layout, spec, coeff_arr)
+        return spec
+
+    def with_coefficients(self, coefficients: ArrayLike) -> BatchSpec:
+        """The same batch with other hydrodynamic coefficients (one row or one per run).
+
+        Parameters
+        ----------
+        coefficients : array_like, shape (R, 4) or (4,)
+            (C_f, C_d, C_a, C_m).
+
+        Returns
+        -------
+        BatchSpec
+        """
+        c = np.broadcast_to(np.asarray(coefficients, dtype=float), (self.n_runs, 4)).copy()
+        params = self.params.copy()
+        out = replace(self, params=params, coefficients=c)
+        _fill_fluid(params, _batch_codegen.make_layout(self.n_links, DEFAULT_LANES), out, c)
+        return out
+
+
+def _coefficient_array(coefficients) -> FloatArray | None:
+    if coefficients is None:
+        return None
+    if isinstance(coefficients, HydroCoefficients):
+        return coefficients.as_array()[None, :]
+    if isinstance(coefficients, Sequence) and coefficients and isinstance(
+        coefficients[0], HydroCoefficients
+    ):
+        return np.stack([c.as_array() for c in coefficients])
+    arr = np.asarray(coefficients, dtype=float)
+    if arr.ndim == 1:
+        arr = arr[None, :]
+    if arr.ndim != 2 or arr.shape[1] != 4:
+        raise ValueError(f"coefficients must have shape (R, 4) or (4,), got {arr.shape}")
+    return arr
+
+
+def _index(items: list, n_runs: int) -> IntArray:
+    """Index into the distinct objects of ``items`` for each run (a single item is shared)."""
+    if len(items) == 1:
+        return np.zeros(n_runs, dtype=np.int64)
+    return np.arange(n_runs, dtype=np.int64)
+
+
+def _robot_arrays(robot: Robot, opts: LoopOptions) -> dict[str, FloatArray]:
+    links = robot.links()
+    half = np.array([lk.half_length_m for lk in links])
+    mass = np.array([lk.mass_kg for lk in links])
+    inertia = np.array(
+        [
+            lk.yaw_inertia_kg_m2 if lk.yaw_inertia_kg_m2 is not None
+            else lk.mass_kg * lk.half_length_m**2 / 3.0
+            for lk in links
+        ]
+    )
+    g = geometry_matrix(half, mass)
+    j = robot.joints
+    return {
+        "half": half,
+        "mass": mass,
+        "inertia": inertia,
+        "a": np.array([lk.half_axis_vertical_m for lk in links]),
+        "b": np.array([lk.half_axis_horizontal_m for lk in links]),
+        "rho": np.array(robot.water_density_kg_m3),
+        "geometry": g,
+        "kp": np.array(j.kp_nm_per_rad),
+        "kd": np.array(j.kd_nms_per_rad),
+        "limit": np.array(j.limit_rad),
+        "clamp": np.array(j.command_limit_rad),
+        # the servo line with infinite stall torque and speed leaves the torque unchanged
+        "stall": np.array(j.servo_max_torque_nm if opts.servo_limits else np.inf),
+        "inv_no_load": np.array(1.0 / j.servo_max_speed_rad_s if opts.servo_limits else 0.0),
+    }
+
+
+def _scenario_arrays(s: Scenario, n: int, dt: float) -> dict[str, FloatArray]:
+    heading = np.radians(s.start_heading_deg)
+    x0 = np.concatenate(
+        [np.full(n, float(heading)), np.asarray(s.start_position_m, float), np.zeros(n + 2)]
+    )
+    j = np.arange(1, n, dtype=float)
+    return {
+        "initial_state": x0,
+        "total_steps": np.array(int(np.floor(s.duration_s / dt + 1e-9))),
+        "n_waypoints": np.array(len(s.waypoints_m)),
+        "radius": np.array(s.acceptance_radius_m),
+        "k_theta": np.array(s.k_theta),
+        "duration": np.array(s.duration_s),
+        # control.joint_amplitudes and gait_reference's phase offsets (j - 1) beta
+        "amp": s.amplitude_rad * (n - j) / (n + 1.0),
+        "cos_beta": np.cos(np.arange(n - 1) * s.beta_rad),
+        "sin_beta": np.sin(np.arange(n - 1) * s.beta_rad),
+        "omega": np.array(s.omega_rad_s),
+        "vcx": np.array(s.current_m_s[0]),
+        "vcy": np.array(s.current_m_s[1]),
+    }
+
+
+def _pad_waypoints(waypoints: list[tuple[float, float]], size: int) -> FloatArray:
+    wp = np.asarray(waypoints, dtype=float)
+    return np.concatenate([wp, np.repeat(wp[-1:], size - len(wp), axis=0)])
+
+
+def _frame_table(max_total: int, dt: float, fps: float) -> tuple[IntArray, FloatArray, FloatArray]:
+    """Camera frames as closed_loop assigns them to physics steps.
+
+    Frame f is seen in the first step k with f / fps <= k dt + dt + 1e-12, at the fraction
+    (f / fps - k dt) / dt of the step (the same float expressions as the reference).
+    """
+    count = int(np.floor(max_total * dt * fps + 1e-9)) + 1
+    times = np.arange(count) / fps
+    t_step = np.arange(max_total) * dt
+    step = np.searchsorted(t_step + dt + 1e-12, times, side="left").astype(np.int64)
+    step[0] = -1  # frame 0 is seen at t = 0, before the loop
+    keep = step < max_total
+    step, times = step[keep], times[keep]
+    frac = np.zeros_like(times)
+    frac[1:] = (times[1:] - t_step[step[1:]]) / dt
+    return step, frac, times
+
+
+def _random_draws(seeds, total, timing, camera, n_frames):
+    """Update schedules and heading noise per run, drawn like simulate_closed_loop."""
+    cache: dict[tuple[int, int], tuple[IntArray, FloatArray]] = {}
+    random = timing.jitter_steps > 0 or camera.heading_noise_rad > 0
+    schedules, noises = [], []
+    for seed, tot in zip(seeds.tolist(), total.tolist(), strict=True):
+        key = (seed if random else 0, tot)
+        if key not in cache:
+            rng = np.random.default_rng(seed)
+            upd = timing.update_steps(tot, rng)
+            noise = (
+                rng.normal(0.0, camera.heading_noise_rad, size=n_frames)
+                if camera.heading_noise_rad
+                else np.zeros(0)
+            )
+            cache[key] = (upd, noise)
+        upd, noise = cache[key]
+        schedules.append(upd)
+        noises.append(noise)
+    width = max(s.size for s in schedules)
+    updates = np.full((len(schedules), width), -1, dtype=np.int64)
+    counts = np.zeros(len(schedules), dtype=np.int64)
+    for i, s in enumerate(schedules):
+        updates[i, : s.size] = s
+        counts[i] = s.size
+    noise = np.stack(noises) if camera.heading_noise_rad else np.zeros((len(schedules), 0))
+    return updates, counts, noise
+
+
+def _rows(params: FloatArray, layout: _batch_codegen.Layout, name: str, size: int) -> FloatArray:
+    start = layout.work[name] - layout.work["geometry"]
+    return params[:, start : start + size]
+
+
+def _fill_params(params, layout, rsel, ssel, n) -> None:
+    g = rsel["geometry"]  # (R, N, N), G[j, i]
+    mass = rsel["mass"]
+    _rows(params, layout, "geometry", n * n)[:] = g.reshape(len(g), n * n)
+    gmg = np.einsum("rj,rji,rjk->rik", mass, g, g)
+    _rows(params, layout, "gmg", n * n)[:] = gmg.reshape(len(g), n * n)
+    _rows(params, layout, "sm", n)[:] = np.einsum("rj,rji->ri", mass, g)
+    _rows(params, layout, "mass", n)[:] = mass
+    _rows(params, layout, "mass_sum", 1)[:, 0] = mass.sum(axis=1)
+    _rows(params, layout, "half_length", n)[:] = rsel["half"]
+    for name in ("kp", "kd", "limit", "clamp", "stall", "inv_no_load"):
+        _rows(params, layout, name, 1)[:, 0] = rsel[name]
+    for name in ("amp", "cos_beta", "sin_beta"):
+        _rows(params, layout, name, n - 1)[:] = ssel[name]
+    for name in ("omega", "vcx", "vcy"):
+        _rows(params, layout, name, 1)[:, 0] = ssel[name]
+
+
+def _fill_fluid(params, layout, spec: BatchSpec, coeffs: FloatArray) -> None:
+    """model.link_coefficients for every run at once (same expressions, broadcast over runs)."""
+    n = spec.n_links
+    l_, a, b = spec.half_length_m, spec.half_axis_vertical_m, spec.half_axis_horizontal_m
+    rho = spec.density_kg_m3[:, None]
+    c_f, c_d, c_a, c_m = (coeffs[:, i : i + 1] for i in range(4))
+    _rows(params, layout, "ct", n)[:] = 0.5 * rho * np.pi * c_f * (a + b) / 2.0 * 2.0 * l_
+    _rows(params, layout, "cn", n)[:] = 0.5 * rho * c_d * 2.0 * a * 2.0 * l_
+    _rows(params, layout, "mu", n)[:] = rho * np.pi * c_a * a**2 * 2.0 * l_
+    lambda_1 = rho * np.pi * c_m * (a**2 - b**2) ** 2 * l_**3 / 12.0
+    _rows(params, layout, "lambda2", n)[:] = rho * np.pi * c_f * (a + b) * l_**3 / 6.0
+    _rows(params, layout, "lambda3", n)[:] = rho * np.pi * c_f * (a + b) * l_**4 / 8.0
+    # the diagonal term J_i + lambda_1,i of dynamics.mass_matrix
+    _rows(params, layout, "inertia", n)[:] = spec.yaw_inertia_kg_m2 + lambda_1
+
+
+# ---------------------------------------------------------------------------------------------
+# outputs
+
+
+@dataclass(frozen=True)
+class BatchResult:
+    """What a batch produced, one entry per run (R runs, S samples, N links).
+
+    Attributes
+    ----------
+    sample_steps : ndarray of int, shape (S,)
+        Requested sample steps (k, at t = k dt), in the order asked.
+    sample_times_s : ndarray, shape (S,)
+    states : ndarray, shape (R, S, 2 N + 4)
+        State at each sample; NaN after the run ended (stopped at the goal, failed, or past
+        T_max).
+    arrival_time_s : ndarray, shape (R,)
+        Camera frame time at which the last waypoint was reached, NaN if never.
+    failure : ndarray of int, shape (R,)
+        :class:`eelsim.flags.Failure` values.
+    failure_time_s : ndarray, shape (R,)
+        When the failure was detected, NaN if none.
+    distance_left_m : ndarray, shape (R,)
+        Path length left to the last waypoint at the end of the run.
+    reason_code : ndarray of int, shape (R,)
+        :class:`Reason` values; :meth:`reason` gives the text.
+    final_state : ndarray, shape (R, 2 N + 4)
+        State at the last recorded step.
+    final_step : ndarray of int, shape (R,)
+        Index of that step.
+    target_index : ndarray of int, shape (R,)
+        Waypoints reached.
+    full_states : ndarray, shape (R, K + 1, 2 N + 4), or None
+        Every step (NaN after the end), only with ``record_full=True``.
+    spec : BatchSpec
+        The inputs.
+    """
+
+    sample_steps: IntArray
+    sample_times_s: FloatArray
+    states: FloatArray
+    arrival_time_s: FloatArray
+    failure: IntArray
+    failure_time_s: FloatArray
+    distance_left_m: FloatArray
+    reason_code: IntArray
+    reason_index: IntArray
+    reason_value: FloatArray
+    final_state: FloatArray
+    final_step: IntArray
+    target_index: IntArray
+    full_states: FloatArray | None
+    spec: BatchSpec
+
+    def reason(self, run: int) -> str:
+        """Human-readable reason of run ``run``'s flag, worded as ``RunResult.reason``.
+
+        Parameters
+        ----------
+        run : int
+
+        Returns
+        -------
+        str
+            Empty when the run did not fail.
+        """
+        code = Reason(int(self.reason_code[run]))
+        i, k = (int(v) for v in self.reason_index[run])
+        value = float(self.reason_value[run])
+        if code == Reason.TOO_SLOW:
+            return (
+                f"reached {i} of {int(self.spec.n_waypoints[run])} waypoints by "
+                f"T_max = {float(self.spec.duration_s[run]):g} s"
+            )
+        if code == Reason.NOT_FINITE:
+            return "state is not finite (the integration blew up)"
+        if code == Reason.DIVERGED:
+            return "rates beyond any physical motion (the integration diverged)"
+        if code == Reason.NOT_POSITIVE_DEFINITE:
+            return "mass matrix is not positive definite"
+        if code == Reason.CONDITION_NUMBER:
+            return (
+                f"mass matrix condition number {value:.3g} is above {ILL_CONDITION_THRESHOLD:.0e}"
+            )
+        if code == Reason.JOINT_LIMIT:
+            limit = float(self.spec.joint_limit_rad[run])
+            return f"joint {i + 1} at {value:+.3f} rad is beyond its limit of {limit:.3f} rad"
+        if code == Reason.LINKS_INTERSECT:
+            return f"links {i + 1} and {k + 1} intersect"
+        return ""
+
+    def penalties(self) -> FloatArray:
+        """The paper's fitness value of each run's failure (0 if none), as ``flags.penalty``."""
+        return np.array(
+            [penalty(Failure(int(f)), float(d))
+             for f, d in zip(self.failure, self.distance_left_m, strict=True)]
+        )
+
+
+def _sample_steps(
+    sample_steps: ArrayLike | None, sample_times_s: ArrayLike | None, dt: float
+) -> IntArray:
+    if sample_steps is not None and sample_times_s is not None:
+        raise ValueError("give sample_steps or sample_times_s, not both")
+    if sample_times_s is not None:
+        times = np.atleast_1d(np.asarray(sample_times_s, dtype=float))
+        steps = np.round(times / dt)
+        off = np.abs(steps * dt - times) > 1e-9 * np.maximum(1.0, np.abs(times))
+        if np.any(off):
+            raise ValueError(
+                f"sample time {times[off][0]} s is not a whole number of physics steps "
+                f"(dt = {dt} s); the batch samples the state at steps"
+            )
+        return steps.astype(np.int64)
+    if sample_steps is None:
+        return np.zeros(0, dtype=np.int64)
+    steps = np.atleast_1d(np.asarray(sample_steps))
+    if steps.size and (steps.dtype.kind not in "iu" or steps.min() < 0):
+        raise ValueError("sample_steps must be non-negative integers")
+    return steps.astype(np.int64)
+
+
+def run_spec(
+    spec: BatchSpec,
+    sample_steps: ArrayLike | None = None,
+    sample_times_s: ArrayLike | None = None,
+    record_full: bool = False,
+    lanes: int = DEFAULT_LANES,
+    threads: int | None = None,
+) -> BatchResult:
+    """Run a prepared batch.
+
+    Parameters
+    ----------
+    spec : BatchSpec
+        The runs.
+    sample_steps : array_like of int, optional
+        Steps k (t = k dt) at which to return the state.
+    sample_times_s : array_like, optional
+        The same as times; each must be a whole number of steps.
+    record_full : bool
+        Also return every step's state (memory R x (K+1) x (2N+4)).
+    lanes : int
+        Runs per block (>= 16).
+    threads : int, optional
+        Number of threads (default: numba's, i.e. all cores).
+
+    Returns
+    -------
+    BatchResult
+    """
+    import numba
+
+    n = spec.n_links
+    ns = 2 * n + 4
+    runs = spec.n_runs
+    dt = spec.options.timing.dt_s
+    steps = _sample_steps(sample_steps, sample_times_s, dt)
+    unique, inverse = np.unique(steps, return_inverse=True)
+    kernel = kernel_module(n, lanes)
+    timing = spec.options.timing
+    pending = timing.delay_steps // max(1, timing.period_steps - timing.jitter_steps) + 2
+    states = np.full((runs, unique.size, ns), np.nan)
+    full = (
+        np.full((runs, int(spec.total_steps.max()) + 1, ns), np.nan)
+        if record_full
+        else np.zeros((0, 0, ns))
+    )
+    out = {
+        "arrival": np.full(runs, np.nan),
+        "failure": np.zeros(runs, dtype=np.int64),
+        "failure_time": np.full(runs, np.nan),
+        "reason": np.zeros(runs, dtype=np.int64),
+        "reason_index": np.zeros((runs, 2), dtype=np.int64),
+        "reason_value": np.zeros(runs),
+        "final_state": np.zeros((runs, ns)),
+        "final_step": np.zeros(runs, dtype=np.int64),
+        "target": np.zeros(runs, dtype=np.int64),
+        "distance": np.zeros(runs),
+    }
+    cam = spec.options.camera
+    previous = numba.get_num_threads()
+    if threads is not None:
+        numba.set_num_threads(int(threads))
+    try:
+        kernel.run_blocks(
+            spec.params, spec.initial_state, spec.total_steps, float(dt), spec.waypoints_m,
+            spec.n_waypoints, spec.acceptance_radius_m, spec.k_theta, spec.delay_steps,
+            spec.update_steps, spec.update_count, spec.frame_step, spec.frame_fraction,
+            spec.frame_time_s, spec.heading_noise_rad, float(cam.pixel_m), int(cam.median_window),
+            bool(spec.options.stop_at_goal), int(pending), unique, states, bool(record_full), full,
+            out["arrival"], out["failure"], out["failure_time"], out["reason"],
+            out["reason_index"], out["reason_value"], out["final_state"], out["final_step"],
+            out["target"], out["distance"],
+        )
+    finally:
+        if threads is not None:
+            numba.set_num_threads(previous)
+    return BatchResult(
+        sample_steps=steps,
+        sample_times_s=steps * dt,
+        states=states[:, inverse.reshape(-1), :],
+        arrival_time_s=out["arrival"],
+        failure=out["failure"],
+        failure_time_s=out["failure_time"],
+        distance_left_m=out["distance"],
+        reason_code=out["reason"],
+        reason_index=out["reason_index"],
+        reason_value=out["reason_value"],
+        final_state=out["final_state"],
+        final_step=out["final_step"],
+        target_index=out["target"],
+        full_states=full if record_full else None,
+        spec=spec,
+    )
+
+
+def run_batch(
+    robots: Robot | Sequence[Robot],
+    scenarios: Scenario | Sequence[Scenario],
+    coefficients: ArrayLike | HydroCoefficients | Sequence[HydroCoefficients] | None = None,
+    options: LoopOptions | None = None,
+    seeds: int | ArrayLike = 0,
+    sample_steps: ArrayLike | None = None,
+    sample_times_s: ArrayLike | None = None,
+    record_full: bool = False,
+    lanes: int = DEFAULT_LANES,
+    threads: int | None = None,
+) -> BatchResult:
+    """Run many closed-loop runs of the twin at once (see the module docstring).
+
+    Parameters
+    ----------
+    robots : Robot or sequence of Robot
+        One robot, or one per run (same N).
+    scenarios : Scenario or sequence of Scenario
+        One scenario, or one per run.
+    coefficients : array_like (R, 4) or (4,), HydroCoefficients or sequence, optional
+        (C_f, C_d, C_a, C_m) per run (default: each robot's own).
+    options : LoopOptions, optional
+        Shared loop options (timing, camera, servo limits, stop at goal).
+    seeds : int or array_like of int
+        Seed per run, as ``simulate_closed_loop``'s.
+    sample_steps, sample_times_s : array_like, optional
+        Where to sample the state (steps, or times on the step grid).
+    record_full : bool
+        Also keep every step's state.
+    lanes : int
+        Runs per block.
+    threads : int, optional
+        Threads to use (default all cores).
+
+    Returns
+    -------
+    BatchResult
+    """
+    spec = BatchSpec.build(robots, scenarios, coefficients, options, seeds)
+    return run_spec(spec, sample_steps, sample_times_s, record_full, lanes, threads)
+
+
+def steps_per_second(result: BatchResult, wall_s: float) -> float:
+    """RK4 steps per wall second of a finished batch (sum of the runs' steps / wall time).
+
+    Parameters
+    ----------
+    result : BatchResult
+    wall_s : float
+
+    Returns
+    -------
+    float
+    """
+    return float(result.final_step.sum()) / wall_s if wall_s > 0 else math.inf

@@ -1,0 +1,195 @@
+"""The batched kernel (eelsim.batch) against the readable reference (closed_loop.simulate_closed_loop).
+
+Agreement is asked to 1e-9 on every recorded step (relative to max(1, |x|), which only matters for
+the state of a run that is blowing up), on arrival and failure times, flags, reasons and the
+distance left. The tests run on one thread (threads=1) except the one that checks threads agree.
+"""
+
+import numpy as np
+import pytest
+
+from eelsim.batch import BatchSpec, Reason, run_batch, run_spec
+from eelsim.camera import CameraModel
+from eelsim.closed_loop import LoopOptions, simulate_closed_loop
+from eelsim.flags import Failure
+from eelsim.robot import HydroCoefficients, Robot
+from eelsim.scenario import load_scenario
+from eelsim.timing import LoopTiming
+
+TOL = 1e-9
+
+
+def with_joints(robot, **changes):
+    return robot.model_copy(update={"joints": robot.joints.model_copy(update=changes)})
+
+
+def assert_agrees(ref, res, run=0):
+    """Batch run ``run`` (sampled at every step and a few beyond) equals the reference run."""
+    k = len(ref.t_s)
+    states = res.states[run]
+    scale = np.maximum(1.0, np.abs(ref.states))
+    assert np.all(np.abs(states[:k] - ref.states) <= TOL * scale)
+    assert np.all(np.isnan(states[k:]))  # nothing after the run ended
+    assert res.failure[run] == ref.failure
+    assert res.reason(run) == ref.reason
+    if ref.failure_time_s is None:
+        assert np.isnan(res.failure_time_s[run])
+    else:
+        assert res.failure_time_s[run] == pytest.approx(ref.failure_time_s, abs=TOL)
+    if ref.arrival_time_s is None:
+        assert np.isnan(res.arrival_time_s[run])
+    else:
+        assert res.arrival_time_s[run] == pytest.approx(ref.arrival_time_s, abs=TOL)
+    assert res.distance_left_m[run] == pytest.approx(ref.distance_left_m, abs=TOL)
+    assert res.final_step[run] == k - 1
+
+
+def compare(robot, scenario, options=None, seed=0, coefficients=None):
+    ref = simulate_closed_loop(robot, scenario, options, seed=seed, coefficients=coefficients)
+    res = run_batch(robot, scenario, coefficients, options, seed,
+                    sample_steps=np.arange(len(ref.t_s) + 5), threads=1)
+    assert_agrees(ref, res)
+    return ref, res
+
+
+def test_batch_agrees_with_reference_on_a_straight_grid_gait(robot):
+    s = load_scenario("straight_A0.61_w2.7").model_copy(update={"duration_s": 8.0})
+    ref, _ = compare(robot, s)
+    assert ref.failure == Failure.TOO_SLOW  # 8 s is too short to arrive: the flag is compared too
+
+
+def test_batch_agrees_with_reference_on_a_turning_gait_up_to_arrival(robot):
+    ref, res = compare(robot, load_scenario("turning"))
+    assert ref.failure == Failure.NONE and res.arrival_time_s[0] > 0
+
+
+def test_batch_agrees_on_path2_with_current_and_waypoint_switching(robot):
+    ref, res = compare(robot, load_scenario("path2"))
+    assert ref.failure == Failure.NONE and res.target_index[0] == 3
+
+
+def test_batch_agrees_with_jitter_delay_heading_noise_and_seed(robot):
+    opts = LoopOptions(
+        timing=LoopTiming(extra_delay_s=0.05, jitter_s=0.05),
+        camera=CameraModel(heading_noise_rad=0.02),
+    )
+    s = load_scenario("turning").model_copy(update={"duration_s": 10.0})
+    compare(robot, s, opts, seed=7)
+
+
+def test_batch_agrees_with_servo_limits_and_other_coefficients(robot):
+    s = load_scenario("straight").model_copy(update={"duration_s": 6.0})
+    compare(robot, s, LoopOptions(servo_limits=True),
+            coefficients=HydroCoefficients(C_f=0.009, C_d=0.978, C_a=1.169, C_m=0.001))
+
+
+def test_batch_agrees_on_links_that_differ_head_and_tail_overrides(robot):
+    data = robot.model_dump()
+    data["head"] = {"half_length_m": 0.07, "mass_kg": 0.3, "half_axis_vertical_m": 0.03}
+    data["tail"] = {"half_length_m": 0.04, "mass_kg": 0.15, "yaw_inertia_kg_m2": 1e-4}
+    odd = Robot.model_validate(data)
+    compare(odd, load_scenario("turning").model_copy(update={"duration_s": 6.0}))
+
+
+def test_batch_flags_too_slow_like_the_reference(robot):
+    s = load_scenario("straight").model_copy(update={"amplitude_rad": 0.05, "duration_s": 6.0})
+    _, res = compare(robot, s)
+    assert res.failure[0] == Failure.TOO_SLOW and res.reason_code[0] == Reason.TOO_SLOW
+    assert res.penalties()[0] == pytest.approx(1e6 * res.distance_left_m[0])
+
+
+def test_batch_flags_a_blow_up_from_a_huge_kd_like_the_reference(robot):
+    _, res = compare(with_joints(robot, kd_nms_per_rad=1.0), load_scenario("straight"))
+    assert res.failure[0] == Failure.ILL_CONDITIONED
+
+
+def test_batch_flags_an_ill_conditioned_mass_matrix_like_the_reference(robot):
+    # a head of almost no mass or inertia and no added mass: cond(M) about 4e12 from the start
+    data = robot.model_dump()
+    data["head"] = {"mass_kg": 1e-10, "yaw_inertia_kg_m2": 1e-15}
+    _, res = compare(Robot.model_validate(data), load_scenario("straight"),
+                     coefficients=HydroCoefficients(C_f=0.008, C_d=0.776, C_a=0.0, C_m=0.0))
+    assert res.reason_code[0] == Reason.CONDITION_NUMBER
+
+
+def test_batch_flags_self_collision_when_links_cross_like_the_reference(robot):
+    curl = load_scenario("straight").model_copy(update={"k_theta": 6.0, "waypoints_m": [(-1, 0.1)]})
+    _, res = compare(with_joints(robot, limit_rad=3.0), curl)
+    assert res.reason_code[0] == Reason.LINKS_INTERSECT
+
+
+def test_batch_flags_a_joint_beyond_its_limit_like_the_reference(robot):
+    curl = load_scenario("straight").model_copy(update={"k_theta": 6.0, "waypoints_m": [(-1, 0.1)]})
+    _, res = compare(with_joints(robot, limit_rad=0.5, reference_limit_rad=0.5), curl)
+    assert res.reason_code[0] == Reason.JOINT_LIMIT
+
+
+def test_mixed_batch_gives_the_same_answers_as_separate_calls(robot):
+    stiff = with_joints(robot, kp_nm_per_rad=0.12)
+    robots = [robot, stiff, robot, robot, stiff]
+    scenarios = [
+        load_scenario("straight_A0.61_w2.7"),
+        load_scenario("turning"),
+        load_scenario("path2"),
+        load_scenario("path1").model_copy(update={"current_speed_m_s": 0.05,
+                                                  "current_direction_deg": 90.0}),
+        load_scenario("turning_A0.87_w2.7"),
+    ]
+    scenarios = [s.model_copy(update={"duration_s": 5.0}) for s in scenarios]
+    coeffs = np.array([[0.008, 0.776, 0.618, 0.007], [0.009, 0.978, 1.169, 0.001],
+                       [0.02, 0.5, 0.3, 0.01], [0.008, 0.776, 0.618, 0.007],
+                       [0.005, 1.5, 0.9, 0.0]])
+    opts = LoopOptions(timing=LoopTiming(jitter_s=0.03), stop_at_goal=False)
+    seeds = [1, 2, 3, 4, 5]
+    steps = [0, 100, 250, 500]
+    together = run_batch(robots, scenarios, coeffs, opts, seeds, sample_steps=steps, threads=1)
+    for i in range(5):
+        alone = run_batch(robots[i], scenarios[i], coeffs[i], opts, seeds[i], sample_steps=steps,
+                          threads=1)
+        assert np.array_equal(together.states[i], alone.states[0], equal_nan=True)
+        assert np.array_equal(together.final_state[i], alone.final_state[0])
+        assert together.failure[i] == alone.failure[0]
+    # and they really differ from one another
+    assert len({together.final_state[i, 6] for i in range(5)}) == 5
+
+
+def test_threads_share_blocks_without_changing_any_result(robot):
+    spec = BatchSpec.build(robot, load_scenario("straight").model_copy(update={"duration_s": 2.0}),
+                           np.tile([0.008, 0.776, 0.618, 0.007], (40, 1)) *
+                           np.linspace(0.5, 1.5, 40)[:, None])
+    one = run_spec(spec, sample_steps=[0, 50, 200], threads=1)
+    two = run_spec(spec, sample_steps=[0, 50, 200], threads=2)
+    assert np.array_equal(one.states, two.states)
+    assert np.array_equal(one.final_state, two.final_state)
+
+
+def test_memory_is_bounded_unless_the_full_history_is_asked_for(robot):
+    s = load_scenario("straight").model_copy(update={"duration_s": 3.0})
+    light = run_batch(robot, s, sample_times_s=[0.0, 1.5, 3.0], threads=1)
+    assert light.full_states is None
+    assert light.states.shape == (1, 3, 16)
+    full = run_batch(robot, s, record_full=True, threads=1)
+    ref = simulate_closed_loop(robot, s)
+    assert full.full_states.shape == (1, 301, 16)
+    assert np.allclose(full.full_states[0], ref.states, rtol=0, atol=TOL)
+    assert np.array_equal(light.states[0, 1], full.full_states[0, 150])
+
+
+def test_spec_with_other_coefficients_equals_building_it_with_them(robot):
+    s = load_scenario("turning").model_copy(update={"duration_s": 2.0})
+    base = BatchSpec.build(robot, [s, s])
+    c = [[0.009, 0.978, 1.169, 0.001], [0.02, 0.5, 0.3, 0.01]]
+    swapped = run_spec(base.with_coefficients(c), sample_steps=[200], threads=1)
+    direct = run_batch(robot, [s, s], c, sample_steps=[200], threads=1)
+    assert np.array_equal(swapped.states, direct.states)
+
+
+def test_sample_times_off_the_step_grid_are_refused_clearly(robot):
+    with pytest.raises(ValueError, match="not a whole number of physics steps"):
+        run_batch(robot, load_scenario("straight"), sample_times_s=[0.005])
+
+
+def test_per_run_inputs_of_different_lengths_are_refused(robot):
+    s = load_scenario("straight")
+    with pytest.raises(ValueError, match="different lengths"):
+        BatchSpec.build(robot, [s, s, s], coefficients=np.ones((2, 4)))
