@@ -68,6 +68,7 @@ __all__ = [
     "JointDriver",
     "NativeDriver",
     "run_firmware_in_loop",
+    "plant_step",
     "run_lockstep",
 ]
 
@@ -390,6 +391,59 @@ class HeldTwinDriver:
 
     def counters(self) -> dict:  # noqa: D102 (see JointDriver)
         return {}
+
+
+def plant_step(
+    model: SwimmerModel,
+    x: FloatArray,
+    torque_nm: FloatArray,
+    t_s: float,
+    dt_s: float,
+    current_m_s: tuple[float, float] = (0.0, 0.0),
+) -> FloatArray:
+    """Advance the twin's plant by one RK4 step with the joint torques held (a zero-order hold).
+
+    The step :func:`run_lockstep` takes, for callers that own their loop (the virtual robot of
+    ``eelhost.link.sim_transport``).
+
+    Parameters
+    ----------
+    model : SwimmerModel
+        The plant.
+    x : ndarray, shape (2 N + 4,)
+        State at ``t_s``.
+    torque_nm : ndarray, shape (N-1,)
+        Joint torques held over the step.
+    t_s, dt_s : float
+        Start and length of the step, s.
+    current_m_s : (float, float)
+        Uniform current velocity.
+
+    Returns
+    -------
+    ndarray
+        The state at ``t_s + dt_s``.
+
+    Raises
+    ------
+    FloatingPointError
+        When the mass matrix is singular or the new state is not finite (the twin's
+        ILL_CONDITIONED flag).
+    """
+    u = np.asarray(torque_nm, dtype=float)
+    vc = np.asarray(current_m_s, dtype=float)
+
+    def rhs(_t: float, state: FloatArray) -> FloatArray:
+        return state_derivative(model, state, u, vc)
+
+    with np.errstate(all="ignore"):
+        try:
+            x_next = rk4_step(rhs, t_s, x, dt_s)
+        except np.linalg.LinAlgError as err:
+            raise FloatingPointError("mass matrix is not positive definite") from err
+    if not np.all(np.isfinite(x_next)):
+        raise FloatingPointError("state is not finite (the integration blew up)")
+    return x_next
 
 
 def _dt_us(options: LoopOptions) -> int:

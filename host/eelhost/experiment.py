@@ -155,7 +155,7 @@ class FrameTable:
     link_angles_rad: np.ndarray | None
 
 
-def read_frames_csv(path: str | Path) -> FrameTable:
+def read_frames_csv(path: str | Path, allow_truncated_tail: bool = False) -> FrameTable:
     """Read and check a frames CSV (``t_s, x_m, y_m`` [, ``heading_rad``, ``theta_i``...]).
 
     Column names may also be ``t``, ``time``, ``x``, ``y``, ``heading``. Unknown columns are refused.
@@ -163,6 +163,10 @@ def read_frames_csv(path: str | Path) -> FrameTable:
     Parameters
     ----------
     path : str or Path
+    allow_truncated_tail : bool
+        Read a file whose writer was killed mid-line (``eelhost.recorder`` appends a line per
+        frame): a last line without its newline is incomplete, whatever it looks like, and is
+        dropped; every complete row is kept. Off by default: a finished file must end cleanly.
 
     Returns
     -------
@@ -178,6 +182,8 @@ def read_frames_csv(path: str | Path) -> FrameTable:
         text = path.read_text()
     except OSError as err:
         raise DataError(f"{path}: cannot read: {err.strerror}") from None
+    if allow_truncated_tail and text and not text.endswith("\n"):
+        text = text[: text.rfind("\n") + 1]
     rows = list(csv.reader(text.splitlines()))
     if not rows or not any(c.strip() for c in rows[0]):
         raise DataError(f"{path}:1: empty file: expected a header line with t_s,x_m,y_m")
@@ -228,8 +234,10 @@ def read_frames_csv(path: str | Path) -> FrameTable:
     )
 
 
-def read_experiment(csv_or_stem: str | Path) -> Experiment:
+def read_experiment(csv_or_stem: str | Path, allow_truncated_tail: bool = False) -> Experiment:
     """Read an experiment from ``<stem>.csv`` and ``<stem>.json``.
+
+    ``allow_truncated_tail`` is passed to :func:`read_frames_csv` (a recording cut by a crash).
 
     Raises
     ------
@@ -241,7 +249,7 @@ def read_experiment(csv_or_stem: str | Path) -> Experiment:
     for ext in (".csv", ".json"):
         stem = stem.removesuffix(ext)
     json_path = Path(stem + ".json")
-    frames = read_frames_csv(Path(stem + ".csv"))
+    frames = read_frames_csv(Path(stem + ".csv"), allow_truncated_tail)
     try:
         meta = json.loads(json_path.read_text())
     except OSError as err:

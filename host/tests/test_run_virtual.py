@@ -1,0 +1,111 @@
+"""``eelbot run`` against the virtual robot: native firmware + twin behind the link, synthetic camera.
+
+The camera is the synthetic one without noise and JPEG (blur only) to keep the tests quick; the
+clock runs as fast as the computer can (``speed=0``), so nothing here sleeps.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from eelhost import protocol
+from eelhost.estimation.fitness import N_SAMPLES_VALIDATE, sample_times, validation_errors
+from eelhost.experiment import read_experiment
+from eelhost.link import open_link
+from eelhost.link.sim_transport import VirtualCamera
+from eelhost.recorder import Recorder, read_commands_csv
+from eelhost.runloop import RunConfig, RunLoop, RunOutcome
+from eelhost.vision.localise import Localiser
+from eelhost.vision.synthetic import RenderOptions, SyntheticCamera
+from eelsim.closed_loop import LoopOptions, simulate_closed_loop
+from eelsim.control import Gait
+from eelsim.robot import load_robot
+from eelsim.scenario import load_scenario
+
+ROBOT = load_robot()
+PATH1 = load_scenario("path1")
+
+
+def virtual_run(uri: str, waypoints, stem, duration_s: float | None = None):
+    """Run the host loop against the virtual robot; return (outcome, link)."""
+    link = open_link(uri, robot=ROBOT)
+    cam = SyntheticCamera(ROBOT, options=RenderOptions(noise_sigma=0.0, jpeg_quality=0))
+    frames = VirtualCamera(link.transport.robot, cam, keep_truth=False)
+    config = RunConfig(PATH1.gait, list(waypoints), duration_s=duration_s)
+    rec = Recorder(stem, PATH1.model_copy(update={"waypoints_m": list(waypoints)}), ROBOT.n_links)
+    out: RunOutcome = RunLoop(link, frames, Localiser(cam.calibration(), ROBOT), ROBOT, config,
+                              rec).run()
+    return out, link
+
+
+def test_virtual_path1_reaches_every_waypoint_and_matches_the_twin(tmp_path) -> None:
+    out, link = virtual_run("sim://?speed=0&seed=0", PATH1.waypoints_m, tmp_path / "path1")
+    assert out.reason == "arrived" and out.waypoints_reached == 3
+    assert out.stop_outcome == "ack"
+    assert link.transport.robot.status()["state"] == protocol.State.IDLE
+    exp = read_experiment(tmp_path / "path1")
+    assert exp.source["recording"]["complete"] is True
+    # The twin runs the recorded task from the recorded start pose.
+    sc = exp.scenario.model_copy(update={"duration_s": exp.t_s[-1] + 0.1})
+    twin = simulate_closed_loop(ROBOT, sc, LoopOptions(stop_at_goal=False))
+    n = ROBOT.n_links
+    ts = sample_times(exp.t_s[0], exp.t_s[-1], N_SAMPLES_VALIDATE)
+    sim = np.c_[np.interp(ts, twin.t_s, twin.states[:, n]),
+                np.interp(ts, twin.t_s, twin.states[:, n + 1])]
+    err = validation_errors(ts, exp.position_at(ts), sim, ROBOT.body_length_m())
+    assert err["Ex_mean_BL"] < 0.03
+    sent = [r for r in read_commands_csv(tmp_path / "path1.commands.csv") if r["event"] == "sent"]
+    assert sum(r["message"] == "SetOffset" for r in sent) == out.offsets_sent + 1  # + the initial 0
+    assert sent[-1]["message"] == "Stop"
+
+
+def test_robot_leaving_the_view_is_stopped(tmp_path) -> None:
+    # Starts near the tank's +x edge (3.1 m) and swims out of the picture.
+    out, link = virtual_run("sim://?speed=0&start=2.75,0,0", [(4.5, 0.0)], tmp_path / "away",
+                            duration_s=20.0)
+    assert out.reason == "lost_from_view"
+    assert out.stop_outcome == "ack"
+    assert link.transport.robot.status()["state"] == protocol.State.IDLE
+    exp = read_experiment(tmp_path / "away")
+    assert out.t_end_s - exp.t_s[-1] == pytest.approx(1.0, abs=0.05)
+
+
+def test_short_link_drop_is_ridden_through_by_reconnecting(tmp_path) -> None:
+    out, link = virtual_run("sim://?speed=0&drop=1.5:2.0", [(3.0, 0.0)], tmp_path / "blip",
+                            duration_s=4.0)
+    assert out.reason == "duration"
+    assert (link.counters.disconnects, link.counters.reconnects) == (1, 1)
+    assert link.counters.not_sent > 0
+    kinds = [e.kind for e in out.events]
+    assert "disconnected" in kinds and "reconnected" in kinds
+    assert out.stop_outcome == "ack"
+
+
+def test_long_link_drop_stops_the_run_and_the_robot(tmp_path) -> None:
+    out, link = virtual_run("sim://?speed=0&drop=1.5:3.0", [(3.0, 0.0)], tmp_path / "drop",
+                            duration_s=10.0)
+    assert out.reason == "link_lost"
+    assert 2.4 < out.t_end_s < 2.7  # the last telemetry before the drop + 1 s
+    # The robot's own watchdog stopped it meanwhile; the Stop lands once the link is back.
+    assert out.stop_outcome == "ack"
+    assert link.transport.robot.status()["state"] == protocol.State.IDLE
+    rows = read_commands_csv(tmp_path / "drop.commands.csv")
+    assert rows[-1]["message"] == "Stop" and rows[-1]["event"] == "ack"
+
+
+def test_stop_request_ends_the_run_with_a_stop(tmp_path) -> None:
+    link = open_link("sim://?speed=0", robot=ROBOT)
+    cam = SyntheticCamera(ROBOT, options=RenderOptions(noise_sigma=0.0, jpeg_quality=0))
+    loop = RunLoop(link, VirtualCamera(link.transport.robot, cam), Localiser(cam.calibration(), ROBOT),
+                   ROBOT, RunConfig(Gait(0.87, 3.9, 1.04, 0.37), [(3.0, 0.0)]))
+
+    def frames():
+        for k, item in enumerate(VirtualCamera(link.transport.robot, cam)):
+            if k == 15:
+                loop.request_stop()  # what the Ctrl-C handler of eelbot run does
+            yield item
+
+    loop.frames = frames()
+    out = loop.run()
+    assert out.reason == "interrupted" and out.frames == 16 and out.stop_outcome == "ack"
