@@ -14,7 +14,9 @@ from eelhost.commands import (
     bench,
     dataset,
     estimate,
+    plan,
     report,
+    run,
     simulate,
     speeds,
     validate,
@@ -25,7 +27,7 @@ from eelsim.robot import RobotFileError
 from eelsim.scenario import ScenarioError
 from eelsim.timing import TimingError
 
-COMMANDS = (simulate, speeds, dataset, estimate, validate, report, vision_bench, bench)
+COMMANDS = (simulate, speeds, dataset, estimate, validate, report, vision_bench, bench, run, plan)
 USER_ERRORS = (RobotFileError, ScenarioError, TimingError, DataError, ValueError, FileNotFoundError)
 
 

@@ -1,0 +1,386 @@
+"""The planning world: tank, start, goal, current and obstacles, read from a TOML file.
+
+A world file looks like this (every key shown; ``clearance_m`` is optional)::
+
+    name = "five obstacles"
+    clearance_m = 0.05            # extra margin kept from obstacles and walls while planning
+
+    [tank]
+    size_m = [3.0, 2.0]           # the tank spans x in [0, 3] m and y in [0, 2] m
+
+    [start]
+    position_m = [0.35, 1.0]
+    heading_deg = 0.0
+
+    [goal]
+    position_m = [2.6, 1.0]
+    radius_m = 0.2
+
+    [current]
+    speed_m_s = 0.03
+    direction_deg = 180.0         # the direction it flows towards
+
+    [[obstacles]]
+    kind = "circle"
+    centre_m = [1.0, 1.0]
+    radius_m = 0.15
+
+    [[obstacles]]
+    kind = "polygon"
+    vertices_m = [[1.6, 0.0], [1.8, 0.0], [1.8, 0.8], [1.6, 0.8]]
+
+Unknown keys are refused; errors name the file and the key.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from functools import cached_property
+from importlib import resources
+from pathlib import Path
+from typing import Annotated, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from eelhost.planning.geometry import (
+    FloatArray,
+    inside_convex,
+    point_segment_distance,
+    segments_circle_distance,
+    segments_cross,
+    segments_polygon_distance,
+)
+
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+Point = tuple[Finite, Finite]
+
+EXAMPLES = ("tank_5_obstacles",)
+
+
+class WorldError(ValueError):
+    """An invalid or unreadable world file."""
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class Tank(_Strict):
+    """The tank: a rectangle from (0, 0) to ``size_m``."""
+
+    size_m: tuple[Positive, Positive]
+
+
+class Start(_Strict):
+    """Start pose of the robot (straight, at rest)."""
+
+    position_m: Point
+    heading_deg: Finite = 0.0
+
+
+class Goal(_Strict):
+    """Goal region: a disc the robot's centre of mass must enter."""
+
+    position_m: Point
+    radius_m: Positive = 0.2
+
+
+class Current(_Strict):
+    """Uniform steady current: speed and the direction it flows towards."""
+
+    speed_m_s: Annotated[float, Field(ge=0, allow_inf_nan=False)] = 0.0
+    direction_deg: Finite = 0.0
+
+
+class CircleObstacle(_Strict):
+    """A round obstacle."""
+
+    kind: Literal["circle"]
+    centre_m: Point
+    radius_m: Positive
+
+
+class PolygonObstacle(_Strict):
+    """A simple polygon obstacle (vertices in order, not repeated, at least 3)."""
+
+    kind: Literal["polygon"]
+    vertices_m: list[Point] = Field(min_length=3)
+
+
+Obstacle = Annotated[CircleObstacle | PolygonObstacle, Field(discriminator="kind")]
+
+
+class World(_Strict):
+    """Everything the planner needs to know about the task (SI units).
+
+    Attributes
+    ----------
+    name : str
+    tank : Tank
+    start : Start
+    goal : Goal
+    current : Current
+    obstacles : list of CircleObstacle or PolygonObstacle
+    clearance_m : float
+        Margin kept between a primitive's swept hull and obstacles or walls while planning,
+        on top of the robot's half width (the hull is drawn through the link centre lines).
+    """
+
+    name: str = "world"
+    tank: Tank
+    start: Start
+    goal: Goal
+    current: Current = Current()
+    obstacles: list[Obstacle] = Field(default_factory=list)
+    clearance_m: Annotated[float, Field(ge=0, allow_inf_nan=False)] = 0.03
+
+    @model_validator(mode="after")
+    def _start_and_goal_in_tank(self) -> World:
+        w, h = self.tank.size_m
+        for key, (x, y) in (("start.position_m", self.start.position_m),
+                            ("goal.position_m", self.goal.position_m)):
+            if not (0 < x < w and 0 < y < h):
+                raise ValueError(f"{key} ({x}, {y}) is outside the tank [0, {w}] x [0, {h}] m")
+        return self
+
+    @property
+    def current_m_s(self) -> tuple[float, float]:
+        """The current velocity vector, m/s."""
+        a = math.radians(self.current.direction_deg)
+        return (self.current.speed_m_s * math.cos(a), self.current.speed_m_s * math.sin(a))
+
+    @cached_property
+    def _polygons(self) -> list[FloatArray]:
+        return [
+            np.asarray(o.vertices_m, dtype=float)
+            for o in self.obstacles
+            if isinstance(o, PolygonObstacle)
+        ]
+
+    @cached_property
+    def _circles(self) -> list[tuple[FloatArray, float]]:
+        return [
+            (np.asarray(o.centre_m, dtype=float), float(o.radius_m))
+            for o in self.obstacles
+            if isinstance(o, CircleObstacle)
+        ]
+
+    @cached_property
+    def obstacle_bounds(self) -> FloatArray:
+        """Bounding circle (x, y, radius) of every obstacle, polygons first, shape (K, 3)."""
+        rows = []
+        for poly in self._polygons:
+            c = poly.mean(axis=0)
+            rows.append([c[0], c[1], np.linalg.norm(poly - c, axis=1).max()])
+        for c, r in self._circles:
+            rows.append([c[0], c[1], r])
+        return np.asarray(rows, dtype=float).reshape(-1, 3)
+
+    def inside_tank(self, points: FloatArray, margin_m: float) -> bool:
+        """Whether every point keeps ``margin_m`` from the tank walls.
+
+        Parameters
+        ----------
+        points : ndarray, shape (P, 2)
+        margin_m : float
+
+        Returns
+        -------
+        bool
+        """
+        w, h = self.tank.size_m
+        x, y = points[:, 0], points[:, 1]
+        return bool(
+            np.all(x >= margin_m) & np.all(x <= w - margin_m)
+            & np.all(y >= margin_m) & np.all(y <= h - margin_m)
+        )
+
+    def hulls_free(self, hulls: FloatArray, margin_m: float) -> NDArray[np.bool_]:
+        """Which convex regions keep ``margin_m`` from every obstacle and wall.
+
+        All regions are tested at once (the planner passes every child of a node together).
+
+        Parameters
+        ----------
+        hulls : ndarray, shape (M, H, 2)
+            Counter-clockwise vertices of each convex region in the world frame; repeated
+            vertices (padding) are allowed.
+        margin_m : float
+
+        Returns
+        -------
+        ndarray of bool, shape (M,)
+        """
+        w, h = self.tank.size_m
+        x, y = hulls[..., 0], hulls[..., 1]
+        free = (
+            (x.min(axis=1) >= margin_m) & (x.max(axis=1) <= w - margin_m)
+            & (y.min(axis=1) >= margin_m) & (y.max(axis=1) <= h - margin_m)
+        )
+        if not np.any(free) or not self.obstacles:
+            return free
+        # bounding circles first: most hulls are far from most obstacles
+        centres = hulls.mean(axis=1)
+        reach = np.linalg.norm(hulls - centres[:, None], axis=2).max(axis=1)
+        bounds = self.obstacle_bounds
+        gap = np.linalg.norm(centres[:, None] - bounds[None, :, :2], axis=2)
+        near = free[:, None] & (gap <= reach[:, None] + bounds[None, :, 2] + margin_m)
+        if not np.any(near):
+            return free
+        pick = np.flatnonzero(near.any(axis=1))
+        free[pick] &= self._hulls_clear(hulls[pick], np.flatnonzero(near.any(axis=0)), margin_m)
+        return free
+
+    def _hulls_clear(self, hulls: FloatArray, obstacles: NDArray[np.int64], margin_m: float):
+        """Exact test of hulls against the obstacles numbered ``obstacles`` (polygons first)."""
+        free = np.ones(len(hulls), dtype=bool)
+        a, b = hulls, np.roll(hulls, -1, axis=1)
+        n_poly = len(self._polygons)
+        circles = [self._circles[k - n_poly] for k in obstacles if k >= n_poly]
+        polygons = [self._polygons[k] for k in obstacles if k < n_poly]
+        if circles:
+            centres = np.stack([c for c, _ in circles])[None]  # (1, C, 2)
+            radii = np.array([r for _, r in circles])
+            near = point_segment_distance(centres, a, b).min(axis=2) - radii <= margin_m
+            free &= ~np.any(near | inside_convex(centres, hulls), axis=1)
+        if polygons:
+            verts = np.concatenate(polygons)
+            e2 = np.concatenate([np.roll(p, -1, axis=0) for p in polygons])
+            starts = np.cumsum([0] + [len(p) for p in polygons[:-1]])
+            e1b, e2b, vb = verts[None], e2[None], verts[None]
+            hit = np.any(segments_cross(a, b, e1b, e2b), axis=(1, 2))
+            hit |= np.any(inside_convex(vb, hulls), axis=1)
+            hit |= point_segment_distance(hulls, e1b, e2b).min(axis=(1, 2)) <= margin_m
+            hit |= point_segment_distance(vb, a, b).min(axis=(1, 2)) <= margin_m
+            # a hull wholly inside a polygon meets none of its edges: even-odd test of one vertex
+            px, py = hulls[:, 0, 0:1], hulls[:, 0, 1:2]
+            e1 = verts
+            straddle = (e1[None, :, 1] > py) != (e2[None, :, 1] > py)
+            dy = e2[:, 1] - e1[:, 1]
+            x_cross = e1[:, 0] + (py - e1[:, 1]) * (e2[:, 0] - e1[:, 0]) / np.where(dy == 0, 1, dy)
+            crossings = np.add.reduceat((straddle & (px < x_cross)).astype(int), starts, axis=1)
+            hit |= np.any(crossings % 2 == 1, axis=1)
+            free &= ~hit
+        return free
+
+    def hull_is_free(self, hull: FloatArray, margin_m: float) -> bool:
+        """Whether one convex region keeps ``margin_m`` from every obstacle and wall.
+
+        Parameters
+        ----------
+        hull : ndarray, shape (H, 2)
+            Counter-clockwise vertices in the world frame.
+        margin_m : float
+
+        Returns
+        -------
+        bool
+        """
+        return bool(self.hulls_free(np.asarray(hull, dtype=float)[None], margin_m)[0])
+
+    def segments_clearance(self, a: FloatArray, b: FloatArray) -> float:
+        """Smallest distance from segments to any obstacle or wall (0 if one touches).
+
+        Parameters
+        ----------
+        a, b : ndarray, shape (S, 2)
+            Segment end points (e.g. the links of the robot at every step).
+
+        Returns
+        -------
+        float
+        """
+        w, h = self.tank.size_m
+        pts = np.concatenate([a, b])
+        wall = float(
+            np.min([pts[:, 0].min(), w - pts[:, 0].max(), pts[:, 1].min(), h - pts[:, 1].max()])
+        )
+        best = max(0.0, wall)
+        for poly in self._polygons:
+            best = min(best, segments_polygon_distance(a, b, poly))
+        for c, r in self._circles:
+            best = min(best, segments_circle_distance(a, b, c, r))
+        return best
+
+
+def _format_errors(source: str, err: ValidationError) -> str:
+    lines = [f"{source}: invalid world:"]
+    for e in err.errors():
+        loc = ".".join(str(p) for p in e["loc"])
+        msg = "unknown key" if e["type"] == "extra_forbidden" else e["msg"]
+        lines.append(f"  {loc}: {msg}")
+    return "\n".join(lines)
+
+
+def example_path(name: str = "tank_5_obstacles") -> Path:
+    """Path of a bundled example world file.
+
+    Parameters
+    ----------
+    name : str
+        One of :data:`EXAMPLES`.
+
+    Returns
+    -------
+    Path
+    """
+    if name not in EXAMPLES:
+        raise WorldError(f"unknown example world {name!r}; bundled: {', '.join(EXAMPLES)}")
+    return Path(str(resources.files("eelhost.planning") / "examples" / f"{name}.toml"))
+
+
+def parse_world(data: dict, source: str = "<world>") -> World:
+    """Validate a world from a dict (as read from TOML).
+
+    Parameters
+    ----------
+    data : dict
+    source : str
+        Named in error messages.
+
+    Returns
+    -------
+    World
+
+    Raises
+    ------
+    WorldError
+        Naming ``source`` and each offending key.
+    """
+    try:
+        return World.model_validate(data)
+    except ValidationError as err:
+        raise WorldError(_format_errors(source, err)) from None
+
+
+def load_world(path_or_name: str | Path) -> World:
+    """Read a world TOML file, or a bundled example by name.
+
+    Parameters
+    ----------
+    path_or_name : str or Path
+        A ``.toml`` file, or the name of a bundled example (:data:`EXAMPLES`).
+
+    Returns
+    -------
+    World
+
+    Raises
+    ------
+    WorldError
+        For an unreadable file, invalid TOML or invalid contents (naming file and key).
+    """
+    key = str(path_or_name)
+    path = example_path(key) if key in EXAMPLES else Path(key)
+    try:
+        data = tomllib.loads(path.read_text())
+    except OSError as err:
+        raise WorldError(f"{path}: cannot read world file: {err.strerror}") from None
+    except tomllib.TOMLDecodeError as err:
+        raise WorldError(f"{path}: not valid TOML: {err}") from None
+    data.setdefault("name", path.stem)
+    return parse_world(data, str(path))
