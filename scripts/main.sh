@@ -1,8 +1,10 @@
 #!/usr/bin/env bash
-# The main job on the bundled default: set up, then simulate the paper robot swimming the turning
-# experiment under its own control stack, writing the trajectory (CSV + JSON) and a plot to out/.
+# The main job on the bundled default: set up, then fit the hydrodynamic coefficients of the paper
+# robot to the bundled virtual-tank dataset (straight and turning, CMA-ES + least-squares polish),
+# validate them on the held-out experiments and paths, and write the report folder out/report/
+# (report.md, tables, figures, coefficients with bootstrap uncertainty and identifiability).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 export PATH="$(pwd)/.venv/bin:$PATH"
-eelbot simulate turning --plot --out out/demo/turning "$@"
+eelbot report --out out/report "$@"

@@ -24,7 +24,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         description="The whole estimation chain. Without DATASET it uses the bundled "
         "virtual-tank dataset (truth = the paper's table 3).",
     )
-    p.add_argument("dataset", nargs="?", help="dataset folder (default: the bundled virtual-tank dataset)")
+    p.add_argument(
+        "dataset", nargs="?", help="dataset folder (default: the bundled virtual-tank dataset)"
+    )
     p.add_argument("--out", default="out/report", help="report folder")
     p.add_argument("--method", choices=METHODS, default="cmaes")
     p.add_argument("--joint", action="store_true", help="also fit one joint set for the robot")
@@ -32,6 +34,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--bootstrap", type=int, default=8, help="bootstrap refits per fit (0: none)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--backend", choices=["auto", "batch", "reference"], default="auto")
+    p.add_argument(
+        "--align",
+        type=float,
+        default=0.0,
+        metavar="SECONDS",
+        help="while fitting, search each recording's clock offset within +-SECONDS (default 0: "
+        "the paper's protocol; with few experiments the offsets absorb model error)",
+    )
     p.add_argument("--resume", action="store_true", help="continue interrupted fits")
     p.set_defaults(run=run)
 
@@ -41,11 +51,15 @@ def run(args: argparse.Namespace) -> int:
     folder = Path(args.dataset) if args.dataset else BUNDLED_DATASET
     if args.dataset is None and not (folder / "manifest.toml").exists():
         folder = Path("out/dataset")
-        print(f"no bundled dataset here; generating the default virtual-tank dataset in {folder} ...")
+        print(
+            f"no bundled dataset here; generating the default virtual-tank dataset in {folder} ..."
+        )
         generate_dataset(folder, seed=args.seed)
     dataset = load_dataset(folder)
     motions = ("straight", "turning") + (("joint",) if args.joint else ())
-    settings = FitSettings(args.method, args.seed, args.budget, backend=args.backend)
+    settings = FitSettings(
+        args.method, args.seed, args.budget, backend=args.backend, align_s=args.align
+    )
 
     def factory(motion: str):
         bar = tqdm(unit="gen", desc=f"fit {motion}", leave=False)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from eelhost.estimation.evaluate import ALIGN_S
 from eelhost.estimation.figures import plot_paths, plot_time_series
 from eelhost.estimation.pipeline import read_coefficients
 from eelhost.estimation.validate import table_csv, table_markdown, validate
@@ -23,6 +24,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("dataset", help="dataset folder")
     p.add_argument("--out", default="out/validate", help="folder for tables and figures")
     p.add_argument("--backend", choices=["auto", "batch", "reference"], default="auto")
+    p.add_argument(
+        "--align",
+        type=float,
+        default=ALIGN_S,
+        metavar="SECONDS",
+        help="also report each experiment at the clock offset of its recording that fits best, "
+        "searched within +-SECONDS (default 0.1, the paper's time-stamp uncertainty)",
+    )
     p.set_defaults(run=run)
 
 
@@ -31,7 +40,7 @@ def run(args: argparse.Namespace) -> int:
     fitted = read_coefficients(args.coefficients)
     dataset = load_dataset(args.dataset)
     tests = [e for exps in dataset.test.values() for e in exps] + list(dataset.paths)
-    runs = validate(dataset.robot, fitted, tests, backend=args.backend)
+    runs = validate(dataset.robot, fitted, tests, backend=args.backend, align_s=args.align)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     md = table_markdown([r.row for r in runs])

@@ -34,6 +34,9 @@ from eelsim.scenario import Scenario
 from eelsim.timing import LoopTiming
 
 TMAX_FACTOR = 1.5
+# Default half-width of the clock-offset search: the paper's stated time-stamp uncertainty.
+ALIGN_S = 0.1
+ALIGN_STEP_S = 0.01
 
 
 @dataclass(frozen=True)
@@ -51,6 +54,10 @@ class PreparedExperiment:
         Sample times.
     exp_positions_m : ndarray, shape (n, 2)
         The experiment's centre of mass at the sample times.
+    shifts_s : ndarray, shape (M,)
+        Candidate clock offsets of the recording (just 0 without alignment).
+    shifted_positions_m : ndarray, shape (M, n, 2)
+        The experiment's centre of mass at ``times_s + shift`` for each shift.
     """
 
     experiment: Experiment
@@ -58,13 +65,29 @@ class PreparedExperiment:
     options: LoopOptions
     times_s: np.ndarray
     exp_positions_m: np.ndarray
+    shifts_s: np.ndarray
+    shifted_positions_m: np.ndarray
 
 
-def prepare(exp: Experiment, n_samples: int, dt_s: float = 0.01, tmax_factor: float = TMAX_FACTOR):
-    """Prepare an experiment for simulation with ``n_samples`` sample times."""
+def prepare(
+    exp: Experiment,
+    n_samples: int,
+    dt_s: float = 0.01,
+    tmax_factor: float = TMAX_FACTOR,
+    align_s: float = 0.0,
+) -> PreparedExperiment:
+    """Prepare an experiment for simulation with ``n_samples`` sample times.
+
+    With ``align_s`` > 0 the recording's unknown clock offset is treated as a nuisance parameter:
+    the experiment is also sampled at ``times + shift`` for shifts in [-align_s, align_s] (0.01 s
+    apart), and the error of a simulation is its smallest over the shifts. Only the densely recorded
+    experiment is shifted, so this costs no extra simulation.
+    """
     t0, t1 = exp.span_s
     times = sample_times(t0, t1, n_samples, dt_s)
     tmax = float(np.ceil(tmax_factor * t1 / dt_s)) * dt_s
+    half = int(round(align_s / ALIGN_STEP_S))
+    shifts = np.arange(-half, half + 1) * ALIGN_STEP_S
     cam = exp.camera
     camera = CameraModel(
         fps=float(cam.get("fps", 30.0)),
@@ -82,6 +105,8 @@ def prepare(exp: Experiment, n_samples: int, dt_s: float = 0.01, tmax_factor: fl
         options=LoopOptions(timing=timing, camera=camera, stop_at_goal=False),
         times_s=times,
         exp_positions_m=exp.position_at(times),
+        shifts_s=shifts,
+        shifted_positions_m=np.stack([exp.position_at(times + d) for d in shifts]),
     )
 
 
@@ -134,6 +159,8 @@ class Evaluator:
         Samples per experiment (7 for fitting, 35 for validation).
     weight : float
         Velocity weight w.
+    align_s : float
+        Half-width of the clock-offset search per experiment (0: the paper's protocol).
     backend : {"auto", "batch", "reference"}
     workers : int
         Processes for the reference backend.
@@ -147,6 +174,7 @@ class Evaluator:
         experiments: Sequence[Experiment],
         n_samples: int = N_SAMPLES_FIT,
         weight: float = VELOCITY_WEIGHT,
+        align_s: float = 0.0,
         backend: str = "auto",
         workers: int = 2,
         map_function: Callable | None = None,
@@ -154,7 +182,7 @@ class Evaluator:
         if not experiments:
             raise ValueError("no experiments to evaluate on")
         self.robot = robot
-        self.prepared = [prepare(e, n_samples) for e in experiments]
+        self.prepared = [prepare(e, n_samples, align_s=align_s) for e in experiments]
         self.weight = weight
         self.backend = _choose_backend(backend)
         self.workers = workers
@@ -207,13 +235,23 @@ class Evaluator:
         c, e = sim.failure.shape
         out = np.empty((c, e))
         for j, p in enumerate(self.prepared):
-            err = trajectory_error(p.times_s, p.exp_positions_m, sim.positions_m[:, j], self.weight)
+            err = self.aligned_errors(p, sim.positions_m[:, j]).min(axis=1)
             for i in range(c):
                 f = Failure(int(sim.failure[i, j]))
                 out[i, j] = (
                     err[i] if f == Failure.NONE else penalty(f, float(sim.distance_left_m[i, j]))
                 )
         return out
+
+    def aligned_errors(self, p: PreparedExperiment, sim_positions_m: np.ndarray) -> np.ndarray:
+        """Error of each simulation against each shifted recording, shape (C, M)."""
+        return trajectory_error(
+            p.times_s, p.shifted_positions_m, sim_positions_m[:, None], self.weight
+        )
+
+    def best_shift(self, p: PreparedExperiment, sim_positions_m: np.ndarray) -> np.ndarray:
+        """The clock offset that fits each simulation best, shape (C,)."""
+        return p.shifts_s[np.argmin(self.aligned_errors(p, sim_positions_m), axis=1)]
 
     def fitness(self, coefficients: np.ndarray) -> np.ndarray:
         """Minimax fitness max_j error_j of each candidate, shape (C,)."""
@@ -230,8 +268,11 @@ class Evaluator:
         blocks = []
         for j, p in enumerate(self.prepared):
             simp = sim.positions_m[:, j]
-            dp = simp - p.exp_positions_m
-            dv = sampled_velocity(p.times_s, simp) - sampled_velocity(p.times_s, p.exp_positions_m)
+            # each candidate is compared with the recording at its own best clock offset
+            idx = np.argmin(np.nan_to_num(self.aligned_errors(p, simp), nan=np.inf), axis=1)
+            exp = p.shifted_positions_m[idx]
+            dp = simp - exp
+            dv = sampled_velocity(p.times_s, simp) - sampled_velocity(p.times_s, exp)
             block = np.concatenate(
                 [dp.reshape(len(simp), -1), self.weight * dv.reshape(len(simp), -1)], axis=1
             )

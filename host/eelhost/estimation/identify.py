@@ -3,8 +3,8 @@
 Two complementary answers:
 
 - **Local identifiability** from the Jacobian of the stacked residuals (positions and weighted
-  velocities at the sample times) with respect to each coefficient's logarithm: the sensitivity of
-  the fit to a 1 % change of each coefficient, the singular values, the correlation matrix and the
+  velocities at the sample times) in the unit cube of the search bounds: the sensitivity of the
+  fit to a step of 1 % of each coefficient's range, the singular values, the correlation matrix and the
   linearised standard errors (residual variance times (J^T J)^-1). A coefficient is *pinned down*
   when its relative standard error is below 10 %, *weakly* below 50 %, otherwise *not identified*.
 - **Bootstrap over experiments**: refit (least-squares polish from the estimate) on training sets
@@ -19,11 +19,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from eelhost.estimation.evaluate import Evaluator
-from eelhost.estimation.optimise import NAMES, polish_least_squares
+from eelhost.estimation.optimise import BOUNDS, NAMES, from_unit, polish_least_squares, to_unit
 from eelhost.experiment import Experiment
 from eelsim.robot import HydroCoefficients, Robot
 
-REL_STEP = 0.01  # 1 % change of a coefficient
+REL_STEP = 0.01  # a step of 1 % of a coefficient's search range
 PINNED, WEAK = 0.10, 0.50
 
 
@@ -34,9 +34,9 @@ class Identifiability:
     Attributes
     ----------
     sensitivity : ndarray, shape (4,)
-        RMS change of the residuals for a 1 % change of each coefficient (m, mixed units).
+        RMS change of the residuals for a step of 1 % of each range (m, mixed units).
     singular_values : ndarray, shape (4,)
-        Of the log-scaled Jacobian, largest first.
+        Of the unit-cube Jacobian, largest first.
     correlation : ndarray, shape (4, 4)
         Linearised correlation of the estimates.
     rel_std_error : ndarray, shape (4,)
@@ -65,6 +65,11 @@ class Identifiability:
 def identifiability(evaluator: Evaluator, estimate: HydroCoefficients) -> Identifiability:
     """Linearised identifiability of ``estimate`` on the evaluator's experiments.
 
+    The Jacobian is taken in the unit cube of the search bounds (a step of 1 % of each range), so a
+    coefficient near zero is probed as well as any other; standard errors come from its singular
+    value decomposition, and a direction the data does not see at all (a singular value below 1e-9
+    of the largest) gets an infinite error instead of the zero a pseudo-inverse would give.
+
     Parameters
     ----------
     evaluator : Evaluator
@@ -76,23 +81,29 @@ def identifiability(evaluator: Evaluator, estimate: HydroCoefficients) -> Identi
     Identifiability
     """
     c0 = estimate.as_array()
-    base = np.where(c0 > 0, c0, 1e-4)  # a zero coefficient is probed at a small positive value
-    pts = np.vstack([c0] + [c0 + np.eye(4)[i] * base[i] * REL_STEP for i in range(4)])
+    u0 = to_unit(c0)
+    steps = np.where(u0 + REL_STEP <= 1.0, REL_STEP, -REL_STEP)
+    pts = np.vstack([c0] + [from_unit(u0 + np.eye(4)[i] * steps[i]) for i in range(4)])
     r = evaluator.residuals(pts)
-    jac = ((r[1:] - r[0]) / REL_STEP).T  # d residual / d ln c, shape (M, 4)
+    jac = ((r[1:] - r[0]) / steps[:, None]).T  # d residual / d unit coordinate, shape (M, 4)
     m = jac.shape[0]
+    ranges = BOUNDS[:, 1] - BOUNDS[:, 0]
     sensitivity = np.sqrt(np.mean((jac * REL_STEP) ** 2, axis=0))
-    sing = np.linalg.svd(jac, compute_uv=False)
+    _, sing, vt = np.linalg.svd(jac, full_matrices=False)
     sigma2 = float(r[0] @ r[0]) / max(1, m - 4)
-    cov = sigma2 * np.linalg.pinv(jac.T @ jac)
-    std = np.sqrt(np.clip(np.diag(cov), 0, None))  # standard error of ln c = relative error of c
-    with np.errstate(invalid="ignore", divide="ignore"):
-        corr = cov / np.outer(std, std)
+    with np.errstate(divide="ignore"):
+        inv_s2 = np.where(sing > 1e-9 * sing[0], 1.0 / sing**2, np.inf)
+    cov_u = sigma2 * (vt.T * inv_s2) @ vt
+    var_u = np.einsum("ij,j,ij->i", vt.T, inv_s2, vt.T) * sigma2  # diagonal, inf-safe
+    std = np.sqrt(np.where(np.isnan(var_u), np.inf, var_u)) * ranges
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rel = np.where(np.abs(c0) > 0, std / np.abs(c0), np.inf)
+        corr = np.nan_to_num(cov_u / np.sqrt(np.outer(np.diag(cov_u), np.diag(cov_u))))
     verdict = [
-        "pinned down" if s < PINNED else "weakly identified" if s < WEAK else "not identified"
-        for s in std
+        "pinned down" if e < PINNED else "weakly identified" if e < WEAK else "not identified"
+        for e in rel
     ]
-    return Identifiability(sensitivity, sing, np.nan_to_num(corr), std, verdict)
+    return Identifiability(sensitivity, sing, corr, rel, verdict)
 
 
 @dataclass

@@ -1,0 +1,103 @@
+"""Estimation end to end on a tiny virtual-tank dataset (short experiments, small budgets)."""
+
+import json
+
+import numpy as np
+import pytest
+
+from eelhost.cli import main
+from eelhost.estimation.evaluate import Evaluator
+from eelhost.estimation.optimise import Checkpoint, fit_ga
+from eelhost.estimation.pipeline import FitSettings, fit_motion, read_coefficients
+from eelhost.experiment import load_dataset, manifest_text, write_experiment, write_manifest
+from eelhost.virtual_tank import TABLE3, TankSettings, record_experiment
+from eelsim.robot import load_robot
+from eelsim.scenario import load_scenario
+
+TRUTH = TABLE3["straight"]
+
+
+@pytest.fixture(scope="module")
+def tiny_dataset(tmp_path_factory):
+    """Three short straight experiments (0.6 m waypoints) recorded with the table-3 truth."""
+    folder = tmp_path_factory.mktemp("tiny")
+    robot = load_robot()
+    names = []
+    for i, name in enumerate(["straight_A0.87_w3.9", "straight_A0.61_w2.7", "straight_A0.78_w3.5"]):
+        s = load_scenario(name).model_copy(update={"waypoints_m": [(0.6, 0.0)]})
+        exp = record_experiment(robot, s, "straight", TRUTH, TankSettings(timestamp_jitter_s=0.0), seed=i)
+        write_experiment(exp, folder)
+        names.append(name)
+    write_manifest(folder, manifest_text("paper_robot.toml", {"straight": {"train": names[:2], "test": names[2:]}},
+                                         [], {"straight": TRUTH}))
+    return folder
+
+
+def test_batch_and_reference_backends_score_candidates_identically(tiny_dataset):
+    ds = load_dataset(tiny_dataset)
+    cands = np.array([TRUTH.as_array(), [0.02, 1.3, 0.3, 0.05]])
+    ref = Evaluator(ds.robot, ds.train["straight"], backend="reference", workers=1).errors(cands)
+    fast = Evaluator(ds.robot, ds.train["straight"], backend="batch").errors(cands)
+    assert np.allclose(ref, fast, rtol=0, atol=1e-9)
+    assert ref[0].max() < ref[1].max()  # the truth fits better than a wrong candidate
+
+
+def test_default_method_recovers_the_truth_on_a_small_dataset(tiny_dataset):
+    ds = load_dataset(tiny_dataset)
+    res, ev = fit_motion(ds, "straight", FitSettings("cmaes", seed=0, budget=600, polish_iterations=8))
+    truth_fitness = float(ev.fitness(TRUTH.as_array()[None])[0])
+    assert res.fitness <= truth_fitness * 1.05 + 1e-3
+    got, want = res.coefficients.as_array(), TRUTH.as_array()
+    assert abs(got[1] - want[1]) / want[1] < 0.15  # C_d: the best pinned-down coefficient
+    assert abs(got[2] - want[2]) / want[2] < 0.3  # C_a
+
+
+def test_ga_resumed_after_a_kill_equals_the_uninterrupted_run_on_real_simulations(tiny_dataset, tmp_path):
+    ds = load_dataset(tiny_dataset)
+    ev = Evaluator(ds.robot, ds.train["straight"], backend="batch")
+    whole = fit_ga(ev.fitness, seed=3, pop_size=8, generations=4)
+
+    class Killed(Exception):
+        pass
+
+    def kill(gen, _b, _s):
+        if gen == 1:
+            raise Killed
+
+    ck = tmp_path / "ck.pkl"
+    with pytest.raises(Killed):
+        fit_ga(ev.fitness, seed=3, pop_size=8, generations=4, checkpoint=Checkpoint(ck, {"s": 3}), progress=kill)
+    resumed = fit_ga(ev.fitness, seed=3, pop_size=8, generations=4, checkpoint=Checkpoint(ck, {"s": 3}), resume=True)
+    assert resumed.fitness == whole.fitness and resumed.coefficients == whole.coefficients
+
+
+def test_evaluation_spread_over_a_local_dask_cluster_gives_the_same_fitness(tiny_dataset):
+    distributed = pytest.importorskip("distributed")  # a dev dependency, installed by the test command
+    from eelhost.estimation.cluster import dask_map
+
+    ds = load_dataset(tiny_dataset)
+    cands = np.array([TRUTH.as_array(), [0.01, 0.9, 0.7, 0.01]])
+    local = Evaluator(ds.robot, ds.train["straight"], backend="reference", workers=1).fitness(cands)
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False,
+                                  dashboard_address=None) as cluster, distributed.Client(cluster) as client:
+        spread = Evaluator(ds.robot, ds.train["straight"], backend="reference",
+                           map_function=dask_map(client)).fitness(cands)
+    assert np.array_equal(local, spread)
+
+
+def test_estimate_and_validate_commands_write_coefficients_and_table(tiny_dataset, tmp_path, capsys):
+    out = tmp_path / "fit"
+    assert main(["estimate", str(tiny_dataset), "--motion", "straight", "--budget", "24", "--out", str(out)]) == 0
+    coeffs = json.loads((out / "coefficients.json").read_text())
+    assert set(coeffs["fits"]) == {"straight"} and coeffs["fits"]["straight"]["fitness"] > 0
+    assert "straight" in read_coefficients(str(out / "coefficients.json"))
+    val = tmp_path / "val"
+    assert main(["validate", str(out / "coefficients.json"), str(tiny_dataset), "--out", str(val)]) == 0
+    table = (val / "table4.csv").read_text().splitlines()
+    assert table[0].startswith("name,motion,coefficients,Ex_mean_BL") and len(table) == 2
+    assert (val / "paths_straight.png").exists()
+
+
+def test_validate_refuses_a_malformed_coefficients_argument(tiny_dataset, capsys):
+    assert main(["validate", "0.1,0.2", str(tiny_dataset)]) == 2
+    assert "expected a .json file or Cf,Cd,Ca,Cm" in capsys.readouterr().err
