@@ -11,13 +11,14 @@ The bundled default, ``paper_robot.toml``, is the robot of Raj & Thakur (N = 6, 
 
 from __future__ import annotations
 
-import tomllib
 from importlib import resources
 from pathlib import Path
 from typing import Annotated, Any
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from eelsim.tomlfile import parse_toml, read_toml, validation_message
 
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
 PositiveFloat = Annotated[float, Field(gt=0.0, allow_inf_nan=False)]
@@ -187,19 +188,6 @@ def _has_key(model: BaseModel, dotted: str) -> bool:
     return True
 
 
-def _format_errors(source: str, err: ValidationError) -> str:
-    lines = [f"{source}: invalid robot description:"]
-    for e in err.errors():
-        loc = ".".join(str(p) for p in e["loc"]) or "(top level)"
-        msg = e["msg"]
-        if e["type"] == "extra_forbidden":
-            msg = "unknown key (not part of the robot description)"
-        value = e.get("input")
-        shown = "" if isinstance(value, dict) or e["type"] == "missing" else f" (got {value!r})"
-        lines.append(f"  {loc}: {msg}{shown}")
-    return "\n".join(lines)
-
-
 def parse_robot(data: dict[str, Any], source: str = "<robot>") -> Robot:
     """Validate a robot description given as a dictionary.
 
@@ -222,7 +210,7 @@ def parse_robot(data: dict[str, Any], source: str = "<robot>") -> Robot:
     try:
         return Robot.model_validate(data)
     except ValidationError as err:
-        raise RobotFileError(_format_errors(source, err)) from None
+        raise RobotFileError(validation_message(source, err, "robot description")) from None
 
 
 def load_robot(path: str | Path | None = None) -> Robot:
@@ -246,15 +234,8 @@ def load_robot(path: str | Path | None = None) -> Robot:
     if path is None or str(path) == DEFAULT_ROBOT:
         text = resources.files("eelsim.data").joinpath(DEFAULT_ROBOT).read_text()
         source = f"<bundled {DEFAULT_ROBOT}>"
+        data = parse_toml(text, source, RobotFileError)
     else:
-        p = Path(path)
-        source = str(p)
-        try:
-            text = p.read_text()
-        except OSError as err:
-            raise RobotFileError(f"{source}: cannot read robot file: {err.strerror}") from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as err:
-        raise RobotFileError(f"{source}: not valid TOML: {err}") from None
+        source = str(path)
+        data = read_toml(path, RobotFileError, "robot file")
     return parse_robot(data, source)

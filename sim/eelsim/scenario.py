@@ -14,13 +14,13 @@ A scenario can also be read from a TOML file (see ``docs/scenarios.md``).
 from __future__ import annotations
 
 import math
-import tomllib
 from pathlib import Path
 from typing import Annotated
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from eelsim.control import Gait
+from eelsim.tomlfile import read_toml, validation_message
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
@@ -174,19 +174,11 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
             f"unknown scenario {key!r}: give a .toml file or one of "
             f"{', '.join(sorted(n for n in names if '_A' not in n))} or e.g. straight_A0.61_w2.7"
         )
-    try:
-        data = tomllib.loads(path.read_text())
-    except OSError as err:
-        raise ScenarioError(f"{path}: cannot read scenario file: {err.strerror}") from None
-    except tomllib.TOMLDecodeError as err:
-        raise ScenarioError(f"{path}: not valid TOML: {err}") from None
+    data = read_toml(path, ScenarioError, "scenario file")
     data.setdefault("name", path.stem)
     try:
         return Scenario.model_validate(data)
     except ValidationError as err:
-        lines = [f"{path}: invalid scenario:"]
-        for e in err.errors():
-            loc = ".".join(str(p) for p in e["loc"])
-            msg = "unknown key" if e["type"] == "extra_forbidden" else e["msg"]
-            lines.append(f"  {loc}: {msg}")
-        raise ScenarioError("\n".join(lines)) from None
+        raise ScenarioError(
+            validation_message(str(path), err, "scenario", show_values=False)
+        ) from None

@@ -35,7 +35,6 @@ Unknown keys are refused; errors name the file and the key.
 from __future__ import annotations
 
 import math
-import tomllib
 from functools import cached_property
 from importlib import resources
 from pathlib import Path
@@ -53,6 +52,7 @@ from eelhost.planning.geometry import (
     segments_cross,
     segments_polygon_distance,
 )
+from eelsim.tomlfile import read_toml, validation_message
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
@@ -307,15 +307,6 @@ class World(_Strict):
         return best
 
 
-def _format_errors(source: str, err: ValidationError) -> str:
-    lines = [f"{source}: invalid world:"]
-    for e in err.errors():
-        loc = ".".join(str(p) for p in e["loc"])
-        msg = "unknown key" if e["type"] == "extra_forbidden" else e["msg"]
-        lines.append(f"  {loc}: {msg}")
-    return "\n".join(lines)
-
-
 def example_path(name: str = "tank_5_obstacles") -> Path:
     """Path of a bundled example world file.
 
@@ -354,7 +345,7 @@ def parse_world(data: dict, source: str = "<world>") -> World:
     try:
         return World.model_validate(data)
     except ValidationError as err:
-        raise WorldError(_format_errors(source, err)) from None
+        raise WorldError(validation_message(source, err, "world", show_values=False)) from None
 
 
 def load_world(path_or_name: str | Path) -> World:
@@ -376,11 +367,6 @@ def load_world(path_or_name: str | Path) -> World:
     """
     key = str(path_or_name)
     path = example_path(key) if key in EXAMPLES else Path(key)
-    try:
-        data = tomllib.loads(path.read_text())
-    except OSError as err:
-        raise WorldError(f"{path}: cannot read world file: {err.strerror}") from None
-    except tomllib.TOMLDecodeError as err:
-        raise WorldError(f"{path}: not valid TOML: {err}") from None
+    data = read_toml(path, WorldError, "world file")
     data.setdefault("name", path.stem)
     return parse_world(data, str(path))
