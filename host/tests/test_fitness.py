@@ -57,3 +57,23 @@ def test_validation_errors_report_the_papers_mean_and_true_rms_in_body_lengths()
     assert e["Ex_mean_BL"] == pytest.approx(0.1 * 18 / 35)
     assert e["Ex_rms_BL"] == pytest.approx(np.sqrt(0.01 * 18 / 35))
     assert e["Ex_rms_BL"] > e["Ex_mean_BL"]
+
+
+def test_failures_after_arrival_and_after_the_recording_do_not_count():
+    from types import SimpleNamespace
+
+    from eelhost.estimation.evaluate import Simulated
+
+    prepared = [SimpleNamespace(times_s=np.array([0.0, 10.0]))]
+    nan = np.nan
+    sim = Simulated(
+        positions_m=np.zeros((4, 1, 2, 2)),
+        heading_rad=np.zeros((4, 1, 2)),
+        failure=np.array([[3], [3], [3], [1]]),
+        distance_left_m=np.zeros((4, 1)),
+        # arrived at 8 s and collided at 12 s | collided at 9 s, inside the data |
+        # collided at 12 s without arriving | too slow
+        arrival_time_s=np.array([[8.0], [8.0], [nan], [nan]]),
+        failure_time_s=np.array([[12.0], [9.0], [12.0], [15.0]]),
+    )
+    assert sim.counted_failure(prepared)[:, 0].tolist() == [0, 3, 3, 1]

@@ -37,6 +37,8 @@ def simulate_batch(robot: Robot, prepared: Sequence, coefficients: np.ndarray):
     heading = np.full((c, e, n), np.nan)
     failure = np.zeros((c, e), dtype=int)
     left = np.zeros((c, e))
+    arrival = np.full((c, e), np.nan)
+    failed = np.full((c, e), np.nan)
     groups: dict[object, list[int]] = {}
     for j, p in enumerate(prepared):
         groups.setdefault(p.options, []).append(j)
@@ -55,4 +57,8 @@ def simulate_batch(robot: Robot, prepared: Sequence, coefficients: np.ndarray):
             heading[:, j] = picked[..., :n_links].mean(axis=-1)
         failure[:, members] = np.asarray(res.failure, dtype=int).reshape(c, len(members))
         left[:, members] = np.asarray(res.distance_left_m).reshape(c, len(members))
-    return Simulated(pos, heading, failure, left)
+        arrival[:, members] = np.asarray(res.arrival_time_s, dtype=float).reshape(c, len(members))
+        codes = np.asarray(res.failure, dtype=int).reshape(c, len(members))
+        times = np.asarray(res.failure_time_s, dtype=float).reshape(c, len(members))
+        failed[:, members] = np.where(codes != 0, times, np.nan)
+    return Simulated(pos, heading, failure, left, arrival, failed)

@@ -123,15 +123,37 @@ class Simulated:
     failure : ndarray of int, shape (C, E)
         :class:`eelsim.flags.Failure` codes.
     distance_left_m : ndarray, shape (C, E)
+    arrival_time_s : ndarray, shape (C, E)
+        When the last waypoint was reached (NaN: never).
+    failure_time_s : ndarray, shape (C, E)
+        When the failure was detected (NaN: none).
     """
 
     positions_m: np.ndarray
     heading_rad: np.ndarray
     failure: np.ndarray
     distance_left_m: np.ndarray
+    arrival_time_s: np.ndarray
+    failure_time_s: np.ndarray
+
+    def counted_failure(self, prepared: Sequence[PreparedExperiment]) -> np.ndarray:
+        """Failure codes that count against a candidate, shape (C, E).
+
+        A run continues past the recording so that a slightly slow candidate can still arrive;
+        a failure after both its arrival and the last sample time (e.g. circling the last waypoint
+        until a joint reaches its stop) happens where there is no data and does not count.
+        """
+        out = self.failure.copy()
+        for j, p in enumerate(prepared):
+            after_data = (self.failure_time_s[:, j] > p.times_s[-1]) & (
+                self.arrival_time_s[:, j] <= self.failure_time_s[:, j]
+            )
+            late = after_data & (self.failure[:, j] != int(Failure.TOO_SLOW))
+            out[late, j] = int(Failure.NONE)
+        return out
 
 
-def _reference_job(args: tuple) -> tuple[np.ndarray, np.ndarray, int, float]:
+def _reference_job(args: tuple) -> tuple[np.ndarray, np.ndarray, int, float, float, float]:
     robot, prepared, coeffs = args
     run = simulate_closed_loop(
         robot, prepared.scenario, prepared.options, seed=0, coefficients=coeffs
@@ -144,7 +166,12 @@ def _reference_job(args: tuple) -> tuple[np.ndarray, np.ndarray, int, float]:
     ok = idx < len(run.t_s)
     pos[ok] = run.states[idx[ok], n : n + 2]
     heading[ok] = run.states[idx[ok], :n].mean(axis=1)
-    return pos, heading, int(run.failure), float(run.distance_left_m)
+    nan = float("nan")
+    arrival = nan if run.arrival_time_s is None else float(run.arrival_time_s)
+    failed = (
+        nan if run.failure_time_s is None or int(run.failure) == 0 else float(run.failure_time_s)
+    )
+    return pos, heading, int(run.failure), float(run.distance_left_m), arrival, failed
 
 
 class Evaluator:
@@ -223,7 +250,9 @@ class Evaluator:
         heading = np.array([r[1] for r in results]).reshape(c, e, n)
         fail = np.array([r[2] for r in results], dtype=int).reshape(c, e)
         left = np.array([r[3] for r in results]).reshape(c, e)
-        return Simulated(pos, heading, fail, left)
+        arrival = np.array([r[4] for r in results]).reshape(c, e)
+        failed = np.array([r[5] for r in results]).reshape(c, e)
+        return Simulated(pos, heading, fail, left, arrival, failed)
 
     def errors(self, coefficients: np.ndarray) -> np.ndarray:
         """Per-experiment error (with the failure penalties), shape (C, E)."""
@@ -233,11 +262,12 @@ class Evaluator:
     def errors_of(self, sim: Simulated) -> np.ndarray:
         """Per-experiment error of already simulated candidates, shape (C, E)."""
         c, e = sim.failure.shape
+        counted = sim.counted_failure(self.prepared)
         out = np.empty((c, e))
         for j, p in enumerate(self.prepared):
             err = self.aligned_errors(p, sim.positions_m[:, j]).min(axis=1)
             for i in range(c):
-                f = Failure(int(sim.failure[i, j]))
+                f = Failure(int(counted[i, j]))
                 out[i, j] = (
                     err[i] if f == Failure.NONE else penalty(f, float(sim.distance_left_m[i, j]))
                 )
@@ -265,6 +295,7 @@ class Evaluator:
         from eelhost.estimation.fitness import sampled_velocity
 
         sim = self.simulate(coefficients)
+        counted = sim.counted_failure(self.prepared)
         blocks = []
         for j, p in enumerate(self.prepared):
             simp = sim.positions_m[:, j]
@@ -276,7 +307,7 @@ class Evaluator:
             block = np.concatenate(
                 [dp.reshape(len(simp), -1), self.weight * dv.reshape(len(simp), -1)], axis=1
             )
-            failed = sim.failure[:, j] != int(Failure.NONE)
+            failed = counted[:, j] != int(Failure.NONE)
             block[failed] = 10.0  # far worse than any real trajectory error (metres)
             blocks.append(np.nan_to_num(block, nan=10.0))
         return np.concatenate(blocks, axis=1)

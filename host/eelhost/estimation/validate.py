@@ -93,8 +93,9 @@ def validate(
     for key, exps in groups.items():
         ev = Evaluator(robot, exps, n_samples=n_samples, backend=backend, align_s=align_s)
         sim: Simulated = ev.simulate(fitted[key].as_array()[None, :])
+        counted = sim.counted_failure(ev.prepared)
         for j, p in enumerate(ev.prepared):
-            failure = Failure(int(sim.failure[0, j]))
+            failure = Failure(int(counted[0, j]))
             simp = sim.positions_m[0, j]
             offset, unaligned, exp_pos = 0.0, float("nan"), p.exp_positions_m
             if np.isnan(simp).any():
