@@ -1,7 +1,6 @@
 import sys
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))  # the test oracles live beside the tests
@@ -23,14 +22,3 @@ def model(robot):
 @pytest.fixture(scope="session")
 def vacuum_model(robot):
     return SwimmerModel.from_robot(robot, HydroCoefficients(C_f=0.0, C_d=0.0, C_a=0.0, C_m=0.0))
-
-
-def random_state(rng, n, angle=0.6, rate=2.0, speed=0.2):
-    return np.concatenate(
-        [
-            rng.normal(0, angle, n),
-            rng.normal(0, 1, 2),
-            rng.normal(0, rate, n),
-            rng.normal(0, speed, 2),
-        ]
-    )

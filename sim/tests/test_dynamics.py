@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 from closed_form_oracle import closed_form_accelerations
-from conftest import random_state
+from sim_helpers import random_state
 
 from eelsim.dynamics import (
     accelerations,

@@ -2,8 +2,8 @@
 
 import numpy as np
 import pytest
-from conftest import random_state
 from scipy.integrate import solve_ivp
+from sim_helpers import random_state
 
 from eelsim.control import Gait, gait_reference, joint_pd_torque
 from eelsim.dynamics import (
