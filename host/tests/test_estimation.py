@@ -72,7 +72,8 @@ def test_ga_resumed_after_a_kill_equals_the_uninterrupted_run_on_real_simulation
 
 
 def test_evaluation_spread_over_a_local_dask_cluster_gives_the_same_fitness(tiny_dataset):
-    distributed = pytest.importorskip("distributed")  # a dev dependency, installed by the test command
+    import distributed  # a dev dependency, installed by the test command
+
     from eelhost.estimation.cluster import dask_map
 
     ds = load_dataset(tiny_dataset)
