@@ -14,6 +14,7 @@ from eelhost.commands import (
     bench,
     dataset,
     estimate,
+    estimate_bench,
     plan,
     report,
     run,
@@ -27,7 +28,7 @@ from eelsim.robot import RobotFileError
 from eelsim.scenario import ScenarioError
 from eelsim.timing import TimingError
 
-COMMANDS = (simulate, speeds, dataset, estimate, validate, report, vision_bench, bench, run, plan)
+COMMANDS = (simulate, speeds, dataset, estimate, estimate_bench, validate, report, vision_bench, bench, run, plan)
 USER_ERRORS = (RobotFileError, ScenarioError, TimingError, DataError, ValueError, FileNotFoundError)
 
 

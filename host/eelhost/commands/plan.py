@@ -37,13 +37,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("world", help="world TOML file, or 'tank_5_obstacles'")
     add_robot_options(p)
     p.add_argument("--out", default="out/plan", help="output folder (default out/plan)")
-    p.add_argument("--cache", metavar="DIR", help=f"primitive cache (default {default_cache_dir()})")
+    p.add_argument(
+        "--cache", metavar="DIR", help=f"primitive cache (default {default_cache_dir()})"
+    )
     p.add_argument("--rebuild", action="store_true", help="rebuild the library even if cached")
     p.add_argument("--plot", action="store_true", help="write <out>/plan.png (figure 11 style)")
     p.add_argument("--no-execute", action="store_true", help="plan only; do not swim the plan")
     p.add_argument("--threads", type=int, default=1, help="threads of the batched twin (1)")
     p.add_argument(
-        "--bench", action="store_true",
+        "--bench",
+        action="store_true",
         help="time a fresh library build and the planning (5 repeats); write --bench-out",
     )
     p.add_argument("--bench-out", default="docs/planning.md", help="benchmark report (markdown)")
@@ -53,8 +56,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def _plan_json(world, lib, plan, execution) -> dict:
     return {
         "world": world.model_dump(mode="json"),
-        "library": {"key": lib.key, "primitives": len(lib), "successful": int(lib.success.sum()),
-                    "build_time_s": lib.build_time_s, "backend": lib.backend},
+        "library": {
+            "key": lib.key,
+            "primitives": len(lib),
+            "successful": int(lib.success.sum()),
+            "build_time_s": lib.build_time_s,
+            "backend": lib.backend,
+        },
         "found": plan.found,
         "message": plan.message,
         "cost_s": plan.cost_s if plan.found else None,
@@ -62,17 +70,29 @@ def _plan_json(world, lib, plan, execution) -> dict:
         "planning_time_s": plan.planning_time_s,
         "waypoints_m": plan.waypoints_m,
         "primitives": [
-            {"row": s.primitive, "kind": s.kind, "current_rel_deg": s.current_rel_deg,
-             "distance_m": s.distance_m, "bearing_deg": s.bearing_deg,
-             "start_pose": s.start_pose, "end_pose": s.end_pose, "waypoint_m": s.waypoint_m,
-             "duration_s": s.duration_s}
+            {
+                "row": s.primitive,
+                "kind": s.kind,
+                "current_rel_deg": s.current_rel_deg,
+                "distance_m": s.distance_m,
+                "bearing_deg": s.bearing_deg,
+                "start_pose": s.start_pose,
+                "end_pose": s.end_pose,
+                "waypoint_m": s.waypoint_m,
+                "duration_s": s.duration_s,
+            }
             for s in plan.steps
         ],
-        "execution": None if execution is None else {
-            "reached": execution.reached, "collision_free": execution.collision_free,
-            "goal_time_s": execution.goal_time_s, "goal_distance_m": execution.goal_distance_m,
+        "execution": None
+        if execution is None
+        else {
+            "reached": execution.reached,
+            "collision_free": execution.collision_free,
+            "goal_time_s": execution.goal_time_s,
+            "goal_distance_m": execution.goal_distance_m,
             "min_clearance_m": execution.min_clearance_m,
-            "first_collision_s": execution.first_collision_s, "reason": execution.reason,
+            "first_collision_s": execution.first_collision_s,
+            "reason": execution.reason,
         },
     }
 
@@ -87,17 +107,27 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     cache = args.cache or default_cache_dir()
-    lib, built = load_or_build(robot, coeffs, world.current.speed_m_s, cache_dir=cache,
-                               threads=args.threads, rebuild=args.rebuild or args.bench)
+    lib, built = load_or_build(
+        robot,
+        coeffs,
+        world.current.speed_m_s,
+        cache_dir=cache,
+        threads=args.threads,
+        rebuild=args.rebuild or args.bench,
+    )
     how = "built" if built else "loaded from cache"
-    print(f"library {lib.key}: {len(lib)} primitives ({int(lib.success.sum())} completed), {how}"
-          f"; build time {lib.build_time_s:.2f} s ({lib.backend})")
+    print(
+        f"library {lib.key}: {len(lib)} primitives ({int(lib.success.sum())} completed), {how}"
+        f"; build time {lib.build_time_s:.2f} s ({lib.backend})"
+    )
     plan = plan_path(world, lib)
     print(f"{world.name}: {plan.message} in {plan.planning_time_s:.2f} s")
     for k, s in enumerate(plan.steps):
-        print(f"  {k + 1:2d}. {s.kind:8s} current {s.current_rel_deg:5.0f} deg  "
-              f"{s.distance_m:.2f} m at {s.bearing_deg:+4.0f} deg -> waypoint "
-              f"({s.waypoint_m[0]:.2f}, {s.waypoint_m[1]:.2f}) m, {s.duration_s:.1f} s")
+        print(
+            f"  {k + 1:2d}. {s.kind:8s} current {s.current_rel_deg:5.0f} deg  "
+            f"{s.distance_m:.2f} m at {s.bearing_deg:+4.0f} deg -> waypoint "
+            f"({s.waypoint_m[0]:.2f}, {s.waypoint_m[1]:.2f}) m, {s.duration_s:.1f} s"
+        )
     execution = None
     if plan.found and plan.steps and not args.no_execute:
         execution = execute_plan(world, plan, robot, coeffs, threads=args.threads)
@@ -111,8 +141,9 @@ def run(args: argparse.Namespace) -> int:
         target = out / "plan.png"
         if args.bench:
             target = Path(args.bench_out).with_suffix(".png")
-        figure = plot_plan(world, lib, plan, execution, SwimmerModel.from_robot(robot, coeffs),
-                           target)
+        figure = plot_plan(
+            world, lib, plan, execution, SwimmerModel.from_robot(robot, coeffs), target
+        )
         print(f"wrote {figure}")
     if args.bench:
         times = []

@@ -94,15 +94,15 @@ def _gait(values: list[float], k_theta: float) -> Gait:
     return Gait(values[0], values[1], beta, k_theta)
 
 
-def _frames(
-    args: argparse.Namespace, link: Link, robot: Robot
-) -> tuple[Iterable, Localiser, dict]:
+def _frames(args: argparse.Namespace, link: Link, robot: Robot) -> tuple[Iterable, Localiser, dict]:
     """The frame source, its localiser and the camera facts to record."""
     spec = args.camera
     if isinstance(link.transport, SimTransport):
         spec = spec or "synthetic"
         if spec in SYNTHETIC:
-            options = RenderOptions(noise_sigma=0.0, jpeg_quality=0) if spec.endswith("clean") else None
+            options = (
+                RenderOptions(noise_sigma=0.0, jpeg_quality=0) if spec.endswith("clean") else None
+            )
             cam = SyntheticCamera(robot, options=options, seed=0)
             source = VirtualCamera(link.transport.robot, cam, keep_truth=False)
             facts = {"fps": source.fps, "median_window": 5, "source": spec}
@@ -184,6 +184,10 @@ def run(args: argparse.Namespace) -> int:
         f"Stop {out.stop_outcome}"
     )
     if virtual is not None and wall > 0:
-        print(f"simulated {out.t_end_s:.1f} s in {wall:.1f} s ({out.t_end_s / wall:.1f}x real time)")
-    print(f"wrote {recorder.csv_path}, {recorder.json_path}, {recorder.commands_path}, {rx_log.path}")
+        print(
+            f"simulated {out.t_end_s:.1f} s in {wall:.1f} s ({out.t_end_s / wall:.1f}x real time)"
+        )
+    print(
+        f"wrote {recorder.csv_path}, {recorder.json_path}, {recorder.commands_path}, {rx_log.path}"
+    )
     return 0 if out.reason in ("arrived", "duration", "interrupted") else 1
