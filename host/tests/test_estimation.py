@@ -25,11 +25,20 @@ def tiny_dataset(tmp_path_factory):
     names = []
     for i, name in enumerate(["straight_A0.87_w3.9", "straight_A0.61_w2.7", "straight_A0.78_w3.5"]):
         s = load_scenario(name).model_copy(update={"waypoints_m": [(0.6, 0.0)]})
-        exp = record_experiment(robot, s, "straight", TRUTH, TankSettings(timestamp_jitter_s=0.0), seed=i)
+        exp = record_experiment(
+            robot, s, "straight", TRUTH, TankSettings(timestamp_jitter_s=0.0), seed=i
+        )
         write_experiment(exp, folder)
         names.append(name)
-    write_manifest(folder, manifest_text("paper_robot.toml", {"straight": {"train": names[:2], "test": names[2:]}},
-                                         [], {"straight": TRUTH}))
+    write_manifest(
+        folder,
+        manifest_text(
+            "paper_robot.toml",
+            {"straight": {"train": names[:2], "test": names[2:]}},
+            [],
+            {"straight": TRUTH},
+        ),
+    )
     return folder
 
 
@@ -44,7 +53,9 @@ def test_batch_and_reference_backends_score_candidates_identically(tiny_dataset)
 
 def test_default_method_recovers_the_truth_on_a_small_dataset(tiny_dataset):
     ds = load_dataset(tiny_dataset)
-    res, ev = fit_motion(ds, "straight", FitSettings("cmaes", seed=0, budget=600, polish_iterations=8))
+    res, ev = fit_motion(
+        ds, "straight", FitSettings("cmaes", seed=0, budget=600, polish_iterations=8)
+    )
     truth_fitness = float(ev.fitness(TRUTH.as_array()[None])[0])
     assert res.fitness <= truth_fitness * 1.05 + 1e-3
     got, want = res.coefficients.as_array(), TRUTH.as_array()
@@ -52,7 +63,9 @@ def test_default_method_recovers_the_truth_on_a_small_dataset(tiny_dataset):
     assert abs(got[2] - want[2]) / want[2] < 0.3  # C_a
 
 
-def test_ga_resumed_after_a_kill_equals_the_uninterrupted_run_on_real_simulations(tiny_dataset, tmp_path):
+def test_ga_resumed_after_a_kill_equals_the_uninterrupted_run_on_real_simulations(
+    tiny_dataset, tmp_path
+):
     ds = load_dataset(tiny_dataset)
     ev = Evaluator(ds.robot, ds.train["straight"], backend="batch")
     whole = fit_ga(ev.fitness, seed=3, pop_size=8, generations=4)
@@ -66,8 +79,22 @@ def test_ga_resumed_after_a_kill_equals_the_uninterrupted_run_on_real_simulation
 
     ck = tmp_path / "ck.pkl"
     with pytest.raises(Killed):
-        fit_ga(ev.fitness, seed=3, pop_size=8, generations=4, checkpoint=Checkpoint(ck, {"s": 3}), progress=kill)
-    resumed = fit_ga(ev.fitness, seed=3, pop_size=8, generations=4, checkpoint=Checkpoint(ck, {"s": 3}), resume=True)
+        fit_ga(
+            ev.fitness,
+            seed=3,
+            pop_size=8,
+            generations=4,
+            checkpoint=Checkpoint(ck, {"s": 3}),
+            progress=kill,
+        )
+    resumed = fit_ga(
+        ev.fitness,
+        seed=3,
+        pop_size=8,
+        generations=4,
+        checkpoint=Checkpoint(ck, {"s": 3}),
+        resume=True,
+    )
     assert resumed.fitness == whole.fitness and resumed.coefficients == whole.coefficients
 
 
@@ -79,21 +106,45 @@ def test_evaluation_spread_over_a_local_dask_cluster_gives_the_same_fitness(tiny
     ds = load_dataset(tiny_dataset)
     cands = np.array([TRUTH.as_array(), [0.01, 0.9, 0.7, 0.01]])
     local = Evaluator(ds.robot, ds.train["straight"], backend="reference", workers=1).fitness(cands)
-    with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False,
-                                  dashboard_address=None) as cluster, distributed.Client(cluster) as client:
-        spread = Evaluator(ds.robot, ds.train["straight"], backend="reference",
-                           map_function=dask_map(client)).fitness(cands)
+    with (
+        distributed.LocalCluster(
+            n_workers=1, threads_per_worker=2, processes=False, dashboard_address=None
+        ) as cluster,
+        distributed.Client(cluster) as client,
+    ):
+        spread = Evaluator(
+            ds.robot, ds.train["straight"], backend="reference", map_function=dask_map(client)
+        ).fitness(cands)
     assert np.array_equal(local, spread)
 
 
-def test_estimate_and_validate_commands_write_coefficients_and_table(tiny_dataset, tmp_path, capsys):
+def test_estimate_and_validate_commands_write_coefficients_and_table(
+    tiny_dataset, tmp_path, capsys
+):
     out = tmp_path / "fit"
-    assert main(["estimate", str(tiny_dataset), "--motion", "straight", "--budget", "24", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "estimate",
+                str(tiny_dataset),
+                "--motion",
+                "straight",
+                "--budget",
+                "24",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     coeffs = json.loads((out / "coefficients.json").read_text())
     assert set(coeffs["fits"]) == {"straight"} and coeffs["fits"]["straight"]["fitness"] > 0
     assert "straight" in read_coefficients(str(out / "coefficients.json"))
     val = tmp_path / "val"
-    assert main(["validate", str(out / "coefficients.json"), str(tiny_dataset), "--out", str(val)]) == 0
+    assert (
+        main(["validate", str(out / "coefficients.json"), str(tiny_dataset), "--out", str(val)])
+        == 0
+    )
     table = (val / "table4.csv").read_text().splitlines()
     assert table[0].startswith("name,motion,coefficients,Ex_mean_BL") and len(table) == 2
     assert (val / "paths_straight.png").exists()
@@ -102,3 +153,15 @@ def test_estimate_and_validate_commands_write_coefficients_and_table(tiny_datase
 def test_validate_refuses_a_malformed_coefficients_argument(tiny_dataset, capsys):
     assert main(["validate", "0.1,0.2", str(tiny_dataset)]) == 2
     assert "expected a .json file or Cf,Cd,Ca,Cm" in capsys.readouterr().err
+
+
+def test_truth_scores_zero_on_a_clean_tank_when_the_twin_is_seen_through_the_same_camera(tmp_path):
+    robot = load_robot()
+    s = load_scenario("turning_A0.61_w2.7").model_copy(update={"waypoints_m": [(0.4, 0.2)]})
+    clean = TankSettings(timestamp_jitter_s=0.0, control_jitter_s=0.0)
+    exp = record_experiment(robot, s, "turning", TABLE3["turning"], clean, seed=4)
+    truth = TABLE3["turning"].as_array()[None]
+    seen = Evaluator(robot, [exp], backend="batch").errors(truth)
+    true_com = Evaluator(robot, [exp], backend="batch", observe=False).errors(truth)
+    assert seen[0, 0] < 1e-12  # same frames, pixels and median filter as the recording
+    assert true_com[0, 0] > 0.01  # the camera's lag and pixels would otherwise count as model error

@@ -97,3 +97,88 @@ class MedianFilter:
         self._last_heading = heading_rad
         self._buf.append(np.array([x_m, y_m, heading_rad]))
         return np.median(np.array(self._buf), axis=0)
+
+
+def _frame_steps(frame: int, fps: float, dt_s: float) -> tuple[int, float]:
+    """The physics step at or before a frame and the frame's fraction of the way to the next."""
+    t = frame / fps
+    k = int(np.floor(t / dt_s + 1e-9))
+    return k, (t - k * dt_s) / dt_s
+
+
+def observation_steps(times_s: np.ndarray, camera: CameraModel, dt_s: float) -> np.ndarray:
+    """Physics steps whose states :func:`observed_positions` needs for the given query times.
+
+    Parameters
+    ----------
+    times_s : ndarray
+        Times at which the filtered camera position is wanted (>= 0).
+    camera : CameraModel
+    dt_s : float
+        Physics step.
+
+    Returns
+    -------
+    ndarray of int
+        Sorted, unique step indices.
+    """
+    steps: set[int] = set()
+    for t in np.asarray(times_s, dtype=float):
+        f = int(np.floor(t * camera.fps + 1e-9))
+        for g in range(max(0, f - camera.median_window + 1), f + 2):
+            k, _ = _frame_steps(g, camera.fps, dt_s)
+            steps.update((k, k + 1))
+    return np.array(sorted(steps), dtype=np.int64)
+
+
+def observed_positions(
+    times_s: np.ndarray,
+    steps: np.ndarray,
+    position_m: np.ndarray,
+    velocity_m_s: np.ndarray,
+    camera: CameraModel,
+    dt_s: float,
+) -> np.ndarray:
+    """What the camera pipeline reports for the centre of mass at the query times.
+
+    The same model as the closed loop's camera: frames at ``fps``, each the cubic Hermite
+    interpolant between physics steps, quantised to pixel centres, then the moving median over the
+    last ``median_window`` frames (fewer at the start); a query time between two frames gets the
+    linear interpolation of their filtered positions, as a recording read between frames does.
+
+    Parameters
+    ----------
+    times_s : ndarray, shape (n,)
+        Query times.
+    steps : ndarray of int, shape (S,)
+        The steps of the states given (must include :func:`observation_steps`).
+    position_m, velocity_m_s : ndarray, shape (S, 2)
+        Centre of mass and its velocity at those steps.
+    camera : CameraModel
+    dt_s : float
+
+    Returns
+    -------
+    ndarray, shape (n, 2)
+    """
+    index = {int(s): i for i, s in enumerate(steps)}
+    raw_cache: dict[int, np.ndarray] = {}
+
+    def raw(g: int) -> np.ndarray:
+        if g not in raw_cache:
+            k, s = _frame_steps(g, camera.fps, dt_s)
+            i, j = index[k], index[k + 1]
+            y = hermite(position_m[i], velocity_m_s[i], position_m[j], velocity_m_s[j], dt_s, s)
+            raw_cache[g] = quantise_position(y, camera.pixel_m)
+        return raw_cache[g]
+
+    def filtered(f: int) -> np.ndarray:
+        window = [raw(g) for g in range(max(0, f - camera.median_window + 1), f + 1)]
+        return np.median(np.array(window), axis=0)
+
+    out = np.empty((len(times_s), 2))
+    for q, t in enumerate(np.asarray(times_s, dtype=float)):
+        f = int(np.floor(t * camera.fps + 1e-9))
+        s = t * camera.fps - f
+        out[q] = filtered(f) if s < 1e-12 else (1 - s) * filtered(f) + s * filtered(f + 1)
+    return out

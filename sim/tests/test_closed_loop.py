@@ -4,7 +4,13 @@ import numpy as np
 import pytest
 
 from eelsim.camera import CameraModel, MedianFilter, hermite, quantise_position
-from eelsim.closed_loop import LoopOptions, servo_limited, simulate_closed_loop
+from eelsim.closed_loop import (
+    JointDrive,
+    LoopOptions,
+    TwinJoints,
+    servo_limited,
+    simulate_closed_loop,
+)
 from eelsim.control import heading_offset, wrap_angle
 from eelsim.flags import Failure, segments_intersect
 from eelsim.scenario import ScenarioError, grid_scenario, load_scenario, named_scenarios, paper_grid
@@ -221,3 +227,60 @@ def test_unknown_scenario_and_bad_scenario_file_are_refused_clearly(tmp_path):
 def test_camera_model_rejects_nonsense():
     with pytest.raises(ValueError, match="median window"):
         CameraModel(median_window=0)
+
+
+class _RecordingJoints:
+    """The twin's joints, keeping every offset command and optionally holding the torques."""
+
+    def __init__(self, robot, scenario, hold=False):
+        self.twin = TwinJoints(robot, scenario.gait, robot.n_links)
+        self.hold = hold
+        self.commands = []
+
+    def on_step(self, step, t_s, state, offset_command):
+        if offset_command is not None:
+            self.commands.append((step, offset_command))
+        drive = self.twin.on_step(step, t_s, state, offset_command)
+        if self.hold:  # a controller ticked once per step: the law at the step's start, held
+            return JointDrive(drive.torque_nm(t_s, state), drive.alpha_rad, drive.offset_rad)
+        return drive
+
+
+def test_a_joint_controller_gets_each_offset_after_the_delay_and_the_default_is_unchanged(robot):
+    scenario = load_scenario("turning").model_copy(update={"duration_s": 4.0})
+    options = LoopOptions(timing=LoopTiming(control_period_s=0.3, extra_delay_s=0.05))
+    twin = simulate_closed_loop(robot, scenario, options, seed=3)
+    joints = _RecordingJoints(robot, scenario)
+    same = simulate_closed_loop(robot, scenario, options, seed=3, joints=joints)
+    np.testing.assert_array_equal(same.states, twin.states)  # bit for bit
+    np.testing.assert_array_equal(same.camera_pose, twin.camera_pose)
+    steps = [k for k, _ in joints.commands]
+    assert steps == list(range(5, len(twin.t_s), 30))  # every update (30 steps) plus 5
+    recorded = twin.offset_rad[steps]
+    np.testing.assert_array_equal(recorded, [g for _, g in joints.commands])
+
+
+def test_held_torques_drive_the_plant_and_swim_close_to_the_twin(robot):
+    scenario = load_scenario("straight").model_copy(update={"duration_s": 4.0})
+    options = LoopOptions(stop_at_goal=False)
+    twin = simulate_closed_loop(robot, scenario, options)
+    held = simulate_closed_loop(
+        robot, scenario, options, joints=_RecordingJoints(robot, scenario, hold=True)
+    )
+    assert held.failure == twin.failure and len(held.t_s) == len(twin.t_s)
+    # Same references until the poses, and so the offsets, part (the first control period).
+    np.testing.assert_array_equal(held.alpha_rad[:30], twin.alpha_rad[:30])
+    gap = np.linalg.norm(held.states[:, 6:8] - twin.states[:, 6:8], axis=1)
+    assert 0.0 < gap.max() < 0.01  # the hold changes the swim, a little (cf. hil_tests)
+
+
+def test_camera_observation_from_states_reproduces_the_closed_loops_camera(robot):
+    from eelsim.camera import observation_steps, observed_positions
+
+    res = simulate_closed_loop(robot, load_scenario("turning"))
+    frames = res.camera_t_s[res.camera_t_s <= res.t_s[-1] - 0.05]
+    steps = observation_steps(frames, CameraModel(), 0.01)
+    seen = observed_positions(
+        frames, steps, res.states[steps, 6:8], res.states[steps, -2:], CameraModel(), 0.01
+    )
+    assert np.array_equal(seen, res.camera_pose[: len(frames), :2])

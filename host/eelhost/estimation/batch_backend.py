@@ -43,18 +43,14 @@ def simulate_batch(robot: Robot, prepared: Sequence, coefficients: np.ndarray):
     for j, p in enumerate(prepared):
         groups.setdefault(p.options, []).append(j)
     for options, members in groups.items():
-        dt = options.timing.dt_s
-        steps = [np.round(prepared[j].times_s / dt).astype(np.int64) for j in members]
-        union = np.unique(np.concatenate(steps))
-        where = [np.searchsorted(union, s) for s in steps]
+        union = np.unique(np.concatenate([prepared[j].state_steps for j in members]))
         scenarios = [prepared[j].scenario for _ in range(c) for j in members]
         coeffs = np.repeat(coefficients, len(members), axis=0)
         res = run_batch(robot, scenarios, coeffs, options, seeds=0, sample_steps=union)
         states = res.states.reshape(c, len(members), union.size, -1)
         for k, j in enumerate(members):
-            picked = states[:, k, where[k]]
-            pos[:, j] = picked[..., n_links : n_links + 2]
-            heading[:, j] = picked[..., :n_links].mean(axis=-1)
+            picked = states[:, k, np.searchsorted(union, prepared[j].state_steps)]
+            pos[:, j], heading[:, j] = prepared[j].positions(picked, n_links)
         failure[:, members] = np.asarray(res.failure, dtype=int).reshape(c, len(members))
         left[:, members] = np.asarray(res.distance_left_m).reshape(c, len(members))
         arrival[:, members] = np.asarray(res.arrival_time_s, dtype=float).reshape(c, len(members))

@@ -26,7 +26,7 @@ from eelhost.estimation.fitness import (
     trajectory_error,
 )
 from eelhost.experiment import Experiment
-from eelsim.camera import CameraModel
+from eelsim.camera import CameraModel, observation_steps, observed_positions
 from eelsim.closed_loop import LoopOptions, simulate_closed_loop
 from eelsim.flags import Failure, penalty
 from eelsim.robot import HydroCoefficients, Robot
@@ -58,6 +58,11 @@ class PreparedExperiment:
         Candidate clock offsets of the recording (just 0 without alignment).
     shifted_positions_m : ndarray, shape (M, n, 2)
         The experiment's centre of mass at ``times_s + shift`` for each shift.
+    state_steps : ndarray of int
+        The physics steps whose simulated states are needed.
+    observe : bool
+        Compare the simulation as the camera saw it (pixels, median filter) rather than its true
+        centre of mass.
     """
 
     experiment: Experiment
@@ -67,6 +72,40 @@ class PreparedExperiment:
     exp_positions_m: np.ndarray
     shifts_s: np.ndarray
     shifted_positions_m: np.ndarray
+    state_steps: np.ndarray
+    observe: bool = True
+
+    def positions(self, states: np.ndarray, n_links: int) -> tuple[np.ndarray, np.ndarray]:
+        """Simulated centre of mass and heading at the sample times from states at ``state_steps``.
+
+        Parameters
+        ----------
+        states : ndarray, shape (C, S, 2 N + 4)
+            NaN where a run had already ended.
+        n_links : int
+
+        Returns
+        -------
+        positions : ndarray, shape (C, n, 2)
+        heading : ndarray, shape (C, n)
+        """
+        dt = self.options.timing.dt_s
+        at = np.searchsorted(self.state_steps, np.round(self.times_s / dt).astype(np.int64))
+        heading = states[:, at, :n_links].mean(axis=-1)
+        if not self.observe:
+            return states[:, at, n_links : n_links + 2], heading
+        pos = np.full((states.shape[0], self.times_s.size, 2), np.nan)
+        for c, run in enumerate(states):
+            if not np.isnan(run).any():
+                pos[c] = observed_positions(
+                    self.times_s,
+                    self.state_steps,
+                    run[:, n_links : n_links + 2],
+                    run[:, -2:],
+                    self.options.camera,
+                    dt,
+                )
+        return pos, heading
 
 
 def prepare(
@@ -75,6 +114,7 @@ def prepare(
     dt_s: float = 0.01,
     tmax_factor: float = TMAX_FACTOR,
     align_s: float = 0.0,
+    observe: bool = True,
 ) -> PreparedExperiment:
     """Prepare an experiment for simulation with ``n_samples`` sample times.
 
@@ -82,6 +122,11 @@ def prepare(
     the experiment is also sampled at ``times + shift`` for shifts in [-align_s, align_s] (0.01 s
     apart), and the error of a simulation is its smallest over the shifts. Only the densely recorded
     experiment is shifted, so this costs no extra simulation.
+
+    With ``observe`` (the default) the simulation is compared as the experiment's camera would
+    have seen it (:func:`eelsim.camera.observed_positions`: the same frames, pixels and median
+    filter as the recording), not by its true centre of mass, so that the camera's quantisation and
+    filter lag are not blamed on the coefficients.
     """
     t0, t1 = exp.span_s
     times = sample_times(t0, t1, n_samples, dt_s)
@@ -107,6 +152,11 @@ def prepare(
         exp_positions_m=exp.position_at(times),
         shifts_s=shifts,
         shifted_positions_m=np.stack([exp.position_at(times + d) for d in shifts]),
+        state_steps=np.union1d(
+            np.round(times / dt_s).astype(np.int64),
+            observation_steps(times, camera, dt_s) if observe else np.zeros(0, dtype=np.int64),
+        ),
+        observe=observe,
     )
 
 
@@ -153,25 +203,20 @@ class Simulated:
         return out
 
 
-def _reference_job(args: tuple) -> tuple[np.ndarray, np.ndarray, int, float, float, float]:
+def _reference_job(args: tuple) -> tuple[np.ndarray, int, float, float, float]:
     robot, prepared, coeffs = args
     run = simulate_closed_loop(
         robot, prepared.scenario, prepared.options, seed=0, coefficients=coeffs
     )
-    n = robot.n_links
-    dt = prepared.options.timing.dt_s
-    idx = np.round(prepared.times_s / dt).astype(int)
-    pos = np.full((idx.size, 2), np.nan)
-    heading = np.full(idx.size, np.nan)
-    ok = idx < len(run.t_s)
-    pos[ok] = run.states[idx[ok], n : n + 2]
-    heading[ok] = run.states[idx[ok], :n].mean(axis=1)
+    states = np.full((prepared.state_steps.size, run.states.shape[1]), np.nan)
+    ok = prepared.state_steps < len(run.t_s)
+    states[ok] = run.states[prepared.state_steps[ok]]
     nan = float("nan")
     arrival = nan if run.arrival_time_s is None else float(run.arrival_time_s)
     failed = (
         nan if run.failure_time_s is None or int(run.failure) == 0 else float(run.failure_time_s)
     )
-    return pos, heading, int(run.failure), float(run.distance_left_m), arrival, failed
+    return states, int(run.failure), float(run.distance_left_m), arrival, failed
 
 
 class Evaluator:
@@ -188,6 +233,9 @@ class Evaluator:
         Velocity weight w.
     align_s : float
         Half-width of the clock-offset search per experiment (0: the paper's protocol).
+    observe : bool
+        Compare the simulation through the experiment's camera model (default) or by its true
+        centre of mass.
     backend : {"auto", "batch", "reference"}
     workers : int
         Processes for the reference backend.
@@ -202,6 +250,7 @@ class Evaluator:
         n_samples: int = N_SAMPLES_FIT,
         weight: float = VELOCITY_WEIGHT,
         align_s: float = 0.0,
+        observe: bool = True,
         backend: str = "auto",
         workers: int = 2,
         map_function: Callable | None = None,
@@ -209,7 +258,9 @@ class Evaluator:
         if not experiments:
             raise ValueError("no experiments to evaluate on")
         self.robot = robot
-        self.prepared = [prepare(e, n_samples, align_s=align_s) for e in experiments]
+        self.prepared = [
+            prepare(e, n_samples, align_s=align_s, observe=observe) for e in experiments
+        ]
         self.weight = weight
         self.backend = _choose_backend(backend)
         self.workers = workers
@@ -246,12 +297,15 @@ class Evaluator:
             results = [_reference_job(j) for j in jobs]
         c, e = coeffs.shape[0], len(self.prepared)
         n = self.prepared[0].times_s.size
-        pos = np.array([r[0] for r in results]).reshape(c, e, n, 2)
-        heading = np.array([r[1] for r in results]).reshape(c, e, n)
-        fail = np.array([r[2] for r in results], dtype=int).reshape(c, e)
-        left = np.array([r[3] for r in results]).reshape(c, e)
-        arrival = np.array([r[4] for r in results]).reshape(c, e)
-        failed = np.array([r[5] for r in results]).reshape(c, e)
+        pos = np.empty((c, e, n, 2))
+        heading = np.empty((c, e, n))
+        for j, p in enumerate(self.prepared):
+            states = np.array([results[i * e + j][0] for i in range(c)])
+            pos[:, j], heading[:, j] = p.positions(states, self.robot.n_links)
+        fail = np.array([r[1] for r in results], dtype=int).reshape(c, e)
+        left = np.array([r[2] for r in results]).reshape(c, e)
+        arrival = np.array([r[3] for r in results]).reshape(c, e)
+        failed = np.array([r[4] for r in results]).reshape(c, e)
         return Simulated(pos, heading, fail, left, arrival, failed)
 
     def errors(self, coefficients: np.ndarray) -> np.ndarray:
