@@ -62,10 +62,12 @@ def _tank(work: Path, name: str, settings: TankSettings, seed: int) -> Dataset:
 def _fit_and_validate(ds: Dataset, settings: FitSettings) -> dict:
     out: dict = {"fits": {}, "seconds": 0.0, "simulations": 0}
     t0 = time.perf_counter()
+    out["truth_fitness"] = {}
     for motion in ("straight", "turning"):
         res, ev = fit_motion(ds, motion, settings)
         out["fits"][motion] = res
         out["simulations"] += ev.simulations
+        out["truth_fitness"][motion] = float(ev.fitness(TABLE3[motion].as_array()[None])[0])
     fitted = {m: r.coefficients for m, r in out["fits"].items()}
     tests = [e for exps in ds.test.values() for e in exps]
     runs = validate(ds.robot, fitted, tests, backend=settings.backend)
