@@ -38,9 +38,10 @@ void Gait::set_targets(const GaitTargets& t) {
   step_q_per_us_ = static_cast<uint64_t>(static_cast<double>(t.omega_rad_s) * kStepPerRadS);
 }
 
-bool Gait::restart_phase() {
+bool Gait::restart_phase(uint32_t now_us) {
   if (amplitude_rad_ != 0.0f) return false;
   phase_q_ = 0;
+  last_us_ = now_us;
   return true;
 }
 

@@ -34,8 +34,10 @@ class Gait {
   // Change targets; call update(now_us) first so the old frequency applies up to now.
   void set_targets(const GaitTargets& t);
   void set_rates(const GaitRates& r) { rates_ = r; }
-  // Phase back to 0 (the twin's t = 0). Only when the amplitude is 0, so nothing jumps.
-  bool restart_phase();
+  // Phase back to 0 with `now_us` as its origin (the twin's t = 0), so that the next update
+  // advances it by the time since now, not since the previous update. Only when the amplitude is
+  // 0, so nothing jumps; returns whether it restarted.
+  bool restart_phase(uint32_t now_us);
 
   // References after the last update, clamped to +-cfg::kJointLimitRad (a clamped joint's rate is 0).
   const float* alpha_rad() const { return alpha_rad_; }

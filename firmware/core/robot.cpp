@@ -115,7 +115,7 @@ void Robot::handle(const Frame& f, uint32_t now_us) {
     case MsgId::Start:
       // From straight, restart the phase so that t = 0 is now, as in the twin. From a
       // half-finished stop the phase runs on, so nothing jumps.
-      if (state_ != State::Running) gait_.restart_phase();
+      if (state_ != State::Running) gait_.restart_phase(now_us);
       state_ = State::Running;
       break;
     case MsgId::Stop:

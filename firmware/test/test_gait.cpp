@@ -129,9 +129,20 @@ TEST(references_are_clamped_to_the_joint_limit_with_zero_rate) {
 TEST(phase_restarts_only_when_the_body_is_straight) {
   Gait g = started_gait(0, GaitTargets{0.5f, 3.0f, 1.0f, 0.0f});
   g.update(500000);
-  CHECK(!g.restart_phase());
+  CHECK(!g.restart_phase(500000));
   g.set_targets(GaitTargets{0.0f, 3.0f, 1.0f, 0.0f});
   g.update(510000);
-  CHECK(g.restart_phase());
+  CHECK(g.restart_phase(510000));
   CHECK_EQ(g.phase_rad(), 0.0f);
+}
+
+TEST(restarted_phase_counts_from_the_restart_not_from_the_last_update) {
+  // Start is handled between two control updates (at 505 ms, after the one at 500 ms): the gait's
+  // t = 0 is 505 ms, so at the next update (510 ms) the phase is omega * 5 ms, not omega * 10 ms.
+  Gait g = started_gait(0, GaitTargets{0.0f, 3.0f, 1.0f, 0.0f});
+  g.update(500000);
+  CHECK(g.restart_phase(505000));
+  CHECK_EQ(g.phase_rad(), 0.0f);
+  g.update(510000);
+  CHECK_NEAR(g.phase_rad(), 3.0 * 0.005, 1e-6);
 }

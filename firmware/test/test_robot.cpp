@@ -285,3 +285,14 @@ TEST(pd_gains_from_a_message_drive_the_joint_torques) {
   CHECK_NEAR(u[1], 0.2, 1e-6);
   CHECK_EQ(u[3], -0.3f);  // clamped
 }
+
+TEST(the_gait_starts_when_start_is_handled_not_at_the_control_update_before) {
+  Bench b;  // control updates every 10 ms from 0
+  eelproto::SetGait g = eelproto::default_set_gait();
+  g.omega_rad_s = 3.0f;
+  b.send(g);
+  b.run(25000);  // Start arrives 5 ms after the update at 20 ms
+  b.send(eelproto::Start{});
+  b.run(5000);  // the next update, at 30 ms
+  CHECK_NEAR(b.robot.gait().phase_rad(), 3.0 * 0.005, 1e-6);
+}

@@ -7,17 +7,20 @@ image), instead of eelsim's PD law. Everything the host does goes to the firmwar
 bytes through a radio model (:mod:`eelhost.radio`), and everything the firmware sends comes back
 the same way.
 
-One physics step of ``dt_us`` (10,000 us) at ``t_us = k * dt_us``, in this order:
+The loop itself (camera, waypoints, control updates and their delay, failure checks, recording,
+stopping rules) is the twin's; :class:`LinkedJoints` is the :class:`eelsim.closed_loop.
+JointController` that takes the joints' place. One physics step of ``dt_us`` (10,000 us) at
+``t_us = k * dt_us``, in this order:
 
 1. the host reads the bytes the downlink has delivered by ``t_us`` (Acks, Telemetry) and resends
    any configuration command not acknowledged after ``resend_after_us``; it sends Start again if
    the robot reports FAILSAFE while the host wants it running (``restart_on_failsafe``);
-2. at the twin's control updates the host computes the heading offset from the filtered camera pose
-   exactly as the twin does (:func:`eelsim.control.heading_offset`) and, after the loop's extra
-   delay, sends it in a SetOffset frame (which also keeps the firmware's link watchdog fed);
+2. when the loop hands over a heading offset (computed at the twin's control updates from the
+   filtered camera pose, exactly as in the twin, and due now that the extra delay has passed), the
+   host sends it in a SetOffset frame (which also keeps the firmware's link watchdog fed);
 3. the firmware is fed the bytes the uplink has delivered by ``t_us``, ticks once at ``t_us`` with
    the plant's joint angles and rates (float32), and returns its references and PD torques;
-4. the state is recorded and checked for failures as in the twin;
+4. the loop records the state and checks it for failures as in the twin;
 5. RK4 advances the plant by one step with those torques held constant (a zero-order hold, as a
    firmware that runs its PD once per control update applies them); camera frames falling in the
    step observe the interpolated pose, as in the twin.
@@ -34,7 +37,7 @@ There are no threads, sleeps or wall clocks: the same seed gives the same run, b
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Protocol
 
 import numpy as np
@@ -43,17 +46,15 @@ from numpy.typing import NDArray
 from eelhost import protocol
 from eelhost.native_firmware import N_JOINTS, NativeFirmware
 from eelhost.radio import ChannelCounters, RadioChannel, RadioModel
-from eelsim.camera import MedianFilter, hermite, quantise_position
 from eelsim.closed_loop import (
+    JointDrive,
     LoopOptions,
     RunResult,
-    check_failures,
-    distance_left,
+    plant_rhs,
     servo_limited,
+    simulate_closed_loop,
 )
-from eelsim.control import Gait, gait_reference, heading_offset, joint_pd_torque
-from eelsim.dynamics import state_derivative, straight_state
-from eelsim.flags import Failure
+from eelsim.control import Gait, gait_reference, joint_pd_torque
 from eelsim.integrate import rk4_step
 from eelsim.model import SwimmerModel
 from eelsim.robot import Robot
@@ -66,6 +67,7 @@ __all__ = [
     "HeldTwinDriver",
     "HostLink",
     "JointDriver",
+    "LinkedJoints",
     "NativeDriver",
     "run_firmware_in_loop",
     "plant_step",
@@ -430,12 +432,7 @@ def plant_step(
         When the mass matrix is singular or the new state is not finite (the twin's
         ILL_CONDITIONED flag).
     """
-    u = np.asarray(torque_nm, dtype=float)
-    vc = np.asarray(current_m_s, dtype=float)
-
-    def rhs(_t: float, state: FloatArray) -> FloatArray:
-        return state_derivative(model, state, u, vc)
-
+    rhs = plant_rhs(model, np.asarray(torque_nm, dtype=float), np.asarray(current_m_s, dtype=float))
     with np.errstate(all="ignore"):
         try:
             x_next = rk4_step(rhs, t_s, x, dt_s)
@@ -451,6 +448,114 @@ def _dt_us(options: LoopOptions) -> int:
     if dt_us <= 0 or abs(dt_us * 1e-6 - options.timing.dt_s) > 1e-12:
         raise ValueError(f"physics step {options.timing.dt_s} s is not a whole number of us")
     return dt_us
+
+
+class LinkedJoints:
+    """A robot-side driver behind the host and a radio link, as the twin loop's joints.
+
+    The :class:`eelsim.closed_loop.JointController` of :func:`run_lockstep`: each physics step the
+    host services the link and sends its frames (configuration at step 0, then every offset the
+    loop hands over as a SetOffset), the driver ticks once with the plant's joint angles, and its
+    torques are held over the step. It keeps what the run needs besides the twin's records: the
+    torques, the robot's state, the commands the robot executed or refused.
+
+    Parameters
+    ----------
+    robot : Robot
+        Its k_p, k_d go out with SetGains; its servo figures limit the torques when asked.
+    scenario : Scenario
+        Its gait goes out with SetGait (slew rates 0).
+    driver : JointDriver
+        The robot's side.
+    host : HostLink
+        The host's end of the link (its uplink carries the frames to the driver).
+    downlink : RadioChannel
+        Robot -> host.
+    dt_us : int
+        Physics step, us (step k starts at ``k * dt_us``).
+    options : CosimOptions
+        Host options and the loop's servo-limit switch.
+    """
+
+    def __init__(
+        self,
+        robot: Robot,
+        scenario: Scenario,
+        driver: JointDriver,
+        host: HostLink,
+        downlink: RadioChannel,
+        dt_us: int,
+        options: CosimOptions,
+    ) -> None:
+        self.driver = driver
+        self.host = host
+        self.downlink = downlink
+        self.dt_us = dt_us
+        self._robot = robot
+        self._gait = scenario.gait
+        self._restart_on_failsafe = options.restart_on_failsafe
+        self._servo_limits = options.loop.servo_limits
+        self.torque_nm: list[FloatArray] = []
+        self.firmware_state: list[int] = []
+        self.executed: list[ExecutedCommand] = []
+        self.refused: list[tuple[int, protocol.Refuse]] = []
+        self._raw_reader = protocol.FrameReader()  # the robot's UART before the radio
+        self._last_by_seq: dict[int, protocol.Message] = {}
+        self._n_sent = 0
+
+    def _send_configuration(self) -> None:
+        joints = self._robot.joints
+        torque_limit = joints.servo_max_torque_nm if self._servo_limits else NO_TORQUE_LIMIT_NM
+        gait = self._gait
+        self.host.send(0, protocol.Hello())
+        self.host.send(
+            0, protocol.SetGains(joints.kp_nm_per_rad, joints.kd_nms_per_rad, torque_limit)
+        )
+        self.host.send(
+            0, protocol.SetGait(gait.amplitude_rad, gait.omega_rad_s, gait.beta_rad, 0, 0, 0)
+        )
+
+    def on_step(
+        self, step: int, t_s: float, state: FloatArray, offset_command: float | None
+    ) -> JointDrive:
+        """See :meth:`eelsim.closed_loop.JointController.on_step`."""
+        t_us = step * self.dt_us
+        host = self.host
+        host.service(t_us, self.downlink.deliver_bytes(t_us), self._restart_on_failsafe)
+        if step == 0:
+            self._send_configuration()
+        if offset_command is not None:
+            # SetOffset takes [-1, 1] rad; the twin's k_theta * pi stays inside for k < 0.32.
+            host.send(t_us, protocol.SetOffset(float(np.clip(offset_command, -1.0, 1.0))))
+        if step == 0:
+            host.send(0, protocol.Start())  # after the first offset, so it starts with it
+        for _, seq, msg in host.sent[self._n_sent :]:
+            self._last_by_seq[seq] = msg
+        self._n_sent = len(host.sent)
+
+        n = self._robot.n_links
+        phi = np.diff(state[:n])
+        phi_dot = np.diff(state[n + 2 : 2 * n + 2])
+        torque, alpha, tx = self.driver.step(t_us, self.dt_us, host.uplink, phi, phi_dot)
+        for t_tx, data in tx:
+            self.downlink.send(t_tx, data)
+            for _, msg in self._raw_reader.feed(data):
+                if isinstance(msg, protocol.Ack):
+                    sent = self._last_by_seq.get(msg.seq)
+                    self.executed.append(ExecutedCommand(t_tx, msg.seq, msg.msg_id, sent))
+                elif isinstance(msg, protocol.Refuse):
+                    self.refused.append((t_tx, msg))
+        robot_state, offset = self.driver.observe()
+        self.torque_nm.append(torque)
+        self.firmware_state.append(robot_state)
+
+        held = np.asarray(torque, dtype=float)
+        if self._servo_limits:
+            joints = self._robot.joints
+            held = servo_limited(
+                held, phi_dot, joints.servo_max_torque_nm, joints.servo_max_speed_rad_s
+            )
+        return JointDrive(held, alpha, offset)
 
 
 def run_lockstep(
@@ -486,183 +591,27 @@ def run_lockstep(
     """
     cpu0 = time.process_time()
     opts = options or CosimOptions()
-    lopts = opts.loop
-    timing, cam = lopts.timing, lopts.camera
-    dt_us = _dt_us(lopts)
-    dt = dt_us * 1e-6
-    model = SwimmerModel.from_robot(robot)
-    n = model.n_links
-    if n - 1 != N_JOINTS:
-        raise ValueError(f"the firmware drives {N_JOINTS} joints; this robot has {n - 1}")
-    rng = np.random.default_rng(seed)  # the twin's stream: jitter, then heading noise
+    dt_us = _dt_us(opts.loop)
+    if robot.n_links - 1 != N_JOINTS:
+        raise ValueError(
+            f"the firmware drives {N_JOINTS} joints; this robot has {robot.n_links - 1}"
+        )
     link = radio or RadioModel()
     up_rng, down_rng = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2))
     uplink, downlink = link.channel(up_rng), link.channel(down_rng)
     host = HostLink(uplink, opts.resend_after_us)
     host.silent_after_us = opts.host_silent_after_us
+    joints = LinkedJoints(robot, scenario, driver, host, downlink, dt_us, opts)
 
-    total = int(np.floor(scenario.duration_s / dt + 1e-9))
-    gait = scenario.gait
-    limit = robot.joints.limit_rad
-    vc = np.asarray(scenario.current_m_s)
-    waypoints = np.asarray(scenario.waypoints_m, dtype=float)
-    radius = scenario.acceptance_radius_m
-    updates = set(timing.update_steps(total, rng).tolist())
-    frame_times = cam.frame_times(total * dt)
-    filt = MedianFilter(cam.median_window)
+    twin = simulate_closed_loop(robot, scenario, opts.loop, seed, joints=joints)
 
-    x = straight_state(model, np.radians(scenario.start_heading_deg), scenario.start_position_m)
-    pending: list[tuple[int, float]] = []
-    target = 0
-    arrival: float | None = None
-    filtered = np.array([*x[n : n + 2], np.mean(x[:n])])
-    failure, fail_t, reason = Failure.NONE, None, ""
-    rec_t, rec_x, rec_g, rec_a, rec_w, rec_u, rec_s = [], [], [], [], [], [], []
-    cam_t: list[float] = []
-    cam_pose: list[FloatArray] = []
-    next_frame = 0
-    executed: list[ExecutedCommand] = []
-    refused: list[tuple[int, protocol.Refuse]] = []
-    raw_reader = protocol.FrameReader()  # the robot's UART before the radio
-    last_by_seq: dict[int, protocol.Message] = {}
-    n_sent = 0
-
-    def observe(t_frame: float, pose_true: FloatArray) -> None:
-        nonlocal filtered, target, arrival
-        pos = quantise_position(pose_true[:2], cam.pixel_m)
-        head = pose_true[2] + (
-            rng.normal(0.0, cam.heading_noise_rad) if cam.heading_noise_rad else 0.0
-        )
-        filtered = filt.push(pos[0], pos[1], head)
-        cam_t.append(t_frame)
-        cam_pose.append(filtered.copy())
-        if target < len(waypoints) and np.linalg.norm(filtered[:2] - waypoints[target]) < radius:
-            target += 1
-            if target == len(waypoints) and arrival is None:
-                arrival = t_frame
-
-    def pose_and_rate(state: FloatArray) -> tuple[FloatArray, FloatArray]:
-        return (
-            np.array([state[n], state[n + 1], np.mean(state[:n])]),
-            np.array([state[-2], state[-1], np.mean(state[n + 2 : 2 * n + 2])]),
-        )
-
-    if frame_times.size and frame_times[0] <= 0.0:
-        observe(0.0, pose_and_rate(x)[0])
-        next_frame = 1
-
-    torque_limit = (
-        robot.joints.servo_max_torque_nm if lopts.servo_limits else NO_TORQUE_LIMIT_NM
-    )
-    step = 0
-    with np.errstate(all="ignore"):
-        while True:
-            t_us = step * dt_us
-            t = step * dt
-            host.service(t_us, downlink.deliver_bytes(t_us), opts.restart_on_failsafe)
-            if step == 0:
-                host.send(0, protocol.Hello())
-                host.send(
-                    0,
-                    protocol.SetGains(
-                        robot.joints.kp_nm_per_rad, robot.joints.kd_nms_per_rad, torque_limit
-                    ),
-                )
-                g = protocol.SetGait(gait.amplitude_rad, gait.omega_rad_s, gait.beta_rad, 0, 0, 0)
-                host.send(0, g)
-            if step in updates:
-                wp = waypoints[min(target, len(waypoints) - 1)]
-                gamma = heading_offset(filtered[:2], filtered[2], wp, gait.k_theta)
-                pending.append((step + timing.delay_steps, gamma))
-            while pending and pending[0][0] <= step:
-                # SetOffset takes [-1, 1] rad; the twin's k_theta * pi stays inside for k < 0.32.
-                gamma = float(np.clip(pending.pop(0)[1], -1.0, 1.0))
-                host.send(t_us, protocol.SetOffset(gamma))
-            if step == 0:
-                host.send(0, protocol.Start())
-            for _, seq, msg in host.sent[n_sent:]:
-                last_by_seq[seq] = msg
-            n_sent = len(host.sent)
-            phi = np.diff(x[:n])
-            phi_dot = np.diff(x[n + 2 : 2 * n + 2])
-            torque, alpha_now, tx = driver.step(t_us, dt_us, uplink, phi, phi_dot)
-            for t_tx, data in tx:
-                downlink.send(t_tx, data)
-                for _, msg in raw_reader.feed(data):
-                    if isinstance(msg, protocol.Ack):
-                        executed.append(
-                            ExecutedCommand(t_tx, msg.seq, msg.msg_id, last_by_seq.get(msg.seq))
-                        )
-                    elif isinstance(msg, protocol.Refuse):
-                        refused.append((t_tx, msg))
-
-            rec_t.append(t)
-            rec_x.append(x.copy())
-            fw_state, fw_offset = driver.observe()
-            rec_g.append(fw_offset)
-            rec_a.append(alpha_now)
-            rec_w.append(target)
-            rec_u.append(torque)
-            rec_s.append(fw_state)
-
-            failure, reason = check_failures(model, x, limit, step in updates)
-            if failure != Failure.NONE:
-                fail_t = t
-                break
-            if (arrival is not None and lopts.stop_at_goal) or step >= total:
-                break
-
-            u = np.asarray(torque, dtype=float)
-            if lopts.servo_limits:
-                u = servo_limited(
-                    u, phi_dot, robot.joints.servo_max_torque_nm, robot.joints.servo_max_speed_rad_s
-                )
-
-            def rhs(_t: float, state: FloatArray, u: FloatArray = u) -> FloatArray:
-                return state_derivative(model, state, u, vc)
-
-            try:
-                x_next = rk4_step(rhs, t, x, dt)
-            except np.linalg.LinAlgError:
-                failure, fail_t = Failure.ILL_CONDITIONED, t
-                reason = "mass matrix is not positive definite"
-                break
-            if not np.all(np.isfinite(x_next)):
-                failure, fail_t = Failure.ILL_CONDITIONED, t + dt
-                reason = "state is not finite (the integration blew up)"
-                break
-            y0, dy0 = pose_and_rate(x)
-            y1, dy1 = pose_and_rate(x_next)
-            while next_frame < frame_times.size and frame_times[next_frame] <= t + dt + 1e-12:
-                s = (frame_times[next_frame] - t) / dt
-                observe(float(frame_times[next_frame]), hermite(y0, dy0, y1, dy1, dt, s))
-                next_frame += 1
-            x = x_next
-            step += 1
-
-    if failure == Failure.NONE and arrival is None:
-        failure, fail_t = Failure.TOO_SLOW, rec_t[-1]
-        reason = (
-            f"reached {target} of {len(waypoints)} waypoints by T_max = {scenario.duration_s:g} s"
-        )
     return FirmwareRunResult(
-        t_s=np.array(rec_t),
-        states=np.array(rec_x),
-        offset_rad=np.array(rec_g),
-        alpha_rad=np.array(rec_a),
-        target_index=np.array(rec_w, dtype=np.int64),
-        camera_t_s=np.array(cam_t),
-        camera_pose=np.array(cam_pose).reshape(-1, 3),
-        failure=failure,
-        failure_time_s=fail_t,
-        reason=reason,
-        arrival_time_s=arrival,
-        distance_left_m=distance_left(x[n : n + 2], waypoints, target),
-        torque_nm=np.array(rec_u),
-        firmware_state=np.array(rec_s, dtype=np.int64),
+        **{f.name: getattr(twin, f.name) for f in fields(RunResult)},
+        torque_nm=np.array(joints.torque_nm),
+        firmware_state=np.array(joints.firmware_state, dtype=np.int64),
         sent=list(host.sent),
-        executed=executed,
-        refused=refused,
+        executed=joints.executed,
+        refused=joints.refused,
         telemetry=list(host.telemetry),
         firmware_counters=driver.counters(),
         host_bad_frames=host.bad_frames,

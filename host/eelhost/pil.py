@@ -381,9 +381,14 @@ def expected_pulse_widths_us(
     Each pulse carries the references of the last control update that ended before it rose
     (the Timer1 driver latches a width when its pulse starts). An update at time ``t_k`` (rise of
     D7) computes ``alpha_j = A_j sin(omega (t_k - t_0) + (j-1) beta) + gamma`` (0 before Start),
-    where ``t_0`` is the update before the Start frame was handled (the firmware restarts the
-    phase there) and ``gamma`` is the last SetOffset handled before the update (slew rates 0).
-    Which frame an update saw is read from the times the frames' last bytes entered the UART.
+    where ``t_0`` is the time the firmware handled Start (it restarts the phase there) and
+    ``gamma`` is the last SetOffset handled before the update (slew rates 0). Which frame an
+    update saw is read from the times the frames' last bytes were queued for the UART.
+
+    The run does not record when the AVR handled Start: after the frame has crossed the UART and
+    any control update in progress has ended. ``t_0`` is taken as the first update at or after the
+    frame was queued, which errs by that delay (about 1.5 ms in the ideal-link test, 2 us of pulse
+    width at most).
 
     Parameters
     ----------
@@ -422,12 +427,12 @@ def expected_pulse_widths_us(
             offsets[rise_u > t] = np.float32(msg.offset_rad)
         elif isinstance(msg, protocol.Start) and k_start is None:
             ambiguous |= near
-            k_start = int(np.searchsorted(rise_u, t)) - 1  # last update before the frame
-            started[k_start + 1 :] = True
+            k_start = int(np.searchsorted(rise_u, t))  # first update at or after the frame
+            started[k_start:] = True
     amp = amplitude_rad * (5.0 - np.arange(5)) / 7.0
     expected_update = np.full((len(upd), 5), 1500.0)
-    if k_start is not None:
-        dt_s = (rise_u - rise_u[max(k_start, 0)]) * 1e-6
+    if k_start is not None and k_start < len(upd):
+        dt_s = (rise_u - rise_u[k_start]) * 1e-6
         phase = omega_rad_s * dt_s[:, None] + beta_rad * np.arange(5)[None, :]
         alpha = np.clip(amp[None, :] * np.sin(phase) + offsets[:, None], -limit_rad, limit_rad)
         widths = np.clip(np.floor(1500.0 + 636.6 * alpha + 0.5), 700, 2300)

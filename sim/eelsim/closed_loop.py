@@ -12,6 +12,13 @@ Per physics step (RK4, dt = 0.01 s by default):
   offset from the latest filtered pose; it reaches the joints after the extra delay and is held;
 - the failure conditions are checked; a failed run stops and returns its flag, time and reason.
 
+The joints are the one part that can be swapped: a :class:`JointController` turns the offset and
+the plant's state into the torques of each step. The default, :class:`TwinJoints`, is the PD law
+above; ``eelhost.cosim`` plugs in the robot's firmware (native or emulated AVR) behind a radio
+link, which is ticked once per step and whose torques are held over it. Everything else (camera,
+waypoints, control updates, failures, recording) is this one loop, so a firmware run and a twin
+run differ only where the robot differs.
+
 This is the readable reference implementation; ``eelsim.batch`` runs the same physics fast.
 """
 
@@ -19,12 +26,13 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
 from eelsim.camera import CameraModel, MedianFilter, hermite, quantise_position
-from eelsim.control import gait_reference, heading_offset, joint_pd_torque
+from eelsim.control import Gait, gait_reference, heading_offset, joint_pd_torque
 from eelsim.dynamics import link_positions, mass_matrix, state_derivative, straight_state
 from eelsim.flags import DIVERGENCE_RATE, ILL_CONDITION_THRESHOLD, Failure, penalty, self_collision
 from eelsim.integrate import rk4_step
@@ -146,6 +154,115 @@ def distance_left(p: FloatArray, waypoints: FloatArray, target: int) -> float:
     return d
 
 
+TorqueLaw = Callable[[float, FloatArray], FloatArray]
+"""Joint torques as a function of time and state, ``torque_nm(t_s, state)``."""
+
+
+@dataclass(frozen=True)
+class JointDrive:
+    """What drives the joints over one physics step, and what the run records of it.
+
+    Attributes
+    ----------
+    torque_nm : ndarray of shape (N-1,), or callable
+        Either torques held over the whole step (a zero-order hold: a controller ticked once per
+        step), or a :data:`TorqueLaw` evaluated at every RK4 stage (a joint loop much faster than
+        the step, as the twin models the servos).
+    alpha_rad : ndarray, shape (N-1,)
+        The joint references in force at the start of the step (recorded).
+    offset_rad : float
+        The offset gamma acting on the joints (recorded).
+    """
+
+    torque_nm: FloatArray | TorqueLaw
+    alpha_rad: FloatArray
+    offset_rad: float
+
+
+class JointController(Protocol):
+    """The robot's joint side: turns the control stack's offset and the plant into torques.
+
+    :func:`simulate_closed_loop` calls :meth:`on_step` once at the start of every physics step,
+    before the state is recorded and checked, and integrates the step with the torques it returns.
+    """
+
+    def on_step(
+        self, step: int, t_s: float, state: FloatArray, offset_command: float | None
+    ) -> JointDrive:
+        """Take the physics step ``step`` (starting at ``t_s = step dt``).
+
+        Parameters
+        ----------
+        step : int
+            Index of the step (0 at the start of the run; one call per step, in order).
+        t_s : float
+            Its start time.
+        state : ndarray, shape (2 N + 4,)
+            The plant's state at ``t_s``.
+        offset_command : float or None
+            The offset the line-of-sight controller computed, arriving now that the loop's extra
+            delay has passed; ``None`` when none arrives at this step (the last one holds).
+
+        Returns
+        -------
+        JointDrive
+        """
+        ...
+
+
+class TwinJoints:
+    """The twin's joints: the gait and the PD law, evaluated inside every RK4 stage.
+
+    The offset is held from one command to the next (a zero-order hold). The default
+    :class:`JointController` of :func:`simulate_closed_loop`.
+
+    Parameters
+    ----------
+    robot : Robot
+        Gains, reference clamp and servo figures.
+    gait : Gait
+        The gait the joints follow (its phase starts at t = 0).
+    n_links : int
+        Number of links N.
+    servo_limits : bool
+        Clip the torques to the servos' torque-speed line.
+    """
+
+    def __init__(self, robot: Robot, gait: Gait, n_links: int, servo_limits: bool = False) -> None:
+        self._gait = gait
+        self._n = n_links
+        self._kp, self._kd = robot.joints.kp_nm_per_rad, robot.joints.kd_nms_per_rad
+        self._clamp = robot.joints.command_limit_rad
+        self._servo = (
+            (robot.joints.servo_max_torque_nm, robot.joints.servo_max_speed_rad_s)
+            if servo_limits
+            else None
+        )
+        self.offset_rad = 0.0
+
+    def on_step(
+        self, step: int, t_s: float, state: FloatArray, offset_command: float | None
+    ) -> JointDrive:
+        """See :meth:`JointController.on_step`; the state is only read inside the RK4 stages."""
+        if offset_command is not None:
+            self.offset_rad = offset_command
+        alpha = gait_reference(t_s, self._gait, self.offset_rad, self._n)[0]
+        return JointDrive(
+            self.torque_nm, np.clip(alpha, -self._clamp, self._clamp), self.offset_rad
+        )
+
+    def torque_nm(self, t_s: float, state: FloatArray) -> FloatArray:
+        """Joint torques at ``t_s`` in ``state`` (a :data:`TorqueLaw`)."""
+        n = self._n
+        alpha, alpha_dot = gait_reference(t_s, self._gait, self.offset_rad, n)
+        alpha = np.clip(alpha, -self._clamp, self._clamp)
+        w = state[n + 2 : 2 * n + 2]
+        u = joint_pd_torque(alpha, alpha_dot, np.diff(state[:n]), np.diff(w), self._kp, self._kd)
+        if self._servo is not None:
+            u = servo_limited(u, np.diff(w), *self._servo)
+        return u
+
+
 def simulate_closed_loop(
     robot: Robot,
     scenario: Scenario,
@@ -153,6 +270,7 @@ def simulate_closed_loop(
     seed: int = 0,
     coefficients: HydroCoefficients | None = None,
     progress: Callable[[int, int], None] | None = None,
+    joints: JointController | None = None,
 ) -> RunResult:
     """Run the twin under its control stack on a scenario.
 
@@ -170,6 +288,10 @@ def simulate_closed_loop(
         Overrides the robot's hydrodynamic coefficients.
     progress : callable, optional
         Called as ``progress(step, total_steps)`` every 100 steps.
+    joints : JointController, optional
+        Where the joint torques come from; by default :class:`TwinJoints` (the scenario's gait
+        through the robot's PD law, servo limits as ``options`` says). Another controller
+        applies any servo limits itself.
 
     Returns
     -------
@@ -184,19 +306,18 @@ def simulate_closed_loop(
     dt = timing.dt_s
     total = int(np.floor(scenario.duration_s / dt + 1e-9))
     gait = scenario.gait
-    kp, kd = robot.joints.kp_nm_per_rad, robot.joints.kd_nms_per_rad
     limit = robot.joints.limit_rad
-    clamp = robot.joints.command_limit_rad
     vc = np.asarray(scenario.current_m_s)
     waypoints = np.asarray(scenario.waypoints_m, dtype=float)
     radius = scenario.acceptance_radius_m
+    if joints is None:
+        joints = TwinJoints(robot, gait, n, opts.servo_limits)
 
     updates = set(timing.update_steps(total, rng).tolist())
     frame_times = cam.frame_times(total * dt)
     filt = MedianFilter(cam.median_window)
 
     x = straight_state(model, np.radians(scenario.start_heading_deg), scenario.start_position_m)
-    gamma = 0.0
     pending: list[tuple[int, float]] = []  # (step at which it acts, offset)
     target = 0
     arrival: float | None = None
@@ -228,20 +349,6 @@ def simulate_closed_loop(
             np.array([state[-2], state[-1], np.mean(state[n + 2 : 2 * n + 2])]),
         )
 
-    def torques(t: float, state: FloatArray) -> FloatArray:
-        alpha, alpha_dot = gait_reference(t, gait, gamma, n)
-        alpha = np.clip(alpha, -clamp, clamp)
-        w = state[n + 2 : 2 * n + 2]
-        u = joint_pd_torque(alpha, alpha_dot, np.diff(state[:n]), np.diff(w), kp, kd)
-        if opts.servo_limits:
-            u = servo_limited(
-                u, np.diff(w), robot.joints.servo_max_torque_nm, robot.joints.servo_max_speed_rad_s
-            )
-        return u
-
-    def rhs(t: float, state: FloatArray) -> FloatArray:
-        return state_derivative(model, state, torques(t, state), vc)
-
     # The frame at t = 0 sees the initial pose.
     if frame_times.size and frame_times[0] <= 0.0:
         observe(0.0, pose_and_rate(x)[0])
@@ -259,14 +366,18 @@ def simulate_closed_loop(
                         heading_offset(filtered[:2], filtered[2], wp, gait.k_theta),
                     )
                 )
+            # An offset reaches the joints the loop's extra delay after its update.
+            offset_command = None
             while pending and pending[0][0] <= step:
-                gamma = pending.pop(0)[1]
+                offset_command = pending.pop(0)[1]
+            # The joints' torques for this step: the twin's PD law by default; in
+            # eelhost.cosim the robot's firmware, ticked once, with its torques held.
+            drive = joints.on_step(step, t, x, offset_command)
 
-            alpha_now = np.clip(gait_reference(t, gait, gamma, n)[0], -clamp, clamp)
             rec_t.append(t)
             rec_x.append(x.copy())
-            rec_g.append(gamma)
-            rec_a.append(alpha_now)
+            rec_g.append(drive.offset_rad)
+            rec_a.append(drive.alpha_rad)
             rec_w.append(target)
 
             failure, reason = check_failures(model, x, limit, step in updates)
@@ -277,7 +388,7 @@ def simulate_closed_loop(
                 break
 
             try:
-                x_next = rk4_step(rhs, t, x, dt)
+                x_next = rk4_step(plant_rhs(model, drive.torque_nm, vc), t, x, dt)
             except np.linalg.LinAlgError:
                 failure, fail_t, reason = (
                     Failure.ILL_CONDITIONED,
@@ -320,6 +431,40 @@ def simulate_closed_loop(
         arrival_time_s=arrival,
         distance_left_m=distance_left(x[n : n + 2], waypoints, target),
     )
+
+
+def plant_rhs(
+    model: SwimmerModel, torque_nm: FloatArray | TorqueLaw, current_m_s: FloatArray
+) -> Callable[[float, FloatArray], FloatArray]:
+    """The plant's right-hand side ``f(t, state)`` for RK4, driven by the joints.
+
+    Parameters
+    ----------
+    model : SwimmerModel
+        The plant.
+    torque_nm : ndarray of shape (N-1,), or callable
+        Torques held over the step, or a :data:`TorqueLaw` evaluated at every call (see
+        :class:`JointDrive`).
+    current_m_s : ndarray, shape (2,)
+        Uniform current velocity.
+
+    Returns
+    -------
+    callable
+    """
+    if callable(torque_nm):
+        law = torque_nm
+
+        def rhs(t: float, state: FloatArray) -> FloatArray:
+            return state_derivative(model, state, law(t, state), current_m_s)
+
+    else:
+        held = np.asarray(torque_nm, dtype=float)
+
+        def rhs(t: float, state: FloatArray) -> FloatArray:
+            return state_derivative(model, state, held, current_m_s)
+
+    return rhs
 
 
 def check_failures(
