@@ -34,7 +34,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="cmaes (+ least-squares polish; default), ga (the paper's), lsq (polish only)",
     )
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--budget", type=int, default=600, help="CMA-ES candidates (default 600)")
+    p.add_argument("--budget", type=int, default=1500, help="CMA-ES candidates at most (default 1500)")
     p.add_argument("--pop-size", type=int, default=150, help="GA population (150)")
     p.add_argument("--generations", type=int, default=130, help="GA generations (130)")
     p.add_argument("--backend", choices=["auto", "batch", "reference"], default="auto")

@@ -115,7 +115,7 @@ def run(args: argparse.Namespace) -> int:
         f"Measured with `eelbot estimate-bench` on {platform.processor() or platform.machine()}, "
         f"{os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f} at the start. Truth: the "
         "paper's table 3 (straight row for straight experiments, turning row for turning ones). "
-        "Default method: CMA-ES (600 candidates) + least-squares polish, the paper's fitness "
+        "Default method: CMA-ES (at most 1500 candidates) + least-squares polish, the paper's fitness "
         "(minimax, n = 7, w = 5). E_x is the paper's mean of norms over n = 35 samples, on the "
         "recording's own clock and at the best clock offset within +-0.1 s.",
         "",

@@ -30,7 +30,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", default="out/report", help="report folder")
     p.add_argument("--method", choices=METHODS, default="cmaes")
     p.add_argument("--joint", action="store_true", help="also fit one joint set for the robot")
-    p.add_argument("--budget", type=int, default=600, help="CMA-ES candidates per fit")
+    p.add_argument("--budget", type=int, default=1500, help="CMA-ES candidates per fit at most")
     p.add_argument("--bootstrap", type=int, default=8, help="bootstrap refits per fit (0: none)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--backend", choices=["auto", "batch", "reference"], default="auto")

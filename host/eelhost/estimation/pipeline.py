@@ -56,7 +56,7 @@ class FitSettings:
 
     method: str = "cmaes"
     seed: int = 0
-    budget: int = 600
+    budget: int = 1500
     pop_size: int = 150
     generations: int = 130
     polish_iterations: int = 10
