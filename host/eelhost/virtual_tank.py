@@ -63,6 +63,8 @@ class TankSettings:
         Mismatch knobs (see the module docstring).
     stray_current_m_s : float
         Speed of the unmodelled current (0: none).
+    pixel_m : float
+        The camera's pixel size on the water (0: no rounding).
     """
 
     timestamp_jitter_s: float = 0.1
@@ -70,6 +72,7 @@ class TankSettings:
     head_tail: bool = False
     servo_limits: bool = False
     stray_current_m_s: float = 0.0
+    pixel_m: float = 0.0038
 
 
 def true_robot(robot: Robot, settings: TankSettings) -> Robot:
@@ -137,7 +140,7 @@ def record_experiment(
             }
         )
     timing = LoopTiming(control_period_s=0.3, jitter_s=settings.control_jitter_s)
-    camera = CameraModel()
+    camera = CameraModel(pixel_m=settings.pixel_m)
     options = LoopOptions(timing=timing, camera=camera, servo_limits=settings.servo_limits)
     run = simulate_closed_loop(
         true_robot(robot, settings),
