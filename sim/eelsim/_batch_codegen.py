@@ -3,20 +3,52 @@
 Why generate code: the right-hand side of the swimmer for N links is a few hundred lines of
 straight-line arithmetic once the loops over links are unrolled. Written that way, inside a single
 loop over the runs of a block ("lanes"), every intermediate is a scalar local, LLVM keeps them in
-(vector) registers and vectorises the lane loop: each machine instruction advances 4 runs (AVX2).
-The same maths written with loops over links and small arrays goes through memory at every
-operation and runs about half as fast. The generated text is written once per (N, lanes) next to
-the package (in ``__pycache__``), so numba's on-disk cache works across processes.
+(vector) registers or spills them to the stack, and vectorises the lane loop: each machine
+instruction advances 4 runs (AVX2). The same maths written with loops over links and small arrays
+goes through memory at every operation and runs about half as fast. The generated text is written
+once per (N, lanes) next to the package (in ``__pycache__``), so numba's on-disk cache works
+across processes.
 
-The arithmetic mirrors ``eelsim.dynamics`` (compact per-link form, spec section 2) and
-``eelsim.control`` (gait, PD, servo line) term by term; the only deliberate differences are in
-rounding (sums in another order, the gait phases by angle addition, an own vectorisable sin/cos),
-all at the 1e-16 level, which the tests check stays below 1e-9 on whole closed-loop runs.
+The physics is that of ``eelsim.dynamics`` (compact per-link form, spec section 2) and
+``eelsim.control`` (gait, PD, servo line), but the accelerations are not computed by assembling
+the dense (N+2) x (N+2) mass matrix M and factoring it (that was ~40 % of a stage and O(N^3)).
+They come from an O(N) articulated-body recursion over the chain, which solves the same
+Newton-Euler equations M q_ddot = Q stands for (the reference's Q = sum J^T (F - A Jdot q_dot) is
+d'Alembert's principle for them):
+
+- link j (centre acceleration a_j, angle theta_j, half-length h, tangent t, normal n):
+  A_j a_j = F_j + f_j + g_j and I_j theta_ddot_j = tau_j + h n.f_j - h n.g_j, where
+  A_j = m_j I + mu_j n n^T, I_j = J_j + lambda_1,j, F_j the drag and current force, tau_j the
+  fluid and joint torques, f_j the force of link j+1 on link j at the front joint point and g_j
+  that of link j-1 at the back one;
+- rigid links: front point acceleration = back point acceleration + 2 d_j and
+  a_j = back + d_j, with d_j = h theta_ddot_j n - h om_j^2 t;
+- a free pin passes no torque, so the links beyond joint j answer the acceleration e of the
+  joint point with a force given by a 2 x 2 "articulated inertia" P and a bias z
+  (force on them = P e - z). The backward sweep (head to tail) builds P and z link by link:
+  with w = 2h P' n + h (m + mu) n and D = I + 4 h^2 n.P'n + h^2 (m + mu) (primes: link j+1's),
+  theta_ddot_j = (rho_j - w.e) / D with rho_j = tau_j + h n.F_j + 2h n.z' + 4h k (P'n).t,
+  k = h om^2, and P = A_j + P' - w w^T / D, z = F_j + z' + k (m t + 2 P't) - w rho_j / D;
+- the tail has nothing behind it: P e = z gives its back point's acceleration (a 2 x 2 solve);
+  the forward sweep (tail to head) then gives theta_ddot_j, d_j and a_j, and p_ddot is the
+  mass-weighted mean of the a_j.
+
+The positive pivots D_j, P_11 and det P play the role of the Cholesky pivots (a pivot <= 0 flags
+the run as the reference's LinAlgError does). Link velocities also come from a recursion along
+the chain instead of the N x N geometry matrix. The results differ from the reference by
+rounding only (about 1e-13 relative on random states; the tests check 1e-11 there and 1e-9 on
+whole closed-loop runs). The dense M is still generated, for the condition-number bound that the
+kernel evaluates at control updates (``_cond_bound``).
+
+Other deliberate differences, all at rounding level: sums in another order, the gait phases by
+angle addition, an own vectorisable sin/cos, fused multiply-adds.
 
 Memory layout: ``work`` and ``out`` are flat float64 arrays holding rows of ``lanes`` values;
 ``work[row * lanes + r]`` is quantity ``row`` of lane ``r``. Row offsets are literals in the
 generated text, so LLVM sees constant distances between accesses and needs no aliasing checks
-beyond one between ``work`` and ``out``.
+beyond one between ``work`` and ``out``. The RK4 bookkeeping (accumulator, next stage's input,
+the new state) is done at the end of each stage, on rows of ``work``, so the driver in
+``eelsim._batch_kernel`` never loops over the state itself.
 """
 
 from __future__ import annotations
@@ -37,6 +69,10 @@ _PIO2_3 = 2.02226624879595063154e-21
 # screen flags pairs within that distance (squared, plus this relative margin for rounding) for the
 # exact segment test of eelsim.flags, which runs only then.
 _SCREEN_MARGIN = 1e-6
+# Stages 2-4 get sin and cos of their angles by rotating stage 1's when every live lane's offset
+# |y - x| (at most dt |theta_dot|, 0.05 rad at 10 rad/s) is below this; the series of _rotate
+# are exact to an ulp up to here.
+_ROTATE_LIMIT = 0.1
 
 
 @dataclass(frozen=True)
@@ -84,10 +120,14 @@ def make_layout(n_links: int, lanes: int) -> Layout:
     n = n_links
     sizes_work = [
         ("y", 2 * n + 4),  # the stage state (theta, p, theta_dot, p_dot)
+        ("x", 2 * n + 4),  # the state at the start of the step
+        ("acc", 2 * n + 4),  # RK4 accumulator k1 + 2 k2 + 2 k3 (+ k4)
+        ("xn", 2 * n + 4),  # the state at the end of the step (valid after stage 4)
         ("gamma", 1),  # held steering offset
         ("geometry", n * n),  # G[j, i] at row j * N + i
-        ("gmg", n * n),  # sum_j m_j G[j, i] G[j, k], at row i * N + k
-        ("sm", n),  # sum_j m_j G[j, i]
+        ("gmg", n * n),  # sum_j m_j G[j, i] G[j, k], at row i * N + k (condition bound only)
+        ("sm", n),  # sum_j m_j G[j, i] (condition bound only)
+        ("mass_sum", 1),
         ("mass", n),
         ("mu", n),
         ("ct", n),
@@ -95,11 +135,15 @@ def make_layout(n_links: int, lanes: int) -> Layout:
         ("lambda2", n),
         ("lambda3", n),
         ("inertia", n),  # J_i + lambda_1,i
-        ("mass_sum", 1),
+        ("mass_weight", n),  # m_j / sum(m): p is the mass-weighted mean of the link centres
         ("amp", n - 1),  # A_j
         ("cos_beta", n - 1),  # cos((j - 1) beta)
         ("sin_beta", n - 1),
         ("omega", 1),
+        ("cos_whalf", 1),  # cos(omega dt / 2), sin, cos(omega dt), sin: the gait phase's steps
+        ("sin_whalf", 1),
+        ("cos_wdt", 1),
+        ("sin_wdt", 1),
         ("kp", 1),
         ("kd", 1),
         ("limit", 1),  # mechanical joint limit (self-collision check)
@@ -110,7 +154,33 @@ def make_layout(n_links: int, lanes: int) -> Layout:
         ("vcx", 1),
         ("vcy", 1),
     ]
-    sizes_out = [("k", 2 * n + 4), ("bad_pivot", 1), ("sin", n), ("cos", n), ("near", 1)]
+    sizes_out = [
+        ("bad_pivot", 1),  # a pivot of the solve was <= 0 in one of the step's stages
+        ("sin", n),  # sin and cos of the stage-1 angles, for the self-collision screen
+        ("cos", n),
+        ("near", 1),  # the screen's verdict: joint past its limit or two links close
+        ("x_bad", 1),  # x is not finite (NaN when any component is NaN or infinite)
+        ("fastest", 1),  # max |rate| of x
+        ("xn_bad", 1),  # the same for the new state
+        # what the stage's three loops pass on (see _stage_body)
+        ("gait_sin", 1),
+        ("gait_cos", 1),
+        ("sin1", n),  # stage 1's sin and cos of the angles and of the gait phase
+        ("gait_sin1", 1),
+        ("cos1", n),
+        ("gait_cos1", 1),
+        ("offset", 1),  # max |y - x| over the angles of the next stage's input
+        ("head_vx", 1),
+        ("head_vy", 1),
+        ("kc", n),
+        ("wx", n),
+        ("wy", n),
+        ("rho", n),
+        ("inv", n),
+        ("tail_ex", 1),
+        ("tail_ey", 1),
+        ("cond_bound", 1),  # trace(M) trace(M^-1) >= cond(M); inf when a pivot is <= 0
+    ]
 
     def assign(sizes: list[tuple[str, int]]) -> tuple[dict[str, int], int]:
         rows, at = {}, 0
@@ -128,6 +198,7 @@ class _Emitter:
     def __init__(self, layout: Layout) -> None:
         self.layout = layout
         self.lines: list[str] = []
+        self.indent = 0  # extra indentation of the current loop (inside an if)
 
     def w(self, name: str, index: int = 0) -> str:
         """Expression reading ``work`` row ``name[index]`` of lane r."""
@@ -137,7 +208,14 @@ class _Emitter:
         return f"out[{(self.layout.out[name] + index) * self.layout.lanes} + r]"
 
     def line(self, text: str) -> None:
-        self.lines.append("        " + text)
+        self.lines.append(" " * (8 + self.indent) + text)
+
+    def loop(self, title: str, indent: int = 0) -> None:
+        """Start a new loop over the lanes (the function body holds several)."""
+        self.indent = indent
+        pad = " " * (4 + indent)
+        self.lines.append(f"{pad}# ---- {title}")
+        self.lines.append(f"{pad}for r in range({self.layout.lanes}):")
 
     def sincos(self, arg: str, s: str, c: str) -> None:
         """Emit s = sin(arg), c = cos(arg) without calls or branches (so the lane loop vectorises).
@@ -165,107 +243,313 @@ class _Emitter:
         self.line(f"{c} = -{c} if abs({t}q - 1.5) < 1.0 else {c}")
 
 
+def _rotate(e: _Emitter, d: str, s0: str, c0: str, s: str, c: str) -> None:
+    """Emit s = sin(x + d), c = cos(x + d) from s0 = sin x, c0 = cos x, for |d| <= _ROTATE_LIMIT.
+
+    Taylor series of sin d to d^9 and cos d to d^10: the first omitted terms are below 3e-19 and
+    3e-21 for |d| <= 0.1, well under an ulp.
+    """
+    line = e.line
+    line(f"z = {d} * {d}")
+    poly = f"{_SIN_TAYLOR[3]!r}"
+    for coef in reversed(_SIN_TAYLOR[:3]):
+        poly = f"{coef!r} + z * ({poly})"
+    line(f"sd = {d} + {d} * z * ({poly})")
+    poly = f"{_COS_TAYLOR[4]!r}"
+    for coef in reversed(_COS_TAYLOR[:4]):
+        poly = f"{coef!r} + z * ({poly})"
+    line(f"cd = 1.0 + z * ({poly})")
+    line(f"sa = {s0}")
+    line(f"ca = {c0}")
+    line(f"{s} = sa * cd + ca * sd")
+    line(f"{c} = ca * cd - sa * sd")
+
+
+def _head_velocity(e: _Emitter) -> None:
+    """Emit the head's velocity relative to the water (rows head_vx, head_vy) from s_i, c_i."""
+    n = e.layout.n_links
+    line, w, o = e.line, e.w, e.o
+    line("# the head's velocity relative to the water, v_N = p_dot + sum_i G_Ni om_i n_i with")
+    line("# n = (-s, c); the backward sweep walks down from it, v_j = v_(j+1) - h_j om_j n_j")
+    line("# - h_(j+1) om_(j+1) n_(j+1) (O(N), instead of the reference's G @ (s om))")
+    last = (n - 1) * n
+    gs = " + ".join(f"{w('geometry', last + i)} * (s{i} * {w('y', n + 2 + i)})" for i in range(n))
+    gc = " + ".join(f"{w('geometry', last + i)} * (c{i} * {w('y', n + 2 + i)})" for i in range(n))
+    line(f"{o('head_vx')} = ({w('y', 2 * n + 2)} - ({gs})) - {w('vcx')}")
+    line(f"{o('head_vy')} = ({w('y', 2 * n + 3)} + ({gc})) - {w('vcy')}")
+
+
 def _stage_body(layout: Layout) -> list[str]:
+    """One RK4 stage for every lane, as three loops over the lanes (see below).
+
+    Why three loops: as one loop body the stage kept about 45 values alive across the sweeps
+    over the links, far more than the 16 vector registers, and LLVM's schedule of the long
+    straight-line block spilled and reloaded about 40 % of its instructions. Split where few
+    values cross (the angles; the results of the backward sweep), each body fits much better,
+    and what crosses goes through rows of ``out`` once instead of through many spills.
+
+    1. sin and cos of the link angles and of the gait phase, the head's velocity;
+    2. the backward sweep (head to tail), with each link's velocity, forces and torques computed
+       where they are consumed; the tail's 2 x 2 solve;
+    3. the forward sweep (tail to head) and the RK4 sums.
+    """
     n = layout.n_links
     e = _Emitter(layout)
     line = e.line
     w, o = e.w, e.o
-    nq = n + 2  # generalised coordinates (theta, p)
 
-    line("# ---- stage state and per-lane parameters")
+    line("# ---- 1. angles. Stage 1 computes sin and cos of the link angles and of the gait phase")
+    line("# in full; stages 2-4 rotate those by the stage's offset from x (angle addition, short")
+    line("# series), when the driver has checked that every live lane's offset is below")
+    line(f"# {_ROTATE_LIMIT} rad (else the full path runs again).")
+    e.lines.append("    if rotate:")
+    e.loop("1a. angles by rotation of stage 1's", indent=4)
     for i in range(n):
-        line(f"th{i} = {w('y', i)}")
-        line(f"om{i} = {w('y', n + 2 + i)}")
-    line(f"vx = {w('y', 2 * n + 2)}")
-    line(f"vy = {w('y', 2 * n + 3)}")
-    line(f"gam = {w('gamma')}")
-    line(f"vcx = {w('vcx')}")
-    line(f"vcy = {w('vcy')}")
-    for i in range(n):
-        line(f"m{i} = {w('mass', i)}")
-        line(f"mu{i} = {w('mu', i)}")
-        for k in range(n):
-            line(f"g{i}_{k} = {w('geometry', i * n + k)}")
-
-    line("# ---- link angles: sin, cos (stored for the self-collision screen)")
-    for i in range(n):
-        e.sincos(f"th{i}", f"s{i}", f"c{i}")
+        line(f"d = {w('y', i)} - {w('x', i)}")
+        _rotate(e, "d", o("sin1", i), o("cos1", i), f"s{i}", f"c{i}")
         line(f"{o('sin', i)} = s{i}")
         line(f"{o('cos', i)} = c{i}")
-
-    line("# ---- gait and joint PD (control.gait_reference, joint_pd_torque, servo_limited)")
-    line(f"omega = {w('omega')}")
-    line(f"kp = {w('kp')}")
-    line(f"kd = {w('kd')}")
-    line(f"lim = {w('clamp')}")
-    line(f"stall = {w('stall')}")
-    line(f"inv_noload = {w('inv_no_load')}")
+    # the gait phase omega t_s = omega t + omega (t_s - t): the step's phase and the lane's
+    # constants cos/sin(omega dt/2) or cos/sin(omega dt)
+    line(f"cw = {w('cos_wdt')} if full else {w('cos_whalf')}")
+    line(f"sw = {w('sin_wdt')} if full else {w('sin_whalf')}")
+    line(f"gs = {o('gait_sin1')}")
+    line(f"gc = {o('gait_cos1')}")
+    line(f"{o('gait_sin')} = gs * cw + gc * sw")
+    line(f"{o('gait_cos')} = gc * cw - gs * sw")
+    _head_velocity(e)
+    e.lines.append("    else:")
+    e.loop("1b. angles in full", indent=4)
+    for i in range(n):
+        e.sincos(w("y", i), f"s{i}", f"c{i}")
+        line(f"{o('sin', i)} = s{i}")
+        line(f"{o('cos', i)} = c{i}")
     # sin(omega t + j beta) by angle addition: one sin/cos per stage instead of N - 1
-    e.sincos("omega * t_s", "sp", "cp")
-    for j in range(n - 1):
-        line(f"amp = {w('amp', j)}")
-        line(f"cb = {w('cos_beta', j)}")
-        line(f"sb = {w('sin_beta', j)}")
-        line("al = amp * (sp * cb + cp * sb) + gam")
-        line("al = min(max(al, -lim), lim)")
-        line("ald = amp * omega * (cp * cb - sp * sb)")
-        line(f"phd = om{j + 1} - om{j}")
-        line(f"u = kp * (al - (th{j + 1} - th{j})) + kd * (ald - phd)")
-        # servo torque-speed line; stall = inf and 1/no_load = 0 when the servo model is off,
-        # which leaves u unchanged exactly
-        line("rr = phd * inv_noload")
-        line("hi = stall * min(1.0, 1.0 - rr)")
-        line("lo = -stall * min(1.0, 1.0 + rr)")
-        line(f"u{j} = min(max(u, lo), hi)")
-
-    line("# ---- link kinematics: velocities and centripetal accelerations (Jdot q_dot)")
-    for i in range(n):
-        line(f"w2_{i} = om{i} * om{i}")
-    for j in range(n):
-        sx = " + ".join(f"g{j}_{i} * (s{i} * om{i})" for i in range(n))
-        sy = " + ".join(f"g{j}_{i} * (c{i} * om{i})" for i in range(n))
-        line(f"lvx{j} = vx - ({sx})")
-        line(f"lvy{j} = vy + ({sy})")
-        ax = " + ".join(f"g{j}_{i} * (c{i} * w2_{i})" for i in range(n))
-        ay = " + ".join(f"g{j}_{i} * (s{i} * w2_{i})" for i in range(n))
-        line(f"ax{j} = -({ax})")
-        line(f"ay{j} = -({ay})")
-
-    line("# ---- per-link forces: Morison drag, added-mass current term, centripetal inertia")
-    for j in range(n):
-        line(f"rx = lvx{j} - vcx")
-        line(f"ry = lvy{j} - vcy")
-        line(f"vt = c{j} * rx + s{j} * ry")
-        line(f"vn = -s{j} * rx + c{j} * ry")
-        line(f"ft = -{w('ct', j)} * (vt + abs(vt) * vt)")
-        line(f"fn = -{w('cn', j)} * (vn + abs(vn) * vn)")
-        line(f"curn = -mu{j} * om{j} * (c{j} * vcx + s{j} * vcy)")
-        line(f"msc = mu{j} * s{j} * c{j}")
-        line(f"ix = (m{j} + mu{j} * s{j} * s{j}) * ax{j} - msc * ay{j}")
-        line(f"iy = -msc * ax{j} + (m{j} + mu{j} * c{j} * c{j}) * ay{j}")
-        line(f"fx{j} = (ft * c{j} - fn * s{j}) + (-curn * s{j}) - ix")
-        line(f"fy{j} = (ft * s{j} + fn * c{j}) + curn * c{j} - iy")
-
-    line("# ---- generalised forces Q = sum_j J_j^T F_j + fluid yaw damping + joint torques")
-    for i in range(n):
-        gx = " + ".join(f"g{j}_{i} * fx{j}" for j in range(n))
-        gy = " + ".join(f"g{j}_{i} * fy{j}" for j in range(n))
-        tau = []
-        if i > 0:
-            tau.append(f"+ u{i - 1}")
-        if i < n - 1:
-            tau.append(f"- u{i}")
-        line(f"q{i} = -s{i} * ({gx}) + c{i} * ({gy})")
-        line(
-            f"q{i} = q{i} + (-{w('lambda2', i)} * om{i} - {w('lambda3', i)} * abs(om{i}) * om{i}"
-            f" {' '.join(tau)})"
+    e.sincos(f"{w('omega')} * t_s", "sp", "cp")
+    line(f"{o('gait_sin')} = sp")
+    line(f"{o('gait_cos')} = cp")
+    _head_velocity(e)
+    e.indent = 0
+    # keep the step's angles for the rotations of stages 2-4
+    lanes = layout.lanes
+    e.lines.append("        if first:")
+    for src_row, dst_row, size in (("sin", "sin1", n), ("cos", "cos1", n),
+                                   ("gait_sin", "gait_sin1", 1), ("gait_cos", "gait_cos1", 1)):
+        e.lines.append(f"            for i in range({size * lanes}):")
+        e.lines.append(
+            f"                out[{layout.out[dst_row] * lanes} + i] = "
+            f"out[{layout.out[src_row] * lanes} + i]"
         )
-    line(f"q{n} = {' + '.join(f'fx{j}' for j in range(n))}")
-    line(f"q{n + 1} = {' + '.join(f'fy{j}' for j in range(n))}")
 
-    line("# ---- mass matrix M (spec section 2) in the rotated form:")
-    line("# M_tt[i,k] = cos(th_i - th_k) sum_j m_j G_ji G_jk + sum_j mu_j b_ji b_jk,")
-    line("# b_ji = G_ji cos(th_j - th_i); M_tp and M_pp follow from the same J_j^T A_j J_j")
+    e.loop("2. backward sweep")
+    line("# Articulated-body recursion (module docstring): the links beyond joint j push on link")
+    line("# j with f = z - P e_j, e_j the acceleration of the joint point (P: 2x2 articulated")
+    line("# inertia through a free pin, z: bias force); k = h om^2: centripetal acceleration -k t.")
+    line("# Each link's external force F_j (Morison drag, added-mass current term), torque and")
+    line("# joint torque (control.gait_reference, joint_pd_torque, servo_limited) are computed")
+    line("# on the way, where they are consumed.")
+    line(f"sp = {o('gait_sin')}")
+    line(f"cp = {o('gait_cos')}")
+    line(f"lvx = {o('head_vx')}")
+    line(f"lvy = {o('head_vy')}")
+    line("gam = " + w("gamma"))
+    line("bad = 0.0")
+    for j in reversed(range(n)):
+        line(f"s{j} = {o('sin', j)}")
+        line(f"c{j} = {o('cos', j)}")
+        line(f"om{j} = {w('y', n + 2 + j)}")
+        if j > 0:  # joint j-1 (between links j-1 and j): acts +u on link j, -u on link j-1
+            jt = j - 1
+            line(f"amp = {w('amp', jt)}")
+            line(f"cb = {w('cos_beta', jt)}")
+            line(f"sb = {w('sin_beta', jt)}")
+            line("lim = " + w("clamp"))
+            line("al = min(max(amp * (sp * cb + cp * sb) + gam, -lim), lim)")
+            line(f"ald = amp * {w('omega')} * (cp * cb - sp * sb)")
+            line(f"phd = om{j} - {w('y', n + 2 + jt)}")
+            line(f"uu = {w('kp')} * (al - ({w('y', j)} - {w('y', jt)})) + {w('kd')} * (ald - phd)")
+            # servo torque-speed line; stall = inf and 1/no_load = 0 when the servo model is
+            # off, which leaves the torque unchanged exactly
+            line(f"rr = phd * {w('inv_no_load')}")
+            line("stall = " + w("stall"))
+            line(f"u{jt} = min(max(uu, -stall * min(1.0, 1.0 + rr)), stall * min(1.0, 1.0 - rr))")
+        line(f"m = {w('mass', j)}")
+        line(f"mu = {w('mu', j)}")
+        line(f"h = {w('half_length', j)}")
+        line(f"hw{j} = h * om{j}")
+        if j < n - 1:
+            line(f"lvx = lvx + (hw{j} * s{j} + hw{j + 1} * s{j + 1})")
+            line(f"lvy = lvy - (hw{j} * c{j} + hw{j + 1} * c{j + 1})")
+        line(f"vt = c{j} * lvx + s{j} * lvy")
+        line(f"vn = c{j} * lvy - s{j} * lvx")
+        line(f"ft = -{w('ct', j)} * (vt + abs(vt) * vt)")
+        line(
+            f"fn = -{w('cn', j)} * (vn + abs(vn) * vn)"
+            f" - mu * om{j} * (c{j} * {w('vcx')} + s{j} * {w('vcy')})"
+        )
+        line(f"fx = ft * c{j} - fn * s{j}")
+        line(f"fy = ft * s{j} + fn * c{j}")
+        tau = []
+        if j > 0:
+            tau.append(f"+ u{j - 1}")
+        if j < n - 1:
+            tau.append(f"- u{j}")
+        line(
+            f"tq = -{w('lambda2', j)} * om{j} - {w('lambda3', j)} * abs(om{j}) * om{j}"
+            f" {' '.join(tau)}"
+        )
+        line(f"k = h * (om{j} * om{j})")
+        line(f"{o('kc', j)} = k")
+        line("hm = h * (m + mu)")
+        line(f"nf = c{j} * fy - s{j} * fx")
+        if j == n - 1:  # the head: nothing beyond it
+            line(f"wx = -hm * s{j}")
+            line(f"wy = hm * c{j}")
+            line(f"dd = {w('inertia', j)} + h * hm")
+            line("rho = tq + h * nf")
+        else:
+            line(f"anx = c{j} * pxy - s{j} * pxx")  # P n
+            line(f"any = c{j} * pyy - s{j} * pxy")
+            line(f"atx = c{j} * pxx + s{j} * pxy")  # P t
+            line(f"aty = c{j} * pxy + s{j} * pyy")
+            line("hh = h + h")
+            line(f"wx = hh * anx - hm * s{j}")
+            line(f"wy = hh * any + hm * c{j}")
+            line(f"dd = ({w('inertia', j)} + h * hm) + (hh * hh) * (c{j} * any - s{j} * anx)")
+            line(
+                f"rho = (tq + h * nf) + hh * ((c{j} * zy - s{j} * zx)"
+                f" + (k + k) * (c{j} * anx + s{j} * any))"
+            )
+        line("bad = 1.0 if dd <= 0.0 else bad")
+        line("inv = 1.0 / dd")
+        line(f"{o('wx', j)} = wx")
+        line(f"{o('wy', j)} = wy")
+        line(f"{o('rho', j)} = rho")
+        line(f"{o('inv', j)} = inv")
+        line("rd = rho * inv")
+        line("gx = wx * inv")
+        line("gy = wy * inv")
+        if j == n - 1:
+            line(f"pxx = (m + mu * (s{j} * s{j})) - gx * wx")
+            line(f"pxy = -mu * (s{j} * c{j}) - gx * wy")
+            line(f"pyy = (m + mu * (c{j} * c{j})) - gy * wy")
+            line(f"zx = (fx + m * k * c{j}) - wx * rd")
+            line(f"zy = (fy + m * k * s{j}) - wy * rd")
+        else:
+            line(f"pxx = (pxx + (m + mu * (s{j} * s{j}))) - gx * wx")
+            line(f"pxy = (pxy - mu * (s{j} * c{j})) - gx * wy")
+            line(f"pyy = (pyy + (m + mu * (c{j} * c{j}))) - gy * wy")
+            line(f"zx = ((zx + fx) + k * (m * c{j} + (atx + atx))) - wx * rd")
+            line(f"zy = ((zy + fy) + k * (m * s{j} + (aty + aty))) - wy * rd")
+    line("# the tail is free (no link behind it): P e = z gives its back point's acceleration.")
+    line("# The positive pivots D_j, P_11 and det P play the role of M's Cholesky pivots: one")
+    line("# <= 0 is what makes LAPACK refuse M (a NaN pivot is not refused there either)")
+    line("det = pxx * pyy - pxy * pxy")
+    line("bad = 1.0 if det <= 0.0 else bad")
+    line("bad = 1.0 if pxx <= 0.0 else bad")
+    line("idet = 1.0 / det")
+    line(f"{o('tail_ex')} = (pyy * zx - pxy * zy) * idet")
+    line(f"{o('tail_ey')} = (pxx * zy - pxy * zx) * idet")
+    line(f"{o('bad_pivot')} = bad if first else max({o('bad_pivot')}, bad)")
+
+    e.loop("3. forward sweep and the RK4 sums")
+    line("# tail to head: theta_ddot_j, link centre acceleration a_j = e + d and the next joint")
+    line("# point's e + 2 d, d = h theta_ddot n - k t; p_ddot = sum_j w_j a_j")
+    line(f"ex = {o('tail_ex')}")
+    line(f"ey = {o('tail_ey')}")
+    line("pdx = 0.0")
+    line("pdy = 0.0")
+    for j in range(n):
+        line(f"s = {o('sin', j)}")
+        line(f"c = {o('cos', j)}")
+        line(f"k = {o('kc', j)}")
+        line(f"x{j} = ({o('rho', j)} - ({o('wx', j)} * ex + {o('wy', j)} * ey)) * {o('inv', j)}")
+        line(f"ht = {w('half_length', j)} * x{j}")
+        line("dx = -(ht * s + k * c)")
+        line("dy = ht * c - k * s")
+        line("ax = ex + dx")
+        line("ay = ey + dy")
+        line(f"pdx = pdx + {w('mass_weight', j)} * ax")
+        line(f"pdy = pdy + {w('mass_weight', j)} * ay")
+        if j < n - 1:
+            line("ex = ax + dx")
+            line("ey = ay + dy")
+    line(f"x{n} = pdx")
+    line(f"x{n + 1} = pdy")
+    line("# RK4 bookkeeping of integrate.rk4_step, fused here so that the state rows are")
+    line("# touched once: acc = k1, acc + 2 k2, acc + 2 k3, acc + k4; next stage input")
+    line("# y = x + a k; xn = x + dt/6 acc (meaningful after stage 4 only)")
+    deriv = [w("y", n + 2 + i) for i in range(n + 2)] + [f"x{i}" for i in range(n + 2)]
+    offsets = ", ".join(f"abs(a * {w('y', n + 2 + i)})" for i in range(n))
+    line(f"{o('offset')} = max({offsets})")
+    for i, d in enumerate(deriv):
+        line(f"d = {d}")
+        line(f"acc = d if first else {w('acc', i)} + wk * d")
+        line(f"{w('acc', i)} = acc")
+        line(f"{w('y', i)} = {w('x', i)} + a * d")
+        line(f"{w('xn', i)} = {w('x', i)} + sixth * acc")
+    return e.lines
+
+
+def _screen_body(layout: Layout) -> list[str]:
+    n = layout.n_links
+    e = _Emitter(layout)
+    line, w, o = e.line, e.w, e.o
+    line("lim = " + w("limit"))
+    line("near = 0.0")
+    for j in range(n - 1):
+        line(f"near = 1.0 if abs({w('x', j + 1)} - {w('x', j)}) > lim else near")
+    for i in range(n):
+        line(f"s{i} = {o('sin', i)}")
+        line(f"c{i} = {o('cos', i)}")
+        line(f"h{i} = {w('half_length', i)}")
+    for j in range(n):
+        gx = " + ".join(f"{w('geometry', j * n + i)} * c{i}" for i in range(n))
+        gy = " + ".join(f"{w('geometry', j * n + i)} * s{i}" for i in range(n))
+        line(f"px{j} = {w('x', n)} + ({gx})")
+        line(f"py{j} = {w('x', n + 1)} + ({gy})")
+    for i in range(n):
+        for k in range(i + 2, n):
+            line(f"dx = px{k} - px{i}")
+            line(f"dy = py{k} - py{i}")
+            line(f"reach = (h{i} + h{k}) * (h{i} + h{k}) * {1.0 + _SCREEN_MARGIN!r}")
+            line("near = 1.0 if dx * dx + dy * dy <= reach else near")
+    line(f"{o('near')} = near")
+    # x - x is 0 for finite x and NaN for NaN or +-inf: one NaN test per lane for all rows
+    ns = 2 * n + 4
+    diffs = " + ".join(f"({w('x', i)} - {w('x', i)})" for i in range(ns))
+    line(f"{o('x_bad')} = {diffs}")
+    rates = ", ".join(f"abs({w('x', i)})" for i in range(n + 2, ns))
+    line(f"{o('fastest')} = max({rates})")
+    return e.lines
+
+
+def _check_new_body(layout: Layout) -> list[str]:
+    e = _Emitter(layout)
+    ns = 2 * layout.n_links + 4
+    diffs = " + ".join(f"({e.w('xn', i)} - {e.w('xn', i)})" for i in range(ns))
+    e.line(f"{e.o('xn_bad')} = {diffs}")
+    return e.lines
+
+
+def _cond_body(layout: Layout) -> list[str]:
+    """trace(M) trace(M^-1), an upper bound of cond(M) (within (N+2)^2 of it), at the state x.
+
+    M is assembled densely (spec section 2, in the rotated form
+    M_tt[i,k] = cos(th_i - th_k) sum_j m_j G_ji G_jk + sum_j mu_j b_ji b_jk, b_ji = G_ji
+    cos(th_j - th_i)) and factored M = L D L^T; trace(M^-1) = sum_i |row i of L^-1|^2 / D_i.
+    It runs only at control updates, where the reference computes np.linalg.cond(M): when the
+    bound is far below the threshold the run is fine, otherwise the driver computes the exact
+    value. sin and cos of the angles come from stage 1 (the out rows).
+    """
+    n = layout.n_links
+    e = _Emitter(layout)
+    line, w, o = e.line, e.w, e.o
+    nq = n + 2
+    for i in range(n):
+        line(f"s{i} = {o('sin', i)}")
+        line(f"c{i} = {o('cos', i)}")
+        line(f"mu{i} = {w('mu', i)}")
     for i in range(n):
         for k in range(i + 1, n):
             line(f"cd{i}_{k} = c{i} * c{k} + s{i} * s{k}")
@@ -275,10 +559,8 @@ def _stage_body(layout: Layout) -> list[str]:
 
     for j in range(n):
         for i in range(n):
-            if i == j:
-                line(f"b{j}_{i} = g{j}_{i}")
-            else:
-                line(f"b{j}_{i} = g{j}_{i} * {cd(j, i)}")
+            g = w("geometry", j * n + i)
+            line(f"b{j}_{i} = {g}" if i == j else f"b{j}_{i} = {g} * {cd(j, i)}")
             line(f"mb{j}_{i} = mu{j} * b{j}_{i}")
     for i in range(n):
         for k in range(i, n):
@@ -296,68 +578,37 @@ def _stage_body(layout: Layout) -> list[str]:
     line(f"a{n}_{n} = msum + ({' + '.join(f'mu{j} * s{j} * s{j}' for j in range(n))})")
     line(f"a{n}_{n + 1} = -({' + '.join(f'mu{j} * s{j} * c{j}' for j in range(n))})")
     line(f"a{n + 1}_{n + 1} = msum + ({' + '.join(f'mu{j} * c{j} * c{j}' for j in range(n))})")
-
-    line("# ---- M = L D L^T (unit L), unrolled. No square roots: the pivots D_k are the squares of")
-    line("# the Cholesky diagonal, and a pivot <= 0 is what makes LAPACK (OpenBLAS potf2) refuse M")
-    line("# (a NaN pivot is not refused there either: NaN propagates to the state)")
-    line("bad = 0.0")
+    line("pd = 1.0")  # stays 1 while every pivot is > 0 (a NaN pivot is not)
     for k in range(nq):
         d = " - ".join([f"a{k}_{k}"] + [f"l{k}_{j} * e{k}_{j}" for j in range(k)])
         line(f"dk = {d}")
-        line("bad = 1.0 if dk <= 0.0 else bad")
+        line("pd = pd if dk > 0.0 else 0.0")
         line(f"inv{k} = 1.0 / dk")
         for i in range(k + 1, nq):
             v = " - ".join([f"a{k}_{i}"] + [f"l{i}_{j} * e{k}_{j}" for j in range(k)])
-            line(f"e{i}_{k} = {v}")  # L[i, k] D[k]
+            line(f"e{i}_{k} = {v}")
             line(f"l{i}_{k} = e{i}_{k} * inv{k}")
-    line(f"{o('bad_pivot')} = bad")
-    line("# ---- solve L z = Q, then D L^T qdd = z")
-    for i in range(nq):
-        v = " - ".join([f"q{i}"] + [f"l{i}_{j} * z{j}" for j in range(i)])
-        line(f"z{i} = {v}")
-    for i in reversed(range(nq)):
-        v = " - ".join([f"z{i} * inv{i}"] + [f"l{j}_{i} * x{j}" for j in range(i + 1, nq)])
-        line(f"x{i} = {v}")
-
-    line("# ---- derivative (theta_dot, p_dot, theta_ddot, p_ddot)")
-    for i in range(n):
-        line(f"{o('k', i)} = om{i}")
-    line(f"{o('k', n)} = vx")
-    line(f"{o('k', n + 1)} = vy")
-    for i in range(nq):
-        line(f"{o('k', n + 2 + i)} = x{i}")
-    return e.lines
-
-
-def _screen_body(layout: Layout) -> list[str]:
-    n = layout.n_links
-    e = _Emitter(layout)
-    line, w, o = e.line, e.w, e.o
-    line("lim = " + w("limit"))
-    line("near = 0.0")
-    for j in range(n - 1):
-        line(f"near = 1.0 if abs({w('y', j + 1)} - {w('y', j)}) > lim else near")
-    for i in range(n):
-        line(f"s{i} = {o('sin', i)}")
-        line(f"c{i} = {o('cos', i)}")
-        line(f"h{i} = {w('half_length', i)}")
-    for j in range(n):
-        gx = " + ".join(f"{w('geometry', j * n + i)} * c{i}" for i in range(n))
-        gy = " + ".join(f"{w('geometry', j * n + i)} * s{i}" for i in range(n))
-        line(f"px{j} = {w('y', n)} + ({gx})")
-        line(f"py{j} = {w('y', n + 1)} + ({gy})")
-    for i in range(n):
-        for k in range(i + 2, n):
-            line(f"dx = px{k} - px{i}")
-            line(f"dy = py{k} - py{i}")
-            line(f"reach = (h{i} + h{k}) * (h{i} + h{k}) * {1.0 + _SCREEN_MARGIN!r}")
-            line("near = 1.0 if dx * dx + dy * dy <= reach else near")
-    line(f"{o('near')} = near")
+    line("# L^-1 (unit lower triangular) by columns; accumulate trace(M^-1)")
+    line(f"tr_inv = {' + '.join(f'inv{i}' for i in range(nq))}")
+    for col in range(nq - 1):
+        for i in range(col + 1, nq):
+            terms = [f"l{i}_{col}"] + [f"l{i}_{j} * y{j}_{col}" for j in range(col + 1, i)]
+            line(f"y{i}_{col} = -({' + '.join(terms)})")
+            line(f"tr_inv = tr_inv + y{i}_{col} * y{i}_{col} * inv{i}")
+    line(f"tr = {' + '.join(f'a{i}_{i}' for i in range(nq))}")
+    line(f"{o('cond_bound')} = tr * tr_inv if pd == 1.0 else np.inf")
     return e.lines
 
 
 def generate_stage_source(layout: Layout) -> str:
-    """Source of ``_stage(work, out, t_s)``: one right-hand-side evaluation for a block of lanes.
+    """Source of the generated functions and row constants of the kernel module.
+
+    ``_stage(work, out, t_s, a, wk, first, sixth, rotate, full)``: one RK4 stage for every lane:
+    the right-hand side f(t_s, y), then acc = f (``first``) or acc + wk f, y = x + a f and
+    xn = x + sixth acc; ``rotate``: the angles by rotation of stage 1's (``full``: t_s = t + dt,
+    else t + dt/2). ``_screen(work, out)``: the self-collision screen and the finiteness and
+    divergence checks of x. ``_check_new(work, out)``: finiteness of xn. ``_cond_bound(work,
+    out)``: the condition-number bound at x.
 
     Parameters
     ----------
@@ -370,6 +621,7 @@ def generate_stage_source(layout: Layout) -> str:
         Python source defining ``_stage``, to be appended to the kernel module's text.
     """
     consts = [f"N_LINKS = {layout.n_links}", f"LANES = {layout.lanes}",
+              f"ROTATE_LIMIT = {_ROTATE_LIMIT!r}",
               f"WORK_ROWS = {layout.work_rows}", f"OUT_ROWS = {layout.out_rows}"]
     consts += [f"W_{k.upper()} = {v}" for k, v in layout.work.items()]
     consts += [f"O_{k.upper()} = {v}" for k, v in layout.out.items()]
@@ -381,9 +633,8 @@ def generate_stage_source(layout: Layout) -> str:
         "",
         "",
         "@numba.njit(cache=True, fastmath=_FASTMATH, error_model='numpy', boundscheck=False)",
-        "def _stage(work, out, t_s):  # noqa: C901",
-        '    """Evaluate the swimmer\'s right-hand side at the stage state of every lane."""',
-        f"    for r in range({layout.lanes}):",
+        "def _stage(work, out, t_s, a, wk, first, sixth, rotate, full):  # noqa: C901",
+        '    """One RK4 stage for every lane: the right-hand side at y, then the RK4 sums."""',
     ]
     screen = [
         "",
@@ -393,4 +644,22 @@ def generate_stage_source(layout: Layout) -> str:
         '    """Flag lanes whose joints are past the limit or whose non-adjacent links are close."""',
         f"    for r in range({layout.lanes}):",
     ]
-    return "\n".join(head + _stage_body(layout) + screen + _screen_body(layout)) + "\n"
+    check = [
+        "",
+        "",
+        "@numba.njit(cache=True, fastmath=_FASTMATH, error_model='numpy', boundscheck=False)",
+        "def _check_new(work, out):",
+        '    """Flag lanes whose new state xn is not finite."""',
+        f"    for r in range({layout.lanes}):",
+    ]
+    cond = [
+        "",
+        "",
+        "@numba.njit(cache=True, fastmath=_FASTMATH, error_model='numpy', boundscheck=False)",
+        "def _cond_bound(work, out):",
+        '    """Upper bound of the mass matrix condition number at x, for every lane."""',
+        f"    for r in range({layout.lanes}):",
+    ]
+    body = head + _stage_body(layout) + screen + _screen_body(layout) + check
+    body += _check_new_body(layout) + cond + _cond_body(layout)
+    return "\n".join(body) + "\n"

@@ -11,12 +11,16 @@ still computed but never committed):
 
 1. control updates (offset gamma from the filtered pose, pending queue for the delay) - per lane;
 2. sampling of the state;
-3. RK4 stage 1 (vectorised), the self-collision screen, then the checks of
-   ``closed_loop._check`` in its order (non-finite, condition number at update steps, joint limit,
-   link intersection) - exact tests only for lanes the screen flags;
-4. the stop rules, RK4 stages 2-4 (vectorised), the pivot and finiteness checks of the new state;
+3. RK4 stage 1 (vectorised), the self-collision screen with the finiteness and divergence tests
+   (vectorised), the condition-number bound when some lane updates its control (vectorised), then
+   the checks of ``closed_loop._check`` in its order (non-finite, condition number at update
+   steps, joint limit, link intersection) - exact tests only for lanes the screen flags and exact
+   condition numbers only where the bound is near the threshold;
+4. the stop rules, RK4 stages 2-4 (vectorised; each stage also does its part of the RK4 sums),
+   the pivot and finiteness checks of the new state;
 5. camera frames in (t, t + dt]: Hermite pose, pixel quantisation, heading noise, median filter,
-   waypoint switching and arrival - per lane.
+   waypoint switching and arrival - per lane;
+6. the lanes still running commit the new state (a vectorised select).
 
 The order of these operations is that of ``eelsim.closed_loop.simulate_closed_loop``; the tests
 compare the two to 1e-9.
@@ -61,15 +65,26 @@ def _vsqrt(typingctx, x):
 N_LINKS = 2
 LANES = 16
 WORK_ROWS = OUT_ROWS = 1
-W_Y = W_GAMMA = W_GEOMETRY = W_HALF_LENGTH = W_LIMIT = W_MASS = W_MU = W_INERTIA = 0
-O_K = O_BAD_PIVOT = O_SIN = O_COS = O_NEAR = 0
+W_Y = W_X = W_ACC = W_XN = W_GAMMA = W_GEOMETRY = W_HALF_LENGTH = W_LIMIT = 0
+W_MASS = W_MU = W_INERTIA = 0
+O_BAD_PIVOT = O_SIN = O_COS = O_NEAR = O_X_BAD = O_FASTEST = O_XN_BAD = O_COND_BOUND = 0
+O_OFFSET = 0
+ROTATE_LIMIT = 0.1
 
 
-def _stage(work, out, t_s):  # pragma: no cover - replaced
+def _stage(work, out, t_s, a, wk, first, sixth, rotate, full):  # pragma: no cover - replaced
     raise RuntimeError("eelsim._batch_kernel is a template; use eelsim.batch")
 
 
 def _screen(work, out):  # pragma: no cover - replaced
+    raise RuntimeError("eelsim._batch_kernel is a template; use eelsim.batch")
+
+
+def _check_new(work, out):  # pragma: no cover - replaced
+    raise RuntimeError("eelsim._batch_kernel is a template; use eelsim.batch")
+
+
+def _cond_bound(work, out):  # pragma: no cover - replaced
     raise RuntimeError("eelsim._batch_kernel is a template; use eelsim.batch")
 
 
@@ -160,6 +175,9 @@ def _jacobi_condition(m):
 @numba.njit(cache=True)
 def _mass_matrix_condition(x, par, n, m, lo, inv, s, c, jx, jy):
     """Condition number of M(x) when it may be above the threshold, else a cheap upper bound.
+
+    The scalar path, for the rare lanes whose vectorised bound (``_cond_bound``) is not far
+    below the threshold.
 
     For SPD M, cond(M) <= trace(M) trace(M^-1) <= (N+2)^2 cond(M), and trace(M^-1) is the squared
     Frobenius norm of L^-1 from the Cholesky factor. When that bound is far below the threshold
@@ -341,14 +359,18 @@ def _observe(r, run, frame, px, py, heading, noise, pixel, window, med, med_coun
 
 
 @numba.njit(cache=True)
-def _pose(x, r, n):
-    """(p_x, p_y, mean theta) and their rates, as closed_loop's pose_and_rate."""
+def _pose(work, base, r, n):
+    """(p_x, p_y, mean theta) and their rates of the state in work rows ``base``.., lane r.
+
+    The same sums as closed_loop's pose_and_rate.
+    """
     h = 0.0
     hd = 0.0
     for i in range(n):
-        h += x[i, r]
-        hd += x[n + 2 + i, r]
-    return x[n, r], x[n + 1, r], h / n, x[2 * n + 2, r], x[2 * n + 3, r], hd / n
+        h += work[(base + i) * LANES + r]
+        hd += work[(base + n + 2 + i) * LANES + r]
+    return (work[(base + n) * LANES + r], work[(base + n + 1) * LANES + r], h / n,
+            work[(base + 2 * n + 2) * LANES + r], work[(base + 2 * n + 3) * LANES + r], hd / n)
 
 
 @numba.njit(cache=True)
@@ -360,11 +382,24 @@ def _hermite(y0, dy0, y1, dy1, h, s):
 
 
 @numba.njit(cache=True)
-def _copy_y(work, src, off, scale, k, ns):
-    """Stage state y = src + scale * k (k = None-like when scale is 0: y = src exactly)."""
+def _rotates(out, alive):
+    """Whether the next stage may rotate stage 1's sin and cos: every live lane's offset is small.
+
+    (A NaN offset is not small: that lane's blow-up then goes through the full sin/cos, exactly
+    as before.)
+    """
+    for r in range(LANES):
+        if alive[r] and not out[O_OFFSET * LANES + r] < ROTATE_LIMIT:
+            return False
+    return True
+
+
+@numba.njit(cache=True)
+def _gather(work, base, r, ns, dest):
+    """The state of lane r from work rows ``base`` on, as a vector (for the scalar checks)."""
     for row in range(ns):
-        for r in range(LANES):
-            work[(W_Y + row) * LANES + r] = src[row, r] + scale * k[(O_K + row) * LANES + r]
+        dest[row] = work[(base + row) * LANES + r]
+    return dest
 
 
 @numba.njit(cache=True)
@@ -374,6 +409,12 @@ def _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radiu
                record_full, full_out, arrival_out, failure_out, failure_time_out, reason_out,
                reason_index_out, reason_value_out, final_state_out, final_step_out, target_out,
                distance_out):
+    """Run the block ``block`` (runs block * LANES ...) to its end; see the module docstring.
+
+    The lanes' states live in ``work`` (rows W_X: the step's start, W_XN: its end), so the
+    generated code reads and writes them with constant offsets; everything per lane and per step
+    that does not vectorise (control updates, checks, camera) reads single numbers from there.
+    """
     n = N_LINKS
     ns = 2 * n + 4
     n_runs = x0.shape[0]
@@ -381,10 +422,8 @@ def _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radiu
     first = block * LANES
     work = np.zeros(WORK_ROWS * LANES)
     out = np.zeros(OUT_ROWS * LANES)
-    x = np.empty((ns, LANES))
-    xn = np.empty((ns, LANES))
-    acc = np.empty((ns, LANES))
-    bad = np.zeros(LANES)
+    xs = np.empty(ns)  # one lane's state, for the scalar checks
+    keep = np.zeros(LANES)  # 1.0 for lanes that commit the step (alive after all checks)
     run_of = np.empty(LANES, np.int64)
     alive = np.zeros(LANES, np.bool_)
     is_update = np.zeros(LANES, np.bool_)
@@ -423,9 +462,9 @@ def _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radiu
         for p in range(n_par):
             work[(W_GEOMETRY + p) * LANES + r] = params[run_of[r], p]
         for row in range(ns):
-            x[row, r] = x0[run_of[r], row]
+            work[(W_X + row) * LANES + r] = x0[run_of[r], row]
         if alive[r]:
-            p0, p1, h0, _, _, _ = _pose(x, r, n)
+            p0, p1, h0, _, _, _ = _pose(work, W_X, r, n)
             filtered[r, 0], filtered[r, 1], filtered[r, 2] = p0, p1, h0
             # the frame at t = 0 sees the initial pose
             _observe(r, run_of[r], 0, p0, p1, h0, noise, pixel, window, med, med_count, med_next,
@@ -472,120 +511,115 @@ def _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radiu
             for r in range(LANES):
                 if alive[r]:
                     for row in range(ns):
-                        states_out[run_of[r], sample, row] = x[row, r]
+                        states_out[run_of[r], sample, row] = work[(W_X + row) * LANES + r]
         if record_full:
             for r in range(LANES):
                 if alive[r]:
                     for row in range(ns):
-                        full_out[run_of[r], step, row] = x[row, r]
-        # 3. RK4 stage 1 at x (its sin/cos feed the collision screen), then closed_loop._check
-        for row in range(ns):
-            for r in range(LANES):
-                work[(W_Y + row) * LANES + r] = x[row, r]
-        _stage(work, out, t)
-        _screen(work, out)
+                        full_out[run_of[r], step, row] = work[(W_X + row) * LANES + r]
+        # 3.-4. the four RK4 stages (same sums as integrate.rk4_step, done inside the stages).
+        # One call site on purpose: LLVM inlines the generated stage into this function, and
+        # four call sites made four copies of it (a minute of cold compile instead of seconds).
+        # After stage 1 at x (its sin/cos feed the collision screen) come the checks of
+        # closed_loop._check.
+        for st in range(4):
+            if st == 0:
+                # the rows x are contiguous: one flat copy
+                for i in range(ns * LANES):
+                    work[W_Y * LANES + i] = work[W_X * LANES + i]
+                t_s, a, wk, rotate = t, half, 1.0, False
+            elif st == 1:
+                t_s, a, wk, rotate = t + half, half, 2.0, _rotates(out, alive)
+            elif st == 2:
+                t_s, a, wk, rotate = t + half, dt, 2.0, _rotates(out, alive)
+            else:
+                t_s, a, wk, rotate = t + dt, 0.0, 1.0, _rotates(out, alive)
+            _stage(work, out, t_s, a, wk, st == 0, sixth, rotate, st == 3)
+            if st == 0:
+                _screen(work, out)
+                any_update = False
+                for r in range(LANES):
+                    any_update = any_update or (alive[r] and is_update[r])
+                if any_update:
+                    _cond_bound(work, out)
+                for r in range(LANES):
+                    if not alive[r]:
+                        continue
+                    run = run_of[r]
+                    code = REASON_NONE
+                    if np.isnan(out[O_X_BAD * LANES + r]):
+                        code = REASON_NOT_FINITE
+                    elif out[O_FASTEST * LANES + r] > DIVERGENCE_RATE:
+                        code = REASON_DIVERGED
+                    elif is_update[r]:
+                        # the vectorised bound settles every physical state; the exact value
+                        # (and the scalar path's bound) only near the threshold or if not PD
+                        cond = out[O_COND_BOUND * LANES + r]
+                        if not cond < 0.5 * ILL_CONDITION_THRESHOLD:
+                            cond = _mass_matrix_condition(_gather(work, W_X, r, ns, xs),
+                                                          params[run], n, cm, clo, cinv, cs, cc,
+                                                          cjx, cjy)
+                        if not cond < ILL_CONDITION_THRESHOLD:
+                            code = REASON_CONDITION
+                            reason_value[r] = cond
+                    if code == REASON_NONE and out[O_NEAR * LANES + r] != 0.0:
+                        code = _self_collision(_gather(work, W_X, r, ns, xs), params[run], n,
+                                               work[W_LIMIT * LANES + r], info)
+                        if code != REASON_NONE:
+                            reason_index[r, 0] = int(info[0])
+                            reason_index[r, 1] = int(info[1])
+                            reason_value[r] = info[2]
+                    if code != REASON_NONE:
+                        self_hit = (code == REASON_JOINT_LIMIT
+                                    or code == REASON_LINKS_INTERSECT)
+                        failure[r] = FAIL_SELF if self_hit else FAIL_ILL
+                        reason[r] = code
+                        fail_t[r] = t
+                        alive[r] = False
+                        final_step[r] = step
+                    elif ((stop_at_goal and not np.isnan(arrival[r]))
+                          or step >= total_steps[run]):
+                        alive[r] = False
+                        final_step[r] = step
+        _check_new(work, out)
         for r in range(LANES):
-            if not alive[r]:
-                continue
-            run = run_of[r]
-            code = REASON_NONE
-            finite = True
-            fastest = 0.0
-            for row in range(ns):
-                if not np.isfinite(x[row, r]):
-                    finite = False
-                if row >= n + 2:
-                    fastest = max(fastest, abs(x[row, r]))
-            if not finite:
-                code = REASON_NOT_FINITE
-            elif fastest > DIVERGENCE_RATE:
-                code = REASON_DIVERGED
-            elif is_update[r]:
-                cond = _mass_matrix_condition(x[:, r], params[run], n, cm, clo, cinv, cs, cc,
-                                              cjx, cjy)
-                if not cond < ILL_CONDITION_THRESHOLD:
-                    code = REASON_CONDITION
-                    reason_value[r] = cond
-            if code == REASON_NONE and out[O_NEAR * LANES + r] != 0.0:
-                code = _self_collision(x[:, r], params[run], n,
-                                       work[W_LIMIT * LANES + r], info)
-                if code != REASON_NONE:
-                    reason_index[r, 0], reason_index[r, 1] = int(info[0]), int(info[1])
-                    reason_value[r] = info[2]
-            if code != REASON_NONE:
-                self_hit = code == REASON_JOINT_LIMIT or code == REASON_LINKS_INTERSECT
-                failure[r] = FAIL_SELF if self_hit else FAIL_ILL
-                reason[r] = code
-                fail_t[r] = t
-                alive[r] = False
-                final_step[r] = step
-            elif (stop_at_goal and not np.isnan(arrival[r])) or step >= total_steps[run]:
-                alive[r] = False
-                final_step[r] = step
-        # 4. RK4 stages 2-4 (same expression order as integrate.rk4_step)
-        for row in range(ns):
-            for r in range(LANES):
-                acc[row, r] = out[(O_K + row) * LANES + r]
-        for r in range(LANES):
-            bad[r] = out[O_BAD_PIVOT * LANES + r]
-        _copy_y(work, x, 0, half, out, ns)
-        _stage(work, out, t + half)
-        for row in range(ns):
-            for r in range(LANES):
-                acc[row, r] = acc[row, r] + 2.0 * out[(O_K + row) * LANES + r]
-        for r in range(LANES):
-            bad[r] += out[O_BAD_PIVOT * LANES + r]
-        _copy_y(work, x, 0, half, out, ns)
-        _stage(work, out, t + half)
-        for row in range(ns):
-            for r in range(LANES):
-                acc[row, r] = acc[row, r] + 2.0 * out[(O_K + row) * LANES + r]
-        for r in range(LANES):
-            bad[r] += out[O_BAD_PIVOT * LANES + r]
-        _copy_y(work, x, 0, dt, out, ns)
-        _stage(work, out, t + dt)
-        for row in range(ns):
-            for r in range(LANES):
-                acc[row, r] = acc[row, r] + out[(O_K + row) * LANES + r]
-                xn[row, r] = x[row, r] + sixth * acc[row, r]
-        for r in range(LANES):
-            bad[r] += out[O_BAD_PIVOT * LANES + r]
-        for r in range(LANES):
+            keep[r] = 0.0
             if not alive[r]:
                 continue
             code = REASON_NONE
-            if bad[r] > 0.0:
+            if out[O_BAD_PIVOT * LANES + r] > 0.0:
                 code = REASON_NOT_PD
                 fail_t[r] = t
-            else:
-                for row in range(ns):
-                    if not np.isfinite(xn[row, r]):
-                        code = REASON_NOT_FINITE
-                        fail_t[r] = t + dt
-                        break
+            elif np.isnan(out[O_XN_BAD * LANES + r]):
+                code = REASON_NOT_FINITE
+                fail_t[r] = t + dt
             if code != REASON_NONE:
                 failure[r] = FAIL_ILL
                 reason[r] = code
                 alive[r] = False
                 final_step[r] = step
+            else:
+                keep[r] = 1.0
         # 5. camera frames in (t, t + dt] see the Hermite-interpolated pose
         while frame < n_frames and frame_step[frame] == step:
             s = frame_fraction[frame]
             for r in range(LANES):
                 if not alive[r]:
                     continue
-                a0, a1, a2, da0, da1, da2 = _pose(x, r, n)
-                b0, b1, b2, db0, db1, db2 = _pose(xn, r, n)
+                a0, a1, a2, da0, da1, da2 = _pose(work, W_X, r, n)
+                b0, b1, b2, db0, db1, db2 = _pose(work, W_XN, r, n)
                 _observe(r, run_of[r], frame, _hermite(a0, da0, b0, db0, dt, s),
                          _hermite(a1, da1, b1, db1, dt, s), _hermite(a2, da2, b2, db2, dt, s),
                          noise, pixel, window, med, med_count, med_next, last_heading, filtered,
                          target, arrival, waypoints, n_waypoints, radius, frame_time[frame],
                          scratch)
             frame += 1
-        for r in range(LANES):
-            if alive[r]:
-                for row in range(ns):
-                    x[row, r] = xn[row, r]
+        # 6. lanes still running commit the step (a select, so that the loop vectorises)
+        for row in range(ns):
+            for r in range(LANES):
+                i = row * LANES + r
+                work[W_X * LANES + i] = (work[W_XN * LANES + i] if keep[r] != 0.0
+                                         else work[W_X * LANES + i])
         step += 1
     for r in range(LANES):
         run = first + r
@@ -604,10 +638,11 @@ def _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radiu
         reason_index_out[run, 1] = reason_index[r, 1]
         reason_value_out[run] = reason_value[r]
         for row in range(ns):
-            final_state_out[run, row] = x[row, r]
+            final_state_out[run, row] = work[(W_X + row) * LANES + r]
         final_step_out[run] = final_step[r]
         target_out[run] = target[r]
-        distance_out[run] = _distance_left(x[n, r], x[n + 1, r], waypoints[run],
+        distance_out[run] = _distance_left(work[(W_X + n) * LANES + r],
+                                           work[(W_X + n + 1) * LANES + r], waypoints[run],
                                            n_waypoints[run], target[r])
 
 
@@ -617,7 +652,11 @@ def run_blocks(params, x0, total_steps, dt, waypoints, n_waypoints, radius, k_th
                window, stop_at_goal, pending_size, sample_steps, states_out, record_full, full_out,
                arrival_out, failure_out, failure_time_out, reason_out, reason_index_out,
                reason_value_out, final_state_out, final_step_out, target_out, distance_out):
-    """Run every block of LANES runs; blocks are shared out over numba's threads."""
+    """Run every block of LANES runs; blocks are shared out over numba's threads.
+
+    The caller sets numba's parallel chunk size to 1 (see ``eelsim.batch.run_spec``); setting it
+    here would keep numba from caching this function.
+    """
     n_blocks = (x0.shape[0] + LANES - 1) // LANES
     for block in numba.prange(n_blocks):
         _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radius, k_theta,

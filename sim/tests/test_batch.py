@@ -193,3 +193,101 @@ def test_per_run_inputs_of_different_lengths_are_refused(robot):
     s = load_scenario("straight")
     with pytest.raises(ValueError, match="different lengths"):
         BatchSpec.build(robot, [s, s, s], coefficients=np.ones((2, 4)))
+
+
+def _lane_block(spec, run=0):
+    """A kernel module and a work/out pair holding ``spec``'s run ``run`` in every lane."""
+    from eelsim.batch import DEFAULT_LANES, kernel_module
+
+    k = kernel_module(spec.n_links, DEFAULT_LANES)
+    lanes = DEFAULT_LANES
+    work = np.zeros(k.WORK_ROWS * lanes)
+    out = np.zeros(k.OUT_ROWS * lanes)
+    for p in range(spec.params.shape[1]):
+        work[(k.W_GEOMETRY + p) * lanes : (k.W_GEOMETRY + p + 1) * lanes] = spec.params[run, p]
+    return k, work, out, lanes
+
+
+def _set_rows(k, work, first_row, lanes, values):
+    for row in range(values.shape[1]):
+        work[(first_row + row) * lanes : (first_row + row + 1) * lanes] = values[:, row]
+
+
+def _random_states(rng, n, lanes):
+    return np.array([np.concatenate([rng.normal(0, 0.6, n), rng.normal(0, 1, 2),
+                                     rng.normal(0, 2.0, n), rng.normal(0, 0.2, 2)])
+                     for _ in range(lanes)])
+
+
+@pytest.mark.parametrize("odd_links", [False, True])
+def test_recursive_accelerations_equal_the_dense_mass_matrix_solve(robot, odd_links):
+    # the kernel's O(N) articulated-body recursion against dynamics.state_derivative (dense M,
+    # Cholesky) on random states, with current and links that differ; joint torques off
+    from eelsim.dynamics import state_derivative
+    from eelsim.model import SwimmerModel
+
+    if odd_links:
+        data = robot.model_dump()
+        data["head"] = {"half_length_m": 0.07, "mass_kg": 0.3, "half_axis_vertical_m": 0.03}
+        data["tail"] = {"half_length_m": 0.04, "mass_kg": 0.15, "yaw_inertia_kg_m2": 1e-4}
+        robot = Robot.model_validate(data)
+    scenario = load_scenario("path2")  # has a current
+    spec = BatchSpec.build(robot, scenario)
+    k, work, out, lanes = _lane_block(spec)
+    work[k.W_KP * lanes : (k.W_KP + 1) * lanes] = 0.0
+    work[k.W_KD * lanes : (k.W_KD + 1) * lanes] = 0.0
+    xs = _random_states(np.random.default_rng(3), robot.n_links, lanes)
+    _set_rows(k, work, k.W_Y, lanes, xs)
+    k._stage(work, out, 0.3, 0.005, 1.0, True, 0.01 / 6.0, False, False)  # acc = f(y)
+    model = SwimmerModel.from_robot(robot)
+    for r in range(lanes):
+        ref = state_derivative(model, xs[r], np.zeros(robot.n_links - 1), scenario.current_m_s)
+        got = work[k.W_ACC * lanes + r : (k.W_ACC + xs.shape[1]) * lanes : lanes]
+        assert np.allclose(got, ref, rtol=1e-11, atol=1e-11)
+    assert np.all(out[k.O_BAD_PIVOT * lanes : (k.O_BAD_PIVOT + 1) * lanes] == 0.0)
+
+
+def test_vectorised_condition_bound_brackets_numpys_condition_number(robot):
+    # trace(M) trace(M^-1) is >= cond(M) and <= (N + 2)^2 cond(M): the kernel only trusts it to
+    # clear a state far below the threshold
+    from eelsim.dynamics import mass_matrix
+    from eelsim.model import SwimmerModel
+
+    spec = BatchSpec.build(robot, load_scenario("straight"))
+    k, work, out, lanes = _lane_block(spec)
+    xs = _random_states(np.random.default_rng(5), robot.n_links, lanes)
+    _set_rows(k, work, k.W_X, lanes, xs)
+    _set_rows(k, work, k.W_Y, lanes, xs)
+    k._stage(work, out, 0.0, 0.005, 1.0, True, 0.01 / 6.0, False, False)  # sin, cos of x
+    k._cond_bound(work, out)
+    model = SwimmerModel.from_robot(robot)
+    nq = robot.n_links + 2
+    for r in range(lanes):
+        cond = np.linalg.cond(mass_matrix(model, xs[r]))
+        bound = out[k.O_COND_BOUND * lanes + r]
+        assert cond * (1 - 1e-9) <= bound <= nq**2 * cond
+
+
+@pytest.mark.parametrize("full_step", [False, True])
+def test_stages_that_rotate_stage_1s_angles_equal_full_sine_and_cosine(robot, full_step):
+    # stages 2-4 get sin/cos of their angles (and of the gait phase) by angle addition from
+    # stage 1's; that must agree with computing them in full
+    spec = BatchSpec.build(robot, load_scenario("path2"))
+    k, work, out, lanes = _lane_block(spec)
+    rng = np.random.default_rng(11)
+    xs = _random_states(rng, robot.n_links, lanes)
+    xs[:, 0] += 40.0  # far from 0: the rotation must not lose the large angle's accuracy
+    _set_rows(k, work, k.W_X, lanes, xs)
+    _set_rows(k, work, k.W_Y, lanes, xs)
+    dt, t = 0.01, 12.34
+    k._stage(work, out, t, 0.5 * dt, 1.0, True, dt / 6.0, False, False)  # stage 1, in full
+    ys = xs.copy()
+    ys[:, : robot.n_links] += rng.uniform(-0.099, 0.099, (lanes, robot.n_links))
+    step = dt if full_step else 0.5 * dt
+    results = []
+    for rotate in (True, False):
+        _set_rows(k, work, k.W_Y, lanes, ys)
+        work[k.W_ACC * lanes : (k.W_ACC + xs.shape[1]) * lanes] = 0.0
+        k._stage(work, out, t + step, 0.0, 1.0, False, dt / 6.0, rotate, full_step)
+        results.append(work[k.W_ACC * lanes : (k.W_ACC + xs.shape[1]) * lanes].copy())
+    assert np.allclose(results[0], results[1], rtol=1e-12, atol=1e-12)

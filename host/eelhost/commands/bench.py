@@ -7,7 +7,9 @@ Measures, in one process and one sitting:
 3. one generation of the paper's GA (150 candidates x 4 training experiments = 600 runs of 3,000
    RK4 steps): RK4 steps per second on one thread and on all cores, and the implied time of the
    whole GA (78,000 runs, 2.34e8 steps) for one motion type;
-4. the same robot in MuJoCo: ``mujoco.rollout`` with the built-in ellipsoid fluid model on all
+4. where the time of a step goes (one thread): the generated RK4 stage, the collision screen and
+   the condition-number bound timed alone, the camera by switching it off, the rest by difference;
+5. the same robot in MuJoCo: ``mujoco.rollout`` with the built-in ellipsoid fluid model on all
    cores, and our Morison drag through ``xfrc_applied`` from Python; printed as ratios.
 
 Prints a markdown report and writes it to ``docs/benchmarks.md`` (``--write`` to change).
@@ -33,6 +35,42 @@ from eelsim.scenario import TRAINING_CORNERS, grid_scenario, load_scenario
 GA_RUNS = 150 * 130 * 4
 GA_STEPS = GA_RUNS * 3000
 
+# Measured during the work on issue 4 (kept here because this command rewrites the report).
+HISTORY = """\
+## History of the kernel (issue 4)
+
+- 2026-11-21, before: dense (N+2) x (N+2) mass matrix + unrolled L D L^T per stage, RK4 sums and
+  checks in the driver, static share of the blocks between threads. `eelbot bench` (load about
+  2): 1.53 M steps/s on 1 thread, 2.23 M on 2, GA 105 s, 12.3 x `mujoco.rollout`. Profile then
+  (CPU time of one thread, machine loaded 1-4, so read the shares): a stage 167 ns per run
+  (4 stages about 70 % of a step; the stage's machine code was half spills and reloads), the
+  driver about 300 ns per step, of which the scalar condition number at control updates
+  (libm sin/cos, dense M, Cholesky, L^-1) about 33 ns and the camera about 40 ns.
+- 2026-11-21, after (this report's figures), in the order they were made, with the stage's cost
+  per run then: O(N) articulated-body recursion instead of the dense M and link velocities by
+  recursion instead of the geometry matrix (167 -> 65 ns); RK4 sums, finiteness and divergence
+  checks inside the generated code; the condition-number bound vectorised across lanes (exact
+  value only near the threshold; the updates' cost fell from about 33 to 2 ns per step); the
+  stage split into three lane loops (angles / backward sweep / forward sweep and RK4 sums) so that
+  fewer values cross (spill instructions 750 -> 510, little change in time); sin and cos of
+  stages 2-4 by rotating stage 1's (angle addition with a short series, full sin/cos again
+  whenever some live lane's offset reaches 0.1 rad); blocks handed to threads one at a time
+  (numba chunk size 1), which matters on a shared machine; one call site of the stage in the
+  driver (a loop over the four stages): LLVM inlines the stage, and four call sites had made the
+  cold compile 67 s. One thread went from about 670 to about 330 ns per step (A/B in
+  alternation, same load); on a quiet moment 1.44 -> 2.95 M steps/s on 1 thread and
+  2.84 -> about 5.7 M on 2.
+- Tried and dropped: two lanes groups interleaved by hand in the backward sweep (LLVM then stopped
+  vectorising: 2.5 x slower); 32 lanes instead of 16 (no measurable difference); a branchless
+  rank-based median for the camera filter instead of the insertion sort (slower: 72 against
+  44 ns per step). Not tried:
+  fastmath beyond contraction (reassociation would undo the Cody-Waite reduction of the own sin).
+- What is left: the backward sweep (about half the stage) is one long dependent chain per lane
+  group (a division and several multiply-adds per link), so it is latency- rather than
+  throughput-bound; the camera (median filter per lane, scalar) and the per-lane driver are about
+  a quarter of a step.
+"""
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register the subcommand."""
@@ -43,15 +81,24 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "write docs/benchmarks.md. Run it on a quiet machine.",
     )
     add_robot_options(p)
-    p.add_argument("--runs", type=int, default=600, help="runs in the batch (600: one GA generation)")
+    p.add_argument(
+        "--runs", type=int, default=600, help="runs in the batch (600: one GA generation)"
+    )
     p.add_argument("--steps", type=int, default=3000, help="RK4 steps per run (3000)")
     p.add_argument("--threads", type=int, default=None, help="threads for 'all cores' (nproc)")
     p.add_argument("--no-mujoco", action="store_true", help="skip the MuJoCo comparison")
-    p.add_argument("--no-cold-compile", action="store_true",
-                   help="skip the cold-compile measurement (it takes about a minute)")
+    p.add_argument(
+        "--no-cold-compile",
+        action="store_true",
+        help="skip the cold-compile measurement (it takes about a minute)",
+    )
     p.add_argument("--note", default="", help="a remark for the report (e.g. other load)")
-    p.add_argument("--write", default="docs/benchmarks.md", metavar="FILE",
-                   help="markdown file to write ('' to skip)")
+    p.add_argument(
+        "--write",
+        default="docs/benchmarks.md",
+        metavar="FILE",
+        help="markdown file to write ('' to skip)",
+    )
     p.set_defaults(run=run)
 
 
@@ -70,8 +117,9 @@ def _simd_flags() -> str:
         text = Path("/proc/cpuinfo").read_text()
     except OSError:
         return "unknown"
-    flags = next((ln.split(":", 1)[1].split() for ln in text.splitlines()
-                  if ln.startswith("flags")), [])
+    flags = next(
+        (ln.split(":", 1)[1].split() for ln in text.splitlines() if ln.startswith("flags")), []
+    )
     wanted = ("avx", "avx2", "fma", "avx512f")
     return " ".join(f for f in wanted if f in flags) or "none of avx/avx2/fma/avx512f"
 
@@ -89,8 +137,9 @@ def _warm_up_in_subprocess(cache_dir: str | None) -> float:
     if cache_dir is not None:
         env["EELSIM_KERNEL_CACHE"] = cache_dir
     code = "from eelsim.batch import warm_up; print(warm_up())"
-    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
-                         check=True)
+    out = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
+    )
     return float(out.stdout.strip().splitlines()[-1])
 
 
@@ -117,8 +166,10 @@ def run(args: argparse.Namespace) -> int:
     say("## Machine")
     say()
     say(f"- CPU: {_cpu_model()}; {os.cpu_count()} logical cores (nproc); SIMD: {_simd_flags()}")
-    say(f"- Python {platform.python_version()}, numpy {np.__version__}, numba {numba.__version__}"
-        f" (threading layer: {numba.config.THREADING_LAYER}, reported again after the runs)")
+    say(
+        f"- Python {platform.python_version()}, numpy {np.__version__}, numba {numba.__version__}"
+        f" (threading layer: {numba.config.THREADING_LAYER}, reported again after the runs)"
+    )
     say(f"- load average before the benchmark: {load_before}")
     if args.note:
         say(f"- note: {args.note}")
@@ -156,21 +207,28 @@ def run(args: argparse.Namespace) -> int:
     say(f"| reference `simulate_closed_loop` (5 s) | {5.0 / ref_wall:,.1f} |")
     say()
     lanes = batch.DEFAULT_LANES
-    say(f"A single run occupies one block of {lanes} lanes, so it runs at 1/{lanes} of the "
-        "batch rate.")
+    say(
+        f"A single run occupies one block of {lanes} lanes, so it runs at 1/{lanes} of the "
+        "batch rate."
+    )
     say()
 
     # 3. a GA generation
     say(f"## 2. One GA generation: {args.runs} runs x {args.steps} steps")
     say()
-    corners = [grid_scenario("straight", a, w).model_copy(
-        update={"duration_s": args.steps * opts.timing.dt_s}) for a, w in TRAINING_CORNERS]
+    corners = [
+        grid_scenario("straight", a, w).model_copy(
+            update={"duration_s": args.steps * opts.timing.dt_s}
+        )
+        for a, w in TRAINING_CORNERS
+    ]
     rng = np.random.default_rng(0)
     base = coeffs.as_array()
     candidates = base * rng.uniform(0.5, 1.5, size=(args.runs, 4))
     start = time.perf_counter()
-    spec = batch.BatchSpec.build(robot, [corners[i % 4] for i in range(args.runs)], candidates,
-                                 opts, 0)
+    spec = batch.BatchSpec.build(
+        robot, [corners[i % 4] for i in range(args.runs)], candidates, opts, 0
+    )
     prep = time.perf_counter() - start
     rates = {}
     for n_threads in sorted({1, threads}):
@@ -188,15 +246,26 @@ def run(args: argparse.Namespace) -> int:
         say(f"| {n_threads} | {rate / 1e6:.2f} million | {n_threads / rate * 1e9:.0f} ns |")
     say()
     ga = GA_STEPS / rates[threads]
-    say(f"- implied time of the paper's whole GA for one motion type (150 x 130 x 4 = {GA_RUNS:,}"
-        f" runs, {GA_STEPS:.3g} steps) on {threads} threads: **{ga:.0f} s**")
-    say(f"- preparing the batch in Python (BatchSpec.build): {prep * 1e3:.0f} ms; "
-        f"runs flagged ill-conditioned or self-colliding: {flagged} of {args.runs}")
+    say(
+        f"- implied time of the paper's whole GA for one motion type (150 x 130 x 4 = {GA_RUNS:,}"
+        f" runs, {GA_STEPS:.3g} steps) on {threads} threads: **{ga:.0f} s**"
+    )
+    say(
+        f"- preparing the batch in Python (BatchSpec.build): {prep * 1e3:.0f} ms; "
+        f"runs flagged ill-conditioned or self-colliding: {flagged} of {args.runs}"
+    )
     say("- target of issue 4: 10 million steps/s on 2 cores (GA under 30 s)")
     say()
 
-    # 4. MuJoCo
-    say("## 3. The same robot in MuJoCo")
+    # 4. profile
+    say("## 3. Where the time of a step goes (one thread)")
+    say()
+    for text in _profile(batch, spec, opts):
+        say(text)
+    say()
+
+    # 5. MuJoCo
+    say("## 4. The same robot in MuJoCo")
     say()
     mj_rate = None
     if args.no_mujoco:
@@ -214,26 +283,158 @@ def run(args: argparse.Namespace) -> int:
             roll = bench_mujoco.rollout_speed(robot, args.runs, args.steps, threads)
             mj_rate = roll.steps_per_s
             xf = bench_mujoco.morison_xfrc_speed(robot, coeffs, 2, args.steps)
-            say(f"mujoco {mujoco.__version__}; ellipsoid fluid model, implicitfast, dt = "
-                f"{opts.timing.dt_s} s, PD as position actuator + joint damping; open-loop gait.")
+            say(
+                f"mujoco {mujoco.__version__}; ellipsoid fluid model, implicitfast, dt = "
+                f"{opts.timing.dt_s} s, PD as position actuator + joint damping; open-loop gait."
+            )
             say()
             say("| path | steps per second | our batched kernel is |")
             say("|---|---|---|")
-            say(f"| `mujoco.rollout`, {args.runs} x {args.steps}, {threads} threads | "
-                f"{mj_rate / 1e6:.3f} million | {rates[threads] / mj_rate:.1f} x faster |")
-            say(f"| Morison drag via `xfrc_applied` from Python, 2 x {args.steps}, 1 thread | "
+            say(
+                f"| `mujoco.rollout`, {args.runs} x {args.steps}, {threads} threads | "
+                f"{mj_rate / 1e6:.3f} million | {rates[threads] / mj_rate:.1f} x faster |"
+            )
+            say(
+                f"| Morison drag via `xfrc_applied` from Python, 2 x {args.steps}, 1 thread | "
                 f"{xf.steps_per_s / 1e6:.4f} million | {rates[1] / xf.steps_per_s:.0f} x faster "
-                "(vs our 1 thread) |")
+                "(vs our 1 thread) |"
+            )
             say()
             say("- target of issue 4: at least 15 x MuJoCo's fastest batched path")
     say()
-    say(f"- load average after the benchmark: {_load()}; numba threading layer used: "
-        f"{numba.threading_layer()}")
+    say(
+        f"- load average after the benchmark: {_load()}; numba threading layer used: "
+        f"{numba.threading_layer()}"
+    )
     say()
-    say("Figures are wall-clock best-of-two; other processes running at the same time slow "
-        "them down (see the load averages above and the note).")
+    say(
+        "Figures are wall-clock best-of-two; other processes running at the same time slow "
+        "them down (see the load averages above and the note)."
+    )
+    say()
+    say(HISTORY.rstrip())
     if args.write:
         Path(args.write).parent.mkdir(parents=True, exist_ok=True)
         Path(args.write).write_text("\n".join(lines) + "\n")
         print(f"wrote {args.write}")
     return 0
+
+
+def _profile(batch, spec, opts: LoopOptions) -> list[str]:
+    """Per-step cost of the kernel's parts on one thread, as markdown lines.
+
+    The generated functions are timed alone on one block whose lanes hold the batch's first runs
+    at random states (their cost does not depend on the values); the camera's share is the
+    difference with the same batch run with the camera off (one frame only); the driver's
+    (control updates, checks, commit, block set-up) is what is left of a step.
+
+    Parameters
+    ----------
+    batch : module
+        ``eelsim.batch``.
+    spec : BatchSpec
+        The GA generation of section 2.
+    opts : LoopOptions
+        Its loop options.
+
+    Returns
+    -------
+    list of str
+    """
+    import dataclasses
+
+    import numba
+
+    from eelsim.camera import CameraModel
+
+    n = spec.n_links
+    lanes = batch.DEFAULT_LANES
+    k = batch.kernel_module(n, lanes)
+    work = np.zeros(k.WORK_ROWS * lanes)
+    out = np.zeros(k.OUT_ROWS * lanes)
+    rng = np.random.default_rng(1)
+    for r in range(lanes):
+        run = r % spec.n_runs
+        for p in range(spec.params.shape[1]):
+            work[(k.W_GEOMETRY + p) * lanes + r] = spec.params[run, p]
+        x = np.concatenate([rng.normal(0, 0.3, n), [0.5, 0.1], rng.normal(0, 1.0, n), [0.1, 0.0]])
+        for row in range(2 * n + 4):
+            work[(k.W_X + row) * lanes + r] = x[row]
+            work[(k.W_Y + row) * lanes + r] = x[row]
+    stage, screen, cond_bound = k._stage, k._screen, k._cond_bound
+
+    @numba.njit
+    def _stages(work, out, count):  # pragma: no cover - compiled
+        # stage 1: angles in full (the state does not move: a = 0)
+        for i in range(count):
+            stage(work, out, i * 1e-3, 0.0, 1.0, True, 1e-3, False, False)
+
+    @numba.njit
+    def _rotated(work, out, count):  # pragma: no cover - compiled
+        # stages 2-4: angles by rotating stage 1's
+        for i in range(count):
+            stage(work, out, i * 1e-3, 0.0, 1.0, False, 1e-3, True, False)
+
+    @numba.njit
+    def _screens(work, out, count):  # pragma: no cover - compiled
+        for _ in range(count):
+            screen(work, out)
+
+    @numba.njit
+    def _bounds(work, out, count):  # pragma: no cover - compiled
+        for _ in range(count):
+            cond_bound(work, out)
+
+    def per_lane(fn, count: int) -> float:
+        fn(work, out, 10)  # compile
+        best = np.inf
+        for _ in range(3):
+            start = time.perf_counter()
+            fn(work, out, count)
+            best = min(best, time.perf_counter() - start)
+        return best / count / lanes * 1e9
+
+    t_stage = per_lane(_stages, 20000)
+    t_rotated = per_lane(_rotated, 20000)
+    t_screen = per_lane(_screens, 20000)
+    t_bound = per_lane(_bounds, 5000)
+    period = max(1, opts.timing.period_steps)
+    no_cam = dataclasses.replace(spec, options=dataclasses.replace(
+        opts, camera=CameraModel(fps=1e-6)))
+    no_cam = dataclasses.replace(no_cam, frame_step=spec.frame_step[:1],
+                                 frame_fraction=spec.frame_fraction[:1],
+                                 frame_time_s=spec.frame_time_s[:1])
+    # with and without the camera, interleaved (best of three each) so that both see the same
+    # background load
+    best = {True: np.inf, False: np.inf}
+    for _ in range(3):
+        for camera in (True, False):
+            start = time.perf_counter()
+            res = batch.run_spec(spec if camera else no_cam, threads=1)
+            wall = time.perf_counter() - start
+            best[camera] = min(best[camera], wall / float(res.final_step.sum()) * 1e9)
+    step, step_no_cam = best[True], best[False]
+    stages = t_stage + 3 * t_rotated
+    bound = t_bound / period
+    rest = step_no_cam - stages - t_screen - bound
+    rows = [
+        ("4 RK4 stages (generated; sin/cos, gait and PD, forces, O(N) recursion, RK4 sums)",
+         stages),
+        ("collision screen and finiteness/divergence checks of x (generated)", t_screen),
+        (f"condition-number bound, once per control period ({period} steps; generated)", bound),
+        ("camera frames (Hermite pose, pixels, median filter, waypoints; per lane)",
+         step - step_no_cam),
+        ("driver: control updates, checks, commit, block set-up (per lane)", rest),
+    ]
+    lines = ["| part | ns per run and step | share |", "|---|---|---|"]
+    for name, value in rows:
+        lines.append(f"| {name} | {value:.0f} | {value / step:.0%} |")
+    lines.append(f"| whole step (measured here, one thread) | {step:.0f} | 100% |")
+    lines.append("")
+    lines.append(
+        f"Stage 1 (sin and cos in full) costs {t_stage:.0f} ns per run, stages 2-4 (rotated sin "
+        f"and cos) {t_rotated:.0f} ns; the condition-number bound {t_bound:.0f} ns per run when it "
+        "is computed. The parts are timed separately (wall clock, best of three), so they need "
+        "not add up exactly; on a loaded machine they scatter."
+    )
+    return lines
