@@ -186,10 +186,11 @@ def run(args: argparse.Namespace) -> int:
     lines += [
         "## Reading these figures",
         "",
-        "- The fitness compares the twin as the recording's camera would have seen it (same frames, "
-        "pixels, median filter), so on the clean tank the truth scores zero and a recovery error is the "
-        "optimiser's; on the noisy tanks, a fit scoring below the truth's fitness means the noise has moved "
-        "the optimum away from the truth, and no optimiser can do better from that data.",
+        "- The fitness compares the twin as the recording's camera would have seen it (the same frames "
+        "and median filter; pixel rounding is left out because it would make the objective piecewise "
+        "constant), so what separates the truth from zero is the recording's own pixel noise and, on the "
+        "noisy tanks, the clock offsets and control jitter. A fit scoring below the truth's fitness means "
+        "that noise has moved the optimum away from the truth: no optimiser can do better from that data.",
         "- The best-clock-offset column removes the time stamps' +-0.1 s uncertainty from the comparison; "
         "the recorded-clock column is the paper's E_x.",
         "- C_m is not identified by these experiments (see the report's identifiability section), so its "
