@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from eelhost.commands.common import add_robot_options, robot_and_coefficients
+from eelhost.commands.common import add_robot_options, cpu_model, robot_and_coefficients
 from eelsim.closed_loop import LoopOptions, simulate_closed_loop
 from eelsim.scenario import TRAINING_CORNERS, grid_scenario, load_scenario
 
@@ -102,16 +102,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(run=run)
 
 
-def _cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown CPU"
-
-
 def _simd_flags() -> str:
     try:
         text = Path("/proc/cpuinfo").read_text()
@@ -165,7 +155,7 @@ def run(args: argparse.Namespace) -> int:
     say()
     say("## Machine")
     say()
-    say(f"- CPU: {_cpu_model()}; {os.cpu_count()} logical cores (nproc); SIMD: {_simd_flags()}")
+    say(f"- CPU: {cpu_model()}; {os.cpu_count()} logical cores (nproc); SIMD: {_simd_flags()}")
     say(
         f"- Python {platform.python_version()}, numpy {np.__version__}, numba {numba.__version__}"
         f" (threading layer: {numba.config.THREADING_LAYER}, reported again after the runs)"

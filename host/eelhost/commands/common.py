@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import platform
+from pathlib import Path
 
 from eelsim.camera import CameraModel
 from eelsim.closed_loop import LoopOptions
@@ -73,4 +75,65 @@ def loop_options(args: argparse.Namespace, stop_at_goal: bool = True) -> LoopOpt
         camera=CameraModel(args.fps, args.pixel, args.median),
         servo_limits=args.servo_limits,
         stop_at_goal=stop_at_goal,
+    )
+
+
+def cpu_model() -> str:
+    """The CPU's model name (from /proc/cpuinfo), for the provenance of benchmark figures."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine() or "unknown CPU"
+
+
+# The repository's bundled virtual-tank dataset (this file is host/eelhost/commands/common.py).
+BUNDLED_DATASET = Path(__file__).resolve().parents[3] / "datasets" / "paper_virtual_tank"
+
+
+def add_fit_options(p: argparse.ArgumentParser) -> None:
+    """Options of a coefficient fit (method, budgets, backend, clock offsets, resume)."""
+    from eelhost.estimation.pipeline import METHODS
+
+    g = p.add_argument_group("fitting")
+    g.add_argument(
+        "--method",
+        choices=METHODS,
+        default="cmaes",
+        help="cmaes (+ least-squares polish; default), ga (the paper's), lsq (polish only)",
+    )
+    g.add_argument("--seed", type=int, default=0)
+    g.add_argument(
+        "--budget", type=int, default=1500, help="CMA-ES candidates per fit at most (1500)"
+    )
+    g.add_argument("--pop-size", type=int, default=150, help="GA population (150)")
+    g.add_argument("--generations", type=int, default=130, help="GA generations (130)")
+    g.add_argument("--backend", choices=["auto", "batch", "reference"], default="auto")
+    g.add_argument(
+        "--align",
+        type=float,
+        default=0.0,
+        metavar="SECONDS",
+        help="while fitting, search each recording's clock offset within +-SECONDS "
+        "(default 0: the paper's protocol; with few experiments the offsets absorb model error)",
+    )
+    g.add_argument(
+        "--resume", action="store_true", help="continue interrupted fits from their checkpoints"
+    )
+
+
+def fit_settings(args: argparse.Namespace):
+    """The :class:`~eelhost.estimation.pipeline.FitSettings` chosen on the command line."""
+    from eelhost.estimation.pipeline import FitSettings
+
+    return FitSettings(
+        args.method,
+        args.seed,
+        args.budget,
+        args.pop_size,
+        args.generations,
+        backend=args.backend,
+        align_s=args.align,
     )

@@ -7,7 +7,8 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from eelhost.estimation.pipeline import METHODS, FitSettings, fit_motion, write_coefficients
+from eelhost.commands.common import add_fit_options, fit_settings
+from eelhost.estimation.pipeline import fit_motion, write_coefficients
 from eelhost.experiment import load_dataset
 
 
@@ -27,45 +28,18 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="separate straight and turning fits (both, the paper's), one of them, or "
         "one joint set for the robot",
     )
-    p.add_argument(
-        "--method",
-        choices=METHODS,
-        default="cmaes",
-        help="cmaes (+ least-squares polish; default), ga (the paper's), lsq (polish only)",
-    )
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--budget", type=int, default=1500, help="CMA-ES candidates at most (default 1500)")
-    p.add_argument("--pop-size", type=int, default=150, help="GA population (150)")
-    p.add_argument("--generations", type=int, default=130, help="GA generations (130)")
-    p.add_argument("--backend", choices=["auto", "batch", "reference"], default="auto")
-    p.add_argument(
-        "--align",
-        type=float,
-        default=0.0,
-        metavar="SECONDS",
-        help="while fitting, search each recording's clock offset within +-SECONDS (default 0: "
-        "the paper's protocol; with few experiments the offsets absorb model error)",
-    )
     p.add_argument("--scheduler", metavar="ADDRESS", help="spread evaluation over a Dask cluster")
     p.add_argument(
         "--out", default="out/estimate", help="folder for coefficients.json and checkpoints"
     )
-    p.add_argument("--resume", action="store_true", help="continue from the checkpoint in --out")
+    add_fit_options(p)
     p.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
     dataset = load_dataset(args.dataset)
-    settings = FitSettings(
-        args.method,
-        args.seed,
-        args.budget,
-        args.pop_size,
-        args.generations,
-        backend=args.backend,
-        align_s=args.align,
-    )
+    settings = fit_settings(args)
     motions = ("straight", "turning") if args.motion == "both" else (args.motion,)
     map_function = None
     if args.scheduler:

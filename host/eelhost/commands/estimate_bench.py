@@ -18,10 +18,10 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import time
 from pathlib import Path
 
+from eelhost.commands.common import BUNDLED_DATASET, cpu_model
 from eelhost.estimation.optimise import NAMES, FitResult
 from eelhost.estimation.pipeline import FitSettings, fit_motion
 from eelhost.estimation.validate import validate
@@ -29,7 +29,6 @@ from eelhost.experiment import Dataset, load_dataset
 from eelhost.virtual_tank import TABLE3, TankSettings, generate_dataset
 
 PAPER_WORST_EX = {"straight": 0.082, "turning": 0.183}
-BUNDLED = Path(__file__).resolve().parents[3] / "datasets" / "paper_virtual_tank"
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -112,7 +111,7 @@ def run(args: argparse.Namespace) -> int:
     lines = [
         "# Estimation benchmarks",
         "",
-        f"Measured with `eelbot estimate-bench` on {platform.processor() or platform.machine()}, "
+        f"Measured with `eelbot estimate-bench` on {cpu_model()}, "
         f"{os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f} at the start. Truth: the "
         "paper's table 3 (straight row for straight experiments, turning row for turning ones). "
         "Default method: CMA-ES (at most 1500 candidates) + least-squares polish, the paper's fitness "
@@ -135,7 +134,7 @@ def run(args: argparse.Namespace) -> int:
     ]
     results = {}
     for key, label, tank in cases:
-        ds = load_dataset(BUNDLED) if tank is None else _tank(work, key, tank, args.seed)
+        ds = load_dataset(BUNDLED_DATASET) if tank is None else _tank(work, key, tank, args.seed)
         print(f"fitting the {label} ...", flush=True)
         results[key] = r = _fit_and_validate(ds, settings)
         lines += [
@@ -159,7 +158,7 @@ def run(args: argparse.Namespace) -> int:
         lines.append("")
         print("\n".join(lines[-8:]), flush=True)
     if not args.skip_ga:
-        ds = load_dataset(BUNDLED)
+        ds = load_dataset(BUNDLED_DATASET)
         lines += [
             "## The paper's GA against the default method (bundled dataset)",
             "",

@@ -17,7 +17,7 @@ import statistics
 import time
 from pathlib import Path
 
-from eelhost.commands.common import add_robot_options, robot_and_coefficients
+from eelhost.commands.common import add_robot_options, cpu_model, robot_and_coefficients
 from eelhost.planning.execute import execute_plan
 from eelhost.planning.primitives import default_cache_dir, load_or_build
 from eelhost.planning.search import plan_path
@@ -159,14 +159,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _write_bench(path: Path, world, lib, plan, execution, times, figure) -> None:
-    cpu = platform.processor() or platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
+    cpu = cpu_model()
     d = lib.discretisation
     ex = "not executed" if execution is None else execution.message
     lines = [

@@ -7,13 +7,10 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from eelhost.estimation.pipeline import METHODS, FitSettings
+from eelhost.commands.common import BUNDLED_DATASET, add_fit_options, fit_settings
 from eelhost.estimation.report import run_report
 from eelhost.experiment import load_dataset
 from eelhost.virtual_tank import generate_dataset
-
-# The repository's datasets/ folder (this file is host/eelhost/commands/report.py).
-BUNDLED_DATASET = Path(__file__).resolve().parents[3] / "datasets" / "paper_virtual_tank"
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -28,21 +25,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "dataset", nargs="?", help="dataset folder (default: the bundled virtual-tank dataset)"
     )
     p.add_argument("--out", default="out/report", help="report folder")
-    p.add_argument("--method", choices=METHODS, default="cmaes")
     p.add_argument("--joint", action="store_true", help="also fit one joint set for the robot")
-    p.add_argument("--budget", type=int, default=1500, help="CMA-ES candidates per fit at most")
     p.add_argument("--bootstrap", type=int, default=8, help="bootstrap refits per fit (0: none)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--backend", choices=["auto", "batch", "reference"], default="auto")
-    p.add_argument(
-        "--align",
-        type=float,
-        default=0.0,
-        metavar="SECONDS",
-        help="while fitting, search each recording's clock offset within +-SECONDS (default 0: "
-        "the paper's protocol; with few experiments the offsets absorb model error)",
-    )
-    p.add_argument("--resume", action="store_true", help="continue interrupted fits")
+    add_fit_options(p)
     p.set_defaults(run=run)
 
 
@@ -57,9 +42,7 @@ def run(args: argparse.Namespace) -> int:
         generate_dataset(folder, seed=args.seed)
     dataset = load_dataset(folder)
     motions = ("straight", "turning") + (("joint",) if args.joint else ())
-    settings = FitSettings(
-        args.method, args.seed, args.budget, backend=args.backend, align_s=args.align
-    )
+    settings = fit_settings(args)
 
     def factory(motion: str):
         bar = tqdm(unit="gen", desc=f"fit {motion}", leave=False)

@@ -17,6 +17,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from eelhost.commands.common import cpu_model
 from eelhost.vision.localise import REFINE_METHODS, Localiser
 from eelhost.vision.synthetic import RenderOptions, SyntheticCamera, sample_run
 from eelsim.closed_loop import simulate_closed_loop
@@ -150,14 +151,7 @@ def run_benchmark(
 
 def machine_description() -> str:
     """CPU model, Python and OpenCV versions, for the figures' provenance."""
-    cpu = platform.processor() or platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
+    cpu = cpu_model()
     return (
         f"{cpu}, one core (cv2.setNumThreads(1)); Python {platform.python_version()}, "
         f"OpenCV {cv2.__version__}, {platform.system()} {platform.release()}"
