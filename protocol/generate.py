@@ -334,200 +334,24 @@ def _snake(name: str) -> str:
 
 PY_RUNTIME = '''
 
-def crc16_ccitt_false(data: bytes) -> int:
-    """CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF, no reflection, no final xor).
-
-    Parameters
-    ----------
-    data : bytes
-        The bytes to check.
-
-    Returns
-    -------
-    int
-        The CRC; ``crc16_ccitt_false(b"123456789") == 0x29B1``.
-    """
-    crc = 0xFFFF
-    for byte in data:
-        crc ^= byte << 8
-        for _ in range(8):
-            crc = ((crc << 1) ^ 0x1021) if crc & 0x8000 else (crc << 1)
-            crc &= 0xFFFF
-    return crc
-
-
-def cobs_encode(data: bytes) -> bytes:
-    """Consistent Overhead Byte Stuffing: the result contains no zero byte.
-
-    Parameters
-    ----------
-    data : bytes
-        Any bytes.
-
-    Returns
-    -------
-    bytes
-        The encoded bytes, without the zero delimiter.
-    """
-    out = bytearray()
-    block = bytearray()
-    for byte in data:
-        if byte == 0:
-            out.append(len(block) + 1)
-            out += block
-            block.clear()
-        else:
-            block.append(byte)
-            if len(block) == 254:
-                out.append(255)
-                out += block
-                block.clear()
-    out.append(len(block) + 1)
-    out += block
-    return bytes(out)
-
-
-def cobs_decode(data: bytes) -> bytes:
-    """Invert :func:`cobs_encode`.
-
-    Parameters
-    ----------
-    data : bytes
-        Encoded bytes without the delimiter.
-
-    Returns
-    -------
-    bytes
-        The decoded bytes.
-
-    Raises
-    ------
-    FrameError
-        With kind ``"cobs"`` when the input is not valid COBS.
-    """
-    out = bytearray()
-    i = 0
-    while i < len(data):
-        code = data[i]
-        end = i + code
-        if code == 0 or end > len(data):
-            raise FrameError("cobs", f"bad COBS code {code} at byte {i}")
-        block = data[i + 1 : end]
-        if 0 in block:
-            raise FrameError("cobs", "zero byte inside a COBS block")
-        out += block
-        i = end
-        if code != 255 and i < len(data):
-            out.append(0)
-    return bytes(out)
-
-
-class FrameError(ValueError):
-    """A frame that must be dropped; ``kind`` names the counter it goes to.
-
-    Kinds: ``cobs`` (garbage), ``short`` (truncated), ``oversize``, ``crc``, ``schema``,
-    ``unknown_id``, ``length``.
-    """
-
-    def __init__(self, kind: str, detail: str) -> None:
-        super().__init__(f"{kind}: {detail}")
-        self.kind = kind
+# The framing is hand-written once in eelhost.framing; these bind it to this schema.
 
 
 def encode_frame(message: Message, seq: int) -> bytes:
-    """Build the bytes to send for a message, zero delimiter included.
-
-    Parameters
-    ----------
-    message : Message
-        Any message dataclass of this module.
-    seq : int
-        Sequence number, 0..255.
-
-    Returns
-    -------
-    bytes
-        ``COBS(header | payload | crc)`` followed by the zero delimiter.
-    """
-    if not 0 <= seq <= 255:
-        raise ValueError(f"seq must be in 0..255, got {seq}")
-    body = struct.pack("<HBB", SCHEMA_HASH, message.MSG_ID, seq) + message.pack()
-    body += struct.pack("<H", crc16_ccitt_false(body))
-    return cobs_encode(body) + b"\\x00"
+    """Build the bytes to send for a message (see :func:`eelhost.framing.encode`)."""
+    return _framing.encode(message, seq, SCHEMA_HASH)
 
 
 def decode_frame(encoded: bytes) -> tuple[int, Message]:
-    """Decode one frame (the bytes between two zero delimiters).
-
-    Parameters
-    ----------
-    encoded : bytes
-        The COBS bytes, without the delimiter.
-
-    Returns
-    -------
-    seq : int
-        The frame's sequence number.
-    message : Message
-        The decoded message.
-
-    Raises
-    ------
-    FrameError
-        When the frame must be dropped (see its ``kind``).
-    """
-    if len(encoded) > MAX_FRAME_BYTES - 1:
-        raise FrameError("oversize", f"{len(encoded)} encoded bytes")
-    body = cobs_decode(encoded)
-    if len(body) < HEADER_BYTES + CRC_BYTES:
-        raise FrameError("short", f"{len(body)} bytes")
-    (crc,) = struct.unpack_from("<H", body, len(body) - CRC_BYTES)
-    if crc != crc16_ccitt_false(body[:-CRC_BYTES]):
-        raise FrameError("crc", "CRC mismatch")
-    schema, msg_id, seq = struct.unpack_from("<HBB", body)
-    if schema != SCHEMA_HASH:
-        raise FrameError("schema", f"peer schema 0x{schema:04X}, ours 0x{SCHEMA_HASH:04X}")
-    cls = MESSAGES.get(msg_id)
-    if cls is None:
-        raise FrameError("unknown_id", f"id 0x{msg_id:02X}")
-    payload = body[HEADER_BYTES:-CRC_BYTES]
-    if len(payload) != cls.PAYLOAD_BYTES:
-        raise FrameError("length", f"{cls.__name__} needs {cls.PAYLOAD_BYTES} bytes")
-    return seq, cls.unpack(payload)
+    """Decode the bytes between two zero delimiters (see :func:`eelhost.framing.decode`)."""
+    return _framing.decode(encoded, SCHEMA_HASH, MESSAGES, MAX_FRAME_BYTES)
 
 
-class FrameReader:
-    """Split a byte stream at zero delimiters and decode the frames, counting the bad ones."""
+class FrameReader(_framing.StreamDecoder):
+    """Split a byte stream at zero delimiters and decode this schema's frames, counting bad ones."""
 
     def __init__(self) -> None:
-        self._buf = bytearray()
-        self.bad: dict[str, int] = {}
-
-    def feed(self, data: bytes) -> list[tuple[int, Message]]:
-        """Consume received bytes.
-
-        Parameters
-        ----------
-        data : bytes
-            Bytes as they came from the link.
-
-        Returns
-        -------
-        list of (seq, message)
-            Frames completed by these bytes; bad frames are counted in ``bad`` and skipped.
-        """
-        out = []
-        for byte in data:
-            if byte != 0:
-                self._buf.append(byte)
-                continue
-            if self._buf:
-                try:
-                    out.append(decode_frame(bytes(self._buf)))
-                except FrameError as err:
-                    self.bad[err.kind] = self.bad.get(err.kind, 0) + 1
-                self._buf.clear()
-        return out
+        super().__init__(decode_frame)
 '''
 
 
@@ -569,6 +393,14 @@ def render_python(d: dict) -> str:
         "from dataclasses import dataclass, field",
         "from enum import IntEnum",
         "from typing import ClassVar",
+        "",
+        "from eelhost import framing as _framing",
+        "from eelhost.framing import (  # noqa: F401 (part of this module's interface)",
+        "    FrameError,",
+        "    cobs_decode,",
+        "    cobs_encode,",
+        "    crc16_ccitt_false,",
+        ")",
         "",
         f"SCHEMA_HASH = 0x{d['schema_hash']:04X}",
         f"PROTOCOL_VERSION = {p['version']}",
