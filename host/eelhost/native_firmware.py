@@ -14,6 +14,7 @@ of the twin at a time::
 
 from __future__ import annotations
 
+import re
 import shutil
 import subprocess
 import threading
@@ -28,39 +29,26 @@ from eelhost import protocol
 
 FIRMWARE_DIR = Path(__file__).resolve().parents[2] / "firmware"
 LIBRARY_PATH = FIRMWARE_DIR / "build" / "native" / "libeelfw.so"
-N_JOINTS = 5
-ABI_VERSION = 1
+HEADER_PATH = FIRMWARE_DIR / "hal" / "native" / "eel_native.h"
 
-_CDEF = """
-typedef struct EelFw EelFw;
-typedef struct EelOutputs {
-  float alpha_rad[5];
-  float alpha_dot_rad_s[5];
-  float torque_nm[5];
-  uint16_t pulse_us[5];
-  uint8_t control_ran;
-} EelOutputs;
-typedef struct EelStatus {
-  uint8_t state;
-  float amplitude_rad, beta_rad, offset_rad, phase_rad;
-  float target_amplitude_rad, target_omega_rad_s, target_beta_rad, target_offset_rad;
-  float kp_nm_per_rad, kd_nms_per_rad, torque_limit_nm;
-  uint32_t last_valid_rx_us;
-  uint16_t frames_ok, bad_cobs, bad_short, bad_oversize, bad_crc, bad_schema, bad_unknown_id,
-      bad_length, duplicates, lost, tx_dropped, frames_bad;
-} EelStatus;
-uint32_t eel_abi_version(void);
-uint16_t eel_schema_hash(void);
-EelFw* eel_create(uint32_t now_us);
-void eel_destroy(EelFw* fw);
-void eel_reset(EelFw* fw, uint32_t now_us);
-void eel_set_control_period_us(EelFw* fw, uint32_t period_us);
-size_t eel_feed(EelFw* fw, const uint8_t* data, size_t n);
-size_t eel_take(EelFw* fw, uint8_t* out, size_t cap);
-void eel_tick(EelFw* fw, uint32_t now_us, const float* phi_rad, const float* phi_dot_rad_s,
-              EelOutputs* out);
-void eel_status(const EelFw* fw, EelStatus* out);
-"""
+
+def _cdef_from_header(path: Path) -> tuple[str, int, int]:
+    """The declarations of the C header for cffi, and its EEL_JOINTS and EEL_ABI_VERSION.
+
+    The header is the one description of the ABI: reading it here, rather than keeping a copy,
+    means a changed struct cannot silently disagree with the library.
+    """
+    text = path.read_text()
+    defines = dict(re.findall(r"#define\s+(EEL_\w+)\s+(\d+)", text))
+    body = text.split('extern "C" {', 1)[1].split("#ifdef __cplusplus", 1)[0]
+    body = re.sub(r"/\*.*?\*/", "", body, flags=re.DOTALL)
+    body = "\n".join(line for line in body.splitlines() if not line.lstrip().startswith("#"))
+    for name, value in defines.items():
+        body = re.sub(rf"\b{name}\b", value, body)
+    return body, int(defines["EEL_JOINTS"]), int(defines["EEL_ABI_VERSION"])
+
+
+_CDEF, N_JOINTS, ABI_VERSION = _cdef_from_header(HEADER_PATH)
 
 _ffi = FFI()
 _ffi.cdef(_CDEF)
