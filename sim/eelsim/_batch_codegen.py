@@ -73,6 +73,10 @@ _SCREEN_MARGIN = 1e-6
 # |y - x| (at most dt |theta_dot|, 0.05 rad at 10 rad/s) is below this; the series of _rotate
 # are exact to an ulp up to here.
 _ROTATE_LIMIT = 0.1
+# Stage 1 rotates the previous step's stage-1 angles too (a chain, one rounding of an ulp or so
+# per step); every this many steps it computes sin and cos in full again, so that the chain's
+# rounding stays below 1e-14.
+_RESYNC_STEPS = 16
 
 
 @dataclass(frozen=True)
@@ -135,8 +139,12 @@ def make_layout(n_links: int, lanes: int) -> Layout:
         ("lambda2", n),
         ("lambda3", n),
         ("inertia", n),  # J_i + lambda_1,i
+        ("hm", n),  # h_j (m_j + mu_j)
+        ("dd0", n),  # J_j + lambda_1,j + h_j^2 (m_j + mu_j): D_j of a link with nothing beyond
+        ("four_h2", n),  # (2 h_j)^2
         ("mass_weight", n),  # m_j / sum(m): p is the mass-weighted mean of the link centres
         ("amp", n - 1),  # A_j
+        ("amp_omega", n - 1),  # A_j omega
         ("cos_beta", n - 1),  # cos((j - 1) beta)
         ("sin_beta", n - 1),
         ("omega", 1),
@@ -151,6 +159,7 @@ def make_layout(n_links: int, lanes: int) -> Layout:
         ("half_length", n),
         ("stall", 1),  # servo stall torque (inf when the servo model is off)
         ("inv_no_load", 1),  # 1 / servo no-load speed (0 when off): a multiply, not a division
+        ("stall_slope", 1),  # stall torque / no-load speed (0 when off)
         ("vcx", 1),
         ("vcy", 1),
     ]
@@ -165,18 +174,19 @@ def make_layout(n_links: int, lanes: int) -> Layout:
         # what the stage's three loops pass on (see _stage_body)
         ("gait_sin", 1),
         ("gait_cos", 1),
-        ("sin1", n),  # stage 1's sin and cos of the angles and of the gait phase
-        ("gait_sin1", 1),
+        ("sin1", n),  # the base of the rotations: sin and cos of the angles ang1 and of the
+        ("gait_sin1", 1),  # gait phase, kept by stage 1 (full or itself rotated)
         ("cos1", n),
         ("gait_cos1", 1),
-        ("offset", 1),  # max |y - x| over the angles of the next stage's input
+        ("ang1", n),
+        ("offset", 1),  # max |angle - ang1| of the next stage's input (next step's after stage 4)
         ("head_vx", 1),
         ("head_vy", 1),
         ("kc", n),
-        ("wx", n),
-        ("wy", n),
-        ("rho", n),
-        ("inv", n),
+        ("gx", n),  # w / D: theta_ddot_j = rd_j - g_j . e_j in the forward sweep
+        ("gy", n),
+        ("rd", n),  # rho / D
+        ("qdd", n + 2),  # the accelerations (theta_ddot, p_ddot) handed to the RK4 sums
         ("tail_ex", 1),
         ("tail_ey", 1),
         ("cond_bound", 1),  # trace(M) trace(M^-1) >= cond(M); inf when a pivot is <= 0
@@ -305,7 +315,7 @@ def _stage_body(layout: Layout) -> list[str]:
     e.lines.append("    if rotate:")
     e.loop("1a. angles by rotation of stage 1's", indent=4)
     for i in range(n):
-        line(f"d = {w('y', i)} - {w('x', i)}")
+        line(f"d = {w('y', i)} - {o('ang1', i)}")
         _rotate(e, "d", o("sin1", i), o("cos1", i), f"s{i}", f"c{i}")
         line(f"{o('sin', i)} = s{i}")
         line(f"{o('cos', i)} = c{i}")
@@ -330,16 +340,23 @@ def _stage_body(layout: Layout) -> list[str]:
     line(f"{o('gait_cos')} = cp")
     _head_velocity(e)
     e.indent = 0
-    # keep the step's angles for the rotations of stages 2-4
+    # stage 1's angles (and their sin and cos) become the base of the next rotations: stages
+    # 2-4 of this step and, chained, stage 1 of the next steps until the driver asks for the
+    # full sin and cos again
     lanes = layout.lanes
-    e.lines.append("        if first:")
-    for src_row, dst_row, size in (("sin", "sin1", n), ("cos", "cos1", n),
-                                   ("gait_sin", "gait_sin1", 1), ("gait_cos", "gait_cos1", 1)):
-        e.lines.append(f"            for i in range({size * lanes}):")
+    e.lines.append("    if first:")
+    copies = (("sin", "sin1", n), ("cos", "cos1", n), ("gait_sin", "gait_sin1", 1),
+              ("gait_cos", "gait_cos1", 1))
+    for src_row, dst_row, size in copies:
+        e.lines.append(f"        for i in range({size * lanes}):")
         e.lines.append(
-            f"                out[{layout.out[dst_row] * lanes} + i] = "
+            f"            out[{layout.out[dst_row] * lanes} + i] = "
             f"out[{layout.out[src_row] * lanes} + i]"
         )
+    e.lines.append(f"        for i in range({n * lanes}):")
+    e.lines.append(
+        f"            out[{layout.out['ang1'] * lanes} + i] = work[{layout.work['y'] * lanes} + i]"
+    )
 
     e.loop("2. backward sweep")
     line("# Articulated-body recursion (module docstring): the links beyond joint j push on link")
@@ -365,21 +382,24 @@ def _stage_body(layout: Layout) -> list[str]:
             line(f"sb = {w('sin_beta', jt)}")
             line("lim = " + w("clamp"))
             line("al = min(max(amp * (sp * cb + cp * sb) + gam, -lim), lim)")
-            line(f"ald = amp * {w('omega')} * (cp * cb - sp * sb)")
+            line(f"ald = {w('amp_omega', jt)} * (cp * cb - sp * sb)")
             line(f"phd = om{j} - {w('y', n + 2 + jt)}")
             line(f"uu = {w('kp')} * (al - ({w('y', j)} - {w('y', jt)})) + {w('kd')} * (ald - phd)")
-            # servo torque-speed line; stall = inf and 1/no_load = 0 when the servo model is
-            # off, which leaves the torque unchanged exactly
-            line(f"rr = phd * {w('inv_no_load')}")
+            # servo torque-speed line, |u| <= stall (1 -+ phd / no_load) on either side:
+            # stall = inf and the slope 0 when the servo model is off, which leaves the torque
+            # unchanged exactly
+            line(f"q = phd * {w('stall_slope')}")
             line("stall = " + w("stall"))
-            line(f"u{jt} = min(max(uu, -stall * min(1.0, 1.0 + rr)), stall * min(1.0, 1.0 - rr))")
+            line(f"u{jt} = min(max(uu, max(-stall, -stall - q)), min(stall, stall - q))")
         line(f"m = {w('mass', j)}")
         line(f"mu = {w('mu', j)}")
         line(f"h = {w('half_length', j)}")
-        line(f"hw{j} = h * om{j}")
+        line(f"hw = h * om{j}")
+        line(f"hws{j} = hw * s{j}")
+        line(f"hwc{j} = hw * c{j}")
         if j < n - 1:
-            line(f"lvx = lvx + (hw{j} * s{j} + hw{j + 1} * s{j + 1})")
-            line(f"lvy = lvy - (hw{j} * c{j} + hw{j + 1} * c{j + 1})")
+            line(f"lvx = lvx + (hws{j} + hws{j + 1})")
+            line(f"lvy = lvy - (hwc{j} + hwc{j + 1})")
         line(f"vt = c{j} * lvx + s{j} * lvy")
         line(f"vn = c{j} * lvy - s{j} * lvx")
         line(f"ft = -{w('ct', j)} * (vt + abs(vt) * vt)")
@@ -400,13 +420,13 @@ def _stage_body(layout: Layout) -> list[str]:
         )
         line(f"k = h * (om{j} * om{j})")
         line(f"{o('kc', j)} = k")
-        line("hm = h * (m + mu)")
-        line(f"nf = c{j} * fy - s{j} * fx")
+        line(f"hm = {w('hm', j)}")
+        line("# n . F_j is fn itself")
         if j == n - 1:  # the head: nothing beyond it
             line(f"wx = -hm * s{j}")
             line(f"wy = hm * c{j}")
-            line(f"dd = {w('inertia', j)} + h * hm")
-            line("rho = tq + h * nf")
+            line(f"dd = {w('dd0', j)}")
+            line("rho = tq + h * fn")
         else:
             line(f"anx = c{j} * pxy - s{j} * pxx")  # P n
             line(f"any = c{j} * pyy - s{j} * pxy")
@@ -415,20 +435,19 @@ def _stage_body(layout: Layout) -> list[str]:
             line("hh = h + h")
             line(f"wx = hh * anx - hm * s{j}")
             line(f"wy = hh * any + hm * c{j}")
-            line(f"dd = ({w('inertia', j)} + h * hm) + (hh * hh) * (c{j} * any - s{j} * anx)")
+            line(f"dd = {w('dd0', j)} + {w('four_h2', j)} * (c{j} * any - s{j} * anx)")
             line(
-                f"rho = (tq + h * nf) + hh * ((c{j} * zy - s{j} * zx)"
+                f"rho = (tq + h * fn) + hh * ((c{j} * zy - s{j} * zx)"
                 f" + (k + k) * (c{j} * anx + s{j} * any))"
             )
         line("bad = 1.0 if dd <= 0.0 else bad")
         line("inv = 1.0 / dd")
-        line(f"{o('wx', j)} = wx")
-        line(f"{o('wy', j)} = wy")
-        line(f"{o('rho', j)} = rho")
-        line(f"{o('inv', j)} = inv")
         line("rd = rho * inv")
         line("gx = wx * inv")
         line("gy = wy * inv")
+        line(f"{o('gx', j)} = gx")
+        line(f"{o('gy', j)} = gy")
+        line(f"{o('rd', j)} = rd")
         if j == n - 1:
             line(f"pxx = (m + mu * (s{j} * s{j})) - gx * wx")
             line(f"pxy = -mu * (s{j} * c{j}) - gx * wy")
@@ -452,9 +471,12 @@ def _stage_body(layout: Layout) -> list[str]:
     line(f"{o('tail_ey')} = (pxx * zy - pxy * zx) * idet")
     line(f"{o('bad_pivot')} = bad if first else max({o('bad_pivot')}, bad)")
 
-    e.loop("3. forward sweep and the RK4 sums")
-    line("# tail to head: theta_ddot_j, link centre acceleration a_j = e + d and the next joint")
-    line("# point's e + 2 d, d = h theta_ddot n - k t; p_ddot = sum_j w_j a_j")
+    e.loop("3. forward sweep")
+    line("# tail to head: theta_ddot_j = rd_j - g_j . e_j, link centre acceleration a_j = e + d")
+    line("# and the next joint point's e + 2 d, d = h theta_ddot n - k t; p_ddot = sum_j w_j a_j.")
+    line("# Written so that the chain from one joint point to the next is two multiply-adds for")
+    line("# theta_ddot and one for e (the rest hangs off it): the sweep is a dependent chain,")
+    line("# and its latency, not the arithmetic, had set the loop's pace.")
     line(f"ex = {o('tail_ex')}")
     line(f"ey = {o('tail_ey')}")
     line("pdx = 0.0")
@@ -463,31 +485,40 @@ def _stage_body(layout: Layout) -> list[str]:
         line(f"s = {o('sin', j)}")
         line(f"c = {o('cos', j)}")
         line(f"k = {o('kc', j)}")
-        line(f"x{j} = ({o('rho', j)} - ({o('wx', j)} * ex + {o('wy', j)} * ey)) * {o('inv', j)}")
-        line(f"ht = {w('half_length', j)} * x{j}")
-        line("dx = -(ht * s + k * c)")
-        line("dy = ht * c - k * s")
-        line("ax = ex + dx")
-        line("ay = ey + dy")
-        line(f"pdx = pdx + {w('mass_weight', j)} * ax")
-        line(f"pdy = pdy + {w('mass_weight', j)} * ay")
+        line(f"h = {w('half_length', j)}")
+        line(f"xj = ({o('rd', j)} - {o('gy', j)} * ey) - {o('gx', j)} * ex")
+        line(f"{o('qdd', j)} = xj")
+        line("hs = h * s")
+        line("hc = h * c")
+        line("kc = k * c")
+        line("ks = k * s")
+        line("dx = -(hs * xj + kc)")
+        line("dy = hc * xj - ks")
+        line(f"pdx = pdx + {w('mass_weight', j)} * (ex + dx)")
+        line(f"pdy = pdy + {w('mass_weight', j)} * (ey + dy)")
         if j < n - 1:
-            line("ex = ax + dx")
-            line("ey = ay + dy")
-    line(f"x{n} = pdx")
-    line(f"x{n + 1} = pdy")
-    line("# RK4 bookkeeping of integrate.rk4_step, fused here so that the state rows are")
-    line("# touched once: acc = k1, acc + 2 k2, acc + 2 k3, acc + k4; next stage input")
-    line("# y = x + a k; xn = x + dt/6 acc (meaningful after stage 4 only)")
-    deriv = [w("y", n + 2 + i) for i in range(n + 2)] + [f"x{i}" for i in range(n + 2)]
-    offsets = ", ".join(f"abs(a * {w('y', n + 2 + i)})" for i in range(n))
+            line("ex = (ex - (kc + kc)) - (hs + hs) * xj")
+            line("ey = (ey - (ks + ks)) + (hc + hc) * xj")
+    line(f"{o('qdd', n)} = pdx")
+    line(f"{o('qdd', n + 1)} = pdy")
+    line("# RK4 bookkeeping of integrate.rk4_step, fused so that the state rows are touched once:")
+    line("# stages 1-3: acc = k1, acc + 2 k2, acc + 2 k3 and the next stage's input y = x + a k;")
+    line("# stage 4: the new state xn = x + dt/6 (acc + k4) only")
+    deriv = [w("y", n + 2 + i) for i in range(n + 2)] + [o("qdd", i) for i in range(n + 2)]
+    e.lines.append("    if last:")
+    e.loop("4b. the new state", indent=4)
+    for i, d in enumerate(deriv):
+        line(f"{w('xn', i)} = {w('x', i)} + sixth * ({w('acc', i)} + wk * {d})")
+    offsets = ", ".join(f"abs({w('xn', i)} - {w('x', i)})" for i in range(n))
     line(f"{o('offset')} = max({offsets})")
+    e.lines.append("    else:")
+    e.loop("4a. RK4 accumulator and the next stage's input", indent=4)
     for i, d in enumerate(deriv):
         line(f"d = {d}")
-        line(f"acc = d if first else {w('acc', i)} + wk * d")
-        line(f"{w('acc', i)} = acc")
+        line(f"{w('acc', i)} = d if first else {w('acc', i)} + wk * d")
         line(f"{w('y', i)} = {w('x', i)} + a * d")
-        line(f"{w('xn', i)} = {w('x', i)} + sixth * acc")
+    offsets = ", ".join(f"abs({w('y', i)} - {w('x', i)})" for i in range(n))
+    line(f"{o('offset')} = max({offsets})")
     return e.lines
 
 
@@ -603,10 +634,11 @@ def _cond_body(layout: Layout) -> list[str]:
 def generate_stage_source(layout: Layout) -> str:
     """Source of the generated functions and row constants of the kernel module.
 
-    ``_stage(work, out, t_s, a, wk, first, sixth, rotate, full)``: one RK4 stage for every lane:
-    the right-hand side f(t_s, y), then acc = f (``first``) or acc + wk f, y = x + a f and
-    xn = x + sixth acc; ``rotate``: the angles by rotation of stage 1's (``full``: t_s = t + dt,
-    else t + dt/2). ``_screen(work, out)``: the self-collision screen and the finiteness and
+    ``_stage(work, out, t_s, a, wk, first, last, sixth, rotate, full)``: one RK4 stage for every
+    lane: the right-hand side f(t_s, y), then acc = f (``first``) or acc + wk f and y = x + a f,
+    or for the ``last`` stage xn = x + sixth (acc + wk f); ``rotate``: the angles by rotation of
+    the base that stage 1 kept (rows ang1, sin1, cos1), the gait phase advanced by dt (``full``)
+    or dt/2 from it. ``_screen(work, out)``: the self-collision screen and the finiteness and
     divergence checks of x. ``_check_new(work, out)``: finiteness of xn. ``_cond_bound(work,
     out)``: the condition-number bound at x.
 
@@ -621,7 +653,7 @@ def generate_stage_source(layout: Layout) -> str:
         Python source defining ``_stage``, to be appended to the kernel module's text.
     """
     consts = [f"N_LINKS = {layout.n_links}", f"LANES = {layout.lanes}",
-              f"ROTATE_LIMIT = {_ROTATE_LIMIT!r}",
+              f"ROTATE_LIMIT = {_ROTATE_LIMIT!r}", f"RESYNC_STEPS = {_RESYNC_STEPS}",
               f"WORK_ROWS = {layout.work_rows}", f"OUT_ROWS = {layout.out_rows}"]
     consts += [f"W_{k.upper()} = {v}" for k, v in layout.work.items()]
     consts += [f"O_{k.upper()} = {v}" for k, v in layout.out.items()]
@@ -633,7 +665,7 @@ def generate_stage_source(layout: Layout) -> str:
         "",
         "",
         "@numba.njit(cache=True, fastmath=_FASTMATH, error_model='numpy', boundscheck=False)",
-        "def _stage(work, out, t_s, a, wk, first, sixth, rotate, full):  # noqa: C901",
+        "def _stage(work, out, t_s, a, wk, first, last, sixth, rotate, full):  # noqa: C901",
         '    """One RK4 stage for every lane: the right-hand side at y, then the RK4 sums."""',
     ]
     screen = [

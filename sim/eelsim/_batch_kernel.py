@@ -70,9 +70,10 @@ W_MASS = W_MU = W_INERTIA = 0
 O_BAD_PIVOT = O_SIN = O_COS = O_NEAR = O_X_BAD = O_FASTEST = O_XN_BAD = O_COND_BOUND = 0
 O_OFFSET = 0
 ROTATE_LIMIT = 0.1
+RESYNC_STEPS = 16
 
 
-def _stage(work, out, t_s, a, wk, first, sixth, rotate, full):  # pragma: no cover - replaced
+def _stage(work, out, t_s, a, wk, first, last, sixth, rotate, full):  # pragma: no cover
     raise RuntimeError("eelsim._batch_kernel is a template; use eelsim.batch")
 
 
@@ -108,25 +109,6 @@ def _heading_offset(px, py, heading, wx, wy, k_theta):
     """control.heading_offset: k_theta * wrap(atan2(wy - py, wx - px) - heading)."""
     a = math.atan2(wy - py, wx - px) - heading
     return k_theta * (math.pi - _np_mod(math.pi - a, 2.0 * math.pi))
-
-
-@numba.njit(cache=True)
-def _median_of(values, count, tmp):
-    """np.median of the first ``count`` entries (mean of the middle two if even).
-
-    ``tmp`` is scratch space for the sorted copy: allocating it here, three times a frame, cost
-    more than the sort.
-    """
-    for i in range(count):
-        v = values[i]
-        j = i
-        while j > 0 and tmp[j - 1] > v:
-            tmp[j] = tmp[j - 1]
-            j -= 1
-        tmp[j] = v
-    if count % 2 == 1:
-        return tmp[count // 2]
-    return (tmp[count // 2 - 1] + tmp[count // 2]) / 2.0
 
 
 @numba.njit(cache=True)
@@ -319,43 +301,101 @@ def _distance_left(px, py, waypoints, n_waypoints, target):
 
 
 @numba.njit(cache=True)
-def _observe(r, run, frame, px, py, heading, noise, pixel, window, med, med_count, med_next,
-             last_heading, filtered, target, arrival, waypoints, n_waypoints, radius, frame_time,
-             scratch):
-    """One camera frame for one lane: quantise, add heading noise, median-filter, switch waypoint."""
+def _observe(frame, px, py, heading, alive, run_of, noise, pixel, window, med, med_state,
+             last_heading, filtered, target, arrival, target_x, target_y, lane_radius,
+             lane_waypoints, waypoints, frame_time, rank, total):
+    """One camera frame for every lane of the block, as loops over the lanes that vectorise.
+
+    ``px``, ``py``, ``heading``: the pose each lane's camera sees (lanes that stopped are
+    computed too and ignored). Pixel quantisation, heading noise, unwrapping against the last
+    heading (``camera.MedianFilter``), the moving median over the last ``window`` frames
+    (``med[slot, channel, lane]``; every lane of a block sees the same frames, so the ring's
+    slot and fill, ``med_state``, are the block's) and waypoint switching with arrival.
+
+    The median of ``count`` values is the value of rank (count - 1) // 2 and count // 2 (their
+    mean when count is even), rank i being the number of values that sort before value i with
+    ties broken by slot: the order a stable sort gives, without branches, so that it runs
+    across lanes (a sort per lane mispredicted its branches, and cost three times as much).
+    """
     if pixel > 0.0:
-        px = (np.floor(px / pixel) + 0.5) * pixel
-        py = (np.floor(py / pixel) + 0.5) * pixel
+        for r in range(LANES):
+            px[r] = (np.floor(px[r] / pixel) + 0.5) * pixel
+            py[r] = (np.floor(py[r] / pixel) + 0.5) * pixel
     if noise.shape[1] > 0:
-        heading = heading + noise[run, frame]
-    else:
-        heading = heading + 0.0
-    if med_count[r] > 0:
-        d = heading - last_heading[r]
+        for r in range(LANES):
+            heading[r] = heading[r] + noise[run_of[r], frame]
+    count = med_state[0]
+    if count > 0:
         # MedianFilter unwraps with angle(exp(i d)) = atan2(sin d, cos d); that is d itself for
         # |d| < pi up to an ulp, and frame-to-frame heading changes are far smaller
-        if abs(d) >= 1.0:
-            d = math.atan2(math.sin(d), math.cos(d))
-        heading = last_heading[r] + d
-    last_heading[r] = heading
-    slot = med_next[r]
-    med[r, slot, 0] = px
-    med[r, slot, 1] = py
-    med[r, slot, 2] = heading
-    med_next[r] = (slot + 1) % window
-    if med_count[r] < window:
-        med_count[r] += 1
-    count = med_count[r]
+        widest = 0.0
+        for r in range(LANES):
+            d = heading[r] - last_heading[r]
+            rank[r] = d
+            widest = max(widest, abs(d))
+        if not widest < 1.0:
+            for r in range(LANES):
+                d = rank[r]
+                if abs(d) >= 1.0:
+                    rank[r] = math.atan2(math.sin(d), math.cos(d))
+        for r in range(LANES):
+            heading[r] = last_heading[r] + rank[r]
+    slot = med_state[1]
+    for r in range(LANES):
+        last_heading[r] = heading[r]
+        med[slot, 0, r] = px[r]
+        med[slot, 1, r] = py[r]
+        med[slot, 2, r] = heading[r]
+    med_state[1] = (slot + 1) % window
+    if count < window:
+        count += 1
+        med_state[0] = count
+    lo = float((count - 1) // 2)
+    hi = float(count // 2)
     for ch in range(3):
-        filtered[r, ch] = _median_of(med[r, :, ch], count, scratch)
-    tgt = target[r]
-    if tgt < n_waypoints[run]:
-        dx = filtered[r, 0] - waypoints[run, tgt, 0]
-        dy = filtered[r, 1] - waypoints[run, tgt, 1]
-        if math.sqrt(dx * dx + dy * dy) < radius[run]:
-            target[r] = tgt + 1
-            if tgt + 1 == n_waypoints[run] and np.isnan(arrival[r]):
-                arrival[r] = frame_time
+        for r in range(LANES):
+            total[r] = 0.0
+        for i in range(count):
+            for r in range(LANES):
+                rank[r] = 0.0
+            for j in range(count):
+                if j < i:
+                    for r in range(LANES):
+                        rank[r] += 1.0 if med[j, ch, r] <= med[i, ch, r] else 0.0
+                elif j > i:
+                    for r in range(LANES):
+                        rank[r] += 1.0 if med[j, ch, r] < med[i, ch, r] else 0.0
+            for r in range(LANES):
+                v = med[i, ch, r]
+                total[r] += (v if rank[r] == lo else 0.0) + (v if rank[r] == hi else 0.0)
+        for r in range(LANES):
+            filtered[ch, r] = total[r] * 0.5
+    # waypoint switching: target_x/y hold each lane's current waypoint (NaN after the last)
+    hits = 0
+    for r in range(LANES):
+        dx = filtered[0, r] - target_x[r]
+        dy = filtered[1, r] - target_y[r]
+        hits += (_vsqrt(dx * dx + dy * dy) < lane_radius[r]) & alive[r]
+    if hits > 0:
+        for r in range(LANES):
+            dx = filtered[0, r] - target_x[r]
+            dy = filtered[1, r] - target_y[r]
+            if alive[r] and _vsqrt(dx * dx + dy * dy) < lane_radius[r]:
+                target[r] += 1
+                _aim(r, run_of[r], target, target_x, target_y, lane_waypoints, waypoints)
+                if target[r] == lane_waypoints[r] and np.isnan(arrival[r]):
+                    arrival[r] = frame_time
+
+
+@numba.njit(cache=True)
+def _aim(r, run, target, target_x, target_y, lane_waypoints, waypoints):
+    """Lane r's current waypoint into target_x/y (NaN once the last one is reached)."""
+    if target[r] < lane_waypoints[r]:
+        target_x[r] = waypoints[run, target[r], 0]
+        target_y[r] = waypoints[run, target[r], 1]
+    else:
+        target_x[r] = np.nan
+        target_y[r] = np.nan
 
 
 @numba.njit(cache=True)
@@ -442,12 +482,20 @@ def _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radiu
     pend_value = np.zeros((LANES, pending_size))
     pend_head = np.zeros(LANES, np.int64)
     pend_count = np.zeros(LANES, np.int64)
-    med = np.zeros((LANES, window, 3))
-    med_count = np.zeros(LANES, np.int64)
-    med_next = np.zeros(LANES, np.int64)
+    # the camera's state, lanes innermost (see _observe)
+    med = np.zeros((window, 3, LANES))
+    med_state = np.zeros(2, np.int64)  # frames in the median window, next slot
     last_heading = np.zeros(LANES)
-    filtered = np.zeros((LANES, 3))
-    scratch = np.empty(window)
+    filtered = np.zeros((3, LANES))
+    target_x = np.full(LANES, np.nan)
+    target_y = np.full(LANES, np.nan)
+    lane_radius = np.zeros(LANES)
+    lane_waypoints = np.zeros(LANES, np.int64)
+    seen_x = np.zeros(LANES)
+    seen_y = np.zeros(LANES)
+    seen_heading = np.zeros(LANES)
+    rank = np.zeros(LANES)
+    total = np.zeros(LANES)
     cm = np.empty((n + 2, n + 2))
     clo = np.empty((n + 2, n + 2))
     cinv = np.empty((n + 2, n + 2))
@@ -463,13 +511,14 @@ def _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radiu
             work[(W_GEOMETRY + p) * LANES + r] = params[run_of[r], p]
         for row in range(ns):
             work[(W_X + row) * LANES + r] = x0[run_of[r], row]
-        if alive[r]:
-            p0, p1, h0, _, _, _ = _pose(work, W_X, r, n)
-            filtered[r, 0], filtered[r, 1], filtered[r, 2] = p0, p1, h0
-            # the frame at t = 0 sees the initial pose
-            _observe(r, run_of[r], 0, p0, p1, h0, noise, pixel, window, med, med_count, med_next,
-                     last_heading, filtered, target, arrival, waypoints, n_waypoints, radius,
-                     frame_time[0], scratch)
+        lane_radius[r] = radius[run_of[r]]
+        lane_waypoints[r] = n_waypoints[run_of[r]]
+        _aim(r, run_of[r], target, target_x, target_y, lane_waypoints, waypoints)
+        seen_x[r], seen_y[r], seen_heading[r], _, _, _ = _pose(work, W_X, r, n)
+    # the frame at t = 0 sees the initial pose
+    _observe(0, seen_x, seen_y, seen_heading, alive, run_of, noise, pixel, window, med,
+             med_state, last_heading, filtered, target, arrival, target_x, target_y,
+             lane_radius, lane_waypoints, waypoints, frame_time[0], rank, total)
     frame = 1
     sample = 0
     n_samples = sample_steps.shape[0]
@@ -491,7 +540,7 @@ def _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radiu
             if is_update[r]:
                 next_update[r] = k + 1
                 w = min(target[r], n_waypoints[run] - 1)
-                offset = _heading_offset(filtered[r, 0], filtered[r, 1], filtered[r, 2],
+                offset = _heading_offset(filtered[0, r], filtered[1, r], filtered[2, r],
                                          waypoints[run, w, 0], waypoints[run, w, 1], k_theta[run])
                 slot = (pend_head[r] + pend_count[r]) % pending_size
                 pend_step[r, slot] = step + delay_steps[run]
@@ -527,14 +576,17 @@ def _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radiu
                 # the rows x are contiguous: one flat copy
                 for i in range(ns * LANES):
                     work[W_Y * LANES + i] = work[W_X * LANES + i]
-                t_s, a, wk, rotate = t, half, 1.0, False
+                # stage 1 rotates the previous step's angles (stage 4 left their offset),
+                # with the full sin and cos every RESYNC_STEPS steps (and at step 0)
+                t_s, a, wk = t, half, 1.0
+                rotate = step % RESYNC_STEPS != 0 and _rotates(out, alive)
             elif st == 1:
                 t_s, a, wk, rotate = t + half, half, 2.0, _rotates(out, alive)
             elif st == 2:
                 t_s, a, wk, rotate = t + half, dt, 2.0, _rotates(out, alive)
             else:
                 t_s, a, wk, rotate = t + dt, 0.0, 1.0, _rotates(out, alive)
-            _stage(work, out, t_s, a, wk, st == 0, sixth, rotate, st == 3)
+            _stage(work, out, t_s, a, wk, st == 0, st == 3, sixth, rotate, st == 0 or st == 3)
             if st == 0:
                 _screen(work, out)
                 any_update = False
@@ -604,15 +656,14 @@ def _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radiu
         while frame < n_frames and frame_step[frame] == step:
             s = frame_fraction[frame]
             for r in range(LANES):
-                if not alive[r]:
-                    continue
                 a0, a1, a2, da0, da1, da2 = _pose(work, W_X, r, n)
                 b0, b1, b2, db0, db1, db2 = _pose(work, W_XN, r, n)
-                _observe(r, run_of[r], frame, _hermite(a0, da0, b0, db0, dt, s),
-                         _hermite(a1, da1, b1, db1, dt, s), _hermite(a2, da2, b2, db2, dt, s),
-                         noise, pixel, window, med, med_count, med_next, last_heading, filtered,
-                         target, arrival, waypoints, n_waypoints, radius, frame_time[frame],
-                         scratch)
+                seen_x[r] = _hermite(a0, da0, b0, db0, dt, s)
+                seen_y[r] = _hermite(a1, da1, b1, db1, dt, s)
+                seen_heading[r] = _hermite(a2, da2, b2, db2, dt, s)
+            _observe(frame, seen_x, seen_y, seen_heading, alive, run_of, noise, pixel, window,
+                     med, med_state, last_heading, filtered, target, arrival, target_x, target_y,
+                     lane_radius, lane_waypoints, waypoints, frame_time[frame], rank, total)
             frame += 1
         # 6. lanes still running commit the step (a select, so that the loop vectorises)
         for row in range(ns):

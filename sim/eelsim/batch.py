@@ -544,12 +544,19 @@ def _fill_params(params, layout, rsel, ssel, n, dt) -> None:
     _rows(params, layout, "sm", n)[:] = np.einsum("rj,rji->ri", mass, g)
     _rows(params, layout, "mass_sum", 1)[:, 0] = mass.sum(axis=1)
     _rows(params, layout, "half_length", n)[:] = rsel["half"]
+    _rows(params, layout, "four_h2", n)[:] = (2.0 * rsel["half"]) ** 2
     for name in ("kp", "kd", "limit", "clamp", "stall", "inv_no_load"):
         _rows(params, layout, name, 1)[:, 0] = rsel[name]
+    # stall / no_load, 0 when the servo model is off (stall = inf, 1 / no_load = 0)
+    on = rsel["inv_no_load"] > 0.0
+    slope = np.zeros(len(on))
+    slope[on] = rsel["stall"][on] * rsel["inv_no_load"][on]
+    _rows(params, layout, "stall_slope", 1)[:, 0] = slope
     for name in ("amp", "cos_beta", "sin_beta"):
         _rows(params, layout, name, n - 1)[:] = ssel[name]
     for name in ("omega", "vcx", "vcy"):
         _rows(params, layout, name, 1)[:, 0] = ssel[name]
+    _rows(params, layout, "amp_omega", n - 1)[:] = ssel["amp"] * ssel["omega"][:, None]
     # the gait phase advanced by half a step and by a step (angle addition in stages 2-4)
     omega = ssel["omega"]
     _rows(params, layout, "cos_whalf", 1)[:, 0] = np.cos(omega * 0.5 * dt)
@@ -571,7 +578,13 @@ def _fill_fluid(params, layout, spec: BatchSpec, coeffs: FloatArray) -> None:
     _rows(params, layout, "lambda2", n)[:] = rho * np.pi * c_f * (a + b) * l_**3 / 6.0
     _rows(params, layout, "lambda3", n)[:] = rho * np.pi * c_f * (a + b) * l_**4 / 8.0
     # the diagonal term J_i + lambda_1,i of dynamics.mass_matrix
-    _rows(params, layout, "inertia", n)[:] = spec.yaw_inertia_kg_m2 + lambda_1
+    inertia = spec.yaw_inertia_kg_m2 + lambda_1
+    _rows(params, layout, "inertia", n)[:] = inertia
+    # the articulated-body recursion's per-link constants (eelsim._batch_codegen)
+    mu = _rows(params, layout, "mu", n)
+    hm = l_ * (_rows(params, layout, "mass", n) + mu)
+    _rows(params, layout, "hm", n)[:] = hm
+    _rows(params, layout, "dd0", n)[:] = inertia + l_ * hm
 
 
 # ---------------------------------------------------------------------------------------------

@@ -357,13 +357,13 @@ def _profile(batch, spec, opts: LoopOptions) -> list[str]:
     def _stages(work, out, count):  # pragma: no cover - compiled
         # stage 1: angles in full (the state does not move: a = 0)
         for i in range(count):
-            stage(work, out, i * 1e-3, 0.0, 1.0, True, 1e-3, False, False)
+            stage(work, out, i * 1e-3, 0.0, 1.0, True, False, 1e-3, False, False)
 
     @numba.njit
     def _rotated(work, out, count):  # pragma: no cover - compiled
         # stages 2-4: angles by rotating stage 1's
         for i in range(count):
-            stage(work, out, i * 1e-3, 0.0, 1.0, False, 1e-3, True, False)
+            stage(work, out, i * 1e-3, 0.0, 1.0, False, False, 1e-3, True, False)
 
     @numba.njit
     def _screens(work, out, count):  # pragma: no cover - compiled
