@@ -73,9 +73,9 @@ _SCREEN_MARGIN = 1e-6
 # |y - x| (at most dt |theta_dot|, 0.05 rad at 10 rad/s) is below this; the series of _rotate
 # are exact to an ulp up to here.
 _ROTATE_LIMIT = 0.1
-# Stage 1 rotates the previous step's stage-1 angles too (a chain, one rounding of an ulp or so
-# per step); every this many steps it computes sin and cos in full again, so that the chain's
-# rounding stays below 1e-14.
+# Every stage rotates the previous stage's sin and cos (a chain, a rounding of an ulp or so per
+# stage); every this many steps stage 1 computes them in full again, so that the chain's rounding
+# stays below 1e-14.
 _RESYNC_STEPS = 16
 
 
@@ -165,7 +165,7 @@ def make_layout(n_links: int, lanes: int) -> Layout:
     ]
     sizes_out = [
         ("bad_pivot", 1),  # a pivot of the solve was <= 0 in one of the step's stages
-        ("sin", n),  # sin and cos of the stage-1 angles, for the self-collision screen
+        ("sin", n),  # sin and cos of the last stage's angles (stage 1's for the screen)
         ("cos", n),
         ("near", 1),  # the screen's verdict: joint past its limit or two links close
         ("x_bad", 1),  # x is not finite (NaN when any component is NaN or infinite)
@@ -174,12 +174,8 @@ def make_layout(n_links: int, lanes: int) -> Layout:
         # what the stage's three loops pass on (see _stage_body)
         ("gait_sin", 1),
         ("gait_cos", 1),
-        ("sin1", n),  # the base of the rotations: sin and cos of the angles ang1 and of the
-        ("gait_sin1", 1),  # gait phase, kept by stage 1 (full or itself rotated)
-        ("cos1", n),
-        ("gait_cos1", 1),
-        ("ang1", n),
-        ("offset", 1),  # max |angle - ang1| of the next stage's input (next step's after stage 4)
+        ("ang", n),  # the angles whose sin and cos the rows sin, cos hold (the last stage's)
+        ("offset", 1),  # max |angle - ang| of the next stage's input (next step's after stage 4)
         ("head_vx", 1),
         ("head_vy", 1),
         ("kc", n),
@@ -308,55 +304,49 @@ def _stage_body(layout: Layout) -> list[str]:
     line = e.line
     w, o = e.w, e.o
 
-    line("# ---- 1. angles. Stage 1 computes sin and cos of the link angles and of the gait phase")
-    line("# in full; stages 2-4 rotate those by the stage's offset from x (angle addition, short")
-    line("# series), when the driver has checked that every live lane's offset is below")
-    line(f"# {_ROTATE_LIMIT} rad (else the full path runs again).")
+    line("# ---- 1. angles. sin and cos of the link angles and of the gait phase, either by")
+    line("# rotating the previous stage's (rows ang, sin, cos: angle addition with a short series,")
+    line(f"# when the driver has checked that every live lane moved less than {_ROTATE_LIMIT} rad")
+    line("# since) or in full; both leave the new ones in those rows. The gait phase advances by")
+    line("# half a step in stages 2 and 4 (``advance``) and stays in stages 1 and 3.")
+    line("# The flags choose between whole loops, never inside one: a select per lane on a flag")
+    line("# had cost about 10 ns per run and stage.")
+    lanes = layout.lanes
+    e.lines.append("    if first:")
+    e.lines.append(f"        for i in range({(2 * n + 4) * lanes}):")
+    e.lines.append(f"            work[{layout.work['acc'] * lanes} + i] = 0.0")
+    e.lines.append(f"        for i in range({lanes}):")
+    e.lines.append(f"            out[{layout.out['bad_pivot'] * lanes} + i] = 0.0")
     e.lines.append("    if rotate:")
-    e.loop("1a. angles by rotation of stage 1's", indent=4)
+    e.lines.append("        if advance:")
+    e.loop("1a. the gait phase advanced by half a step", indent=8)
+    line(f"gs = {o('gait_sin')}")
+    line(f"gc = {o('gait_cos')}")
+    line(f"{o('gait_sin')} = gs * {w('cos_whalf')} + gc * {w('sin_whalf')}")
+    line(f"{o('gait_cos')} = gc * {w('cos_whalf')} - gs * {w('sin_whalf')}")
+    e.loop("1a. angles by rotation of the previous ones", indent=4)
     for i in range(n):
-        line(f"d = {w('y', i)} - {o('ang1', i)}")
-        _rotate(e, "d", o("sin1", i), o("cos1", i), f"s{i}", f"c{i}")
+        line(f"y = {w('y', i)}")
+        line(f"d = y - {o('ang', i)}")
+        _rotate(e, "d", o("sin", i), o("cos", i), f"s{i}", f"c{i}")
         line(f"{o('sin', i)} = s{i}")
         line(f"{o('cos', i)} = c{i}")
-    # the gait phase omega t_s = omega t + omega (t_s - t): the step's phase and the lane's
-    # constants cos/sin(omega dt/2) or cos/sin(omega dt)
-    line(f"cw = {w('cos_wdt')} if full else {w('cos_whalf')}")
-    line(f"sw = {w('sin_wdt')} if full else {w('sin_whalf')}")
-    line(f"gs = {o('gait_sin1')}")
-    line(f"gc = {o('gait_cos1')}")
-    line(f"{o('gait_sin')} = gs * cw + gc * sw")
-    line(f"{o('gait_cos')} = gc * cw - gs * sw")
+        line(f"{o('ang', i)} = y")
     _head_velocity(e)
     e.lines.append("    else:")
     e.loop("1b. angles in full", indent=4)
     for i in range(n):
-        e.sincos(w("y", i), f"s{i}", f"c{i}")
+        line(f"y = {w('y', i)}")
+        e.sincos("y", f"s{i}", f"c{i}")
         line(f"{o('sin', i)} = s{i}")
         line(f"{o('cos', i)} = c{i}")
+        line(f"{o('ang', i)} = y")
     # sin(omega t + j beta) by angle addition: one sin/cos per stage instead of N - 1
     e.sincos(f"{w('omega')} * t_s", "sp", "cp")
     line(f"{o('gait_sin')} = sp")
     line(f"{o('gait_cos')} = cp")
     _head_velocity(e)
     e.indent = 0
-    # stage 1's angles (and their sin and cos) become the base of the next rotations: stages
-    # 2-4 of this step and, chained, stage 1 of the next steps until the driver asks for the
-    # full sin and cos again
-    lanes = layout.lanes
-    e.lines.append("    if first:")
-    copies = (("sin", "sin1", n), ("cos", "cos1", n), ("gait_sin", "gait_sin1", 1),
-              ("gait_cos", "gait_cos1", 1))
-    for src_row, dst_row, size in copies:
-        e.lines.append(f"        for i in range({size * lanes}):")
-        e.lines.append(
-            f"            out[{layout.out[dst_row] * lanes} + i] = "
-            f"out[{layout.out[src_row] * lanes} + i]"
-        )
-    e.lines.append(f"        for i in range({n * lanes}):")
-    e.lines.append(
-        f"            out[{layout.out['ang1'] * lanes} + i] = work[{layout.work['y'] * lanes} + i]"
-    )
 
     e.loop("2. backward sweep")
     line("# Articulated-body recursion (module docstring): the links beyond joint j push on link")
@@ -469,7 +459,7 @@ def _stage_body(layout: Layout) -> list[str]:
     line("idet = 1.0 / det")
     line(f"{o('tail_ex')} = (pyy * zx - pxy * zy) * idet")
     line(f"{o('tail_ey')} = (pxx * zy - pxy * zx) * idet")
-    line(f"{o('bad_pivot')} = bad if first else max({o('bad_pivot')}, bad)")
+    line(f"{o('bad_pivot')} = max({o('bad_pivot')}, bad)")
 
     e.loop("3. forward sweep")
     line("# tail to head: theta_ddot_j = rd_j - g_j . e_j, link centre acceleration a_j = e + d")
@@ -509,15 +499,15 @@ def _stage_body(layout: Layout) -> list[str]:
     e.loop("4b. the new state", indent=4)
     for i, d in enumerate(deriv):
         line(f"{w('xn', i)} = {w('x', i)} + sixth * ({w('acc', i)} + wk * {d})")
-    offsets = ", ".join(f"abs({w('xn', i)} - {w('x', i)})" for i in range(n))
+    offsets = ", ".join(f"abs({w('xn', i)} - {o('ang', i)})" for i in range(n))
     line(f"{o('offset')} = max({offsets})")
     e.lines.append("    else:")
     e.loop("4a. RK4 accumulator and the next stage's input", indent=4)
     for i, d in enumerate(deriv):
         line(f"d = {d}")
-        line(f"{w('acc', i)} = d if first else {w('acc', i)} + wk * d")
+        line(f"{w('acc', i)} = {w('acc', i)} + wk * d")
         line(f"{w('y', i)} = {w('x', i)} + a * d")
-    offsets = ", ".join(f"abs({w('y', i)} - {w('x', i)})" for i in range(n))
+    offsets = ", ".join(f"abs({w('y', i)} - {o('ang', i)})" for i in range(n))
     line(f"{o('offset')} = max({offsets})")
     return e.lines
 
@@ -634,11 +624,11 @@ def _cond_body(layout: Layout) -> list[str]:
 def generate_stage_source(layout: Layout) -> str:
     """Source of the generated functions and row constants of the kernel module.
 
-    ``_stage(work, out, t_s, a, wk, first, last, sixth, rotate, full)``: one RK4 stage for every
-    lane: the right-hand side f(t_s, y), then acc = f (``first``) or acc + wk f and y = x + a f,
-    or for the ``last`` stage xn = x + sixth (acc + wk f); ``rotate``: the angles by rotation of
-    the base that stage 1 kept (rows ang1, sin1, cos1), the gait phase advanced by dt (``full``)
-    or dt/2 from it. ``_screen(work, out)``: the self-collision screen and the finiteness and
+    ``_stage(work, out, t_s, a, wk, first, last, sixth, rotate, advance)``: one RK4 stage for
+    every lane: the right-hand side f(t_s, y), then acc = f (``first``) or acc + wk f and
+    y = x + a f, or for the ``last`` stage xn = x + sixth (acc + wk f); ``rotate``: sin and cos
+    of the angles by rotation of the previous stage's (rows ang, sin, cos) and of the gait phase
+    advanced by dt/2 (``advance``) or not, else both in full at t_s. ``_screen(work, out)``: the self-collision screen and the finiteness and
     divergence checks of x. ``_check_new(work, out)``: finiteness of xn. ``_cond_bound(work,
     out)``: the condition-number bound at x.
 
@@ -665,7 +655,7 @@ def generate_stage_source(layout: Layout) -> str:
         "",
         "",
         "@numba.njit(cache=True, fastmath=_FASTMATH, error_model='numpy', boundscheck=False)",
-        "def _stage(work, out, t_s, a, wk, first, last, sixth, rotate, full):  # noqa: C901",
+        "def _stage(work, out, t_s, a, wk, first, last, sixth, rotate, advance):  # noqa: C901",
         '    """One RK4 stage for every lane: the right-hand side at y, then the RK4 sums."""',
     ]
     screen = [

@@ -47,6 +47,7 @@ DIVERGENCE_RATE = 1e3
 FAIL_NONE, FAIL_TOO_SLOW, FAIL_ILL, FAIL_SELF = 0, 1, 2, 3
 REASON_NONE, REASON_TOO_SLOW, REASON_NOT_FINITE, REASON_NOT_PD = 0, 1, 2, 3
 REASON_CONDITION, REASON_JOINT_LIMIT, REASON_LINKS_INTERSECT, REASON_DIVERGED = 4, 5, 6, 7
+NEVER = 2**62  # a step no run reaches
 
 
 @intrinsic
@@ -73,7 +74,7 @@ ROTATE_LIMIT = 0.1
 RESYNC_STEPS = 16
 
 
-def _stage(work, out, t_s, a, wk, first, last, sixth, rotate, full):  # pragma: no cover
+def _stage(work, out, t_s, a, wk, first, last, sixth, rotate, advance):  # pragma: no cover
     raise RuntimeError("eelsim._batch_kernel is a template; use eelsim.batch")
 
 
@@ -482,6 +483,11 @@ def _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radiu
     pend_value = np.zeros((LANES, pending_size))
     pend_head = np.zeros(LANES, np.int64)
     pend_count = np.zeros(LANES, np.int64)
+    # the next step at which each lane updates its control or applies a pending offset (NEVER:
+    # none), and its last step: a vectorised test per step finds the lanes with something to do
+    update_at = np.full(LANES, NEVER, np.int64)
+    pending_at = np.full(LANES, NEVER, np.int64)
+    lane_total = np.zeros(LANES, np.int64)
     # the camera's state, lanes innermost (see _observe)
     med = np.zeros((window, 3, LANES))
     med_state = np.zeros(2, np.int64)  # frames in the median window, next slot
@@ -512,6 +518,9 @@ def _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radiu
         for row in range(ns):
             work[(W_X + row) * LANES + r] = x0[run_of[r], row]
         lane_radius[r] = radius[run_of[r]]
+        lane_total[r] = total_steps[run_of[r]]
+        if update_count[run_of[r]] > 0:
+            update_at[r] = update_steps[run_of[r], 0]
         lane_waypoints[r] = n_waypoints[run_of[r]]
         _aim(r, run_of[r], target, target_x, target_y, lane_waypoints, waypoints)
         seen_x[r], seen_y[r], seen_heading[r], _, _, _ = _pose(work, W_X, r, n)
@@ -529,30 +538,40 @@ def _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radiu
     while True:
         t = step * dt
         # 1. control updates; offsets act after the delay (pending queue, in order)
-        any_alive = False
+        live = 0
+        due = 0
         for r in range(LANES):
-            if not alive[r]:
-                continue
-            any_alive = True
-            run = run_of[r]
-            k = next_update[r]
-            is_update[r] = k < update_count[run] and update_steps[run, k] == step
-            if is_update[r]:
-                next_update[r] = k + 1
-                w = min(target[r], n_waypoints[run] - 1)
-                offset = _heading_offset(filtered[0, r], filtered[1, r], filtered[2, r],
-                                         waypoints[run, w, 0], waypoints[run, w, 1], k_theta[run])
-                slot = (pend_head[r] + pend_count[r]) % pending_size
-                pend_step[r, slot] = step + delay_steps[run]
-                pend_value[r, slot] = offset
-                pend_count[r] += 1
-            while pend_count[r] > 0 and pend_step[r, pend_head[r]] <= step:
-                gamma[r] = pend_value[r, pend_head[r]]
-                pend_head[r] = (pend_head[r] + 1) % pending_size
-                pend_count[r] -= 1
-            work[W_GAMMA * LANES + r] = gamma[r]
-        if not any_alive:
+            is_update[r] = False
+            live += alive[r]
+            due += alive[r] & ((update_at[r] == step) | (pending_at[r] <= step))
+        if live == 0:
             break
+        any_update = False
+        if due > 0:
+            for r in range(LANES):
+                if not alive[r]:
+                    continue
+                run = run_of[r]
+                if update_at[r] == step:
+                    is_update[r] = True
+                    any_update = True
+                    k = next_update[r] + 1
+                    next_update[r] = k
+                    update_at[r] = update_steps[run, k] if k < update_count[run] else NEVER
+                    w = min(target[r], n_waypoints[run] - 1)
+                    offset = _heading_offset(filtered[0, r], filtered[1, r], filtered[2, r],
+                                             waypoints[run, w, 0], waypoints[run, w, 1],
+                                             k_theta[run])
+                    slot = (pend_head[r] + pend_count[r]) % pending_size
+                    pend_step[r, slot] = step + delay_steps[run]
+                    pend_value[r, slot] = offset
+                    pend_count[r] += 1
+                while pend_count[r] > 0 and pend_step[r, pend_head[r]] <= step:
+                    gamma[r] = pend_value[r, pend_head[r]]
+                    pend_head[r] = (pend_head[r] + 1) % pending_size
+                    pend_count[r] -= 1
+                pending_at[r] = pend_step[r, pend_head[r]] if pend_count[r] > 0 else NEVER
+                work[W_GAMMA * LANES + r] = gamma[r]
         # 2. samples (the reference records every step before its checks)
         while sample < n_samples and sample_steps[sample] < step:
             sample += 1
@@ -576,8 +595,8 @@ def _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radiu
                 # the rows x are contiguous: one flat copy
                 for i in range(ns * LANES):
                     work[W_Y * LANES + i] = work[W_X * LANES + i]
-                # stage 1 rotates the previous step's angles (stage 4 left their offset),
-                # with the full sin and cos every RESYNC_STEPS steps (and at step 0)
+                # stage 1 rotates stage 4's angles (which left their offset), with the full
+                # sin and cos every RESYNC_STEPS steps (and at step 0)
                 t_s, a, wk = t, half, 1.0
                 rotate = step % RESYNC_STEPS != 0 and _rotates(out, alive)
             elif st == 1:
@@ -586,15 +605,26 @@ def _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radiu
                 t_s, a, wk, rotate = t + half, dt, 2.0, _rotates(out, alive)
             else:
                 t_s, a, wk, rotate = t + dt, 0.0, 1.0, _rotates(out, alive)
-            _stage(work, out, t_s, a, wk, st == 0, st == 3, sixth, rotate, st == 0 or st == 3)
+            _stage(work, out, t_s, a, wk, st == 0, st == 3, sixth, rotate, st == 1 or st == 3)
             if st == 0:
                 _screen(work, out)
-                any_update = False
-                for r in range(LANES):
-                    any_update = any_update or (alive[r] and is_update[r])
                 if any_update:
                     _cond_bound(work, out)
+                # the lanes that fail a check or stop here (most steps: none), found by a loop
+                # that vectorises; the checks of closed_loop._check below run only for them
+                flagged = 0
                 for r in range(LANES):
+                    bound = out[O_COND_BOUND * LANES + r]
+                    x_bad = out[O_X_BAD * LANES + r]
+                    stops = ((x_bad != x_bad) | (out[O_FASTEST * LANES + r] > DIVERGENCE_RATE)
+                             | (out[O_NEAR * LANES + r] != 0.0) | (step >= lane_total[r])
+                             | (stop_at_goal & (arrival[r] == arrival[r]))
+                             | (is_update[r] & ((bound >= 0.5 * ILL_CONDITION_THRESHOLD)
+                                                | (bound != bound))))
+                    flagged += alive[r] & stops
+                for r in range(LANES):
+                    if flagged == 0:
+                        break
                     if not alive[r]:
                         continue
                     run = run_of[r]
@@ -634,9 +664,16 @@ def _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radiu
                         alive[r] = False
                         final_step[r] = step
         _check_new(work, out)
+        failing = 0
         for r in range(LANES):
-            keep[r] = 0.0
-            if not alive[r]:
+            xn_bad = out[O_XN_BAD * LANES + r]
+            ok = alive[r] & (out[O_BAD_PIVOT * LANES + r] == 0.0) & (xn_bad == xn_bad)
+            keep[r] = 1.0 if ok else 0.0
+            failing += alive[r] & (not ok)
+        for r in range(LANES):
+            if failing == 0:
+                break
+            if not alive[r] or keep[r] != 0.0:
                 continue
             code = REASON_NONE
             if out[O_BAD_PIVOT * LANES + r] > 0.0:
@@ -645,13 +682,10 @@ def _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radiu
             elif np.isnan(out[O_XN_BAD * LANES + r]):
                 code = REASON_NOT_FINITE
                 fail_t[r] = t + dt
-            if code != REASON_NONE:
-                failure[r] = FAIL_ILL
-                reason[r] = code
-                alive[r] = False
-                final_step[r] = step
-            else:
-                keep[r] = 1.0
+            failure[r] = FAIL_ILL
+            reason[r] = code
+            alive[r] = False
+            final_step[r] = step
         # 5. camera frames in (t, t + dt] see the Hermite-interpolated pose
         while frame < n_frames and frame_step[frame] == step:
             s = frame_fraction[frame]

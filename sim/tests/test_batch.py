@@ -268,10 +268,11 @@ def test_vectorised_condition_bound_brackets_numpys_condition_number(robot):
         assert cond * (1 - 1e-9) <= bound <= nq**2 * cond
 
 
-@pytest.mark.parametrize("full_step", [False, True])
-def test_stages_that_rotate_stage_1s_angles_equal_full_sine_and_cosine(robot, full_step):
-    # stages 2-4 get sin/cos of their angles (and of the gait phase) by angle addition from
-    # stage 1's; that must agree with computing them in full
+@pytest.mark.parametrize("advance", [False, True])
+def test_stages_that_rotate_the_previous_angles_equal_full_sine_and_cosine(robot, advance):
+    # a stage gets sin/cos of its angles by angle addition from the previous stage's, and the
+    # gait phase advanced by half a step (stages 2 and 4) or not (1 and 3); that must agree
+    # with computing them in full
     spec = BatchSpec.build(robot, load_scenario("path2"))
     k, work, out, lanes = _lane_block(spec)
     rng = np.random.default_rng(11)
@@ -283,11 +284,13 @@ def test_stages_that_rotate_stage_1s_angles_equal_full_sine_and_cosine(robot, fu
     k._stage(work, out, t, 0.5 * dt, 1.0, True, False, dt / 6.0, False, False)  # stage 1, in full
     ys = xs.copy()
     ys[:, : robot.n_links] += rng.uniform(-0.099, 0.099, (lanes, robot.n_links))
-    step = dt if full_step else 0.5 * dt
+    step = 0.5 * dt if advance else 0.0
     results = []
+    previous = out.copy()
     for rotate in (True, False):
+        out[:] = previous
         _set_rows(k, work, k.W_Y, lanes, ys)
         work[k.W_ACC * lanes : (k.W_ACC + xs.shape[1]) * lanes] = 0.0
-        k._stage(work, out, t + step, 0.0, 1.0, False, False, dt / 6.0, rotate, full_step)
+        k._stage(work, out, t + step, 0.0, 1.0, False, False, dt / 6.0, rotate, advance)
         results.append(work[k.W_ACC * lanes : (k.W_ACC + xs.shape[1]) * lanes].copy())
     assert np.allclose(results[0], results[1], rtol=1e-12, atol=1e-12)

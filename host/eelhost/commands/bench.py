@@ -354,16 +354,13 @@ def _profile(batch, spec, opts: LoopOptions) -> list[str]:
     stage, screen, cond_bound = k._stage, k._screen, k._cond_bound
 
     @numba.njit
-    def _stages(work, out, count):  # pragma: no cover - compiled
-        # stage 1: angles in full (the state does not move: a = 0)
+    def _steps(work, out, count, rotate_first):  # pragma: no cover - compiled
+        # the four stages of a step with the driver's flags (the state does not move: a = 0);
+        # stage 1 rotates stage 4's angles or computes them in full
         for i in range(count):
-            stage(work, out, i * 1e-3, 0.0, 1.0, True, False, 1e-3, False, False)
-
-    @numba.njit
-    def _rotated(work, out, count):  # pragma: no cover - compiled
-        # stages 2-4: angles by rotating stage 1's
-        for i in range(count):
-            stage(work, out, i * 1e-3, 0.0, 1.0, False, False, 1e-3, True, False)
+            for st in range(4):
+                stage(work, out, i * 1e-3, 0.0, 1.0, st == 0, st == 3, 1e-3,
+                      st != 0 or rotate_first, st == 1 or st == 3)
 
     @numba.njit
     def _screens(work, out, count):  # pragma: no cover - compiled
@@ -375,17 +372,18 @@ def _profile(batch, spec, opts: LoopOptions) -> list[str]:
         for _ in range(count):
             cond_bound(work, out)
 
-    def per_lane(fn, count: int) -> float:
-        fn(work, out, 10)  # compile
+    def per_lane(fn, count: int, *extra) -> float:
+        fn(work, out, 10, *extra)  # compile
         best = np.inf
         for _ in range(3):
             start = time.perf_counter()
-            fn(work, out, count)
+            fn(work, out, count, *extra)
             best = min(best, time.perf_counter() - start)
         return best / count / lanes * 1e9
 
-    t_stage = per_lane(_stages, 20000)
-    t_rotated = per_lane(_rotated, 20000)
+    t_rotated = per_lane(_steps, 5000, True)
+    t_full = per_lane(_steps, 5000, False)
+    resync = k.RESYNC_STEPS
     t_screen = per_lane(_screens, 20000)
     t_bound = per_lane(_bounds, 5000)
     period = max(1, opts.timing.period_steps)
@@ -404,7 +402,7 @@ def _profile(batch, spec, opts: LoopOptions) -> list[str]:
             wall = time.perf_counter() - start
             best[camera] = min(best[camera], wall / float(res.final_step.sum()) * 1e9)
     step, step_no_cam = best[True], best[False]
-    stages = t_stage + 3 * t_rotated
+    stages = ((resync - 1) * t_rotated + t_full) / resync
     bound = t_bound / period
     rest = step_no_cam - stages - t_screen - bound
     rows = [
@@ -422,9 +420,10 @@ def _profile(batch, spec, opts: LoopOptions) -> list[str]:
     lines.append(f"| whole step (measured here, one thread) | {step:.0f} | 100% |")
     lines.append("")
     lines.append(
-        f"Stage 1 (sin and cos in full) costs {t_stage:.0f} ns per run, stages 2-4 (rotated sin "
-        f"and cos) {t_rotated:.0f} ns; the condition-number bound {t_bound:.0f} ns per run when it "
-        "is computed. The parts are timed separately (wall clock, best of three), so they need "
-        "not add up exactly; on a loaded machine they scatter."
+        f"The four stages cost {t_rotated:.0f} ns per run when every stage rotates the previous "
+        f"stage's sin and cos, {t_full:.0f} ns when stage 1 computes them in full (one step in "
+        f"{resync}); the condition-number bound {t_bound:.0f} ns per run when it is computed. "
+        "The parts are timed separately (wall clock, best of three), so they need not add up "
+        "exactly; on a loaded machine they scatter."
     )
     return lines
