@@ -211,7 +211,9 @@ class _Emitter:
         return f"work[{(self.layout.work[name] + index) * self.layout.lanes} + r]"
 
     def o(self, name: str, index: int = 0) -> str:
-        return f"out[{(self.layout.out[name] + index) * self.layout.lanes} + r]"
+        """Expression reading ``out`` row ``name[index]`` of lane r (``out`` follows ``work``)."""
+        row = self.layout.work_rows + self.layout.out[name] + index
+        return f"work[{row * self.layout.lanes} + r]"
 
     def line(self, text: str) -> None:
         self.lines.append(" " * (8 + self.indent) + text)
@@ -316,7 +318,9 @@ def _stage_body(layout: Layout) -> list[str]:
     e.lines.append(f"        for i in range({(2 * n + 4) * lanes}):")
     e.lines.append(f"            work[{layout.work['acc'] * lanes} + i] = 0.0")
     e.lines.append(f"        for i in range({lanes}):")
-    e.lines.append(f"            out[{layout.out['bad_pivot'] * lanes} + i] = 0.0")
+    e.lines.append(
+        f"            work[{(layout.work_rows + layout.out['bad_pivot']) * lanes} + i] = 0.0"
+    )
     e.lines.append("    if rotate:")
     e.lines.append("        if advance:")
     e.loop("1a. the gait phase advanced by half a step", indent=8)
@@ -624,13 +628,14 @@ def _cond_body(layout: Layout) -> list[str]:
 def generate_stage_source(layout: Layout) -> str:
     """Source of the generated functions and row constants of the kernel module.
 
-    ``_stage(work, out, t_s, a, wk, first, last, sixth, rotate, advance)``: one RK4 stage for
+    ``work`` is one buffer: the rows of ``work`` and after them those of ``out`` (so that LLVM
+    sees one base and constant distances, and needs no runtime alias checks between the two).
+    ``_stage(work, t_s, a, wk, first, last, sixth, rotate, advance)``: one RK4 stage for
     every lane: the right-hand side f(t_s, y), then acc = f (``first``) or acc + wk f and
     y = x + a f, or for the ``last`` stage xn = x + sixth (acc + wk f); ``rotate``: sin and cos
     of the angles by rotation of the previous stage's (rows ang, sin, cos) and of the gait phase
-    advanced by dt/2 (``advance``) or not, else both in full at t_s. ``_screen(work, out)``: the self-collision screen and the finiteness and
-    divergence checks of x. ``_check_new(work, out)``: finiteness of xn. ``_cond_bound(work,
-    out)``: the condition-number bound at x.
+    advanced by dt/2 (``advance``) or not, else both in full at t_s. ``_screen(work)``: the self-collision screen and the finiteness and
+    divergence checks of x. ``_check_new(work)``: finiteness of xn. ``_cond_bound(work)``: the condition-number bound at x.
 
     Parameters
     ----------
@@ -655,14 +660,14 @@ def generate_stage_source(layout: Layout) -> str:
         "",
         "",
         "@numba.njit(cache=True, fastmath=_FASTMATH, error_model='numpy', boundscheck=False)",
-        "def _stage(work, out, t_s, a, wk, first, last, sixth, rotate, advance):  # noqa: C901",
+        "def _stage(work, t_s, a, wk, first, last, sixth, rotate, advance):  # noqa: C901",
         '    """One RK4 stage for every lane: the right-hand side at y, then the RK4 sums."""',
     ]
     screen = [
         "",
         "",
         "@numba.njit(cache=True, fastmath=_FASTMATH, error_model='numpy', boundscheck=False)",
-        "def _screen(work, out):",
+        "def _screen(work):",
         '    """Flag lanes whose joints are past the limit or whose non-adjacent links are close."""',
         f"    for r in range({layout.lanes}):",
     ]
@@ -670,7 +675,7 @@ def generate_stage_source(layout: Layout) -> str:
         "",
         "",
         "@numba.njit(cache=True, fastmath=_FASTMATH, error_model='numpy', boundscheck=False)",
-        "def _check_new(work, out):",
+        "def _check_new(work):",
         '    """Flag lanes whose new state xn is not finite."""',
         f"    for r in range({layout.lanes}):",
     ]
@@ -678,7 +683,7 @@ def generate_stage_source(layout: Layout) -> str:
         "",
         "",
         "@numba.njit(cache=True, fastmath=_FASTMATH, error_model='numpy', boundscheck=False)",
-        "def _cond_bound(work, out):",
+        "def _cond_bound(work):",
         '    """Upper bound of the mass matrix condition number at x, for every lane."""',
         f"    for r in range({layout.lanes}):",
     ]

@@ -74,19 +74,19 @@ ROTATE_LIMIT = 0.1
 RESYNC_STEPS = 16
 
 
-def _stage(work, out, t_s, a, wk, first, last, sixth, rotate, advance):  # pragma: no cover
+def _stage(work, t_s, a, wk, first, last, sixth, rotate, advance):  # pragma: no cover
     raise RuntimeError("eelsim._batch_kernel is a template; use eelsim.batch")
 
 
-def _screen(work, out):  # pragma: no cover - replaced
+def _screen(work):  # pragma: no cover - replaced
     raise RuntimeError("eelsim._batch_kernel is a template; use eelsim.batch")
 
 
-def _check_new(work, out):  # pragma: no cover - replaced
+def _check_new(work):  # pragma: no cover - replaced
     raise RuntimeError("eelsim._batch_kernel is a template; use eelsim.batch")
 
 
-def _cond_bound(work, out):  # pragma: no cover - replaced
+def _cond_bound(work):  # pragma: no cover - replaced
     raise RuntimeError("eelsim._batch_kernel is a template; use eelsim.batch")
 
 
@@ -461,8 +461,9 @@ def _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radiu
     n_runs = x0.shape[0]
     n_par = params.shape[1]
     first = block * LANES
-    work = np.zeros(WORK_ROWS * LANES)
-    out = np.zeros(OUT_ROWS * LANES)
+    # one buffer: the rows of work, then those of out (the generated code indexes it whole)
+    work = np.zeros((WORK_ROWS + OUT_ROWS) * LANES)
+    out = work[WORK_ROWS * LANES :]
     xs = np.empty(ns)  # one lane's state, for the scalar checks
     keep = np.zeros(LANES)  # 1.0 for lanes that commit the step (alive after all checks)
     run_of = np.empty(LANES, np.int64)
@@ -605,11 +606,11 @@ def _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radiu
                 t_s, a, wk, rotate = t + half, dt, 2.0, _rotates(out, alive)
             else:
                 t_s, a, wk, rotate = t + dt, 0.0, 1.0, _rotates(out, alive)
-            _stage(work, out, t_s, a, wk, st == 0, st == 3, sixth, rotate, st == 1 or st == 3)
+            _stage(work, t_s, a, wk, st == 0, st == 3, sixth, rotate, st == 1 or st == 3)
             if st == 0:
-                _screen(work, out)
+                _screen(work)
                 if any_update:
-                    _cond_bound(work, out)
+                    _cond_bound(work)
                 # the lanes that fail a check or stop here (most steps: none), found by a loop
                 # that vectorises; the checks of closed_loop._check below run only for them
                 flagged = 0
@@ -663,7 +664,7 @@ def _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radiu
                           or step >= total_steps[run]):
                         alive[r] = False
                         final_step[r] = step
-        _check_new(work, out)
+        _check_new(work)
         failing = 0
         for r in range(LANES):
             xn_bad = out[O_XN_BAD * LANES + r]

@@ -201,8 +201,8 @@ def _lane_block(spec, run=0):
 
     k = kernel_module(spec.n_links, DEFAULT_LANES)
     lanes = DEFAULT_LANES
-    work = np.zeros(k.WORK_ROWS * lanes)
-    out = np.zeros(k.OUT_ROWS * lanes)
+    work = np.zeros((k.WORK_ROWS + k.OUT_ROWS) * lanes)  # out's rows follow work's
+    out = work[k.WORK_ROWS * lanes :]
     for p in range(spec.params.shape[1]):
         work[(k.W_GEOMETRY + p) * lanes : (k.W_GEOMETRY + p + 1) * lanes] = spec.params[run, p]
     return k, work, out, lanes
@@ -238,7 +238,7 @@ def test_recursive_accelerations_equal_the_dense_mass_matrix_solve(robot, odd_li
     work[k.W_KD * lanes : (k.W_KD + 1) * lanes] = 0.0
     xs = _random_states(np.random.default_rng(3), robot.n_links, lanes)
     _set_rows(k, work, k.W_Y, lanes, xs)
-    k._stage(work, out, 0.3, 0.005, 1.0, True, False, 0.01 / 6.0, False, False)  # acc = f(y)
+    k._stage(work, 0.3, 0.005, 1.0, True, False, 0.01 / 6.0, False, False)  # acc = f(y)
     model = SwimmerModel.from_robot(robot)
     for r in range(lanes):
         ref = state_derivative(model, xs[r], np.zeros(robot.n_links - 1), scenario.current_m_s)
@@ -258,8 +258,8 @@ def test_vectorised_condition_bound_brackets_numpys_condition_number(robot):
     xs = _random_states(np.random.default_rng(5), robot.n_links, lanes)
     _set_rows(k, work, k.W_X, lanes, xs)
     _set_rows(k, work, k.W_Y, lanes, xs)
-    k._stage(work, out, 0.0, 0.005, 1.0, True, False, 0.01 / 6.0, False, False)  # sin, cos of x
-    k._cond_bound(work, out)
+    k._stage(work, 0.0, 0.005, 1.0, True, False, 0.01 / 6.0, False, False)  # sin, cos of x
+    k._cond_bound(work)
     model = SwimmerModel.from_robot(robot)
     nq = robot.n_links + 2
     for r in range(lanes):
@@ -281,7 +281,7 @@ def test_stages_that_rotate_the_previous_angles_equal_full_sine_and_cosine(robot
     _set_rows(k, work, k.W_X, lanes, xs)
     _set_rows(k, work, k.W_Y, lanes, xs)
     dt, t = 0.01, 12.34
-    k._stage(work, out, t, 0.5 * dt, 1.0, True, False, dt / 6.0, False, False)  # stage 1, in full
+    k._stage(work, t, 0.5 * dt, 1.0, True, False, dt / 6.0, False, False)  # stage 1, in full
     ys = xs.copy()
     ys[:, : robot.n_links] += rng.uniform(-0.099, 0.099, (lanes, robot.n_links))
     step = 0.5 * dt if advance else 0.0
@@ -291,6 +291,6 @@ def test_stages_that_rotate_the_previous_angles_equal_full_sine_and_cosine(robot
         out[:] = previous
         _set_rows(k, work, k.W_Y, lanes, ys)
         work[k.W_ACC * lanes : (k.W_ACC + xs.shape[1]) * lanes] = 0.0
-        k._stage(work, out, t + step, 0.0, 1.0, False, False, dt / 6.0, rotate, advance)
+        k._stage(work, t + step, 0.0, 1.0, False, False, dt / 6.0, rotate, advance)
         results.append(work[k.W_ACC * lanes : (k.W_ACC + xs.shape[1]) * lanes].copy())
     assert np.allclose(results[0], results[1], rtol=1e-12, atol=1e-12)

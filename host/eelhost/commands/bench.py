@@ -35,41 +35,6 @@ from eelsim.scenario import TRAINING_CORNERS, grid_scenario, load_scenario
 GA_RUNS = 150 * 130 * 4
 GA_STEPS = GA_RUNS * 3000
 
-# Measured during the work on issue 4 (kept here because this command rewrites the report).
-HISTORY = """\
-## History of the kernel (issue 4)
-
-- 2026-11-21, before: dense (N+2) x (N+2) mass matrix + unrolled L D L^T per stage, RK4 sums and
-  checks in the driver, static share of the blocks between threads. `eelbot bench` (load about
-  2): 1.53 M steps/s on 1 thread, 2.23 M on 2, GA 105 s, 12.3 x `mujoco.rollout`. Profile then
-  (CPU time of one thread, machine loaded 1-4, so read the shares): a stage 167 ns per run
-  (4 stages about 70 % of a step; the stage's machine code was half spills and reloads), the
-  driver about 300 ns per step, of which the scalar condition number at control updates
-  (libm sin/cos, dense M, Cholesky, L^-1) about 33 ns and the camera about 40 ns.
-- 2026-11-21, after (this report's figures), in the order they were made, with the stage's cost
-  per run then: O(N) articulated-body recursion instead of the dense M and link velocities by
-  recursion instead of the geometry matrix (167 -> 65 ns); RK4 sums, finiteness and divergence
-  checks inside the generated code; the condition-number bound vectorised across lanes (exact
-  value only near the threshold; the updates' cost fell from about 33 to 2 ns per step); the
-  stage split into three lane loops (angles / backward sweep / forward sweep and RK4 sums) so that
-  fewer values cross (spill instructions 750 -> 510, little change in time); sin and cos of
-  stages 2-4 by rotating stage 1's (angle addition with a short series, full sin/cos again
-  whenever some live lane's offset reaches 0.1 rad); blocks handed to threads one at a time
-  (numba chunk size 1), which matters on a shared machine; one call site of the stage in the
-  driver (a loop over the four stages): LLVM inlines the stage, and four call sites had made the
-  cold compile 67 s. One thread went from about 670 to about 330 ns per step (A/B in
-  alternation, same load); on a quiet moment 1.44 -> 2.95 M steps/s on 1 thread and
-  2.84 -> about 5.7 M on 2.
-- Tried and dropped: two lanes groups interleaved by hand in the backward sweep (LLVM then stopped
-  vectorising: 2.5 x slower); 32 lanes instead of 16 (no measurable difference); a branchless
-  rank-based median for the camera filter instead of the insertion sort (slower: 72 against
-  44 ns per step). Not tried:
-  fastmath beyond contraction (reassociation would undo the Cody-Waite reduction of the own sin).
-- What is left: the backward sweep (about half the stage) is one long dependent chain per lane
-  group (a division and several multiply-adds per link), so it is latency- rather than
-  throughput-bound; the camera (median filter per lane, scalar) and the per-lane driver are about
-  a quarter of a step.
-"""
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -302,7 +267,10 @@ def run(args: argparse.Namespace) -> int:
         "them down (see the load averages above and the note)."
     )
     say()
-    say(HISTORY.rstrip())
+    say(
+        "How the kernel got here, what each change gained and what was tried and dropped: "
+        "[kernel_history.md](kernel_history.md)."
+    )
     if args.write:
         Path(args.write).parent.mkdir(parents=True, exist_ok=True)
         Path(args.write).write_text("\n".join(lines) + "\n")
@@ -340,8 +308,7 @@ def _profile(batch, spec, opts: LoopOptions) -> list[str]:
     n = spec.n_links
     lanes = batch.DEFAULT_LANES
     k = batch.kernel_module(n, lanes)
-    work = np.zeros(k.WORK_ROWS * lanes)
-    out = np.zeros(k.OUT_ROWS * lanes)
+    work = np.zeros((k.WORK_ROWS + k.OUT_ROWS) * lanes)  # out's rows follow work's
     rng = np.random.default_rng(1)
     for r in range(lanes):
         run = r % spec.n_runs
@@ -354,30 +321,30 @@ def _profile(batch, spec, opts: LoopOptions) -> list[str]:
     stage, screen, cond_bound = k._stage, k._screen, k._cond_bound
 
     @numba.njit
-    def _steps(work, out, count, rotate_first):  # pragma: no cover - compiled
+    def _steps(work, count, rotate_first):  # pragma: no cover - compiled
         # the four stages of a step with the driver's flags (the state does not move: a = 0);
         # stage 1 rotates stage 4's angles or computes them in full
         for i in range(count):
             for st in range(4):
-                stage(work, out, i * 1e-3, 0.0, 1.0, st == 0, st == 3, 1e-3,
+                stage(work, i * 1e-3, 0.0, 1.0, st == 0, st == 3, 1e-3,
                       st != 0 or rotate_first, st == 1 or st == 3)
 
     @numba.njit
-    def _screens(work, out, count):  # pragma: no cover - compiled
+    def _screens(work, count):  # pragma: no cover - compiled
         for _ in range(count):
-            screen(work, out)
+            screen(work)
 
     @numba.njit
-    def _bounds(work, out, count):  # pragma: no cover - compiled
+    def _bounds(work, count):  # pragma: no cover - compiled
         for _ in range(count):
-            cond_bound(work, out)
+            cond_bound(work)
 
     def per_lane(fn, count: int, *extra) -> float:
-        fn(work, out, 10, *extra)  # compile
+        fn(work, 10, *extra)  # compile
         best = np.inf
         for _ in range(3):
             start = time.perf_counter()
-            fn(work, out, count, *extra)
+            fn(work, count, *extra)
             best = min(best, time.perf_counter() - start)
         return best / count / lanes * 1e9
 
