@@ -64,9 +64,9 @@ FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
 DEFAULT_LANES = 16
-"""Runs per block. LLVM vectorises the lane loop only from 16 iterations up (shorter loops are
-left scalar because of the runtime alias check), and longer blocks waste more work on runs that
-stopped early while others in the block continue."""
+"""Runs per block (4 AVX2 vectors). Measured on the 2-core machine (docs/kernel_history.md): 8
+lanes spend more of each step in the per-block driver, 32 gain nothing measurable, and longer
+blocks waste more work on runs that stopped early while others in the block continue."""
 
 
 class Reason(enum.IntEnum):
@@ -136,7 +136,7 @@ def kernel_module(n_links: int, lanes: int = DEFAULT_LANES):
     n_links : int
         N.
     lanes : int
-        Runs per block (16 or more, so that the lane loop vectorises).
+        Runs per block (a multiple of 4, so that the lane loops vectorise).
 
     Returns
     -------
@@ -145,8 +145,8 @@ def kernel_module(n_links: int, lanes: int = DEFAULT_LANES):
     key = (n_links, lanes)
     if key in _KERNELS:
         return _KERNELS[key]
-    if lanes < 16:
-        raise ValueError(f"lanes must be at least 16 (vectorisation), got {lanes}")
+    if lanes < 4 or lanes % 4:
+        raise ValueError(f"lanes must be a positive multiple of 4 (vectors), got {lanes}")
     name = f"eelsim_batch_kernel_n{n_links}_l{lanes}"
     folder = kernel_cache_dir()
     folder.mkdir(parents=True, exist_ok=True)
@@ -730,7 +730,7 @@ def run_spec(
     record_full : bool
         Also return every step's state (memory R x (K+1) x (2N+4)).
     lanes : int
-        Runs per block (>= 16).
+        Runs per block (a multiple of 4).
     threads : int, optional
         Number of threads (default: numba's, i.e. all cores).
 

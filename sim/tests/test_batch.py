@@ -294,3 +294,8 @@ def test_stages_that_rotate_the_previous_angles_equal_full_sine_and_cosine(robot
         k._stage(work, t + step, 0.0, 1.0, False, False, dt / 6.0, rotate, advance)
         results.append(work[k.W_ACC * lanes : (k.W_ACC + xs.shape[1]) * lanes].copy())
     assert np.allclose(results[0], results[1], rtol=1e-12, atol=1e-12)
+
+
+def test_a_block_size_that_is_not_whole_vectors_is_refused(robot):
+    with pytest.raises(ValueError, match="multiple of 4"):
+        run_batch(robot, load_scenario("straight"), lanes=10)
