@@ -302,6 +302,45 @@ def _distance_left(px, py, waypoints, n_waypoints, target):
 
 
 @numba.njit(cache=True)
+def _median_of_five(a, b, c, d, e):
+    """The middle one of five values (what np.median gives), by min and max without branches."""
+    f = max(min(a, b), min(c, d))
+    g = min(max(a, b), max(c, d))
+    return max(min(e, f), min(max(e, f), g))
+
+
+@numba.njit(cache=True)
+def _median_by_ranks(med, count, filtered, rank, total):
+    """np.median of the first ``count`` slots of ``med[slot, channel, lane]`` for every lane.
+
+    The value of rank (count - 1) // 2 and count // 2 (their mean when count is even), rank i
+    being the number of values that sort before value i with ties broken by slot: the order a
+    stable sort gives, without branches, so that it runs across lanes (a sort per lane
+    mispredicted its branches, and cost three times as much).
+    """
+    lo = float((count - 1) // 2)
+    hi = float(count // 2)
+    for ch in range(3):
+        for r in range(LANES):
+            total[r] = 0.0
+        for i in range(count):
+            for r in range(LANES):
+                rank[r] = 0.0
+            for j in range(count):
+                if j < i:
+                    for r in range(LANES):
+                        rank[r] += 1.0 if med[j, ch, r] <= med[i, ch, r] else 0.0
+                elif j > i:
+                    for r in range(LANES):
+                        rank[r] += 1.0 if med[j, ch, r] < med[i, ch, r] else 0.0
+            for r in range(LANES):
+                v = med[i, ch, r]
+                total[r] += (v if rank[r] == lo else 0.0) + (v if rank[r] == hi else 0.0)
+        for r in range(LANES):
+            filtered[ch, r] = total[r] * 0.5
+
+
+@numba.njit(cache=True)
 def _observe(frame, px, py, heading, alive, run_of, noise, pixel, window, med, med_state,
              last_heading, filtered, target, arrival, target_x, target_y, lane_radius,
              lane_waypoints, waypoints, frame_time, rank, total):
@@ -313,10 +352,8 @@ def _observe(frame, px, py, heading, alive, run_of, noise, pixel, window, med, m
     (``med[slot, channel, lane]``; every lane of a block sees the same frames, so the ring's
     slot and fill, ``med_state``, are the block's) and waypoint switching with arrival.
 
-    The median of ``count`` values is the value of rank (count - 1) // 2 and count // 2 (their
-    mean when count is even), rank i being the number of values that sort before value i with
-    ties broken by slot: the order a stable sort gives, without branches, so that it runs
-    across lanes (a sort per lane mispredicted its branches, and cost three times as much).
+    The median: :func:`_median_of_five` for the default window once full, else
+    :func:`_median_by_ranks`.
     """
     if pixel > 0.0:
         for r in range(LANES):
@@ -351,26 +388,14 @@ def _observe(frame, px, py, heading, alive, run_of, noise, pixel, window, med, m
     if count < window:
         count += 1
         med_state[0] = count
-    lo = float((count - 1) // 2)
-    hi = float(count // 2)
-    for ch in range(3):
+    if count == 5:
+        # the default window, once filled: the middle value by min and max, in one loop
         for r in range(LANES):
-            total[r] = 0.0
-        for i in range(count):
-            for r in range(LANES):
-                rank[r] = 0.0
-            for j in range(count):
-                if j < i:
-                    for r in range(LANES):
-                        rank[r] += 1.0 if med[j, ch, r] <= med[i, ch, r] else 0.0
-                elif j > i:
-                    for r in range(LANES):
-                        rank[r] += 1.0 if med[j, ch, r] < med[i, ch, r] else 0.0
-            for r in range(LANES):
-                v = med[i, ch, r]
-                total[r] += (v if rank[r] == lo else 0.0) + (v if rank[r] == hi else 0.0)
-        for r in range(LANES):
-            filtered[ch, r] = total[r] * 0.5
+            for ch in range(3):
+                filtered[ch, r] = _median_of_five(med[0, ch, r], med[1, ch, r], med[2, ch, r],
+                                                  med[3, ch, r], med[4, ch, r])
+    else:
+        _median_by_ranks(med, count, filtered, rank, total)
     # waypoint switching: target_x/y hold each lane's current waypoint (NaN after the last)
     hits = 0
     for r in range(LANES):

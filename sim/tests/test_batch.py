@@ -77,6 +77,15 @@ def test_batch_agrees_with_jitter_delay_heading_noise_and_seed(robot):
     compare(robot, s, opts, seed=7)
 
 
+@pytest.mark.parametrize("window", [1, 4, 7])
+def test_batch_agrees_with_median_windows_other_than_five(robot, window):
+    # five frames take a min/max network; other windows (even ones: the mean of the middle two)
+    # and the filling of any window take the rank method
+    opts = LoopOptions(camera=CameraModel(median_window=window, heading_noise_rad=0.02))
+    s = load_scenario("turning").model_copy(update={"duration_s": 6.0})
+    compare(robot, s, opts, seed=3)
+
+
 def test_batch_agrees_with_servo_limits_and_other_coefficients(robot):
     s = load_scenario("straight").model_copy(update={"duration_s": 6.0})
     compare(robot, s, LoopOptions(servo_limits=True),
