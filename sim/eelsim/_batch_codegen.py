@@ -186,6 +186,7 @@ def make_layout(n_links: int, lanes: int) -> Layout:
         ("tail_ex", 1),
         ("tail_ey", 1),
         ("cond_bound", 1),  # trace(M) trace(M^-1) >= cond(M); inf when a pivot is <= 0
+        ("keep", 1),  # 1.0 for lanes that commit the step (set by the driver)
     ]
 
     def assign(sizes: list[tuple[str, int]]) -> tuple[dict[str, int], int]:
