@@ -40,7 +40,7 @@ def stage_assembly(n_links: int, lanes: int) -> str:
         k._stage.py_func
     )
     work = np.zeros((k.WORK_ROWS + k.OUT_ROWS) * lanes)
-    fresh(work, 0.0, 0.0, 1.0, True, False, 1e-3, True, True)
+    fresh(work, 0.0, 0.0, 1.0, True, False, 1e-3, True, True, False)
     return fresh.inspect_asm(fresh.signatures[0])
 
 

@@ -288,6 +288,130 @@ def _head_velocity(e: _Emitter) -> None:
     line(f"{o('head_vy')} = ({w('y', 2 * n + 3)} + ({gc})) - {w('vcy')}")
 
 
+def _backward_sweep(e: _Emitter, plain: bool) -> None:
+    """Emit loop 2, the backward sweep (see _stage_body).
+
+    ``plain``: for blocks whose lanes all have no servo line and no current, without those terms
+    (the numbers are the same: the general code adds exact zeros and clamps at infinity there).
+    """
+    n = e.layout.n_links
+    line, w, o = e.line, e.w, e.o
+    title = "2. backward sweep" + (" (no servo line, no current)" if plain else "")
+    e.loop(title, indent=4)
+    line("# Articulated-body recursion (module docstring): the links beyond joint j push on link")
+    line("# j with f = z - P e_j, e_j the acceleration of the joint point (P: 2x2 articulated")
+    line("# inertia through a free pin, z: bias force); k = h om^2: centripetal acceleration -k t.")
+    line("# Each link's external force F_j (Morison drag, added-mass current term), torque and")
+    line("# joint torque (control.gait_reference, joint_pd_torque, servo_limited) are computed")
+    line("# on the way, where they are consumed.")
+    line(f"sp = {o('gait_sin')}")
+    line(f"cp = {o('gait_cos')}")
+    line(f"lvx = {o('head_vx')}")
+    line(f"lvy = {o('head_vy')}")
+    line("gam = " + w("gamma"))
+    line("bad = 0.0")
+    for j in reversed(range(n)):
+        line(f"s{j} = {o('sin', j)}")
+        line(f"c{j} = {o('cos', j)}")
+        line(f"om{j} = {w('y', n + 2 + j)}")
+        if j > 0:  # joint j-1 (between links j-1 and j): acts +u on link j, -u on link j-1
+            jt = j - 1
+            line(f"amp = {w('amp', jt)}")
+            line(f"cb = {w('cos_beta', jt)}")
+            line(f"sb = {w('sin_beta', jt)}")
+            line("lim = " + w("clamp"))
+            line("al = min(max(amp * (sp * cb + cp * sb) + gam, -lim), lim)")
+            line(f"ald = {w('amp_omega', jt)} * (cp * cb - sp * sb)")
+            line(f"phd = om{j} - {w('y', n + 2 + jt)}")
+            line(f"uu = {w('kp')} * (al - ({w('y', j)} - {w('y', jt)})) + {w('kd')} * (ald - phd)")
+            if plain:
+                line(f"u{jt} = uu")
+            else:
+                # servo torque-speed line, |u| <= stall (1 -+ phd / no_load) on either side:
+                # stall = inf and the slope 0 when the servo model is off, which leaves the
+                # torque unchanged exactly (so ``plain`` gives the same numbers)
+                line(f"q = phd * {w('stall_slope')}")
+                line("stall = " + w("stall"))
+                line(f"u{jt} = min(max(uu, max(-stall, -stall - q)), min(stall, stall - q))")
+        line(f"m = {w('mass', j)}")
+        line(f"mu = {w('mu', j)}")
+        line(f"h = {w('half_length', j)}")
+        line(f"hw = h * om{j}")
+        line(f"hws{j} = hw * s{j}")
+        line(f"hwc{j} = hw * c{j}")
+        if j < n - 1:
+            line(f"lvx = lvx + (hws{j} + hws{j + 1})")
+            line(f"lvy = lvy - (hwc{j} + hwc{j + 1})")
+        line(f"vt = c{j} * lvx + s{j} * lvy")
+        line(f"vn = c{j} * lvy - s{j} * lvx")
+        line(f"ft = -{w('ct', j)} * (vt + abs(vt) * vt)")
+        current = "" if plain else f" - mu * om{j} * (c{j} * {w('vcx')} + s{j} * {w('vcy')})"
+        line(f"fn = -{w('cn', j)} * (vn + abs(vn) * vn){current}")
+        line(f"fx = ft * c{j} - fn * s{j}")
+        line(f"fy = ft * s{j} + fn * c{j}")
+        tau = []
+        if j > 0:
+            tau.append(f"+ u{j - 1}")
+        if j < n - 1:
+            tau.append(f"- u{j}")
+        line(
+            f"tq = -{w('lambda2', j)} * om{j} - {w('lambda3', j)} * abs(om{j}) * om{j}"
+            f" {' '.join(tau)}"
+        )
+        line(f"k = h * (om{j} * om{j})")
+        line(f"{o('kc', j)} = k")
+        line(f"hm = {w('hm', j)}")
+        line("# n . F_j is fn itself")
+        if j == n - 1:  # the head: nothing beyond it
+            line(f"wx = -hm * s{j}")
+            line(f"wy = hm * c{j}")
+            line(f"dd = {w('dd0', j)}")
+            line("rho = tq + h * fn")
+        else:
+            line(f"anx = c{j} * pxy - s{j} * pxx")  # P n
+            line(f"any = c{j} * pyy - s{j} * pxy")
+            line(f"atx = c{j} * pxx + s{j} * pxy")  # P t
+            line(f"aty = c{j} * pxy + s{j} * pyy")
+            line("hh = h + h")
+            line(f"wx = hh * anx - hm * s{j}")
+            line(f"wy = hh * any + hm * c{j}")
+            line(f"dd = {w('dd0', j)} + {w('four_h2', j)} * (c{j} * any - s{j} * anx)")
+            line(
+                f"rho = (tq + h * fn) + hh * ((c{j} * zy - s{j} * zx)"
+                f" + (k + k) * (c{j} * anx + s{j} * any))"
+            )
+        line("bad = 1.0 if dd <= 0.0 else bad")
+        line("inv = 1.0 / dd")
+        line("rd = rho * inv")
+        line("gx = wx * inv")
+        line("gy = wy * inv")
+        line(f"{o('gx', j)} = gx")
+        line(f"{o('gy', j)} = gy")
+        line(f"{o('rd', j)} = rd")
+        if j == n - 1:
+            line(f"pxx = (m + mu * (s{j} * s{j})) - gx * wx")
+            line(f"pxy = -mu * (s{j} * c{j}) - gx * wy")
+            line(f"pyy = (m + mu * (c{j} * c{j})) - gy * wy")
+            line(f"zx = (fx + m * k * c{j}) - wx * rd")
+            line(f"zy = (fy + m * k * s{j}) - wy * rd")
+        else:
+            line(f"pxx = (pxx + (m + mu * (s{j} * s{j}))) - gx * wx")
+            line(f"pxy = (pxy - mu * (s{j} * c{j})) - gx * wy")
+            line(f"pyy = (pyy + (m + mu * (c{j} * c{j}))) - gy * wy")
+            line(f"zx = ((zx + fx) + k * (m * c{j} + (atx + atx))) - wx * rd")
+            line(f"zy = ((zy + fy) + k * (m * s{j} + (aty + aty))) - wy * rd")
+    line("# the tail is free (no link behind it): P e = z gives its back point's acceleration.")
+    line("# The positive pivots D_j, P_11 and det P play the role of M's Cholesky pivots: one")
+    line("# <= 0 is what makes LAPACK refuse M (a NaN pivot is not refused there either)")
+    line("det = pxx * pyy - pxy * pxy")
+    line("bad = 1.0 if det <= 0.0 else bad")
+    line("bad = 1.0 if pxx <= 0.0 else bad")
+    line("idet = 1.0 / det")
+    line(f"{o('tail_ex')} = (pyy * zx - pxy * zy) * idet")
+    line(f"{o('tail_ey')} = (pxx * zy - pxy * zx) * idet")
+    line(f"{o('bad_pivot')} = max({o('bad_pivot')}, bad)")
+
+
 def _stage_body(layout: Layout) -> list[str]:
     """One RK4 stage for every lane, as three loops over the lanes (see below).
 
@@ -353,118 +477,11 @@ def _stage_body(layout: Layout) -> list[str]:
     _head_velocity(e)
     e.indent = 0
 
-    e.loop("2. backward sweep")
-    line("# Articulated-body recursion (module docstring): the links beyond joint j push on link")
-    line("# j with f = z - P e_j, e_j the acceleration of the joint point (P: 2x2 articulated")
-    line("# inertia through a free pin, z: bias force); k = h om^2: centripetal acceleration -k t.")
-    line("# Each link's external force F_j (Morison drag, added-mass current term), torque and")
-    line("# joint torque (control.gait_reference, joint_pd_torque, servo_limited) are computed")
-    line("# on the way, where they are consumed.")
-    line(f"sp = {o('gait_sin')}")
-    line(f"cp = {o('gait_cos')}")
-    line(f"lvx = {o('head_vx')}")
-    line(f"lvy = {o('head_vy')}")
-    line("gam = " + w("gamma"))
-    line("bad = 0.0")
-    for j in reversed(range(n)):
-        line(f"s{j} = {o('sin', j)}")
-        line(f"c{j} = {o('cos', j)}")
-        line(f"om{j} = {w('y', n + 2 + j)}")
-        if j > 0:  # joint j-1 (between links j-1 and j): acts +u on link j, -u on link j-1
-            jt = j - 1
-            line(f"amp = {w('amp', jt)}")
-            line(f"cb = {w('cos_beta', jt)}")
-            line(f"sb = {w('sin_beta', jt)}")
-            line("lim = " + w("clamp"))
-            line("al = min(max(amp * (sp * cb + cp * sb) + gam, -lim), lim)")
-            line(f"ald = {w('amp_omega', jt)} * (cp * cb - sp * sb)")
-            line(f"phd = om{j} - {w('y', n + 2 + jt)}")
-            line(f"uu = {w('kp')} * (al - ({w('y', j)} - {w('y', jt)})) + {w('kd')} * (ald - phd)")
-            # servo torque-speed line, |u| <= stall (1 -+ phd / no_load) on either side:
-            # stall = inf and the slope 0 when the servo model is off, which leaves the torque
-            # unchanged exactly
-            line(f"q = phd * {w('stall_slope')}")
-            line("stall = " + w("stall"))
-            line(f"u{jt} = min(max(uu, max(-stall, -stall - q)), min(stall, stall - q))")
-        line(f"m = {w('mass', j)}")
-        line(f"mu = {w('mu', j)}")
-        line(f"h = {w('half_length', j)}")
-        line(f"hw = h * om{j}")
-        line(f"hws{j} = hw * s{j}")
-        line(f"hwc{j} = hw * c{j}")
-        if j < n - 1:
-            line(f"lvx = lvx + (hws{j} + hws{j + 1})")
-            line(f"lvy = lvy - (hwc{j} + hwc{j + 1})")
-        line(f"vt = c{j} * lvx + s{j} * lvy")
-        line(f"vn = c{j} * lvy - s{j} * lvx")
-        line(f"ft = -{w('ct', j)} * (vt + abs(vt) * vt)")
-        line(
-            f"fn = -{w('cn', j)} * (vn + abs(vn) * vn)"
-            f" - mu * om{j} * (c{j} * {w('vcx')} + s{j} * {w('vcy')})"
-        )
-        line(f"fx = ft * c{j} - fn * s{j}")
-        line(f"fy = ft * s{j} + fn * c{j}")
-        tau = []
-        if j > 0:
-            tau.append(f"+ u{j - 1}")
-        if j < n - 1:
-            tau.append(f"- u{j}")
-        line(
-            f"tq = -{w('lambda2', j)} * om{j} - {w('lambda3', j)} * abs(om{j}) * om{j}"
-            f" {' '.join(tau)}"
-        )
-        line(f"k = h * (om{j} * om{j})")
-        line(f"{o('kc', j)} = k")
-        line(f"hm = {w('hm', j)}")
-        line("# n . F_j is fn itself")
-        if j == n - 1:  # the head: nothing beyond it
-            line(f"wx = -hm * s{j}")
-            line(f"wy = hm * c{j}")
-            line(f"dd = {w('dd0', j)}")
-            line("rho = tq + h * fn")
-        else:
-            line(f"anx = c{j} * pxy - s{j} * pxx")  # P n
-            line(f"any = c{j} * pyy - s{j} * pxy")
-            line(f"atx = c{j} * pxx + s{j} * pxy")  # P t
-            line(f"aty = c{j} * pxy + s{j} * pyy")
-            line("hh = h + h")
-            line(f"wx = hh * anx - hm * s{j}")
-            line(f"wy = hh * any + hm * c{j}")
-            line(f"dd = {w('dd0', j)} + {w('four_h2', j)} * (c{j} * any - s{j} * anx)")
-            line(
-                f"rho = (tq + h * fn) + hh * ((c{j} * zy - s{j} * zx)"
-                f" + (k + k) * (c{j} * anx + s{j} * any))"
-            )
-        line("bad = 1.0 if dd <= 0.0 else bad")
-        line("inv = 1.0 / dd")
-        line("rd = rho * inv")
-        line("gx = wx * inv")
-        line("gy = wy * inv")
-        line(f"{o('gx', j)} = gx")
-        line(f"{o('gy', j)} = gy")
-        line(f"{o('rd', j)} = rd")
-        if j == n - 1:
-            line(f"pxx = (m + mu * (s{j} * s{j})) - gx * wx")
-            line(f"pxy = -mu * (s{j} * c{j}) - gx * wy")
-            line(f"pyy = (m + mu * (c{j} * c{j})) - gy * wy")
-            line(f"zx = (fx + m * k * c{j}) - wx * rd")
-            line(f"zy = (fy + m * k * s{j}) - wy * rd")
-        else:
-            line(f"pxx = (pxx + (m + mu * (s{j} * s{j}))) - gx * wx")
-            line(f"pxy = (pxy - mu * (s{j} * c{j})) - gx * wy")
-            line(f"pyy = (pyy + (m + mu * (c{j} * c{j}))) - gy * wy")
-            line(f"zx = ((zx + fx) + k * (m * c{j} + (atx + atx))) - wx * rd")
-            line(f"zy = ((zy + fy) + k * (m * s{j} + (aty + aty))) - wy * rd")
-    line("# the tail is free (no link behind it): P e = z gives its back point's acceleration.")
-    line("# The positive pivots D_j, P_11 and det P play the role of M's Cholesky pivots: one")
-    line("# <= 0 is what makes LAPACK refuse M (a NaN pivot is not refused there either)")
-    line("det = pxx * pyy - pxy * pxy")
-    line("bad = 1.0 if det <= 0.0 else bad")
-    line("bad = 1.0 if pxx <= 0.0 else bad")
-    line("idet = 1.0 / det")
-    line(f"{o('tail_ex')} = (pyy * zx - pxy * zy) * idet")
-    line(f"{o('tail_ey')} = (pxx * zy - pxy * zx) * idet")
-    line(f"{o('bad_pivot')} = max({o('bad_pivot')}, bad)")
+    e.lines.append("    if plain:")
+    _backward_sweep(e, True)
+    e.lines.append("    else:")
+    _backward_sweep(e, False)
+    e.indent = 0
 
     e.loop("3. forward sweep")
     line("# tail to head: theta_ddot_j = rd_j - g_j . e_j, link centre acceleration a_j = e + d")
@@ -661,7 +678,7 @@ def generate_stage_source(layout: Layout) -> str:
         "",
         "",
         "@numba.njit(cache=True, fastmath=_FASTMATH, error_model='numpy', boundscheck=False)",
-        "def _stage(work, t_s, a, wk, first, last, sixth, rotate, advance):  # noqa: C901",
+        "def _stage(work, t_s, a, wk, first, last, sixth, rotate, advance, plain):  # noqa: C901",
         '    """One RK4 stage for every lane: the right-hand side at y, then the RK4 sums."""',
     ]
     screen = [

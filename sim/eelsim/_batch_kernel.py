@@ -67,14 +67,14 @@ N_LINKS = 2
 LANES = 16
 WORK_ROWS = OUT_ROWS = 1
 W_Y = W_X = W_ACC = W_XN = W_GAMMA = W_GEOMETRY = W_HALF_LENGTH = W_LIMIT = 0
-W_MASS = W_MU = W_INERTIA = 0
+W_MASS = W_MU = W_INERTIA = W_STALL = W_STALL_SLOPE = W_VCX = W_VCY = 0
 O_BAD_PIVOT = O_SIN = O_COS = O_NEAR = O_X_BAD = O_FASTEST = O_XN_BAD = O_COND_BOUND = 0
 O_OFFSET = O_KEEP = 0
 ROTATE_LIMIT = 0.1
 RESYNC_STEPS = 16
 
 
-def _stage(work, t_s, a, wk, first, last, sixth, rotate, advance):  # pragma: no cover
+def _stage(work, t_s, a, wk, first, last, sixth, rotate, advance, plain):  # pragma: no cover
     raise RuntimeError("eelsim._batch_kernel is a template; use eelsim.batch")
 
 
@@ -553,6 +553,12 @@ def _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radiu
     _observe(0, seen_x, seen_y, seen_heading, alive, run_of, noise, pixel, window, med,
              med_state, last_heading, filtered, target, arrival, target_x, target_y,
              lane_radius, lane_waypoints, waypoints, frame_time[0], rank, total)
+    # no lane with a servo line or a current: the stage may leave those terms out
+    plain = True
+    for r in range(LANES):
+        plain = plain and (work[W_STALL * LANES + r] == np.inf
+                           and work[W_STALL_SLOPE * LANES + r] == 0.0
+                           and work[W_VCX * LANES + r] == 0.0 and work[W_VCY * LANES + r] == 0.0)
     frame = 1
     sample = 0
     n_samples = sample_steps.shape[0]
@@ -630,7 +636,7 @@ def _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radiu
                 t_s, a, wk, rotate = t + half, dt, 2.0, _rotates(out, alive)
             else:
                 t_s, a, wk, rotate = t + dt, 0.0, 1.0, _rotates(out, alive)
-            _stage(work, t_s, a, wk, st == 0, st == 3, sixth, rotate, st == 1 or st == 3)
+            _stage(work, t_s, a, wk, st == 0, st == 3, sixth, rotate, st == 1 or st == 3, plain)
             if st == 0:
                 _screen(work)
                 if any_update:

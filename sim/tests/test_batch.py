@@ -247,7 +247,7 @@ def test_recursive_accelerations_equal_the_dense_mass_matrix_solve(robot, odd_li
     work[k.W_KD * lanes : (k.W_KD + 1) * lanes] = 0.0
     xs = _random_states(np.random.default_rng(3), robot.n_links, lanes)
     _set_rows(k, work, k.W_Y, lanes, xs)
-    k._stage(work, 0.3, 0.005, 1.0, True, False, 0.01 / 6.0, False, False)  # acc = f(y)
+    k._stage(work, 0.3, 0.005, 1.0, True, False, 0.01 / 6.0, False, False, False)  # acc = f(y)
     model = SwimmerModel.from_robot(robot)
     for r in range(lanes):
         ref = state_derivative(model, xs[r], np.zeros(robot.n_links - 1), scenario.current_m_s)
@@ -267,7 +267,7 @@ def test_vectorised_condition_bound_brackets_numpys_condition_number(robot):
     xs = _random_states(np.random.default_rng(5), robot.n_links, lanes)
     _set_rows(k, work, k.W_X, lanes, xs)
     _set_rows(k, work, k.W_Y, lanes, xs)
-    k._stage(work, 0.0, 0.005, 1.0, True, False, 0.01 / 6.0, False, False)  # sin, cos of x
+    k._stage(work, 0.0, 0.005, 1.0, True, False, 0.01 / 6.0, False, False, False)  # sin, cos
     k._cond_bound(work)
     model = SwimmerModel.from_robot(robot)
     nq = robot.n_links + 2
@@ -290,7 +290,7 @@ def test_stages_that_rotate_the_previous_angles_equal_full_sine_and_cosine(robot
     _set_rows(k, work, k.W_X, lanes, xs)
     _set_rows(k, work, k.W_Y, lanes, xs)
     dt, t = 0.01, 12.34
-    k._stage(work, t, 0.5 * dt, 1.0, True, False, dt / 6.0, False, False)  # stage 1, in full
+    k._stage(work, t, 0.5 * dt, 1.0, True, False, dt / 6.0, False, False, False)  # stage 1, full
     ys = xs.copy()
     ys[:, : robot.n_links] += rng.uniform(-0.099, 0.099, (lanes, robot.n_links))
     step = 0.5 * dt if advance else 0.0
@@ -300,7 +300,7 @@ def test_stages_that_rotate_the_previous_angles_equal_full_sine_and_cosine(robot
         out[:] = previous
         _set_rows(k, work, k.W_Y, lanes, ys)
         work[k.W_ACC * lanes : (k.W_ACC + xs.shape[1]) * lanes] = 0.0
-        k._stage(work, t + step, 0.0, 1.0, False, False, dt / 6.0, rotate, advance)
+        k._stage(work, t + step, 0.0, 1.0, False, False, dt / 6.0, rotate, advance, False)
         results.append(work[k.W_ACC * lanes : (k.W_ACC + xs.shape[1]) * lanes].copy())
     assert np.allclose(results[0], results[1], rtol=1e-12, atol=1e-12)
 
@@ -308,3 +308,18 @@ def test_stages_that_rotate_the_previous_angles_equal_full_sine_and_cosine(robot
 def test_a_block_size_that_is_not_whole_vectors_is_refused(robot):
     with pytest.raises(ValueError, match="multiple of 4"):
         run_batch(robot, load_scenario("straight"), lanes=10)
+
+
+def test_the_plain_sweep_equals_the_general_one_without_current_or_servo_line(robot):
+    # blocks with no current and no servo line take a backward sweep without those terms; the
+    # general sweep adds exact zeros and clamps at infinity there, so the two agree bit for bit
+    spec = BatchSpec.build(robot, load_scenario("straight"))
+    k, work, out, lanes = _lane_block(spec)
+    xs = _random_states(np.random.default_rng(8), robot.n_links, lanes)
+    results = []
+    for plain in (True, False):
+        _set_rows(k, work, k.W_Y, lanes, xs)
+        k._stage(work, 0.7, 0.005, 1.0, True, False, 0.01 / 6.0, False, False, plain)
+        results.append(work[k.W_ACC * lanes : (k.W_ACC + xs.shape[1]) * lanes].copy())
+    assert np.array_equal(results[0], results[1])
+    assert np.all(np.isfinite(results[0]))

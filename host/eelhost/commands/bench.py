@@ -325,6 +325,12 @@ def _profile(batch, spec, opts: LoopOptions) -> list[str]:
             work[(k.W_Y + row) * lanes + r] = x[row]
     stage, screen, cond_bound = k._stage, k._screen, k._cond_bound
 
+    # the GA's runs have no current and no servo line: the driver picks the plain sweep
+    plain = bool(np.all(spec.params[:, k.W_VCX - k.W_GEOMETRY] == 0.0)
+                 and np.all(spec.params[:, k.W_VCY - k.W_GEOMETRY] == 0.0)
+                 and np.all(spec.params[:, k.W_STALL_SLOPE - k.W_GEOMETRY] == 0.0)
+                 and np.all(np.isinf(spec.params[:, k.W_STALL - k.W_GEOMETRY])))
+
     @numba.njit
     def _steps(work, count, rotate_first):  # pragma: no cover - compiled
         # the four stages of a step with the driver's flags (the state does not move: a = 0);
@@ -332,7 +338,7 @@ def _profile(batch, spec, opts: LoopOptions) -> list[str]:
         for i in range(count):
             for st in range(4):
                 stage(work, i * 1e-3, 0.0, 1.0, st == 0, st == 3, 1e-3,
-                      st != 0 or rotate_first, st == 1 or st == 3)
+                      st != 0 or rotate_first, st == 1 or st == 3, plain)
 
     @numba.njit
     def _screens(work, count):  # pragma: no cover - compiled
