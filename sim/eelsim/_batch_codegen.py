@@ -518,11 +518,14 @@ def _stage_body(layout: Layout) -> list[str]:
     line("# stage 4: the new state xn = x + dt/6 (acc + k4) only")
     deriv = [w("y", n + 2 + i) for i in range(n + 2)] + [o("qdd", i) for i in range(n + 2)]
     e.lines.append("    if last:")
-    e.loop("4b. the new state", indent=4)
+    e.loop("4b. the new state and its finiteness", indent=4)
     for i, d in enumerate(deriv):
-        line(f"{w('xn', i)} = {w('x', i)} + sixth * ({w('acc', i)} + wk * {d})")
-    offsets = ", ".join(f"abs({w('xn', i)} - {o('ang', i)})" for i in range(n))
+        line(f"v{i} = {w('x', i)} + sixth * ({w('acc', i)} + wk * {d})")
+        line(f"{w('xn', i)} = v{i}")
+    offsets = ", ".join(f"abs(v{i} - {o('ang', i)})" for i in range(n))
     line(f"{o('offset')} = max({offsets})")
+    line("# v - v is 0 for finite v and NaN for NaN or +-inf: one NaN test per lane for all rows")
+    line(f"{o('xn_bad')} = {' + '.join(f'(v{i} - v{i})' for i in range(len(deriv)))}")
     e.lines.append("    else:")
     e.loop("4a. RK4 accumulator and the next stage's input", indent=4)
     for i, d in enumerate(deriv):
@@ -546,11 +549,13 @@ def _screen_body(layout: Layout) -> list[str]:
         line(f"s{i} = {o('sin', i)}")
         line(f"c{i} = {o('cos', i)}")
         line(f"h{i} = {w('half_length', i)}")
-    for j in range(n):
-        gx = " + ".join(f"{w('geometry', j * n + i)} * c{i}" for i in range(n))
-        gy = " + ".join(f"{w('geometry', j * n + i)} * s{i}" for i in range(n))
-        line(f"px{j} = {w('x', n)} + ({gx})")
-        line(f"py{j} = {w('x', n + 1)} + ({gy})")
+    # link centres relative to link 0's, along the chain (only differences matter here; they
+    # differ from eelsim.flags' positions by rounding, far inside the screen's margin)
+    line("px0 = 0.0")
+    line("py0 = 0.0")
+    for j in range(1, n):
+        line(f"px{j} = px{j - 1} + (h{j - 1} * c{j - 1} + h{j} * c{j})")
+        line(f"py{j} = py{j - 1} + (h{j - 1} * s{j - 1} + h{j} * s{j})")
     for i in range(n):
         for k in range(i + 2, n):
             line(f"dx = px{k} - px{i}")
@@ -564,14 +569,6 @@ def _screen_body(layout: Layout) -> list[str]:
     line(f"{o('x_bad')} = {diffs}")
     rates = ", ".join(f"abs({w('x', i)})" for i in range(n + 2, ns))
     line(f"{o('fastest')} = max({rates})")
-    return e.lines
-
-
-def _check_new_body(layout: Layout) -> list[str]:
-    e = _Emitter(layout)
-    ns = 2 * layout.n_links + 4
-    diffs = " + ".join(f"({e.w('xn', i)} - {e.w('xn', i)})" for i in range(ns))
-    e.line(f"{e.o('xn_bad')} = {diffs}")
     return e.lines
 
 
@@ -653,7 +650,7 @@ def generate_stage_source(layout: Layout) -> str:
     y = x + a f, or for the ``last`` stage xn = x + sixth (acc + wk f); ``rotate``: sin and cos
     of the angles by rotation of the previous stage's (rows ang, sin, cos) and of the gait phase
     advanced by dt/2 (``advance``) or not, else both in full at t_s. ``_screen(work)``: the self-collision screen and the finiteness and
-    divergence checks of x. ``_check_new(work)``: finiteness of xn. ``_cond_bound(work)``: the condition-number bound at x.
+    divergence checks of x. ``_cond_bound(work)``: the condition-number bound at x.
 
     Parameters
     ----------
@@ -689,14 +686,6 @@ def generate_stage_source(layout: Layout) -> str:
         '    """Flag lanes whose joints are past the limit or whose non-adjacent links are close."""',
         f"    for r in range({layout.lanes}):",
     ]
-    check = [
-        "",
-        "",
-        "@numba.njit(cache=True, fastmath=_FASTMATH, error_model='numpy', boundscheck=False)",
-        "def _check_new(work):",
-        '    """Flag lanes whose new state xn is not finite."""',
-        f"    for r in range({layout.lanes}):",
-    ]
     cond = [
         "",
         "",
@@ -705,6 +694,6 @@ def generate_stage_source(layout: Layout) -> str:
         '    """Upper bound of the mass matrix condition number at x, for every lane."""',
         f"    for r in range({layout.lanes}):",
     ]
-    body = head + _stage_body(layout) + screen + _screen_body(layout) + check
-    body += _check_new_body(layout) + cond + _cond_body(layout)
+    body = head + _stage_body(layout) + screen + _screen_body(layout)
+    body += cond + _cond_body(layout)
     return "\n".join(body) + "\n"

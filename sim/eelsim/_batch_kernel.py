@@ -82,10 +82,6 @@ def _screen(work):  # pragma: no cover - replaced
     raise RuntimeError("eelsim._batch_kernel is a template; use eelsim.batch")
 
 
-def _check_new(work):  # pragma: no cover - replaced
-    raise RuntimeError("eelsim._batch_kernel is a template; use eelsim.batch")
-
-
 def _cond_bound(work):  # pragma: no cover - replaced
     raise RuntimeError("eelsim._batch_kernel is a template; use eelsim.batch")
 
@@ -694,7 +690,6 @@ def _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radiu
                           or step >= total_steps[run]):
                         alive[r] = False
                         final_step[r] = step
-        _check_new(work)
         failing = 0
         kept = 0
         for r in range(LANES):
