@@ -42,4 +42,7 @@ fi
 if [ -f firmware/Makefile ]; then
   make -s -C firmware native
 fi
+# 4. The twin's batched kernel, compiled into numba's on-disk cache (about a minute the first
+# time, half a second once cached), so that no command pays for it.
+.venv/bin/python -c "from eelsim.batch import warm_up; print(f'setup: batched kernel ready ({warm_up():.1f} s)')"
 echo "setup: ready ($root/.venv)"
