@@ -69,8 +69,8 @@ _PIO2_3 = 2.02226624879595063154e-21
 # screen flags pairs within that distance (squared, plus this relative margin for rounding) for the
 # exact segment test of eelsim.flags, which runs only then.
 _SCREEN_MARGIN = 1e-6
-# Stages 2-4 get sin and cos of their angles by rotating stage 1's when every live lane's offset
-# |y - x| (at most dt |theta_dot|, 0.05 rad at 10 rad/s) is below this; the series of _rotate
+# A stage gets sin and cos of its angles by rotating the previous stage's when every live lane's
+# offset (at most dt/2 |theta_dot|, 0.05 rad at 10 rad/s) is below this; the series of _rotate
 # are exact to an ulp up to here.
 _ROTATE_LIMIT = 0.1
 # Every stage rotates the previous stage's sin and cos (a chain, a rounding of an ulp or so per
@@ -148,10 +148,8 @@ def make_layout(n_links: int, lanes: int) -> Layout:
         ("cos_beta", n - 1),  # cos((j - 1) beta)
         ("sin_beta", n - 1),
         ("omega", 1),
-        ("cos_whalf", 1),  # cos(omega dt / 2), sin, cos(omega dt), sin: the gait phase's steps
+        ("cos_whalf", 1),  # cos(omega dt / 2), sin: the gait phase's half step
         ("sin_whalf", 1),
-        ("cos_wdt", 1),
-        ("sin_wdt", 1),
         ("kp", 1),
         ("kd", 1),
         ("limit", 1),  # mechanical joint limit (self-collision check)

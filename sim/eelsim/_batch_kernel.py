@@ -9,7 +9,8 @@ What runs here, for a block of ``LANES`` runs advancing in lock step (one physic
 so the time, the camera frame schedule and the sample steps are shared; runs that stopped are
 still computed but never committed):
 
-1. control updates (offset gamma from the filtered pose, pending queue for the delay) - per lane;
+1. control updates (offset gamma from the filtered pose, pending queue for the delay) - a
+   vectorised test finds the lanes that have one, the update itself is per lane;
 2. sampling of the state;
 3. RK4 stage 1 (vectorised), the self-collision screen with the finiteness and divergence tests
    (vectorised), the condition-number bound when some lane updates its control (vectorised), then
@@ -19,8 +20,9 @@ still computed but never committed):
 4. the stop rules, RK4 stages 2-4 (vectorised; each stage also does its part of the RK4 sums),
    the pivot and finiteness checks of the new state;
 5. camera frames in (t, t + dt]: Hermite pose, pixel quantisation, heading noise, median filter,
-   waypoint switching and arrival - per lane;
-6. the lanes still running commit the new state (a vectorised select).
+   waypoint switching and arrival - for all lanes at once;
+6. the lanes still running commit the new state (a copy of the rows when all do, else a select
+   per lane).
 
 The order of these operations is that of ``eelsim.closed_loop.simulate_closed_loop``; the tests
 compare the two to 1e-9.
@@ -445,7 +447,7 @@ def _hermite(y0, dy0, y1, dy1, h, s):
 
 @numba.njit(cache=True)
 def _rotates(out, alive):
-    """Whether the next stage may rotate stage 1's sin and cos: every live lane's offset is small.
+    """Whether the next stage may rotate the last stage's sin and cos: every live lane moved little.
 
     (A NaN offset is not small: that lane's blow-up then goes through the full sin/cos, exactly
     as before.)

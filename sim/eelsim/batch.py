@@ -557,12 +557,10 @@ def _fill_params(params, layout, rsel, ssel, n, dt) -> None:
     for name in ("omega", "vcx", "vcy"):
         _rows(params, layout, name, 1)[:, 0] = ssel[name]
     _rows(params, layout, "amp_omega", n - 1)[:] = ssel["amp"] * ssel["omega"][:, None]
-    # the gait phase advanced by half a step and by a step (angle addition in stages 2-4)
+    # the gait phase advanced by half a step (angle addition in stages 2 and 4)
     omega = ssel["omega"]
     _rows(params, layout, "cos_whalf", 1)[:, 0] = np.cos(omega * 0.5 * dt)
     _rows(params, layout, "sin_whalf", 1)[:, 0] = np.sin(omega * 0.5 * dt)
-    _rows(params, layout, "cos_wdt", 1)[:, 0] = np.cos(omega * dt)
-    _rows(params, layout, "sin_wdt", 1)[:, 0] = np.sin(omega * dt)
 
 
 def _fill_fluid(params, layout, spec: BatchSpec, coeffs: FloatArray) -> None:
