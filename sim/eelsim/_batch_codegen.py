@@ -156,7 +156,6 @@ def make_layout(n_links: int, lanes: int) -> Layout:
         ("clamp", 1),  # joint references are clamped to +-this (JointSpec.command_limit_rad)
         ("half_length", n),
         ("stall", 1),  # servo stall torque (inf when the servo model is off)
-        ("inv_no_load", 1),  # 1 / servo no-load speed (0 when off): a multiply, not a division
         ("stall_slope", 1),  # stall torque / no-load speed (0 when off)
         ("vcx", 1),
         ("vcy", 1),

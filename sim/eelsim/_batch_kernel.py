@@ -69,7 +69,7 @@ N_LINKS = 2
 LANES = 16
 WORK_ROWS = OUT_ROWS = 1
 W_Y = W_X = W_ACC = W_XN = W_GAMMA = W_GEOMETRY = W_HALF_LENGTH = W_LIMIT = 0
-W_MASS = W_MU = W_INERTIA = W_STALL = W_STALL_SLOPE = W_VCX = W_VCY = 0
+W_MASS = W_MU = W_INERTIA = 0
 O_BAD_PIVOT = O_SIN = O_COS = O_NEAR = O_X_BAD = O_FASTEST = O_XN_BAD = O_COND_BOUND = 0
 O_OFFSET = O_KEEP = 0
 ROTATE_LIMIT = 0.1
@@ -341,7 +341,7 @@ def _median_by_ranks(med, count, filtered, rank, total):
 @numba.njit(cache=True)
 def _observe(frame, px, py, heading, alive, run_of, noise, pixel, window, med, med_state,
              last_heading, filtered, target, arrival, target_x, target_y, lane_radius,
-             lane_waypoints, waypoints, frame_time, rank, total):
+             lane_waypoints, waypoints, frame_time, turn, rank, total):
     """One camera frame for every lane of the block, as loops over the lanes that vectorise.
 
     ``px``, ``py``, ``heading``: the pose each lane's camera sees (lanes that stopped are
@@ -367,15 +367,15 @@ def _observe(frame, px, py, heading, alive, run_of, noise, pixel, window, med, m
         widest = 0.0
         for r in range(LANES):
             d = heading[r] - last_heading[r]
-            rank[r] = d
+            turn[r] = d
             widest = max(widest, abs(d))
         if not widest < 1.0:
             for r in range(LANES):
-                d = rank[r]
+                d = turn[r]
                 if abs(d) >= 1.0:
-                    rank[r] = math.atan2(math.sin(d), math.cos(d))
+                    turn[r] = math.atan2(math.sin(d), math.cos(d))
         for r in range(LANES):
-            heading[r] = last_heading[r] + rank[r]
+            heading[r] = last_heading[r] + turn[r]
     slot = med_state[1]
     for r in range(LANES):
         last_heading[r] = heading[r]
@@ -469,10 +469,10 @@ def _gather(work, base, r, ns, dest):
 @numba.njit(cache=True)
 def _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radius, k_theta,
                delay_steps, update_steps, update_count, frame_step, frame_fraction, frame_time,
-               noise, pixel, window, stop_at_goal, pending_size, sample_steps, states_out,
-               record_full, full_out, arrival_out, failure_out, failure_time_out, reason_out,
-               reason_index_out, reason_value_out, final_state_out, final_step_out, target_out,
-               distance_out):
+               noise, plain_run, pixel, window, stop_at_goal, pending_size, sample_steps,
+               states_out, record_full, full_out, arrival_out, failure_out, failure_time_out,
+               reason_out, reason_index_out, reason_value_out, final_state_out, final_step_out,
+               target_out, distance_out):
     """Run the block ``block`` (runs block * LANES ...) to its end; see the module docstring.
 
     The lanes' states live in ``work`` (rows W_X: the step's start, W_XN: its end), so the
@@ -523,6 +523,7 @@ def _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radiu
     seen_x = np.zeros(LANES)
     seen_y = np.zeros(LANES)
     seen_heading = np.zeros(LANES)
+    turn = np.zeros(LANES)  # scratch of _observe: heading change, median ranks and sums
     rank = np.zeros(LANES)
     total = np.zeros(LANES)
     cm = np.empty((n + 2, n + 2))
@@ -550,13 +551,11 @@ def _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radiu
     # the frame at t = 0 sees the initial pose
     _observe(0, seen_x, seen_y, seen_heading, alive, run_of, noise, pixel, window, med,
              med_state, last_heading, filtered, target, arrival, target_x, target_y,
-             lane_radius, lane_waypoints, waypoints, frame_time[0], rank, total)
-    # no lane with a servo line or a current: the stage may leave those terms out
+             lane_radius, lane_waypoints, waypoints, frame_time[0], turn, rank, total)
+    # no lane with a servo line or a current (batch.plain_runs): the stage leaves those out
     plain = True
     for r in range(LANES):
-        plain = plain and (work[W_STALL * LANES + r] == np.inf
-                           and work[W_STALL_SLOPE * LANES + r] == 0.0
-                           and work[W_VCX * LANES + r] == 0.0 and work[W_VCY * LANES + r] == 0.0)
+        plain = plain and plain_run[run_of[r]]
     frame = 1
     sample = 0
     n_samples = sample_steps.shape[0]
@@ -651,9 +650,7 @@ def _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radiu
                              | (is_update[r] & ((bound >= 0.5 * ILL_CONDITION_THRESHOLD)
                                                 | (bound != bound))))
                     flagged += alive[r] & stops
-                for r in range(LANES):
-                    if flagged == 0:
-                        break
+                for r in range(LANES if flagged > 0 else 0):
                     if not alive[r]:
                         continue
                     run = run_of[r]
@@ -700,9 +697,7 @@ def _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radiu
             out[O_KEEP * LANES + r] = 1.0 if ok else 0.0
             failing += alive[r] & (not ok)
             kept += ok
-        for r in range(LANES):
-            if failing == 0:
-                break
+        for r in range(LANES if failing > 0 else 0):
             if not alive[r] or out[O_KEEP * LANES + r] != 0.0:
                 continue
             code = REASON_NONE
@@ -727,7 +722,8 @@ def _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radiu
                 seen_heading[r] = _hermite(a2, da2, b2, db2, dt, s)
             _observe(frame, seen_x, seen_y, seen_heading, alive, run_of, noise, pixel, window,
                      med, med_state, last_heading, filtered, target, arrival, target_x, target_y,
-                     lane_radius, lane_waypoints, waypoints, frame_time[frame], rank, total)
+                     lane_radius, lane_waypoints, waypoints, frame_time[frame], turn, rank,
+                     total)
             frame += 1
         # 6. lanes still running commit the step: a plain copy of the rows when every lane
         # does (most steps; the select per lane cost about 11 ns per run and step), else a
@@ -770,10 +766,11 @@ def _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radiu
 
 @numba.njit(cache=True, parallel=True)
 def run_blocks(params, x0, total_steps, dt, waypoints, n_waypoints, radius, k_theta, delay_steps,
-               update_steps, update_count, frame_step, frame_fraction, frame_time, noise, pixel,
-               window, stop_at_goal, pending_size, sample_steps, states_out, record_full, full_out,
-               arrival_out, failure_out, failure_time_out, reason_out, reason_index_out,
-               reason_value_out, final_state_out, final_step_out, target_out, distance_out):
+               update_steps, update_count, frame_step, frame_fraction, frame_time, noise,
+               plain_run, pixel, window, stop_at_goal, pending_size, sample_steps, states_out,
+               record_full, full_out, arrival_out, failure_out, failure_time_out, reason_out,
+               reason_index_out, reason_value_out, final_state_out, final_step_out, target_out,
+               distance_out):
     """Run every block of LANES runs; blocks are shared out over numba's threads.
 
     The caller sets numba's parallel chunk size to 1 (see ``eelsim.batch.run_spec``); setting it
@@ -783,7 +780,7 @@ def run_blocks(params, x0, total_steps, dt, waypoints, n_waypoints, radius, k_th
     for block in numba.prange(n_blocks):
         _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radius, k_theta,
                    delay_steps, update_steps, update_count, frame_step, frame_fraction, frame_time,
-                   noise, pixel, window, stop_at_goal, pending_size, sample_steps, states_out,
-                   record_full, full_out, arrival_out, failure_out, failure_time_out, reason_out,
-                   reason_index_out, reason_value_out, final_state_out, final_step_out,
-                   target_out, distance_out)
+                   noise, plain_run, pixel, window, stop_at_goal, pending_size, sample_steps,
+                   states_out, record_full, full_out, arrival_out, failure_out, failure_time_out,
+                   reason_out, reason_index_out, reason_value_out, final_state_out,
+                   final_step_out, target_out, distance_out)

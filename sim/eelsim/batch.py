@@ -533,6 +533,30 @@ def _rows(params: FloatArray, layout: _batch_codegen.Layout, name: str, size: in
     return params[:, start : start + size]
 
 
+def plain_runs(spec: BatchSpec) -> NDArray[np.bool_]:
+    """Which runs have no servo line and no current.
+
+    A block whose runs all have neither takes the kernel's backward sweep without those terms
+    (``eelsim._batch_codegen``): same numbers, about 12 % less work in that loop.
+
+    Parameters
+    ----------
+    spec : BatchSpec
+
+    Returns
+    -------
+    ndarray of bool, shape (R,)
+    """
+    layout = _batch_codegen.make_layout(spec.n_links, DEFAULT_LANES)
+    params = spec.params
+    return (
+        np.isinf(_rows(params, layout, "stall", 1)[:, 0])
+        & (_rows(params, layout, "stall_slope", 1)[:, 0] == 0.0)
+        & (_rows(params, layout, "vcx", 1)[:, 0] == 0.0)
+        & (_rows(params, layout, "vcy", 1)[:, 0] == 0.0)
+    )
+
+
 def _fill_params(params, layout, rsel, ssel, n, dt) -> None:
     g = rsel["geometry"]  # (R, N, N), G[j, i]
     mass = rsel["mass"]
@@ -545,7 +569,7 @@ def _fill_params(params, layout, rsel, ssel, n, dt) -> None:
     _rows(params, layout, "mass_sum", 1)[:, 0] = mass.sum(axis=1)
     _rows(params, layout, "half_length", n)[:] = rsel["half"]
     _rows(params, layout, "four_h2", n)[:] = (2.0 * rsel["half"]) ** 2
-    for name in ("kp", "kd", "limit", "clamp", "stall", "inv_no_load"):
+    for name in ("kp", "kd", "limit", "clamp", "stall"):
         _rows(params, layout, name, 1)[:, 0] = rsel[name]
     # stall / no_load, 0 when the servo model is off (stall = inf, 1 / no_load = 0)
     on = rsel["inv_no_load"] > 0.0
@@ -778,7 +802,8 @@ def run_spec(
             spec.params, spec.initial_state, spec.total_steps, float(dt), spec.waypoints_m,
             spec.n_waypoints, spec.acceptance_radius_m, spec.k_theta, spec.delay_steps,
             spec.update_steps, spec.update_count, spec.frame_step, spec.frame_fraction,
-            spec.frame_time_s, spec.heading_noise_rad, float(cam.pixel_m), int(cam.median_window),
+            spec.frame_time_s, spec.heading_noise_rad, plain_runs(spec), float(cam.pixel_m),
+            int(cam.median_window),
             bool(spec.options.stop_at_goal), int(pending), unique, states, bool(record_full), full,
             out["arrival"], out["failure"], out["failure_time"], out["reason"],
             out["reason_index"], out["reason_value"], out["final_state"], out["final_step"],

@@ -323,3 +323,13 @@ def test_the_plain_sweep_equals_the_general_one_without_current_or_servo_line(ro
         results.append(work[k.W_ACC * lanes : (k.W_ACC + xs.shape[1]) * lanes].copy())
     assert np.array_equal(results[0], results[1])
     assert np.all(np.isfinite(results[0]))
+
+
+def test_runs_with_a_current_or_a_servo_line_are_not_plain(robot):
+    from eelsim.batch import plain_runs
+
+    still = load_scenario("straight")
+    spec = BatchSpec.build(robot, [still, load_scenario("path2")])  # path2 has a current
+    assert plain_runs(spec).tolist() == [True, False]
+    servo = BatchSpec.build(robot, still, options=LoopOptions(servo_limits=True))
+    assert plain_runs(servo).tolist() == [False]

@@ -326,11 +326,8 @@ def _profile(batch, spec, opts: LoopOptions) -> list[str]:
             work[(k.W_Y + row) * lanes + r] = x[row]
     stage, screen, cond_bound = k._stage, k._screen, k._cond_bound
 
-    # the GA's runs have no current and no servo line: the driver picks the plain sweep
-    plain = bool(np.all(spec.params[:, k.W_VCX - k.W_GEOMETRY] == 0.0)
-                 and np.all(spec.params[:, k.W_VCY - k.W_GEOMETRY] == 0.0)
-                 and np.all(spec.params[:, k.W_STALL_SLOPE - k.W_GEOMETRY] == 0.0)
-                 and np.all(np.isinf(spec.params[:, k.W_STALL - k.W_GEOMETRY])))
+    # the sweep the driver picks for this block (the GA's runs: no current, no servo line)
+    plain = bool(batch.plain_runs(spec)[np.arange(lanes) % spec.n_runs].all())
 
     @numba.njit
     def _steps(work, count, rotate_first):  # pragma: no cover - compiled
