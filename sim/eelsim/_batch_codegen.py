@@ -165,8 +165,8 @@ def make_layout(n_links: int, lanes: int) -> Layout:
         ("sin", n),  # sin and cos of the last stage's angles (stage 1's for the screen)
         ("cos", n),
         ("near", 1),  # the screen's verdict: joint past its limit or two links close
-        ("x_bad", 1),  # x is not finite (NaN when any component is NaN or infinite)
-        ("fastest", 1),  # max |rate| of x
+        ("x_bad", 1),  # x0 is not finite (NaN when any component is NaN or infinite; step 0)
+        ("fastest", 1),  # max |rate| of x (x0's, then each new state's from the last stage)
         ("xn_bad", 1),  # the same for the new state
         # what the stage's three loops pass on (see _stage_body)
         ("gait_sin", 1),
@@ -523,6 +523,8 @@ def _stage_body(layout: Layout) -> list[str]:
     line(f"{o('offset')} = max({offsets})")
     line("# v - v is 0 for finite v and NaN for NaN or +-inf: one NaN test per lane for all rows")
     line(f"{o('xn_bad')} = {' + '.join(f'(v{i} - v{i})' for i in range(len(deriv)))}")
+    line("# the divergence test of the next step's x (the new state, if the lane goes on)")
+    line(f"{o('fastest')} = max({', '.join(f'abs(v{i})' for i in range(n + 2, 2 * n + 4))})")
     e.lines.append("    else:")
     e.loop("4a. RK4 accumulator and the next stage's input", indent=4)
     for i, d in enumerate(deriv):
@@ -560,12 +562,6 @@ def _screen_body(layout: Layout) -> list[str]:
             line(f"reach = (h{i} + h{k}) * (h{i} + h{k}) * {1.0 + _SCREEN_MARGIN!r}")
             line("near = 1.0 if dx * dx + dy * dy <= reach else near")
     line(f"{o('near')} = near")
-    # x - x is 0 for finite x and NaN for NaN or +-inf: one NaN test per lane for all rows
-    ns = 2 * n + 4
-    diffs = " + ".join(f"({w('x', i)} - {w('x', i)})" for i in range(ns))
-    line(f"{o('x_bad')} = {diffs}")
-    rates = ", ".join(f"abs({w('x', i)})" for i in range(n + 2, ns))
-    line(f"{o('fastest')} = max({rates})")
     return e.lines
 
 
@@ -642,12 +638,14 @@ def generate_stage_source(layout: Layout) -> str:
 
     ``work`` is one buffer: the rows of ``work`` and after them those of ``out`` (so that LLVM
     sees one base and constant distances, and needs no runtime alias checks between the two).
-    ``_stage(work, t_s, a, wk, first, last, sixth, rotate, advance)``: one RK4 stage for
+    ``_stage(work, t_s, a, wk, first, last, sixth, rotate, advance, plain)``: one RK4 stage for
     every lane: the right-hand side f(t_s, y), then acc = f (``first``) or acc + wk f and
-    y = x + a f, or for the ``last`` stage xn = x + sixth (acc + wk f); ``rotate``: sin and cos
-    of the angles by rotation of the previous stage's (rows ang, sin, cos) and of the gait phase
-    advanced by dt/2 (``advance``) or not, else both in full at t_s. ``_screen(work)``: the self-collision screen and the finiteness and
-    divergence checks of x. ``_cond_bound(work)``: the condition-number bound at x.
+    y = x + a f, or for the ``last`` stage xn = x + sixth (acc + wk f) with its finiteness and
+    fastest rate; ``rotate``: sin and cos of the angles by rotation of the previous stage's
+    (rows ang, sin, cos) and of the gait phase advanced by dt/2 (``advance``) or not, else both
+    in full at t_s; ``plain``: the backward sweep without servo line and current.
+    ``_screen(work)``: the self-collision screen of x. ``_cond_bound(work)``: the
+    condition-number bound at x.
 
     Parameters
     ----------

@@ -450,12 +450,32 @@ def _rotates(out, alive):
     """Whether the next stage may rotate the last stage's sin and cos: every live lane moved little.
 
     (A NaN offset is not small: that lane's blow-up then goes through the full sin/cos, exactly
-    as before.)
+    as before.) One count over the lanes, without branches, so that it vectorises: it runs four
+    times per step, and the loop with an early exit had cost about 6 ns per run and step.
+    """
+    far = 0
+    for r in range(LANES):
+        far += alive[r] & ((out[O_OFFSET * LANES + r] < ROTATE_LIMIT) ^ True)
+    return far == 0
+
+
+@numba.njit(cache=True)
+def _check_start(work, out):
+    """Finiteness and fastest rate of the block's initial states (rows x_bad and fastest).
+
+    After step 0 the last RK4 stage writes both for the new state, which is the next step's x
+    whenever the lane goes on (a lane whose new state is not finite stops there).
     """
     for r in range(LANES):
-        if alive[r] and not out[O_OFFSET * LANES + r] < ROTATE_LIMIT:
-            return False
-    return True
+        bad = 0.0
+        fastest = 0.0
+        for row in range(2 * N_LINKS + 4):
+            v = work[(W_X + row) * LANES + r]
+            bad += v - v
+            if row >= N_LINKS + 2:
+                fastest = max(fastest, abs(v))
+        out[O_X_BAD * LANES + r] = bad
+        out[O_FASTEST * LANES + r] = fastest
 
 
 @numba.njit(cache=True)
@@ -552,6 +572,7 @@ def _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radiu
     _observe(0, seen_x, seen_y, seen_heading, alive, run_of, noise, pixel, window, med,
              med_state, last_heading, filtered, target, arrival, target_x, target_y,
              lane_radius, lane_waypoints, waypoints, frame_time[0], turn, rank, total)
+    _check_start(work, out)
     # no lane with a servo line or a current (batch.plain_runs): the stage leaves those out
     plain = True
     for r in range(LANES):

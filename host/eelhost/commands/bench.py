@@ -394,7 +394,7 @@ def _profile(batch, spec, opts: LoopOptions) -> list[str]:
     rows = [
         ("4 RK4 stages (generated; sin/cos, gait and PD, forces, O(N) recursion, RK4 sums)",
          stages),
-        ("collision screen and finiteness/divergence checks of x (generated)", t_screen),
+        ("self-collision screen of x (generated)", t_screen),
         (f"condition-number bound, once per control period ({period} steps; generated)", bound),
         ("camera frames (Hermite pose, pixels, median filter, waypoints; per lane)", camera),
         ("driver: control updates, checks, commit, block set-up (per lane)", driver),
@@ -438,8 +438,6 @@ def _driver_only_kernel(batch, n_links: int, lanes: int):
             "def _screen(work):\n"
             "    for r in range(LANES):\n"
             "        work[(WORK_ROWS + O_NEAR) * LANES + r] = 0.0\n"
-            "        work[(WORK_ROWS + O_X_BAD) * LANES + r] = 0.0\n"
-            "        work[(WORK_ROWS + O_FASTEST) * LANES + r] = 0.0\n"
         ),
         "_cond_bound": (
             "def _cond_bound(work):\n"
