@@ -11,8 +11,8 @@ Usage (from the repo root, after ``bash scripts/setup.sh``)::
 
     .venv/bin/python scripts/kernel_ab.py [--base HEAD] [--rounds 15] [--threads 1]
 
-The first call compiles both kernels (about a minute each; cached afterwards under
-``$TMPDIR/eelsim_kernel_ab``). The two versions must lay out the per-run parameter rows
+The first call compiles both kernels (about a minute each; cached afterwards beside the
+package's own kernel, ``eelsim.batch.kernel_cache_dir``). The two versions must lay out the per-run parameter rows
 (``work`` rows) alike, since the batch is built once, by the working tree's ``eelsim.batch``.
 """
 
@@ -67,7 +67,7 @@ def kernel_at(revision: str | None, n_links: int, lanes: int, where: Path) -> Mo
     n_links, lanes : int
         The kernel's N and block size.
     where : Path
-        Directory for the generated modules (numba caches next to them).
+        Directory for the revision's generator module.
 
     Returns
     -------
@@ -77,25 +77,17 @@ def kernel_at(revision: str | None, n_links: int, lanes: int, where: Path) -> Mo
     generator_text = _text_at(revision, _GENERATOR)
     template = _text_at(revision, _TEMPLATE)
     key = hashlib.sha1((generator_text + template).encode()).hexdigest()[:12]
-    generator = _import(_write(where / f"gen_{key}.py", generator_text), f"kernel_ab_gen_{key}")
-    for line, value in (("ILL_CONDITION_THRESHOLD = 1e10", batch.ILL_CONDITION_THRESHOLD),
-                        ("DIVERGENCE_RATE = 1e3", batch.DIVERGENCE_RATE)):
-        template = template.replace(line, f"{line.split(' = ')[0]} = {value!r}")
-    layout = generator.make_layout(n_links, lanes)
-    ours = batch._batch_codegen.make_layout(n_links, lanes)
-    if layout.work != ours.work:
+    path = where / f"gen_{key}.py"
+    if not path.exists() or path.read_text() != generator_text:
+        path.write_text(generator_text)
+    generator = _import(path, f"kernel_ab_gen_{key}")
+    if generator.make_layout(n_links, lanes).work != batch._batch_codegen.make_layout(
+            n_links, lanes).work:
         raise SystemExit(f"{revision or 'working tree'} lays out the work rows differently from "
                          "the working tree's eelsim.batch; this comparison cannot build one batch "
                          "for both")
-    source = template + generator.generate_stage_source(layout)
-    name = f"kernel_ab_{key}_n{n_links}_l{lanes}"
-    return _import(_write(where / f"{name}.py", source), name)
-
-
-def _write(path: Path, text: str) -> Path:
-    if not path.exists() or path.read_text() != text:
-        path.write_text(text)
-    return path
+    source = batch._kernel_source(n_links, lanes, template=template, generator=generator)
+    return batch.load_kernel_source(f"kernel_ab_{key}_n{n_links}_l{lanes}", source)
 
 
 def main() -> int:

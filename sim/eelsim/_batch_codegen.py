@@ -56,6 +56,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
+
 # Taylor coefficients of sin and cos; after reduction to |r| <= pi/4 the first omitted terms are
 # below 1e-19 (sin, r^19/19!) and 1e-20 (cos, r^20/20!), so rounding dominates (about 1 ulp).
 _SIN_TAYLOR = [(-1.0) ** k / math.factorial(2 * k + 1) for k in range(1, 9)]
@@ -77,6 +79,36 @@ _ROTATE_LIMIT = 0.1
 # stage); every this many steps stage 1 computes them in full again, so that the chain's rounding
 # stays below 1e-14.
 _RESYNC_STEPS = 16
+
+
+def screen_pairs(n_links: int) -> list[tuple[int, int]]:
+    """The link pairs the self-collision screen tests: (i, k) with k >= i + 2.
+
+    Parameters
+    ----------
+    n_links : int
+
+    Returns
+    -------
+    list of (int, int)
+    """
+    return [(i, k) for i in range(n_links) for k in range(i + 2, n_links)]
+
+
+def screen_reach(half_length: np.ndarray) -> np.ndarray:
+    """Squared reach of each screened pair, (h_i + h_k)^2 (1 + margin), per run.
+
+    Parameters
+    ----------
+    half_length : ndarray, shape (R, N)
+
+    Returns
+    -------
+    ndarray, shape (R, len(screen_pairs(N)))
+    """
+    pairs = np.array(screen_pairs(half_length.shape[1]), dtype=np.int64).reshape(-1, 2)
+    total = half_length[:, pairs[:, 0]] + half_length[:, pairs[:, 1]]
+    return total * total * (1.0 + _SCREEN_MARGIN)
 
 
 @dataclass(frozen=True)
@@ -155,6 +187,8 @@ def make_layout(n_links: int, lanes: int) -> Layout:
         ("limit", 1),  # mechanical joint limit (self-collision check)
         ("clamp", 1),  # joint references are clamped to +-this (JointSpec.command_limit_rad)
         ("half_length", n),
+        # the screen's squared reach of each link pair (i, k >= i + 2), in screen_pairs' order
+        ("reach", len(screen_pairs(n))),
         ("stall", 1),  # servo stall torque (inf when the servo model is off)
         ("stall_slope", 1),  # stall torque / no-load speed (0 when off)
         ("vcx", 1),
@@ -555,12 +589,10 @@ def _screen_body(layout: Layout) -> list[str]:
     for j in range(1, n):
         line(f"px{j} = px{j - 1} + (h{j - 1} * c{j - 1} + h{j} * c{j})")
         line(f"py{j} = py{j - 1} + (h{j - 1} * s{j - 1} + h{j} * s{j})")
-    for i in range(n):
-        for k in range(i + 2, n):
-            line(f"dx = px{k} - px{i}")
-            line(f"dy = py{k} - py{i}")
-            line(f"reach = (h{i} + h{k}) * (h{i} + h{k}) * {1.0 + _SCREEN_MARGIN!r}")
-            line("near = 1.0 if dx * dx + dy * dy <= reach else near")
+    for pair, (i, k) in enumerate(screen_pairs(n)):
+        line(f"dx = px{k} - px{i}")
+        line(f"dy = py{k} - py{i}")
+        line(f"near = 1.0 if dx * dx + dy * dy <= {w('reach', pair)} else near")
     line(f"{o('near')} = near")
     return e.lines
 

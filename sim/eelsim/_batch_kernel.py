@@ -12,13 +12,15 @@ still computed but never committed):
 1. control updates (offset gamma from the filtered pose, pending queue for the delay) - a
    vectorised test finds the lanes that have one, the update itself is per lane;
 2. sampling of the state;
-3. RK4 stage 1 (vectorised), the self-collision screen with the finiteness and divergence tests
-   (vectorised), the condition-number bound when some lane updates its control (vectorised), then
-   the checks of ``closed_loop._check`` in its order (non-finite, condition number at update
-   steps, joint limit, link intersection) - exact tests only for lanes the screen flags and exact
-   condition numbers only where the bound is near the threshold;
-4. the stop rules, RK4 stages 2-4 (vectorised; each stage also does its part of the RK4 sums),
-   the pivot and finiteness checks of the new state;
+3. RK4 stage 1 (vectorised), the self-collision screen (vectorised), the condition-number bound
+   when some lane updates its control (vectorised), then the checks of ``closed_loop._check`` in
+   its order (non-finite, diverging, condition number at update steps, joint limit, link
+   intersection) - exact tests only for lanes the screen flags and exact condition numbers only
+   where the bound is near the threshold. x's finiteness and fastest rate come from the last
+   stage of the step before (x0's from a check at the block's start);
+4. the stop rules, RK4 stages 2-4 (vectorised; each stage also does its part of the RK4 sums,
+   the last one the finiteness and fastest rate of the new state), the pivot and finiteness
+   checks of the new state;
 5. camera frames in (t, t + dt]: Hermite pose, pixel quantisation, heading noise, median filter,
    waypoint switching and arrival - for all lanes at once;
 6. the lanes still running commit the new state (a copy of the rows when all do, else a select
@@ -423,29 +425,36 @@ def _aim(r, run, target, target_x, target_y, lane_waypoints, waypoints):
 
 
 @numba.njit(cache=True)
-def _pose(work, base, r, n):
-    """(p_x, p_y, mean theta) and their rates of the state in work rows ``base``.., lane r.
+def _frame_poses(work, s, h, seen_x, seen_y, seen_heading):
+    """The pose every lane's camera sees at fraction ``s`` of the step (rows x to xn, length h).
 
-    The same sums as closed_loop's pose_and_rate.
-    """
-    h = 0.0
-    hd = 0.0
-    for i in range(n):
-        h += work[(base + i) * LANES + r]
-        hd += work[(base + n + 2 + i) * LANES + r]
-    return (work[(base + n) * LANES + r], work[(base + n + 1) * LANES + r], h / n,
-            work[(base + 2 * n + 2) * LANES + r], work[(base + 2 * n + 3) * LANES + r], hd / n)
-
-
-@numba.njit(cache=True)
-def _hermite_weights(s, h):
-    """The weights of y0, dy0, y1, dy1 in camera.hermite at fraction s of a step h.
-
-    Computed as camera.hermite computes them, so that k0 y0 + k1 dy0 + k2 y1 + k3 dy1 (summed in
-    that order) is its value to the bit.
+    camera.hermite of closed_loop's pose_and_rate (p and the mean angle, with their rates) at
+    both ends of the step: its weights computed as it computes them and the terms summed in its
+    order, the mean angle summed in pose_and_rate's order, so the pose is the same to the bit. At
+    s = 0 the weights are (1, 0, 0, 0): the step's start itself. One loop over the lanes that
+    vectorises.
     """
     s2, s3 = s * s, s * s * s
-    return 2 * s3 - 3 * s2 + 1, (s3 - 2 * s2 + s) * h, -2 * s3 + 3 * s2, (s3 - s2) * h
+    k0, k1, k2, k3 = 2 * s3 - 3 * s2 + 1, (s3 - 2 * s2 + s) * h, -2 * s3 + 3 * s2, (s3 - s2) * h
+    n = N_LINKS
+    for r in range(LANES):
+        h0 = 0.0
+        hd0 = 0.0
+        h1 = 0.0
+        hd1 = 0.0
+        for i in range(n):
+            h0 += work[(W_X + i) * LANES + r]
+            hd0 += work[(W_X + n + 2 + i) * LANES + r]
+            h1 += work[(W_XN + i) * LANES + r]
+            hd1 += work[(W_XN + n + 2 + i) * LANES + r]
+        seen_x[r] = (((k0 * work[(W_X + n) * LANES + r] + k1 * work[(W_X + 2 * n + 2) * LANES + r])
+                      + k2 * work[(W_XN + n) * LANES + r])
+                     + k3 * work[(W_XN + 2 * n + 2) * LANES + r])
+        seen_y[r] = (((k0 * work[(W_X + n + 1) * LANES + r]
+                       + k1 * work[(W_X + 2 * n + 3) * LANES + r])
+                      + k2 * work[(W_XN + n + 1) * LANES + r])
+                     + k3 * work[(W_XN + 2 * n + 3) * LANES + r])
+        seen_heading[r] = ((k0 * (h0 / n) + k1 * (hd0 / n)) + k2 * (h1 / n)) + k3 * (hd1 / n)
 
 
 @numba.njit(cache=True)
@@ -485,9 +494,9 @@ def _check_start(work, out):
 def _zeros_on_cache_lines(count):
     """np.zeros(count) that starts on a 64-byte boundary (numba's allocator aligns to 32).
 
-    The block's rows are 128 bytes (16 lanes); with the buffer on cache-line boundaries each
-    row is exactly two lines. Paired A/B on the GA generation, aligned against not: median time
-    ratios 0.86-0.95 over five comparisons in separate processes (docs/kernel_history.md).
+    Paired A/B on the GA generation, aligned against not: faster in seven of eight comparisons
+    in separate processes (median time ratios 0.86-0.98), 1.01 in the eighth; the likely cause
+    is address aliasing at some 4 KB offsets (docs/kernel_history.md, session 3).
     """
     raw = np.zeros(count + 8)
     skip = ((64 - raw.ctypes.data % 64) % 64) // 8
@@ -583,8 +592,9 @@ def _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radiu
             update_at[r] = update_steps[run_of[r], 0]
         lane_waypoints[r] = n_waypoints[run_of[r]]
         _aim(r, run_of[r], target, target_x, target_y, lane_waypoints, waypoints)
-        seen_x[r], seen_y[r], seen_heading[r], _, _, _ = _pose(work, W_X, r, n)
-    # the frame at t = 0 sees the initial pose
+    # the frame at t = 0 sees the initial pose (fraction 0 of the first step; the xn rows are
+    # still zero)
+    _frame_poses(work, 0.0, dt, seen_x, seen_y, seen_heading)
     _observe(0, seen_x, seen_y, seen_heading, alive, run_of, noise, pixel, window, med,
              med_state, last_heading, filtered, target, arrival, target_x, target_y,
              lane_radius, lane_waypoints, waypoints, frame_time[0], turn, rank, total)
@@ -750,29 +760,7 @@ def _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radiu
             final_step[r] = step
         # 5. camera frames in (t, t + dt] see the Hermite-interpolated pose
         while frame < n_frames and frame_step[frame] == step:
-            k0, k1, k2, k3 = _hermite_weights(frame_fraction[frame], dt)
-            for r in range(LANES):
-                # the mean angle and its rate at both ends of the step (_pose's sums, in its
-                # order), for all lanes in one loop that vectorises
-                h0 = 0.0
-                hd0 = 0.0
-                h1 = 0.0
-                hd1 = 0.0
-                for i in range(N_LINKS):
-                    h0 += work[(W_X + i) * LANES + r]
-                    hd0 += work[(W_X + N_LINKS + 2 + i) * LANES + r]
-                    h1 += work[(W_XN + i) * LANES + r]
-                    hd1 += work[(W_XN + N_LINKS + 2 + i) * LANES + r]
-                seen_x[r] = (((k0 * work[(W_X + N_LINKS) * LANES + r]
-                               + k1 * work[(W_X + 2 * N_LINKS + 2) * LANES + r])
-                              + k2 * work[(W_XN + N_LINKS) * LANES + r])
-                             + k3 * work[(W_XN + 2 * N_LINKS + 2) * LANES + r])
-                seen_y[r] = (((k0 * work[(W_X + N_LINKS + 1) * LANES + r]
-                               + k1 * work[(W_X + 2 * N_LINKS + 3) * LANES + r])
-                              + k2 * work[(W_XN + N_LINKS + 1) * LANES + r])
-                             + k3 * work[(W_XN + 2 * N_LINKS + 3) * LANES + r])
-                seen_heading[r] = (((k0 * (h0 / n) + k1 * (hd0 / n)) + k2 * (h1 / n))
-                                   + k3 * (hd1 / n))
+            _frame_poses(work, frame_fraction[frame], dt, seen_x, seen_y, seen_heading)
             _observe(frame, seen_x, seen_y, seen_heading, alive, run_of, noise, pixel, window,
                      med, med_state, last_heading, filtered, target, arrival, target_x, target_y,
                      lane_radius, lane_waypoints, waypoints, frame_time[frame], turn, rank,

@@ -49,6 +49,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
+from types import ModuleType
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -112,8 +113,16 @@ def kernel_cache_dir() -> Path:
         return Path.home() / ".cache" / "eelsim" / "batch_kernels"
 
 
-def _kernel_source(n_links: int, lanes: int) -> str:
-    template = (Path(__file__).parent / "_batch_kernel.py").read_text()
+def _kernel_source(n_links: int, lanes: int, template: str | None = None,
+                   generator: ModuleType | None = None) -> str:
+    """The kernel module's text: the driver template with the generated part appended.
+
+    ``template`` (the text of ``_batch_kernel.py``) and ``generator`` (a module like
+    ``_batch_codegen``) default to this package's; scripts/kernel_ab.py passes other versions.
+    """
+    if template is None:
+        template = (Path(__file__).parent / "_batch_kernel.py").read_text()
+    generator = _batch_codegen if generator is None else generator
     for name, value in (
         ("ILL_CONDITION_THRESHOLD = 1e10", ILL_CONDITION_THRESHOLD),
         ("DIVERGENCE_RATE = 1e3", DIVERGENCE_RATE),
@@ -121,15 +130,46 @@ def _kernel_source(n_links: int, lanes: int) -> str:
         if name not in template:
             raise RuntimeError(f"kernel template lost its line {name!r}")
         template = template.replace(name, f"{name.split(' = ')[0]} = {value!r}")
-    layout = _batch_codegen.make_layout(n_links, lanes)
-    return template + _batch_codegen.generate_stage_source(layout)
+    layout = generator.make_layout(n_links, lanes)
+    return template + generator.generate_stage_source(layout)
+
+
+def load_kernel_source(name: str, source: str) -> ModuleType:
+    """Write a kernel module's text to :func:`kernel_cache_dir` and import it as ``name``.
+
+    The file is rewritten only when the text changed, so numba's cache (keyed on the file's
+    time stamp) stays valid across processes.
+
+    Parameters
+    ----------
+    name : str
+        Module name (also the file's stem).
+    source : str
+        The module's text.
+
+    Returns
+    -------
+    module
+    """
+    folder = kernel_cache_dir()
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / f"{name}.py"
+    if not path.exists() or path.read_text() != source:
+        tmp = path.with_suffix(f".tmp{os.getpid()}")
+        tmp.write_text(source)
+        os.replace(tmp, path)  # atomic: concurrent processes never see half a file
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    # numba's cache re-imports the module by name when it loads compiled code
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    return module
 
 
 def kernel_module(n_links: int, lanes: int = DEFAULT_LANES):
     """Return the compiled-on-demand kernel module for N links and ``lanes`` runs per block.
 
-    The module's source is written to :func:`kernel_cache_dir` only when it changed, so numba's
-    cache (keyed on the file's time stamp) stays valid across processes.
+    The module's source is written to :func:`kernel_cache_dir` (:func:`load_kernel_source`).
 
     Parameters
     ----------
@@ -147,20 +187,8 @@ def kernel_module(n_links: int, lanes: int = DEFAULT_LANES):
         return _KERNELS[key]
     if lanes < 4 or lanes % 4:
         raise ValueError(f"lanes must be a positive multiple of 4 (vectors), got {lanes}")
-    name = f"eelsim_batch_kernel_n{n_links}_l{lanes}"
-    folder = kernel_cache_dir()
-    folder.mkdir(parents=True, exist_ok=True)
-    path = folder / f"{name}.py"
-    source = _kernel_source(n_links, lanes)
-    if not path.exists() or path.read_text() != source:
-        tmp = path.with_suffix(f".tmp{os.getpid()}")
-        tmp.write_text(source)
-        os.replace(tmp, path)  # atomic: concurrent processes never see half a file
-    spec = importlib.util.spec_from_file_location(name, path)
-    module = importlib.util.module_from_spec(spec)
-    # numba's cache re-imports the module by name when it loads compiled code
-    sys.modules[name] = module
-    spec.loader.exec_module(module)
+    module = load_kernel_source(f"eelsim_batch_kernel_n{n_links}_l{lanes}",
+                                _kernel_source(n_links, lanes))
     _KERNELS[key] = module
     return module
 
@@ -569,6 +597,8 @@ def _fill_params(params, layout, rsel, ssel, n, dt) -> None:
     _rows(params, layout, "mass_sum", 1)[:, 0] = mass.sum(axis=1)
     _rows(params, layout, "half_length", n)[:] = rsel["half"]
     _rows(params, layout, "four_h2", n)[:] = (2.0 * rsel["half"]) ** 2
+    reach = _batch_codegen.screen_reach(rsel["half"])
+    _rows(params, layout, "reach", reach.shape[1])[:] = reach
     for name in ("kp", "kd", "limit", "clamp", "stall"):
         _rows(params, layout, name, 1)[:, 0] = rsel[name]
     # stall / no_load, 0 when the servo model is off (stall = inf, 1 / no_load = 0)

@@ -430,8 +430,6 @@ def _driver_only_kernel(batch, n_links: int, lanes: int):
     state stays put (the stub stage only clears the rotation offset), so the runs go their full
     length without a failure. Written beside the real kernel, under its own module name.
     """
-    import importlib.util
-
     source = batch._kernel_source(n_links, lanes)
     generated = source.index("# ---- generated for N")
     stubs = {
@@ -456,12 +454,4 @@ def _driver_only_kernel(batch, n_links: int, lanes: int):
         end = source.find("@numba.njit", start)
         end = len(source) if end < 0 else end
         source = source[:start] + stub + "\n\n" + source[end:]
-    module_name = f"eelsim_batch_driver_only_n{n_links}_l{lanes}"
-    path = batch.kernel_cache_dir() / f"{module_name}.py"
-    if not path.exists() or path.read_text() != source:
-        path.write_text(source)
-    spec = importlib.util.spec_from_file_location(module_name, path)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[module_name] = module
-    spec.loader.exec_module(module)
-    return module
+    return batch.load_kernel_source(f"eelsim_batch_driver_only_n{n_links}_l{lanes}", source)
