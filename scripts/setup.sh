@@ -42,7 +42,13 @@ fi
 if [ -f firmware/Makefile ]; then
   make -s -C firmware native
 fi
-# 4. The twin's batched kernel, compiled into numba's on-disk cache (about a minute the first
-# time, half a second once cached), so that no command pays for it.
-.venv/bin/python -c "from eelsim.batch import warm_up; print(f'setup: batched kernel ready ({warm_up():.1f} s)')"
+# 4. The twin's batched kernel, compiled into numba's on-disk cache (half a minute to a minute
+# the first time, half a second once cached), so that no command pays for it: with its stage
+# compiled by the C compiler (the default when there is one) and by numba (the fallback, which
+# the tests cross-check).
+.venv/bin/python - <<'PY'
+from eelsim.batch import stage_backend, warm_up
+for stage in dict.fromkeys([stage_backend(), "numba"]):
+    print(f"setup: batched kernel ready, stage by {stage} ({warm_up(stage=stage):.1f} s)")
+PY
 echo "setup: ready ($root/.venv)"

@@ -29,6 +29,12 @@ Blocks are spread over the cores with numba's ``prange``, handed out one at a ti
 module is generated once per (N, lanes) and compiled once: numba caches it on disk (next to the
 package in ``__pycache__``, or in ``$EELSIM_KERNEL_CACHE``) for every later process.
 
+The generated RK4 stage (about 85 % of a step) is by default translated to C and compiled by the
+machine's C compiler (``eelsim._batch_c``), whose schedule of its long straight-line loops runs
+about 15 % faster than LLVM's here; numba compiles the same generated text when there is no C
+compiler, or when ``stage="numba"`` / ``$EELSIM_STAGE=numba`` asks for it
+(:func:`stage_backend`). Both agree to rounding (tested).
+
 Randomness follows the reference exactly: for each run, ``np.random.default_rng(seed)`` draws
 first the control update schedule (:meth:`eelsim.timing.LoopTiming.update_steps`), then one heading
 noise sample per camera frame when ``heading_noise_rad > 0``. These draws are made here in Python;
@@ -46,6 +52,7 @@ import math
 import os
 import sys
 import time
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -54,7 +61,7 @@ from types import ModuleType
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from eelsim import _batch_codegen
+from eelsim import _batch_c, _batch_codegen
 from eelsim.closed_loop import LoopOptions
 from eelsim.flags import DIVERGENCE_RATE, ILL_CONDITION_THRESHOLD, Failure, penalty
 from eelsim.model import geometry_matrix
@@ -87,7 +94,45 @@ class Reason(enum.IntEnum):
 # the compiled kernel
 
 
-_KERNELS: dict[tuple[int, int], object] = {}
+_KERNELS: dict[tuple[int, int, str], object] = {}
+
+STAGE_ENV = "EELSIM_STAGE"
+"""Environment variable choosing how the generated stage is compiled: ``c``, ``numba`` or ``auto``."""
+STAGES = ("auto", "c", "numba")
+_C_FUNCTIONS = ("_stage",)  # the generated functions compiled as C when the stage is "c"
+_C_UNAVAILABLE: list[str] = []  # why "auto" fell back to numba (said once per process)
+
+
+def stage_backend(stage: str | None = None) -> str:
+    """Resolve how the generated RK4 stage is compiled: ``"c"`` or ``"numba"``.
+
+    ``"c"``: translated to C and compiled by the machine's C compiler (``eelsim._batch_c``; about
+    15 % faster here); ``"numba"``: by numba/LLVM like the rest of the kernel. ``"auto"`` (the
+    default, or ``$EELSIM_STAGE``) takes C when a compiler is found.
+
+    Parameters
+    ----------
+    stage : str, optional
+        ``"auto"``, ``"c"`` or ``"numba"``; default ``$EELSIM_STAGE`` or ``"auto"``.
+
+    Returns
+    -------
+    str
+        ``"c"`` or ``"numba"``.
+
+    Raises
+    ------
+    ValueError
+        An unknown choice (naming where it came from).
+    """
+    where = "stage"
+    if stage is None:
+        stage, where = os.environ.get(STAGE_ENV, "auto"), f"${STAGE_ENV}"
+    if stage not in STAGES:
+        raise ValueError(f"{where} must be one of {', '.join(STAGES)}; got {stage!r}")
+    if stage == "auto":
+        return "c" if _batch_c.find_compiler() is not None and not _C_UNAVAILABLE else "numba"
+    return stage
 
 
 def kernel_cache_dir() -> Path:
@@ -114,11 +159,13 @@ def kernel_cache_dir() -> Path:
 
 
 def _kernel_source(n_links: int, lanes: int, template: str | None = None,
-                   generator: ModuleType | None = None) -> str:
+                   generator: ModuleType | None = None, stage: str = "numba") -> str:
     """The kernel module's text: the driver template with the generated part appended.
 
     ``template`` (the text of ``_batch_kernel.py``) and ``generator`` (a module like
     ``_batch_codegen``) default to this package's; scripts/kernel_ab.py passes other versions.
+    ``stage="c"`` compiles the generated stage as C (``eelsim._batch_c``, raising its
+    ``CStageError``) and appends the binding that makes ``_stage`` call it.
     """
     if template is None:
         template = (Path(__file__).parent / "_batch_kernel.py").read_text()
@@ -131,7 +178,11 @@ def _kernel_source(n_links: int, lanes: int, template: str | None = None,
             raise RuntimeError(f"kernel template lost its line {name!r}")
         template = template.replace(name, f"{name.split(' = ')[0]} = {value!r}")
     layout = generator.make_layout(n_links, lanes)
-    return template + generator.generate_stage_source(layout)
+    generated = generator.generate_stage_source(layout)
+    if stage == "numba":
+        return template + generated
+    library, symbols = _batch_c.build(generated, _C_FUNCTIONS, kernel_cache_dir())
+    return template + generated + _batch_c.binding_source(library, symbols, generated)
 
 
 def load_kernel_source(name: str, source: str) -> ModuleType:
@@ -166,7 +217,7 @@ def load_kernel_source(name: str, source: str) -> ModuleType:
     return module
 
 
-def kernel_module(n_links: int, lanes: int = DEFAULT_LANES):
+def kernel_module(n_links: int, lanes: int = DEFAULT_LANES, stage: str | None = None):
     """Return the compiled-on-demand kernel module for N links and ``lanes`` runs per block.
 
     The module's source is written to :func:`kernel_cache_dir` (:func:`load_kernel_source`).
@@ -177,23 +228,38 @@ def kernel_module(n_links: int, lanes: int = DEFAULT_LANES):
         N.
     lanes : int
         Runs per block (a multiple of 4, so that the lane loops vectorise).
+    stage : str, optional
+        How the generated stage is compiled (:func:`stage_backend`). With ``"auto"`` a C
+        compiler that fails is reported once as a warning and numba compiles the stage instead;
+        an explicit ``"c"`` raises the compiler's error.
 
     Returns
     -------
     module
     """
-    key = (n_links, lanes)
+    requested = stage if stage is not None else os.environ.get(STAGE_ENV, "auto")
+    stage = stage_backend(stage)
+    key = (n_links, lanes, stage)
     if key in _KERNELS:
         return _KERNELS[key]
     if lanes < 4 or lanes % 4:
         raise ValueError(f"lanes must be a positive multiple of 4 (vectors), got {lanes}")
-    module = load_kernel_source(f"eelsim_batch_kernel_n{n_links}_l{lanes}",
-                                _kernel_source(n_links, lanes))
+    try:
+        source = _kernel_source(n_links, lanes, stage=stage)
+    except _batch_c.CStageError as exc:
+        if requested != "auto":
+            raise
+        _C_UNAVAILABLE.append(str(exc))
+        warnings.warn(f"the batched kernel's C stage is unavailable, numba compiles it: {exc}",
+                      RuntimeWarning, stacklevel=2)
+        return kernel_module(n_links, lanes, "numba")
+    suffix = "_c" if stage == "c" else ""
+    module = load_kernel_source(f"eelsim_batch_kernel_n{n_links}_l{lanes}{suffix}", source)
     _KERNELS[key] = module
     return module
 
 
-def warm_up(n_links: int = 6, lanes: int = DEFAULT_LANES) -> float:
+def warm_up(n_links: int = 6, lanes: int = DEFAULT_LANES, stage: str | None = None) -> float:
     """Compile (or load from the disk cache) the kernel for N links; return the seconds it took.
 
     Parameters
@@ -202,6 +268,8 @@ def warm_up(n_links: int = 6, lanes: int = DEFAULT_LANES) -> float:
         N.
     lanes : int
         Runs per block.
+    stage : str, optional
+        How the stage is compiled (:func:`stage_backend`).
 
     Returns
     -------
@@ -216,7 +284,7 @@ def warm_up(n_links: int = 6, lanes: int = DEFAULT_LANES) -> float:
     if robot.n_links != n_links:
         robot = robot.model_copy(update={"n_links": n_links})
     scenario = load_scenario("straight").model_copy(update={"duration_s": 0.05})
-    run_batch(robot, scenario, lanes=lanes, sample_steps=[0])
+    run_batch(robot, scenario, lanes=lanes, sample_steps=[0], stage=stage)
     return time.perf_counter() - start
 
 
@@ -768,6 +836,7 @@ def run_spec(
     record_full: bool = False,
     lanes: int = DEFAULT_LANES,
     threads: int | None = None,
+    stage: str | None = None,
 ) -> BatchResult:
     """Run a prepared batch.
 
@@ -785,6 +854,9 @@ def run_spec(
         Runs per block (a multiple of 4).
     threads : int, optional
         Number of threads (default: numba's, i.e. all cores).
+    stage : str, optional
+        How the generated RK4 stage is compiled: ``"auto"``, ``"c"`` or ``"numba"``
+        (:func:`stage_backend`; the results agree to rounding).
 
     Returns
     -------
@@ -798,7 +870,7 @@ def run_spec(
     dt = spec.options.timing.dt_s
     steps = _sample_steps(sample_steps, sample_times_s, dt)
     unique, inverse = np.unique(steps, return_inverse=True)
-    kernel = kernel_module(n, lanes)
+    kernel = kernel_module(n, lanes, stage)
     timing = spec.options.timing
     pending = timing.delay_steps // max(1, timing.period_steps - timing.jitter_steps) + 2
     states = np.full((runs, unique.size, ns), np.nan)
@@ -873,6 +945,7 @@ def run_batch(
     record_full: bool = False,
     lanes: int = DEFAULT_LANES,
     threads: int | None = None,
+    stage: str | None = None,
 ) -> BatchResult:
     """Run many closed-loop runs of the twin at once (see the module docstring).
 
@@ -896,13 +969,15 @@ def run_batch(
         Runs per block.
     threads : int, optional
         Threads to use (default all cores).
+    stage : str, optional
+        How the generated RK4 stage is compiled (:func:`stage_backend`).
 
     Returns
     -------
     BatchResult
     """
     spec = BatchSpec.build(robots, scenarios, coefficients, options, seeds)
-    return run_spec(spec, sample_steps, sample_times_s, record_full, lanes, threads)
+    return run_spec(spec, sample_steps, sample_times_s, record_full, lanes, threads, stage)
 
 
 def steps_per_second(result: BatchResult, wall_s: float) -> float:

@@ -17,6 +17,8 @@ from eelsim.scenario import load_scenario
 from eelsim.timing import LoopTiming
 
 TOL = 1e-9
+# the generated stage compiled as C and by numba: both are tested (eelsim.batch.stage_backend)
+STAGES = ["c", "numba"]
 
 
 def with_joints(robot, **changes):
@@ -204,11 +206,11 @@ def test_per_run_inputs_of_different_lengths_are_refused(robot):
         BatchSpec.build(robot, [s, s, s], coefficients=np.ones((2, 4)))
 
 
-def _lane_block(spec, run=0):
+def _lane_block(spec, stage, run=0):
     """A kernel module and a work/out pair holding ``spec``'s run ``run`` in every lane."""
     from eelsim.batch import DEFAULT_LANES, kernel_module
 
-    k = kernel_module(spec.n_links, DEFAULT_LANES)
+    k = kernel_module(spec.n_links, DEFAULT_LANES, stage)
     lanes = DEFAULT_LANES
     work = np.zeros((k.WORK_ROWS + k.OUT_ROWS) * lanes)  # out's rows follow work's
     out = work[k.WORK_ROWS * lanes :]
@@ -228,8 +230,9 @@ def _random_states(rng, n, lanes):
                      for _ in range(lanes)])
 
 
+@pytest.mark.parametrize("stage", STAGES)
 @pytest.mark.parametrize("odd_links", [False, True])
-def test_recursive_accelerations_equal_the_dense_mass_matrix_solve(robot, odd_links):
+def test_recursive_accelerations_equal_the_dense_mass_matrix_solve(robot, odd_links, stage):
     # the kernel's O(N) articulated-body recursion against dynamics.state_derivative (dense M,
     # Cholesky) on random states, with current and links that differ; joint torques off
     from eelsim.dynamics import state_derivative
@@ -242,7 +245,7 @@ def test_recursive_accelerations_equal_the_dense_mass_matrix_solve(robot, odd_li
         robot = Robot.model_validate(data)
     scenario = load_scenario("path2")  # has a current
     spec = BatchSpec.build(robot, scenario)
-    k, work, out, lanes = _lane_block(spec)
+    k, work, out, lanes = _lane_block(spec, stage)
     work[k.W_KP * lanes : (k.W_KP + 1) * lanes] = 0.0
     work[k.W_KD * lanes : (k.W_KD + 1) * lanes] = 0.0
     xs = _random_states(np.random.default_rng(3), robot.n_links, lanes)
@@ -256,14 +259,15 @@ def test_recursive_accelerations_equal_the_dense_mass_matrix_solve(robot, odd_li
     assert np.all(out[k.O_BAD_PIVOT * lanes : (k.O_BAD_PIVOT + 1) * lanes] == 0.0)
 
 
-def test_vectorised_condition_bound_brackets_numpys_condition_number(robot):
+@pytest.mark.parametrize("stage", STAGES)
+def test_vectorised_condition_bound_brackets_numpys_condition_number(robot, stage):
     # trace(M) trace(M^-1) is >= cond(M) and <= (N + 2)^2 cond(M): the kernel only trusts it to
     # clear a state far below the threshold
     from eelsim.dynamics import mass_matrix
     from eelsim.model import SwimmerModel
 
     spec = BatchSpec.build(robot, load_scenario("straight"))
-    k, work, out, lanes = _lane_block(spec)
+    k, work, out, lanes = _lane_block(spec, stage)
     xs = _random_states(np.random.default_rng(5), robot.n_links, lanes)
     _set_rows(k, work, k.W_X, lanes, xs)
     _set_rows(k, work, k.W_Y, lanes, xs)
@@ -277,13 +281,14 @@ def test_vectorised_condition_bound_brackets_numpys_condition_number(robot):
         assert cond * (1 - 1e-9) <= bound <= nq**2 * cond
 
 
+@pytest.mark.parametrize("stage", STAGES)
 @pytest.mark.parametrize("advance", [False, True])
-def test_stages_that_rotate_the_previous_angles_equal_full_sine_and_cosine(robot, advance):
+def test_stages_that_rotate_the_previous_angles_equal_full_sine_and_cosine(robot, advance, stage):
     # a stage gets sin/cos of its angles by angle addition from the previous stage's, and the
     # gait phase advanced by half a step (stages 2 and 4) or not (1 and 3); that must agree
     # with computing them in full
     spec = BatchSpec.build(robot, load_scenario("path2"))
-    k, work, out, lanes = _lane_block(spec)
+    k, work, out, lanes = _lane_block(spec, stage)
     rng = np.random.default_rng(11)
     xs = _random_states(rng, robot.n_links, lanes)
     xs[:, 0] += 40.0  # far from 0: the rotation must not lose the large angle's accuracy
@@ -310,11 +315,12 @@ def test_a_block_size_that_is_not_whole_vectors_is_refused(robot):
         run_batch(robot, load_scenario("straight"), lanes=10)
 
 
-def test_the_plain_sweep_equals_the_general_one_without_current_or_servo_line(robot):
+@pytest.mark.parametrize("stage", STAGES)
+def test_the_plain_sweep_equals_the_general_one_without_current_or_servo_line(robot, stage):
     # blocks with no current and no servo line take a backward sweep without those terms; the
     # general sweep adds exact zeros and clamps at infinity there, so the two agree bit for bit
     spec = BatchSpec.build(robot, load_scenario("straight"))
-    k, work, out, lanes = _lane_block(spec)
+    k, work, out, lanes = _lane_block(spec, stage)
     xs = _random_states(np.random.default_rng(8), robot.n_links, lanes)
     results = []
     for plain in (True, False):
