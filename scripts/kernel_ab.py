@@ -10,6 +10,11 @@ docs/kernel_history.md for what it decided.
 Usage (from the repo root, after ``bash scripts/setup.sh``)::
 
     .venv/bin/python scripts/kernel_ab.py [--base HEAD] [--rounds 15] [--threads 1]
+        [--stage c|numba] [--base-stage c|numba]
+
+``--stage`` compiles the generated stage of both versions that way (default: as
+``eelsim.batch.stage_backend`` chooses); ``--base-stage`` another way for the base, e.g.
+``--base HEAD --base-stage numba --stage c`` weighs the C stage against numba's on the same code.
 
 The first call compiles both kernels (about a minute each; cached afterwards beside the
 package's own kernel, ``eelsim.batch.kernel_cache_dir``). The two versions must lay out the per-run parameter rows
@@ -57,7 +62,8 @@ def _import(path: Path, name: str) -> ModuleType:
     return module
 
 
-def kernel_at(revision: str | None, n_links: int, lanes: int, where: Path) -> ModuleType:
+def kernel_at(revision: str | None, n_links: int, lanes: int, where: Path,
+              stage: str) -> ModuleType:
     """Build and import the kernel module of ``revision`` (None: the working tree).
 
     Parameters
@@ -68,6 +74,8 @@ def kernel_at(revision: str | None, n_links: int, lanes: int, where: Path) -> Mo
         The kernel's N and block size.
     where : Path
         Directory for the revision's generator module.
+    stage : str
+        ``"c"`` or ``"numba"``: how the generated stage is compiled.
 
     Returns
     -------
@@ -86,8 +94,10 @@ def kernel_at(revision: str | None, n_links: int, lanes: int, where: Path) -> Mo
         raise SystemExit(f"{revision or 'working tree'} lays out the work rows differently from "
                          "the working tree's eelsim.batch; this comparison cannot build one batch "
                          "for both")
-    source = batch._kernel_source(n_links, lanes, template=template, generator=generator)
-    return batch.load_kernel_source(f"kernel_ab_{key}_n{n_links}_l{lanes}", source)
+    source = batch._kernel_source(n_links, lanes, template=template, generator=generator,
+                                  stage=stage)
+    suffix = "_c" if stage == "c" else ""
+    return batch.load_kernel_source(f"kernel_ab_{key}_n{n_links}_l{lanes}{suffix}", source)
 
 
 def main() -> int:
@@ -98,7 +108,11 @@ def main() -> int:
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--runs", type=int, default=600)
     parser.add_argument("--steps", type=int, default=3000)
+    parser.add_argument("--stage", choices=("c", "numba"), default=None)
+    parser.add_argument("--base-stage", choices=("c", "numba"), default=None)
     args = parser.parse_args()
+    stage = batch.stage_backend(args.stage)
+    base_stage = args.base_stage or stage
 
     robot, coeffs = robot_and_coefficients(argparse.Namespace(robot=None, coefficients=None))
     opts = LoopOptions(stop_at_goal=False)
@@ -110,9 +124,11 @@ def main() -> int:
     lanes = batch.DEFAULT_LANES
     where = Path(tempfile.gettempdir()) / "eelsim_kernel_ab"
     where.mkdir(exist_ok=True)
-    names = [args.base, "working tree"]
-    modules = [kernel_at(rev, spec.n_links, lanes, where) for rev in (args.base, None)]
-    key = (spec.n_links, lanes)
+    names = [f"{args.base} ({base_stage} stage)", f"working tree ({stage} stage)"]
+    modules = [kernel_at(args.base, spec.n_links, lanes, where, base_stage),
+               kernel_at(None, spec.n_links, lanes, where, stage)]
+    # run_spec looks the kernel up under the default stage's key; each round puts one there
+    key = (spec.n_links, lanes, batch.stage_backend())
     results = []
     for module in modules:
         batch._KERNELS[key] = module

@@ -87,12 +87,27 @@ def _load() -> str:
         return "unknown"
 
 
-def _warm_up_in_subprocess(cache_dir: str | None) -> float:
+def _stage_name(stage: str) -> str:
+    """How a stage backend is called in the report (the C compiler's own name and version)."""
+    if stage != "c":
+        return "numba (LLVM)"
+    from eelsim import _batch_c
+
+    compiler = _batch_c.find_compiler() or "C"
+    try:
+        out = subprocess.run([compiler, "--version"], capture_output=True, text=True, check=False)
+        version = out.stdout.splitlines()[0].strip()
+    except (OSError, IndexError):
+        version = compiler
+    return f"C ({version})"
+
+
+def _warm_up_in_subprocess(cache_dir: str | None, stage: str) -> float:
     """Seconds to compile (or load) the kernel in a fresh Python process."""
     env = dict(os.environ)
     if cache_dir is not None:
         env["EELSIM_KERNEL_CACHE"] = cache_dir
-    code = "from eelsim.batch import warm_up; print(warm_up())"
+    code = f"from eelsim.batch import warm_up; print(warm_up(stage={stage!r}))"
     out = subprocess.run(
         [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
     )
@@ -134,13 +149,20 @@ def run(args: argparse.Namespace) -> int:
     # 1. compile time
     say(f"## Compile time of the batched kernel (N = {robot.n_links})")
     say()
-    if not args.no_cold_compile:
-        with tempfile.TemporaryDirectory() as tmp:
-            cold = _warm_up_in_subprocess(tmp)
-        say(f"- cold (empty cache, fresh process): {cold:.1f} s")
-    batch.warm_up(robot.n_links)  # make sure the default cache is filled
-    cached = _warm_up_in_subprocess(None)
-    say(f"- cached (fresh process, numba's on-disk cache): {cached:.2f} s")
+    default_stage = batch.stage_backend()
+    stages = [default_stage] + (["numba"] if default_stage == "c" else [])
+    say(f"The generated RK4 stage is compiled by {_stage_name(default_stage)} (the default here"
+        f"; `{batch.STAGE_ENV}` chooses); the rest of the kernel by numba.")
+    say()
+    for stage in stages:
+        if not args.no_cold_compile:
+            with tempfile.TemporaryDirectory() as tmp:
+                cold = _warm_up_in_subprocess(tmp, stage)
+            say(f"- stage by {_stage_name(stage)}: cold (empty cache, fresh process): {cold:.1f} s")
+        batch.warm_up(robot.n_links, stage=stage)  # make sure the default cache is filled
+        cached = _warm_up_in_subprocess(None, stage)
+        say(f"- stage by {_stage_name(stage)}: cached (fresh process, on-disk cache): "
+            f"{cached:.2f} s")
     say()
 
     # 2. a single run
@@ -189,31 +211,44 @@ def run(args: argparse.Namespace) -> int:
     # best of REPEATS, the thread counts in alternation, so that both see the same moments of
     # a machine whose speed drifts (a shared VM: 5-10 % from minute to minute)
     counts = sorted({1, threads})
-    walls: dict[int, list[float]] = {n_threads: [] for n_threads in counts}
-    for n_threads in counts:
-        batch.run_spec(spec, threads=n_threads)  # warm the threads
+    cases = [(stage, n_threads) for stage in stages for n_threads in counts]
+    walls: dict[tuple[str, int], list[float]] = {case: [] for case in cases}
+    for stage, n_threads in cases:
+        batch.run_spec(spec, threads=n_threads, stage=stage)  # warm the threads
     for _ in range(REPEATS):
-        for n_threads in counts:
+        for stage, n_threads in cases:
             start = time.perf_counter()
-            res = batch.run_spec(spec, threads=n_threads)
-            walls[n_threads].append(time.perf_counter() - start)
+            res = batch.run_spec(spec, threads=n_threads, stage=stage)
+            walls[stage, n_threads].append(time.perf_counter() - start)
     steps = float(res.final_step.sum())
-    rates = {n: steps / min(walls[n]) for n in counts}
-    typical = {n: steps / float(np.median(walls[n])) for n in counts}
+    best_rate = {case: steps / min(walls[case]) for case in cases}
+    median_rate = {case: steps / float(np.median(walls[case])) for case in cases}
+    rates = {n: best_rate[default_stage, n] for n in counts}
+    typical = {n: median_rate[default_stage, n] for n in counts}
     flagged = int(np.count_nonzero(res.failure >= 2))
-    say(f"Best and median of {REPEATS} generations per thread count, the counts in alternation.")
+    say(f"Best and median of {REPEATS} generations per case, the cases in alternation.")
     say()
-    say("| threads | RK4 steps per second (best) | per step and core | median of the runs |")
-    say("|---|---|---|---|")
-    for n_threads, rate in rates.items():
-        say(f"| {n_threads} | {rate / 1e6:.2f} million | {n_threads / rate * 1e9:.0f} ns "
-            f"| {typical[n_threads] / 1e6:.2f} million |")
+    say("| stage compiled by | threads | RK4 steps per second (best) | per step and core "
+        "| median of the runs |")
+    say("|---|---|---|---|---|")
+    for stage, n_threads in cases:
+        rate = best_rate[stage, n_threads]
+        say(f"| {_stage_name(stage)} | {n_threads} | {rate / 1e6:.2f} million "
+            f"| {n_threads / rate * 1e9:.0f} ns | {median_rate[stage, n_threads] / 1e6:.2f} million |")
     say()
+    if len(stages) > 1:
+        ratios = [
+            f"{np.median(np.array(walls['c', n]) / np.array(walls['numba', n])):.3f} ({n} thr.)"
+            for n in counts
+        ]
+        say("- time of the C-compiled stage's generation over numba's, median of the paired "
+            f"repeats: {', '.join(ratios)}")
     ga = GA_STEPS / rates[threads]
     say(
         f"- implied time of the paper's whole GA for one motion type (150 x 130 x 4 = {GA_RUNS:,}"
-        f" runs, {GA_STEPS:.3g} steps) on {threads} threads: **{ga:.0f} s** at the best "
-        f"generation's rate, {GA_STEPS / typical[threads]:.0f} s at the median's"
+        f" runs, {GA_STEPS:.3g} steps) on {threads} threads, stage by "
+        f"{_stage_name(default_stage)}: **{ga:.0f} s** at the best generation's rate, "
+        f"{GA_STEPS / typical[threads]:.0f} s at the median's"
     )
     say(
         f"- preparing the batch in Python (BatchSpec.build): {prep * 1e3:.0f} ms; "
@@ -319,6 +354,7 @@ def _profile(batch, spec, opts: LoopOptions) -> list[str]:
 
     n = spec.n_links
     lanes = batch.DEFAULT_LANES
+    backend = batch.stage_backend()
     k = batch.kernel_module(n, lanes)
     work = np.zeros((k.WORK_ROWS + k.OUT_ROWS) * lanes)  # out's rows follow work's
     rng = np.random.default_rng(1)
@@ -383,7 +419,7 @@ def _profile(batch, spec, opts: LoopOptions) -> list[str]:
     try:
         for _ in range(3):
             for physics in (True, False):
-                batch._KERNELS[(n, lanes)] = real if physics else stub
+                batch._KERNELS[(n, lanes, backend)] = real if physics else stub
                 for camera in (True, False):
                     start = time.perf_counter()
                     res = batch.run_spec(spec if camera else no_cam, threads=1)
@@ -391,7 +427,7 @@ def _profile(batch, spec, opts: LoopOptions) -> list[str]:
                     per_step = wall / float(res.final_step.sum()) * 1e9
                     best[physics, camera] = min(best.get((physics, camera), np.inf), per_step)
     finally:
-        batch._KERNELS[(n, lanes)] = real
+        batch._KERNELS[(n, lanes, backend)] = real
     step = best[True, True]
     driver = best[False, False]
     camera = best[False, True] - best[False, False]
