@@ -6,6 +6,10 @@ llvm-mca's estimate of its cycles per iteration (one iteration = one AVX2 vector
 Usage (from the repo root, after ``bash scripts/setup.sh``)::
 
     .venv/bin/python scripts/kernel_loops.py [--links 6] [--lanes 16] [--cpu znver3]
+        [--stage c|numba]
+
+``--stage`` picks whose machine code: the C compiler's (the default when there is one, as in
+``eelsim.batch.stage_backend``) or numba's.
 
 Needs ``llvm-mca`` on the PATH (Debian/Ubuntu package ``llvm``); without it the loops are still
 listed. This is how the work on the kernel was steered (docs/kernel_history.md): llvm-mca's
@@ -33,9 +37,21 @@ _LABEL = re.compile(r"^(\.?[\w.$]+):")
 _JUMP = re.compile(r"^\s+j\w+\s+(\.?[\w.$]+)")
 
 
-def stage_assembly(n_links: int, lanes: int) -> str:
-    """Assembly of the generated stage, compiled afresh (numba does not show cached code)."""
-    k = batch.kernel_module(n_links, lanes)
+def stage_assembly(n_links: int, lanes: int, stage: str) -> str:
+    """Assembly of the generated stage, the C compiler's or numba's.
+
+    Numba's is compiled afresh (numba does not show cached code).
+    """
+    if stage == "c":
+        from eelsim import _batch_c, _batch_codegen
+
+        source = _batch_codegen.generate_stage_source(_batch_codegen.make_layout(n_links, lanes))
+        library, _ = _batch_c.build(source, batch._C_FUNCTIONS, batch.kernel_cache_dir())
+        flags = [f for f in _batch_c.C_FLAGS if f not in ("-shared", "-fPIC")]
+        return subprocess.run([_batch_c.find_compiler(), *flags, "-S", "-o", "-",
+                               str(library.with_suffix(".c"))],
+                              capture_output=True, text=True, check=True).stdout
+    k = batch.kernel_module(n_links, lanes, "numba")
     fresh = numba.njit(fastmath=k._FASTMATH, error_model="numpy", boundscheck=False)(
         k._stage.py_func
     )
@@ -83,8 +99,11 @@ def main() -> int:
     parser.add_argument("--links", type=int, default=6)
     parser.add_argument("--lanes", type=int, default=batch.DEFAULT_LANES)
     parser.add_argument("--cpu", default="znver3", help="llvm-mca -mcpu (default znver3)")
+    parser.add_argument("--stage", choices=("c", "numba"), default=None,
+                        help="whose code: the C compiler's or numba's (default: as the kernel)")
     args = parser.parse_args()
-    loops = vector_loops(stage_assembly(args.links, args.lanes))
+    stage = batch.stage_backend(args.stage)
+    loops = vector_loops(stage_assembly(args.links, args.lanes, stage))
     if shutil.which("llvm-mca") is None:
         print("llvm-mca not found (apt install llvm): listing the loops only", file=sys.stderr)
     total = 0.0
