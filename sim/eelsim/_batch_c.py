@@ -242,18 +242,24 @@ def build(source: str, functions: tuple[str, ...], folder: Path,
     if library.exists():
         return library, symbols
     folder.mkdir(parents=True, exist_ok=True)
+    # each process writes and compiles its own files, then renames them into place (atomic):
+    # concurrent processes never compile half a C file or load half a library
     c_path = folder / f"{stem}.c"
-    c_path.write_text(text)
+    own_c = folder / f"{stem}.tmp{os.getpid()}.c"
+    own_c.write_text(text)
     partial = folder / f"{stem}.so.tmp{os.getpid()}"
     try:
-        done = subprocess.run([compiler, *C_FLAGS, "-o", str(partial), str(c_path)],
+        done = subprocess.run([compiler, *C_FLAGS, "-o", str(partial), str(own_c)],
                               capture_output=True, text=True, check=False)
     except OSError as exc:
+        own_c.unlink(missing_ok=True)
         raise CStageError(f"C compiler {compiler!r} could not be run: {exc}") from exc
+    os.replace(own_c, c_path)  # kept beside the library, for reading (and the error below)
     if done.returncode != 0:
         partial.unlink(missing_ok=True)
-        raise CStageError(f"C compiler {compiler!r} failed on {c_path}:\n{done.stderr.strip()}")
-    os.replace(partial, library)  # atomic: concurrent processes never load half a library
+        errors = done.stderr.strip().replace(str(own_c), str(c_path))
+        raise CStageError(f"C compiler {compiler!r} failed on {c_path}:\n{errors}")
+    os.replace(partial, library)
     return library, symbols
 
 
