@@ -158,11 +158,9 @@ def translate(source: str, function: str, symbol: str) -> str:
         If the function is missing or uses a construct outside the subset (the message names
         the line and the expression).
     """
-    tree = ast.parse(source)
-    found = [n for n in tree.body if isinstance(n, ast.FunctionDef) and n.name == function]
-    if not found:
+    node = _functions(source).get(function)
+    if node is None:
         raise CStageError(f"no function {function!r} in the generated source")
-    node = found[0]
     names = [a.arg for a in node.args.args]
     if not names or names[0] != "work":
         raise CStageError(f"{function}: the first argument must be the buffer 'work'")
@@ -173,6 +171,11 @@ def translate(source: str, function: str, symbol: str) -> str:
     decl = [f"    double {', '.join(sorted(tr.doubles))};"] if tr.doubles else []
     head = f"void {symbol}({', '.join(params)})"
     return "\n".join([f"{head} {{", *decl, *tr.lines, "}", ""])
+
+
+def _functions(source: str) -> dict[str, ast.FunctionDef]:
+    """The module-level functions of a generated text, by name."""
+    return {n.name: n for n in ast.parse(source).body if isinstance(n, ast.FunctionDef)}
 
 
 def find_compiler() -> str | None:
@@ -282,9 +285,7 @@ def binding_source(library: Path, symbols: dict[str, str], source: str) -> str:
     -------
     str
     """
-    tree = ast.parse(source)
-    args = {n.name: [a.arg for a in n.args.args] for n in tree.body
-            if isinstance(n, ast.FunctionDef)}
+    args = {name: [a.arg for a in node.args.args] for name, node in _functions(source).items()}
     lines = ["", "", "# ---- the generated functions compiled as C (eelsim._batch_c)",
              "import llvmlite.binding as _llvm_binding", "",
              f"_llvm_binding.load_library_permanently({str(library)!r})"]

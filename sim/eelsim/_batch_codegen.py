@@ -447,8 +447,9 @@ def _stage_body(layout: Layout) -> list[str]:
     """One RK4 stage for every lane, as three loops over the lanes (see below).
 
     Why three loops: as one loop body the stage kept about 45 values alive across the sweeps
-    over the links, far more than the 16 vector registers, and LLVM's schedule of the long
-    straight-line block spilled and reloaded about 40 % of its instructions. Split where few
+    over the links, far more than the 16 vector registers, and the compiler's schedule of the
+    long straight-line block (LLVM's, when this was measured) spilled and reloaded about 40 % of
+    its instructions. Split where few
     values cross (the angles; the results of the backward sweep), each body fits much better,
     and what crosses goes through rows of ``out`` once instead of through many spills.
 

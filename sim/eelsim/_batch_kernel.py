@@ -568,7 +568,8 @@ def _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radiu
     seen_x = np.zeros(LANES)
     seen_y = np.zeros(LANES)
     seen_heading = np.zeros(LANES)
-    turn = np.zeros(LANES)  # scratch of _observe: heading change, median ranks and sums
+    turn = np.zeros(LANES)  # scratch of _observe: heading change since the last frame
+    # scratch of _median_by_ranks: ranks and sums
     rank = np.zeros(LANES)
     total = np.zeros(LANES)
     cm = np.empty((n + 2, n + 2))

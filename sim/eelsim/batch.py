@@ -125,13 +125,19 @@ def stage_backend(stage: str | None = None) -> str:
     ValueError
         An unknown choice (naming where it came from).
     """
+    stage = _requested_stage(stage)
+    if stage == "auto":
+        return "c" if _batch_c.find_compiler() is not None and not _C_UNAVAILABLE else "numba"
+    return stage
+
+
+def _requested_stage(stage: str | None) -> str:
+    """The choice as given (argument, else ``$EELSIM_STAGE``, else auto), checked."""
     where = "stage"
     if stage is None:
         stage, where = os.environ.get(STAGE_ENV, "auto"), f"${STAGE_ENV}"
     if stage not in STAGES:
         raise ValueError(f"{where} must be one of {', '.join(STAGES)}; got {stage!r}")
-    if stage == "auto":
-        return "c" if _batch_c.find_compiler() is not None and not _C_UNAVAILABLE else "numba"
     return stage
 
 
@@ -237,8 +243,8 @@ def kernel_module(n_links: int, lanes: int = DEFAULT_LANES, stage: str | None = 
     -------
     module
     """
-    requested = stage if stage is not None else os.environ.get(STAGE_ENV, "auto")
-    stage = stage_backend(stage)
+    requested = _requested_stage(stage)
+    stage = stage_backend(requested)
     key = (n_links, lanes, stage)
     if key in _KERNELS:
         return _KERNELS[key]
@@ -837,6 +843,8 @@ def run_spec(
     lanes: int = DEFAULT_LANES,
     threads: int | None = None,
     stage: str | None = None,
+    *,
+    kernel: ModuleType | None = None,
 ) -> BatchResult:
     """Run a prepared batch.
 
@@ -857,6 +865,10 @@ def run_spec(
     stage : str, optional
         How the generated RK4 stage is compiled: ``"auto"``, ``"c"`` or ``"numba"``
         (:func:`stage_backend`; the results agree to rounding).
+    kernel : module, optional
+        A kernel module to run instead of :func:`kernel_module`'s (``lanes`` and ``stage`` are
+        then its own): for tools that time or compare versions of the kernel, e.g.
+        ``eelbot bench`` and scripts/kernel_ab.py.
 
     Returns
     -------
@@ -870,7 +882,10 @@ def run_spec(
     dt = spec.options.timing.dt_s
     steps = _sample_steps(sample_steps, sample_times_s, dt)
     unique, inverse = np.unique(steps, return_inverse=True)
-    kernel = kernel_module(n, lanes, stage)
+    if kernel is None:
+        kernel = kernel_module(n, lanes, stage)
+    elif kernel.N_LINKS != n:
+        raise ValueError(f"the kernel given is for N = {kernel.N_LINKS}, the batch has N = {n}")
     timing = spec.options.timing
     pending = timing.delay_steps // max(1, timing.period_steps - timing.jitter_steps) + 2
     states = np.full((runs, unique.size, ns), np.nan)

@@ -7,7 +7,6 @@ paths: unknown choices, constructs outside the subset, a compiler that fails.
 """
 
 import ctypes
-import math
 
 import numpy as np
 import pytest
@@ -109,6 +108,7 @@ def test_c_stage_and_numba_stage_give_the_same_runs(robot):
     spec = BatchSpec.build(robot, [path2, turning] * 3, coefficients, options,
                            seeds=[0, 1, 2, 3, 4, 5])
     samples = np.arange(0, 1201, 50)
+    assert "_C_STAGE" in vars(batch.kernel_module(spec.n_links, batch.DEFAULT_LANES, "c"))
     c = run_spec(spec, sample_steps=samples, threads=1, stage="c")
     nb = run_spec(spec, sample_steps=samples, threads=1, stage="numba")
     scale = np.maximum(1.0, np.nan_to_num(np.abs(nb.states)))
@@ -139,5 +139,5 @@ def test_a_failing_c_compiler_is_an_error_when_asked_for_and_a_fallback_on_auto(
     with pytest.warns(RuntimeWarning, match="C stage is unavailable, numba compiles it"):
         module = batch.kernel_module(6, batch.DEFAULT_LANES, "auto")
     assert module.__name__.endswith("_l16")  # the numba-compiled kernel
+    assert "_C_STAGE" not in vars(module)  # no binding to a C library in it
     assert batch.stage_backend("auto") == "numba"  # said once, then numba for this process
-    assert math.isfinite(module.ROTATE_LIMIT)

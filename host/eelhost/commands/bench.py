@@ -151,17 +151,18 @@ def run(args: argparse.Namespace) -> int:
     say()
     default_stage = batch.stage_backend()
     stages = [default_stage] + (["numba"] if default_stage == "c" else [])
-    say(f"The generated RK4 stage is compiled by {_stage_name(default_stage)} (the default here"
+    name = {stage: _stage_name(stage) for stage in stages}  # asks the compiler once
+    say(f"The generated RK4 stage is compiled by {name[default_stage]} (the default here"
         f"; `{batch.STAGE_ENV}` chooses); the rest of the kernel by numba.")
     say()
     for stage in stages:
         if not args.no_cold_compile:
             with tempfile.TemporaryDirectory() as tmp:
                 cold = _warm_up_in_subprocess(tmp, stage)
-            say(f"- stage by {_stage_name(stage)}: cold (empty cache, fresh process): {cold:.1f} s")
+            say(f"- stage by {name[stage]}: cold (empty cache, fresh process): {cold:.1f} s")
         batch.warm_up(robot.n_links, stage=stage)  # make sure the default cache is filled
         cached = _warm_up_in_subprocess(None, stage)
-        say(f"- stage by {_stage_name(stage)}: cached (fresh process, on-disk cache): "
+        say(f"- stage by {name[stage]}: cached (fresh process, on-disk cache): "
             f"{cached:.2f} s")
     say()
 
@@ -233,7 +234,7 @@ def run(args: argparse.Namespace) -> int:
     say("|---|---|---|---|---|")
     for stage, n_threads in cases:
         rate = best_rate[stage, n_threads]
-        say(f"| {_stage_name(stage)} | {n_threads} | {rate / 1e6:.2f} million "
+        say(f"| {name[stage]} | {n_threads} | {rate / 1e6:.2f} million "
             f"| {n_threads / rate * 1e9:.0f} ns | {median_rate[stage, n_threads] / 1e6:.2f} million |")
     say()
     if len(stages) > 1:
@@ -247,7 +248,7 @@ def run(args: argparse.Namespace) -> int:
     say(
         f"- implied time of the paper's whole GA for one motion type (150 x 130 x 4 = {GA_RUNS:,}"
         f" runs, {GA_STEPS:.3g} steps) on {threads} threads, stage by "
-        f"{_stage_name(default_stage)}: **{ga:.0f} s** at the best generation's rate, "
+        f"{name[default_stage]}: **{ga:.0f} s** at the best generation's rate, "
         f"{GA_STEPS / typical[threads]:.0f} s at the median's"
     )
     say(
@@ -354,7 +355,6 @@ def _profile(batch, spec, opts: LoopOptions) -> list[str]:
 
     n = spec.n_links
     lanes = batch.DEFAULT_LANES
-    backend = batch.stage_backend()
     k = batch.kernel_module(n, lanes)
     work = np.zeros((k.WORK_ROWS + k.OUT_ROWS) * lanes)  # out's rows follow work's
     rng = np.random.default_rng(1)
@@ -414,20 +414,16 @@ def _profile(batch, spec, opts: LoopOptions) -> list[str]:
     # with and without the camera, interleaved (best of three each) so that all see the same
     # moments of the machine
     stub = _driver_only_kernel(batch, n, lanes)
-    real = batch.kernel_module(n, lanes)
     best = {}
-    try:
-        for _ in range(3):
-            for physics in (True, False):
-                batch._KERNELS[(n, lanes, backend)] = real if physics else stub
-                for camera in (True, False):
-                    start = time.perf_counter()
-                    res = batch.run_spec(spec if camera else no_cam, threads=1)
-                    wall = time.perf_counter() - start
-                    per_step = wall / float(res.final_step.sum()) * 1e9
-                    best[physics, camera] = min(best.get((physics, camera), np.inf), per_step)
-    finally:
-        batch._KERNELS[(n, lanes, backend)] = real
+    for _ in range(3):
+        for physics in (True, False):
+            for camera in (True, False):
+                start = time.perf_counter()
+                res = batch.run_spec(spec if camera else no_cam, threads=1,
+                                     kernel=k if physics else stub)
+                wall = time.perf_counter() - start
+                per_step = wall / float(res.final_step.sum()) * 1e9
+                best[physics, camera] = min(best.get((physics, camera), np.inf), per_step)
     step = best[True, True]
     driver = best[False, False]
     camera = best[False, True] - best[False, False]
