@@ -79,6 +79,9 @@ _ROTATE_LIMIT = 0.1
 # stage); every this many steps stage 1 computes them in full again, so that the chain's rounding
 # stays below 1e-14.
 _RESYNC_STEPS = 16
+# what the backward recursion hands from one link's lane loop to the next (rows ``carry``): the
+# articulated inertia P and bias z at the joint point, and the pivot flag
+_CARRY = ("pxx", "pxy", "pyy", "zx", "zy", "bad")
 
 
 def screen_pairs(n_links: int) -> list[tuple[int, int]]:
@@ -202,7 +205,7 @@ def make_layout(n_links: int, lanes: int) -> Layout:
         ("x_bad", 1),  # x0 is not finite (NaN when any component is NaN or infinite; step 0)
         ("fastest", 1),  # max |rate| of x (x0's, then each new state's from the last stage)
         ("xn_bad", 1),  # the same for the new state
-        # what the stage's three loops pass on (see _stage_body)
+        # what the stage's loops pass on to each other (see _stage_body)
         ("gait_sin", 1),
         ("gait_cos", 1),
         ("ang", n),  # the angles whose sin and cos the rows sin, cos hold (the last stage's)
@@ -210,6 +213,11 @@ def make_layout(n_links: int, lanes: int) -> Layout:
         ("head_vx", 1),
         ("head_vy", 1),
         ("kc", n),
+        ("torque", n - 1),  # joint j's torque u_j (on link j + 1, minus it on link j), loop 1c
+        ("fxn", n),  # minus the fluid force on link j, x and y (loop 2a, for 2b)
+        ("fyn", n),
+        ("rho0", n),  # tau_j + h n.F_j: the part of rho_j that the recursion does not change
+        ("carry", len(_CARRY)),  # the recursion's running values from one link's loop to the next
         ("gx", n),  # w / D: theta_ddot_j = rd_j - g_j . e_j in the forward sweep
         ("gy", n),
         ("rd", n),  # rho / D
@@ -319,98 +327,119 @@ def _head_velocity(e: _Emitter) -> None:
     line(f"{o('head_vy')} = ({w('y', 2 * n + 3)} + ({gc})) - {w('vcy')}")
 
 
+def _joint_torques(e: _Emitter, plain: bool) -> None:
+    """Emit loop 1c, every joint's torque (control.gait_reference, joint_pd_torque, servo_limited).
+
+    ``plain``: for blocks whose lanes all have no servo line (see ``_backward_sweep``).
+    """
+    n = e.layout.n_links
+    line, w, o = e.line, e.w, e.o
+    e.loop("1c. joint torques" + (" (no servo line)" if plain else ""), indent=4)
+    line("# the gait phase's sin and cos give each joint's by angle addition; joint jt lies")
+    line("# between links jt and jt + 1 and acts +u on link jt + 1, -u on link jt")
+    line(f"sp = {o('gait_sin')}")
+    line(f"cp = {o('gait_cos')}")
+    line("gam = " + w("gamma"))
+    line("lim = " + w("clamp"))
+    for jt in range(n - 1):
+        j = jt + 1
+        line(f"cb = {w('cos_beta', jt)}")
+        line(f"sb = {w('sin_beta', jt)}")
+        line(f"al = min(max({w('amp', jt)} * (sp * cb + cp * sb) + gam, -lim), lim)")
+        line(f"ald = {w('amp_omega', jt)} * (cp * cb - sp * sb)")
+        line(f"phd = {w('y', n + 2 + j)} - {w('y', n + 2 + jt)}")
+        line(f"uu = {w('kp')} * (al - ({w('y', j)} - {w('y', jt)})) + {w('kd')} * (ald - phd)")
+        if plain:
+            line(f"{o('torque', jt)} = uu")
+        else:
+            # servo torque-speed line, |u| <= stall (1 -+ phd / no_load) on either side: stall =
+            # inf and the slope 0 when the servo model is off, which leaves the torque unchanged
+            # exactly (so ``plain`` gives the same numbers)
+            line(f"q = phd * {w('stall_slope')}")
+            line("stall = " + w("stall"))
+            line(f"{o('torque', jt)} = min(max(uu, max(-stall, -stall - q)), min(stall, stall - q))")
+
+
 def _backward_sweep(e: _Emitter, plain: bool) -> None:
-    """Emit loop 2, the backward sweep (see _stage_body).
+    """Emit loops 2a and 2b, the backward sweep (see _stage_body).
 
     ``plain``: for blocks whose lanes all have no servo line and no current, without those terms
     (the numbers are the same: the general code adds exact zeros and clamps at infinity there).
     """
     n = e.layout.n_links
     line, w, o = e.line, e.w, e.o
-    title = "2. backward sweep" + (" (no servo line, no current)" if plain else "")
-    e.loop(title, indent=4)
-    line("# Articulated-body recursion (module docstring): the links beyond joint j push on link")
-    line("# j with f = z - P e_j, e_j the acceleration of the joint point (P: 2x2 articulated")
-    line("# inertia through a free pin, z: bias force); k = h om^2: centripetal acceleration -k t.")
-    line("# Each link's external force F_j (Morison drag, added-mass current term), torque and")
-    line("# joint torque (control.gait_reference, joint_pd_torque, servo_limited) are computed")
-    line("# on the way, where they are consumed.")
-    line(f"sp = {o('gait_sin')}")
-    line(f"cp = {o('gait_cos')}")
+    suffix = " (no servo line, no current)" if plain else ""
+    e.loop("2a. link velocities, fluid forces and torques" + suffix, indent=4)
+    line("# Each link's velocity relative to the water walks down the chain from the head's:")
+    line("# (lvx, lvy) is that of the joint point in front of link j, the link's centre is")
+    line("# h om n_j = h om (-s, c) behind it and the next joint point as much again. Morison drag")
+    line("# (and the added-mass current term) in the link's frame, kept negated (ftn, fnn) so")
+    line("# that no instruction is spent on signs; k = h om^2: centripetal acceleration -k t.")
     line(f"lvx = {o('head_vx')}")
     line(f"lvy = {o('head_vy')}")
-    line("gam = " + w("gamma"))
-    line("bad = 0.0")
     for j in reversed(range(n)):
-        line(f"s{j} = {o('sin', j)}")
-        line(f"c{j} = {o('cos', j)}")
-        line(f"om{j} = {w('y', n + 2 + j)}")
-        if j > 0:  # joint j-1 (between links j-1 and j): acts +u on link j, -u on link j-1
-            jt = j - 1
-            line(f"amp = {w('amp', jt)}")
-            line(f"cb = {w('cos_beta', jt)}")
-            line(f"sb = {w('sin_beta', jt)}")
-            line("lim = " + w("clamp"))
-            line("al = min(max(amp * (sp * cb + cp * sb) + gam, -lim), lim)")
-            line(f"ald = {w('amp_omega', jt)} * (cp * cb - sp * sb)")
-            line(f"phd = om{j} - {w('y', n + 2 + jt)}")
-            line(f"uu = {w('kp')} * (al - ({w('y', j)} - {w('y', jt)})) + {w('kd')} * (ald - phd)")
-            if plain:
-                line(f"u{jt} = uu")
-            else:
-                # servo torque-speed line, |u| <= stall (1 -+ phd / no_load) on either side:
-                # stall = inf and the slope 0 when the servo model is off, which leaves the
-                # torque unchanged exactly (so ``plain`` gives the same numbers)
-                line(f"q = phd * {w('stall_slope')}")
-                line("stall = " + w("stall"))
-                line(f"u{jt} = min(max(uu, max(-stall, -stall - q)), min(stall, stall - q))")
+        line(f"s = {o('sin', j)}")
+        line(f"c = {o('cos', j)}")
+        line(f"om = {w('y', n + 2 + j)}")
+        line(f"h = {w('half_length', j)}")
+        line("hw = h * om")
+        line("hws = hw * s")
+        line("hwc = hw * c")
+        if j < n - 1:  # the head's row holds its centre's velocity already
+            line("lvx = lvx + hws")
+            line("lvy = lvy - hwc")
+        line("vt = c * lvx + s * lvy")
+        line("vn = c * lvy - s * lvx")
+        line(f"ftn = {w('ct', j)} * (vt + abs(vt) * vt)")
+        current = "" if plain else f" + {w('mu', j)} * om * (c * {w('vcx')} + s * {w('vcy')})"
+        line(f"fnn = {w('cn', j)} * (vn + abs(vn) * vn){current}")
+        line(f"{o('fxn', j)} = ftn * c - fnn * s")
+        line(f"{o('fyn', j)} = ftn * s + fnn * c")
+        if 0 < j < n - 1:
+            joint = f"({o('torque', j - 1)} - {o('torque', j)})"
+        elif j > 0:
+            joint = o("torque", j - 1)
+        else:
+            joint = f"-{o('torque', j)}"
+        line(f"tq = {joint} - ({w('lambda2', j)} * om + {w('lambda3', j)} * abs(om) * om)")
+        line("# n . F_j is -fnn")
+        line(f"{o('rho0', j)} = tq - h * fnn")
+        line(f"{o('kc', j)} = h * (om * om)")
+        if j > 0:
+            line("lvx = lvx + hws")
+            line("lvy = lvy - hwc")
+    for j in reversed(range(n)):
+        e.loop(f"2b. articulated-body recursion, link {j}", indent=4)
+        if j == n - 1:
+            line("# Articulated-body recursion (module docstring): the links beyond joint j push on")
+            line("# link j with f = z - P e_j, e_j the acceleration of the joint point (P: 2x2")
+            line("# articulated inertia through a free pin, z: bias force). One lane loop per link:")
+            line("# P, z and the pivot flag go from one to the next through rows ``carry``.")
+            line("bad = 0.0")
+        else:
+            for index, name in enumerate(_CARRY):
+                line(f"{name} = {o('carry', index)}")
+        line(f"s = {o('sin', j)}")
+        line(f"c = {o('cos', j)}")
         line(f"m = {w('mass', j)}")
         line(f"mu = {w('mu', j)}")
-        line(f"h = {w('half_length', j)}")
-        line(f"hw = h * om{j}")
-        line(f"hws{j} = hw * s{j}")
-        line(f"hwc{j} = hw * c{j}")
-        if j < n - 1:
-            line(f"lvx = lvx + (hws{j} + hws{j + 1})")
-            line(f"lvy = lvy - (hwc{j} + hwc{j + 1})")
-        line(f"vt = c{j} * lvx + s{j} * lvy")
-        line(f"vn = c{j} * lvy - s{j} * lvx")
-        line(f"ft = -{w('ct', j)} * (vt + abs(vt) * vt)")
-        current = "" if plain else f" - mu * om{j} * (c{j} * {w('vcx')} + s{j} * {w('vcy')})"
-        line(f"fn = -{w('cn', j)} * (vn + abs(vn) * vn){current}")
-        line(f"fx = ft * c{j} - fn * s{j}")
-        line(f"fy = ft * s{j} + fn * c{j}")
-        tau = []
-        if j > 0:
-            tau.append(f"+ u{j - 1}")
-        if j < n - 1:
-            tau.append(f"- u{j}")
-        line(
-            f"tq = -{w('lambda2', j)} * om{j} - {w('lambda3', j)} * abs(om{j}) * om{j}"
-            f" {' '.join(tau)}"
-        )
-        line(f"k = h * (om{j} * om{j})")
-        line(f"{o('kc', j)} = k")
         line(f"hm = {w('hm', j)}")
-        line("# n . F_j is fn itself")
+        line(f"k = {o('kc', j)}")
         if j == n - 1:  # the head: nothing beyond it
-            line(f"wx = -hm * s{j}")
-            line(f"wy = hm * c{j}")
+            line("wx = -hm * s")
+            line("wy = hm * c")
             line(f"dd = {w('dd0', j)}")
-            line("rho = tq + h * fn")
+            line(f"rho = {o('rho0', j)}")
         else:
-            line(f"anx = c{j} * pxy - s{j} * pxx")  # P n
-            line(f"any = c{j} * pyy - s{j} * pxy")
-            line(f"atx = c{j} * pxx + s{j} * pxy")  # P t
-            line(f"aty = c{j} * pxy + s{j} * pyy")
-            line("hh = h + h")
-            line(f"wx = hh * anx - hm * s{j}")
-            line(f"wy = hh * any + hm * c{j}")
-            line(f"dd = {w('dd0', j)} + {w('four_h2', j)} * (c{j} * any - s{j} * anx)")
-            line(
-                f"rho = (tq + h * fn) + hh * ((c{j} * zy - s{j} * zx)"
-                f" + (k + k) * (c{j} * anx + s{j} * any))"
-            )
+            line("anx = c * pxy - s * pxx")  # P n
+            line("any = c * pyy - s * pxy")
+            line("atx = c * pxx + s * pxy")  # P t
+            line("aty = c * pxy + s * pyy")
+            line(f"hh = {w('half_length', j)} + {w('half_length', j)}")
+            line("wx = hh * anx - hm * s")
+            line("wy = hh * any + hm * c")
+            line(f"dd = {w('dd0', j)} + {w('four_h2', j)} * (c * any - s * anx)")
+            line(f"rho = {o('rho0', j)} + hh * ((c * zy - s * zx) + (k + k) * (c * anx + s * any))")
         line("bad = 1.0 if dd <= 0.0 else bad")
         line("inv = 1.0 / dd")
         line("rd = rho * inv")
@@ -420,17 +449,20 @@ def _backward_sweep(e: _Emitter, plain: bool) -> None:
         line(f"{o('gy', j)} = gy")
         line(f"{o('rd', j)} = rd")
         if j == n - 1:
-            line(f"pxx = (m + mu * (s{j} * s{j})) - gx * wx")
-            line(f"pxy = -mu * (s{j} * c{j}) - gx * wy")
-            line(f"pyy = (m + mu * (c{j} * c{j})) - gy * wy")
-            line(f"zx = (fx + m * k * c{j}) - wx * rd")
-            line(f"zy = (fy + m * k * s{j}) - wy * rd")
+            line("pxx = (m + mu * (s * s)) - gx * wx")
+            line("pxy = -mu * (s * c) - gx * wy")
+            line("pyy = (m + mu * (c * c)) - gy * wy")
+            line(f"zx = (m * k * c - {o('fxn', j)}) - wx * rd")
+            line(f"zy = (m * k * s - {o('fyn', j)}) - wy * rd")
         else:
-            line(f"pxx = (pxx + (m + mu * (s{j} * s{j}))) - gx * wx")
-            line(f"pxy = (pxy - mu * (s{j} * c{j})) - gx * wy")
-            line(f"pyy = (pyy + (m + mu * (c{j} * c{j}))) - gy * wy")
-            line(f"zx = ((zx + fx) + k * (m * c{j} + (atx + atx))) - wx * rd")
-            line(f"zy = ((zy + fy) + k * (m * s{j} + (aty + aty))) - wy * rd")
+            line("pxx = (pxx + (m + mu * (s * s))) - gx * wx")
+            line("pxy = (pxy - mu * (s * c)) - gx * wy")
+            line("pyy = (pyy + (m + mu * (c * c))) - gy * wy")
+            line(f"zx = ((zx - {o('fxn', j)}) + k * (m * c + (atx + atx))) - wx * rd")
+            line(f"zy = ((zy - {o('fyn', j)}) + k * (m * s + (aty + aty))) - wy * rd")
+        if j > 0:
+            for index, name in enumerate(_CARRY):
+                line(f"{o('carry', index)} = {name}")
     line("# the tail is free (no link behind it): P e = z gives its back point's acceleration.")
     line("# The positive pivots D_j, P_11 and det P play the role of M's Cholesky pivots: one")
     line("# <= 0 is what makes LAPACK refuse M (a NaN pivot is not refused there either)")
@@ -444,19 +476,22 @@ def _backward_sweep(e: _Emitter, plain: bool) -> None:
 
 
 def _stage_body(layout: Layout) -> list[str]:
-    """One RK4 stage for every lane, as three loops over the lanes (see below).
+    """One RK4 stage for every lane, as a series of short loops over the lanes (see below).
 
-    Why three loops: as one loop body the stage kept about 45 values alive across the sweeps
+    Why many loops: as one loop body the stage kept about 45 values alive across the sweeps
     over the links, far more than the 16 vector registers, and the compiler's schedule of the
-    long straight-line block (LLVM's, when this was measured) spilled and reloaded about 40 % of
-    its instructions. Split where few
-    values cross (the angles; the results of the backward sweep), each body fits much better,
-    and what crosses goes through rows of ``out`` once instead of through many spills.
+    long straight-line block spilled and reloaded about 40 % of its instructions (LLVM's, when
+    this was measured). Split where few values cross, each body fits, and what crosses goes
+    through rows of ``out`` once instead of through many spills. Session 5 went further (GCC
+    compiling the stage): the backward sweep, still one body of ~770 instructions with ~130 stack
+    accesses, became one loop for the links' forces and one per link for the recursion (about 80
+    instructions each, no spills), 0.92-0.94 of the stage's time (docs/kernel_history.md).
 
-    1. sin and cos of the link angles and of the gait phase, the head's velocity;
-    2. the backward sweep (head to tail), with each link's velocity, forces and torques computed
-       where they are consumed; the tail's 2 x 2 solve;
-    3. the forward sweep (tail to head) and the RK4 sums.
+    1. sin and cos of the link angles (a/b) and of the gait phase, the head's velocity;
+       1c. every joint's torque;
+    2. the backward sweep (head to tail): 2a. each link's velocity, fluid force and torque;
+       2b. the articulated-body recursion, one loop per link; the tail's 2 x 2 solve;
+    3. the forward sweep (tail to head); 4. the RK4 sums.
     """
     n = layout.n_links
     e = _Emitter(layout)
@@ -510,6 +545,11 @@ def _stage_body(layout: Layout) -> list[str]:
     e.indent = 0
 
     e.lines.append("    if plain:")
+    _joint_torques(e, True)
+    e.lines.append("    else:")
+    _joint_torques(e, False)
+    e.indent = 0
+    e.lines.append("    if plain:")
     _backward_sweep(e, True)
     e.lines.append("    else:")
     _backward_sweep(e, False)
@@ -551,15 +591,21 @@ def _stage_body(layout: Layout) -> list[str]:
     deriv = [w("y", n + 2 + i) for i in range(n + 2)] + [o("qdd", i) for i in range(n + 2)]
     e.lines.append("    if last:")
     e.loop("4b. the new state and its finiteness", indent=4)
+    line("# v - v is 0 for finite v and NaN for NaN or +-inf: one NaN test per lane for all rows;")
+    line("# fastest: the divergence test of the next step's x (the new state, if the lane goes on).")
+    line("# Reduced row by row, so that no row's value waits in a register (or on the stack)")
     for i, d in enumerate(deriv):
-        line(f"v{i} = {w('x', i)} + sixth * ({w('acc', i)} + wk * {d})")
-        line(f"{w('xn', i)} = v{i}")
-    offsets = ", ".join(f"abs(v{i} - {o('ang', i)})" for i in range(n))
-    line(f"{o('offset')} = max({offsets})")
-    line("# v - v is 0 for finite v and NaN for NaN or +-inf: one NaN test per lane for all rows")
-    line(f"{o('xn_bad')} = {' + '.join(f'(v{i} - v{i})' for i in range(len(deriv)))}")
-    line("# the divergence test of the next step's x (the new state, if the lane goes on)")
-    line(f"{o('fastest')} = max({', '.join(f'abs(v{i})' for i in range(n + 2, 2 * n + 4))})")
+        line(f"v = {w('x', i)} + sixth * ({w('acc', i)} + wk * {d})")
+        line(f"{w('xn', i)} = v")
+        if i < n:
+            offset = f"abs(v - {o('ang', i)})"
+            line(f"offset = {offset}" if i == 0 else f"offset = max(offset, {offset})")
+        line("nan = v - v" if i == 0 else "nan = nan + (v - v)")
+        if i >= n + 2:
+            line("fastest = abs(v)" if i == n + 2 else "fastest = max(fastest, abs(v))")
+    line(f"{o('offset')} = offset")
+    line(f"{o('xn_bad')} = nan")
+    line(f"{o('fastest')} = fastest")
     e.lines.append("    else:")
     e.loop("4a. RK4 accumulator and the next stage's input", indent=4)
     for i, d in enumerate(deriv):
