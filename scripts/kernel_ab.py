@@ -54,7 +54,8 @@ def _text_at(revision: str | None, path: str) -> str:
                           capture_output=True, text=True).stdout
 
 
-def _import(path: Path, name: str) -> ModuleType:
+def import_path(path: Path, name: str) -> ModuleType:
+    """Import the Python file ``path`` as module ``name`` (registered, as dataclasses need)."""
     spec = importlib.util.spec_from_file_location(name, path)
     module = importlib.util.module_from_spec(spec)
     sys.modules[name] = module
@@ -88,7 +89,7 @@ def kernel_at(revision: str | None, n_links: int, lanes: int, where: Path,
     path = where / f"gen_{key}.py"
     if not path.exists() or path.read_text() != generator_text:
         path.write_text(generator_text)
-    generator = _import(path, f"kernel_ab_gen_{key}")
+    generator = import_path(path, f"kernel_ab_gen_{key}")
     if generator.make_layout(n_links, lanes).work != batch._batch_codegen.make_layout(
             n_links, lanes).work:
         raise SystemExit(f"{revision or 'working tree'} lays out the work rows differently from "

@@ -27,15 +27,14 @@ from __future__ import annotations
 
 import argparse
 import ctypes
-import importlib.util
 import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
 from types import ModuleType
 
 import numpy as np
+from kernel_ab import import_path  # scripts/, first on the path when this script runs
 
 from eelhost.commands.bench import TRAINING_CORNERS
 from eelhost.commands.common import robot_and_coefficients
@@ -45,8 +44,8 @@ from eelsim.scenario import grid_scenario
 
 N_LINKS = 6
 DT_S = 0.01
-# the options every variant gets (those of eelsim._batch_c.C_FLAGS that do not tune the code)
-_BASE_FLAGS = ["-ffp-contract=fast", "-fno-trapping-math", "-fno-math-errno", "-fPIC", "-shared"]
+_TUNING = ("-O3", "-march=native")  # the variant's FLAGS replace these of the kernel's C_FLAGS
+_BASE_FLAGS = [f for f in _batch_c.C_FLAGS if f not in _TUNING]
 
 # whole RK4 steps as the kernel's driver calls the stage (eelsim/_batch_kernel.py), without the
 # checks: y = x, four stages (rotating sin/cos except every 16th step's first), x = xn
@@ -60,7 +59,7 @@ void bench(double *restrict work, int64_t steps, double dt) {
             double a = st == 0 || st == 1 ? half : st == 2 ? dt : 0.0;
             double wk = st == 0 || st == 3 ? 1.0 : 2.0;
             if (st == 0) for (int64_t k = 0; k < ns * lanes; k++) work[k] = work[wx * lanes + k];
-            STAGE(work, ts, a, wk, st == 0, st == 3, dt / 6.0, st > 0 || i %% 16 != 0,
+            STAGE_stage(work, ts, a, wk, st == 0, st == 3, dt / 6.0, st > 0 || i %% 16 != 0,
                   st == 1 || st == 3, 1);
         }
         for (int64_t k = 0; k < ns * lanes; k++) work[wx * lanes + k] = work[wxn * lanes + k];
@@ -70,13 +69,7 @@ void bench(double *restrict work, int64_t steps, double dt) {
 
 
 def _load_generator(path: str | None, name: str) -> ModuleType:
-    if not path:
-        return _batch_codegen
-    spec = importlib.util.spec_from_file_location(name, path)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module  # dataclasses look their module up
-    spec.loader.exec_module(module)
-    return module
+    return import_path(Path(path), name) if path else _batch_codegen
 
 
 def _build(name: str, flags: str, generator: ModuleType, lanes: int, folder: Path):
@@ -85,7 +78,7 @@ def _build(name: str, flags: str, generator: ModuleType, lanes: int, folder: Pat
     if layout.work["y"] != 0:
         raise SystemExit(f"{name}: the driver here assumes the stage state's rows come first")
     source = generator.generate_stage_source(layout)
-    text = _batch_c._PRELUDE + _batch_c.translate(source, "_stage", "STAGE")
+    text = _batch_c.c_source(source, ("_stage",), "STAGE")
     text += _DRIVER % dict(ns=2 * N_LINKS + 4, lanes=lanes, wx=layout.work["x"],
                            wxn=layout.work["xn"])
     c_file, library = folder / f"{name}.c", folder / f"{name}.so"
@@ -133,7 +126,7 @@ def main() -> None:
         flags, _, generator_path = spec.partition("@")
         lanes = int(lanes_text) if lanes_text else 16
         generator = _load_generator(generator_path or None, f"stage_ab_{name}")
-        lib, layout = _build(name, flags or "-O3 -march=native", generator, lanes, folder)
+        lib, layout = _build(name, flags or " ".join(_TUNING), generator, lanes, folder)
         init = _initial(layout, lanes, args.seed)
         if lanes not in buffers:
             buffers[lanes] = np.zeros(init.size + 8192)  # room for variants with more rows

@@ -173,6 +173,25 @@ def translate(source: str, function: str, symbol: str) -> str:
     return "\n".join([f"{head} {{", *decl, *tr.lines, "}", ""])
 
 
+def c_source(source: str, functions: tuple[str, ...], prefix: str) -> str:
+    """The C file for ``functions`` of the generated ``source``: prelude and translations.
+
+    Parameters
+    ----------
+    source : str
+        The generated Python text.
+    functions : tuple of str
+        Names of the generated functions to translate.
+    prefix : str
+        Each C function is named ``prefix + name``.
+
+    Returns
+    -------
+    str
+    """
+    return _PRELUDE + "\n".join(translate(source, f, prefix + f) for f in functions)
+
+
 def _functions(source: str) -> dict[str, ast.FunctionDef]:
     """The module-level functions of a generated text, by name."""
     return {n.name: n for n in ast.parse(source).body if isinstance(n, ast.FunctionDef)}
@@ -236,7 +255,7 @@ def build(source: str, functions: tuple[str, ...], folder: Path,
     if compiler is None:
         raise CStageError("no C compiler found (set CC, or install gcc)")
     marker = "STAGE_SYMBOL_"
-    text = _PRELUDE + "\n".join(translate(source, f, marker + f) for f in functions)
+    text = c_source(source, functions, marker)
     key = hashlib.sha256("\n".join([text, compiler, *C_FLAGS, _host_cpu()]).encode())
     stem = f"eelsim_c_{key.hexdigest()[:16]}"
     symbols = {f: f"{stem}{f}" for f in functions}

@@ -482,10 +482,10 @@ def _stage_body(layout: Layout) -> list[str]:
     over the links, far more than the 16 vector registers, and the compiler's schedule of the
     long straight-line block spilled and reloaded about 40 % of its instructions (LLVM's, when
     this was measured). Split where few values cross, each body fits, and what crosses goes
-    through rows of ``out`` once instead of through many spills. Session 5 went further (GCC
-    compiling the stage): the backward sweep, still one body of ~770 instructions with ~130 stack
-    accesses, became one loop for the links' forces and one per link for the recursion (about 80
-    instructions each, no spills), 0.92-0.94 of the stage's time (docs/kernel_history.md).
+    through rows of ``out`` once instead of through many spills. The recursion, whose chain
+    (P, the pivot, its division, P again) is long, runs one short loop per link, so that the
+    processor overlaps the lane vectors' chains; loops without such a chain gain nothing from
+    being cut (docs/kernel_history.md, session 5).
 
     1. sin and cos of the link angles (a/b) and of the gait phase, the head's velocity;
        1c. every joint's torque;
@@ -546,12 +546,9 @@ def _stage_body(layout: Layout) -> list[str]:
 
     e.lines.append("    if plain:")
     _joint_torques(e, True)
-    e.lines.append("    else:")
-    _joint_torques(e, False)
-    e.indent = 0
-    e.lines.append("    if plain:")
     _backward_sweep(e, True)
     e.lines.append("    else:")
+    _joint_torques(e, False)
     _backward_sweep(e, False)
     e.indent = 0
 
