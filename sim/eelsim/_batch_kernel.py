@@ -512,13 +512,13 @@ def _gather(work, base, r, ns, dest):
 
 
 @numba.njit(cache=True)
-def _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radius, k_theta,
-               delay_steps, update_steps, update_count, frame_step, frame_fraction, frame_time,
-               noise, plain_run, pixel, window, stop_at_goal, pending_size, sample_steps,
+def _run_block(block, order, params, x0, total_steps, goal_steps, dt, waypoints, n_waypoints,
+               radius, k_theta, delay_steps, update_steps, update_count, frame_step,
+               frame_fraction, frame_time, noise, plain_run, pixel, window, stop_at_goal, pending_size, sample_steps,
                states_out, record_full, full_out, arrival_out, failure_out, failure_time_out,
                reason_out, reason_index_out, reason_value_out, final_state_out, final_step_out,
                target_out, distance_out):
-    """Run the block ``block`` (runs block * LANES ...) to its end; see the module docstring.
+    """Run the block ``block`` (runs order[block * LANES ...]) to its end; see the module docstring.
 
     The lanes' states live in ``work`` (rows W_X: the step's start, W_XN: its end), so the
     generated code reads and writes them with constant offsets; everything per lane and per step
@@ -556,6 +556,7 @@ def _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radiu
     update_at = np.full(LANES, NEVER, np.int64)
     pending_at = np.full(LANES, NEVER, np.int64)
     lane_total = np.zeros(LANES, np.int64)
+    lane_goal = np.zeros(LANES, np.int64)  # with stop_at_goal: stop at the goal from this step on
     # the camera's state, lanes innermost (see _observe)
     med = np.zeros((window, 3, LANES))
     med_state = np.zeros(2, np.int64)  # frames in the median window, next slot
@@ -580,15 +581,15 @@ def _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radiu
     cjx = np.empty(n + 2)
     cjy = np.empty(n + 2)
     for r in range(LANES):
-        run = first + r
-        alive[r] = run < n_runs
-        run_of[r] = run if run < n_runs else first
+        alive[r] = first + r < n_runs
+        run_of[r] = order[first + r] if first + r < n_runs else order[first]
         for p in range(n_par):
             work[(W_GEOMETRY + p) * LANES + r] = params[run_of[r], p]
         for row in range(ns):
             work[(W_X + row) * LANES + r] = x0[run_of[r], row]
         lane_radius[r] = radius[run_of[r]]
         lane_total[r] = total_steps[run_of[r]]
+        lane_goal[r] = goal_steps[run_of[r]]
         if update_count[run_of[r]] > 0:
             update_at[r] = update_steps[run_of[r], 0]
         lane_waypoints[r] = n_waypoints[run_of[r]]
@@ -694,7 +695,8 @@ def _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radiu
                     x_bad = out[O_X_BAD * LANES + r]
                     stops = ((x_bad != x_bad) | (out[O_FASTEST * LANES + r] > DIVERGENCE_RATE)
                              | (out[O_NEAR * LANES + r] != 0.0) | (step >= lane_total[r])
-                             | (stop_at_goal & (arrival[r] == arrival[r]))
+                             | (stop_at_goal & (arrival[r] == arrival[r])
+                                & (step >= lane_goal[r]))
                              | (is_update[r] & ((bound >= 0.5 * ILL_CONDITION_THRESHOLD)
                                                 | (bound != bound))))
                     flagged += alive[r] & stops
@@ -733,7 +735,7 @@ def _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radiu
                         fail_t[r] = t
                         alive[r] = False
                         final_step[r] = step
-                    elif ((stop_at_goal and not np.isnan(arrival[r]))
+                    elif ((stop_at_goal and not np.isnan(arrival[r]) and step >= lane_goal[r])
                           or step >= total_steps[run]):
                         alive[r] = False
                         final_step[r] = step
@@ -782,9 +784,9 @@ def _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radiu
                                              else work[W_X * LANES + i])
         step += 1
     for r in range(LANES):
-        run = first + r
-        if run >= n_runs:
+        if first + r >= n_runs:
             continue
+        run = run_of[r]
         if failure[r] == FAIL_NONE and np.isnan(arrival[r]):
             failure[r] = FAIL_TOO_SLOW
             reason[r] = REASON_TOO_SLOW
@@ -807,22 +809,24 @@ def _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radiu
 
 
 @numba.njit(cache=True, parallel=True)
-def run_blocks(params, x0, total_steps, dt, waypoints, n_waypoints, radius, k_theta, delay_steps,
-               update_steps, update_count, frame_step, frame_fraction, frame_time, noise,
+def run_blocks(order, params, x0, total_steps, goal_steps, dt, waypoints, n_waypoints, radius,
+               k_theta, delay_steps, update_steps, update_count, frame_step, frame_fraction, frame_time, noise,
                plain_run, pixel, window, stop_at_goal, pending_size, sample_steps, states_out,
                record_full, full_out, arrival_out, failure_out, failure_time_out, reason_out,
                reason_index_out, reason_value_out, final_state_out, final_step_out, target_out,
                distance_out):
     """Run every block of LANES runs; blocks are shared out over numba's threads.
 
+    Block b runs ``order[b * LANES : (b + 1) * LANES]``: the caller orders the runs so that a
+    block's lanes end at about the same step (a lane that has ended idles until its block ends).
     The caller sets numba's parallel chunk size to 1 (see ``eelsim.batch.run_spec``); setting it
     here would keep numba from caching this function.
     """
     n_blocks = (x0.shape[0] + LANES - 1) // LANES
     for block in numba.prange(n_blocks):
-        _run_block(block, params, x0, total_steps, dt, waypoints, n_waypoints, radius, k_theta,
-                   delay_steps, update_steps, update_count, frame_step, frame_fraction, frame_time,
-                   noise, plain_run, pixel, window, stop_at_goal, pending_size, sample_steps,
+        _run_block(block, order, params, x0, total_steps, goal_steps, dt, waypoints, n_waypoints,
+                   radius, k_theta, delay_steps, update_steps, update_count, frame_step,
+                   frame_fraction, frame_time, noise, plain_run, pixel, window, stop_at_goal, pending_size, sample_steps,
                    states_out, record_full, full_out, arrival_out, failure_out, failure_time_out,
                    reason_out, reason_index_out, reason_value_out, final_state_out,
                    final_step_out, target_out, distance_out)

@@ -316,6 +316,9 @@ class BatchSpec:
         Straight robot at rest at the scenario's start pose.
     total_steps : ndarray of int, shape (R,)
         floor(T_max / dt).
+    goal_steps : ndarray of int, shape (R,)
+        With ``options.stop_at_goal``, the first step at which reaching the goal ends the run
+        (``Scenario.goal_steps``).
     waypoints_m : ndarray, shape (R, W, 2)
         Waypoints, padded (repeating the last one) to the longest list.
     n_waypoints : ndarray of int, shape (R,)
@@ -345,6 +348,7 @@ class BatchSpec:
     params: FloatArray
     initial_state: FloatArray
     total_steps: IntArray
+    goal_steps: IntArray
     waypoints_m: FloatArray
     n_waypoints: IntArray
     acceptance_radius_m: FloatArray
@@ -422,8 +426,10 @@ class BatchSpec:
         if any(rb.n_links != n for rb in robot_list):
             raise ValueError("all robots of a batch must have the same number of links")
 
-        robot_idx = _index(robot_list, n_runs)
-        scen_idx = _index(scen_list, n_runs)
+        # per-run inputs are often a few objects repeated (estimation: every candidate on the
+        # same experiments): their arrays are computed once per distinct object
+        robot_list, robot_idx = _distinct(robot_list, n_runs)
+        scen_list, scen_idx = _distinct(scen_list, n_runs)
         seed_of = np.broadcast_to(seed_arr, (n_runs,))
         timing, camera = opts.timing, opts.camera
         dt = timing.dt_s
@@ -456,6 +462,7 @@ class BatchSpec:
             params=params,
             initial_state=ssel["initial_state"],
             total_steps=total,
+            goal_steps=ssel["goal_steps"].astype(np.int64),
             waypoints_m=wp,
             n_waypoints=ssel["n_waypoints"].astype(np.int64),
             acceptance_radius_m=ssel["radius"],
@@ -517,11 +524,22 @@ def _coefficient_array(coefficients) -> FloatArray | None:
     return arr
 
 
-def _index(items: list, n_runs: int) -> IntArray:
-    """Index into the distinct objects of ``items`` for each run (a single item is shared)."""
+def _distinct(items: list, n_runs: int) -> tuple[list, IntArray]:
+    """The distinct objects of ``items`` (by identity) and each run's index into them.
+
+    A single item is shared by all ``n_runs`` runs.
+    """
     if len(items) == 1:
-        return np.zeros(n_runs, dtype=np.int64)
-    return np.arange(n_runs, dtype=np.int64)
+        return items, np.zeros(n_runs, dtype=np.int64)
+    slot: dict[int, int] = {}  # id -> position among the distinct objects
+    distinct = []
+    index = np.empty(len(items), dtype=np.int64)
+    for i, item in enumerate(items):
+        if id(item) not in slot:
+            slot[id(item)] = len(distinct)
+            distinct.append(item)
+        index[i] = slot[id(item)]
+    return distinct, index
 
 
 def _robot_arrays(robot: Robot, opts: LoopOptions) -> dict[str, FloatArray]:
@@ -563,7 +581,8 @@ def _scenario_arrays(s: Scenario, n: int, dt: float) -> dict[str, FloatArray]:
     j = np.arange(1, n, dtype=float)
     return {
         "initial_state": x0,
-        "total_steps": np.array(int(np.floor(s.duration_s / dt + 1e-9))),
+        "total_steps": np.array(s.total_steps(dt)),
+        "goal_steps": np.array(s.goal_steps(dt)),
         "n_waypoints": np.array(len(s.waypoints_m)),
         "radius": np.array(s.acceptance_radius_m),
         "k_theta": np.array(s.k_theta),
@@ -845,6 +864,7 @@ def run_spec(
     stage: str | None = None,
     *,
     kernel: ModuleType | None = None,
+    expected_steps: ArrayLike | None = None,
 ) -> BatchResult:
     """Run a prepared batch.
 
@@ -869,6 +889,9 @@ def run_spec(
         A kernel module to run instead of :func:`kernel_module`'s (``lanes`` and ``stage`` are
         then its own): for tools that time or compare versions of the kernel, e.g.
         ``eelbot bench`` and scripts/kernel_ab.py.
+    expected_steps : array_like, shape (R,), optional
+        How many steps each run is expected to last: runs of about the same length share a
+        block (:func:`block_order`). Only the speed depends on it, never a result.
 
     Returns
     -------
@@ -916,7 +939,8 @@ def run_spec(
     previous_chunk = numba.set_parallel_chunksize(1)
     try:
         kernel.run_blocks(
-            spec.params, spec.initial_state, spec.total_steps, float(dt), spec.waypoints_m,
+            block_order(spec, expected_steps), spec.params, spec.initial_state, spec.total_steps,
+            spec.goal_steps, float(dt), spec.waypoints_m,
             spec.n_waypoints, spec.acceptance_radius_m, spec.k_theta, spec.delay_steps,
             spec.update_steps, spec.update_count, spec.frame_step, spec.frame_fraction,
             spec.frame_time_s, spec.heading_noise_rad, plain_runs(spec), float(cam.pixel_m),
@@ -932,7 +956,8 @@ def run_spec(
     return BatchResult(
         sample_steps=steps,
         sample_times_s=steps * dt,
-        states=states[:, inverse.reshape(-1), :],
+        # (asked for sorted unique steps, as estimation does, the rows are already in order)
+        states=states if np.array_equal(unique, steps) else states[:, inverse.reshape(-1), :],
         arrival_time_s=out["arrival"],
         failure=out["failure"],
         failure_time_s=out["failure_time"],
@@ -948,6 +973,37 @@ def run_spec(
     )
 
 
+def block_order(spec: BatchSpec, expected_steps: ArrayLike | None = None) -> IntArray:
+    """The order in which runs fill the kernel's blocks: longest expected run first.
+
+    A lane whose run has ended idles until the last run of its block ends, so runs of about
+    the same length belong together: a batch mixing experiments of different spans (every
+    estimation generation) otherwise runs each block as long as its longest run. Without a
+    hint a run is expected to last until T_max (runs with the same T_max then by their minimum
+    duration). np.lexsort is stable: a batch of equal runs keeps its order.
+
+    Parameters
+    ----------
+    spec : BatchSpec
+    expected_steps : array_like, shape (R,), optional
+        Each run's expected number of steps (a caller's prediction, e.g. from similar runs).
+
+    Returns
+    -------
+    ndarray of int, shape (R,)
+        Run indices; block b takes entries b * lanes to (b + 1) * lanes - 1.
+    """
+    expected = spec.total_steps
+    if expected_steps is not None:
+        hint = np.asarray(expected_steps, dtype=float)
+        if hint.shape != expected.shape:
+            raise ValueError(
+                f"expected_steps has shape {hint.shape}, the batch has {expected.shape[0]} runs"
+            )
+        expected = np.minimum(np.nan_to_num(hint, nan=np.inf), expected)
+    return np.lexsort((-spec.goal_steps, -spec.total_steps, -expected)).astype(np.int64)
+
+
 def run_batch(
     robots: Robot | Sequence[Robot],
     scenarios: Scenario | Sequence[Scenario],
@@ -960,6 +1016,7 @@ def run_batch(
     lanes: int = DEFAULT_LANES,
     threads: int | None = None,
     stage: str | None = None,
+    expected_steps: ArrayLike | None = None,
 ) -> BatchResult:
     """Run many closed-loop runs of the twin at once (see the module docstring).
 
@@ -985,13 +1042,16 @@ def run_batch(
         Threads to use (default all cores).
     stage : str, optional
         How the generated RK4 stage is compiled (:func:`stage_backend`).
+    expected_steps : array_like, shape (R,), optional
+        Each run's expected length in steps, a hint for packing the blocks (:func:`run_spec`).
 
     Returns
     -------
     BatchResult
     """
     spec = BatchSpec.build(robots, scenarios, coefficients, options, seeds)
-    return run_spec(spec, sample_steps, sample_times_s, record_full, lanes, threads, stage)
+    return run_spec(spec, sample_steps, sample_times_s, record_full, lanes, threads, stage,
+                    expected_steps=expected_steps)
 
 
 def steps_per_second(result: BatchResult, wall_s: float) -> float:

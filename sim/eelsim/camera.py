@@ -145,6 +145,8 @@ def observed_positions(
     interpolant between physics steps, quantised to pixel centres, then the moving median over the
     last ``median_window`` frames (fewer at the start); a query time between two frames gets the
     linear interpolation of their filtered positions, as a recording read between frames does.
+    Any number of runs at once (leading axes of the states): estimation scores a whole
+    generation of candidates in one call.
 
     Parameters
     ----------
@@ -152,33 +154,57 @@ def observed_positions(
         Query times.
     steps : ndarray of int, shape (S,)
         The steps of the states given (must include :func:`observation_steps`).
-    position_m, velocity_m_s : ndarray, shape (S, 2)
+    position_m, velocity_m_s : ndarray, shape (..., S, 2)
         Centre of mass and its velocity at those steps.
     camera : CameraModel
     dt_s : float
 
     Returns
     -------
-    ndarray, shape (n, 2)
+    ndarray, shape (..., n, 2)
+
+    Raises
+    ------
+    ValueError
+        When ``steps`` lacks a step the query times need.
     """
+    times = np.asarray(times_s, dtype=float)
+    position = np.asarray(position_m, dtype=float)
+    velocity = np.asarray(velocity_m_s, dtype=float)
     index = {int(s): i for i, s in enumerate(steps)}
-    raw_cache: dict[int, np.ndarray] = {}
-
-    def raw(g: int) -> np.ndarray:
-        if g not in raw_cache:
-            k, s = _frame_steps(g, camera.fps, dt_s)
-            i, j = index[k], index[k + 1]
-            y = hermite(position_m[i], velocity_m_s[i], position_m[j], velocity_m_s[j], dt_s, s)
-            raw_cache[g] = quantise_position(y, camera.pixel_m)
-        return raw_cache[g]
-
-    def filtered(f: int) -> np.ndarray:
-        window = [raw(g) for g in range(max(0, f - camera.median_window + 1), f + 1)]
-        return np.median(np.array(window), axis=0)
-
-    out = np.empty((len(times_s), 2))
-    for q, t in enumerate(np.asarray(times_s, dtype=float)):
-        f = int(np.floor(t * camera.fps + 1e-9))
-        s = t * camera.fps - f
-        out[q] = filtered(f) if s < 1e-12 else (1 - s) * filtered(f) + s * filtered(f + 1)
-    return out
+    frame = np.floor(times * camera.fps + 1e-9).astype(np.int64)
+    between = times * camera.fps - frame
+    # the filtered frames the queries read, and the raw frames their windows hold
+    wanted = np.unique(np.concatenate([frame, frame[between >= 1e-12] + 1]))
+    first = np.maximum(0, wanted - camera.median_window + 1)
+    spans = [np.arange(a, b + 1) for a, b in zip(first, wanted, strict=True)]
+    raw_frames = np.unique(np.concatenate(spans))
+    at, fraction = zip(*(_frame_steps(int(g), camera.fps, dt_s) for g in raw_frames), strict=True)
+    try:
+        i = np.array([index[k] for k in at])
+        j = np.array([index[k + 1] for k in at])
+    except KeyError as err:
+        raise ValueError(
+            f"observed_positions: the state at step {err.args[0]} is missing "
+            "(pass the steps of observation_steps)"
+        ) from None
+    s = np.asarray(fraction)[:, None]
+    raw = quantise_position(
+        hermite(position[..., i, :], velocity[..., i, :], position[..., j, :],
+                velocity[..., j, :], dt_s, s),
+        camera.pixel_m,
+    )
+    # moving median by sorting each window, short windows padded with +inf (sorted last): the
+    # middle value, or the mean of the two middle ones, as np.median gives
+    slot = np.searchsorted(raw_frames, first[:, None] + np.arange(camera.median_window))
+    count = np.minimum(camera.median_window, wanted - first + 1)
+    padded = np.concatenate([raw, np.full(raw.shape[:-2] + (1, 2), np.inf)], axis=-2)
+    slot = np.where(np.arange(camera.median_window) < count[:, None], slot, raw.shape[-2])
+    ordered = np.sort(padded[..., slot, :], axis=-2)
+    rows = np.arange(wanted.size)
+    filtered = (ordered[..., rows, (count - 1) // 2, :] + ordered[..., rows, count // 2, :]) / 2
+    lo = np.searchsorted(wanted, frame)
+    hi = np.minimum(lo + 1, wanted.size - 1)
+    weight = between[:, None]
+    mixed = (1 - weight) * filtered[..., lo, :] + weight * filtered[..., hi, :]
+    return np.where(between[:, None] < 1e-12, filtered[..., lo, :], mixed)

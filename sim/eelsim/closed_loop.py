@@ -57,7 +57,8 @@ class LoopOptions:
     servo_limits : bool
         Limit joint torques by the servos' torque-speed line (stall torque, no-load speed).
     stop_at_goal : bool
-        End the run when the last waypoint is reached (estimation runs the whole span instead).
+        End the run when the last waypoint is reached (not before the scenario's
+        ``min_duration_s``).
     """
 
     timing: LoopTiming = field(default_factory=LoopTiming)
@@ -304,7 +305,8 @@ def simulate_closed_loop(
     rng = np.random.default_rng(seed)
     n = model.n_links
     dt = timing.dt_s
-    total = int(np.floor(scenario.duration_s / dt + 1e-9))
+    total = scenario.total_steps(dt)
+    goal_from = scenario.goal_steps(dt)
     gait = scenario.gait
     limit = robot.joints.limit_rad
     vc = np.asarray(scenario.current_m_s)
@@ -384,7 +386,7 @@ def simulate_closed_loop(
             if failure != Failure.NONE:
                 fail_t = t
                 break
-            if (arrival is not None and opts.stop_at_goal) or step >= total:
+            if (arrival is not None and opts.stop_at_goal and step >= goal_from) or step >= total:
                 break
 
             try:

@@ -57,6 +57,10 @@ class Scenario(BaseModel):
         Uniform steady current: speed and the direction it flows towards.
     duration_s : float
         T_max: the run ends here, flagged too slow if the last waypoint was not reached.
+    min_duration_s : float
+        Where reaching the last waypoint ends a run (``LoopOptions.stop_at_goal``), it does so
+        only from this time on (default 0: at once). Estimation sets it to the last time it
+        compares with a recording, so that no run goes on once nothing it does can count.
     start_position_m : (x, y)
         Initial centre of mass.
     start_heading_deg : float
@@ -75,6 +79,7 @@ class Scenario(BaseModel):
     current_speed_m_s: Annotated[float, Field(ge=0, allow_inf_nan=False)] = 0.0
     current_direction_deg: Finite = 0.0
     duration_s: Positive = 60.0
+    min_duration_s: Annotated[float, Field(ge=0, allow_inf_nan=False)] = 0.0
     start_position_m: tuple[Finite, Finite] = (0.0, 0.0)
     start_heading_deg: Finite = 0.0
 
@@ -82,6 +87,14 @@ class Scenario(BaseModel):
     def gait(self) -> Gait:
         """The gait parameters as a :class:`~eelsim.control.Gait`."""
         return Gait(self.amplitude_rad, self.omega_rad_s, self.beta_rad, self.k_theta)
+
+    def total_steps(self, dt_s: float) -> int:
+        """The run's last step: floor(T_max / dt)."""
+        return int(math.floor(self.duration_s / dt_s + 1e-9))
+
+    def goal_steps(self, dt_s: float) -> int:
+        """The first step at which reaching the goal may end the run: ceil(min_duration / dt)."""
+        return int(math.ceil(self.min_duration_s / dt_s - 1e-9))
 
     @property
     def current_m_s(self) -> tuple[float, float]:

@@ -8,7 +8,7 @@ distance left. The tests run on one thread (threads=1) except the one that check
 import numpy as np
 import pytest
 
-from eelsim.batch import BatchSpec, Reason, run_batch, run_spec
+from eelsim.batch import BatchSpec, Reason, block_order, run_batch, run_spec
 from eelsim.camera import CameraModel
 from eelsim.closed_loop import LoopOptions, simulate_closed_loop
 from eelsim.flags import Failure
@@ -162,6 +162,69 @@ def test_mixed_batch_gives_the_same_answers_as_separate_calls(robot):
         assert together.failure[i] == alone.failure[0]
     # and they really differ from one another
     assert len({together.final_state[i, 6] for i in range(5)}) == 5
+
+
+def test_runs_of_different_lengths_packed_into_blocks_keep_their_own_answers(robot):
+    # 20 runs of three lengths, interleaved: the kernel packs runs of equal length into the same
+    # block (so that no lane idles), and every answer must still land on its own run
+    base = load_scenario("turning")
+    durations = [1.0, 2.5, 1.7] * 6 + [2.5, 1.0]
+    scenarios = [base.model_copy(update={"duration_s": d}) for d in durations]
+    coeffs = np.tile([0.009, 0.978, 1.169, 0.001], (20, 1)) * np.linspace(0.6, 1.4, 20)[:, None]
+    steps = [0, 60, 120, 240]
+    together = run_batch(robot, scenarios, coeffs, sample_steps=steps, threads=2)
+    for i in (0, 1, 2, 7, 19):
+        alone = run_batch(robot, scenarios[i], coeffs[i], sample_steps=steps, threads=1)
+        assert np.array_equal(together.states[i], alone.states[0], equal_nan=True)
+        assert np.array_equal(together.final_state[i], alone.final_state[0])
+        assert together.final_step[i] == alone.final_step[0] == round(durations[i] / 0.01)
+        assert together.failure[i] == alone.failure[0]
+
+
+@pytest.mark.parametrize("after_arrival_s", [-1.0, 0.8])
+def test_a_minimum_duration_holds_the_stop_at_goal_like_the_reference(robot, after_arrival_s):
+    # stop at the goal, but not before min_duration_s: before the arrival it changes nothing,
+    # after it the run goes on (the fit's last sample time comes after some candidates arrive)
+    s = load_scenario("turning")
+    arrived = simulate_closed_loop(robot, s).arrival_time_s
+    held = s.model_copy(update={"min_duration_s": arrived + after_arrival_s})
+    ref, res = compare(robot, held)
+    assert ref.failure == Failure.NONE
+    assert res.arrival_time_s[0] == pytest.approx(arrived, abs=TOL)
+    stop_s = ref.t_s[-1]
+    if after_arrival_s < 0:
+        assert stop_s == pytest.approx(arrived, abs=0.011)
+    else:
+        assert stop_s == pytest.approx(arrived + after_arrival_s, abs=0.011)
+
+
+def test_a_run_length_hint_changes_how_blocks_are_packed_but_no_result(robot):
+    base = load_scenario("straight").model_copy(update={"duration_s": 1.5})
+    coeffs = np.tile([0.008, 0.776, 0.618, 0.007], (24, 1)) * np.linspace(0.5, 2.0, 24)[:, None]
+    spec = BatchSpec.build(robot, base, coeffs)
+    plain = run_spec(spec, sample_steps=[0, 50, 150], threads=1)
+    hint = np.arange(24) * 7.0  # any guess (here: the last run longest): only the packing moves
+    hinted = run_spec(spec, sample_steps=[0, 50, 150], threads=1, expected_steps=hint)
+    assert not np.array_equal(block_order(spec), block_order(spec, hint))
+    assert np.array_equal(plain.states, hinted.states)
+    assert np.array_equal(plain.final_state, hinted.final_state)
+    with pytest.raises(ValueError, match="expected_steps has shape"):
+        run_spec(spec, threads=1, expected_steps=hint[:5])
+
+
+def test_packing_by_expected_length_leaves_fewer_lanes_idle():
+    # runs of 4 lengths, interleaved; a block of 16 lanes runs as long as its longest run
+    class Spec:  # the fields block_order reads
+        total_steps = np.full(64, 4000)
+        goal_steps = np.zeros(64, dtype=np.int64)
+
+    final = np.tile([1000, 4000, 2000, 3000], 16)
+
+    def lane_steps(order):
+        return sum(16 * final[order[i:i + 16]].max() for i in range(0, 64, 16))
+
+    assert lane_steps(block_order(Spec)) == 4 * 16 * 4000  # every block as long as the longest
+    assert lane_steps(block_order(Spec, final)) == final.sum()  # no lane idles
 
 
 def test_threads_share_blocks_without_changing_any_result(robot):

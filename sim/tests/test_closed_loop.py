@@ -292,3 +292,38 @@ def test_camera_observation_from_states_reproduces_the_closed_loops_camera(robot
         frames, steps, res.states[steps, 6:8], res.states[steps, -2:], CameraModel(), 0.01
     )
     assert np.array_equal(seen, res.camera_pose[: len(frames), :2])
+
+
+def test_camera_observation_of_several_runs_at_once_matches_each_runs_camera(robot):
+    from eelsim.camera import observation_steps, observed_positions
+
+    runs = [
+        simulate_closed_loop(robot, load_scenario(name).model_copy(update={"duration_s": 2.0}),
+                             LoopOptions(stop_at_goal=False))
+        for name in ("turning", "straight")
+    ]
+    frames = runs[0].camera_t_s[runs[0].camera_t_s <= 1.9]
+    queries = np.concatenate([frames, frames[3:-1] + 0.01])  # on frames and between them
+    steps = observation_steps(queries, CameraModel(), 0.01)
+    states = np.stack([r.states[steps] for r in runs])
+    seen = observed_positions(
+        queries, steps, states[..., 6:8], states[..., -2:], CameraModel(), 0.01
+    )
+    assert seen.shape == (2, queries.size, 2)
+    for k, run in enumerate(runs):
+        pose = run.camera_pose[: len(frames), :2]
+        assert np.array_equal(seen[k, : len(frames)], pose)
+        # between frames: the linear interpolation of the two frames' filtered positions
+        s = (frames[3:-1] + 0.01) * 30.0 - np.floor((frames[3:-1] + 0.01) * 30.0 + 1e-9)
+        expected = (1 - s)[:, None] * pose[3:-1] + s[:, None] * pose[4:]
+        np.testing.assert_allclose(seen[k, len(frames):], expected, rtol=0, atol=1e-15)
+
+
+def test_camera_observation_names_a_missing_step():
+    from eelsim.camera import observed_positions
+
+    steps = np.arange(10)  # the query at 0.2 s needs steps up to 20
+    with pytest.raises(ValueError, match="state at step .* is missing"):
+        observed_positions(
+            np.array([0.2]), steps, np.zeros((10, 2)), np.zeros((10, 2)), CameraModel(), 0.01
+        )
