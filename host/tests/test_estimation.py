@@ -51,6 +51,45 @@ def test_batch_and_reference_backends_score_candidates_identically(tiny_dataset)
     assert ref[0].max() < ref[1].max()  # the truth fits better than a wrong candidate
 
 
+def test_runs_that_stop_once_nothing_more_can_count_score_as_runs_to_t_max(tiny_dataset):
+    # Estimation ends a run at its goal once the last compared state is reached; scored by
+    # running every candidate to T_max instead, nothing changes (failures after both the arrival
+    # and the last sample do not count either way), and the runs really were shorter.
+    import dataclasses
+
+    ds = load_dataset(tiny_dataset)
+    cands = np.array([TRUTH.as_array(), [0.02, 1.3, 0.3, 0.05], [0.001, 0.1, 0.1, 0.9],
+                      [0.05, 2.5, 2.5, 0.0]])
+    ev = Evaluator(ds.robot, ds.train["straight"], backend="batch")
+    short = ev.errors(cands)
+    full = Evaluator(ds.robot, ds.train["straight"], backend="batch")
+    full.prepared = [
+        dataclasses.replace(
+            p,
+            scenario=p.scenario.model_copy(update={"min_duration_s": 0.0}),
+            options=dataclasses.replace(p.options, stop_at_goal=False),
+        )
+        for p in full.prepared
+    ]
+    assert np.array_equal(short, full.errors(cands))
+    steps_short, steps_full = ev._lengths._steps, full._lengths._steps  # (candidate, experiment)
+    assert np.all(steps_short <= steps_full) and steps_short.sum() < 0.9 * steps_full.sum()
+
+
+def test_run_lengths_are_guessed_from_the_nearest_earlier_candidate():
+    from eelhost.estimation.batch_backend import RunLengths
+
+    lengths = RunLengths(experiments=2, memory=3)
+    assert lengths.predict(np.ones((1, 4))) is None  # nothing learnt yet
+    lengths.record(np.array([[0.01, 1.0, 1.0, 0.1], [0.02, 2.0, 2.0, 0.5]]),
+                   np.array([[100, 200], [300, 400]]))
+    guess = lengths.predict(np.array([[0.019, 2.1, 1.9, 0.45], [0.011, 0.9, 1.0, 0.0]]))
+    assert np.array_equal(guess, [[300, 400], [100, 200]])
+    lengths.record(np.array([[0.05, 0.1, 0.1, 0.0], [0.06, 0.1, 0.1, 0.0]]),
+                   np.array([[1, 1], [2, 2]]))
+    assert len(lengths._keys) == 3  # only the most recent are kept
+
+
 def test_default_method_recovers_the_truth_on_a_small_dataset(tiny_dataset):
     ds = load_dataset(tiny_dataset)
     res, ev = fit_motion(

@@ -75,5 +75,6 @@ def test_failures_after_arrival_and_after_the_recording_do_not_count():
         # collided at 12 s without arriving | too slow
         arrival_time_s=np.array([[8.0], [8.0], [nan], [nan]]),
         failure_time_s=np.array([[12.0], [9.0], [12.0], [15.0]]),
+        steps=np.full((4, 1), 1500),
     )
     assert sim.counted_failure(prepared)[:, 0].tolist() == [0, 3, 3, 1]

@@ -3,6 +3,13 @@
 The kernel samples all runs at one shared set of steps, so the union of every experiment's sample
 steps is requested and each run's own are picked from it. Experiments whose loop options differ go
 in separate calls (the options are shared by a batch).
+
+The kernel runs LANES runs side by side in a block until the last of them ends; a run that ends
+early leaves its lane idle. Estimation asks again and again about candidates near the earlier
+ones (a GA's children, CMA-ES's samples), so :class:`RunLengths` guesses each run's length from
+the nearest earlier candidate on the same experiment and the kernel packs runs of about the same
+length together: on the paper's GA this took the kernel's lane-steps from 243 M to about 197 M
+(lanes busy 75 % -> 93 % of the time). The guess changes the speed only, never a result.
 """
 
 from __future__ import annotations
@@ -10,12 +17,70 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from eelsim.batch import run_batch
 from eelsim.robot import Robot
 
 
-def simulate_batch(robot: Robot, prepared: Sequence, coefficients: np.ndarray):
+class RunLengths:
+    """Each (candidate, experiment) run's length guessed from the runs done before.
+
+    The guess for a candidate is what the nearest earlier candidate (Euclidean distance of the
+    logarithms of the coefficients, C_m floored at 1e-4) took on each experiment.
+
+    Parameters
+    ----------
+    experiments : int
+        E, the experiments every call simulates.
+    memory : int
+        How many earlier candidates are kept (the most recent).
+    """
+
+    def __init__(self, experiments: int, memory: int = 3000) -> None:
+        self.memory = memory
+        self._keys = np.zeros((0, 4))
+        self._steps = np.zeros((0, experiments))
+
+    @staticmethod
+    def _key(coefficients: np.ndarray) -> np.ndarray:
+        return np.log(np.maximum(np.asarray(coefficients, dtype=float), 1e-4))
+
+    def predict(self, coefficients: np.ndarray) -> np.ndarray | None:
+        """Expected steps of each candidate on each experiment, shape (C, E); None before any.
+
+        Parameters
+        ----------
+        coefficients : ndarray, shape (C, 4)
+
+        Returns
+        -------
+        ndarray or None
+        """
+        if not len(self._keys):
+            return None
+        _, nearest = cKDTree(self._keys).query(self._key(coefficients))
+        return self._steps[nearest]
+
+    def record(self, coefficients: np.ndarray, steps: np.ndarray) -> None:
+        """Remember the candidates' run lengths.
+
+        Parameters
+        ----------
+        coefficients : ndarray, shape (C, 4)
+        steps : ndarray, shape (C, E)
+            Steps each run lasted.
+        """
+        self._keys = np.concatenate([self._keys, self._key(coefficients)])[-self.memory :]
+        self._steps = np.concatenate([self._steps, steps])[-self.memory :]
+
+
+def simulate_batch(
+    robot: Robot,
+    prepared: Sequence,
+    coefficients: np.ndarray,
+    lengths: RunLengths | None = None,
+):
     """Simulate every prepared experiment for every candidate with ``eelsim.batch``.
 
     Parameters
@@ -23,6 +88,8 @@ def simulate_batch(robot: Robot, prepared: Sequence, coefficients: np.ndarray):
     robot : Robot
     prepared : sequence of PreparedExperiment
     coefficients : ndarray, shape (C, 4)
+    lengths : RunLengths, optional
+        Guesses the runs' lengths for the kernel's packing, and learns them from this call.
 
     Returns
     -------
@@ -39,6 +106,8 @@ def simulate_batch(robot: Robot, prepared: Sequence, coefficients: np.ndarray):
     left = np.zeros((c, e))
     arrival = np.full((c, e), np.nan)
     failed = np.full((c, e), np.nan)
+    expected = lengths.predict(coefficients) if lengths is not None else None
+    steps = np.zeros((c, e))
     groups: dict[object, list[int]] = {}
     for j, p in enumerate(prepared):
         groups.setdefault(p.options, []).append(j)
@@ -46,7 +115,10 @@ def simulate_batch(robot: Robot, prepared: Sequence, coefficients: np.ndarray):
         union = np.unique(np.concatenate([prepared[j].state_steps for j in members]))
         scenarios = [prepared[j].scenario for _ in range(c) for j in members]
         coeffs = np.repeat(coefficients, len(members), axis=0)
-        res = run_batch(robot, scenarios, coeffs, options, seeds=0, sample_steps=union)
+        hint = None if expected is None else expected[:, members].reshape(-1)
+        res = run_batch(robot, scenarios, coeffs, options, seeds=0, sample_steps=union,
+                        expected_steps=hint)
+        steps[:, members] = res.final_step.reshape(c, len(members))
         states = res.states.reshape(c, len(members), union.size, -1)
         for k, j in enumerate(members):
             picked = states[:, k, np.searchsorted(union, prepared[j].state_steps)]
@@ -57,4 +129,6 @@ def simulate_batch(robot: Robot, prepared: Sequence, coefficients: np.ndarray):
         codes = np.asarray(res.failure, dtype=int).reshape(c, len(members))
         times = np.asarray(res.failure_time_s, dtype=float).reshape(c, len(members))
         failed[:, members] = np.where(codes != 0, times, np.nan)
-    return Simulated(pos, heading, failure, left, arrival, failed)
+    if lengths is not None:
+        lengths.record(coefficients, steps)
+    return Simulated(pos, heading, failure, left, arrival, failed, steps.astype(np.int64))

@@ -95,22 +95,21 @@ class PreparedExperiment:
         heading = states[:, at, :n_links].mean(axis=-1)
         if not self.observe:
             return states[:, at, n_links : n_links + 2], heading
-        pos = np.full((states.shape[0], self.times_s.size, 2), np.nan)
         # The camera's frames and median filter, but not its pixel rounding: rounding would make the
         # objective piecewise constant (finite differences, the least-squares polish, the bootstrap
         # and the identifiability Jacobian would all see zero slopes); in the recording it is a
         # zero-mean +-half-pixel noise that needs no reproducing.
         smooth_camera = dataclasses.replace(self.options.camera, pixel_m=0.0)
-        for c, run in enumerate(states):
-            if not np.isnan(run).any():
-                pos[c] = observed_positions(
-                    self.times_s,
-                    self.state_steps,
-                    run[:, n_links : n_links + 2],
-                    run[:, -2:],
-                    smooth_camera,
-                    dt,
-                )
+        pos = observed_positions(
+            self.times_s,
+            self.state_steps,
+            states[:, :, n_links : n_links + 2],
+            states[:, :, -2:],
+            smooth_camera,
+            dt,
+        )
+        # a run that ended before the last state needed has no camera view there
+        pos[np.isnan(states).any(axis=(1, 2))] = np.nan
         return pos, heading
 
 
@@ -150,18 +149,22 @@ def prepare(
         control_period_s=float(exp.timing.get("control_period_s", 0.3)),
         extra_delay_s=float(exp.timing.get("extra_delay_s", 0.0)),
     )
+    state_steps = np.union1d(
+        np.round(times / dt_s).astype(np.int64),
+        observation_steps(times, camera, dt_s) if observe else np.zeros(0, dtype=np.int64),
+    )
+    # A run ends at T_max, or at its goal once the last state compared has been reached: after
+    # both, nothing it does can count (see Simulated.counted_failure), so it need not be run.
+    last_s = float(state_steps[-1]) * dt_s
     return PreparedExperiment(
         experiment=exp,
-        scenario=exp.scenario.model_copy(update={"duration_s": tmax}),
-        options=LoopOptions(timing=timing, camera=camera, stop_at_goal=False),
+        scenario=exp.scenario.model_copy(update={"duration_s": tmax, "min_duration_s": last_s}),
+        options=LoopOptions(timing=timing, camera=camera, stop_at_goal=True),
         times_s=times,
         exp_positions_m=exp.position_at(times),
         shifts_s=shifts,
         shifted_positions_m=np.stack([exp.position_at(times + d) for d in shifts]),
-        state_steps=np.union1d(
-            np.round(times / dt_s).astype(np.int64),
-            observation_steps(times, camera, dt_s) if observe else np.zeros(0, dtype=np.int64),
-        ),
+        state_steps=state_steps,
         observe=observe,
     )
 
@@ -183,6 +186,8 @@ class Simulated:
         When the last waypoint was reached (NaN: never).
     failure_time_s : ndarray, shape (C, E)
         When the failure was detected (NaN: none).
+    steps : ndarray of int, shape (C, E)
+        RK4 steps each run took.
     """
 
     positions_m: np.ndarray
@@ -191,6 +196,7 @@ class Simulated:
     distance_left_m: np.ndarray
     arrival_time_s: np.ndarray
     failure_time_s: np.ndarray
+    steps: np.ndarray
 
     def counted_failure(self, prepared: Sequence[PreparedExperiment]) -> np.ndarray:
         """Failure codes that count against a candidate, shape (C, E).
@@ -209,7 +215,7 @@ class Simulated:
         return out
 
 
-def _reference_job(args: tuple) -> tuple[np.ndarray, int, float, float, float]:
+def _reference_job(args: tuple) -> tuple[np.ndarray, int, float, float, float, int]:
     robot, prepared, coeffs = args
     run = simulate_closed_loop(
         robot, prepared.scenario, prepared.options, seed=0, coefficients=coeffs
@@ -222,7 +228,7 @@ def _reference_job(args: tuple) -> tuple[np.ndarray, int, float, float, float]:
     failed = (
         nan if run.failure_time_s is None or int(run.failure) == 0 else float(run.failure_time_s)
     )
-    return states, int(run.failure), float(run.distance_left_m), arrival, failed
+    return states, int(run.failure), float(run.distance_left_m), arrival, failed, len(run.t_s) - 1
 
 
 class Evaluator:
@@ -272,6 +278,8 @@ class Evaluator:
         self.workers = workers
         self.map_function = map_function
         self.simulations = 0  # closed-loop runs done so far
+        self.steps = 0  # and the RK4 steps they took
+        self._lengths = None  # the batch backend's guesses of run lengths (batch_backend.RunLengths)
 
     def simulate(self, coefficients: np.ndarray) -> Simulated:
         """Simulate every experiment for every candidate.
@@ -288,9 +296,13 @@ class Evaluator:
         coeffs = np.atleast_2d(np.asarray(coefficients, dtype=float))
         self.simulations += coeffs.shape[0] * len(self.prepared)
         if self.backend == "batch":
-            from eelhost.estimation.batch_backend import simulate_batch
+            from eelhost.estimation.batch_backend import RunLengths, simulate_batch
 
-            return simulate_batch(self.robot, self.prepared, coeffs)
+            if self._lengths is None:
+                self._lengths = RunLengths(len(self.prepared))
+            sim = simulate_batch(self.robot, self.prepared, coeffs, self._lengths)
+            self.steps += int(sim.steps.sum())
+            return sim
         jobs = [
             (self.robot, p, HydroCoefficients.from_array(c)) for c in coeffs for p in self.prepared
         ]
@@ -312,7 +324,9 @@ class Evaluator:
         left = np.array([r[2] for r in results]).reshape(c, e)
         arrival = np.array([r[3] for r in results]).reshape(c, e)
         failed = np.array([r[4] for r in results]).reshape(c, e)
-        return Simulated(pos, heading, fail, left, arrival, failed)
+        steps = np.array([r[5] for r in results]).reshape(c, e)
+        self.steps += int(steps.sum())
+        return Simulated(pos, heading, fail, left, arrival, failed, steps)
 
     def errors(self, coefficients: np.ndarray) -> np.ndarray:
         """Per-experiment error (with the failure penalties), shape (C, E)."""
