@@ -72,8 +72,9 @@ def test_runs_that_stop_once_nothing_more_can_count_score_as_runs_to_t_max(tiny_
         for p in full.prepared
     ]
     assert np.array_equal(short, full.errors(cands))
-    steps_short, steps_full = ev._lengths._steps, full._lengths._steps  # (candidate, experiment)
+    steps_short, steps_full = ev.simulate(cands).steps, full.simulate(cands).steps
     assert np.all(steps_short <= steps_full) and steps_short.sum() < 0.9 * steps_full.sum()
+    assert ev.steps == 2 * steps_short.sum()  # the evaluator counts the steps of both calls
 
 
 def test_run_lengths_are_guessed_from_the_nearest_earlier_candidate():
@@ -87,7 +88,8 @@ def test_run_lengths_are_guessed_from_the_nearest_earlier_candidate():
     assert np.array_equal(guess, [[300, 400], [100, 200]])
     lengths.record(np.array([[0.05, 0.1, 0.1, 0.0], [0.06, 0.1, 0.1, 0.0]]),
                    np.array([[1, 1], [2, 2]]))
-    assert len(lengths._keys) == 3  # only the most recent are kept
+    # only the 3 most recent are kept: the first candidate is forgotten, the second is nearest
+    assert np.array_equal(lengths.predict(np.array([[0.01, 1.0, 1.0, 0.1]])), [[300, 400]])
 
 
 def test_default_method_recovers_the_truth_on_a_small_dataset(tiny_dataset):

@@ -514,11 +514,11 @@ def _gather(work, base, r, ns, dest):
 @numba.njit(cache=True)
 def _run_block(block, order, params, x0, total_steps, goal_steps, dt, waypoints, n_waypoints,
                radius, k_theta, delay_steps, update_steps, update_count, frame_step,
-               frame_fraction, frame_time, noise, plain_run, pixel, window, stop_at_goal, pending_size, sample_steps,
-               states_out, record_full, full_out, arrival_out, failure_out, failure_time_out,
+               frame_fraction, frame_time, noise, plain_run, pixel, window, stop_at_goal,
+               pending_size, sample_steps, states_out, record_full, full_out, arrival_out, failure_out, failure_time_out,
                reason_out, reason_index_out, reason_value_out, final_state_out, final_step_out,
                target_out, distance_out):
-    """Run the block ``block`` (runs order[block * LANES ...]) to its end; see the module docstring.
+    """Run block ``block`` (runs ``order[block * LANES ...]``) to its end; see the module docstring.
 
     The lanes' states live in ``work`` (rows W_X: the step's start, W_XN: its end), so the
     generated code reads and writes them with constant offsets; everything per lane and per step

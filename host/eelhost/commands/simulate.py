@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import math
 from pathlib import Path
 
 from tqdm import tqdm
@@ -91,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
     if upd:
         scenario = type(scenario).model_validate({**scenario.model_dump(), **upd})
     options = loop_options(args, stop_at_goal=not args.full)
-    total = int(math.floor(scenario.duration_s / options.timing.dt_s))
+    total = scenario.total_steps(options.timing.dt_s)
     bar = tqdm(
         total=total, unit="step", desc=scenario.name, disable=scenario.duration_s < 5.0, leave=False
     )

@@ -107,7 +107,7 @@ def simulate_batch(
     arrival = np.full((c, e), np.nan)
     failed = np.full((c, e), np.nan)
     expected = lengths.predict(coefficients) if lengths is not None else None
-    steps = np.zeros((c, e))
+    steps = np.zeros((c, e), dtype=np.int64)
     groups: dict[object, list[int]] = {}
     for j, p in enumerate(prepared):
         groups.setdefault(p.options, []).append(j)
@@ -131,4 +131,4 @@ def simulate_batch(
         failed[:, members] = np.where(codes != 0, times, np.nan)
     if lengths is not None:
         lengths.record(coefficients, steps)
-    return Simulated(pos, heading, failure, left, arrival, failed, steps.astype(np.int64))
+    return Simulated(pos, heading, failure, left, arrival, failed, steps)

@@ -2,8 +2,8 @@
 
 An :class:`Evaluator` holds a set of experiments (training or test) prepared for simulation: the
 task from each experiment's metadata, run for T_max = ``tmax_factor`` times the recorded span so that
-a slightly slow candidate is not flagged too slow by the clock's noise, with the sample times of the
-fitness. ``simulate`` runs every (candidate, experiment) pair through a backend:
+a slightly slow candidate is not flagged too slow by the clock's noise (but ended at its goal once
+the last state compared is simulated), with the sample times of the fitness. ``simulate`` runs every (candidate, experiment) pair through a backend:
 
 - ``"reference"``: the readable closed loop (``eelsim.closed_loop``), spread over processes;
 - ``"batch"``: the fast batched kernel (``eelsim.batch``), the default when it is available.
@@ -294,15 +294,20 @@ class Evaluator:
         Simulated
         """
         coeffs = np.atleast_2d(np.asarray(coefficients, dtype=float))
-        self.simulations += coeffs.shape[0] * len(self.prepared)
         if self.backend == "batch":
             from eelhost.estimation.batch_backend import RunLengths, simulate_batch
 
             if self._lengths is None:
                 self._lengths = RunLengths(len(self.prepared))
             sim = simulate_batch(self.robot, self.prepared, coeffs, self._lengths)
-            self.steps += int(sim.steps.sum())
-            return sim
+        else:
+            sim = self._simulate_reference(coeffs)
+        self.simulations += coeffs.shape[0] * len(self.prepared)
+        self.steps += int(sim.steps.sum())
+        return sim
+
+    def _simulate_reference(self, coeffs: np.ndarray) -> Simulated:
+        """The reference backend: one readable closed-loop run per (candidate, experiment)."""
         jobs = [
             (self.robot, p, HydroCoefficients.from_array(c)) for c in coeffs for p in self.prepared
         ]
@@ -325,7 +330,6 @@ class Evaluator:
         arrival = np.array([r[3] for r in results]).reshape(c, e)
         failed = np.array([r[4] for r in results]).reshape(c, e)
         steps = np.array([r[5] for r in results]).reshape(c, e)
-        self.steps += int(steps.sum())
         return Simulated(pos, heading, fail, left, arrival, failed, steps)
 
     def errors(self, coefficients: np.ndarray) -> np.ndarray:
