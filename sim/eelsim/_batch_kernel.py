@@ -66,6 +66,26 @@ def _vsqrt(typingctx, x):
     return sig, codegen
 
 
+@intrinsic
+def _next_block(typingctx, counter):
+    """Atomically add one to ``counter[0]`` and return its value before: the next block to run.
+
+    numba's ``prange`` splits its range into equal contiguous shares fixed in advance, whatever
+    the parallel chunk size (measured with both the OpenMP and the workqueue layers): with the
+    blocks ordered longest first, one thread would get all the long ones. Threads that take the
+    next block from a shared counter when they finish one keep every core busy to the end, and
+    a core also busy with other work (a shared machine) simply takes fewer blocks.
+    """
+    sig = types.int64(counter)
+
+    def codegen(context, builder, signature, args):
+        array = context.make_array(signature.args[0])(context, builder, args[0])
+        one = llvm_ir.Constant(llvm_ir.IntType(64), 1)
+        return builder.atomic_rmw("add", array.data, one, "monotonic")
+
+    return sig, codegen
+
+
 # ---- placeholders, redefined by the generated part appended to this text ----
 N_LINKS = 2
 LANES = 16
@@ -814,19 +834,23 @@ def run_blocks(order, params, x0, total_steps, goal_steps, dt, waypoints, n_wayp
                plain_run, pixel, window, stop_at_goal, pending_size, sample_steps, states_out,
                record_full, full_out, arrival_out, failure_out, failure_time_out, reason_out,
                reason_index_out, reason_value_out, final_state_out, final_step_out, target_out,
-               distance_out):
-    """Run every block of LANES runs; blocks are shared out over numba's threads.
+               distance_out, threads):
+    """Run every block of LANES runs on ``threads`` threads, each taking the next block when free.
 
     Block b runs ``order[b * LANES : (b + 1) * LANES]``: the caller orders the runs so that a
-    block's lanes end at about the same step (a lane that has ended idles until its block ends).
-    The caller sets numba's parallel chunk size to 1 (see ``eelsim.batch.run_spec``); setting it
-    here would keep numba from caching this function.
+    block's lanes end at about the same step (a lane that has ended idles until its block ends),
+    longest blocks first. ``threads`` is numba's thread count (asking numba for it in here would
+    keep numba from caching this function).
     """
     n_blocks = (x0.shape[0] + LANES - 1) // LANES
-    for block in numba.prange(n_blocks):
-        _run_block(block, order, params, x0, total_steps, goal_steps, dt, waypoints, n_waypoints,
-                   radius, k_theta, delay_steps, update_steps, update_count, frame_step,
-                   frame_fraction, frame_time, noise, plain_run, pixel, window, stop_at_goal, pending_size, sample_steps,
-                   states_out, record_full, full_out, arrival_out, failure_out, failure_time_out,
-                   reason_out, reason_index_out, reason_value_out, final_state_out,
-                   final_step_out, target_out, distance_out)
+    counter = np.zeros(1, dtype=np.int64)
+    for _ in numba.prange(max(1, min(threads, n_blocks))):
+        block = _next_block(counter)
+        while block < n_blocks:
+            _run_block(block, order, params, x0, total_steps, goal_steps, dt, waypoints, n_waypoints,
+                       radius, k_theta, delay_steps, update_steps, update_count, frame_step,
+                       frame_fraction, frame_time, noise, plain_run, pixel, window, stop_at_goal, pending_size, sample_steps,
+                       states_out, record_full, full_out, arrival_out, failure_out, failure_time_out,
+                       reason_out, reason_index_out, reason_value_out, final_state_out,
+                       final_step_out, target_out, distance_out)
+            block = _next_block(counter)

@@ -25,7 +25,8 @@ dynamics is generated as straight-line code for the robot's N (``eelsim._batch_c
 one loop over the lanes, which LLVM vectorises (4 runs per AVX2 instruction); the accelerations
 come from an O(N) articulated-body recursion rather than the dense mass matrix, and the RK4 sums,
 the finiteness checks and the condition-number bound at control updates are generated code too.
-Blocks are spread over the cores with numba's ``prange``, handed out one at a time. The kernel
+Blocks are spread over the cores by numba's threads, each taking the next block from a shared
+counter when it finishes one (longest blocks first, so that the cores end together). The kernel
 module is generated once per (N, lanes) and compiled once: numba caches it on disk (next to the
 package in ``__pycache__``, or in ``$EELSIM_KERNEL_CACHE``) for every later process.
 
@@ -933,10 +934,6 @@ def run_spec(
     previous = numba.get_num_threads()
     if threads is not None:
         numba.set_num_threads(int(threads))
-    # blocks are handed to the threads one at a time rather than in equal shares fixed in
-    # advance: a block runs for milliseconds, so this costs nothing, and a thread whose core is
-    # also busy with other work (a shared machine) simply takes fewer blocks
-    previous_chunk = numba.set_parallel_chunksize(1)
     try:
         kernel.run_blocks(
             block_order(spec, expected_steps), spec.params, spec.initial_state, spec.total_steps,
@@ -947,10 +944,9 @@ def run_spec(
             int(cam.median_window), bool(spec.options.stop_at_goal), int(pending), unique, states, bool(record_full), full,
             out["arrival"], out["failure"], out["failure_time"], out["reason"],
             out["reason_index"], out["reason_value"], out["final_state"], out["final_step"],
-            out["target"], out["distance"],
+            out["target"], out["distance"], int(numba.get_num_threads()),
         )
     finally:
-        numba.set_parallel_chunksize(previous_chunk)
         if threads is not None:
             numba.set_num_threads(previous)
     return BatchResult(
