@@ -622,32 +622,29 @@ def _frame_table(max_total: int, dt: float, fps: float) -> tuple[IntArray, Float
 
 
 def _random_draws(seeds, total, timing, camera, n_frames):
-    """Update schedules and heading noise per run, drawn like simulate_closed_loop."""
-    cache: dict[tuple[int, int], tuple[IntArray, FloatArray]] = {}
+    """Update schedules and heading noise per run, drawn like simulate_closed_loop.
+
+    Drawn once per distinct (seed, length): a generation of the GA has hundreds of runs but a
+    handful of lengths, and without jitter or heading noise the seed does not matter.
+    """
     random = timing.jitter_steps > 0 or camera.heading_noise_rad > 0
+    keys = np.stack([seeds if random else np.zeros_like(seeds), total], axis=1)
+    distinct, inverse = np.unique(keys, axis=0, return_inverse=True)
     schedules, noises = [], []
-    for seed, tot in zip(seeds.tolist(), total.tolist(), strict=True):
-        key = (seed if random else 0, tot)
-        if key not in cache:
-            rng = np.random.default_rng(seed)
-            upd = timing.update_steps(tot, rng)
-            noise = (
-                rng.normal(0.0, camera.heading_noise_rad, size=n_frames)
-                if camera.heading_noise_rad
-                else np.zeros(0)
-            )
-            cache[key] = (upd, noise)
-        upd, noise = cache[key]
-        schedules.append(upd)
-        noises.append(noise)
+    for seed, tot in distinct.tolist():
+        rng = np.random.default_rng(seed)
+        schedules.append(timing.update_steps(tot, rng))
+        if camera.heading_noise_rad:
+            noises.append(rng.normal(0.0, camera.heading_noise_rad, size=n_frames))
     width = max(s.size for s in schedules)
     updates = np.full((len(schedules), width), -1, dtype=np.int64)
     counts = np.zeros(len(schedules), dtype=np.int64)
     for i, s in enumerate(schedules):
         updates[i, : s.size] = s
         counts[i] = s.size
-    noise = np.stack(noises) if camera.heading_noise_rad else np.zeros((len(schedules), 0))
-    return updates, counts, noise
+    noise = np.stack(noises) if noises else np.zeros((len(schedules), 0))
+    inverse = inverse.reshape(-1)
+    return updates[inverse], counts[inverse], noise[inverse]
 
 
 def _rows(params: FloatArray, layout: _batch_codegen.Layout, name: str, size: int) -> FloatArray:

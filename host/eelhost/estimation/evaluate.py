@@ -100,16 +100,13 @@ class PreparedExperiment:
         # and the identifiability Jacobian would all see zero slopes); in the recording it is a
         # zero-mean +-half-pixel noise that needs no reproducing.
         smooth_camera = dataclasses.replace(self.options.camera, pixel_m=0.0)
+        com = states[:, :, n_links : n_links + 2]
         pos = observed_positions(
-            self.times_s,
-            self.state_steps,
-            states[:, :, n_links : n_links + 2],
-            states[:, :, -2:],
-            smooth_camera,
-            dt,
+            self.times_s, self.state_steps, com, states[:, :, -2:], smooth_camera, dt
         )
-        # a run that ended before the last state needed has no camera view there
-        pos[np.isnan(states).any(axis=(1, 2))] = np.nan
+        # a run that ended before the last state needed (its later rows are NaN) has no camera
+        # view there
+        pos[np.isnan(com).any(axis=(1, 2))] = np.nan
         return pos, heading
 
 
