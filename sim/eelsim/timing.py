@@ -113,13 +113,10 @@ class LoopTiming:
         ndarray of int
         """
         steps = [0]
+        period, jitter = self.period_steps, self.jitter_steps
         while True:
-            j = (
-                int(rng.integers(-self.jitter_steps, self.jitter_steps + 1))
-                if self.jitter_steps
-                else 0
-            )
-            nxt = steps[-1] + self.period_steps + j
+            j = int(rng.integers(-jitter, jitter + 1)) if jitter else 0
+            nxt = steps[-1] + period + j
             if nxt > total_steps:
                 return np.array(steps, dtype=np.int64)
             steps.append(nxt)
