@@ -14,7 +14,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.integrate import solve_ivp
 
 from eelsim.dynamics import state_derivative
 from eelsim.model import SwimmerModel
@@ -156,6 +155,9 @@ def integrate_reference(
     RuntimeError
         When the solver fails.
     """
+    # imported here: scipy.integrate takes 0.6 s to import and only this check needs it
+    from scipy.integrate import solve_ivp
+
     u = _torque_function(model, torques)
     vc = np.asarray(current_m_s, dtype=float)
     times = np.linspace(0.0, duration_s, 101) if t_eval is None else np.asarray(t_eval, float)

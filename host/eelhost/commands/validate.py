@@ -6,7 +6,6 @@ import argparse
 from pathlib import Path
 
 from eelhost.estimation.evaluate import ALIGN_S
-from eelhost.estimation.figures import plot_paths, plot_time_series
 from eelhost.estimation.pipeline import read_coefficients
 from eelhost.estimation.validate import table_csv, table_markdown, validate
 from eelhost.experiment import load_dataset
@@ -46,6 +45,8 @@ def run(args: argparse.Namespace) -> int:
     md = table_markdown([r.row for r in runs])
     (out / "table4.md").write_text(md + "\n")
     (out / "table4.csv").write_text(table_csv([r.row for r in runs]))
+    from eelhost.estimation.figures import plot_paths, plot_time_series  # matplotlib: slow import
+
     for motion in ("straight", "turning", "path"):
         group = [r for r in runs if r.experiment.motion == motion]
         if group:

@@ -14,7 +14,6 @@ from pathlib import Path
 import numpy as np
 
 from eelhost.estimation.evaluate import ALIGN_S
-from eelhost.estimation.figures import plot_fitness_history, plot_paths, plot_time_series
 from eelhost.estimation.identify import bootstrap, identifiability
 from eelhost.estimation.optimise import NAMES, FitResult
 from eelhost.estimation.pipeline import (
@@ -103,6 +102,9 @@ def run_report(
     runs = validate(dataset.robot, fitted, tests, backend=settings.backend)
     (out / "table4.md").write_text(table_markdown([r.row for r in runs]) + "\n")
     (out / "table4.csv").write_text(table_csv([r.row for r in runs]))
+    # matplotlib only now: importing it costs half a second of every command's start
+    from eelhost.estimation.figures import plot_fitness_history, plot_paths, plot_time_series
+
     plot_fitness_history(fits, out / "fitness_history.png")
     for motion in ("straight", "turning", "path"):
         group = [r for r in runs if r.experiment.motion == motion]
