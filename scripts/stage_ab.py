@@ -36,11 +36,10 @@ from types import ModuleType
 import numpy as np
 from kernel_ab import import_path  # scripts/, first on the path when this script runs
 
-from eelhost.commands.bench import TRAINING_CORNERS
 from eelhost.commands.common import robot_and_coefficients
 from eelsim import _batch_c, _batch_codegen, batch
 from eelsim.closed_loop import LoopOptions
-from eelsim.scenario import grid_scenario
+from eelsim.scenario import TRAINING_CORNERS, grid_scenario
 
 N_LINKS = 6
 DT_S = 0.01

@@ -118,17 +118,16 @@ def simulate_batch(
         hint = None if expected is None else expected[:, members].reshape(-1)
         res = run_batch(robot, scenarios, coeffs, options, seeds=0, sample_steps=union,
                         expected_steps=hint)
-        steps[:, members] = res.final_step.reshape(c, len(members))
         states = res.states.reshape(c, len(members), union.size, -1)
         for k, j in enumerate(members):
             picked = states[:, k, np.searchsorted(union, prepared[j].state_steps)]
             pos[:, j], heading[:, j] = prepared[j].positions(picked, n_links)
-        failure[:, members] = np.asarray(res.failure, dtype=int).reshape(c, len(members))
-        left[:, members] = np.asarray(res.distance_left_m).reshape(c, len(members))
-        arrival[:, members] = np.asarray(res.arrival_time_s, dtype=float).reshape(c, len(members))
-        codes = np.asarray(res.failure, dtype=int).reshape(c, len(members))
-        times = np.asarray(res.failure_time_s, dtype=float).reshape(c, len(members))
-        failed[:, members] = np.where(codes != 0, times, np.nan)
+        shape = (c, len(members))  # the batch's runs are candidate-major
+        steps[:, members] = res.final_step.reshape(shape)
+        failure[:, members] = codes = res.failure.reshape(shape)
+        left[:, members] = res.distance_left_m.reshape(shape)
+        arrival[:, members] = res.arrival_time_s.reshape(shape)
+        failed[:, members] = np.where(codes != 0, res.failure_time_s.reshape(shape), np.nan)
     if lengths is not None:
         lengths.record(coefficients, steps)
     return Simulated(pos, heading, failure, left, arrival, failed, steps)
