@@ -1,4 +1,4 @@
-// The eel-like gait (spec section 4): alpha_j(t) = A_j sin(phi(t) + (j-1) beta) + gamma,
+// The eel-like gait (docs/model.md section 4): alpha_j(t) = A_j sin(phi(t) + (j-1) beta) + gamma,
 // A_j = A (N-j)/(N+1), j = 1..N-1, where phi is the accumulated phase (phi = omega t while omega is
 // constant, as in the twin's eelsim.control.gait_reference).
 //

@@ -6,8 +6,8 @@
 namespace {
 constexpr double kPi = 3.14159265358979323846;
 
-// The spec's gait in double precision: alpha_j = A (N-j)/(N+1) sin(omega t + (j-1) beta) + gamma.
-double spec_alpha(int j0, double t_s, double a, double omega, double beta, double gamma) {
+// The gait of docs/model.md section 4 in double precision: alpha_j = A (N-j)/(N+1) sin(omega t + (j-1) beta) + gamma.
+double model_alpha(int j0, double t_s, double a, double omega, double beta, double gamma) {
   return a * (6.0 - (j0 + 1)) / 7.0 * sin(omega * t_s + j0 * beta) + gamma;
 }
 
@@ -27,14 +27,14 @@ float max_step(const float* a, const float* b) {
 }
 }  // namespace
 
-TEST(gait_equals_the_spec_formula_at_the_start_of_a_run) {
+TEST(gait_equals_the_model_formula_at_the_start_of_a_run) {
   const GaitTargets t{0.6f, 3.0f, 1.04f, 0.05f};
   Gait g = started_gait(1000, t);
   for (uint32_t k = 0; k <= 500; ++k) {
     const uint32_t now = 1000 + k * 10000;
     g.update(now);
     for (int j = 0; j < 5; ++j) {
-      CHECK_NEAR(g.alpha_rad()[j], spec_alpha(j, k * 0.01, 0.6f, 3.0f, 1.04f, 0.05f), 2e-6);
+      CHECK_NEAR(g.alpha_rad()[j], model_alpha(j, k * 0.01, 0.6f, 3.0f, 1.04f, 0.05f), 2e-6);
     }
   }
 }
@@ -65,7 +65,7 @@ TEST(gait_is_continuous_across_the_micros_wrap) {
   for (uint32_t k = 1; k <= 100; ++k) {
     const uint32_t now = t0 + k * 10000u;  // wraps at k = 26
     g.update(now);
-    for (int j = 0; j < 5; ++j) CHECK_NEAR(g.alpha_rad()[j], spec_alpha(j, k * 0.01, 0.5f, 3.0f, 1.04f, 0.0), 2e-6);
+    for (int j = 0; j < 5; ++j) CHECK_NEAR(g.alpha_rad()[j], model_alpha(j, k * 0.01, 0.5f, 3.0f, 1.04f, 0.0), 2e-6);
   }
 }
 
