@@ -1,14 +1,20 @@
-"""Render the eelbot protocol definition into a C++ header and a Python module.
+"""Render the eelbot protocol definition into the firmware, the host and the docs.
 
 Usage::
 
-    python protocol/generate.py          # write the C++ header and the Python module
-    python protocol/generate.py --check  # exit 1 when either differs from the definition
+    python protocol/generate.py          # write every rendered file
+    python protocol/generate.py --check  # exit 1 when any differs from the definition
 
-The definition is ``protocol/eelbot.toml``. The schema hash is the first two bytes of the SHA-256
-of a canonical JSON form of everything that changes the meaning of bytes on the wire (ids, names,
-types, counts, ranges, enum values, frame constants); documentation strings and defaults are left
-out so that editing a doc does not break compatibility with robots already flashed.
+The definition is ``protocol/eelbot.toml``. It renders into a C++ header (constants, message
+structs and one field table per message, read by the generic codec of
+``firmware/core/message_codec.h``), the ``EEL_JOINTS`` line of the native library's C header, a
+Python module (one generic codec driven by each message's field metadata) and two tables of
+``docs/firmware.md``; the last two are spliced between marker comments.
+
+The schema hash is the first two bytes of the SHA-256 of a canonical JSON form of everything that
+changes the meaning of bytes on the wire (ids, names, types, counts, ranges, enum values, frame
+constants, baud, max_frame_bytes, n_joints); documentation strings, defaults and periods are left
+out so that editing them does not break compatibility with robots already flashed.
 """
 
 from __future__ import annotations
@@ -16,6 +22,7 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
+import re
 import sys
 import textwrap
 import tomllib
@@ -38,8 +45,49 @@ HEADER_BYTES = 4  # schema_hash u16, msg_id u8, seq u8 (frozen, see eelbot.toml)
 CRC_BYTES = 2
 
 
+NATIVE_H_OUT = ROOT / "firmware" / "hal" / "native" / "eel_native.h"
+DOCS_OUT = ROOT / "docs" / "firmware.md"
+
+# The constants whose values enter the schema hash (with the messages, whose counts they may set).
+WIRE_CONSTANTS = ("baud", "max_frame_bytes", "n_joints")
+CONSTANT_TYPES = ("u8", "u16", "u32")
+
+
 class DefinitionError(ValueError):
     """The protocol definition is malformed."""
+
+
+class OutputError(ValueError):
+    """A file that receives generated text has no marked place for it."""
+
+
+@dataclass(frozen=True)
+class Constant:
+    """A number the firmware and the host share."""
+
+    name: str
+    value: int
+    type: str
+    doc: str
+
+    @property
+    def cpp_name(self) -> str:
+        """The C++ name, ``eelproto::k<CamelName>``."""
+        return "k" + _camel(self.name)
+
+    @property
+    def py_name(self) -> str:
+        """The Python name, upper case."""
+        return self.name.upper()
+
+    def quoted(self) -> str:
+        """The value as a doc quotes it: a time in microseconds in s, ms or us."""
+        if not self.name.endswith("_us"):
+            return str(self.value)
+        for unit, scale in (("s", 1_000_000), ("ms", 1000)):
+            if self.value % scale == 0:
+                return f"{self.value // scale} {unit}"
+        return f"{self.value} us"
 
 
 @dataclass(frozen=True)
@@ -54,11 +102,17 @@ class Field:
     max: float | None
     default: float | None
     enum: str | None
+    count_name: str | None = None  # the constant that sets the count, if one does
 
     @property
     def size(self) -> int:
         """Bytes on the wire."""
         return TYPES[self.type][0] * self.count
+
+    @property
+    def ranged(self) -> bool:
+        """Whether the receiver checks the value against [min, max]."""
+        return self.min is not None
 
 
 @dataclass(frozen=True)
@@ -75,6 +129,11 @@ class Message:
     def payload_bytes(self) -> int:
         """Payload size in bytes."""
         return sum(f.size for f in self.fields)
+
+    @property
+    def encoded_bytes(self) -> int:
+        """Largest encoded frame of this message, zero delimiter included."""
+        return cobs_worst_case(HEADER_BYTES + self.payload_bytes + CRC_BYTES) + 1
 
     @property
     def upper(self) -> str:
@@ -103,6 +162,70 @@ def cobs_worst_case(n: int) -> int:
     return n + 1 + n // 254
 
 
+def _quote_constants(text: str, constants: dict[str, Constant], where: str) -> str:
+    """Replace each {name} in a doc by the value of that constant."""
+
+    def value(match: re.Match[str]) -> str:
+        name = match.group(1)
+        if name not in constants:
+            raise DefinitionError(f"{where}: the doc quotes {{{name}}}, which is not a constant")
+        return constants[name].quoted()
+
+    return re.sub(r"\{(\w+)\}", value, text)
+
+
+def _load_constants(raw: dict) -> dict[str, Constant]:
+    """The [constants] tables, checked, with their docs' quotes of each other expanded."""
+    consts = {}
+    for name, c in raw.items():
+        if set(c) != {"value", "type", "doc"}:
+            raise DefinitionError(f"constants.{name}: needs exactly value, type and doc")
+        if c["type"] not in CONSTANT_TYPES:
+            raise DefinitionError(f"constants.{name}: type must be one of {CONSTANT_TYPES}")
+        limit = 1 << (8 * TYPES[c["type"]][0])
+        if not isinstance(c["value"], int) or not 0 <= c["value"] < limit:
+            raise DefinitionError(f"constants.{name}: {c['value']!r} is not a {c['type']}")
+        consts[name] = Constant(name, c["value"], c["type"], " ".join(c["doc"].split()))
+    for name in WIRE_CONSTANTS:
+        if name not in consts:
+            raise DefinitionError(f"[constants] must define {name}")
+    return {
+        n: Constant(n, c.value, c.type, _quote_constants(c.doc, consts, f"constants.{n}"))
+        for n, c in consts.items()
+    }
+
+
+def _load_field(m: dict, f: dict, consts: dict[str, Constant], enums: dict) -> Field:
+    """One field of message m, checked, its count resolved and its doc's quotes expanded."""
+    where = f"{m['name']}.{f['name']}"
+    if f["type"] not in TYPES:
+        raise DefinitionError(f"{where}: unknown type {f['type']!r}")
+    if f.get("enum") and f["enum"] not in enums:
+        raise DefinitionError(f"{where}: unknown enum {f['enum']!r}")
+    count, count_name = f.get("count", 1), None
+    if isinstance(count, str):
+        if count not in consts:
+            raise DefinitionError(f"{where}: count names {count!r}, which is not a constant")
+        count, count_name = consts[count].value, count
+    if not isinstance(count, int) or count < 1:
+        raise DefinitionError(f"{where}: count must be a positive integer or a constant's name")
+    if ("min" in f) != ("max" in f):
+        raise DefinitionError(f"{where}: give both min and max, or neither")
+    if "min" in f and (f["type"] != "f32" or count != 1 or not f["min"] <= f["max"]):
+        raise DefinitionError(f"{where}: a range needs a single f32 field and min <= max")
+    return Field(
+        f["name"],
+        f["type"],
+        count,
+        _quote_constants(f.get("doc", ""), consts, where),
+        f.get("min"),
+        f.get("max"),
+        f.get("default"),
+        f.get("enum"),
+        count_name,
+    )
+
+
 def load(path: Path | None = None) -> dict:
     """Read and validate the definition.
 
@@ -114,16 +237,20 @@ def load(path: Path | None = None) -> dict:
     Returns
     -------
     dict
-        With keys ``protocol``, ``frame``, ``enums`` (name -> list of (name, value, doc)),
+        With keys ``protocol`` (name, version and the value of every constant), ``constants``
+        (name -> Constant), ``frame``, ``enums`` (name -> doc and list of (name, value, doc)),
         ``messages`` (list of Message) and ``schema_hash`` (int).
 
     Raises
     ------
     DefinitionError
-        When a rule of the definition is broken (duplicate id, unknown type, frame too large...).
+        When a rule of the definition is broken (duplicate id, unknown type or constant, frame too
+        large...); the message names the table or field.
     """
     raw = tomllib.loads((path or DEFINITION).read_text(encoding="utf-8"))
-    proto = raw["protocol"]
+    consts = _load_constants(raw.get("constants", {}))
+    proto = {"name": raw["protocol"]["name"], "version": raw["protocol"]["version"]}
+    proto |= {name: c.value for name, c in consts.items()}
     frame = raw["frame"]
     want_frame = {
         "schema_hash": "u16",
@@ -136,48 +263,32 @@ def load(path: Path | None = None) -> dict:
         raise DefinitionError(f"[frame] must be {want_frame} (the header is frozen), got {frame}")
     enums = {}
     for e in raw.get("enum", []):
-        values = [(str(n), int(v), str(d)) for n, v, d in e["values"]]
+        values = [
+            (str(n), int(v), _quote_constants(str(d), consts, f"{e['name']}.{n}"))
+            for n, v, d in e["values"]
+        ]
         if len({v for _, v, _ in values}) != len(values):
             raise DefinitionError(f"enum {e['name']}: duplicate values")
         enums[e["name"]] = {"doc": e.get("doc", ""), "values": values}
     messages = []
     for m in raw["message"]:
-        fields = []
-        for f in m["fields"]:
-            if f["type"] not in TYPES:
-                raise DefinitionError(f"{m['name']}.{f['name']}: unknown type {f['type']!r}")
-            if f.get("enum") and f["enum"] not in enums:
-                raise DefinitionError(f"{m['name']}.{f['name']}: unknown enum {f['enum']!r}")
-            fields.append(
-                Field(
-                    f["name"],
-                    f["type"],
-                    int(f.get("count", 1)),
-                    f.get("doc", ""),
-                    f.get("min"),
-                    f.get("max"),
-                    f.get("default"),
-                    f.get("enum"),
-                )
-            )
-        if len(m.get("doc", "")) > 88:
+        fields = tuple(_load_field(m, f, consts, enums) for f in m["fields"])
+        doc = _quote_constants(m.get("doc", ""), consts, m["name"])
+        if len(doc) > 88:
             raise DefinitionError(f"{m['name']}: doc longer than 88 characters (one line)")
         if m["direction"] not in ("to_robot", "to_host"):
             raise DefinitionError(f"{m['name']}: direction must be to_robot or to_host")
-        messages.append(
-            Message(m["name"], int(m["id"]), m["direction"], m.get("doc", ""), tuple(fields))
-        )
+        messages.append(Message(m["name"], int(m["id"]), m["direction"], doc, fields))
     ids = [m.id for m in messages]
     if len(set(ids)) != len(ids) or not all(0 < i < 256 for i in ids):
         raise DefinitionError("message ids must be unique and in 1..255")
     for m in messages:
-        size = cobs_worst_case(HEADER_BYTES + m.payload_bytes + CRC_BYTES) + 1
-        if size > proto["max_frame_bytes"]:
-            raise DefinitionError(f"{m.name}: {size} encoded bytes exceed max_frame_bytes")
+        if m.encoded_bytes > proto["max_frame_bytes"]:
+            raise DefinitionError(
+                f"{m.name}: {m.encoded_bytes} encoded bytes exceed max_frame_bytes"
+            )
     canonical = {
-        "protocol": {
-            k: proto[k] for k in ("name", "version", "baud", "max_frame_bytes", "n_joints")
-        },
+        "protocol": {k: proto[k] for k in ("name", "version", *WIRE_CONSTANTS)},
         "frame": frame,
         "enums": {k: [(n, val) for n, val, _ in v["values"]] for k, v in enums.items()},
         "messages": [
@@ -193,6 +304,7 @@ def load(path: Path | None = None) -> dict:
     digest = hashlib.sha256(json.dumps(canonical, sort_keys=True).encode()).digest()
     return {
         "protocol": proto,
+        "constants": consts,
         "frame": frame,
         "enums": enums,
         "messages": messages,
@@ -208,6 +320,11 @@ def _cpp_float(x: float) -> str:
     return f"{float(x)!r}f"
 
 
+def _comment(prefix: str, text: str, width: int = 100) -> list[str]:
+    """Text as comment lines of at most width characters."""
+    return textwrap.wrap(text, width, initial_indent=prefix, subsequent_indent=prefix)
+
+
 def render_cpp(d: dict) -> str:
     """Render the C++ header.
 
@@ -219,7 +336,8 @@ def render_cpp(d: dict) -> str:
     Returns
     -------
     str
-        The text of ``firmware/core/protocol_gen.h``.
+        The text of ``firmware/core/protocol_gen.h``: constants, enums, one struct and one field
+        table (``each_field``) per message; ``firmware/core/message_codec.h`` holds the codec.
     """
     p = d["protocol"]
     out = [
@@ -227,19 +345,20 @@ def render_cpp(d: dict) -> str:
         "// definition and run `python protocol/generate.py`.",
         "#pragma once",
         "#include <stdint.h>",
-        '#include "wire.h"',
         "",
         "namespace eelproto {",
         "",
         f"constexpr uint16_t kSchemaHash = 0x{d['schema_hash']:04X};",
         f"constexpr uint8_t kProtocolVersion = {p['version']};",
-        f"constexpr uint32_t kBaud = {p['baud']}UL;",
-        f"constexpr uint8_t kMaxFrameBytes = {p['max_frame_bytes']};  // encoded, with delimiter",
         f"constexpr uint8_t kHeaderBytes = {HEADER_BYTES};",
         f"constexpr uint8_t kCrcBytes = {CRC_BYTES};",
-        f"constexpr uint8_t kJoints = {p['n_joints']};",
         "",
     ]
+    for c in d["constants"].values():
+        suffix = "UL" if c.type == "u32" else ""
+        out += _comment("// ", c.doc)
+        out.append(f"constexpr {TYPES[c.type][2]} {c.cpp_name} = {c.value}{suffix};")
+    out.append("")
     for name, e in d["enums"].items():
         out.append(f"// {e['doc']}")
         out.append(f"enum class {name} : uint8_t {{")
@@ -250,67 +369,13 @@ def render_cpp(d: dict) -> str:
     for m in d["messages"]:
         out.append(f"  {m.name} = 0x{m.id:02X},")
     out += ["};", ""]
+    out += [
+        "// Each message's field table is its each_field(): visit(field, wire offset) for each",
+        "// field in wire order, visit(field, wire offset, min, max) for a field with a range.",
+        "",
+    ]
     for m in d["messages"]:
-        out.append(f"// {m.doc} ({m.direction.replace('_', ' ')})")
-        out.append(f"struct {m.name} {{")
-        out.append(f"  static constexpr MsgId kId = MsgId::{m.name};")
-        out.append(f"  static constexpr uint8_t kPayloadBytes = {m.payload_bytes};")
-        for f in m.fields:
-            ctype = TYPES[f.type][2]
-            arr = f"[{f.count}]" if f.count > 1 else ""
-            out.append(f"  {ctype} {f.name}{arr};  // {f.doc}")
-        out += ["};", ""]
-        var = "m" if m.fields else "/*m*/"
-        pname = "p" if m.fields else ""
-        out.append(f"inline void pack(const {m.name}& {var}, uint8_t* {pname}) {{")
-        off = 0
-        for f in m.fields:
-            for k in range(f.count):
-                idx = f"[{k}]" if f.count > 1 else ""
-                out.append(f"  wire::put_{f.type}(p + {off}, m.{f.name}{idx});")
-                off += TYPES[f.type][0]
-        out.append("}")
-        out.append(
-            f"inline void unpack({m.name}& {var}, const uint8_t* {'p' if m.fields else ''}) {{"
-        )
-        off = 0
-        for f in m.fields:
-            for k in range(f.count):
-                idx = f"[{k}]" if f.count > 1 else ""
-                out.append(f"  m.{f.name}{idx} = wire::get_{f.type}(p + {off});")
-                off += TYPES[f.type][0]
-        out.append("}")
-        ranged = [f for f in m.fields if f.min is not None or f.max is not None]
-        if m.direction == "to_robot":
-            out.append("// RefuseReason value, or 0 when every field is finite and in range.")
-            out.append(f"inline uint8_t validate(const {m.name}& {'m' if ranged else '/*m*/'}) {{")
-            for f in ranged:
-                out.append(
-                    f"  if (!wire::finite(m.{f.name})) return "
-                    "static_cast<uint8_t>(RefuseReason::NotFinite);"
-                )
-            for f in ranged:
-                conds = []
-                if f.min is not None:
-                    conds.append(f"m.{f.name} < {_cpp_float(f.min)}")
-                if f.max is not None:
-                    conds.append(f"m.{f.name} > {_cpp_float(f.max)}")
-                out.append(
-                    f"  if ({' || '.join(conds)}) return "
-                    "static_cast<uint8_t>(RefuseReason::OutOfRange);"
-                )
-            out.append("  return 0;")
-            out.append("}")
-        defaults = [f for f in m.fields if f.default is not None]
-        if defaults:
-            out.append("// The documented defaults (also the firmware's boot values).")
-            out.append(f"inline {m.name} default_{_snake(m.name)}() {{")
-            out.append(f"  {m.name} m{{}};")
-            for f in defaults:
-                out.append(f"  m.{f.name} = {_cpp_float(f.default)};")
-            out.append("  return m;")
-            out.append("}")
-        out.append("")
+        out += _cpp_message(d, m)
     out.append("// Payload size of a message id, or -1 for an id this schema does not define.")
     out.append("inline int16_t payload_bytes(uint8_t id) {")
     out.append("  switch (id) {")
@@ -326,6 +391,43 @@ def render_cpp(d: dict) -> str:
     out += ["      return true;", "    default:", "      return false;", "  }", "}", ""]
     out.append("}  // namespace eelproto")
     return "\n".join(out) + "\n"
+
+
+def _cpp_message(d: dict, m: Message) -> list[str]:
+    """The struct, field table and defaults of one message."""
+    out = [
+        f"// {m.doc} ({m.direction.replace('_', ' ')})",
+        f"struct {m.name} {{",
+        f"  static constexpr MsgId kId = MsgId::{m.name};",
+        f"  static constexpr uint8_t kPayloadBytes = {m.payload_bytes};",
+    ]
+    for f in m.fields:
+        size = d["constants"][f.count_name].cpp_name if f.count_name else f.count
+        arr = f"[{size}]" if f.count > 1 else ""
+        out.append(f"  {TYPES[f.type][2]} {f.name}{arr};  // {f.doc}")
+    out.append("};")
+    if not m.fields:
+        out += [f"template <typename Visit> void each_field({m.name}&, Visit&) {{}}", ""]
+        return out
+    out += ["template <typename Visit>", f"void each_field({m.name}& m, Visit& visit) {{"]
+    offset = 0
+    for f in m.fields:
+        bounds = f", {_cpp_float(f.min)}, {_cpp_float(f.max)}" if f.ranged else ""
+        out.append(f"  visit(m.{f.name}, {offset}{bounds});")
+        offset += f.size
+    out.append("}")
+    defaults = [f for f in m.fields if f.default is not None]
+    if defaults:
+        # Field by field, not an aggregate: avr-gcc would keep an aggregate's bytes in RAM.
+        out.append("// The documented defaults (also the firmware's boot values).")
+        out.append(f"inline {m.name} default_{_snake(m.name)}() {{")
+        out.append(f"  {m.name} m{{}};")
+        for f in defaults:
+            value = _cpp_float(f.default) if f.type == "f32" else str(int(f.default))
+            out.append(f"  m.{f.name} = {value};")
+        out += ["  return m;", "}"]
+    out.append("")
+    return out
 
 
 def _snake(name: str) -> str:
@@ -355,13 +457,137 @@ class FrameReader(_framing.StreamDecoder):
 '''
 
 
-def _py_default(f: Field) -> str:
-    if f.count > 1:
-        zero = "0.0" if f.type == "f32" else "0"
-        return f"({', '.join([zero] * f.count)},)"
-    if f.default is not None:
-        return repr(float(f.default)) if f.type == "f32" else str(int(f.default))
-    return "0.0" if f.type == "f32" else "0"
+# Emitted once into the Python module, after MsgId: what every message shares.
+PY_MESSAGE_BASE = '''
+
+_M = TypeVar("_M", bound="_Message")
+_STRUCT_CODES = {STRUCT_CODES}
+
+
+def _wire(
+    wire_type: str,
+    default: float = 0,
+    *,
+    count: int = 1,
+    lo: float | None = None,
+    hi: float | None = None,
+) -> Any:
+    """A message field: its default, with its wire format in the dataclass field's metadata.
+
+    Parameters
+    ----------
+    wire_type : str
+        The type of one value on the wire: u8, u16, u32 or f32.
+    default : float
+        The default (of every element when ``count > 1``).
+    count : int
+        Number of values; more than one makes the field a tuple.
+    lo, hi : float, optional
+        The range that :meth:`_Message.validate` enforces.
+    """
+    value = (default,) * count if count > 1 else default
+    code = _STRUCT_CODES[wire_type]
+    return field(default=value, metadata={"code": code, "count": count, "range": (lo, hi)})
+
+
+class _Message:
+    """What every message shares: pack, unpack and validate, driven by its fields' metadata."""
+
+    MSG_ID: ClassVar[MsgId]
+    TO_ROBOT: ClassVar[bool]
+    FORMAT: ClassVar[str]
+    PAYLOAD_BYTES: ClassVar[int]
+    # (name, count, lo, hi) of each field in wire order, set by _message from the metadata.
+    LAYOUT: ClassVar[tuple[tuple[str, int, float | None, float | None], ...]]
+
+    if TYPE_CHECKING:
+
+        def __init__(self, *values: Any) -> None: ...
+
+    def pack(self) -> bytes:
+        """Payload bytes of this message."""
+        values: list[Any] = []
+        for name, count, _, _ in self.LAYOUT:
+            if count > 1:
+                values.extend(getattr(self, name))
+            else:
+                values.append(getattr(self, name))
+        return struct.pack(self.FORMAT, *values)
+
+    @classmethod
+    def unpack(cls, payload: bytes) -> Self:
+        """Message from its payload bytes (struct.error on a wrong size)."""
+        flat = struct.unpack(cls.FORMAT, payload)
+        values: list[Any] = []
+        for _, count, _, _ in cls.LAYOUT:
+            values.append(tuple(flat[:count]) if count > 1 else flat[0])
+            flat = flat[count:]
+        return cls(*values)
+
+    def validate(self) -> None:
+        """Raise ValueError when a field is not finite or out of range."""
+        for name, _, lo, hi in self.LAYOUT:
+            v = getattr(self, name)
+            if lo is not None and hi is not None and not (math.isfinite(v) and lo <= v <= hi):
+                raise ValueError(f"{type(self).__name__}.{name}={v} outside [{lo}, {hi}]")
+
+
+def _message(msg_id: MsgId, *, to_robot: bool) -> Callable[[type[_M]], type[_M]]:
+    """Class decorator: bind a message dataclass to its id and derive its wire format."""
+
+    def bind(cls: type[_M]) -> type[_M]:
+        wire = fields(cls)  # type: ignore[arg-type]
+        cls.MSG_ID, cls.TO_ROBOT = msg_id, to_robot
+        cls.LAYOUT = tuple((f.name, f.metadata["count"], *f.metadata["range"]) for f in wire)
+        cls.FORMAT = "<" + "".join(
+            (str(f.metadata["count"]) if f.metadata["count"] > 1 else "") + f.metadata["code"]
+            for f in wire
+        )
+        cls.PAYLOAD_BYTES = struct.calcsize(cls.FORMAT)
+        return cls
+
+    return bind
+'''
+
+
+def _py_count(d: dict, f: Field) -> str:
+    """A field's count as the Python module spells it: the constant's name, if one sets it."""
+    return d["constants"][f.count_name].py_name if f.count_name else str(f.count)
+
+
+def _py_message(d: dict, m: Message) -> list[str]:
+    """The dataclass of one message: its docstring and one line per field."""
+    to_robot = m.direction == "to_robot"
+    out = ["", "", f"@_message(MsgId.{m.upper}, to_robot={to_robot})", "@dataclass(frozen=True)"]
+    out.append(f"class {m.name}(_Message):")
+    doc = textwrap.wrap(m.doc, 92)
+    if not m.fields and len(doc) == 1:
+        return out + [f'    """{doc[0]}"""']
+    out.append(f'    """{doc[0]}')
+    out += [f"    {line}" for line in doc[1:]]
+    if m.fields:
+        out += ["", "    Attributes", "    ----------"]
+        for f in m.fields:
+            kind = "float" if f.type == "f32" else "int"
+            if f.count > 1:
+                kind = f"tuple of {_py_count(d, f)} {kind}"
+            rng = f" Range [{f.min}, {f.max}]." if f.ranged else ""
+            out.append(f"    {f.name} : {kind}")
+            out += [f"        {line}" for line in textwrap.wrap(f.doc + rng, 88)]
+    out += ['    """', ""]
+    for f in m.fields:
+        pytype = "float" if f.type == "f32" else "int"
+        args = [f'"{f.type}"']
+        if f.default is not None or f.type == "f32":
+            value = f.default or 0
+            args.append(repr(float(value)) if f.type == "f32" else str(int(value)))
+        if f.count > 1:
+            pytype = f"tuple[{pytype}, ...]"
+            args.append(f"count={_py_count(d, f)}")
+        if f.ranged:
+            args += [f"lo={f.min!r}", f"hi={f.max!r}"]
+        out.append(f"    {f.name}: {pytype} = _wire({', '.join(args)})")
+    return out
 
 
 def render_python(d: dict) -> str:
@@ -390,9 +616,10 @@ def render_python(d: dict) -> str:
         "",
         "import math",
         "import struct",
-        "from dataclasses import dataclass, field",
+        "from collections.abc import Callable",
+        "from dataclasses import dataclass, field, fields",
         "from enum import IntEnum",
-        "from typing import ClassVar",
+        "from typing import TYPE_CHECKING, Any, ClassVar, Self, TypeVar",
         "",
         "from eelhost import framing as _framing",
         "from eelhost.framing import (  # noqa: F401 (part of this module's interface)",
@@ -404,13 +631,13 @@ def render_python(d: dict) -> str:
         "",
         f"SCHEMA_HASH = 0x{d['schema_hash']:04X}",
         f"PROTOCOL_VERSION = {p['version']}",
-        f"BAUD = {p['baud']}",
-        f"MAX_FRAME_BYTES = {p['max_frame_bytes']}",
         f"HEADER_BYTES = {HEADER_BYTES}",
         f"CRC_BYTES = {CRC_BYTES}",
-        f"N_JOINTS = {p['n_joints']}",
-        "",
     ]
+    for c in d["constants"].values():
+        out += _comment("#: ", c.doc)
+        out.append(f"{c.py_name} = {c.value}")
+    out.append("")
     for name, e in d["enums"].items():
         out += ["", f"class {name}(IntEnum):", f'    """{e["doc"]}"""', ""]
         for n, v, doc in e["values"]:
@@ -420,97 +647,142 @@ def render_python(d: dict) -> str:
     out += ["", "class MsgId(IntEnum):", '    """Message ids."""', ""]
     for m in d["messages"]:
         out.append(f"    {m.upper} = 0x{m.id:02X}")
-    out.append("")
+    codes = {name: code for name, (_, code, _) in TYPES.items()}
+    out.append(PY_MESSAGE_BASE.replace("{STRUCT_CODES}", json.dumps(codes)).rstrip("\n"))
     for m in d["messages"]:
-        fmt = "<" + "".join(
-            (str(f.count) if f.count > 1 else "") + TYPES[f.type][1] for f in m.fields
-        )
-        out += ["", "@dataclass(frozen=True)", f"class {m.name}:"]
-        doc = textwrap.wrap(m.doc, 92)
-        if not m.fields and len(doc) == 1:
-            out.append(f'    """{doc[0]}"""')
-        else:
-            out.append(f'    """{doc[0]}')
-            out += [f"    {line}" for line in doc[1:]]
-        if m.fields:
-            out += ["", "    Attributes", "    ----------"]
-            for f in m.fields:
-                kind = "float" if f.type == "f32" else "int"
-                if f.count > 1:
-                    kind = f"tuple of {f.count} {kind}"
-                rng = ""
-                if f.min is not None:
-                    rng = f" Range [{f.min}, {f.max}]."
-                out.append(f"    {f.name} : {kind}")
-                out += [f"        {line}" for line in textwrap.wrap(f.doc + rng, 88)]
-        if m.fields or len(doc) > 1:
-            out.append('    """')
-        out.append("")
-        out.append(f"    MSG_ID: ClassVar[MsgId] = MsgId.{m.upper}")
-        out.append(f"    PAYLOAD_BYTES: ClassVar[int] = {m.payload_bytes}")
-        out.append(f'    FORMAT: ClassVar[str] = "{fmt}"')
-        out.append(f"    TO_ROBOT: ClassVar[bool] = {m.direction == 'to_robot'}")
-        for f in m.fields:
-            pytype = "float" if f.type == "f32" else "int"
-            if f.count > 1:
-                out.append(f"    {f.name}: tuple[{pytype}, ...] = field(default={_py_default(f)})")
-            else:
-                out.append(f"    {f.name}: {pytype} = {_py_default(f)}")
-        flat = []
-        for f in m.fields:
-            flat.append(f"*self.{f.name}" if f.count > 1 else f"self.{f.name}")
-        out += ["", "    def pack(self) -> bytes:", '        """Payload bytes of this message."""']
-        if m.fields:
-            out.append("        return struct.pack(")
-            out.append("            self.FORMAT,")
-            out += [f"            {a}," for a in flat]
-            out.append("        )")
-        else:
-            out.append('        return b""')
-        out += [
-            "",
-            "    @classmethod",
-            f"    def unpack(cls, payload: bytes) -> {m.name}:",
-            '        """Message from its payload bytes (struct.error on a wrong size)."""',
-        ]
-        if m.fields:
-            out.append("        v = struct.unpack(cls.FORMAT, payload)")
-            args, i = [], 0
-            for f in m.fields:
-                if f.count > 1:
-                    args.append(f"tuple(v[{i}:{i + f.count}])")
-                else:
-                    args.append(f"v[{i}]")
-                i += f.count
-            out.append("        return cls(")
-            out += [f"            {a}," for a in args]
-            out.append("        )")
-        else:
-            out.append("        struct.unpack(cls.FORMAT, payload)")
-            out.append("        return cls()")
-        ranged = [f for f in m.fields if f.min is not None or f.max is not None]
-        out += [
-            "",
-            "    def validate(self) -> None:",
-            '        """Raise ValueError when a field is not finite or out of range."""',
-        ]
-        if ranged:
-            for f in ranged:
-                out.append(f"        v = self.{f.name}")
-                out.append(f"        if not math.isfinite(v) or not ({f.min!r} <= v <= {f.max!r}):")
-                out.append(
-                    f'            raise ValueError(f"{m.name}.{f.name}={{v}}'
-                    f' outside [{f.min}, {f.max}]")'
-                )
-        else:
-            out.append("        return None")
-        out.append("")
-    out += ["", "Message = " + " | ".join(m.name for m in d["messages"]), ""]
+        out += _py_message(d, m)
+    out += ["", "", "Message = " + " | ".join(m.name for m in d["messages"]), ""]
     out.append("MESSAGES: dict[int, type] = {")
     for m in d["messages"]:
         out.append(f"    MsgId.{m.upper}: {m.name},")
     out.append("}")
     return "\n".join(out) + PY_RUNTIME
+
+
+def _number(x: float) -> str:
+    return f"{x:g}"
+
+
+def render_docs_constants(d: dict) -> str:
+    """Render the table of shared constants for ``docs/firmware.md``.
+
+    Parameters
+    ----------
+    d : dict
+        The loaded definition (see :func:`load`).
+
+    Returns
+    -------
+    str
+        A Markdown table, one row per constant.
+    """
+    out = [
+        "| constant | value | firmware (C++) | host (Python) | meaning |",
+        "| --- | --- | --- | --- | --- |",
+    ]
+    for c in d["constants"].values():
+        out.append(
+            f"| `{c.name}` | {c.value} | `eelproto::{c.cpp_name}` | `{c.py_name}` | {c.doc} |"
+        )
+    return "\n".join(out) + "\n"
+
+
+def _docs_field(d: dict, f: Field) -> str:
+    """One field as the message table shows it: name, type, count, range, default, enum."""
+    text = f"{f.name} {f.type}"
+    if f.count > 1:
+        text += f" x {f.count_name} ({f.count})" if f.count_name else f" x {f.count}"
+    if f.ranged:
+        text += f" [{_number(f.min)}, {_number(f.max)}]"
+    if f.default is not None:
+        text += f" ({_number(f.default)})"
+    if f.enum:
+        values = d["enums"][f.enum]["values"]
+        text += " (" + ", ".join(f"{n} {v}" for n, v, _ in values) + ")"
+    return text
+
+
+def render_docs_messages(d: dict) -> str:
+    """Render the table of messages for ``docs/firmware.md``.
+
+    Parameters
+    ----------
+    d : dict
+        The loaded definition (see :func:`load`).
+
+    Returns
+    -------
+    str
+        The schema hash and a Markdown table, one row per message.
+    """
+    out = [
+        f"Schema hash of this definition: **0x{d['schema_hash']:04X}**.",
+        "",
+        "| id | name | direction | payload (bytes) | encoded frame (bytes, at most) | fields "
+        "| what |",
+        "| --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for m in d["messages"]:
+        fields = ", ".join(_docs_field(d, f) for f in m.fields) or "(none)"
+        out.append(
+            f"| 0x{m.id:02X} | {m.name} | {m.direction.replace('_', ' ')} | {m.payload_bytes} "
+            f"| {m.encoded_bytes} | {fields} | {m.doc} |"
+        )
+    return "\n".join(out) + "\n"
+
+
+def render_native_joints(d: dict) -> str:
+    """Render the joint count of the native library's C header.
+
+    Parameters
+    ----------
+    d : dict
+        The loaded definition (see :func:`load`).
+
+    Returns
+    -------
+    str
+        The ``#define EEL_JOINTS`` line (a plain number: the host's cffi binding reads it).
+    """
+    return f"#define EEL_JOINTS {d['constants']['n_joints'].value}\n"
+
+
+def splice(text: str, region: str, body: str, comment: tuple[str, str], path: Path) -> str:
+    """Put body between the BEGIN and END marker lines of a region of a hand-written file.
+
+    Parameters
+    ----------
+    text : str
+        The file's text.
+    region : str
+        The region's name, as the markers spell it.
+    body : str
+        The generated text (ending in a newline).
+    comment : tuple of str
+        How the file's language opens and closes a comment (``("<!--", "-->")``, ``("/*", "*/")``).
+    path : Path
+        The file, for the error message.
+
+    Returns
+    -------
+    str
+        The text with the region's old body replaced.
+
+    Raises
+    ------
+    OutputError
+        When the file lacks either marker, or has them in the wrong order.
+    """
+    opening, closing = comment
+    begin = f"{opening} BEGIN GENERATED by protocol/generate.py: {region} {closing}\n"
+    end = f"{opening} END GENERATED: {region} {closing}\n"
+    start, stop = text.find(begin), text.find(end)
+    if start < 0 or stop < start:
+        raise OutputError(
+            f"{path}: needs the lines {begin.strip()!r} and then {end.strip()!r} "
+            "around the generated text"
+        )
+    return text[: start + len(begin)] + body + text[stop:]
 
 
 def render_all() -> dict[Path, str]:
@@ -519,10 +791,21 @@ def render_all() -> dict[Path, str]:
     Returns
     -------
     dict
-        Output path -> text.
+        Output path -> its whole text as it should be (spliced files: as they are, with their
+        generated regions rendered).
     """
     d = load()
-    return {CPP_OUT: render_cpp(d), PY_OUT: render_python(d)}
+    docs = DOCS_OUT.read_text(encoding="utf-8")
+    docs = splice(docs, "constants", render_docs_constants(d), ("<!--", "-->"), DOCS_OUT)
+    docs = splice(docs, "messages", render_docs_messages(d), ("<!--", "-->"), DOCS_OUT)
+    native = NATIVE_H_OUT.read_text(encoding="utf-8")
+    native = splice(native, "joints", render_native_joints(d), ("/*", "*/"), NATIVE_H_OUT)
+    return {
+        CPP_OUT: render_cpp(d),
+        PY_OUT: render_python(d),
+        NATIVE_H_OUT: native,
+        DOCS_OUT: docs,
+    }
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -536,13 +819,19 @@ def main(argv: list[str] | None = None) -> int:
     Returns
     -------
     int
-        0 on success; 1 when ``--check`` finds a file that differs from the definition.
+        0 on success; 1 when ``--check`` finds a file that differs from the definition, or when
+        the definition is malformed or a file lacks its markers (the error is printed).
     """
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--check", action="store_true", help="fail when outputs are stale")
     args = ap.parse_args(argv)
+    try:
+        rendered = render_all()
+    except (DefinitionError, OutputError) as err:
+        print(f"protocol/generate.py: {err}", file=sys.stderr)
+        return 1
     stale = []
-    for path, text in render_all().items():
+    for path, text in rendered.items():
         current = path.read_text(encoding="utf-8") if path.exists() else None
         if current != text:
             if args.check:

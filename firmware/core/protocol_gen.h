@@ -2,17 +2,34 @@
 // definition and run `python protocol/generate.py`.
 #pragma once
 #include <stdint.h>
-#include "wire.h"
 
 namespace eelproto {
 
 constexpr uint16_t kSchemaHash = 0x8D84;
 constexpr uint8_t kProtocolVersion = 1;
-constexpr uint32_t kBaud = 57600UL;
-constexpr uint8_t kMaxFrameBytes = 64;  // encoded, with delimiter
 constexpr uint8_t kHeaderBytes = 4;
 constexpr uint8_t kCrcBytes = 2;
-constexpr uint8_t kJoints = 5;
+
+// Servo joints of the robot, joint 1 (tail) first: N - 1 for a body of N links.
+constexpr uint8_t kNJoints = 5;
+// UART bit rate to the XBee, 8N1 (XBee setting BD=6). The 16 MHz ATmega328P makes it with -0.8 %
+// error (U2X, UBRR=34); 115200 would be +2.1 %, too close to the UART's tolerance.
+constexpr uint32_t kBaud = 57600UL;
+// Largest encoded frame, zero delimiter included. Below the XBee's RF payload (100 bytes for
+// 802.15.4 modules, 84 for ZigBee modules without encryption), so one frame is never split across
+// two radio packets; the generator refuses a message that would not fit.
+constexpr uint8_t kMaxFrameBytes = 64;
+// Period of the firmware's control update (gait, clamps, servo pulses): the twin's physics step, so
+// the robot and the twin sample the gait at the same instants. Version reports it.
+constexpr uint32_t kControlPeriodUs = 10000UL;
+// Period of the Telemetry frames; the robot also sends one at once when it enters FAILSAFE.
+constexpr uint32_t kTelemetryPeriodUs = 100000UL;
+// Failsafe: while running, this long without a valid frame stops the undulation and straightens the
+// body. The host's SetOffset, sent every ~0.3 s, keeps the link alive.
+constexpr uint32_t kLinkTimeoutUs = 1000000UL;
+// Period of the servo pulses (50 Hz, what hobby servos expect); the n_joints pulses of at most 2.5
+// ms each follow each other within it.
+constexpr uint16_t kServoFrameUs = 20000;
 
 // What the robot is doing.
 enum class State : uint8_t {
@@ -41,20 +58,15 @@ enum class MsgId : uint8_t {
   Refuse = 0x84,
 };
 
+// Each message's field table is its each_field(): visit(field, wire offset) for each
+// field in wire order, visit(field, wire offset, min, max) for a field with a range.
+
 // Ask who the robot is (it answers Version); also resynchronises the sequence check. (to robot)
 struct Hello {
   static constexpr MsgId kId = MsgId::Hello;
   static constexpr uint8_t kPayloadBytes = 0;
 };
-
-inline void pack(const Hello& /*m*/, uint8_t* ) {
-}
-inline void unpack(Hello& /*m*/, const uint8_t* ) {
-}
-// RefuseReason value, or 0 when every field is finite and in range.
-inline uint8_t validate(const Hello& /*m*/) {
-  return 0;
-}
+template <typename Visit> void each_field(Hello&, Visit&) {}
 
 // Set the gait (A, omega, beta) and slew limits; no joint reference jumps. (to robot)
 struct SetGait {
@@ -67,38 +79,14 @@ struct SetGait {
   float beta_rate_rad_s;  // Slew limit of beta; 0 = no limit.
   float offset_rate_rad_s;  // Rate limit of the offset gamma; 0 = no limit (matches the twin's zero-order hold).
 };
-
-inline void pack(const SetGait& m, uint8_t* p) {
-  wire::put_f32(p + 0, m.amplitude_rad);
-  wire::put_f32(p + 4, m.omega_rad_s);
-  wire::put_f32(p + 8, m.beta_rad);
-  wire::put_f32(p + 12, m.amplitude_rate_rad_s);
-  wire::put_f32(p + 16, m.beta_rate_rad_s);
-  wire::put_f32(p + 20, m.offset_rate_rad_s);
-}
-inline void unpack(SetGait& m, const uint8_t* p) {
-  m.amplitude_rad = wire::get_f32(p + 0);
-  m.omega_rad_s = wire::get_f32(p + 4);
-  m.beta_rad = wire::get_f32(p + 8);
-  m.amplitude_rate_rad_s = wire::get_f32(p + 12);
-  m.beta_rate_rad_s = wire::get_f32(p + 16);
-  m.offset_rate_rad_s = wire::get_f32(p + 20);
-}
-// RefuseReason value, or 0 when every field is finite and in range.
-inline uint8_t validate(const SetGait& m) {
-  if (!wire::finite(m.amplitude_rad)) return static_cast<uint8_t>(RefuseReason::NotFinite);
-  if (!wire::finite(m.omega_rad_s)) return static_cast<uint8_t>(RefuseReason::NotFinite);
-  if (!wire::finite(m.beta_rad)) return static_cast<uint8_t>(RefuseReason::NotFinite);
-  if (!wire::finite(m.amplitude_rate_rad_s)) return static_cast<uint8_t>(RefuseReason::NotFinite);
-  if (!wire::finite(m.beta_rate_rad_s)) return static_cast<uint8_t>(RefuseReason::NotFinite);
-  if (!wire::finite(m.offset_rate_rad_s)) return static_cast<uint8_t>(RefuseReason::NotFinite);
-  if (m.amplitude_rad < 0.0f || m.amplitude_rad > 1.5f) return static_cast<uint8_t>(RefuseReason::OutOfRange);
-  if (m.omega_rad_s < 0.0f || m.omega_rad_s > 20.0f) return static_cast<uint8_t>(RefuseReason::OutOfRange);
-  if (m.beta_rad < -3.1416f || m.beta_rad > 3.1416f) return static_cast<uint8_t>(RefuseReason::OutOfRange);
-  if (m.amplitude_rate_rad_s < 0.0f || m.amplitude_rate_rad_s > 100.0f) return static_cast<uint8_t>(RefuseReason::OutOfRange);
-  if (m.beta_rate_rad_s < 0.0f || m.beta_rate_rad_s > 100.0f) return static_cast<uint8_t>(RefuseReason::OutOfRange);
-  if (m.offset_rate_rad_s < 0.0f || m.offset_rate_rad_s > 100.0f) return static_cast<uint8_t>(RefuseReason::OutOfRange);
-  return 0;
+template <typename Visit>
+void each_field(SetGait& m, Visit& visit) {
+  visit(m.amplitude_rad, 0, 0.0f, 1.5f);
+  visit(m.omega_rad_s, 4, 0.0f, 20.0f);
+  visit(m.beta_rad, 8, -3.1416f, 3.1416f);
+  visit(m.amplitude_rate_rad_s, 12, 0.0f, 100.0f);
+  visit(m.beta_rate_rad_s, 16, 0.0f, 100.0f);
+  visit(m.offset_rate_rad_s, 20, 0.0f, 100.0f);
 }
 // The documented defaults (also the firmware's boot values).
 inline SetGait default_set_gait() {
@@ -118,18 +106,9 @@ struct SetOffset {
   static constexpr uint8_t kPayloadBytes = 4;
   float offset_rad;  // Offset gamma; approached at the SetGait offset rate.
 };
-
-inline void pack(const SetOffset& m, uint8_t* p) {
-  wire::put_f32(p + 0, m.offset_rad);
-}
-inline void unpack(SetOffset& m, const uint8_t* p) {
-  m.offset_rad = wire::get_f32(p + 0);
-}
-// RefuseReason value, or 0 when every field is finite and in range.
-inline uint8_t validate(const SetOffset& m) {
-  if (!wire::finite(m.offset_rad)) return static_cast<uint8_t>(RefuseReason::NotFinite);
-  if (m.offset_rad < -1.0f || m.offset_rad > 1.0f) return static_cast<uint8_t>(RefuseReason::OutOfRange);
-  return 0;
+template <typename Visit>
+void each_field(SetOffset& m, Visit& visit) {
+  visit(m.offset_rad, 0, -1.0f, 1.0f);
 }
 // The documented defaults (also the firmware's boot values).
 inline SetOffset default_set_offset() {
@@ -143,30 +122,14 @@ struct Start {
   static constexpr MsgId kId = MsgId::Start;
   static constexpr uint8_t kPayloadBytes = 0;
 };
-
-inline void pack(const Start& /*m*/, uint8_t* ) {
-}
-inline void unpack(Start& /*m*/, const uint8_t* ) {
-}
-// RefuseReason value, or 0 when every field is finite and in range.
-inline uint8_t validate(const Start& /*m*/) {
-  return 0;
-}
+template <typename Visit> void each_field(Start&, Visit&) {}
 
 // Stop undulating and straighten (amplitude and offset ramp to zero). (to robot)
 struct Stop {
   static constexpr MsgId kId = MsgId::Stop;
   static constexpr uint8_t kPayloadBytes = 0;
 };
-
-inline void pack(const Stop& /*m*/, uint8_t* ) {
-}
-inline void unpack(Stop& /*m*/, const uint8_t* ) {
-}
-// RefuseReason value, or 0 when every field is finite and in range.
-inline uint8_t validate(const Stop& /*m*/) {
-  return 0;
-}
+template <typename Visit> void each_field(Stop&, Visit&) {}
 
 // Set the joint PD gains and torque limit (used where the firmware closes the joint loop). (to robot)
 struct SetGains {
@@ -176,26 +139,11 @@ struct SetGains {
   float kd_nms_per_rad;  // Derivative gain k_d.
   float torque_limit_nm;  // Torque clamp |u| <= limit (servo stall torque by default).
 };
-
-inline void pack(const SetGains& m, uint8_t* p) {
-  wire::put_f32(p + 0, m.kp_nm_per_rad);
-  wire::put_f32(p + 4, m.kd_nms_per_rad);
-  wire::put_f32(p + 8, m.torque_limit_nm);
-}
-inline void unpack(SetGains& m, const uint8_t* p) {
-  m.kp_nm_per_rad = wire::get_f32(p + 0);
-  m.kd_nms_per_rad = wire::get_f32(p + 4);
-  m.torque_limit_nm = wire::get_f32(p + 8);
-}
-// RefuseReason value, or 0 when every field is finite and in range.
-inline uint8_t validate(const SetGains& m) {
-  if (!wire::finite(m.kp_nm_per_rad)) return static_cast<uint8_t>(RefuseReason::NotFinite);
-  if (!wire::finite(m.kd_nms_per_rad)) return static_cast<uint8_t>(RefuseReason::NotFinite);
-  if (!wire::finite(m.torque_limit_nm)) return static_cast<uint8_t>(RefuseReason::NotFinite);
-  if (m.kp_nm_per_rad < 0.0f || m.kp_nm_per_rad > 100.0f) return static_cast<uint8_t>(RefuseReason::OutOfRange);
-  if (m.kd_nms_per_rad < 0.0f || m.kd_nms_per_rad > 10.0f) return static_cast<uint8_t>(RefuseReason::OutOfRange);
-  if (m.torque_limit_nm < 0.0f || m.torque_limit_nm > 10.0f) return static_cast<uint8_t>(RefuseReason::OutOfRange);
-  return 0;
+template <typename Visit>
+void each_field(SetGains& m, Visit& visit) {
+  visit(m.kp_nm_per_rad, 0, 0.0f, 100.0f);
+  visit(m.kd_nms_per_rad, 4, 0.0f, 10.0f);
+  visit(m.torque_limit_nm, 8, 0.0f, 10.0f);
 }
 // The documented defaults (also the firmware's boot values).
 inline SetGains default_set_gains() {
@@ -217,22 +165,14 @@ struct Version {
   uint16_t schema_hash;  // The robot's schema hash (also in every header).
   uint32_t control_period_us;  // Period of the control update.
 };
-
-inline void pack(const Version& m, uint8_t* p) {
-  wire::put_u8(p + 0, m.firmware_major);
-  wire::put_u8(p + 1, m.firmware_minor);
-  wire::put_u8(p + 2, m.protocol_version);
-  wire::put_u8(p + 3, m.n_joints);
-  wire::put_u16(p + 4, m.schema_hash);
-  wire::put_u32(p + 6, m.control_period_us);
-}
-inline void unpack(Version& m, const uint8_t* p) {
-  m.firmware_major = wire::get_u8(p + 0);
-  m.firmware_minor = wire::get_u8(p + 1);
-  m.protocol_version = wire::get_u8(p + 2);
-  m.n_joints = wire::get_u8(p + 3);
-  m.schema_hash = wire::get_u16(p + 4);
-  m.control_period_us = wire::get_u32(p + 6);
+template <typename Visit>
+void each_field(Version& m, Visit& visit) {
+  visit(m.firmware_major, 0);
+  visit(m.firmware_minor, 1);
+  visit(m.protocol_version, 2);
+  visit(m.n_joints, 3);
+  visit(m.schema_hash, 4);
+  visit(m.control_period_us, 6);
 }
 
 // Sent every 100 ms: time, state, references and link counters. (to host)
@@ -241,41 +181,23 @@ struct Telemetry {
   static constexpr uint8_t kPayloadBytes = 39;
   uint32_t time_us;  // The robot's clock (wraps every 71.6 min).
   uint8_t state;  // Robot state.
-  float alpha_rad[5];  // Joint references alpha_j after clamping, joint 1 (tail) first.
+  float alpha_rad[kNJoints];  // Joint references alpha_j after clamping, joint 1 (tail) first.
   float offset_rad;  // Present (rate-limited) offset gamma.
   float amplitude_rad;  // Present (slewed) amplitude A.
   uint16_t frames_ok;  // Valid frames received (wraps).
   uint16_t frames_bad;  // Frames dropped: garbage, truncated, oversize, CRC, schema, unknown id, length (wraps).
   uint16_t frames_lost;  // Frames missing according to the sequence numbers (wraps).
 };
-
-inline void pack(const Telemetry& m, uint8_t* p) {
-  wire::put_u32(p + 0, m.time_us);
-  wire::put_u8(p + 4, m.state);
-  wire::put_f32(p + 5, m.alpha_rad[0]);
-  wire::put_f32(p + 9, m.alpha_rad[1]);
-  wire::put_f32(p + 13, m.alpha_rad[2]);
-  wire::put_f32(p + 17, m.alpha_rad[3]);
-  wire::put_f32(p + 21, m.alpha_rad[4]);
-  wire::put_f32(p + 25, m.offset_rad);
-  wire::put_f32(p + 29, m.amplitude_rad);
-  wire::put_u16(p + 33, m.frames_ok);
-  wire::put_u16(p + 35, m.frames_bad);
-  wire::put_u16(p + 37, m.frames_lost);
-}
-inline void unpack(Telemetry& m, const uint8_t* p) {
-  m.time_us = wire::get_u32(p + 0);
-  m.state = wire::get_u8(p + 4);
-  m.alpha_rad[0] = wire::get_f32(p + 5);
-  m.alpha_rad[1] = wire::get_f32(p + 9);
-  m.alpha_rad[2] = wire::get_f32(p + 13);
-  m.alpha_rad[3] = wire::get_f32(p + 17);
-  m.alpha_rad[4] = wire::get_f32(p + 21);
-  m.offset_rad = wire::get_f32(p + 25);
-  m.amplitude_rad = wire::get_f32(p + 29);
-  m.frames_ok = wire::get_u16(p + 33);
-  m.frames_bad = wire::get_u16(p + 35);
-  m.frames_lost = wire::get_u16(p + 37);
+template <typename Visit>
+void each_field(Telemetry& m, Visit& visit) {
+  visit(m.time_us, 0);
+  visit(m.state, 4);
+  visit(m.alpha_rad, 5);
+  visit(m.offset_rad, 25);
+  visit(m.amplitude_rad, 29);
+  visit(m.frames_ok, 33);
+  visit(m.frames_bad, 35);
+  visit(m.frames_lost, 37);
 }
 
 // The command with this id and sequence number was applied. (to host)
@@ -285,14 +207,10 @@ struct Ack {
   uint8_t msg_id;  // Id of the acknowledged message.
   uint8_t seq;  // Its sequence number.
 };
-
-inline void pack(const Ack& m, uint8_t* p) {
-  wire::put_u8(p + 0, m.msg_id);
-  wire::put_u8(p + 1, m.seq);
-}
-inline void unpack(Ack& m, const uint8_t* p) {
-  m.msg_id = wire::get_u8(p + 0);
-  m.seq = wire::get_u8(p + 1);
+template <typename Visit>
+void each_field(Ack& m, Visit& visit) {
+  visit(m.msg_id, 0);
+  visit(m.seq, 1);
 }
 
 // The command with this id and sequence number was refused and had no effect. (to host)
@@ -303,16 +221,11 @@ struct Refuse {
   uint8_t seq;  // Its sequence number.
   uint8_t reason;  // Why.
 };
-
-inline void pack(const Refuse& m, uint8_t* p) {
-  wire::put_u8(p + 0, m.msg_id);
-  wire::put_u8(p + 1, m.seq);
-  wire::put_u8(p + 2, m.reason);
-}
-inline void unpack(Refuse& m, const uint8_t* p) {
-  m.msg_id = wire::get_u8(p + 0);
-  m.seq = wire::get_u8(p + 1);
-  m.reason = wire::get_u8(p + 2);
+template <typename Visit>
+void each_field(Refuse& m, Visit& visit) {
+  visit(m.msg_id, 0);
+  visit(m.seq, 1);
+  visit(m.reason, 2);
 }
 
 // Payload size of a message id, or -1 for an id this schema does not define.

@@ -1,5 +1,6 @@
 #include "robot.h"
 
+#include "message_codec.h"
 #include "servo_map.h"
 #include "time_util.h"
 
@@ -90,25 +91,19 @@ void Robot::handle(const Frame& f, uint32_t now_us) {
       return;
     case MsgId::SetGait: {
       eelproto::SetGait m;
-      eelproto::unpack(m, f.payload);
-      const uint8_t why = eelproto::validate(m);
-      if (why) return refuse(f, why);
+      if (!accept(f, m)) return;
       gait_cmd_ = m;
       break;
     }
     case MsgId::SetOffset: {
       eelproto::SetOffset m;
-      eelproto::unpack(m, f.payload);
-      const uint8_t why = eelproto::validate(m);
-      if (why) return refuse(f, why);
+      if (!accept(f, m)) return;
       offset_cmd_rad_ = m.offset_rad;
       break;
     }
     case MsgId::SetGains: {
       eelproto::SetGains m;
-      eelproto::unpack(m, f.payload);
-      const uint8_t why = eelproto::validate(m);
-      if (why) return refuse(f, why);
+      if (!accept(f, m)) return;
       gains_ = PdGains{m.kp_nm_per_rad, m.kd_nms_per_rad, m.torque_limit_nm};
       break;
     }
@@ -126,6 +121,14 @@ void Robot::handle(const Frame& f, uint32_t now_us) {
   }
   apply_targets();
   ack(f);
+}
+
+template <typename M>
+bool Robot::accept(const Frame& f, M& m) {
+  eelproto::unpack(m, f.payload);
+  const uint8_t why = eelproto::validate(m);
+  if (why) refuse(f, why);
+  return why == 0;
 }
 
 void Robot::service(uint32_t now_us) {
@@ -170,26 +173,20 @@ void Robot::send(uint8_t msg_id, const uint8_t* payload, uint8_t len) {
   ++tx_seq_;
 }
 
-void Robot::ack(const Frame& f) {
-  eelproto::Ack m{f.msg_id, f.seq};
-  uint8_t p[eelproto::Ack::kPayloadBytes];
+template <typename M>
+void Robot::send(const M& m) {
+  uint8_t p[M::kPayloadBytes];
   eelproto::pack(m, p);
-  send(static_cast<uint8_t>(eelproto::MsgId::Ack), p, sizeof(p));
+  send(static_cast<uint8_t>(M::kId), p, sizeof(p));
 }
 
-void Robot::refuse(const Frame& f, uint8_t reason) {
-  eelproto::Refuse m{f.msg_id, f.seq, reason};
-  uint8_t p[eelproto::Refuse::kPayloadBytes];
-  eelproto::pack(m, p);
-  send(static_cast<uint8_t>(eelproto::MsgId::Refuse), p, sizeof(p));
-}
+void Robot::ack(const Frame& f) { send(eelproto::Ack{f.msg_id, f.seq}); }
+
+void Robot::refuse(const Frame& f, uint8_t reason) { send(eelproto::Refuse{f.msg_id, f.seq, reason}); }
 
 void Robot::send_version() {
-  eelproto::Version m{cfg::kFirmwareMajor, cfg::kFirmwareMinor, eelproto::kProtocolVersion,
-                      cfg::kJoints, eelproto::kSchemaHash, cfg::kControlPeriodUs};
-  uint8_t p[eelproto::Version::kPayloadBytes];
-  eelproto::pack(m, p);
-  send(static_cast<uint8_t>(eelproto::MsgId::Version), p, sizeof(p));
+  send(eelproto::Version{cfg::kFirmwareMajor, cfg::kFirmwareMinor, eelproto::kProtocolVersion,
+                         cfg::kJoints, eelproto::kSchemaHash, cfg::kControlPeriodUs});
 }
 
 void Robot::send_telemetry(uint32_t now_us) {
@@ -202,7 +199,5 @@ void Robot::send_telemetry(uint32_t now_us) {
   m.frames_ok = counters_.frames_ok;
   m.frames_bad = counters_.bad_total();
   m.frames_lost = counters_.lost;
-  uint8_t p[eelproto::Telemetry::kPayloadBytes];
-  eelproto::pack(m, p);
-  send(static_cast<uint8_t>(eelproto::MsgId::Telemetry), p, sizeof(p));
+  send(m);
 }

@@ -44,7 +44,12 @@ class Robot {
  private:
   void handle(const Frame& f, uint32_t now_us);
   bool accept_seq(uint8_t msg_id, uint8_t seq);
+  // Decode a command's payload into m; refuse it (and return false) when a field is not valid.
+  template <typename M>
+  bool accept(const Frame& f, M& m);
   void apply_targets();
+  template <typename M>
+  void send(const M& m);
   void send(uint8_t msg_id, const uint8_t* payload, uint8_t len);
   void ack(const Frame& f);
   void refuse(const Frame& f, uint8_t reason);

@@ -37,6 +37,25 @@ inline float get_f32(const uint8_t* p) {
   return v;
 }
 
+// The same by type, for the generic message codec (core/message_codec.h): one encoder and one
+// decoder per field type, and arrays element by element. Every wire type is its own size in C++.
+inline void put(uint8_t* p, uint8_t v) { put_u8(p, v); }
+inline void put(uint8_t* p, uint16_t v) { put_u16(p, v); }
+inline void put(uint8_t* p, uint32_t v) { put_u32(p, v); }
+inline void put(uint8_t* p, float v) { put_f32(p, v); }
+template <typename T, uint8_t N>
+inline void put(uint8_t* p, const T (&v)[N]) {
+  for (uint8_t i = 0; i < N; ++i) put(p + i * sizeof(T), v[i]);
+}
+inline void get(const uint8_t* p, uint8_t& v) { v = get_u8(p); }
+inline void get(const uint8_t* p, uint16_t& v) { v = get_u16(p); }
+inline void get(const uint8_t* p, uint32_t& v) { v = get_u32(p); }
+inline void get(const uint8_t* p, float& v) { v = get_f32(p); }
+template <typename T, uint8_t N>
+inline void get(const uint8_t* p, T (&v)[N]) {
+  for (uint8_t i = 0; i < N; ++i) get(p + i * sizeof(T), v[i]);
+}
+
 // True for every number except NaN and +-infinity (exponent bits all ones). Works on the bits so it
 // does not depend on the compiler's float flags.
 inline bool finite(float v) {

@@ -6,7 +6,7 @@
 #include "cobs.h"
 #include "crc16.h"
 #include "frame_codec.h"
-#include "protocol_gen.h"
+#include "message_codec.h"
 #include "wire.h"
 
 struct Bytes {

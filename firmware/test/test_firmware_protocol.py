@@ -2,6 +2,7 @@
 
 import importlib.util
 import math
+import re
 import struct
 import subprocess
 import sys
@@ -31,18 +32,83 @@ def test_rendered_files_match_the_definition():
     assert proc.returncode == 0, proc.stderr
 
 
-def test_check_fails_when_a_rendered_file_drifts(tmp_path, monkeypatch, capsys):
-    gen = load_generator()
-    stale_cpp = tmp_path / "protocol_gen.h"
-    stale_py = tmp_path / "protocol.py"
-    stale_cpp.write_text(gen.CPP_OUT.read_text().replace("kBaud = 57600UL", "kBaud = 9600UL"))
-    stale_py.write_text(gen.PY_OUT.read_text())
-    monkeypatch.setattr(gen, "CPP_OUT", stale_cpp)
-    monkeypatch.setattr(gen, "PY_OUT", stale_py)
+def outputs_copied_to(tmp_path, gen, monkeypatch):
+    """Point the generator at copies of its outputs in tmp_path; return name -> copy."""
+    copies = {}
+    for name in ("CPP_OUT", "PY_OUT", "NATIVE_H_OUT", "DOCS_OUT"):
+        copy = tmp_path / getattr(gen, name).name
+        copy.write_text(getattr(gen, name).read_text())
+        monkeypatch.setattr(gen, name, copy)
+        copies[name] = copy
     monkeypatch.setattr(gen, "ROOT", tmp_path)
+    return copies
+
+
+@pytest.mark.parametrize(
+    ("output", "old", "new"),
+    [
+        ("CPP_OUT", "kBaud = 57600UL", "kBaud = 9600UL"),
+        ("PY_OUT", "BAUD = 57600", "BAUD = 9600"),
+        ("NATIVE_H_OUT", "#define EEL_JOINTS ", "#define EEL_JOINTS 1"),
+        ("DOCS_OUT", "| 0x04 | Start |", "| 0x07 | Start |"),
+    ],
+)
+def test_check_fails_when_a_rendered_file_drifts(tmp_path, monkeypatch, capsys, output, old, new):
+    gen = load_generator()
+    copies = outputs_copied_to(tmp_path, gen, monkeypatch)
+    text = copies[output].read_text()
+    assert old in text
+    copies[output].write_text(text.replace(old, new, 1))
+    before = {name: copy.read_text() for name, copy in copies.items()}
     assert gen.main(["--check"]) == 1
-    assert "protocol_gen.h differs" in capsys.readouterr().err
-    assert stale_py.read_text() == gen.PY_OUT.read_text()  # check mode writes nothing
+    assert f"{copies[output].name} differs" in capsys.readouterr().err
+    assert {name: copy.read_text() for name, copy in copies.items()} == before  # writes nothing
+    assert gen.main([]) == 0 and gen.main(["--check"]) == 0  # and regenerating repairs it
+
+
+def test_check_names_a_file_that_lost_its_generated_region(tmp_path, monkeypatch, capsys):
+    gen = load_generator()
+    copies = outputs_copied_to(tmp_path, gen, monkeypatch)
+    docs = copies["DOCS_OUT"]
+    docs.write_text(docs.read_text().replace("<!-- END GENERATED: messages -->\n", ""))
+    assert gen.main(["--check"]) == 1
+    err = capsys.readouterr().err
+    assert "firmware.md" in err and "END GENERATED: messages" in err
+
+
+def with_constant(text, name, value):
+    """The definition with one constant's value changed."""
+    head = f"[constants.{name}]\nvalue = "
+    start = text.index(head) + len(head)
+    return text[:start] + str(value) + text[text.index("\n", start) :]
+
+
+def test_the_joint_count_is_set_in_one_place_and_reaches_every_output(tmp_path):
+    gen = load_generator()
+    seven = tmp_path / "seven.toml"
+    seven.write_text(with_constant((ROOT / "protocol" / "eelbot.toml").read_text(), "n_joints", 7))
+    d = gen.load(seven)
+    telemetry = next(m for m in d["messages"] if m.name == "Telemetry")
+    assert telemetry.payload_bytes == p.Telemetry.PAYLOAD_BYTES + 2 * 4
+    assert "constexpr uint8_t kNJoints = 7;" in gen.render_cpp(d)
+    assert "float alpha_rad[kNJoints];" in gen.render_cpp(d)
+    assert "\nN_JOINTS = 7\n" in gen.render_python(d)
+    assert gen.render_native_joints(d) == "#define EEL_JOINTS 7\n"
+    assert "alpha_rad f32 x n_joints (7)" in gen.render_docs_messages(d)
+    assert d["schema_hash"] != p.SCHEMA_HASH  # the telemetry layout changed
+
+
+def test_periods_are_shared_constants_outside_the_schema_hash(tmp_path):
+    gen = load_generator()
+    slower = tmp_path / "slower.toml"
+    text = (ROOT / "protocol" / "eelbot.toml").read_text()
+    slower.write_text(with_constant(text, "link_timeout_us", 2_000_000))
+    d = gen.load(slower)
+    assert d["schema_hash"] == p.SCHEMA_HASH
+    assert "constexpr uint32_t kLinkTimeoutUs = 2000000UL;" in gen.render_cpp(d)
+    # docs quote the constant ({link_timeout_us}), so they follow it
+    assert "No valid frame for 2 s while running" in gen.render_cpp(d)
+    assert "No valid frame for 1 s while running" in gen.render_cpp(gen.load())
 
 
 def test_schema_hash_follows_wire_changes_but_not_doc_changes(tmp_path):
@@ -60,17 +126,29 @@ def test_schema_hash_follows_wire_changes_but_not_doc_changes(tmp_path):
     assert gen.load(type_edit)["schema_hash"] != base
 
 
-def test_definition_errors_are_reported_clearly(tmp_path):
+@pytest.mark.parametrize(
+    ("old", "new", "message"),
+    [
+        ("id = 0x05", "id = 0x04", "unique"),
+        (
+            "[constants.n_joints]\nvalue = 5",
+            "[constants.n_joints]\nvalue = 15",
+            "exceed max_frame_bytes",
+        ),
+        ('count = "n_joints"', 'count = "n_links"', "Telemetry.alpha_rad: count names 'n_links'"),
+        ("{telemetry_period_us}", "{telemetry_rate}", "Telemetry: the doc quotes {telemetry_rate}"),
+        ("[constants.baud]\nvalue = 57600", "[constants.baud]\nvalue = -1", "constants.baud"),
+        ("max = 1.5, default = 0.5", "default = 0.5", "SetGait.amplitude_rad: give both"),
+    ],
+)
+def test_definition_errors_name_what_is_wrong_and_where(tmp_path, old, new, message):
     gen = load_generator()
     text = (ROOT / "protocol" / "eelbot.toml").read_text()
-    dup = tmp_path / "dup.toml"
-    dup.write_text(text.replace("id = 0x05", "id = 0x04"))
-    with pytest.raises(gen.DefinitionError, match="unique"):
-        gen.load(dup)
-    big = tmp_path / "big.toml"
-    big.write_text(text.replace('type = "f32", count = 5', 'type = "f32", count = 15'))
-    with pytest.raises(gen.DefinitionError, match="exceed max_frame_bytes"):
-        gen.load(big)
+    assert old in text
+    bad = tmp_path / "bad.toml"
+    bad.write_text(text.replace(old, new))
+    with pytest.raises(gen.DefinitionError, match=re.escape(message)):
+        gen.load(bad)
 
 
 def test_crc16_matches_the_published_check_value():
@@ -95,8 +173,8 @@ ALL_MESSAGES = [
     p.Start(),
     p.Stop(),
     p.SetGains(kp_nm_per_rad=3.0, kd_nms_per_rad=0.125, torque_limit_nm=1.0),
-    p.Version(0, 1, 1, 5, p.SCHEMA_HASH, 10000),
-    p.Telemetry(123, 2, (0.5, -0.25, 0.125, 0.0, 1.0), 0.25, 0.5, 7, 8, 9),
+    p.Version(0, 1, 1, p.N_JOINTS, p.SCHEMA_HASH, p.CONTROL_PERIOD_US),
+    p.Telemetry(123, 2, tuple(0.125 * j - 0.25 for j in range(p.N_JOINTS)), 0.25, 0.5, 7, 8, 9),
     p.Ack(2, 17),
     p.Refuse(2, 18, int(p.RefuseReason.OUT_OF_RANGE)),
 ]

@@ -9,9 +9,10 @@ from __future__ import annotations
 
 import math
 import struct
-from dataclasses import dataclass, field
+from collections.abc import Callable
+from dataclasses import dataclass, field, fields
 from enum import IntEnum
-from typing import ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar, Self, TypeVar
 
 from eelhost import framing as _framing
 from eelhost.framing import (  # noqa: F401 (part of this module's interface)
@@ -23,11 +24,28 @@ from eelhost.framing import (  # noqa: F401 (part of this module's interface)
 
 SCHEMA_HASH = 0x8D84
 PROTOCOL_VERSION = 1
-BAUD = 57600
-MAX_FRAME_BYTES = 64
 HEADER_BYTES = 4
 CRC_BYTES = 2
+#: Servo joints of the robot, joint 1 (tail) first: N - 1 for a body of N links.
 N_JOINTS = 5
+#: UART bit rate to the XBee, 8N1 (XBee setting BD=6). The 16 MHz ATmega328P makes it with -0.8 %
+#: error (U2X, UBRR=34); 115200 would be +2.1 %, too close to the UART's tolerance.
+BAUD = 57600
+#: Largest encoded frame, zero delimiter included. Below the XBee's RF payload (100 bytes for
+#: 802.15.4 modules, 84 for ZigBee modules without encryption), so one frame is never split across
+#: two radio packets; the generator refuses a message that would not fit.
+MAX_FRAME_BYTES = 64
+#: Period of the firmware's control update (gait, clamps, servo pulses): the twin's physics step, so
+#: the robot and the twin sample the gait at the same instants. Version reports it.
+CONTROL_PERIOD_US = 10000
+#: Period of the Telemetry frames; the robot also sends one at once when it enters FAILSAFE.
+TELEMETRY_PERIOD_US = 100000
+#: Failsafe: while running, this long without a valid frame stops the undulation and straightens the
+#: body. The host's SetOffset, sent every ~0.3 s, keeps the link alive.
+LINK_TIMEOUT_US = 1000000
+#: Period of the servo pulses (50 Hz, what hobby servos expect); the n_joints pulses of at most 2.5
+#: ms each follow each other within it.
+SERVO_FRAME_US = 20000
 
 
 class State(IntEnum):
@@ -67,32 +85,104 @@ class MsgId(IntEnum):
     REFUSE = 0x84
 
 
-@dataclass(frozen=True)
-class Hello:
-    """Ask who the robot is (it answers Version); also resynchronises the sequence check."""
+_M = TypeVar("_M", bound="_Message")
+_STRUCT_CODES = {"u8": "B", "u16": "H", "u32": "I", "f32": "f"}
 
-    MSG_ID: ClassVar[MsgId] = MsgId.HELLO
-    PAYLOAD_BYTES: ClassVar[int] = 0
-    FORMAT: ClassVar[str] = "<"
-    TO_ROBOT: ClassVar[bool] = True
+
+def _wire(
+    wire_type: str,
+    default: float = 0,
+    *,
+    count: int = 1,
+    lo: float | None = None,
+    hi: float | None = None,
+) -> Any:
+    """A message field: its default, with its wire format in the dataclass field's metadata.
+
+    Parameters
+    ----------
+    wire_type : str
+        The type of one value on the wire: u8, u16, u32 or f32.
+    default : float
+        The default (of every element when ``count > 1``).
+    count : int
+        Number of values; more than one makes the field a tuple.
+    lo, hi : float, optional
+        The range that :meth:`_Message.validate` enforces.
+    """
+    value = (default,) * count if count > 1 else default
+    code = _STRUCT_CODES[wire_type]
+    return field(default=value, metadata={"code": code, "count": count, "range": (lo, hi)})
+
+
+class _Message:
+    """What every message shares: pack, unpack and validate, driven by its fields' metadata."""
+
+    MSG_ID: ClassVar[MsgId]
+    TO_ROBOT: ClassVar[bool]
+    FORMAT: ClassVar[str]
+    PAYLOAD_BYTES: ClassVar[int]
+    # (name, count, lo, hi) of each field in wire order, set by _message from the metadata.
+    LAYOUT: ClassVar[tuple[tuple[str, int, float | None, float | None], ...]]
+
+    if TYPE_CHECKING:
+
+        def __init__(self, *values: Any) -> None: ...
 
     def pack(self) -> bytes:
         """Payload bytes of this message."""
-        return b""
+        values: list[Any] = []
+        for name, count, _, _ in self.LAYOUT:
+            if count > 1:
+                values.extend(getattr(self, name))
+            else:
+                values.append(getattr(self, name))
+        return struct.pack(self.FORMAT, *values)
 
     @classmethod
-    def unpack(cls, payload: bytes) -> Hello:
+    def unpack(cls, payload: bytes) -> Self:
         """Message from its payload bytes (struct.error on a wrong size)."""
-        struct.unpack(cls.FORMAT, payload)
-        return cls()
+        flat = struct.unpack(cls.FORMAT, payload)
+        values: list[Any] = []
+        for _, count, _, _ in cls.LAYOUT:
+            values.append(tuple(flat[:count]) if count > 1 else flat[0])
+            flat = flat[count:]
+        return cls(*values)
 
     def validate(self) -> None:
         """Raise ValueError when a field is not finite or out of range."""
-        return None
+        for name, _, lo, hi in self.LAYOUT:
+            v = getattr(self, name)
+            if lo is not None and hi is not None and not (math.isfinite(v) and lo <= v <= hi):
+                raise ValueError(f"{type(self).__name__}.{name}={v} outside [{lo}, {hi}]")
 
 
+def _message(msg_id: MsgId, *, to_robot: bool) -> Callable[[type[_M]], type[_M]]:
+    """Class decorator: bind a message dataclass to its id and derive its wire format."""
+
+    def bind(cls: type[_M]) -> type[_M]:
+        wire = fields(cls)  # type: ignore[arg-type]
+        cls.MSG_ID, cls.TO_ROBOT = msg_id, to_robot
+        cls.LAYOUT = tuple((f.name, f.metadata["count"], *f.metadata["range"]) for f in wire)
+        cls.FORMAT = "<" + "".join(
+            (str(f.metadata["count"]) if f.metadata["count"] > 1 else "") + f.metadata["code"]
+            for f in wire
+        )
+        cls.PAYLOAD_BYTES = struct.calcsize(cls.FORMAT)
+        return cls
+
+    return bind
+
+
+@_message(MsgId.HELLO, to_robot=True)
 @dataclass(frozen=True)
-class SetGait:
+class Hello(_Message):
+    """Ask who the robot is (it answers Version); also resynchronises the sequence check."""
+
+
+@_message(MsgId.SET_GAIT, to_robot=True)
+@dataclass(frozen=True)
+class SetGait(_Message):
     """Set the gait (A, omega, beta) and slew limits; no joint reference jumps.
 
     Attributes
@@ -112,66 +202,17 @@ class SetGait:
         [0.0, 100.0].
     """
 
-    MSG_ID: ClassVar[MsgId] = MsgId.SET_GAIT
-    PAYLOAD_BYTES: ClassVar[int] = 24
-    FORMAT: ClassVar[str] = "<ffffff"
-    TO_ROBOT: ClassVar[bool] = True
-    amplitude_rad: float = 0.5
-    omega_rad_s: float = 3.1416
-    beta_rad: float = 1.04
-    amplitude_rate_rad_s: float = 0.5
-    beta_rate_rad_s: float = 1.0
-    offset_rate_rad_s: float = 2.0
-
-    def pack(self) -> bytes:
-        """Payload bytes of this message."""
-        return struct.pack(
-            self.FORMAT,
-            self.amplitude_rad,
-            self.omega_rad_s,
-            self.beta_rad,
-            self.amplitude_rate_rad_s,
-            self.beta_rate_rad_s,
-            self.offset_rate_rad_s,
-        )
-
-    @classmethod
-    def unpack(cls, payload: bytes) -> SetGait:
-        """Message from its payload bytes (struct.error on a wrong size)."""
-        v = struct.unpack(cls.FORMAT, payload)
-        return cls(
-            v[0],
-            v[1],
-            v[2],
-            v[3],
-            v[4],
-            v[5],
-        )
-
-    def validate(self) -> None:
-        """Raise ValueError when a field is not finite or out of range."""
-        v = self.amplitude_rad
-        if not math.isfinite(v) or not (0.0 <= v <= 1.5):
-            raise ValueError(f"SetGait.amplitude_rad={v} outside [0.0, 1.5]")
-        v = self.omega_rad_s
-        if not math.isfinite(v) or not (0.0 <= v <= 20.0):
-            raise ValueError(f"SetGait.omega_rad_s={v} outside [0.0, 20.0]")
-        v = self.beta_rad
-        if not math.isfinite(v) or not (-3.1416 <= v <= 3.1416):
-            raise ValueError(f"SetGait.beta_rad={v} outside [-3.1416, 3.1416]")
-        v = self.amplitude_rate_rad_s
-        if not math.isfinite(v) or not (0.0 <= v <= 100.0):
-            raise ValueError(f"SetGait.amplitude_rate_rad_s={v} outside [0.0, 100.0]")
-        v = self.beta_rate_rad_s
-        if not math.isfinite(v) or not (0.0 <= v <= 100.0):
-            raise ValueError(f"SetGait.beta_rate_rad_s={v} outside [0.0, 100.0]")
-        v = self.offset_rate_rad_s
-        if not math.isfinite(v) or not (0.0 <= v <= 100.0):
-            raise ValueError(f"SetGait.offset_rate_rad_s={v} outside [0.0, 100.0]")
+    amplitude_rad: float = _wire("f32", 0.5, lo=0.0, hi=1.5)
+    omega_rad_s: float = _wire("f32", 3.1416, lo=0.0, hi=20.0)
+    beta_rad: float = _wire("f32", 1.04, lo=-3.1416, hi=3.1416)
+    amplitude_rate_rad_s: float = _wire("f32", 0.5, lo=0.0, hi=100.0)
+    beta_rate_rad_s: float = _wire("f32", 1.0, lo=0.0, hi=100.0)
+    offset_rate_rad_s: float = _wire("f32", 2.0, lo=0.0, hi=100.0)
 
 
+@_message(MsgId.SET_OFFSET, to_robot=True)
 @dataclass(frozen=True)
-class SetOffset:
+class SetOffset(_Message):
     """Set the steering offset gamma added to every joint (the host sends it every ~0.3 s).
 
     Attributes
@@ -180,84 +221,24 @@ class SetOffset:
         Offset gamma; approached at the SetGait offset rate. Range [-1.0, 1.0].
     """
 
-    MSG_ID: ClassVar[MsgId] = MsgId.SET_OFFSET
-    PAYLOAD_BYTES: ClassVar[int] = 4
-    FORMAT: ClassVar[str] = "<f"
-    TO_ROBOT: ClassVar[bool] = True
-    offset_rad: float = 0.0
-
-    def pack(self) -> bytes:
-        """Payload bytes of this message."""
-        return struct.pack(
-            self.FORMAT,
-            self.offset_rad,
-        )
-
-    @classmethod
-    def unpack(cls, payload: bytes) -> SetOffset:
-        """Message from its payload bytes (struct.error on a wrong size)."""
-        v = struct.unpack(cls.FORMAT, payload)
-        return cls(
-            v[0],
-        )
-
-    def validate(self) -> None:
-        """Raise ValueError when a field is not finite or out of range."""
-        v = self.offset_rad
-        if not math.isfinite(v) or not (-1.0 <= v <= 1.0):
-            raise ValueError(f"SetOffset.offset_rad={v} outside [-1.0, 1.0]")
+    offset_rad: float = _wire("f32", 0.0, lo=-1.0, hi=1.0)
 
 
+@_message(MsgId.START, to_robot=True)
 @dataclass(frozen=True)
-class Start:
+class Start(_Message):
     """Start undulating (from IDLE or FAILSAFE); the amplitude ramps up from its present value."""
 
-    MSG_ID: ClassVar[MsgId] = MsgId.START
-    PAYLOAD_BYTES: ClassVar[int] = 0
-    FORMAT: ClassVar[str] = "<"
-    TO_ROBOT: ClassVar[bool] = True
 
-    def pack(self) -> bytes:
-        """Payload bytes of this message."""
-        return b""
-
-    @classmethod
-    def unpack(cls, payload: bytes) -> Start:
-        """Message from its payload bytes (struct.error on a wrong size)."""
-        struct.unpack(cls.FORMAT, payload)
-        return cls()
-
-    def validate(self) -> None:
-        """Raise ValueError when a field is not finite or out of range."""
-        return None
-
-
+@_message(MsgId.STOP, to_robot=True)
 @dataclass(frozen=True)
-class Stop:
+class Stop(_Message):
     """Stop undulating and straighten (amplitude and offset ramp to zero)."""
 
-    MSG_ID: ClassVar[MsgId] = MsgId.STOP
-    PAYLOAD_BYTES: ClassVar[int] = 0
-    FORMAT: ClassVar[str] = "<"
-    TO_ROBOT: ClassVar[bool] = True
 
-    def pack(self) -> bytes:
-        """Payload bytes of this message."""
-        return b""
-
-    @classmethod
-    def unpack(cls, payload: bytes) -> Stop:
-        """Message from its payload bytes (struct.error on a wrong size)."""
-        struct.unpack(cls.FORMAT, payload)
-        return cls()
-
-    def validate(self) -> None:
-        """Raise ValueError when a field is not finite or out of range."""
-        return None
-
-
+@_message(MsgId.SET_GAINS, to_robot=True)
 @dataclass(frozen=True)
-class SetGains:
+class SetGains(_Message):
     """Set the joint PD gains and torque limit (used where the firmware closes the joint loop).
 
     Attributes
@@ -270,48 +251,14 @@ class SetGains:
         Torque clamp |u| <= limit (servo stall torque by default). Range [0.0, 10.0].
     """
 
-    MSG_ID: ClassVar[MsgId] = MsgId.SET_GAINS
-    PAYLOAD_BYTES: ClassVar[int] = 12
-    FORMAT: ClassVar[str] = "<fff"
-    TO_ROBOT: ClassVar[bool] = True
-    kp_nm_per_rad: float = 1.0
-    kd_nms_per_rad: float = 0.02
-    torque_limit_nm: float = 1.26
-
-    def pack(self) -> bytes:
-        """Payload bytes of this message."""
-        return struct.pack(
-            self.FORMAT,
-            self.kp_nm_per_rad,
-            self.kd_nms_per_rad,
-            self.torque_limit_nm,
-        )
-
-    @classmethod
-    def unpack(cls, payload: bytes) -> SetGains:
-        """Message from its payload bytes (struct.error on a wrong size)."""
-        v = struct.unpack(cls.FORMAT, payload)
-        return cls(
-            v[0],
-            v[1],
-            v[2],
-        )
-
-    def validate(self) -> None:
-        """Raise ValueError when a field is not finite or out of range."""
-        v = self.kp_nm_per_rad
-        if not math.isfinite(v) or not (0.0 <= v <= 100.0):
-            raise ValueError(f"SetGains.kp_nm_per_rad={v} outside [0.0, 100.0]")
-        v = self.kd_nms_per_rad
-        if not math.isfinite(v) or not (0.0 <= v <= 10.0):
-            raise ValueError(f"SetGains.kd_nms_per_rad={v} outside [0.0, 10.0]")
-        v = self.torque_limit_nm
-        if not math.isfinite(v) or not (0.0 <= v <= 10.0):
-            raise ValueError(f"SetGains.torque_limit_nm={v} outside [0.0, 10.0]")
+    kp_nm_per_rad: float = _wire("f32", 1.0, lo=0.0, hi=100.0)
+    kd_nms_per_rad: float = _wire("f32", 0.02, lo=0.0, hi=10.0)
+    torque_limit_nm: float = _wire("f32", 1.26, lo=0.0, hi=10.0)
 
 
+@_message(MsgId.VERSION, to_robot=False)
 @dataclass(frozen=True)
-class Version:
+class Version(_Message):
     """Answer to Hello.
 
     Attributes
@@ -330,49 +277,17 @@ class Version:
         Period of the control update.
     """
 
-    MSG_ID: ClassVar[MsgId] = MsgId.VERSION
-    PAYLOAD_BYTES: ClassVar[int] = 10
-    FORMAT: ClassVar[str] = "<BBBBHI"
-    TO_ROBOT: ClassVar[bool] = False
-    firmware_major: int = 0
-    firmware_minor: int = 0
-    protocol_version: int = 0
-    n_joints: int = 0
-    schema_hash: int = 0
-    control_period_us: int = 0
-
-    def pack(self) -> bytes:
-        """Payload bytes of this message."""
-        return struct.pack(
-            self.FORMAT,
-            self.firmware_major,
-            self.firmware_minor,
-            self.protocol_version,
-            self.n_joints,
-            self.schema_hash,
-            self.control_period_us,
-        )
-
-    @classmethod
-    def unpack(cls, payload: bytes) -> Version:
-        """Message from its payload bytes (struct.error on a wrong size)."""
-        v = struct.unpack(cls.FORMAT, payload)
-        return cls(
-            v[0],
-            v[1],
-            v[2],
-            v[3],
-            v[4],
-            v[5],
-        )
-
-    def validate(self) -> None:
-        """Raise ValueError when a field is not finite or out of range."""
-        return None
+    firmware_major: int = _wire("u8")
+    firmware_minor: int = _wire("u8")
+    protocol_version: int = _wire("u8")
+    n_joints: int = _wire("u8")
+    schema_hash: int = _wire("u16")
+    control_period_us: int = _wire("u32")
 
 
+@_message(MsgId.TELEMETRY, to_robot=False)
 @dataclass(frozen=True)
-class Telemetry:
+class Telemetry(_Message):
     """Sent every 100 ms: time, state, references and link counters.
 
     Attributes
@@ -381,7 +296,7 @@ class Telemetry:
         The robot's clock (wraps every 71.6 min).
     state : int
         Robot state.
-    alpha_rad : tuple of 5 float
+    alpha_rad : tuple of N_JOINTS float
         Joint references alpha_j after clamping, joint 1 (tail) first.
     offset_rad : float
         Present (rate-limited) offset gamma.
@@ -395,55 +310,19 @@ class Telemetry:
         Frames missing according to the sequence numbers (wraps).
     """
 
-    MSG_ID: ClassVar[MsgId] = MsgId.TELEMETRY
-    PAYLOAD_BYTES: ClassVar[int] = 39
-    FORMAT: ClassVar[str] = "<IB5fffHHH"
-    TO_ROBOT: ClassVar[bool] = False
-    time_us: int = 0
-    state: int = 0
-    alpha_rad: tuple[float, ...] = field(default=(0.0, 0.0, 0.0, 0.0, 0.0,))
-    offset_rad: float = 0.0
-    amplitude_rad: float = 0.0
-    frames_ok: int = 0
-    frames_bad: int = 0
-    frames_lost: int = 0
-
-    def pack(self) -> bytes:
-        """Payload bytes of this message."""
-        return struct.pack(
-            self.FORMAT,
-            self.time_us,
-            self.state,
-            *self.alpha_rad,
-            self.offset_rad,
-            self.amplitude_rad,
-            self.frames_ok,
-            self.frames_bad,
-            self.frames_lost,
-        )
-
-    @classmethod
-    def unpack(cls, payload: bytes) -> Telemetry:
-        """Message from its payload bytes (struct.error on a wrong size)."""
-        v = struct.unpack(cls.FORMAT, payload)
-        return cls(
-            v[0],
-            v[1],
-            tuple(v[2:7]),
-            v[7],
-            v[8],
-            v[9],
-            v[10],
-            v[11],
-        )
-
-    def validate(self) -> None:
-        """Raise ValueError when a field is not finite or out of range."""
-        return None
+    time_us: int = _wire("u32")
+    state: int = _wire("u8")
+    alpha_rad: tuple[float, ...] = _wire("f32", 0.0, count=N_JOINTS)
+    offset_rad: float = _wire("f32", 0.0)
+    amplitude_rad: float = _wire("f32", 0.0)
+    frames_ok: int = _wire("u16")
+    frames_bad: int = _wire("u16")
+    frames_lost: int = _wire("u16")
 
 
+@_message(MsgId.ACK, to_robot=False)
 @dataclass(frozen=True)
-class Ack:
+class Ack(_Message):
     """The command with this id and sequence number was applied.
 
     Attributes
@@ -454,37 +333,13 @@ class Ack:
         Its sequence number.
     """
 
-    MSG_ID: ClassVar[MsgId] = MsgId.ACK
-    PAYLOAD_BYTES: ClassVar[int] = 2
-    FORMAT: ClassVar[str] = "<BB"
-    TO_ROBOT: ClassVar[bool] = False
-    msg_id: int = 0
-    seq: int = 0
-
-    def pack(self) -> bytes:
-        """Payload bytes of this message."""
-        return struct.pack(
-            self.FORMAT,
-            self.msg_id,
-            self.seq,
-        )
-
-    @classmethod
-    def unpack(cls, payload: bytes) -> Ack:
-        """Message from its payload bytes (struct.error on a wrong size)."""
-        v = struct.unpack(cls.FORMAT, payload)
-        return cls(
-            v[0],
-            v[1],
-        )
-
-    def validate(self) -> None:
-        """Raise ValueError when a field is not finite or out of range."""
-        return None
+    msg_id: int = _wire("u8")
+    seq: int = _wire("u8")
 
 
+@_message(MsgId.REFUSE, to_robot=False)
 @dataclass(frozen=True)
-class Refuse:
+class Refuse(_Message):
     """The command with this id and sequence number was refused and had no effect.
 
     Attributes
@@ -497,36 +352,9 @@ class Refuse:
         Why.
     """
 
-    MSG_ID: ClassVar[MsgId] = MsgId.REFUSE
-    PAYLOAD_BYTES: ClassVar[int] = 3
-    FORMAT: ClassVar[str] = "<BBB"
-    TO_ROBOT: ClassVar[bool] = False
-    msg_id: int = 0
-    seq: int = 0
-    reason: int = 0
-
-    def pack(self) -> bytes:
-        """Payload bytes of this message."""
-        return struct.pack(
-            self.FORMAT,
-            self.msg_id,
-            self.seq,
-            self.reason,
-        )
-
-    @classmethod
-    def unpack(cls, payload: bytes) -> Refuse:
-        """Message from its payload bytes (struct.error on a wrong size)."""
-        v = struct.unpack(cls.FORMAT, payload)
-        return cls(
-            v[0],
-            v[1],
-            v[2],
-        )
-
-    def validate(self) -> None:
-        """Raise ValueError when a field is not finite or out of range."""
-        return None
+    msg_id: int = _wire("u8")
+    seq: int = _wire("u8")
+    reason: int = _wire("u8")
 
 
 Message = Hello | SetGait | SetOffset | Start | Stop | SetGains | Version | Telemetry | Ack | Refuse

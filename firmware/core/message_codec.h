@@ -1,0 +1,65 @@
+// The one codec of every message: pack, unpack and validate walk a message's field table (its
+// each_field() in protocol_gen.h, generated from protocol/eelbot.toml) and encode or decode each
+// field with the wire:: function for its type. Everything inlines to the same straight-line code a
+// hand-written codec per message would be, so the table costs neither flash nor time on the AVR.
+#pragma once
+#include <stdint.h>
+
+#include "protocol_gen.h"
+#include "wire.h"
+
+namespace eelproto {
+namespace codec {
+
+struct Packer {
+  uint8_t* p;
+  template <typename T>
+  void operator()(const T& v, uint8_t offset) { wire::put(p + offset, v); }
+  void operator()(float v, uint8_t offset, float /*min*/, float /*max*/) { wire::put(p + offset, v); }
+};
+
+struct Unpacker {
+  const uint8_t* p;
+  template <typename T>
+  void operator()(T& v, uint8_t offset) { wire::get(p + offset, v); }
+  void operator()(float& v, uint8_t offset, float /*min*/, float /*max*/) { wire::get(p + offset, v); }
+};
+
+// The RefuseReason of the worst field: NotFinite anywhere wins over OutOfRange anywhere.
+struct RangeCheck {
+  uint8_t reason;
+  template <typename T>
+  void operator()(const T& /*v*/, uint8_t /*offset*/) {}
+  void operator()(float v, uint8_t /*offset*/, float min, float max) {
+    if (!wire::finite(v)) {
+      reason = static_cast<uint8_t>(RefuseReason::NotFinite);
+    } else if (reason == 0 && (v < min || v > max)) {
+      reason = static_cast<uint8_t>(RefuseReason::OutOfRange);
+    }
+  }
+};
+
+}  // namespace codec
+
+// Payload bytes of a message (M::kPayloadBytes of them).
+template <typename M>
+inline void pack(const M& m, uint8_t* p) {
+  codec::Packer visit{p};
+  each_field(const_cast<M&>(m), visit);  // the packer only reads: one field table serves both ways
+}
+
+template <typename M>
+inline void unpack(M& m, const uint8_t* p) {
+  codec::Unpacker visit{p};
+  each_field(m, visit);
+}
+
+// RefuseReason value, or 0 when every field with a range is finite and in range.
+template <typename M>
+inline uint8_t validate(const M& m) {
+  codec::RangeCheck visit{0};
+  each_field(const_cast<M&>(m), visit);
+  return visit.reason;
+}
+
+}  // namespace eelproto
