@@ -10,11 +10,17 @@ namespace {
 constexpr double kStepPerRadS = 18446744073709551616.0 / (6.283185307179586 * 1.0e6);
 // 2 pi / 2^32: radians per unit of the phase's top 32 bits.
 constexpr float kRadPerTop32 = 1.4629180792671596e-09f;
-// A_j / A = (N - j) / (N + 1), j = 1..N-1: a table, because a float division costs the AVR ~500
-// cycles per joint.
-constexpr float kAmplitudeRatio[cfg::kJoints] = {5.0f / 7.0f, 4.0f / 7.0f, 3.0f / 7.0f, 2.0f / 7.0f,
-                                                 1.0f / 7.0f};
-static_assert(cfg::kLinks == 6, "kAmplitudeRatio is written out for N = 6 links");
+// A_j / A = (N - j) / (N + 1), j = 1..N-1: a table computed by the compiler, because a float
+// division costs the AVR ~500 cycles per joint.
+struct AmplitudeRatios {
+  float of_joint[cfg::kJoints];
+  constexpr AmplitudeRatios() : of_joint() {
+    for (uint8_t i = 0; i < cfg::kJoints; ++i) {  // joint j = i + 1
+      of_joint[i] = static_cast<float>(cfg::kLinks - (i + 1)) / static_cast<float>(cfg::kLinks + 1);
+    }
+  }
+};
+constexpr AmplitudeRatios kAmplitudeRatio;
 
 float clamp_joint(float v) {
   if (v > cfg::kJointLimitRad) return cfg::kJointLimitRad;
@@ -71,7 +77,7 @@ void Gait::compute_references() {
   const float cb = cosf(beta_rad_);
   const float omega = target_.omega_rad_s;
   for (uint8_t j = 0; j < cfg::kJoints; ++j) {
-    const float amp = amplitude_rad_ * kAmplitudeRatio[j];
+    const float amp = amplitude_rad_ * kAmplitudeRatio.of_joint[j];
     const float raw = amp * s + offset_rad_;
     alpha_rad_[j] = clamp_joint(raw);
     // Like the twin, the offset counts as piecewise constant: it adds nothing to the rate.

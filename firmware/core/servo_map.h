@@ -14,12 +14,14 @@ struct ServoCalibration {
 };
 
 // 636.6 us/rad; the joint limit of 1.2 rad gives 736..2264 us; min/max add a margin for the trim.
-constexpr ServoCalibration kServoCalibration[cfg::kJoints] = {
-    {1500, 636.6f, 700, 2300},
-    {1500, 636.6f, 700, 2300},
-    {1500, 636.6f, 700, 2300},
-    {1500, 636.6f, 700, 2300},
-    {1500, 636.6f, 700, 2300},
+constexpr ServoCalibration kNominalServo{1500, 636.6f, 700, 2300};
+
+// One row per servo, as mounted on this robot: hardware, so listed by hand.
+constexpr ServoCalibration kServoCalibration[] = {
+    kNominalServo, kNominalServo, kNominalServo, kNominalServo, kNominalServo,
 };
+static_assert(sizeof(kServoCalibration) / sizeof(kServoCalibration[0]) == cfg::kJoints,
+              "one servo calibration per joint: protocol/eelbot.toml n_joints changed, so add or "
+              "remove rows here");
 
 uint16_t servo_pulse_us(const ServoCalibration& cal, float alpha_rad);

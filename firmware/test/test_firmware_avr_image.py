@@ -13,7 +13,7 @@ ELF = FIRMWARE / "build" / "avr" / "eelbot.elf"
 SIM = FIRMWARE / "build" / "tools" / "eel_avrsim"
 pytestmark = pytest.mark.slow  # a few seconds of emulated AVR per test
 
-SERVO_PINS = ["D2", "D3", "D4", "D5", "D6"]
+SERVO_PINS = ["D2", "D3", "D4", "D5", "D6"]  # firmware/hal/avr/pins.h, joint 1 first
 # Another interrupt (Timer0's millis tick, the UART) can delay a servo edge by up to ~80 cycles.
 JITTER_US = 6.0
 
@@ -99,7 +99,7 @@ def test_avr_servo_pulses_repeat_at_50hz_and_follow_the_gait(run_avr):
     stdout, _, edges = run_avr(session(500_000, 0.8, 2 * np.pi), 2500)
     # Joint 1's pulse starts every frame of 20 ms (50 Hz); each next joint's pulse starts when the
     # previous one ends (one after the other, as the Timer1 driver sequences them).
-    np.testing.assert_allclose(np.diff(edges["D2"][:, 0]), 20_000, atol=2 * JITTER_US)
+    np.testing.assert_allclose(np.diff(edges["D2"][:, 0]), p.SERVO_FRAME_US, atol=2 * JITTER_US)
     n = min(len(e) for e in edges.values())
     for prev, pin in zip(SERVO_PINS, SERVO_PINS[1:], strict=False):
         end_prev = edges[prev][:n, 0] + edges[prev][:n, 1]
@@ -108,7 +108,7 @@ def test_avr_servo_pulses_repeat_at_50hz_and_follow_the_gait(run_avr):
         rise, width = edges[pin][:, 0], edges[pin][:, 1]
         assert_centred(width[rise < 450_000])  # straight until Start
         after = width[rise > 600_000]  # a whole 1 Hz cycle and more
-        swing = 636.6 * 0.8 * (5 - j) / 7  # calibration x A_j
+        swing = 636.6 * 0.8 * (p.N_JOINTS - j) / (p.N_JOINTS + 2)  # calibration x A_j
         assert after.max() - 1500 == pytest.approx(swing, rel=0.03, abs=JITTER_US)
         assert 1500 - after.min() == pytest.approx(swing, rel=0.03, abs=JITTER_US)
     assert "control update" in stdout

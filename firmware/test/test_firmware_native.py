@@ -7,7 +7,7 @@ from eelhost import protocol as p
 from eelhost.native_firmware import NativeFirmware
 from eelsim.control import Gait, gait_reference, joint_pd_torque
 
-N_LINKS = 6
+N_LINKS = p.N_JOINTS + 1
 
 
 def f32(x):
@@ -69,8 +69,8 @@ def test_pd_torque_equals_the_twins_joint_pd_torque():
     fw.send(p.SetGains(kp_nm_per_rad=2.5, kd_nms_per_rad=0.04, torque_limit_nm=10.0), 3)
     rng = np.random.default_rng(7)
     for k in range(1, 50):
-        phi = rng.uniform(-0.5, 0.5, 5).astype(np.float32)
-        phi_dot = rng.uniform(-3, 3, 5).astype(np.float32)
+        phi = rng.uniform(-0.5, 0.5, p.N_JOINTS).astype(np.float32)
+        phi_dot = rng.uniform(-3, 3, p.N_JOINTS).astype(np.float32)
         out = fw.tick(k * 10_000, phi, phi_dot)
         want = joint_pd_torque(out.alpha_rad, out.alpha_dot_rad_s, phi, phi_dot, 2.5, f32(0.04))
         np.testing.assert_allclose(out.torque_nm, want, rtol=1e-5, atol=1e-6)
@@ -79,7 +79,7 @@ def test_pd_torque_equals_the_twins_joint_pd_torque():
 def test_pd_torque_is_clamped_to_the_commanded_limit():
     fw = started(0, 0.5, 3.0, 1.0, 0.0)
     fw.send(p.SetGains(kp_nm_per_rad=50.0, kd_nms_per_rad=0.0, torque_limit_nm=0.5), 3)
-    out = fw.tick(10_000, np.full(5, 1.0), np.zeros(5))
+    out = fw.tick(10_000, np.full(p.N_JOINTS, 1.0), np.zeros(p.N_JOINTS))
     assert np.all(out.torque_nm == np.float32(-0.5))
 
 

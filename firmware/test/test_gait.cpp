@@ -8,7 +8,8 @@ constexpr double kPi = 3.14159265358979323846;
 
 // The gait of docs/model.md section 4 in double precision: alpha_j = A (N-j)/(N+1) sin(omega t + (j-1) beta) + gamma.
 double model_alpha(int j0, double t_s, double a, double omega, double beta, double gamma) {
-  return a * (6.0 - (j0 + 1)) / 7.0 * sin(omega * t_s + j0 * beta) + gamma;
+  const double n = cfg::kLinks;
+  return a * (n - (j0 + 1)) / (n + 1.0) * sin(omega * t_s + j0 * beta) + gamma;
 }
 
 Gait started_gait(uint32_t t0_us, GaitTargets t, GaitRates r = GaitRates{0, 0, 0}) {
@@ -22,7 +23,7 @@ Gait started_gait(uint32_t t0_us, GaitTargets t, GaitRates r = GaitRates{0, 0, 0
 
 float max_step(const float* a, const float* b) {
   float m = 0.0f;
-  for (int j = 0; j < 5; ++j) m = fmaxf(m, fabsf(a[j] - b[j]));
+  for (int j = 0; j < cfg::kJoints; ++j) m = fmaxf(m, fabsf(a[j] - b[j]));
   return m;
 }
 }  // namespace
@@ -33,7 +34,7 @@ TEST(gait_equals_the_model_formula_at_the_start_of_a_run) {
   for (uint32_t k = 0; k <= 500; ++k) {
     const uint32_t now = 1000 + k * 10000;
     g.update(now);
-    for (int j = 0; j < 5; ++j) {
+    for (int j = 0; j < cfg::kJoints; ++j) {
       CHECK_NEAR(g.alpha_rad()[j], model_alpha(j, k * 0.01, 0.6f, 3.0f, 1.04f, 0.05f), 2e-6);
     }
   }
@@ -43,8 +44,9 @@ TEST(gait_rate_equals_the_derivative_of_the_formula) {
   Gait g = started_gait(0, GaitTargets{0.5f, 2.0f, 0.8f, 0.0f});
   g.update(1234567);
   const double t = 1.234567;
-  for (int j = 0; j < 5; ++j) {
-    const double want = 0.5f * (5.0 - j) / 7.0 * 2.0 * cos(2.0 * t + j * static_cast<double>(0.8f));
+  for (int j = 0; j < cfg::kJoints; ++j) {
+    const double ratio = (cfg::kLinks - 1.0 - j) / (cfg::kLinks + 1.0);  // (N - j) / (N + 1), j = 1..
+    const double want = 0.5f * ratio * 2.0 * cos(2.0 * t + j * static_cast<double>(0.8f));
     CHECK_NEAR(g.alpha_dot_rad_s()[j], want, 1e-5);
   }
 }
@@ -65,15 +67,15 @@ TEST(gait_is_continuous_across_the_micros_wrap) {
   for (uint32_t k = 1; k <= 100; ++k) {
     const uint32_t now = t0 + k * 10000u;  // wraps at k = 26
     g.update(now);
-    for (int j = 0; j < 5; ++j) CHECK_NEAR(g.alpha_rad()[j], model_alpha(j, k * 0.01, 0.5f, 3.0f, 1.04f, 0.0), 2e-6);
+    for (int j = 0; j < cfg::kJoints; ++j) CHECK_NEAR(g.alpha_rad()[j], model_alpha(j, k * 0.01, 0.5f, 3.0f, 1.04f, 0.0), 2e-6);
   }
 }
 
 TEST(frequency_change_keeps_every_reference_continuous) {
   Gait g = started_gait(0, GaitTargets{0.8f, 2.0f, 1.0f, 0.0f});
   g.update(730000);
-  float before[5];
-  for (int j = 0; j < 5; ++j) before[j] = g.alpha_rad()[j];
+  float before[cfg::kJoints];
+  for (int j = 0; j < cfg::kJoints; ++j) before[j] = g.alpha_rad()[j];
   g.set_targets(GaitTargets{0.8f, 9.0f, 1.0f, 0.0f});
   g.update(730000);  // the same instant: a new omega alone must not move anything
   CHECK(max_step(before, g.alpha_rad()) < 1e-6f);
@@ -87,13 +89,13 @@ TEST(amplitude_and_beta_changes_slew_at_their_rate_limits) {
   g.update(1000000);
   CHECK_NEAR(g.amplitude_rad(), 0.2, 1e-6);
   g.set_targets(GaitTargets{1.2f, 3.0f, 1.5f, 0.0f});
-  float prev[5];
-  for (int j = 0; j < 5; ++j) prev[j] = g.alpha_rad()[j];
+  float prev[cfg::kJoints];
+  for (int j = 0; j < cfg::kJoints; ++j) prev[j] = g.alpha_rad()[j];
   float worst = 0.0f;
   for (uint32_t now = 1010000; now <= 4000000; now += 10000) {
     g.update(now);
     worst = fmaxf(worst, max_step(prev, g.alpha_rad()));
-    for (int j = 0; j < 5; ++j) prev[j] = g.alpha_rad()[j];
+    for (int j = 0; j < cfg::kJoints; ++j) prev[j] = g.alpha_rad()[j];
     if (now == 1510000) {
       CHECK_NEAR(g.amplitude_rad(), 0.2 + 0.5 * 0.51, 1e-5);
       CHECK_NEAR(g.beta_rad(), 0.5 + 1.0 * 0.51, 1e-5);
@@ -123,7 +125,7 @@ TEST(references_are_clamped_to_the_joint_limit_with_zero_rate) {
   g.update(1570796);  // phase pi/2: joint 1 wants 1.5*5/7 + 1 = 2.07 rad
   CHECK_EQ(g.alpha_rad()[0], cfg::kJointLimitRad);
   CHECK_EQ(g.alpha_dot_rad_s()[0], 0.0f);
-  for (int j = 0; j < 5; ++j) CHECK(fabsf(g.alpha_rad()[j]) <= cfg::kJointLimitRad);
+  for (int j = 0; j < cfg::kJoints; ++j) CHECK(fabsf(g.alpha_rad()[j]) <= cfg::kJointLimitRad);
 }
 
 TEST(phase_restarts_only_when_the_body_is_straight) {

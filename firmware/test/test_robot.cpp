@@ -62,7 +62,7 @@ struct Bench {
   }
   float max_abs_alpha() const {
     float m = 0.0f;
-    for (int j = 0; j < 5; ++j) m = fmaxf(m, fabsf(robot.gait().alpha_rad()[j]));
+    for (int j = 0; j < cfg::kJoints; ++j) m = fmaxf(m, fabsf(robot.gait().alpha_rad()[j]));
     return m;
   }
 };
@@ -79,7 +79,7 @@ TEST(robot_boots_idle_and_straight) {
   b.run(200000);
   CHECK(b.robot.state() == State::Idle);
   CHECK_EQ(b.max_abs_alpha(), 0.0f);
-  for (int j = 0; j < 5; ++j) CHECK_EQ(b.robot.pulse_us()[j], 1500);
+  for (int j = 0; j < cfg::kJoints; ++j) CHECK_EQ(b.robot.pulse_us()[j], 1500);
 }
 
 TEST(start_is_acknowledged_and_the_amplitude_ramps_up_at_its_rate) {
@@ -149,12 +149,12 @@ TEST(failsafe_straightening_has_no_jump) {
   b.run(900000);
   b.send(offset(0.0f));
   b.run(900000);  // link lost 0.9 s ago; failsafe in 0.1 s
-  float prev[5];
-  for (int j = 0; j < 5; ++j) prev[j] = b.robot.gait().alpha_rad()[j];
+  float prev[cfg::kJoints];
+  for (int j = 0; j < cfg::kJoints; ++j) prev[j] = b.robot.gait().alpha_rad()[j];
   float worst = 0.0f;
   for (int k = 0; k < 300; ++k) {
     b.run(10000);
-    for (int j = 0; j < 5; ++j) {
+    for (int j = 0; j < cfg::kJoints; ++j) {
       worst = fmaxf(worst, fabsf(b.robot.gait().alpha_rad()[j] - prev[j]));
       prev[j] = b.robot.gait().alpha_rad()[j];
     }
@@ -278,8 +278,8 @@ TEST(pd_gains_from_a_message_drive_the_joint_torques) {
   g.torque_limit_nm = 0.3f;
   b.send(g);
   CHECK_EQ(b.acks, 1);
-  const float phi[5] = {0.1f, -0.1f, 0.0f, 0.5f, 0.0f}, phid[5] = {};
-  float u[5];
+  const float phi[cfg::kJoints] = {0.1f, -0.1f, 0.0f, 0.5f}, phid[cfg::kJoints] = {};
+  float u[cfg::kJoints];
   b.robot.joint_torques(phi, phid, u);
   CHECK_NEAR(u[0], -0.2, 1e-6);
   CHECK_NEAR(u[1], 0.2, 1e-6);

@@ -6,8 +6,21 @@
 #pragma once
 #include <stdint.h>
 
+#include "config.h"
+
 namespace pins {
-constexpr uint8_t kServoBit[5] = {2, 3, 4, 5, 6};  // PORTD bits, joint 1 first
-constexpr uint8_t kServoMask = 0x7C;                // bits 2..6 of PORTD
-constexpr uint8_t kBusyBit = 7;                     // PD7 = D7
+// One PORTD bit per joint, joint 1 first: hardware, so listed by hand.
+constexpr uint8_t kServoBit[] = {2, 3, 4, 5, 6};
+constexpr uint8_t kBusyBit = 7;  // PD7 = D7
+constexpr uint8_t kServos = sizeof(kServoBit);
+static_assert(kServos == cfg::kJoints,
+              "one servo pin per joint: protocol/eelbot.toml n_joints changed, so list the pins "
+              "here (and in firmware/README.md)");
+
+constexpr uint8_t servo_mask(uint8_t i = 0) {
+  return i == kServos ? 0 : static_cast<uint8_t>((1u << kServoBit[i]) | servo_mask(i + 1));
+}
+constexpr uint8_t kServoMask = servo_mask();  // the servo bits of PORTD
+static_assert((kServoMask & ((1u << kBusyBit) | 0x03u)) == 0,
+              "the servo pins must leave PD0/PD1 (the UART) and the busy pin free");
 }  // namespace pins

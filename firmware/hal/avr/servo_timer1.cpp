@@ -7,18 +7,25 @@
 #include "pins.h"
 
 namespace {
-constexpr uint8_t kServos = 5;
+using pins::kServos;
 constexpr uint16_t kTicksPerUs = 2;  // 16 MHz / 8
-constexpr uint16_t kFrameTicks = servo_timer1::kFrameUs * kTicksPerUs;  // 40000 < 65536
+static_assert(static_cast<uint32_t>(servo_timer1::kFrameUs) * kTicksPerUs <= 0xFFFFu,
+              "a servo frame must fit in Timer1's 16 bits");
+constexpr uint16_t kFrameTicks = servo_timer1::kFrameUs * kTicksPerUs;
 
 volatile uint16_t g_width_ticks[kServos];
 volatile uint8_t g_next;        // servo whose pulse starts at the next compare match
 volatile uint16_t g_used_ticks;  // ticks spent on pulses in this frame
+
 // Port masks, not bit numbers: a variable shift on the AVR takes a loop, and a variable delay before
 // the edge would make the widths depend on the joint.
-const uint8_t g_bit[kServos] = {
-    _BV(pins::kServoBit[0]), _BV(pins::kServoBit[1]), _BV(pins::kServoBit[2]),
-    _BV(pins::kServoBit[3]), _BV(pins::kServoBit[4])};
+struct ServoMasks {
+  uint8_t of_servo[kServos];
+  constexpr ServoMasks() : of_servo() {
+    for (uint8_t i = 0; i < kServos; ++i) of_servo[i] = static_cast<uint8_t>(1u << pins::kServoBit[i]);
+  }
+};
+constexpr ServoMasks g_bit;
 }  // namespace
 
 // Each match ends the pulse in progress (if any) and starts the next one, or idles until the frame
@@ -30,7 +37,7 @@ const uint8_t g_bit[kServos] = {
 ISR(TIMER1_COMPA_vect) {
   const uint8_t i = g_next;
   const uint8_t others = static_cast<uint8_t>(PORTD & ~pins::kServoMask);
-  PORTD = (i < kServos) ? static_cast<uint8_t>(others | g_bit[i]) : others;
+  PORTD = (i < kServos) ? static_cast<uint8_t>(others | g_bit.of_servo[i]) : others;
   if (i < kServos) {
     const uint16_t w = g_width_ticks[i];
     OCR1A += w;
