@@ -111,7 +111,7 @@ class Field:
 
     @property
     def ranged(self) -> bool:
-        """Whether the receiver checks the value against [min, max]."""
+        """Whether the receiver checks the value against [min, max] (and boots with the default)."""
         return self.min is not None
 
 
@@ -209,10 +209,14 @@ def _load_field(m: dict, f: dict, consts: dict[str, Constant], enums: dict) -> F
         count, count_name = consts[count].value, count
     if not isinstance(count, int) or count < 1:
         raise DefinitionError(f"{where}: count must be a positive integer or a constant's name")
-    if ("min" in f) != ("max" in f):
-        raise DefinitionError(f"{where}: give both min and max, or neither")
-    if "min" in f and (f["type"] != "f32" or count != 1 or not f["min"] <= f["max"]):
-        raise DefinitionError(f"{where}: a range needs a single f32 field and min <= max")
+    if len({"min" in f, "max" in f, "default" in f}) != 1:
+        raise DefinitionError(f"{where}: give min, max and default together, or none of them")
+    if "min" in f and (
+        f["type"] != "f32" or count != 1 or not f["min"] <= f["default"] <= f["max"]
+    ):
+        raise DefinitionError(
+            f"{where}: a range needs a single f32 field and min <= default <= max"
+        )
     return Field(
         f["name"],
         f["type"],
@@ -336,8 +340,7 @@ def render_cpp(d: dict) -> str:
     Returns
     -------
     str
-        The text of ``firmware/core/protocol_gen.h``: constants, enums, one struct and one field
-        table (``each_field``) per message; ``firmware/core/message_codec.h`` holds the codec.
+        The text of ``firmware/core/protocol_gen.h``.
     """
     p = d["protocol"]
     out = [
@@ -371,7 +374,8 @@ def render_cpp(d: dict) -> str:
     out += ["};", ""]
     out += [
         "// Each message's field table is its each_field(): visit(field, wire offset) for each",
-        "// field in wire order, visit(field, wire offset, min, max) for a field with a range.",
+        "// field in wire order, visit(field, wire offset, min, max, default) for a command's field",
+        "// (see message_codec.h).",
         "",
     ]
     for m in d["messages"]:
@@ -412,21 +416,12 @@ def _cpp_message(d: dict, m: Message) -> list[str]:
     out += ["template <typename Visit>", f"void each_field({m.name}& m, Visit& visit) {{"]
     offset = 0
     for f in m.fields:
-        bounds = f", {_cpp_float(f.min)}, {_cpp_float(f.max)}" if f.ranged else ""
-        out.append(f"  visit(m.{f.name}, {offset}{bounds});")
+        args = [f"m.{f.name}", str(offset)]
+        if f.ranged:
+            args += [_cpp_float(f.min), _cpp_float(f.max), _cpp_float(f.default)]
+        out.append(f"  visit({', '.join(args)});")
         offset += f.size
-    out.append("}")
-    defaults = [f for f in m.fields if f.default is not None]
-    if defaults:
-        # Field by field, not an aggregate: avr-gcc would keep an aggregate's bytes in RAM.
-        out.append("// The documented defaults (also the firmware's boot values).")
-        out.append(f"inline {m.name} default_{_snake(m.name)}() {{")
-        out.append(f"  {m.name} m{{}};")
-        for f in defaults:
-            value = _cpp_float(f.default) if f.type == "f32" else str(int(f.default))
-            out.append(f"  m.{f.name} = {value};")
-        out += ["  return m;", "}"]
-    out.append("")
+    out += ["}", ""]
     return out
 
 
@@ -663,19 +658,8 @@ def _number(x: float) -> str:
     return f"{x:g}"
 
 
-def render_docs_constants(d: dict) -> str:
-    """Render the table of shared constants for ``docs/firmware.md``.
-
-    Parameters
-    ----------
-    d : dict
-        The loaded definition (see :func:`load`).
-
-    Returns
-    -------
-    str
-        A Markdown table, one row per constant.
-    """
+def _docs_constants(d: dict) -> str:
+    """The Markdown table of the shared constants, one row per constant."""
     out = [
         "| constant | value | firmware (C++) | host (Python) | meaning |",
         "| --- | --- | --- | --- | --- |",
@@ -702,19 +686,8 @@ def _docs_field(d: dict, f: Field) -> str:
     return text
 
 
-def render_docs_messages(d: dict) -> str:
-    """Render the table of messages for ``docs/firmware.md``.
-
-    Parameters
-    ----------
-    d : dict
-        The loaded definition (see :func:`load`).
-
-    Returns
-    -------
-    str
-        The schema hash and a Markdown table, one row per message.
-    """
+def _docs_messages(d: dict) -> str:
+    """The schema hash and the Markdown table of messages, one row per message."""
     out = [
         f"Schema hash of this definition: **0x{d['schema_hash']:04X}**.",
         "",
@@ -731,19 +704,8 @@ def render_docs_messages(d: dict) -> str:
     return "\n".join(out) + "\n"
 
 
-def render_native_joints(d: dict) -> str:
-    """Render the joint count of the native library's C header.
-
-    Parameters
-    ----------
-    d : dict
-        The loaded definition (see :func:`load`).
-
-    Returns
-    -------
-    str
-        The ``#define EEL_JOINTS`` line (a plain number: the host's cffi binding reads it).
-    """
+def _native_joints(d: dict) -> str:
+    """The ``#define EEL_JOINTS`` line (a plain number: the host's cffi binding reads it)."""
     return f"#define EEL_JOINTS {d['constants']['n_joints'].value}\n"
 
 
@@ -796,10 +758,10 @@ def render_all() -> dict[Path, str]:
     """
     d = load()
     docs = DOCS_OUT.read_text(encoding="utf-8")
-    docs = splice(docs, "constants", render_docs_constants(d), ("<!--", "-->"), DOCS_OUT)
-    docs = splice(docs, "messages", render_docs_messages(d), ("<!--", "-->"), DOCS_OUT)
+    docs = splice(docs, "constants", _docs_constants(d), ("<!--", "-->"), DOCS_OUT)
+    docs = splice(docs, "messages", _docs_messages(d), ("<!--", "-->"), DOCS_OUT)
     native = NATIVE_H_OUT.read_text(encoding="utf-8")
-    native = splice(native, "joints", render_native_joints(d), ("/*", "*/"), NATIVE_H_OUT)
+    native = splice(native, "joints", _native_joints(d), ("/*", "*/"), NATIVE_H_OUT)
     return {
         CPP_OUT: render_cpp(d),
         PY_OUT: render_python(d),

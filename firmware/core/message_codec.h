@@ -1,5 +1,5 @@
-// The one codec of every message: pack, unpack and validate walk a message's field table (its
-// each_field() in protocol_gen.h, generated from protocol/eelbot.toml) and encode or decode each
+// The one codec of every message: pack, unpack, validate and defaults walk a message's field table
+// (its each_field() in protocol_gen.h, generated from protocol/eelbot.toml) and encode or decode each
 // field with the wire:: function for its type. Everything inlines to the same straight-line code a
 // hand-written codec per message would be, so the table costs neither flash nor time on the AVR.
 #pragma once
@@ -15,14 +15,18 @@ struct Packer {
   uint8_t* p;
   template <typename T>
   void operator()(const T& v, uint8_t offset) { wire::put(p + offset, v); }
-  void operator()(float v, uint8_t offset, float /*min*/, float /*max*/) { wire::put(p + offset, v); }
+  void operator()(float v, uint8_t offset, float /*min*/, float /*max*/, float /*default*/) {
+    wire::put(p + offset, v);
+  }
 };
 
 struct Unpacker {
   const uint8_t* p;
   template <typename T>
   void operator()(T& v, uint8_t offset) { wire::get(p + offset, v); }
-  void operator()(float& v, uint8_t offset, float /*min*/, float /*max*/) { wire::get(p + offset, v); }
+  void operator()(float& v, uint8_t offset, float /*min*/, float /*max*/, float /*default*/) {
+    wire::get(p + offset, v);
+  }
 };
 
 // The RefuseReason of the worst field: NotFinite anywhere wins over OutOfRange anywhere.
@@ -30,13 +34,19 @@ struct RangeCheck {
   uint8_t reason;
   template <typename T>
   void operator()(const T& /*v*/, uint8_t /*offset*/) {}
-  void operator()(float v, uint8_t /*offset*/, float min, float max) {
+  void operator()(float v, uint8_t /*offset*/, float min, float max, float /*default*/) {
     if (!wire::finite(v)) {
       reason = static_cast<uint8_t>(RefuseReason::NotFinite);
     } else if (reason == 0 && (v < min || v > max)) {
       reason = static_cast<uint8_t>(RefuseReason::OutOfRange);
     }
   }
+};
+
+struct Defaults {
+  template <typename T>
+  void operator()(T& /*v*/, uint8_t /*offset*/) {}
+  void operator()(float& v, uint8_t /*offset*/, float /*min*/, float /*max*/, float value) { v = value; }
 };
 
 }  // namespace codec
@@ -60,6 +70,16 @@ inline uint8_t validate(const M& m) {
   codec::RangeCheck visit{0};
   each_field(const_cast<M&>(m), visit);
   return visit.reason;
+}
+
+// A command with every field at its documented default (the firmware's boot values); fields
+// without a default (those of messages the robot sends) are 0.
+template <typename M>
+inline M defaults() {
+  M m{};
+  codec::Defaults visit;
+  each_field(m, visit);
+  return m;
 }
 
 }  // namespace eelproto

@@ -59,7 +59,8 @@ enum class MsgId : uint8_t {
 };
 
 // Each message's field table is its each_field(): visit(field, wire offset) for each
-// field in wire order, visit(field, wire offset, min, max) for a field with a range.
+// field in wire order, visit(field, wire offset, min, max, default) for a command's field
+// (see message_codec.h).
 
 // Ask who the robot is (it answers Version); also resynchronises the sequence check. (to robot)
 struct Hello {
@@ -81,23 +82,12 @@ struct SetGait {
 };
 template <typename Visit>
 void each_field(SetGait& m, Visit& visit) {
-  visit(m.amplitude_rad, 0, 0.0f, 1.5f);
-  visit(m.omega_rad_s, 4, 0.0f, 20.0f);
-  visit(m.beta_rad, 8, -3.1416f, 3.1416f);
-  visit(m.amplitude_rate_rad_s, 12, 0.0f, 100.0f);
-  visit(m.beta_rate_rad_s, 16, 0.0f, 100.0f);
-  visit(m.offset_rate_rad_s, 20, 0.0f, 100.0f);
-}
-// The documented defaults (also the firmware's boot values).
-inline SetGait default_set_gait() {
-  SetGait m{};
-  m.amplitude_rad = 0.5f;
-  m.omega_rad_s = 3.1416f;
-  m.beta_rad = 1.04f;
-  m.amplitude_rate_rad_s = 0.5f;
-  m.beta_rate_rad_s = 1.0f;
-  m.offset_rate_rad_s = 2.0f;
-  return m;
+  visit(m.amplitude_rad, 0, 0.0f, 1.5f, 0.5f);
+  visit(m.omega_rad_s, 4, 0.0f, 20.0f, 3.1416f);
+  visit(m.beta_rad, 8, -3.1416f, 3.1416f, 1.04f);
+  visit(m.amplitude_rate_rad_s, 12, 0.0f, 100.0f, 0.5f);
+  visit(m.beta_rate_rad_s, 16, 0.0f, 100.0f, 1.0f);
+  visit(m.offset_rate_rad_s, 20, 0.0f, 100.0f, 2.0f);
 }
 
 // Set the steering offset gamma added to every joint (the host sends it every ~0.3 s). (to robot)
@@ -108,13 +98,7 @@ struct SetOffset {
 };
 template <typename Visit>
 void each_field(SetOffset& m, Visit& visit) {
-  visit(m.offset_rad, 0, -1.0f, 1.0f);
-}
-// The documented defaults (also the firmware's boot values).
-inline SetOffset default_set_offset() {
-  SetOffset m{};
-  m.offset_rad = 0.0f;
-  return m;
+  visit(m.offset_rad, 0, -1.0f, 1.0f, 0.0f);
 }
 
 // Start undulating (from IDLE or FAILSAFE); the amplitude ramps up from its present value. (to robot)
@@ -141,17 +125,9 @@ struct SetGains {
 };
 template <typename Visit>
 void each_field(SetGains& m, Visit& visit) {
-  visit(m.kp_nm_per_rad, 0, 0.0f, 100.0f);
-  visit(m.kd_nms_per_rad, 4, 0.0f, 10.0f);
-  visit(m.torque_limit_nm, 8, 0.0f, 10.0f);
-}
-// The documented defaults (also the firmware's boot values).
-inline SetGains default_set_gains() {
-  SetGains m{};
-  m.kp_nm_per_rad = 1.0f;
-  m.kd_nms_per_rad = 0.02f;
-  m.torque_limit_nm = 1.26f;
-  return m;
+  visit(m.kp_nm_per_rad, 0, 0.0f, 100.0f, 1.0f);
+  visit(m.kd_nms_per_rad, 4, 0.0f, 10.0f, 0.02f);
+  visit(m.torque_limit_nm, 8, 0.0f, 10.0f, 1.26f);
 }
 
 // Answer to Hello. (to host)

@@ -16,9 +16,9 @@ uint32_t next_deadline(uint32_t previous_us, uint32_t period_us, uint32_t now_us
 void Robot::reset(uint32_t now_us) {
   state_ = State::Idle;
   control_period_us_ = cfg::kControlPeriodUs;
-  gait_cmd_ = eelproto::default_set_gait();
+  gait_cmd_ = eelproto::defaults<eelproto::SetGait>();
   offset_cmd_rad_ = 0.0f;
-  const eelproto::SetGains g = eelproto::default_set_gains();
+  const eelproto::SetGains g = eelproto::defaults<eelproto::SetGains>();
   gains_ = PdGains{g.kp_nm_per_rad, g.kd_nms_per_rad, g.torque_limit_nm};
   apply_targets();
   gait_.reset(now_us);

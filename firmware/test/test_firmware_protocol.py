@@ -83,19 +83,21 @@ def with_constant(text, name, value):
     return text[:start] + str(value) + text[text.index("\n", start) :]
 
 
-def test_the_joint_count_is_set_in_one_place_and_reaches_every_output(tmp_path):
+def test_the_joint_count_is_set_in_one_place_and_reaches_every_output(tmp_path, monkeypatch):
     gen = load_generator()
     seven = tmp_path / "seven.toml"
     seven.write_text(with_constant((ROOT / "protocol" / "eelbot.toml").read_text(), "n_joints", 7))
-    d = gen.load(seven)
-    telemetry = next(m for m in d["messages"] if m.name == "Telemetry")
-    assert telemetry.payload_bytes == p.Telemetry.PAYLOAD_BYTES + 2 * 4
-    assert "constexpr uint8_t kNJoints = 7;" in gen.render_cpp(d)
-    assert "float alpha_rad[kNJoints];" in gen.render_cpp(d)
-    assert "\nN_JOINTS = 7\n" in gen.render_python(d)
-    assert gen.render_native_joints(d) == "#define EEL_JOINTS 7\n"
-    assert "alpha_rad f32 x n_joints (7)" in gen.render_docs_messages(d)
-    assert d["schema_hash"] != p.SCHEMA_HASH  # the telemetry layout changed
+    monkeypatch.setattr(gen, "DEFINITION", seven)
+    out = outputs_copied_to(tmp_path, gen, monkeypatch)
+    assert gen.main([]) == 0
+    cpp = out["CPP_OUT"].read_text()
+    assert "constexpr uint8_t kNJoints = 7;" in cpp and "float alpha_rad[kNJoints];" in cpp
+    assert f"kPayloadBytes = {p.Telemetry.PAYLOAD_BYTES + 2 * 4};" in cpp  # two more f32
+    assert "\nN_JOINTS = 7\n" in out["PY_OUT"].read_text()
+    assert "\n#define EEL_JOINTS 7\n" in out["NATIVE_H_OUT"].read_text()
+    docs = out["DOCS_OUT"].read_text()
+    assert "| `n_joints` | 7 |" in docs and "alpha_rad f32 x n_joints (7)" in docs
+    assert f"**0x{p.SCHEMA_HASH:04X}**" not in docs  # the telemetry layout changed the hash
 
 
 def test_periods_are_shared_constants_outside_the_schema_hash(tmp_path):
@@ -138,7 +140,11 @@ def test_schema_hash_follows_wire_changes_but_not_doc_changes(tmp_path):
         ('count = "n_joints"', 'count = "n_links"', "Telemetry.alpha_rad: count names 'n_links'"),
         ("{telemetry_period_us}", "{telemetry_rate}", "Telemetry: the doc quotes {telemetry_rate}"),
         ("[constants.baud]\nvalue = 57600", "[constants.baud]\nvalue = -1", "constants.baud"),
-        ("max = 1.5, default = 0.5", "default = 0.5", "SetGait.amplitude_rad: give both"),
+        (
+            "max = 1.5, default = 0.5",
+            "default = 0.5",
+            "SetGait.amplitude_rad: give min, max and default",
+        ),
     ],
 )
 def test_definition_errors_name_what_is_wrong_and_where(tmp_path, old, new, message):

@@ -102,12 +102,12 @@ TEST(hello_is_answered_with_the_version) {
 
 TEST(out_of_range_gait_is_refused_and_changes_nothing) {
   Bench b;
-  eelproto::SetGait g = eelproto::default_set_gait();
+  eelproto::SetGait g = eelproto::defaults<eelproto::SetGait>();
   g.amplitude_rad = 2.0f;
   b.send(g);
   CHECK_EQ(b.refusals, 1);
   CHECK_EQ(b.last_refuse_reason, static_cast<uint8_t>(eelproto::RefuseReason::OutOfRange));
-  CHECK_EQ(b.robot.gait().targets().omega_rad_s, eelproto::default_set_gait().omega_rad_s);
+  CHECK_EQ(b.robot.gait().targets().omega_rad_s, eelproto::defaults<eelproto::SetGait>().omega_rad_s);
 }
 
 TEST(nan_offset_is_refused_as_not_finite) {
@@ -139,7 +139,7 @@ TEST(no_valid_frame_for_one_second_enters_failsafe_and_straightens) {
 
 TEST(failsafe_straightening_has_no_jump) {
   Bench b;
-  eelproto::SetGait g = eelproto::default_set_gait();
+  eelproto::SetGait g = eelproto::defaults<eelproto::SetGait>();
   g.amplitude_rad = 1.0f;
   g.amplitude_rate_rad_s = 0.1f;  // slow: straightening must still be at least 1 rad/s
   g.offset_rate_rad_s = 0.0f;
@@ -288,7 +288,7 @@ TEST(pd_gains_from_a_message_drive_the_joint_torques) {
 
 TEST(the_gait_starts_when_start_is_handled_not_at_the_control_update_before) {
   Bench b;  // control updates every 10 ms from 0
-  eelproto::SetGait g = eelproto::default_set_gait();
+  eelproto::SetGait g = eelproto::defaults<eelproto::SetGait>();
   g.omega_rad_s = 3.0f;
   b.send(g);
   b.run(25000);  // Start arrives 5 ms after the update at 20 ms
