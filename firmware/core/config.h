@@ -5,8 +5,8 @@
 
 namespace cfg {
 
-// The joint count and the shared periods come from protocol/eelbot.toml (via protocol_gen.h): change
-// them there and run `python protocol/generate.py`.
+// The joint count and the shared periods come from protocol/eelbot.toml (via protocol_gen.h):
+// change them there and run `python protocol/generate.py`.
 constexpr uint8_t kJoints = eelproto::kNJoints;  // joint 1 (index 0) is the tail joint
 constexpr uint8_t kLinks = kJoints + 1;          // N: head, body modules, tail
 

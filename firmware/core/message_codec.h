@@ -1,6 +1,6 @@
-// The one codec of every message: pack, unpack, validate and defaults walk a message's field table
-// (its each_field() in protocol_gen.h, generated from protocol/eelbot.toml) and encode or decode each
-// field with the wire:: function for its type. Everything inlines to the same straight-line code a
+// The one codec of every message: pack, unpack, validate and defaults walk a message's field
+// table (its each_field() in protocol_gen.h, generated from protocol/eelbot.toml) and encode or
+// decode each field with the wire:: function for its type. Everything inlines to the same straight-line code a
 // hand-written codec per message would be, so the table costs neither flash nor time on the AVR.
 #pragma once
 #include <stdint.h>
@@ -46,7 +46,9 @@ struct RangeCheck {
 struct Defaults {
   template <typename T>
   void operator()(T& /*v*/, uint8_t /*offset*/) {}
-  void operator()(float& v, uint8_t /*offset*/, float /*min*/, float /*max*/, float value) { v = value; }
+  void operator()(float& v, uint8_t /*offset*/, float /*min*/, float /*max*/, float value) {
+    v = value;
+  }
 };
 
 }  // namespace codec

@@ -1,6 +1,6 @@
-// Joint PD law (docs/model.md section 4): u = kp (alpha - phi) + kd (alpha_dot - phi_dot), clamped to
-// +-torque_limit. On the robot the hobby servos close this loop themselves on the position
-// reference; the firmware's own PD drives the simulated plant in the native build.
+// Joint PD law (docs/model.md section 4): u = kp (alpha - phi) + kd (alpha_dot - phi_dot),
+// clamped to +-torque_limit. On the robot the hobby servos close this loop themselves on the
+// position reference; the firmware's own PD drives the simulated plant in the native build.
 #pragma once
 #include <stdint.h>
 

@@ -182,7 +182,9 @@ void Robot::send(const M& m) {
 
 void Robot::ack(const Frame& f) { send(eelproto::Ack{f.msg_id, f.seq}); }
 
-void Robot::refuse(const Frame& f, uint8_t reason) { send(eelproto::Refuse{f.msg_id, f.seq, reason}); }
+void Robot::refuse(const Frame& f, uint8_t reason) {
+  send(eelproto::Refuse{f.msg_id, f.seq, reason});
+}
 
 void Robot::send_version() {
   send(eelproto::Version{cfg::kFirmwareMajor, cfg::kFirmwareMinor, eelproto::kProtocolVersion,

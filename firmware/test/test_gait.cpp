@@ -6,7 +6,8 @@
 namespace {
 constexpr double kPi = 3.14159265358979323846;
 
-// The gait of docs/model.md section 4 in double precision: alpha_j = A (N-j)/(N+1) sin(omega t + (j-1) beta) + gamma.
+// The gait of docs/model.md section 4 in double precision:
+// alpha_j = A (N-j)/(N+1) sin(omega t + (j-1) beta) + gamma.
 double model_alpha(int j0, double t_s, double a, double omega, double beta, double gamma) {
   const double n = cfg::kLinks;
   return a * (n - (j0 + 1)) / (n + 1.0) * sin(omega * t_s + j0 * beta) + gamma;
@@ -45,7 +46,7 @@ TEST(gait_rate_equals_the_derivative_of_the_formula) {
   g.update(1234567);
   const double t = 1.234567;
   for (int j = 0; j < cfg::kJoints; ++j) {
-    const double ratio = (cfg::kLinks - 1.0 - j) / (cfg::kLinks + 1.0);  // (N - j) / (N + 1), j = 1..
+    const double ratio = (cfg::kLinks - 1.0 - j) / (cfg::kLinks + 1.0);  // (N - j) / (N + 1)
     const double want = 0.5f * ratio * 2.0 * cos(2.0 * t + j * static_cast<double>(0.8f));
     CHECK_NEAR(g.alpha_dot_rad_s()[j], want, 1e-5);
   }

@@ -22,7 +22,9 @@ volatile uint16_t g_used_ticks;  // ticks spent on pulses in this frame
 struct ServoMasks {
   uint8_t of_servo[kServos];
   constexpr ServoMasks() : of_servo() {
-    for (uint8_t i = 0; i < kServos; ++i) of_servo[i] = static_cast<uint8_t>(1u << pins::kServoBit[i]);
+    for (uint8_t i = 0; i < kServos; ++i) {
+      of_servo[i] = static_cast<uint8_t>(1u << pins::kServoBit[i]);
+    }
   }
 };
 constexpr ServoMasks g_bit;

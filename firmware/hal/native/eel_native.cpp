@@ -10,7 +10,8 @@ struct EelFw {
   Hal hal;
 };
 
-static_assert(EEL_JOINTS == cfg::kJoints, "eel_native.h must agree with config.h");
+static_assert(EEL_JOINTS == cfg::kJoints,
+              "eel_native.h is stale: run python protocol/generate.py (its EEL_JOINTS is generated)");
 
 extern "C" {
 
