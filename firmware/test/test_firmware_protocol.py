@@ -35,7 +35,7 @@ def test_rendered_files_match_the_definition():
 def outputs_copied_to(tmp_path, gen, monkeypatch):
     """Point the generator at copies of its outputs in tmp_path; return name -> copy."""
     copies = {}
-    for name in ("CPP_OUT", "PY_OUT", "NATIVE_H_OUT", "DOCS_OUT"):
+    for name in ("CPP_OUT", "PY_OUT", "NATIVE_H_OUT", "DOCS_OUT", "PLATFORMIO_OUT"):
         copy = tmp_path / getattr(gen, name).name
         copy.write_text(getattr(gen, name).read_text())
         monkeypatch.setattr(gen, name, copy)
@@ -51,6 +51,7 @@ def outputs_copied_to(tmp_path, gen, monkeypatch):
         ("PY_OUT", "BAUD = 57600", "BAUD = 9600"),
         ("NATIVE_H_OUT", "#define EEL_JOINTS ", "#define EEL_JOINTS 1"),
         ("DOCS_OUT", "| 0x04 | Start |", "| 0x07 | Start |"),
+        ("PLATFORMIO_OUT", "monitor_speed = 57600", "monitor_speed = 115200"),
     ],
 )
 def test_check_fails_when_a_rendered_file_drifts(tmp_path, monkeypatch, capsys, output, old, new):
