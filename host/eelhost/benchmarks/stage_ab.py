@@ -13,7 +13,7 @@ Usage (from the repo root, after ``bash scripts/setup.sh``)::
     .venv/bin/python -m eelhost.benchmarks.stage_ab [--rounds 41] [--steps 1500] NAME=SPEC ...
 
 SPEC is ``[FLAGS][@GENERATOR][%LANES]``: compiler options (default ``-O3 -march=native``), a copy
-of ``eelsim/_batch_codegen.py`` to generate the stage with (default: the working tree's) and the
+of ``eelsim/batch/codegen.py`` to generate the stage with (default: the working tree's) and the
 runs per block (default 16). For example::
 
     python -m eelhost.benchmarks.stage_ab base= mine=@/tmp/my_codegen.py \
@@ -38,7 +38,8 @@ from types import ModuleType
 
 import numpy as np
 
-from eelsim import _batch_c, _batch_codegen, batch
+from eelsim import batch
+from eelsim.batch import c_stage, codegen
 from eelsim.closed_loop import LoopOptions
 from eelsim.robot import load_robot
 from eelsim.scenario import TRAINING_CORNERS, grid_scenario
@@ -46,9 +47,9 @@ from eelsim.scenario import TRAINING_CORNERS, grid_scenario
 N_LINKS = 6
 DT_S = 0.01
 _TUNING = ("-O3", "-march=native")  # the variant's FLAGS replace these of the kernel's C_FLAGS
-_BASE_FLAGS = [f for f in _batch_c.C_FLAGS if f not in _TUNING]
+_BASE_FLAGS = [f for f in c_stage.C_FLAGS if f not in _TUNING]
 
-# whole RK4 steps as the kernel's driver calls the stage (eelsim/_batch_kernel.py), without the
+# whole RK4 steps as the kernel's driver calls the stage (eelsim/batch/kernel_template.py), without the
 # checks: y = x, four stages (rotating sin/cos except every 16th step's first), x = xn
 _DRIVER = r"""
 void bench(double *restrict work, int64_t steps, double dt) {
@@ -72,7 +73,7 @@ void bench(double *restrict work, int64_t steps, double dt) {
 def _load_generator(path: str | None, name: str) -> ModuleType:
     """The generator module at ``path`` (imported as ``name``), or the working tree's."""
     if not path:
-        return _batch_codegen
+        return codegen
     spec = importlib.util.spec_from_file_location(name, path)
     if spec is None or spec.loader is None:
         raise SystemExit(f"{path}: not a Python file")
@@ -88,7 +89,7 @@ def _build(name: str, flags: str, generator: ModuleType, lanes: int, folder: Pat
     if layout.work["y"] != 0:
         raise SystemExit(f"{name}: the driver here assumes the stage state's rows come first")
     source = generator.generate_stage_source(layout)
-    text = _batch_c.c_source(source, ("_stage",), "STAGE")
+    text = c_stage.c_source(source, ("_stage",), "STAGE")
     text += _DRIVER % dict(ns=2 * N_LINKS + 4, lanes=lanes, wx=layout.work["x"],
                            wxn=layout.work["xn"])
     c_file, library = folder / f"{name}.c", folder / f"{name}.so"

@@ -43,8 +43,11 @@ def register_fluid_law(law: FluidLaw) -> FluidLaw:
     Raises
     ------
     ValueError
-        When another law already has that name, or the law's coefficient record does not name it.
+        When the name is not an identifier (it names the law's kernel modules) or is taken by
+        another law, or the law's coefficient record or bounds do not fit it.
     """
+    if not law.name.isidentifier():
+        raise ValueError(f"a fluid law's name must be an identifier, got {law.name!r}")
     if law.name in FLUID_LAWS and FLUID_LAWS[law.name] is not law:
         raise ValueError(f"a fluid law named {law.name!r} is already registered")
     if law.coefficients.law_name != law.name:
