@@ -17,6 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from eelsim.control import wrap_angle
+
 
 @dataclass(frozen=True)
 class CameraModel:
@@ -87,13 +89,11 @@ class MedianFilter:
     def push(self, x_m: float, y_m: float, heading_rad: float) -> np.ndarray:
         """Add a sample and return the filtered (x, y, heading).
 
-        Headings are unwrapped against the previous sample so that the median does not jump
-        across +-pi.
+        Headings are unwrapped against the previous sample (the change taken in (-pi, pi],
+        :func:`eelsim.control.wrap_angle`) so that the median does not jump across +-pi.
         """
         if self._last_heading is not None:
-            heading_rad = self._last_heading + float(
-                np.angle(np.exp(1j * (heading_rad - self._last_heading)))
-            )
+            heading_rad = self._last_heading + float(wrap_angle(heading_rad - self._last_heading))
         self._last_heading = heading_rad
         self._buf.append(np.array([x_m, y_m, heading_rad]))
         return np.median(np.array(self._buf), axis=0)

@@ -132,7 +132,8 @@ def _wrap_angle(a):
     """control.wrap_angle for one angle: a itself in (-pi, pi], else pi - mod(pi - a, 2 pi)."""
     if -math.pi < a <= math.pi:
         return a
-    return math.pi - _np_mod(math.pi - a, 2.0 * math.pi)
+    w = math.pi - _np_mod(math.pi - a, 2.0 * math.pi)
+    return math.pi if w <= -math.pi else w
 
 
 @numba.njit(cache=True)
