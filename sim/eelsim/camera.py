@@ -62,7 +62,10 @@ def quantise_position(position_m: np.ndarray, pixel_m: float) -> np.ndarray:
     return (np.floor(np.asarray(position_m) / pixel_m) + 0.5) * pixel_m
 
 
-def hermite(y0: np.ndarray, dy0: np.ndarray, y1: np.ndarray, dy1: np.ndarray, h: float, s: float):
+def hermite(
+    y0: np.ndarray, dy0: np.ndarray, y1: np.ndarray, dy1: np.ndarray, h: float,
+    s: float | np.ndarray,
+) -> np.ndarray:
     """Cubic Hermite interpolation at fraction ``s`` in [0, 1] of a step of length ``h``."""
     s2, s3 = s * s, s * s * s
     return (

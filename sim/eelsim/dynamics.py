@@ -117,7 +117,7 @@ def joint_angles(theta_rad: ArrayLike) -> FloatArray:
 
 def heading(theta_rad: ArrayLike) -> float:
     """The robot's heading theta_bar, the mean of the link angles."""
-    return float(np.mean(theta_rad))
+    return float(np.mean(np.asarray(theta_rad, dtype=float)))
 
 
 @dataclass(frozen=True)

@@ -433,3 +433,19 @@ def test_runs_with_a_current_or_a_servo_line_are_not_plain(robot):
     assert plain_runs(spec).tolist() == [True, False]
     servo = BatchSpec.build(robot, still, options=LoopOptions(servo_limits=True))
     assert plain_runs(servo).tolist() == [False]
+
+
+def test_the_kernels_segment_test_is_flags_segments_intersect():
+    # the kernel's scalar copy of flags.segments_intersect, on a coarse grid where touching,
+    # collinear and degenerate (zero-length) segments are common
+    from eelsim.batch import DEFAULT_LANES, kernel_module
+    from eelsim.flags import segments_intersect
+
+    k = kernel_module(6, DEFAULT_LANES, "c")
+    rng = np.random.default_rng(4)
+    answers = set()
+    for p1, p2, q1, q2 in rng.integers(0, 4, (3000, 4, 2)).astype(float):
+        expect = segments_intersect(p1, p2, q1, q2)
+        assert k._segments_intersect(*p1, *p2, *q1, *q2) == expect, (p1, p2, q1, q2)
+        answers.add(expect)
+    assert answers == {True, False}

@@ -137,12 +137,12 @@ def test_kernels_camera_step_and_offset_agree_with_the_guidance(kernel, window):
             q = quantise_position(np.array([px[r], py[r]]), pixel)
             pose = guides[r].observe(t, q[0], q[1], float(seen[r]))
             assert np.array_equal(camera.filtered[:, r], pose), (frame, r)
-            assert targets.index[r] == guides[r].target_index
+            assert targets.reached[r] == guides[r].target_index
             arrival = guides[r].arrival_time_s
             assert (np.isnan(targets.arrival[r]) if arrival is None
                     else targets.arrival[r] == arrival)
             if frame % 9 == 0:
-                w = waypoints[r, min(targets.index[r], counts[r] - 1)]
+                w = waypoints[r, min(targets.reached[r], counts[r] - 1)]
                 offset = kernel._heading_offset(pose[0], pose[1], pose[2], w[0], w[1], k_theta)
                 assert offset == guides[r].offset()
     assert sum(g.arrived for g in guides) >= lanes // 2  # the paths did reach their waypoints

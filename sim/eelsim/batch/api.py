@@ -239,7 +239,7 @@ def run_spec(
             numba.set_num_threads(previous)
     return BatchResult(
         sample_steps=steps,
-        sample_times_s=steps * dt,
+        sample_times_s=steps.astype(np.float64) * dt,
         # (asked for sorted unique steps, as estimation does, the rows are already in order)
         states=(out.states if np.array_equal(unique, steps)
                 else out.states[:, inverse.reshape(-1), :]),

@@ -22,10 +22,13 @@ from __future__ import annotations
 
 import ast
 import hashlib
+import logging
 import os
 import shutil
 import subprocess
 from pathlib import Path
+
+logger = logging.getLogger(__name__)
 
 # -O3 with the host's vector units; contraction to FMA as numba's fastmath={"contract"};
 # floor inlines (and the lane loops vectorise) only without trapping-math and errno
@@ -264,6 +267,7 @@ def build(source: str, functions: tuple[str, ...], folder: Path,
     if library.exists():
         return library, symbols
     folder.mkdir(parents=True, exist_ok=True)
+    logger.info("compiling the kernel's C stage with %s into %s", compiler, library)
     # each process writes and compiles its own files, then renames them into place (atomic):
     # concurrent processes never compile half a C file or load half a library
     c_path = folder / f"{stem}.c"

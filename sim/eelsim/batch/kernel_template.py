@@ -448,9 +448,9 @@ def _observe(frame, px, py, heading, alive, run_of, noise, pixel, window, camera
 @numba.njit(cache=True)
 def _aim(r, run, targets, waypoints):
     """Lane r's current waypoint into targets.x/y (NaN once the last one is reached)."""
-    if targets.index[r] < targets.count[r]:
-        targets.x[r] = waypoints[run, targets.index[r], 0]
-        targets.y[r] = waypoints[run, targets.index[r], 1]
+    if targets.reached[r] < targets.n_waypoints[r]:
+        targets.x[r] = waypoints[run, targets.reached[r], 0]
+        targets.y[r] = waypoints[run, targets.reached[r], 1]
     else:
         targets.x[r] = np.nan
         targets.y[r] = np.nan

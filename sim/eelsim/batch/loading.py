@@ -159,6 +159,7 @@ def load_kernel_source(name: str, source: str) -> ModuleType:
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / f"{name}.py"
     if not path.exists() or path.read_text() != source:
+        logger.info("new kernel module text %s: numba compiles it on first use", path)
         tmp = path.with_suffix(f".tmp{os.getpid()}")
         tmp.write_text(source)
         os.replace(tmp, path)  # atomic: concurrent processes never see half a file
@@ -212,7 +213,6 @@ def kernel_module(n_links: int, lanes: int = DEFAULT_LANES, stage: str | None = 
                       RuntimeWarning, stacklevel=2)
         return kernel_module(n_links, lanes, "numba", fluid)
     module = load_kernel_source(f"n{n_links}_l{lanes}_{chosen}_{fluid.name}", source)
-    logger.debug("kernel module %s ready", module.__name__)
     _KERNELS[key] = module
     return module
 

@@ -286,7 +286,7 @@ def _distinct(items: list, n_runs: int) -> tuple[list, IntArray]:
     if len(items) == 1:
         return items, np.zeros(n_runs, dtype=np.int64)
     slot: dict[int, int] = {}  # id -> position among the distinct objects
-    distinct = []
+    distinct: list[Any] = []
     index = np.empty(len(items), dtype=np.int64)
     for i, item in enumerate(items):
         if id(item) not in slot:

@@ -148,21 +148,21 @@ class Targets(NamedTuple):
 
     Attributes
     ----------
-    index : ndarray of int
-        Waypoints reached.
+    reached : ndarray of int
+        Waypoints reached (the index of the current one).
     arrival : ndarray
         Frame time at which the last one was reached (NaN before).
     x, y : ndarray
         The current waypoint (NaN after the last).
     radius : ndarray
         Acceptance radius.
-    count : ndarray of int
+    n_waypoints : ndarray of int
         Number of waypoints.
     """
 
-    index: IntArray
+    reached: IntArray
     arrival: FloatArray
     x: FloatArray
     y: FloatArray
     radius: FloatArray
-    count: IntArray
+    n_waypoints: IntArray
