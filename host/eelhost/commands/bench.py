@@ -95,9 +95,9 @@ def _stage_name(stage: str) -> str:
     """How a stage backend is called in the report (the C compiler's own name and version)."""
     if stage != "c":
         return "numba (LLVM)"
-    from eelsim import _batch_c
+    from eelsim.batch import c_stage
 
-    compiler = _batch_c.find_compiler() or "C"
+    compiler = c_stage.find_compiler() or "C"
     try:
         out = subprocess.run([compiler, "--version"], capture_output=True, text=True, check=False)
         version = out.stdout.splitlines()[0].strip()
@@ -498,7 +498,7 @@ def _driver_only_kernel(batch, n_links: int, lanes: int):
     state stays put (the stub stage only clears the rotation offset), so the runs go their full
     length without a failure. Written beside the real kernel, under its own module name.
     """
-    source = batch._kernel_source(n_links, lanes)
+    source = batch.kernel_source(n_links, lanes)
     generated = source.index("# ---- generated for N")
     stubs = {
         "_stage": (
