@@ -14,9 +14,9 @@ Tolerances, from measurements (hil_tests/README.md):
 import numpy as np
 import pytest
 
-from eelhost import protocol as p
 from eelhost.cosim import CosimOptions, HeldTwinDriver, run_firmware_in_loop, run_lockstep
 from eelhost.radio import RadioModel
+from eelhost.wire import protocol as p
 from eelsim.closed_loop import LoopOptions, simulate_closed_loop
 from eelsim.flags import Failure
 from eelsim.robot import load_robot

@@ -14,9 +14,9 @@ one run. Tolerances (measured figures in hil_tests/README.md):
 import numpy as np
 import pytest
 
-from eelhost import protocol as p
 from eelhost.cosim import CosimOptions, run_firmware_in_loop
 from eelhost.pil import expected_pulse_widths_us, run_processor_in_loop
+from eelhost.wire import protocol as p
 from eelsim.closed_loop import LoopOptions
 from eelsim.robot import load_robot
 from eelsim.scenario import load_scenario

@@ -43,9 +43,9 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from eelhost import protocol
 from eelhost.native_firmware import N_JOINTS, NativeFirmware
 from eelhost.radio import ChannelCounters, RadioChannel, RadioModel
+from eelhost.wire import protocol
 from eelsim.closed_loop import (
     JointDrive,
     LoopOptions,
@@ -146,7 +146,7 @@ class FirmwareRunResult(RunResult):
     torque_nm : ndarray, shape (K, N-1)
         Joint torques applied over each recorded step.
     firmware_state : ndarray of int, shape (K,)
-        The robot's state (:class:`eelhost.protocol.State`) after each tick; -1 where unknown.
+        The robot's state (:class:`eelhost.wire.protocol.State`) after each tick; -1 where unknown.
     sent : list of (int, int, protocol.Message)
         Every frame the host sent: (time, seq, message).
     executed : list of ExecutedCommand

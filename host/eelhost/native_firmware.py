@@ -25,7 +25,7 @@ import numpy as np
 from cffi import FFI
 from numpy.typing import ArrayLike, NDArray
 
-from eelhost import protocol
+from eelhost.wire import protocol
 
 FIRMWARE_DIR = Path(__file__).resolve().parents[2] / "firmware"
 LIBRARY_PATH = FIRMWARE_DIR / "build" / "native" / "libeelfw.so"
@@ -122,7 +122,7 @@ def load_library(path: Path | None = None):
             )
         if lib.eel_schema_hash() != protocol.SCHEMA_HASH:
             raise NativeFirmwareError(
-                f"{target}: schema 0x{lib.eel_schema_hash():04X}, eelhost.protocol has "
+                f"{target}: schema 0x{lib.eel_schema_hash():04X}, eelhost.wire.protocol has "
                 f"0x{protocol.SCHEMA_HASH:04X}; rebuild with `make -C firmware native`"
             )
         if path is None:
@@ -220,7 +220,7 @@ class NativeFirmware:
         Parameters
         ----------
         message : protocol.Message
-            Any message of :mod:`eelhost.protocol`.
+            Any message of :mod:`eelhost.wire.protocol`.
         seq : int
             Its sequence number, 0..255.
         """
@@ -295,7 +295,7 @@ class NativeFirmware:
         -------
         dict
             Keys as in ``EelStatus`` of ``firmware/hal/native/eel_native.h``; ``state`` is a
-            :class:`eelhost.protocol.State`.
+            :class:`eelhost.wire.protocol.State`.
         """
         self._lib.eel_status(self._fw, self._status)
         s = self._status

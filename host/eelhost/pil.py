@@ -30,9 +30,9 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from eelhost import protocol
 from eelhost.cosim import CosimOptions, FirmwareRunResult, run_lockstep
 from eelhost.radio import RadioChannel, RadioModel
+from eelhost.wire import protocol
 from eelsim.robot import Robot
 from eelsim.scenario import Scenario
 

@@ -31,10 +31,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from eelhost import protocol
 from eelhost.link.base import Clock, Link, LinkEvent
 from eelhost.recorder import Recorder
 from eelhost.vision.localise import Localiser
+from eelhost.wire import protocol
 from eelsim.camera import MedianFilter
 from eelsim.control import Gait, heading_offset
 from eelsim.robot import Robot

@@ -8,10 +8,10 @@ import select
 
 import pytest
 
-from eelhost import protocol
 from eelhost.link import Link, LinkURIError, TransportError, open_link, parse_link_uri
 from eelhost.link.replay_transport import ReplayTransport, RxLogWriter, read_rx_log
 from eelhost.link.serial_transport import SerialTransport
+from eelhost.wire import protocol
 
 
 class ManualClock:

@@ -10,10 +10,10 @@ import textwrap
 import numpy as np
 import pytest
 
-from eelhost import protocol
 from eelhost.experiment import DataError, read_experiment
 from eelhost.link.base import LinkEvent
 from eelhost.recorder import Recorder, read_commands_csv
+from eelhost.wire import protocol
 from eelsim.scenario import load_scenario
 
 

@@ -1,7 +1,7 @@
 """The host's link to the robot: a byte transport behind one interface, and the framed link on top.
 
 A :class:`Transport` moves bytes (a serial port, the virtual robot, a replayed log). A
-:class:`Link` turns messages of :mod:`eelhost.protocol` into frames and back: it numbers what it
+:class:`Link` turns messages of :mod:`eelhost.wire.protocol` into frames and back: it numbers what it
 sends, tracks the robot's Acks and Refuses, resends unacknowledged commands, counts bad frames,
 notices a dropped transport and reopens it, and tells listeners (the recorder) about every event.
 
@@ -17,7 +17,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Protocol
 
-from eelhost import protocol
+from eelhost.wire import protocol
 
 __all__ = [
     "Clock",
@@ -130,7 +130,7 @@ class LinkCounters:
     frames_sent, frames_received : int
         Frames written and frames decoded.
     bad_frames : dict
-        Received frames dropped, by :class:`eelhost.protocol.FrameError` kind.
+        Received frames dropped, by :class:`eelhost.wire.protocol.FrameError` kind.
     acks, refuses, resends, lost : int
         Acks and Refuses received, commands sent again, commands given up on.
     not_sent : int

@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import serial
 
-from eelhost import protocol
 from eelhost.link.base import TransportError
+from eelhost.wire import protocol
 
 __all__ = ["SerialTransport"]
 

@@ -18,12 +18,12 @@ import math
 from dataclasses import dataclass
 from urllib.parse import parse_qs, urlsplit
 
-from eelhost import protocol
 from eelhost.link.base import Clock, Link, WallClock
 from eelhost.link.replay_transport import ReplayTransport
 from eelhost.link.serial_transport import SerialTransport
 from eelhost.link.sim_transport import SimTransport, VirtualRobot
 from eelhost.radio import RadioModel
+from eelhost.wire import protocol
 from eelsim.robot import Robot, load_robot
 
 __all__ = ["LinkURI", "LinkURIError", "open_link", "parse_link_uri"]

@@ -1,7 +1,7 @@
 """Framing of the wire protocol: CRC-16, COBS, and frames of header | payload | CRC.
 
-Hand-written and shared by every message set: the generated ``eelhost.protocol`` binds these to its
-schema hash and message table (``encode_frame``, ``decode_frame``, ``FrameReader``). A frame is
+Hand-written and shared by every message set: the generated ``eelhost.wire.protocol`` binds these
+to its schema hash and message table (``encode_frame``, ``decode_frame``, ``FrameReader``). A frame is
 ``COBS(schema_hash u16 | msg_id u8 | seq u8 | payload | crc16 u16)`` followed by a zero byte,
 little-endian, CRC-16/CCITT-FALSE over everything before it.
 """
