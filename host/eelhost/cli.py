@@ -23,7 +23,7 @@ from eelhost.commands import (
     validate,
     vision_bench,
 )
-from eelhost.experiment import DataError
+from eelhost.data.experiments import DataError
 from eelsim.robot import RobotFileError
 from eelsim.scenario import ScenarioError
 from eelsim.timing import TimingError

@@ -282,18 +282,18 @@ def run(args: argparse.Namespace) -> int:
     if args.no_mujoco:
         say("Skipped (--no-mujoco).")
     else:
-        from eelhost import bench_mujoco
+        from eelhost.benchmarks import mujoco_compare
 
         try:
-            bench_mujoco.require_mujoco()
-        except bench_mujoco.MujocoMissing as err:
+            mujoco_compare.require_mujoco()
+        except mujoco_compare.MujocoMissing as err:
             say(f"Skipped: {err}")
         else:
             import mujoco
 
-            roll = bench_mujoco.rollout_speed(robot, args.runs, args.steps, threads)
+            roll = mujoco_compare.rollout_speed(robot, args.runs, args.steps, threads)
             mj_rate = roll.steps_per_s
-            xf = bench_mujoco.morison_xfrc_speed(robot, coeffs, 2, args.steps)
+            xf = mujoco_compare.morison_xfrc_speed(robot, coeffs, 2, args.steps)
             say(
                 f"mujoco {mujoco.__version__}; ellipsoid fluid model, implicitfast, dt = "
                 f"{opts.timing.dt_s} s, PD as position actuator + joint damping; open-loop gait."
@@ -338,8 +338,8 @@ def run(args: argparse.Namespace) -> int:
 def _whole_ga(threads: int) -> list[str]:
     """Run the paper's GA for the bundled dataset's straight runs; report it as markdown lines."""
     from eelhost.commands.common import BUNDLED_DATASET
+    from eelhost.data.experiments import load_dataset
     from eelhost.estimation.pipeline import FitSettings, fit_motion
-    from eelhost.experiment import load_dataset
 
     dataset = load_dataset(BUNDLED_DATASET)
     start = time.perf_counter()

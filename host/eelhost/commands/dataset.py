@@ -7,7 +7,7 @@ import argparse
 from tqdm import tqdm
 
 from eelhost.commands.common import add_robot_options, floats
-from eelhost.virtual_tank import TABLE3, TankSettings, generate_dataset
+from eelhost.data.virtual_tank import TABLE3, TankSettings, generate_dataset
 from eelsim.robot import HydroCoefficients, load_robot
 
 

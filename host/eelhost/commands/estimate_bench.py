@@ -22,11 +22,11 @@ import time
 from pathlib import Path
 
 from eelhost.commands.common import BUNDLED_DATASET, cpu_model
+from eelhost.data.experiments import Dataset, load_dataset
+from eelhost.data.virtual_tank import TABLE3, TankSettings, generate_dataset
 from eelhost.estimation.optimise import NAMES, FitResult
 from eelhost.estimation.pipeline import FitSettings, fit_motion
 from eelhost.estimation.validate import validate
-from eelhost.experiment import Dataset, load_dataset
-from eelhost.virtual_tank import TABLE3, TankSettings, generate_dataset
 
 PAPER_WORST_EX = {"straight": 0.082, "turning": 0.183}
 

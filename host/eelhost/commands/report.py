@@ -8,9 +8,9 @@ from pathlib import Path
 from tqdm import tqdm
 
 from eelhost.commands.common import BUNDLED_DATASET, add_fit_options, fit_settings
+from eelhost.data.experiments import load_dataset
+from eelhost.data.virtual_tank import generate_dataset
 from eelhost.estimation.report import run_report
-from eelhost.experiment import load_dataset
-from eelhost.virtual_tank import generate_dataset
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:

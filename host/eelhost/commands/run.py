@@ -11,12 +11,12 @@ from collections.abc import Iterable
 from pathlib import Path
 
 from eelhost.commands.common import floats
+from eelhost.field.recorder import Recorder
+from eelhost.field.runloop import RunConfig, RunLoop
 from eelhost.link.base import Link
 from eelhost.link.replay_transport import RxLogWriter
 from eelhost.link.sim_transport import SimTransport, VirtualCamera
 from eelhost.link.uri import open_link, parse_link_uri
-from eelhost.recorder import Recorder
-from eelhost.runloop import RunConfig, RunLoop
 from eelhost.vision.calibration import load_calibration
 from eelhost.vision.localise import Localiser
 from eelhost.vision.sources import CameraSource, open_source

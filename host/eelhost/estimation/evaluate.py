@@ -20,13 +20,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from eelhost.data.experiments import Experiment
 from eelhost.estimation.fitness import (
     N_SAMPLES_FIT,
     VELOCITY_WEIGHT,
     sample_times,
     trajectory_error,
 )
-from eelhost.experiment import Experiment
 from eelsim.camera import CameraModel, observation_steps, observed_positions
 from eelsim.closed_loop import LoopOptions, simulate_closed_loop
 from eelsim.flags import Failure, penalty

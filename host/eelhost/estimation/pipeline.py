@@ -17,6 +17,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from eelhost.data.experiments import Dataset, Experiment
 from eelhost.estimation.evaluate import Evaluator
 from eelhost.estimation.optimise import (
     Checkpoint,
@@ -25,7 +26,6 @@ from eelhost.estimation.optimise import (
     fit_ga,
     polish_least_squares,
 )
-from eelhost.experiment import Dataset, Experiment
 from eelsim.robot import HydroCoefficients
 
 METHODS = ("cmaes", "ga", "lsq")

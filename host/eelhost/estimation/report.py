@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from eelhost.data.experiments import Dataset
 from eelhost.estimation.evaluate import ALIGN_S
 from eelhost.estimation.identify import bootstrap, identifiability
 from eelhost.estimation.optimise import NAMES, FitResult
@@ -23,7 +24,6 @@ from eelhost.estimation.pipeline import (
     write_coefficients,
 )
 from eelhost.estimation.validate import ValidationRun, table_csv, table_markdown, validate
-from eelhost.experiment import Dataset
 
 Say = Callable[[str], None]
 

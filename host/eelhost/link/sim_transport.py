@@ -1,11 +1,11 @@
 """The virtual robot: the native firmware driving the twin, behind the link and in front of the camera.
 
 :class:`VirtualRobot` owns a :class:`SimClock`: whenever the host loop waits for a time, the robot
-steps there, one physics step (10 ms) at a time, exactly as :func:`eelhost.cosim.run_lockstep`
-does it: the firmware (:class:`eelhost.cosim.NativeDriver`) reads the bytes the uplink has
+steps there, one physics step (10 ms) at a time, exactly as :func:`eelhost.xil.lockstep.run_lockstep`
+does it: the firmware (:class:`eelhost.xil.lockstep.NativeDriver`) reads the bytes the uplink has
 delivered, ticks with the plant's joint angles and returns its torques and transmitted bytes; the
-plant takes one RK4 step with the torques held (:func:`eelhost.cosim.plant_step`). Bytes travel
-through the radio model (:mod:`eelhost.radio`, an XBee at 57600 baud by default).
+plant takes one RK4 step with the torques held (:func:`eelhost.xil.lockstep.plant_step`). Bytes travel
+through the radio model (:mod:`eelhost.xil.radio`, an XBee at 57600 baud by default).
 
 - :class:`SimTransport` is the host's end of the radio (the :class:`~eelhost.link.base.Transport`
   of ``sim://``); a dropped link (``drops``) both loses the bytes sent in the window, as the radio
@@ -25,11 +25,11 @@ from collections.abc import Iterator
 import numpy as np
 from numpy.typing import NDArray
 
-from eelhost.cosim import NativeDriver, plant_step
 from eelhost.link.base import TransportError
-from eelhost.native_firmware import NativeFirmware
-from eelhost.radio import RadioModel
 from eelhost.vision.synthetic import SyntheticCamera, TruePose
+from eelhost.xil.lockstep import NativeDriver, plant_step
+from eelhost.xil.native_firmware import NativeFirmware
+from eelhost.xil.radio import RadioModel
 from eelsim.dynamics import straight_state
 from eelsim.model import SwimmerModel
 from eelsim.robot import Robot

@@ -22,8 +22,8 @@ from eelhost.link.base import Clock, Link, WallClock
 from eelhost.link.replay_transport import ReplayTransport
 from eelhost.link.serial_transport import SerialTransport
 from eelhost.link.sim_transport import SimTransport, VirtualRobot
-from eelhost.radio import RadioModel
 from eelhost.wire import protocol
+from eelhost.xil.radio import RadioModel
 from eelsim.robot import Robot, load_robot
 
 __all__ = ["LinkURI", "LinkURIError", "open_link", "parse_link_uri"]

@@ -2,7 +2,7 @@
 
 The ELF that would be flashed (``firmware/build/avr/eelbot.elf``) runs in simavr through
 ``firmware/build/tools/libeelavrsim.so`` (``firmware/tools/eel_avrsim.c`` built as a library, loaded
-here with ctypes). One physics step ``[t_us, t_us + dt_us)`` of :func:`eelhost.cosim.run_lockstep`:
+here with ctypes). One physics step ``[t_us, t_us + dt_us)`` of :func:`eelhost.xil.lockstep.run_lockstep`:
 
 1. the joint torques for the step come from the :class:`ServoModel`: each joint's servo holds the
    angle of the last pulse it has received (width -> angle through the firmware's calibration,
@@ -30,9 +30,10 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from eelhost.cosim import CosimOptions, FirmwareRunResult, run_lockstep
-from eelhost.radio import RadioChannel, RadioModel
 from eelhost.wire import protocol
+from eelhost.xil.lockstep import CosimOptions, FirmwareRunResult, run_lockstep
+from eelhost.xil.native_firmware import FIRMWARE_DIR
+from eelhost.xil.radio import RadioChannel, RadioModel
 from eelsim.robot import Robot
 from eelsim.scenario import Scenario
 
@@ -46,7 +47,6 @@ __all__ = [
     "run_processor_in_loop",
 ]
 
-FIRMWARE_DIR = Path(__file__).resolve().parents[2] / "firmware"
 ELF_PATH = FIRMWARE_DIR / "build" / "avr" / "eelbot.elf"
 LIBRARY_PATH = FIRMWARE_DIR / "build" / "tools" / "libeelavrsim.so"
 SERVO_PINS = ("D2", "D3", "D4", "D5", "D6")  # joint 1 (tail) .. joint 5 (head); README wiring
@@ -219,7 +219,7 @@ class ServoModel:
 
 
 class AvrDriver:
-    """The emulated AVR as a :class:`eelhost.cosim.JointDriver`.
+    """The emulated AVR as a :class:`eelhost.xil.lockstep.JointDriver`.
 
     Parameters
     ----------
@@ -293,7 +293,7 @@ class AvrDriver:
 
 @dataclass
 class PilRunResult(FirmwareRunResult):
-    """A run driven by the emulated AVR: :class:`eelhost.cosim.FirmwareRunResult` plus the pins.
+    """A run driven by the emulated AVR: :class:`eelhost.xil.lockstep.FirmwareRunResult` plus the pins.
 
     Attributes
     ----------

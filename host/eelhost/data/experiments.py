@@ -164,7 +164,7 @@ def read_frames_csv(path: str | Path, allow_truncated_tail: bool = False) -> Fra
     ----------
     path : str or Path
     allow_truncated_tail : bool
-        Read a file whose writer was killed mid-line (``eelhost.recorder`` appends a line per
+        Read a file whose writer was killed mid-line (``eelhost.field.recorder`` appends a line per
         frame): a last line without its newline is incomplete, whatever it looks like, and is
         dropped; every complete row is kept. Off by default: a finished file must end cleanly.
 

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from eelhost.experiment import (
+from eelhost.data.experiments import (
     Experiment,
     manifest_text,
     write_experiment,

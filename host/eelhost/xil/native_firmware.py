@@ -27,7 +27,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from eelhost.wire import protocol
 
-FIRMWARE_DIR = Path(__file__).resolve().parents[2] / "firmware"
+FIRMWARE_DIR = Path(__file__).resolve().parents[3] / "firmware"
 LIBRARY_PATH = FIRMWARE_DIR / "build" / "native" / "libeelfw.so"
 HEADER_PATH = FIRMWARE_DIR / "hal" / "native" / "eel_native.h"
 

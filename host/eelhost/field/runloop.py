@@ -31,8 +31,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from eelhost.field.recorder import Recorder
 from eelhost.link.base import Clock, Link, LinkEvent
-from eelhost.recorder import Recorder
 from eelhost.vision.localise import Localiser
 from eelhost.wire import protocol
 from eelsim.camera import MedianFilter

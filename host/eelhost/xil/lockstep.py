@@ -2,9 +2,9 @@
 
 :func:`run_firmware_in_loop` runs the twin's closed loop (:func:`eelsim.closed_loop.
 simulate_closed_loop`) with one change: the joint torques come from the robot's firmware, compiled
-for this PC (:class:`eelhost.native_firmware.NativeFirmware`, the same C++ sources as the AVR
+for this PC (:class:`eelhost.xil.native_firmware.NativeFirmware`, the same C++ sources as the AVR
 image), instead of eelsim's PD law. Everything the host does goes to the firmware as real protocol
-bytes through a radio model (:mod:`eelhost.radio`), and everything the firmware sends comes back
+bytes through a radio model (:mod:`eelhost.xil.radio`), and everything the firmware sends comes back
 the same way.
 
 The loop itself (camera, waypoints, control updates and their delay, failure checks, recording,
@@ -43,9 +43,9 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from eelhost.native_firmware import N_JOINTS, NativeFirmware
-from eelhost.radio import ChannelCounters, RadioChannel, RadioModel
 from eelhost.wire import protocol
+from eelhost.xil.native_firmware import N_JOINTS, NativeFirmware
+from eelhost.xil.radio import ChannelCounters, RadioChannel, RadioModel
 from eelsim.closed_loop import (
     JointDrive,
     LoopOptions,
@@ -260,7 +260,7 @@ class HostLink:
 class JointDriver(Protocol):
     """What turns link bytes and joint measurements into joint torques, one physics step at a time.
 
-    Implemented by :class:`NativeDriver` (the native firmware) and :class:`eelhost.pil.AvrDriver`
+    Implemented by :class:`NativeDriver` (the native firmware) and :class:`eelhost.xil.simavr.AvrDriver`
     (the AVR image in simavr).
     """
 
@@ -656,7 +656,7 @@ def run_firmware_in_loop(
     --------
     >>> from eelsim.robot import load_robot
     >>> from eelsim.scenario import load_scenario
-    >>> from eelhost.radio import RadioModel
+    >>> from eelhost.xil.radio import RadioModel
     >>> res = run_firmware_in_loop(load_robot(), load_scenario("straight"), seed=1,
     ...                            radio=RadioModel.xbee())  # doctest: +SKIP
     """

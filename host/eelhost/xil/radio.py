@@ -1,7 +1,7 @@
 """A model of the serial radio link (XBee) between the host and the robot, byte by byte.
 
-Used by the lockstep co-simulation (:mod:`eelhost.cosim`) and the processor-in-the-loop driver
-(:mod:`eelhost.pil`). Each direction is a :class:`RadioChannel`: bytes handed to it at an integer
+Used by the lockstep co-simulation (:mod:`eelhost.xil.lockstep`) and the processor-in-the-loop driver
+(:mod:`eelhost.xil.simavr`). Each direction is a :class:`RadioChannel`: bytes handed to it at an integer
 microsecond time come out later, in order, at the times the link delivers them.
 
 What is modelled, per direction:

@@ -30,7 +30,7 @@ from typing import Any, TextIO
 
 import numpy as np
 
-from eelhost.experiment import EXPERIMENT_FORMAT, _atomic_write
+from eelhost.data.experiments import EXPERIMENT_FORMAT, _atomic_write
 from eelhost.link.base import LinkEvent
 from eelsim.scenario import Scenario
 
