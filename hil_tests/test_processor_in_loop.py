@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from eelhost.wire import protocol as p
-from eelhost.xil.lockstep import CosimOptions, run_firmware_in_loop
+from eelhost.xil.lockstep import LockstepOptions, run_firmware_in_loop
 from eelhost.xil.simavr import expected_pulse_widths_us, run_processor_in_loop
 from eelsim.closed_loop import LoopOptions
 from eelsim.robot import load_robot
@@ -31,7 +31,7 @@ DISTANCE_TOLERANCE = 0.15
 def straight_runs():
     robot = load_robot()
     scenario = load_scenario("straight").model_copy(update={"duration_s": 5.0})
-    options = CosimOptions(LoopOptions(stop_at_goal=False))
+    options = LockstepOptions(LoopOptions(stop_at_goal=False))
     pil = run_processor_in_loop(robot, scenario, seed=0, options=options)
     native = run_firmware_in_loop(robot, scenario, seed=0, options=options)
     return scenario, pil, native

@@ -67,7 +67,7 @@ def test_recorder_killed_mid_run_leaves_a_readable_experiment(tmp_path) -> None:
         f"""
         import os, signal
         from eelhost.link import open_link
-        from eelhost.link.sim_transport import VirtualCamera
+        from eelhost.xil.virtual_robot import VirtualCamera
         from eelhost.field.recorder import Recorder
         from eelhost.field.runloop import RunConfig, RunLoop
         from eelhost.vision.localise import Localiser

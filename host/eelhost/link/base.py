@@ -5,9 +5,12 @@ A :class:`Transport` moves bytes (a serial port, the virtual robot, a replayed l
 sends, tracks the robot's Acks and Refuses, resends unacknowledged commands, counts bad frames,
 notices a dropped transport and reopens it, and tells listeners (the recorder) about every event.
 
-Time comes from a :class:`Clock` owned by the caller (architecture rule 2): the wall clock for a
-real robot, the simulation clock for the virtual one, so nothing here sleeps or reads the time on
-its own.
+One :class:`Link` serves every transport: the serial port at the tank, the virtual robot of
+``sim://``, a replayed log, and the firmware-in-the-loop runs of :mod:`eelhost.xil.lockstep`.
+
+Time comes from a :class:`Clock` owned by the caller (docs/architecture.md, "one clock owner"):
+the wall clock for a real robot, the simulated clock for the virtual one and for lockstep runs,
+so nothing here sleeps or reads the time on its own.
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Protocol
 
+from eelhost.errors import UserError
 from eelhost.wire import protocol
 
 __all__ = [
@@ -30,8 +34,12 @@ __all__ = [
 ]
 
 
-class TransportError(ConnectionError):
-    """The transport cannot carry bytes right now (a port that went away, a finished replay)."""
+class TransportError(UserError, ConnectionError):
+    """The transport cannot carry bytes right now (a port that went away, a finished replay).
+
+    Inside a run the :class:`Link` handles it (it reconnects); when a link cannot be opened at
+    all it reaches the user, whose port it names.
+    """
 
 
 class Clock(Protocol):
@@ -171,8 +179,8 @@ class Link:
     resend_after_s : float
         A command sent with ``want_ack`` and not acknowledged this long is sent again, under a
         new sequence number (the firmware counts a repeated number as a duplicate).
-    max_attempts : int
-        Attempts before such a command is reported ``lost``.
+    max_attempts : int or None
+        Attempts before such a command is reported ``lost``; None: resend until acknowledged.
     reconnect_every_s : float
         How often to try reopening a dropped transport.
     rx_log : callable, optional
@@ -185,7 +193,7 @@ class Link:
         transport: Transport,
         clock: Clock,
         resend_after_s: float = 0.2,
-        max_attempts: int = 5,
+        max_attempts: int | None = 5,
         reconnect_every_s: float = 0.25,
         rx_log: Callable[[float, bytes], None] | None = None,
     ) -> None:
@@ -263,6 +271,14 @@ class Link:
             return self._answered[seq]
         return "pending" if seq in self._pending else "unknown"
 
+    def pending(self) -> list[protocol.Message]:
+        """The commands sent with ``want_ack`` that are still being resent, oldest first."""
+        return [p.message for p in self._pending.values()]
+
+    def sent_under(self, seq: int) -> protocol.Message | None:
+        """The message last written under a sequence number (None if none was)."""
+        return self._by_seq.get(seq)
+
     # -- receiving -------------------------------------------------------------------------
     def poll(self) -> list[protocol.Message]:
         """Reconnect if needed, read what has arrived, handle Acks, resend what is due.
@@ -329,7 +345,7 @@ class Link:
         for first, p in list(self._pending.items()):
             if now - p.sent_s < self.resend_after_s:
                 continue
-            if p.attempts >= self.max_attempts:
+            if self.max_attempts is not None and p.attempts >= self.max_attempts:
                 del self._pending[first]
                 self._answered[first] = "lost"
                 self.counters.lost += 1

@@ -1,25 +1,34 @@
-"""Firmware in the loop: the robot's firmware drives the twin, in lockstep, on one integer clock.
+"""Lockstep: the robot's firmware and the twin's plant on one integer clock, the host on a Link.
 
-:func:`run_firmware_in_loop` runs the twin's closed loop (:func:`eelsim.closed_loop.
-simulate_closed_loop`) with one change: the joint torques come from the robot's firmware, compiled
-for this PC (:class:`eelhost.xil.native_firmware.NativeFirmware`, the same C++ sources as the AVR
-image), instead of eelsim's PD law. Everything the host does goes to the firmware as real protocol
-bytes through a radio model (:mod:`eelhost.xil.radio`), and everything the firmware sends comes back
-the same way.
+One stepper, :class:`Lockstep`, is the robot's side of every lockstep simulation: once per
+physics step of ``dt_us`` (10,000 us) at ``t_us = k * dt_us`` its :class:`~eelhost.xil.drivers.
+JointDriver` (the native firmware, the AVR image in simavr, or the twin's laws held) is fed the
+bytes the uplink of a radio model (:mod:`eelhost.xil.radio`) has delivered, ticks once with the
+plant's joint angles and rates, and returns the torques held over the step; what it transmits goes
+into the downlink. Two loops drive it:
 
-The loop itself (camera, waypoints, control updates and their delay, failure checks, recording,
-stopping rules) is the twin's; :class:`LinkedJoints` is the :class:`eelsim.closed_loop.
-JointController` that takes the joints' place. One physics step of ``dt_us`` (10,000 us) at
-``t_us = k * dt_us``, in this order:
+- :func:`run_lockstep` (and :func:`run_firmware_in_loop`): the twin's closed loop
+  (:func:`eelsim.closed_loop.simulate_closed_loop`) with the joint torques from the driver;
+- :class:`eelhost.xil.virtual_robot.VirtualRobot`: the robot behind ``sim://``, stepped whenever
+  the host's clock moves, the plant advanced by :func:`plant_step`.
 
-1. the host reads the bytes the downlink has delivered by ``t_us`` (Acks, Telemetry) and resends
-   any configuration command not acknowledged after ``resend_after_us``; it sends Start again if
-   the robot reports FAILSAFE while the host wants it running (``restart_on_failsafe``);
+On the host's side there is one session, :class:`eelhost.link.base.Link`, as at the tank: here
+over :class:`eelhost.link.sim_transport.SimTransport` (the host's end of the radio channels),
+timed by a :class:`SimClock`.
+
+In :func:`run_lockstep` the loop itself (camera, waypoints, control updates and their delay,
+failure checks, recording, stopping rules) is the twin's; :class:`LinkedJoints` is the
+:class:`eelsim.closed_loop.JointController` that takes the joints' place. One physics step, in
+this order:
+
+1. the host's clock moves to ``t_us``; the link reads the bytes the downlink has delivered (Acks,
+   Telemetry) and resends any configuration command not acknowledged after ``resend_after_us``;
+   the host sends Start again if the robot reports FAILSAFE while it wants it running
+   (``restart_on_failsafe``);
 2. when the loop hands over a heading offset (computed at the twin's control updates from the
    filtered camera pose, exactly as in the twin, and due now that the extra delay has passed), the
    host sends it in a SetOffset frame (which also keeps the firmware's link watchdog fed);
-3. the firmware is fed the bytes the uplink has delivered by ``t_us``, ticks once at ``t_us`` with
-   the plant's joint angles and rates (float32), and returns its references and PD torques;
+3. the driver ticks once at ``t_us`` (the :class:`Lockstep` step above);
 4. the loop records the state and checks it for failures as in the twin;
 5. RK4 advances the plant by one step with those torques held constant (a zero-order hold, as a
    firmware that runs its PD once per control update applies them); camera frames falling in the
@@ -31,21 +40,27 @@ SetOffset and Start. Over an ideal link (``radio=None``) these arrive before the
 gait's phase starts at 0 with the twin's, and the only differences from the twin are float32
 arithmetic and the torque hold; see ``hil_tests/README.md`` for the measured size of both.
 
-There are no threads, sleeps or wall clocks: the same seed gives the same run, byte for byte.
+There are no threads, sleeps or wall clocks (unless a :class:`SimClock` is asked to keep pace
+with the wall clock): the same seed gives the same run, byte for byte.
 """
 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, fields
-from typing import Protocol
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from eelhost.errors import UserError
+from eelhost.link.base import Link, LinkEvent
+from eelhost.link.sim_transport import SimTransport
 from eelhost.wire import protocol
+from eelhost.xil.drivers import JointDriver, NativeDriver
 from eelhost.xil.native_firmware import N_JOINTS, NativeFirmware
-from eelhost.xil.radio import ChannelCounters, RadioChannel, RadioModel
+from eelhost.xil.radio import ChannelCounters, RadioModel
 from eelsim.closed_loop import (
     JointDrive,
     LoopOptions,
@@ -54,33 +69,165 @@ from eelsim.closed_loop import (
     servo_limited,
     simulate_closed_loop,
 )
-from eelsim.control import Gait, gait_reference, joint_pd_torque
 from eelsim.integrate import rk4_step
 from eelsim.model import SwimmerModel
 from eelsim.robot import Robot
 from eelsim.scenario import Scenario
 
 __all__ = [
-    "CosimOptions",
+    "DT_US",
     "ExecutedCommand",
     "FirmwareRunResult",
-    "HeldTwinDriver",
-    "HostLink",
-    "JointDriver",
     "LinkedJoints",
-    "NativeDriver",
-    "run_firmware_in_loop",
+    "Lockstep",
+    "LockstepError",
+    "LockstepOptions",
+    "RobotTick",
+    "SimClock",
     "plant_step",
+    "run_firmware_in_loop",
     "run_lockstep",
 ]
 
 FloatArray = NDArray[np.float64]
+DT_US = 10_000  # the twin's physics step
 # SetGains takes torque limits up to 10 N m; the twin's PD has no limit unless servo limits are on.
 NO_TORQUE_LIMIT_NM = 10.0
 
 
+class LockstepError(UserError, ValueError):
+    """A lockstep run that cannot be set up (a robot the firmware cannot drive, a bad step)."""
+
+
+class SimClock:
+    """Simulated time for the host's :class:`~eelhost.link.base.Link`; waiting on it steps the robot.
+
+    Parameters
+    ----------
+    advance : callable, optional
+        ``advance(t_us)`` runs the simulation up to ``t_us`` whenever :meth:`wait_until` moves the
+        clock forward (the virtual robot); without it the clock is only set (a loop that owns the
+        steps, as :func:`run_lockstep`).
+    speed : float
+        Simulated seconds per wall second; 0 for as fast as possible.
+    """
+
+    def __init__(self, advance: Callable[[int], None] | None = None, speed: float = 0.0) -> None:
+        if not (speed >= 0 and np.isfinite(speed)):
+            raise LockstepError(f"speed must be finite and >= 0, got {speed}")
+        self.speed = speed
+        self._advance = advance
+        self._t_s = 0.0
+        self._wall0 = time.monotonic()
+
+    def now(self) -> float:
+        """Simulated time, s."""
+        return self._t_s
+
+    def now_us(self) -> int:
+        """Simulated time, us (rounded)."""
+        return round(self._t_s * 1e6)
+
+    def wait_until(self, t_s: float) -> None:
+        """Step the simulation to ``t_s`` (and, with a speed, keep pace with the wall clock)."""
+        if t_s <= self._t_s:
+            return
+        if self._advance is not None:
+            self._advance(round(t_s * 1e6))
+        self._t_s = t_s
+        if self.speed > 0:
+            lag = self._wall0 + t_s / self.speed - time.monotonic()
+            if lag > 0:
+                time.sleep(lag)
+
+
 @dataclass(frozen=True)
-class CosimOptions:
+class RobotTick:
+    """What the robot's side did in one physics step.
+
+    Attributes
+    ----------
+    t_us : int
+        Start of the step.
+    torque_nm : ndarray, shape (N-1,)
+        Joint torques held over the step.
+    alpha_rad : ndarray, shape (N-1,)
+        The joint references in force at ``t_us``.
+    phi_dot_rad_s : ndarray, shape (N-1,)
+        The plant's joint rates the driver was given.
+    """
+
+    t_us: int
+    torque_nm: FloatArray
+    alpha_rad: FloatArray
+    phi_dot_rad_s: FloatArray
+
+
+class Lockstep:
+    """The robot's side of a lockstep simulation: a driver behind a radio, ticked once per step.
+
+    Parameters
+    ----------
+    driver : JointDriver
+        The robot: native firmware, emulated AVR, or the twin's laws held.
+    radio : RadioModel
+        The link, both directions.
+    seed : int
+        Seed of the radio's loss and corruption (see :meth:`RadioModel.channels`).
+    n_links : int
+        Number of links N of the plant.
+    dt_us : int
+        Physics step; step k starts at ``k * dt_us``.
+
+    Attributes
+    ----------
+    uplink, downlink : RadioChannel
+        Host -> robot and robot -> host.
+    on_transmit : callable or None
+        ``on_transmit(t_us, data)`` sees every chunk the robot transmits, before the radio.
+    """
+
+    def __init__(
+        self, driver: JointDriver, radio: RadioModel, seed: int, n_links: int, dt_us: int = DT_US
+    ) -> None:
+        self.driver = driver
+        self.n_links = n_links
+        self.dt_us = dt_us
+        self.uplink, self.downlink = radio.channels(seed)
+        self.on_transmit: Callable[[int, bytes], None] | None = None
+
+    def tick(self, step: int, state: FloatArray) -> RobotTick:
+        """Tick the driver at the start of physics step ``step`` with the plant in ``state``.
+
+        Parameters
+        ----------
+        step : int
+            Index of the step (``t_us = step * dt_us``).
+        state : ndarray, shape (2 N + 4,)
+            The plant's state at ``t_us``.
+
+        Returns
+        -------
+        RobotTick
+        """
+        n = self.n_links
+        t_us = step * self.dt_us
+        phi = np.diff(state[:n])
+        phi_dot = np.diff(state[n + 2 : 2 * n + 2])
+        torque, alpha, tx = self.driver.step(t_us, self.dt_us, self.uplink, phi, phi_dot)
+        for t_tx, data in tx:
+            self.downlink.send(t_tx, data)
+            if self.on_transmit is not None:
+                self.on_transmit(t_tx, data)
+        return RobotTick(t_us, torque, alpha, phi_dot)
+
+    def host_transport(self, clock: SimClock) -> SimTransport:
+        """The host's end of this radio, stamped by ``clock``."""
+        return SimTransport(self.uplink, self.downlink, clock.now_us)
+
+
+@dataclass(frozen=True)
+class LockstepOptions:
     """How a firmware-in-the-loop run is done, besides the robot, the task and the link.
 
     Attributes
@@ -97,7 +244,8 @@ class CosimOptions:
         The firmware's control period: 0 runs a control update on every tick (the lockstep mode),
         10000 as on the robot (the same thing with ticks every 10 ms).
     host_silent_after_us : int or None
-        The host stops sending anything from this time on (a host that hangs), or never.
+        The host stops from this time on, neither sending nor reading (a host that hangs), or
+        never.
     """
 
     loop: LoopOptions = field(default_factory=LoopOptions)
@@ -172,227 +320,11 @@ class FirmwareRunResult(RunResult):
     executed: list[ExecutedCommand] = field(default_factory=list)
     refused: list[tuple[int, protocol.Refuse]] = field(default_factory=list)
     telemetry: list[tuple[int, protocol.Telemetry]] = field(default_factory=list)
-    firmware_counters: dict = field(default_factory=dict)
-    host_bad_frames: dict = field(default_factory=dict)
+    firmware_counters: dict[str, Any] = field(default_factory=dict)
+    host_bad_frames: dict[str, int] = field(default_factory=dict)
     uplink: ChannelCounters = field(default_factory=ChannelCounters)
     downlink: ChannelCounters = field(default_factory=ChannelCounters)
     cpu_s: float = 0.0
-
-
-class HostLink:
-    """The host's end of the link: numbers and sends frames, reads the robot's frames.
-
-    Parameters
-    ----------
-    uplink : RadioChannel
-        Host -> robot.
-    resend_after_us : int
-        Resend unacknowledged configuration commands after this long.
-    """
-
-    CONFIG = (protocol.MsgId.SET_GAINS, protocol.MsgId.SET_GAIT, protocol.MsgId.START)
-
-    def __init__(self, uplink: RadioChannel, resend_after_us: int) -> None:
-        self.uplink = uplink
-        self.resend_after_us = resend_after_us
-        self.sent: list[tuple[int, int, protocol.Message]] = []
-        self.telemetry: list[tuple[int, protocol.Telemetry]] = []
-        self.acked: set[int] = set()  # seq numbers acknowledged
-        self._seq = 0
-        self._waiting: dict[int, tuple[int, int, protocol.Message]] = {}  # msg_id -> (t, seq, msg)
-        self._reader = protocol.FrameReader()
-        self._now = 0
-        self.silent_after_us: int | None = None
-
-    def send(self, t_us: int, message: protocol.Message) -> int:
-        """Send a message at ``t_us``; returns its sequence number (-1 when the host is silent)."""
-        if self.silent_after_us is not None and t_us >= self.silent_after_us:
-            return -1
-        seq = self._seq
-        self._seq = (self._seq + 1) % 256
-        self.uplink.send(t_us, protocol.encode_frame(message, seq))
-        self.sent.append((t_us, seq, message))
-        if message.MSG_ID in self.CONFIG:
-            self._waiting[message.MSG_ID] = (t_us, seq, message)
-        return seq
-
-    def receive(self, data: bytes) -> None:
-        """Read bytes from the downlink (telemetry is stamped with the last ``service`` time)."""
-        for _, msg in self._reader.feed(data):
-            if isinstance(msg, protocol.Ack):
-                self.acked.add(msg.seq)
-                waiting = self._waiting.get(msg.msg_id)
-                if waiting is not None and waiting[1] == msg.seq:
-                    del self._waiting[msg.msg_id]
-            elif isinstance(msg, protocol.Telemetry):
-                self.telemetry.append((self._now, msg))
-
-    def service(self, t_us: int, data: bytes, restart_on_failsafe: bool) -> None:
-        """Read the downlink, then resend what needs it.
-
-        Parameters
-        ----------
-        t_us : int
-            Now.
-        data : bytes
-            Bytes the downlink delivered since the last call.
-        restart_on_failsafe : bool
-            Send Start when new telemetry reports FAILSAFE.
-        """
-        self._now = t_us
-        before = len(self.telemetry)
-        self.receive(data)
-        for msg_id in self.CONFIG:  # in this order: gains and gait before Start
-            waiting = self._waiting.get(msg_id)
-            if waiting is not None and t_us - waiting[0] >= self.resend_after_us:
-                self.send(t_us, waiting[2])
-        if restart_on_failsafe and protocol.MsgId.START not in self._waiting:
-            fresh = self.telemetry[before:]
-            if fresh and fresh[-1][1].state == protocol.State.FAILSAFE:
-                self.send(t_us, protocol.Start())
-
-    @property
-    def bad_frames(self) -> dict[str, int]:
-        """Frames from the robot that failed to decode, by kind."""
-        return dict(self._reader.bad)
-
-
-class JointDriver(Protocol):
-    """What turns link bytes and joint measurements into joint torques, one physics step at a time.
-
-    Implemented by :class:`NativeDriver` (the native firmware) and :class:`eelhost.xil.simavr.AvrDriver`
-    (the AVR image in simavr).
-    """
-
-    def step(
-        self,
-        t_us: int,
-        dt_us: int,
-        uplink: RadioChannel,
-        phi_rad: FloatArray,
-        phi_dot_rad_s: FloatArray,
-    ) -> tuple[FloatArray, FloatArray, list[tuple[int, bytes]]]:
-        """Advance the robot's side over ``[t_us, t_us + dt_us)``.
-
-        Parameters
-        ----------
-        t_us, dt_us : int
-            Start and length of the physics step.
-        uplink : RadioChannel
-            Bytes from the host; take what has arrived by the time the robot reads it.
-        phi_rad, phi_dot_rad_s : ndarray, shape (N-1,)
-            The plant's joint angles and rates at ``t_us``.
-
-        Returns
-        -------
-        torque_nm : ndarray, shape (N-1,)
-            Joint torques held over the step.
-        alpha_rad : ndarray, shape (N-1,)
-            The joint references in force at ``t_us``.
-        tx : list of (int, bytes)
-            What the robot transmitted during the step, with the times.
-        """
-        ...
-
-    def observe(self) -> tuple[int, float]:
-        """The robot's state after the step (-1 when unknown) and the offset it holds, rad."""
-        ...
-
-    def counters(self) -> dict:
-        """The robot's link counters at the end of the run."""
-        ...
-
-
-class NativeDriver:
-    """The native firmware as a :class:`JointDriver`: feed, tick at ``t_us``, take.
-
-    Parameters
-    ----------
-    firmware : NativeFirmware
-        A firmware instance booted at ``t_us = 0``.
-    torque_hook : callable, optional
-        ``torque_hook(torque_nm, phi_dot_rad_s) -> torque_nm`` applied to the firmware's torques
-        (the servo torque-speed limit).
-    """
-
-    def __init__(self, firmware: NativeFirmware, torque_hook=None) -> None:
-        self.firmware = firmware
-        self._hook = torque_hook
-
-    def step(self, t_us, dt_us, uplink, phi_rad, phi_dot_rad_s):  # noqa: D102 (see JointDriver)
-        data = uplink.deliver_bytes(t_us)
-        if data:
-            self.firmware.feed(data)
-        out = self.firmware.tick(t_us, phi_rad, phi_dot_rad_s)
-        torque = out.torque_nm.astype(np.float64)
-        if self._hook is not None:
-            torque = self._hook(torque, phi_dot_rad_s)
-        tx = self.firmware.take()
-        return torque, out.alpha_rad.astype(np.float64), [(t_us, tx)] if tx else []
-
-    def observe(self) -> tuple[int, float]:  # noqa: D102 (see JointDriver)
-        s = self.firmware.status()
-        return int(s["state"]), float(s["offset_rad"])
-
-    def counters(self) -> dict:  # noqa: D102 (see JointDriver)
-        s = self.firmware.status()
-        s["state"] = int(s["state"])
-        return s
-
-
-class HeldTwinDriver:
-    """The twin's own control laws in float64, evaluated once per step and held (a reference).
-
-    It reads the same frames as the firmware (SetGains, SetGait, SetOffset, Start, Stop; no slew
-    limits, no failsafe) and computes :func:`eelsim.control.gait_reference` and
-    :func:`eelsim.control.joint_pd_torque` in float64 at the start of each step. Comparing the twin
-    with this driver isolates the effect of the torque hold; comparing this driver with the
-    firmware isolates float32.
-
-    Parameters
-    ----------
-    n_links : int
-        Number of links N.
-    limit_rad : float
-        Clamp of the joint references.
-    """
-
-    def __init__(self, n_links: int, limit_rad: float) -> None:
-        self._n = n_links
-        self._limit = limit_rad
-        self._reader = protocol.FrameReader()
-        self._gait = Gait(0.0, 0.0, 0.0)
-        self._kp = self._kd = 0.0
-        self._offset = 0.0
-        self._start_us: int | None = None
-
-    def step(self, t_us, dt_us, uplink, phi_rad, phi_dot_rad_s):  # noqa: D102 (see JointDriver)
-        for _, msg in self._reader.feed(uplink.deliver_bytes(t_us)):
-            if isinstance(msg, protocol.SetGains):
-                self._kp, self._kd = msg.kp_nm_per_rad, msg.kd_nms_per_rad
-            elif isinstance(msg, protocol.SetGait):
-                self._gait = Gait(msg.amplitude_rad, msg.omega_rad_s, msg.beta_rad)
-            elif isinstance(msg, protocol.SetOffset):
-                self._offset = msg.offset_rad
-            elif isinstance(msg, protocol.Start) and self._start_us is None:
-                self._start_us = t_us
-            elif isinstance(msg, protocol.Stop):
-                self._start_us = None
-        if self._start_us is None:
-            alpha = alpha_dot = np.zeros(self._n - 1)
-        else:
-            t_s = (t_us - self._start_us) * 1e-6
-            alpha, alpha_dot = gait_reference(t_s, self._gait, self._offset, self._n)
-            alpha = np.clip(alpha, -self._limit, self._limit)
-        u = joint_pd_torque(alpha, alpha_dot, phi_rad, phi_dot_rad_s, self._kp, self._kd)
-        return u, alpha, []
-
-    def observe(self) -> tuple[int, float]:  # noqa: D102 (see JointDriver)
-        running = self._start_us is not None
-        return int(protocol.State.RUNNING if running else protocol.State.IDLE), self._offset
-
-    def counters(self) -> dict:  # noqa: D102 (see JointDriver)
-        return {}
 
 
 def plant_step(
@@ -405,8 +337,8 @@ def plant_step(
 ) -> FloatArray:
     """Advance the twin's plant by one RK4 step with the joint torques held (a zero-order hold).
 
-    The step :func:`run_lockstep` takes, for callers that own their loop (the virtual robot of
-    ``eelhost.link.sim_transport``).
+    The step the twin's closed loop takes in :func:`run_lockstep`, for callers that own their loop
+    (the virtual robot, :class:`eelhost.xil.virtual_robot.VirtualRobot`).
 
     Parameters
     ----------
@@ -446,18 +378,20 @@ def plant_step(
 def _dt_us(options: LoopOptions) -> int:
     dt_us = round(options.timing.dt_s * 1e6)
     if dt_us <= 0 or abs(dt_us * 1e-6 - options.timing.dt_s) > 1e-12:
-        raise ValueError(f"physics step {options.timing.dt_s} s is not a whole number of us")
+        raise LockstepError(f"physics step {options.timing.dt_s} s is not a whole number of us")
     return dt_us
 
 
 class LinkedJoints:
-    """A robot-side driver behind the host and a radio link, as the twin loop's joints.
+    """A robot-side driver behind the host's link and a radio, as the twin loop's joints.
 
     The :class:`eelsim.closed_loop.JointController` of :func:`run_lockstep`: each physics step the
-    host services the link and sends its frames (configuration at step 0, then every offset the
-    loop hands over as a SetOffset), the driver ticks once with the plant's joint angles, and its
-    torques are held over the step. It keeps what the run needs besides the twin's records: the
-    torques, the robot's state, the commands the robot executed or refused.
+    host's clock moves to the step, its :class:`~eelhost.link.base.Link` polls (reading Acks and
+    Telemetry, resending what is due) and sends its frames (configuration at step 0, then every
+    offset the loop hands over as a SetOffset), the :class:`Lockstep` ticks once with the plant's
+    joint angles, and the driver's torques are held over the step. It keeps what the run needs
+    besides the twin's records: the torques, the robot's state, what the host sent and received,
+    the commands the robot executed or refused.
 
     Parameters
     ----------
@@ -465,15 +399,13 @@ class LinkedJoints:
         Its k_p, k_d go out with SetGains; its servo figures limit the torques when asked.
     scenario : Scenario
         Its gait goes out with SetGait (slew rates 0).
-    driver : JointDriver
+    lockstep : Lockstep
         The robot's side.
-    host : HostLink
-        The host's end of the link (its uplink carries the frames to the driver).
-    downlink : RadioChannel
-        Robot -> host.
-    dt_us : int
-        Physics step, us (step k starts at ``k * dt_us``).
-    options : CosimOptions
+    link : Link
+        The host's session, opened, over ``lockstep``'s radio and timed by ``clock``.
+    clock : SimClock
+        The host's clock (moved to each step's start).
+    options : LockstepOptions
         Host options and the loop's servo-limit switch.
     """
 
@@ -481,81 +413,96 @@ class LinkedJoints:
         self,
         robot: Robot,
         scenario: Scenario,
-        driver: JointDriver,
-        host: HostLink,
-        downlink: RadioChannel,
-        dt_us: int,
-        options: CosimOptions,
+        lockstep: Lockstep,
+        link: Link,
+        clock: SimClock,
+        options: LockstepOptions,
     ) -> None:
-        self.driver = driver
-        self.host = host
-        self.downlink = downlink
-        self.dt_us = dt_us
+        self.lockstep = lockstep
+        self.link = link
+        self.clock = clock
         self._robot = robot
         self._gait = scenario.gait
-        self._restart_on_failsafe = options.restart_on_failsafe
-        self._servo_limits = options.loop.servo_limits
+        self._options = options
         self.torque_nm: list[FloatArray] = []
         self.firmware_state: list[int] = []
+        self.sent: list[tuple[int, int, protocol.Message]] = []
+        self.telemetry: list[tuple[int, protocol.Telemetry]] = []
         self.executed: list[ExecutedCommand] = []
         self.refused: list[tuple[int, protocol.Refuse]] = []
         self._raw_reader = protocol.FrameReader()  # the robot's UART before the radio
-        self._last_by_seq: dict[int, protocol.Message] = {}
-        self._n_sent = 0
+        link.listeners.append(self._on_link_event)
+        lockstep.on_transmit = self._on_transmit
+
+    def _on_link_event(self, event: LinkEvent) -> None:
+        if event.kind in ("sent", "resent") and event.message is not None:
+            self.sent.append((round(event.t_s * 1e6), event.seq, event.message))
+
+    def _on_transmit(self, t_us: int, data: bytes) -> None:
+        for _, msg in self._raw_reader.feed(data):
+            if isinstance(msg, protocol.Ack):
+                sent = self.link.sent_under(msg.seq)
+                self.executed.append(ExecutedCommand(t_us, msg.seq, msg.msg_id, sent))
+            elif isinstance(msg, protocol.Refuse):
+                self.refused.append((t_us, msg))
 
     def _send_configuration(self) -> None:
         joints = self._robot.joints
-        torque_limit = joints.servo_max_torque_nm if self._servo_limits else NO_TORQUE_LIMIT_NM
+        servo_limits = self._options.loop.servo_limits
+        torque_limit = joints.servo_max_torque_nm if servo_limits else NO_TORQUE_LIMIT_NM
         gait = self._gait
-        self.host.send(0, protocol.Hello())
-        self.host.send(
-            0, protocol.SetGains(joints.kp_nm_per_rad, joints.kd_nms_per_rad, torque_limit)
+        self.link.send(protocol.Hello())
+        self.link.send(
+            protocol.SetGains(joints.kp_nm_per_rad, joints.kd_nms_per_rad, torque_limit),
+            want_ack=True,
         )
-        self.host.send(
-            0, protocol.SetGait(gait.amplitude_rad, gait.omega_rad_s, gait.beta_rad, 0, 0, 0)
+        self.link.send(
+            protocol.SetGait(gait.amplitude_rad, gait.omega_rad_s, gait.beta_rad, 0, 0, 0),
+            want_ack=True,
         )
+
+    def _service(self, t_us: int) -> None:
+        """Read the link (it resends what is due), and restart a robot that fell into FAILSAFE."""
+        fresh = [m for m in self.link.poll() if isinstance(m, protocol.Telemetry)]
+        self.telemetry.extend((t_us, m) for m in fresh)
+        if (
+            self._options.restart_on_failsafe
+            and fresh
+            and fresh[-1].state == protocol.State.FAILSAFE
+            and not any(isinstance(m, protocol.Start) for m in self.link.pending())
+        ):
+            self.link.send(protocol.Start(), want_ack=True)
 
     def on_step(
         self, step: int, t_s: float, state: FloatArray, offset_command: float | None
     ) -> JointDrive:
         """See :meth:`eelsim.closed_loop.JointController.on_step`."""
-        t_us = step * self.dt_us
-        host = self.host
-        host.service(t_us, self.downlink.deliver_bytes(t_us), self._restart_on_failsafe)
-        if step == 0:
-            self._send_configuration()
-        if offset_command is not None:
-            # SetOffset takes [-1, 1] rad; the twin's k_theta * pi stays inside for k < 0.32.
-            host.send(t_us, protocol.SetOffset(float(np.clip(offset_command, -1.0, 1.0))))
-        if step == 0:
-            host.send(0, protocol.Start())  # after the first offset, so it starts with it
-        for _, seq, msg in host.sent[self._n_sent :]:
-            self._last_by_seq[seq] = msg
-        self._n_sent = len(host.sent)
+        t_us = step * self.lockstep.dt_us
+        silent_after = self._options.host_silent_after_us
+        if silent_after is None or t_us < silent_after:
+            self.clock.wait_until(t_us * 1e-6)
+            self._service(t_us)
+            if step == 0:
+                self._send_configuration()
+            if offset_command is not None:
+                # SetOffset takes [-1, 1] rad; the twin's k_theta * pi stays inside for k < 0.32.
+                self.link.send(protocol.SetOffset(float(np.clip(offset_command, -1.0, 1.0))))
+            if step == 0:
+                # after the first offset, so that the gait starts with it
+                self.link.send(protocol.Start(), want_ack=True)
 
-        n = self._robot.n_links
-        phi = np.diff(state[:n])
-        phi_dot = np.diff(state[n + 2 : 2 * n + 2])
-        torque, alpha, tx = self.driver.step(t_us, self.dt_us, host.uplink, phi, phi_dot)
-        for t_tx, data in tx:
-            self.downlink.send(t_tx, data)
-            for _, msg in self._raw_reader.feed(data):
-                if isinstance(msg, protocol.Ack):
-                    sent = self._last_by_seq.get(msg.seq)
-                    self.executed.append(ExecutedCommand(t_tx, msg.seq, msg.msg_id, sent))
-                elif isinstance(msg, protocol.Refuse):
-                    self.refused.append((t_tx, msg))
-        robot_state, offset = self.driver.observe()
-        self.torque_nm.append(torque)
+        tick = self.lockstep.tick(step, state)
+        robot_state, offset = self.lockstep.driver.observe()
+        self.torque_nm.append(tick.torque_nm)
         self.firmware_state.append(robot_state)
 
-        held = np.asarray(torque, dtype=float)
-        if self._servo_limits:
+        held = np.asarray(tick.torque_nm, dtype=float)
+        if self._options.loop.servo_limits:
             joints = self._robot.joints
             held = servo_limited(
-                held, phi_dot, joints.servo_max_torque_nm, joints.servo_max_speed_rad_s
+                held, tick.phi_dot_rad_s, joints.servo_max_torque_nm, joints.servo_max_speed_rad_s
             )
-        return JointDrive(held, alpha, offset)
+        return JointDrive(held, tick.alpha_rad, offset)
 
 
 def run_lockstep(
@@ -564,7 +511,7 @@ def run_lockstep(
     driver: JointDriver,
     seed: int = 0,
     radio: RadioModel | None = None,
-    options: CosimOptions | None = None,
+    options: LockstepOptions | None = None,
 ) -> FirmwareRunResult:
     """Run the twin's closed loop with the joint torques from ``driver`` (any robot-side model).
 
@@ -575,33 +522,45 @@ def run_lockstep(
     scenario : Scenario
         Gait, waypoints, current, duration, start pose.
     driver : JointDriver
-        The robot's side: native firmware, emulated AVR.
+        The robot's side: native firmware, emulated AVR, the twin's laws held.
     seed : int
         Seed of the twin's period jitter and heading noise (drawn exactly as the twin draws them)
         and, through separate streams, of the radio's loss and corruption.
     radio : RadioModel, optional
         The link, both directions; ``None`` is an ideal link.
-    options : CosimOptions, optional
+    options : LockstepOptions, optional
         Loop, host and firmware options.
 
     Returns
     -------
     FirmwareRunResult
         Never raises for a run that goes wrong: failures come back as flags, as in the twin.
+
+    Raises
+    ------
+    LockstepError
+        When the robot's joint count is not the firmware's, or the physics step is not a whole
+        number of microseconds.
     """
     cpu0 = time.process_time()
-    opts = options or CosimOptions()
+    opts = options or LockstepOptions()
     dt_us = _dt_us(opts.loop)
     if robot.n_links - 1 != N_JOINTS:
-        raise ValueError(
+        raise LockstepError(
             f"the firmware drives {N_JOINTS} joints; this robot has {robot.n_links - 1}"
         )
-    link = radio or RadioModel()
-    up_rng, down_rng = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2))
-    uplink, downlink = link.channel(up_rng), link.channel(down_rng)
-    host = HostLink(uplink, opts.resend_after_us)
-    host.silent_after_us = opts.host_silent_after_us
-    joints = LinkedJoints(robot, scenario, driver, host, downlink, dt_us, opts)
+    lockstep = Lockstep(driver, radio or RadioModel(), seed, robot.n_links, dt_us)
+    clock = SimClock()
+    # Resent when (now - sent) >= resend_after_us on the integer clock: the half microsecond
+    # keeps the link's comparison in seconds exact whatever the rounding of the two times.
+    link = Link(
+        lockstep.host_transport(clock),
+        clock,
+        resend_after_s=(opts.resend_after_us - 0.5) * 1e-6,
+        max_attempts=None,
+    )
+    link.open()
+    joints = LinkedJoints(robot, scenario, lockstep, link, clock, opts)
 
     twin = simulate_closed_loop(robot, scenario, opts.loop, seed, joints=joints)
 
@@ -609,14 +568,14 @@ def run_lockstep(
         **{f.name: getattr(twin, f.name) for f in fields(RunResult)},
         torque_nm=np.array(joints.torque_nm),
         firmware_state=np.array(joints.firmware_state, dtype=np.int64),
-        sent=list(host.sent),
+        sent=joints.sent,
         executed=joints.executed,
         refused=joints.refused,
-        telemetry=list(host.telemetry),
+        telemetry=joints.telemetry,
         firmware_counters=driver.counters(),
-        host_bad_frames=host.bad_frames,
-        uplink=uplink.counters,
-        downlink=downlink.counters,
+        host_bad_frames=dict(link.counters.bad_frames),
+        uplink=lockstep.uplink.counters,
+        downlink=lockstep.downlink.counters,
         cpu_s=time.process_time() - cpu0,
     )
 
@@ -626,7 +585,7 @@ def run_firmware_in_loop(
     scenario: Scenario,
     seed: int = 0,
     radio: RadioModel | None = None,
-    options: CosimOptions | None = None,
+    options: LockstepOptions | None = None,
     firmware: NativeFirmware | None = None,
 ) -> FirmwareRunResult:
     """Run the twin's closed loop with the native firmware computing the joint torques.
@@ -641,7 +600,7 @@ def run_firmware_in_loop(
         Seed of the twin's jitter and heading noise and of the radio's loss and corruption.
     radio : RadioModel, optional
         The link; ``None`` is ideal (bytes arrive when sent), as the twin assumes.
-    options : CosimOptions, optional
+    options : LockstepOptions, optional
         Loop, host and firmware options.
     firmware : NativeFirmware, optional
         A firmware instance to use (booted at 0); by default a fresh one.
@@ -660,6 +619,6 @@ def run_firmware_in_loop(
     >>> res = run_firmware_in_loop(load_robot(), load_scenario("straight"), seed=1,
     ...                            radio=RadioModel.xbee())  # doctest: +SKIP
     """
-    opts = options or CosimOptions()
+    opts = options or LockstepOptions()
     fw = firmware or NativeFirmware(now_us=0, control_period_us=opts.firmware_control_period_us)
     return run_lockstep(robot, scenario, NativeDriver(fw), seed, radio, opts)

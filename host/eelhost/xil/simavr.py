@@ -31,7 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from eelhost.wire import protocol
-from eelhost.xil.lockstep import CosimOptions, FirmwareRunResult, run_lockstep
+from eelhost.xil.lockstep import FirmwareRunResult, LockstepOptions, run_lockstep
 from eelhost.xil.native_firmware import FIRMWARE_DIR
 from eelhost.xil.radio import RadioChannel, RadioModel
 from eelsim.robot import Robot
@@ -219,7 +219,7 @@ class ServoModel:
 
 
 class AvrDriver:
-    """The emulated AVR as a :class:`eelhost.xil.lockstep.JointDriver`.
+    """The emulated AVR as a :class:`eelhost.xil.drivers.JointDriver`.
 
     Parameters
     ----------
@@ -321,7 +321,7 @@ def run_processor_in_loop(
     scenario: Scenario,
     seed: int = 0,
     radio: RadioModel | None = None,
-    options: CosimOptions | None = None,
+    options: LockstepOptions | None = None,
     servo: ServoModel | None = None,
     elf: Path | None = None,
 ) -> PilRunResult:
@@ -338,7 +338,7 @@ def run_processor_in_loop(
     radio : RadioModel, optional
         The link; ``None`` is ideal (bytes enter the UART when sent; the UART itself still takes
         173.6 us a byte at 57600 baud).
-    options : CosimOptions, optional
+    options : LockstepOptions, optional
         Loop and host options.
     servo : ServoModel, optional
         Pulse width to joint reference.
