@@ -21,6 +21,7 @@ from eelhost.commands.common import cpu_model
 from eelhost.vision.localise import REFINE_METHODS, Localiser
 from eelhost.vision.synthetic import RenderOptions, SyntheticCamera, sample_run
 from eelsim.closed_loop import simulate_closed_loop
+from eelsim.control import wrap_angle
 from eelsim.robot import Robot, load_robot
 from eelsim.scenario import load_scenario
 
@@ -123,7 +124,7 @@ def run_benchmark(
             assert r.com_m is not None and r.heading_rad is not None
             errors[name][0].append(float(np.linalg.norm(cal.to_px(r.com_m) - truth.com_px)))
             errors[name][1].append(
-                float(np.degrees(abs(np.angle(np.exp(1j * (r.heading_rad - truth.heading_rad))))))
+                float(np.degrees(abs(wrap_angle(r.heading_rad - truth.heading_rad))))
             )
             if localiser is main:
                 found += 1

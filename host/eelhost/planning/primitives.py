@@ -35,11 +35,11 @@ from functools import cached_property
 from pathlib import Path
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import ConvexHull
 
 from eelsim.closed_loop import LoopOptions, simulate_closed_loop
-from eelsim.control import Gait
+from eelsim.control import Gait, wrap_angle
 from eelsim.model import SwimmerModel
 from eelsim.robot import HydroCoefficients, Robot
 from eelsim.scenario import PATH_GAIT, Scenario
@@ -190,7 +190,7 @@ class PrimitiveLibrary:
             -1 when no direction holds a primitive of ``kind``.
         """
         dirs = np.asarray(self.discretisation.current_directions_deg)
-        diff = np.abs((relative_deg - dirs + 180.0) % 360.0 - 180.0)
+        diff = np.abs(wrap_deg(relative_deg - dirs))
         if kind is not None:
             filled = np.array([self.group(kind, i).size > 0 for i in range(dirs.size)])
             if not filled.any():
@@ -474,8 +474,9 @@ def _rotate(xy: FloatArray, angle_rad: float) -> FloatArray:
     return xy @ np.array([[c, s], [-s, c]])
 
 
-def _wrap_deg(a):
-    return (np.asarray(a) + 180.0) % 360.0 - 180.0
+def wrap_deg(angle_deg: ArrayLike) -> FloatArray:
+    """Wrap angles in degrees to (-180, 180], the convention of :func:`eelsim.control.wrap_angle`."""
+    return np.degrees(wrap_angle(np.radians(angle_deg)))
 
 
 def _switch_heading(run: _Run, lead_in: tuple[float, float], radius: float, n: int) -> float | None:
@@ -563,7 +564,7 @@ def build_library(
         if kind != SWIMMING:
             continue
         h0 = _switch_heading(runs[i], wps[0], radius, n)
-        if h0 is not None and abs(_wrap_deg(math.degrees(h0))) > 22.5:
+        if h0 is not None and abs(wrap_deg(math.degrees(h0))) > 22.5:
             redo.append(i)
             scenarios[i] = scenarios[i].model_copy(
                 update={"current_direction_deg": cdir + math.degrees(h0)}
@@ -614,9 +615,9 @@ def build_library(
         out["end_pose"][i] = (end_xy[0], end_xy[1], heading[-1] - h0)
         out["waypoint_rel"][i] = _rotate((np.asarray(wps[-1]) - p0)[None], h0)[0]
         out["duration_s"][i] = run.t_s[-1] - run.t_s[k0]
-        out["current_rel_deg"][i] = _wrap_deg(cdir - math.degrees(h0))
+        out["current_rel_deg"][i] = wrap_deg(cdir - math.degrees(h0))
         dirs = np.asarray(disc.current_directions_deg)
-        out["current_index"][i] = int(np.argmin(np.abs(_wrap_deg(out["current_rel_deg"][i] - dirs))))
+        out["current_index"][i] = int(np.argmin(np.abs(wrap_deg(out["current_rel_deg"][i] - dirs))))
         idx = np.linspace(0, len(seg) - 1, disc.path_points).round().astype(int)
         out["paths"][i] = _rotate(p[k0:][idx] - p0, h0)
         out["success"][i] = True

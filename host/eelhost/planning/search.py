@@ -26,6 +26,7 @@ import numpy as np
 from eelhost.planning.geometry import FloatArray
 from eelhost.planning.primitives import KIND_NAMES, REST, SWIMMING, PrimitiveLibrary
 from eelhost.planning.world import World
+from eelsim.control import wrap_angle
 
 
 @dataclass(frozen=True)
@@ -98,11 +99,6 @@ class Plan:
     def waypoints_m(self) -> list[tuple[float, float]]:
         """The waypoints to give the robot, in order."""
         return [s.waypoint_m for s in self.steps]
-
-
-def wrap_angle(a: float | FloatArray) -> float | FloatArray:
-    """Wrap angles to [-pi, pi)."""
-    return (np.asarray(a) + math.pi) % (2 * math.pi) - math.pi
 
 
 def heuristic_s(world: World, library: PrimitiveLibrary, xy: FloatArray) -> float:
