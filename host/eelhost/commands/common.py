@@ -3,13 +3,16 @@
 from __future__ import annotations
 
 import argparse
-import platform
-from pathlib import Path
 
+from eelhost.errors import UserError
 from eelsim.camera import CameraModel
 from eelsim.closed_loop import LoopOptions
 from eelsim.robot import HydroCoefficients, Robot, load_robot
 from eelsim.timing import LoopTiming
+
+
+class OptionError(UserError, ValueError):
+    """A command-line option that cannot be used; the message names the option."""
 
 
 def floats(text: str, count: int | None = None, what: str = "value") -> list[float]:
@@ -76,21 +79,6 @@ def loop_options(args: argparse.Namespace, stop_at_goal: bool = True) -> LoopOpt
         servo_limits=args.servo_limits,
         stop_at_goal=stop_at_goal,
     )
-
-
-def cpu_model() -> str:
-    """The CPU's model name (from /proc/cpuinfo), for the provenance of benchmark figures."""
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine() or "unknown CPU"
-
-
-# The repository's bundled virtual-tank dataset (this file is host/eelhost/commands/common.py).
-BUNDLED_DATASET = Path(__file__).resolve().parents[3] / "datasets" / "paper_virtual_tank"
 
 
 def add_fit_options(p: argparse.ArgumentParser) -> None:

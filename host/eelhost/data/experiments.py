@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 from pydantic import ValidationError
 
+from eelhost.errors import UserError
 from eelsim.robot import HydroCoefficients, Robot, load_robot
 from eelsim.scenario import Scenario
 
@@ -41,7 +42,11 @@ REQUIRED_COLUMNS = ("t_s", "x_m", "y_m")
 COLUMN_ALIASES = {"t": "t_s", "time": "t_s", "x": "x_m", "y": "y_m", "heading": "heading_rad"}
 
 
-class DataError(ValueError):
+# The repository's bundled virtual-tank dataset (this file is host/eelhost/data/experiments.py).
+BUNDLED_DATASET = Path(__file__).resolve().parents[3] / "datasets" / "paper_virtual_tank"
+
+
+class DataError(UserError, ValueError):
     """A malformed experiment, CSV or dataset; the message says where (file, line, column)."""
 
 
