@@ -7,6 +7,7 @@ Folder contents: ``coefficients.json`` (fits, uncertainty, identifiability), ``t
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -25,6 +26,8 @@ from eelhost.estimation.pipeline import (
 )
 from eelhost.estimation.validate import ValidationRun, table_csv, table_markdown, validate
 
+log = logging.getLogger(__name__)
+
 Say = Callable[[str], None]
 
 
@@ -35,7 +38,7 @@ def run_report(
     settings: FitSettings | None = None,
     bootstrap_replicates: int = 8,
     resume: bool = False,
-    say: Say = print,
+    say: Say | None = None,
     progress_factory: Callable[[str], Callable[[int, float, int], None]] | None = None,
 ) -> Path:
     """Run the whole chain on a dataset and write the report folder.
@@ -52,8 +55,8 @@ def run_report(
         Refits per motion for the uncertainty (0: skip).
     resume : bool
         Continue interrupted fits from their checkpoints.
-    say : callable
-        Where progress messages go.
+    say : callable, optional
+        Where progress messages go (default: this module's logger, at INFO).
     progress_factory : callable, optional
         Gives a per-generation progress callback for a motion.
 
@@ -62,6 +65,7 @@ def run_report(
     Path
         ``report.md``.
     """
+    say = say or log.info
     settings = settings or FitSettings()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

@@ -28,6 +28,7 @@ Whatever ends the loop, even an exception, Stop is sent and waited for (with res
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
@@ -41,6 +42,8 @@ from eelhost.wire import protocol
 from eelsim.camera import MedianFilter
 from eelsim.control import Gait, heading_offset
 from eelsim.robot import Robot
+
+log = logging.getLogger(__name__)
 
 __all__ = ["Guidance", "RunConfig", "RunLoop", "RunOutcome"]
 
@@ -295,6 +298,9 @@ class RunLoop:
         finally:
             out.waypoints_reached = self.target
             out.stop_outcome = self._stop_robot()
+            log.info("run ended: %s (%s); Stop %s", out.reason, out.detail, out.stop_outcome)
+            if out.stop_outcome != "ack":
+                log.warning("the final Stop was not acknowledged (%s)", out.stop_outcome)
             if self.recorder is not None:
                 self.recorder.close(out.as_dict())
         return out

@@ -15,6 +15,7 @@ so nothing here sleeps or reads the time on its own.
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -22,6 +23,8 @@ from typing import Protocol
 
 from eelhost.errors import UserError
 from eelhost.wire import protocol
+
+log = logging.getLogger(__name__)
 
 __all__ = [
     "Clock",
@@ -332,6 +335,7 @@ class Link:
             detail = ""
             if isinstance(msg, protocol.Refuse):
                 detail = _refuse_reason(msg.reason)
+                log.warning("the robot refused %s: %s", type(sent).__name__, detail)
             self._emit(LinkEvent(now, kind, msg.seq, sent, detail))
 
     def _first_seq(self, seq: int) -> int:
@@ -349,9 +353,11 @@ class Link:
                 del self._pending[first]
                 self._answered[first] = "lost"
                 self.counters.lost += 1
+                log.warning("%s lost after %d attempts", type(p.message).__name__, p.attempts)
                 self._emit(LinkEvent(now, "lost", first, p.message, f"{p.attempts} attempts"))
                 continue
             p.seq = self._write(p.message, "resent")
+            log.debug("%s resent (attempt %d)", type(p.message).__name__, p.attempts + 1)
             p.sent_s, p.attempts = now, p.attempts + 1
             self.counters.resends += 1
 
@@ -370,6 +376,7 @@ class Link:
         if self._was_connected:
             self._was_connected = False
             self.counters.disconnects += 1
+            log.warning("link dropped: %s", err)
             self._emit(LinkEvent(now, "disconnected", detail=str(err)))
 
     def _try_reconnect(self, now: float) -> None:
@@ -385,6 +392,7 @@ class Link:
             return
         self._was_connected = True
         self.counters.reconnects += 1
+        log.info("link back: %s", self.transport.description)
         self._emit(LinkEvent(now, "reconnected", detail=self.transport.description))
         # Hello resynchronises the robot's sequence check after the frames lost in the gap.
         self._write(protocol.Hello(), "sent")

@@ -27,6 +27,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import logging
 import math
 import os
 import time
@@ -44,9 +45,12 @@ from eelsim.model import SwimmerModel
 from eelsim.robot import HydroCoefficients, Robot
 from eelsim.scenario import PATH_GAIT, Scenario
 
+log = logging.getLogger(__name__)
+
 FloatArray = NDArray[np.float64]
 
 REST, SWIMMING = 0, 1
+
 KIND_NAMES = ("rest", "swimming")
 LIBRARY_VERSION = 2
 """Bump when what a library holds or how it is simulated changes: old caches then miss."""
@@ -681,6 +685,7 @@ def load_or_build(
         cached = PrimitiveLibrary.load(folder, key)
         if cached is not None:
             return cached, False
+    log.info("no cached primitive library %s in %s: simulating it", key, folder)
     lib = build_library(robot, coefficients, current_speed_m_s, disc, gait, opts, backend, threads)
     lib.save(folder)
     return lib, True

@@ -14,6 +14,7 @@ of the twin at a time::
 
 from __future__ import annotations
 
+import logging
 import re
 import shutil
 import subprocess
@@ -26,6 +27,8 @@ from cffi import FFI
 from numpy.typing import ArrayLike, NDArray
 
 from eelhost.wire import protocol
+
+log = logging.getLogger(__name__)
 
 FIRMWARE_DIR = Path(__file__).resolve().parents[3] / "firmware"
 LIBRARY_PATH = FIRMWARE_DIR / "build" / "native" / "libeelfw.so"
@@ -73,6 +76,7 @@ def build_library() -> Path:
     NativeFirmwareError
         When make fails (its output is in the message).
     """
+    log.debug("bringing %s up to date (make native)", LIBRARY_PATH)
     try:
         proc = subprocess.run(
             ["make", "-s", "-C", str(FIRMWARE_DIR), "native"],

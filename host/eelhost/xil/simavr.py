@@ -21,6 +21,7 @@ One simulated second costs about 1-2 s of CPU (simavr interprets every AVR instr
 from __future__ import annotations
 
 import ctypes
+import logging
 import math
 import shutil
 import subprocess
@@ -36,6 +37,8 @@ from eelhost.xil.native_firmware import FIRMWARE_DIR
 from eelhost.xil.radio import RadioChannel, RadioModel
 from eelsim.robot import Robot
 from eelsim.scenario import Scenario
+
+log = logging.getLogger(__name__)
 
 __all__ = [
     "AvrDriver",
@@ -73,6 +76,7 @@ def build_avr(force: bool = False) -> None:
     """
     if not force and ELF_PATH.exists() and LIBRARY_PATH.exists():
         return
+    log.debug("bringing %s and %s up to date (make avr tools)", ELF_PATH, LIBRARY_PATH)
     proc = subprocess.run(
         ["make", "-s", "-C", str(FIRMWARE_DIR), "avr", "tools"],
         capture_output=True,
