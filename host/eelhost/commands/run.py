@@ -6,18 +6,13 @@ import argparse
 import signal
 import time
 
-from eelhost.commands.common import floats
-from eelhost.errors import UserError
+from eelhost.commands.common import OptionError, floats
 from eelhost.field.runloop import RunConfig
 from eelhost.field.session import TankSession, open_camera, virtual_robot
 from eelhost.link.uri import open_link, parse_link_uri
 from eelhost.wire import protocol
 from eelsim.control import Gait
 from eelsim.robot import load_robot
-
-
-class RunOptionError(UserError, ValueError):
-    """An option of ``eelbot run`` that cannot be used."""
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -75,19 +70,19 @@ def parse_waypoints(text: str) -> list[tuple[float, float]]:
             x, y = floats(part, 2, "--waypoints")
             out.append((x, y))
     if not out:
-        raise RunOptionError("--waypoints: give at least one x,y")
+        raise OptionError("--waypoints: give at least one x,y")
     return out
 
 
 def _gait(values: list[float], k_theta: float) -> Gait:
     if len(values) not in (2, 3):
-        raise RunOptionError("--gait: give A,omega or A,omega,beta")
+        raise OptionError("--gait: give A,omega or A,omega,beta")
     beta = values[2] if len(values) == 3 else 1.04
     gait = Gait(values[0], values[1], beta, k_theta)
     try:  # the robot would refuse it: say so before anything is opened
         protocol.SetGait(gait.amplitude_rad, gait.omega_rad_s, gait.beta_rad, 0, 0, 0).validate()
     except ValueError as err:
-        raise RunOptionError(f"--gait: {err}") from None
+        raise OptionError(f"--gait: {err}") from None
     return gait
 
 
@@ -101,9 +96,9 @@ def run(args: argparse.Namespace) -> int:
     virtual = virtual_robot(link)
     if args.speed is not None:
         if virtual is None:
-            raise RunOptionError("--speed: only a sim:// robot can run faster than real time")
+            raise OptionError("--speed: only a sim:// robot can run faster than real time")
         if args.speed < 0:
-            raise RunOptionError("--speed: must be >= 0")
+            raise OptionError("--speed: must be >= 0")
         virtual.clock.speed = args.speed
     camera = open_camera(link, robot, args.camera, args.calibration)
     config = RunConfig(

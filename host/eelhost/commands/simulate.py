@@ -8,6 +8,7 @@ from pathlib import Path
 from tqdm import tqdm
 
 from eelhost.commands.common import (
+    OptionError,
     add_loop_options,
     add_robot_options,
     floats,
@@ -65,7 +66,7 @@ def _overrides(args: argparse.Namespace) -> dict:
     upd: dict = {}
     if args.gait:
         if len(args.gait) not in (2, 3):
-            raise ValueError("--gait: give A,omega or A,omega,beta")
+            raise OptionError("--gait: give A,omega or A,omega,beta")
         upd["amplitude_rad"], upd["omega_rad_s"] = args.gait[:2]
         if len(args.gait) == 3:
             upd["beta_rad"] = args.gait[2]

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from eelhost.data.experiments import Experiment
+from eelhost.errors import UserError
 from eelhost.estimation.fitness import (
     N_SAMPLES_FIT,
     VELOCITY_WEIGHT,
@@ -38,6 +39,10 @@ TMAX_FACTOR = 1.5
 # Default half-width of the clock-offset search: the paper's stated time-stamp uncertainty.
 ALIGN_S = 0.1
 ALIGN_STEP_S = 0.01
+
+
+class EstimationError(UserError, ValueError):
+    """A fit or validation that cannot be set up from what was given."""
 
 
 @dataclass(frozen=True)
@@ -265,7 +270,7 @@ class Evaluator:
         map_function: Callable | None = None,
     ) -> None:
         if not experiments:
-            raise ValueError("no experiments to evaluate on")
+            raise EstimationError("no experiments to evaluate on")
         self.robot = robot
         self.prepared = [
             prepare(e, n_samples, align_s=align_s, observe=observe) for e in experiments
@@ -390,7 +395,7 @@ class Evaluator:
 
 def _choose_backend(backend: str) -> str:
     if backend not in ("auto", "batch", "reference"):
-        raise ValueError(f"backend must be auto, batch or reference, got {backend!r}")
+        raise EstimationError(f"backend must be auto, batch or reference, got {backend!r}")
     if backend != "auto":
         return backend
     try:

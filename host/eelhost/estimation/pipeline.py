@@ -18,7 +18,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from eelhost.data.experiments import Dataset, Experiment
-from eelhost.estimation.evaluate import Evaluator
+from eelhost.errors import UserError
+from eelhost.estimation.evaluate import EstimationError, Evaluator
 from eelhost.estimation.optimise import (
     Checkpoint,
     FitResult,
@@ -29,6 +30,10 @@ from eelhost.estimation.optimise import (
 from eelsim.robot import HydroCoefficients
 
 METHODS = ("cmaes", "ga", "lsq")
+
+
+class CoefficientsError(UserError, ValueError):
+    """Coefficients that cannot be read (a malformed file or "Cf,Cd,Ca,Cm" argument)."""
 
 
 @dataclass(frozen=True)
@@ -69,7 +74,7 @@ def training_experiments(dataset: Dataset, motion: str) -> list[Experiment]:
     if motion == "joint":
         return [e for exps in dataset.train.values() for e in exps]
     if motion not in dataset.train:
-        raise ValueError(
+        raise EstimationError(
             f"dataset has no training experiments for motion {motion!r} (has {sorted(dataset.train)})"
         )
     return list(dataset.train[motion])
@@ -110,7 +115,7 @@ def fit_motion(
         The result (``evaluations`` counts candidates; the evaluator's ``simulations`` counts runs).
     """
     if settings.method not in METHODS:
-        raise ValueError(f"method must be one of {', '.join(METHODS)}, got {settings.method!r}")
+        raise EstimationError(f"method must be one of {', '.join(METHODS)}, got {settings.method!r}")
     ev = Evaluator(
         dataset.robot,
         training_experiments(dataset, motion),
@@ -187,18 +192,18 @@ def read_coefficients(spec: str) -> dict[str, HydroCoefficients]:
         try:
             data = json.loads(path.read_text())
         except (OSError, json.JSONDecodeError) as err:
-            raise ValueError(f"{path}: cannot read coefficients: {err}") from None
+            raise CoefficientsError(f"{path}: cannot read coefficients: {err}") from None
         fits = data.get("fits")
         if not isinstance(fits, dict) or not fits:
-            raise ValueError(f"{path}: fits: expected fitted coefficient sets")
+            raise CoefficientsError(f"{path}: fits: expected fitted coefficient sets")
         try:
             return {m: HydroCoefficients.model_validate(f["coefficients"]) for m, f in fits.items()}
         except (KeyError, TypeError, ValueError) as err:
-            raise ValueError(f"{path}: fits: malformed coefficient set ({err})") from None
+            raise CoefficientsError(f"{path}: fits: malformed coefficient set ({err})") from None
     try:
         values = [float(v) for v in spec.split(",")]
         return {"joint": HydroCoefficients.from_array(values)}
     except ValueError:
-        raise ValueError(
+        raise CoefficientsError(
             f"coefficients: expected a .json file or Cf,Cd,Ca,Cm, got {spec!r}"
         ) from None

@@ -99,7 +99,7 @@ def _open_serial(u: LinkURI, robot: Robot | None, clock: Clock | None) -> Link:
 
 def _list_serial_ports() -> list[Port]:
     return [
-        Port(f"serial://{p.device}", p.description or p.device)
+        Port(f"serial://{p.device}", p.description if p.description not in ("", "n/a") else "serial port")
         for p in sorted(serial_ports.comports(), key=lambda p: p.device)
     ]
 

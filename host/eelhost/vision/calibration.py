@@ -32,12 +32,18 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from eelhost.errors import UserError
+
 FloatArray = NDArray[np.float64]
 FORMAT = "eelbot-camera-calibration"
 VERSION = 1
 
 
-class CalibrationFileError(ValueError):
+class CalibrationError(UserError, ValueError):
+    """A calibration that cannot be made from what was given (corners, heights, a board's frame)."""
+
+
+class CalibrationFileError(CalibrationError):
     """A calibration file that cannot be used; the message names the file and the key."""
 
 
@@ -107,7 +113,7 @@ def _four_point_homography(src: FloatArray, dst: FloatArray) -> FloatArray:
     try:
         h = np.linalg.solve(a, b)
     except np.linalg.LinAlgError:
-        raise ValueError("the four corners are degenerate (three on a line?)") from None
+        raise CalibrationError("the four corners are degenerate (three on a line?)") from None
     return np.append(h, 1.0).reshape(3, 3)
 
 
@@ -132,7 +138,7 @@ def height_scaling(camera_height_m: float, marker_height_m: float, nadir_m: Arra
     ndarray, shape (3, 3)
     """
     if not camera_height_m > marker_height_m:
-        raise ValueError("the camera must be above the markers")
+        raise CalibrationError("the camera must be above the markers")
     k = camera_height_m / (camera_height_m - marker_height_m)
     n = np.asarray(nadir_m, dtype=float)
     return np.array([[k, 0, (1 - k) * n[0]], [0, k, (1 - k) * n[1]], [0, 0, 1.0]])
@@ -175,12 +181,12 @@ def from_tank_corners(
     px = np.asarray(corners_px, dtype=float).reshape(-1, 2)
     if corners_m is None:
         if tank_size_m is None:
-            raise ValueError("give tank_size_m or corners_m")
+            raise CalibrationError("give tank_size_m or corners_m")
         length, width = tank_size_m
         corners_m = [(0.0, 0.0), (length, 0.0), (length, width), (0.0, width)]
     wm = np.asarray(corners_m, dtype=float).reshape(-1, 2)
     if px.shape != (4, 2) or wm.shape != (4, 2):
-        raise ValueError("need exactly four corners in pixels and in metres")
+        raise CalibrationError("need exactly four corners in pixels and in metres")
     h = _four_point_homography(wm, px)
     if camera_height_m is not None and marker_height_m != 0.0:
         if nadir_m is None:
@@ -270,7 +276,7 @@ def from_charuco(
     corners, ids, _, _ = detector.detectBoard(grey)
     if ids is None or len(ids) < 8:
         found = 0 if ids is None else len(ids)
-        raise ValueError(f"ChArUco board: found {found} corners, need at least 8")
+        raise CalibrationError(f"ChArUco board: found {found} corners, need at least 8")
     ids = np.asarray(ids).ravel()
     px = np.asarray(corners, dtype=float).reshape(-1, 2)
     # Board object points: x right along the printed image, y down the page; face up, seen from
