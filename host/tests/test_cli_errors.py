@@ -12,6 +12,7 @@ from eelhost import cli
 from eelhost.cli import main
 from eelhost.commands import speeds
 
+
 @pytest.fixture(autouse=True)
 def keep_the_root_loggers_level():
     level = logging.getLogger().level
@@ -42,6 +43,15 @@ def one_line_error(capsys, *named: str) -> str:
          ("--gait", "amplitude_rad")),
         (["run", "--robot", "sim://", *RUN[1:], "--camera", "take1.mp4", "--out", "x"],
          ("--calibration",)),
+        (["run", "--robot", "sim://", "--waypoints", "1,0;2", "--gait", "0.87,3.9", "--out", "x"],
+         ("--waypoints", "expected 2 numbers")),
+        (["run", "--robot", "sim://", *RUN[1:], "--radius", "-1", "--out", "x"],
+         ("--radius", "acceptance_radius_m")),
+        (["simulate", "straight", "--coefficients=-1,0.7,0.6,0.01", "--out", "x"],
+         ("--coefficients", "C_f")),
+        (["simulate", "straight", "--gait", "0.8,-4", "--out", "x"], ("--gait", "omega_rad_s")),
+        (["simulate", "straight", "--waypoints", "1,0;2", "--out", "x"], ("--waypoints",)),
+        (["simulate", "straight", "--fps", "0", "--out", "x"], ("--fps", "fps must be positive")),
         (["validate", "nowhere/coefficients.json", "nowhere"], ("nowhere/coefficients.json",)),
         (["plan", "nowhere_world.toml"], ("nowhere_world.toml",)),
     ],

@@ -6,7 +6,7 @@ import argparse
 import signal
 import time
 
-from eelhost.commands.common import OptionError, floats
+from eelhost.commands.common import OptionError, floats, rejected_as
 from eelhost.field.runloop import RunConfig
 from eelhost.field.session import TankSession, open_camera, virtual_robot
 from eelhost.link.uri import open_link, parse_link_uri
@@ -67,7 +67,10 @@ def parse_waypoints(text: str) -> list[tuple[float, float]]:
     out = []
     for part in text.split(";"):
         if part.strip():
-            x, y = floats(part, 2, "--waypoints")
+            try:
+                x, y = floats(part, 2, "--waypoints")
+            except argparse.ArgumentTypeError as err:
+                raise OptionError(str(err)) from None
             out.append((x, y))
     if not out:
         raise OptionError("--waypoints: give at least one x,y")
@@ -108,7 +111,8 @@ def run(args: argparse.Namespace) -> int:
         control_period_s=args.control_period,
         duration_s=args.duration,
     )
-    session = TankSession(link, camera, robot, config, args.out, args.robot)
+    with rejected_as("--waypoints/--gait/--radius/--duration"):  # the task's record checks them
+        session = TankSession(link, camera, robot, config, args.out, args.robot)
     previous = signal.signal(signal.SIGINT, lambda *_: session.loop.request_stop("interrupted"))
     wall0 = time.monotonic()
     try:

@@ -13,6 +13,7 @@ from eelhost.commands.common import (
     add_robot_options,
     floats,
     loop_options,
+    rejected_as,
     robot_and_coefficients,
 )
 from eelsim.closed_loop import simulate_closed_loop
@@ -87,9 +88,10 @@ def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
     robot, coeffs = robot_and_coefficients(args)
     scenario = load_scenario(args.scenario)
-    upd = _overrides(args)
-    if upd:
-        scenario = type(scenario).model_validate({**scenario.model_dump(), **upd})
+    with rejected_as("--gait/--k-theta/--waypoints/--current/--duration"):
+        upd = _overrides(args)
+        if upd:
+            scenario = type(scenario).model_validate({**scenario.model_dump(), **upd})
     options = loop_options(args, stop_at_goal=not args.full)
     total = scenario.total_steps(options.timing.dt_s)
     bar = tqdm(
