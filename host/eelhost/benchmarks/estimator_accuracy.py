@@ -184,15 +184,15 @@ def estimator_report(
         for motion in ("straight", "turning"):
             say(f"running the paper's GA on {motion} ...")
             t0 = time.perf_counter()
-            ga, ev = fit_motion(
+            ga_fit, ev = fit_motion(
                 ds, motion, FitSettings("ga", seed=seed, generations=ga_generations)
             )
             ga_s = time.perf_counter() - t0
             default = results["bundled"]["fits"][motion]
-            reach = _sims_to_reach(default, ga.fitness)
+            reach = _sims_to_reach(default, ga_fit.fitness)
             ratio = f"{ev.simulations / reach:.1f}x fewer" if reach else "not reached"
             lines.append(
-                f"| {motion} | {ga.fitness:.4f} | {ev.simulations} | {ga_s:.0f} | {default.fitness:.4f} | "
+                f"| {motion} | {ga_fit.fitness:.4f} | {ev.simulations} | {ga_s:.0f} | {default.fitness:.4f} | "
                 f"{reach if reach else '-'} | {ratio} |"
             )
             say(lines[-1])

@@ -150,7 +150,7 @@ def twin_speed_report(
     say(f"- CPU: {cpu_model()}; {os.cpu_count()} logical cores (nproc); SIMD: {simd_flags()}")
     say(
         f"- Python {platform.python_version()}, numpy {np.__version__}, numba {numba.__version__}"
-        f" (threading layer: {numba.config.THREADING_LAYER}, reported again after the runs)"
+        f" (threading layer: {getattr(numba.config, 'THREADING_LAYER', '?')}, reported again after the runs)"
     )
     say(f"- load average before the benchmark: {load_before}")
     if settings.note:
@@ -452,7 +452,7 @@ def _profile(batch: ModuleType, spec: Any, opts: LoopOptions) -> list[str]:
     # with and without the camera, interleaved (best of three each) so that all see the same
     # moments of the machine
     stub = _driver_only_kernel(batch, n, lanes)
-    best = {}
+    best: dict[tuple[bool, bool], float] = {}
     for _ in range(3):
         for physics in (True, False):
             for camera in (True, False):
@@ -464,7 +464,7 @@ def _profile(batch: ModuleType, spec: Any, opts: LoopOptions) -> list[str]:
                 best[physics, camera] = min(best.get((physics, camera), np.inf), per_step)
     step = best[True, True]
     driver = best[False, False]
-    camera = best[False, True] - best[False, False]
+    camera_ns = best[False, True] - best[False, False]
     bound = t_bound / period
     stages = step - best[False, True] - t_screen - bound
     rows = [
@@ -472,7 +472,7 @@ def _profile(batch: ModuleType, spec: Any, opts: LoopOptions) -> list[str]:
          stages),
         ("self-collision screen of x (generated)", t_screen),
         (f"condition-number bound, once per control period ({period} steps; generated)", bound),
-        ("camera frames (Hermite pose, pixels, median filter, waypoints; per lane)", camera),
+        ("camera frames (Hermite pose, pixels, median filter, waypoints; per lane)", camera_ns),
         ("driver: control updates, checks, commit, block set-up (per lane)", driver),
     ]
     lines = ["| part | ns per run and step | share |", "|---|---|---|"]

@@ -9,6 +9,7 @@ full pose was found, and frames per second on one core (localisation alone; rend
 
 from __future__ import annotations
 
+import math
 import platform
 import time
 from dataclasses import dataclass
@@ -123,7 +124,7 @@ def run_benchmark(
             assert r.com_m is not None and r.heading_rad is not None
             errors[name][0].append(float(np.linalg.norm(cal.to_px(r.com_m) - truth.com_px)))
             errors[name][1].append(
-                float(np.degrees(abs(wrap_angle(r.heading_rad - truth.heading_rad))))
+                math.degrees(abs(float(wrap_angle(r.heading_rad - truth.heading_rad))))
             )
             if localiser is main:
                 found += 1

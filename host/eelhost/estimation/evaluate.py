@@ -17,6 +17,7 @@ import dataclasses
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -34,6 +35,9 @@ from eelsim.flags import Failure, penalty
 from eelsim.robot import HydroCoefficients, Robot
 from eelsim.scenario import Scenario
 from eelsim.timing import LoopTiming
+
+if TYPE_CHECKING:  # imported when used: it loads the batched kernel
+    from eelhost.estimation.batch_backend import RunLengths
 
 TMAX_FACTOR = 1.5
 # Default half-width of the clock-offset search: the paper's stated time-stamp uncertainty.
@@ -281,7 +285,7 @@ class Evaluator:
         self.map_function = map_function
         self.simulations = 0  # closed-loop runs done so far
         self.steps = 0  # and the RK4 steps they took
-        self._lengths = None  # the batch backend's guesses of run lengths (batch_backend.RunLengths)
+        self._lengths: RunLengths | None = None  # the batch backend's guesses of run lengths
 
     def simulate(self, coefficients: np.ndarray) -> Simulated:
         """Simulate every experiment for every candidate.

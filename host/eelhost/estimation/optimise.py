@@ -326,6 +326,8 @@ def fit_cmaes(
             )
         if progress:
             progress(*history[-1])
+    if best_u is None:
+        raise RuntimeError("CMA-ES stopped before evaluating a candidate")
     return FitResult(
         "cmaes", HydroCoefficients.from_array(from_unit(best_u)), best_f, history, evaluations
     )

@@ -189,9 +189,9 @@ def _report_text(
                 for n in NAMES
             )
         )
-    worst = {}
-    for r in runs:
-        worst.setdefault(r.experiment.motion, []).append(r.row.Ex_mean_BL)
+    worst: dict[str, list[float]] = {}
+    for run in runs:
+        worst.setdefault(run.experiment.motion, []).append(run.row.Ex_mean_BL)
     lines += [
         "",
         "## Validation on held-out experiments",
@@ -208,8 +208,8 @@ def _report_text(
             "On the recordings' own clocks:"
         )
         raw: dict[str, list[float]] = {}
-        for r in runs:
-            raw.setdefault(r.experiment.motion, []).append(r.row.Ex_mean_unaligned_BL)
+        for run in runs:
+            raw.setdefault(run.experiment.motion, []).append(run.row.Ex_mean_unaligned_BL)
         lines += [
             f"- worst E_x ({m}), recorded clock: {np.nanmax(v):.4f} BL" for m, v in raw.items()
         ]

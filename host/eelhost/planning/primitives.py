@@ -34,6 +34,7 @@ import time
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -306,8 +307,8 @@ class PrimitiveLibrary:
             return None
         if meta.get("version") != LIBRARY_VERSION or meta.get("key") != key:
             return None
-        disc = {k: tuple(v) if isinstance(v, list) else v
-                for k, v in meta["discretisation"].items()}
+        disc: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v
+                                for k, v in meta["discretisation"].items()}
         return cls(
             key=key,
             discretisation=Discretisation(**disc),
@@ -419,9 +420,12 @@ def _rollouts_batch(
         part = scenarios[i : i + chunk]
         res = run_batch(robot, part, coefficients=coefficients, options=options, seeds=0,
                         record_full=True, threads=threads)
+        full = res.full_states
+        if full is None:
+            raise RuntimeError("run_batch returned no full states although record_full was set")
         for r in range(len(part)):
             k = int(res.final_step[r])
-            out.append(_Run(np.arange(k + 1) * dt, res.full_states[r, : k + 1],
+            out.append(_Run(np.arange(k + 1, dtype=np.float64) * dt, full[r, : k + 1],
                             bool(np.isfinite(res.arrival_time_s[r])), res.reason(r)))
     return out
 
@@ -580,7 +584,7 @@ def build_library(
         for i, run in zip(redo, again, strict=True):
             runs[i] = run
     p_count = len(rows)
-    out = {
+    out: dict[str, Any] = {
         "kind": np.zeros(p_count, dtype=np.int64),
         "current_index": np.zeros(p_count, dtype=np.int64),
         "current_rel_deg": np.full(p_count, np.nan),

@@ -89,14 +89,15 @@ class Calibration:
         return 1.0 / math.sqrt(abs(np.linalg.det(j)))
 
 
-def _apply(h: FloatArray, xy: ArrayLike) -> FloatArray:
+def _apply(h: ArrayLike, xy: ArrayLike) -> FloatArray:
+    h = np.asarray(h, dtype=float)
     p = np.asarray(xy, dtype=float)
     flat = p.reshape(-1, 2)
     q = np.c_[flat, np.ones(len(flat))] @ h.T
     return (q[:, :2] / q[:, 2:3]).reshape(p.shape)
 
 
-def _rms(h: FloatArray, points_m: FloatArray, points_px: FloatArray) -> float:
+def _rms(h: ArrayLike, points_m: FloatArray, points_px: FloatArray) -> float:
     err = _apply(h, points_m) - points_px
     return float(np.sqrt(np.mean(np.sum(err**2, axis=1))))
 
@@ -193,7 +194,8 @@ def from_tank_corners(
             nadir_m = _apply(np.linalg.inv(h), np.array(image_size_px, dtype=float) / 2 - 0.5)
         h = h @ height_scaling(camera_height_m, marker_height_m, nadir_m)
         wm = _apply(np.linalg.inv(h), px)  # the corners' rays, where they cross the markers' plane
-    return Calibration(h / h[2, 2], tuple(image_size_px), "tank_corners", wm, px, _rms(h, wm, px))
+    width_px, height_px = image_size_px
+    return Calibration(h / h[2, 2], (width_px, height_px), "tank_corners", wm, px, _rms(h, wm, px))
 
 
 @dataclass(frozen=True)
@@ -233,7 +235,7 @@ class CharucoSpec:
         dots_per_m = dpi / 0.0254
         size = (int(round(self.squares[0] * self.square_m * dots_per_m)),
                 int(round(self.squares[1] * self.square_m * dots_per_m)))
-        return self.board().generateImage(size, marginSize=0, borderBits=1)
+        return np.asarray(self.board().generateImage(size, marginSize=0, borderBits=1), np.uint8)
 
 
 def from_charuco(

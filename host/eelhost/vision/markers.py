@@ -136,9 +136,10 @@ def plate_image(layout: MarkerLayout, link_index: int, px_per_cell: int) -> NDAr
         layout.dictionary(), layout.link_ids[link_index], cells * px_per_cell, borderBits=1
     )
     margin_px = int(round(layout.margin_m / layout.marker_size_m * cells * px_per_cell))
-    return cv2.copyMakeBorder(
+    framed = cv2.copyMakeBorder(
         marker, margin_px, margin_px, margin_px, margin_px, cv2.BORDER_CONSTANT, value=255
     )
+    return np.asarray(framed, dtype=np.uint8)
 
 
 def marker_sheet(

@@ -81,7 +81,7 @@ class CameraSource:
                 now = self.clock()
                 start = now if start is None else start
                 count += 1
-                yield now - start, frame
+                yield now - start, np.asarray(frame, np.uint8)
         finally:
             cap.release()
 
@@ -116,7 +116,7 @@ class VideoFileSource:
                 # Some containers report no timestamps; fall back on the nominal rate.
                 t_s = ms / 1000.0 if ms > 0 or index == 0 else index / fps
                 index += 1
-                yield t_s, frame
+                yield t_s, np.asarray(frame, np.uint8)
         finally:
             cap.release()
 
@@ -156,7 +156,7 @@ class FolderSource:
             frame = cv2.imread(str(path), cv2.IMREAD_COLOR)
             if frame is None:
                 raise FrameSourceError(f"{path}: cannot read as an image")
-            yield i / self.fps, frame
+            yield i / self.fps, np.asarray(frame, np.uint8)
 
 
 class SyntheticSource:

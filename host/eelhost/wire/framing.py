@@ -142,7 +142,7 @@ def encode(message: Any, seq: int, schema_hash: int) -> bytes:
 
 
 def decode(
-    encoded: bytes, schema_hash: int, messages: Mapping[int, type], max_frame_bytes: int
+    encoded: bytes, schema_hash: int, messages: Mapping[int, type[Any]], max_frame_bytes: int
 ) -> tuple[int, Any]:
     """Decode one frame (the bytes between two zero delimiters).
 

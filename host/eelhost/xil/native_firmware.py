@@ -232,7 +232,7 @@ class NativeFirmware:
 
     def take(self) -> bytes:
         """Return every byte the firmware has transmitted since the last call."""
-        chunks = []
+        chunks: list[bytes] = []
         buf = _ffi.new("uint8_t[4096]")
         while True:
             n = self._lib.eel_take(self._fw, buf, 4096)

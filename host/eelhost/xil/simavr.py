@@ -144,7 +144,7 @@ class AvrSimulator:
         handle = self._lib.eas_create(str(elf or ELF_PATH).encode(), b"atmega328p", freq_hz)
         if not handle:
             raise AvrSimulatorError(f"simavr cannot load {elf or ELF_PATH}")
-        self._h = ctypes.c_void_p(handle)
+        self._h: ctypes.c_void_p | None = ctypes.c_void_p(handle)
         self._lib.eas_buffer_outputs(self._h, 1)
         for name in pins:
             if self._lib.eas_watch_pin(self._h, name.encode()) < 0:
