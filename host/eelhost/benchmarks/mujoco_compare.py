@@ -7,7 +7,7 @@ Two MuJoCo versions of the robot of a :class:`~eelsim.robot.Robot` file:
   joint PD as a position actuator (k_p) plus joint damping (k_d) so that the stiff damping is
   integrated implicitly (``implicitfast``); the gait enters as the actuator target
   alpha + (k_d / k_p) alpha_dot, which gives exactly u = k_p (alpha - phi) + k_d (alpha_dot - phi_dot);
-- our Morison drag (spec section 2: linear + quadratic tangential and normal drag and the fluid yaw
+- our Morison drag (docs/model.md section 2: linear + quadratic tangential and normal drag and the fluid yaw
   damping, no added mass) applied as ``xfrc_applied`` from Python between ``mj_step`` calls, with
   MuJoCo's fluid model switched off.
 

@@ -164,7 +164,7 @@ def _write_bench(path: Path, world, lib, plan, execution, times, figure) -> None
         "# Motion planning with the calibrated twin",
         "",
         "`eelbot plan WORLD.toml` plans with motion primitives simulated in the twin (paper "
-        "section 8.3, spec section 9) and swims the plan in the twin. Regenerate this page with "
+        "section 8.3, docs/model.md section 9) and swims the plan in the twin. Regenerate this page with "
         f"`eelbot plan {world.name} --bench`.",
         "",
         "## How it works",

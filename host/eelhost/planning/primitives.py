@@ -1,4 +1,4 @@
-"""The action set: short closed-loop manoeuvres simulated with the calibrated twin (spec section 9).
+"""The action set: short closed-loop manoeuvres simulated with the calibrated twin (docs/model.md section 9).
 
 A primitive is one waypoint-following manoeuvre in the robot's own frame: the robot starts at the
 origin with heading 0, either straight and at rest (``REST``, the first move of a plan) or already

@@ -1,4 +1,4 @@
-"""A* over robot poses, with the twin's motion primitives as edges (spec section 9).
+"""A* over robot poses, with the twin's motion primitives as edges (docs/model.md section 9).
 
 A node is a pose (x, y, heading) and whether the robot is at rest (the start) or swimming. Its
 children are the end poses of the primitives simulated for the current as the robot would feel it
