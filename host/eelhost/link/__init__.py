@@ -1,10 +1,13 @@
 """The link to the robot: transports chosen by a URI, one framed session on top (see ``uri.py``).
 
-Importing the package registers the bundled transports (serial, sim, replay); a new transport is
-a module here that calls :func:`eelhost.link.uri.register_transport`, imported below.
+Every module of this package named ``*_transport`` is imported here, and registers its URI
+scheme with :func:`eelhost.link.uri.register_transport` when it is: adding a transport is adding
+such a module (see docs/architecture.md).
 """
 
-from eelhost.link import replay_transport, serial_transport, sim_transport  # register schemes
+import importlib
+import pkgutil
+
 from eelhost.link.base import (
     Clock,
     Link,
@@ -23,6 +26,10 @@ from eelhost.link.uri import (
     register_transport,
 )
 
+for _module in pkgutil.iter_modules(__path__):
+    if _module.name.endswith("_transport"):
+        importlib.import_module(f"{__name__}.{_module.name}")
+
 __all__ = [
     "Clock",
     "Link",
@@ -37,7 +44,4 @@ __all__ = [
     "open_link",
     "parse_link_uri",
     "register_transport",
-    "replay_transport",
-    "serial_transport",
-    "sim_transport",
 ]
