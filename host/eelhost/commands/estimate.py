@@ -8,8 +8,8 @@ from pathlib import Path
 from tqdm import tqdm
 
 from eelhost.commands.common import add_fit_options, fit_settings
+from eelhost.data.experiments import load_dataset
 from eelhost.estimation.pipeline import fit_motion, write_coefficients
-from eelhost.experiment import load_dataset
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:

@@ -18,9 +18,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from eelhost.data.experiments import Experiment
 from eelhost.estimation.evaluate import Evaluator
 from eelhost.estimation.optimise import BOUNDS, NAMES, from_unit, polish_least_squares, to_unit
-from eelhost.experiment import Experiment
 from eelsim.robot import HydroCoefficients, Robot
 
 REL_STEP = 0.01  # a step of 1 % of a coefficient's search range

@@ -28,6 +28,7 @@ from typing import Any
 import cloudpickle
 import numpy as np
 
+from eelhost.errors import UserError
 from eelsim.robot import HydroCoefficients
 
 # Search bounds (C_f, C_d, C_a, C_m). Table 3: C_f 0.008-0.009, C_d 0.78-0.98, C_a 0.62-1.17,
@@ -48,6 +49,10 @@ def from_unit(u: np.ndarray) -> np.ndarray:
 def to_unit(c: np.ndarray) -> np.ndarray:
     """Map coefficients to the unit cube."""
     return (np.asarray(c, dtype=float) - BOUNDS[:, 0]) / (BOUNDS[:, 1] - BOUNDS[:, 0])
+
+
+class CheckpointError(UserError, ValueError):
+    """A checkpoint that belongs to another fit (other dataset, method, seed or budget)."""
 
 
 @dataclass
@@ -128,7 +133,7 @@ class Checkpoint:
         with open(self.path, "rb") as f:
             state = pickle.load(f)
         if state.get("fingerprint") != self.fingerprint:
-            raise ValueError(
+            raise CheckpointError(
                 f"{self.path}: checkpoint was made with other settings (dataset, method, seed or "
                 "budget); remove it or run with the same settings"
             )
@@ -321,6 +326,8 @@ def fit_cmaes(
             )
         if progress:
             progress(*history[-1])
+    if best_u is None:
+        raise RuntimeError("CMA-ES stopped before evaluating a candidate")
     return FitResult(
         "cmaes", HydroCoefficients.from_array(from_unit(best_u)), best_f, history, evaluations
     )

@@ -13,9 +13,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from eelhost.data.experiments import Experiment
 from eelhost.estimation.evaluate import ALIGN_S, Evaluator, Simulated
 from eelhost.estimation.fitness import N_SAMPLES_VALIDATE, validation_errors
-from eelhost.experiment import Experiment
 from eelsim.flags import Failure
 from eelsim.robot import HydroCoefficients, Robot
 

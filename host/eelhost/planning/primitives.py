@@ -1,4 +1,4 @@
-"""The action set: short closed-loop manoeuvres simulated with the calibrated twin (spec section 9).
+"""The action set: short closed-loop manoeuvres simulated with the calibrated twin (docs/model.md section 9).
 
 A primitive is one waypoint-following manoeuvre in the robot's own frame: the robot starts at the
 origin with heading 0, either straight and at rest (``REST``, the first move of a plan) or already
@@ -27,26 +27,31 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import logging
 import math
 import os
 import time
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
+from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import ConvexHull
 
 from eelsim.closed_loop import LoopOptions, simulate_closed_loop
-from eelsim.control import Gait
+from eelsim.control import Gait, wrap_angle
 from eelsim.model import SwimmerModel
 from eelsim.robot import HydroCoefficients, Robot
 from eelsim.scenario import PATH_GAIT, Scenario
 
+log = logging.getLogger(__name__)
+
 FloatArray = NDArray[np.float64]
 
 REST, SWIMMING = 0, 1
+
 KIND_NAMES = ("rest", "swimming")
 LIBRARY_VERSION = 2
 """Bump when what a library holds or how it is simulated changes: old caches then miss."""
@@ -190,7 +195,7 @@ class PrimitiveLibrary:
             -1 when no direction holds a primitive of ``kind``.
         """
         dirs = np.asarray(self.discretisation.current_directions_deg)
-        diff = np.abs((relative_deg - dirs + 180.0) % 360.0 - 180.0)
+        diff = np.abs(wrap_deg(relative_deg - dirs))
         if kind is not None:
             filled = np.array([self.group(kind, i).size > 0 for i in range(dirs.size)])
             if not filled.any():
@@ -302,8 +307,8 @@ class PrimitiveLibrary:
             return None
         if meta.get("version") != LIBRARY_VERSION or meta.get("key") != key:
             return None
-        disc = {k: tuple(v) if isinstance(v, list) else v
-                for k, v in meta["discretisation"].items()}
+        disc: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v
+                                for k, v in meta["discretisation"].items()}
         return cls(
             key=key,
             discretisation=Discretisation(**disc),
@@ -415,9 +420,12 @@ def _rollouts_batch(
         part = scenarios[i : i + chunk]
         res = run_batch(robot, part, coefficients=coefficients, options=options, seeds=0,
                         record_full=True, threads=threads)
+        full = res.full_states
+        if full is None:
+            raise RuntimeError("run_batch returned no full states although record_full was set")
         for r in range(len(part)):
             k = int(res.final_step[r])
-            out.append(_Run(np.arange(k + 1) * dt, res.full_states[r, : k + 1],
+            out.append(_Run(np.arange(k + 1, dtype=np.float64) * dt, full[r, : k + 1],
                             bool(np.isfinite(res.arrival_time_s[r])), res.reason(r)))
     return out
 
@@ -474,8 +482,9 @@ def _rotate(xy: FloatArray, angle_rad: float) -> FloatArray:
     return xy @ np.array([[c, s], [-s, c]])
 
 
-def _wrap_deg(a):
-    return (np.asarray(a) + 180.0) % 360.0 - 180.0
+def wrap_deg(angle_deg: ArrayLike) -> FloatArray:
+    """Wrap angles in degrees to (-180, 180], the convention of :func:`eelsim.control.wrap_angle`."""
+    return np.degrees(wrap_angle(np.radians(angle_deg)))
 
 
 def _switch_heading(run: _Run, lead_in: tuple[float, float], radius: float, n: int) -> float | None:
@@ -563,7 +572,7 @@ def build_library(
         if kind != SWIMMING:
             continue
         h0 = _switch_heading(runs[i], wps[0], radius, n)
-        if h0 is not None and abs(_wrap_deg(math.degrees(h0))) > 22.5:
+        if h0 is not None and abs(wrap_deg(math.degrees(h0))) > 22.5:
             redo.append(i)
             scenarios[i] = scenarios[i].model_copy(
                 update={"current_direction_deg": cdir + math.degrees(h0)}
@@ -575,7 +584,7 @@ def build_library(
         for i, run in zip(redo, again, strict=True):
             runs[i] = run
     p_count = len(rows)
-    out = {
+    out: dict[str, Any] = {
         "kind": np.zeros(p_count, dtype=np.int64),
         "current_index": np.zeros(p_count, dtype=np.int64),
         "current_rel_deg": np.full(p_count, np.nan),
@@ -614,9 +623,9 @@ def build_library(
         out["end_pose"][i] = (end_xy[0], end_xy[1], heading[-1] - h0)
         out["waypoint_rel"][i] = _rotate((np.asarray(wps[-1]) - p0)[None], h0)[0]
         out["duration_s"][i] = run.t_s[-1] - run.t_s[k0]
-        out["current_rel_deg"][i] = _wrap_deg(cdir - math.degrees(h0))
+        out["current_rel_deg"][i] = wrap_deg(cdir - math.degrees(h0))
         dirs = np.asarray(disc.current_directions_deg)
-        out["current_index"][i] = int(np.argmin(np.abs(_wrap_deg(out["current_rel_deg"][i] - dirs))))
+        out["current_index"][i] = int(np.argmin(np.abs(wrap_deg(out["current_rel_deg"][i] - dirs))))
         idx = np.linspace(0, len(seg) - 1, disc.path_points).round().astype(int)
         out["paths"][i] = _rotate(p[k0:][idx] - p0, h0)
         out["success"][i] = True
@@ -680,6 +689,7 @@ def load_or_build(
         cached = PrimitiveLibrary.load(folder, key)
         if cached is not None:
             return cached, False
+    log.info("no cached primitive library %s in %s: simulating it", key, folder)
     lib = build_library(robot, coefficients, current_speed_m_s, disc, gait, opts, backend, threads)
     lib.save(folder)
     return lib, True

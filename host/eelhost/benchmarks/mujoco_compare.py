@@ -7,7 +7,7 @@ Two MuJoCo versions of the robot of a :class:`~eelsim.robot.Robot` file:
   joint PD as a position actuator (k_p) plus joint damping (k_d) so that the stiff damping is
   integrated implicitly (``implicitfast``); the gait enters as the actuator target
   alpha + (k_d / k_p) alpha_dot, which gives exactly u = k_p (alpha - phi) + k_d (alpha_dot - phi_dot);
-- our Morison drag (spec section 2: linear + quadratic tangential and normal drag and the fluid yaw
+- our Morison drag (docs/model.md section 2: linear + quadratic tangential and normal drag and the fluid yaw
   damping, no added mass) applied as ``xfrc_applied`` from Python between ``mj_step`` calls, with
   MuJoCo's fluid model switched off.
 
@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from eelsim.model import SwimmerModel
 from eelsim.robot import HydroCoefficients, Robot
 
 try:  # optional: pip install eelbot[bench]
@@ -76,8 +77,9 @@ def robot_mjcf(
     body_lines: list[str] = []
     closing: list[str] = []
     indent = "    "
+    yaw_inertia = SwimmerModel.from_robot(robot).yaw_inertia_kg_m2  # the twin's (default m l^2/3)
     for i, lk in enumerate(links):
-        inertia = lk.yaw_inertia_kg_m2 or lk.mass_kg * lk.half_length_m**2 / 3.0
+        inertia = float(yaw_inertia[i])
         # roll and pitch inertia are irrelevant in the plane but must satisfy the triangle
         # inequality: (small, J, J) does
         small = inertia * 1e-3

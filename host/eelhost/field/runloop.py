@@ -12,12 +12,15 @@ with acknowledgement and resends. Then, per camera frame:
 2. localise the robot (:class:`eelhost.vision.localise.Localiser`); a frame with a pose is
    recorded and fed to the moving median filter (the twin's :class:`eelsim.camera.MedianFilter`),
    and the target moves to the next waypoint when the filtered position is within the acceptance
-   radius (spec section 4);
+   radius (docs/model.md section 4);
 3. check the stop conditions: a stop request (Ctrl-C), the last waypoint reached, no pose for
    more than ``lost_after_s`` (1 s), no frame from the robot for more than ``link_timeout_s`` (1 s;
    the robot sends Telemetry every 0.1 s), the duration;
 4. every control period, compute gamma = :func:`eelsim.control.heading_offset` from the latest
    filtered pose (the twin's law) and send SetOffset (which also feeds the robot's watchdog).
+
+Steps 2 and 4 (filter, waypoint switch, line of sight, clipping) are the guidance, kept together
+in :class:`Guidance` so that the twin's guidance object can take its place in one spot.
 
 Whatever ends the loop, even an exception, Stop is sent and waited for (with resends) for up to
 ``stop_timeout_s``, and the recording is closed with the outcome.
@@ -25,21 +28,24 @@ Whatever ends the loop, even an exception, Stop is sent and waited for (with res
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 
-from eelhost import protocol
+from eelhost.field.recorder import Recorder
 from eelhost.link.base import Clock, Link, LinkEvent
-from eelhost.recorder import Recorder
 from eelhost.vision.localise import Localiser
+from eelhost.wire import protocol
 from eelsim.camera import MedianFilter
 from eelsim.control import Gait, heading_offset
 from eelsim.robot import Robot
 
-__all__ = ["RunConfig", "RunLoop", "RunOutcome"]
+log = logging.getLogger(__name__)
+
+__all__ = ["Guidance", "RunConfig", "RunLoop", "RunOutcome"]
 
 OFFSET_LIMIT_RAD = 1.0  # SetOffset's range
 EPS_S = 1e-9
@@ -138,6 +144,54 @@ class RunOutcome:
         }
 
 
+class Guidance:
+    """The host's guidance: median filter, waypoint switch, line-of-sight offset, clipping.
+
+    The twin's steps (docs/model.md section 4), called with the camera's poses and at the control
+    updates. This is the one place the run loop does guidance: when eelsim's guidance object is
+    available, it replaces this class here and nowhere else.
+
+    Parameters
+    ----------
+    config : RunConfig
+        Waypoints, acceptance radius, median window and the heading gain.
+    """
+
+    def __init__(self, config: RunConfig) -> None:
+        self._config = config
+        self._filter = MedianFilter(config.median_window)
+        self.target = 0
+        self.filtered: NDArray[np.float64] | None = None
+
+    @property
+    def finished(self) -> bool:
+        """Whether every waypoint has been reached."""
+        return self.target >= len(self._config.waypoints_m)
+
+    def observe(self, com_m: NDArray[np.float64], heading_rad: float) -> None:
+        """Filter a pose and move the target on when the filtered position is within reach."""
+        c = self._config
+        self.filtered = self._filter.push(float(com_m[0]), float(com_m[1]), heading_rad)
+        wp = np.asarray(c.waypoints_m[self.target], dtype=float)
+        if np.linalg.norm(self.filtered[:2] - wp) < c.acceptance_radius_m:
+            self.target += 1
+
+    def offset_rad(self) -> float | None:
+        """The heading offset for the latest filtered pose, clipped to SetOffset's range.
+
+        Returns
+        -------
+        float or None
+            None before the first pose.
+        """
+        if self.filtered is None:
+            return None
+        c = self._config
+        wp = c.waypoints_m[min(self.target, len(c.waypoints_m) - 1)]
+        gamma = heading_offset(self.filtered[:2], self.filtered[2], wp, c.gait.k_theta)
+        return float(np.clip(gamma, -OFFSET_LIMIT_RAD, OFFSET_LIMIT_RAD))
+
+
 class RunLoop:
     """One run of the robot along waypoints.
 
@@ -179,11 +233,20 @@ class RunLoop:
         self.recorder = recorder
         self.clock = clock or link.clock
         self.outcome = RunOutcome()
-        self.target = 0
-        self.filtered: NDArray[np.float64] | None = None
+        self.guidance = Guidance(config)
         self._stop_request: str | None = None
         self._t_start = 0.0
         link.listeners.append(self._on_event)
+
+    @property
+    def target(self) -> int:
+        """Index of the waypoint being steered to (the number reached so far)."""
+        return self.guidance.target
+
+    @property
+    def filtered(self) -> NDArray[np.float64] | None:
+        """The latest filtered pose (x, y, heading), or None before the first."""
+        return self.guidance.filtered
 
     def request_stop(self, reason: str = "interrupted") -> None:
         """Ask the loop to stop at the next frame (safe from a signal handler)."""
@@ -235,13 +298,15 @@ class RunLoop:
         finally:
             out.waypoints_reached = self.target
             out.stop_outcome = self._stop_robot()
+            log.info("run ended: %s (%s); Stop %s", out.reason, out.detail, out.stop_outcome)
+            if out.stop_outcome != "ack":
+                log.warning("the final Stop was not acknowledged (%s)", out.stop_outcome)
             if self.recorder is not None:
                 self.recorder.close(out.as_dict())
         return out
 
     def _loop(self) -> None:
         c, out = self.config, self.outcome
-        filt = MedianFilter(c.median_window)
         offset_to_clock: float | None = None
         next_control = 0.0
         last_pose_t: float | None = None
@@ -264,17 +329,13 @@ class RunLoop:
                 last_pose_t = t
                 if self.recorder is not None:
                     self.recorder.frame(t, loc.com_m, loc.heading_rad, loc.link_angles_rad)
-                self.filtered = filt.push(float(loc.com_m[0]), float(loc.com_m[1]), loc.heading_rad)
-                wp = np.asarray(c.waypoints_m[self.target], dtype=float)
-                if np.linalg.norm(self.filtered[:2] - wp) < c.acceptance_radius_m:
-                    self.target += 1
+                self.guidance.observe(loc.com_m, loc.heading_rad)
             if self._should_stop(t, last_pose_t):
                 return
             if t >= next_control - EPS_S:
-                if self.filtered is not None:
-                    wp = c.waypoints_m[self.target]
-                    gamma = heading_offset(self.filtered[:2], self.filtered[2], wp, c.gait.k_theta)
-                    gamma = float(np.clip(gamma, -OFFSET_LIMIT_RAD, OFFSET_LIMIT_RAD))
+                new_gamma = self.guidance.offset_rad()
+                if new_gamma is not None:
+                    gamma = new_gamma
                 # Sent even before the first pose: it keeps the robot's watchdog fed.
                 self.link.send(protocol.SetOffset(gamma))
                 out.offsets_sent += 1
@@ -285,7 +346,7 @@ class RunLoop:
         c, out = self.config, self.outcome
         if self._stop_request is not None:
             out.reason, out.detail = self._stop_request, "stop requested"
-        elif self.target >= len(c.waypoints_m):
+        elif self.guidance.finished:
             out.reason, out.detail = "arrived", f"reached all {len(c.waypoints_m)} waypoints"
         elif last_pose_t is not None and t - last_pose_t > c.lost_after_s:
             out.reason = "lost_from_view"

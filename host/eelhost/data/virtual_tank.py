@@ -19,6 +19,7 @@ Everything is deterministic for a seed.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
@@ -27,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from eelhost.experiment import (
+from eelhost.data.experiments import (
     Experiment,
     manifest_text,
     write_experiment,
@@ -39,12 +40,15 @@ from eelsim.robot import HydroCoefficients, Robot, load_robot
 from eelsim.scenario import TRAINING_CORNERS, Scenario, named_scenarios, paper_grid
 from eelsim.timing import LoopTiming
 
+log = logging.getLogger(__name__)
+
 TABLE3 = {
     "straight": HydroCoefficients(C_f=0.008, C_d=0.776, C_a=0.618, C_m=0.007),
     "turning": HydroCoefficients(C_f=0.009, C_d=0.978, C_a=1.169, C_m=0.001),
 }
 
 # The mismatched robot's head and tail (per-link overrides of the true robot only).
+
 MISMATCH_HEAD = {"half_axis_vertical_m": 0.032, "half_axis_horizontal_m": 0.026, "mass_kg": 0.33}
 MISMATCH_TAIL = {"half_axis_vertical_m": 0.014, "half_axis_horizontal_m": 0.008, "mass_kg": 0.15}
 
@@ -232,6 +236,7 @@ def generate_dataset(
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "robot.toml").write_text(_robot_file_text(robot))
     done = 0
+    log.info("recording %d virtual-tank experiments into %s", len(jobs), folder)
     with ProcessPoolExecutor(max_workers=max(1, workers)) as pool:
         for exp in pool.map(_record_job, jobs):
             write_experiment(exp, folder)

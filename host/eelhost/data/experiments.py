@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 from pydantic import ValidationError
 
+from eelhost.errors import UserError
 from eelsim.robot import HydroCoefficients, Robot, load_robot
 from eelsim.scenario import Scenario
 
@@ -41,7 +42,11 @@ REQUIRED_COLUMNS = ("t_s", "x_m", "y_m")
 COLUMN_ALIASES = {"t": "t_s", "time": "t_s", "x": "x_m", "y": "y_m", "heading": "heading_rad"}
 
 
-class DataError(ValueError):
+# The repository's bundled virtual-tank dataset (this file is host/eelhost/data/experiments.py).
+BUNDLED_DATASET = Path(__file__).resolve().parents[3] / "datasets" / "paper_virtual_tank"
+
+
+class DataError(UserError, ValueError):
     """A malformed experiment, CSV or dataset; the message says where (file, line, column)."""
 
 
@@ -164,7 +169,7 @@ def read_frames_csv(path: str | Path, allow_truncated_tail: bool = False) -> Fra
     ----------
     path : str or Path
     allow_truncated_tail : bool
-        Read a file whose writer was killed mid-line (``eelhost.recorder`` appends a line per
+        Read a file whose writer was killed mid-line (``eelhost.field.recorder`` appends a line per
         frame): a last line without its newline is incomplete, whatever it looks like, and is
         dropped; every complete row is kept. Off by default: a finished file must end cleanly.
 
