@@ -223,6 +223,23 @@ class CharucoSpec:
     dictionary_name: str = "DICT_4X4_50"
     first_id: int = 10
 
+    def __post_init__(self) -> None:
+        if len(self.squares) != 2 or min(self.squares) < 2:
+            raise CalibrationError(f"ChArUco board: need at least 2 x 2 squares, got {self.squares}")
+        if not 0 < self.marker_m < self.square_m:
+            raise CalibrationError(
+                f"ChArUco board: the marker ({self.marker_m} m) must be smaller than the square "
+                f"({self.square_m} m)"
+            )
+        if not hasattr(cv2.aruco, self.dictionary_name):
+            raise CalibrationError(f"ChArUco board: unknown ArUco dictionary {self.dictionary_name!r}")
+        dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, self.dictionary_name))
+        last = self.first_id + self.squares[0] * self.squares[1] // 2 - 1
+        if self.first_id < 0 or last >= dictionary.bytesList.shape[0]:
+            raise CalibrationError(
+                f"ChArUco board: ids {self.first_id}..{last} do not fit {self.dictionary_name}"
+            )
+
     def board(self) -> cv2.aruco.CharucoBoard:
         """The OpenCV board object."""
         dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, self.dictionary_name))
