@@ -16,6 +16,7 @@ import sys
 
 from eelhost.commands import (
     bench,
+    calibrate,
     dataset,
     estimate,
     estimate_bench,
@@ -44,6 +45,7 @@ COMMANDS = (
     report,
     vision_bench,
     markers,
+    calibrate,
     bench,
     run,
     ports,

@@ -1,7 +1,8 @@
 """Localise the robot in a frame from its link markers.
 
 Per frame: detect the ArUco markers (``cv2.aruco.ArucoDetector``, contour corner refinement),
-map each marker's four corners to metres through the calibration homography, and take
+map each marker's four corners to metres through the calibration homography (undistorted first
+when the calibration has a lens), and take
 
 - the marker centre as the mean of its metric corners (exact for a square on the plane, unlike
   the mean of the pixel corners under perspective),
@@ -192,7 +193,8 @@ class Localiser:
             if link is None or counts[marker_id] > 1:
                 continue
             px = np.asarray(c, dtype=float).reshape(4, 2)
-            q = np.c_[px, np.ones(4)] @ self._to_m.T
+            ideal = px if self.calibration.lens is None else self.calibration.lens.undistort(px)
+            q = np.c_[ideal, np.ones(4)] @ self._to_m.T
             m = q[:, :2] / q[:, 2:3]
             along = (m[1] - m[0]) + (m[2] - m[3])
             angle = math.atan2(along[1], along[0])
