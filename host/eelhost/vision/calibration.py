@@ -29,7 +29,7 @@ import math
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import cv2
 import numpy as np
@@ -442,7 +442,8 @@ def from_charuco(
     wm, px = charuco_points(frame, spec, board_origin_m, board_angle_rad)
     ideal = px if lens is None else lens.undistort(px)
     h, _ = cv2.findHomography(wm, ideal, 0)
-    return _fitted(h, (frame.shape[1], frame.shape[0]), "charuco", wm, px, lens)
+    return _fitted(np.asarray(h, dtype=float), (frame.shape[1], frame.shape[0]), "charuco", wm,
+                   px, lens)
 
 
 def calibrate_lens(
@@ -488,7 +489,7 @@ def calibrate_lens(
         corners, ids, _, _ = detector.detectBoard(grey)
         if ids is None or len(ids) < 8:
             continue
-        obj, img = board.matchImagePoints(corners, ids)
+        obj, img = board.matchImagePoints(cast(Any, corners), ids)
         obj_points.append(np.asarray(obj, np.float32))
         img_points.append(np.asarray(img, np.float32))
     if size is None or len(obj_points) < min_views:

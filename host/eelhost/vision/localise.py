@@ -100,6 +100,8 @@ class Localisation:
         perfect rigid chain; large values mean a wrong calibration, layout or robot model).
     message : str
         Human-readable reason when the pose is incomplete.
+    sightings : tuple of MarkerSighting
+        The robot's markers detected in the frame (their pixel corners, for display).
     """
 
     t_s: float
@@ -112,6 +114,7 @@ class Localisation:
     rebuilt: tuple[int, ...]
     max_joint_gap_m: float
     message: str
+    sightings: tuple[MarkerSighting, ...] = ()
 
     @property
     def found(self) -> bool:
@@ -208,6 +211,7 @@ class Localiser:
     def from_sightings(self, t_s: float, sightings: Iterable[MarkerSighting]) -> Localisation:
         """Build the pose from marker sightings (see the module docstring for the rules)."""
         t_s = float(t_s)
+        sightings = tuple(sightings)
         n = self.layout.n_links
         angles = np.full(n, np.nan)
         centres = np.full((n, 2), np.nan)
@@ -219,7 +223,7 @@ class Localiser:
         gap = self._max_joint_gap(angles, centres)
         if not any(seen):
             return Localisation(t_s, "not_found", None, None, angles, centres, seen, (), 0.0,
-                                "no robot marker in view")
+                                "no robot marker in view", sightings)
         rebuilt = []
         for i in range(1, n - 1):
             if not seen[i] and seen[i - 1] and seen[i + 1]:
@@ -230,14 +234,14 @@ class Localiser:
             msg = (f"links {missing} (1 = tail) not seen and not recoverable: no pose "
                    f"(saw {sum(seen)} of {n} markers)")
             return Localisation(t_s, "partial", None, None, angles, centres, seen, tuple(rebuilt),
-                                gap, msg)
+                                gap, msg, sightings)
         # Joint angles stay within +-pi, so unwrapping along the chain gives consistent angles.
         chain = angles[0] + np.concatenate(([0.0], np.cumsum(wrap_angle(np.diff(angles)))))
         heading = float(wrap_angle(np.mean(chain)))
         status = "rebuilt" if rebuilt else "ok"
         msg = f"links {[i + 1 for i in rebuilt]} rebuilt from their neighbours" if rebuilt else ""
         return Localisation(t_s, status, centres.mean(axis=0), heading, chain, centres, seen,
-                            tuple(rebuilt), gap, msg)
+                            tuple(rebuilt), gap, msg, sightings)
 
     def _rebuild(self, i: int, angles: FloatArray, centres: FloatArray) -> None:
         lh = self.half_length_m

@@ -188,7 +188,8 @@ def write_board_pdf(path: str | Path, spec: CharucoSpec) -> Path:
     dictionary = board.getDictionary()
     cells = int(dictionary.markerSize) + 2
     marker_mm = spec.marker_m * 1000.0
-    for marker_id, corners in zip(board.getIds().ravel(), board.getObjPoints(), strict=True):
+    ids = np.asarray(board.getIds()).ravel()
+    for marker_id, corners in zip(ids, board.getObjPoints(), strict=True):
         tl = np.asarray(corners, dtype=float).reshape(4, 3)[0] * 1000.0  # metres on the page
         _image(ax, marker_bits(dictionary, int(marker_id), cells), x0 + tl[0], y0 + tl[1],
                marker_mm, marker_mm)

@@ -103,6 +103,7 @@ def lens_views(
                           borderValue=150.0)
         if blur_sigma_px > 0:
             frame = cv2.GaussianBlur(frame, (0, 0), blur_sigma_px)
-        frame = frame + noise_sigma * rng.standard_normal(frame.shape).astype(np.float32)
-        views.append(np.clip(frame, 0, 255).astype(np.uint8))
+        noisy = np.asarray(frame, np.float32) + noise_sigma * rng.standard_normal(
+            (h, w), dtype=np.float32)
+        views.append(np.clip(noisy, 0, 255).astype(np.uint8))
     return views
