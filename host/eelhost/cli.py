@@ -17,6 +17,7 @@ import sys
 from eelhost.commands import (
     bench,
     calibrate,
+    campaign,
     dataset,
     estimate,
     estimate_bench,
@@ -46,6 +47,7 @@ COMMANDS = (
     vision_bench,
     markers,
     calibrate,
+    campaign,
     bench,
     run,
     ports,

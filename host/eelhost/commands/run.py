@@ -3,15 +3,14 @@
 from __future__ import annotations
 
 import argparse
-import time
 from pathlib import Path
 
 from eelhost.commands.common import OptionError, floats, rejected_as
-from eelhost.field.recorder import MOTIONS, take_paths
+from eelhost.field.recorder import MOTIONS
 from eelhost.field.runloop import RunConfig
-from eelhost.field.session import TakeNotes, TankSession, open_camera, virtual_robot
-from eelhost.field.signals import stop_on_signals
-from eelhost.link.uri import open_link, parse_link_uri
+from eelhost.field.session import TakeNotes
+from eelhost.field.take import TakeRequest, refuse_overwrite, run_take
+from eelhost.link.uri import parse_link_uri
 from eelhost.vision.markerfile import load_marker_file
 from eelhost.wire import protocol
 from eelsim.control import Gait
@@ -120,16 +119,6 @@ def _gait(values: list[float], k_theta: float) -> Gait:
     return gait
 
 
-def refuse_overwrite(stem: str, force: bool) -> None:
-    """Refuse to write over an earlier take at ``stem`` (or remove it with ``force``)."""
-    existing = [p for p in take_paths(stem) if p.exists()]
-    if existing and not force:
-        raise OptionError(f"--out: {existing[0]} exists (an earlier take); choose another --out "
-                          "or add --force to replace it")
-    for p in existing:
-        p.unlink()
-
-
 def current_option(value: list[float] | None, virtual: bool) -> tuple[float, float] | None:
     """The ``--current`` as (speed, direction), refused for ``sim://`` (its URI sets it)."""
     if value is None:
@@ -148,19 +137,9 @@ def run(args: argparse.Namespace) -> int:
     markers = load_marker_file(args.markers)
     waypoints = parse_waypoints(args.waypoints)
     gait = _gait(args.gait, args.k_theta)
+    current = current_option(args.current, args.robot.startswith("sim:"))
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     refuse_overwrite(args.out, args.force)
-    link = open_link(args.robot, robot=robot)
-    virtual = virtual_robot(link)
-    current = current_option(args.current, virtual is not None)
-    if args.speed is not None:
-        if virtual is None:
-            raise OptionError("--speed: only a sim:// robot can run faster than real time")
-        if args.speed < 0:
-            raise OptionError("--speed: must be >= 0")
-        virtual.clock.speed = args.speed
-    camera = open_camera(link, robot, args.camera, args.calibration, markers.layout)
-    camera.prime()  # the camera opens and gives a frame before the robot is started
     config = RunConfig(
         gait,
         waypoints,
@@ -169,33 +148,19 @@ def run(args: argparse.Namespace) -> int:
         duration_s=args.duration,
     )
     notes = TakeNotes(args.robot, args.robot_file, args.motion, current, args.note)
-    view = None
-    if not args.no_view:
-        from eelhost.web.liveview import LiveView
-
-        view = LiveView(camera.calibration, robot, config, port=args.view_port)
-        print(f"live view: {view.url}", flush=True)
+    request = TakeRequest(robot, config, args.out, notes, args.camera, args.calibration,
+                          markers.layout, args.speed)
     with rejected_as("--waypoints/--gait/--radius/--duration"):  # the task's record checks them
-        session = TankSession(link, camera, robot, config, args.out, notes,
-                              observers=[view.update] if view else None)
-    wall0 = time.monotonic()
-    try:
-        with stop_on_signals(
-            lambda name: session.loop.request_stop("interrupted", f"{name} received")
-        ):
-            out = session.run()
-    finally:
-        if view is not None:
-            view.close()
-    wall = time.monotonic() - wall0
+        result = run_take(request, None if args.no_view else args.view_port,
+                          announce=lambda msg: print(msg, flush=True))
+    out = result.outcome
     print(
         f"{out.reason}: {out.detail}; {out.waypoints_reached}/{len(waypoints)} waypoints, "
         f"{out.frames_with_pose}/{out.frames} frames with a pose, {out.offsets_sent} offsets, "
         f"Stop {out.stop_outcome}"
     )
-    if virtual is not None and wall > 0:
-        print(
-            f"simulated {out.t_end_s:.1f} s in {wall:.1f} s ({out.t_end_s / wall:.1f}x real time)"
-        )
-    print("wrote " + ", ".join(str(path) for path in session.paths if path.exists()))
+    if result.virtual and result.wall_s > 0:
+        print(f"simulated {out.t_end_s:.1f} s in {result.wall_s:.1f} s "
+              f"({out.t_end_s / result.wall_s:.1f}x real time)")
+    print("wrote " + ", ".join(str(path) for path in result.paths))
     return 0 if out.reason in STOPPED_ON_PURPOSE else 1
