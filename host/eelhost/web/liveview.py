@@ -216,7 +216,7 @@ PAGE = """<!doctype html>
  .acceptance { fill: rgba(255, 0, 200, 0.12); stroke: #ff00c8; stroke-width: 2; }
  .acceptance.reached { stroke: #3ddc84; fill: rgba(61, 220, 132, 0.12); }
  .waypoint { fill: #ff00c8; }
- #predicted { fill: none; stroke: #ff7a00; stroke-width: 2; stroke-dasharray: 8 5; }
+ #predicted { fill: none; stroke: #ff7a00; stroke-width: 3; stroke-dasharray: 8 5; }
 </style></head>
 <body>
 <div id="status">connecting...</div>
