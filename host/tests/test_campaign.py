@@ -1,0 +1,113 @@
+"""``eelbot campaign`` against ``sim://`` at reduced size, and the lab's whole sequence.
+
+The sequence is the one docs/host.md walks through: markers -> calibrate on a synthetic frame ->
+campaign -> estimate -> validate, with two gaits of one motion and short takes.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+import tomllib
+
+import pytest
+
+from eelhost.cli import main
+from eelhost.data.experiments import load_dataset
+from eelhost.field.campaign import load_plan, plan_takes
+
+PLAN = """
+name = "reduced"
+motions = ["straight"]
+amplitudes_rad = [0.61, 0.87]
+omegas_rad_s = [3.9]
+train = [[0.87, 3.9]]
+duration_s = {duration}
+"""
+
+
+def _plan(tmp_path, duration=4.0):
+    path = tmp_path / "plan.toml"
+    path.write_text(PLAN.format(duration=duration))
+    return path
+
+
+def test_the_paper_protocol_is_the_default_plan():
+    takes = plan_takes(load_plan(None))
+    assert len(takes) == 32
+    train = sorted(t.name for t in takes if t.split == "train")
+    assert train == sorted(f"{m}_A{a}_w{w}" for m in ("straight", "turning")
+                           for a in ("0.61", "0.87") for w in ("2.7", "3.9"))
+    turning = next(t for t in takes if t.motion == "turning")
+    assert turning.waypoint_m == pytest.approx((1.4 * 0.8660254, 0.7)) and turning.k_theta == 0.37
+
+
+def test_a_bad_plan_is_refused_naming_the_key(tmp_path, capsys):
+    path = tmp_path / "bad.toml"
+    path.write_text('motions = ["sideways"]\n')
+    assert main(["campaign", str(path), "--robot", "sim://", "--out", str(tmp_path / "d")]) == 2
+    assert "bad.toml: motions: Value error, motion 'sideways'" in capsys.readouterr().err
+
+
+def test_campaign_resumes_after_a_kill_skipping_finished_takes_and_redoing_the_partial_one(tmp_path):
+    plan, out = _plan(tmp_path, duration=3.0), tmp_path / "ds"
+    cmd = [sys.executable, "-m", "eelhost", "campaign", str(plan), "--robot", "sim://?speed=1",
+           "--camera", "synthetic:clean", "--out", str(out), "--no-view"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        # Killed (no cleanup at all) once the second take has recorded a few frames.
+        deadline = time.monotonic() + 120
+        second = out / "straight_A0.87_w3.9.csv"
+        while not (second.exists() and second.read_text().count("\n") > 10):
+            assert time.monotonic() < deadline and proc.poll() is None, proc.communicate()
+            time.sleep(0.05)
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    partial = json.loads((out / "straight_A0.87_w3.9.json").read_text())
+    assert partial["source"]["recording"]["complete"] is False
+    manifest = tomllib.loads((out / "manifest.toml").read_text())
+    assert manifest["motions"]["straight"] == {"train": [], "test": ["straight_A0.61_w3.9"]}
+    first_csv = (out / "straight_A0.61_w3.9.csv").read_text()
+
+    done = subprocess.run([*cmd[:6], "sim://?speed=0", *cmd[7:]], capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 0, done.stderr
+    lines = done.stdout.splitlines()
+    assert lines[1] == "[1/2] straight_A0.61_w3.9: done earlier, skipped"
+    assert lines[2].startswith("[2/2] straight_A0.87_w3.9: duration at 3.0 s (train)")
+    assert (out / "straight_A0.61_w3.9.csv").read_text() == first_csv
+    ds = load_dataset(out)  # loads directly, no incomplete recording left
+    assert [e.name for e in ds.train["straight"]] == ["straight_A0.87_w3.9"]
+    assert [e.name for e in ds.test["straight"]] == ["straight_A0.61_w3.9"]
+    redone = ds.train["straight"][0]
+    assert redone.source["recording"]["complete"] is True
+    assert redone.source["run"]["campaign"] == {"plan": "reduced", "take": "straight_A0.87_w3.9",
+                                                "split": "train", "repeat": 1}
+
+
+def test_the_lab_sequence_from_markers_to_a_validation_report(tmp_path, capsys):
+    lab = tmp_path / "lab"
+    assert main(["markers", "--out", str(lab)]) == 0
+    assert main(["calibrate", "--camera", "synthetic", "--markers", str(lab / "markers.json"),
+                 "--calibration", str(lab / "calibration.json"),
+                 "--save-frame", str(lab / "frame.png")]) == 0
+    assert main(["campaign", str(_plan(tmp_path, duration=6.0)), "--robot", "sim://?speed=0",
+                 "--camera", "synthetic:clean", "--calibration", str(lab / "calibration.json"),
+                 "--markers", str(lab / "markers.json"), "--out", str(lab / "campaign"),
+                 "--no-view"]) == 0
+    assert main(["estimate", str(lab / "campaign"), "--motion", "straight", "--budget", "60",
+                 "--out", str(lab / "fit")]) == 0
+    assert main(["validate", str(lab / "fit" / "coefficients.json"), str(lab / "campaign"),
+                 "--out", str(lab / "validation")]) == 0
+    table = (lab / "validation" / "table4.md").read_text()
+    assert "straight_A0.61_w3.9" in table
+    assert (lab / "validation" / "paths_straight.png").exists()
+    printed = capsys.readouterr().out
+    assert "2/2 takes done" in printed and "reprojection rms" in printed
