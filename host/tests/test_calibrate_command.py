@@ -45,6 +45,34 @@ def test_calibrating_on_the_synthetic_board_recovers_the_camera_and_checks_clean
     assert "on this frame: rms 0.0" in capsys.readouterr().out
 
 
+def test_calibrating_from_a_camera_source_reads_its_frames(tmp_path, capsys):
+    # A folder of images and a video stand for a camera: the same frames as the synthetic one.
+    frame_png, folder = tmp_path / "frame.png", tmp_path / "camera"
+    assert main(["calibrate", "--camera", "synthetic", "--calibration", str(tmp_path / "a.json"),
+                 "--save-frame", str(frame_png)]) == 0
+    frame = cv2.imread(str(frame_png))
+    folder.mkdir()
+    for i in range(12):
+        cv2.imwrite(str(folder / f"{i:03d}.png"), frame)
+    video = tmp_path / "camera.avi"
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 30.0,
+                             (frame.shape[1], frame.shape[0]))
+    for _ in range(12):
+        writer.write(frame)
+    writer.release()
+    for source in (folder, video):
+        cal_path = tmp_path / f"{source.stem}.json"
+        assert main(["calibrate", "--camera", str(source), "--board-origin", "0.2,0.6",
+                     "--calibration", str(cal_path)]) == 0
+        cal = load_calibration(cal_path)
+        assert cal.method == "charuco" and cal.rms_reprojection_px < 0.3
+        assert np.abs(cal.to_px(AREA_M) - TRUTH.to_px(AREA_M)).max() < 1.5
+    # A camera that is not there is named, and nothing is written.
+    assert main(["calibrate", "--camera", "7", "--calibration", str(tmp_path / "none.json")]) == 2
+    assert "camera 7" in capsys.readouterr().err
+    assert not (tmp_path / "none.json").exists()
+
+
 def test_check_fails_when_the_board_is_not_where_the_calibration_says(tmp_path, capsys):
     cal_path, frame = tmp_path / "cal.json", tmp_path / "frame.png"
     assert main(["calibrate", "--camera", "synthetic", "--calibration", str(cal_path),

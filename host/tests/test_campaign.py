@@ -13,6 +13,7 @@ import subprocess
 import sys
 import time
 import tomllib
+import urllib.request
 
 import pytest
 
@@ -90,6 +91,45 @@ def test_campaign_resumes_after_a_kill_skipping_finished_takes_and_redoing_the_p
     assert redone.source["recording"]["complete"] is True
     assert redone.source["run"]["campaign"] == {"plan": "reduced", "take": "straight_A0.87_w3.9",
                                                 "split": "train", "repeat": 1}
+
+
+def test_campaign_serves_the_live_view_and_stops_cleanly_on_sigterm(tmp_path):
+    plan, out = _plan(tmp_path, duration=30.0), tmp_path / "ds"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "eelhost", "campaign", str(plan), "--robot", "sim://?speed=1",
+         "--camera", "synthetic:clean", "--out", str(out), "--view-port", "0"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout is not None
+        lines = [proc.stdout.readline(), proc.stdout.readline()]
+        assert lines[1].startswith("live view: http://127.0.0.1:"), (lines, proc.poll())
+        url = lines[1].split(": ", 1)[1].strip()
+        page = urllib.request.urlopen(url, timeout=10).read().decode()
+        assert 'id="frame"' in page
+        # Poll the overlay until the robot is seen swimming and the twin's prediction is drawn.
+        deadline = time.monotonic() + 120
+        while True:
+            state = json.loads(urllib.request.urlopen(url + "state.json", timeout=10).read())
+            if len(state["markers"]) == 6 and state["predicted"] and len(state["track"]) > 5:
+                break
+            assert time.monotonic() < deadline and proc.poll() is None, state
+            time.sleep(0.2)
+        assert [len(w["circle"]) for w in state["waypoints"]] == [48]
+        assert not state["waypoints"][0]["reached"]
+        jpeg = urllib.request.urlopen(url + "frame.jpg", timeout=10).read()
+        assert jpeg[:2] == b"\xff\xd8"
+        os.kill(proc.pid, signal.SIGTERM)
+        rest, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 1, err  # not every take done
+    assert "stopped by SIGTERM: run the same command to go on" in rest
+    first = json.loads((out / "straight_A0.61_w3.9.json").read_text())["source"]["recording"]
+    assert first["complete"] is True and first["reason"] == "interrupted" and first["stop"] == "ack"
+    assert not (out / "straight_A0.87_w3.9.json").exists()  # the campaign went no further
+    manifest = tomllib.loads((out / "manifest.toml").read_text())
+    assert not manifest.get("motions")  # an interrupted take is not done: the next run redoes it
 
 
 def test_the_lab_sequence_from_markers_to_a_validation_report(tmp_path, capsys):
