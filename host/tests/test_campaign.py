@@ -54,6 +54,17 @@ def test_a_bad_plan_is_refused_naming_the_key(tmp_path, capsys):
     assert "bad.toml: motions: Value error, motion 'sideways'" in capsys.readouterr().err
 
 
+def test_the_written_plan_reads_back_as_the_same_plan(tmp_path, capsys):
+    written = tmp_path / "plan.toml"
+    assert main(["campaign", "--write-plan", str(written)]) == 0  # no robot needed to write it
+    assert plan_takes(load_plan(written)) == plan_takes(load_plan(None))  # the same takes
+    edited = written.read_text().replace("repeats = 1", "repeats = 2")
+    written.write_text(edited)
+    assert len(plan_takes(load_plan(written))) == 64
+    assert main(["campaign", str(written), "--out", str(tmp_path / "d")]) == 2
+    assert "--robot: required to run a campaign" in capsys.readouterr().err
+
+
 def test_campaign_resumes_after_a_kill_skipping_finished_takes_and_redoing_the_partial_one(tmp_path):
     plan, out = _plan(tmp_path, duration=3.0), tmp_path / "ds"
     cmd = [sys.executable, "-m", "eelhost", "campaign", str(plan), "--robot", "sim://?speed=1",

@@ -43,9 +43,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("plan", nargs="?", help="plan TOML (default: the paper's protocol; see "
                    "docs/host.md)")
-    p.add_argument("--robot", required=True, metavar="URI", help="serial:///dev/ttyUSB0?baud="
-                   "57600, sim://?speed=0 ...")
-    p.add_argument("--out", required=True, metavar="FOLDER", help="the dataset folder")
+    p.add_argument("--robot", metavar="URI", help="serial:///dev/ttyUSB0?baud=57600, "
+                   "sim://?speed=0 ... (required unless --write-plan)")
+    p.add_argument("--out", metavar="FOLDER", help="the dataset folder (required unless "
+                   "--write-plan)")
     p.add_argument("--camera", metavar="SOURCE", help="as eelbot run (sim://: synthetic)")
     p.add_argument("--calibration", metavar="FILE", help="calibration JSON")
     p.add_argument("--markers", metavar="FILE", help="markers.json from eelbot markers")
@@ -112,6 +113,10 @@ def run(args: argparse.Namespace) -> int:
         Path(args.write_plan).write_text(plan_toml(plan))
         print(f"wrote {args.write_plan}")
         return 0
+    for option, value in (("--robot", args.robot), ("--out", args.out)):
+        if not value:
+            raise OptionError(f"{option}: required to run a campaign (only --write-plan does "
+                              "without)")
     parse_link_uri(args.robot)
     virtual = args.robot.startswith("sim:")
     if args.speed is not None and not virtual:
