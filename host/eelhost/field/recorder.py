@@ -8,7 +8,7 @@ Three files share the stem ``<out>``:
 - ``<out>.csv``: the experiment's frames (``t_s, x_m, y_m, heading_rad, theta_1..theta_N``), one
   line per frame that gave a pose, each appended in one write, flushed and fsynced. A writer
   killed mid-line leaves a last line without its newline;
-  ``read_experiment(stem, allow_truncated_tail=True)`` drops it and keeps every complete row.
+  ``read_experiment(stem, allow_incomplete=True)`` drops it and keeps every complete row.
 - ``<out>.frames.csv``: every camera frame, pose or not: ``t_s, status, markers`` (the
   localisation's status and how many markers it read), appended the same way; the measured frame
   rate and intervals go into the metadata's ``camera`` at the end.
