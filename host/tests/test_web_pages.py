@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import io
+import subprocess
+import sys
 import threading
 
 import numpy as np
@@ -14,6 +16,7 @@ from selenium.webdriver.common.by import By
 from selenium.webdriver.support.ui import WebDriverWait
 
 from eelhost.field.runloop import FrameReport, RunConfig
+from eelhost.vision.calibration import load_calibration
 from eelhost.vision.localise import Localiser
 from eelhost.vision.synthetic import RenderOptions, SyntheticCamera
 from eelhost.web.liveview import LiveView
@@ -120,3 +123,38 @@ def test_picker_gives_up_with_a_clear_error_when_nobody_clicks():
 
     with pytest.raises(PickError, match="no 4 points were clicked within 0.2 s"):
         pick_points(np.zeros((10, 10), np.uint8), 4, timeout_s=0.2)
+
+
+def test_calibrate_click_takes_the_corners_clicked_on_the_synthetic_tank(tmp_path):
+    # The synthetic tank's corners are at these pixels (the exact camera puts them there).
+    corners_px = [(35, 689), (1245, 689), (1237, 31), (43, 31)]
+    corners_m = "-1.5,-1;3.1,-1;3.1,1.5;-1.5,1.5"
+    cal_path = tmp_path / "cal.json"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "eelhost", "calibrate", "--camera", "synthetic", "--click",
+         "--port", "0", f"--corners-m={corners_m}", "--calibration", str(cal_path)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout is not None
+        line = proc.stdout.readline()
+        assert line.startswith("click the tank's four corners at http://127.0.0.1:"), line
+        url = line.split(" at ", 1)[1].split()[0]
+        with headless_chromium() as browser:
+            browser.get(url)
+            WebDriverWait(browser, 30).until(lambda b: b.execute_script(
+                "return document.getElementById('frame').naturalWidth > 0"))
+            img = browser.find_element(By.ID, "frame")
+            for u, v in corners_px:
+                ActionChains(browser).move_to_element_with_offset(img, u - 640, v - 360).click().perform()
+            browser.find_element(By.ID, "done").click()
+            out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0, err
+    assert "tank_corners, 4 points" in out
+    cal = load_calibration(cal_path)
+    truth = SyntheticCamera(ROBOT).calibration()
+    area = np.stack(np.meshgrid(np.linspace(-0.5, 2.0, 6), np.linspace(-0.5, 1.0, 4)), -1)
+    # Clicks land on whole CSS pixels: the map is within a pixel of the camera's.
+    assert np.abs(cal.to_px(area.reshape(-1, 2)) - truth.to_px(area.reshape(-1, 2))).max() < 1.0
