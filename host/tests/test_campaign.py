@@ -70,6 +70,64 @@ def test_the_written_plan_reads_back_as_the_same_plan(tmp_path, capsys):
     assert "--robot: required to run a campaign" in capsys.readouterr().err
 
 
+def _stand_in_take(ran: list[str]):
+    """A stand-in for run_take that writes a finished take (no robot or camera needed)."""
+    from eelhost.field.runloop import RunOutcome
+    from eelhost.field.take import TakeResult
+
+    def run_take(request, view_port=None, announce=None, stop_flag=None):
+        ran.append(request.out)
+        meta = {"source": {"recording": {"complete": True, "reason": "arrived"}}}
+        Path(f"{request.out}.json").write_text(json.dumps(meta))
+        Path(f"{request.out}.csv").write_text("t_s,x_m,y_m\n")
+        return TakeResult(RunOutcome(reason="arrived", stop_outcome="ack"), [], 0.0, False, [])
+
+    return run_take
+
+
+def test_a_real_robots_campaign_rests_and_asks_for_a_reset_between_takes(tmp_path, monkeypatch,
+                                                                        capsys):
+    import eelhost.commands.campaign as campaign
+
+    ran: list[str] = []
+    prompts: list[str] = []
+    rests: list[float] = []
+    monkeypatch.setattr(campaign, "run_take", _stand_in_take(ran))
+    monkeypatch.setattr(campaign, "_wait_rest", lambda seconds, stopped: rests.append(seconds))
+    monkeypatch.setattr("builtins.input", lambda text: prompts.append(text) or "")
+    plan = tmp_path / "plan.toml"
+    plan.write_text(PLAN.format(duration=5.0) + "rest_s = 45.0\nstart = [0.3, 0.2, 10.0]\n")
+    argv = ["campaign", str(plan), "--robot", "serial:///dev/ttyUSB9", "--camera", "0",
+            "--out", str(tmp_path / "ds"), "--no-view"]
+    assert main(argv) == 0
+    assert [Path(p).name for p in ran] == ["straight_A0.61_w3.9", "straight_A0.87_w3.9"]
+    # Before the second take only: the plan's rest, then the operator puts the robot back.
+    assert rests == [45.0]
+    assert prompts == ["put the robot at x 0.3 m, y 0.2 m, heading 10 deg, still, then press "
+                       "Enter: "]
+    assert "2/2 takes done" in capsys.readouterr().out
+
+
+def test_a_campaign_without_a_terminal_to_ask_stops_naming_no_prompt(tmp_path, monkeypatch,
+                                                                     capsys):
+    import eelhost.commands.campaign as campaign
+
+    ran: list[str] = []
+    monkeypatch.setattr(campaign, "run_take", _stand_in_take(ran))
+
+    def no_terminal(_text: str) -> str:
+        raise EOFError
+
+    monkeypatch.setattr("builtins.input", no_terminal)
+    argv = ["campaign", str(_plan(tmp_path)), "--robot", "serial:///dev/ttyUSB9", "--camera",
+            "0", "--out", str(tmp_path / "ds"), "--no-view", "--rest", "0"]
+    assert main(argv) == 2
+    assert "run it in a terminal, or --no-prompt" in capsys.readouterr().err
+    assert len(ran) == 1
+    assert main([*argv, "--no-prompt"]) == 0  # resumes with the second take, asking nothing
+    assert len(ran) == 2
+
+
 def test_campaign_resumes_after_a_kill_skipping_finished_takes_and_redoing_the_partial_one(tmp_path):
     plan, out = _plan(tmp_path, duration=3.0), tmp_path / "ds"
     cmd = [sys.executable, "-m", "eelhost", "campaign", str(plan), "--robot", "sim://?speed=1",

@@ -105,3 +105,17 @@ def test_sigterm_and_sighup_stop_the_robot_and_close_the_take(tmp_path, signum):
     assert stop and stop[-1]["event"] == "ack"
     exp = read_experiment(stem)  # complete: read without --allow-incomplete
     assert np.all(np.diff(exp.t_s) > 0)
+
+
+def test_the_current_is_recorded_when_known_and_a_sim_robot_takes_its_own(tmp_path, capsys):
+    stem = tmp_path / "drift"
+    assert main(["run", "--robot", "sim://?speed=0&current=0.03,180", "--camera",
+                 "synthetic:clean", "--gait", "0.87,3.9", "--no-view", "--waypoints", "1.4,0",
+                 "--duration", "1", "--out", str(stem)]) == 0
+    exp = read_experiment(stem)
+    assert exp.scenario.current_speed_m_s == pytest.approx(0.03)
+    assert exp.scenario.current_direction_deg == pytest.approx(180.0)
+    assert exp.source["run"]["current_known"] is True
+    assert main(["run", *FAST, "--waypoints", "1.4,0", "--current", "0.03,180",
+                 "--out", str(tmp_path / "refused")]) == 2
+    assert "--current: a sim:// robot's current is set in its URI" in capsys.readouterr().err
