@@ -19,7 +19,7 @@ changes any of it; every key is optional::
     k_theta_straight = 0.1
     k_theta_turning = 0.37
     radius_m = 0.15
-    duration_s = 40.0                  # a take stops after this long if not arrived
+    duration_s = 60.0                  # a take stops after this long if not arrived
     rest_s = 60.0                      # between takes with a real robot (the water settles)
     control_period_s = 0.3
 
@@ -79,7 +79,7 @@ class CampaignPlan(BaseModel):
     k_theta_straight: float = 0.1
     k_theta_turning: float = 0.37
     radius_m: float = Field(0.15, gt=0)
-    duration_s: float = Field(40.0, gt=0)
+    duration_s: float = Field(60.0, gt=0)  # the slowest turning gaits need more than 40 s
     rest_s: float = Field(60.0, ge=0)
     control_period_s: float = Field(0.3, gt=0)
 
