@@ -101,3 +101,30 @@ def test_marker_file_round_trips_and_names_what_is_wrong(tmp_path):
         load_marker_file(path)
     with pytest.raises(MarkerFileError, match=r"ids \[10, 11\] are also on the robot"):
         MarkerFile(MarkerLayout(link_ids=(6, 7, 8, 9, 10, 11)))
+
+
+def test_the_localiser_reads_the_robot_as_the_marker_file_says_it_was_printed(tmp_path):
+    from eelhost.cli import main
+    from eelhost.vision.localise import Localiser
+    from eelhost.vision.markerfile import load_marker_file
+    from eelhost.vision.synthetic import RenderOptions, SyntheticCamera
+    from eelsim.dynamics import straight_state
+    from eelsim.model import SwimmerModel
+    from eelsim.robot import load_robot
+
+    # Printed head first (ids 5..0 from the tail) with the plates 1 cm towards the head.
+    assert main(["markers", "--out", str(tmp_path), "--ids", "5,4,3,2,1,0",
+                 "--offsets", "0.01,0.01,0.01,0.01,0.01,0.01"]) == 0
+    printed = load_marker_file(tmp_path / "markers.json").layout
+    robot = load_robot()
+    camera = SyntheticCamera(robot, layout=printed,
+                             options=RenderOptions(noise_sigma=0.0, jpeg_quality=0))
+    frame, truth = camera.render(straight_state(SwimmerModel.from_robot(robot), 0.4, (0.6, 0.2)))
+    loc = Localiser(camera.calibration(), robot, printed).localise(0.0, frame)
+    assert loc.found
+    assert np.hypot(*(np.asarray(loc.com_m) - truth.com_m)) < 0.002
+    assert abs(np.angle(np.exp(1j * (loc.heading_rad - truth.heading_rad)))) < np.radians(1.0)
+    # Read with the default layout (plates centred on their links), the same robot is placed
+    # the plates' offset away from where it is.
+    wrong = Localiser(camera.calibration(), robot).localise(0.0, frame)
+    assert np.hypot(*(np.asarray(wrong.com_m) - truth.com_m)) > 0.008
