@@ -72,8 +72,8 @@ def test_a_camera_that_does_not_open_fails_before_anything_is_sent(tmp_path, cap
     assert not list(tmp_path.glob("nocam*"))
 
 
-@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP])
-def test_sigterm_and_sighup_stop_the_robot_and_close_the_take(tmp_path, signum):
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
+def test_ctrl_c_sigterm_and_sighup_stop_the_robot_and_close_the_take(tmp_path, signum):
     stem = tmp_path / "sig"
     proc = subprocess.Popen(
         [sys.executable, "-m", "eelhost", "run", "--robot", "sim://?speed=1", "--camera",
