@@ -16,9 +16,12 @@ import sys
 
 from eelhost.commands import (
     bench,
+    calibrate,
+    campaign,
     dataset,
     estimate,
     estimate_bench,
+    markers,
     plan,
     ports,
     report,
@@ -42,6 +45,9 @@ COMMANDS = (
     validate,
     report,
     vision_bench,
+    markers,
+    calibrate,
+    campaign,
     bench,
     run,
     ports,

@@ -43,9 +43,9 @@ def test_half_written_last_line_is_dropped_and_every_complete_row_kept(tmp_path)
     rec = _record(tmp_path, 12)
     with open(tmp_path / "run.csv", "a") as f:
         f.write("0.4,0.04")  # the writer died mid-line
-    with pytest.raises(DataError):
-        read_experiment(tmp_path / "run")  # a finished file must end cleanly
-    exp = read_experiment(tmp_path / "run", allow_truncated_tail=True)
+    with pytest.raises(DataError, match=r"run\.json: incomplete recording"):
+        read_experiment(tmp_path / "run")  # never closed: refused, naming the file
+    exp = read_experiment(tmp_path / "run", allow_incomplete=True)
     assert len(exp.t_s) == 12
     meta = json.loads((tmp_path / "run.json").read_text())
     assert meta["source"]["recording"]["complete"] is False
@@ -92,8 +92,30 @@ def test_recorder_killed_mid_run_leaves_a_readable_experiment(tmp_path) -> None:
     )
     proc = subprocess.run([sys.executable, "-c", child], capture_output=True, text=True)
     assert proc.returncode == -9, proc.stderr
-    exp = read_experiment(stem, allow_truncated_tail=True)
+    exp = read_experiment(stem, allow_incomplete=True)
     assert len(exp.t_s) == 40 and exp.t_s[-1] == pytest.approx(39 / 30)
     assert exp.source["recording"]["complete"] is False
     events = [r["message"] for r in read_commands_csv(f"{stem}.commands.csv")]
     assert "Start" in events and "SetOffset" in events
+
+
+def test_incomplete_recording_in_a_dataset_is_refused_naming_it_unless_allowed(tmp_path, capsys) -> None:
+    from eelhost.cli import main
+    from eelhost.data.experiments import load_dataset, manifest_text, write_manifest
+
+    rec = _record(tmp_path, 12)  # not closed, as after a kill
+    closed = Recorder(tmp_path / "done", load_scenario("path1"), 6, fsync=False)
+    for k in range(5):
+        closed.frame(k / 30, (0.01 * k, 0.0), 0.0, np.zeros(6))
+    closed.close({"reason": "arrived"})
+    write_manifest(tmp_path, manifest_text("paper_robot.toml", {"straight": {"train": ["done"], "test": ["run"]}}, []))
+    with pytest.raises(DataError, match=r"run\.json: incomplete recording.*--allow-incomplete"):
+        load_dataset(tmp_path)
+    ds = load_dataset(tmp_path, allow_incomplete=True)
+    assert len(ds.test["straight"][0].t_s) == 12
+    # The commands say so too, with exit status 2 and the file named.
+    for argv in (["estimate", str(tmp_path), "--out", str(tmp_path / "fit")],
+                 ["validate", "0.008,0.776,0.618,0.007", str(tmp_path), "--out", str(tmp_path / "v")]):
+        assert main(argv) == 2
+        assert "run.json: incomplete recording" in capsys.readouterr().err
+    rec.close()

@@ -222,54 +222,45 @@ smooths the poses for the controller, as in the paper.
 ### Printing
 
 ```
-.venv/bin/python -c "from eelhost.vision.markers import default_layout, save_marker_sheet; \\
-save_marker_sheet('markers.pdf', default_layout(), dpi=300)"
+.venv/bin/eelbot markers --out lab      # lab/markers.pdf, lab/charuco.pdf, lab/markers.json
 ```
 
 The sheet (A4) holds the six plates with labels, an arrow to the head side and grey cut lines.
-Print at 100 % ("actual size", no fit to page) on matte paper (gloss reflects the lights), laminate
+Each marker is drawn as its exact bit matrix over its printed extent (vector,
+no resampling); `lab/markers.json` records the layout (dictionary, ids tail first, sizes, offsets)
+and the board, and `calibrate`, `run` and `campaign` read it with `--markers`. Print at 100 %
+("actual size", no fit to page) on matte paper (gloss reflects the lights), laminate
 or seal it against water, and cut on the grey lines, keeping the white quiet zone. The printed size
 does not enter the localisation (only each marker's centre and orientation do), so a small scaling
 by the printer is harmless.
 
 ## Calibration (pixels to metres at the markers' height)
 
-A calibration is a homography between the markers' plane and the image, saved as JSON
-(`eelhost.vision.calibration.save_calibration`; `load_calibration` names the file and the key of
-anything malformed). Lens distortion is not modelled: undistort first if straight tank edges look
-curved.
+A calibration is a homography between the markers' plane and the image, optionally after undoing
+the lens's distortion, saved as JSON (`eelhost.vision.calibration.save_calibration`;
+`load_calibration` names the file and the key of anything malformed). `eelbot calibrate` makes one
+from a frame of a camera (`--camera 0`, a video or an image folder) or an image (`--image`), prints
+its reprojection error in pixels and millimetres and the pixel size, and `--check` measures an
+existing one on a new frame. [host.md](host.md#4-calibration) gives the steps at the tank.
 
-**From the tank's corners.** Click the four corners in a frame (any image viewer shows pixel
-coordinates), in order: origin, along +x, opposite, along +y.
+**From a ChArUco board (automatic).** The board of `eelbot markers` (`CharucoSpec`: 7 x 5 squares
+of 110 mm, 80 mm markers, `DICT_4X4_50` ids 10 to 26, clear of the robot's; 770 x 550 mm, printed
+on A1) lies flat at the markers' height at a known place: `--board-origin X,Y` is the outer corner
+of its first square (the top-left of the printed board), `--board-angle` the direction of its
+printed rows. The fit (`from_charuco`) is accurate over the board and less so far beyond it; use a
+board covering much of the swimming area, or check it elsewhere.
 
-```python
-from eelhost.vision.calibration import from_tank_corners, save_calibration
-cal = from_tank_corners([(35, 689), (1245, 689), (1237, 31), (43, 31)], (1280, 720),
-                        tank_size_m=(4.6, 2.5),
-                        camera_height_m=2.0, marker_height_m=-0.03)  # rim 3 cm above the plates
-save_calibration(cal, "calibration.json")
-```
+**From the tank's corners.** Clicked on a local web page (`--click`) or given as pixels
+(`--corners "U,V;U,V;U,V;U,V"`), in order: origin, along +x, opposite, along +y; `--tank-size`
+or `--corners-m` their world coordinates (`from_tank_corners`). The corners are on the rim, not at
+the markers' height: give the camera's height above the rim (`--camera-height`) and the markers'
+height relative to it (`--marker-height`, negative when below), and the homography is corrected
+exactly for a pinhole camera (scaling about the point under the camera: the point seen at the
+image centre). Leave them out if the corners are at the markers' height.
 
-The corners are on the rim, not at the markers' height: give the camera's height above the rim and
-the markers' height relative to it (negative when below), and the homography is corrected exactly
-for a pinhole camera (scaling about the point under the camera; by default the point seen at the
-image centre, or pass `nadir_m`). Leave them out if the corners are at the markers' height.
-
-**From a ChArUco board.** Float or hold the board (`CharucoSpec`: 7 x 5 squares of 110 mm, 80 mm
-markers, `DICT_4X4_50` ids 10 to 26, clear of the robot's) flat at the markers' height, at a known
-place, and take a frame:
-
-```python
-import cv2
-from eelhost.vision.calibration import CharucoSpec, from_charuco, save_calibration
-cv2.imwrite("charuco.png", CharucoSpec().image(dpi=150))  # 770 x 550 mm: print on A1 at 100 %
-cal = from_charuco(cv2.imread("frame.png"), board_origin_m=(0.5, 0.2), board_angle_rad=0.0)
-save_calibration(cal, "calibration.json")
-```
-
-The board's origin is the outer corner of its first square (the top-left of the printed image),
-x along the printed rows. It is accurate over the board and less so far beyond it; use a board
-covering much of the swimming area, or check it against the tank corners.
+**Lens distortion.** `--lens FOLDER` fits OpenCV's camera model (focal lengths, centre, radial
+and tangential distortion) to views of the board at several poses (`calibrate_lens`); the
+calibration then maps undistorted pixels, and the localiser undistorts the marker corners first.
 
 ## Localising
 

@@ -32,13 +32,18 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--out", default="out/estimate", help="folder for coefficients.json and checkpoints"
     )
+    p.add_argument(
+        "--allow-incomplete",
+        action="store_true",
+        help="use recordings that were never closed (killed runs); refused by default",
+    )
     add_fit_options(p)
     p.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
-    dataset = load_dataset(args.dataset)
+    dataset = load_dataset(args.dataset, allow_incomplete=args.allow_incomplete)
     settings = fit_settings(args)
     motions = ("straight", "turning") if args.motion == "both" else (args.motion,)
     map_function = None

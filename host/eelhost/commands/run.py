@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import argparse
-import signal
-import time
+from pathlib import Path
 
 from eelhost.commands.common import OptionError, floats, rejected_as
+from eelhost.field.recorder import MOTIONS
 from eelhost.field.runloop import RunConfig
-from eelhost.field.session import TankSession, open_camera, virtual_robot
-from eelhost.link.uri import open_link, parse_link_uri
+from eelhost.field.session import TakeNotes
+from eelhost.field.take import TakeRequest, refuse_overwrite, run_take
+from eelhost.link.uri import parse_link_uri
+from eelhost.vision.markerfile import load_marker_file
 from eelhost.wire import protocol
 from eelsim.control import Gait
 from eelsim.robot import load_robot
@@ -21,9 +23,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "run",
         help="steer the robot along waypoints from the camera, and record the run",
         description="Localise the robot in the camera frames, send the heading offset every "
-        "control period, record every pose and command (<out>.csv, .json, .commands.csv, "
-        ".rx.bin). Stops the robot on Ctrl-C, when it is out of view for more than 1 s, when "
-        "nothing comes from it for 1 s, at the last waypoint and after --duration. "
+        "control period, record every pose, frame and command (<out>.csv, .json, .frames.csv, "
+        ".commands.csv, .rx.bin, and copies of the robot file and calibration). Stops the robot "
+        "on Ctrl-C, SIGTERM or SIGHUP, when it is out of view for more than 1 s, when nothing "
+        "comes from it for 1 s, at the last waypoint and after --duration. "
         "Example: eelbot run --robot sim:// --waypoints '0.43,0.25;0.93,0.25;1.37,0.5' "
         "--gait 0.87,3.9 --k-theta 0.37 --out out/run/path1 --speed 0",
     )
@@ -39,7 +42,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="camera index, video file or image folder; for sim:// 'synthetic' (default, with "
         "noise and JPEG) or 'synthetic:clean' (blur only, faster)",
     )
-    p.add_argument("--calibration", metavar="FILE", help="calibration JSON (docs/vision.md)")
+    p.add_argument("--calibration", metavar="FILE", help="calibration JSON (docs/vision.md); "
+                   "with the synthetic camera, localise with it instead of the exact one")
+    p.add_argument("--markers", metavar="FILE", help="markers.json from eelbot markers "
+                   "(default: ids 0..N-1, tail first)")
     p.add_argument("--robot-file", metavar="FILE", help="robot TOML (default: the paper robot)")
     p.add_argument("--waypoints", required=True, metavar="x,y;x,y", help="waypoints, m")
     p.add_argument(
@@ -53,13 +59,37 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--radius", type=float, default=0.15, help="acceptance radius, m (0.15)")
     p.add_argument("--control-period", type=float, default=0.3, help="offset period, s (0.3)")
     p.add_argument("--duration", type=float, help="stop after this long, s (default: no limit)")
+    p.add_argument("--motion", choices=MOTIONS, default="auto",
+                   help="what the take is, for a dataset: straight, turning, path, or auto "
+                   "(path for several waypoints; one waypoint within 10 deg of the start heading "
+                   "is straight, else turning)")
     p.add_argument(
         "--speed",
         type=float,
         help="sim:// only: simulated s per wall s, 0 = as fast as possible (overrides the URI)",
     )
+    add_take_options(p)
     p.add_argument("--out", required=True, metavar="STEM", help="output path without extension")
+    p.add_argument("--force", action="store_true", help="replace an existing take at --out")
     p.set_defaults(run=run)
+
+
+def add_take_options(p: argparse.ArgumentParser) -> None:
+    """What a take records beyond the task, and the live view (shared with ``campaign``)."""
+    p.add_argument("--note", default="", help="operator's note, kept in the record")
+    p.add_argument("--current", metavar="SPEED,DIR",
+                   type=lambda s: floats(s, 2, "--current"),
+                   help="the water's current if known: m/s, direction in degrees (sim:// has "
+                   "its own)")
+    p.add_argument("--no-view", action="store_true",
+                   help="no live view (headless); by default a web page on localhost shows the "
+                   "camera, the markers, the track, the waypoints and the twin's prediction")
+    p.add_argument("--view-port", type=int, default=8765,
+                   help="port of the live view on 127.0.0.1 (8765; 0: any free port)")
+
+
+# Ends that are not failures: arrived, ran its --duration, or stopped by the operator (a signal).
+STOPPED_ON_PURPOSE = ("arrived", "duration", "interrupted")
 
 
 def parse_waypoints(text: str) -> list[tuple[float, float]]:
@@ -89,21 +119,27 @@ def _gait(values: list[float], k_theta: float) -> Gait:
     return gait
 
 
+def current_option(value: list[float] | None, virtual: bool) -> tuple[float, float] | None:
+    """The ``--current`` as (speed, direction), refused for ``sim://`` (its URI sets it)."""
+    if value is None:
+        return None
+    if virtual:
+        raise OptionError("--current: a sim:// robot's current is set in its URI (current=)")
+    if value[0] < 0:
+        raise OptionError(f"--current: the speed must be >= 0, got {value[0]:g}")
+    return (value[0], value[1])
+
+
 def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
     parse_link_uri(args.robot)  # a bad URI is reported before anything is opened
     robot = load_robot(args.robot_file)
+    markers = load_marker_file(args.markers)
     waypoints = parse_waypoints(args.waypoints)
     gait = _gait(args.gait, args.k_theta)
-    link = open_link(args.robot, robot=robot)
-    virtual = virtual_robot(link)
-    if args.speed is not None:
-        if virtual is None:
-            raise OptionError("--speed: only a sim:// robot can run faster than real time")
-        if args.speed < 0:
-            raise OptionError("--speed: must be >= 0")
-        virtual.clock.speed = args.speed
-    camera = open_camera(link, robot, args.camera, args.calibration)
+    current = current_option(args.current, args.robot.startswith("sim:"))
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    refuse_overwrite(args.out, args.force)
     config = RunConfig(
         gait,
         waypoints,
@@ -111,23 +147,20 @@ def run(args: argparse.Namespace) -> int:
         control_period_s=args.control_period,
         duration_s=args.duration,
     )
+    notes = TakeNotes(args.robot, args.robot_file, args.motion, current, args.note)
+    request = TakeRequest(robot, config, args.out, notes, args.camera, args.calibration,
+                          markers.layout, args.speed)
     with rejected_as("--waypoints/--gait/--radius/--duration"):  # the task's record checks them
-        session = TankSession(link, camera, robot, config, args.out, args.robot)
-    previous = signal.signal(signal.SIGINT, lambda *_: session.loop.request_stop("interrupted"))
-    wall0 = time.monotonic()
-    try:
-        out = session.run()
-    finally:
-        signal.signal(signal.SIGINT, previous)
-    wall = time.monotonic() - wall0
+        result = run_take(request, None if args.no_view else args.view_port,
+                          announce=lambda msg: print(msg, flush=True))
+    out = result.outcome
     print(
         f"{out.reason}: {out.detail}; {out.waypoints_reached}/{len(waypoints)} waypoints, "
         f"{out.frames_with_pose}/{out.frames} frames with a pose, {out.offsets_sent} offsets, "
         f"Stop {out.stop_outcome}"
     )
-    if virtual is not None and wall > 0:
-        print(
-            f"simulated {out.t_end_s:.1f} s in {wall:.1f} s ({out.t_end_s / wall:.1f}x real time)"
-        )
-    print("wrote " + ", ".join(str(path) for path in session.paths))
-    return 0 if out.reason in ("arrived", "duration", "interrupted") else 1
+    if result.virtual and result.wall_s > 0:
+        print(f"simulated {out.t_end_s:.1f} s in {result.wall_s:.1f} s "
+              f"({out.t_end_s / result.wall_s:.1f}x real time)")
+    print("wrote " + ", ".join(str(path) for path in result.paths))
+    return 0 if out.reason in STOPPED_ON_PURPOSE else 1

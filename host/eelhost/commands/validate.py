@@ -31,13 +31,18 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="also report each experiment at the clock offset of its recording that fits best, "
         "searched within +-SECONDS (default 0.1, the paper's time-stamp uncertainty)",
     )
+    p.add_argument(
+        "--allow-incomplete",
+        action="store_true",
+        help="use recordings that were never closed (killed runs); refused by default",
+    )
     p.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
     fitted = read_coefficients(args.coefficients)
-    dataset = load_dataset(args.dataset)
+    dataset = load_dataset(args.dataset, allow_incomplete=args.allow_incomplete)
     tests = [e for exps in dataset.test.values() for e in exps] + list(dataset.paths)
     runs = validate(dataset.robot, fitted, tests, backend=args.backend, align_s=args.align)
     out = Path(args.out)

@@ -240,22 +240,32 @@ def read_frames_csv(path: str | Path, allow_truncated_tail: bool = False) -> Fra
     )
 
 
-def read_experiment(csv_or_stem: str | Path, allow_truncated_tail: bool = False) -> Experiment:
+def read_experiment(csv_or_stem: str | Path, allow_incomplete: bool = False) -> Experiment:
     """Read an experiment from ``<stem>.csv`` and ``<stem>.json``.
 
-    ``allow_truncated_tail`` is passed to :func:`read_frames_csv` (a recording cut by a crash).
+    A recording made by ``eelbot run`` says in ``source.recording.complete`` whether it was closed
+    (docs/data.md): one still false was cut short (the recorder was killed, the power went) and is
+    refused unless ``allow_incomplete``, which also drops the line its writer may have left
+    half-written (:func:`read_frames_csv`'s ``allow_truncated_tail``).
+
+    Parameters
+    ----------
+    csv_or_stem : str or Path
+        ``<stem>``, ``<stem>.csv`` or ``<stem>.json``.
+    allow_incomplete : bool
+        Read a recording that was never closed, keeping every complete row.
 
     Raises
     ------
     DataError
-        For a missing, malformed or inconsistent file, naming it (and the line and column).
+        For a missing, malformed or inconsistent file, naming it (and the line and column), and
+        for an incomplete recording without ``allow_incomplete``.
     """
     # Names may contain dots (straight_A0.61_w2.7), so suffixes are added, never replaced.
     stem = str(csv_or_stem)
     for ext in (".csv", ".json"):
         stem = stem.removesuffix(ext)
     json_path = Path(stem + ".json")
-    frames = read_frames_csv(Path(stem + ".csv"), allow_truncated_tail)
     try:
         meta = json.loads(json_path.read_text())
     except OSError as err:
@@ -266,6 +276,13 @@ def read_experiment(csv_or_stem: str | Path, allow_truncated_tail: bool = False)
         ) from None
     if not isinstance(meta, dict) or meta.get("format") != EXPERIMENT_FORMAT:
         raise DataError(f"{json_path}: format: expected {EXPERIMENT_FORMAT!r}")
+    if not allow_incomplete and not recording_complete(meta):
+        raise DataError(
+            f"{json_path}: incomplete recording (source.recording.complete is false: the "
+            "recorder did not close it, it was killed or lost power); re-record it, or use it "
+            "as it is with --allow-incomplete"
+        )
+    frames = read_frames_csv(Path(stem + ".csv"), allow_truncated_tail=allow_incomplete)
     try:
         scenario = Scenario.model_validate(meta.get("scenario"))
     except ValidationError as err:
@@ -287,6 +304,19 @@ def read_experiment(csv_or_stem: str | Path, allow_truncated_tail: bool = False)
         timing=dict(meta.get("timing", {})),
         source=dict(meta.get("source", {})),
     )
+
+
+def recording_complete(meta: dict[str, Any]) -> bool:
+    """Whether an experiment's metadata says it is whole.
+
+    Only a recording of ``eelbot run`` carries ``source.recording``; anything else (a virtual tank,
+    an imported tracker file) is whole by construction.
+    """
+    source = meta.get("source")
+    recording = source.get("recording") if isinstance(source, dict) else None
+    if not isinstance(recording, dict):
+        return True
+    return recording.get("complete") is True
 
 
 def import_tracker_csv(
@@ -404,13 +434,21 @@ def write_manifest(folder: str | Path, text: str) -> Path:
     return path
 
 
-def load_dataset(folder: str | Path) -> Dataset:
+def load_dataset(folder: str | Path, allow_incomplete: bool = False) -> Dataset:
     """Load a dataset folder: its manifest, robot and every experiment it names.
+
+    Parameters
+    ----------
+    folder : str or Path
+        The dataset folder (with ``manifest.toml``).
+    allow_incomplete : bool
+        Accept recordings that were never closed (see :func:`read_experiment`).
 
     Raises
     ------
     DataError
-        For a missing or malformed manifest or experiment (naming the file and the key or line).
+        For a missing or malformed manifest or experiment (naming the file and the key or line),
+        and for an incomplete recording without ``allow_incomplete``.
     """
     folder = Path(folder)
     mpath = folder / "manifest.toml"
@@ -435,13 +473,15 @@ def load_dataset(folder: str | Path) -> Dataset:
         if not isinstance(split, dict) or set(split) - {"train", "test"}:
             raise DataError(f"{mpath}: motions.{motion}: expected only 'train' and 'test' lists")
         train[motion] = [
-            _load_named(folder, n, mpath, f"motions.{motion}.train") for n in split.get("train", [])
+            _load_named(folder, n, mpath, f"motions.{motion}.train", allow_incomplete)
+            for n in split.get("train", [])
         ]
         test[motion] = [
-            _load_named(folder, n, mpath, f"motions.{motion}.test") for n in split.get("test", [])
+            _load_named(folder, n, mpath, f"motions.{motion}.test", allow_incomplete)
+            for n in split.get("test", [])
         ]
     paths = [
-        _load_named(folder, n, mpath, "validation.paths")
+        _load_named(folder, n, mpath, "validation.paths", allow_incomplete)
         for n in manifest.get("validation", {}).get("paths", [])
     ]
     truth: dict[str, FluidCoefficients] = {}
@@ -455,9 +495,11 @@ def load_dataset(folder: str | Path) -> Dataset:
     return Dataset(folder, robot, train, test, paths, truth, manifest)
 
 
-def _load_named(folder: Path, name: str, mpath: Path, key: str) -> Experiment:
+def _load_named(
+    folder: Path, name: str, mpath: Path, key: str, allow_incomplete: bool = False
+) -> Experiment:
     if not (folder / f"{name}.csv").exists():
         raise DataError(
             f"{mpath}: {key}: experiment {name!r} has no file {folder / (name + '.csv')}"
         )
-    return read_experiment(folder / name)
+    return read_experiment(folder / name, allow_incomplete)

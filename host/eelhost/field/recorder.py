@@ -8,7 +8,10 @@ Three files share the stem ``<out>``:
 - ``<out>.csv``: the experiment's frames (``t_s, x_m, y_m, heading_rad, theta_1..theta_N``), one
   line per frame that gave a pose, each appended in one write, flushed and fsynced. A writer
   killed mid-line leaves a last line without its newline;
-  ``read_experiment(stem, allow_truncated_tail=True)`` drops it and keeps every complete row.
+  ``read_experiment(stem, allow_incomplete=True)`` drops it and keeps every complete row.
+- ``<out>.frames.csv``: every camera frame, pose or not: ``t_s, status, markers`` (the
+  localisation's status and how many markers it read), appended the same way; the measured frame
+  rate and intervals go into the metadata's ``camera`` at the end.
 - ``<out>.commands.csv``: the link's events, appended and flushed the same way:
   ``t_s, seq, message, fields, event`` where ``event`` is ``sent``, ``resent``, ``not_sent``,
   ``ack``, ``refused:<reason>``, ``lost``, ``disconnected`` or ``reconnected``; ``fields`` is the
@@ -24,19 +27,41 @@ import dataclasses
 import io
 import json
 import os
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TextIO
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from eelhost.data.experiments import EXPERIMENT_FORMAT, _atomic_write
 from eelhost.link.base import LinkEvent
 from eelsim.scenario import Scenario
 
-__all__ = ["COMMAND_COLUMNS", "Recorder", "read_commands_csv"]
+__all__ = ["COMMAND_COLUMNS", "FRAME_COLUMNS", "MOTIONS", "Recorder", "read_commands_csv",
+           "take_paths"]
 
 COMMAND_COLUMNS = ("t_s", "seq", "message", "fields", "event")
+FRAME_COLUMNS = ("t_s", "status", "markers")
+MOTIONS = ("auto", "straight", "turning", "path")
+STRAIGHT_WITHIN_DEG = 10.0  # a lone waypoint this close to the start heading is a straight run
+
+
+def take_paths(stem: str | Path) -> list[Path]:
+    """Every file a take writes (the recorder's, the byte log and the copies beside them)."""
+    suffixes = (".json", ".csv", ".frames.csv", ".commands.csv", ".rx.bin", ".robot.toml",
+                ".calibration.json")
+    return [Path(f"{stem}{suffix}") for suffix in suffixes]
+
+
+def infer_motion(waypoints_m: list[tuple[float, float]], start_m: tuple[float, float],
+                 heading_rad: float) -> str:
+    """``path`` for several waypoints; for one, ``straight`` when it lies ahead, else ``turning``."""
+    if len(waypoints_m) > 1:
+        return "path"
+    dx, dy = waypoints_m[0][0] - start_m[0], waypoints_m[0][1] - start_m[1]
+    off = (np.arctan2(dy, dx) - heading_rad + np.pi) % (2 * np.pi) - np.pi
+    return "straight" if abs(np.degrees(off)) <= STRAIGHT_WITHIN_DEG else "turning"
 
 
 class Recorder:
@@ -54,6 +79,12 @@ class Recorder:
         Experiment metadata (``docs/data.md``).
     fsync : bool
         fsync every line (on by default: a power cut then loses at most the line being written).
+    motion : str
+        ``straight``, ``turning``, ``path``, or ``auto`` (decided at the first pose by
+        :func:`infer_motion`).
+    pixel_size_m : callable, optional
+        ``pixel_size_m((x, y))``: the camera's pixel size there; at the end it is taken at the
+        mean recorded position and written as ``camera.pixel_m``.
     """
 
     def __init__(
@@ -65,19 +96,30 @@ class Recorder:
         timing: dict[str, Any] | None = None,
         source: dict[str, Any] | None = None,
         fsync: bool = True,
+        motion: str = "auto",
+        pixel_size_m: Callable[[NDArray[np.float64]], float] | None = None,
     ) -> None:
+        if motion not in MOTIONS:
+            raise ValueError(f"motion must be one of {MOTIONS}, got {motion!r}")
         self.stem = Path(stem)
         self.csv_path = Path(f"{self.stem}.csv")
         self.json_path = Path(f"{self.stem}.json")
         self.commands_path = Path(f"{self.stem}.commands.csv")
+        self.frames_path = Path(f"{self.stem}.frames.csv")
         self.n_links = n_links
         self.fsync = fsync
         self.frames = 0
         self.last_t_s = -float("inf")
+        self._auto_motion = motion == "auto"
+        self._waypoints = [(float(x), float(y)) for x, y in scenario.waypoints_m]
+        self._pixel_size_m = pixel_size_m
+        self._position_sum = np.zeros(2)
+        self._frame_times: list[float] = []
         self._meta: dict[str, Any] = {
             "format": EXPERIMENT_FORMAT,
             "name": self.stem.name,
-            "motion": "path" if len(scenario.waypoints_m) > 1 else "turning",
+            "motion": ("path" if len(self._waypoints) > 1 else "turning") if self._auto_motion
+            else motion,
             "scenario": scenario.model_dump(mode="json"),
             "camera": dict(camera or {}),
             "timing": dict(timing or {}),
@@ -90,6 +132,8 @@ class Recorder:
         self._append(self._csv, ",".join(header) + "\n")
         self._cmd = self._open_append(self.commands_path)
         self._append(self._cmd, ",".join(COMMAND_COLUMNS) + "\n")
+        self._seen = self._open_append(self.frames_path)
+        self._append(self._seen, ",".join(FRAME_COLUMNS) + "\n")
 
     @staticmethod
     def _open_append(path: Path) -> TextIO:
@@ -134,6 +178,9 @@ class Recorder:
             return False
         if not self._start_known:
             self._start_known = True
+            if self._auto_motion:
+                self._meta["motion"] = infer_motion(self._waypoints, (values[1], values[2]),
+                                                    values[3])
             self.update_metadata(
                 scenario={
                     "start_position_m": [values[1], values[2]],
@@ -143,7 +190,26 @@ class Recorder:
         self._append(self._csv, ",".join(f"{v:.9g}" for v in values) + "\n")
         self.last_t_s = float(t_s)
         self.frames += 1
+        self._position_sum += values[1:3]
         return True
+
+    def frame_seen(self, t_s: float, status: str, markers: int) -> None:
+        """Append one camera frame's time and what the localisation made of it (every frame)."""
+        self._frame_times.append(float(t_s))
+        self._append(self._seen, f"{t_s:.6f},{status},{int(markers)}\n")
+
+    def camera_timing(self) -> dict[str, Any]:
+        """The frame rate and intervals measured from the frame times so far."""
+        t = np.asarray(self._frame_times)
+        if len(t) < 2 or not t[-1] > t[0]:
+            return {"frames": int(len(t))}
+        dt = np.diff(t)
+        return {
+            "frames": int(len(t)),
+            "fps": float((len(t) - 1) / (t[-1] - t[0])),
+            "frame_interval_s": {"mean": float(dt.mean()), "std": float(dt.std()),
+                                 "max": float(dt.max())},
+        }
 
     def command(self, t_s: float, event: LinkEvent) -> None:
         """Append one link event (``t_s`` since the gait started; the event's own time is not)."""
@@ -167,11 +233,31 @@ class Recorder:
         _atomic_write(self.json_path, json.dumps(self._meta, indent=2) + "\n")
 
     def close(self, outcome: dict[str, Any] | None = None) -> None:
-        """Write the outcome into the metadata (``source.recording``) and close the files."""
+        """Write the outcome and the measured facts into the metadata and close the files.
+
+        ``source.recording`` gets the outcome and ``complete: true``; ``camera`` the measured frame
+        rate (``fps``, from the frame times; the nominal one stays as ``fps_nominal``) and the pixel
+        size at the mean recorded position; ``scenario.duration_s`` becomes the time the run
+        lasted (the last frame's).
+        """
         rec = {**self._meta["source"]["recording"], "complete": True, "frames": self.frames}
         rec.update(outcome or {})
-        self.update_metadata(source={"recording": rec})
-        for f in (self._csv, self._cmd):
+        timing = self.camera_timing()
+        camera: dict[str, Any] = {}
+        if "fps" in timing:
+            nominal = self._meta["camera"].get("fps")
+            if nominal is not None and "fps_nominal" not in self._meta["camera"]:
+                camera["fps_nominal"] = nominal
+            camera["fps"] = timing["fps"]
+            camera["frame_interval_s"] = timing["frame_interval_s"]
+        camera["frames"] = timing["frames"]
+        if self._pixel_size_m is not None and self.frames:
+            camera["pixel_m"] = float(self._pixel_size_m(self._position_sum / self.frames))
+        scenario = {}
+        if self._frame_times and self._frame_times[-1] > 0:
+            scenario["duration_s"] = float(self._frame_times[-1])
+        self.update_metadata(source={"recording": rec}, camera=camera, scenario=scenario)
+        for f in (self._csv, self._cmd, self._seen):
             if not f.closed:
                 f.close()
 

@@ -4,7 +4,8 @@
 Clock`): the wall clock at the tank, the virtual robot's clock for ``sim://`` (whose camera moves
 the clock to each frame's time, so a virtual run needs no sleeps and runs as fast as it can).
 
-At the start it sends Hello, SetGains (the robot file's k_p, k_d), SetGait (the gait; slew rates
+Before anything is sent, the camera is opened and its first frame read (a camera that is not there
+fails the run before the robot moves). Then it sends Hello, SetGains (the robot file's k_p, k_d), SetGait (the gait; slew rates
 as configured, 0 = none, as the twin assumes), SetOffset(0) and Start, the configuration commands
 with acknowledgement and resends. Then, per camera frame:
 
@@ -28,8 +29,9 @@ Whatever ends the loop, even an exception, Stop is sent and waited for (with res
 
 from __future__ import annotations
 
+import itertools
 import logging
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -37,7 +39,7 @@ from numpy.typing import NDArray
 
 from eelhost.field.recorder import Recorder
 from eelhost.link.base import Clock, Link, LinkEvent
-from eelhost.vision.localise import Localiser
+from eelhost.vision.localise import Localisation, Localiser
 from eelhost.wire import protocol
 from eelsim.control import Gait
 from eelsim.guidance import Guidance
@@ -45,7 +47,7 @@ from eelsim.robot import Robot
 
 log = logging.getLogger(__name__)
 
-__all__ = ["RunConfig", "RunLoop", "RunOutcome"]
+__all__ = ["FrameReport", "RunConfig", "RunLoop", "RunOutcome"]
 
 OFFSET_LIMIT_RAD = 1.0  # SetOffset's range
 EPS_S = 1e-9
@@ -144,6 +146,46 @@ class RunOutcome:
         }
 
 
+@dataclass(frozen=True)
+class FrameReport:
+    """What the loop made of one frame, for observers (the live view).
+
+    Attributes
+    ----------
+    t_s : float
+        Time since the gait started.
+    frame : ndarray
+        The camera frame.
+    localisation : Localisation
+        The markers seen and the pose.
+    filtered_pose : ndarray (3,) or None
+        The guidance's filtered (x, y, heading).
+    target_index : int
+        The waypoint being steered to.
+    """
+
+    t_s: float
+    frame: NDArray[np.uint8]
+    localisation: Localisation
+    filtered_pose: NDArray[np.float64] | None
+    target_index: int
+
+
+def open_frames(frames: Iterable[tuple[float, NDArray[np.uint8]]]
+                ) -> Iterator[tuple[float, NDArray[np.uint8]]]:
+    """Open a frame source and read its first frame now; yield it and the rest in order.
+
+    Raises whatever the source raises when it cannot be opened (a camera that is not there), and
+    yields nothing when the source has no frame at all.
+    """
+    it = iter(frames)
+    try:
+        first = next(it)
+    except StopIteration:
+        return iter(())
+    return itertools.chain([first], it)
+
+
 class RunLoop:
     """One run of the robot along waypoints.
 
@@ -163,6 +205,8 @@ class RunLoop:
         Where to record frames and link events.
     clock : Clock, optional
         Time of the loop (default: the link's clock).
+    observers : list of callable, optional
+        Each called with a :class:`FrameReport` for every frame.
     """
 
     def __init__(
@@ -174,6 +218,7 @@ class RunLoop:
         config: RunConfig,
         recorder: Recorder | None = None,
         clock: Clock | None = None,
+        observers: list[Callable[[FrameReport], None]] | None = None,
     ) -> None:
         if not config.waypoints_m:
             raise ValueError("a run needs at least one waypoint")
@@ -184,6 +229,7 @@ class RunLoop:
         self.config = config
         self.recorder = recorder
         self.clock = clock or link.clock
+        self.observers = list(observers or [])
         self.outcome = RunOutcome()
         self.guidance = Guidance(
             config.waypoints_m,
@@ -193,6 +239,7 @@ class RunLoop:
             offset_limit_rad=OFFSET_LIMIT_RAD,
         )
         self._stop_request: str | None = None
+        self._stop_detail = ""
         self._t_start = 0.0
         link.listeners.append(self._on_event)
 
@@ -206,9 +253,10 @@ class RunLoop:
         """The latest filtered pose (x, y, heading), or None before the first."""
         return self.guidance.filtered_pose
 
-    def request_stop(self, reason: str = "interrupted") -> None:
+    def request_stop(self, reason: str = "interrupted", detail: str = "stop requested") -> None:
         """Ask the loop to stop at the next frame (safe from a signal handler)."""
         self._stop_request = reason
+        self._stop_detail = detail
 
     def _on_event(self, event: LinkEvent) -> None:
         self.outcome.events.append(event)
@@ -245,10 +293,11 @@ class RunLoop:
         RunOutcome
         """
         out = self.outcome
+        frames = open_frames(self.frames)  # the camera first: nothing is sent if it fails
         self._t_start = self.clock.now()
         try:
             self._start_robot()
-            self._loop()
+            self._loop(frames)
         except BaseException as err:
             out.reason = "interrupted" if isinstance(err, KeyboardInterrupt) else "error"
             out.detail = f"{type(err).__name__}: {err}"
@@ -263,12 +312,12 @@ class RunLoop:
                 self.recorder.close(out.as_dict())
         return out
 
-    def _loop(self) -> None:
+    def _loop(self, frames: Iterable[tuple[float, NDArray[np.uint8]]]) -> None:
         c, out = self.config, self.outcome
         offset_to_clock: float | None = None
         next_control = 0.0
         last_pose_t: float | None = None
-        for t_src, frame in self.frames:
+        for t_src, frame in frames:
             now = self.clock.now()
             if offset_to_clock is None:
                 # Frame times have their own origin; anchor them to the loop's clock once.
@@ -287,6 +336,12 @@ class RunLoop:
                 if self.recorder is not None:
                     self.recorder.frame(t, loc.com_m, loc.heading_rad, loc.link_angles_rad)
                 self.guidance.observe(t, float(loc.com_m[0]), float(loc.com_m[1]), loc.heading_rad)
+            if self.recorder is not None:
+                self.recorder.frame_seen(t, loc.status, sum(loc.seen))
+            if self.observers:
+                report = FrameReport(t, frame, loc, self.filtered, self.target)
+                for observer in self.observers:
+                    observer(report)
             if self._should_stop(t, last_pose_t):
                 return
             if t >= next_control - EPS_S:
@@ -299,7 +354,7 @@ class RunLoop:
     def _should_stop(self, t: float, last_pose_t: float | None) -> bool:
         c, out = self.config, self.outcome
         if self._stop_request is not None:
-            out.reason, out.detail = self._stop_request, "stop requested"
+            out.reason, out.detail = self._stop_request, self._stop_detail
         elif self.guidance.arrived:
             out.reason, out.detail = "arrived", f"reached all {len(c.waypoints_m)} waypoints"
         elif last_pose_t is not None and t - last_pose_t > c.lost_after_s:

@@ -2,8 +2,10 @@
 
 The overhead camera sees the robot's marker plates on one horizontal plane, so a plane-to-plane
 homography H maps world metres (x, y on that plane, y to the left of x as seen from above) to pixel
-coordinates (OpenCV's convention: the centre of pixel (row r, column c) is at (c, r)). Lens
-distortion is not modelled: undistort the frames first if the lens needs it.
+coordinates (OpenCV's convention: the centre of pixel (row r, column c) is at (c, r)). A lens
+that bends straight lines is calibrated apart (:func:`calibrate_lens`: OpenCV's camera
+calibration on a ChArUco board shown at several poses); the homography then maps to undistorted
+pixels, and :meth:`Calibration.to_px` and :meth:`Calibration.to_m` add and remove the distortion.
 
 Two ways to get H:
 
@@ -16,17 +18,18 @@ Two ways to get H:
   a tenth of a pixel and H is fitted to all of them. Accurate over the board; extrapolation far
   beyond it is not, so use a board that covers much of the tank, or the tank corners.
 
-A calibration is saved as JSON (``format: eelbot-camera-calibration``, ``version: 1``); loading
-checks every key and names the file and the key when something is wrong.
+A calibration is saved as JSON (``format: eelbot-camera-calibration``, ``version: 1``, an optional
+``lens``); loading checks every key and names the file and the key when something is wrong.
 """
 
 from __future__ import annotations
 
 import json
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import cv2
 import numpy as np
@@ -47,6 +50,65 @@ class CalibrationFileError(CalibrationError):
     """A calibration file that cannot be used; the message names the file and the key."""
 
 
+UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-10)
+
+
+def undistort_points(points_px: ArrayLike, camera_matrix: ArrayLike, distortion: ArrayLike
+                     ) -> FloatArray:
+    """Where a lens's pixels (N, 1, 2) would be in an ideal pinhole camera with the same matrix.
+
+    OpenCV's iterative undistortion run to convergence (its default stops after 5 iterations,
+    short of it near the corners of a wide lens); OpenCV 4 names it ``undistortPointsIter``,
+    OpenCV 5 gives ``undistortPoints`` the criteria.
+    """
+    src = np.asarray(points_px, dtype=np.float64)
+    k = np.asarray(camera_matrix, dtype=np.float64)
+    d = np.asarray(distortion, dtype=np.float64)
+    if hasattr(cv2, "undistortPointsIter"):
+        out = cv2.undistortPointsIter(src, k, d, None, k, UNDISTORT_CRITERIA)
+    else:
+        out = cv2.undistortPoints(src, k, d, R=None, P=k, criteria=UNDISTORT_CRITERIA)
+    return np.asarray(out, dtype=float)
+
+
+@dataclass(frozen=True)
+class Lens:
+    """A camera's lens: its pinhole matrix and OpenCV distortion coefficients.
+
+    Attributes
+    ----------
+    camera_matrix : ndarray, shape (3, 3)
+        Focal lengths and principal point, pixels.
+    distortion : ndarray, shape (K,)
+        OpenCV's coefficients (k1, k2, p1, p2, k3, ...).
+    rms_px : float
+        RMS reprojection error of the board corners in the views it was fitted to.
+    views : int
+        Board views it was fitted to.
+    """
+
+    camera_matrix: FloatArray
+    distortion: FloatArray
+    rms_px: float
+    views: int
+
+    def undistort(self, xy_px: ArrayLike) -> FloatArray:
+        """Pixels of the camera's frames (..., 2) to where an ideal pinhole camera sees them."""
+        p = np.asarray(xy_px, dtype=float)
+        out = undistort_points(p.reshape(-1, 1, 2), self.camera_matrix, self.distortion)
+        return out.reshape(p.shape)
+
+    def distort(self, xy_px: ArrayLike) -> FloatArray:
+        """Ideal pinhole pixels (..., 2) to where the camera's lens puts them."""
+        p = np.asarray(xy_px, dtype=float)
+        flat = p.reshape(-1, 2)
+        k_inv = np.linalg.inv(self.camera_matrix)
+        rays = np.c_[flat, np.ones(len(flat))] @ k_inv.T
+        out, _ = cv2.projectPoints(rays.reshape(-1, 1, 3), np.zeros(3), np.zeros(3),
+                                   self.camera_matrix, self.distortion)
+        return np.asarray(out, dtype=float).reshape(p.shape)
+
+
 @dataclass(frozen=True)
 class Calibration:
     """A metres <-> pixels homography on the markers' plane.
@@ -63,6 +125,9 @@ class Calibration:
         The correspondences it was fitted to (metres on the markers' plane, pixels).
     rms_reprojection_px : float
         RMS distance between ``points_px`` and the mapped ``points_m``.
+    lens : Lens or None
+        The lens distortion, when it was calibrated: the homography then maps to undistorted
+        pixels, and :meth:`to_px` and :meth:`to_m` apply and remove the distortion.
     """
 
     homography_m_to_px: FloatArray
@@ -71,14 +136,44 @@ class Calibration:
     points_m: FloatArray
     points_px: FloatArray
     rms_reprojection_px: float
+    lens: Lens | None = None
 
     def to_px(self, xy_m: ArrayLike) -> FloatArray:
-        """Map world points (..., 2) in metres to pixels (..., 2)."""
-        return _apply(self.homography_m_to_px, xy_m)
+        """Map world points (..., 2) in metres to pixels (..., 2) of the camera's frames."""
+        ideal = _apply(self.homography_m_to_px, xy_m)
+        return ideal if self.lens is None else self.lens.distort(ideal)
 
     def to_m(self, xy_px: ArrayLike) -> FloatArray:
         """Map pixels (..., 2) to world points (..., 2) in metres on the markers' plane."""
-        return _apply(np.linalg.inv(self.homography_m_to_px), xy_px)
+        ideal = xy_px if self.lens is None else self.lens.undistort(xy_px)
+        return _apply(np.linalg.inv(self.homography_m_to_px), ideal)
+
+    @property
+    def rms_reprojection_m(self) -> float:
+        """RMS distance on the markers' plane between ``points_m`` and the mapped ``points_px``."""
+        err = self.to_m(self.points_px) - self.points_m
+        return float(np.sqrt(np.mean(np.sum(err**2, axis=1))))
+
+    def errors(self, points_m: ArrayLike, points_px: ArrayLike) -> tuple[float, float]:
+        """RMS error of this calibration on correspondences it was not fitted to.
+
+        Parameters
+        ----------
+        points_m, points_px : array, shape (K, 2)
+            World points and where they were found in a frame.
+
+        Returns
+        -------
+        (float, float)
+            RMS distance in pixels (world points mapped into the image) and in metres (pixels
+            mapped onto the markers' plane).
+        """
+        wm = np.asarray(points_m, dtype=float).reshape(-1, 2)
+        px = np.asarray(points_px, dtype=float).reshape(-1, 2)
+        e_px = self.to_px(wm) - px
+        e_m = self.to_m(px) - wm
+        return (float(np.sqrt(np.mean(np.sum(e_px**2, axis=1)))),
+                float(np.sqrt(np.mean(np.sum(e_m**2, axis=1)))))
 
     def pixel_size_m(self, xy_m: ArrayLike) -> float:
         """Mean size of a pixel (m) near the world point ``xy_m`` (square root of the area)."""
@@ -95,11 +190,6 @@ def _apply(h: ArrayLike, xy: ArrayLike) -> FloatArray:
     flat = p.reshape(-1, 2)
     q = np.c_[flat, np.ones(len(flat))] @ h.T
     return (q[:, :2] / q[:, 2:3]).reshape(p.shape)
-
-
-def _rms(h: ArrayLike, points_m: FloatArray, points_px: FloatArray) -> float:
-    err = _apply(h, points_m) - points_px
-    return float(np.sqrt(np.mean(np.sum(err**2, axis=1))))
 
 
 def _four_point_homography(src: FloatArray, dst: FloatArray) -> FloatArray:
@@ -153,6 +243,7 @@ def from_tank_corners(
     camera_height_m: float | None = None,
     marker_height_m: float = 0.0,
     nadir_m: ArrayLike | None = None,
+    lens: Lens | None = None,
 ) -> Calibration:
     """Calibrate from the four tank corners.
 
@@ -174,6 +265,8 @@ def from_tank_corners(
         Markers' height above the corners' plane (negative when below the rim).
     nadir_m : (float, float), optional
         World point under the camera; default: the point seen at the image centre.
+    lens : Lens, optional
+        The lens distortion (the corners are undistorted before the fit).
 
     Returns
     -------
@@ -188,14 +281,24 @@ def from_tank_corners(
     wm = np.asarray(corners_m, dtype=float).reshape(-1, 2)
     if px.shape != (4, 2) or wm.shape != (4, 2):
         raise CalibrationError("need exactly four corners in pixels and in metres")
-    h = _four_point_homography(wm, px)
+    ideal = px if lens is None else lens.undistort(px)
+    h = _four_point_homography(wm, ideal)
     if camera_height_m is not None and marker_height_m != 0.0:
         if nadir_m is None:
-            nadir_m = _apply(np.linalg.inv(h), np.array(image_size_px, dtype=float) / 2 - 0.5)
+            centre = np.array(image_size_px, dtype=float) / 2 - 0.5
+            nadir_m = _apply(np.linalg.inv(h), centre if lens is None else lens.undistort(centre))
         h = h @ height_scaling(camera_height_m, marker_height_m, nadir_m)
-        wm = _apply(np.linalg.inv(h), px)  # the corners' rays, where they cross the markers' plane
+        wm = _apply(np.linalg.inv(h), ideal)  # the corners' rays, where they cross the markers' plane
     width_px, height_px = image_size_px
-    return Calibration(h / h[2, 2], (width_px, height_px), "tank_corners", wm, px, _rms(h, wm, px))
+    return _fitted(h, (width_px, height_px), "tank_corners", wm, px, lens)
+
+
+def _fitted(h: FloatArray, size: tuple[int, int], method: str, points_m: FloatArray,
+            points_px: FloatArray, lens: Lens | None) -> Calibration:
+    """A calibration with its reprojection error over the points it was fitted to."""
+    cal = Calibration(h / h[2, 2], size, method, points_m, points_px, 0.0, lens)
+    rms = cal.errors(points_m, points_px)[0]
+    return Calibration(cal.homography_m_to_px, size, method, points_m, points_px, rms, lens)
 
 
 @dataclass(frozen=True)
@@ -223,6 +326,23 @@ class CharucoSpec:
     dictionary_name: str = "DICT_4X4_50"
     first_id: int = 10
 
+    def __post_init__(self) -> None:
+        if len(self.squares) != 2 or min(self.squares) < 2:
+            raise CalibrationError(f"ChArUco board: need at least 2 x 2 squares, got {self.squares}")
+        if not 0 < self.marker_m < self.square_m:
+            raise CalibrationError(
+                f"ChArUco board: the marker ({self.marker_m} m) must be smaller than the square "
+                f"({self.square_m} m)"
+            )
+        if not hasattr(cv2.aruco, self.dictionary_name):
+            raise CalibrationError(f"ChArUco board: unknown ArUco dictionary {self.dictionary_name!r}")
+        dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, self.dictionary_name))
+        last = self.first_id + self.squares[0] * self.squares[1] // 2 - 1
+        if self.first_id < 0 or last >= dictionary.bytesList.shape[0]:
+            raise CalibrationError(
+                f"ChArUco board: ids {self.first_id}..{last} do not fit {self.dictionary_name}"
+            )
+
     def board(self) -> cv2.aruco.CharucoBoard:
         """The OpenCV board object."""
         dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, self.dictionary_name))
@@ -238,13 +358,13 @@ class CharucoSpec:
         return np.asarray(self.board().generateImage(size, marginSize=0, borderBits=1), np.uint8)
 
 
-def from_charuco(
+def charuco_points(
     frame: NDArray[np.uint8],
     spec: CharucoSpec | None = None,
     board_origin_m: tuple[float, float] = (0.0, 0.0),
     board_angle_rad: float = 0.0,
-) -> Calibration:
-    """Calibrate from one frame showing a ChArUco board at the markers' height.
+) -> tuple[FloatArray, FloatArray]:
+    """The ChArUco board's corners found in a frame: world metres and pixels.
 
     The board's own frame has its origin at the outer corner of its first square, x along the
     squares' rows and y across them, as the board lies face up (its printed image's top-left
@@ -264,18 +384,17 @@ def from_charuco(
 
     Returns
     -------
-    Calibration
+    points_m, points_px : ndarray, shape (K, 2)
 
     Raises
     ------
-    ValueError
+    CalibrationError
         When fewer than 8 board corners are found.
     """
     spec = spec or CharucoSpec()
     board = spec.board()
     grey = frame if frame.ndim == 2 else cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
-    detector = cv2.aruco.CharucoDetector(board)
-    corners, ids, _, _ = detector.detectBoard(grey)
+    corners, ids, _, _ = cv2.aruco.CharucoDetector(board).detectBoard(grey)
     if ids is None or len(ids) < 8:
         found = 0 if ids is None else len(ids)
         raise CalibrationError(f"ChArUco board: found {found} corners, need at least 8")
@@ -286,9 +405,104 @@ def from_charuco(
     obj = np.asarray(board.getChessboardCorners(), dtype=float)[ids, :2] * [1.0, -1.0]
     c, s = math.cos(board_angle_rad), math.sin(board_angle_rad)
     wm = obj @ np.array([[c, s], [-s, c]]) + np.asarray(board_origin_m, dtype=float)
-    h, _ = cv2.findHomography(wm, px, 0)
-    size = (grey.shape[1], grey.shape[0])
-    return Calibration(h / h[2, 2], size, "charuco", wm, px, _rms(h, wm, px))
+    return wm, px
+
+
+def from_charuco(
+    frame: NDArray[np.uint8],
+    spec: CharucoSpec | None = None,
+    board_origin_m: tuple[float, float] = (0.0, 0.0),
+    board_angle_rad: float = 0.0,
+    lens: Lens | None = None,
+) -> Calibration:
+    """Calibrate from one frame showing a ChArUco board at the markers' height.
+
+    Parameters
+    ----------
+    frame : ndarray
+        Grey or BGR image.
+    spec : CharucoSpec, optional
+        The board (default :class:`CharucoSpec`).
+    board_origin_m : (float, float)
+        World position of the board's origin (see :func:`charuco_points`).
+    board_angle_rad : float
+        World angle of the board's x axis.
+    lens : Lens, optional
+        The lens distortion (the corners are undistorted before the fit).
+
+    Returns
+    -------
+    Calibration
+
+    Raises
+    ------
+    CalibrationError
+        When fewer than 8 board corners are found.
+    """
+    wm, px = charuco_points(frame, spec, board_origin_m, board_angle_rad)
+    ideal = px if lens is None else lens.undistort(px)
+    h, _ = cv2.findHomography(wm, ideal, 0)
+    return _fitted(np.asarray(h, dtype=float), (frame.shape[1], frame.shape[0]), "charuco", wm,
+                   px, lens)
+
+
+def calibrate_lens(
+    frames: Iterable[NDArray[np.uint8]], spec: CharucoSpec | None = None, min_views: int = 4
+) -> Lens:
+    """Fit the lens (pinhole matrix and distortion) to views of a ChArUco board at several poses.
+
+    OpenCV's camera calibration (``cv2.calibrateCamera``, radial k1, k2 and tangential p1, p2; k3
+    fixed at 0) on the board corners of every view in which at least 8 were found. The board must be seen tilted in different directions and over
+    the whole image, or the focal length and the distortion cannot be told apart.
+
+    Parameters
+    ----------
+    frames : iterable of ndarray
+        Grey or BGR images, all of one size.
+    spec : CharucoSpec, optional
+        The board (default :class:`CharucoSpec`).
+    min_views : int
+        Fewest views with the board found.
+
+    Returns
+    -------
+    Lens
+
+    Raises
+    ------
+    CalibrationError
+        Too few views showed the board, or the images differ in size.
+    """
+    spec = spec or CharucoSpec()
+    board = spec.board()
+    detector = cv2.aruco.CharucoDetector(board)
+    obj_points, img_points = [], []
+    size: tuple[int, int] | None = None
+    seen = 0
+    for frame in frames:
+        seen += 1
+        grey = frame if frame.ndim == 2 else cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
+        this = (grey.shape[1], grey.shape[0])
+        if size is not None and this != size:
+            raise CalibrationError(f"lens views differ in size: {size} and {this}")
+        size = this
+        corners, ids, _, _ = detector.detectBoard(grey)
+        if ids is None or len(ids) < 8:
+            continue
+        obj, img = board.matchImagePoints(cast(Any, corners), ids)
+        obj_points.append(np.asarray(obj, np.float32))
+        img_points.append(np.asarray(img, np.float32))
+    if size is None or len(obj_points) < min_views:
+        raise CalibrationError(
+            f"lens calibration: the board was found in {len(obj_points)} of {seen} views, "
+            f"need at least {min_views} (tilted differently, over the whole image)"
+        )
+    # k3 fixed at 0 (OpenCV's advice for all but very wide lenses): with it free, k2 and k3 trade
+    # off against each other and the fit extrapolates badly where the board was not shown.
+    rms, k, dist, _, _ = cv2.calibrateCamera(obj_points, img_points, size, None, None,
+                                             flags=cv2.CALIB_FIX_K3)
+    return Lens(np.asarray(k, dtype=float), np.asarray(dist, dtype=float).ravel(), float(rms),
+                len(obj_points))
 
 
 def save_calibration(calibration: Calibration, path: str | Path) -> Path:
@@ -305,6 +519,14 @@ def save_calibration(calibration: Calibration, path: str | Path) -> Path:
         "points_px": calibration.points_px.tolist(),
         "rms_reprojection_px": calibration.rms_reprojection_px,
     }
+    if calibration.lens is not None:
+        lens = calibration.lens
+        data["lens"] = {
+            "camera_matrix": lens.camera_matrix.tolist(),
+            "distortion": lens.distortion.tolist(),
+            "rms_px": lens.rms_px,
+            "views": lens.views,
+        }
     out.write_text(json.dumps(data, indent=2) + "\n")
     return out
 
@@ -343,7 +565,7 @@ def load_calibration(path: str | Path) -> Calibration:
     if not isinstance(data, dict):
         raise CalibrationFileError(f"{source}: expected a JSON object at the top level")
     known = {"format", "version", "method", "image_size_px", "homography_m_to_px", "points_m",
-             "points_px", "rms_reprojection_px"}
+             "points_px", "rms_reprojection_px", "lens"}
     for key in data:
         if key not in known:
             raise CalibrationFileError(f"{source}: unknown key '{key}'")
@@ -367,4 +589,28 @@ def load_calibration(path: str | Path) -> Calibration:
     rms = data.get("rms_reprojection_px")
     if not isinstance(rms, int | float) or not math.isfinite(rms) or rms < 0:
         raise CalibrationFileError(f"{source}: 'rms_reprojection_px' must be a number >= 0")
-    return Calibration(h / h[2, 2], (size[0], size[1]), method, points_m, points_px, float(rms))
+    lens = _load_lens(data["lens"], source) if "lens" in data else None
+    return Calibration(h / h[2, 2], (size[0], size[1]), method, points_m, points_px, float(rms),
+                       lens)
+
+
+def _load_lens(data: Any, source: str) -> Lens:
+    if not isinstance(data, dict):
+        raise CalibrationFileError(f"{source}: 'lens' must be an object")
+    for key in data:
+        if key not in ("camera_matrix", "distortion", "rms_px", "views"):
+            raise CalibrationFileError(f"{source}: unknown key 'lens.{key}'")
+    k = _matrix(data, "camera_matrix", (3, 3), f"{source}: lens")
+    try:
+        dist = np.asarray(data.get("distortion"), dtype=float)
+    except (TypeError, ValueError):
+        dist = np.zeros((0, 0))
+    if dist.ndim != 1 or len(dist) not in (4, 5, 8, 12, 14) or not np.all(np.isfinite(dist)):
+        raise CalibrationFileError(f"{source}: 'lens.distortion' must be 4, 5, 8, 12 or 14 "
+                                   f"finite numbers, got {data.get('distortion')!r}")
+    rms, views = data.get("rms_px"), data.get("views")
+    if not isinstance(rms, int | float) or not math.isfinite(rms) or rms < 0:
+        raise CalibrationFileError(f"{source}: 'lens.rms_px' must be a number >= 0")
+    if not isinstance(views, int) or views < 1:
+        raise CalibrationFileError(f"{source}: 'lens.views' must be a positive integer")
+    return Lens(k, dist, float(rms), views)

@@ -1,7 +1,8 @@
 """Localise the robot in a frame from its link markers.
 
 Per frame: detect the ArUco markers (``cv2.aruco.ArucoDetector``, contour corner refinement),
-map each marker's four corners to metres through the calibration homography, and take
+map each marker's four corners to metres through the calibration homography (undistorted first
+when the calibration has a lens), and take
 
 - the marker centre as the mean of its metric corners (exact for a square on the plane, unlike
   the mean of the pixel corners under perspective),
@@ -99,6 +100,8 @@ class Localisation:
         perfect rigid chain; large values mean a wrong calibration, layout or robot model).
     message : str
         Human-readable reason when the pose is incomplete.
+    sightings : tuple of MarkerSighting
+        The robot's markers detected in the frame (their pixel corners, for display).
     """
 
     t_s: float
@@ -111,6 +114,7 @@ class Localisation:
     rebuilt: tuple[int, ...]
     max_joint_gap_m: float
     message: str
+    sightings: tuple[MarkerSighting, ...] = ()
 
     @property
     def found(self) -> bool:
@@ -192,7 +196,8 @@ class Localiser:
             if link is None or counts[marker_id] > 1:
                 continue
             px = np.asarray(c, dtype=float).reshape(4, 2)
-            q = np.c_[px, np.ones(4)] @ self._to_m.T
+            ideal = px if self.calibration.lens is None else self.calibration.lens.undistort(px)
+            q = np.c_[ideal, np.ones(4)] @ self._to_m.T
             m = q[:, :2] / q[:, 2:3]
             along = (m[1] - m[0]) + (m[2] - m[3])
             angle = math.atan2(along[1], along[0])
@@ -206,6 +211,7 @@ class Localiser:
     def from_sightings(self, t_s: float, sightings: Iterable[MarkerSighting]) -> Localisation:
         """Build the pose from marker sightings (see the module docstring for the rules)."""
         t_s = float(t_s)
+        sightings = tuple(sightings)
         n = self.layout.n_links
         angles = np.full(n, np.nan)
         centres = np.full((n, 2), np.nan)
@@ -217,7 +223,7 @@ class Localiser:
         gap = self._max_joint_gap(angles, centres)
         if not any(seen):
             return Localisation(t_s, "not_found", None, None, angles, centres, seen, (), 0.0,
-                                "no robot marker in view")
+                                "no robot marker in view", sightings)
         rebuilt = []
         for i in range(1, n - 1):
             if not seen[i] and seen[i - 1] and seen[i + 1]:
@@ -228,14 +234,14 @@ class Localiser:
             msg = (f"links {missing} (1 = tail) not seen and not recoverable: no pose "
                    f"(saw {sum(seen)} of {n} markers)")
             return Localisation(t_s, "partial", None, None, angles, centres, seen, tuple(rebuilt),
-                                gap, msg)
+                                gap, msg, sightings)
         # Joint angles stay within +-pi, so unwrapping along the chain gives consistent angles.
         chain = angles[0] + np.concatenate(([0.0], np.cumsum(wrap_angle(np.diff(angles)))))
         heading = float(wrap_angle(np.mean(chain)))
         status = "rebuilt" if rebuilt else "ok"
         msg = f"links {[i + 1 for i in rebuilt]} rebuilt from their neighbours" if rebuilt else ""
         return Localisation(t_s, status, centres.mean(axis=0), heading, chain, centres, seen,
-                            tuple(rebuilt), gap, msg)
+                            tuple(rebuilt), gap, msg, sightings)
 
     def _rebuild(self, i: int, angles: FloatArray, centres: FloatArray) -> None:
         lh = self.half_length_m

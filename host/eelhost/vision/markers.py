@@ -203,14 +203,15 @@ def marker_sheet(
 
 
 def save_marker_sheet(path: str | Path, layout: MarkerLayout, dpi: float = 300.0) -> Path:
-    """Write the marker sheet as PNG or PDF (chosen by the suffix), tagged with its DPI.
+    """Write the marker sheet as a PNG image tagged with its DPI.
 
-    Print it at 100 % ("actual size", no fit-to-page).
+    For printing, prefer the PDF of :func:`eelhost.vision.printing.write_marker_sheet_pdf`
+    (``eelbot markers``): its markers are exact, where the image's cells are whole dots.
 
     Parameters
     ----------
     path : str or Path
-        Output file, ``.png`` or ``.pdf``.
+        Output file, ``.png``.
     layout : MarkerLayout
         The marker layout.
     dpi : float
@@ -224,14 +225,10 @@ def save_marker_sheet(path: str | Path, layout: MarkerLayout, dpi: float = 300.0
     from PIL import Image  # Pillow comes with matplotlib; only the sheet writer needs it
 
     out = Path(path)
-    suffix = out.suffix.lower()
-    if suffix not in (".png", ".pdf"):
-        raise MarkerLayoutError(f"{out}: marker sheet must be .png or .pdf")
+    if out.suffix.lower() != ".png":
+        raise MarkerLayoutError(f"{out}: the marker sheet image must be .png (eelbot markers "
+                                "writes the PDF)")
     sheet, _ = marker_sheet(layout, dpi)
     out.parent.mkdir(parents=True, exist_ok=True)
-    image = Image.fromarray(sheet)
-    if suffix == ".pdf":
-        image.save(out, "PDF", resolution=dpi)
-    else:
-        image.save(out, "PNG", dpi=(dpi, dpi))
+    Image.fromarray(sheet).save(out, "PNG", dpi=(dpi, dpi))
     return out

@@ -20,7 +20,7 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from eelhost.vision.calibration import Calibration, from_tank_corners
+from eelhost.vision.calibration import Calibration, CharucoSpec, from_tank_corners
 from eelhost.vision.markers import MarkerLayout, default_layout, plate_image
 from eelsim.dynamics import link_positions, split_state
 from eelsim.model import SwimmerModel
@@ -244,10 +244,42 @@ class SyntheticCamera:
         roi *= 1 - b
         roi += b * BODY_BGR * self._light[y0:y1, x0:x1]
 
+    def render_board(
+        self, spec: CharucoSpec, origin_m: ArrayLike = (0.0, 0.0), angle_rad: float = 0.0
+    ) -> NDArray[np.uint8]:
+        """A frame of the empty tank with a ChArUco board lying face up on the markers' plane.
+
+        Parameters
+        ----------
+        spec : CharucoSpec
+            The board.
+        origin_m : (float, float)
+            World position of the board's origin (its printed image's top-left corner).
+        angle_rad : float
+            World angle of the board's x axis (docs/vision.md, calibration).
+
+        Returns
+        -------
+        ndarray, uint8, (H, W, 3)
+            BGR frame with the camera's faults.
+        """
+        # Texture finer than the supersampled frame (about 0.5 mm per texel).
+        tex = spec.image(dpi=50.8).astype(np.float32)
+        k = spec.square_m * spec.squares[0] / tex.shape[1]  # metres per texel
+        c, sn = np.cos(angle_rad), np.sin(angle_rad)
+        o = np.asarray(origin_m, dtype=float)
+        # Texture (column, row) -> world: columns along the board's x, rows down the page (-y).
+        tex_to_m = np.array([[c * k, sn * k, o[0]], [sn * k, -c * k, o[1]], [0.0, 0.0, 1.0]])
+        w_m, h_m = spec.square_m * spec.squares[0], spec.square_m * spec.squares[1]
+        outline = o + np.array([[0, 0], [w_m, 0], [w_m, -h_m], [0, -h_m]]) @ np.array(
+            [[c, sn], [-sn, c]])
+        img = self._background.copy()
+        self._draw_texture(img, tex, tex_to_m, outline)
+        return self._degrade(img)
+
     def _draw_plate(
         self, img: NDArray[np.float32], i: int, centre_m: FloatArray, angle_rad: float
     ) -> None:
-        s = self.options.supersample
         tex = self._plates[i]
         n_tex = tex.shape[0]
         k = self._plate_tex_m / n_tex  # metres per texture pixel
@@ -258,10 +290,22 @@ class SyntheticCamera:
             [c * k, sn * k, centre_m[0] - (c + sn) * k * n_tex / 2],
             [sn * k, -c * k, centre_m[1] - (sn - c) * k * n_tex / 2],
             [0.0, 0.0, 1.0],
-        ]) @ np.array([[1, 0, 0.5], [0, 1, 0.5], [0, 0, 1.0]])  # texel centre = index + 0.5
-        corners = self._calibration.to_px(
-            centre_m + self.layout.plate_size_m * 0.75 * np.array([[1, 1], [1, -1], [-1, 1], [-1, -1]])
-        )
+        ])
+        outline = centre_m + self.layout.plate_size_m * 0.75 * np.array(
+            [[1, 1], [1, -1], [-1, 1], [-1, -1]])
+        self._draw_texture(img, tex, tex_to_m, outline)
+
+    def _draw_texture(
+        self, img: NDArray[np.float32], tex: NDArray[np.float32], tex_to_m: FloatArray,
+        outline_m: FloatArray,
+    ) -> None:
+        """Paint a grey texture (0 ink .. 255 paper) lying on the markers' plane into ``img``.
+
+        ``tex_to_m`` maps texel (column, row) corners to world metres; ``outline_m`` bounds it.
+        """
+        s = self.options.supersample
+        tex_to_m = tex_to_m @ np.array([[1, 0, 0.5], [0, 1, 0.5], [0, 0, 1.0]])  # texel centre
+        corners = self._calibration.to_px(outline_m)
         w, h = self.view.image_size_px
         x0, y0 = np.floor(corners.min(axis=0)).astype(int) - 2
         x1, y1 = np.ceil(corners.max(axis=0)).astype(int) + 2

@@ -1,0 +1,158 @@
+"""One take, from options to a closed recording: what ``eelbot run`` and ``eelbot campaign`` share.
+
+:func:`run_take` opens the link and the camera (reading a frame before anything is sent), builds
+the :class:`~eelhost.field.session.TankSession` with its optional live view, runs it with SIGINT,
+SIGTERM and SIGHUP turned into a clean stop, and closes everything.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from eelhost.errors import UserError
+from eelhost.field.recorder import take_paths
+from eelhost.field.runloop import RunConfig, RunOutcome
+from eelhost.field.session import TakeNotes, TankSession, open_camera, virtual_robot
+from eelhost.field.signals import stop_on_signals
+from eelhost.link.uri import open_link
+from eelhost.vision.markers import MarkerLayout
+from eelsim.robot import Robot
+
+__all__ = ["TakeExistsError", "TakeOptionError", "TakeRequest", "TakeResult", "refuse_overwrite",
+           "run_take"]
+
+
+class TakeExistsError(UserError, FileExistsError):
+    """An earlier take is where a new one would be written."""
+
+
+class TakeOptionError(UserError, ValueError):
+    """A take's option that does not fit its link (``--speed`` for a real robot)."""
+
+
+@dataclass(frozen=True)
+class TakeRequest:
+    """Everything one take needs.
+
+    Attributes
+    ----------
+    robot : Robot
+        The robot.
+    config : RunConfig
+        The task and stop conditions.
+    out : str
+        Output path without extension.
+    notes : TakeNotes
+        Link URI, robot file, motion, current, note.
+    camera : str or None
+        The frame source (``--camera``).
+    calibration : str or None
+        The calibration file.
+    layout : MarkerLayout or None
+        The robot's markers.
+    speed : float or None
+        ``sim://`` only: simulated seconds per wall second.
+    """
+
+    robot: Robot
+    config: RunConfig
+    out: str
+    notes: TakeNotes
+    camera: str | None = None
+    calibration: str | None = None
+    layout: MarkerLayout | None = None
+    speed: float | None = None
+
+
+@dataclass
+class TakeResult:
+    """How a take went: its outcome, files, wall time and whether the robot was virtual."""
+
+    outcome: RunOutcome
+    paths: list[Path]
+    wall_s: float
+    virtual: bool
+    signals: list[str]
+
+
+def refuse_overwrite(stem: str | Path, force: bool) -> None:
+    """Refuse to write over an earlier take at ``stem``, or remove its files with ``force``."""
+    existing = [p for p in take_paths(stem) if p.exists()]
+    if existing and not force:
+        raise TakeExistsError(f"--out: {existing[0]} exists (an earlier take); choose another "
+                              "--out or add --force to replace it")
+    for p in existing:
+        p.unlink()
+
+
+def run_take(request: TakeRequest, view_port: int | None = None,
+             announce: Callable[[str], None] = lambda _msg: None,
+             stop_flag: list[str] | None = None) -> TakeResult:
+    """Run one take and close it, whatever happens.
+
+    Parameters
+    ----------
+    request : TakeRequest
+        What to do.
+    view_port : int or None
+        Serve the live view on this port (0: any); None: no view.
+    announce : callable
+        Told the live view's address.
+    stop_flag : list of str, optional
+        Signals received are appended here too (a campaign stops after the take).
+
+    Returns
+    -------
+    TakeResult
+
+    Raises
+    ------
+    TakeOptionError
+        For ``speed`` on a link that is not ``sim://``; and whatever opening the link or the
+        camera raises (nothing has been sent then).
+    """
+    link = open_link(request.notes.link_uri, robot=request.robot)
+    virtual = virtual_robot(link)
+    try:
+        if request.speed is not None:
+            if virtual is None:
+                raise TakeOptionError("--speed: only a sim:// robot can run faster than real time")
+            if request.speed < 0:
+                raise TakeOptionError("--speed: must be >= 0")
+            virtual.clock.speed = request.speed
+        camera = open_camera(link, request.robot, request.camera, request.calibration,
+                             request.layout)
+        camera.prime()  # the camera opens and gives a frame before the robot is started
+    except BaseException:
+        link.close()
+        raise
+    view = None
+    if view_port is not None:
+        from eelhost.web.liveview import LiveView
+
+        view = LiveView(camera.calibration, request.robot, request.config, port=view_port)
+        announce(f"live view: {view.url}")
+    wall0 = time.monotonic()
+    try:
+        try:
+            session = TankSession(link, camera, request.robot, request.config, request.out,
+                                  request.notes, observers=[view.update] if view else None)
+        except BaseException:
+            link.close()
+            raise
+
+        def stop(name: str) -> None:
+            session.loop.request_stop("interrupted", f"{name} received")
+            if stop_flag is not None:
+                stop_flag.append(name)
+
+        with stop_on_signals(stop) as received:
+            outcome = session.run()
+    finally:
+        if view is not None:
+            view.close()
+    return TakeResult(outcome, [p for p in session.paths if p.exists()],
+                      time.monotonic() - wall0, virtual is not None, list(received))

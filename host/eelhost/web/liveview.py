@@ -1,0 +1,268 @@
+"""The live view of a run: a web page on localhost showing what the host sees and plans.
+
+:class:`LiveView` observes the run loop (each frame's :class:`~eelhost.field.runloop.FrameReport`)
+and serves at ``http://127.0.0.1:<port>/``:
+
+- ``/``: the page: the latest camera frame with an SVG overlay (the markers found, outlined and
+  labelled with their ids; the track of filtered positions; each waypoint with its acceptance
+  circle, drawn through the calibration so perspective bends it as the camera does; the twin's
+  predicted path from the present pose) and a status line. The page polls ``/state.json`` five times
+  a second and reloads the frame when it changed.
+- ``/frame.jpg``: the latest frame (encoded only when asked for);
+- ``/state.json``: the overlay in image pixels.
+
+The prediction is the twin's closed loop (:func:`eelsim.closed_loop.simulate_closed_loop`) over
+the next ``horizon_s`` from the latest filtered pose, straight and at rest there (the camera gives
+no joint rates), steering to the waypoints not yet reached; it runs in a background thread at most
+once per ``predict_every_s`` of wall time, so a slow prediction never holds up the run.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import threading
+import time
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from eelhost.field.runloop import FrameReport, RunConfig
+from eelhost.vision.calibration import Calibration
+from eelhost.web.server import LocalServer
+from eelsim.closed_loop import LoopOptions, simulate_closed_loop
+from eelsim.robot import Robot
+from eelsim.scenario import Scenario
+
+log = logging.getLogger(__name__)
+
+__all__ = ["LiveView"]
+
+FloatArray = NDArray[np.float64]
+TRACK_POINTS = 3000  # the oldest positions are dropped beyond this
+
+
+class LiveView:
+    """Serve the live view of a run (see the module docstring).
+
+    Parameters
+    ----------
+    calibration : Calibration
+        Metres <-> pixels, to draw world things on the frame.
+    robot : Robot
+        The twin of the prediction.
+    config : RunConfig
+        The gait, waypoints and acceptance radius.
+    port : int
+        Port on 127.0.0.1 (0: any free one).
+    horizon_s, predict_every_s : float
+        Length of the predicted path, and how often it is recomputed (wall time).
+    """
+
+    def __init__(self, calibration: Calibration, robot: Robot, config: RunConfig, port: int = 0,
+                 horizon_s: float = 6.0, predict_every_s: float = 1.0) -> None:
+        self.calibration = calibration
+        self.robot = robot
+        self.config = config
+        self.horizon_s = horizon_s
+        self.predict_every_s = predict_every_s
+        self._lock = threading.Lock()
+        self._report: FrameReport | None = None
+        self._frame_id = 0
+        self._track: list[tuple[float, float]] = []
+        self._predicted_m: FloatArray = np.zeros((0, 2))
+        self._closed = threading.Event()
+        self._wake = threading.Event()
+        self._circles = [self._circle_px(w) for w in config.waypoints_m]
+        self.server = LocalServer(
+            {"/": self._page, "/state.json": self._state, "/frame.jpg": self._frame}, port=port
+        )
+        self._predictor = threading.Thread(target=self._predict_loop, name="eelbot-predict",
+                                           daemon=True)
+        self._predictor.start()
+
+    @property
+    def url(self) -> str:
+        """Where to point the browser."""
+        return self.server.url
+
+    def update(self, report: FrameReport) -> None:
+        """Take one frame's report (called by the run loop for every frame; cheap)."""
+        with self._lock:
+            self._report = report
+            self._frame_id += 1
+            if report.filtered_pose is not None:
+                x, y = float(report.filtered_pose[0]), float(report.filtered_pose[1])
+                if not self._track or self._track[-1] != (x, y):
+                    self._track.append((x, y))
+                    del self._track[:-TRACK_POINTS]
+        self._wake.set()
+
+    def close(self) -> None:
+        """Stop the prediction and the server."""
+        self._closed.set()
+        self._wake.set()
+        self._predictor.join(timeout=10)
+        self.server.close()
+
+    # -- what is served ------------------------------------------------------------------
+    def _circle_px(self, centre: tuple[float, float]) -> list[list[float]]:
+        a = np.linspace(0.0, 2 * math.pi, 48, endpoint=False)
+        r = self.config.acceptance_radius_m
+        ring = np.c_[centre[0] + r * np.cos(a), centre[1] + r * np.sin(a)]
+        return np.round(self.calibration.to_px(ring), 1).tolist()
+
+    def _px(self, points_m: FloatArray | list[tuple[float, float]]) -> list[list[float]]:
+        pts = np.asarray(points_m, dtype=float).reshape(-1, 2)
+        return np.round(self.calibration.to_px(pts), 1).tolist() if len(pts) else []
+
+    def state(self) -> dict:
+        """The overlay in image pixels (what ``/state.json`` serves)."""
+        with self._lock:
+            report, frame_id = self._report, self._frame_id
+            track, predicted = list(self._track), self._predicted_m
+        width, height = self.calibration.image_size_px
+        target = report.target_index if report else 0
+        waypoints = [
+            {"centre": self._px([w])[0], "circle": circle, "reached": i < target}
+            for i, (w, circle) in enumerate(zip(self.config.waypoints_m, self._circles,
+                                                strict=True))
+        ]
+        markers = []
+        status = "waiting for the first frame"
+        if report is not None:
+            loc = report.localisation
+            markers = [{"id": s.marker_id, "link": s.link + 1,
+                        "corners": np.round(s.corners_px, 1).tolist()} for s in loc.sightings]
+            pose = report.filtered_pose
+            where = (f"x {pose[0]:.2f} m, y {pose[1]:.2f} m, heading "
+                     f"{math.degrees(pose[2]):.0f} deg" if pose is not None else "no pose yet")
+            status = (f"t {report.t_s:.1f} s | {loc.status} ({sum(loc.seen)}/{len(loc.seen)} "
+                      f"markers) | {where} | waypoint {min(target + 1, len(waypoints))}/"
+                      f"{len(waypoints)}")
+            height, width = report.frame.shape[:2]
+        return {"t_s": report.t_s if report else None, "frame_id": frame_id,
+                "size": [width, height], "markers": markers, "track": self._px(track),
+                "waypoints": waypoints, "predicted": self._px(predicted), "status": status}
+
+    def _state(self) -> tuple[str, bytes]:
+        return "application/json", json.dumps(self.state()).encode()
+
+    def _frame(self) -> tuple[str, bytes]:
+        with self._lock:
+            frame = None if self._report is None else self._report.frame
+        if frame is None:
+            width, height = self.calibration.image_size_px
+            frame = np.full((height, width, 3), 40, np.uint8)
+        ok, jpeg = cv2.imencode(".jpg", frame, [cv2.IMWRITE_JPEG_QUALITY, 75])
+        return "image/jpeg", jpeg.tobytes()
+
+    def _page(self) -> tuple[str, bytes]:
+        return "text/html; charset=utf-8", PAGE.encode()
+
+    # -- the twin's prediction -------------------------------------------------------------
+    def _predict_loop(self) -> None:
+        last = -math.inf
+        while not self._closed.is_set():
+            self._wake.wait(timeout=self.predict_every_s)
+            self._wake.clear()
+            if self._closed.is_set() or time.monotonic() - last < self.predict_every_s:
+                continue
+            with self._lock:
+                report = self._report
+            if report is None or report.filtered_pose is None:
+                continue
+            last = time.monotonic()
+            try:
+                self._predicted_m = self.predict(report.filtered_pose, report.target_index)
+            except Exception:  # noqa: BLE001 (a failed prediction must not end the run)
+                log.exception("the live view's prediction failed")
+
+    def predict(self, pose: FloatArray, target_index: int) -> FloatArray:
+        """The twin's centre-of-mass path over the horizon from ``pose`` (x, y, heading).
+
+        Returns
+        -------
+        ndarray, shape (K, 2)
+            Positions every 0.1 s.
+        """
+        remaining = self.config.waypoints_m[target_index:] or self.config.waypoints_m[-1:]
+        g = self.config.gait
+        scenario = Scenario(
+            name="live-view prediction", amplitude_rad=g.amplitude_rad, omega_rad_s=g.omega_rad_s,
+            beta_rad=g.beta_rad, k_theta=g.k_theta, waypoints_m=list(remaining),
+            acceptance_radius_m=self.config.acceptance_radius_m, duration_s=self.horizon_s,
+            start_position_m=(float(pose[0]), float(pose[1])),
+            start_heading_deg=math.degrees(float(pose[2])),
+        )
+        run = simulate_closed_loop(self.robot, scenario, LoopOptions(stop_at_goal=True))
+        n = self.robot.n_links
+        return np.asarray(run.states[::10, n : n + 2], dtype=float)
+
+
+PAGE = """<!doctype html>
+<html><head><meta charset="utf-8"><title>eelbot live view</title>
+<style>
+ body { margin: 0; background: #222; color: #eee; font: 14px sans-serif; }
+ #status { padding: 6px 10px; }
+ #view { position: relative; display: inline-block; }
+ #frame { display: block; max-width: 100vw; }
+ #overlay { position: absolute; left: 0; top: 0; width: 100%; height: 100%; }
+ .marker { fill: none; stroke: #00e5ff; stroke-width: 2; }
+ .marker-id { fill: #00e5ff; font: bold 14px sans-serif; }
+ #track { fill: none; stroke: #ffd400; stroke-width: 2; }
+ .acceptance { fill: rgba(255, 0, 200, 0.12); stroke: #ff00c8; stroke-width: 2; }
+ .acceptance.reached { stroke: #3ddc84; fill: rgba(61, 220, 132, 0.12); }
+ .waypoint { fill: #ff00c8; }
+ #predicted { fill: none; stroke: #ff7a00; stroke-width: 3; stroke-dasharray: 8 5; }
+</style></head>
+<body>
+<div id="status">connecting...</div>
+<div id="view">
+ <img id="frame" alt="camera frame">
+ <svg id="overlay" xmlns="http://www.w3.org/2000/svg">
+  <g id="waypoints"></g><polyline id="track" points=""></polyline>
+  <polyline id="predicted" points=""></polyline><g id="markers"></g>
+ </svg>
+</div>
+<script>
+const NS = "http://www.w3.org/2000/svg";
+let shown = -1;
+const pts = (list) => list.map((p) => p[0] + "," + p[1]).join(" ");
+function el(name, attrs, text) {
+  const e = document.createElementNS(NS, name);
+  for (const [k, v] of Object.entries(attrs)) e.setAttribute(k, v);
+  if (text !== undefined) e.textContent = text;
+  return e;
+}
+async function tick() {
+  try {
+    const s = await (await fetch("/state.json", {cache: "no-store"})).json();
+    document.getElementById("status").textContent = s.status;
+    document.getElementById("overlay").setAttribute("viewBox", "0 0 " + s.size[0] + " " + s.size[1]);
+    if (s.frame_id !== shown) {
+      shown = s.frame_id;
+      document.getElementById("frame").src = "/frame.jpg?k=" + s.frame_id;
+    }
+    const wp = document.getElementById("waypoints");
+    wp.replaceChildren(...s.waypoints.flatMap((w) => [
+      el("polygon", {class: "acceptance" + (w.reached ? " reached" : ""), points: pts(w.circle)}),
+      el("circle", {class: "waypoint", cx: w.centre[0], cy: w.centre[1], r: 4}),
+    ]));
+    document.getElementById("track").setAttribute("points", pts(s.track));
+    document.getElementById("predicted").setAttribute("points", pts(s.predicted));
+    document.getElementById("markers").replaceChildren(...s.markers.flatMap((m) => [
+      el("polygon", {class: "marker", points: pts(m.corners)}),
+      el("text", {class: "marker-id", x: m.corners[0][0], y: m.corners[0][1] - 4}, String(m.id)),
+    ]));
+  } catch (e) {
+    document.getElementById("status").textContent = "run ended or not reachable";
+  }
+  setTimeout(tick, 200);
+}
+tick();
+</script>
+</body></html>
+"""
