@@ -88,9 +88,11 @@ def mca(body: list[str], cpu: str) -> tuple[float, float] | None:
     report = subprocess.run([tool, f"-mcpu={cpu}", "-iterations=50", f.name],
                             capture_output=True, text=True, check=True).stdout
     Path(f.name).unlink()
-    cycles = int(re.search(r"Total Cycles:\s+(\d+)", report).group(1)) / 50
-    rthroughput = float(re.search(r"Block RThroughput:\s+([\d.]+)", report).group(1))
-    return cycles, rthroughput
+    total = re.search(r"Total Cycles:\s+(\d+)", report)
+    throughput = re.search(r"Block RThroughput:\s+([\d.]+)", report)
+    if total is None or throughput is None:
+        raise RuntimeError(f"{tool} printed no cycle count for {cpu}:\n{report}")
+    return int(total.group(1)) / 50, float(throughput.group(1))
 
 
 def main() -> int:

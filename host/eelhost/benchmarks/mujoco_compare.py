@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from eelsim.fluid import FluidCoefficients
 from eelsim.model import SwimmerModel
 from eelsim.robot import HydroCoefficients, Robot
 
@@ -202,15 +203,16 @@ def rollout_speed(robot: Robot, runs: int, steps: int, threads: int, dt_s: float
     return MujocoTiming(runs, steps, best, threads)
 
 
-def morison_xfrc_speed(robot: Robot, coefficients: HydroCoefficients, runs: int, steps: int,
+def morison_xfrc_speed(robot: Robot, coefficients: FluidCoefficients, runs: int, steps: int,
                        dt_s: float = 0.01) -> MujocoTiming:
     """Time MuJoCo with our Morison drag applied through ``xfrc_applied`` (one thread, Python loop).
 
     Parameters
     ----------
     robot : Robot
-    coefficients : HydroCoefficients
-        (C_f, C_d, C_a, C_m): the drag and yaw damping coefficients (added mass is not modelled).
+    coefficients : FluidCoefficients
+        The paper's Morison coefficients (C_f, C_d, C_a, C_m): the drag and yaw damping
+        (added mass is not modelled). Another fluid law is refused.
     runs, steps : int
         Runs are simulated one after the other.
     dt_s : float
@@ -222,6 +224,8 @@ def morison_xfrc_speed(robot: Robot, coefficients: HydroCoefficients, runs: int,
     require_mujoco()
     from eelsim.model import SwimmerModel
 
+    if not isinstance(coefficients, HydroCoefficients):
+        raise TypeError(f"MuJoCo's drag here is the Morison law's, not {type(coefficients).__name__}'s")
     model = mujoco.MjModel.from_xml_string(robot_mjcf(robot, dt_s, fluid=False))
     data = mujoco.MjData(model)
     swimmer = SwimmerModel.from_robot(robot, coefficients)

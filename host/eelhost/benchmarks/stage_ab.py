@@ -161,10 +161,10 @@ def main() -> None:
         for j in order:
             name, lib, layout, init, work, lanes = variants[j]
             work[:] = init
-            steps = args.steps * 16 // lanes
-            start = time.perf_counter()
-            lib.bench(work.ctypes.data, steps, DT_S)
-            per_step[i, j] = (time.perf_counter() - start) / (steps * lanes) * 1e9
+            block_steps = args.steps * 16 // lanes
+            t0 = time.perf_counter()
+            lib.bench(work.ctypes.data, block_steps, DT_S)
+            per_step[i, j] = (time.perf_counter() - t0) / (block_steps * lanes) * 1e9
     for j, (name, *_) in enumerate(variants):
         ratio = per_step[:, j] / per_step[:, 0]
         print(f"{name:>12}: best {per_step[:, j].min():6.1f} ns per run and step, median"

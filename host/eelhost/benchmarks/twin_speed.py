@@ -34,7 +34,8 @@ import numpy as np
 
 from eelhost.benchmarks.machine import cpu_model, load_average, simd_flags
 from eelsim.closed_loop import LoopOptions, simulate_closed_loop
-from eelsim.robot import HydroCoefficients, Robot
+from eelsim.fluid import FluidCoefficients
+from eelsim.robot import Robot
 from eelsim.scenario import TRAINING_CORNERS, grid_scenario, load_scenario
 
 GA_RUNS = 150 * 130 * 4
@@ -106,7 +107,7 @@ def _warm_up_in_subprocess(cache_dir: str | None, stage: str) -> float:
 
 def twin_speed_report(
     robot: Robot,
-    coeffs: HydroCoefficients,
+    coeffs: FluidCoefficients,
     settings: TwinBenchSettings,
     emit: Callable[[str], None] | None = None,
 ) -> list[str]:
@@ -116,7 +117,7 @@ def twin_speed_report(
     ----------
     robot : Robot
         The robot simulated.
-    coeffs : HydroCoefficients
+    coeffs : FluidCoefficients
         Its hydrodynamic coefficients.
     settings : TwinBenchSettings
         What to measure.

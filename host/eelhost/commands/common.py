@@ -11,7 +11,8 @@ from pydantic import ValidationError
 from eelhost.errors import UserError
 from eelsim.camera import CameraModel
 from eelsim.closed_loop import LoopOptions
-from eelsim.robot import HydroCoefficients, Robot, load_robot
+from eelsim.fluid import FluidCoefficients
+from eelsim.robot import Robot, load_robot
 from eelsim.timing import LoopTiming
 
 
@@ -72,13 +73,13 @@ def add_robot_options(p: argparse.ArgumentParser) -> None:
     )
 
 
-def robot_and_coefficients(args: argparse.Namespace) -> tuple[Robot, HydroCoefficients]:
+def robot_and_coefficients(args: argparse.Namespace) -> tuple[Robot, FluidCoefficients]:
     """Load the robot and the coefficients chosen on the command line."""
     robot = load_robot(args.robot)
     if not args.coefficients:
         return robot, robot.hydrodynamics
     with rejected_as("--coefficients"):
-        return robot, HydroCoefficients.from_array(args.coefficients)
+        return robot, type(robot.hydrodynamics).from_array(args.coefficients)
 
 
 def add_loop_options(p: argparse.ArgumentParser) -> None:

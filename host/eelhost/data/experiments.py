@@ -33,6 +33,7 @@ import numpy as np
 from pydantic import ValidationError
 
 from eelhost.errors import UserError
+from eelsim.fluid import FluidCoefficients
 from eelsim.robot import HydroCoefficients, Robot, load_robot
 from eelsim.scenario import Scenario
 
@@ -348,7 +349,7 @@ class Dataset:
         Per motion type ("straight", "turning").
     paths : list[Experiment]
         Multi-waypoint validation runs.
-    truth : dict[str, HydroCoefficients]
+    truth : dict[str, FluidCoefficients]
         For virtual tanks: the coefficients the data was generated with, per motion type.
     manifest : dict
         The manifest as read.
@@ -359,7 +360,7 @@ class Dataset:
     train: dict[str, list[Experiment]]
     test: dict[str, list[Experiment]]
     paths: list[Experiment]
-    truth: dict[str, HydroCoefficients]
+    truth: dict[str, FluidCoefficients]
     manifest: dict[str, Any]
 
 
@@ -367,7 +368,7 @@ def manifest_text(
     robot_file: str,
     motions: dict[str, dict[str, list[str]]],
     paths: list[str],
-    truth: dict[str, HydroCoefficients] | None = None,
+    truth: dict[str, FluidCoefficients] | None = None,
     description: str = "",
 ) -> str:
     """Render a dataset manifest (TOML)."""
@@ -392,7 +393,7 @@ def manifest_text(
     if truth:
         lines.append("[truth]  # coefficients the data was generated with (C_f, C_d, C_a, C_m)")
         for motion, c in truth.items():
-            lines.append(f"{motion} = [{c.C_f}, {c.C_d}, {c.C_a}, {c.C_m}]")
+            lines.append(f"{motion} = [{', '.join(str(v) for v in c.as_array())}]")
     return "\n".join(lines) + "\n"
 
 
@@ -443,7 +444,7 @@ def load_dataset(folder: str | Path) -> Dataset:
         _load_named(folder, n, mpath, "validation.paths")
         for n in manifest.get("validation", {}).get("paths", [])
     ]
-    truth = {}
+    truth: dict[str, FluidCoefficients] = {}
     for motion, values in manifest.get("truth", {}).items():
         try:
             truth[motion] = HydroCoefficients.from_array(values)

@@ -36,13 +36,14 @@ from eelhost.data.experiments import (
 )
 from eelsim.camera import CameraModel
 from eelsim.closed_loop import LoopOptions, simulate_closed_loop
+from eelsim.fluid import FluidCoefficients
 from eelsim.robot import HydroCoefficients, Robot, load_robot
 from eelsim.scenario import TRAINING_CORNERS, Scenario, named_scenarios, paper_grid
 from eelsim.timing import LoopTiming
 
 log = logging.getLogger(__name__)
 
-TABLE3 = {
+TABLE3: dict[str, FluidCoefficients] = {
     "straight": HydroCoefficients(C_f=0.008, C_d=0.776, C_a=0.618, C_m=0.007),
     "turning": HydroCoefficients(C_f=0.009, C_d=0.978, C_a=1.169, C_m=0.001),
 }
@@ -105,7 +106,7 @@ def record_experiment(
     robot: Robot,
     scenario: Scenario,
     motion: str,
-    truth: HydroCoefficients,
+    truth: FluidCoefficients,
     settings: TankSettings,
     seed: int,
 ) -> Experiment:
@@ -119,7 +120,7 @@ def record_experiment(
         The task.
     motion : str
         "straight", "turning" or "path".
-    truth : HydroCoefficients
+    truth : FluidCoefficients
         The true coefficients.
     settings : TankSettings
     seed : int
@@ -194,7 +195,7 @@ def _record_job(args: tuple) -> Experiment:
 def generate_dataset(
     folder: str | Path,
     robot: Robot | None = None,
-    truth: dict[str, HydroCoefficients] | None = None,
+    truth: dict[str, FluidCoefficients] | None = None,
     settings: TankSettings | None = None,
     seed: int = 0,
     workers: int = 2,
@@ -226,11 +227,11 @@ def generate_dataset(
     """
     folder = Path(folder)
     robot = robot or load_robot()
-    truth = truth or TABLE3
+    truths = truth or TABLE3
     settings = settings or TankSettings()
     plan = paper_experiment_plan()
     jobs = [
-        (robot, s, motion, truth["turning" if motion == "path" else motion], settings, seed + i)
+        (robot, s, motion, truths["turning" if motion == "path" else motion], settings, seed + i)
         for i, (motion, _split, s) in enumerate(plan)
     ]
     folder.mkdir(parents=True, exist_ok=True)
@@ -257,7 +258,7 @@ def generate_dataset(
             "robot.toml",
             motions,
             ["path1", "path2"],
-            {"straight": truth["straight"], "turning": truth["turning"]},
+            {"straight": truths["straight"], "turning": truths["turning"]},
             desc,
         ),
     )

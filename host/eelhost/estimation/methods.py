@@ -31,7 +31,7 @@ from eelhost.estimation.optimise import (
     fit_ga,
     polish_least_squares,
 )
-from eelsim.robot import HydroCoefficients
+from eelsim.fluid import FluidCoefficients
 
 if TYPE_CHECKING:  # pipeline imports this module
     from eelhost.estimation.pipeline import FitSettings
@@ -49,7 +49,7 @@ class FitProblem:
         Fitness and residuals of candidate coefficients on the training experiments.
     settings : FitSettings
         Seed, budgets, polish iterations.
-    start : HydroCoefficients
+    start : FluidCoefficients
         Where a local method starts (default: the robot file's coefficients).
     checkpoint : Checkpoint or None
         Where a method that can resume keeps its state.
@@ -61,7 +61,7 @@ class FitProblem:
 
     evaluator: Evaluator
     settings: FitSettings
-    start: HydroCoefficients
+    start: FluidCoefficients
     checkpoint: Checkpoint | None = None
     resume: bool = False
     progress: Progress | None = None

@@ -29,6 +29,7 @@ import cloudpickle
 import numpy as np
 
 from eelhost.errors import UserError
+from eelsim.fluid import FluidCoefficients
 from eelsim.robot import HydroCoefficients
 
 # Search bounds (C_f, C_d, C_a, C_m). Table 3: C_f 0.008-0.009, C_d 0.78-0.98, C_a 0.62-1.17,
@@ -62,7 +63,7 @@ class FitResult:
     Attributes
     ----------
     method : str
-    coefficients : HydroCoefficients
+    coefficients : FluidCoefficients
         Best candidate found.
     fitness : float
         Its fitness.
@@ -73,7 +74,7 @@ class FitResult:
     """
 
     method: str
-    coefficients: HydroCoefficients
+    coefficients: FluidCoefficients
     fitness: float
     history: list[tuple[int, float, int]] = field(default_factory=list)
     evaluations: int = 0
@@ -336,7 +337,7 @@ def fit_cmaes(
 def polish_least_squares(
     residuals: Callable[[np.ndarray], np.ndarray],
     objective: Objective,
-    start: HydroCoefficients,
+    start: FluidCoefficients,
     start_fitness: float,
     max_iterations: int = 20,
 ) -> FitResult:
@@ -351,7 +352,7 @@ def polish_least_squares(
         Candidates (C, 4) -> stacked residuals (C, M) (:meth:`Evaluator.residuals`).
     objective : callable
         Candidates -> minimax fitness, to judge the result.
-    start : HydroCoefficients
+    start : FluidCoefficients
     start_fitness : float
     max_iterations : int
         Jacobian evaluations at most.

@@ -19,6 +19,7 @@ from eelhost.errors import UserError
 from eelhost.estimation.evaluate import EstimationError, Evaluator
 from eelhost.estimation.methods import FitProblem, get_method, method_names
 from eelhost.estimation.optimise import Checkpoint, FitResult
+from eelsim.fluid import FluidCoefficients
 from eelsim.robot import HydroCoefficients
 
 METHODS = method_names()  # as registered when this module is imported
@@ -79,7 +80,7 @@ def fit_motion(
     checkpoint_dir: str | Path | None = None,
     resume: bool = False,
     progress: Callable[[int, float, int], None] | None = None,
-    start: HydroCoefficients | None = None,
+    start: FluidCoefficients | None = None,
     map_function: Callable | None = None,
 ) -> tuple[FitResult, Evaluator]:
     """Fit the coefficients of one motion type.
@@ -96,7 +97,7 @@ def fit_motion(
         Continue from a checkpoint.
     progress : callable, optional
         (generation, best fitness, simulations).
-    start : HydroCoefficients, optional
+    start : FluidCoefficients, optional
         Start of the "lsq" method (default: the robot file's coefficients).
     map_function : callable, optional
         Spreads the evaluation (e.g. a Dask client's map).
@@ -136,7 +137,7 @@ def write_coefficients(
     return path
 
 
-def read_coefficients(spec: str) -> dict[str, HydroCoefficients]:
+def read_coefficients(spec: str) -> dict[str, FluidCoefficients]:
     """Coefficients from a JSON file written by :func:`write_coefficients` or "Cf,Cd,Ca,Cm".
 
     A single set applies to every motion type ("joint").

@@ -16,11 +16,11 @@ with acknowledgement and resends. Then, per camera frame:
 3. check the stop conditions: a stop request (Ctrl-C), the last waypoint reached, no pose for
    more than ``lost_after_s`` (1 s), no frame from the robot for more than ``link_timeout_s`` (1 s;
    the robot sends Telemetry every 0.1 s), the duration;
-4. every control period, compute gamma = :func:`eelsim.control.heading_offset` from the latest
+4. every control period, compute gamma = k_theta wrap(theta_ref - theta_bar) from the latest
    filtered pose (the twin's law) and send SetOffset (which also feeds the robot's watchdog).
 
-Steps 2 and 4 (filter, waypoint switch, line of sight, clipping) are the guidance, kept together
-in :class:`Guidance` so that the twin's guidance object can take its place in one spot.
+Steps 2 and 4 (filter, waypoint switch, line of sight, clipping) are the twin's own guidance
+object, :class:`eelsim.guidance.Guidance`, so the tank steers exactly as the twin does.
 
 Whatever ends the loop, even an exception, Stop is sent and waited for (with resends) for up to
 ``stop_timeout_s``, and the recording is closed with the outcome.
@@ -39,13 +39,13 @@ from eelhost.field.recorder import Recorder
 from eelhost.link.base import Clock, Link, LinkEvent
 from eelhost.vision.localise import Localiser
 from eelhost.wire import protocol
-from eelsim.camera import MedianFilter
-from eelsim.control import Gait, heading_offset
+from eelsim.control import Gait
+from eelsim.guidance import Guidance
 from eelsim.robot import Robot
 
 log = logging.getLogger(__name__)
 
-__all__ = ["Guidance", "RunConfig", "RunLoop", "RunOutcome"]
+__all__ = ["RunConfig", "RunLoop", "RunOutcome"]
 
 OFFSET_LIMIT_RAD = 1.0  # SetOffset's range
 EPS_S = 1e-9
@@ -144,54 +144,6 @@ class RunOutcome:
         }
 
 
-class Guidance:
-    """The host's guidance: median filter, waypoint switch, line-of-sight offset, clipping.
-
-    The twin's steps (docs/model.md section 4), called with the camera's poses and at the control
-    updates. This is the one place the run loop does guidance: when eelsim's guidance object is
-    available, it replaces this class here and nowhere else.
-
-    Parameters
-    ----------
-    config : RunConfig
-        Waypoints, acceptance radius, median window and the heading gain.
-    """
-
-    def __init__(self, config: RunConfig) -> None:
-        self._config = config
-        self._filter = MedianFilter(config.median_window)
-        self.target = 0
-        self.filtered: NDArray[np.float64] | None = None
-
-    @property
-    def finished(self) -> bool:
-        """Whether every waypoint has been reached."""
-        return self.target >= len(self._config.waypoints_m)
-
-    def observe(self, com_m: NDArray[np.float64], heading_rad: float) -> None:
-        """Filter a pose and move the target on when the filtered position is within reach."""
-        c = self._config
-        self.filtered = self._filter.push(float(com_m[0]), float(com_m[1]), heading_rad)
-        wp = np.asarray(c.waypoints_m[self.target], dtype=float)
-        if np.linalg.norm(self.filtered[:2] - wp) < c.acceptance_radius_m:
-            self.target += 1
-
-    def offset_rad(self) -> float | None:
-        """The heading offset for the latest filtered pose, clipped to SetOffset's range.
-
-        Returns
-        -------
-        float or None
-            None before the first pose.
-        """
-        if self.filtered is None:
-            return None
-        c = self._config
-        wp = c.waypoints_m[min(self.target, len(c.waypoints_m) - 1)]
-        gamma = heading_offset(self.filtered[:2], self.filtered[2], wp, c.gait.k_theta)
-        return float(np.clip(gamma, -OFFSET_LIMIT_RAD, OFFSET_LIMIT_RAD))
-
-
 class RunLoop:
     """One run of the robot along waypoints.
 
@@ -233,7 +185,13 @@ class RunLoop:
         self.recorder = recorder
         self.clock = clock or link.clock
         self.outcome = RunOutcome()
-        self.guidance = Guidance(config)
+        self.guidance = Guidance(
+            config.waypoints_m,
+            config.acceptance_radius_m,
+            config.gait.k_theta,
+            config.median_window,
+            offset_limit_rad=OFFSET_LIMIT_RAD,
+        )
         self._stop_request: str | None = None
         self._t_start = 0.0
         link.listeners.append(self._on_event)
@@ -241,12 +199,12 @@ class RunLoop:
     @property
     def target(self) -> int:
         """Index of the waypoint being steered to (the number reached so far)."""
-        return self.guidance.target
+        return self.guidance.target_index
 
     @property
     def filtered(self) -> NDArray[np.float64] | None:
         """The latest filtered pose (x, y, heading), or None before the first."""
-        return self.guidance.filtered
+        return self.guidance.filtered_pose
 
     def request_stop(self, reason: str = "interrupted") -> None:
         """Ask the loop to stop at the next frame (safe from a signal handler)."""
@@ -310,7 +268,6 @@ class RunLoop:
         offset_to_clock: float | None = None
         next_control = 0.0
         last_pose_t: float | None = None
-        gamma = 0.0
         for t_src, frame in self.frames:
             now = self.clock.now()
             if offset_to_clock is None:
@@ -329,15 +286,12 @@ class RunLoop:
                 last_pose_t = t
                 if self.recorder is not None:
                     self.recorder.frame(t, loc.com_m, loc.heading_rad, loc.link_angles_rad)
-                self.guidance.observe(loc.com_m, loc.heading_rad)
+                self.guidance.observe(t, float(loc.com_m[0]), float(loc.com_m[1]), loc.heading_rad)
             if self._should_stop(t, last_pose_t):
                 return
             if t >= next_control - EPS_S:
-                new_gamma = self.guidance.offset_rad()
-                if new_gamma is not None:
-                    gamma = new_gamma
-                # Sent even before the first pose: it keeps the robot's watchdog fed.
-                self.link.send(protocol.SetOffset(gamma))
+                # Sent even before the first pose (0 then): it keeps the robot's watchdog fed.
+                self.link.send(protocol.SetOffset(self.guidance.offset()))
                 out.offsets_sent += 1
                 next_control += c.control_period_s
         out.reason, out.detail = "camera_ended", "the camera delivered no more frames"
@@ -346,7 +300,7 @@ class RunLoop:
         c, out = self.config, self.outcome
         if self._stop_request is not None:
             out.reason, out.detail = self._stop_request, "stop requested"
-        elif self.guidance.finished:
+        elif self.guidance.arrived:
             out.reason, out.detail = "arrived", f"reached all {len(c.waypoints_m)} waypoints"
         elif last_pose_t is not None and t - last_pose_t > c.lost_after_s:
             out.reason = "lost_from_view"

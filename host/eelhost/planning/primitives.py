@@ -42,8 +42,9 @@ from scipy.spatial import ConvexHull
 
 from eelsim.closed_loop import LoopOptions, simulate_closed_loop
 from eelsim.control import Gait, wrap_angle
+from eelsim.fluid import FluidCoefficients
 from eelsim.model import SwimmerModel
-from eelsim.robot import HydroCoefficients, Robot
+from eelsim.robot import Robot
 from eelsim.scenario import PATH_GAIT, Scenario
 
 log = logging.getLogger(__name__)
@@ -326,7 +327,7 @@ class PrimitiveLibrary:
 
 def library_key(
     robot: Robot,
-    coefficients: HydroCoefficients,
+    coefficients: FluidCoefficients,
     current_speed_m_s: float,
     discretisation: Discretisation,
     gait: Gait = PATH_GAIT,
@@ -337,7 +338,7 @@ def library_key(
     Parameters
     ----------
     robot : Robot
-    coefficients : HydroCoefficients
+    coefficients : FluidCoefficients
     current_speed_m_s : float
     discretisation : Discretisation
     gait : Gait
@@ -395,7 +396,7 @@ class _Run:
 
 
 def _rollouts_reference(
-    robot: Robot, coefficients: HydroCoefficients, scenarios: list[Scenario], options: LoopOptions
+    robot: Robot, coefficients: FluidCoefficients, scenarios: list[Scenario], options: LoopOptions
 ) -> list[_Run]:
     out = []
     for s in scenarios:
@@ -406,7 +407,7 @@ def _rollouts_reference(
 
 def _rollouts_batch(
     robot: Robot,
-    coefficients: HydroCoefficients,
+    coefficients: FluidCoefficients,
     scenarios: list[Scenario],
     options: LoopOptions,
     threads: int | None,
@@ -441,7 +442,7 @@ def batch_available() -> bool:
 
 def simulate_manoeuvres(
     robot: Robot,
-    coefficients: HydroCoefficients,
+    coefficients: FluidCoefficients,
     scenarios: list[Scenario],
     options: LoopOptions,
     backend: str = "auto",
@@ -452,7 +453,7 @@ def simulate_manoeuvres(
     Parameters
     ----------
     robot : Robot
-    coefficients : HydroCoefficients
+    coefficients : FluidCoefficients
     scenarios : list of Scenario
     options : LoopOptions
         Must stop at the goal (a primitive ends when its waypoint is accepted).
@@ -512,7 +513,7 @@ def _scenario(
 
 def build_library(
     robot: Robot,
-    coefficients: HydroCoefficients,
+    coefficients: FluidCoefficients,
     current_speed_m_s: float,
     discretisation: Discretisation | None = None,
     gait: Gait = PATH_GAIT,
@@ -525,7 +526,7 @@ def build_library(
     Parameters
     ----------
     robot : Robot
-    coefficients : HydroCoefficients
+    coefficients : FluidCoefficients
         The calibrated coefficients.
     current_speed_m_s : float
         Planning current speed.
@@ -654,7 +655,7 @@ def default_cache_dir() -> Path:
 
 def load_or_build(
     robot: Robot,
-    coefficients: HydroCoefficients,
+    coefficients: FluidCoefficients,
     current_speed_m_s: float,
     discretisation: Discretisation | None = None,
     cache_dir: str | Path | None = None,

@@ -174,7 +174,10 @@ class NativeFirmware:
     """
 
     def __init__(
-        self, now_us: int = 0, control_period_us: int = 10000, library: Path | None = None
+        self,
+        now_us: int = 0,
+        control_period_us: int = protocol.CONTROL_PERIOD_US,
+        library: Path | None = None,
     ) -> None:
         self._lib = load_library(library)
         handle = self._lib.eel_create(_u32(now_us))

@@ -28,6 +28,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from eelhost.wire import protocol
+
 __all__ = ["ChannelCounters", "RadioChannel", "RadioModel"]
 
 
@@ -76,7 +78,7 @@ class RadioModel:
     @classmethod
     def xbee(
         cls,
-        baud: int = 57600,
+        baud: int = protocol.BAUD,
         latency_us: int = 5000,
         loss_probability: float = 0.0,
         corruption_probability: float = 0.0,
