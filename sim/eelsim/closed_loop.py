@@ -342,6 +342,45 @@ class TwinJoints:
     torque_nm = law  # the PD model's law by its earlier name (a TorqueLaw)
 
 
+def held_reference_drive(robot: Robot, alpha_rad: FloatArray, offset_rad: float) -> JointDrive:
+    """Kinematic joints following references held over the step, as the robot's joint model does.
+
+    For a controller ticked once per step whose joints are servos (the firmware in the loop,
+    ``eelhost.xil``): the angles it commands are the servo references, held over the step; the
+    joint law (:meth:`eelsim.joints.JointModel.drive`, reference rate 0) acts at every RK4 stage
+    and the plant is the prescribed-shape dynamics (docs/model.md section 4).
+
+    Parameters
+    ----------
+    robot : Robot
+        Its joint model must be kinematic (``[joints] model = "servo"``).
+    alpha_rad : ndarray, shape (N-1,)
+        The commanded joint angles.
+    offset_rad : float
+        The offset acting (recorded).
+
+    Returns
+    -------
+    JointDrive
+
+    Raises
+    ------
+    ValueError
+        When the robot's joint model gives torques (its controller must give them).
+    """
+    model, spec = robot.joint_model, robot.joints
+    if not model.kinematic:
+        raise ValueError(f"the {model.name!r} joint model is driven by torques, not references")
+    alpha = np.array(alpha_rad, dtype=float)
+    zero = np.zeros_like(alpha)
+    n = alpha.size + 1
+
+    def law(_t_s: float, state: FloatArray) -> FloatArray:
+        return model.drive(spec, alpha, zero, np.diff(state[:n]), np.diff(state[n + 2 : 2 * n + 2]))
+
+    return JointDrive(None, alpha, offset_rad, joint_acceleration=law)
+
+
 def simulate_closed_loop(
     robot: Robot,
     scenario: Scenario,

@@ -117,7 +117,7 @@ def joint_parameters(table: Any) -> Any:
 
 
 # ---- the models (one module each)
-from eelsim.joints.pd import PD, PDJointParameters, stiffness_hint  # noqa: E402
+from eelsim.joints.pd import PD, PDJointParameters, pd_gains, stiffness_hint  # noqa: E402
 from eelsim.joints.servo import SERVO, ServoJointParameters  # noqa: E402
 
 for _model in (PD, SERVO):
@@ -136,6 +136,7 @@ __all__ = [
     "joint_model_of",
     "joint_parameters",
     "largest_stable_step",
+    "pd_gains",
     "register_joint_model",
     "stiffness_hint",
 ]

@@ -163,6 +163,25 @@ def stiffness_hint(spec: JointParameters, stable_step_s: float, dt_s: float) -> 
     )
 
 
+def pd_gains(spec: JointParameters) -> tuple[float, float] | None:
+    """The PD model's gains (k_p, k_d) in N m/rad and N m s/rad; None for another joint model.
+
+    For what the firmware is sent (SetGains): with the servo model the servos close their own
+    loop and the firmware's torques drive nothing.
+
+    Parameters
+    ----------
+    spec : JointParameters
+
+    Returns
+    -------
+    tuple of float, or None
+    """
+    if not isinstance(spec, PDJointParameters):
+        return None
+    return spec.kp_nm_per_rad, spec.kd_nms_per_rad
+
+
 def _pd(spec: JointParameters) -> PDJointParameters:
     if not isinstance(spec, PDJointParameters):
         raise TypeError(f"the PD joint model needs its own parameters, got {type(spec).__name__}")
