@@ -403,3 +403,21 @@ def test_a_servo_batch_of_other_coefficients_agrees_run_by_run(servo_robot):
         ref = simulate_closed_loop(servo_robot, s, coefficients=c)
         assert_agrees(ref, res, run=i)
         assert res.saturated_steps[i] == ref.saturated_steps
+
+
+def test_servo_runs_at_a_step_that_divides_the_camera_period_and_the_batch_agrees(servo_robot):
+    from test_batch import assert_agrees
+
+    # dt = 1/120 s: four steps a camera frame (frames fall on steps), 36 a control period; the
+    # batch agrees with the reference, and the swim is the one at dt = 0.01 s to RK4's accuracy
+    opts = LoopOptions(timing=LoopTiming(dt_s=1 / 120))
+    assert opts.timing.period_steps == 36
+    s = load_scenario("turning").model_copy(update={"duration_s": 5.0})
+    ref = simulate_closed_loop(servo_robot, s, opts)
+    res = run_batch(servo_robot, s, None, opts, sample_steps=np.arange(len(ref.t_s) + 5),
+                    threads=1)
+    assert_agrees(ref, res)
+    assert res.saturated_steps[0] == ref.saturated_steps > 0
+    coarse = simulate_closed_loop(servo_robot, s)
+    assert np.linalg.norm(ref.states[-1, 6:8] - coarse.states[-1, 6:8]) < 1e-3
+    assert np.linalg.norm(ref.states[-1, 6:8] - ref.states[0, 6:8]) > 0.2  # it swam
