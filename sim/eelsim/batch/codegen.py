@@ -207,7 +207,7 @@ def make_layout(n_links: int, lanes: int, law: FluidLaw | None = None,
         ("sin_whalf", 1),
         *((name, 1) for name in joints.kernel_rows),  # the joint model's own rows
         ("limit", 1),  # mechanical joint limit (self-collision check)
-        ("clamp", 1),  # joint references are clamped to +-this (JointSpec.command_limit_rad)
+        ("clamp", 1),  # joint references are clamped to +-this (JointParameters.command_limit_rad)
         ("half_length", n),
         # the screen's squared reach of each link pair (i, k >= i + 2), in screen_pairs' order
         ("reach", len(screen_pairs(n))),
