@@ -13,6 +13,7 @@ float32 rounding only (5e-8 m; references 1.7e-7 rad): we allow 1e-5 m and 1e-5 
 
 import numpy as np
 import pytest
+from test_firmware_in_loop import path_deviation_m
 
 from eelhost.xil.drivers import HeldTwinDriver
 from eelhost.xil.lockstep import run_firmware_in_loop, run_lockstep
@@ -32,11 +33,6 @@ def robot():
     robot = load_robot("servo_robot.toml")
     assert robot.joint_model.kinematic
     return robot
-
-
-def path_deviation_m(a, b):
-    k = min(len(a.t_s), len(b.t_s))
-    return float(np.linalg.norm(a.states[:k, 6:8] - b.states[:k, 6:8], axis=1).max())
 
 
 @pytest.fixture(scope="module", params=["straight", "turning"])

@@ -720,26 +720,7 @@ def _prescribed_shape(e: _Emitter) -> None:
                  "itot", "rsx", "rsy", "ge", "tb", "pmx", "pmy", "cmx", "cmy"):
         line(f"{name} = 0.0")
     for j in range(n):
-        line(f"s = {o('sin', j)}")
-        line(f"c = {o('cos', j)}")
-        line(f"k = {o('kc', j)}")
-        line(f"h = {w('half_length', j)}")
-        line("htx = h * c")
-        line("hty = h * s")
-        if j > 0:
-            line(f"beta = beta + {o('jacc', j - 1)}")
-            line("px = px + (phtx + htx)")
-            line("py = py + (phty + hty)")
-        line("phtx = htx")
-        line("phty = hty")
-        line("# the centre's acceleration at th0 = 0: back point + d, d = h beta n - k t")
-        line("hb = h * beta")
-        line("dx = -(hb * s) - k * c")
-        line("dy = hb * c - k * s")
-        line("cx = ex + dx")
-        line("cy = ey + dy")
-        line("ex = cx + dx")
-        line("ey = cy + dy")
+        _shape_chain_link(e, j)
         line(f"m = {w('mass', j)}")
         line(f"mus = {w('mu', j)} * s")
         line(f"muc = {w('mu', j)} * c")
@@ -810,6 +791,36 @@ def _prescribed_shape(e: _Emitter) -> None:
         line(f"{o('centre', index)} = {name}")
 
 
+def _shape_chain_link(e: _Emitter, j: int) -> None:
+    """Emit one link of the kinematic chain from the tail (loops 2s and 5).
+
+    Sets ``s``, ``c``, ``k`` (theta_dot^2), ``h``; ``px``, ``py``: the link centre relative to the
+    tail's; ``beta``: the joint accelerations summed from the tail; ``cx``, ``cy``: the centre's
+    acceleration at th0 = 0, p_ddot = 0 (back point + d, d = h beta n - k t); ``ex``, ``ey``: the
+    next joint point's.
+    """
+    line, w, o = e.line, e.w, e.o
+    line(f"s = {o('sin', j)}")
+    line(f"c = {o('cos', j)}")
+    line(f"k = {o('kc', j)}")
+    line(f"h = {w('half_length', j)}")
+    line("htx = h * c")
+    line("hty = h * s")
+    if j > 0:
+        line(f"beta = beta + {o('jacc', j - 1)}")
+        line("px = px + (phtx + htx)")
+        line("py = py + (phty + hty)")
+    line("phtx = htx")
+    line("phty = hty")
+    line("hb = h * beta")
+    line("dx = -(hb * s) - k * c")
+    line("dy = hb * c - k * s")
+    line("cx = ex + dx")
+    line("cy = ey + dy")
+    line("ex = cx + dx")
+    line("ey = cy + dy")
+
+
 def _prescribed_shape_torques(e: _Emitter) -> None:
     """Emit loop 5 (stage 1 only): the torques the kinematic joints must give.
 
@@ -831,25 +842,7 @@ def _prescribed_shape_torques(e: _Emitter) -> None:
     for name in ("px", "py", "ex", "ey", "beta", "fbx", "fby", "uu"):
         line(f"{name} = 0.0")
     for j in range(n - 1):
-        line(f"s = {o('sin', j)}")
-        line(f"c = {o('cos', j)}")
-        line(f"k = {o('kc', j)}")
-        line(f"h = {w('half_length', j)}")
-        line("htx = h * c")
-        line("hty = h * s")
-        if j > 0:
-            line(f"beta = beta + {o('jacc', j - 1)}")
-            line("px = px + (phtx + htx)")
-            line("py = py + (phty + hty)")
-        line("phtx = htx")
-        line("phty = hty")
-        line("hb = h * beta")
-        line("dx = -(hb * s) - k * c")
-        line("dy = hb * c - k * s")
-        line("cx = ex + dx")
-        line("cy = ey + dy")
-        line("ex = cx + dx")
-        line("ey = cy + dy")
+        _shape_chain_link(e, j)
         line("ajx = (pdx + th0 * (-py - gmx)) + (cx - cmx)")
         line("ajy = (pdy + th0 * (px - gmy)) + (cy - cmy)")
         line(f"m = {w('mass', j)}")
