@@ -18,8 +18,9 @@ Per physics step (RK4, dt = 0.01 s by default):
 
 The joints are the one part that can be swapped: a :class:`JointController` turns the offset and
 the plant's state into the torques (or joint accelerations) of each step. The default,
-:class:`TwinJoints`, is the robot's joint model above; ``eelhost.xil`` plugs in the robot's firmware (native or emulated AVR) behind a radio
-link, which is ticked once per step and whose torques are held over it. Everything else (camera,
+:class:`TwinJoints`, is the robot's joint model above; ``eelhost.xil`` plugs in the robot's
+firmware (native or emulated AVR) behind a radio link, which is ticked once per step and whose
+torques (or, with the servo model, commanded angles) are held over it. Everything else (camera,
 waypoints, control updates, failures, recording) is this one loop, so a firmware run and a twin
 run differ only where the robot differs.
 

@@ -4,8 +4,8 @@ A robot file gives the geometry and mass of the links (with optional head and ta
 water density, the fluid law and its coefficients (``[hydrodynamics]``: ``law``, default
 ``"morison"``, and e.g. the paper's e = (C_f, C_d, C_a, C_m); see :mod:`eelsim.fluid`), the joint
 model and its parameters and limits (``[joints]``: ``model``, default ``"pd"``, the paper's PD
-gains, or ``"servo"``, a hobby servo; see :mod:`eelsim.joints`), and an ``[assumptions]`` table naming every value that was assumed rather than
-measured, with the reason. Unknown keys are refused at every level; every number must be finite.
+gains, or ``"servo"``, a hobby servo; see :mod:`eelsim.joints`), and an ``[assumptions]`` table
+naming every value that was assumed rather than measured, with the reason. Unknown keys are refused at every level; every number must be finite.
 Errors name the file and the dotted key that is wrong (docs/model.md section 8).
 
 The bundled default, ``paper_robot.toml``, is the robot of Raj & Thakur (N = 6, BL about 0.64 m).

@@ -6,7 +6,8 @@ stepper (:class:`eelhost.xil.lockstep.Lockstep`): the firmware (:class:`eelhost.
 NativeDriver`) reads the bytes the uplink has delivered, ticks with the plant's joint angles and
 returns its torques and transmitted bytes; the plant takes one RK4 step with the torques held
 (:func:`eelhost.xil.lockstep.plant_step`), or, for a robot with the servo joint model, with the
-firmware's commanded angles as the servo references (:func:`eelhost.xil.lockstep.joint_drive`). Bytes travel through the radio model
+firmware's commanded angles as the servo references (:func:`eelhost.xil.lockstep.joint_drive`).
+Bytes travel through the radio model
 (:mod:`eelhost.xil.radio`, an XBee at 57600 baud by default).
 
 - :meth:`VirtualRobot.transport` is the host's end of the radio (the

@@ -528,8 +528,8 @@ def _torque_use(work, alive, ratio, saturated):
     """Each live lane's torques at the step's start (stage 1's rows torque), put to use.
 
     The largest |u| as a fraction of the stall torque so far, and whether the step is outside
-    the torque-speed line: closed_loop.outside_torque_speed_line's expression, lane by lane; a torque that is not
-    finite counts for neither (as in the reference).
+    the torque-speed line: closed_loop.outside_torque_speed_line's expression, lane by lane; a
+    torque that is not finite counts for neither (as in the reference).
     """
     n = N_LINKS
     for r in range(LANES):
