@@ -61,6 +61,25 @@ def test_simulate_overrides_gait_waypoints_and_current(tmp_path):
     assert meta["outcome"]["failure"] == "NONE"
 
 
+def test_simulate_with_servo_joints_records_their_torques_and_warns_of_saturation(
+        tmp_path, capsys):
+    stem = tmp_path / "servo"
+    code = main(["simulate", "straight", "--robot", "servo_robot.toml", "--duration", "2",
+                 "--out", str(stem)])
+    assert code == 0
+    header = stem.with_suffix(".csv").read_text().splitlines()[0].split(",")
+    table = np.loadtxt(stem.with_suffix(".csv"), delimiter=",", skiprows=1)
+    torque = table[:, header.index("torque_1"):header.index("torque_5") + 1]
+    assert torque.shape == (201, 5) and np.all(np.isfinite(torque))
+    meta = json.loads(stem.with_suffix(".json").read_text())
+    assert meta["robot"]["joints"]["model"] == "servo"
+    # from rest the servos ask more than their stall torque for a few steps: counted, not failed
+    assert 0 < meta["outcome"]["saturated_steps"] < 50
+    assert meta["outcome"]["max_torque_ratio"] > 1.0
+    assert meta["outcome"]["failure"] == "TOO_SLOW"
+    assert "than the servo's torque-speed line allows" in capsys.readouterr().out
+
+
 def test_bad_robot_file_gives_a_one_line_error_naming_file_and_key(tmp_path, capsys):
     bad = tmp_path / "robot.toml"
     bad.write_text('name = "x"\nn_links = 1\n')

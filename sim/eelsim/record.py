@@ -3,11 +3,15 @@
 ``<stem>.csv`` has one row per physics step, columns (SI units, angles in rad):
 
     t_s, x_m, y_m, heading_rad, vx_m_s, vy_m_s, heading_rate_rad_s,
-    theta_1..theta_N, phi_1..phi_{N-1}, alpha_1..alpha_{N-1}, offset_rad, target_index
+    theta_1..theta_N, phi_1..phi_{N-1}, alpha_1..alpha_{N-1}, offset_rad, target_index,
+    torque_1..torque_{N-1}
 
 (theta: absolute link angles, link 1 = tail; phi: joint angles theta_{j+1} - theta_j; alpha: joint
-references). ``<stem>.json`` holds the robot, scenario, loop options, seed, coefficients and the
-outcome: failure flag, its time and reason, arrival time.
+references; torque: the torque each joint gives at the step, N m, or with the servo joint model
+what the servo must give; docs/model.md section 4). ``<stem>.json`` holds the robot, scenario,
+loop options, seed, coefficients and the outcome: failure flag, its time and reason, arrival
+time, and the steps at which a joint's torque was outside the servo's torque-speed line
+(``saturated_steps``, a warning) with the largest |torque| as a fraction of the stall torque.
 """
 
 from __future__ import annotations
@@ -33,6 +37,7 @@ def trajectory_columns(n_links: int) -> list[str]:
         + [f"phi_{j}" for j in range(1, n_links)]
         + [f"alpha_{j}" for j in range(1, n_links)]
         + ["offset_rad", "target_index"]
+        + [f"torque_{j}" for j in range(1, n_links)]
     )
 
 
@@ -41,6 +46,9 @@ def trajectory_table(result: RunResult, n_links: int) -> np.ndarray:
     x = result.states
     n = n_links
     theta = x[:, :n]
+    torque = result.joint_torque_nm
+    if torque.shape != (len(result.t_s), n - 1):  # a result made without torques
+        torque = np.full((len(result.t_s), n - 1), np.nan)
     return np.column_stack(
         [
             result.t_s,
@@ -55,6 +63,7 @@ def trajectory_table(result: RunResult, n_links: int) -> np.ndarray:
             result.alpha_rad,
             result.offset_rad,
             result.target_index,
+            torque,
         ]
     )
 
@@ -82,6 +91,8 @@ def run_metadata(
             "reason": result.reason,
             "arrival_time_s": result.arrival_time_s,
             "distance_left_m": result.distance_left_m,
+            "saturated_steps": result.saturated_steps,
+            "max_torque_ratio": result.max_torque_ratio,
         },
     }
 

@@ -112,6 +112,12 @@ def run(args: argparse.Namespace) -> int:
         + (f" at t = {result.failure_time_s:.2f} s ({result.reason})" if result.reason else "")
         + (f"; arrival {result.arrival_time_s:.2f} s" if result.arrival_time_s is not None else "")
     )
+    if result.saturated_steps:
+        print(
+            f"warning: at {result.saturated_steps} of {len(result.t_s)} steps a joint needed more "
+            f"torque than the servo's torque-speed line allows (largest |u| "
+            f"{result.max_torque_ratio:.2f} x the stall torque; docs/model.md section 4)"
+        )
     print(f"wrote {csv_path} and {json_path}")
     if args.plot or args.animate:
         from eelhost.plots import animate_run, plot_run
