@@ -41,10 +41,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--calibration", metavar="FILE", help="calibration JSON (docs/vision.md)")
     p.add_argument("--robot-file", metavar="FILE", help="robot TOML (default: the paper robot)")
-    p.add_argument("--waypoints", required=True, metavar="x,y;x,y", help="waypoints, m")
+    p.add_argument("--waypoints", metavar="x,y;x,y", help="waypoints, m (or --plan)")
+    p.add_argument(
+        "--plan",
+        metavar="WORLD",
+        help="plan in WORLD (world TOML, 'tank_5_obstacles' or 'bench:SEED') from its start, "
+        "follow the plan and replan when the robot leaves the planned corridor "
+        "(docs/planning.md); a sim:// robot is put at the world's start in its current",
+    )
     p.add_argument(
         "--gait",
-        required=True,
         metavar="A,omega[,beta]",
         type=lambda s: floats(s, None, "--gait"),
         help="gait amplitude (rad), frequency (rad/s), optionally phase shift (rad, 1.04)",
@@ -93,9 +99,26 @@ def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
     parse_link_uri(args.robot)  # a bad URI is reported before anything is opened
     robot = load_robot(args.robot_file)
-    waypoints = parse_waypoints(args.waypoints)
-    gait = _gait(args.gait, args.k_theta)
-    link = open_link(args.robot, robot=robot)
+    if (args.waypoints is None) == (args.plan is None):
+        raise OptionError("give either --waypoints or --plan WORLD")
+    if args.gait is None and args.plan is None:
+        raise OptionError("--gait: required with --waypoints")
+    monitor = None
+    uri = args.robot
+    if args.plan is not None:
+        from eelhost.commands.plan import world_from_name
+        from eelhost.planning.tank import plan_for_run
+        from eelsim.scenario import PATH_GAIT
+
+        gait = PATH_GAIT if args.gait is None else _gait(args.gait, args.k_theta)
+        planned = plan_for_run(world_from_name(args.plan), robot, args.robot, gait,
+                               acceptance_radius_m=args.radius)
+        print(planned.outcome.message)
+        waypoints, monitor, uri = planned.waypoints_m, planned.monitor, planned.uri
+    else:
+        waypoints = parse_waypoints(args.waypoints)
+        gait = _gait(args.gait, args.k_theta)
+    link = open_link(uri, robot=robot)
     virtual = virtual_robot(link)
     if args.speed is not None:
         if virtual is None:
@@ -112,7 +135,7 @@ def run(args: argparse.Namespace) -> int:
         duration_s=args.duration,
     )
     with rejected_as("--waypoints/--gait/--radius/--duration"):  # the task's record checks them
-        session = TankSession(link, camera, robot, config, args.out, args.robot)
+        session = TankSession(link, camera, robot, config, args.out, uri, monitor)
     previous = signal.signal(signal.SIGINT, lambda *_: session.loop.request_stop("interrupted"))
     wall0 = time.monotonic()
     try:
@@ -129,5 +152,7 @@ def run(args: argparse.Namespace) -> int:
         print(
             f"simulated {out.t_end_s:.1f} s in {wall:.1f} s ({out.t_end_s / wall:.1f}x real time)"
         )
+    if monitor is not None:
+        print(f"replans: {session.loop.replans}")
     print("wrote " + ", ".join(str(path) for path in session.paths))
     return 0 if out.reason in ("arrived", "duration", "interrupted") else 1

@@ -29,7 +29,7 @@ Whatever ends the loop, even an exception, Stop is sent and waited for (with res
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -163,6 +163,10 @@ class RunLoop:
         Where to record frames and link events.
     clock : Clock, optional
         Time of the loop (default: the link's clock).
+    monitor : callable, optional
+        ``monitor(t_s, filtered_pose)`` after every pose (``eelbot run --plan``): new waypoints
+        to steer to from now on (a replan), ``"arrived"`` to end the run (the planner's goal
+        test), or None.
     """
 
     def __init__(
@@ -174,6 +178,8 @@ class RunLoop:
         config: RunConfig,
         recorder: Recorder | None = None,
         clock: Clock | None = None,
+        monitor: Callable[[float, NDArray[np.float64]], list[tuple[float, float]] | str | None]
+        | None = None,
     ) -> None:
         if not config.waypoints_m:
             raise ValueError("a run needs at least one waypoint")
@@ -194,6 +200,9 @@ class RunLoop:
         )
         self._stop_request: str | None = None
         self._t_start = 0.0
+        self.monitor = monitor
+        self.replans = 0
+        self._goal_reached = False
         link.listeners.append(self._on_event)
 
     @property
@@ -287,6 +296,8 @@ class RunLoop:
                 if self.recorder is not None:
                     self.recorder.frame(t, loc.com_m, loc.heading_rad, loc.link_angles_rad)
                 self.guidance.observe(t, float(loc.com_m[0]), float(loc.com_m[1]), loc.heading_rad)
+                if self.monitor is not None:
+                    self._consult_monitor(t, loc.com_m, loc.heading_rad)
             if self._should_stop(t, last_pose_t):
                 return
             if t >= next_control - EPS_S:
@@ -296,10 +307,28 @@ class RunLoop:
                 next_control += c.control_period_s
         out.reason, out.detail = "camera_ended", "the camera delivered no more frames"
 
+    def _consult_monitor(self, t: float, com_m: NDArray[np.float64], heading_rad: float) -> None:
+        """Ask the monitor about the filtered pose: go on, steer to new waypoints, or stop."""
+        pose = self.guidance.filtered_pose
+        assert self.monitor is not None and pose is not None
+        decision = self.monitor(t, pose)
+        if decision == "arrived":
+            self._goal_reached = True
+        elif isinstance(decision, list) and decision:
+            self.replans += 1
+            log.info("replanned at t = %.2f s: %d waypoints", t, len(decision))
+            c = self.config
+            self.guidance = Guidance(decision, c.acceptance_radius_m, c.gait.k_theta,
+                                     c.median_window, offset_limit_rad=OFFSET_LIMIT_RAD)
+            self.guidance.observe(t, float(com_m[0]), float(com_m[1]), heading_rad)
+
     def _should_stop(self, t: float, last_pose_t: float | None) -> bool:
         c, out = self.config, self.outcome
         if self._stop_request is not None:
             out.reason, out.detail = self._stop_request, "stop requested"
+        elif self._goal_reached:
+            out.reason = "arrived"
+            out.detail = f"in the planned goal disc ({self.replans} replans)"
         elif self.guidance.arrived:
             out.reason, out.detail = "arrived", f"reached all {len(c.waypoints_m)} waypoints"
         elif last_pose_t is not None and t - last_pose_t > c.lost_after_s:

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -140,6 +140,8 @@ class TankSession:
         Output path without extension.
     link_uri : str
         The link's URI, for the record.
+    monitor : callable, optional
+        The run loop's monitor (``eelbot run --plan``; see :class:`RunLoop`).
     """
 
     def __init__(
@@ -150,6 +152,8 @@ class TankSession:
         config: RunConfig,
         out: str,
         link_uri: str,
+        monitor: Callable[[float, NDArray[np.float64]], list[tuple[float, float]] | str | None]
+        | None = None,
     ) -> None:
         self.link = link
         self.virtual = virtual_robot(link)
@@ -183,7 +187,8 @@ class TankSession:
         )
         self.rx_log = RxLogWriter(f"{out}.rx.bin")
         link.rx_log = self.rx_log
-        self.loop = RunLoop(link, camera.frames, camera.localiser, robot, config, self.recorder)
+        self.loop = RunLoop(link, camera.frames, camera.localiser, robot, config, self.recorder,
+                            monitor=monitor)
 
     @property
     def paths(self) -> list[Path]:

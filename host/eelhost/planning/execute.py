@@ -169,8 +169,6 @@ def swim(
     model = SwimmerModel.from_robot(twin.robot, sets[0][1])
     n = model.n_links
     field = clearance if clearance is not None else ClearanceField(world)
-    half_link = float(model.half_length_m.max())
-    half_width = float(model.half_axis_horizontal_m.max())
     wps = np.asarray(waypoints, dtype=float)
     dt = twin.dt_s
     out = []
@@ -182,8 +180,7 @@ def swim(
         inside = np.flatnonzero(gap <= world.goal.radius_m)
         stop = int(inside[0]) if inside.size else end
         states = states[: stop + 1]
-        clear = _body_clearance(world, field, link_endpoints(model, states), half_link,
-                                half_width) - half_width
+        clear = body_clearance_m(world, field, model, states)
         touching = np.flatnonzero(clear <= 0.0)
         first = int(touching[0]) if touching.size else None
         reason = runs.reasons[i] if not inside.size else ""
@@ -208,6 +205,31 @@ def swim(
             states=states,
         ))
     return out
+
+
+def body_clearance_m(
+    world: World, field: ClearanceField, model: SwimmerModel, states: FloatArray
+) -> FloatArray:
+    """Gap between the body and the nearest obstacle or wall at each state (negative: overlap).
+
+    The link centre lines' exact distance less the body's half width, wherever it can be the
+    smallest or near contact (see :func:`_body_clearance`).
+
+    Parameters
+    ----------
+    world : World
+    field : ClearanceField
+    model : SwimmerModel
+    states : ndarray, shape (K, 2 N + 4)
+
+    Returns
+    -------
+    ndarray, shape (K,)
+    """
+    half_link = float(model.half_length_m.max())
+    half_width = float(model.half_axis_horizontal_m.max())
+    ends = link_endpoints(model, states)
+    return _body_clearance(world, field, ends, half_link, half_width) - half_width
 
 
 def _body_clearance(

@@ -265,11 +265,20 @@ class Planner:
         banned: set = set()
         total = searching = 0.0
         checks: list[Swim] = []
+        bad: list[Swim] = []
         plan = Plan(False, "gave_up", "")
         for attempt in range(self.repairs + 1):
             plan = self.search.plan(banned, start_state=state, start_step=step)
             total += plan.planning_time_s
             searching += plan.planning_time_s
+            if not plan.found and attempt > 0:
+                msg = (f"check failed: {attempt} plans failed their check in the twin (last: "
+                       f"{bad[0].label}: {bad[0].message}) and the search found no other "
+                       f"({plan.message})")
+                return Outcome(Plan(False, "check_failed", msg, expansions=plan.expansions,
+                                    simulations=plan.simulations,
+                                    planning_time_s=plan.planning_time_s, tree=plan.tree),
+                               "check_failed", msg, checks, attempt, total, searching)
             if not plan.found:
                 return Outcome(plan, plan.status, plan.message, checks, attempt, total, searching)
             if not self.check:
