@@ -20,6 +20,7 @@ from pathlib import Path
 
 from eelhost.benchmarks.machine import cpu_model
 from eelhost.commands.common import OptionError, add_robot_options, robot_and_coefficients
+from eelhost.planning.coverage import action_coverage
 from eelhost.planning.planner import Outcome, Planner, PlanRefused
 from eelhost.planning.uncertainty import (
     CoefficientModel,
@@ -141,6 +142,8 @@ def run(args: argparse.Namespace) -> int:
               f"({leg.waypoint_m[0]:.2f}, {leg.waypoint_m[1]:.2f}) m"
               + (" (goal)" if leg.goal else ""))
     print(f"coefficients: {model.describe()}")
+    coverage = action_coverage(robot, model, world.current.speed_m_s, planner.settings)
+    print(f"action coverage: {coverage.line()}")
     print(f"wrote {out / 'plan.json'}")
     if args.plot and outcome.found:
         from eelhost.planning.figures import plot_plan
@@ -169,6 +172,10 @@ def _bench(args: argparse.Namespace, robot: Robot, model: CoefficientModel) -> i
 
     summary = run_bench(robot, model, args.worlds, args.seed, args.threads, progress)
     lines = summary.lines()
+    lines += ["- action coverage (successful actions per current direction relative to the "
+              "heading):"]
+    lines += [f"  - {action_coverage(robot, model, speed).line()}"
+              for speed in (0.0, 0.02, 0.04, 0.06)]
     command = (f"nice eelbot plan --bench --worlds {args.worlds} --seed {args.seed}"
                + (f" --threads {args.threads}" if args.threads != 1 else ""))
     block = [
