@@ -66,3 +66,12 @@ def body_points(model: SwimmerModel, states: FloatArray, per_link: int = 2) -> F
 def point_spacing_m(model: SwimmerModel, per_link: int = 2) -> float:
     """Largest distance between neighbouring points of :func:`body_points`."""
     return float(2.0 * model.half_length_m.max() / max(per_link, 1))
+
+
+def reach_m(model: SwimmerModel) -> float:
+    """Largest distance from the centre of mass to any point of the body, whatever its shape.
+
+    A link centre is p + sum_j G_ij (cos, sin)(theta_j) (docs/model.md section 1), so it is at
+    most sum_j |G_ij| from the centre of mass p, and the link's points at most l_i further.
+    """
+    return float((np.abs(model.geometry).sum(axis=1) + model.half_length_m).max())

@@ -19,6 +19,7 @@ import math
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.ndimage import map_coordinates
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
@@ -99,14 +100,11 @@ class ClearanceField:
         p = np.asarray(points, dtype=float)
         u = p[..., 0] / self.cell_m
         v = p[..., 1] / self.cell_m
-        uc = np.clip(u, 0.0, self.nx - 1.000001)
-        vc = np.clip(v, 0.0, self.ny - 1.000001)
-        i = uc.astype(np.int64)
-        j = vc.astype(np.int64)
-        fu, fv = uc - i, vc - j
-        f = self.values
-        val = ((f[i, j] * (1 - fu) + f[i + 1, j] * fu) * (1 - fv)
-               + (f[i, j + 1] * (1 - fu) + f[i + 1, j + 1] * fu) * fv)
+        uc = np.clip(u, 0.0, self.nx - 1.0)
+        vc = np.clip(v, 0.0, self.ny - 1.0)
+        # bilinear (order 1, no prefilter) interpolation of the node values
+        val = map_coordinates(self.values, [uc.ravel(), vc.ravel()], order=1, prefilter=False,
+                              mode="nearest").reshape(u.shape)
         outside = np.hypot(u - uc, v - vc) * self.cell_m
         return val - outside
 

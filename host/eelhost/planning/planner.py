@@ -50,6 +50,9 @@ log = logging.getLogger(__name__)
 SPEED_RUN_S = 20.0
 """Length of the twin run that measures the swimming speed, s."""
 
+LEG_TIME_FACTOR = 1.6
+"""A leg's time limit per metre, as a multiple of the time the robot needs against the current."""
+
 
 class PlanRefused(UserError, ValueError):
     """The planner refuses a world (the message says why; ``status`` names the case)."""
@@ -182,18 +185,23 @@ class Planner:
         straight = coefficients.fits["straight"]
         self.model = SwimmerModel.from_robot(robot, straight)
         self.body_half_width_m = float(self.model.half_axis_horizontal_m.max())
-        base = settings or SearchSettings()
-        # the body's half width and the world's clearance, never less than the settings ask
-        margin = max(base.margin_m, self.body_half_width_m + world.clearance_m)
-        self.settings = SearchSettings(**{**base.__dict__, "margin_m": margin})
-        self.twin = Twin(robot, coefficients.sets, gait, self.options, world.current_m_s,
-                         threads=threads)
-        self.clearance = ClearanceField(world)
-        self.goal_distance = GoalDistance(world, self.clearance, self.body_half_width_m)
         self.swimming_speed_m_s = min(
             swimming_speed_m_s(robot, c, gait, self.options) for c in coefficients.sets
         )
         fastest = max(swimming_speed_m_s(robot, c, gait, self.options) for c in coefficients.sets)
+        base = settings or SearchSettings()
+        # the body's half width and the world's clearance, never less than the settings ask
+        margin = max(base.margin_m, self.body_half_width_m + world.clearance_m)
+        # a leg may take LEG_TIME_FACTOR times as long as swimming it straight against the whole
+        # current would: a run still going then is circling its waypoint and is cut short
+        slowest = max(self.swimming_speed_m_s - world.current.speed_m_s, 1e-3)
+        leg_time = min(base.leg_time_s, LEG_TIME_FACTOR / slowest)
+        self.settings = SearchSettings(**{**base.__dict__, "margin_m": margin,
+                                          "leg_time_s": leg_time})
+        self.twin = Twin(robot, coefficients.sets, gait, self.options, world.current_m_s,
+                         threads=threads)
+        self.clearance = ClearanceField(world)
+        self.goal_distance = GoalDistance(world, self.clearance, self.body_half_width_m)
         # 1.3: the body's sway and a turn's cut corner let the centre of mass gain on the
         # straight-line speed; a heuristic speed too low only makes the search greedier
         self.search = Search(world, self.twin, self.settings, self.clearance, self.goal_distance,

@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from eelhost.planning.body import body_points, point_spacing_m
+from eelhost.planning.body import body_points, point_spacing_m, reach_m
 from eelhost.planning.field import ClearanceField, GoalDistance
 from eelhost.planning.geometry import FloatArray
 from eelhost.planning.twin import Runs, Twin
@@ -120,11 +120,11 @@ class SearchSettings:
     actions: Actions = Actions()
     margin_m: float = 0.07
     goal_margin_m: float = 0.03
-    weight: float = 1.5
+    weight: float = 2.0
     cell_m: float = 0.1
     heading_bins: int = 12
     batch: int = 8
-    max_expansions: int = 1500
+    max_expansions: int = 600
     stride: int = 3
     per_link: int = 2
     leg_time_s: float = 40.0
@@ -257,6 +257,7 @@ class Search:
         ))
         self._slack_m = clearance.error_m + point_spacing_m(self.model, settings.per_link) / 4
         self.body_half_width_m = float(self.model.half_axis_horizontal_m.max())
+        self.reach_m = reach_m(self.model)
         self._start_margin_m = settings.margin_m
         self._memo: dict[tuple, list] = {}
         self.simulations = 0
@@ -343,12 +344,18 @@ class Search:
         states = runs.states
         r, k, _ = states.shape
         flat = states.reshape(r * k, -1)
-        live = np.isfinite(flat[:, 0])
+        live = np.flatnonzero(np.isfinite(flat[:, 0]))
         out = np.full(r * k, np.nan)
-        if np.any(live):
-            pts = body_points(self.model, flat[live], self.settings.per_link)
-            out[live] = self.clearance(pts).min(axis=1) - self._slack_m
-        del n
+        if not live.size:
+            return out.reshape(r, k)
+        # every body point is within reach_m of the centre of mass: where the centre of mass is
+        # far enough from everything, that bound is all the search needs (and is what it keeps)
+        far = self.clearance(flat[live, n : n + 2]) - self.clearance.error_m - self.reach_m
+        out[live] = far
+        near = live[far < self.settings.margin_m + self._slack_m]
+        if near.size:
+            pts = body_points(self.model, flat[near], self.settings.per_link)
+            out[near] = self.clearance(pts).min(axis=1) - self._slack_m
         return out.reshape(r, k)
 
     def _child(self, parent: _Node, action: int, wp, psi, runs: Runs, j: int,
