@@ -86,15 +86,16 @@ def test_coefficient_file_gives_fits_and_bootstrap_std_and_names_bad_keys(tmp_pa
 
 def test_bench_summary_counts_plans_collisions_and_goals():
     results = [
-        WorldResult("a", "found", "", 0.5, 0.4, 0, True, False, 0.05, 0.1),
-        WorldResult("b", "found", "", 0.9, 0.7, 1, False, True, -0.01, 0.5),
-        WorldResult("c", "unreachable", "", 0.2, 0.1, 0),
+        WorldResult("a", "found", "", 0.5, 0.4, 0.5, 0, True, False, 0.05, 0.1),
+        WorldResult("b", "found", "", 0.9, 0.7, 0.8, 1, False, True, -0.01, 0.5),
+        WorldResult("c", "unreachable", "", 0.2, 0.1, 0.2, 0),
     ]
     s = BenchSummary(results, Counter(r.status for r in results))
     assert len(s.planned) == 2 and s.collisions == 1 and s.reached == 1
     assert math.isclose(s.median_planning_time_s, 0.5)
     text = "\n".join(s.lines())
     assert "with a plan: 2 (67%)" in text and "1 of 2 (50.0%)" in text
+    assert "processor time of the planning (the same span; " in text and "median 0.50 s" in text
 
 
 def test_bench_block_replaces_only_its_own_section(tmp_path):

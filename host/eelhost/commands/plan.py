@@ -168,7 +168,8 @@ def _bench(args: argparse.Namespace, robot: Robot, model: CoefficientModel) -> i
         extra = ("" if r.reached is None else
                  f" reached={r.reached} collision={r.collision} "
                  f"clearance={r.min_clearance_m * 1000:.0f}mm")
-        print(f"{k + 1:3d} {r.name}: {r.status} {r.planning_time_s:.2f} s{extra}", flush=True)
+        print(f"{k + 1:3d} {r.name}: {r.status} {r.planning_time_s:.2f} s "
+              f"(cpu {r.cpu_time_s:.2f} s){extra}", flush=True)
 
     summary = run_bench(robot, model, args.worlds, args.seed, args.threads, progress)
     lines = summary.lines()

@@ -25,6 +25,7 @@ import numpy as np
 from eelhost.planning.body import link_endpoints
 from eelhost.planning.field import ClearanceField
 from eelhost.planning.geometry import FloatArray
+from eelhost.planning.search import goal_mask
 from eelhost.planning.twin import IntArray, Twin
 from eelhost.planning.world import World
 from eelsim.fluid import FluidCoefficients
@@ -177,7 +178,7 @@ def swim(
         states = runs.states[i, : end + 1]
         com = states[:, n : n + 2]
         gap = np.hypot(*(com - np.asarray(world.goal.position_m)).T)
-        inside = np.flatnonzero(gap <= world.goal.radius_m)
+        inside = np.flatnonzero(goal_mask(world, com))
         stop = int(inside[0]) if inside.size else end
         states = states[: stop + 1]
         clear = body_clearance_m(world, field, model, states)

@@ -33,6 +33,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.typing import NDArray
 
 from eelhost.planning.body import body_points, point_spacing_m, reach_m
 from eelhost.planning.field import ClearanceField, GoalDistance
@@ -62,8 +63,24 @@ def in_goal(world: World, xy: Sequence[float] | FloatArray, shrink_m: float = 0.
     -------
     bool
     """
+    return bool(goal_mask(world, np.asarray(xy, dtype=float), shrink_m))
+
+
+def goal_mask(world: World, xy: FloatArray, shrink_m: float = 0.0) -> NDArray[np.bool_]:
+    """:func:`in_goal` for many positions at once.
+
+    Parameters
+    ----------
+    world : World
+    xy : ndarray, shape (..., 2)
+    shrink_m : float
+
+    Returns
+    -------
+    ndarray of bool, shape (...)
+    """
     gx, gy = world.goal.position_m
-    return math.hypot(float(xy[0]) - gx, float(xy[1]) - gy) <= world.goal.radius_m - shrink_m
+    return np.hypot(xy[..., 0] - gx, xy[..., 1] - gy) <= world.goal.radius_m - shrink_m
 
 
 @dataclass(frozen=True)
@@ -371,9 +388,7 @@ class Search:
         origin = parent.waypoint if parent.waypoint is not None else (com[0, 0], com[0, 1])
         d = math.hypot(wp[0] - origin[0], wp[1] - origin[1])
         if action == GOAL:
-            gx, gy = self.world.goal.position_m
-            inside = np.flatnonzero(np.hypot(com[:, 0] - gx, com[:, 1] - gy)
-                                    <= self.world.goal.radius_m - s.goal_margin_m)
+            inside = np.flatnonzero(goal_mask(self.world, com, s.goal_margin_m))
             if not inside.size:
                 return None
             at = int(inside[0])
