@@ -61,6 +61,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="run the benchmark over --worlds generated worlds; write --bench-out")
     p.add_argument("--worlds", type=int, default=100, help="benchmark worlds (100)")
     p.add_argument("--seed", type=int, default=0, help="first benchmark world's seed (0)")
+    p.add_argument("--jobs", type=int, default=1,
+                   help="benchmark worlds planned at once, one process each (1)")
     p.add_argument("--bench-out", default="docs/planning.md",
                    help="markdown file whose benchmark section is rewritten (docs/planning.md)")
     p.set_defaults(run=run)
@@ -171,20 +173,23 @@ def _bench(args: argparse.Namespace, robot: Robot, model: CoefficientModel) -> i
         print(f"{k + 1:3d} {r.name}: {r.status} {r.planning_time_s:.2f} s "
               f"(cpu {r.cpu_time_s:.2f} s){extra}", flush=True)
 
-    summary = run_bench(robot, model, args.worlds, args.seed, args.threads, progress)
+    summary = run_bench(robot, model, args.worlds, args.seed, args.threads, progress,
+                        max(args.jobs, 1))
     lines = summary.lines()
     lines += ["- action coverage (successful actions per current direction relative to the "
               "heading):"]
     lines += [f"  - {action_coverage(robot, model, speed).line()}"
               for speed in (0.0, 0.02, 0.04, 0.06)]
     command = (f"nice eelbot plan --bench --worlds {args.worlds} --seed {args.seed}"
-               + (f" --threads {args.threads}" if args.threads != 1 else ""))
+               + (f" --threads {args.threads}" if args.threads != 1 else "")
+               + (f" --jobs {args.jobs}" if args.jobs > 1 else ""))
     block = [
         BENCH_BEGIN,
         f"Command: `{command}`",
         "",
         f"- machine: {cpu_model()}, {os.cpu_count()} cores visible (shared with other work), "
-        f"{args.threads} thread(s) of the batched twin; Python {platform.python_version()}",
+        f"{args.threads} thread(s) of the batched twin, {max(args.jobs, 1)} world(s) at once; "
+        f"Python {platform.python_version()}",
         f"- coefficients: {model.describe()}",
         *lines,
         BENCH_END,
