@@ -103,3 +103,15 @@ def test_bench_block_replaces_only_its_own_section(tmp_path):
     page.write_text(f"# Title\n\nbefore\n{BENCH_BEGIN}\nold\n{BENCH_END}\nafter\n")
     _write_block(page, [BENCH_BEGIN, "new", BENCH_END])
     assert page.read_text() == f"# Title\n\nbefore\n{BENCH_BEGIN}\nnew\n{BENCH_END}\nafter\n"
+
+
+def test_bench_gives_the_same_outcomes_in_worker_processes():
+    from eelhost.planning.bench import run_bench
+
+    here = run_bench(ROBOT, MODEL, count=1, seed=0)
+    there = run_bench(ROBOT, MODEL, count=1, seed=0, jobs=2)
+    (a,), (b,) = here.results, there.results
+    assert a.name == b.name == "bench_0"
+    assert (a.status, a.reached, a.collision) == (b.status, b.reached, b.collision)
+    assert a.status == "found" and a.reached and not a.collision
+    assert a.min_clearance_m == pytest.approx(b.min_clearance_m)

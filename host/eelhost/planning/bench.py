@@ -13,6 +13,7 @@ docs/planning.md ("Benchmark") states what is measured. For each world of
 
 from __future__ import annotations
 
+import multiprocessing
 import statistics
 import time
 from collections import Counter
@@ -217,7 +218,9 @@ def run_bench(
         results: Iterable[WorldResult] = (_one(robot, coefficients, s, threads) for s in seeds)
         _collect(summary, results, progress)
         return summary
-    with ProcessPoolExecutor(jobs, initializer=_warm_up,
+    # spawned, not forked: a fork after the kernel's OpenMP runtime started is unsafe
+    with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn"),
+                             initializer=_warm_up,
                              initargs=(robot, coefficients, seed + count, threads)) as pool:
         results = pool.map(_one, *zip(*[(robot, coefficients, s, threads) for s in seeds],
                                        strict=True))
