@@ -128,3 +128,14 @@ def test_chained_legs_are_the_run_the_robot_swims(example):
     from eelhost.planning.replan import distance_to_path
 
     assert distance_to_path(planned, run.states[:, N : N + 2]).max() < 0.03
+
+
+def test_issue_world_with_a_035_m_gate_off_the_start_goal_line_is_planned_through_it():
+    world = issue_worlds()["gap_0.35_off_line"]
+    outcome = Planner(world, ROBOT, MODEL).plan()
+    assert outcome.found, outcome.message
+    assert all(c.reached and c.collision_free for c in outcome.checks)
+    # the gate is at x = 1.5 m between y = 1.25 and 1.6 m: the plan goes through it
+    com = np.concatenate([leg.com_m for leg in outcome.plan.legs])
+    at_wall = com[np.abs(com[:, 0] - 1.5) < 0.02]
+    assert at_wall.size and np.all((at_wall[:, 1] > 1.25) & (at_wall[:, 1] < 1.6))
