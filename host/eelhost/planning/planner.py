@@ -110,8 +110,8 @@ class Outcome:
     plan : Plan
         The last search's plan (``found`` False when refused).
     status : str
-        ``found``, or why not: ``blocked_start``, ``current_too_strong``, ``unreachable``,
-        ``gave_up``, ``check_failed``.
+        ``found``, or why not: ``blocked_start``, ``current_too_strong``, ``unreachable``
+        (refusals), ``exhausted``, ``gave_up`` (the search's), ``check_failed``.
     message : str
         One line.
     checks : list of Swim

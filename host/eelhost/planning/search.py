@@ -193,8 +193,9 @@ class Plan:
     ----------
     found : bool
     status : str
-        ``found``, ``blocked_start``, ``unreachable`` (no corridor, or every reachable node was
-        expanded), ``gave_up`` (expansion limit) or ``refused`` (set by the planner).
+        ``found``, ``exhausted`` (every node the actions reach, as merged on the closed-set
+        grid, was expanded: no plan with these actions and this margin, which is not a proof
+        that none exists) or ``gave_up`` (expansion limit); the planner adds its own.
     message : str
         One line: the outcome, and why when no plan was found.
     legs : list of Leg
@@ -528,8 +529,8 @@ class Search:
                 msg = (f"no plan: the search gave up after {expansions} expansions "
                        f"({sims} manoeuvres swum in the twin) without reaching the goal")
             else:
-                status = "unreachable"
-                msg = (f"goal unreachable: every reachable pose ({expansions} expanded, {sims} "
+                status = "exhausted"
+                msg = (f"no plan: every pose the actions reach ({expansions} expanded, {sims} "
                        f"manoeuvres swum) was tried and none enters the goal disc (radius "
                        f"{world.goal.radius_m} m at ({world.goal.position_m[0]:.2f}, "
                        f"{world.goal.position_m[1]:.2f}) m) without coming closer than "
