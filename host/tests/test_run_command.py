@@ -34,7 +34,9 @@ def test_a_take_records_everything_a_dataset_needs(tmp_path, capsys):
     assert exp.camera["pixel_m"] == pytest.approx(0.0038, rel=0.01)
     run = exp.source["run"]
     assert run["note"] == "water 21 C"
-    assert run["gains"] == {"kp_nm_per_rad": 0.08, "kd_nms_per_rad": 0.003, "k_theta": 0.37}
+    assert run["gains"] == {"k_theta": 0.37}
+    assert run["joints"]["model"] == "pd"
+    assert (run["joints"]["kp_nm_per_rad"], run["joints"]["kd_nms_per_rad"]) == (0.08, 0.003)
     assert run["eelbot_version"] and len(run["git_commit"]) == 40
     assert run["date"][:4].isdigit() and "T" in run["date"]
     bundled = resources.files("eelsim.data").joinpath("paper_robot.toml").read_text()

@@ -1,10 +1,12 @@
-"""``eelbot plan``: plan a collision-free path with the twin's motion primitives, then swim it.
+"""``eelbot plan``: plan a path the twin swims without collision, check it, or benchmark the planner.
 
-``eelbot plan WORLD.toml`` (or the bundled example ``tank_5_obstacles``) loads or builds the
-primitive library for the robot, coefficients and current speed, runs A*, prints and writes the
-plan (``<out>/plan.json``), executes it in the twin and reports whether it reached the goal without
-a collision. ``--plot`` writes ``<out>/plan.png`` (figure 11 style); ``--bench`` also times a fresh
-library build and the planning and writes ``docs/planning.md`` (or ``--bench-out``).
+``eelbot plan WORLD`` (a world TOML file, the bundled example ``tank_5_obstacles``, or
+``bench:SEED`` for a generated benchmark world) refuses what cannot be planned (exit 2 with the
+reason), searches with every leg swum in the twin, checks the plan over the coefficients'
+uncertainty, and writes ``<out>/plan.json`` (``--plot``: ``<out>/plan.png``). ``--replan`` also
+swims it in the twin with closed-loop replanning (:mod:`eelhost.planning.replan`).
+``eelbot plan --bench`` runs the benchmark of docs/planning.md over ``--worlds`` generated worlds
+and writes its figures into ``--bench-out``.
 """
 
 from __future__ import annotations
@@ -13,200 +15,200 @@ import argparse
 import json
 import os
 import platform
-import statistics
-import time
+import re
 from pathlib import Path
 
 from eelhost.benchmarks.machine import cpu_model
-from eelhost.commands.common import add_robot_options, robot_and_coefficients
-from eelhost.planning.execute import execute_plan
-from eelhost.planning.primitives import default_cache_dir, load_or_build
-from eelhost.planning.search import plan_path
-from eelhost.planning.world import load_world
-from eelsim.model import SwimmerModel
+from eelhost.commands.common import OptionError, add_robot_options, robot_and_coefficients
+from eelhost.planning.coverage import action_coverage
+from eelhost.planning.planner import Outcome, Planner, PlanRefused
+from eelhost.planning.uncertainty import (
+    CoefficientModel,
+    default_model,
+    read_coefficient_model,
+)
+from eelhost.planning.world import World, load_world
+from eelhost.planning.worlds import generate_world
+from eelsim.robot import Robot
+
+REFUSALS = ("blocked_start", "current_too_strong", "unreachable")
+"""Planner statuses the command reports as refusals (exit 2)."""
+
+BENCH_BEGIN = "<!-- bench: begin (written by eelbot plan --bench) -->"
+BENCH_END = "<!-- bench: end -->"
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register the subcommand."""
     p = sub.add_parser(
         "plan",
-        help="plan a collision-free path with motion primitives and swim it in the twin",
-        description="Plan with motion primitives simulated in the calibrated twin (A*), then "
-        "execute the plan in the twin and check it. WORLD is a world TOML file or the bundled "
-        "example 'tank_5_obstacles'.",
+        help="plan a path the twin swims without collision, or benchmark the planner",
+        description="Plan with every manoeuvre swum in the calibrated twin (A*), check the plan "
+        "in the twin over the coefficients' uncertainty, repair or refuse it. WORLD is a world "
+        "TOML file, the bundled example 'tank_5_obstacles', or 'bench:SEED' (a generated "
+        "benchmark world). Exit status: 0 plan found, 1 none found, 2 refused (blocked start, "
+        "goal outside the tank, current too strong, no corridor) or bad input.",
     )
-    p.add_argument("world", help="world TOML file, or 'tank_5_obstacles'")
+    p.add_argument("world", nargs="?", help="world TOML file, 'tank_5_obstacles' or 'bench:SEED'")
     add_robot_options(p)
+    add_coefficient_model_option(p)
     p.add_argument("--out", default="out/plan", help="output folder (default out/plan)")
-    p.add_argument(
-        "--cache", metavar="DIR", help=f"primitive cache (default {default_cache_dir()})"
-    )
-    p.add_argument("--rebuild", action="store_true", help="rebuild the library even if cached")
-    p.add_argument("--plot", action="store_true", help="write <out>/plan.png (figure 11 style)")
-    p.add_argument("--no-execute", action="store_true", help="plan only; do not swim the plan")
+    p.add_argument("--plot", action="store_true", help="write <out>/plan.png")
+    p.add_argument("--replan", action="store_true",
+                   help="also swim the plan in the twin with closed-loop replanning")
     p.add_argument("--threads", type=int, default=1, help="threads of the batched twin (1)")
-    p.add_argument(
-        "--bench",
-        action="store_true",
-        help="time a fresh library build and the planning (5 repeats); write --bench-out",
-    )
-    p.add_argument("--bench-out", default="docs/planning.md", help="benchmark report (markdown)")
+    p.add_argument("--bench", action="store_true",
+                   help="run the benchmark over --worlds generated worlds; write --bench-out")
+    p.add_argument("--worlds", type=int, default=100, help="benchmark worlds (100)")
+    p.add_argument("--seed", type=int, default=0, help="first benchmark world's seed (0)")
+    p.add_argument("--jobs", type=int, default=1,
+                   help="benchmark worlds planned at once, one process each (1)")
+    p.add_argument("--bench-out", default="docs/planning.md",
+                   help="markdown file whose benchmark section is rewritten (docs/planning.md)")
     p.set_defaults(run=run)
 
 
-def _plan_json(world, lib, plan, execution) -> dict:
+def add_coefficient_model_option(p: argparse.ArgumentParser) -> None:
+    """--coefficients-file: fits and their uncertainty."""
+    p.add_argument(
+        "--coefficients-file", metavar="FILE",
+        help="coefficients.json from 'eelbot report' (straight and turning fits with bootstrap "
+        "std); default: the robot's coefficients with 10%% std (docs/planning.md)",
+    )
+
+
+def coefficient_model(args: argparse.Namespace, robot: Robot) -> CoefficientModel:
+    """The coefficient model chosen on the command line."""
+    if getattr(args, "coefficients_file", None):
+        return read_coefficient_model(args.coefficients_file, robot)
+    _, coeffs = robot_and_coefficients(args)
+    return default_model(robot, coeffs)
+
+
+def world_from_name(name: str) -> World:
+    """A world file, a bundled example, or ``bench:SEED``."""
+    m = re.fullmatch(r"bench:(\d+)", name)
+    if m:
+        return generate_world(int(m.group(1)))
+    return load_world(name)
+
+
+def plan_json(world: World, outcome: Outcome) -> dict:
+    """What ``plan.json`` holds."""
+    plan = outcome.plan
     return {
         "world": world.model_dump(mode="json"),
-        "library": {
-            "key": lib.key,
-            "primitives": len(lib),
-            "successful": int(lib.success.sum()),
-            "build_time_s": lib.build_time_s,
-            "backend": lib.backend,
-        },
-        "found": plan.found,
-        "message": plan.message,
-        "cost_s": plan.cost_s if plan.found else None,
+        "status": outcome.status,
+        "message": outcome.message,
+        "found": outcome.found,
+        "cost_s": plan.cost_s if outcome.found else None,
         "expansions": plan.expansions,
-        "planning_time_s": plan.planning_time_s,
-        "waypoints_m": plan.waypoints_m,
-        "primitives": [
-            {
-                "row": s.primitive,
-                "kind": s.kind,
-                "current_rel_deg": s.current_rel_deg,
-                "distance_m": s.distance_m,
-                "bearing_deg": s.bearing_deg,
-                "start_pose": s.start_pose,
-                "end_pose": s.end_pose,
-                "waypoint_m": s.waypoint_m,
-                "duration_s": s.duration_s,
-            }
-            for s in plan.steps
+        "simulations": plan.simulations,
+        "planning_time_s": outcome.planning_time_s,
+        "repairs": outcome.repairs,
+        "waypoints_m": plan.waypoints_m if outcome.found else [],
+        "legs": [
+            {"waypoint_m": leg.waypoint_m, "distance_m": leg.distance_m,
+             "bearing_deg": leg.bearing_deg, "goal": leg.goal,
+             "min_clearance_m": leg.min_clearance_m}
+            for leg in plan.legs
+        ] if outcome.found else [],
+        "checks": [
+            {"coefficients": c.label, "reached": c.reached, "collision_free": c.collision_free,
+             "min_clearance_m": c.min_clearance_m, "goal_time_s": c.goal_time_s,
+             "goal_distance_m": c.goal_distance_m}
+            for c in outcome.checks
         ],
-        "execution": None
-        if execution is None
-        else {
-            "reached": execution.reached,
-            "collision_free": execution.collision_free,
-            "goal_time_s": execution.goal_time_s,
-            "goal_distance_m": execution.goal_distance_m,
-            "min_clearance_m": execution.min_clearance_m,
-            "first_collision_s": execution.first_collision_s,
-            "reason": execution.reason,
-        },
     }
 
 
 def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
-    world = load_world(args.world)
-    robot, coeffs = robot_and_coefficients(args)
+    robot, _ = robot_and_coefficients(args)
+    model = coefficient_model(args, robot)
+    if args.bench:
+        return _bench(args, robot, model)
+    if not args.world:
+        raise OptionError("give a WORLD (or --bench)")
+    world = world_from_name(args.world)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    cache = args.cache or default_cache_dir()
-    lib, built = load_or_build(
-        robot,
-        coeffs,
-        world.current.speed_m_s,
-        cache_dir=cache,
-        threads=args.threads,
-        rebuild=args.rebuild or args.bench,
-    )
-    how = "built" if built else "loaded from cache"
-    print(
-        f"library {lib.key}: {len(lib)} primitives ({int(lib.success.sum())} completed), {how}"
-        f"; build time {lib.build_time_s:.2f} s ({lib.backend})"
-    )
-    plan = plan_path(world, lib)
-    print(f"{world.name}: {plan.message} in {plan.planning_time_s:.2f} s")
-    for k, s in enumerate(plan.steps):
-        print(
-            f"  {k + 1:2d}. {s.kind:8s} current {s.current_rel_deg:5.0f} deg  "
-            f"{s.distance_m:.2f} m at {s.bearing_deg:+4.0f} deg -> waypoint "
-            f"({s.waypoint_m[0]:.2f}, {s.waypoint_m[1]:.2f}) m, {s.duration_s:.1f} s"
-        )
-    execution = None
-    if plan.found and plan.steps and not args.no_execute:
-        execution = execute_plan(world, plan, robot, coeffs, threads=args.threads)
-        print(f"executed in the twin: {execution.message}")
-    (out / "plan.json").write_text(json.dumps(_plan_json(world, lib, plan, execution), indent=1))
+    planner = Planner(world, robot, model, threads=args.threads)
+    outcome = planner.plan()
+    (out / "plan.json").write_text(json.dumps(plan_json(world, outcome), indent=1))
+    if outcome.status in REFUSALS:
+        raise PlanRefused(outcome.status, f"{world.name}: {outcome.message}")
+    print(f"{world.name}: {outcome.message} ({outcome.planning_time_s:.2f} s)")
+    for k, leg in enumerate(outcome.plan.legs if outcome.found else []):
+        print(f"  {k + 1:2d}. {leg.distance_m:.2f} m at {leg.bearing_deg:+4.0f} deg -> waypoint "
+              f"({leg.waypoint_m[0]:.2f}, {leg.waypoint_m[1]:.2f}) m"
+              + (" (goal)" if leg.goal else ""))
+    print(f"coefficients: {model.describe()}")
+    coverage = action_coverage(robot, model, world.current.speed_m_s, planner.settings)
+    print(f"action coverage: {coverage.line()}")
     print(f"wrote {out / 'plan.json'}")
-    figure = None
-    if args.plot or args.bench:
+    if args.plot and outcome.found:
         from eelhost.planning.figures import plot_plan
 
-        target = out / "plan.png"
-        if args.bench:
-            target = Path(args.bench_out).with_suffix(".png")
-        figure = plot_plan(
-            world, lib, plan, execution, SwimmerModel.from_robot(robot, coeffs), target
-        )
-        print(f"wrote {figure}")
-    if args.bench:
-        times = []
-        for _ in range(5):
-            t0 = time.perf_counter()
-            plan_path(world, lib)
-            times.append(time.perf_counter() - t0)
-        _write_bench(Path(args.bench_out), world, lib, plan, execution, times, figure)
-        print(f"planning time median {statistics.median(times):.3f} s; wrote {args.bench_out}")
-    if not plan.found:
-        return 1
-    return 0 if execution is None or (execution.reached and execution.collision_free) else 1
+        check = outcome.checks[0] if outcome.checks else None
+        print(f"wrote {plot_plan(world, outcome.plan, check, planner.model, out / 'plan.png')}")
+    if args.replan and outcome.found:
+        from eelhost.planning.replan import execute_with_replanning
+
+        run_ = execute_with_replanning(planner, model.fits["straight"])
+        print(f"swum with replanning: {run_.message}")
+    return 0 if outcome.found else 1
 
 
-def _write_bench(path: Path, world, lib, plan, execution, times, figure) -> None:
-    cpu = cpu_model()
-    d = lib.discretisation
-    ex = "not executed" if execution is None else execution.message
-    lines = [
-        "# Motion planning with the calibrated twin",
+def _bench(args: argparse.Namespace, robot: Robot, model: CoefficientModel) -> int:
+    from eelhost.planning.bench import run_bench
+
+    if args.worlds < 1:
+        raise OptionError("--worlds: give at least 1")
+
+    def progress(k: int, r) -> None:  # noqa: ANN001
+        extra = ("" if r.reached is None else
+                 f" reached={r.reached} collision={r.collision} "
+                 f"clearance={r.min_clearance_m * 1000:.0f}mm")
+        print(f"{k + 1:3d} {r.name}: {r.status} {r.planning_time_s:.2f} s "
+              f"(cpu {r.cpu_time_s:.2f} s){extra}", flush=True)
+
+    summary = run_bench(robot, model, args.worlds, args.seed, args.threads, progress,
+                        max(args.jobs, 1))
+    lines = summary.lines()
+    lines += ["- action coverage (successful actions per current direction relative to the "
+              "heading):"]
+    lines += [f"  - {action_coverage(robot, model, speed).line()}"
+              for speed in (0.0, 0.02, 0.04, 0.06)]
+    command = (f"nice eelbot plan --bench --worlds {args.worlds} --seed {args.seed}"
+               + (f" --threads {args.threads}" if args.threads != 1 else "")
+               + (f" --jobs {args.jobs}" if args.jobs > 1 else ""))
+    block = [
+        BENCH_BEGIN,
+        f"Command: `{command}`",
         "",
-        "`eelbot plan WORLD.toml` plans with motion primitives simulated in the twin (paper "
-        "section 8.3, docs/model.md section 9) and swims the plan in the twin. Regenerate this page with "
-        f"`eelbot plan {world.name} --bench`.",
-        "",
-        "## How it works",
-        "",
-        "- `eelhost.planning.primitives`: the action set. For each of 8 current directions "
-        "(relative to the robot's heading) and each waypoint (distance x bearing), one "
-        "closed-loop run of the twin from rest and one after a straight lead-in (swimming); "
-        "kept: end pose, duration, convex hull of the link end points (the swept region). "
-        "Built with `eelsim.batch` (or `simulate_closed_loop`), cached on disk under a hash of "
-        "robot, coefficients, gait, current speed, discretisation and loop options.",
-        "- `eelhost.planning.search`: A* over (x, y, heading, rest/swimming); a node's children "
-        "are the primitives for the current direction the robot feels there; cost is time; "
-        "heuristic = distance to the goal disc / fastest displacement per second of any "
-        "primitive (admissible); closed set on a 0.1 m x 30 deg grid.",
-        "- `eelhost.planning.execute`: the planned waypoints as one closed-loop scenario in the "
-        "twin; every step's links are checked against obstacles and walls.",
-        "- Known limits: primitives start from rest or after a straight lead-in, while in a plan "
-        "they start from whatever the previous one left, so the executed path departs from the "
-        "hulls by a few centimetres; the world's `clearance_m` (0.05 m in the example) absorbs "
-        "it (with 0.03 m the example plan touched an obstacle in the twin). In a cross-current "
-        "the lead-in can leave the robot turned, so some current directions hold no swimming "
-        "primitive; the search then uses the nearest direction that has some.",
-        "",
-        "## Benchmark",
-        "",
-        f"- machine: {cpu}, {os.cpu_count()} cores visible, one thread used; "
+        f"- machine: {cpu_model()}, {os.cpu_count()} cores visible (shared with other work), "
+        f"{args.threads} thread(s) of the batched twin, {max(args.jobs, 1)} world(s) at once; "
         f"Python {platform.python_version()}",
-        f"- library: {len(lib)} primitives ({int(lib.success.sum())} completed) = 2 start kinds x "
-        f"{len(d.current_directions_deg)} current directions x {len(d.distances_m)} distances x "
-        f"{len(d.bearings_deg)} bearings, current {lib.current_speed_m_s} m/s",
-        f"- library build time: {lib.build_time_s:.2f} s ({lib.backend} backend, kernel loaded "
-        "from its disk cache)",
-        f"- world: `{world.name}`, {world.tank.size_m[0]:g} m x {world.tank.size_m[1]:g} m tank, "
-        f"{len(world.obstacles)} obstacles, current {world.current.speed_m_s:g} m/s towards "
-        f"{world.current.direction_deg:g} deg",
-        f"- planning time: median {statistics.median(times):.3f} s, max {max(times):.3f} s over "
-        f"{len(times)} runs ({plan.expansions} expansions; target under 2 s)",
-        f"- plan: {plan.message}",
-        f"- execution in the twin: {ex}",
-        "",
+        f"- coefficients: {model.describe()}",
+        *lines,
+        BENCH_END,
     ]
-    if figure is not None:
-        lines += [f"![plan]({Path(figure).name})", ""]
+    _write_block(Path(args.bench_out), block)
+    print("\n".join(lines))
+    print(f"wrote {args.bench_out}")
+    return 0
+
+
+def _write_block(path: Path, block: list[str]) -> None:
+    """Replace the benchmark block of a markdown file (append it when absent)."""
+    text = path.read_text() if path.exists() else ""
+    new = "\n".join(block)
+    if BENCH_BEGIN in text and BENCH_END in text:
+        head, rest = text.split(BENCH_BEGIN, 1)
+        tail = rest.split(BENCH_END, 1)[1]
+        text = head + new + tail
+    else:
+        text = text.rstrip("\n") + ("\n\n" if text else "") + new + "\n"
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("\n".join(lines))
+    path.write_text(text)

@@ -47,10 +47,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--markers", metavar="FILE", help="markers.json from eelbot markers "
                    "(default: ids 0..N-1, tail first)")
     p.add_argument("--robot-file", metavar="FILE", help="robot TOML (default: the paper robot)")
-    p.add_argument("--waypoints", required=True, metavar="x,y;x,y", help="waypoints, m")
+    p.add_argument("--waypoints", metavar="x,y;x,y", help="waypoints, m (or --plan)")
+    p.add_argument(
+        "--plan",
+        metavar="WORLD",
+        help="plan in WORLD (world TOML, 'tank_5_obstacles' or 'bench:SEED') from its start, "
+        "follow the plan and replan when the robot leaves the planned corridor "
+        "(docs/planning.md); a sim:// robot is put at the world's start in its current",
+    )
     p.add_argument(
         "--gait",
-        required=True,
         metavar="A,omega[,beta]",
         type=lambda s: floats(s, None, "--gait"),
         help="gait amplitude (rad), frequency (rad/s), optionally phase shift (rad, 1.04)",
@@ -135,11 +141,28 @@ def run(args: argparse.Namespace) -> int:
     parse_link_uri(args.robot)  # a bad URI is reported before anything is opened
     robot = load_robot(args.robot_file)
     markers = load_marker_file(args.markers)
-    waypoints = parse_waypoints(args.waypoints)
-    gait = _gait(args.gait, args.k_theta)
+    if (args.waypoints is None) == (args.plan is None):
+        raise OptionError("give either --waypoints or --plan WORLD")
+    if args.gait is None and args.plan is None:
+        raise OptionError("--gait: required with --waypoints")
     current = current_option(args.current, args.robot.startswith("sim:"))
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     refuse_overwrite(args.out, args.force)
+    monitor = None
+    uri = args.robot
+    if args.plan is not None:
+        from eelhost.commands.plan import world_from_name
+        from eelhost.planning.tank import plan_for_run
+        from eelsim.scenario import PATH_GAIT
+
+        gait = PATH_GAIT if args.gait is None else _gait(args.gait, args.k_theta)
+        planned = plan_for_run(world_from_name(args.plan), robot, args.robot, gait,
+                               acceptance_radius_m=args.radius)
+        print(planned.outcome.message)
+        waypoints, monitor, uri = planned.waypoints_m, planned.monitor, planned.uri
+    else:
+        waypoints = parse_waypoints(args.waypoints)
+        gait = _gait(args.gait, args.k_theta)
     config = RunConfig(
         gait,
         waypoints,
@@ -147,9 +170,9 @@ def run(args: argparse.Namespace) -> int:
         control_period_s=args.control_period,
         duration_s=args.duration,
     )
-    notes = TakeNotes(args.robot, args.robot_file, args.motion, current, args.note)
+    notes = TakeNotes(uri, args.robot_file, args.motion, current, args.note)
     request = TakeRequest(robot, config, args.out, notes, args.camera, args.calibration,
-                          markers.layout, args.speed)
+                          markers.layout, args.speed, monitor)
     with rejected_as("--waypoints/--gait/--radius/--duration"):  # the task's record checks them
         result = run_take(request, None if args.no_view else args.view_port,
                           announce=lambda msg: print(msg, flush=True))
@@ -162,5 +185,7 @@ def run(args: argparse.Namespace) -> int:
     if result.virtual and result.wall_s > 0:
         print(f"simulated {out.t_end_s:.1f} s in {result.wall_s:.1f} s "
               f"({out.t_end_s / result.wall_s:.1f}x real time)")
+    if monitor is not None:
+        print(f"replans: {result.replans}")
     print("wrote " + ", ".join(str(path) for path in result.paths))
     return 0 if out.reason in STOPPED_ON_PURPOSE else 1

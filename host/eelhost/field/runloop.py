@@ -48,10 +48,14 @@ from eelsim.robot import Robot
 
 log = logging.getLogger(__name__)
 
-__all__ = ["FrameReport", "RunConfig", "RunLoop", "RunOutcome"]
+__all__ = ["FrameReport", "Monitor", "RunConfig", "RunLoop", "RunOutcome"]
 
 OFFSET_LIMIT_RAD = 1.0  # SetOffset's range
 EPS_S = 1e-9
+
+Monitor = Callable[[float, NDArray[np.float64]], list[tuple[float, float]] | str | None]
+"""``monitor(t_s, filtered_pose)`` (``eelbot run --plan``): new waypoints (a replan), ``"arrived"``
+(the planner's goal test holds), or None to go on."""
 
 
 @dataclass(frozen=True)
@@ -208,6 +212,10 @@ class RunLoop:
         Time of the loop (default: the link's clock).
     observers : list of callable, optional
         Each called with a :class:`FrameReport` for every frame.
+    monitor : callable, optional
+        ``monitor(t_s, filtered_pose)`` after every pose (``eelbot run --plan``): new waypoints
+        to steer to from now on (a replan), ``"arrived"`` to end the run (the planner's goal
+        test), or None.
     """
 
     def __init__(
@@ -220,6 +228,7 @@ class RunLoop:
         recorder: Recorder | None = None,
         clock: Clock | None = None,
         observers: list[Callable[[FrameReport], None]] | None = None,
+        monitor: Monitor | None = None,
     ) -> None:
         if not config.waypoints_m:
             raise ValueError("a run needs at least one waypoint")
@@ -242,6 +251,9 @@ class RunLoop:
         self._stop_request: str | None = None
         self._stop_detail = ""
         self._t_start = 0.0
+        self.monitor = monitor
+        self.replans = 0
+        self._goal_reached = False
         link.listeners.append(self._on_event)
 
     @property
@@ -338,6 +350,8 @@ class RunLoop:
                 if self.recorder is not None:
                     self.recorder.frame(t, loc.com_m, loc.heading_rad, loc.link_angles_rad)
                 self.guidance.observe(t, float(loc.com_m[0]), float(loc.com_m[1]), loc.heading_rad)
+                if self.monitor is not None:
+                    self._consult_monitor(t, loc.com_m, loc.heading_rad)
             if self.recorder is not None:
                 self.recorder.frame_seen(t, loc.status, sum(loc.seen))
             if self.observers:
@@ -353,10 +367,28 @@ class RunLoop:
                 next_control += c.control_period_s
         out.reason, out.detail = "camera_ended", "the camera delivered no more frames"
 
+    def _consult_monitor(self, t: float, com_m: NDArray[np.float64], heading_rad: float) -> None:
+        """Ask the monitor about the filtered pose: go on, steer to new waypoints, or stop."""
+        pose = self.guidance.filtered_pose
+        assert self.monitor is not None and pose is not None
+        decision = self.monitor(t, pose)
+        if decision == "arrived":
+            self._goal_reached = True
+        elif isinstance(decision, list) and decision:
+            self.replans += 1
+            log.info("replanned at t = %.2f s: %d waypoints", t, len(decision))
+            c = self.config
+            self.guidance = Guidance(decision, c.acceptance_radius_m, c.gait.k_theta,
+                                     c.median_window, offset_limit_rad=OFFSET_LIMIT_RAD)
+            self.guidance.observe(t, float(com_m[0]), float(com_m[1]), heading_rad)
+
     def _should_stop(self, t: float, last_pose_t: float | None) -> bool:
         c, out = self.config, self.outcome
         if self._stop_request is not None:
             out.reason, out.detail = self._stop_request, self._stop_detail
+        elif self._goal_reached:
+            out.reason = "arrived"
+            out.detail = f"in the planned goal disc ({self.replans} replans)"
         elif self.guidance.arrived:
             out.reason, out.detail = "arrived", f"reached all {len(c.waypoints_m)} waypoints"
         elif last_pose_t is not None and t - last_pose_t > c.lost_after_s:

@@ -24,7 +24,7 @@ from numpy.typing import NDArray
 from eelhost.errors import UserError
 from eelhost.field.provenance import robot_file_text, software
 from eelhost.field.recorder import Recorder, take_paths
-from eelhost.field.runloop import FrameReport, RunConfig, RunLoop, RunOutcome, open_frames
+from eelhost.field.runloop import FrameReport, Monitor, RunConfig, RunLoop, RunOutcome, open_frames
 from eelhost.link.base import Link
 from eelhost.link.replay_transport import RxLogWriter
 from eelhost.link.sim_transport import SimTransport
@@ -193,6 +193,8 @@ class TankSession:
         The link URI, robot file, motion, current and note to record.
     observers : list of callable, optional
         Called with every frame's :class:`~eelhost.field.runloop.FrameReport` (the live view).
+    monitor : callable, optional
+        The run loop's monitor (``eelbot run --plan``; see :class:`RunLoop`).
     """
 
     def __init__(
@@ -204,6 +206,7 @@ class TankSession:
         out: str,
         notes: TakeNotes,
         observers: list[Callable[[FrameReport], None]] | None = None,
+        monitor: Monitor | None = None,
     ) -> None:
         self.link = link
         self.virtual = virtual_robot(link)
@@ -237,8 +240,9 @@ class TankSession:
             "robot_file": notes.robot_file or "paper_robot.toml (bundled)",
             "robot_copy": robot_copy.name,
             "calibration_copy": calibration_copy.name,
-            "gains": {"kp_nm_per_rad": j.kp_nm_per_rad, "kd_nms_per_rad": j.kd_nms_per_rad,
-                      "k_theta": gait.k_theta},
+            # every joint model records its own fields (PD gains, servo lag, ...) under its name
+            "joints": {"model": j.model_name, **j.model_dump(mode="json")},
+            "gains": {"k_theta": gait.k_theta},
             "current_known": self.virtual is not None or notes.current_m_s is not None,
             "duration_limit_s": config.duration_s,
             "reprojection_rms_px": camera.calibration.rms_reprojection_px,
@@ -263,7 +267,7 @@ class TankSession:
         self.rx_log = RxLogWriter(f"{out}.rx.bin")
         link.rx_log = self.rx_log
         self.loop = RunLoop(link, camera.frames, camera.localiser, robot, config, self.recorder,
-                            observers=observers)
+                            observers=observers, monitor=monitor)
 
     @property
     def paths(self) -> list[Path]:

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from eelhost.errors import UserError
 from eelhost.field.recorder import take_paths
-from eelhost.field.runloop import RunConfig, RunOutcome
+from eelhost.field.runloop import Monitor, RunConfig, RunOutcome
 from eelhost.field.session import TakeNotes, TankSession, open_camera, virtual_robot
 from eelhost.field.signals import stop_on_signals
 from eelhost.link.uri import open_link
@@ -55,6 +55,9 @@ class TakeRequest:
         The robot's markers.
     speed : float or None
         ``sim://`` only: simulated seconds per wall second.
+    monitor : callable or None
+        The run loop's monitor (``eelbot run --plan``; see
+        :class:`~eelhost.field.runloop.RunLoop`).
     """
 
     robot: Robot
@@ -65,17 +68,19 @@ class TakeRequest:
     calibration: str | None = None
     layout: MarkerLayout | None = None
     speed: float | None = None
+    monitor: Monitor | None = None
 
 
 @dataclass
 class TakeResult:
-    """How a take went: its outcome, files, wall time and whether the robot was virtual."""
+    """How a take went: its outcome, files, wall time, whether the robot was virtual, replans."""
 
     outcome: RunOutcome
     paths: list[Path]
     wall_s: float
     virtual: bool
     signals: list[str]
+    replans: int = 0
 
 
 def refuse_overwrite(stem: str | Path, force: bool) -> None:
@@ -139,7 +144,8 @@ def run_take(request: TakeRequest, view_port: int | None = None,
     try:
         try:
             session = TankSession(link, camera, request.robot, request.config, request.out,
-                                  request.notes, observers=[view.update] if view else None)
+                                  request.notes, observers=[view.update] if view else None,
+                                  monitor=request.monitor)
         except BaseException:
             link.close()
             raise
@@ -155,4 +161,5 @@ def run_take(request: TakeRequest, view_port: int | None = None,
         if view is not None:
             view.close()
     return TakeResult(outcome, [p for p in session.paths if p.exists()],
-                      time.monotonic() - wall0, virtual is not None, list(received))
+                      time.monotonic() - wall0, virtual is not None, list(received),
+                      session.loop.replans)

@@ -1,17 +1,27 @@
-"""A* over robot poses, with the twin's motion primitives as edges (docs/model.md section 9).
+"""A* over waypoint sequences, every manoeuvre swum in the twin from the state the last one left.
 
-A node is a pose (x, y, heading) and whether the robot is at rest (the start) or swimming. Its
-children are the end poses of the primitives simulated for the current as the robot would feel it
-there: the world current's direction relative to the node's heading, rounded to the nearest of the
-library's directions (8 by default). A child is kept only if the primitive's swept hull, placed at
-the node, keeps the robot's half width plus the world's clearance from every obstacle and wall.
+docs/planning.md ("The search") is the long form. In short:
 
-Cost is time (the primitives' durations). The heuristic is the straight-line distance left to the
-goal disc divided by the largest displacement per second any primitive of the library achieves
-(:attr:`PrimitiveLibrary.max_progress_speed_m_s`): no sequence of primitives covers distance faster,
-so it never overestimates the time left (admissible) and the first goal node popped is optimal for
-this graph. Poses are merged on a grid (``cell_m``, ``heading_bins``) so the search is finite; a goal
-that cannot be reached therefore exhausts the queue and is reported as such.
+- **Actions** (the motion primitives): from the waypoint the robot is steering to, the next
+  waypoint at a distance d and a bearing b relative to the direction of the last leg (the first
+  leg from the start pose's heading); d in ``distances_m``, b in ``bearings_deg``.
+- **A node** is the robot's full twin state (links, speed, turn, gait phase: everything a
+  primitive leaves) at a control update shortly before its guidance accepts a waypoint W, with W,
+  the leg's direction psi and the time. Its children swim each action from that state, in the
+  world's current, under the robot's own control stack (camera, median filter, 0.3 s offset
+  updates; :mod:`eelhost.planning.twin`), until the next waypoint is accepted. The child's node
+  is taken from that run at the last control update at least one median-filter window before the
+  acceptance, so the next run starts with the same guidance as the uninterrupted run would.
+- **A child is kept** when the twin raised no failure flag and every sampled body point keeps
+  ``margin_m`` from every obstacle and wall (:class:`eelhost.planning.field.ClearanceField`).
+- **The goal test** (:func:`in_goal`, the one used by execution and at the tank too): the centre
+  of mass is inside the goal disc. A child whose run enters the disc shrunk by ``goal_margin_m``
+  is a goal node; its cost is the time it enters.
+- **Cost** is time. The heuristic is the free-space path length to the goal disc
+  (:class:`eelhost.planning.field.GoalDistance`) over the fastest ground speed (swimming speed plus
+  current), weighted by ``weight`` (weighted A*: the plan costs at most ``weight`` times the
+  optimum of this graph). Nodes are merged on a grid of waypoint cells x leg directions, so the
+  search is finite; the B best open nodes are expanded together, their children swum in one batch.
 """
 
 from __future__ import annotations
@@ -23,46 +33,156 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.typing import NDArray
 
+from eelhost.planning.body import body_points, point_spacing_m, reach_m
+from eelhost.planning.field import ClearanceField, GoalDistance
 from eelhost.planning.geometry import FloatArray
-from eelhost.planning.primitives import KIND_NAMES, REST, SWIMMING, PrimitiveLibrary
+from eelhost.planning.twin import Runs, Twin
 from eelhost.planning.world import World
 from eelsim.control import wrap_angle
+from eelsim.model import SwimmerModel
+
+REST_KEY = -1
+GOAL = -1
+"""The action index of the leg to the goal's centre."""
+
+
+def in_goal(world: World, xy: Sequence[float] | FloatArray, shrink_m: float = 0.0) -> bool:
+    """The goal test of planning, the twin's execution and the tank's run loop.
+
+    Parameters
+    ----------
+    world : World
+    xy : array_like, shape (2,)
+        The robot's centre of mass (at the tank: the filtered camera position).
+    shrink_m : float
+        Test against the disc shrunk by this much (the planner's margin).
+
+    Returns
+    -------
+    bool
+    """
+    return bool(goal_mask(world, np.asarray(xy, dtype=float), shrink_m))
+
+
+def goal_mask(world: World, xy: FloatArray, shrink_m: float = 0.0) -> NDArray[np.bool_]:
+    """:func:`in_goal` for many positions at once.
+
+    Parameters
+    ----------
+    world : World
+    xy : ndarray, shape (..., 2)
+    shrink_m : float
+
+    Returns
+    -------
+    ndarray of bool, shape (...)
+    """
+    gx, gy = world.goal.position_m
+    return np.hypot(xy[..., 0] - gx, xy[..., 1] - gy) <= world.goal.radius_m - shrink_m
 
 
 @dataclass(frozen=True)
-class PlanStep:
-    """One primitive of a plan, placed in the world.
+class Actions:
+    """The action set: legs of ``distances_m`` at ``bearings_deg`` from the last leg's direction.
+
+    ``coefficient_index`` says which coefficient set swims each bearing: 0 (straight motion) for
+    bearing 0, 1 (turning) otherwise (docs/planning.md, "Coefficients").
+    """
+
+    distances_m: tuple[float, ...] = (0.3, 0.5)
+    bearings_deg: tuple[float, ...] = (-60.0, -30.0, 0.0, 30.0, 60.0)
+
+    @property
+    def legs(self) -> list[tuple[float, float]]:
+        """(distance m, bearing deg) of every action."""
+        return [(d, b) for d in self.distances_m for b in self.bearings_deg]
+
+    def coefficient_index(self, bearing_deg: float) -> int:
+        """0 (the straight-motion coefficients) for a straight leg, 1 (turning) otherwise."""
+        return 0 if abs(bearing_deg) < 1e-9 else 1
+
+
+@dataclass(frozen=True)
+class SearchSettings:
+    """How the search runs.
 
     Attributes
     ----------
-    primitive : int
-        Row of the library.
-    kind : str
-        "rest" or "swimming".
-    current_rel_deg : float
-        Nominal direction of the current relative to the heading the primitive was chosen for.
-    distance_m, bearing_deg : float
-        The primitive's nominal waypoint.
-    start_pose, end_pose : tuple of float
-        (x, y, heading) in the world, m and rad.
-    waypoint_m : tuple of float
-        The waypoint the robot steers to, world frame.
-    duration_s : float
-    hull : ndarray, shape (H, 2)
-        Swept region in the world.
+    actions : Actions
+    margin_m : float
+        Clearance every sampled body centre-line point keeps from obstacles and walls (the
+        body's half width, the world's clearance and the uncertainty margin).
+    goal_margin_m : float
+        A goal node's centre of mass enters the goal disc shrunk by this much.
+    weight : float
+        Heuristic weight (1: plain A*).
+    cell_m : float
+        Waypoint cells of the closed set.
+    heading_bins : int
+        Leg-direction bins of the closed set.
+    batch : int
+        Open nodes expanded together.
+    max_expansions : int
+        The search gives up after this many expansions.
+    stride : int
+        Physics steps between the sampled states that are checked.
+    per_link : int
+        Body points per link (intervals; see :func:`eelhost.planning.body.body_points`).
+    leg_time_s : float
+        Time limit of one leg at the slowest expected ground speed, s (scaled by distance).
     """
 
-    primitive: int
-    kind: str
-    current_rel_deg: float
+    actions: Actions = Actions()
+    margin_m: float = 0.07
+    goal_margin_m: float = 0.03
+    weight: float = 2.0
+    cell_m: float = 0.1
+    heading_bins: int = 12
+    batch: int = 8
+    max_expansions: int = 600
+    stride: int = 3
+    per_link: int = 2
+    leg_time_s: float = 40.0
+
+
+@dataclass
+class Leg:
+    """One leg of a plan: the waypoint steered to, and what the twin did on the way.
+
+    Attributes
+    ----------
+    waypoint_m : (float, float)
+    distance_m, bearing_deg : float
+        The action.
+    start_step : int
+        Step of the task at which this leg's run started (its parent's node).
+    end_step : int
+        Step at which the waypoint was accepted (or the goal entered, for the last leg).
+    com_m : ndarray, shape (S, 2)
+        Sampled centre of mass over the leg's run.
+    min_clearance_m : float
+        Smallest clearance of the sampled body centre line over the leg.
+    goal : bool
+        The last leg, to the goal's centre.
+    parent_key : tuple of int
+        Closed-set key of the node the leg leaves (with ``action``: what the planner bans when
+        the leg fails its check).
+    action : int
+        Index of the action in :attr:`Actions.legs` (``GOAL`` for the leg to the goal).
+    """
+
+    waypoint_m: tuple[float, float]
     distance_m: float
     bearing_deg: float
-    start_pose: tuple[float, float, float]
-    end_pose: tuple[float, float, float]
-    waypoint_m: tuple[float, float]
-    duration_s: float
-    hull: FloatArray
+    start_step: int
+    end_step: int
+    com_m: FloatArray
+    min_clearance_m: float
+    goal: bool = False
+    parent_key: tuple[int, int, int] = (REST_KEY, REST_KEY, REST_KEY)
+    action: int = GOAL
 
 
 @dataclass
@@ -72,226 +192,390 @@ class Plan:
     Attributes
     ----------
     found : bool
+    status : str
+        ``found``, ``exhausted`` (every node the actions reach, as merged on the closed-set
+        grid, was expanded: no plan with these actions and this margin, which is not a proof
+        that none exists) or ``gave_up`` (expansion limit); the planner adds its own.
     message : str
-        One line: the outcome, and why when no path was found.
-    steps : list of PlanStep
+        One line: the outcome, and why when no plan was found.
+    legs : list of Leg
     cost_s : float
-        Sum of the primitives' durations (planned time to the goal), NaN when not found.
+        Time at which the planned run enters the goal (NaN when not found).
     expansions : int
-        Nodes expanded.
+    simulations : int
+        Manoeuvres swum in the twin.
     planning_time_s : float
-        Wall time of the search.
     tree : ndarray, shape (E, 4)
-        Every collision-free edge generated, (x0, y0, x1, y1), for figures.
-    heuristic_speed_m_s : float
-        The speed the heuristic divides by.
+        Every collision-free leg generated, (x0, y0, x1, y1) from waypoint to waypoint.
     """
 
     found: bool
+    status: str
     message: str
-    steps: list[PlanStep] = field(default_factory=list)
+    legs: list[Leg] = field(default_factory=list)
     cost_s: float = math.nan
     expansions: int = 0
+    simulations: int = 0
     planning_time_s: float = 0.0
     tree: FloatArray = field(default_factory=lambda: np.zeros((0, 4)))
-    heuristic_speed_m_s: float = math.nan
 
     @property
     def waypoints_m(self) -> list[tuple[float, float]]:
         """The waypoints to give the robot, in order."""
-        return [s.waypoint_m for s in self.steps]
+        return [leg.waypoint_m for leg in self.legs]
 
 
-def heuristic_s(
-    world: World, library: PrimitiveLibrary, xy: Sequence[float] | FloatArray
-) -> float:
-    """Admissible estimate of the time from ``xy`` into the goal disc.
-
-    Parameters
-    ----------
-    world : World
-    library : PrimitiveLibrary
-    xy : array_like, shape (2,)
-
-    Returns
-    -------
-    float
-        max(0, distance to the goal centre - goal radius) / fastest progress speed, s.
-    """
-    gx, gy = world.goal.position_m
-    d = math.hypot(float(xy[0]) - gx, float(xy[1]) - gy) - world.goal.radius_m
-    return max(0.0, d) / library.max_progress_speed_m_s
+@dataclass
+class _Node:
+    waypoint: tuple[float, float] | None  # None: the start, at rest
+    psi: float
+    state: FloatArray
+    step: int
+    g: float
+    parent: int
+    leg: Leg | None
+    key: tuple[int, int, int]
+    goal: bool = False
 
 
-def place(pose: tuple[float, float, float], rel: FloatArray) -> FloatArray:
-    """Transform points from a pose's frame into the world.
-
-    Parameters
-    ----------
-    pose : (x, y, heading)
-    rel : ndarray, shape (..., 2)
-
-    Returns
-    -------
-    ndarray, shape (..., 2)
-    """
-    c, s = math.cos(pose[2]), math.sin(pose[2])
-    rot = np.array([[c, s], [-s, c]])  # row vectors: p_world = p_rel @ rot + origin
-    return rel @ rot + np.array(pose[:2])
-
-
-def current_index_at(
-    world: World, library: PrimitiveLibrary, heading_rad: float, kind: int = SWIMMING
-) -> int:
-    """Which of the library's current directions the robot feels at this heading.
+class Search:
+    """A* over the world with the twin (module docstring); reusable across searches of one world.
 
     Parameters
     ----------
     world : World
-    library : PrimitiveLibrary
-    heading_rad : float
-    kind : int
-        ``REST`` or ``SWIMMING``: directions without primitives of this kind are skipped.
-
-    Returns
-    -------
-    int
+    twin : Twin
+        Its coefficient sets 0 and 1 are the straight and turning ones.
+    settings : SearchSettings
+    clearance : ClearanceField, optional
+    goal_distance : GoalDistance, optional
+    ground_speed_m_s : float
+        Fastest ground speed the heuristic divides by (swimming speed plus current).
     """
-    rel = world.current.direction_deg - math.degrees(heading_rad)
-    return library.nearest_current_index(rel, kind)
 
+    def __init__(
+        self,
+        world: World,
+        twin: Twin,
+        settings: SearchSettings,
+        clearance: ClearanceField,
+        goal_distance: GoalDistance,
+        ground_speed_m_s: float,
+    ) -> None:
+        self.world = world
+        self.twin = twin
+        self.settings = settings
+        self.clearance = clearance
+        self.goal_distance = goal_distance
+        self.ground_speed_m_s = float(ground_speed_m_s)
+        self.model = SwimmerModel.from_robot(twin.robot, twin.coefficients[0])
+        self.n = twin.n_links
+        self.warm_steps = int(math.ceil(
+            twin.options.camera.median_window / twin.options.camera.fps / twin.dt_s - 1e-9
+        ))
+        self._slack_m = clearance.error_m + point_spacing_m(self.model, settings.per_link) / 4
+        self.body_half_width_m = float(self.model.half_axis_horizontal_m.max())
+        self.reach_m = reach_m(self.model)
+        self._start_margin_m = settings.margin_m
+        self._memo: dict[tuple, list] = {}
+        self.simulations = 0
 
-def plan_path(
-    world: World,
-    library: PrimitiveLibrary,
-    cell_m: float = 0.1,
-    heading_bins: int = 12,
-    max_expansions: int = 200_000,
-) -> Plan:
-    """Find the fastest collision-free sequence of primitives from the start into the goal disc.
+    # -- pieces ----------------------------------------------------------------------------------
 
-    Parameters
-    ----------
-    world : World
-    library : PrimitiveLibrary
-        Built for the world's current speed.
-    cell_m : float
-        Size of the position cells of the closed set.
-    heading_bins : int
-        Heading cells of the closed set.
-    max_expansions : int
-        Safety stop; hitting it is reported as such, not as unreachable.
+    def _key(self, waypoint: tuple[float, float], psi: float) -> tuple[int, int, int]:
+        s = self.settings
+        hb = int(round(psi / (2 * math.pi) * s.heading_bins)) % s.heading_bins
+        return (int(waypoint[0] // s.cell_m), int(waypoint[1] // s.cell_m), hb)
 
-    Returns
-    -------
-    Plan
+    def heuristic_s(self, xy: FloatArray) -> float:
+        """Time to the goal disc at the fastest ground speed along the free-space path, s."""
+        return self.goal_distance(xy) / self.ground_speed_m_s
 
-    Raises
-    ------
-    ValueError
-        When the library was built for another current speed.
-    """
-    if abs(library.current_speed_m_s - world.current.speed_m_s) > 1e-9:
-        raise ValueError(
-            f"primitive library built for a {library.current_speed_m_s} m/s current, the world "
-            f"has {world.current.speed_m_s} m/s"
+    def _jobs(self, nodes: list[_Node]) -> list[tuple[int, int, tuple[float, float], float]]:
+        """(node position, action, waypoint, leg direction) of every leg to swim.
+
+        Action ``GOAL`` is the leg to the goal's centre, offered within reach of it.
+        """
+        s = self.settings
+        legs = s.actions.legs
+        w, h = self.world.tank.size_m
+        goal = self.world.goal.position_m
+        reach = max(s.actions.distances_m) + self.world.goal.radius_m
+        jobs = []
+        for pos, node in enumerate(nodes):
+            origin = (node.waypoint if node.waypoint is not None
+                      else (float(node.state[self.n]), float(node.state[self.n + 1])))
+            for a, (d, b) in enumerate(legs):
+                psi = node.psi + math.radians(b)
+                wp = (origin[0] + d * math.cos(psi), origin[1] + d * math.sin(psi))
+                if 0 < wp[0] < w and 0 < wp[1] < h:
+                    jobs.append((pos, a, wp, psi))
+            to_goal = math.hypot(goal[0] - origin[0], goal[1] - origin[1])
+            if 1e-9 < to_goal <= reach:
+                psi = math.atan2(goal[1] - origin[1], goal[0] - origin[0])
+                jobs.append((pos, GOAL, (float(goal[0]), float(goal[1])), psi))
+        return jobs
+
+    def _bearing_deg(self, node: _Node, psi: float) -> float:
+        return math.degrees(float(wrap_angle(psi - node.psi)))
+
+    def _children(self, nodes: list[_Node]) -> list[list[tuple[int, _Node | None]]]:
+        """Swim every leg from every node in one batch.
+
+        Per node: (action, child or None for a leg that failed).
+        """
+        s = self.settings
+        out: list[list[tuple[int, _Node | None]]] = [[] for _ in nodes]
+        jobs = self._jobs(nodes)
+        if not jobs:
+            return out
+        waypoints, durations, index = [], [], []
+        for pos, a, wp, psi in jobs:
+            node = nodes[pos]
+            waypoints.append([wp] if node.waypoint is None else [node.waypoint, wp])
+            bearing = self._bearing_deg(node, psi)
+            index.append(s.actions.coefficient_index(bearing if a != GOAL else
+                                                     (0.0 if abs(bearing) < 15 else bearing)))
+            origin = node.state[self.n : self.n + 2]
+            durations.append(s.leg_time_s * (math.hypot(wp[0] - origin[0], wp[1] - origin[1])
+                                             + 0.3))
+        runs = self.twin.run(
+            waypoints,
+            durations,
+            states=np.stack([nodes[pos].state for pos, _, _, _ in jobs]),
+            start_steps=[nodes[pos].step for pos, _, _, _ in jobs],
+            coefficient_index=index,
+            stride=s.stride,
         )
-    started = time.perf_counter()
-    margin = world.clearance_m + library.body_half_width_m
-    speed = library.max_progress_speed_m_s
-    goal = np.asarray(world.goal.position_m, dtype=float)
-    sx, sy = map(float, world.start.position_m)
-    start = (sx, sy, math.radians(world.start.heading_deg))
+        self.simulations += len(jobs)
+        clear = self._clearances(runs)
+        for j, (pos, a, wp, psi) in enumerate(jobs):
+            out[pos].append((a, self._child(nodes[pos], a, wp, psi, runs, j, clear[j])))
+        return out
 
-    def cell(pose: tuple[float, float, float], kind: int) -> tuple[int, int, int, int]:
-        hb = int(round(float(wrap_angle(pose[2])) / (2 * math.pi) * heading_bins)) % heading_bins
-        return (int(pose[0] // cell_m), int(pose[1] // cell_m), hb, kind)
+    def _clearances(self, runs: Runs) -> FloatArray:
+        """Clearance of the body centre line at every sample of every run, shape (R, S).
 
-    # node records: pose, kind, g, parent node, primitive row
-    nodes: list[tuple[tuple[float, float, float], int, float, int, int]] = []
-    nodes.append((start, REST, 0.0, -1, -1))
-    best_g = {cell(start, REST): 0.0}
-    closed: set[tuple[int, int, int, int]] = set()
-    open_heap = [(heuristic_s(world, library, start[:2]), 0, 0)]  # (f, tie, node)
-    tie = 1
-    tree: list[tuple[float, float, float, float]] = []
-    expansions = 0
-    found = -1
-    while open_heap:
-        _, _, ni = heapq.heappop(open_heap)
-        pose, kind, g, _, _ = nodes[ni]
-        key = cell(pose, kind)
-        if key in closed:
-            continue
-        if math.hypot(pose[0] - goal[0], pose[1] - goal[1]) <= world.goal.radius_m:
-            found = ni
-            break
-        closed.add(key)
-        expansions += 1
-        if expansions > max_expansions:
-            break
-        ci = current_index_at(world, library, pose[2], kind)
-        rows = library.group(kind, ci)
-        if ci < 0 or rows.size == 0:
-            continue
-        ends = library.end_pose[rows]
-        child_xy = place(pose, ends[:, :2])
-        child_h = np.asarray(wrap_angle(pose[2] + ends[:, 2]))
-        hulls = place(pose, library.group_hulls(kind, ci)[0])
-        free = world.hulls_free(hulls, margin)
-        for j in np.flatnonzero(free):
-            child = (float(child_xy[j, 0]), float(child_xy[j, 1]), float(child_h[j]))
-            ckey = cell(child, SWIMMING)
-            cg = g + float(library.duration_s[rows[j]])
-            if ckey in closed or cg >= best_g.get(ckey, math.inf):
+        NaN after a run's end; less the field's and the point sampling's error.
+        """
+        n = self.n
+        states = runs.states
+        r, k, _ = states.shape
+        flat = states.reshape(r * k, -1)
+        live = np.flatnonzero(np.isfinite(flat[:, 0]))
+        out = np.full(r * k, np.nan)
+        if not live.size:
+            return out.reshape(r, k)
+        # every body point is within reach_m of the centre of mass: where the centre of mass is
+        # far enough from everything, that bound is all the search needs (and is what it keeps)
+        far = self.clearance(flat[live, n : n + 2]) - self.clearance.error_m - self.reach_m
+        out[live] = far
+        near = live[far < self.settings.margin_m + self._slack_m]
+        if near.size:
+            pts = body_points(self.model, flat[near], self.settings.per_link)
+            out[near] = self.clearance(pts).min(axis=1) - self._slack_m
+        return out.reshape(r, k)
+
+    def _child(self, parent: _Node, action: int, wp, psi, runs: Runs, j: int,
+               clear: FloatArray) -> _Node | None:
+        s = self.settings
+        stride = runs.stride
+        end = int(runs.final_step[j])
+        last = end // stride
+        samples = runs.states[j, : last + 1]
+        com = samples[:, self.n : self.n + 2]
+        margin = s.margin_m if parent.waypoint is not None else self._start_margin_m
+        bearing = self._bearing_deg(parent, psi)
+        origin = parent.waypoint if parent.waypoint is not None else (com[0, 0], com[0, 1])
+        d = math.hypot(wp[0] - origin[0], wp[1] - origin[1])
+        if action == GOAL:
+            inside = np.flatnonzero(goal_mask(self.world, com, s.goal_margin_m))
+            if not inside.size:
+                return None
+            at = int(inside[0])
+            c = float(np.min(clear[: at + 1]))
+            if c < margin:
+                return None
+            step = parent.step + at * stride
+            leg = Leg(wp, d, bearing, parent.step, step, com[: at + 1], c, True, parent.key,
+                      action)
+            return _Node(wp, psi, samples[at], step, step * self.twin.dt_s, -1, leg,
+                         self._key(wp, psi), goal=True)
+        if runs.reasons[j] or runs.arrival_step[j] < 0:
+            return None
+        c = float(np.min(clear[: last + 1]))
+        if c < margin:
+            return None
+        arrival = int(runs.arrival_step[j])
+        period = self.twin.restart_steps or stride
+        restart = ((arrival - self.warm_steps) // period) * period
+        if restart <= 0 or restart % stride:
+            return None
+        if parent.waypoint is not None:
+            # the guidance must already steer to wp at the restart: the previous waypoint was
+            # accepted before it (the true centre of mass well inside its circle)
+            r = self.twin.acceptance_radius_m - 0.01
+            near = np.hypot(*(com[: restart // stride + 1] - np.asarray(parent.waypoint)).T)
+            if not np.any(near < r):
+                return None
+        step = parent.step + restart
+        leg = Leg(wp, d, bearing, parent.step, parent.step + arrival, com, c, False, parent.key,
+                  action)
+        return _Node(wp, psi, samples[restart // stride], step, step * self.twin.dt_s, -1,
+                     leg, self._key(wp, psi))
+
+    # -- the search ------------------------------------------------------------------------------
+
+    def plan(
+        self,
+        banned: set | None = None,
+        start_state: FloatArray | None = None,
+        start_step: int = 0,
+        heading_rad: float | None = None,
+    ) -> Plan:
+        """Search from the world's start, or from any state (see the module docstring).
+
+        Parameters
+        ----------
+        banned : set of (node key, action index), optional
+            Legs not to take (the planner bans legs that failed its check in the twin).
+        start_state : ndarray, shape (2 N + 4,), optional
+            The robot's state to plan from (default: straight at rest at the world's start);
+            replanning passes the state it observes.
+        start_step : int
+            Step of the task at ``start_state`` (its gait phase).
+        heading_rad : float, optional
+            Direction the first legs' bearings are measured from (default: the world's start
+            heading when planning from the start, else the head link's direction).
+
+        Returns
+        -------
+        Plan
+        """
+        banned = banned or set()
+        started = time.perf_counter()
+        sims0 = self.simulations
+        s = self.settings
+        world = self.world
+        if start_state is None:
+            start_state = self.twin_start_state()
+            start_step = 0
+            if heading_rad is None:
+                heading_rad = math.radians(world.start.heading_deg)
+        start_state = np.asarray(start_state, dtype=float)
+        if heading_rad is None:
+            # the body's mean direction: the head swings with the gait
+            heading_rad = float(np.angle(np.exp(1j * start_state[: self.n]).mean()))
+        start_xy = start_state[self.n : self.n + 2].copy()
+        # the first legs leave the start, which may be closer to a wall than the margin: they
+        # keep what the start has (never less than the body's half width)
+        start_clear = float(self.clearance(body_points(self.model, start_state[None],
+                                                       s.per_link)).min()) - self._slack_m
+        self._start_margin_m = min(s.margin_m, max(start_clear - 0.01, self.body_half_width_m))
+        root = _Node(None, heading_rad, start_state, start_step, start_step * self.twin.dt_s, -1,
+                     None, (REST_KEY, REST_KEY, REST_KEY))
+        nodes = [root]
+        best_g: dict = {root.key: root.g}
+        closed: set = set()
+        heap = [(s.weight * self.heuristic_s(start_xy), 0, 0)]
+        tie = 1
+        tree: list[tuple[float, float, float, float]] = []
+        expansions = 0
+        found = -1
+        while heap and found < 0 and expansions < s.max_expansions:
+            batch: list[int] = []
+            while heap and len(batch) < s.batch:
+                _, _, ni = heapq.heappop(heap)
+                node = nodes[ni]
+                if node.goal:
+                    if not batch:
+                        found = ni
+                    else:
+                        heapq.heappush(heap, (node.g, -1, ni))  # pop it after this batch
+                    break
+                if node.key in closed:
+                    continue
+                closed.add(node.key)
+                batch.append(ni)
+            if found >= 0 or not batch:
                 continue
-            best_g[ckey] = cg
-            nodes.append((child, SWIMMING, cg, ni, int(rows[j])))
-            tree.append((pose[0], pose[1], child[0], child[1]))
-            f = cg + heuristic_s(world, library, child[:2])
-            heapq.heappush(open_heap, (f, tie, len(nodes) - 1))
-            tie += 1
+            expansions += len(batch)
+            for ni, kids in zip(batch, self._expand([nodes[i] for i in batch], batch, banned),
+                                strict=True):
+                parent = nodes[ni]
+                for child in kids:
+                    if child is None:
+                        continue
+                    if not child.goal and (child.key in closed
+                                           or child.g >= best_g.get(child.key, math.inf)):
+                        continue
+                    child.parent = ni
+                    nodes.append(child)
+                    if not child.goal:
+                        best_g[child.key] = child.g
+                    origin = (parent.waypoint if parent.waypoint is not None
+                              else tuple(start_xy))
+                    tree.append((origin[0], origin[1], child.waypoint[0], child.waypoint[1]))
+                    xy = child.state[self.n : self.n + 2]
+                    f = child.g if child.goal else child.g + s.weight * self.heuristic_s(xy)
+                    heapq.heappush(heap, (f, tie, len(nodes) - 1))
+                    tie += 1
+        elapsed = time.perf_counter() - started
+        tree_arr = np.asarray(tree, dtype=float).reshape(-1, 4)
+        sims = self.simulations - sims0
+        if found < 0:
+            if expansions >= s.max_expansions:
+                status = "gave_up"
+                msg = (f"no plan: the search gave up after {expansions} expansions "
+                       f"({sims} manoeuvres swum in the twin) without reaching the goal")
+            else:
+                status = "exhausted"
+                msg = (f"no plan: every pose the actions reach ({expansions} expanded, {sims} "
+                       f"manoeuvres swum) was tried and none enters the goal disc (radius "
+                       f"{world.goal.radius_m} m at ({world.goal.position_m[0]:.2f}, "
+                       f"{world.goal.position_m[1]:.2f}) m) without coming closer than "
+                       f"{s.margin_m * 1000:.0f} mm to an obstacle or wall")
+            return Plan(False, status, msg, expansions=expansions, simulations=sims,
+                        planning_time_s=elapsed, tree=tree_arr)
+        legs = []
+        ni = found
+        while nodes[ni].parent >= 0:
+            leg = nodes[ni].leg
+            assert leg is not None
+            legs.append(leg)
+            ni = nodes[ni].parent
+        legs.reverse()
+        cost = nodes[found].g
+        msg = (f"plan found: {len(legs)} legs, goal entered at {cost:.1f} s, "
+               f"{expansions} expansions, {sims} manoeuvres swum")
+        return Plan(True, "found", msg, legs, cost, expansions, sims, elapsed, tree_arr)
 
-    elapsed = time.perf_counter() - started
-    tree_arr = np.asarray(tree, dtype=float).reshape(-1, 4)
-    if found < 0:
-        if expansions > max_expansions:
-            msg = (f"no path found: search stopped at the limit of {max_expansions} expansions "
-                   "(raise max_expansions)")
-        else:
-            msg = (f"goal unreachable: all {expansions} reachable poses were expanded and none "
-                   f"enters the goal disc (radius {world.goal.radius_m} m at "
-                   f"({goal[0]:.2f}, {goal[1]:.2f}) m) with a collision-free primitive")
-        return Plan(False, msg, expansions=expansions, planning_time_s=elapsed, tree=tree_arr,
-                    heuristic_speed_m_s=speed)
+    def twin_start_state(self) -> FloatArray:
+        """The straight robot at rest at the world's start pose."""
+        from eelsim.dynamics import straight_state
 
-    chain = []
-    ni = found
-    while nodes[ni][3] >= 0:
-        chain.append(ni)
-        ni = nodes[ni][3]
-    steps = []
-    for ni in reversed(chain):
-        pose, _, _, parent, row = nodes[ni]
-        ppose = nodes[parent][0]
-        waypoint = place(ppose, library.waypoint_rel[row])
-        steps.append(
-            PlanStep(
-                primitive=row,
-                kind=KIND_NAMES[int(library.kind[row])],
-                current_rel_deg=float(
-                    library.discretisation.current_directions_deg[int(library.current_index[row])]
-                ),
-                distance_m=float(library.distance_m[row]),
-                bearing_deg=float(library.bearing_deg[row]),
-                start_pose=ppose,
-                end_pose=pose,
-                waypoint_m=(float(waypoint[0]), float(waypoint[1])),
-                duration_s=float(library.duration_s[row]),
-                hull=place(ppose, library.hulls[row]),
-            )
-        )
-    cost = nodes[found][2]
-    msg = (f"path found: {len(steps)} primitives, {cost:.1f} s planned, "
-           f"{expansions} expansions")
-    return Plan(True, msg, steps, cost, expansions, elapsed, tree_arr, speed)
+        return straight_state(self.model, math.radians(self.world.start.heading_deg),
+                              self.world.start.position_m)
+
+    def _expand(self, batch_nodes: list[_Node], ids: list[int], banned: set) -> list[list]:
+        """Children of the nodes, from the memo where this search has swum them before."""
+        todo = [k for k, ni in enumerate(ids) if self._path_key(ni, batch_nodes[k]) not in self._memo]
+        if todo:
+            fresh = self._children([batch_nodes[k] for k in todo])
+            for k, kids in zip(todo, fresh, strict=True):
+                self._memo[self._path_key(ids[k], batch_nodes[k])] = kids
+        out = []
+        for k, ni in enumerate(ids):
+            kids = self._memo[self._path_key(ni, batch_nodes[k])]
+            out.append([None if (batch_nodes[k].key, a) in banned or c is None
+                        else _copy(c) for a, c in kids])
+        return out
+
+    @staticmethod
+    def _path_key(ni: int, node: _Node) -> tuple:
+        return (node.step, node.state.tobytes())
+
+
+def _copy(node: _Node) -> _Node:
+    return _Node(node.waypoint, node.psi, node.state, node.step, node.g, -1, node.leg, node.key,
+                 node.goal)

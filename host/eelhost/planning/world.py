@@ -49,6 +49,7 @@ from eelhost.planning.geometry import (
     FloatArray,
     inside_convex,
     point_segment_distance,
+    points_in_polygon,
     segments_circle_distance,
     segments_cross,
     segments_polygon_distance,
@@ -305,6 +306,49 @@ class World(_Strict):
             best = min(best, segments_polygon_distance(a, b, poly))
         for c, r in self._circles:
             best = min(best, segments_circle_distance(a, b, c, r))
+        return best
+
+
+    def body_clearance(self, polylines: FloatArray) -> FloatArray:
+        """Exact distance from each polyline to the nearest obstacle or wall (0 when touching).
+
+        The executor's check of the robot's centre line at every step of a run.
+
+        Parameters
+        ----------
+        polylines : ndarray, shape (K, P, 2)
+            K polylines of P points (e.g. the link end points at K steps).
+
+        Returns
+        -------
+        ndarray, shape (K,)
+        """
+        pts = np.asarray(polylines, dtype=float)
+        w, h = self.tank.size_m
+        x, y = pts[..., 0], pts[..., 1]
+        best = np.maximum(0.0, np.minimum.reduce(
+            [x.min(axis=1), w - x.max(axis=1), y.min(axis=1), h - y.max(axis=1)]))
+        a, b = pts[:, :-1], pts[:, 1:]
+        for c, r in self._circles:
+            d = point_segment_distance(c[None, None], a, b)[:, 0].min(axis=1) - r
+            best = np.minimum(best, np.maximum(d, 0.0))
+        for poly in self._polygons:
+            # only steps that its bounding circle leaves a chance to come closer than so far
+            centre = poly.mean(axis=0)
+            radius = float(np.hypot(*(poly - centre).T).max())
+            gap = np.hypot(pts[..., 0] - centre[0], pts[..., 1] - centre[1]).min(axis=1)
+            rows = np.flatnonzero(gap - radius < best)
+            if not rows.size:
+                continue
+            pa, pb, pp = a[rows], b[rows], pts[rows]
+            e1, e2 = poly[None], np.roll(poly, -1, axis=0)[None]
+            touch = np.any(segments_cross(pa, pb, e1, e2), axis=(1, 2))
+            touch |= points_in_polygon(pp[:, 0], poly)
+            d = np.minimum(
+                point_segment_distance(pp, e1, e2).min(axis=(1, 2)),
+                point_segment_distance(poly[None], pa, pb).min(axis=(1, 2)),
+            )
+            best[rows] = np.minimum(best[rows], np.where(touch, 0.0, d))
         return best
 
 

@@ -1,0 +1,119 @@
+"""What ``eelbot run --plan WORLD`` needs from the planner: the plan, the monitor, the robot's URI.
+
+docs/planning.md ("At the tank") is the long form. :func:`plan_for_run` plans in the world from its
+start (refusing with :class:`eelhost.planning.planner.PlanRefused`, which the CLI reports with
+exit 2), and returns the plan's waypoints for the run loop with a
+:class:`eelhost.planning.replan.PlanMonitor` that replans when the filtered pose leaves the
+corridor and ends the run when the goal test holds. For a ``sim://`` robot it puts the virtual
+robot at the world's start in the world's current (``start=`` and ``current=`` of the URI) unless
+the URI already says where; a ``serial://`` robot must be placed at the start by hand.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from urllib.parse import parse_qsl, urlencode, urlsplit
+
+from eelhost.planning.planner import Outcome, Planner, PlanRefused
+from eelhost.planning.replan import PlanMonitor
+from eelhost.planning.uncertainty import CoefficientModel, default_model
+from eelhost.planning.world import World
+from eelsim.control import Gait
+from eelsim.robot import Robot
+from eelsim.scenario import PATH_GAIT
+
+
+class NoPlanFound(PlanRefused):
+    """The planner searched and found no plan that passes its check (exit 2 with the reason)."""
+
+
+@dataclass
+class RunPlan:
+    """A plan ready for the run loop.
+
+    Attributes
+    ----------
+    waypoints_m : list of (float, float)
+    monitor : PlanMonitor
+    uri : str
+        The robot's URI (for ``sim://``: with the world's start and current).
+    outcome : Outcome
+    """
+
+    waypoints_m: list[tuple[float, float]]
+    monitor: PlanMonitor
+    uri: str
+    outcome: Outcome
+
+
+def sim_uri_for_world(uri: str, world: World) -> str:
+    """A ``sim://`` URI with the world's start and current added where it gives none.
+
+    Parameters
+    ----------
+    uri : str
+    world : World
+
+    Returns
+    -------
+    str
+        ``uri`` unchanged for any other scheme.
+    """
+    parts = urlsplit(uri)
+    if parts.scheme != "sim":
+        return uri
+    query = parse_qsl(parts.query, keep_blank_values=True)
+    keys = {k for k, _ in query}
+    s = world.start
+    if "start" not in keys:
+        query.append(("start", f"{s.position_m[0]:g},{s.position_m[1]:g},{s.heading_deg:g}"))
+    if "current" not in keys:
+        c = world.current
+        query.append(("current", f"{c.speed_m_s:g},{c.direction_deg:g}"))
+    # built by hand: urlunsplit drops the "//" of a URI without a host
+    return f"sim://{parts.netloc}{parts.path}?{urlencode(query, safe=',:')}"
+
+
+def plan_for_run(
+    world: World,
+    robot: Robot,
+    uri: str,
+    gait: Gait = PATH_GAIT,
+    coefficients: CoefficientModel | None = None,
+    acceptance_radius_m: float = 0.15,
+) -> RunPlan:
+    """Plan in a world for ``eelbot run --plan`` (module docstring).
+
+    Parameters
+    ----------
+    world : World
+    robot : Robot
+    uri : str
+        The robot's link URI.
+    gait : Gait
+        The gait the run will use (the planner swims the same).
+    coefficients : CoefficientModel, optional
+        Default: the robot file's coefficients with the default uncertainty.
+    acceptance_radius_m : float
+        The run loop's acceptance radius (the planner's twin must use the same).
+
+    Returns
+    -------
+    RunPlan
+
+    Raises
+    ------
+    PlanRefused
+        The planner refused the world, or found no plan that passes its check.
+    """
+    model = coefficients or default_model(robot)
+    planner = Planner(world, robot, model, gait)
+    if abs(planner.twin.acceptance_radius_m - acceptance_radius_m) > 1e-9:
+        raise PlanRefused("acceptance_radius",
+                          f"--radius {acceptance_radius_m:g}: the planner swims with "
+                          f"{planner.twin.acceptance_radius_m:g} m")
+    outcome = planner.plan()
+    if not outcome.found:
+        raise NoPlanFound(outcome.status, f"{world.name}: {outcome.message}")
+    return RunPlan(outcome.plan.waypoints_m, PlanMonitor(planner, outcome),
+                   sim_uri_for_world(uri, world), outcome)

@@ -1,0 +1,250 @@
+"""Closed-loop runs of the twin that start from any state at any time (docs/planning.md, "The twin").
+
+The planner swims every manoeuvre from the state the previous one left: the body's shape, speed,
+turn and the gait's phase, not from a fresh straight robot at rest. ``eelsim.batch`` always starts
+a run from the scenario's straight robot at rest with the gait at phase 0; this module starts it
+from a given state at a given time of the task by changing two inputs of the prepared batch
+(:class:`eelsim.batch.BatchSpec`) before it runs:
+
+- ``initial_state``, one row per run;
+- the gait phase: joint j's reference is A_j sin(omega t + (j - 1) beta) (docs/model.md
+  section 4), and the kernel keeps cos and sin of (j - 1) beta per run; adding omega t0 to those
+  angles runs the gait as if the run had started at t0.
+
+A run restarted at a step that is a whole number of control periods and camera frames into the
+task sees its control updates and camera frames at the same times as the task's own run, so it
+reproduces that run except for its first offset, which it computes from a median filter holding
+one frame instead of five (a few millimetres over a manoeuvre; ``test_planning_twin`` checks it
+against an uninterrupted run). The twin has no public way to do this (yet); this module is the one
+place that relies on the batch's row layout (``eelsim.batch.codegen.make_layout``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from fractions import Fraction
+
+import numpy as np
+from numpy.typing import NDArray
+
+from eelsim.batch import DEFAULT_LANES, BatchSpec, codegen, run_spec
+from eelsim.closed_loop import LoopOptions
+from eelsim.control import Gait
+from eelsim.fluid import FluidCoefficients
+from eelsim.robot import Robot
+from eelsim.scenario import Scenario
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+
+def restart_period_steps(options: LoopOptions) -> int:
+    """Smallest step count that is a whole number of control periods and of camera frames.
+
+    Runs restarted at multiples of it see their control updates and frames when an uninterrupted
+    run would (0.3 s, 30 steps, with the tank's timing).
+
+    Parameters
+    ----------
+    options : LoopOptions
+
+    Returns
+    -------
+    int
+        0 when no multiple up to 100 control periods fits (the restarts are then approximate).
+    """
+    timing = options.timing
+    frame = Fraction(options.camera.fps).limit_denominator(10_000)
+    for k in range(1, 101):
+        steps = k * timing.period_steps
+        frames = steps * Fraction(timing.dt_s).limit_denominator(1_000_000) * frame
+        if frames.denominator == 1:
+            return steps
+    return 0
+
+
+@dataclass(frozen=True)
+class Runs:
+    """What a batch of restarted runs produced (R runs, S samples).
+
+    Attributes
+    ----------
+    stride : int
+        Physics steps between samples; sample s is at local step s * stride.
+    states : ndarray, shape (R, S, 2 N + 4)
+        Sampled states, NaN after a run ended.
+    arrival_step : ndarray of int, shape (R,)
+        Local step at which the last waypoint was accepted (the step whose interval holds the
+        camera frame that accepted it), -1 if never.
+    final_step : ndarray of int, shape (R,)
+        Local step at which the run stopped.
+    reasons : list of str
+        The twin's failure flag of each run ("" when none; a run that did not reach its last
+        waypoint in time is flagged too slow).
+    """
+
+    stride: int
+    states: FloatArray
+    arrival_step: IntArray
+    final_step: IntArray
+    reasons: list[str]
+
+
+class Twin:
+    """The robot's closed loop in a uniform current, run in batches from any state.
+
+    Parameters
+    ----------
+    robot : Robot
+    coefficients : sequence of FluidCoefficients
+        The coefficient sets a run may use (by index).
+    gait : Gait
+        Gait and heading gain.
+    options : LoopOptions
+        Loop timing and camera (the tank's); runs stop at their last waypoint.
+    current_m_s : (float, float)
+        Current velocity.
+    acceptance_radius_m : float
+        Waypoint acceptance radius of the guidance.
+    threads : int or None
+        Threads of the batched kernel.
+    """
+
+    def __init__(
+        self,
+        robot: Robot,
+        coefficients: Sequence[FluidCoefficients],
+        gait: Gait,
+        options: LoopOptions,
+        current_m_s: tuple[float, float],
+        acceptance_radius_m: float = 0.15,
+        threads: int | None = 1,
+    ) -> None:
+        if not coefficients:
+            raise ValueError("the twin needs at least one coefficient set")
+        self.robot = robot
+        self.coefficients = list(coefficients)
+        self.gait = gait
+        self.options = dataclasses.replace(options, stop_at_goal=True)
+        self.current_m_s = (float(current_m_s[0]), float(current_m_s[1]))
+        self.acceptance_radius_m = float(acceptance_radius_m)
+        self.threads = threads
+        self.dt_s = self.options.timing.dt_s
+        self.restart_steps = restart_period_steps(self.options)
+        self.n_links = robot.n_links
+        self._layout = codegen.make_layout(robot.n_links, DEFAULT_LANES, robot.fluid_law)
+        self._speed = math.hypot(*self.current_m_s)
+        self._direction_deg = (
+            math.degrees(math.atan2(self.current_m_s[1], self.current_m_s[0])) if self._speed else 0
+        )
+
+    def scenario(
+        self,
+        waypoints: Sequence[tuple[float, float]],
+        duration_s: float,
+        start: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    ) -> Scenario:
+        """The scenario of a run from rest: the gait, the waypoints, the current.
+
+        Parameters
+        ----------
+        waypoints : sequence of (x, y)
+        duration_s : float
+            T_max.
+        start : (x, y, heading_rad)
+            Start pose of the straight robot at rest.
+
+        Returns
+        -------
+        Scenario
+        """
+        g = self.gait
+        return Scenario(
+            name="planning",
+            amplitude_rad=g.amplitude_rad,
+            omega_rad_s=g.omega_rad_s,
+            beta_rad=g.beta_rad,
+            k_theta=g.k_theta,
+            waypoints_m=[(float(x), float(y)) for x, y in waypoints],
+            acceptance_radius_m=self.acceptance_radius_m,
+            current_speed_m_s=self._speed,
+            current_direction_deg=self._direction_deg,
+            duration_s=duration_s,
+            start_position_m=(float(start[0]), float(start[1])),
+            start_heading_deg=math.degrees(start[2]),
+        )
+
+    def _rows(self, name: str, size: int) -> slice:
+        first = self._layout.work[name] - self._layout.work["geometry"]
+        return slice(first, first + size)
+
+    def run(
+        self,
+        waypoints: Sequence[Sequence[tuple[float, float]]],
+        duration_s: float | Sequence[float],
+        states: FloatArray | None = None,
+        start_steps: Sequence[int] | IntArray | None = None,
+        coefficient_index: Sequence[int] | IntArray | None = None,
+        stride: int = 3,
+        starts: Sequence[tuple[float, float, float]] | None = None,
+    ) -> Runs:
+        """Run R closed-loop manoeuvres at once.
+
+        Parameters
+        ----------
+        waypoints : sequence of R waypoint lists
+        duration_s : float or sequence of R floats
+            Time limit of each run (from its own start).
+        states : ndarray, shape (R, 2 N + 4), optional
+            Start states (default: straight at rest at ``starts``).
+        start_steps : sequence of R ints, optional
+            The step of the task at which each run starts (its gait phase); restarts are exact at
+            multiples of :attr:`restart_steps`. Default 0.
+        coefficient_index : sequence of R ints, optional
+            Which coefficient set each run uses (default 0).
+        stride : int
+            Steps between samples.
+        starts : sequence of R (x, y, heading_rad), optional
+            Start poses of runs from rest (ignored where ``states`` is given).
+
+        Returns
+        -------
+        Runs
+        """
+        r = len(waypoints)
+        durations = np.broadcast_to(np.asarray(duration_s, dtype=float), (r,))
+        poses = list(starts) if starts is not None else [(0.0, 0.0, 0.0)] * r
+        scenarios = [self.scenario(w, float(d), p)
+                     for w, d, p in zip(waypoints, durations, poses, strict=True)]
+        index = (np.zeros(r, dtype=np.int64) if coefficient_index is None
+                 else np.asarray(coefficient_index, dtype=np.int64))
+        coeffs = [self.coefficients[i] for i in index]
+        spec = BatchSpec.build(self.robot, scenarios, coeffs, self.options, 0)
+        changes: dict = {}
+        if states is not None:
+            changes["initial_state"] = np.asarray(states, dtype=float).reshape(r, -1).copy()
+        if start_steps is not None:
+            t0 = np.asarray(start_steps, dtype=float) * self.dt_s
+            if np.any(t0 != 0):
+                params = spec.params.copy()
+                n = self.n_links
+                g = self.gait
+                phase = (np.arange(n - 1)[None, :] * g.beta_rad
+                         + g.omega_rad_s * t0[:, None])
+                params[:, self._rows("cos_beta", n - 1)] = np.cos(phase)
+                params[:, self._rows("sin_beta", n - 1)] = np.sin(phase)
+                changes["params"] = params
+        if changes:
+            spec = dataclasses.replace(spec, **changes)
+        longest = int(spec.total_steps.max())
+        res = run_spec(spec, sample_steps=np.arange(0, longest + 1, stride), threads=self.threads)
+        arrival = np.where(
+            np.isfinite(res.arrival_time_s),
+            np.ceil(res.arrival_time_s / self.dt_s - 1e-6),
+            -1,
+        ).astype(np.int64)
+        return Runs(stride, res.states, arrival, res.final_step.astype(np.int64),
+                    [res.reason(i) for i in range(r)])

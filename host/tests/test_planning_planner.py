@@ -1,0 +1,141 @@
+"""The planner: refusals with their reasons, plans the twin swims as planned, one goal test."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from eelhost.cli import main
+from eelhost.planning.planner import Planner
+from eelhost.planning.search import in_goal
+from eelhost.planning.uncertainty import CoefficientModel, default_model
+from eelhost.planning.world import WorldError, load_world, parse_world
+from eelhost.planning.worlds import issue_worlds
+from eelsim.robot import load_robot
+
+ROBOT = load_robot()
+MODEL = default_model(ROBOT)
+N = ROBOT.n_links
+
+
+def open_tank(start=(0.5, 1.0), goal=(2.0, 1.0), speed=0.0, direction=0.0, obstacles=()):
+    return parse_world({
+        "name": "open",
+        "tank": {"size_m": [3.0, 2.0]},
+        "start": {"position_m": list(start), "heading_deg": 0.0},
+        "goal": {"position_m": list(goal), "radius_m": 0.2},
+        "current": {"speed_m_s": speed, "direction_deg": direction},
+        "obstacles": list(obstacles),
+    })
+
+
+def write_world(path, **kwargs):
+    w = open_tank(**kwargs).model_dump(mode="json")
+    lines = [f'name = "{w["name"]}"', f"clearance_m = {w['clearance_m']}", "[tank]",
+             f"size_m = {list(w['tank']['size_m'])}", "[start]",
+             f"position_m = {list(w['start']['position_m'])}", "heading_deg = 0.0", "[goal]",
+             f"position_m = {list(w['goal']['position_m'])}", "radius_m = 0.2", "[current]",
+             f"speed_m_s = {w['current']['speed_m_s']}",
+             f"direction_deg = {w['current']['direction_deg']}"]
+    for o in w["obstacles"]:
+        lines += ["[[obstacles]]", 'kind = "circle"', f"centre_m = {list(o['centre_m'])}",
+                  f"radius_m = {o['radius_m']}"]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_start_inside_an_obstacle_is_refused_as_blocked():
+    world = open_tank(obstacles=[{"kind": "circle", "centre_m": [0.6, 1.0], "radius_m": 0.1}])
+    outcome = Planner(world, ROBOT, MODEL).plan()
+    assert outcome.status == "blocked_start"
+    assert "start blocked" in outcome.message and "(0.50, 1.00)" in outcome.message
+
+
+def test_current_faster_than_the_robot_swims_is_refused():
+    planner = Planner(open_tank(speed=0.15, direction=180.0), ROBOT, MODEL)
+    outcome = planner.plan()
+    assert outcome.status == "current_too_strong"
+    assert f"{planner.swimming_speed_m_s:.3f} m/s" in outcome.message
+
+
+def test_goal_behind_a_wall_is_refused_as_unreachable_without_searching():
+    outcome = Planner(issue_worlds()["walled_off_goal"], ROBOT, MODEL).plan()
+    assert outcome.status == "unreachable"
+    assert "no corridor" in outcome.message
+    assert outcome.plan.simulations == 0
+
+
+def test_goal_outside_the_tank_is_refused_when_the_world_is_read():
+    with pytest.raises(WorldError, match="goal.position_m .* outside the tank"):
+        open_tank(goal=(3.4, 1.0))
+
+
+def test_refusals_exit_2_with_the_reason(tmp_path, capsys):
+    blocked = write_world(tmp_path / "blocked.toml", obstacles=[
+        {"kind": "circle", "centre_m": [0.6, 1.0], "radius_m": 0.1}])
+    assert main(["plan", str(blocked), "--out", str(tmp_path / "out")]) == 2
+    assert "start blocked" in capsys.readouterr().err
+    strong = write_world(tmp_path / "strong.toml", speed=0.15, direction=180.0)
+    assert main(["plan", str(strong), "--out", str(tmp_path / "out")]) == 2
+    assert "current too strong" in capsys.readouterr().err
+    saved = json.loads((tmp_path / "out" / "plan.json").read_text())
+    assert saved["status"] == "current_too_strong" and not saved["found"]
+
+
+@pytest.fixture(scope="module")
+def example():
+    world = load_world("tank_5_obstacles")
+    planner = Planner(world, ROBOT, MODEL)
+    return world, planner, planner.plan()
+
+
+def test_example_plan_passes_every_check_run_without_contact(example):
+    world, planner, outcome = example
+    assert outcome.found, outcome.message
+    assert len(outcome.checks) == len(MODEL.ensemble())
+    for run in outcome.checks:
+        assert run.reached and run.collision_free, run.message
+        assert in_goal(world, run.states[-1, N : N + 2])
+    last = outcome.plan.legs[-1]
+    assert last.goal and last.waypoint_m == tuple(world.goal.position_m)
+
+
+def test_search_and_execution_use_the_same_goal_test(example):
+    world, planner, outcome = example
+    entered = outcome.plan.legs[-1].com_m[-1]
+    assert in_goal(world, entered, planner.settings.goal_margin_m)
+    # the centre of mass one sample earlier was not in the disc the search tests against
+    before = outcome.plan.legs[-1].com_m[-2]
+    assert not in_goal(world, before, planner.settings.goal_margin_m)
+
+
+def test_chained_legs_are_the_run_the_robot_swims(example):
+    """With one coefficient set for every leg, the plan's chained legs and one run of its
+    waypoints from the start are the same physics: same path, same goal time."""
+    world, _, _ = example
+    one = CoefficientModel({"straight": MODEL.fits["straight"], "turning": MODEL.fits["straight"]},
+                           MODEL.std, "straight only")
+    planner = Planner(world, ROBOT, one, check=False)
+    outcome = planner.plan()
+    assert outcome.found, outcome.message
+    (run,) = planner.check_plan(outcome.plan)[0][:1]
+    planned = np.concatenate([leg.com_m for leg in outcome.plan.legs])
+    assert run.reached and run.collision_free
+    assert abs(run.goal_time_s - outcome.plan.cost_s) < 1.0
+    # every swum position lies within a few centimetres of the planned path
+    from eelhost.planning.replan import distance_to_path
+
+    assert distance_to_path(planned, run.states[:, N : N + 2]).max() < 0.03
+
+
+def test_issue_world_with_a_035_m_gate_off_the_start_goal_line_is_planned_through_it():
+    world = issue_worlds()["gap_0.35_off_line"]
+    outcome = Planner(world, ROBOT, MODEL).plan()
+    assert outcome.found, outcome.message
+    assert all(c.reached and c.collision_free for c in outcome.checks)
+    # the gate is at x = 1.5 m between y = 1.25 and 1.6 m: the plan goes through it
+    com = np.concatenate([leg.com_m for leg in outcome.plan.legs])
+    at_wall = com[np.abs(com[:, 0] - 1.5) < 0.02]
+    assert at_wall.size and np.all((at_wall[:, 1] > 1.25) & (at_wall[:, 1] < 1.6))
