@@ -8,8 +8,6 @@
 constexpr uint32_t kCrc32Init = 0xFFFFFFFFUL;
 
 // One byte more into the register (start with kCrc32Init; the CRC is the register's complement).
-// Bitwise, no table: a table would sit in the AVR's RAM or cost pgm_read calls, and bytes arrive
-// at most one every 174 us.
 uint32_t crc32_iso_hdlc_step(uint32_t reg, uint8_t byte);
 
 uint32_t crc32_iso_hdlc(const uint8_t* data, size_t n);

@@ -22,6 +22,12 @@ struct AmplitudeRatios {
 };
 constexpr AmplitudeRatios kAmplitudeRatio;
 
+// Phase increments per microsecond at omega. On the AVR double is float: omega then carries a
+// relative error of 6e-8 (0.2 ms an hour).
+uint64_t phase_step(float omega_rad_s) {
+  return static_cast<uint64_t>(static_cast<double>(omega_rad_s) * kStepPerRadS);
+}
+
 float clamp_joint(float v) {
   if (v > cfg::kJointLimitRad) return cfg::kJointLimitRad;
   if (v < -cfg::kJointLimitRad) return -cfg::kJointLimitRad;
@@ -30,6 +36,8 @@ float clamp_joint(float v) {
 }  // namespace
 
 void Gait::reset(uint32_t now_us) {
+  step_q_per_us_ = phase_step(target_.omega_rad_s);
+  omega_pending_ = false;
   phase_q_ = 0;
   phase_us_ = now_us;
   last_us_ = now_us;
@@ -41,11 +49,9 @@ void Gait::reset(uint32_t now_us) {
 }
 
 void Gait::set_targets(const GaitTargets& t, uint32_t now_us) {
-  // On the AVR double is float: omega then carries a relative error of 6e-8 (0.2 ms an hour).
-  const uint64_t step = static_cast<uint64_t>(static_cast<double>(t.omega_rad_s) * kStepPerRadS);
-  if (step != step_q_per_us_) {
-    advance_phase(now_us);
-    step_q_per_us_ = step;
+  if (t.omega_rad_s != target_.omega_rad_s && !omega_pending_) {
+    omega_set_us_ = now_us;  // the first change since the last update: the old rate holds to here
+    omega_pending_ = true;
   }
   target_ = t;
 }
@@ -54,6 +60,7 @@ bool Gait::restart_phase(uint32_t now_us) {
   if (amplitude_rad_ != 0.0f) return false;
   phase_q_ = 0;
   phase_us_ = now_us;
+  if (omega_pending_) omega_set_us_ = now_us;  // a new omega counts from the restart
   return true;
 }
 
@@ -63,6 +70,11 @@ void Gait::advance_phase(uint32_t now_us) {
 }
 
 bool Gait::update(uint32_t now_us, float cap_rad) {
+  if (omega_pending_) {
+    advance_phase(omega_set_us_);
+    step_q_per_us_ = phase_step(target_.omega_rad_s);
+    omega_pending_ = false;
+  }
   advance_phase(now_us);
   const float dt_s = static_cast<float>(elapsed_us(now_us, last_us_)) * 1e-6f;
   last_us_ = now_us;

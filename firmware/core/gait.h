@@ -33,8 +33,8 @@ class Gait {
   // A, beta and gamma towards their targets over the time since the last update, then cap the
   // amplitude and |gamma| at `cap_rad` (the link-loss envelope). Returns whether the cap bound.
   bool update(uint32_t now_us, float cap_rad);
-  // Change targets at `now_us` (cheap: no references are computed). A new omega applies from
-  // now_us on: the phase is first advanced at the old rate.
+  // Change targets at `now_us` (cheap: nothing is computed until the next update). A new omega
+  // applies from now_us on: the next update first advances the phase at the old rate to then.
   void set_targets(const GaitTargets& t, uint32_t now_us);
   void set_rates(const GaitRates& r) { rates_ = r; }
   // Phase back to 0 with `now_us` as its origin (the twin's t = 0), so that the next update
@@ -63,6 +63,8 @@ class Gait {
   uint64_t step_q_per_us_ = 0;     // phase increment per microsecond (from omega)
   uint32_t phase_us_ = 0;          // time the phase was advanced to
   uint32_t last_us_ = 0;           // time of the last update (the slews' step)
+  uint32_t omega_set_us_ = 0;      // when a new omega was set, if omega_pending_
+  bool omega_pending_ = false;     // step_q_per_us_ is not yet target_.omega_rad_s's
   uint16_t updates_ = 0;
   GaitTargets target_{};
   GaitRates rates_{};

@@ -18,6 +18,10 @@ class JointLoop {
  public:
   // Forget the measurements (the next update with feedback starts the rate estimate afresh).
   void reset();
+  // Take the feedback calibration and servo stiffness from the settings: call after they change.
+  // (Their inverses are kept, so that an update divides nothing: a float division costs the AVR
+  // ~500 cycles.)
+  void configure(const eelproto::Settings& s);
   // One update, dt_us after the previous one. adc_counts: the joints' potentiometer readings,
   // joint 1 first, or nullptr without feedback.
   void update(const eelproto::Settings& s, const float* alpha_rad, const float* alpha_dot_rad_s,
@@ -31,13 +35,12 @@ class JointLoop {
  private:
   float phi_rad_[cfg::kJoints] = {};
   float phi_dot_rad_s_[cfg::kJoints] = {};
+  float rad_per_count_[cfg::kJoints] = {};  // signed: negative for a reversed servo
+  float per_stiffness_ = 0.0f;
   uint16_t pulse_us_[cfg::kJoints] = {};
   bool measured_ = false;
 };
 
-// The angle a feedback potentiometer reading stands for (setting adc_centre, adc_counts_per_rad,
-// reversed of joint j).
-float joint_angle_rad(const eelproto::Settings& s, uint8_t j, uint16_t counts);
 // The reading a joint angle gives, rounded and clamped to the ADC's 0..1023 (the native build's
 // way of feeding measured angles through the calibration).
 uint16_t joint_adc_counts(const eelproto::Settings& s, uint8_t j, float angle_rad);

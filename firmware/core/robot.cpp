@@ -11,7 +11,6 @@
 namespace {
 using eelproto::MsgId;
 using eelproto::RefuseReason;
-using eelproto::SettingKey;
 
 // Keep the cadence (next = previous + period) unless we fell a whole period behind, then restart
 // it from now rather than firing a burst of late updates.
@@ -41,6 +40,7 @@ void Robot::reset(uint32_t now_us, const BootInfo& boot, const uint8_t* settings
   control_period_us_ = cfg::kControlPeriodUs;
   settings_source_ = settings_from_image(settings_image, settings_);
   settings_dirty_ = false;
+  joints_.configure(settings_);
   const eelproto::SetGait g = eelproto::defaults<eelproto::SetGait>();
   gait_cmd_ = GaitTargets{g.amplitude_rad, g.omega_rad_s, g.beta_rad, 0.0f};
   apply_targets(now_us);
@@ -109,22 +109,23 @@ bool Robot::settings_locked(const Frame& f) {
   return true;
 }
 
-void Robot::set_setting(SettingKey key, float value) {
-  bool changed = false;
-  eelproto::setting_set(settings_, static_cast<uint8_t>(key), 0, value, changed);
-  settings_dirty_ = settings_dirty_ || changed;
+// SetGait's rates and SetGains's gains are settings: the commands' fields were checked against
+// the same ranges (protocol/eelbot.toml, "from"), so they are stored as they are.
+__attribute__((noinline)) void Robot::store_setting(float& field, float value) {
+  settings_dirty_ = settings_dirty_ || field != value;
+  field = value;
 }
 
 void Robot::set_rate_settings(const eelproto::SetGait& m) {
-  set_setting(SettingKey::AmplitudeRateRadS, m.amplitude_rate_rad_s);
-  set_setting(SettingKey::BetaRateRadS, m.beta_rate_rad_s);
-  set_setting(SettingKey::OffsetRateRadS, m.offset_rate_rad_s);
+  store_setting(settings_.amplitude_rate_rad_s, m.amplitude_rate_rad_s);
+  store_setting(settings_.beta_rate_rad_s, m.beta_rate_rad_s);
+  store_setting(settings_.offset_rate_rad_s, m.offset_rate_rad_s);
 }
 
 void Robot::set_gain_settings(const eelproto::SetGains& m) {
-  set_setting(SettingKey::KpNmPerRad, m.kp_nm_per_rad);
-  set_setting(SettingKey::KdNmsPerRad, m.kd_nms_per_rad);
-  set_setting(SettingKey::TorqueLimitNm, m.torque_limit_nm);
+  store_setting(settings_.kp_nm_per_rad, m.kp_nm_per_rad);
+  store_setting(settings_.kd_nms_per_rad, m.kd_nms_per_rad);
+  store_setting(settings_.torque_limit_nm, m.torque_limit_nm);
 }
 
 void Robot::handle(const Frame& f, uint32_t now_us) {
@@ -192,12 +193,14 @@ void Robot::handle(const Frame& f, uint32_t now_us) {
         return;
       }
       settings_dirty_ = settings_dirty_ || changed;
+      joints_.configure(settings_);
       break;
     }
     case MsgId::DefaultSettings:
       if (settings_locked(f)) return;
       settings_ = eelproto::settings_defaults();
       settings_dirty_ = true;
+      joints_.configure(settings_);
       break;
     case MsgId::SaveSettings:
       if (settings_locked(f)) return;
@@ -246,23 +249,30 @@ void Robot::control_update(uint32_t now_us) {
 }
 
 void Robot::joint_update(const uint16_t* adc_counts) {
-  const bool sampled = adc_counts != nullptr;
-  if (sampled) {
-    battery_.update(settings_, adc_counts[cfg::kBatteryInput], control_dt_us_);
-  } else {
-    battery_.reset();
-  }
-  if (battery_.low()) {
-    enter(State::LowBattery, last_control_us_);
-  } else if (state_ == State::LowBattery) {
-    enter(State::Idle, last_control_us_);
-  }
-  const bool feedback = sampled && settings_.joint_feedback != 0;
+  battery_sampled_ = adc_counts != nullptr;
+  if (battery_sampled_) battery_counts_ = adc_counts[cfg::kBatteryInput];
+  const bool feedback = battery_sampled_ && settings_.joint_feedback != 0;
   joints_.update(settings_, gait_.alpha_rad(), gait_.alpha_dot_rad_s(),
                  feedback ? adc_counts : nullptr, control_dt_us_);
 }
 
+// The battery is health, not control: its filter runs after the update (outside its timing), and
+// a low battery changes the targets from the next update on.
+void Robot::update_battery(uint32_t now_us) {
+  if (battery_sampled_) {
+    battery_.update(settings_, battery_counts_, control_dt_us_);
+  } else {
+    battery_.reset();
+  }
+  if (battery_.low()) {
+    enter(State::LowBattery, now_us);
+  } else if (state_ == State::LowBattery) {
+    enter(State::Idle, now_us);
+  }
+}
+
 void Robot::service(uint32_t now_us) {
+  update_battery(now_us);
   if (report_now_ || deadline_reached(now_us, next_telemetry_us_)) {
     if (!report_now_) {
       next_telemetry_us_ = next_deadline(next_telemetry_us_, cfg::kTelemetryPeriodUs, now_us);

@@ -31,9 +31,9 @@ class Robot {
   // Control update at now_us: failsafe, link-loss envelope, the gait.
   void control_update(uint32_t now_us);
   // Then the rest of it with this update's analog readings (nullptr when wants_adc() was false):
-  // battery, measured angles, joint loop, servo pulses.
+  // measured angles, joint loop, servo pulses.
   void joint_update(const uint16_t* adc_counts);
-  // After the update: Telemetry and Status frames when due.
+  // After the update: the battery's reading of it, Telemetry and Status frames when due.
   void service(uint32_t now_us);
 
   // SaveSettings: the board writes this image to the EEPROM (at kSettingsEepromAddress) and says
@@ -68,10 +68,11 @@ class Robot {
   bool accept(const Frame& f, M& m);
   void apply_targets(uint32_t now_us);
   void enter(State s, uint32_t now_us);
+  void update_battery(uint32_t now_us);
   bool settings_locked(const Frame& f);
   void set_rate_settings(const eelproto::SetGait& m);
   void set_gain_settings(const eelproto::SetGains& m);
-  void set_setting(eelproto::SettingKey key, float value);
+  void store_setting(float& field, float value);
   void send_version();
   void send_telemetry(uint32_t now_us);
   void send_status(uint32_t now_us);
@@ -89,6 +90,7 @@ class Robot {
   uint32_t next_control_us_ = 0;
   uint32_t last_control_us_ = 0;
   uint32_t control_dt_us_ = 0;     // since the update before
+  uint16_t battery_counts_ = 0;    // the battery's reading at the last update
   uint32_t next_telemetry_us_ = 0;
   uint32_t next_status_us_ = 0;
   uint16_t control_updates_ = 0;
@@ -99,4 +101,5 @@ class Robot {
   bool fading_ = false;
   bool report_now_ = false;        // a state change: Telemetry at the next service
   bool status_requested_ = false;
+  bool battery_sampled_ = false;   // battery_counts_ is of the last update
 };

@@ -43,8 +43,8 @@ ISR(USART_UDRE_vect) {
 namespace uart {
 
 void begin() {
+  UCSR0A = _BV(U2X0);  // before UBRR0: simavr derives the byte time when UBRR0 is written
   UBRR0 = kUbrr;
-  UCSR0A = _BV(U2X0);
   UCSR0C = _BV(UCSZ01) | _BV(UCSZ00);  // 8N1
   UCSR0B = _BV(RXEN0) | _BV(TXEN0) | _BV(RXCIE0);
 }
