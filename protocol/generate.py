@@ -521,8 +521,10 @@ def _cpp_settings(d: dict) -> list[str]:
         "struct Settings {",
     ]
     for s in settings:
-        arr = f"[{d['constants'][s.count_name].cpp_name}]" if s.count_name else (
-            f"[{s.count}]" if s.count > 1 else ""
+        arr = (
+            f"[{d['constants'][s.count_name].cpp_name}]"
+            if s.count_name
+            else (f"[{s.count}]" if s.count > 1 else "")
         )
         out += _comment("  // ", s.doc)
         out.append(f"  {TYPES[s.type][2]} {s.name}{arr};")
@@ -871,8 +873,10 @@ def render_python(d: dict) -> str:
         out.append(f'    "{s.name}": SettingInfo(')
         out.append(f"        {args},")
         doc = textwrap.wrap(s.doc, 84)
-        out += [f"        {json.dumps(line + (' ' if k < len(doc) - 1 else ''))}" for k, line in
-                enumerate(doc)]
+        out += [
+            f"        {json.dumps(line + (' ' if k < len(doc) - 1 else ''))}"
+            for k, line in enumerate(doc)
+        ]
         out.append("    ),")
     out.append("}")
     return "\n".join(out) + PY_RUNTIME

@@ -50,7 +50,7 @@ inline Bytes raw_frame(uint16_t schema, uint8_t id, uint8_t seq, const uint8_t* 
 
 template <class M>
 Bytes frame_of(const M& m, uint8_t seq) {
-  uint8_t p[64];
+  uint8_t p[64] = {};
   eelproto::pack(m, p);
   Bytes out;
   out.n = encode_frame(static_cast<uint8_t>(M::kId), seq, p, M::kPayloadBytes, out.data,
