@@ -17,7 +17,7 @@
  * tests.
  *
  * Built with -DEEL_AVRSIM_LIBRARY -shared (build/tools/libeelavrsim.so) the same code is a library
- * for the processor-in-the-loop driver (host/eelhost/pil.py, through ctypes): the caller queues
+ * for the processor-in-the-loop driver (host/eelhost/xil/simavr.py, through ctypes): the caller queues
  * UART bytes at times, runs the AVR up to a time, and takes what it sent and the pulses it made
  * (the eas_* functions below).
  */
