@@ -1,9 +1,9 @@
-"""The native firmware drives the twin in lockstep (eelhost.cosim), over a modelled radio link.
+"""The native firmware drives the twin in lockstep (eelhost.xil.lockstep), over a modelled radio link.
 
 Tolerances, from measurements (hil_tests/README.md):
 
 - float32: the firmware against the twin's own laws in float64, evaluated once per step and held
-  (eelhost.cosim.HeldTwinDriver), differ by 1.4e-7 m (straight) and 1.6e-7 m (turning) over the
+  (eelhost.xil.drivers.HeldTwinDriver), differ by 1.4e-7 m (straight) and 1.6e-7 m (turning) over the
   whole run; we allow 1e-5 m.
 - torque hold: the twin evaluates its PD inside every RK4 stage, the firmware once per 10 ms step.
   The held torques make the robot about 2 % slower: the twin and the held laws part by 2.7 cm
@@ -14,9 +14,10 @@ Tolerances, from measurements (hil_tests/README.md):
 import numpy as np
 import pytest
 
-from eelhost import protocol as p
-from eelhost.cosim import CosimOptions, HeldTwinDriver, run_firmware_in_loop, run_lockstep
-from eelhost.radio import RadioModel
+from eelhost.wire import protocol as p
+from eelhost.xil.drivers import HeldTwinDriver
+from eelhost.xil.lockstep import LockstepOptions, run_firmware_in_loop, run_lockstep
+from eelhost.xil.radio import RadioModel
 from eelsim.closed_loop import LoopOptions, simulate_closed_loop
 from eelsim.flags import Failure
 from eelsim.robot import load_robot
@@ -75,7 +76,7 @@ def test_link_drop_mid_run_makes_the_failsafe_stop_the_gait_within_1s_and_the_ro
     scenario = load_scenario("straight").model_copy(update={"duration_s": 9.0})
     radio = RadioModel.xbee(outages_us=((int(drop_s * 1e6), 10**12),))
     res = run_firmware_in_loop(
-        robot, scenario, seed=3, radio=radio, options=CosimOptions(LoopOptions(stop_at_goal=False))
+        robot, scenario, seed=3, radio=radio, options=LockstepOptions(LoopOptions(stop_at_goal=False))
     )
     t, state = res.t_s, res.firmware_state
     assert np.all(state[(t > 0.1) & (t < drop_s)] == p.State.RUNNING)

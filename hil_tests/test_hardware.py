@@ -9,7 +9,7 @@ import time
 
 import pytest
 
-from eelhost import protocol as p
+from eelhost.wire import protocol as p
 
 pytestmark = pytest.mark.hardware
 

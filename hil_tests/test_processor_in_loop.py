@@ -1,4 +1,4 @@
-"""The real AVR image, emulated in simavr, drives the twin (eelhost.pil).
+"""The real AVR image, emulated in simavr, drives the twin (eelhost.xil.simavr).
 
 A 5 s straight run costs ~7 s of CPU (simavr interprets every instruction), so the tests share
 one run. Tolerances (measured figures in hil_tests/README.md):
@@ -14,9 +14,9 @@ one run. Tolerances (measured figures in hil_tests/README.md):
 import numpy as np
 import pytest
 
-from eelhost import protocol as p
-from eelhost.cosim import CosimOptions, run_firmware_in_loop
-from eelhost.pil import expected_pulse_widths_us, run_processor_in_loop
+from eelhost.wire import protocol as p
+from eelhost.xil.lockstep import LockstepOptions, run_firmware_in_loop
+from eelhost.xil.simavr import expected_pulse_widths_us, run_processor_in_loop
 from eelsim.closed_loop import LoopOptions
 from eelsim.robot import load_robot
 from eelsim.scenario import load_scenario
@@ -31,7 +31,7 @@ DISTANCE_TOLERANCE = 0.15
 def straight_runs():
     robot = load_robot()
     scenario = load_scenario("straight").model_copy(update={"duration_s": 5.0})
-    options = CosimOptions(LoopOptions(stop_at_goal=False))
+    options = LockstepOptions(LoopOptions(stop_at_goal=False))
     pil = run_processor_in_loop(robot, scenario, seed=0, options=options)
     native = run_firmware_in_loop(robot, scenario, seed=0, options=options)
     return scenario, pil, native

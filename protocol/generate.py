@@ -37,7 +37,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 DEFINITION = ROOT / "protocol" / "eelbot.toml"
 CPP_OUT = ROOT / "firmware" / "core" / "protocol_gen.h"
-PY_OUT = ROOT / "host" / "eelhost" / "protocol.py"
+PY_OUT = ROOT / "host" / "eelhost" / "wire" / "protocol.py"
 
 # type name -> (size in bytes, struct code, C++ type)
 TYPES = {
@@ -593,16 +593,16 @@ def _snake(name: str) -> str:
 
 PY_RUNTIME = '''
 
-# The framing is hand-written once in eelhost.framing; these bind it to this schema.
+# The framing is hand-written once in eelhost.wire.framing; these bind it to this schema.
 
 
 def encode_frame(message: Message, seq: int) -> bytes:
-    """Build the bytes to send for a message (see :func:`eelhost.framing.encode`)."""
+    """Build the bytes to send for a message (see :func:`eelhost.wire.framing.encode`)."""
     return _framing.encode(message, seq, SCHEMA_HASH)
 
 
 def decode_frame(encoded: bytes) -> tuple[int, Message]:
-    """Decode the bytes between two zero delimiters (see :func:`eelhost.framing.decode`)."""
+    """Decode the bytes between two zero delimiters (see :func:`eelhost.wire.framing.decode`)."""
     return _framing.decode(encoded, SCHEMA_HASH, MESSAGES, MAX_FRAME_BYTES)
 
 
@@ -806,7 +806,7 @@ def render_python(d: dict) -> str:
     Returns
     -------
     str
-        The text of ``host/eelhost/protocol.py``.
+        The text of ``host/eelhost/wire/protocol.py``.
     """
     p = d["protocol"]
     out = [
@@ -827,8 +827,8 @@ def render_python(d: dict) -> str:
         "from enum import IntEnum, IntFlag",
         "from typing import TYPE_CHECKING, Any, ClassVar, Self, TypeVar",
         "",
-        "from eelhost import framing as _framing",
-        "from eelhost.framing import (  # noqa: F401 (part of this module's interface)",
+        "from eelhost.wire import framing as _framing",
+        "from eelhost.wire.framing import (  # noqa: F401 (part of this module's interface)",
         "    FrameError,",
         "    cobs_decode,",
         "    cobs_encode,",

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from eelhost import protocol as p
+from eelhost.wire import protocol as p
 
 FIRMWARE = Path(__file__).resolve().parents[1]
 ELF = FIRMWARE / "build" / "avr" / "eelbot.elf"

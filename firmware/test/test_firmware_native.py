@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from eelhost import protocol as p
-from eelhost.native_firmware import NativeFirmware
+from eelhost.wire import protocol as p
+from eelhost.xil.native_firmware import NativeFirmware
 from eelsim.control import Gait, gait_reference, joint_pd_torque
 
 N_LINKS = p.N_JOINTS + 1

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from eelhost import protocol as p
+from eelhost.wire import protocol as p
 
 ROOT = Path(__file__).resolve().parents[2]
 

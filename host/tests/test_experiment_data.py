@@ -3,7 +3,7 @@ import json
 import numpy as np
 import pytest
 
-from eelhost.experiment import (
+from eelhost.data.experiments import (
     DataError,
     Experiment,
     import_tracker_csv,

@@ -8,10 +8,21 @@ import select
 
 import pytest
 
-from eelhost import protocol
-from eelhost.link import Link, LinkURIError, TransportError, open_link, parse_link_uri
+from eelhost.link import (
+    Link,
+    LinkURIError,
+    Port,
+    TransportError,
+    list_ports,
+    open_link,
+    parse_link_uri,
+    register_transport,
+    uri,
+)
 from eelhost.link.replay_transport import ReplayTransport, RxLogWriter, read_rx_log
 from eelhost.link.serial_transport import SerialTransport
+from eelhost.link.uri import TransportScheme
+from eelhost.wire import protocol
 
 
 class ManualClock:
@@ -128,3 +139,24 @@ def test_serial_port_that_comes_back_is_reconnected(tmp_path) -> None:
     link.close()
     os.close(master)
     os.close(slave)
+
+
+def test_a_registered_transport_opens_by_its_scheme_and_lists_its_ports(monkeypatch) -> None:
+    monkeypatch.setattr(uri, "_SCHEMES", dict(uri._SCHEMES))  # the registration ends with the test
+
+    def open_loopback(u, robot, clock):
+        return Link(SerialTransport("loop://"), clock or ManualClock())
+
+    register_transport(
+        TransportScheme(
+            "loopback", ("delay",), "", open_loopback,
+            lambda: [Port("loopback://", "bytes come back")], "loopback://",
+        )
+    )
+    link = open_link("loopback://?delay=0")
+    link.send(protocol.SetOffset(0.25))
+    assert link.poll() == [protocol.SetOffset(0.25)]
+    assert Port("loopback://", "bytes come back") in list_ports()
+    assert Port("sim://", uri.transport_schemes()["sim"].list_ports()[0].description) in list_ports()
+    with pytest.raises(LinkURIError, match="'speed' for loopback://"):
+        parse_link_uri("loopback://?speed=1")

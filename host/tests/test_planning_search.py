@@ -5,8 +5,9 @@ import pytest
 
 from eelhost.planning.execute import execute_plan
 from eelhost.planning.primitives import REST, SWIMMING, Discretisation, load_or_build
-from eelhost.planning.search import heuristic_s, place, plan_path, wrap_angle
+from eelhost.planning.search import heuristic_s, place, plan_path
 from eelhost.planning.world import load_world, parse_world
+from eelsim.control import wrap_angle
 from eelsim.robot import load_robot
 
 SMALL = Discretisation(distances_m=(0.35,), bearings_deg=(-45.0, 0.0, 45.0))

@@ -1,7 +1,9 @@
 import numpy as np
 import pytest
 
+from eelhost.planning.geometry import segments_cross
 from eelhost.planning.world import WorldError, load_world, parse_world
+from eelsim.flags import segments_intersect
 
 BASE = {
     "tank": {"size_m": [3.0, 2.0]},
@@ -70,3 +72,19 @@ def test_segment_clearance_measures_distance_to_nearest_obstacle():
     # nearest: the circle (centre 1.5,1.0 r 0.2) and the top wall at y = 2 (0.3 m)
     expected = min(np.hypot(0.5, 0.5) - 0.2, 0.3)
     assert world.segments_clearance(a, b) == pytest.approx(expected)
+
+
+def test_vectorised_segment_crossing_agrees_with_the_twins_segment_intersection():
+    # random segments (general position) and touching ones: a T, shared end points, a near miss
+    rng = np.random.default_rng(4)
+    a1, a2, b1, b2 = (rng.uniform(0, 1, (40, 2)) for _ in range(4))
+    touching = np.array([[[0, 0], [1, 0], [0.5, 0], [0.5, 1]],
+                         [[0, 0], [1, 1], [1, 1], [2, 0]],
+                         [[0, 0], [1, 0], [0.5, 1e-9], [0.5, 1]]], dtype=float)
+    a1, a2 = np.r_[a1, touching[:, 0]], np.r_[a2, touching[:, 1]]
+    b1, b2 = np.r_[b1, touching[:, 2]], np.r_[b2, touching[:, 3]]
+    crossed = segments_cross(a1, a2, b1, b2)
+    expected = np.array([[segments_intersect(a1[i], a2[i], b1[j], b2[j]) for j in range(len(b1))]
+                         for i in range(len(a1))])
+    assert crossed.any() and not crossed.all()
+    np.testing.assert_array_equal(crossed, expected)

@@ -10,10 +10,10 @@ import textwrap
 import numpy as np
 import pytest
 
-from eelhost import protocol
-from eelhost.experiment import DataError, read_experiment
+from eelhost.data.experiments import DataError, read_experiment
+from eelhost.field.recorder import Recorder, read_commands_csv
 from eelhost.link.base import LinkEvent
-from eelhost.recorder import Recorder, read_commands_csv
+from eelhost.wire import protocol
 from eelsim.scenario import load_scenario
 
 
@@ -67,9 +67,9 @@ def test_recorder_killed_mid_run_leaves_a_readable_experiment(tmp_path) -> None:
         f"""
         import os, signal
         from eelhost.link import open_link
-        from eelhost.link.sim_transport import VirtualCamera
-        from eelhost.recorder import Recorder
-        from eelhost.runloop import RunConfig, RunLoop
+        from eelhost.xil.virtual_robot import VirtualCamera
+        from eelhost.field.recorder import Recorder
+        from eelhost.field.runloop import RunConfig, RunLoop
         from eelhost.vision.localise import Localiser
         from eelhost.vision.synthetic import RenderOptions, SyntheticCamera
         from eelsim.robot import load_robot

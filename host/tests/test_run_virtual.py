@@ -9,15 +9,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from eelhost import protocol
+from eelhost.data.experiments import read_experiment
 from eelhost.estimation.fitness import N_SAMPLES_VALIDATE, sample_times, validation_errors
-from eelhost.experiment import read_experiment
+from eelhost.field.recorder import Recorder, read_commands_csv
+from eelhost.field.runloop import RunConfig, RunLoop, RunOutcome
 from eelhost.link import open_link
-from eelhost.link.sim_transport import VirtualCamera
-from eelhost.recorder import Recorder, read_commands_csv
-from eelhost.runloop import RunConfig, RunLoop, RunOutcome
 from eelhost.vision.localise import Localiser
 from eelhost.vision.synthetic import RenderOptions, SyntheticCamera
+from eelhost.wire import protocol
+from eelhost.xil.virtual_robot import VirtualCamera
 from eelsim.closed_loop import LoopOptions, simulate_closed_loop
 from eelsim.control import Gait
 from eelsim.robot import load_robot

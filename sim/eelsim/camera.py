@@ -17,6 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from eelsim.control import wrap_angle
+
 
 @dataclass(frozen=True)
 class CameraModel:
@@ -60,7 +62,10 @@ def quantise_position(position_m: np.ndarray, pixel_m: float) -> np.ndarray:
     return (np.floor(np.asarray(position_m) / pixel_m) + 0.5) * pixel_m
 
 
-def hermite(y0: np.ndarray, dy0: np.ndarray, y1: np.ndarray, dy1: np.ndarray, h: float, s: float):
+def hermite(
+    y0: np.ndarray, dy0: np.ndarray, y1: np.ndarray, dy1: np.ndarray, h: float,
+    s: float | np.ndarray,
+) -> np.ndarray:
     """Cubic Hermite interpolation at fraction ``s`` in [0, 1] of a step of length ``h``."""
     s2, s3 = s * s, s * s * s
     return (
@@ -87,13 +92,11 @@ class MedianFilter:
     def push(self, x_m: float, y_m: float, heading_rad: float) -> np.ndarray:
         """Add a sample and return the filtered (x, y, heading).
 
-        Headings are unwrapped against the previous sample so that the median does not jump
-        across +-pi.
+        Headings are unwrapped against the previous sample (the change taken in (-pi, pi],
+        :func:`eelsim.control.wrap_angle`) so that the median does not jump across +-pi.
         """
         if self._last_heading is not None:
-            heading_rad = self._last_heading + float(
-                np.angle(np.exp(1j * (heading_rad - self._last_heading)))
-            )
+            heading_rad = self._last_heading + float(wrap_angle(heading_rad - self._last_heading))
         self._last_heading = heading_rad
         self._buf.append(np.array([x_m, y_m, heading_rad]))
         return np.median(np.array(self._buf), axis=0)

@@ -1,15 +1,16 @@
-"""The twin swimming under the robot's own control stack (spec sections 4, 5 and 7).
+"""The twin swimming under the robot's own control stack (docs/model.md sections 4, 5 and 7).
 
 Per physics step (RK4, dt = 0.01 s by default):
 
 - the joints track the gait alpha_j(t) (with the held offset gamma) through the PD law, evaluated
   inside every RK4 stage as the robot's fast joint loop does; optionally through a hobby-servo
   torque-speed limit;
-- the camera takes its frames (30 fps) between steps, quantises positions to pixels and feeds the
-  moving median filter; a waypoint is reached when the filtered position is inside its acceptance
-  circle;
-- every control period (0.3 s, optionally jittered) the line-of-sight controller computes a new
-  offset from the latest filtered pose; it reaches the joints after the extra delay and is held;
+- the camera takes its frames (30 fps) between steps and quantises positions to pixels; the
+  guidance (:class:`eelsim.guidance.Guidance`) filters them with the moving median and switches
+  to the next waypoint when the filtered position is inside the acceptance circle;
+- every control period (0.3 s, optionally jittered) the guidance's line-of-sight law computes a
+  new offset from the latest filtered pose; it reaches the joints after the extra delay and is
+  held;
 - the failure conditions are checked; a failed run stops and returns its flag, time and reason.
 
 The joints are the one part that can be swapped: a :class:`JointController` turns the offset and
@@ -31,13 +32,15 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from eelsim.camera import CameraModel, MedianFilter, hermite, quantise_position
-from eelsim.control import Gait, gait_reference, heading_offset, joint_pd_torque
+from eelsim.camera import CameraModel, hermite, quantise_position
+from eelsim.control import Gait, gait_reference, joint_pd_torque
 from eelsim.dynamics import link_positions, mass_matrix, state_derivative, straight_state
 from eelsim.flags import DIVERGENCE_RATE, ILL_CONDITION_THRESHOLD, Failure, penalty, self_collision
+from eelsim.fluid import FluidCoefficients
+from eelsim.guidance import Guidance
 from eelsim.integrate import rk4_step
 from eelsim.model import SwimmerModel
-from eelsim.robot import HydroCoefficients, Robot
+from eelsim.robot import Robot
 from eelsim.scenario import Scenario
 from eelsim.timing import LoopTiming
 
@@ -269,7 +272,7 @@ def simulate_closed_loop(
     scenario: Scenario,
     options: LoopOptions | None = None,
     seed: int = 0,
-    coefficients: HydroCoefficients | None = None,
+    coefficients: FluidCoefficients | None = None,
     progress: Callable[[int, int], None] | None = None,
     joints: JointController | None = None,
 ) -> RunResult:
@@ -285,8 +288,8 @@ def simulate_closed_loop(
         Timing, camera, servo limits, stopping rule.
     seed : int
         Seed of the period jitter and heading noise.
-    coefficients : HydroCoefficients, optional
-        Overrides the robot's hydrodynamic coefficients.
+    coefficients : FluidCoefficients, optional
+        Overrides the robot's hydrodynamic coefficients (e.g. ``HydroCoefficients``).
     progress : callable, optional
         Called as ``progress(step, total_steps)`` every 100 steps.
     joints : JointController, optional
@@ -311,19 +314,15 @@ def simulate_closed_loop(
     limit = robot.joints.limit_rad
     vc = np.asarray(scenario.current_m_s)
     waypoints = np.asarray(scenario.waypoints_m, dtype=float)
-    radius = scenario.acceptance_radius_m
+    guide = Guidance(waypoints, scenario.acceptance_radius_m, gait.k_theta, cam.median_window)
     if joints is None:
         joints = TwinJoints(robot, gait, n, opts.servo_limits)
 
     updates = set(timing.update_steps(total, rng).tolist())
     frame_times = cam.frame_times(total * dt)
-    filt = MedianFilter(cam.median_window)
 
     x = straight_state(model, np.radians(scenario.start_heading_deg), scenario.start_position_m)
     pending: list[tuple[int, float]] = []  # (step at which it acts, offset)
-    target = 0
-    arrival: float | None = None
-    filtered = np.array([*x[n : n + 2], np.mean(x[:n])])
     failure, fail_t, reason = Failure.NONE, None, ""
 
     rec_t, rec_x, rec_g, rec_a, rec_w = [], [], [], [], []
@@ -332,18 +331,14 @@ def simulate_closed_loop(
     next_frame = 0
 
     def observe(t_frame: float, pose_true: FloatArray) -> None:
-        nonlocal filtered, target, arrival
+        # the camera model (pixels, heading noise), then the host's guidance
         pos = quantise_position(pose_true[:2], cam.pixel_m)
         head = pose_true[2] + (
             rng.normal(0.0, cam.heading_noise_rad) if cam.heading_noise_rad else 0.0
         )
-        filtered = filt.push(pos[0], pos[1], head)
+        filtered = guide.observe(t_frame, pos[0], pos[1], head)
         cam_t.append(t_frame)
         cam_pose.append(filtered.copy())
-        if target < len(waypoints) and np.linalg.norm(filtered[:2] - waypoints[target]) < radius:
-            target += 1
-            if target == len(waypoints) and arrival is None:
-                arrival = t_frame
 
     def pose_and_rate(state: FloatArray) -> tuple[FloatArray, FloatArray]:
         return (
@@ -361,13 +356,7 @@ def simulate_closed_loop(
         while True:
             t = step * dt
             if step in updates:
-                wp = waypoints[min(target, len(waypoints) - 1)]
-                pending.append(
-                    (
-                        step + timing.delay_steps,
-                        heading_offset(filtered[:2], filtered[2], wp, gait.k_theta),
-                    )
-                )
+                pending.append((step + timing.delay_steps, guide.offset()))
             # An offset reaches the joints the loop's extra delay after its update.
             offset_command = None
             while pending and pending[0][0] <= step:
@@ -380,13 +369,13 @@ def simulate_closed_loop(
             rec_x.append(x.copy())
             rec_g.append(drive.offset_rad)
             rec_a.append(drive.alpha_rad)
-            rec_w.append(target)
+            rec_w.append(guide.target_index)
 
             failure, reason = check_failures(model, x, limit, step in updates)
             if failure != Failure.NONE:
                 fail_t = t
                 break
-            if (arrival is not None and opts.stop_at_goal and step >= goal_from) or step >= total:
+            if (guide.arrived and opts.stop_at_goal and step >= goal_from) or step >= total:
                 break
 
             try:
@@ -414,10 +403,11 @@ def simulate_closed_loop(
             if progress is not None and step % 100 == 0:
                 progress(step, total)
 
-    if failure == Failure.NONE and arrival is None:
+    if failure == Failure.NONE and not guide.arrived:
         failure, fail_t = Failure.TOO_SLOW, rec_t[-1]
         reason = (
-            f"reached {target} of {len(waypoints)} waypoints by T_max = {scenario.duration_s:g} s"
+            f"reached {guide.target_index} of {len(waypoints)} waypoints by "
+            f"T_max = {scenario.duration_s:g} s"
         )
     return RunResult(
         t_s=np.array(rec_t),
@@ -430,8 +420,8 @@ def simulate_closed_loop(
         failure=failure,
         failure_time_s=fail_t,
         reason=reason,
-        arrival_time_s=arrival,
-        distance_left_m=distance_left(x[n : n + 2], waypoints, target),
+        arrival_time_s=guide.arrival_time_s,
+        distance_left_m=distance_left(x[n : n + 2], waypoints, guide.target_index),
     )
 
 

@@ -2,7 +2,7 @@
 
 The twin runs them inside its closed loop, the host's real-time loop calls the same functions, and
 the firmware's C++ core implements the gait and PD laws identically (its tests compare to these).
-Spec section 4 (`shared/spec/model.md`):
+docs/model.md section 4:
 
 - gait:  alpha_j(t) = A_j sin(omega t + beta_j) + gamma,
          A_j = A (N - j)/(N + 1),  beta_j = (j-1) beta
@@ -48,7 +48,11 @@ class Gait:
 
 
 def wrap_angle(angle_rad: ArrayLike) -> FloatArray | float:
-    """Wrap an angle to the half-open interval (-pi, pi].
+    """Wrap an angle to the half-open interval (-pi, pi]: the twin's one convention.
+
+    An angle already in (-pi, pi] comes back unchanged (to the bit); others as
+    pi - mod(pi - a, 2 pi), and a result that rounds to -pi (from just above pi) as pi. The
+    batched kernel's ``_wrap_angle`` is the same expression (tested against this one).
 
     Parameters
     ----------
@@ -61,7 +65,9 @@ def wrap_angle(angle_rad: ArrayLike) -> FloatArray | float:
         The equivalent angle(s) in (-pi, pi].
     """
     a = np.asarray(angle_rad, dtype=float)
-    w = np.pi - np.mod(np.pi - a, 2.0 * np.pi)  # lands in (-pi, pi]
+    inside = (a > -np.pi) & (a <= np.pi)
+    w = np.where(inside, a, np.pi - np.mod(np.pi - a, 2.0 * np.pi))  # in [-pi, pi]
+    w = np.where(w <= -np.pi, np.pi, w)  # the float interval is (-pi, pi]
     return float(w) if w.ndim == 0 else w
 
 

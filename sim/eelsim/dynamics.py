@@ -1,4 +1,4 @@
-"""Equations of motion of the N-link swimmer in water (spec section 2, the compact per-link form).
+"""Equations of motion of the N-link swimmer in water (docs/model.md section 2, compact per-link form).
 
 State x = (theta, p, theta_dot, p_dot): N absolute link angles (from the global x axis, link 1 the
 tail), the centre of mass p = (p_x, p_y), and their rates: 2 N + 4 numbers, SI units.
@@ -7,12 +7,13 @@ In the generalised coordinates q = (theta, p), with J_i the Jacobian of link cen
 
     M(q) q_ddot = Q(q, q_dot, u, v_c)
     M = sum_i J_i^T (m_i I + mu_i n_i n_i^T) J_i + diag(J_i + lambda_1,i ; 0, 0)
-    Q = sum_i J_i^T [f_drag,i + f_cur,i - (m_i I + mu_i n_i n_i^T) Jdot_i q_dot]
-        + (theta block) [-lambda_2 theta_dot - lambda_3 |theta_dot| theta_dot - D^T u]
+    Q = sum_i J_i^T [f_i - (m_i I + mu_i n_i n_i^T) Jdot_i q_dot]
+        + (theta block) [tau_i - D^T u]
 
-with Morison drag f_drag = -c_t (v_t + |v_t| v_t) t - c_n (v_n + |v_n| v_n) n on the velocity
-relative to the current, the added-mass current term f_cur = -mu theta_dot (t . v_c) n, and joint
-torques u (u_j acts +u_j on link j+1 and -u_j on link j). M is symmetric positive definite.
+where f_i and tau_i are the force and torque of the water on link i given by the model's fluid law
+(:mod:`eelsim.fluid`; the paper's Morison law: drag on the velocity relative to the current, the
+added-mass current term and the fluid yaw damping), and u the joint torques (u_j acts +u_j on
+link j+1 and -u_j on link j). M is symmetric positive definite.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from eelsim.fluid import LinkForces, LinkMotion
 from eelsim.model import SwimmerModel
 
 FloatArray = NDArray[np.float64]
@@ -115,7 +117,7 @@ def joint_angles(theta_rad: ArrayLike) -> FloatArray:
 
 def heading(theta_rad: ArrayLike) -> float:
     """The robot's heading theta_bar, the mean of the link angles."""
-    return float(np.mean(theta_rad))
+    return float(np.mean(np.asarray(theta_rad, dtype=float)))
 
 
 @dataclass(frozen=True)
@@ -154,8 +156,8 @@ def _kinematics(model: SwimmerModel, theta: FloatArray, w: FloatArray, v: FloatA
 
 def fluid_link_forces(
     model: SwimmerModel, state: ArrayLike, current_m_s: ArrayLike = (0.0, 0.0)
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """Drag and added-mass current forces on each link (spec section 2).
+) -> LinkForces:
+    """The water's force and torque on each link, from the model's fluid law (docs/model.md section 2).
 
     Parameters
     ----------
@@ -166,25 +168,20 @@ def fluid_link_forces(
 
     Returns
     -------
-    drag_x, drag_y, current_x, current_y : ndarray, shape (N,)
-        f_drag,i and f_cur,i in global coordinates.
+    LinkForces
+        Force (global x, y) and torque per link, and the law's named parts (for the Morison law
+        ``"drag"`` and ``"current"``).
     """
     theta, _, w, v = split_state(model, state)
     k = _kinematics(model, theta, w, v)
     return _fluid_forces(model, k, w, np.asarray(current_m_s, dtype=float))
 
 
-def _fluid_forces(model: SwimmerModel, k: _LinkKinematics, w: FloatArray, vc: FloatArray):
-    f = model.fluid
-    rx, ry = k.vx - vc[0], k.vy - vc[1]
-    vt = k.c * rx + k.s * ry
-    vn = -k.s * rx + k.c * ry
-    ft = -f.c_t * (vt + np.abs(vt) * vt)
-    fn = -f.c_n * (vn + np.abs(vn) * vn)
-    drag_x = ft * k.c - fn * k.s
-    drag_y = ft * k.s + fn * k.c
-    cur_n = -f.mu_n * w * (k.c * vc[0] + k.s * vc[1])
-    return drag_x, drag_y, -cur_n * k.s, cur_n * k.c
+def _fluid_forces(
+    model: SwimmerModel, k: _LinkKinematics, w: FloatArray, vc: FloatArray
+) -> LinkForces:
+    motion = LinkMotion(sin=k.s, cos=k.c, omega=w, rel_vx=k.vx - vc[0], rel_vy=k.vy - vc[1])
+    return model.fluid_law.forces(model.fluid, motion, vc)
 
 
 def mass_matrix(model: SwimmerModel, state: ArrayLike) -> FloatArray:
@@ -249,14 +246,13 @@ def accelerations(
         raise ValueError(f"torques must have shape ({n - 1},) for N = {n}, got {u.shape}")
     k = _kinematics(model, theta, w, v)
     big_m = _mass_matrix(model, k)
-    drag_x, drag_y, cur_x, cur_y = _fluid_forces(model, k, w, np.asarray(current_m_s, float))
+    water = _fluid_forces(model, k, w, np.asarray(current_m_s, float))
     m, mu = model.mass_kg, model.fluid.mu_n
     # Inertial forces of the centripetal link accelerations, (m I + mu n n^T) Jdot q_dot.
     inert_x = (m + mu * k.s**2) * k.ax0 - mu * k.s * k.c * k.ay0
     inert_y = -mu * k.s * k.c * k.ax0 + (m + mu * k.c**2) * k.ay0
-    q = k.jx.T @ (drag_x + cur_x - inert_x) + k.jy.T @ (drag_y + cur_y - inert_y)
-    f = model.fluid
-    q[:n] += -f.lambda_2 * w - f.lambda_3 * np.abs(w) * w + joint_torques_on_links(u)
+    q = k.jx.T @ (water.fx - inert_x) + k.jy.T @ (water.fy - inert_y)
+    q[:n] += water.torque + joint_torques_on_links(u)
     chol = np.linalg.cholesky(big_m)
     qdd = np.linalg.solve(chol.T, np.linalg.solve(chol, q))
     return qdd[:n], qdd[n:]

@@ -5,8 +5,8 @@ Kinetic energy counts the bodies, the normal added mass and the added yaw inerti
     T = sum_i 1/2 m_i |v_i|^2 + 1/2 (J_i + lambda_1,i) theta_dot_i^2 + 1/2 mu_i (n_i . v_i)^2
 
 Along any solution, dT/dt = P_joint + P_fluid + P_added_mass, where P_joint is the power of the
-joint torques, P_fluid the power of drag, fluid yaw damping and the current term (negative in still
-water: dissipation), and P_added_mass = -sum_i mu_i theta_dot_i v_n,i v_t,i is the power that the
+joint torques, P_fluid the power of the fluid law's forces and torques (for the Morison law: drag,
+fluid yaw damping and the current term; negative in still water: dissipation), and P_added_mass = -sum_i mu_i theta_dot_i v_n,i v_t,i is the power that the
 Morison added-mass force -mu n (n . a) exchanges as a link turns while it moves (it is not the time
 derivative of any energy; with C_a = 0 it vanishes and T changes only by joint work minus
 dissipation).
@@ -32,7 +32,8 @@ class PowerBalance:
     joint : float
         Power delivered by the joint torques, sum_j u_j phi_dot_j.
     fluid : float
-        Power of drag, fluid yaw damping and the added-mass current term.
+        Power of the fluid law's forces and torques (Morison: drag, fluid yaw damping and the
+        added-mass current term).
     added_mass : float
         Power exchanged by the Morison added-mass force as links rotate.
     """
@@ -91,16 +92,12 @@ def power_balance(
     theta, _, w, _ = split_state(model, state)
     u = np.asarray(torques_nm, dtype=float)
     vx, vy = link_velocities(model, state)
-    dx, dy, cx, cy = fluid_link_forces(model, state, current_m_s)
-    f = model.fluid
+    water = fluid_link_forces(model, state, current_m_s)
     s, c = np.sin(theta), np.cos(theta)
     vt, vn = c * vx + s * vy, -s * vx + c * vy
-    fluid = float(
-        np.sum(vx * (dx + cx) + vy * (dy + cy))
-        - np.sum(f.lambda_2 * w**2 + f.lambda_3 * np.abs(w) * w**2)
-    )
+    fluid = float(np.sum(vx * water.fx + vy * water.fy) + np.sum(w * water.torque))
     return PowerBalance(
         joint=float(np.dot(u, np.diff(w))),
         fluid=fluid,
-        added_mass=float(-np.sum(f.mu_n * w * vn * vt)),
+        added_mass=float(-np.sum(model.fluid.mu_n * w * vn * vt)),
     )

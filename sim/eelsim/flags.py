@@ -1,4 +1,4 @@
-"""Failure conditions of a simulated run (spec section 5, paper eq. 34 and table 2).
+"""Failure conditions of a simulated run (docs/model.md section 5, paper eq. 34 and table 2).
 
 A run is flagged, never crashed, when it is too slow (not at its last waypoint by T_max), when the
 mass matrix is ill-conditioned or the state is not finite (the integration blew up), or when the

@@ -119,7 +119,7 @@ def integrate_rk4(
     states[0] = np.asarray(initial_state, dtype=float)
     for k in range(steps):
         states[k + 1] = rk4_step(f, k * dt_s, states[k], dt_s)
-    return Trajectory(t_s=np.arange(steps + 1) * dt_s, states=states)
+    return Trajectory(t_s=np.arange(steps + 1, dtype=float) * dt_s, states=states)
 
 
 def integrate_reference(

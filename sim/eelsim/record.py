@@ -20,7 +20,8 @@ from typing import Any
 import numpy as np
 
 from eelsim.closed_loop import LoopOptions, RunResult
-from eelsim.robot import HydroCoefficients, Robot
+from eelsim.fluid import FluidCoefficients
+from eelsim.robot import Robot
 from eelsim.scenario import Scenario
 
 
@@ -64,7 +65,7 @@ def run_metadata(
     scenario: Scenario,
     options: LoopOptions,
     seed: int,
-    coefficients: HydroCoefficients | None = None,
+    coefficients: FluidCoefficients | None = None,
 ) -> dict[str, Any]:
     """Everything needed to reproduce and judge the run, as JSON-ready data."""
     coeffs = coefficients or robot.hydrodynamics
@@ -92,7 +93,7 @@ def write_run(
     options: LoopOptions,
     seed: int,
     stem: str | Path,
-    coefficients: HydroCoefficients | None = None,
+    coefficients: FluidCoefficients | None = None,
 ) -> tuple[Path, Path]:
     """Write ``<stem>.csv`` and ``<stem>.json``; return their paths.
 

@@ -1,24 +1,59 @@
 """Robot description: a TOML file, validated on load.
 
 A robot file gives the geometry and mass of the links (with optional head and tail overrides), the
-water density, the hydrodynamic coefficients e = (C_f, C_d, C_a, C_m), the joint gains and limits,
-and an ``[assumptions]`` table naming every value that was assumed rather than measured, with the
-reason. Unknown keys are refused at every level; every number must be finite. Errors name the file
-and the dotted key that is wrong.
+water density, the fluid law and its coefficients (``[hydrodynamics]``: ``law``, default
+``"morison"``, and e.g. the paper's e = (C_f, C_d, C_a, C_m); see :mod:`eelsim.fluid`), the joint
+gains and limits, and an ``[assumptions]`` table naming every value that was assumed rather than
+measured, with the reason. Unknown keys are refused at every level; every number must be finite.
+Errors name the file and the dotted key that is wrong (docs/model.md section 8).
 
 The bundled default, ``paper_robot.toml``, is the robot of Raj & Thakur (N = 6, BL about 0.64 m).
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 from typing import Annotated, Any
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from numpy.typing import NDArray
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    SerializationInfo,
+    SerializeAsAny,
+    SerializerFunctionWrapHandler,
+    ValidationError,
+    field_serializer,
+    field_validator,
+    model_validator,
+)
 
+from eelsim.fluid import (
+    DEFAULT_FLUID_LAW,
+    FluidCoefficients,
+    FluidLaw,
+    HydroCoefficients,
+    get_fluid_law,
+    law_of,
+)
 from eelsim.tomlfile import parse_toml, read_toml, validation_message
+
+__all__ = [
+    "DEFAULT_ROBOT",
+    "HydroCoefficients",
+    "JointSpec",
+    "LinkArrays",
+    "LinkOverride",
+    "LinkSpec",
+    "Robot",
+    "RobotFileError",
+    "load_robot",
+    "parse_robot",
+]
 
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
 PositiveFloat = Annotated[float, Field(gt=0.0, allow_inf_nan=False)]
@@ -58,6 +93,34 @@ class LinkSpec(_Strict):
     mass_kg: PositiveFloat
     yaw_inertia_kg_m2: PositiveFloat | None = None
 
+    def yaw_inertia_or_default_kg_m2(self) -> float:
+        """J: ``yaw_inertia_kg_m2`` when given, else that of a slender rod, m l^2 / 3.
+
+        The one place that default lives (docs/model.md section 1).
+        """
+        if self.yaw_inertia_kg_m2 is not None:
+            return self.yaw_inertia_kg_m2
+        return self.mass_kg * self.half_length_m**2 / 3.0
+
+
+@dataclass(frozen=True)
+class LinkArrays:
+    """The links of a robot as arrays of shape (N,), tail first (what the dynamics need).
+
+    Attributes
+    ----------
+    half_length_m, half_axis_vertical_m, half_axis_horizontal_m, mass_kg : ndarray
+        l, a, b and m of each link.
+    yaw_inertia_kg_m2 : ndarray
+        J of each link (:meth:`LinkSpec.yaw_inertia_or_default_kg_m2`).
+    """
+
+    half_length_m: NDArray[np.float64]
+    half_axis_vertical_m: NDArray[np.float64]
+    half_axis_horizontal_m: NDArray[np.float64]
+    mass_kg: NDArray[np.float64]
+    yaw_inertia_kg_m2: NDArray[np.float64]
+
 
 class LinkOverride(_Strict):
     """Per-link values that replace the body link's for the head or the tail (all optional)."""
@@ -67,39 +130,6 @@ class LinkOverride(_Strict):
     half_axis_horizontal_m: PositiveFloat | None = None
     mass_kg: PositiveFloat | None = None
     yaw_inertia_kg_m2: PositiveFloat | None = None
-
-
-class HydroCoefficients(_Strict):
-    """Hydrodynamic parameters e = (C_f, C_d, C_a, C_m), dimensionless.
-
-    Attributes
-    ----------
-    C_f : float
-        Tangential (longitudinal) drag coefficient.
-    C_d : float
-        Normal (transverse) drag coefficient.
-    C_a : float
-        Added mass coefficient (normal direction).
-    C_m : float
-        Added yaw inertia coefficient.
-    """
-
-    C_f: NonNegativeFloat
-    C_d: NonNegativeFloat
-    C_a: NonNegativeFloat
-    C_m: NonNegativeFloat
-
-    def as_array(self) -> np.ndarray:
-        """Return (C_f, C_d, C_a, C_m) as a float array."""
-        return np.array([self.C_f, self.C_d, self.C_a, self.C_m], dtype=float)
-
-    @classmethod
-    def from_array(cls, values: Any) -> HydroCoefficients:
-        """Build from a sequence (C_f, C_d, C_a, C_m)."""
-        v = [float(x) for x in values]
-        if len(v) != 4:
-            raise ValueError(f"expected 4 coefficients (C_f, C_d, C_a, C_m), got {len(v)}")
-        return cls(C_f=v[0], C_d=v[1], C_a=v[2], C_m=v[3])
 
 
 class JointSpec(_Strict):
@@ -146,9 +176,32 @@ class Robot(_Strict):
     link: LinkSpec
     head: LinkOverride | None = None
     tail: LinkOverride | None = None
-    hydrodynamics: HydroCoefficients
+    hydrodynamics: SerializeAsAny[FluidCoefficients]
     joints: JointSpec
     assumptions: dict[str, str] = Field(default_factory=dict)
+
+    @field_validator("hydrodynamics", mode="before")
+    @classmethod
+    def _coefficients_of_the_named_law(cls, value: Any) -> Any:
+        """Validate the table against the coefficients of its ``law`` (default: morison)."""
+        if isinstance(value, dict):
+            fields = dict(value)
+            name = fields.pop("law", DEFAULT_FLUID_LAW)
+            if not isinstance(name, str):
+                raise ValueError(f"law must be the name of a fluid law, got {name!r}")
+            return get_fluid_law(name).coefficients.model_validate(fields)
+        return value
+
+    @field_serializer("hydrodynamics", mode="wrap")
+    def _with_the_law_unless_default(
+        self, value: FluidCoefficients, handler: SerializerFunctionWrapHandler,
+        info: SerializationInfo,
+    ) -> Any:
+        """The table as in a robot file: ``law`` first, left out for the default law."""
+        table = handler(value)
+        if type(value).law_name == DEFAULT_FLUID_LAW:
+            return table
+        return {"law": type(value).law_name, **table}
 
     @model_validator(mode="after")
     def _assumptions_name_real_keys(self) -> Robot:
@@ -169,12 +222,28 @@ class Robot(_Strict):
             out.append(LinkSpec(**values))
         return out
 
+    def link_arrays(self) -> LinkArrays:
+        """Return the links' geometry, masses and inertias as arrays, tail first."""
+        links = self.links()
+        return LinkArrays(
+            half_length_m=np.array([lk.half_length_m for lk in links]),
+            half_axis_vertical_m=np.array([lk.half_axis_vertical_m for lk in links]),
+            half_axis_horizontal_m=np.array([lk.half_axis_horizontal_m for lk in links]),
+            mass_kg=np.array([lk.mass_kg for lk in links]),
+            yaw_inertia_kg_m2=np.array([lk.yaw_inertia_or_default_kg_m2() for lk in links]),
+        )
+
     def body_length_m(self) -> float:
         """Return BL, the total length of the robot (sum of the link lengths)."""
         return float(sum(2.0 * lk.half_length_m for lk in self.links()))
 
-    def with_coefficients(self, coeffs: HydroCoefficients) -> Robot:
-        """Return a copy of this robot with other hydrodynamic coefficients."""
+    @property
+    def fluid_law(self) -> FluidLaw:
+        """The fluid law of the robot's hydrodynamic coefficients."""
+        return law_of(self.hydrodynamics)
+
+    def with_coefficients(self, coeffs: FluidCoefficients) -> Robot:
+        """Return a copy of this robot with other hydrodynamic coefficients (of any law)."""
         return self.model_copy(update={"hydrodynamics": coeffs})
 
 

@@ -1,6 +1,6 @@
 """Scenarios: what the robot is asked to do (gait, waypoints, current, time limit).
 
-The paper's experiments are available by name (spec section 7):
+The paper's experiments are available by name (docs/model.md section 7):
 
 - ``straight_A<A>_w<omega>`` and ``turning_A<A>_w<omega>`` for the 4 x 4 gait grid
   (A in 0.61, 0.69, 0.78, 0.87 rad; omega in 2.7, 3.1, 3.5, 3.9 rad/s; beta = 1.04 rad), a waypoint

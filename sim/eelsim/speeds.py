@@ -11,7 +11,8 @@ from __future__ import annotations
 import numpy as np
 
 from eelsim.closed_loop import LoopOptions, simulate_closed_loop
-from eelsim.robot import HydroCoefficients, Robot
+from eelsim.fluid import FluidCoefficients
+from eelsim.robot import Robot
 from eelsim.scenario import GRID_AMPLITUDES_RAD, GRID_OMEGAS_RAD_S, grid_scenario
 
 
@@ -20,7 +21,7 @@ def steady_speed(
     amplitude_rad: float,
     omega_rad_s: float,
     duration_s: float = 20.0,
-    coefficients: HydroCoefficients | None = None,
+    coefficients: FluidCoefficients | None = None,
 ) -> tuple[float, bool]:
     """Steady forward speed of one gait and whether it swam head first.
 
@@ -31,7 +32,7 @@ def steady_speed(
         The gait (beta = 1.04 rad, straight-motion gain).
     duration_s : float
         Length of the run.
-    coefficients : HydroCoefficients, optional
+    coefficients : FluidCoefficients, optional
         Overrides the robot's coefficients.
 
     Returns
@@ -60,7 +61,7 @@ def steady_speed(
 
 
 def grid_speeds(
-    robot: Robot, duration_s: float = 20.0, coefficients: HydroCoefficients | None = None
+    robot: Robot, duration_s: float = 20.0, coefficients: FluidCoefficients | None = None
 ) -> np.ndarray:
     """Steady speeds over the 4 x 4 grid, shape (4 amplitudes, 4 frequencies), m/s.
 

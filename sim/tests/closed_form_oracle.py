@@ -1,4 +1,4 @@
-"""The paper's closed form (spec section 3), written separately as a test oracle.
+"""The paper's closed form (docs/model.md section 3), written separately as a test oracle.
 
 Only valid for identical links. Deliberately written in the paper's matrix notation, sharing no
 code with eelsim.dynamics except the coefficient values.
@@ -77,7 +77,7 @@ def closed_form_accelerations(n, l, m, ct, cn, mu, lam1, lam2, lam3, state, u, v
         - K_Dy @ fDy
     )
     tdd = np.linalg.solve(M_theta, rhs)
-    # Centre of mass (paper eq. 6 as restated in spec section 3).
+    # Centre of mass (paper eq. 6 as restated in docs/model.md section 3).
     fcur_n = -mu * td * (c * vc[0] + s * vc[1])
     fcx, fcy = -fcur_n * s, fcur_n * c
     ax = l * K.T @ (C @ td**2 + S @ tdd)

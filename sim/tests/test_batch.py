@@ -3,6 +3,8 @@
 Agreement is asked to 1e-9 on every recorded step (relative to max(1, |x|), which only matters for
 the state of a run that is blowing up), on arrival and failure times, flags, reasons and the
 distance left. The tests run on one thread (threads=1) except the one that checks threads agree.
+The kernel is generated for the robot's N: the comparisons run at N = 3, 6 and 8 (the paper's
+robot has 6 links; the others run shorter, to keep the suite quick).
 """
 
 import numpy as np
@@ -19,6 +21,21 @@ from eelsim.timing import LoopTiming
 TOL = 1e-9
 # the generated stage compiled as C and by numba: both are tested (eelsim.batch.stage_backend)
 STAGES = ["c", "numba"]
+LINK_COUNTS = [3, 6, 8]
+
+
+@pytest.fixture(params=LINK_COUNTS, ids=lambda n: f"N{n}")
+def sized_robot(request, robot):
+    """The paper's robot, and the same links in chains of 3 and 8."""
+    n = request.param
+    return robot if n == robot.n_links else robot.model_copy(update={"n_links": n})
+
+
+def for_size(robot, scenario, short_s=3.0):
+    """The scenario, cut to ``short_s`` seconds for the robots other than the paper's."""
+    if robot.n_links == 6:
+        return scenario
+    return scenario.model_copy(update={"duration_s": min(scenario.duration_s, short_s)})
 
 
 def with_joints(robot, **changes):
@@ -54,9 +71,9 @@ def compare(robot, scenario, options=None, seed=0, coefficients=None):
     return ref, res
 
 
-def test_batch_agrees_with_reference_on_a_straight_grid_gait(robot):
+def test_batch_agrees_with_reference_on_a_straight_grid_gait(sized_robot):
     s = load_scenario("straight_A0.61_w2.7").model_copy(update={"duration_s": 8.0})
-    ref, _ = compare(robot, s)
+    ref, _ = compare(sized_robot, for_size(sized_robot, s))
     assert ref.failure == Failure.TOO_SLOW  # 8 s is too short to arrive: the flag is compared too
 
 
@@ -70,13 +87,23 @@ def test_batch_agrees_on_path2_with_current_and_waypoint_switching(robot):
     assert ref.failure == Failure.NONE and res.target_index[0] == 3
 
 
-def test_batch_agrees_with_jitter_delay_heading_noise_and_seed(robot):
+def test_batch_agrees_on_close_waypoints_in_a_current_for_other_link_counts(sized_robot):
+    # waypoint switching, arrival and the current's terms at every N, in a few seconds: the
+    # waypoints lie just outside the acceptance circle ahead and to the side
+    s = load_scenario("path2").model_copy(update={
+        "waypoints_m": [(0.16, 0.0), (0.22, 0.12)], "duration_s": 3.0,
+        "current_speed_m_s": 0.03, "current_direction_deg": 45.0})
+    ref, res = compare(sized_robot, s)
+    assert res.target_index[0] >= 1  # the first waypoint was reached
+
+
+def test_batch_agrees_with_jitter_delay_heading_noise_and_seed(sized_robot):
     opts = LoopOptions(
         timing=LoopTiming(extra_delay_s=0.05, jitter_s=0.05),
         camera=CameraModel(heading_noise_rad=0.02),
     )
     s = load_scenario("turning").model_copy(update={"duration_s": 10.0})
-    compare(robot, s, opts, seed=7)
+    compare(sized_robot, for_size(sized_robot, s), opts, seed=7)
 
 
 @pytest.mark.parametrize("window", [1, 4, 7])
@@ -88,18 +115,18 @@ def test_batch_agrees_with_median_windows_other_than_five(robot, window):
     compare(robot, s, opts, seed=3)
 
 
-def test_batch_agrees_with_servo_limits_and_other_coefficients(robot):
+def test_batch_agrees_with_servo_limits_and_other_coefficients(sized_robot):
     s = load_scenario("straight").model_copy(update={"duration_s": 6.0})
-    compare(robot, s, LoopOptions(servo_limits=True),
+    compare(sized_robot, for_size(sized_robot, s), LoopOptions(servo_limits=True),
             coefficients=HydroCoefficients(C_f=0.009, C_d=0.978, C_a=1.169, C_m=0.001))
 
 
-def test_batch_agrees_on_links_that_differ_head_and_tail_overrides(robot):
-    data = robot.model_dump()
+def test_batch_agrees_on_links_that_differ_head_and_tail_overrides(sized_robot):
+    data = sized_robot.model_dump()
     data["head"] = {"half_length_m": 0.07, "mass_kg": 0.3, "half_axis_vertical_m": 0.03}
     data["tail"] = {"half_length_m": 0.04, "mass_kg": 0.15, "yaw_inertia_kg_m2": 1e-4}
     odd = Robot.model_validate(data)
-    compare(odd, load_scenario("turning").model_copy(update={"duration_s": 6.0}))
+    compare(odd, for_size(odd, load_scenario("turning").model_copy(update={"duration_s": 6.0})))
 
 
 def test_batch_flags_too_slow_like_the_reference(robot):
@@ -295,14 +322,16 @@ def _random_states(rng, n, lanes):
                      for _ in range(lanes)])
 
 
-@pytest.mark.parametrize("stage", STAGES)
+@pytest.mark.parametrize(("stage", "n_links"), [("c", 3), ("c", 6), ("numba", 6), ("c", 8)])
 @pytest.mark.parametrize("odd_links", [False, True])
-def test_recursive_accelerations_equal_the_dense_mass_matrix_solve(robot, odd_links, stage):
+def test_recursive_accelerations_equal_the_dense_mass_matrix_solve(robot, odd_links, stage,
+                                                                   n_links):
     # the kernel's O(N) articulated-body recursion against dynamics.state_derivative (dense M,
     # Cholesky) on random states, with current and links that differ; joint torques off
     from eelsim.dynamics import state_derivative
     from eelsim.model import SwimmerModel
 
+    robot = robot.model_copy(update={"n_links": n_links})
     if odd_links:
         data = robot.model_dump()
         data["head"] = {"half_length_m": 0.07, "mass_kg": 0.3, "half_axis_vertical_m": 0.03}
@@ -404,3 +433,19 @@ def test_runs_with_a_current_or_a_servo_line_are_not_plain(robot):
     assert plain_runs(spec).tolist() == [True, False]
     servo = BatchSpec.build(robot, still, options=LoopOptions(servo_limits=True))
     assert plain_runs(servo).tolist() == [False]
+
+
+def test_the_kernels_segment_test_is_flags_segments_intersect():
+    # the kernel's scalar copy of flags.segments_intersect, on a coarse grid where touching,
+    # collinear and degenerate (zero-length) segments are common
+    from eelsim.batch import DEFAULT_LANES, kernel_module
+    from eelsim.flags import segments_intersect
+
+    k = kernel_module(6, DEFAULT_LANES, "c")
+    rng = np.random.default_rng(4)
+    answers = set()
+    for p1, p2, q1, q2 in rng.integers(0, 4, (3000, 4, 2)).astype(float):
+        expect = segments_intersect(p1, p2, q1, q2)
+        assert k._segments_intersect(*p1, *p2, *q1, *q2) == expect, (p1, p2, q1, q2)
+        answers.add(expect)
+    assert answers == {True, False}

@@ -1,4 +1,4 @@
-"""The generated stage compiled as C (eelsim._batch_c) against numba's compilation of the same text.
+"""The generated stage compiled as C (eelsim.batch.c_stage) against numba's compilation of the same text.
 
 The C text is a translation of the generated Python; these tests check the translation on its own
 (every construct of the subset, with NaN, infinities and signed zeros, against Python running
@@ -11,8 +11,8 @@ import ctypes
 import numpy as np
 import pytest
 
-from eelsim import _batch_c, batch
-from eelsim.batch import BatchSpec, run_spec
+from eelsim import batch
+from eelsim.batch import BatchSpec, c_stage, loading, run_spec
 from eelsim.camera import CameraModel
 from eelsim.closed_loop import LoopOptions
 from eelsim.robot import HydroCoefficients
@@ -47,7 +47,7 @@ def _python_probe(work, t_s, flag):
 
 
 def _c_probe(tmp_path):
-    library, symbols = _batch_c.build(_SUBSET, ("_probe",), tmp_path)
+    library, symbols = c_stage.build(_SUBSET, ("_probe",), tmp_path)
     fn = getattr(ctypes.CDLL(str(library)), symbols["_probe"])
     fn.argtypes = [ctypes.POINTER(ctypes.c_double), ctypes.c_double, ctypes.c_int64]
     fn.restype = None
@@ -58,7 +58,7 @@ def _c_probe(tmp_path):
     return call
 
 
-needs_cc = pytest.mark.skipif(_batch_c.find_compiler() is None,
+needs_cc = pytest.mark.skipif(c_stage.find_compiler() is None,
                               reason="no C compiler (install gcc; scripts/setup.sh does as root)")
 
 
@@ -89,10 +89,10 @@ def test_translated_subset_computes_what_python_computes_with_nan_inf_and_signed
 
 def test_the_translator_refuses_a_construct_outside_the_subset_naming_its_line():
     source = "def _f(work):\n    for r in range(4):\n        work[r] = work[r] ** 2\n"
-    with pytest.raises(_batch_c.CStageError, match=r"line 3: no C for 'work\[r\] \*\* 2'"):
-        _batch_c.translate(source, "_f", "f")
-    with pytest.raises(_batch_c.CStageError, match="no function '_g'"):
-        _batch_c.translate(source, "_g", "g")
+    with pytest.raises(c_stage.CStageError, match=r"line 3: no C for 'work\[r\] \*\* 2'"):
+        c_stage.translate(source, "_f", "f")
+    with pytest.raises(c_stage.CStageError, match="no function '_g'"):
+        c_stage.translate(source, "_g", "g")
 
 
 @needs_cc
@@ -132,12 +132,12 @@ def test_an_unknown_stage_choice_is_refused_naming_where_it_came_from(monkeypatc
 
 def test_a_failing_c_compiler_is_an_error_when_asked_for_and_a_fallback_on_auto(monkeypatch):
     monkeypatch.setenv("CC", "false")  # a "compiler" that fails on anything
-    monkeypatch.setattr(batch, "_KERNELS", {})
-    monkeypatch.setattr(batch, "_C_UNAVAILABLE", [])
-    with pytest.raises(_batch_c.CStageError, match="C compiler 'false' failed"):
+    monkeypatch.setattr(loading, "_KERNELS", {})
+    monkeypatch.setattr(loading, "_C_UNAVAILABLE", [])
+    with pytest.raises(c_stage.CStageError, match="C compiler 'false' failed"):
         batch.kernel_module(6, batch.DEFAULT_LANES, "c")
     with pytest.warns(RuntimeWarning, match="C stage is unavailable, numba compiles it"):
         module = batch.kernel_module(6, batch.DEFAULT_LANES, "auto")
-    assert module.__name__.endswith("_l16")  # the numba-compiled kernel
+    assert module.__name__.endswith("_l16_numba_morison")  # the numba-compiled kernel
     assert "_C_STAGE" not in vars(module)  # no binding to a C library in it
     assert batch.stage_backend("auto") == "numba"  # said once, then numba for this process

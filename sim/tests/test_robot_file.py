@@ -54,6 +54,9 @@ def test_file_round_trip_loads_the_same_robot(tmp_path):
         (lambda d: d.update(head={"mass_kg": 0.3, "fins": 2}), "head.fins", "unknown key"),
         (lambda d: d["hydrodynamics"].pop("C_a"), "hydrodynamics.C_a", "Field required"),
         (lambda d: d["assumptions"].update({"link.colour": "why"}), "assumptions", "names no key"),
+        (lambda d: d["hydrodynamics"].update(law="potential"), "hydrodynamics",
+         "unknown fluid law 'potential'; known laws: morison"),
+        (lambda d: d["hydrodynamics"].update(C_x=1.0), "hydrodynamics.C_x", "unknown key"),
     ],
 )
 def test_bad_robot_file_is_refused_naming_the_file_and_the_key(tmp_path, edit, key, what):
@@ -66,6 +69,24 @@ def test_bad_robot_file_is_refused_naming_the_file_and_the_key(tmp_path, edit, k
     assert str(path) in msg
     assert key in msg
     assert what in msg
+
+
+def test_a_robot_file_without_a_fluid_law_gets_the_papers_morison_law(tmp_path):
+    data = tomllib.loads(bundled_text())
+    assert "law" not in data["hydrodynamics"]
+    robot = load_robot()
+    assert robot.fluid_law.name == "morison"
+    assert robot.fluid_law.coefficient_names == ("C_f", "C_d", "C_a", "C_m")
+    data["hydrodynamics"]["law"] = "morison"
+    assert load_robot(write(tmp_path, _dump(data))) == robot
+
+
+def test_yaw_inertia_defaults_to_a_slender_rods_unless_given():
+    link = load_robot().link
+    assert link.yaw_inertia_or_default_kg_m2() == pytest.approx(
+        link.mass_kg * link.half_length_m**2 / 3.0)
+    given = link.model_copy(update={"yaw_inertia_kg_m2": 2e-4})
+    assert given.yaw_inertia_or_default_kg_m2() == 2e-4
 
 
 def test_unreadable_and_malformed_files_are_refused_with_the_path(tmp_path):

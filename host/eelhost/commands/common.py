@@ -3,13 +3,46 @@
 from __future__ import annotations
 
 import argparse
-import platform
-from pathlib import Path
+from collections.abc import Iterator
+from contextlib import contextmanager
 
+from pydantic import ValidationError
+
+from eelhost.errors import UserError
 from eelsim.camera import CameraModel
 from eelsim.closed_loop import LoopOptions
-from eelsim.robot import HydroCoefficients, Robot, load_robot
+from eelsim.fluid import FluidCoefficients
+from eelsim.robot import Robot, load_robot
 from eelsim.timing import LoopTiming
+
+
+class OptionError(UserError, ValueError):
+    """A command-line option that cannot be used; the message names the option."""
+
+
+@contextmanager
+def rejected_as(options: str) -> Iterator[None]:
+    """Report values the twin's models reject as an :class:`OptionError` naming the options.
+
+    Wraps the building of a model from command-line values: a pydantic ``ValidationError`` (the
+    model's own checks) or an ``argparse.ArgumentTypeError`` (a list of numbers that does not
+    parse) becomes a one-line :class:`OptionError`; anything else passes through.
+
+    Parameters
+    ----------
+    options : str
+        The options the values came from, as the message names them.
+    """
+    try:
+        yield
+    except ValidationError as err:
+        fields = "; ".join(
+            f"{'.'.join(str(p) for p in e['loc'])}: {e['msg']} (got {e.get('input')!r})"
+            for e in err.errors()
+        )
+        raise OptionError(f"{options}: {fields}") from None
+    except argparse.ArgumentTypeError as err:
+        raise OptionError(str(err)) from None
 
 
 def floats(text: str, count: int | None = None, what: str = "value") -> list[float]:
@@ -40,15 +73,13 @@ def add_robot_options(p: argparse.ArgumentParser) -> None:
     )
 
 
-def robot_and_coefficients(args: argparse.Namespace) -> tuple[Robot, HydroCoefficients]:
+def robot_and_coefficients(args: argparse.Namespace) -> tuple[Robot, FluidCoefficients]:
     """Load the robot and the coefficients chosen on the command line."""
     robot = load_robot(args.robot)
-    coeffs = (
-        HydroCoefficients.from_array(args.coefficients)
-        if args.coefficients
-        else robot.hydrodynamics
-    )
-    return robot, coeffs
+    if not args.coefficients:
+        return robot, robot.hydrodynamics
+    with rejected_as("--coefficients"):
+        return robot, type(robot.hydrodynamics).from_array(args.coefficients)
 
 
 def add_loop_options(p: argparse.ArgumentParser) -> None:
@@ -70,27 +101,16 @@ def add_loop_options(p: argparse.ArgumentParser) -> None:
 
 def loop_options(args: argparse.Namespace, stop_at_goal: bool = True) -> LoopOptions:
     """Build :class:`LoopOptions` from the parsed options."""
+    try:
+        camera = CameraModel(args.fps, args.pixel, args.median)
+    except ValueError as err:  # CameraModel checks its three values and names the bad one
+        raise OptionError(f"--fps/--pixel/--median: {err}") from None
     return LoopOptions(
         timing=LoopTiming(args.dt, args.control_period, args.delay, args.jitter),
-        camera=CameraModel(args.fps, args.pixel, args.median),
+        camera=camera,
         servo_limits=args.servo_limits,
         stop_at_goal=stop_at_goal,
     )
-
-
-def cpu_model() -> str:
-    """The CPU's model name (from /proc/cpuinfo), for the provenance of benchmark figures."""
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine() or "unknown CPU"
-
-
-# The repository's bundled virtual-tank dataset (this file is host/eelhost/commands/common.py).
-BUNDLED_DATASET = Path(__file__).resolve().parents[3] / "datasets" / "paper_virtual_tank"
 
 
 def add_fit_options(p: argparse.ArgumentParser) -> None:

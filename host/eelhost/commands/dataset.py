@@ -6,8 +6,8 @@ import argparse
 
 from tqdm import tqdm
 
-from eelhost.commands.common import add_robot_options, floats
-from eelhost.virtual_tank import TABLE3, TankSettings, generate_dataset
+from eelhost.commands.common import add_robot_options, floats, rejected_as
+from eelhost.data.virtual_tank import TABLE3, TankSettings, generate_dataset
 from eelsim.robot import HydroCoefficients, load_robot
 
 
@@ -48,7 +48,8 @@ def run(args: argparse.Namespace) -> int:
     robot = load_robot(args.robot)
     truth = TABLE3
     if args.truth:
-        c = HydroCoefficients.from_array(args.truth)
+        with rejected_as("--truth"):
+            c = HydroCoefficients.from_array(args.truth)
         truth = {"straight": c, "turning": c}
     settings = TankSettings(
         timestamp_jitter_s=args.timestamp_jitter,

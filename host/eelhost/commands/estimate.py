@@ -8,8 +8,8 @@ from pathlib import Path
 from tqdm import tqdm
 
 from eelhost.commands.common import add_fit_options, fit_settings
+from eelhost.data.experiments import load_dataset
 from eelhost.estimation.pipeline import fit_motion, write_coefficients
-from eelhost.experiment import load_dataset
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -68,8 +68,8 @@ def run(args: argparse.Namespace) -> int:
         fits[motion] = res
         print(
             f"{motion}: fitness {res.fitness:.4f}, {ev.simulations} simulations, "
-            f"C_f {res.coefficients.C_f:.4g} C_d {res.coefficients.C_d:.4g} "
-            f"C_a {res.coefficients.C_a:.4g} C_m {res.coefficients.C_m:.4g}"
+            + " ".join(f"{name} {value:.4g}" for name, value in zip(
+                res.coefficients.names(), res.coefficients.as_array(), strict=True))
         )
     path = write_coefficients(Path(args.out) / "coefficients.json", fits)
     print(f"wrote {path}")

@@ -1,34 +1,15 @@
 """``eelbot estimate-bench``: measure the estimator against its targets and write the figures.
 
-Four measurements, each on a virtual tank whose truth is the paper's table 3:
-
-1. the bundled dataset (clock offsets up to 0.1 s, control jitter): recovery of the coefficients
-   and the worst test E_x with the default method;
-2. a clean tank (no clock offset, no control jitter, otherwise identical): the same, to separate the
-   method's accuracy from the data's noise;
-3. a mismatched tank (bulkier head, pointed tail, servo limits, a 0.005 m/s stray current; the
-   fitted model keeps identical links): worst test E_x against the paper's table 4;
-4. the paper's genetic algorithm on the bundled dataset: its final fitness and simulations, and how
-   many simulations the default method needs to reach that fitness.
-
-Results go to stdout and to a markdown file (default ``docs/estimation_benchmarks.md``).
+The measurements are :func:`eelhost.benchmarks.estimator_accuracy.estimator_report`'s; results go
+to stdout and to a markdown file (default ``docs/estimation_benchmarks.md``).
 """
 
 from __future__ import annotations
 
 import argparse
-import os
-import time
 from pathlib import Path
 
-from eelhost.commands.common import BUNDLED_DATASET, cpu_model
-from eelhost.estimation.optimise import NAMES, FitResult
-from eelhost.estimation.pipeline import FitSettings, fit_motion
-from eelhost.estimation.validate import validate
-from eelhost.experiment import Dataset, load_dataset
-from eelhost.virtual_tank import TABLE3, TankSettings, generate_dataset
-
-PAPER_WORST_EX = {"straight": 0.082, "turning": 0.183}
+from eelhost.benchmarks.estimator_accuracy import estimator_report
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -36,7 +17,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "estimate-bench",
         help="measure the estimator against its targets",
-        description=__doc__.split("\n\n")[0] if __doc__ else None,
+        description="Measure the estimator against its targets and write the figures.",
     )
     p.add_argument("--work", default="out/estimate-bench", help="folder for generated datasets")
     p.add_argument(
@@ -50,153 +31,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(run=run)
 
 
-def _tank(work: Path, name: str, settings: TankSettings, seed: int) -> Dataset:
-    folder = work / name
-    if not (folder / "manifest.toml").exists():
-        print(f"generating the {name} virtual tank in {folder} ...", flush=True)
-        generate_dataset(folder, settings=settings, seed=seed)
-    return load_dataset(folder)
-
-
-def _fit_and_validate(ds: Dataset, settings: FitSettings) -> dict:
-    out: dict = {"fits": {}, "seconds": 0.0, "simulations": 0}
-    t0 = time.perf_counter()
-    out["truth_fitness"] = {}
-    for motion in ("straight", "turning"):
-        res, ev = fit_motion(ds, motion, settings)
-        out["fits"][motion] = res
-        out["simulations"] += ev.simulations
-        out["truth_fitness"][motion] = float(ev.fitness(TABLE3[motion].as_array()[None])[0])
-    fitted = {m: r.coefficients for m, r in out["fits"].items()}
-    tests = [e for exps in ds.test.values() for e in exps]
-    runs = validate(ds.robot, fitted, tests, backend=settings.backend)
-    out["seconds"] = time.perf_counter() - t0
-    out["worst_ex"] = {
-        m: (
-            max(r.row.Ex_mean_unaligned_BL for r in runs if r.experiment.motion == m),
-            max(r.row.Ex_mean_BL for r in runs if r.experiment.motion == m),
-        )
-        for m in ("straight", "turning")
-    }
-    return out
-
-
-def _recovery_rows(result: dict) -> list[str]:
-    rows = []
-    for motion, res in result["fits"].items():
-        truth = TABLE3[motion].as_array()
-        rel = (res.coefficients.as_array() - truth) / truth
-        rows.append(
-            f"| {motion} | {res.fitness:.4f} | {result['truth_fitness'][motion]:.4f} | "
-            + " | ".join(
-                f"{v:.4g} ({e * 100:+.1f} %)"
-                for v, e in zip(res.coefficients.as_array(), rel, strict=True)
-            )
-            + " |"
-        )
-    return rows
-
-
-def _sims_to_reach(res: FitResult, target: float) -> int | None:
-    for _gen, best, sims in res.history:
-        if best <= target:
-            return sims
-    return None
-
-
 def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
-    work = Path(args.work)
-    settings = FitSettings("cmaes", seed=args.seed)
-    lines = [
-        "# Estimation benchmarks",
-        "",
-        f"Measured with `eelbot estimate-bench` on {cpu_model()}, "
-        f"{os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f} at the start. Truth: the "
-        "paper's table 3 (straight row for straight experiments, turning row for turning ones). "
-        "Default method: CMA-ES (at most 1500 candidates) + least-squares polish, the paper's fitness "
-        "(minimax, n = 7, w = 5). E_x is the paper's mean of norms over n = 35 samples, on the "
-        "recording's own clock and at the best clock offset within +-0.1 s.",
-        "",
-    ]
-    cases = [
-        ("bundled", "bundled dataset (clock offsets <= 0.1 s, control jitter 0.03 s)", None),
-        (
-            "clean",
-            "clean tank (no clock offset, no control jitter)",
-            TankSettings(timestamp_jitter_s=0.0, control_jitter_s=0.0),
-        ),
-        (
-            "mismatch",
-            "mismatched tank (head/tail shapes, servo limits, 0.005 m/s stray current)",
-            TankSettings(head_tail=True, servo_limits=True, stray_current_m_s=0.005),
-        ),
-    ]
-    results = {}
-    for key, label, tank in cases:
-        ds = load_dataset(BUNDLED_DATASET) if tank is None else _tank(work, key, tank, args.seed)
-        print(f"fitting the {label} ...", flush=True)
-        results[key] = r = _fit_and_validate(ds, settings)
-        lines += [
-            f"## {label[0].upper() + label[1:]}",
-            "",
-            f"{r['simulations']} simulations, {r['seconds']:.0f} s for both fits and the validation.",
-            "",
-            "| fit | fitness | truth's fitness | " + " | ".join(NAMES) + " |",
-            "|---|---|---|" + "---|" * 4,
-        ]
-        lines += _recovery_rows(r)
-        lines += [
-            "",
-            "| motion | worst test E_x, recorded clock (BL) | worst test E_x, best clock offset (BL) | paper (table 4) |",
-            "|---|---|---|---|",
-        ]
-        lines += [
-            f"| {m} | {a:.4f} | {b:.4f} | {PAPER_WORST_EX[m]} |"
-            for m, (a, b) in r["worst_ex"].items()
-        ]
-        lines.append("")
-        print("\n".join(lines[-8:]), flush=True)
-    if not args.skip_ga:
-        ds = load_dataset(BUNDLED_DATASET)
-        lines += [
-            "## The paper's GA against the default method (bundled dataset)",
-            "",
-            "| fit | GA final fitness | GA simulations | GA time (s) | default fitness | default simulations "
-            "to reach the GA's final fitness | ratio |",
-            "|---|---|---|---|---|---|---|",
-        ]
-        for motion in ("straight", "turning"):
-            print(f"running the paper's GA on {motion} ...", flush=True)
-            t0 = time.perf_counter()
-            ga, ev = fit_motion(
-                ds, motion, FitSettings("ga", seed=args.seed, generations=args.ga_generations)
-            )
-            ga_s = time.perf_counter() - t0
-            default = results["bundled"]["fits"][motion]
-            reach = _sims_to_reach(default, ga.fitness)
-            ratio = f"{ev.simulations / reach:.1f}x fewer" if reach else "not reached"
-            lines.append(
-                f"| {motion} | {ga.fitness:.4f} | {ev.simulations} | {ga_s:.0f} | {default.fitness:.4f} | "
-                f"{reach if reach else '-'} | {ratio} |"
-            )
-            print(lines[-1], flush=True)
-        lines.append("")
-    lines += [
-        "## Reading these figures",
-        "",
-        "- The fitness compares the twin as the recording's camera would have seen it (the same frames "
-        "and median filter; pixel rounding is left out because it would make the objective piecewise "
-        "constant), so what separates the truth from zero is the recording's own pixel noise and, on the "
-        "noisy tanks, the clock offsets and control jitter. A fit scoring below the truth's fitness means "
-        "that noise has moved the optimum away from the truth: no optimiser can do better from that data.",
-        "- The best-clock-offset column removes the time stamps' +-0.1 s uncertainty from the comparison; "
-        "the recorded-clock column is the paper's E_x.",
-        "- C_m is not identified by these experiments (see the report's identifiability section), so its "
-        "recovery is not a target.",
-        "",
-    ]
-    text = "\n".join(lines)
+    text = estimator_report(
+        Path(args.work),
+        seed=args.seed,
+        ga_generations=args.ga_generations,
+        ga=not args.skip_ga,
+        progress=lambda line: print(line, flush=True),
+    )
     if args.write != "-":
         Path(args.write).parent.mkdir(parents=True, exist_ok=True)
         Path(args.write).write_text(text)

@@ -17,11 +17,12 @@ import statistics
 import time
 from pathlib import Path
 
-from eelhost.commands.common import add_robot_options, cpu_model, robot_and_coefficients
+from eelhost.benchmarks.machine import cpu_model
+from eelhost.commands.common import add_robot_options, robot_and_coefficients
 from eelhost.planning.execute import execute_plan
 from eelhost.planning.primitives import default_cache_dir, load_or_build
 from eelhost.planning.search import plan_path
-from eelhost.planning.world import WorldError, load_world
+from eelhost.planning.world import load_world
 from eelsim.model import SwimmerModel
 
 
@@ -99,10 +100,7 @@ def _plan_json(world, lib, plan, execution) -> dict:
 
 def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
-    try:
-        world = load_world(args.world)
-    except WorldError as err:
-        raise ValueError(str(err)) from None
+    world = load_world(args.world)
     robot, coeffs = robot_and_coefficients(args)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -166,7 +164,7 @@ def _write_bench(path: Path, world, lib, plan, execution, times, figure) -> None
         "# Motion planning with the calibrated twin",
         "",
         "`eelbot plan WORLD.toml` plans with motion primitives simulated in the twin (paper "
-        "section 8.3, spec section 9) and swims the plan in the twin. Regenerate this page with "
+        "section 8.3, docs/model.md section 9) and swims the plan in the twin. Regenerate this page with "
         f"`eelbot plan {world.name} --bench`.",
         "",
         "## How it works",

@@ -7,10 +7,10 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from eelhost.commands.common import BUNDLED_DATASET, add_fit_options, fit_settings
+from eelhost.commands.common import add_fit_options, fit_settings
+from eelhost.data.experiments import BUNDLED_DATASET, load_dataset
+from eelhost.data.virtual_tank import generate_dataset
 from eelhost.estimation.report import run_report
-from eelhost.experiment import load_dataset
-from eelhost.virtual_tank import generate_dataset
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -54,6 +54,13 @@ def run(args: argparse.Namespace) -> int:
         return progress
 
     run_report(
-        dataset, args.out, motions, settings, args.bootstrap, args.resume, progress_factory=factory
+        dataset,
+        args.out,
+        motions,
+        settings,
+        args.bootstrap,
+        args.resume,
+        say=print,
+        progress_factory=factory,
     )
     return 0

@@ -3,29 +3,16 @@
 from __future__ import annotations
 
 import argparse
-import math
-import re
 import signal
 import time
-from collections.abc import Iterable
-from pathlib import Path
 
-from eelhost.commands.common import floats
-from eelhost.link.base import Link
-from eelhost.link.replay_transport import RxLogWriter
-from eelhost.link.sim_transport import SimTransport, VirtualCamera
+from eelhost.commands.common import OptionError, floats, rejected_as
+from eelhost.field.runloop import RunConfig
+from eelhost.field.session import TankSession, open_camera, virtual_robot
 from eelhost.link.uri import open_link, parse_link_uri
-from eelhost.recorder import Recorder
-from eelhost.runloop import RunConfig, RunLoop
-from eelhost.vision.calibration import load_calibration
-from eelhost.vision.localise import Localiser
-from eelhost.vision.sources import CameraSource, open_source
-from eelhost.vision.synthetic import RenderOptions, SyntheticCamera
+from eelhost.wire import protocol
 from eelsim.control import Gait
-from eelsim.robot import Robot, load_robot
-from eelsim.scenario import Scenario
-
-SYNTHETIC = ("synthetic", "synthetic:clean")
+from eelsim.robot import load_robot
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -80,45 +67,26 @@ def parse_waypoints(text: str) -> list[tuple[float, float]]:
     out = []
     for part in text.split(";"):
         if part.strip():
-            x, y = floats(part, 2, "--waypoints")
+            try:
+                x, y = floats(part, 2, "--waypoints")
+            except argparse.ArgumentTypeError as err:
+                raise OptionError(str(err)) from None
             out.append((x, y))
     if not out:
-        raise ValueError("--waypoints: give at least one x,y")
+        raise OptionError("--waypoints: give at least one x,y")
     return out
 
 
 def _gait(values: list[float], k_theta: float) -> Gait:
     if len(values) not in (2, 3):
-        raise ValueError("--gait: give A,omega or A,omega,beta")
+        raise OptionError("--gait: give A,omega or A,omega,beta")
     beta = values[2] if len(values) == 3 else 1.04
-    return Gait(values[0], values[1], beta, k_theta)
-
-
-def _frames(args: argparse.Namespace, link: Link, robot: Robot) -> tuple[Iterable, Localiser, dict]:
-    """The frame source, its localiser and the camera facts to record."""
-    spec = args.camera
-    if isinstance(link.transport, SimTransport):
-        spec = spec or "synthetic"
-        if spec in SYNTHETIC:
-            options = (
-                RenderOptions(noise_sigma=0.0, jpeg_quality=0) if spec.endswith("clean") else None
-            )
-            cam = SyntheticCamera(robot, options=options, seed=0)
-            source = VirtualCamera(link.transport.robot, cam, keep_truth=False)
-            facts = {"fps": source.fps, "median_window": 5, "source": spec}
-            return source, Localiser(cam.calibration(), robot), facts
-    if spec is None:
-        raise ValueError("--camera: give a camera index, video file or image folder")
-    if spec in SYNTHETIC:
-        raise ValueError(f"--camera {spec}: the synthetic camera needs --robot sim://")
-    if args.calibration is None:
-        raise ValueError("--calibration: needed to localise in a real camera's frames")
-    calibration = load_calibration(args.calibration)
-    if re.fullmatch(r"\d+", spec.strip()):
-        source = CameraSource(int(spec), clock=link.clock.now)
-    else:
-        source = open_source(spec)
-    return source, Localiser(calibration, robot), {"fps": 30.0, "median_window": 5, "source": spec}
+    gait = Gait(values[0], values[1], beta, k_theta)
+    try:  # the robot would refuse it: say so before anything is opened
+        protocol.SetGait(gait.amplitude_rad, gait.omega_rad_s, gait.beta_rad, 0, 0, 0).validate()
+    except ValueError as err:
+        raise OptionError(f"--gait: {err}") from None
+    return gait
 
 
 def run(args: argparse.Namespace) -> int:
@@ -128,29 +96,14 @@ def run(args: argparse.Namespace) -> int:
     waypoints = parse_waypoints(args.waypoints)
     gait = _gait(args.gait, args.k_theta)
     link = open_link(args.robot, robot=robot)
-    virtual = link.transport.robot if isinstance(link.transport, SimTransport) else None
+    virtual = virtual_robot(link)
     if args.speed is not None:
         if virtual is None:
-            raise ValueError("--speed: only a sim:// robot can run faster than real time")
+            raise OptionError("--speed: only a sim:// robot can run faster than real time")
         if args.speed < 0:
-            raise ValueError("--speed: must be >= 0")
+            raise OptionError("--speed: must be >= 0")
         virtual.clock.speed = args.speed
-    frames, localiser, camera = _frames(args, link, robot)
-    current = (0.0, 0.0) if virtual is None else virtual.current_m_s
-    speed = float((current[0] ** 2 + current[1] ** 2) ** 0.5)
-    direction = math.degrees(math.atan2(current[1], current[0])) if speed else 0.0
-    scenario = Scenario(
-        name=Path(args.out).name,
-        amplitude_rad=gait.amplitude_rad,
-        omega_rad_s=gait.omega_rad_s,
-        beta_rad=gait.beta_rad,
-        k_theta=gait.k_theta,
-        waypoints_m=waypoints,
-        acceptance_radius_m=args.radius,
-        current_speed_m_s=speed,
-        current_direction_deg=direction,
-        duration_s=args.duration or 600.0,
-    )
+    camera = open_camera(link, robot, args.camera, args.calibration)
     config = RunConfig(
         gait,
         waypoints,
@@ -158,25 +111,14 @@ def run(args: argparse.Namespace) -> int:
         control_period_s=args.control_period,
         duration_s=args.duration,
     )
-    recorder = Recorder(
-        args.out,
-        scenario,
-        robot.n_links,
-        camera=camera,
-        timing={"control_period_s": args.control_period, "extra_delay_s": 0.0, "jitter_s": 0.0},
-        source={"link": args.robot, "virtual": virtual is not None},
-    )
-    rx_log = RxLogWriter(f"{args.out}.rx.bin")
-    link.rx_log = rx_log
-    loop = RunLoop(link, frames, localiser, robot, config, recorder)
-    previous = signal.signal(signal.SIGINT, lambda *_: loop.request_stop("interrupted"))
+    with rejected_as("--waypoints/--gait/--radius/--duration"):  # the task's record checks them
+        session = TankSession(link, camera, robot, config, args.out, args.robot)
+    previous = signal.signal(signal.SIGINT, lambda *_: session.loop.request_stop("interrupted"))
     wall0 = time.monotonic()
     try:
-        out = loop.run()
+        out = session.run()
     finally:
         signal.signal(signal.SIGINT, previous)
-        rx_log.close()
-        link.close()
     wall = time.monotonic() - wall0
     print(
         f"{out.reason}: {out.detail}; {out.waypoints_reached}/{len(waypoints)} waypoints, "
@@ -187,7 +129,5 @@ def run(args: argparse.Namespace) -> int:
         print(
             f"simulated {out.t_end_s:.1f} s in {wall:.1f} s ({out.t_end_s / wall:.1f}x real time)"
         )
-    print(
-        f"wrote {recorder.csv_path}, {recorder.json_path}, {recorder.commands_path}, {rx_log.path}"
-    )
+    print("wrote " + ", ".join(str(path) for path in session.paths))
     return 0 if out.reason in ("arrived", "duration", "interrupted") else 1

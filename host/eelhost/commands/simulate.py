@@ -8,10 +8,12 @@ from pathlib import Path
 from tqdm import tqdm
 
 from eelhost.commands.common import (
+    OptionError,
     add_loop_options,
     add_robot_options,
     floats,
     loop_options,
+    rejected_as,
     robot_and_coefficients,
 )
 from eelsim.closed_loop import simulate_closed_loop
@@ -65,7 +67,7 @@ def _overrides(args: argparse.Namespace) -> dict:
     upd: dict = {}
     if args.gait:
         if len(args.gait) not in (2, 3):
-            raise ValueError("--gait: give A,omega or A,omega,beta")
+            raise OptionError("--gait: give A,omega or A,omega,beta")
         upd["amplitude_rad"], upd["omega_rad_s"] = args.gait[:2]
         if len(args.gait) == 3:
             upd["beta_rad"] = args.gait[2]
@@ -86,9 +88,10 @@ def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
     robot, coeffs = robot_and_coefficients(args)
     scenario = load_scenario(args.scenario)
-    upd = _overrides(args)
-    if upd:
-        scenario = type(scenario).model_validate({**scenario.model_dump(), **upd})
+    with rejected_as("--gait/--k-theta/--waypoints/--current/--duration"):
+        upd = _overrides(args)
+        if upd:
+            scenario = type(scenario).model_validate({**scenario.model_dump(), **upd})
     options = loop_options(args, stop_at_goal=not args.full)
     total = scenario.total_steps(options.timing.dt_s)
     bar = tqdm(

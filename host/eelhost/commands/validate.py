@@ -5,10 +5,10 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from eelhost.data.experiments import load_dataset
 from eelhost.estimation.evaluate import ALIGN_S
 from eelhost.estimation.pipeline import read_coefficients
 from eelhost.estimation.validate import table_csv, table_markdown, validate
-from eelhost.experiment import load_dataset
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:

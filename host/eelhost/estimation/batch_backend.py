@@ -20,6 +20,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from eelsim.batch import run_batch
+from eelsim.closed_loop import LoopOptions
 from eelsim.robot import Robot
 
 
@@ -108,7 +109,7 @@ def simulate_batch(
     failed = np.full((c, e), np.nan)
     expected = lengths.predict(coefficients) if lengths is not None else None
     steps = np.zeros((c, e), dtype=np.int64)
-    groups: dict[object, list[int]] = {}
+    groups: dict[LoopOptions, list[int]] = {}
     for j, p in enumerate(prepared):
         groups.setdefault(p.options, []).append(j)
     for options, members in groups.items():

@@ -17,16 +17,18 @@ import dataclasses
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from eelhost.data.experiments import Experiment
+from eelhost.errors import UserError
 from eelhost.estimation.fitness import (
     N_SAMPLES_FIT,
     VELOCITY_WEIGHT,
     sample_times,
     trajectory_error,
 )
-from eelhost.experiment import Experiment
 from eelsim.camera import CameraModel, observation_steps, observed_positions
 from eelsim.closed_loop import LoopOptions, simulate_closed_loop
 from eelsim.flags import Failure, penalty
@@ -34,10 +36,17 @@ from eelsim.robot import HydroCoefficients, Robot
 from eelsim.scenario import Scenario
 from eelsim.timing import LoopTiming
 
+if TYPE_CHECKING:  # imported when used: it loads the batched kernel
+    from eelhost.estimation.batch_backend import RunLengths
+
 TMAX_FACTOR = 1.5
 # Default half-width of the clock-offset search: the paper's stated time-stamp uncertainty.
 ALIGN_S = 0.1
 ALIGN_STEP_S = 0.01
+
+
+class EstimationError(UserError, ValueError):
+    """A fit or validation that cannot be set up from what was given."""
 
 
 @dataclass(frozen=True)
@@ -265,7 +274,7 @@ class Evaluator:
         map_function: Callable | None = None,
     ) -> None:
         if not experiments:
-            raise ValueError("no experiments to evaluate on")
+            raise EstimationError("no experiments to evaluate on")
         self.robot = robot
         self.prepared = [
             prepare(e, n_samples, align_s=align_s, observe=observe) for e in experiments
@@ -276,7 +285,7 @@ class Evaluator:
         self.map_function = map_function
         self.simulations = 0  # closed-loop runs done so far
         self.steps = 0  # and the RK4 steps they took
-        self._lengths = None  # the batch backend's guesses of run lengths (batch_backend.RunLengths)
+        self._lengths: RunLengths | None = None  # the batch backend's guesses of run lengths
 
     def simulate(self, coefficients: np.ndarray) -> Simulated:
         """Simulate every experiment for every candidate.
@@ -390,7 +399,7 @@ class Evaluator:
 
 def _choose_backend(backend: str) -> str:
     if backend not in ("auto", "batch", "reference"):
-        raise ValueError(f"backend must be auto, batch or reference, got {backend!r}")
+        raise EstimationError(f"backend must be auto, batch or reference, got {backend!r}")
     if backend != "auto":
         return backend
     try:

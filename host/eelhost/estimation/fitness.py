@@ -1,4 +1,4 @@
-"""The paper's trajectory error and fitness (spec section 6), and the validation errors (section 7).
+"""The paper's trajectory error and fitness, and the validation errors (docs/model.md sections 6, 7).
 
 For a training experiment j, the simulation runs the same task over the experiment's whole span (it
 does not stop at the acceptance circle). Both trajectories are sampled at the same n = 7 time stamps,

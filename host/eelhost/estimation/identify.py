@@ -18,10 +18,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from eelhost.data.experiments import Experiment
 from eelhost.estimation.evaluate import Evaluator
 from eelhost.estimation.optimise import BOUNDS, NAMES, from_unit, polish_least_squares, to_unit
-from eelhost.experiment import Experiment
-from eelsim.robot import HydroCoefficients, Robot
+from eelsim.fluid import FluidCoefficients
+from eelsim.robot import Robot
 
 REL_STEP = 0.01  # a step of 1 % of a coefficient's search range
 PINNED, WEAK = 0.10, 0.50
@@ -62,7 +63,7 @@ class Identifiability:
         }
 
 
-def identifiability(evaluator: Evaluator, estimate: HydroCoefficients) -> Identifiability:
+def identifiability(evaluator: Evaluator, estimate: FluidCoefficients) -> Identifiability:
     """Linearised identifiability of ``estimate`` on the evaluator's experiments.
 
     The Jacobian is taken in the unit cube of the search bounds (a step of 1 % of each range), so a
@@ -74,7 +75,7 @@ def identifiability(evaluator: Evaluator, estimate: HydroCoefficients) -> Identi
     ----------
     evaluator : Evaluator
         The (training) experiments.
-    estimate : HydroCoefficients
+    estimate : FluidCoefficients
 
     Returns
     -------
@@ -132,7 +133,7 @@ class Bootstrap:
 def bootstrap(
     robot: Robot,
     experiments: Sequence[Experiment],
-    estimate: HydroCoefficients,
+    estimate: FluidCoefficients,
     replicates: int = 12,
     seed: int = 0,
     backend: str = "auto",
@@ -146,7 +147,7 @@ def bootstrap(
     robot : Robot
     experiments : sequence of Experiment
         The training experiments.
-    estimate : HydroCoefficients
+    estimate : FluidCoefficients
         Where each refit starts.
     replicates : int
         Number of resampled training sets.

@@ -28,6 +28,8 @@ from typing import Any
 import cloudpickle
 import numpy as np
 
+from eelhost.errors import UserError
+from eelsim.fluid import FluidCoefficients
 from eelsim.robot import HydroCoefficients
 
 # Search bounds (C_f, C_d, C_a, C_m). Table 3: C_f 0.008-0.009, C_d 0.78-0.98, C_a 0.62-1.17,
@@ -50,6 +52,10 @@ def to_unit(c: np.ndarray) -> np.ndarray:
     return (np.asarray(c, dtype=float) - BOUNDS[:, 0]) / (BOUNDS[:, 1] - BOUNDS[:, 0])
 
 
+class CheckpointError(UserError, ValueError):
+    """A checkpoint that belongs to another fit (other dataset, method, seed or budget)."""
+
+
 @dataclass
 class FitResult:
     """Outcome of a fit.
@@ -57,7 +63,7 @@ class FitResult:
     Attributes
     ----------
     method : str
-    coefficients : HydroCoefficients
+    coefficients : FluidCoefficients
         Best candidate found.
     fitness : float
         Its fitness.
@@ -68,7 +74,7 @@ class FitResult:
     """
 
     method: str
-    coefficients: HydroCoefficients
+    coefficients: FluidCoefficients
     fitness: float
     history: list[tuple[int, float, int]] = field(default_factory=list)
     evaluations: int = 0
@@ -128,7 +134,7 @@ class Checkpoint:
         with open(self.path, "rb") as f:
             state = pickle.load(f)
         if state.get("fingerprint") != self.fingerprint:
-            raise ValueError(
+            raise CheckpointError(
                 f"{self.path}: checkpoint was made with other settings (dataset, method, seed or "
                 "budget); remove it or run with the same settings"
             )
@@ -321,6 +327,8 @@ def fit_cmaes(
             )
         if progress:
             progress(*history[-1])
+    if best_u is None:
+        raise RuntimeError("CMA-ES stopped before evaluating a candidate")
     return FitResult(
         "cmaes", HydroCoefficients.from_array(from_unit(best_u)), best_f, history, evaluations
     )
@@ -329,7 +337,7 @@ def fit_cmaes(
 def polish_least_squares(
     residuals: Callable[[np.ndarray], np.ndarray],
     objective: Objective,
-    start: HydroCoefficients,
+    start: FluidCoefficients,
     start_fitness: float,
     max_iterations: int = 20,
 ) -> FitResult:
@@ -344,7 +352,7 @@ def polish_least_squares(
         Candidates (C, 4) -> stacked residuals (C, M) (:meth:`Evaluator.residuals`).
     objective : callable
         Candidates -> minimax fitness, to judge the result.
-    start : HydroCoefficients
+    start : FluidCoefficients
     start_fitness : float
     max_iterations : int
         Jacobian evaluations at most.

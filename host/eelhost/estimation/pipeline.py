@@ -1,10 +1,7 @@
 """The estimation chain: fit each motion type, validate, quantify uncertainty, write a report.
 
-Methods (``method``):
-
-- ``"cmaes"`` (default): CMA-ES from the middle of the bounds, then a least-squares polish;
-- ``"ga"``: the paper's genetic algorithm (population 150, 130 generations, uniform crossover);
-- ``"lsq"``: the least-squares polish alone, from ``start``.
+The methods (``method``: ``cmaes``, the default; ``ga``, the paper's; ``lsq``) are registered by
+name in :mod:`eelhost.estimation.methods`, the one place a new estimator is added.
 
 ``motion`` is "straight" or "turning" (the paper's separate fits) or "joint" (one coefficient set
 for the robot, fitted on the training experiments of both motion types).
@@ -17,18 +14,19 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from eelhost.estimation.evaluate import Evaluator
-from eelhost.estimation.optimise import (
-    Checkpoint,
-    FitResult,
-    fit_cmaes,
-    fit_ga,
-    polish_least_squares,
-)
-from eelhost.experiment import Dataset, Experiment
+from eelhost.data.experiments import Dataset, Experiment
+from eelhost.errors import UserError
+from eelhost.estimation.evaluate import EstimationError, Evaluator
+from eelhost.estimation.methods import FitProblem, get_method, method_names
+from eelhost.estimation.optimise import Checkpoint, FitResult
+from eelsim.fluid import FluidCoefficients
 from eelsim.robot import HydroCoefficients
 
-METHODS = ("cmaes", "ga", "lsq")
+METHODS = method_names()  # as registered when this module is imported
+
+
+class CoefficientsError(UserError, ValueError):
+    """Coefficients that cannot be read (a malformed file or "Cf,Cd,Ca,Cm" argument)."""
 
 
 @dataclass(frozen=True)
@@ -38,7 +36,7 @@ class FitSettings:
     Attributes
     ----------
     method : str
-        "cmaes", "ga" or "lsq".
+        A registered method (:mod:`eelhost.estimation.methods`): "cmaes", "ga", "lsq".
     seed : int
     budget : int
         Candidates for CMA-ES (the GA's is population x generations).
@@ -69,7 +67,7 @@ def training_experiments(dataset: Dataset, motion: str) -> list[Experiment]:
     if motion == "joint":
         return [e for exps in dataset.train.values() for e in exps]
     if motion not in dataset.train:
-        raise ValueError(
+        raise EstimationError(
             f"dataset has no training experiments for motion {motion!r} (has {sorted(dataset.train)})"
         )
     return list(dataset.train[motion])
@@ -82,7 +80,7 @@ def fit_motion(
     checkpoint_dir: str | Path | None = None,
     resume: bool = False,
     progress: Callable[[int, float, int], None] | None = None,
-    start: HydroCoefficients | None = None,
+    start: FluidCoefficients | None = None,
     map_function: Callable | None = None,
 ) -> tuple[FitResult, Evaluator]:
     """Fit the coefficients of one motion type.
@@ -99,7 +97,7 @@ def fit_motion(
         Continue from a checkpoint.
     progress : callable, optional
         (generation, best fitness, simulations).
-    start : HydroCoefficients, optional
+    start : FluidCoefficients, optional
         Start of the "lsq" method (default: the robot file's coefficients).
     map_function : callable, optional
         Spreads the evaluation (e.g. a Dask client's map).
@@ -109,8 +107,7 @@ def fit_motion(
     (FitResult, Evaluator)
         The result (``evaluations`` counts candidates; the evaluator's ``simulations`` counts runs).
     """
-    if settings.method not in METHODS:
-        raise ValueError(f"method must be one of {', '.join(METHODS)}, got {settings.method!r}")
+    fit = get_method(settings.method)
     ev = Evaluator(
         dataset.robot,
         training_experiments(dataset, motion),
@@ -122,45 +119,8 @@ def fit_motion(
     if checkpoint_dir is not None:
         ident = {"dataset": str(dataset.folder.resolve()), "motion": motion, **settings.__dict__}
         ck = Checkpoint(Path(checkpoint_dir) / f"checkpoint_{motion}_{settings.method}.pkl", ident)
-    sims = lambda: ev.simulations  # noqa: E731
-    if settings.method == "ga":
-        res = fit_ga(
-            ev.fitness,
-            settings.seed,
-            settings.pop_size,
-            settings.generations,
-            ck,
-            resume,
-            progress,
-            sims,
-        )
-    elif settings.method == "cmaes":
-        res = fit_cmaes(
-            ev.fitness,
-            settings.seed,
-            settings.budget,
-            checkpoint=ck,
-            resume=resume,
-            progress=progress,
-            simulations=sims,
-        )
-        if settings.polish_iterations > 0:
-            pol = polish_least_squares(
-                ev.residuals, ev.fitness, res.coefficients, res.fitness, settings.polish_iterations
-            )
-            res = FitResult(
-                "cmaes+lsq",
-                pol.coefficients,
-                pol.fitness,
-                res.history + [(len(res.history), pol.fitness, ev.simulations)],
-                res.evaluations + pol.evaluations,
-            )
-    else:
-        begin = start or dataset.robot.hydrodynamics
-        f0 = float(ev.fitness(begin.as_array()[None, :])[0])
-        res = polish_least_squares(
-            ev.residuals, ev.fitness, begin, f0, max(1, settings.polish_iterations)
-        )
+    problem = FitProblem(ev, settings, start or dataset.robot.hydrodynamics, ck, resume, progress)
+    res = fit(problem)
     return res, ev
 
 
@@ -177,7 +137,7 @@ def write_coefficients(
     return path
 
 
-def read_coefficients(spec: str) -> dict[str, HydroCoefficients]:
+def read_coefficients(spec: str) -> dict[str, FluidCoefficients]:
     """Coefficients from a JSON file written by :func:`write_coefficients` or "Cf,Cd,Ca,Cm".
 
     A single set applies to every motion type ("joint").
@@ -187,18 +147,18 @@ def read_coefficients(spec: str) -> dict[str, HydroCoefficients]:
         try:
             data = json.loads(path.read_text())
         except (OSError, json.JSONDecodeError) as err:
-            raise ValueError(f"{path}: cannot read coefficients: {err}") from None
+            raise CoefficientsError(f"{path}: cannot read coefficients: {err}") from None
         fits = data.get("fits")
         if not isinstance(fits, dict) or not fits:
-            raise ValueError(f"{path}: fits: expected fitted coefficient sets")
+            raise CoefficientsError(f"{path}: fits: expected fitted coefficient sets")
         try:
             return {m: HydroCoefficients.model_validate(f["coefficients"]) for m, f in fits.items()}
         except (KeyError, TypeError, ValueError) as err:
-            raise ValueError(f"{path}: fits: malformed coefficient set ({err})") from None
+            raise CoefficientsError(f"{path}: fits: malformed coefficient set ({err})") from None
     try:
         values = [float(v) for v in spec.split(",")]
         return {"joint": HydroCoefficients.from_array(values)}
     except ValueError:
-        raise ValueError(
+        raise CoefficientsError(
             f"coefficients: expected a .json file or Cf,Cd,Ca,Cm, got {spec!r}"
         ) from None

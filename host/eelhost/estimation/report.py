@@ -7,12 +7,14 @@ Folder contents: ``coefficients.json`` (fits, uncertainty, identifiability), ``t
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
+from eelhost.data.experiments import Dataset
 from eelhost.estimation.evaluate import ALIGN_S
 from eelhost.estimation.identify import bootstrap, identifiability
 from eelhost.estimation.optimise import NAMES, FitResult
@@ -23,7 +25,8 @@ from eelhost.estimation.pipeline import (
     write_coefficients,
 )
 from eelhost.estimation.validate import ValidationRun, table_csv, table_markdown, validate
-from eelhost.experiment import Dataset
+
+log = logging.getLogger(__name__)
 
 Say = Callable[[str], None]
 
@@ -35,7 +38,7 @@ def run_report(
     settings: FitSettings | None = None,
     bootstrap_replicates: int = 8,
     resume: bool = False,
-    say: Say = print,
+    say: Say | None = None,
     progress_factory: Callable[[str], Callable[[int, float, int], None]] | None = None,
 ) -> Path:
     """Run the whole chain on a dataset and write the report folder.
@@ -52,8 +55,8 @@ def run_report(
         Refits per motion for the uncertainty (0: skip).
     resume : bool
         Continue interrupted fits from their checkpoints.
-    say : callable
-        Where progress messages go.
+    say : callable, optional
+        Where progress messages go (default: this module's logger, at INFO).
     progress_factory : callable, optional
         Gives a per-generation progress callback for a motion.
 
@@ -62,6 +65,7 @@ def run_report(
     Path
         ``report.md``.
     """
+    say = say or log.info
     settings = settings or FitSettings()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -185,9 +189,9 @@ def _report_text(
                 for n in NAMES
             )
         )
-    worst = {}
-    for r in runs:
-        worst.setdefault(r.experiment.motion, []).append(r.row.Ex_mean_BL)
+    worst: dict[str, list[float]] = {}
+    for run in runs:
+        worst.setdefault(run.experiment.motion, []).append(run.row.Ex_mean_BL)
     lines += [
         "",
         "## Validation on held-out experiments",
@@ -204,8 +208,8 @@ def _report_text(
             "On the recordings' own clocks:"
         )
         raw: dict[str, list[float]] = {}
-        for r in runs:
-            raw.setdefault(r.experiment.motion, []).append(r.row.Ex_mean_unaligned_BL)
+        for run in runs:
+            raw.setdefault(run.experiment.motion, []).append(run.row.Ex_mean_unaligned_BL)
         lines += [
             f"- worst E_x ({m}), recorded clock: {np.nanmax(v):.4f} BL" for m, v in raw.items()
         ]

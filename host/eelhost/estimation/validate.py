@@ -13,11 +13,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from eelhost.data.experiments import Experiment
 from eelhost.estimation.evaluate import ALIGN_S, Evaluator, Simulated
 from eelhost.estimation.fitness import N_SAMPLES_VALIDATE, validation_errors
-from eelhost.experiment import Experiment
 from eelsim.flags import Failure
-from eelsim.robot import HydroCoefficients, Robot
+from eelsim.fluid import FluidCoefficients
+from eelsim.robot import Robot
 
 
 @dataclass
@@ -48,7 +49,7 @@ class ValidationRun:
     row: ValidationRow
 
 
-def coefficient_set_for(motion: str, fitted: dict[str, HydroCoefficients]) -> str:
+def coefficient_set_for(motion: str, fitted: dict[str, FluidCoefficients]) -> str:
     """Which fitted set predicts an experiment of this motion type."""
     if "joint" in fitted:
         return "joint"
@@ -59,7 +60,7 @@ def coefficient_set_for(motion: str, fitted: dict[str, HydroCoefficients]) -> st
 
 def validate(
     robot: Robot,
-    fitted: dict[str, HydroCoefficients],
+    fitted: dict[str, FluidCoefficients],
     experiments: Sequence[Experiment],
     n_samples: int = N_SAMPLES_VALIDATE,
     backend: str = "auto",

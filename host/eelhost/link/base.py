@@ -1,23 +1,30 @@
 """The host's link to the robot: a byte transport behind one interface, and the framed link on top.
 
 A :class:`Transport` moves bytes (a serial port, the virtual robot, a replayed log). A
-:class:`Link` turns messages of :mod:`eelhost.protocol` into frames and back: it numbers what it
+:class:`Link` turns messages of :mod:`eelhost.wire.protocol` into frames and back: it numbers what it
 sends, tracks the robot's Acks and Refuses, resends unacknowledged commands, counts bad frames,
 notices a dropped transport and reopens it, and tells listeners (the recorder) about every event.
 
-Time comes from a :class:`Clock` owned by the caller (architecture rule 2): the wall clock for a
-real robot, the simulation clock for the virtual one, so nothing here sleeps or reads the time on
-its own.
+One :class:`Link` serves every transport: the serial port at the tank, the virtual robot of
+``sim://``, a replayed log, and the firmware-in-the-loop runs of :mod:`eelhost.xil.lockstep`.
+
+Time comes from a :class:`Clock` owned by the caller (docs/architecture.md, "one clock owner"):
+the wall clock for a real robot, the simulated clock for the virtual one and for lockstep runs,
+so nothing here sleeps or reads the time on its own.
 """
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Protocol
 
-from eelhost import protocol
+from eelhost.errors import UserError
+from eelhost.wire import protocol
+
+log = logging.getLogger(__name__)
 
 __all__ = [
     "Clock",
@@ -30,8 +37,12 @@ __all__ = [
 ]
 
 
-class TransportError(ConnectionError):
-    """The transport cannot carry bytes right now (a port that went away, a finished replay)."""
+class TransportError(UserError, ConnectionError):
+    """The transport cannot carry bytes right now (a port that went away, a finished replay).
+
+    Inside a run the :class:`Link` handles it (it reconnects); when a link cannot be opened at
+    all it reaches the user, whose port it names.
+    """
 
 
 class Clock(Protocol):
@@ -130,7 +141,7 @@ class LinkCounters:
     frames_sent, frames_received : int
         Frames written and frames decoded.
     bad_frames : dict
-        Received frames dropped, by :class:`eelhost.protocol.FrameError` kind.
+        Received frames dropped, by :class:`eelhost.wire.protocol.FrameError` kind.
     acks, refuses, resends, lost : int
         Acks and Refuses received, commands sent again, commands given up on.
     not_sent : int
@@ -171,8 +182,8 @@ class Link:
     resend_after_s : float
         A command sent with ``want_ack`` and not acknowledged this long is sent again, under a
         new sequence number (the firmware counts a repeated number as a duplicate).
-    max_attempts : int
-        Attempts before such a command is reported ``lost``.
+    max_attempts : int or None
+        Attempts before such a command is reported ``lost``; None: resend until acknowledged.
     reconnect_every_s : float
         How often to try reopening a dropped transport.
     rx_log : callable, optional
@@ -185,7 +196,7 @@ class Link:
         transport: Transport,
         clock: Clock,
         resend_after_s: float = 0.2,
-        max_attempts: int = 5,
+        max_attempts: int | None = 5,
         reconnect_every_s: float = 0.25,
         rx_log: Callable[[float, bytes], None] | None = None,
     ) -> None:
@@ -263,6 +274,14 @@ class Link:
             return self._answered[seq]
         return "pending" if seq in self._pending else "unknown"
 
+    def pending(self) -> list[protocol.Message]:
+        """The commands sent with ``want_ack`` that are still being resent, oldest first."""
+        return [p.message for p in self._pending.values()]
+
+    def sent_under(self, seq: int) -> protocol.Message | None:
+        """The message last written under a sequence number (None if none was)."""
+        return self._by_seq.get(seq)
+
     # -- receiving -------------------------------------------------------------------------
     def poll(self) -> list[protocol.Message]:
         """Reconnect if needed, read what has arrived, handle Acks, resend what is due.
@@ -316,6 +335,7 @@ class Link:
             detail = ""
             if isinstance(msg, protocol.Refuse):
                 detail = _refuse_reason(msg.reason)
+                log.warning("the robot refused %s: %s", type(sent).__name__, detail)
             self._emit(LinkEvent(now, kind, msg.seq, sent, detail))
 
     def _first_seq(self, seq: int) -> int:
@@ -329,13 +349,15 @@ class Link:
         for first, p in list(self._pending.items()):
             if now - p.sent_s < self.resend_after_s:
                 continue
-            if p.attempts >= self.max_attempts:
+            if self.max_attempts is not None and p.attempts >= self.max_attempts:
                 del self._pending[first]
                 self._answered[first] = "lost"
                 self.counters.lost += 1
+                log.warning("%s lost after %d attempts", type(p.message).__name__, p.attempts)
                 self._emit(LinkEvent(now, "lost", first, p.message, f"{p.attempts} attempts"))
                 continue
             p.seq = self._write(p.message, "resent")
+            log.debug("%s resent (attempt %d)", type(p.message).__name__, p.attempts + 1)
             p.sent_s, p.attempts = now, p.attempts + 1
             self.counters.resends += 1
 
@@ -354,6 +376,7 @@ class Link:
         if self._was_connected:
             self._was_connected = False
             self.counters.disconnects += 1
+            log.warning("link dropped: %s", err)
             self._emit(LinkEvent(now, "disconnected", detail=str(err)))
 
     def _try_reconnect(self, now: float) -> None:
@@ -369,6 +392,7 @@ class Link:
             return
         self._was_connected = True
         self.counters.reconnects += 1
+        log.info("link back: %s", self.transport.description)
         self._emit(LinkEvent(now, "reconnected", detail=self.transport.description))
         # Hello resynchronises the robot's sequence check after the frames lost in the gap.
         self._write(protocol.Hello(), "sent")

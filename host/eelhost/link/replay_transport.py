@@ -9,6 +9,8 @@ last record is ignored on reading.
 its time (relative to the first read); without one, a record per read. What the host writes is
 counted and dropped. After the last record the transport reports itself disconnected, as a link
 that went silent, and cannot be reopened.
+
+Registers the ``replay:///path/run.rx.bin`` scheme. It lists no ports: a log is named, not found.
 """
 
 from __future__ import annotations
@@ -17,11 +19,18 @@ import struct
 from collections.abc import Callable
 from pathlib import Path
 
-from eelhost.link.base import TransportError
+from eelhost.errors import UserError
+from eelhost.link.base import Clock, Link, TransportError, WallClock
+from eelhost.link.uri import LinkURI, Port, TransportScheme, register_transport
+from eelsim.robot import Robot
 
-__all__ = ["RECORD_HEADER", "ReplayTransport", "RxLogWriter", "read_rx_log"]
+__all__ = ["RECORD_HEADER", "ReplayLogError", "ReplayTransport", "RxLogWriter", "read_rx_log"]
 
 RECORD_HEADER = struct.Struct("<dI")
+
+
+class ReplayLogError(UserError, FileNotFoundError):
+    """A replay log that is not there."""
 
 
 class RxLogWriter:
@@ -63,9 +72,11 @@ def read_rx_log(path: str | Path) -> list[tuple[float, bytes]]:
 
     Raises
     ------
-    FileNotFoundError
+    ReplayLogError
         When the file does not exist.
     """
+    if not Path(path).is_file():
+        raise ReplayLogError(f"{path}: no such replay log")
     raw = Path(path).read_bytes()
     out: list[tuple[float, bytes]] = []
     i = 0
@@ -93,8 +104,6 @@ class ReplayTransport:
 
     def __init__(self, path: str | Path, clock: Callable[[], float] | None = None) -> None:
         self.path = Path(path)
-        if not self.path.is_file():
-            raise FileNotFoundError(f"{self.path}: no such replay log")
         self.records = read_rx_log(self.path)
         self.clock = clock
         self.description = f"replay of {self.path}"
@@ -145,3 +154,24 @@ class ReplayTransport:
             out += self.records[self._next][1]
             self._next += 1
         return bytes(out)
+
+
+def _open_replay(u: LinkURI, robot: Robot | None, clock: Clock | None) -> Link:
+    c = clock or WallClock()
+    return Link(ReplayTransport(u.target, c.now), c)
+
+
+def _list_replay_ports() -> list[Port]:
+    return []
+
+
+register_transport(
+    TransportScheme(
+        name="replay",
+        parameters=(),
+        target="log file path",
+        open=_open_replay,
+        list_ports=_list_replay_ports,
+        example="replay:///path/run.rx.bin",
+    )
+)

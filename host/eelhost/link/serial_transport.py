@@ -4,14 +4,20 @@ A USB serial adapter that is unplugged, or that the kernel resets, makes reads a
 with ``serial.SerialException`` (or ``OSError``); the transport then closes the port and reports
 itself disconnected, and :class:`eelhost.link.base.Link` calls :meth:`SerialTransport.open` every
 ``reconnect_every_s`` until the device node is back.
+
+Registers the ``serial://PORT?baud=N`` scheme (``serial:///dev/ttyUSB0``, ``serial://COM3``); its
+ports are the serial ports pyserial sees (``serial.tools.list_ports``).
 """
 
 from __future__ import annotations
 
 import serial
+from serial.tools import list_ports as serial_ports
 
-from eelhost import protocol
-from eelhost.link.base import TransportError
+from eelhost.link.base import Clock, Link, TransportError, WallClock
+from eelhost.link.uri import LinkURI, LinkURIError, Port, TransportScheme, register_transport
+from eelhost.wire import protocol
+from eelsim.robot import Robot
 
 __all__ = ["SerialTransport"]
 
@@ -82,3 +88,29 @@ class SerialTransport:
         except (serial.SerialException, OSError) as err:
             self.close()
             raise TransportError(f"{self.port}: read failed: {err}") from None
+
+
+def _open_serial(u: LinkURI, robot: Robot | None, clock: Clock | None) -> Link:
+    baud = int(u.number("baud", protocol.BAUD, int))
+    if baud <= 0:
+        raise LinkURIError(f"{u.text!r}: baud={baud} must be positive")
+    return Link(SerialTransport(u.target, baud), clock or WallClock())
+
+
+def _list_serial_ports() -> list[Port]:
+    return [
+        Port(f"serial://{p.device}", p.description if p.description not in ("", "n/a") else "serial port")
+        for p in sorted(serial_ports.comports(), key=lambda p: p.device)
+    ]
+
+
+register_transport(
+    TransportScheme(
+        name="serial",
+        parameters=("baud",),
+        target="port",
+        open=_open_serial,
+        list_ports=_list_serial_ports,
+        example="serial:///dev/ttyUSB0?baud=57600",
+    )
+)

@@ -1,215 +1,91 @@
-"""The virtual robot: the native firmware driving the twin, behind the link and in front of the camera.
+"""The ``sim://`` transport: the host's end of a simulated radio (the virtual robot, lockstep runs).
 
-:class:`VirtualRobot` owns a :class:`SimClock`: whenever the host loop waits for a time, the robot
-steps there, one physics step (10 ms) at a time, exactly as :func:`eelhost.cosim.run_lockstep`
-does it: the firmware (:class:`eelhost.cosim.NativeDriver`) reads the bytes the uplink has
-delivered, ticks with the plant's joint angles and returns its torques and transmitted bytes; the
-plant takes one RK4 step with the torques held (:func:`eelhost.cosim.plant_step`). Bytes travel
-through the radio model (:mod:`eelhost.radio`, an XBee at 57600 baud by default).
+:class:`SimTransport` writes the host's bytes into the uplink of a radio model
+(:class:`eelhost.xil.radio.RadioChannel`) and reads what the downlink has delivered, both stamped
+with a simulated clock. It is the transport of ``sim://`` (the virtual robot,
+:class:`eelhost.xil.virtual_robot.VirtualRobot`) and of the firmware-in-the-loop runs
+(:func:`eelhost.xil.lockstep.run_lockstep`): one host session, :class:`eelhost.link.base.Link`,
+over either.
 
-- :class:`SimTransport` is the host's end of the radio (the :class:`~eelhost.link.base.Transport`
-  of ``sim://``); a dropped link (``drops``) both loses the bytes sent in the window, as the radio
-  model's outages do, and makes the transport report disconnected, like a serial port unplugged.
-- :class:`VirtualCamera` renders the plant with the synthetic overhead camera at 30 fps, moving the
-  clock to each frame's time first; it is the frame source of ``eelbot run`` for ``sim://``.
-
-With ``speed`` 0 the clock runs as fast as the computer can; with ``speed`` X > 0 it waits on the
-wall clock so that simulated time runs X times faster than real time.
+``sim://?speed=10&seed=0`` parameters: ``speed`` (simulated seconds per wall second, 0 = as fast as
+possible; default 1), ``seed``, ``radio`` (``xbee`` or ``ideal``), ``loss`` (byte loss
+probability), ``drop=START:END`` (the link is down over that window, s; repeat or separate with
+commas), ``start=x,y,heading_deg`` (where the robot starts in the virtual tank),
+``current=speed,direction_deg``.
 """
 
 from __future__ import annotations
 
-import time
-from collections.abc import Iterator
+import math
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Protocol
 
-import numpy as np
-from numpy.typing import NDArray
+from eelhost.link.base import Clock, Link, TransportError
+from eelhost.link.uri import LinkURI, LinkURIError, Port, TransportScheme, register_transport
+from eelsim.robot import Robot, load_robot
 
-from eelhost.cosim import NativeDriver, plant_step
-from eelhost.link.base import TransportError
-from eelhost.native_firmware import NativeFirmware
-from eelhost.radio import RadioModel
-from eelhost.vision.synthetic import SyntheticCamera, TruePose
-from eelsim.dynamics import straight_state
-from eelsim.model import SwimmerModel
-from eelsim.robot import Robot
+if TYPE_CHECKING:
+    from eelhost.xil.virtual_robot import VirtualRobot
 
-__all__ = ["SimClock", "SimTransport", "VirtualCamera", "VirtualRobot"]
-
-FloatArray = NDArray[np.float64]
-DT_US = 10_000  # the twin's physics step
+__all__ = ["SimTransport"]
 
 
-class SimClock:
-    """The simulation's clock; waiting on it steps the virtual robot.
+class ByteChannel(Protocol):
+    """One direction of a simulated radio (:class:`eelhost.xil.radio.RadioChannel`)."""
 
-    Parameters
-    ----------
-    robot : VirtualRobot
-        What moves when time passes.
-    speed : float
-        Simulated seconds per wall second; 0 for as fast as possible.
-    """
+    def send(self, t_us: int, data: bytes) -> None:
+        """Hand bytes to the channel at ``t_us``."""
+        ...
 
-    def __init__(self, robot: VirtualRobot, speed: float = 0.0) -> None:
-        if not (speed >= 0 and np.isfinite(speed)):
-            raise ValueError(f"speed must be finite and >= 0, got {speed}")
-        self.robot = robot
-        self.speed = speed
-        self._t_s = 0.0
-        self._wall0 = time.monotonic()
-
-    def now(self) -> float:
-        """Simulated time, s."""
-        return self._t_s
-
-    def wait_until(self, t_s: float) -> None:
-        """Step the robot to ``t_s`` (and, with a speed, keep pace with the wall clock)."""
-        if t_s <= self._t_s:
-            return
-        self.robot.advance_to(round(t_s * 1e6))
-        self._t_s = t_s
-        if self.speed > 0:
-            lag = self._wall0 + t_s / self.speed - time.monotonic()
-            if lag > 0:
-                time.sleep(lag)
+    def deliver_bytes(self, until_us: int) -> bytes:
+        """The bytes that have arrived by ``until_us``."""
+        ...
 
 
-class VirtualRobot:
-    """The native firmware and the twin's plant stepping in lockstep, with a radio between.
+class SimTransport:
+    """The host's end of a simulated radio.
 
     Parameters
     ----------
-    robot : Robot
-        Geometry, coefficients, joint limits.
-    start_position_m : (float, float)
-        Initial centre of mass.
-    start_heading_deg : float
-        Initial heading of the straight robot.
-    current_m_s : (float, float)
-        Uniform current velocity.
-    radio : RadioModel, optional
-        The link (default: an XBee at 57600 baud, 5 ms latency).
-    drops_s : list of (float, float)
-        Windows ``[start, end)`` in which the link is down.
-    seed : int
-        Seed of the radio's loss and corruption.
-    speed : float
-        Speed of the clock (see :class:`SimClock`).
+    uplink, downlink : RadioChannel
+        Host -> robot and robot -> host.
+    now_us : callable
+        The simulated time, us (the clock of the host's :class:`~eelhost.link.base.Link`).
+    link_down : callable, optional
+        ``link_down(t_us)``: whether the link is down at that time (a drop window); never by
+        default.
+    robot : VirtualRobot, optional
+        What is at the other end, for callers that need it (``sim://``); None in lockstep runs.
     """
 
     def __init__(
         self,
-        robot: Robot,
-        start_position_m: tuple[float, float] = (0.0, 0.0),
-        start_heading_deg: float = 0.0,
-        current_m_s: tuple[float, float] = (0.0, 0.0),
-        radio: RadioModel | None = None,
-        drops_s: list[tuple[float, float]] | None = None,
-        seed: int = 0,
-        speed: float = 0.0,
+        uplink: ByteChannel,
+        downlink: ByteChannel,
+        now_us: Callable[[], int],
+        link_down: Callable[[int], bool] | None = None,
+        robot: VirtualRobot | None = None,
     ) -> None:
+        self.uplink = uplink
+        self.downlink = downlink
         self.robot = robot
-        self.model = SwimmerModel.from_robot(robot)
-        self.current_m_s = (float(current_m_s[0]), float(current_m_s[1]))
-        self.start_position_m = (float(start_position_m[0]), float(start_position_m[1]))
-        self.start_heading_deg = float(start_heading_deg)
-        self.drops_us = [(round(a * 1e6), round(b * 1e6)) for a, b in (drops_s or [])]
-        base = radio or RadioModel.xbee()
-        link = RadioModel(
-            base.baud,
-            base.bits_per_byte,
-            base.latency_us,
-            base.loss_probability,
-            base.corruption_probability,
-            tuple(base.outages_us) + tuple(self.drops_us),
+        self.description = (
+            "virtual robot (native firmware + twin)" if robot is not None else "simulated radio"
         )
-        up_rng, down_rng = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2))
-        self.uplink, self.downlink = link.channel(up_rng), link.channel(down_rng)
-        self.firmware = NativeFirmware(now_us=0, control_period_us=0)
-        self.driver = NativeDriver(self.firmware)
-        self.clock = SimClock(self, speed)
-        self.failure = ""
-        self._k = -1  # last physics step ticked
-        self._x = straight_state(
-            self.model, np.radians(self.start_heading_deg), self.start_position_m
-        )
-        self._x_next = self._x.copy()
-
-    @property
-    def now_us(self) -> int:
-        """Time of the last firmware tick, us (-1 before the first)."""
-        return self._k * DT_US if self._k >= 0 else -1
-
-    def advance_to(self, t_us: int) -> None:
-        """Run every physics step whose start time is at or before ``t_us``.
-
-        After it, the state over ``[k dt, (k+1) dt]`` is known for the last step k, so
-        :meth:`state_at` can interpolate anywhere up to ``t_us``.
-        """
-        n = self.model.n_links
-        while (self._k + 1) * DT_US <= t_us:
-            self._k += 1
-            t_k = self._k * DT_US
-            if self._k > 0:
-                self._x = self._x_next
-            if self.failure:
-                continue  # a blown-up plant stays where it was; the firmware is not ticked
-            phi = np.diff(self._x[:n])
-            phi_dot = np.diff(self._x[n + 2 : 2 * n + 2])
-            torque, _, tx = self.driver.step(t_k, DT_US, self.uplink, phi, phi_dot)
-            for t_tx, data in tx:
-                self.downlink.send(t_tx, data)
-            try:
-                self._x_next = plant_step(
-                    self.model, self._x, torque, t_k * 1e-6, DT_US * 1e-6, self.current_m_s
-                )
-            except FloatingPointError as err:
-                self.failure = str(err)
-                self._x_next = self._x
-
-    def state_at(self, t_s: float) -> FloatArray:
-        """The plant's state at ``t_s`` (linear between steps; ``t_s`` within the last step)."""
-        t_k = max(self._k, 0) * DT_US * 1e-6
-        s = float(np.clip((t_s - t_k) / (DT_US * 1e-6), 0.0, 1.0))
-        return (1.0 - s) * self._x + s * self._x_next
-
-    def link_down(self, t_us: int) -> bool:
-        """Whether ``t_us`` falls in a drop window."""
-        return any(a <= t_us < b for a, b in self.drops_us)
-
-    def status(self) -> dict:
-        """The firmware's state and counters (``NativeFirmware.status()``)."""
-        return self.driver.counters()
-
-
-class SimTransport:
-    """The host's end of the virtual robot's radio.
-
-    Parameters
-    ----------
-    robot : VirtualRobot
-        The robot; its clock stamps the bytes.
-    """
-
-    def __init__(self, robot: VirtualRobot) -> None:
-        self.robot = robot
-        self.description = "virtual robot (native firmware + twin)"
+        self._now_us = now_us
+        self._link_down = link_down or (lambda _t_us: False)
         self._open = False
-
-    def _now_us(self) -> int:
-        return round(self.robot.clock.now() * 1e6)
 
     @property
     def is_connected(self) -> bool:
         """Open, and no drop window has closed it (a dropped link stays down until reopened)."""
-        if self._open and self.robot.link_down(self._now_us()):
+        if self._open and self._link_down(self._now_us()):
             self._open = False  # like a USB adapter that vanished: the host must reopen it
         return self._open
 
     def open(self) -> None:
         """Connect; fails inside a drop window, like a port that is not there."""
-        if self.robot.link_down(self._now_us()):
+        if self._link_down(self._now_us()):
             raise TransportError("virtual link is down")
         self._open = True
 
@@ -221,57 +97,78 @@ class SimTransport:
         """Hand bytes to the uplink at the present time."""
         if not self.is_connected:
             raise TransportError("virtual link is down")
-        self.robot.uplink.send(self._now_us(), data)
+        self.uplink.send(self._now_us(), data)
 
     def read(self) -> bytes:
         """Bytes the downlink has delivered by now."""
         if not self.is_connected:
             raise TransportError("virtual link is down")
-        return self.robot.downlink.deliver_bytes(self._now_us())
+        return self.downlink.deliver_bytes(self._now_us())
 
 
-class VirtualCamera:
-    """The synthetic overhead camera looking at the virtual robot, at ``fps``.
+def _open_sim(u: LinkURI, robot: Robot | None, clock: Clock | None) -> Link:
+    """A link to a new virtual robot; its clock, not ``clock``, times the link."""
+    vr = _virtual_robot(u, robot or load_robot())
+    return Link(vr.transport(), vr.clock)
 
-    Iterating moves the robot's clock to each frame time, renders the plant there and yields
-    ``(t_s, frame)``; :attr:`truth` keeps the true pose of every frame.
 
-    Parameters
-    ----------
-    robot : VirtualRobot
-        What is filmed; its clock is advanced.
-    camera : SyntheticCamera, optional
-        The renderer (default: the paper's tank view, seeded with ``seed``).
-    fps : float
-        Frame rate.
-    seed : int
-        Seed of the image noise.
-    keep_truth : bool
-        Keep the true pose of every frame.
-    """
+def _virtual_robot(u: LinkURI, robot: Robot) -> VirtualRobot:
+    # Imported here: eelhost.xil builds on the link layer, and a URI can be parsed without
+    # loading the native firmware.
+    from eelhost.xil.radio import RadioModel
+    from eelhost.xil.virtual_robot import VirtualRobot
 
-    def __init__(
-        self,
-        robot: VirtualRobot,
-        camera: SyntheticCamera | None = None,
-        fps: float = 30.0,
-        seed: int = 0,
-        keep_truth: bool = True,
-    ) -> None:
-        self.robot = robot
-        self.camera = camera or SyntheticCamera(robot.robot, seed=seed)
-        self.fps = fps
-        self.keep_truth = keep_truth
-        self.truth: list[TruePose] = []
+    speed = u.number("speed", 1.0)
+    if speed < 0:
+        raise LinkURIError(f"{u.text!r}: speed={speed:g} must be >= 0 (0 = as fast as possible)")
+    seed = int(u.number("seed", 0, int))
+    radio_name = u.one("radio", "xbee")
+    loss = u.number("loss", 0.0)
+    if not 0.0 <= loss <= 1.0:
+        raise LinkURIError(f"{u.text!r}: loss={loss:g} must be in [0, 1]")
+    if radio_name == "xbee":
+        radio = RadioModel.xbee(loss_probability=loss)
+    elif radio_name == "ideal":
+        radio = RadioModel(loss_probability=loss)
+    else:
+        raise LinkURIError(f"{u.text!r}: radio={radio_name!r} (expected xbee or ideal)")
+    drops = []
+    for raw in u.params.get("drop", []):
+        for window in raw.split(","):
+            a, b = u.numbers("drop", window, 2)
+            if not 0 <= a < b:
+                raise LinkURIError(f"{u.text!r}: drop={window!r} needs 0 <= start < end")
+            drops.append((a, b))
+    start = u.one("start")
+    x, y, heading = u.numbers("start", start, 3) if start else (0.0, 0.0, 0.0)
+    current = u.one("current")
+    c_speed, c_dir = u.numbers("current", current, 2) if current else (0.0, 0.0)
+    if c_speed < 0:
+        raise LinkURIError(f"{u.text!r}: current speed {c_speed:g} must be >= 0")
+    c = math.radians(c_dir)
+    return VirtualRobot(
+        robot,
+        start_position_m=(x, y),
+        start_heading_deg=heading,
+        current_m_s=(c_speed * math.cos(c), c_speed * math.sin(c)),
+        radio=radio,
+        drops_s=drops,
+        seed=seed,
+        speed=speed,
+    )
 
-    def __iter__(self) -> Iterator[tuple[float, NDArray[np.uint8]]]:
-        """Frames at k / fps, k = 0, 1, ... (endless: the host loop decides when to stop)."""
-        k = 0
-        while True:
-            t = k / self.fps
-            self.robot.clock.wait_until(t)
-            frame, pose = self.camera.render(self.robot.state_at(t), t)
-            if self.keep_truth:
-                self.truth.append(pose)
-            yield t, frame
-            k += 1
+
+def _list_sim_ports() -> list[Port]:
+    return [Port("sim://", "virtual robot: the native firmware driving the twin (always there)")]
+
+
+register_transport(
+    TransportScheme(
+        name="sim",
+        parameters=("speed", "seed", "radio", "loss", "drop", "start", "current"),
+        target="",
+        open=_open_sim,
+        list_ports=_list_sim_ports,
+        example="sim://?speed=1&seed=0",
+    )
+)

@@ -1,13 +1,16 @@
-"""Open a link from a URI: one host code for the robot, the virtual robot and a replay (rule 8).
+"""Open a link from a URI: one host code for the robot, the virtual robot and a replay.
 
-- ``serial:///dev/ttyUSB0?baud=57600`` (``serial://COM3`` on Windows): the XBee on a serial port.
-- ``sim://?speed=10&seed=0``: the virtual robot (native firmware + twin). Parameters:
-  ``speed`` (simulated seconds per wall second, 0 = as fast as possible; default 1),
-  ``seed``, ``radio`` (``xbee`` or ``ideal``), ``loss`` (byte loss probability),
-  ``drop=START:END`` (the link is down over that window, s; repeat or separate with commas),
-  ``start=x,y,heading_deg`` (where the robot starts in the virtual tank),
-  ``current=speed,direction_deg``.
-- ``replay:///path/log.bin``: the bytes of a recorded run (``<out>.rx.bin``) played back.
+Transports are chosen by a URI (docs/architecture.md, "transports chosen by a URI"). Each transport
+module registers its scheme here with :func:`register_transport` (its parameters, how to open it,
+how to list the ports it can see), as cflib's drivers do; :func:`open_link` and
+:func:`list_ports` consult that registry. The bundled ones:
+
+- ``serial:///dev/ttyUSB0?baud=57600`` (``serial://COM3`` on Windows): the XBee on a serial port
+  (:mod:`eelhost.link.serial_transport`);
+- ``sim://?speed=10&seed=0``: the virtual robot, native firmware + twin
+  (:mod:`eelhost.link.sim_transport`, which lists its parameters);
+- ``replay:///path/log.bin``: the bytes of a recorded run (``<out>.rx.bin``) played back
+  (:mod:`eelhost.link.replay_transport`).
 
 Errors are :class:`LinkURIError` naming the part of the URI that is wrong.
 """
@@ -15,28 +18,28 @@ Errors are :class:`LinkURIError` naming the part of the URI that is wrong.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from urllib.parse import parse_qs, urlsplit
 
-from eelhost import protocol
-from eelhost.link.base import Clock, Link, WallClock
-from eelhost.link.replay_transport import ReplayTransport
-from eelhost.link.serial_transport import SerialTransport
-from eelhost.link.sim_transport import SimTransport, VirtualRobot
-from eelhost.radio import RadioModel
-from eelsim.robot import Robot, load_robot
+from eelhost.errors import UserError
+from eelhost.link.base import Clock, Link
+from eelsim.robot import Robot
 
-__all__ = ["LinkURI", "LinkURIError", "open_link", "parse_link_uri"]
+__all__ = [
+    "LinkURI",
+    "LinkURIError",
+    "Port",
+    "TransportScheme",
+    "list_ports",
+    "open_link",
+    "parse_link_uri",
+    "register_transport",
+    "transport_schemes",
+]
 
-SCHEMES = ("serial", "sim", "replay")
-PARAMETERS = {
-    "serial": ("baud",),
-    "sim": ("speed", "seed", "radio", "loss", "drop", "start", "current"),
-    "replay": (),
-}
 
-
-class LinkURIError(ValueError):
+class LinkURIError(UserError, ValueError):
     """A link URI that cannot be used; the message names the bad part."""
 
 
@@ -47,7 +50,7 @@ class LinkURI:
     Attributes
     ----------
     scheme : str
-        ``serial``, ``sim`` or ``replay``.
+        A registered scheme (``serial``, ``sim``, ``replay``, ...).
     target : str
         The port or the log path ("" for ``sim``).
     params : dict of str to list of str
@@ -99,13 +102,88 @@ class LinkURI:
         return values
 
 
+@dataclass(frozen=True)
+class Port:
+    """A link a transport can open now.
+
+    Attributes
+    ----------
+    uri : str
+        The URI that opens it.
+    description : str
+        What it is (the adapter's name, ...).
+    """
+
+    uri: str
+    description: str
+
+
+@dataclass(frozen=True)
+class TransportScheme:
+    """A transport's entry in the registry of URI schemes.
+
+    Attributes
+    ----------
+    name : str
+        The scheme, lower case (``serial``).
+    parameters : tuple of str
+        The query parameters it accepts.
+    target : str
+        What must follow ``scheme://`` (``port``, ``log file path``), or "" when nothing may.
+    open : callable
+        ``open(uri, robot, clock) -> Link``: the link, not yet opened. ``robot`` is the robot a
+        simulated transport simulates (None: the bundled paper robot); ``clock`` times a real
+        transport (None: the wall clock).
+    list_ports : callable
+        ``list_ports() -> list of Port``: what it can open now.
+    example : str
+        A URI to show in messages.
+    """
+
+    name: str
+    parameters: tuple[str, ...]
+    target: str
+    open: Callable[[LinkURI, Robot | None, Clock | None], Link]
+    list_ports: Callable[[], list[Port]]
+    example: str
+
+
+_SCHEMES: dict[str, TransportScheme] = {}
+
+
+def register_transport(scheme: TransportScheme) -> None:
+    """Make a transport available under its URI scheme (a transport module calls this once).
+
+    Parameters
+    ----------
+    scheme : TransportScheme
+        The entry; a second registration of the same name replaces the first.
+    """
+    _SCHEMES[scheme.name.lower()] = scheme
+
+
+def transport_schemes() -> dict[str, TransportScheme]:
+    """The registered schemes, by name."""
+    return dict(_SCHEMES)
+
+
+def list_ports() -> list[Port]:
+    """Every link the registered transports can open now, transport by transport.
+
+    Returns
+    -------
+    list of Port
+    """
+    return [port for scheme in _SCHEMES.values() for port in scheme.list_ports()]
+
+
 def parse_link_uri(uri: str) -> LinkURI:
-    """Split and check a link URI.
+    """Split and check a link URI against the registered transports.
 
     Parameters
     ----------
     uri : str
-        ``serial://PORT?baud=N``, ``sim://?...`` or ``replay://PATH``.
+        ``serial://PORT?baud=N``, ``sim://?...``, ``replay://PATH`` or another registered scheme.
 
     Returns
     -------
@@ -117,37 +195,37 @@ def parse_link_uri(uri: str) -> LinkURI:
         Unknown scheme, missing port or path, unknown parameter.
     """
     text = str(uri).strip()
+    examples = ", ".join(s.example.split("?")[0] for s in _SCHEMES.values())
     if "://" not in text:
-        raise LinkURIError(
-            f"{text!r}: not a link URI (expected serial:///dev/ttyUSB0, sim:// or replay:///log.bin)"
-        )
+        raise LinkURIError(f"{text!r}: not a link URI (expected {examples})")
     parts = urlsplit(text)
-    scheme = parts.scheme.lower()
-    if scheme not in SCHEMES:
+    scheme = _SCHEMES.get(parts.scheme.lower())
+    if scheme is None:
         raise LinkURIError(
-            f"{text!r}: unknown scheme {parts.scheme!r} (expected {', '.join(SCHEMES)})"
+            f"{text!r}: unknown scheme {parts.scheme!r} (expected {', '.join(_SCHEMES)})"
         )
     target = parts.netloc + parts.path
-    if scheme in ("serial", "replay") and not target:
-        what = "port" if scheme == "serial" else "log file path"
-        raise LinkURIError(f"{text!r}: no {what} after {scheme}://")
-    if scheme == "sim" and target.strip("/"):
-        raise LinkURIError(f"{text!r}: sim:// takes no path ({target!r}); use parameters")
+    if scheme.target and not target:
+        raise LinkURIError(f"{text!r}: no {scheme.target} after {scheme.name}://")
+    if not scheme.target and target.strip("/"):
+        raise LinkURIError(
+            f"{text!r}: {scheme.name}:// takes no path ({target!r}); use parameters"
+        )
     try:
         params = parse_qs(parts.query, keep_blank_values=True, strict_parsing=bool(parts.query))
     except ValueError:
         raise LinkURIError(f"{text!r}: malformed parameters {parts.query!r}") from None
     for name in params:
-        if name not in PARAMETERS[scheme]:
-            known = ", ".join(PARAMETERS[scheme]) or "none"
+        if name not in scheme.parameters:
+            known = ", ".join(scheme.parameters) or "none"
             raise LinkURIError(
-                f"{text!r}: unknown parameter {name!r} for {scheme}:// (known: {known})"
+                f"{text!r}: unknown parameter {name!r} for {scheme.name}:// (known: {known})"
             )
-    return LinkURI(scheme, target, params, text)
+    return LinkURI(scheme.name, target, params, text)
 
 
 def open_link(uri: str, robot: Robot | None = None, clock: Clock | None = None) -> Link:
-    """Open the link a URI names.
+    """Open the link a URI names, with the transport registered for its scheme.
 
     Parameters
     ----------
@@ -163,7 +241,8 @@ def open_link(uri: str, robot: Robot | None = None, clock: Clock | None = None) 
     Returns
     -------
     Link
-        Opened. For ``sim://``, ``link.transport.robot`` is the :class:`VirtualRobot`.
+        Opened. For ``sim://``, ``link.transport.robot`` is the virtual robot
+        (:class:`eelhost.xil.virtual_robot.VirtualRobot`).
 
     Raises
     ------
@@ -171,61 +250,10 @@ def open_link(uri: str, robot: Robot | None = None, clock: Clock | None = None) 
         For a malformed URI.
     eelhost.link.base.TransportError
         When the port cannot be opened.
-    FileNotFoundError
+    eelhost.link.replay_transport.ReplayLogError
         For a missing replay log.
     """
     u = parse_link_uri(uri)
-    if u.scheme == "serial":
-        baud = int(u.number("baud", protocol.BAUD, int))
-        if baud <= 0:
-            raise LinkURIError(f"{u.text!r}: baud={baud} must be positive")
-        link = Link(SerialTransport(u.target, baud), clock or WallClock())
-    elif u.scheme == "replay":
-        c = clock or WallClock()
-        link = Link(ReplayTransport(u.target, c.now), c)
-    else:
-        vr = _virtual_robot(u, robot or load_robot())
-        link = Link(SimTransport(vr), vr.clock)
+    link = _SCHEMES[u.scheme].open(u, robot, clock)
     link.open()
     return link
-
-
-def _virtual_robot(u: LinkURI, robot: Robot) -> VirtualRobot:
-    speed = u.number("speed", 1.0)
-    if speed < 0:
-        raise LinkURIError(f"{u.text!r}: speed={speed:g} must be >= 0 (0 = as fast as possible)")
-    seed = int(u.number("seed", 0, int))
-    radio_name = u.one("radio", "xbee")
-    loss = u.number("loss", 0.0)
-    if not 0.0 <= loss <= 1.0:
-        raise LinkURIError(f"{u.text!r}: loss={loss:g} must be in [0, 1]")
-    if radio_name == "xbee":
-        radio = RadioModel.xbee(loss_probability=loss)
-    elif radio_name == "ideal":
-        radio = RadioModel(loss_probability=loss)
-    else:
-        raise LinkURIError(f"{u.text!r}: radio={radio_name!r} (expected xbee or ideal)")
-    drops = []
-    for raw in u.params.get("drop", []):
-        for window in raw.split(","):
-            a, b = u.numbers("drop", window, 2)
-            if not 0 <= a < b:
-                raise LinkURIError(f"{u.text!r}: drop={window!r} needs 0 <= start < end")
-            drops.append((a, b))
-    start = u.one("start")
-    x, y, heading = u.numbers("start", start, 3) if start else (0.0, 0.0, 0.0)
-    current = u.one("current")
-    c_speed, c_dir = u.numbers("current", current, 2) if current else (0.0, 0.0)
-    if c_speed < 0:
-        raise LinkURIError(f"{u.text!r}: current speed {c_speed:g} must be >= 0")
-    c = math.radians(c_dir)
-    return VirtualRobot(
-        robot,
-        start_position_m=(x, y),
-        start_heading_deg=heading,
-        current_m_s=(c_speed * math.cos(c), c_speed * math.sin(c)),
-        radio=radio,
-        drops_s=drops,
-        seed=seed,
-        speed=speed,
-    )

@@ -19,8 +19,9 @@ from eelhost.planning.search import Plan
 from eelhost.planning.world import World
 from eelsim.closed_loop import LoopOptions
 from eelsim.control import Gait
+from eelsim.fluid import FluidCoefficients
 from eelsim.model import SwimmerModel
-from eelsim.robot import HydroCoefficients, Robot
+from eelsim.robot import Robot
 from eelsim.scenario import PATH_GAIT, Scenario
 
 
@@ -111,7 +112,7 @@ def execute_plan(
     world: World,
     plan: Plan,
     robot: Robot,
-    coefficients: HydroCoefficients,
+    coefficients: FluidCoefficients,
     gait: Gait = PATH_GAIT,
     options: LoopOptions | None = None,
     backend: str = "auto",
@@ -124,7 +125,7 @@ def execute_plan(
     world : World
     plan : Plan
     robot : Robot
-    coefficients : HydroCoefficients
+    coefficients : FluidCoefficients
     gait : Gait
     options : LoopOptions, optional
     backend : {"auto", "batch", "reference"}

@@ -106,7 +106,7 @@ def plot_plan(
     _obstacles(ax_c, world)
     if len(plan.tree):
         segs = plan.tree.reshape(-1, 2, 2)
-        ax_c.add_collection(LineCollection(segs, colors="0.7", lw=0.4, label="search tree"))
+        ax_c.add_collection(LineCollection(list(segs), colors="0.7", lw=0.4, label="search tree"))
     for k, step in enumerate(plan.steps):
         ax_c.add_patch(Polygon(step.hull, closed=True, fc="tab:orange", alpha=0.15,
                                ec="tab:orange", lw=0.8, label="swept hulls" if k == 0 else None))

@@ -45,6 +45,10 @@ def point_segment_distance(points: FloatArray, a: FloatArray, b: FloatArray) -> 
 def segments_cross(a1: FloatArray, a2: FloatArray, b1: FloatArray, b2: FloatArray) -> FloatArray:
     """Whether segment i of set A meets segment j of set B (leading dimensions broadcast).
 
+    The vectorised form of :func:`eelsim.flags.segments_intersect` (the twin's self-collision
+    test), which the planner cannot call pair by pair in its inner loop; a test checks that the
+    two agree.
+
     Parameters
     ----------
     a1, a2 : ndarray, shape (..., S, 2)

@@ -1,4 +1,4 @@
-"""The action set: short closed-loop manoeuvres simulated with the calibrated twin (spec section 9).
+"""The action set: short closed-loop manoeuvres simulated with the calibrated twin (docs/model.md section 9).
 
 A primitive is one waypoint-following manoeuvre in the robot's own frame: the robot starts at the
 origin with heading 0, either straight and at rest (``REST``, the first move of a plan) or already
@@ -27,26 +27,32 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import logging
 import math
 import os
 import time
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
+from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import ConvexHull
 
 from eelsim.closed_loop import LoopOptions, simulate_closed_loop
-from eelsim.control import Gait
+from eelsim.control import Gait, wrap_angle
+from eelsim.fluid import FluidCoefficients
 from eelsim.model import SwimmerModel
-from eelsim.robot import HydroCoefficients, Robot
+from eelsim.robot import Robot
 from eelsim.scenario import PATH_GAIT, Scenario
+
+log = logging.getLogger(__name__)
 
 FloatArray = NDArray[np.float64]
 
 REST, SWIMMING = 0, 1
+
 KIND_NAMES = ("rest", "swimming")
 LIBRARY_VERSION = 2
 """Bump when what a library holds or how it is simulated changes: old caches then miss."""
@@ -190,7 +196,7 @@ class PrimitiveLibrary:
             -1 when no direction holds a primitive of ``kind``.
         """
         dirs = np.asarray(self.discretisation.current_directions_deg)
-        diff = np.abs((relative_deg - dirs + 180.0) % 360.0 - 180.0)
+        diff = np.abs(wrap_deg(relative_deg - dirs))
         if kind is not None:
             filled = np.array([self.group(kind, i).size > 0 for i in range(dirs.size)])
             if not filled.any():
@@ -302,8 +308,8 @@ class PrimitiveLibrary:
             return None
         if meta.get("version") != LIBRARY_VERSION or meta.get("key") != key:
             return None
-        disc = {k: tuple(v) if isinstance(v, list) else v
-                for k, v in meta["discretisation"].items()}
+        disc: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v
+                                for k, v in meta["discretisation"].items()}
         return cls(
             key=key,
             discretisation=Discretisation(**disc),
@@ -321,7 +327,7 @@ class PrimitiveLibrary:
 
 def library_key(
     robot: Robot,
-    coefficients: HydroCoefficients,
+    coefficients: FluidCoefficients,
     current_speed_m_s: float,
     discretisation: Discretisation,
     gait: Gait = PATH_GAIT,
@@ -332,7 +338,7 @@ def library_key(
     Parameters
     ----------
     robot : Robot
-    coefficients : HydroCoefficients
+    coefficients : FluidCoefficients
     current_speed_m_s : float
     discretisation : Discretisation
     gait : Gait
@@ -390,7 +396,7 @@ class _Run:
 
 
 def _rollouts_reference(
-    robot: Robot, coefficients: HydroCoefficients, scenarios: list[Scenario], options: LoopOptions
+    robot: Robot, coefficients: FluidCoefficients, scenarios: list[Scenario], options: LoopOptions
 ) -> list[_Run]:
     out = []
     for s in scenarios:
@@ -401,7 +407,7 @@ def _rollouts_reference(
 
 def _rollouts_batch(
     robot: Robot,
-    coefficients: HydroCoefficients,
+    coefficients: FluidCoefficients,
     scenarios: list[Scenario],
     options: LoopOptions,
     threads: int | None,
@@ -415,9 +421,12 @@ def _rollouts_batch(
         part = scenarios[i : i + chunk]
         res = run_batch(robot, part, coefficients=coefficients, options=options, seeds=0,
                         record_full=True, threads=threads)
+        full = res.full_states
+        if full is None:
+            raise RuntimeError("run_batch returned no full states although record_full was set")
         for r in range(len(part)):
             k = int(res.final_step[r])
-            out.append(_Run(np.arange(k + 1) * dt, res.full_states[r, : k + 1],
+            out.append(_Run(np.arange(k + 1, dtype=np.float64) * dt, full[r, : k + 1],
                             bool(np.isfinite(res.arrival_time_s[r])), res.reason(r)))
     return out
 
@@ -433,7 +442,7 @@ def batch_available() -> bool:
 
 def simulate_manoeuvres(
     robot: Robot,
-    coefficients: HydroCoefficients,
+    coefficients: FluidCoefficients,
     scenarios: list[Scenario],
     options: LoopOptions,
     backend: str = "auto",
@@ -444,7 +453,7 @@ def simulate_manoeuvres(
     Parameters
     ----------
     robot : Robot
-    coefficients : HydroCoefficients
+    coefficients : FluidCoefficients
     scenarios : list of Scenario
     options : LoopOptions
         Must stop at the goal (a primitive ends when its waypoint is accepted).
@@ -474,8 +483,9 @@ def _rotate(xy: FloatArray, angle_rad: float) -> FloatArray:
     return xy @ np.array([[c, s], [-s, c]])
 
 
-def _wrap_deg(a):
-    return (np.asarray(a) + 180.0) % 360.0 - 180.0
+def wrap_deg(angle_deg: ArrayLike) -> FloatArray:
+    """Wrap angles in degrees to (-180, 180], the convention of :func:`eelsim.control.wrap_angle`."""
+    return np.degrees(wrap_angle(np.radians(angle_deg)))
 
 
 def _switch_heading(run: _Run, lead_in: tuple[float, float], radius: float, n: int) -> float | None:
@@ -503,7 +513,7 @@ def _scenario(
 
 def build_library(
     robot: Robot,
-    coefficients: HydroCoefficients,
+    coefficients: FluidCoefficients,
     current_speed_m_s: float,
     discretisation: Discretisation | None = None,
     gait: Gait = PATH_GAIT,
@@ -516,7 +526,7 @@ def build_library(
     Parameters
     ----------
     robot : Robot
-    coefficients : HydroCoefficients
+    coefficients : FluidCoefficients
         The calibrated coefficients.
     current_speed_m_s : float
         Planning current speed.
@@ -563,7 +573,7 @@ def build_library(
         if kind != SWIMMING:
             continue
         h0 = _switch_heading(runs[i], wps[0], radius, n)
-        if h0 is not None and abs(_wrap_deg(math.degrees(h0))) > 22.5:
+        if h0 is not None and abs(wrap_deg(math.degrees(h0))) > 22.5:
             redo.append(i)
             scenarios[i] = scenarios[i].model_copy(
                 update={"current_direction_deg": cdir + math.degrees(h0)}
@@ -575,7 +585,7 @@ def build_library(
         for i, run in zip(redo, again, strict=True):
             runs[i] = run
     p_count = len(rows)
-    out = {
+    out: dict[str, Any] = {
         "kind": np.zeros(p_count, dtype=np.int64),
         "current_index": np.zeros(p_count, dtype=np.int64),
         "current_rel_deg": np.full(p_count, np.nan),
@@ -614,9 +624,9 @@ def build_library(
         out["end_pose"][i] = (end_xy[0], end_xy[1], heading[-1] - h0)
         out["waypoint_rel"][i] = _rotate((np.asarray(wps[-1]) - p0)[None], h0)[0]
         out["duration_s"][i] = run.t_s[-1] - run.t_s[k0]
-        out["current_rel_deg"][i] = _wrap_deg(cdir - math.degrees(h0))
+        out["current_rel_deg"][i] = wrap_deg(cdir - math.degrees(h0))
         dirs = np.asarray(disc.current_directions_deg)
-        out["current_index"][i] = int(np.argmin(np.abs(_wrap_deg(out["current_rel_deg"][i] - dirs))))
+        out["current_index"][i] = int(np.argmin(np.abs(wrap_deg(out["current_rel_deg"][i] - dirs))))
         idx = np.linspace(0, len(seg) - 1, disc.path_points).round().astype(int)
         out["paths"][i] = _rotate(p[k0:][idx] - p0, h0)
         out["success"][i] = True
@@ -645,7 +655,7 @@ def default_cache_dir() -> Path:
 
 def load_or_build(
     robot: Robot,
-    coefficients: HydroCoefficients,
+    coefficients: FluidCoefficients,
     current_speed_m_s: float,
     discretisation: Discretisation | None = None,
     cache_dir: str | Path | None = None,
@@ -680,6 +690,7 @@ def load_or_build(
         cached = PrimitiveLibrary.load(folder, key)
         if cached is not None:
             return cached, False
+    log.info("no cached primitive library %s in %s: simulating it", key, folder)
     lib = build_library(robot, coefficients, current_speed_m_s, disc, gait, opts, backend, threads)
     lib.save(folder)
     return lib, True

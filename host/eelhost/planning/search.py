@@ -1,4 +1,4 @@
-"""A* over robot poses, with the twin's motion primitives as edges (spec section 9).
+"""A* over robot poses, with the twin's motion primitives as edges (docs/model.md section 9).
 
 A node is a pose (x, y, heading) and whether the robot is at rest (the start) or swimming. Its
 children are the end poses of the primitives simulated for the current as the robot would feel it
@@ -19,6 +19,7 @@ from __future__ import annotations
 import heapq
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -26,6 +27,7 @@ import numpy as np
 from eelhost.planning.geometry import FloatArray
 from eelhost.planning.primitives import KIND_NAMES, REST, SWIMMING, PrimitiveLibrary
 from eelhost.planning.world import World
+from eelsim.control import wrap_angle
 
 
 @dataclass(frozen=True)
@@ -100,12 +102,9 @@ class Plan:
         return [s.waypoint_m for s in self.steps]
 
 
-def wrap_angle(a: float | FloatArray) -> float | FloatArray:
-    """Wrap angles to [-pi, pi)."""
-    return (np.asarray(a) + math.pi) % (2 * math.pi) - math.pi
-
-
-def heuristic_s(world: World, library: PrimitiveLibrary, xy: FloatArray) -> float:
+def heuristic_s(
+    world: World, library: PrimitiveLibrary, xy: Sequence[float] | FloatArray
+) -> float:
     """Admissible estimate of the time from ``xy`` into the goal disc.
 
     Parameters
@@ -201,7 +200,8 @@ def plan_path(
     margin = world.clearance_m + library.body_half_width_m
     speed = library.max_progress_speed_m_s
     goal = np.asarray(world.goal.position_m, dtype=float)
-    start = (*map(float, world.start.position_m), math.radians(world.start.heading_deg))
+    sx, sy = map(float, world.start.position_m)
+    start = (sx, sy, math.radians(world.start.heading_deg))
 
     def cell(pose: tuple[float, float, float], kind: int) -> tuple[int, int, int, int]:
         hb = int(round(float(wrap_angle(pose[2])) / (2 * math.pi) * heading_bins)) % heading_bins
@@ -236,7 +236,7 @@ def plan_path(
             continue
         ends = library.end_pose[rows]
         child_xy = place(pose, ends[:, :2])
-        child_h = wrap_angle(pose[2] + ends[:, 2])
+        child_h = np.asarray(wrap_angle(pose[2] + ends[:, 2]))
         hulls = place(pose, library.group_hulls(kind, ci)[0])
         free = world.hulls_free(hulls, margin)
         for j in np.flatnonzero(free):
@@ -274,6 +274,7 @@ def plan_path(
     for ni in reversed(chain):
         pose, _, _, parent, row = nodes[ni]
         ppose = nodes[parent][0]
+        waypoint = place(ppose, library.waypoint_rel[row])
         steps.append(
             PlanStep(
                 primitive=row,
@@ -285,7 +286,7 @@ def plan_path(
                 bearing_deg=float(library.bearing_deg[row]),
                 start_pose=ppose,
                 end_pose=pose,
-                waypoint_m=tuple(float(v) for v in place(ppose, library.waypoint_rel[row])),
+                waypoint_m=(float(waypoint[0]), float(waypoint[1])),
                 duration_s=float(library.duration_s[row]),
                 hull=place(ppose, library.hulls[row]),
             )

@@ -44,6 +44,7 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+from eelhost.errors import UserError
 from eelhost.planning.geometry import (
     FloatArray,
     inside_convex,
@@ -61,7 +62,7 @@ Point = tuple[Finite, Finite]
 EXAMPLES = ("tank_5_obstacles",)
 
 
-class WorldError(ValueError):
+class WorldError(UserError, ValueError):
     """An invalid or unreadable world file."""
 
 

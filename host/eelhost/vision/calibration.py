@@ -32,12 +32,18 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from eelhost.errors import UserError
+
 FloatArray = NDArray[np.float64]
 FORMAT = "eelbot-camera-calibration"
 VERSION = 1
 
 
-class CalibrationFileError(ValueError):
+class CalibrationError(UserError, ValueError):
+    """A calibration that cannot be made from what was given (corners, heights, a board's frame)."""
+
+
+class CalibrationFileError(CalibrationError):
     """A calibration file that cannot be used; the message names the file and the key."""
 
 
@@ -83,14 +89,15 @@ class Calibration:
         return 1.0 / math.sqrt(abs(np.linalg.det(j)))
 
 
-def _apply(h: FloatArray, xy: ArrayLike) -> FloatArray:
+def _apply(h: ArrayLike, xy: ArrayLike) -> FloatArray:
+    h = np.asarray(h, dtype=float)
     p = np.asarray(xy, dtype=float)
     flat = p.reshape(-1, 2)
     q = np.c_[flat, np.ones(len(flat))] @ h.T
     return (q[:, :2] / q[:, 2:3]).reshape(p.shape)
 
 
-def _rms(h: FloatArray, points_m: FloatArray, points_px: FloatArray) -> float:
+def _rms(h: ArrayLike, points_m: FloatArray, points_px: FloatArray) -> float:
     err = _apply(h, points_m) - points_px
     return float(np.sqrt(np.mean(np.sum(err**2, axis=1))))
 
@@ -107,7 +114,7 @@ def _four_point_homography(src: FloatArray, dst: FloatArray) -> FloatArray:
     try:
         h = np.linalg.solve(a, b)
     except np.linalg.LinAlgError:
-        raise ValueError("the four corners are degenerate (three on a line?)") from None
+        raise CalibrationError("the four corners are degenerate (three on a line?)") from None
     return np.append(h, 1.0).reshape(3, 3)
 
 
@@ -132,7 +139,7 @@ def height_scaling(camera_height_m: float, marker_height_m: float, nadir_m: Arra
     ndarray, shape (3, 3)
     """
     if not camera_height_m > marker_height_m:
-        raise ValueError("the camera must be above the markers")
+        raise CalibrationError("the camera must be above the markers")
     k = camera_height_m / (camera_height_m - marker_height_m)
     n = np.asarray(nadir_m, dtype=float)
     return np.array([[k, 0, (1 - k) * n[0]], [0, k, (1 - k) * n[1]], [0, 0, 1.0]])
@@ -175,19 +182,20 @@ def from_tank_corners(
     px = np.asarray(corners_px, dtype=float).reshape(-1, 2)
     if corners_m is None:
         if tank_size_m is None:
-            raise ValueError("give tank_size_m or corners_m")
+            raise CalibrationError("give tank_size_m or corners_m")
         length, width = tank_size_m
         corners_m = [(0.0, 0.0), (length, 0.0), (length, width), (0.0, width)]
     wm = np.asarray(corners_m, dtype=float).reshape(-1, 2)
     if px.shape != (4, 2) or wm.shape != (4, 2):
-        raise ValueError("need exactly four corners in pixels and in metres")
+        raise CalibrationError("need exactly four corners in pixels and in metres")
     h = _four_point_homography(wm, px)
     if camera_height_m is not None and marker_height_m != 0.0:
         if nadir_m is None:
             nadir_m = _apply(np.linalg.inv(h), np.array(image_size_px, dtype=float) / 2 - 0.5)
         h = h @ height_scaling(camera_height_m, marker_height_m, nadir_m)
         wm = _apply(np.linalg.inv(h), px)  # the corners' rays, where they cross the markers' plane
-    return Calibration(h / h[2, 2], tuple(image_size_px), "tank_corners", wm, px, _rms(h, wm, px))
+    width_px, height_px = image_size_px
+    return Calibration(h / h[2, 2], (width_px, height_px), "tank_corners", wm, px, _rms(h, wm, px))
 
 
 @dataclass(frozen=True)
@@ -227,7 +235,7 @@ class CharucoSpec:
         dots_per_m = dpi / 0.0254
         size = (int(round(self.squares[0] * self.square_m * dots_per_m)),
                 int(round(self.squares[1] * self.square_m * dots_per_m)))
-        return self.board().generateImage(size, marginSize=0, borderBits=1)
+        return np.asarray(self.board().generateImage(size, marginSize=0, borderBits=1), np.uint8)
 
 
 def from_charuco(
@@ -270,7 +278,7 @@ def from_charuco(
     corners, ids, _, _ = detector.detectBoard(grey)
     if ids is None or len(ids) < 8:
         found = 0 if ids is None else len(ids)
-        raise ValueError(f"ChArUco board: found {found} corners, need at least 8")
+        raise CalibrationError(f"ChArUco board: found {found} corners, need at least 8")
     ids = np.asarray(ids).ravel()
     px = np.asarray(corners, dtype=float).reshape(-1, 2)
     # Board object points: x right along the printed image, y down the page; face up, seen from

@@ -33,6 +33,7 @@ from numpy.typing import NDArray
 from eelhost.vision.calibration import Calibration
 from eelhost.vision.markers import MarkerLayout, default_layout
 from eelsim.camera import MedianFilter
+from eelsim.control import wrap_angle
 from eelsim.robot import Robot
 
 FloatArray = NDArray[np.float64]
@@ -229,8 +230,8 @@ class Localiser:
             return Localisation(t_s, "partial", None, None, angles, centres, seen, tuple(rebuilt),
                                 gap, msg)
         # Joint angles stay within +-pi, so unwrapping along the chain gives consistent angles.
-        chain = angles[0] + np.concatenate(([0.0], np.cumsum(_wrap(np.diff(angles)))))
-        heading = float(_wrap(np.mean(chain)))
+        chain = angles[0] + np.concatenate(([0.0], np.cumsum(wrap_angle(np.diff(angles)))))
+        heading = float(wrap_angle(np.mean(chain)))
         status = "rebuilt" if rebuilt else "ok"
         msg = f"links {[i + 1 for i in rebuilt]} rebuilt from their neighbours" if rebuilt else ""
         return Localisation(t_s, status, centres.mean(axis=0), heading, chain, centres, seen,
@@ -253,10 +254,6 @@ class Localiser:
         gaps = np.linalg.norm(ends_head[:-1] - ends_tail[1:], axis=1)
         gaps = gaps[np.isfinite(gaps)]
         return float(gaps.max()) if len(gaps) else 0.0
-
-
-def _wrap(a: FloatArray | float) -> FloatArray:
-    return np.angle(np.exp(1j * np.asarray(a, dtype=float)))
 
 
 def localise_frames(

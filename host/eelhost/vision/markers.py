@@ -29,7 +29,13 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from eelhost.errors import UserError
+
 INCH_M = 0.0254
+
+
+class MarkerLayoutError(UserError, ValueError):
+    """A marker layout or sheet that cannot be made (ids, sizes, dictionary, file type)."""
 
 
 @dataclass(frozen=True)
@@ -59,16 +65,16 @@ class MarkerLayout:
 
     def __post_init__(self) -> None:
         if not hasattr(cv2.aruco, self.dictionary_name):
-            raise ValueError(f"unknown ArUco dictionary {self.dictionary_name!r}")
+            raise MarkerLayoutError(f"unknown ArUco dictionary {self.dictionary_name!r}")
         if len(set(self.link_ids)) != len(self.link_ids):
-            raise ValueError(f"marker ids must be distinct, got {self.link_ids}")
+            raise MarkerLayoutError(f"marker ids must be distinct, got {self.link_ids}")
         size = self.dictionary().bytesList.shape[0]
         if any(not 0 <= i < size for i in self.link_ids):
-            raise ValueError(f"marker ids must be in 0..{size - 1} for {self.dictionary_name}")
+            raise MarkerLayoutError(f"marker ids must be in 0..{size - 1} for {self.dictionary_name}")
         if self.offsets_m and len(self.offsets_m) != len(self.link_ids):
-            raise ValueError("offsets_m needs one value per link (or none)")
+            raise MarkerLayoutError("offsets_m needs one value per link (or none)")
         if not (self.marker_size_m > 0 and self.margin_m >= 0):
-            raise ValueError("marker size must be positive and the margin non-negative")
+            raise MarkerLayoutError("marker size must be positive and the margin non-negative")
 
     @property
     def n_links(self) -> int:
@@ -130,9 +136,10 @@ def plate_image(layout: MarkerLayout, link_index: int, px_per_cell: int) -> NDAr
         layout.dictionary(), layout.link_ids[link_index], cells * px_per_cell, borderBits=1
     )
     margin_px = int(round(layout.margin_m / layout.marker_size_m * cells * px_per_cell))
-    return cv2.copyMakeBorder(
+    framed = cv2.copyMakeBorder(
         marker, margin_px, margin_px, margin_px, margin_px, cv2.BORDER_CONSTANT, value=255
     )
+    return np.asarray(framed, dtype=np.uint8)
 
 
 def marker_sheet(
@@ -174,7 +181,7 @@ def marker_sheet(
     cols = max(1, (width_px - gap) // (side + gap))
     rows = -(-layout.n_links // cols)
     if cols * (side + gap) + gap > width_px or rows * (side + gap) + top > height_px:
-        raise ValueError(f"{layout.n_links} plates of {layout.plate_size_m} m do not fit on "
+        raise MarkerLayoutError(f"{layout.n_links} plates of {layout.plate_size_m} m do not fit on "
                          f"{paper_m[0]} x {paper_m[1]} m paper")
     scale = dpi / 300.0
     font = cv2.FONT_HERSHEY_SIMPLEX
@@ -219,7 +226,7 @@ def save_marker_sheet(path: str | Path, layout: MarkerLayout, dpi: float = 300.0
     out = Path(path)
     suffix = out.suffix.lower()
     if suffix not in (".png", ".pdf"):
-        raise ValueError(f"{out}: marker sheet must be .png or .pdf")
+        raise MarkerLayoutError(f"{out}: marker sheet must be .png or .pdf")
     sheet, _ = marker_sheet(layout, dpi)
     out.parent.mkdir(parents=True, exist_ok=True)
     image = Image.fromarray(sheet)

@@ -24,10 +24,19 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from eelhost.errors import UserError
 from eelhost.vision.synthetic import SyntheticCamera, TruePose
 
 Frame = NDArray[np.uint8]
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
+
+
+class FrameSourceError(UserError, ValueError):
+    """Frames that cannot be read (a file that is not a video, an unreadable image)."""
+
+
+class FrameSourceNotFound(UserError, FileNotFoundError):
+    """A camera, video file or image folder that is not there."""
 
 
 class FrameSource(Protocol):
@@ -61,7 +70,7 @@ class CameraSource:
         """Yield frames until the camera stops or ``max_frames`` is reached."""
         cap = cv2.VideoCapture(self.index)
         if not cap.isOpened():
-            raise FileNotFoundError(f"camera {self.index}: cannot open")
+            raise FrameSourceNotFound(f"camera {self.index}: cannot open")
         try:
             start = None
             count = 0
@@ -72,7 +81,7 @@ class CameraSource:
                 now = self.clock()
                 start = now if start is None else start
                 count += 1
-                yield now - start, frame
+                yield now - start, np.asarray(frame, np.uint8)
         finally:
             cap.release()
 
@@ -89,13 +98,13 @@ class VideoFileSource:
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
         if not self.path.is_file():
-            raise FileNotFoundError(f"{self.path}: no such video file")
+            raise FrameSourceNotFound(f"{self.path}: no such video file")
 
     def __iter__(self) -> Iterator[tuple[float, Frame]]:
         """Yield every frame with its presentation time."""
         cap = cv2.VideoCapture(str(self.path))
         if not cap.isOpened():
-            raise ValueError(f"{self.path}: cannot open as a video")
+            raise FrameSourceError(f"{self.path}: cannot open as a video")
         fps = cap.get(cv2.CAP_PROP_FPS) or 30.0
         try:
             index = 0
@@ -107,7 +116,7 @@ class VideoFileSource:
                 # Some containers report no timestamps; fall back on the nominal rate.
                 t_s = ms / 1000.0 if ms > 0 or index == 0 else index / fps
                 index += 1
-                yield t_s, frame
+                yield t_s, np.asarray(frame, np.uint8)
         finally:
             cap.release()
 
@@ -130,7 +139,7 @@ class FolderSource:
     def __init__(self, folder: str | Path, fps: float = 30.0) -> None:
         self.folder = Path(folder)
         if not self.folder.is_dir():
-            raise FileNotFoundError(f"{self.folder}: no such folder")
+            raise FrameSourceNotFound(f"{self.folder}: no such folder")
         if not fps > 0:
             raise ValueError(f"fps must be positive, got {fps}")
         self.fps = fps
@@ -139,15 +148,15 @@ class FolderSource:
             key=_natural_key,
         )
         if not self.paths:
-            raise FileNotFoundError(f"{self.folder}: no images ({', '.join(IMAGE_SUFFIXES)})")
+            raise FrameSourceNotFound(f"{self.folder}: no images ({', '.join(IMAGE_SUFFIXES)})")
 
     def __iter__(self) -> Iterator[tuple[float, Frame]]:
         """Yield the images in order."""
         for i, path in enumerate(self.paths):
             frame = cv2.imread(str(path), cv2.IMREAD_COLOR)
             if frame is None:
-                raise ValueError(f"{path}: cannot read as an image")
-            yield i / self.fps, frame
+                raise FrameSourceError(f"{path}: cannot read as an image")
+            yield i / self.fps, np.asarray(frame, np.uint8)
 
 
 class SyntheticSource:

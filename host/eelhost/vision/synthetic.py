@@ -284,7 +284,7 @@ class SyntheticCamera:
     def _degrade(self, img: NDArray[np.float32]) -> NDArray[np.uint8]:
         o = self.options
         if o.blur_sigma_px > 0:
-            img = cv2.GaussianBlur(img, (0, 0), o.blur_sigma_px)
+            img = np.asarray(cv2.GaussianBlur(img, (0, 0), o.blur_sigma_px), np.float32)
         if o.noise_sigma > 0:
             # Luminance noise, one draw per pixel shared by the channels: what the detector sees
             # after grey conversion, at a third of the cost of per-channel noise.
@@ -293,7 +293,7 @@ class SyntheticCamera:
         out = np.clip(img, 0, 255).astype(np.uint8)
         if o.jpeg_quality > 0:
             ok, enc = cv2.imencode(".jpg", out, [cv2.IMWRITE_JPEG_QUALITY, int(o.jpeg_quality)])
-            out = cv2.imdecode(enc, cv2.IMREAD_COLOR)
+            out = np.asarray(cv2.imdecode(enc, cv2.IMREAD_COLOR), np.uint8)
         return out
 
 

@@ -5,7 +5,7 @@ llvm-mca's estimate of its cycles per iteration (one iteration = one AVX2 vector
 
 Usage (from the repo root, after ``bash scripts/setup.sh``)::
 
-    .venv/bin/python scripts/kernel_loops.py [--links 6] [--lanes 16] [--cpu znver3]
+    .venv/bin/python -m eelhost.benchmarks.kernel_loops [--links 6] [--lanes 16] [--cpu znver3]
         [--stage c|numba]
 
 ``--stage`` picks whose machine code: the C compiler's (the default when there is one, as in
@@ -32,6 +32,7 @@ import numba
 import numpy as np
 
 from eelsim import batch
+from eelsim.batch import c_stage, codegen, loading
 
 _LABEL = re.compile(r"^(\.?[\w.$]+):")
 _JUMP = re.compile(r"^\s+j\w+\s+(\.?[\w.$]+)")
@@ -43,12 +44,10 @@ def stage_assembly(n_links: int, lanes: int, stage: str) -> str:
     Numba's is compiled afresh (numba does not show cached code).
     """
     if stage == "c":
-        from eelsim import _batch_c, _batch_codegen
-
-        source = _batch_codegen.generate_stage_source(_batch_codegen.make_layout(n_links, lanes))
-        library, _ = _batch_c.build(source, batch._C_FUNCTIONS, batch.kernel_cache_dir())
-        flags = [f for f in _batch_c.C_FLAGS if f not in ("-shared", "-fPIC")]
-        return subprocess.run([_batch_c.find_compiler(), *flags, "-S", "-o", "-",
+        source = codegen.generate_stage_source(codegen.make_layout(n_links, lanes))
+        library, _ = c_stage.build(source, loading.C_FUNCTIONS, batch.kernel_cache_dir())
+        flags = [f for f in c_stage.C_FLAGS if f not in ("-shared", "-fPIC")]
+        return subprocess.run([c_stage.find_compiler() or "cc", *flags, "-S", "-o", "-",
                                str(library.with_suffix(".c"))],
                               capture_output=True, text=True, check=True).stdout
     k = batch.kernel_module(n_links, lanes, "numba")
@@ -61,7 +60,7 @@ def stage_assembly(n_links: int, lanes: int, stage: str) -> str:
 
 
 def vector_loops(asm: str) -> list[list[str]]:
-    """Bodies of the loops (backward jumps) that are mostly 256-bit instructions."""
+    """Bodies of the loops (backward jumps) that are mostly 256- or 512-bit instructions."""
     lines = asm.splitlines()
     labels = {m.group(1): i for i, text in enumerate(lines) if (m := _LABEL.match(text))}
     loops, seen = [], set()
@@ -71,7 +70,8 @@ def vector_loops(asm: str) -> list[list[str]]:
             continue
         start = labels[m.group(1)]
         body = [t for t in lines[start + 1 : i] if t.startswith("\t") and not t.startswith("\t.")]
-        if start in seen or sum("ymm" in t for t in body) < 0.5 * max(1, len(body)):
+        vector = sum("ymm" in t or "zmm" in t for t in body)  # AVX2 or AVX-512 registers
+        if start in seen or vector < 0.5 * max(1, len(body)):
             continue
         seen.add(start)
         loops.append(body)
@@ -88,9 +88,11 @@ def mca(body: list[str], cpu: str) -> tuple[float, float] | None:
     report = subprocess.run([tool, f"-mcpu={cpu}", "-iterations=50", f.name],
                             capture_output=True, text=True, check=True).stdout
     Path(f.name).unlink()
-    cycles = int(re.search(r"Total Cycles:\s+(\d+)", report).group(1)) / 50
-    rthroughput = float(re.search(r"Block RThroughput:\s+([\d.]+)", report).group(1))
-    return cycles, rthroughput
+    total = re.search(r"Total Cycles:\s+(\d+)", report)
+    throughput = re.search(r"Block RThroughput:\s+([\d.]+)", report)
+    if total is None or throughput is None:
+        raise RuntimeError(f"{tool} printed no cycle count for {cpu}:\n{report}")
+    return int(total.group(1)) / 50, float(throughput.group(1))
 
 
 def main() -> int:
@@ -98,7 +100,9 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--links", type=int, default=6)
     parser.add_argument("--lanes", type=int, default=batch.DEFAULT_LANES)
-    parser.add_argument("--cpu", default="znver3", help="llvm-mca -mcpu (default znver3)")
+    parser.add_argument("--cpu", default="znver3",
+                        help="llvm-mca -mcpu (default znver3; code built for AVX-512 needs a "
+                        "model that has it, e.g. skylake-avx512)")
     parser.add_argument("--stage", choices=("c", "numba"), default=None,
                         help="whose code: the C compiler's or numba's (default: as the kernel)")
     args = parser.parse_args()

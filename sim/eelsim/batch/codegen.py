@@ -6,11 +6,12 @@ loop over the runs of a block ("lanes"), every intermediate is a scalar local, L
 (vector) registers or spills them to the stack, and vectorises the lane loop: each machine
 instruction advances 4 runs (AVX2). The same maths written with loops over links and small arrays
 goes through memory at every operation and runs about half as fast. The generated text is written
-once per (N, lanes) next to the package (in ``__pycache__``), so numba's on-disk cache works
-across processes.
+once per (N, lanes, stage, fluid law) to the kernel cache folder (``eelsim.batch.loading``), so
+numba's on-disk cache works across processes.
 
-The physics is that of ``eelsim.dynamics`` (compact per-link form, spec section 2) and
-``eelsim.control`` (gait, PD, servo line), but the accelerations are not computed by assembling
+The physics is that of ``eelsim.dynamics`` (compact per-link form, docs/model.md section 2) and
+``eelsim.control`` (gait, PD, servo line), with the fluid law's forces written by the law itself
+(:meth:`eelsim.fluid.FluidLaw.emit_link_forces`), but the accelerations are not computed by assembling
 the dense (N+2) x (N+2) mass matrix M and factoring it (that was ~40 % of a stage and O(N^3)).
 They come from an O(N) articulated-body recursion over the chain, which solves the same
 Newton-Euler equations M q_ddot = Q stands for (the reference's Q = sum J^T (F - A Jdot q_dot) is
@@ -48,15 +49,21 @@ Memory layout: ``work`` and ``out`` are flat float64 arrays holding rows of ``la
 generated text, so LLVM sees constant distances between accesses and needs no aliasing checks
 beyond one between ``work`` and ``out``. The RK4 bookkeeping (accumulator, next stage's input,
 the new state) is done at the end of each stage, on rows of ``work``, so the driver in
-``eelsim._batch_kernel`` never loops over the state itself.
+``eelsim.batch.kernel_template`` never loops over the state itself.
 """
 
 from __future__ import annotations
 
+import ast
 import math
 from dataclasses import dataclass
 
 import numpy as np
+
+from eelsim.batch.records import Reason
+from eelsim.flags import DIVERGENCE_RATE, ILL_CONDITION_THRESHOLD, Failure
+from eelsim.fluid import DEFAULT_FLUID_LAW, FluidLaw, get_fluid_law
+from eelsim.fluid.base import KERNEL_INPUTS, KERNEL_OUTPUTS, KERNEL_TEMPORARY_PREFIX
 
 # Taylor coefficients of sin and cos; after reduction to |r| <= pi/4 the first omitted terms are
 # below 1e-19 (sin, r^19/19!) and 1e-20 (cos, r^20/20!), so rounding dominates (about 1 ulp).
@@ -124,6 +131,8 @@ class Layout:
         N.
     lanes : int
         Runs per block.
+    law : FluidLaw
+        The fluid law whose forces the stage computes.
     work : dict
         Name -> first row in ``work``.
     work_rows : int
@@ -136,13 +145,14 @@ class Layout:
 
     n_links: int
     lanes: int
+    law: FluidLaw
     work: dict[str, int]
     work_rows: int
     out: dict[str, int]
     out_rows: int
 
 
-def make_layout(n_links: int, lanes: int) -> Layout:
+def make_layout(n_links: int, lanes: int, law: FluidLaw | None = None) -> Layout:
     """Assign rows to every per-lane quantity the stage function reads or writes.
 
     Parameters
@@ -151,12 +161,15 @@ def make_layout(n_links: int, lanes: int) -> Layout:
         N.
     lanes : int
         Runs per block.
+    law : FluidLaw, optional
+        The fluid law (default: the default law); its ``kernel_rows`` get one row per link.
 
     Returns
     -------
     Layout
     """
     n = n_links
+    law = law if law is not None else get_fluid_law(DEFAULT_FLUID_LAW)
     sizes_work = [
         ("y", 2 * n + 4),  # the stage state (theta, p, theta_dot, p_dot)
         ("x", 2 * n + 4),  # the state at the start of the step
@@ -168,11 +181,8 @@ def make_layout(n_links: int, lanes: int) -> Layout:
         ("sm", n),  # sum_j m_j G[j, i] (condition bound only)
         ("mass_sum", 1),
         ("mass", n),
-        ("mu", n),
-        ("ct", n),
-        ("cn", n),
-        ("lambda2", n),
-        ("lambda3", n),
+        ("mu", n),  # the fluid law's added mass mu_n
+        *((name, n) for name in law.kernel_rows),  # the fluid law's own rows
         ("inertia", n),  # J_i + lambda_1,i
         ("hm", n),  # h_j (m_j + mu_j)
         ("dd0", n),  # J_j + lambda_1,j + h_j^2 (m_j + mu_j): D_j of a link with nothing beyond
@@ -237,7 +247,9 @@ def make_layout(n_links: int, lanes: int) -> Layout:
 
     work, work_rows = assign(sizes_work)
     out, out_rows = assign(sizes_out)
-    return Layout(n, lanes, work, work_rows, out, out_rows)
+    if len(work) != len(sizes_work):
+        raise ValueError(f"fluid law {law.name!r}: a kernel row name is taken by the kernel")
+    return Layout(n, lanes, law, work, work_rows, out, out_rows)
 
 
 class _Emitter:
@@ -360,6 +372,46 @@ def _joint_torques(e: _Emitter, plain: bool) -> None:
             line(f"{o('torque', jt)} = min(max(uu, max(-stall, -stall - q)), min(stall, stall - q))")
 
 
+def emit_law_forces(e: _Emitter, link: int, still_water: bool) -> None:
+    """Emit the fluid law's code for one link (its batched form), after checking what it assigns.
+
+    The law may assign only its outputs and ``fl_`` temporaries
+    (:meth:`eelsim.fluid.FluidLaw.emit_link_forces`), and must assign every output: a law that
+    clobbered the sweep's locals would give wrong numbers silently.
+
+    Parameters
+    ----------
+    e : _Emitter
+        Where the lines go (``e.line``).
+    link : int
+        The link.
+    still_water : bool
+        The block has no current.
+
+    Raises
+    ------
+    ValueError
+        Naming the law and the offending name.
+    """
+    law = e.layout.law
+    start = len(e.lines)
+    law.emit_link_forces(e, link, still_water)
+    assigned: set[str] = set()
+    for text in e.lines[start:]:
+        for node in ast.walk(ast.parse(text.strip())):
+            if isinstance(node, ast.Name) and isinstance(node.ctx, ast.Store):
+                assigned.add(node.id)
+    wrong = sorted(name for name in assigned if name not in KERNEL_OUTPUTS
+                   and not name.startswith(KERNEL_TEMPORARY_PREFIX))
+    missing = sorted(set(KERNEL_OUTPUTS) - assigned)
+    if wrong or missing:
+        raise ValueError(
+            f"fluid law {law.name!r}: its kernel code for link {link} assigns {wrong} and leaves "
+            f"{missing} unassigned; it must assign {', '.join(KERNEL_OUTPUTS)} and otherwise only "
+            f"{KERNEL_TEMPORARY_PREFIX}... temporaries (reading {', '.join(KERNEL_INPUTS)})"
+        )
+
+
 def _backward_sweep(e: _Emitter, plain: bool) -> None:
     """Emit loops 2a and 2b, the backward sweep (see _stage_body).
 
@@ -372,9 +424,9 @@ def _backward_sweep(e: _Emitter, plain: bool) -> None:
     e.loop("2a. link velocities, fluid forces and torques" + suffix, indent=4)
     line("# Each link's velocity relative to the water walks down the chain from the head's:")
     line("# (lvx, lvy) is that of the joint point in front of link j, the link's centre is")
-    line("# h om n_j = h om (-s, c) behind it and the next joint point as much again. Morison drag")
-    line("# (and the added-mass current term) in the link's frame, kept negated (ftn, fnn) so")
-    line("# that no instruction is spent on signs; k = h om^2: centripetal acceleration -k t.")
+    line("# h om n_j = h om (-s, c) behind it and the next joint point as much again. The fluid")
+    line(f"# law ({e.layout.law.name}) gives minus its force (fxn, fyn), minus the normal part fnn")
+    line("# and minus its torque tqn; k = h om^2: centripetal acceleration -k t.")
     line(f"lvx = {o('head_vx')}")
     line(f"lvy = {o('head_vy')}")
     for j in reversed(range(n)):
@@ -388,20 +440,16 @@ def _backward_sweep(e: _Emitter, plain: bool) -> None:
         if j < n - 1:  # the head's row holds its centre's velocity already
             line("lvx = lvx + hws")
             line("lvy = lvy - hwc")
-        line("vt = c * lvx + s * lvy")
-        line("vn = c * lvy - s * lvx")
-        line(f"ftn = {w('ct', j)} * (vt + abs(vt) * vt)")
-        current = "" if plain else f" + {w('mu', j)} * om * (c * {w('vcx')} + s * {w('vcy')})"
-        line(f"fnn = {w('cn', j)} * (vn + abs(vn) * vn){current}")
-        line(f"{o('fxn', j)} = ftn * c - fnn * s")
-        line(f"{o('fyn', j)} = ftn * s + fnn * c")
+        emit_law_forces(e, j, still_water=plain)
+        line(f"{o('fxn', j)} = fxn")
+        line(f"{o('fyn', j)} = fyn")
         if 0 < j < n - 1:
             joint = f"({o('torque', j - 1)} - {o('torque', j)})"
         elif j > 0:
             joint = o("torque", j - 1)
         else:
             joint = f"-{o('torque', j)}"
-        line(f"tq = {joint} - ({w('lambda2', j)} * om + {w('lambda3', j)} * abs(om) * om)")
+        line(f"tq = {joint} - tqn")
         line("# n . F_j is -fnn")
         line(f"{o('rho0', j)} = tq - h * fnn")
         line(f"{o('kc', j)} = h * (om * om)")
@@ -644,7 +692,7 @@ def _screen_body(layout: Layout) -> list[str]:
 def _cond_body(layout: Layout) -> list[str]:
     """trace(M) trace(M^-1), an upper bound of cond(M) (within (N+2)^2 of it), at the state x.
 
-    M is assembled densely (spec section 2, in the rotated form
+    M is assembled densely (docs/model.md section 2, in the rotated form
     M_tt[i,k] = cos(th_i - th_k) sum_j m_j G_ji G_jk + sum_j mu_j b_ji b_jk, b_ji = G_ji
     cos(th_j - th_i)) and factored M = L D L^T; trace(M^-1) = sum_i |row i of L^-1|^2 / D_i.
     It runs only at control updates, where the reference computes np.linalg.cond(M): when the
@@ -733,7 +781,11 @@ def generate_stage_source(layout: Layout) -> str:
     str
         Python source defining ``_stage``, to be appended to the kernel module's text.
     """
-    consts = [f"N_LINKS = {layout.n_links}", f"LANES = {layout.lanes}",
+    consts = [f"ILL_CONDITION_THRESHOLD = {ILL_CONDITION_THRESHOLD!r}",
+              f"DIVERGENCE_RATE = {float(DIVERGENCE_RATE)!r}"]
+    consts += [f"FAIL_{code.name} = {int(code)}" for code in Failure]
+    consts += [f"REASON_{code.name} = {int(code)}" for code in Reason]
+    consts += [f"N_LINKS = {layout.n_links}", f"LANES = {layout.lanes}",
               f"ROTATE_LIMIT = {_ROTATE_LIMIT!r}", f"RESYNC_STEPS = {_RESYNC_STEPS}",
               f"WORK_ROWS = {layout.work_rows}", f"OUT_ROWS = {layout.out_rows}"]
     consts += [f"W_{k.upper()} = {v}" for k, v in layout.work.items()]
@@ -741,7 +793,8 @@ def generate_stage_source(layout: Layout) -> str:
     head = [
         "",
         "",
-        f"# ---- generated for N = {layout.n_links}, {layout.lanes} lanes by eelsim._batch_codegen",
+        f"# ---- generated for N = {layout.n_links}, {layout.lanes} lanes, fluid law "
+        f"{layout.law.name!r} by eelsim.batch.codegen",
         *consts,
         "",
         "",

@@ -1,6 +1,6 @@
 """Paired A/B of the generated RK4 stage alone, compiled as C and driven from C.
 
-Why: the GA generation (``scripts/kernel_ab.py``) mixes the stage with the driver, the camera and
+Why: the GA generation (``eelhost.benchmarks.kernel_ab``) mixes the stage with the driver, the camera and
 numba's threads; to ask what bounds the stage itself (a wrong-maths variant, another GCC option,
 another block size) this script compiles each variant's stage with a small C loop that runs whole
 RK4 steps on one block (four stages, then the commit of the new state) and times them in
@@ -10,13 +10,14 @@ session 5, for what it decided.
 
 Usage (from the repo root, after ``bash scripts/setup.sh``)::
 
-    .venv/bin/python scripts/stage_ab.py [--rounds 41] [--steps 1500] NAME=SPEC ...
+    .venv/bin/python -m eelhost.benchmarks.stage_ab [--rounds 41] [--steps 1500] NAME=SPEC ...
 
 SPEC is ``[FLAGS][@GENERATOR][%LANES]``: compiler options (default ``-O3 -march=native``), a copy
-of ``eelsim/_batch_codegen.py`` to generate the stage with (default: the working tree's) and the
+of ``eelsim/batch/codegen.py`` to generate the stage with (default: the working tree's) and the
 runs per block (default 16). For example::
 
-    scripts/stage_ab.py base= mine=@/tmp/my_codegen.py unrolled='-O3 -march=native -funroll-loops'
+    python -m eelhost.benchmarks.stage_ab base= mine=@/tmp/my_codegen.py \
+        unrolled='-O3 -march=native -funroll-loops'
 
 The state starts from random angles and rates with the bundled robot's per-run parameters; the
 final states of the variants are printed against the first's (a correct variant differs by
@@ -27,26 +28,28 @@ from __future__ import annotations
 
 import argparse
 import ctypes
+import importlib.util
 import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
 from types import ModuleType
 
 import numpy as np
-from kernel_ab import import_path  # scripts/, first on the path when this script runs
 
-from eelhost.commands.common import robot_and_coefficients
-from eelsim import _batch_c, _batch_codegen, batch
+from eelsim import batch
+from eelsim.batch import c_stage, codegen
 from eelsim.closed_loop import LoopOptions
+from eelsim.robot import load_robot
 from eelsim.scenario import TRAINING_CORNERS, grid_scenario
 
 N_LINKS = 6
 DT_S = 0.01
 _TUNING = ("-O3", "-march=native")  # the variant's FLAGS replace these of the kernel's C_FLAGS
-_BASE_FLAGS = [f for f in _batch_c.C_FLAGS if f not in _TUNING]
+_BASE_FLAGS = [f for f in c_stage.C_FLAGS if f not in _TUNING]
 
-# whole RK4 steps as the kernel's driver calls the stage (eelsim/_batch_kernel.py), without the
+# whole RK4 steps as the kernel's driver calls the stage (eelsim/batch/kernel_template.py), without the
 # checks: y = x, four stages (rotating sin/cos except every 16th step's first), x = xn
 _DRIVER = r"""
 void bench(double *restrict work, int64_t steps, double dt) {
@@ -68,7 +71,16 @@ void bench(double *restrict work, int64_t steps, double dt) {
 
 
 def _load_generator(path: str | None, name: str) -> ModuleType:
-    return import_path(Path(path), name) if path else _batch_codegen
+    """The generator module at ``path`` (imported as ``name``), or the working tree's."""
+    if not path:
+        return codegen
+    spec = importlib.util.spec_from_file_location(name, path)
+    if spec is None or spec.loader is None:
+        raise SystemExit(f"{path}: not a Python file")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module  # dataclasses look their module up by name
+    spec.loader.exec_module(module)
+    return module
 
 
 def _build(name: str, flags: str, generator: ModuleType, lanes: int, folder: Path):
@@ -77,7 +89,7 @@ def _build(name: str, flags: str, generator: ModuleType, lanes: int, folder: Pat
     if layout.work["y"] != 0:
         raise SystemExit(f"{name}: the driver here assumes the stage state's rows come first")
     source = generator.generate_stage_source(layout)
-    text = _batch_c.c_source(source, ("_stage",), "STAGE")
+    text = c_stage.c_source(source, ("_stage",), "STAGE")
     text += _DRIVER % dict(ns=2 * N_LINKS + 4, lanes=lanes, wx=layout.work["x"],
                            wxn=layout.work["xn"])
     c_file, library = folder / f"{name}.c", folder / f"{name}.so"
@@ -91,7 +103,8 @@ def _build(name: str, flags: str, generator: ModuleType, lanes: int, folder: Pat
 
 def _initial(layout, lanes: int, seed: int) -> np.ndarray:
     """A block's buffer: the bundled robot's per-run rows and random start states."""
-    robot, coeffs = robot_and_coefficients(argparse.Namespace(robot=None, coefficients=None))
+    robot = load_robot()
+    coeffs = robot.hydrodynamics
     corners = [grid_scenario("straight", a, w) for a, w in TRAINING_CORNERS]
     rng = np.random.default_rng(seed)
     candidates = coeffs.as_array() * rng.uniform(0.5, 1.5, size=(lanes, 4))
@@ -148,10 +161,10 @@ def main() -> None:
         for j in order:
             name, lib, layout, init, work, lanes = variants[j]
             work[:] = init
-            steps = args.steps * 16 // lanes
-            start = time.perf_counter()
-            lib.bench(work.ctypes.data, steps, DT_S)
-            per_step[i, j] = (time.perf_counter() - start) / (steps * lanes) * 1e9
+            block_steps = args.steps * 16 // lanes
+            t0 = time.perf_counter()
+            lib.bench(work.ctypes.data, block_steps, DT_S)
+            per_step[i, j] = (time.perf_counter() - t0) / (block_steps * lanes) * 1e9
     for j, (name, *_) in enumerate(variants):
         ratio = per_step[:, j] / per_step[:, 0]
         print(f"{name:>12}: best {per_step[:, j].min():6.1f} ns per run and step, median"

@@ -19,6 +19,7 @@ Everything is deterministic for a seed.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
@@ -27,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from eelhost.experiment import (
+from eelhost.data.experiments import (
     Experiment,
     manifest_text,
     write_experiment,
@@ -35,16 +36,20 @@ from eelhost.experiment import (
 )
 from eelsim.camera import CameraModel
 from eelsim.closed_loop import LoopOptions, simulate_closed_loop
+from eelsim.fluid import FluidCoefficients
 from eelsim.robot import HydroCoefficients, Robot, load_robot
 from eelsim.scenario import TRAINING_CORNERS, Scenario, named_scenarios, paper_grid
 from eelsim.timing import LoopTiming
 
-TABLE3 = {
+log = logging.getLogger(__name__)
+
+TABLE3: dict[str, FluidCoefficients] = {
     "straight": HydroCoefficients(C_f=0.008, C_d=0.776, C_a=0.618, C_m=0.007),
     "turning": HydroCoefficients(C_f=0.009, C_d=0.978, C_a=1.169, C_m=0.001),
 }
 
 # The mismatched robot's head and tail (per-link overrides of the true robot only).
+
 MISMATCH_HEAD = {"half_axis_vertical_m": 0.032, "half_axis_horizontal_m": 0.026, "mass_kg": 0.33}
 MISMATCH_TAIL = {"half_axis_vertical_m": 0.014, "half_axis_horizontal_m": 0.008, "mass_kg": 0.15}
 
@@ -101,7 +106,7 @@ def record_experiment(
     robot: Robot,
     scenario: Scenario,
     motion: str,
-    truth: HydroCoefficients,
+    truth: FluidCoefficients,
     settings: TankSettings,
     seed: int,
 ) -> Experiment:
@@ -115,7 +120,7 @@ def record_experiment(
         The task.
     motion : str
         "straight", "turning" or "path".
-    truth : HydroCoefficients
+    truth : FluidCoefficients
         The true coefficients.
     settings : TankSettings
     seed : int
@@ -190,7 +195,7 @@ def _record_job(args: tuple) -> Experiment:
 def generate_dataset(
     folder: str | Path,
     robot: Robot | None = None,
-    truth: dict[str, HydroCoefficients] | None = None,
+    truth: dict[str, FluidCoefficients] | None = None,
     settings: TankSettings | None = None,
     seed: int = 0,
     workers: int = 2,
@@ -222,16 +227,17 @@ def generate_dataset(
     """
     folder = Path(folder)
     robot = robot or load_robot()
-    truth = truth or TABLE3
+    truths = truth or TABLE3
     settings = settings or TankSettings()
     plan = paper_experiment_plan()
     jobs = [
-        (robot, s, motion, truth["turning" if motion == "path" else motion], settings, seed + i)
+        (robot, s, motion, truths["turning" if motion == "path" else motion], settings, seed + i)
         for i, (motion, _split, s) in enumerate(plan)
     ]
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "robot.toml").write_text(_robot_file_text(robot))
     done = 0
+    log.info("recording %d virtual-tank experiments into %s", len(jobs), folder)
     with ProcessPoolExecutor(max_workers=max(1, workers)) as pool:
         for exp in pool.map(_record_job, jobs):
             write_experiment(exp, folder)
@@ -252,7 +258,7 @@ def generate_dataset(
             "robot.toml",
             motions,
             ["path1", "path2"],
-            {"straight": truth["straight"], "turning": truth["turning"]},
+            {"straight": truths["straight"], "turning": truths["turning"]},
             desc,
         ),
     )

@@ -12,12 +12,15 @@ with acknowledgement and resends. Then, per camera frame:
 2. localise the robot (:class:`eelhost.vision.localise.Localiser`); a frame with a pose is
    recorded and fed to the moving median filter (the twin's :class:`eelsim.camera.MedianFilter`),
    and the target moves to the next waypoint when the filtered position is within the acceptance
-   radius (spec section 4);
+   radius (docs/model.md section 4);
 3. check the stop conditions: a stop request (Ctrl-C), the last waypoint reached, no pose for
    more than ``lost_after_s`` (1 s), no frame from the robot for more than ``link_timeout_s`` (1 s;
    the robot sends Telemetry every 0.1 s), the duration;
-4. every control period, compute gamma = :func:`eelsim.control.heading_offset` from the latest
+4. every control period, compute gamma = k_theta wrap(theta_ref - theta_bar) from the latest
    filtered pose (the twin's law) and send SetOffset (which also feeds the robot's watchdog).
+
+Steps 2 and 4 (filter, waypoint switch, line of sight, clipping) are the twin's own guidance
+object, :class:`eelsim.guidance.Guidance`, so the tank steers exactly as the twin does.
 
 Whatever ends the loop, even an exception, Stop is sent and waited for (with resends) for up to
 ``stop_timeout_s``, and the recording is closed with the outcome.
@@ -25,19 +28,22 @@ Whatever ends the loop, even an exception, Stop is sent and waited for (with res
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 
-from eelhost import protocol
+from eelhost.field.recorder import Recorder
 from eelhost.link.base import Clock, Link, LinkEvent
-from eelhost.recorder import Recorder
 from eelhost.vision.localise import Localiser
-from eelsim.camera import MedianFilter
-from eelsim.control import Gait, heading_offset
+from eelhost.wire import protocol
+from eelsim.control import Gait
+from eelsim.guidance import Guidance
 from eelsim.robot import Robot
+
+log = logging.getLogger(__name__)
 
 __all__ = ["RunConfig", "RunLoop", "RunOutcome"]
 
@@ -179,11 +185,26 @@ class RunLoop:
         self.recorder = recorder
         self.clock = clock or link.clock
         self.outcome = RunOutcome()
-        self.target = 0
-        self.filtered: NDArray[np.float64] | None = None
+        self.guidance = Guidance(
+            config.waypoints_m,
+            config.acceptance_radius_m,
+            config.gait.k_theta,
+            config.median_window,
+            offset_limit_rad=OFFSET_LIMIT_RAD,
+        )
         self._stop_request: str | None = None
         self._t_start = 0.0
         link.listeners.append(self._on_event)
+
+    @property
+    def target(self) -> int:
+        """Index of the waypoint being steered to (the number reached so far)."""
+        return self.guidance.target_index
+
+    @property
+    def filtered(self) -> NDArray[np.float64] | None:
+        """The latest filtered pose (x, y, heading), or None before the first."""
+        return self.guidance.filtered_pose
 
     def request_stop(self, reason: str = "interrupted") -> None:
         """Ask the loop to stop at the next frame (safe from a signal handler)."""
@@ -235,17 +256,18 @@ class RunLoop:
         finally:
             out.waypoints_reached = self.target
             out.stop_outcome = self._stop_robot()
+            log.info("run ended: %s (%s); Stop %s", out.reason, out.detail, out.stop_outcome)
+            if out.stop_outcome != "ack":
+                log.warning("the final Stop was not acknowledged (%s)", out.stop_outcome)
             if self.recorder is not None:
                 self.recorder.close(out.as_dict())
         return out
 
     def _loop(self) -> None:
         c, out = self.config, self.outcome
-        filt = MedianFilter(c.median_window)
         offset_to_clock: float | None = None
         next_control = 0.0
         last_pose_t: float | None = None
-        gamma = 0.0
         for t_src, frame in self.frames:
             now = self.clock.now()
             if offset_to_clock is None:
@@ -264,19 +286,12 @@ class RunLoop:
                 last_pose_t = t
                 if self.recorder is not None:
                     self.recorder.frame(t, loc.com_m, loc.heading_rad, loc.link_angles_rad)
-                self.filtered = filt.push(float(loc.com_m[0]), float(loc.com_m[1]), loc.heading_rad)
-                wp = np.asarray(c.waypoints_m[self.target], dtype=float)
-                if np.linalg.norm(self.filtered[:2] - wp) < c.acceptance_radius_m:
-                    self.target += 1
+                self.guidance.observe(t, float(loc.com_m[0]), float(loc.com_m[1]), loc.heading_rad)
             if self._should_stop(t, last_pose_t):
                 return
             if t >= next_control - EPS_S:
-                if self.filtered is not None:
-                    wp = c.waypoints_m[self.target]
-                    gamma = heading_offset(self.filtered[:2], self.filtered[2], wp, c.gait.k_theta)
-                    gamma = float(np.clip(gamma, -OFFSET_LIMIT_RAD, OFFSET_LIMIT_RAD))
-                # Sent even before the first pose: it keeps the robot's watchdog fed.
-                self.link.send(protocol.SetOffset(gamma))
+                # Sent even before the first pose (0 then): it keeps the robot's watchdog fed.
+                self.link.send(protocol.SetOffset(self.guidance.offset()))
                 out.offsets_sent += 1
                 next_control += c.control_period_s
         out.reason, out.detail = "camera_ended", "the camera delivered no more frames"
@@ -285,7 +300,7 @@ class RunLoop:
         c, out = self.config, self.outcome
         if self._stop_request is not None:
             out.reason, out.detail = self._stop_request, "stop requested"
-        elif self.target >= len(c.waypoints_m):
+        elif self.guidance.arrived:
             out.reason, out.detail = "arrived", f"reached all {len(c.waypoints_m)} waypoints"
         elif last_pose_t is not None and t - last_pose_t > c.lost_after_s:
             out.reason = "lost_from_view"

@@ -1,8 +1,8 @@
 """Framing of the wire protocol: CRC-16, COBS, and frames of header | payload | CRC.
 
-Hand-written and shared by every message set: the generated ``eelhost.protocol`` binds these to its
-schema hash and message table (``encode_frame``, ``decode_frame``, ``FrameReader``). A frame is
-``COBS(schema_hash u16 | msg_id u8 | seq u8 | payload | [crc32 u32] | crc16 u16)`` followed by a
+Hand-written and shared by every message set: the generated ``eelhost.wire.protocol`` binds these
+to its schema hash and message table (``encode_frame``, ``decode_frame``, ``FrameReader``). A frame
+is ``COBS(schema_hash u16 | msg_id u8 | seq u8 | payload | [crc32 u32] | crc16 u16)`` followed by a
 zero byte, little-endian, CRC-16/CCITT-FALSE over everything before it; messages to the robot
 carry the CRC-32 (zlib's) of header and payload (docs/firmware.md, "Command integrity").
 """
@@ -147,7 +147,7 @@ def encode(message: Any, seq: int, schema_hash: int) -> bytes:
 
 
 def decode(
-    encoded: bytes, schema_hash: int, messages: Mapping[int, type], max_frame_bytes: int
+    encoded: bytes, schema_hash: int, messages: Mapping[int, type[Any]], max_frame_bytes: int
 ) -> tuple[int, Any]:
     """Decode one frame (the bytes between two zero delimiters).
 

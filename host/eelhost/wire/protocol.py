@@ -15,8 +15,8 @@ from dataclasses import dataclass, field, fields
 from enum import IntEnum, IntFlag
 from typing import TYPE_CHECKING, Any, ClassVar, Self, TypeVar
 
-from eelhost import framing as _framing
-from eelhost.framing import (  # noqa: F401 (part of this module's interface)
+from eelhost.wire import framing as _framing
+from eelhost.wire.framing import (  # noqa: F401 (part of this module's interface)
     FrameError,
     cobs_decode,
     cobs_encode,
@@ -778,16 +778,16 @@ SETTINGS: dict[str, SettingInfo] = {
     ),
 }
 
-# The framing is hand-written once in eelhost.framing; these bind it to this schema.
+# The framing is hand-written once in eelhost.wire.framing; these bind it to this schema.
 
 
 def encode_frame(message: Message, seq: int) -> bytes:
-    """Build the bytes to send for a message (see :func:`eelhost.framing.encode`)."""
+    """Build the bytes to send for a message (see :func:`eelhost.wire.framing.encode`)."""
     return _framing.encode(message, seq, SCHEMA_HASH)
 
 
 def decode_frame(encoded: bytes) -> tuple[int, Message]:
-    """Decode the bytes between two zero delimiters (see :func:`eelhost.framing.decode`)."""
+    """Decode the bytes between two zero delimiters (see :func:`eelhost.wire.framing.decode`)."""
     return _framing.decode(encoded, SCHEMA_HASH, MESSAGES, MAX_FRAME_BYTES)
 
 

@@ -32,6 +32,8 @@ from typing import Any
 import numpy as np
 from pydantic import ValidationError
 
+from eelhost.errors import UserError
+from eelsim.fluid import FluidCoefficients
 from eelsim.robot import HydroCoefficients, Robot, load_robot
 from eelsim.scenario import Scenario
 
@@ -41,7 +43,11 @@ REQUIRED_COLUMNS = ("t_s", "x_m", "y_m")
 COLUMN_ALIASES = {"t": "t_s", "time": "t_s", "x": "x_m", "y": "y_m", "heading": "heading_rad"}
 
 
-class DataError(ValueError):
+# The repository's bundled virtual-tank dataset (this file is host/eelhost/data/experiments.py).
+BUNDLED_DATASET = Path(__file__).resolve().parents[3] / "datasets" / "paper_virtual_tank"
+
+
+class DataError(UserError, ValueError):
     """A malformed experiment, CSV or dataset; the message says where (file, line, column)."""
 
 
@@ -164,7 +170,7 @@ def read_frames_csv(path: str | Path, allow_truncated_tail: bool = False) -> Fra
     ----------
     path : str or Path
     allow_truncated_tail : bool
-        Read a file whose writer was killed mid-line (``eelhost.recorder`` appends a line per
+        Read a file whose writer was killed mid-line (``eelhost.field.recorder`` appends a line per
         frame): a last line without its newline is incomplete, whatever it looks like, and is
         dropped; every complete row is kept. Off by default: a finished file must end cleanly.
 
@@ -343,7 +349,7 @@ class Dataset:
         Per motion type ("straight", "turning").
     paths : list[Experiment]
         Multi-waypoint validation runs.
-    truth : dict[str, HydroCoefficients]
+    truth : dict[str, FluidCoefficients]
         For virtual tanks: the coefficients the data was generated with, per motion type.
     manifest : dict
         The manifest as read.
@@ -354,7 +360,7 @@ class Dataset:
     train: dict[str, list[Experiment]]
     test: dict[str, list[Experiment]]
     paths: list[Experiment]
-    truth: dict[str, HydroCoefficients]
+    truth: dict[str, FluidCoefficients]
     manifest: dict[str, Any]
 
 
@@ -362,7 +368,7 @@ def manifest_text(
     robot_file: str,
     motions: dict[str, dict[str, list[str]]],
     paths: list[str],
-    truth: dict[str, HydroCoefficients] | None = None,
+    truth: dict[str, FluidCoefficients] | None = None,
     description: str = "",
 ) -> str:
     """Render a dataset manifest (TOML)."""
@@ -387,7 +393,7 @@ def manifest_text(
     if truth:
         lines.append("[truth]  # coefficients the data was generated with (C_f, C_d, C_a, C_m)")
         for motion, c in truth.items():
-            lines.append(f"{motion} = [{c.C_f}, {c.C_d}, {c.C_a}, {c.C_m}]")
+            lines.append(f"{motion} = [{', '.join(str(v) for v in c.as_array())}]")
     return "\n".join(lines) + "\n"
 
 
@@ -438,7 +444,7 @@ def load_dataset(folder: str | Path) -> Dataset:
         _load_named(folder, n, mpath, "validation.paths")
         for n in manifest.get("validation", {}).get("paths", [])
     ]
-    truth = {}
+    truth: dict[str, FluidCoefficients] = {}
     for motion, values in manifest.get("truth", {}).items():
         try:
             truth[motion] = HydroCoefficients.from_array(values)

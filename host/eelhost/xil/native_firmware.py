@@ -14,6 +14,7 @@ of the twin at a time::
 
 from __future__ import annotations
 
+import logging
 import re
 import shutil
 import subprocess
@@ -25,9 +26,11 @@ import numpy as np
 from cffi import FFI
 from numpy.typing import ArrayLike, NDArray
 
-from eelhost import protocol
+from eelhost.wire import protocol
 
-FIRMWARE_DIR = Path(__file__).resolve().parents[2] / "firmware"
+log = logging.getLogger(__name__)
+
+FIRMWARE_DIR = Path(__file__).resolve().parents[3] / "firmware"
 LIBRARY_PATH = FIRMWARE_DIR / "build" / "native" / "libeelfw.so"
 HEADER_PATH = FIRMWARE_DIR / "hal" / "native" / "eel_native.h"
 
@@ -73,6 +76,7 @@ def build_library() -> Path:
     NativeFirmwareError
         When make fails (its output is in the message).
     """
+    log.debug("bringing %s up to date (make native)", LIBRARY_PATH)
     try:
         proc = subprocess.run(
             ["make", "-s", "-C", str(FIRMWARE_DIR), "native"],
@@ -122,7 +126,7 @@ def load_library(path: Path | None = None):
             )
         if lib.eel_schema_hash() != protocol.SCHEMA_HASH:
             raise NativeFirmwareError(
-                f"{target}: schema 0x{lib.eel_schema_hash():04X}, eelhost.protocol has "
+                f"{target}: schema 0x{lib.eel_schema_hash():04X}, eelhost.wire.protocol has "
                 f"0x{protocol.SCHEMA_HASH:04X}; rebuild with `make -C firmware native`"
             )
         if path is None:
@@ -170,7 +174,10 @@ class NativeFirmware:
     """
 
     def __init__(
-        self, now_us: int = 0, control_period_us: int = 10000, library: Path | None = None
+        self,
+        now_us: int = 0,
+        control_period_us: int = protocol.CONTROL_PERIOD_US,
+        library: Path | None = None,
     ) -> None:
         self._lib = load_library(library)
         handle = self._lib.eel_create(_u32(now_us))
@@ -220,7 +227,7 @@ class NativeFirmware:
         Parameters
         ----------
         message : protocol.Message
-            Any message of :mod:`eelhost.protocol`.
+            Any message of :mod:`eelhost.wire.protocol`.
         seq : int
             Its sequence number, 0..255.
         """
@@ -228,7 +235,7 @@ class NativeFirmware:
 
     def take(self) -> bytes:
         """Return every byte the firmware has transmitted since the last call."""
-        chunks = []
+        chunks: list[bytes] = []
         buf = _ffi.new("uint8_t[4096]")
         while True:
             n = self._lib.eel_take(self._fw, buf, 4096)
@@ -295,7 +302,7 @@ class NativeFirmware:
         -------
         dict
             Keys as in ``EelStatus`` of ``firmware/hal/native/eel_native.h``; ``state`` is a
-            :class:`eelhost.protocol.State`.
+            :class:`eelhost.wire.protocol.State`.
         """
         self._lib.eel_status(self._fw, self._status)
         s = self._status

@@ -1,6 +1,6 @@
 """The batched kernel's generated functions compiled as C, for the machine's C compiler to schedule.
 
-Why: the generated stage (``eelsim._batch_codegen``) is one long straight-line block per lane loop,
+Why: the generated stage (``eelsim.batch.codegen``) is one long straight-line block per lane loop,
 and how fast it runs is decided by instruction scheduling and register allocation, not by the
 arithmetic. Measured on the same text, GCC's schedule of the stage is 11-19 % faster than
 LLVM's (numba's) on the GA generation and the stage alone (docs/kernel_history.md, session 4).
@@ -22,10 +22,13 @@ from __future__ import annotations
 
 import ast
 import hashlib
+import logging
 import os
 import shutil
 import subprocess
 from pathlib import Path
+
+logger = logging.getLogger(__name__)
 
 # -O3 with the host's vector units; contraction to FMA as numba's fastmath={"contract"};
 # floor inlines (and the lane loops vectorise) only without trapping-math and errno
@@ -233,7 +236,7 @@ def build(source: str, functions: tuple[str, ...], folder: Path,
     Parameters
     ----------
     source : str
-        The generated Python text (``_batch_codegen.generate_stage_source``).
+        The generated Python text (``codegen.generate_stage_source``).
     functions : tuple of str
         Names of the generated functions to compile.
     folder : Path
@@ -264,6 +267,7 @@ def build(source: str, functions: tuple[str, ...], folder: Path,
     if library.exists():
         return library, symbols
     folder.mkdir(parents=True, exist_ok=True)
+    logger.info("compiling the kernel's C stage with %s into %s", compiler, library)
     # each process writes and compiles its own files, then renames them into place (atomic):
     # concurrent processes never compile half a C file or load half a library
     c_path = folder / f"{stem}.c"
@@ -305,7 +309,7 @@ def binding_source(library: Path, symbols: dict[str, str], source: str) -> str:
     str
     """
     args = {name: [a.arg for a in node.args.args] for name, node in _functions(source).items()}
-    lines = ["", "", "# ---- the generated functions compiled as C (eelsim._batch_c)",
+    lines = ["", "", "# ---- the generated functions compiled as C (eelsim.batch.c_stage)",
              "import llvmlite.binding as _llvm_binding", "",
              f"_llvm_binding.load_library_permanently({str(library)!r})"]
     for name, symbol in symbols.items():

@@ -1,9 +1,11 @@
-"""The batched closed loop: template of the compiled kernel module (see ``eelsim.batch``).
+"""The batched closed loop: the driver of the compiled kernel module (see ``eelsim.batch``).
 
-This file is valid Python and is read as text: ``eelsim.batch`` appends the per-N generated part
-(``_stage``, ``_screen`` and the row constants, from ``eelsim._batch_codegen``) and writes the
-result to a cache directory, where numba compiles and caches it. The placeholders below are
-replaced by those later definitions; importing this module on its own is useless.
+This file is valid Python and is read as text: ``eelsim.batch.loading`` appends the generated part
+(``_stage``, ``_screen``, ``_cond_bound`` and the constants: N, lanes, row offsets, thresholds and
+codes, from ``eelsim.batch.codegen``) and writes the result to the kernel cache folder, where it is
+imported as ``eelsim.batch.kernels.<name>`` and numba compiles and caches it. The placeholders
+below are redefined by that later text before anything is compiled; importing this file on its
+own is useless.
 
 What runs here, for a block of ``LANES`` runs advancing in lock step (one physics step at a time,
 so the time, the camera frame schedule and the sample steps are shared; runs that stopped are
@@ -38,19 +40,13 @@ from llvmlite import ir as llvm_ir
 from numba.core import types
 from numba.extending import intrinsic
 
+from eelsim.batch.records import CameraState, Targets
+
 # Floating-point contraction (FMA) only: no reassociation (it would undo the Cody-Waite range
 # reduction of the generated sin/cos) and no "no NaN / no inf" assumptions (the failure checks
 # rely on NaN and inf).
 _FASTMATH = {"contract"}
 
-# replaced by the values of eelsim.flags when batch.py writes the module
-ILL_CONDITION_THRESHOLD = 1e10
-DIVERGENCE_RATE = 1e3
-
-# Failure codes (eelsim.flags.Failure) and reason codes (eelsim.batch.Reason).
-FAIL_NONE, FAIL_TOO_SLOW, FAIL_ILL, FAIL_SELF = 0, 1, 2, 3
-REASON_NONE, REASON_TOO_SLOW, REASON_NOT_FINITE, REASON_NOT_PD = 0, 1, 2, 3
-REASON_CONDITION, REASON_JOINT_LIMIT, REASON_LINKS_INTERSECT, REASON_DIVERGED = 4, 5, 6, 7
 NEVER = 2**62  # a step no run reaches
 
 
@@ -87,6 +83,12 @@ def _next_block(typingctx, counter):
 
 
 # ---- placeholders, redefined by the generated part appended to this text ----
+# thresholds of eelsim.flags, failure codes (eelsim.flags.Failure: FAIL_<name>) and reason codes
+# (eelsim.batch.records.Reason: REASON_<name>)
+ILL_CONDITION_THRESHOLD = DIVERGENCE_RATE = 0.0
+FAIL_NONE = FAIL_TOO_SLOW = FAIL_ILL_CONDITIONED = FAIL_SELF_COLLISION = 0
+REASON_NONE = REASON_TOO_SLOW = REASON_NOT_FINITE = REASON_NOT_POSITIVE_DEFINITE = 0
+REASON_CONDITION_NUMBER = REASON_JOINT_LIMIT = REASON_LINKS_INTERSECT = REASON_DIVERGED = 0
 N_LINKS = 2
 LANES = 16
 WORK_ROWS = OUT_ROWS = 1
@@ -99,15 +101,15 @@ RESYNC_STEPS = 16
 
 
 def _stage(work, t_s, a, wk, first, last, sixth, rotate, advance, plain):  # pragma: no cover
-    raise RuntimeError("eelsim._batch_kernel is a template; use eelsim.batch")
+    raise RuntimeError("eelsim.batch.kernel_template is a template; use eelsim.batch")
 
 
 def _screen(work):  # pragma: no cover - replaced
-    raise RuntimeError("eelsim._batch_kernel is a template; use eelsim.batch")
+    raise RuntimeError("eelsim.batch.kernel_template is a template; use eelsim.batch")
 
 
 def _cond_bound(work):  # pragma: no cover - replaced
-    raise RuntimeError("eelsim._batch_kernel is a template; use eelsim.batch")
+    raise RuntimeError("eelsim.batch.kernel_template is a template; use eelsim.batch")
 
 
 # ---- scalar helpers (per lane, not in the hot loop) ----
@@ -126,10 +128,18 @@ def _np_mod(a, b):
 
 
 @numba.njit(cache=True)
+def _wrap_angle(a):
+    """control.wrap_angle for one angle: a itself in (-pi, pi], else pi - mod(pi - a, 2 pi)."""
+    if -math.pi < a <= math.pi:
+        return a
+    w = math.pi - _np_mod(math.pi - a, 2.0 * math.pi)
+    return math.pi if w <= -math.pi else w
+
+
+@numba.njit(cache=True)
 def _heading_offset(px, py, heading, wx, wy, k_theta):
-    """control.heading_offset: k_theta * wrap(atan2(wy - py, wx - px) - heading)."""
-    a = math.atan2(wy - py, wx - px) - heading
-    return k_theta * (math.pi - _np_mod(math.pi - a, 2.0 * math.pi))
+    """guidance.Guidance.offset: k_theta * wrap(atan2(wy - py, wx - px) - heading)."""
+    return k_theta * _wrap_angle(math.atan2(wy - py, wx - px) - heading)
 
 
 @numba.njit(cache=True)
@@ -361,20 +371,21 @@ def _median_by_ranks(med, count, filtered, rank, total):
 
 
 @numba.njit(cache=True)
-def _observe(frame, px, py, heading, alive, run_of, noise, pixel, window, med, med_state,
-             last_heading, filtered, target, arrival, target_x, target_y, lane_radius,
-             lane_waypoints, waypoints, frame_time, turn, rank, total):
+def _observe(frame, px, py, heading, alive, run_of, noise, pixel, window, camera, targets,
+             waypoints, frame_time):
     """One camera frame for every lane of the block, as loops over the lanes that vectorise.
 
     ``px``, ``py``, ``heading``: the pose each lane's camera sees (lanes that stopped are
-    computed too and ignored). Pixel quantisation, heading noise, unwrapping against the last
-    heading (``camera.MedianFilter``), the moving median over the last ``window`` frames
-    (``med[slot, channel, lane]``; every lane of a block sees the same frames, so the ring's
-    slot and fill, ``med_state``, are the block's) and waypoint switching with arrival.
+    computed too and ignored). Pixel quantisation and heading noise (the camera model of
+    ``closed_loop``), then what ``guidance.Guidance.observe`` does: unwrapping against the last
+    heading, the moving median over the last ``window`` frames (``camera.median[slot, channel,
+    lane]``; every lane of a block sees the same frames, so the ring's slot and fill are the
+    block's) and waypoint switching with arrival (``targets``).
 
     The median: :func:`_median_of_five` for the default window once full, else
     :func:`_median_by_ranks`.
     """
+    med, med_state, last_heading, filtered, turn, rank, total = camera
     if pixel > 0.0:
         for r in range(LANES):
             px[r] = (np.floor(px[r] / pixel) + 0.5) * pixel
@@ -384,8 +395,8 @@ def _observe(frame, px, py, heading, alive, run_of, noise, pixel, window, med, m
             heading[r] = heading[r] + noise[run_of[r], frame]
     count = med_state[0]
     if count > 0:
-        # MedianFilter unwraps with angle(exp(i d)) = atan2(sin d, cos d); that is d itself for
-        # |d| < pi up to an ulp, and frame-to-frame heading changes are far smaller
+        # the unwrapped change is wrap(d), d itself for |d| < 1 < pi (frame-to-frame heading
+        # changes are far smaller): the general case only when some lane turned that far
         widest = 0.0
         for r in range(LANES):
             d = heading[r] - last_heading[r]
@@ -395,7 +406,7 @@ def _observe(frame, px, py, heading, alive, run_of, noise, pixel, window, med, m
             for r in range(LANES):
                 d = turn[r]
                 if abs(d) >= 1.0:
-                    turn[r] = math.atan2(math.sin(d), math.cos(d))
+                    turn[r] = _wrap_angle(d)
         for r in range(LANES):
             heading[r] = last_heading[r] + turn[r]
     slot = med_state[1]
@@ -416,7 +427,8 @@ def _observe(frame, px, py, heading, alive, run_of, noise, pixel, window, med, m
                                                   med[3, ch, r], med[4, ch, r])
     else:
         _median_by_ranks(med, count, filtered, rank, total)
-    # waypoint switching: target_x/y hold each lane's current waypoint (NaN after the last)
+    # waypoint switching: targets.x/y hold each lane's current waypoint (NaN after the last)
+    target, arrival, target_x, target_y, lane_radius, lane_waypoints = targets
     hits = 0
     for r in range(LANES):
         dx = filtered[0, r] - target_x[r]
@@ -428,20 +440,20 @@ def _observe(frame, px, py, heading, alive, run_of, noise, pixel, window, med, m
             dy = filtered[1, r] - target_y[r]
             if alive[r] and _vsqrt(dx * dx + dy * dy) < lane_radius[r]:
                 target[r] += 1
-                _aim(r, run_of[r], target, target_x, target_y, lane_waypoints, waypoints)
+                _aim(r, run_of[r], targets, waypoints)
                 if target[r] == lane_waypoints[r] and np.isnan(arrival[r]):
                     arrival[r] = frame_time
 
 
 @numba.njit(cache=True)
-def _aim(r, run, target, target_x, target_y, lane_waypoints, waypoints):
-    """Lane r's current waypoint into target_x/y (NaN once the last one is reached)."""
-    if target[r] < lane_waypoints[r]:
-        target_x[r] = waypoints[run, target[r], 0]
-        target_y[r] = waypoints[run, target[r], 1]
+def _aim(r, run, targets, waypoints):
+    """Lane r's current waypoint into targets.x/y (NaN once the last one is reached)."""
+    if targets.reached[r] < targets.n_waypoints[r]:
+        targets.x[r] = waypoints[run, targets.reached[r], 0]
+        targets.y[r] = waypoints[run, targets.reached[r], 1]
     else:
-        target_x[r] = np.nan
-        target_y[r] = np.nan
+        targets.x[r] = np.nan
+        targets.y[r] = np.nan
 
 
 @numba.njit(cache=True)
@@ -532,18 +544,21 @@ def _gather(work, base, r, ns, dest):
 
 
 @numba.njit(cache=True)
-def _run_block(block, order, params, x0, total_steps, goal_steps, dt, waypoints, n_waypoints,
-               radius, k_theta, delay_steps, update_steps, update_count, frame_step,
-               frame_fraction, frame_time, noise, plain_run, pixel, window, stop_at_goal,
-               pending_size, sample_steps, states_out, record_full, full_out, arrival_out, failure_out, failure_time_out,
-               reason_out, reason_index_out, reason_value_out, final_state_out, final_step_out,
-               target_out, distance_out):
-    """Run block ``block`` (runs ``order[block * LANES ...]``) to its end; see the module docstring.
+def _run_block(block, runs, frames, loop, outputs):
+    """Run block ``block`` (runs ``runs.order[block * LANES ...]``) to its end (module docstring).
 
+    ``runs``, ``frames``, ``loop`` and ``outputs`` are the records of ``eelsim.batch.records``.
     The lanes' states live in ``work`` (rows W_X: the step's start, W_XN: its end), so the
     generated code reads and writes them with constant offsets; everything per lane and per step
     that does not vectorise (control updates, checks, camera) reads single numbers from there.
     """
+    (order, params, x0, total_steps, goal_steps, waypoints, n_waypoints, radius, k_theta,
+     delay_steps, update_steps, update_count, noise, plain_run) = runs
+    frame_step, frame_fraction, frame_time = frames
+    dt, pixel, window, stop_at_goal, pending_size, record_full, sample_steps = loop
+    (states_out, full_out, arrival_out, failure_out, failure_time_out, reason_out,
+     reason_index_out, reason_value_out, final_state_out, final_step_out, target_out,
+     distance_out) = outputs
     n = N_LINKS
     ns = 2 * n + 4
     n_runs = x0.shape[0]
@@ -577,22 +592,17 @@ def _run_block(block, order, params, x0, total_steps, goal_steps, dt, waypoints,
     pending_at = np.full(LANES, NEVER, np.int64)
     lane_total = np.zeros(LANES, np.int64)
     lane_goal = np.zeros(LANES, np.int64)  # with stop_at_goal: stop at the goal from this step on
-    # the camera's state, lanes innermost (see _observe)
-    med = np.zeros((window, 3, LANES))
-    med_state = np.zeros(2, np.int64)  # frames in the median window, next slot
-    last_heading = np.zeros(LANES)
+    # the camera's state, lanes innermost (see _observe), and the lanes' waypoints
     filtered = np.zeros((3, LANES))
-    target_x = np.full(LANES, np.nan)
-    target_y = np.full(LANES, np.nan)
+    camera = CameraState(np.zeros((window, 3, LANES)), np.zeros(2, np.int64), np.zeros(LANES),
+                         filtered, np.zeros(LANES), np.zeros(LANES), np.zeros(LANES))
     lane_radius = np.zeros(LANES)
     lane_waypoints = np.zeros(LANES, np.int64)
+    targets = Targets(target, arrival, np.full(LANES, np.nan), np.full(LANES, np.nan),
+                      lane_radius, lane_waypoints)
     seen_x = np.zeros(LANES)
     seen_y = np.zeros(LANES)
     seen_heading = np.zeros(LANES)
-    turn = np.zeros(LANES)  # scratch of _observe: heading change since the last frame
-    # scratch of _median_by_ranks: ranks and sums
-    rank = np.zeros(LANES)
-    total = np.zeros(LANES)
     cm = np.empty((n + 2, n + 2))
     clo = np.empty((n + 2, n + 2))
     cinv = np.empty((n + 2, n + 2))
@@ -613,13 +623,12 @@ def _run_block(block, order, params, x0, total_steps, goal_steps, dt, waypoints,
         if update_count[run_of[r]] > 0:
             update_at[r] = update_steps[run_of[r], 0]
         lane_waypoints[r] = n_waypoints[run_of[r]]
-        _aim(r, run_of[r], target, target_x, target_y, lane_waypoints, waypoints)
+        _aim(r, run_of[r], targets, waypoints)
     # the frame at t = 0 sees the initial pose (fraction 0 of the first step; the xn rows are
     # still zero)
     _frame_poses(work, 0.0, dt, seen_x, seen_y, seen_heading)
-    _observe(0, seen_x, seen_y, seen_heading, alive, run_of, noise, pixel, window, med,
-             med_state, last_heading, filtered, target, arrival, target_x, target_y,
-             lane_radius, lane_waypoints, waypoints, frame_time[0], turn, rank, total)
+    _observe(0, seen_x, seen_y, seen_heading, alive, run_of, noise, pixel, window, camera,
+             targets, waypoints, frame_time[0])
     _check_start(work, out)
     # no lane with a servo line or a current (batch.plain_runs): the stage leaves those out
     plain = True
@@ -738,7 +747,7 @@ def _run_block(block, order, params, x0, total_steps, goal_steps, dt, waypoints,
                                                           params[run], n, cm, clo, cinv, cs, cc,
                                                           cjx, cjy)
                         if not cond < ILL_CONDITION_THRESHOLD:
-                            code = REASON_CONDITION
+                            code = REASON_CONDITION_NUMBER
                             reason_value[r] = cond
                     if code == REASON_NONE and out[O_NEAR * LANES + r] != 0.0:
                         code = _self_collision(_gather(work, W_X, r, ns, xs), params[run], n,
@@ -750,7 +759,7 @@ def _run_block(block, order, params, x0, total_steps, goal_steps, dt, waypoints,
                     if code != REASON_NONE:
                         self_hit = (code == REASON_JOINT_LIMIT
                                     or code == REASON_LINKS_INTERSECT)
-                        failure[r] = FAIL_SELF if self_hit else FAIL_ILL
+                        failure[r] = FAIL_SELF_COLLISION if self_hit else FAIL_ILL_CONDITIONED
                         reason[r] = code
                         fail_t[r] = t
                         alive[r] = False
@@ -772,12 +781,12 @@ def _run_block(block, order, params, x0, total_steps, goal_steps, dt, waypoints,
                 continue
             code = REASON_NONE
             if out[O_BAD_PIVOT * LANES + r] > 0.0:
-                code = REASON_NOT_PD
+                code = REASON_NOT_POSITIVE_DEFINITE
                 fail_t[r] = t
             elif np.isnan(out[O_XN_BAD * LANES + r]):
                 code = REASON_NOT_FINITE
                 fail_t[r] = t + dt
-            failure[r] = FAIL_ILL
+            failure[r] = FAIL_ILL_CONDITIONED
             reason[r] = code
             alive[r] = False
             final_step[r] = step
@@ -785,9 +794,7 @@ def _run_block(block, order, params, x0, total_steps, goal_steps, dt, waypoints,
         while frame < n_frames and frame_step[frame] == step:
             _frame_poses(work, frame_fraction[frame], dt, seen_x, seen_y, seen_heading)
             _observe(frame, seen_x, seen_y, seen_heading, alive, run_of, noise, pixel, window,
-                     med, med_state, last_heading, filtered, target, arrival, target_x, target_y,
-                     lane_radius, lane_waypoints, waypoints, frame_time[frame], turn, rank,
-                     total)
+                     camera, targets, waypoints, frame_time[frame])
             frame += 1
         # 6. lanes still running commit the step: a plain copy of the rows when every lane
         # does (most steps; the select per lane cost about 11 ns per run and step), else a
@@ -829,28 +836,18 @@ def _run_block(block, order, params, x0, total_steps, goal_steps, dt, waypoints,
 
 
 @numba.njit(cache=True, parallel=True)
-def run_blocks(order, params, x0, total_steps, goal_steps, dt, waypoints, n_waypoints, radius,
-               k_theta, delay_steps, update_steps, update_count, frame_step, frame_fraction, frame_time, noise,
-               plain_run, pixel, window, stop_at_goal, pending_size, sample_steps, states_out,
-               record_full, full_out, arrival_out, failure_out, failure_time_out, reason_out,
-               reason_index_out, reason_value_out, final_state_out, final_step_out, target_out,
-               distance_out, threads):
+def run_blocks(runs, frames, loop, outputs, threads):
     """Run every block of LANES runs on ``threads`` threads, each taking the next block when free.
 
-    Block b runs ``order[b * LANES : (b + 1) * LANES]``: the caller orders the runs so that a
-    block's lanes end at about the same step (a lane that has ended idles until its block ends),
-    longest blocks first. ``threads`` is numba's thread count (asking numba for it in here would
-    keep numba from caching this function).
+    Block b runs ``runs.order[b * LANES : (b + 1) * LANES]``: the caller orders the runs so that
+    a block's lanes end at about the same step (a lane that has ended idles until its block
+    ends), longest blocks first. ``threads`` is numba's thread count (asking numba for it in here
+    would keep numba from caching this function).
     """
-    n_blocks = (x0.shape[0] + LANES - 1) // LANES
+    n_blocks = (runs.x0.shape[0] + LANES - 1) // LANES
     counter = np.zeros(1, dtype=np.int64)
     for _ in numba.prange(max(1, min(threads, n_blocks))):
         block = _next_block(counter)
         while block < n_blocks:
-            _run_block(block, order, params, x0, total_steps, goal_steps, dt, waypoints, n_waypoints,
-                       radius, k_theta, delay_steps, update_steps, update_count, frame_step,
-                       frame_fraction, frame_time, noise, plain_run, pixel, window, stop_at_goal, pending_size, sample_steps,
-                       states_out, record_full, full_out, arrival_out, failure_out, failure_time_out,
-                       reason_out, reason_index_out, reason_value_out, final_state_out,
-                       final_step_out, target_out, distance_out)
+            _run_block(block, runs, frames, loop, outputs)
             block = _next_block(counter)

@@ -2,7 +2,7 @@
 
 The ELF that would be flashed (``firmware/build/avr/eelbot.elf``) runs in simavr through
 ``firmware/build/tools/libeelavrsim.so`` (``firmware/tools/eel_avrsim.c`` built as a library, loaded
-here with ctypes). One physics step ``[t_us, t_us + dt_us)`` of :func:`eelhost.cosim.run_lockstep`:
+here with ctypes). One physics step ``[t_us, t_us + dt_us)`` of :func:`eelhost.xil.lockstep.run_lockstep`:
 
 1. the joint torques for the step come from the :class:`ServoModel`: each joint's servo holds the
    angle of the last pulse it has received (width -> angle through the firmware's calibration,
@@ -21,6 +21,7 @@ One simulated second costs about 1-2 s of CPU (simavr interprets every AVR instr
 from __future__ import annotations
 
 import ctypes
+import logging
 import math
 import shutil
 import subprocess
@@ -30,11 +31,14 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from eelhost import protocol
-from eelhost.cosim import CosimOptions, FirmwareRunResult, run_lockstep
-from eelhost.radio import RadioChannel, RadioModel
+from eelhost.wire import protocol
+from eelhost.xil.lockstep import FirmwareRunResult, LockstepOptions, run_lockstep
+from eelhost.xil.native_firmware import FIRMWARE_DIR
+from eelhost.xil.radio import RadioChannel, RadioModel
 from eelsim.robot import Robot
 from eelsim.scenario import Scenario
+
+log = logging.getLogger(__name__)
 
 __all__ = [
     "AvrDriver",
@@ -46,7 +50,6 @@ __all__ = [
     "run_processor_in_loop",
 ]
 
-FIRMWARE_DIR = Path(__file__).resolve().parents[2] / "firmware"
 ELF_PATH = FIRMWARE_DIR / "build" / "avr" / "eelbot.elf"
 LIBRARY_PATH = FIRMWARE_DIR / "build" / "tools" / "libeelavrsim.so"
 SERVO_PINS = ("D2", "D3", "D4", "D5", "D6")  # joint 1 (tail) .. joint 5 (head); README wiring
@@ -73,6 +76,7 @@ def build_avr(force: bool = False) -> None:
     """
     if not force and ELF_PATH.exists() and LIBRARY_PATH.exists():
         return
+    log.debug("bringing %s and %s up to date (make avr tools)", ELF_PATH, LIBRARY_PATH)
     proc = subprocess.run(
         ["make", "-s", "-C", str(FIRMWARE_DIR), "avr", "tools"],
         capture_output=True,
@@ -140,7 +144,7 @@ class AvrSimulator:
         handle = self._lib.eas_create(str(elf or ELF_PATH).encode(), b"atmega328p", freq_hz)
         if not handle:
             raise AvrSimulatorError(f"simavr cannot load {elf or ELF_PATH}")
-        self._h = ctypes.c_void_p(handle)
+        self._h: ctypes.c_void_p | None = ctypes.c_void_p(handle)
         self._lib.eas_buffer_outputs(self._h, 1)
         for name in pins:
             if self._lib.eas_watch_pin(self._h, name.encode()) < 0:
@@ -219,7 +223,7 @@ class ServoModel:
 
 
 class AvrDriver:
-    """The emulated AVR as a :class:`eelhost.cosim.JointDriver`.
+    """The emulated AVR as a :class:`eelhost.xil.drivers.JointDriver`.
 
     Parameters
     ----------
@@ -293,7 +297,7 @@ class AvrDriver:
 
 @dataclass
 class PilRunResult(FirmwareRunResult):
-    """A run driven by the emulated AVR: :class:`eelhost.cosim.FirmwareRunResult` plus the pins.
+    """A run driven by the emulated AVR: :class:`eelhost.xil.lockstep.FirmwareRunResult` plus the pins.
 
     Attributes
     ----------
@@ -321,7 +325,7 @@ def run_processor_in_loop(
     scenario: Scenario,
     seed: int = 0,
     radio: RadioModel | None = None,
-    options: CosimOptions | None = None,
+    options: LockstepOptions | None = None,
     servo: ServoModel | None = None,
     elf: Path | None = None,
 ) -> PilRunResult:
@@ -338,7 +342,7 @@ def run_processor_in_loop(
     radio : RadioModel, optional
         The link; ``None`` is ideal (bytes enter the UART when sent; the UART itself still takes
         173.6 us a byte at 57600 baud).
-    options : CosimOptions, optional
+    options : LockstepOptions, optional
         Loop and host options.
     servo : ServoModel, optional
         Pulse width to joint reference.

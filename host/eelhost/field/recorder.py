@@ -24,13 +24,13 @@ import dataclasses
 import io
 import json
 import os
-from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, TextIO
 
 import numpy as np
+from numpy.typing import ArrayLike
 
-from eelhost.experiment import EXPERIMENT_FORMAT, _atomic_write
+from eelhost.data.experiments import EXPERIMENT_FORMAT, _atomic_write
 from eelhost.link.base import LinkEvent
 from eelsim.scenario import Scenario
 
@@ -104,7 +104,7 @@ class Recorder:
             os.fsync(f.fileno())
 
     def frame(
-        self, t_s: float, com_m: Sequence[float], heading_rad: float, link_angles_rad: Sequence[float]
+        self, t_s: float, com_m: ArrayLike, heading_rad: float, link_angles_rad: ArrayLike
     ) -> bool:
         """Append one frame's pose.
 
@@ -125,8 +125,9 @@ class Recorder:
             False (nothing written) when the row would break the format: a time not after the
             last one, or a value that is not finite.
         """
-        values = [float(t_s), float(com_m[0]), float(com_m[1]), float(heading_rad)]
-        values += [float(a) for a in link_angles_rad]
+        com = np.asarray(com_m, dtype=float)
+        values = [float(t_s), float(com[0]), float(com[1]), float(heading_rad)]
+        values += [float(a) for a in np.asarray(link_angles_rad, dtype=float)]
         if len(values) != 4 + self.n_links:
             raise ValueError(f"expected {self.n_links} link angles, got {len(values) - 4}")
         if t_s <= self.last_t_s or not all(np.isfinite(values)):

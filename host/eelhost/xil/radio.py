@@ -1,8 +1,9 @@
 """A model of the serial radio link (XBee) between the host and the robot, byte by byte.
 
-Used by the lockstep co-simulation (:mod:`eelhost.cosim`) and the processor-in-the-loop driver
-(:mod:`eelhost.pil`). Each direction is a :class:`RadioChannel`: bytes handed to it at an integer
-microsecond time come out later, in order, at the times the link delivers them.
+Used by the lockstep stepper (:mod:`eelhost.xil.lockstep`, behind both the firmware-in-the-loop runs
+and the virtual robot of ``sim://``) and the processor-in-the-loop driver (:mod:`eelhost.xil.simavr`).
+Each direction is a :class:`RadioChannel`: bytes handed to it at an integer microsecond time come
+out later, in order, at the times the link delivers them.
 
 What is modelled, per direction:
 
@@ -23,11 +24,13 @@ time it was sent, which is what the twin assumes.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-__all__ = ["RadioChannel", "RadioModel"]
+from eelhost.wire import protocol
+
+__all__ = ["ChannelCounters", "RadioChannel", "RadioModel"]
 
 
 @dataclass(frozen=True)
@@ -75,7 +78,7 @@ class RadioModel:
     @classmethod
     def xbee(
         cls,
-        baud: int = 57600,
+        baud: int = protocol.BAUD,
         latency_us: int = 5000,
         loss_probability: float = 0.0,
         corruption_probability: float = 0.0,
@@ -116,6 +119,37 @@ class RadioModel:
             and self.corruption_probability == 0.0
             and not self.outages_us
         )
+
+    def with_outages(self, extra_us: tuple[tuple[int, int], ...]) -> RadioModel:
+        """The same link with more outage windows (``[start_us, end_us)`` each).
+
+        Parameters
+        ----------
+        extra_us : tuple of (int, int)
+            Windows added to :attr:`outages_us`.
+
+        Returns
+        -------
+        RadioModel
+        """
+        return replace(self, outages_us=tuple(self.outages_us) + tuple(extra_us))
+
+    def channels(self, seed: int) -> tuple[RadioChannel, RadioChannel]:
+        """Both directions of this link, each with its own random stream of ``seed``.
+
+        Parameters
+        ----------
+        seed : int
+            Seed of the loss and corruption; the uplink and the downlink draw from two streams
+            spawned from it (``numpy.random.SeedSequence(seed).spawn(2)``).
+
+        Returns
+        -------
+        uplink, downlink : RadioChannel
+            Host -> robot and robot -> host.
+        """
+        up, down = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2))
+        return self.channel(up), self.channel(down)
 
     def channel(self, rng: np.random.Generator) -> RadioChannel:
         """Create one direction of this link.

@@ -7,7 +7,7 @@ Two MuJoCo versions of the robot of a :class:`~eelsim.robot.Robot` file:
   joint PD as a position actuator (k_p) plus joint damping (k_d) so that the stiff damping is
   integrated implicitly (``implicitfast``); the gait enters as the actuator target
   alpha + (k_d / k_p) alpha_dot, which gives exactly u = k_p (alpha - phi) + k_d (alpha_dot - phi_dot);
-- our Morison drag (spec section 2: linear + quadratic tangential and normal drag and the fluid yaw
+- our Morison drag (docs/model.md section 2: linear + quadratic tangential and normal drag and the fluid yaw
   damping, no added mass) applied as ``xfrc_applied`` from Python between ``mj_step`` calls, with
   MuJoCo's fluid model switched off.
 
@@ -25,6 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from eelsim.fluid import FluidCoefficients
+from eelsim.model import SwimmerModel
 from eelsim.robot import HydroCoefficients, Robot
 
 try:  # optional: pip install eelbot[bench]
@@ -76,8 +78,9 @@ def robot_mjcf(
     body_lines: list[str] = []
     closing: list[str] = []
     indent = "    "
+    yaw_inertia = SwimmerModel.from_robot(robot).yaw_inertia_kg_m2  # the twin's (default m l^2/3)
     for i, lk in enumerate(links):
-        inertia = lk.yaw_inertia_kg_m2 or lk.mass_kg * lk.half_length_m**2 / 3.0
+        inertia = float(yaw_inertia[i])
         # roll and pitch inertia are irrelevant in the plane but must satisfy the triangle
         # inequality: (small, J, J) does
         small = inertia * 1e-3
@@ -200,15 +203,16 @@ def rollout_speed(robot: Robot, runs: int, steps: int, threads: int, dt_s: float
     return MujocoTiming(runs, steps, best, threads)
 
 
-def morison_xfrc_speed(robot: Robot, coefficients: HydroCoefficients, runs: int, steps: int,
+def morison_xfrc_speed(robot: Robot, coefficients: FluidCoefficients, runs: int, steps: int,
                        dt_s: float = 0.01) -> MujocoTiming:
     """Time MuJoCo with our Morison drag applied through ``xfrc_applied`` (one thread, Python loop).
 
     Parameters
     ----------
     robot : Robot
-    coefficients : HydroCoefficients
-        (C_f, C_d, C_a, C_m): the drag and yaw damping coefficients (added mass is not modelled).
+    coefficients : FluidCoefficients
+        The paper's Morison coefficients (C_f, C_d, C_a, C_m): the drag and yaw damping
+        (added mass is not modelled). Another fluid law is refused.
     runs, steps : int
         Runs are simulated one after the other.
     dt_s : float
@@ -220,6 +224,8 @@ def morison_xfrc_speed(robot: Robot, coefficients: HydroCoefficients, runs: int,
     require_mujoco()
     from eelsim.model import SwimmerModel
 
+    if not isinstance(coefficients, HydroCoefficients):
+        raise TypeError(f"MuJoCo's drag here is the Morison law's, not {type(coefficients).__name__}'s")
     model = mujoco.MjModel.from_xml_string(robot_mjcf(robot, dt_s, fluid=False))
     data = mujoco.MjData(model)
     swimmer = SwimmerModel.from_robot(robot, coefficients)

@@ -1,0 +1,7 @@
+"""``python -m eelhost``: the ``eelbot`` command line."""
+
+import sys
+
+from eelhost.cli import main
+
+sys.exit(main())

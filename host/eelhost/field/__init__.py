@@ -1,0 +1,1 @@
+"""At the tank: the run loop of ``eelbot run`` and the recorder of what happened."""

@@ -1,0 +1,253 @@
+"""Getting the compiled kernel: stage choice, kernel cache folder, module text, import.
+
+The kernel is one Python module per (N, lanes, stage, fluid law): the driver
+(``eelsim/batch/kernel_template.py``, read as text) followed by the generated part
+(``eelsim.batch.codegen``) and, when the stage is compiled as C, the binding to the C library
+(``eelsim.batch.c_stage``). The text is written to :func:`kernel_cache_dir` and imported from
+there as ``eelsim.batch.kernels.<name>`` (the package ``eelsim.batch.kernels`` searches that
+folder), where numba compiles it on first use and caches the machine code on disk beside it.
+
+Why a file and not closures: numba's disk cache keys compiled code on a function's source file
+(path and time stamp), and the driver is specialised on N and the block size (its loops over the
+lanes must have constant bounds to vectorise), so each (N, lanes, ...) needs its own module
+text. The file is rewritten only when its text changes, so a second process finds the cache
+valid and loads in about half a second instead of compiling for a minute.
+"""
+
+from __future__ import annotations
+
+import importlib
+import logging
+import os
+import sys
+import time
+import warnings
+from pathlib import Path
+from types import ModuleType
+
+from eelsim.batch import c_stage, codegen
+from eelsim.fluid import DEFAULT_FLUID_LAW, FluidLaw, get_fluid_law
+
+logger = logging.getLogger(__name__)
+
+DEFAULT_LANES = 16
+"""Runs per block (4 AVX2 vectors). Measured on the 2-core machine (docs/kernel_history.md): 8
+lanes spend more of each step in the per-block driver, 32 gain nothing measurable, and longer
+blocks waste more work on runs that stopped early while others in the block continue."""
+
+STAGE_ENV = "EELSIM_STAGE"
+"""Environment variable choosing how the generated stage is compiled: ``c``, ``numba`` or ``auto``."""
+STAGES = ("auto", "c", "numba")
+C_FUNCTIONS = ("_stage",)
+"""The generated functions compiled as C when the stage is ``"c"``."""
+CACHE_ENV = "EELSIM_KERNEL_CACHE"
+"""Environment variable naming the kernel cache folder (:func:`kernel_cache_dir`)."""
+KERNELS_PACKAGE = "eelsim.batch.kernels"
+
+_KERNELS: dict[tuple[int, int, str, str], ModuleType] = {}
+_C_UNAVAILABLE: list[str] = []  # why "auto" fell back to numba (said once per process)
+
+
+def stage_backend(stage: str | None = None) -> str:
+    """Resolve how the generated RK4 stage is compiled: ``"c"`` or ``"numba"``.
+
+    ``"c"``: translated to C and compiled by the machine's C compiler (``eelsim.batch.c_stage``;
+    about 15 % faster here); ``"numba"``: by numba/LLVM like the rest of the kernel. ``"auto"``
+    (the default, or ``$EELSIM_STAGE``) takes C when a compiler is found.
+
+    Parameters
+    ----------
+    stage : str, optional
+        ``"auto"``, ``"c"`` or ``"numba"``; default ``$EELSIM_STAGE`` or ``"auto"``.
+
+    Returns
+    -------
+    str
+        ``"c"`` or ``"numba"``.
+
+    Raises
+    ------
+    ValueError
+        An unknown choice (naming where it came from).
+    """
+    stage = _requested_stage(stage)
+    if stage == "auto":
+        return "c" if c_stage.find_compiler() is not None and not _C_UNAVAILABLE else "numba"
+    return stage
+
+
+def _requested_stage(stage: str | None) -> str:
+    """The choice as given (argument, else ``$EELSIM_STAGE``, else auto), checked."""
+    where = "stage"
+    if stage is None:
+        stage, where = os.environ.get(STAGE_ENV, "auto"), f"${STAGE_ENV}"
+    if stage not in STAGES:
+        raise ValueError(f"{where} must be one of {', '.join(STAGES)}; got {stage!r}")
+    return stage
+
+
+def kernel_cache_dir() -> Path:
+    """Directory holding the generated kernel sources and numba's on-disk cache of them.
+
+    ``$EELSIM_KERNEL_CACHE`` when set, else ``__pycache__/batch_kernels`` beside this module (git
+    ignores ``__pycache__``), else ``~/.cache/eelsim/batch_kernels`` if the package is read-only.
+
+    Returns
+    -------
+    Path
+    """
+    env = os.environ.get(CACHE_ENV)
+    if env:
+        return Path(env)
+    here = Path(__file__).resolve().parent / "__pycache__" / "batch_kernels"
+    try:
+        here.mkdir(parents=True, exist_ok=True)
+        probe = here / ".writable"
+        probe.touch()
+        return here
+    except OSError:
+        return Path.home() / ".cache" / "eelsim" / "batch_kernels"
+
+
+def kernel_source(n_links: int, lanes: int, stage: str = "numba",
+                  law: FluidLaw | None = None) -> str:
+    """The kernel module's text: the driver template with the generated part appended.
+
+    Parameters
+    ----------
+    n_links, lanes : int
+        N and the runs per block.
+    stage : str
+        ``"numba"``, or ``"c"`` to compile the generated stage as C (``eelsim.batch.c_stage``,
+        raising its ``CStageError``) and append the binding that makes ``_stage`` call it.
+    law : FluidLaw, optional
+        The fluid law (default: the default law).
+
+    Returns
+    -------
+    str
+    """
+    template = (Path(__file__).parent / "kernel_template.py").read_text()
+    generated = codegen.generate_stage_source(codegen.make_layout(n_links, lanes, law))
+    if stage == "numba":
+        return template + generated
+    library, symbols = c_stage.build(generated, C_FUNCTIONS, kernel_cache_dir())
+    return template + generated + c_stage.binding_source(library, symbols, generated)
+
+
+def load_kernel_source(name: str, source: str) -> ModuleType:
+    """Write a kernel module's text to :func:`kernel_cache_dir` and import it.
+
+    The module is ``eelsim.batch.kernels.<name>``, importable by that name in any process that
+    uses the same cache folder. The file is rewritten only when the text changed, so numba's
+    cache (keyed on the file's time stamp) stays valid across processes.
+
+    Parameters
+    ----------
+    name : str
+        Module name within ``eelsim.batch.kernels`` (also the file's stem); an identifier.
+    source : str
+        The module's text.
+
+    Returns
+    -------
+    module
+    """
+    if not name.isidentifier():
+        raise ValueError(f"kernel module name must be an identifier, got {name!r}")
+    folder = kernel_cache_dir()
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / f"{name}.py"
+    if not path.exists() or path.read_text() != source:
+        logger.info("new kernel module text %s: numba compiles it on first use", path)
+        tmp = path.with_suffix(f".tmp{os.getpid()}")
+        tmp.write_text(source)
+        os.replace(tmp, path)  # atomic: concurrent processes never see half a file
+    package = importlib.import_module(KERNELS_PACKAGE)
+    if package.__path__[:1] != [str(folder)]:  # the cache folder was changed in this process
+        package.__path__[:] = [str(folder)]
+    importlib.invalidate_caches()  # a file written just now must be found
+    full = f"{KERNELS_PACKAGE}.{name}"
+    sys.modules.pop(full, None)  # run the text as it is now, even if imported before
+    return importlib.import_module(full)
+
+
+def kernel_module(n_links: int, lanes: int = DEFAULT_LANES, stage: str | None = None,
+                  law: FluidLaw | str | None = None) -> ModuleType:
+    """Return the compiled-on-demand kernel module for N links and ``lanes`` runs per block.
+
+    The module's source is written to :func:`kernel_cache_dir` (:func:`load_kernel_source`).
+
+    Parameters
+    ----------
+    n_links : int
+        N.
+    lanes : int
+        Runs per block (a multiple of 4, so that the lane loops vectorise).
+    stage : str, optional
+        How the generated stage is compiled (:func:`stage_backend`). With ``"auto"`` a C
+        compiler that fails is reported once as a warning and numba compiles the stage instead;
+        an explicit ``"c"`` raises the compiler's error.
+    law : FluidLaw or str, optional
+        The fluid law (or its name); default: the default law.
+
+    Returns
+    -------
+    module
+    """
+    fluid = _law(law)
+    requested = _requested_stage(stage)
+    chosen = stage_backend(requested)
+    key = (n_links, lanes, chosen, fluid.name)
+    if key in _KERNELS:
+        return _KERNELS[key]
+    if lanes < 4 or lanes % 4:
+        raise ValueError(f"lanes must be a positive multiple of 4 (vectors), got {lanes}")
+    try:
+        source = kernel_source(n_links, lanes, chosen, fluid)
+    except c_stage.CStageError as exc:
+        if requested != "auto":
+            raise
+        _C_UNAVAILABLE.append(str(exc))
+        warnings.warn(f"the batched kernel's C stage is unavailable, numba compiles it: {exc}",
+                      RuntimeWarning, stacklevel=2)
+        return kernel_module(n_links, lanes, "numba", fluid)
+    module = load_kernel_source(f"n{n_links}_l{lanes}_{chosen}_{fluid.name}", source)
+    _KERNELS[key] = module
+    return module
+
+
+def _law(law: FluidLaw | str | None) -> FluidLaw:
+    if law is None:
+        return get_fluid_law(DEFAULT_FLUID_LAW)
+    return get_fluid_law(law) if isinstance(law, str) else law
+
+
+def warm_up(n_links: int = 6, lanes: int = DEFAULT_LANES, stage: str | None = None) -> float:
+    """Compile (or load from the disk cache) the kernel for N links; return the seconds it took.
+
+    Parameters
+    ----------
+    n_links : int
+        N.
+    lanes : int
+        Runs per block.
+    stage : str, optional
+        How the stage is compiled (:func:`stage_backend`).
+
+    Returns
+    -------
+    float
+        Wall time of loading or compiling, s.
+    """
+    from eelsim.batch.api import run_batch
+    from eelsim.robot import load_robot
+    from eelsim.scenario import load_scenario
+
+    start = time.perf_counter()
+    robot = load_robot()
+    if robot.n_links != n_links:
+        robot = robot.model_copy(update={"n_links": n_links})
+    scenario = load_scenario("straight").model_copy(update={"duration_s": 0.05})
+    run_batch(robot, scenario, lanes=lanes, sample_steps=[0], stage=stage)
+    return time.perf_counter() - start

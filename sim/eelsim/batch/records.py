@@ -1,0 +1,168 @@
+"""The records the compiled kernel takes and the codes it returns (shared by Python and the kernel).
+
+The kernel's entry point takes four records instead of three dozen arrays: what each run is
+(:class:`RunInputs`), when the camera sees it (:class:`FrameTable`), how the loop runs
+(:class:`LoopSettings`) and where the answers go (:class:`RunOutputs`). numba passes named tuples
+of arrays and scalars by value, field by field, so grouping costs nothing at run time; the tuple
+classes live in this ordinary module so that numba's on-disk cache finds them by name in every
+process. Inside a block, the camera's state (:class:`CameraState`) and each lane's waypoint
+(:class:`Targets`) are records too.
+"""
+
+from __future__ import annotations
+
+import enum
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+BoolArray = NDArray[np.bool_]
+
+
+class Reason(enum.IntEnum):
+    """Why a run was flagged; ``BatchResult.reason`` turns it into the reference's text."""
+
+    NONE = 0
+    TOO_SLOW = 1
+    NOT_FINITE = 2
+    NOT_POSITIVE_DEFINITE = 3
+    CONDITION_NUMBER = 4
+    JOINT_LIMIT = 5
+    LINKS_INTERSECT = 6
+    DIVERGED = 7
+
+
+class RunInputs(NamedTuple):
+    """Per-run inputs (R runs; see ``BatchSpec`` for each field's meaning).
+
+    ``order`` is the order in which runs fill the blocks (``block_order``); ``plain_run`` says
+    which runs have neither current nor servo line (``plain_runs``).
+    """
+
+    order: IntArray
+    params: FloatArray
+    x0: FloatArray
+    total_steps: IntArray
+    goal_steps: IntArray
+    waypoints: FloatArray
+    n_waypoints: IntArray
+    radius: FloatArray
+    k_theta: FloatArray
+    delay_steps: IntArray
+    update_steps: IntArray
+    update_count: IntArray
+    noise: FloatArray
+    plain_run: BoolArray
+
+
+class FrameTable(NamedTuple):
+    """The camera frames, shared by all runs.
+
+    For each frame: the step whose interval (t_k, t_k + dt] holds it, its fraction of that step
+    and its time (frame 0 is seen at t = 0, before the first step).
+    """
+
+    step: IntArray
+    fraction: FloatArray
+    time: FloatArray
+
+
+class LoopSettings(NamedTuple):
+    """How the loop runs, shared by all runs.
+
+    Attributes
+    ----------
+    dt : float
+        Physics step, s.
+    pixel : float
+        Camera pixel size, m (0: no quantisation).
+    window : int
+        Frames in the moving median.
+    stop_at_goal : bool
+        End a run at its goal (from its goal step on).
+    pending_size : int
+        Room for offsets waiting out the loop's extra delay.
+    record_full : bool
+        Keep every step's state.
+    sample_steps : ndarray of int
+        Sorted unique steps at which states are sampled.
+    """
+
+    dt: float
+    pixel: float
+    window: int
+    stop_at_goal: bool
+    pending_size: int
+    record_full: bool
+    sample_steps: IntArray
+
+
+class RunOutputs(NamedTuple):
+    """Where the kernel writes each run's answers (see ``BatchResult``)."""
+
+    states: FloatArray
+    full: FloatArray
+    arrival: FloatArray
+    failure: IntArray
+    failure_time: FloatArray
+    reason: IntArray
+    reason_index: IntArray
+    reason_value: FloatArray
+    final_state: FloatArray
+    final_step: IntArray
+    target: IntArray
+    distance: FloatArray
+
+
+class CameraState(NamedTuple):
+    """The camera pipeline's state in a block, lanes innermost (the kernel's ``_observe``).
+
+    Attributes
+    ----------
+    median : ndarray, shape (window, 3, lanes)
+        The last frames' (x, y, heading), a ring.
+    fill : ndarray of int, shape (2,)
+        Frames in the ring and its next slot (every lane of a block sees the same frames).
+    last_heading : ndarray, shape (lanes,)
+        The last unwrapped heading.
+    filtered : ndarray, shape (3, lanes)
+        The filtered pose.
+    turn, rank, total : ndarray, shape (lanes,)
+        Scratch space.
+    """
+
+    median: FloatArray
+    fill: IntArray
+    last_heading: FloatArray
+    filtered: FloatArray
+    turn: FloatArray
+    rank: FloatArray
+    total: FloatArray
+
+
+class Targets(NamedTuple):
+    """Each lane's waypoint (the kernel's ``_observe`` and ``_aim``).
+
+    Attributes
+    ----------
+    reached : ndarray of int
+        Waypoints reached (the index of the current one).
+    arrival : ndarray
+        Frame time at which the last one was reached (NaN before).
+    x, y : ndarray
+        The current waypoint (NaN after the last).
+    radius : ndarray
+        Acceptance radius.
+    n_waypoints : ndarray of int
+        Number of waypoints.
+    """
+
+    reached: IntArray
+    arrival: FloatArray
+    x: FloatArray
+    y: FloatArray
+    radius: FloatArray
+    n_waypoints: IntArray

@@ -1,0 +1,148 @@
+"""The guidance (eelsim.guidance.Guidance), the one wrap convention, and the batched kernel's copies.
+
+The kernel's camera step (``_observe``: median filter, waypoint switching, arrival), ``_aim`` and
+``_heading_offset`` are fed the same frames as the guidance object, lane by lane, and must give
+the same filtered poses, targets, arrival times and offsets.
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from eelsim.batch import DEFAULT_LANES, kernel_module
+from eelsim.batch.records import CameraState, Targets
+from eelsim.camera import quantise_position
+from eelsim.control import wrap_angle
+from eelsim.guidance import Guidance
+
+EDGES = [0.0, -0.0, 1e-300, math.pi, -math.pi, np.nextafter(math.pi, 4), np.nextafter(-math.pi, -4),
+         np.nextafter(-math.pi, 0), 3 * math.pi, -3 * math.pi, 2 * math.pi, -2 * math.pi, 7.5, -7.5,
+         1e6, -1e6, 0.999, -1.0, 4.0, -4.0]
+
+
+@pytest.fixture(scope="module")
+def kernel():
+    return kernel_module(6, DEFAULT_LANES, "c")
+
+
+def test_wrap_lands_in_minus_pi_exclusive_to_pi_inclusive_and_keeps_inside_angles():
+    angles = np.array(EDGES + list(np.random.default_rng(0).uniform(-50, 50, 200)))
+    wrapped = wrap_angle(angles)
+    assert np.all((wrapped > -math.pi) & (wrapped <= math.pi))
+    assert np.allclose(np.cos(wrapped), np.cos(angles), atol=1e-9)
+    assert np.allclose(np.sin(wrapped), np.sin(angles), atol=1e-9)
+    inside = (angles > -math.pi) & (angles <= math.pi)
+    assert np.array_equal(wrapped[inside], angles[inside])
+    assert wrap_angle(-math.pi) == math.pi
+
+
+def test_kernels_wrap_is_control_wrap_angle_to_the_bit(kernel):
+    angles = EDGES + list(np.random.default_rng(1).uniform(-50, 50, 200))
+    for a in angles:
+        assert kernel._wrap_angle(float(a)) == wrap_angle(a), a
+
+
+def test_median_filter_takes_the_middle_pose_and_unwraps_heading_across_pi():
+    g = Guidance([(10.0, 0.0)], 0.15, 0.1, median_window=3)
+    g.observe(0.0, 0.0, 0.0, 3.1)
+    g.observe(0.1, 0.3, 0.0, -3.1)  # 0.083 rad further, across +-pi
+    pose = g.observe(0.2, 0.1, 5.0, 3.12)
+    assert pose[0] == 0.1 and pose[1] == 0.0
+    assert pose[2] == pytest.approx(3.12)  # median of 3.1, 3.183, 3.12
+    assert g.filtered_pose is pose
+
+
+def test_waypoints_switch_inside_the_acceptance_circle_and_arrival_takes_the_poses_time():
+    g = Guidance([(1.0, 0.0), (1.0, 1.0)], 0.15, 0.37, median_window=1)
+    assert g.target_index == 0 and not g.arrived and g.arrival_time_s is None
+    g.observe(1.0, 0.86, 0.0, 0.0)  # 0.14 m: inside
+    assert g.target_index == 1 and np.array_equal(g.target_m, [1.0, 1.0])
+    g.observe(2.0, 1.0, 0.85, 0.0)  # exactly 0.15 m: not inside
+    assert g.target_index == 1
+    g.observe(3.5, 1.0, 0.9, 0.0)
+    assert g.arrived and g.arrival_time_s == 3.5 and g.target_m is None
+    g.observe(4.0, 1.0, 1.0, 0.0)
+    assert g.arrival_time_s == 3.5  # the first arrival counts
+
+
+def test_offset_steers_towards_the_waypoint_and_is_clipped_only_when_asked():
+    free = Guidance([(0.0, 1.0)], 0.15, 2.0, median_window=1)
+    assert free.offset() == 0.0  # no pose yet: the last offset (none) holds
+    free.observe(0.0, 0.0, 0.0, 0.0)
+    assert free.offset() == pytest.approx(2.0 * math.pi / 2)  # waypoint to the left: positive
+    clipped = Guidance([(0.0, 1.0)], 0.15, 2.0, median_window=1, offset_limit_rad=1.0)
+    clipped.observe(0.0, 0.0, 0.0, 0.0)
+    assert clipped.offset() == 1.0
+    behind = Guidance([(-1.0, -1e-9)], 0.15, 1.0, median_window=1)
+    behind.observe(0.0, 0.0, 0.0, 0.0)
+    assert behind.offset() == pytest.approx(-math.pi)  # wrap keeps the error in (-pi, pi]
+
+
+def test_after_the_last_waypoint_the_offset_still_aims_at_it():
+    g = Guidance([(1.0, 0.0)], 0.15, 1.0, median_window=1)
+    g.observe(0.0, 0.9, 0.1, 0.0)
+    assert g.arrived
+    assert g.offset() == pytest.approx(math.atan2(-0.1, 0.1))
+
+
+@pytest.mark.parametrize("value", [[], [(0, 0)]])
+def test_bad_guidance_settings_are_refused(value):
+    if not value:
+        with pytest.raises(ValueError, match="at least one waypoint"):
+            Guidance(value, 0.15, 0.1)
+        return
+    with pytest.raises(ValueError, match="acceptance radius must be positive"):
+        Guidance(value, 0.0, 0.1)
+    with pytest.raises(ValueError, match="median window must be at least 1"):
+        Guidance(value, 0.15, 0.1, median_window=0)
+    with pytest.raises(ValueError, match="offset limit must be positive"):
+        Guidance(value, 0.15, 0.1, offset_limit_rad=-1.0)
+
+
+@pytest.mark.parametrize("window", [1, 4, 5])
+def test_kernels_camera_step_and_offset_agree_with_the_guidance(kernel, window):
+    # 16 lanes, each its own path towards its own waypoints, headings that cross +-pi and jump
+    # by more than a radian now and then (the kernel's slow unwrap path), pixel quantisation
+    lanes = DEFAULT_LANES
+    rng = np.random.default_rng(window)
+    pixel, radius, k_theta = 0.0038, 0.15, 0.37
+    direction = rng.uniform(-math.pi, math.pi, lanes)
+    ahead = np.stack([np.cos(direction), np.sin(direction)], axis=1)
+    waypoints = np.stack([0.3 * ahead, 0.6 * ahead + 0.05 * rng.normal(size=(lanes, 2)),
+                          0.6 * ahead], axis=1)
+    counts = np.array([3, 2] * (lanes // 2), dtype=np.int64)  # a shorter list pads with its last
+    waypoints[counts == 2, 2] = waypoints[counts == 2, 1]
+    guides = [Guidance(waypoints[r, : counts[r]], radius, k_theta, window) for r in range(lanes)]
+    targets = Targets(np.zeros(lanes, np.int64), np.full(lanes, np.nan), np.full(lanes, np.nan),
+                      np.full(lanes, np.nan), np.full(lanes, radius), counts)
+    camera = CameraState(np.zeros((window, 3, lanes)), np.zeros(2, np.int64), np.zeros(lanes),
+                         np.zeros((3, lanes)), np.zeros(lanes), np.zeros(lanes), np.zeros(lanes))
+    alive = np.ones(lanes, np.bool_)
+    run_of = np.arange(lanes, dtype=np.int64)
+    no_noise = np.zeros((lanes, 0))
+    for r in range(lanes):
+        kernel._aim(r, r, targets, waypoints)
+    heading = direction + math.pi * (np.arange(lanes) % 2)  # half the lanes near +-pi
+    for frame in range(240):
+        t = frame / 30.0
+        px = 0.09 * t * ahead[:, 0] + 0.01 * rng.normal(size=lanes)
+        py = 0.09 * t * ahead[:, 1] + 0.01 * rng.normal(size=lanes)
+        heading = heading + rng.normal(0, 0.05, lanes) + (1.5 if frame % 37 == 5 else 0.0)
+        seen = wrap_angle(heading)  # the camera reports headings in (-pi, pi]
+        kx, ky, kh = px.copy(), py.copy(), np.array(seen, dtype=float)
+        kernel._observe(frame, kx, ky, kh, alive, run_of, no_noise, pixel, window, camera,
+                        targets, waypoints, t)
+        for r in range(lanes):
+            q = quantise_position(np.array([px[r], py[r]]), pixel)
+            pose = guides[r].observe(t, q[0], q[1], float(seen[r]))
+            assert np.array_equal(camera.filtered[:, r], pose), (frame, r)
+            assert targets.reached[r] == guides[r].target_index
+            arrival = guides[r].arrival_time_s
+            assert (np.isnan(targets.arrival[r]) if arrival is None
+                    else targets.arrival[r] == arrival)
+            if frame % 9 == 0:
+                w = waypoints[r, min(targets.reached[r], counts[r] - 1)]
+                offset = kernel._heading_offset(pose[0], pose[1], pose[2], w[0], w[1], k_theta)
+                assert offset == guides[r].offset()
+    assert sum(g.arrived for g in guides) >= lanes // 2  # the paths did reach their waypoints
