@@ -22,6 +22,7 @@ from eelhost.commands import (
     plan,
     ports,
     report,
+    robot,
     run,
     simulate,
     speeds,
@@ -44,6 +45,7 @@ COMMANDS = (
     vision_bench,
     bench,
     run,
+    robot,
     ports,
     plan,
 )
