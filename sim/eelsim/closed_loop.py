@@ -2,9 +2,12 @@
 
 Per physics step (RK4, dt = 0.01 s by default):
 
-- the joints track the gait alpha_j(t) (with the held offset gamma) through the PD law, evaluated
-  inside every RK4 stage as the robot's fast joint loop does; optionally through a hobby-servo
-  torque-speed limit;
+- the joints track the gait alpha_j(t) (with the held offset gamma) through the robot's joint
+  model (``[joints] model``, :mod:`eelsim.joints`), evaluated inside every RK4 stage as the
+  robot's fast joint loop does: the PD law's torques on free joints (optionally through a
+  hobby-servo torque-speed limit), or the servo law's joint accelerations with x, y and the
+  heading from the prescribed-shape dynamics; the torque each joint gives (or must give) is
+  recorded at every step and steps outside the servo's torque-speed line are counted;
 - the camera takes its frames (30 fps) between steps and quantises positions to pixels; the
   guidance (:class:`eelsim.guidance.Guidance`) filters them with the moving median and switches
   to the next waypoint when the filtered position is inside the acceptance circle;
@@ -14,8 +17,8 @@ Per physics step (RK4, dt = 0.01 s by default):
 - the failure conditions are checked; a failed run stops and returns its flag, time and reason.
 
 The joints are the one part that can be swapped: a :class:`JointController` turns the offset and
-the plant's state into the torques of each step. The default, :class:`TwinJoints`, is the PD law
-above; ``eelhost.cosim`` plugs in the robot's firmware (native or emulated AVR) behind a radio
+the plant's state into the torques (or joint accelerations) of each step. The default,
+:class:`TwinJoints`, is the robot's joint model above; ``eelhost.xil`` plugs in the robot's firmware (native or emulated AVR) behind a radio
 link, which is ticked once per step and whose torques are held over it. Everything else (camera,
 waypoints, control updates, failures, recording) is this one loop, so a firmware run and a twin
 run differ only where the robot differs.
@@ -33,12 +36,19 @@ import numpy as np
 from numpy.typing import NDArray
 
 from eelsim.camera import CameraModel, hermite, quantise_position
-from eelsim.control import Gait, gait_reference, joint_pd_torque
-from eelsim.dynamics import link_positions, mass_matrix, state_derivative, straight_state
+from eelsim.control import Gait, gait_reference
+from eelsim.dynamics import (
+    link_positions,
+    mass_matrix,
+    prescribed_shape_derivative,
+    state_derivative,
+    straight_state,
+)
 from eelsim.flags import DIVERGENCE_RATE, ILL_CONDITION_THRESHOLD, Failure, penalty, self_collision
 from eelsim.fluid import FluidCoefficients
 from eelsim.guidance import Guidance
 from eelsim.integrate import rk4_step
+from eelsim.joints import PD, stiffness_hint
 from eelsim.model import SwimmerModel
 from eelsim.robot import Robot
 from eelsim.scenario import Scenario
@@ -58,7 +68,9 @@ class LoopOptions:
     camera : CameraModel
         Frame rate, pixel size, median filter.
     servo_limits : bool
-        Limit joint torques by the servos' torque-speed line (stall torque, no-load speed).
+        Limit the PD model's joint torques by the servos' torque-speed line (stall torque,
+        no-load speed). The servo joint model has its own limits (rate limit; torque counted
+        as saturation) and ignores this.
     stop_at_goal : bool
         End the run when the last waypoint is reached (not before the scenario's
         ``min_duration_s``).
@@ -100,6 +112,17 @@ class RunResult:
         When the last waypoint was reached.
     distance_left_m : float
         Path length left to the last waypoint at the end of the run.
+    joint_torque_nm : ndarray, shape (K, N-1)
+        The torque each joint gives at each recorded step: the PD law at the step's start (held
+        torques for a controller that holds them), or what the servos must give for the servo
+        model (prescribed-shape dynamics); NaN where it could not be computed.
+    saturated_steps : int
+        Recorded steps at which some joint's torque is outside the servo's torque-speed line
+        (stall torque ``servo_max_torque_nm``, falling to zero at ``servo_max_speed_rad_s``): a
+        warning, not a failure (docs/model.md section 4). With the PD model and the loop's
+        ``servo_limits`` the torque is clipped to the line and never counts.
+    torque_limit_nm : float
+        The stall torque that :attr:`max_torque_ratio` divides by.
     """
 
     t_s: FloatArray
@@ -114,6 +137,18 @@ class RunResult:
     reason: str
     arrival_time_s: float | None
     distance_left_m: float
+    joint_torque_nm: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
+    saturated_steps: int = 0
+    torque_limit_nm: float = float("inf")
+
+    @property
+    def max_torque_ratio(self) -> float:
+        """Largest |u| over the recorded steps and joints, as a fraction of the stall torque.
+
+        Steps whose torque is not finite are left out (0 when none is).
+        """
+        finite = self.joint_torque_nm[np.isfinite(self.joint_torque_nm)]
+        return float(np.abs(finite).max() / self.torque_limit_nm) if finite.size else 0.0
 
     @property
     def penalty(self) -> float:
@@ -160,6 +195,35 @@ def distance_left(p: FloatArray, waypoints: FloatArray, target: int) -> float:
 
 TorqueLaw = Callable[[float, FloatArray], FloatArray]
 """Joint torques as a function of time and state, ``torque_nm(t_s, state)``."""
+AccelerationLaw = Callable[[float, FloatArray], FloatArray]
+"""Joint accelerations as a function of time and state, ``phi_ddot(t_s, state)``."""
+
+
+def outside_torque_speed_line(
+    torque_nm: FloatArray, phi_dot_rad_s: FloatArray, stall_nm: float, no_load_rad_s: float
+) -> bool:
+    """Whether some joint's torque lies outside the servo's torque-speed line (saturation).
+
+    The line of :func:`servo_limited`: up to the stall torque at rest, driving torque falling
+    to zero at the no-load speed; with a relative tolerance of 1e-9 of the stall torque, so that
+    a torque clipped to the line does not count. The batched kernel counts with the same
+    expression.
+
+    Parameters
+    ----------
+    torque_nm, phi_dot_rad_s : ndarray, shape (N-1,)
+    stall_nm, no_load_rad_s : float
+
+    Returns
+    -------
+    bool
+        False for torques that are not finite.
+    """
+    q = phi_dot_rad_s * (stall_nm * (1.0 / no_load_rad_s))
+    tol = 1e-9 * stall_nm
+    upper = np.minimum(stall_nm, stall_nm - q)
+    lower = np.maximum(-stall_nm, -stall_nm - q)
+    return bool(np.any((torque_nm > upper + tol) | (torque_nm < lower - tol)))
 
 
 @dataclass(frozen=True)
@@ -168,19 +232,24 @@ class JointDrive:
 
     Attributes
     ----------
-    torque_nm : ndarray of shape (N-1,), or callable
+    torque_nm : ndarray of shape (N-1,), callable, or None
         Either torques held over the whole step (a zero-order hold: a controller ticked once per
         step), or a :data:`TorqueLaw` evaluated at every RK4 stage (a joint loop much faster than
-        the step, as the twin models the servos).
+        the step, as the twin models the PD loop); None with ``joint_acceleration``.
     alpha_rad : ndarray, shape (N-1,)
         The joint references in force at the start of the step (recorded).
     offset_rad : float
         The offset gamma acting on the joints (recorded).
+    joint_acceleration : callable, optional
+        An :data:`AccelerationLaw` evaluated at every RK4 stage: the joint angles follow it
+        whatever the water does (kinematic joints, the servo model) and the plant is the
+        prescribed-shape dynamics (``eelsim.dynamics.prescribed_shape_derivative``).
     """
 
-    torque_nm: FloatArray | TorqueLaw
+    torque_nm: FloatArray | TorqueLaw | None
     alpha_rad: FloatArray
     offset_rad: float
+    joint_acceleration: AccelerationLaw | None = None
 
 
 class JointController(Protocol):
@@ -215,31 +284,34 @@ class JointController(Protocol):
 
 
 class TwinJoints:
-    """The twin's joints: the gait and the PD law, evaluated inside every RK4 stage.
+    """The twin's joints: the gait and the robot's joint model, evaluated inside every RK4 stage.
 
-    The offset is held from one command to the next (a zero-order hold). The default
-    :class:`JointController` of :func:`simulate_closed_loop`.
+    The PD model gives torques (optionally clipped to the servos' torque-speed line), the servo
+    model joint accelerations (:mod:`eelsim.joints`). The offset is held from one command to the
+    next (a zero-order hold). The default :class:`JointController` of
+    :func:`simulate_closed_loop`.
 
     Parameters
     ----------
     robot : Robot
-        Gains, reference clamp and servo figures.
+        Joint model and its parameters, reference clamp and servo figures.
     gait : Gait
         The gait the joints follow (its phase starts at t = 0).
     n_links : int
         Number of links N.
     servo_limits : bool
-        Clip the torques to the servos' torque-speed line.
+        Clip the PD model's torques to the servos' torque-speed line.
     """
 
     def __init__(self, robot: Robot, gait: Gait, n_links: int, servo_limits: bool = False) -> None:
         self._gait = gait
         self._n = n_links
-        self._kp, self._kd = robot.joints.kp_nm_per_rad, robot.joints.kd_nms_per_rad
+        self._joints = robot.joints
+        self._model = robot.joint_model
         self._clamp = robot.joints.command_limit_rad
         self._servo = (
             (robot.joints.servo_max_torque_nm, robot.joints.servo_max_speed_rad_s)
-            if servo_limits
+            if servo_limits and not self._model.kinematic
             else None
         )
         self.offset_rad = 0.0
@@ -251,20 +323,62 @@ class TwinJoints:
         if offset_command is not None:
             self.offset_rad = offset_command
         alpha = gait_reference(t_s, self._gait, self.offset_rad, self._n)[0]
-        return JointDrive(
-            self.torque_nm, np.clip(alpha, -self._clamp, self._clamp), self.offset_rad
-        )
+        alpha = np.clip(alpha, -self._clamp, self._clamp)
+        if self._model.kinematic:
+            return JointDrive(None, alpha, self.offset_rad, joint_acceleration=self.law)
+        return JointDrive(self.law, alpha, self.offset_rad)
 
-    def torque_nm(self, t_s: float, state: FloatArray) -> FloatArray:
-        """Joint torques at ``t_s`` in ``state`` (a :data:`TorqueLaw`)."""
+    def law(self, t_s: float, state: FloatArray) -> FloatArray:
+        """The joint model's law at ``t_s`` in ``state``: torques or joint accelerations."""
         n = self._n
         alpha, alpha_dot = gait_reference(t_s, self._gait, self.offset_rad, n)
         alpha = np.clip(alpha, -self._clamp, self._clamp)
         w = state[n + 2 : 2 * n + 2]
-        u = joint_pd_torque(alpha, alpha_dot, np.diff(state[:n]), np.diff(w), self._kp, self._kd)
+        u = self._model.drive(self._joints, alpha, alpha_dot, np.diff(state[:n]), np.diff(w))
         if self._servo is not None:
             u = servo_limited(u, np.diff(w), *self._servo)
         return u
+
+    torque_nm = law  # the PD model's law by its earlier name (a TorqueLaw)
+
+
+def held_reference_drive(robot: Robot, alpha_rad: FloatArray, offset_rad: float) -> JointDrive:
+    """Kinematic joints following references held over the step, as the robot's joint model does.
+
+    For a controller ticked once per step whose joints are servos (the firmware in the loop,
+    ``eelhost.xil``): the angles it commands are the servo references, held over the step; the
+    joint law (:meth:`eelsim.joints.JointModel.drive`, reference rate 0) acts at every RK4 stage
+    and the plant is the prescribed-shape dynamics (docs/model.md section 4).
+
+    Parameters
+    ----------
+    robot : Robot
+        Its joint model must be kinematic (``[joints] model = "servo"``).
+    alpha_rad : ndarray, shape (N-1,)
+        The commanded joint angles.
+    offset_rad : float
+        The offset acting (recorded).
+
+    Returns
+    -------
+    JointDrive
+
+    Raises
+    ------
+    ValueError
+        When the robot's joint model gives torques (its controller must give them).
+    """
+    model, spec = robot.joint_model, robot.joints
+    if not model.kinematic:
+        raise ValueError(f"the {model.name!r} joint model is driven by torques, not references")
+    alpha = np.array(alpha_rad, dtype=float)
+    zero = np.zeros_like(alpha)
+    n = alpha.size + 1
+
+    def law(_t_s: float, state: FloatArray) -> FloatArray:
+        return model.drive(spec, alpha, zero, np.diff(state[:n]), np.diff(state[n + 2 : 2 * n + 2]))
+
+    return JointDrive(None, alpha, offset_rad, joint_acceleration=law)
 
 
 def simulate_closed_loop(
@@ -294,17 +408,24 @@ def simulate_closed_loop(
         Called as ``progress(step, total_steps)`` every 100 steps.
     joints : JointController, optional
         Where the joint torques come from; by default :class:`TwinJoints` (the scenario's gait
-        through the robot's PD law, servo limits as ``options`` says). Another controller
+        through the robot's joint model, servo limits as ``options`` says). Another controller
         applies any servo limits itself.
 
     Returns
     -------
     RunResult
         Never raises for a run that goes wrong: failures come back as flags.
+
+    Raises
+    ------
+    ValueError
+        When the robot's joint model refuses the physics step (the servo model at a step where
+        RK4 is unstable on its law; the message names the largest stable step).
     """
     opts = options or LoopOptions()
     timing, cam = opts.timing, opts.camera
     model = SwimmerModel.from_robot(robot, coefficients)
+    robot.joint_model.check_step(robot.joints, model, timing.dt_s)
     rng = np.random.default_rng(seed)
     n = model.n_links
     dt = timing.dt_s
@@ -325,7 +446,9 @@ def simulate_closed_loop(
     pending: list[tuple[int, float]] = []  # (step at which it acts, offset)
     failure, fail_t, reason = Failure.NONE, None, ""
 
-    rec_t, rec_x, rec_g, rec_a, rec_w = [], [], [], [], []
+    rec_t, rec_x, rec_g, rec_a, rec_w, rec_u = [], [], [], [], [], []
+    stall, no_load = robot.joints.servo_max_torque_nm, robot.joints.servo_max_speed_rad_s
+    saturated = 0
     cam_t: list[float] = []
     cam_pose: list[FloatArray] = []
     next_frame = 0
@@ -364,12 +487,19 @@ def simulate_closed_loop(
             # The joints' torques for this step: the twin's PD law by default; in
             # eelhost.cosim the robot's firmware, ticked once, with its torques held.
             drive = joints.on_step(step, t, x, offset_command)
+            rhs = plant_rhs(model, drive, vc)
+            # the torque at the step's start (for the servo model the first RK4 stage's
+            # solve gives it, and that stage is reused)
+            first_stage, torque = _step_start(model, drive, vc, t, x)
 
             rec_t.append(t)
             rec_x.append(x.copy())
             rec_g.append(drive.offset_rad)
             rec_a.append(drive.alpha_rad)
             rec_w.append(guide.target_index)
+            rec_u.append(torque)
+            saturated += outside_torque_speed_line(torque, np.diff(x[n + 2 : 2 * n + 2]), stall,
+                                                   no_load)
 
             failure, reason = check_failures(model, x, limit, step in updates)
             if failure != Failure.NONE:
@@ -379,7 +509,7 @@ def simulate_closed_loop(
                 break
 
             try:
-                x_next = rk4_step(plant_rhs(model, drive.torque_nm, vc), t, x, dt)
+                x_next = rk4_step(rhs, t, x, dt, first_stage)
             except np.linalg.LinAlgError:
                 failure, fail_t, reason = (
                     Failure.ILL_CONDITIONED,
@@ -403,6 +533,8 @@ def simulate_closed_loop(
             if progress is not None and step % 100 == 0:
                 progress(step, total)
 
+    if failure == Failure.ILL_CONDITIONED and not reason.startswith("mass matrix condition"):
+        reason += blow_up_hint(robot, model, dt)
     if failure == Failure.NONE and not guide.arrived:
         failure, fail_t = Failure.TOO_SLOW, rec_t[-1]
         reason = (
@@ -422,11 +554,53 @@ def simulate_closed_loop(
         reason=reason,
         arrival_time_s=guide.arrival_time_s,
         distance_left_m=distance_left(x[n : n + 2], waypoints, guide.target_index),
+        joint_torque_nm=np.array(rec_u, dtype=float).reshape(-1, n - 1),
+        saturated_steps=saturated,
+        torque_limit_nm=stall,
     )
 
 
+def blow_up_hint(robot: Robot, model: SwimmerModel, dt_s: float) -> str:
+    """What to add to the reason of a run that blew up: the PD joints' stiffness, if that is why.
+
+    Parameters
+    ----------
+    robot : Robot
+    model : SwimmerModel
+        Its model (the hint's stable step is computed with the robot's own coefficients, so that
+        the batched kernel words it the same for every candidate).
+    dt_s : float
+
+    Returns
+    -------
+    str
+        Empty unless the robot's joints are the PD model's and ``dt_s`` is beyond RK4's
+        stability on their fastest mode (:func:`eelsim.joints.stiffness_hint`).
+    """
+    if robot.joint_model is not PD:
+        return ""
+    own = model if model.coefficients == robot.hydrodynamics else SwimmerModel.from_robot(robot)
+    return stiffness_hint(robot.joints, PD.largest_stable_step_s(robot.joints, own), dt_s)
+
+
+def _step_start(
+    model: SwimmerModel, drive: JointDrive, current_m_s: FloatArray, t_s: float, x: FloatArray
+) -> tuple[FloatArray | None, FloatArray]:
+    """The first RK4 stage (for kinematic joints, else None) and the joint torques at (t, x)."""
+    n = model.n_links
+    if drive.joint_acceleration is not None:
+        try:
+            return prescribed_shape_derivative(model, x, drive.joint_acceleration(t_s, x),
+                                               current_m_s)
+        except np.linalg.LinAlgError:  # RK4's first stage meets it again and flags the run
+            return None, np.full(n - 1, np.nan)
+    if callable(drive.torque_nm):
+        return None, np.asarray(drive.torque_nm(t_s, x), dtype=float)
+    return None, np.asarray(drive.torque_nm, dtype=float)
+
+
 def plant_rhs(
-    model: SwimmerModel, torque_nm: FloatArray | TorqueLaw, current_m_s: FloatArray
+    model: SwimmerModel, drive: JointDrive | FloatArray | TorqueLaw, current_m_s: FloatArray
 ) -> Callable[[float, FloatArray], FloatArray]:
     """The plant's right-hand side ``f(t, state)`` for RK4, driven by the joints.
 
@@ -434,9 +608,10 @@ def plant_rhs(
     ----------
     model : SwimmerModel
         The plant.
-    torque_nm : ndarray of shape (N-1,), or callable
-        Torques held over the step, or a :data:`TorqueLaw` evaluated at every call (see
-        :class:`JointDrive`).
+    drive : JointDrive, ndarray of shape (N-1,), or callable
+        What drives the joints over the step (:class:`JointDrive`: torques held or evaluated at
+        every stage, or joint accelerations with the prescribed-shape dynamics), or directly the
+        torques held over the step or a :data:`TorqueLaw`.
     current_m_s : ndarray, shape (2,)
         Uniform current velocity.
 
@@ -444,14 +619,26 @@ def plant_rhs(
     -------
     callable
     """
-    if callable(torque_nm):
-        law = torque_nm
+    if isinstance(drive, JointDrive):
+        if drive.joint_acceleration is not None:
+            kinematic = drive.joint_acceleration
+
+            def shape_rhs(t: float, state: FloatArray) -> FloatArray:
+                return prescribed_shape_derivative(model, state, kinematic(t, state),
+                                                   current_m_s)[0]
+
+            return shape_rhs
+        if drive.torque_nm is None:
+            raise ValueError("a JointDrive needs torques or joint accelerations")
+        drive = drive.torque_nm
+    if callable(drive):
+        law = drive
 
         def rhs(t: float, state: FloatArray) -> FloatArray:
             return state_derivative(model, state, law(t, state), current_m_s)
 
     else:
-        held = np.asarray(torque_nm, dtype=float)
+        held = np.asarray(drive, dtype=float)
 
         def rhs(t: float, state: FloatArray) -> FloatArray:
             return state_derivative(model, state, held, current_m_s)

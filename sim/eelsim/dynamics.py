@@ -239,11 +239,22 @@ def accelerations(
     theta_ddot : ndarray, shape (N,)
     p_ddot : ndarray, shape (2,)
     """
-    theta, _, w, v = split_state(model, state)
     n = model.n_links
     u = np.asarray(torques_nm, dtype=float)
     if u.shape != (n - 1,):
         raise ValueError(f"torques must have shape ({n - 1},) for N = {n}, got {u.shape}")
+    big_m, q, fluid_torque = _mass_matrix_and_forces(model, state, current_m_s)
+    q[:n] += fluid_torque + joint_torques_on_links(u)
+    chol = np.linalg.cholesky(big_m)
+    qdd = np.linalg.solve(chol.T, np.linalg.solve(chol, q))
+    return qdd[:n], qdd[n:]
+
+
+def _mass_matrix_and_forces(
+    model: SwimmerModel, state: ArrayLike, current_m_s: ArrayLike
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """M, the generalised force without torques on the theta block, and the fluid torques."""
+    theta, _, w, v = split_state(model, state)
     k = _kinematics(model, theta, w, v)
     big_m = _mass_matrix(model, k)
     water = _fluid_forces(model, k, w, np.asarray(current_m_s, float))
@@ -252,10 +263,81 @@ def accelerations(
     inert_x = (m + mu * k.s**2) * k.ax0 - mu * k.s * k.c * k.ay0
     inert_y = -mu * k.s * k.c * k.ax0 + (m + mu * k.c**2) * k.ay0
     q = k.jx.T @ (water.fx - inert_x) + k.jy.T @ (water.fy - inert_y)
-    q[:n] += water.torque + joint_torques_on_links(u)
-    chol = np.linalg.cholesky(big_m)
-    qdd = np.linalg.solve(chol.T, np.linalg.solve(chol, q))
-    return qdd[:n], qdd[n:]
+    return big_m, q, water.torque
+
+
+def prescribed_shape_accelerations(
+    model: SwimmerModel,
+    state: ArrayLike,
+    phi_ddot_rad_s2: ArrayLike,
+    current_m_s: ArrayLike = (0.0, 0.0),
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Accelerations of a swimmer whose joint accelerations are given, and the joint torques.
+
+    Prescribed-shape dynamics (docs/model.md section 4, "Joint models"): with the joint angles
+    kinematic, the free coordinates are s = (theta_1, p_x, p_y); theta = e theta_1 + C phi
+    (C[i, j] = 1 for j < i) gives q_ddot = T s_ddot + c with T = [[e, 0], [0, I2]] and
+    c = [C phi_ddot; 0], and the 3 x 3 system (T^T M T) s_ddot = T^T (Q0 - M c) is the whole
+    body's force and moment balance (the joint torques are internal: T^T [-D^T u; 0] = 0). The
+    torques the joints must give follow from the theta rows, r = (M q_ddot - Q0)[theta] = -D^T u:
+    u_1 = -r_1, u_j = u_(j-1) - r_j.
+
+    Parameters
+    ----------
+    model : SwimmerModel
+    state : array_like, shape (2 N + 4,)
+    phi_ddot_rad_s2 : array_like, shape (N-1,)
+        The joint accelerations.
+    current_m_s : array_like, shape (2,)
+
+    Returns
+    -------
+    theta_ddot : ndarray, shape (N,)
+    p_ddot : ndarray, shape (2,)
+    torques_nm : ndarray, shape (N-1,)
+        Joint torques u (u_j acts +u_j on link j+1 and -u_j on link j).
+    """
+    n = model.n_links
+    phi_ddot = np.asarray(phi_ddot_rad_s2, dtype=float)
+    if phi_ddot.shape != (n - 1,):
+        raise ValueError(f"joint accelerations must have shape ({n - 1},) for N = {n}, got "
+                         f"{phi_ddot.shape}")
+    big_m, q0, fluid_torque = _mass_matrix_and_forces(model, state, current_m_s)
+    q0[:n] += fluid_torque
+    t = np.zeros((n + 2, 3))
+    t[:n, 0] = 1.0
+    t[n:, 1:] = np.eye(2)
+    c = np.zeros(n + 2)
+    c[1:n] = np.cumsum(phi_ddot)
+    reduced = t.T @ big_m @ t
+    chol = np.linalg.cholesky(reduced)
+    s_ddot = np.linalg.solve(chol.T, np.linalg.solve(chol, t.T @ (q0 - big_m @ c)))
+    qdd = t @ s_ddot + c
+    residual = (big_m @ qdd - q0)[:n]
+    torques = -np.cumsum(residual[:-1])
+    return qdd[:n], qdd[n:], torques
+
+
+def prescribed_shape_derivative(
+    model: SwimmerModel,
+    state: ArrayLike,
+    phi_ddot_rad_s2: ArrayLike,
+    current_m_s: ArrayLike = (0.0, 0.0),
+) -> tuple[FloatArray, FloatArray]:
+    """Time derivative of the state with the joint accelerations given, and the joint torques.
+
+    Parameters are those of :func:`prescribed_shape_accelerations`.
+
+    Returns
+    -------
+    x_dot : ndarray, shape (2 N + 4,)
+    torques_nm : ndarray, shape (N-1,)
+    """
+    x = np.asarray(state, dtype=float)
+    n = model.n_links
+    theta_ddot, p_ddot, torques = prescribed_shape_accelerations(model, x, phi_ddot_rad_s2,
+                                                                 current_m_s)
+    return np.concatenate([x[n + 2 :], theta_ddot, p_ddot]), torques
 
 
 def state_derivative(

@@ -4,7 +4,9 @@ RK4 at dt = 0.01 s is what the closed loop, estimation and planning use. The ada
 (scipy's ``solve_ivp``, DOP853 with tight tolerances by default) exists to check RK4 and physics.
 
 Joint torques are given as a function ``torques(t_s, state) -> u`` (so a PD law can act inside the
-RK4 stages), as a constant array, or as ``None`` for no torque.
+RK4 stages), as a constant array, or as ``None`` for no torque. Kinematic joints (the servo joint
+model, docs/model.md section 4) are given instead as their accelerations
+``joint_accelerations(t_s, state) -> phi_ddot``: the plant is then the prescribed-shape dynamics.
 """
 
 from __future__ import annotations
@@ -15,11 +17,12 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from eelsim.dynamics import state_derivative
+from eelsim.dynamics import prescribed_shape_derivative, state_derivative
 from eelsim.model import SwimmerModel
 
 FloatArray = NDArray[np.float64]
 TorqueInput = Callable[[float, FloatArray], ArrayLike] | ArrayLike | None
+JointAccelerations = Callable[[float, FloatArray], ArrayLike]
 
 
 @dataclass(frozen=True)
@@ -50,8 +53,37 @@ def _torque_function(
     return lambda _t, _x: const
 
 
+def _right_hand_side(
+    model: SwimmerModel,
+    torques: TorqueInput,
+    current_m_s: ArrayLike,
+    joint_accelerations: JointAccelerations | None,
+) -> Callable[[float, FloatArray], FloatArray]:
+    """f(t, x): torque-driven joints, or kinematic ones (then ``torques`` must be None)."""
+    vc = np.asarray(current_m_s, dtype=float)
+    if joint_accelerations is not None:
+        if torques is not None:
+            raise ValueError("give joint torques or joint accelerations, not both")
+        law = joint_accelerations
+
+        def kinematic(t: float, x: FloatArray) -> FloatArray:
+            return prescribed_shape_derivative(model, x, law(t, x), vc)[0]
+
+        return kinematic
+    u = _torque_function(model, torques)
+
+    def f(t: float, x: FloatArray) -> FloatArray:
+        return state_derivative(model, x, u(t, x), vc)
+
+    return f
+
+
 def rk4_step(
-    f: Callable[[float, FloatArray], FloatArray], t_s: float, state: FloatArray, dt_s: float
+    f: Callable[[float, FloatArray], FloatArray],
+    t_s: float,
+    state: FloatArray,
+    dt_s: float,
+    first_stage: FloatArray | None = None,
 ) -> FloatArray:
     """Advance ``state`` by one classical fourth-order Runge-Kutta step.
 
@@ -65,13 +97,15 @@ def rk4_step(
         Current state.
     dt_s : float
         Step.
+    first_stage : ndarray, optional
+        f(t_s, state) when the caller has it already (it is not evaluated again).
 
     Returns
     -------
     ndarray
         The state at t_s + dt_s.
     """
-    k1 = f(t_s, state)
+    k1 = f(t_s, state) if first_stage is None else first_stage
     k2 = f(t_s + 0.5 * dt_s, state + 0.5 * dt_s * k1)
     k3 = f(t_s + 0.5 * dt_s, state + 0.5 * dt_s * k2)
     k4 = f(t_s + dt_s, state + dt_s * k3)
@@ -85,6 +119,7 @@ def integrate_rk4(
     dt_s: float = 0.01,
     torques: TorqueInput = None,
     current_m_s: ArrayLike = (0.0, 0.0),
+    joint_accelerations: JointAccelerations | None = None,
 ) -> Trajectory:
     """Integrate the swimmer open loop with fixed-step RK4.
 
@@ -102,6 +137,8 @@ def integrate_rk4(
         Joint torques ``u(t, x)``, a constant, or none.
     current_m_s : array_like, shape (2,)
         Uniform current velocity.
+    joint_accelerations : callable, optional
+        ``phi_ddot(t, x)`` of kinematic joints (prescribed-shape dynamics) instead of torques.
 
     Returns
     -------
@@ -109,11 +146,7 @@ def integrate_rk4(
         Every step, from t = 0 to ``duration_s`` inclusive.
     """
     steps = _whole_steps(duration_s, dt_s)
-    u = _torque_function(model, torques)
-    vc = np.asarray(current_m_s, dtype=float)
-
-    def f(t: float, x: FloatArray) -> FloatArray:
-        return state_derivative(model, x, u(t, x), vc)
+    f = _right_hand_side(model, torques, current_m_s, joint_accelerations)
 
     states = np.empty((steps + 1, model.state_size))
     states[0] = np.asarray(initial_state, dtype=float)
@@ -132,6 +165,7 @@ def integrate_reference(
     rtol: float = 1e-11,
     atol: float = 1e-13,
     method: str = "DOP853",
+    joint_accelerations: JointAccelerations | None = None,
 ) -> Trajectory:
     """Integrate the swimmer with an adaptive solver (``scipy.integrate.solve_ivp``) for checking.
 
@@ -144,7 +178,9 @@ def integrate_reference(
     rtol, atol : float
         Solver tolerances.
     method : str
-        Any ``solve_ivp`` method.
+        Any ``solve_ivp`` method (an implicit one, ``"Radau"``, for stiff joints).
+    joint_accelerations : callable, optional
+        As for :func:`integrate_rk4`.
 
     Returns
     -------
@@ -158,11 +194,10 @@ def integrate_reference(
     # imported here: scipy.integrate takes 0.6 s to import and only this check needs it
     from scipy.integrate import solve_ivp
 
-    u = _torque_function(model, torques)
-    vc = np.asarray(current_m_s, dtype=float)
+    f = _right_hand_side(model, torques, current_m_s, joint_accelerations)
     times = np.linspace(0.0, duration_s, 101) if t_eval is None else np.asarray(t_eval, float)
     sol = solve_ivp(
-        lambda t, x: state_derivative(model, x, u(t, x), vc),
+        f,
         (0.0, float(duration_s)),
         np.asarray(initial_state, dtype=float),
         method=method,

@@ -3,7 +3,8 @@
 A robot file gives the geometry and mass of the links (with optional head and tail overrides), the
 water density, the fluid law and its coefficients (``[hydrodynamics]``: ``law``, default
 ``"morison"``, and e.g. the paper's e = (C_f, C_d, C_a, C_m); see :mod:`eelsim.fluid`), the joint
-gains and limits, and an ``[assumptions]`` table naming every value that was assumed rather than
+model and its parameters and limits (``[joints]``: ``model``, default ``"pd"``, the paper's PD
+gains, or ``"servo"``, a hobby servo; see :mod:`eelsim.joints`), and an ``[assumptions]`` table naming every value that was assumed rather than
 measured, with the reason. Unknown keys are refused at every level; every number must be finite.
 Errors name the file and the dotted key that is wrong (docs/model.md section 8).
 
@@ -40,12 +41,21 @@ from eelsim.fluid import (
     get_fluid_law,
     law_of,
 )
+from eelsim.joints import (
+    DEFAULT_JOINT_MODEL,
+    JointModel,
+    JointParameters,
+    joint_model_of,
+    joint_parameters,
+)
 from eelsim.tomlfile import parse_toml, read_toml, validation_message
 
 __all__ = [
+    "BUNDLED_ROBOTS",
     "DEFAULT_ROBOT",
+    "SERVO_ROBOT",
     "HydroCoefficients",
-    "JointSpec",
+    "JointParameters",
     "LinkArrays",
     "LinkOverride",
     "LinkSpec",
@@ -57,9 +67,11 @@ __all__ = [
 
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
 PositiveFloat = Annotated[float, Field(gt=0.0, allow_inf_nan=False)]
-NonNegativeFloat = Annotated[float, Field(ge=0.0, allow_inf_nan=False)]
 
 DEFAULT_ROBOT = "paper_robot.toml"
+SERVO_ROBOT = "servo_robot.toml"
+"""The paper's robot with hobby-servo joints (``[joints] model = "servo"``), bundled too."""
+BUNDLED_ROBOTS = (DEFAULT_ROBOT, SERVO_ROBOT)
 
 
 class RobotFileError(ValueError):
@@ -132,41 +144,6 @@ class LinkOverride(_Strict):
     yaw_inertia_kg_m2: PositiveFloat | None = None
 
 
-class JointSpec(_Strict):
-    """Joint control gains and limits.
-
-    Attributes
-    ----------
-    kp_nm_per_rad, kd_nms_per_rad : float
-        PD gains of the joint loop u = k_p (alpha - phi) + k_d (alpha_dot - phi_dot).
-    limit_rad : float
-        Mechanical limit of |phi_j|; exceeding it is a failure (self-collision).
-    reference_limit_rad : float, optional
-        The joint references are clamped to +-this (default: ``limit_rad``); keep it below the
-        mechanical limit so that the PD loop's overshoot stays clear of the stop.
-    servo_max_torque_nm, servo_max_speed_rad_s : float
-        Hobby-servo limits (stall torque, no-load speed), used when the servo model is switched on.
-    """
-
-    kp_nm_per_rad: PositiveFloat
-    kd_nms_per_rad: NonNegativeFloat
-    limit_rad: PositiveFloat
-    reference_limit_rad: PositiveFloat | None = None
-    servo_max_torque_nm: PositiveFloat = 1.26
-    servo_max_speed_rad_s: PositiveFloat = 8.0
-
-    @model_validator(mode="after")
-    def _reference_inside_mechanical_limit(self) -> JointSpec:
-        if self.reference_limit_rad is not None and self.reference_limit_rad > self.limit_rad:
-            raise ValueError("reference_limit_rad must not exceed limit_rad")
-        return self
-
-    @property
-    def command_limit_rad(self) -> float:
-        """The clamp applied to joint references."""
-        return self.reference_limit_rad if self.reference_limit_rad is not None else self.limit_rad
-
-
 class Robot(_Strict):
     """A whole robot description. See the module docstring and ``docs/model.md``."""
 
@@ -177,7 +154,7 @@ class Robot(_Strict):
     head: LinkOverride | None = None
     tail: LinkOverride | None = None
     hydrodynamics: SerializeAsAny[FluidCoefficients]
-    joints: JointSpec
+    joints: SerializeAsAny[JointParameters]
     assumptions: dict[str, str] = Field(default_factory=dict)
 
     @field_validator("hydrodynamics", mode="before")
@@ -202,6 +179,27 @@ class Robot(_Strict):
         if type(value).law_name == DEFAULT_FLUID_LAW:
             return table
         return {"law": type(value).law_name, **table}
+
+    @field_validator("joints", mode="before")
+    @classmethod
+    def _parameters_of_the_named_joint_model(cls, value: Any) -> Any:
+        """Validate the table against the parameters of its ``model`` (default: pd)."""
+        return joint_parameters(value)
+
+    @field_serializer("joints", mode="wrap")
+    def _with_the_model_unless_default(
+        self, value: JointParameters, handler: SerializerFunctionWrapHandler,
+        info: SerializationInfo,
+    ) -> Any:
+        """The table as in a robot file: ``model`` first, left out for the default.
+
+        Then the model's own fields, then the shared ones.
+        """
+        table = handler(value)
+        ordered = {k: table[k] for k in type(value).table_order() if k in table}
+        if type(value).model_name == DEFAULT_JOINT_MODEL:
+            return ordered
+        return {"model": type(value).model_name, **ordered}
 
     @model_validator(mode="after")
     def _assumptions_name_real_keys(self) -> Robot:
@@ -241,6 +239,15 @@ class Robot(_Strict):
     def fluid_law(self) -> FluidLaw:
         """The fluid law of the robot's hydrodynamic coefficients."""
         return law_of(self.hydrodynamics)
+
+    @property
+    def joint_model(self) -> JointModel:
+        """The joint model of the robot's ``[joints]`` table."""
+        return joint_model_of(self.joints)
+
+    def with_joints(self, joints: JointParameters) -> Robot:
+        """Return a copy of this robot with other joints (of any model)."""
+        return self.model_copy(update={"joints": joints})
 
     def with_coefficients(self, coeffs: FluidCoefficients) -> Robot:
         """Return a copy of this robot with other hydrodynamic coefficients (of any law)."""
@@ -288,7 +295,9 @@ def load_robot(path: str | Path | None = None) -> Robot:
     Parameters
     ----------
     path : str or Path, optional
-        The robot file. ``None`` or the bare name ``paper_robot.toml`` selects the bundled default.
+        The robot file. ``None`` or the bare name ``paper_robot.toml`` selects the bundled default;
+        ``servo_robot.toml`` (when no such file is in the working folder) the bundled robot with
+        servo joints.
 
     Returns
     -------
@@ -300,11 +309,12 @@ def load_robot(path: str | Path | None = None) -> Robot:
         When the file is missing, is not valid TOML, or fails validation; the message names the
         file and the offending key.
     """
-    if path is None or str(path) == DEFAULT_ROBOT:
-        text = resources.files("eelsim.data").joinpath(DEFAULT_ROBOT).read_text()
-        source = f"<bundled {DEFAULT_ROBOT}>"
+    name = DEFAULT_ROBOT if path is None else str(path)
+    if name == DEFAULT_ROBOT or (name in BUNDLED_ROBOTS and not Path(name).exists()):
+        text = resources.files("eelsim.data").joinpath(name).read_text()
+        source = f"<bundled {name}>"
         data = parse_toml(text, source, RobotFileError)
     else:
-        source = str(path)
-        data = read_toml(path, RobotFileError, "robot file")
+        source = name
+        data = read_toml(Path(name), RobotFileError, "robot file")
     return parse_robot(data, source)

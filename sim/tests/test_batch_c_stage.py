@@ -15,7 +15,7 @@ from eelsim import batch
 from eelsim.batch import BatchSpec, c_stage, loading, run_spec
 from eelsim.camera import CameraModel
 from eelsim.closed_loop import LoopOptions
-from eelsim.robot import HydroCoefficients
+from eelsim.robot import HydroCoefficients, load_robot
 from eelsim.scenario import load_scenario
 from eelsim.timing import LoopTiming
 
@@ -107,8 +107,35 @@ def test_c_stage_and_numba_stage_give_the_same_runs(robot):
                     HydroCoefficients(C_f=0.02, C_d=1.5, C_a=1.2, C_m=0.02)] * 3
     spec = BatchSpec.build(robot, [path2, turning] * 3, coefficients, options,
                            seeds=[0, 1, 2, 3, 4, 5])
-    samples = np.arange(0, 1201, 50)
-    assert "_C_STAGE" in vars(batch.kernel_module(spec.n_links, batch.DEFAULT_LANES, "c"))
+    assert_the_stages_agree(spec, np.arange(0, 1201, 50))
+
+
+@needs_cc
+def test_c_stage_and_numba_stage_give_the_same_servo_runs():
+    # the servo joint model's kernel (servo law, prescribed-shape solve, the torques the servos
+    # must give): a current and waypoint switching, jitter and noise, other coefficients, and a
+    # servo weak enough that some steps saturate
+    robot = load_robot("servo_robot.toml")
+    robot = robot.with_joints(robot.joints.model_copy(update={"servo_max_torque_nm": 0.3}))
+    path2 = load_scenario("path2").model_copy(update={"duration_s": 8.0})
+    turning = load_scenario("turning").model_copy(update={"duration_s": 6.0})
+    options = LoopOptions(camera=CameraModel(heading_noise_rad=0.01),
+                          timing=LoopTiming(extra_delay_s=0.05, jitter_s=0.05))
+    coefficients = [HydroCoefficients(C_f=0.008, C_d=0.776, C_a=0.618, C_m=0.007),
+                    HydroCoefficients(C_f=0.02, C_d=1.5, C_a=1.2, C_m=0.02)] * 2
+    spec = BatchSpec.build(robot, [path2, turning] * 2, coefficients, options,
+                           seeds=[0, 1, 2, 3])
+    c, nb = assert_the_stages_agree(spec, np.arange(0, 801, 40))
+    assert np.array_equal(c.saturated_steps, nb.saturated_steps)
+    assert np.allclose(c.max_torque_ratio, nb.max_torque_ratio, rtol=1e-9)
+    assert (c.saturated_steps > 0).all()
+
+
+def assert_the_stages_agree(spec, samples):
+    """Both stages run ``spec`` to the same samples, flags, arrivals; returns (c, numba)."""
+    model = spec.joint_model
+    assert "_C_STAGE" in vars(batch.kernel_module(spec.n_links, batch.DEFAULT_LANES, "c",
+                                                  spec.fluid_law, model))
     c = run_spec(spec, sample_steps=samples, threads=1, stage="c")
     nb = run_spec(spec, sample_steps=samples, threads=1, stage="numba")
     scale = np.maximum(1.0, np.nan_to_num(np.abs(nb.states)))
@@ -120,6 +147,7 @@ def test_c_stage_and_numba_stage_give_the_same_runs(robot):
     assert np.allclose(c.arrival_time_s, nb.arrival_time_s, atol=1e-9, equal_nan=True)
     assert np.allclose(c.distance_left_m, nb.distance_left_m, atol=1e-9)
     assert c.final_step.min() > 500  # the runs went somewhere
+    return c, nb
 
 
 def test_an_unknown_stage_choice_is_refused_naming_where_it_came_from(monkeypatch):

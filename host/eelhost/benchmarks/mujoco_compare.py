@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from eelsim.fluid import FluidCoefficients
+from eelsim.joints import pd_gains
 from eelsim.model import SwimmerModel
 from eelsim.robot import HydroCoefficients, Robot
 
@@ -69,9 +70,15 @@ def robot_mjcf(
     Returns
     -------
     str
+
+    Raises
+    ------
+    TypeError
+        For a robot whose joints are not the PD model's (MuJoCo's position actuator is a PD law).
     """
     links = robot.links()
     j = robot.joints
+    kp, kd = _pd_gains(robot)
     density = robot.water_density_kg_m3 if fluid else 0.0
     wind = f"{current_m_s[0]:.9g} {current_m_s[1]:.9g} 0"
     shape = ' fluidshape="ellipsoid"' if fluid else ""
@@ -96,7 +103,7 @@ def robot_mjcf(
             )
             body_lines.append(
                 f'{indent}  <joint name="j{i}" type="hinge" axis="0 0 1" pos="{-lk.half_length_m:.9g} 0 0"'
-                f' damping="{j.kd_nms_per_rad:.9g}" range="{-j.limit_rad:.6g} {j.limit_rad:.6g}"'
+                f' damping="{kd:.9g}" range="{-j.limit_rad:.6g} {j.limit_rad:.6g}"'
                 ' limited="false"/>'
             )
         body_lines.append(
@@ -111,7 +118,7 @@ def robot_mjcf(
         closing.append(f"{indent}</body>")
         indent += "  "
     actuators = "\n".join(
-        f'    <position joint="j{i}" kp="{j.kp_nm_per_rad:.9g}"/>' for i in range(1, len(links))
+        f'    <position joint="j{i}" kp="{kp:.9g}"/>' for i in range(1, len(links))
     )
     return f"""<mujoco model="eelbot swimmer">
   <option timestep="{dt_s:.9g}" integrator="implicitfast" gravity="0 0 0"
@@ -138,7 +145,16 @@ def gait_targets(robot: Robot, n_steps: int, dt_s: float, amplitude_rad: float =
     alpha = np.clip(amp * np.sin(phase), -robot.joints.command_limit_rad,
                     robot.joints.command_limit_rad)
     alpha_dot = amp * omega_rad_s * np.cos(phase)
-    return alpha + robot.joints.kd_nms_per_rad / robot.joints.kp_nm_per_rad * alpha_dot
+    kp, kd = _pd_gains(robot)
+    return alpha + kd / kp * alpha_dot
+
+
+def _pd_gains(robot: Robot) -> tuple[float, float]:
+    gains = pd_gains(robot.joints)
+    if gains is None:
+        raise TypeError(f"MuJoCo's joints here are the PD model's; this robot's joint model is "
+                        f"{robot.joint_model.name!r}")
+    return gains
 
 
 @dataclass(frozen=True)

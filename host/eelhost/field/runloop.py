@@ -41,6 +41,7 @@ from eelhost.vision.localise import Localiser
 from eelhost.wire import protocol
 from eelsim.control import Gait
 from eelsim.guidance import Guidance
+from eelsim.joints import pd_gains
 from eelsim.robot import Robot
 
 log = logging.getLogger(__name__)
@@ -216,13 +217,14 @@ class RunLoop:
             self.recorder.command(event.t_s - self._t_start, event)
 
     def _start_robot(self) -> None:
-        c, j = self.config, self.robot.joints
+        c = self.config
         g = c.gait
+        # the robot file's PD gains; with the servo joint model the servos close their own loop
+        # and the firmware keeps its defaults
+        gains = pd_gains(self.robot.joints)
         self.link.send(protocol.Hello())
-        self.link.send(
-            protocol.SetGains(j.kp_nm_per_rad, j.kd_nms_per_rad, protocol.SetGains().torque_limit_nm),
-            want_ack=True,
-        )
+        self.link.send(protocol.SetGains(*gains) if gains is not None else protocol.SetGains(),
+                       want_ack=True)
         self.link.send(
             protocol.SetGait(
                 g.amplitude_rad,

@@ -32,9 +32,13 @@ this order:
 4. the loop records the state and checks it for failures as in the twin;
 5. RK4 advances the plant by one step with those torques held constant (a zero-order hold, as a
    firmware that runs its PD once per control update applies them); camera frames falling in the
-   step observe the interpolated pose, as in the twin.
+   step observe the interpolated pose, as in the twin. With the servo joint model
+   (``[joints] model = "servo"``) the angles the firmware commands are instead the servo
+   references, held over the step, and the servo law drives the joints
+   (:func:`eelsim.closed_loop.held_reference_drive`; the firmware's torques are recorded only).
 
-At ``t_us = 0`` the host sends Hello, SetGains (the robot file's k_p, k_d), SetGait (the scenario's
+At ``t_us = 0`` the host sends Hello, SetGains (the robot file's k_p, k_d; the protocol's
+defaults with the servo joint model, whose firmware torques drive nothing), SetGait (the scenario's
 gait with slew rates 0, so the firmware reproduces the twin's zero-order hold of the offset),
 SetOffset and Start. Over an ideal link (``radio=None``) these arrive before the first tick, the
 gait's phase starts at 0 with the twin's, and the only differences from the twin are float32
@@ -65,11 +69,13 @@ from eelsim.closed_loop import (
     JointDrive,
     LoopOptions,
     RunResult,
+    held_reference_drive,
     plant_rhs,
     servo_limited,
     simulate_closed_loop,
 )
 from eelsim.integrate import rk4_step
+from eelsim.joints import pd_gains
 from eelsim.model import SwimmerModel
 from eelsim.robot import Robot
 from eelsim.scenario import Scenario
@@ -84,6 +90,7 @@ __all__ = [
     "LockstepOptions",
     "RobotTick",
     "SimClock",
+    "joint_drive",
     "plant_step",
     "run_firmware_in_loop",
     "run_lockstep",
@@ -330,7 +337,7 @@ class FirmwareRunResult(RunResult):
 def plant_step(
     model: SwimmerModel,
     x: FloatArray,
-    torque_nm: FloatArray,
+    torque_nm: FloatArray | JointDrive,
     t_s: float,
     dt_s: float,
     current_m_s: tuple[float, float] = (0.0, 0.0),
@@ -346,8 +353,8 @@ def plant_step(
         The plant.
     x : ndarray, shape (2 N + 4,)
         State at ``t_s``.
-    torque_nm : ndarray, shape (N-1,)
-        Joint torques held over the step.
+    torque_nm : ndarray of shape (N-1,), or JointDrive
+        Joint torques held over the step, or what drives the joints (:func:`joint_drive`).
     t_s, dt_s : float
         Start and length of the step, s.
     current_m_s : (float, float)
@@ -364,7 +371,8 @@ def plant_step(
         When the mass matrix is singular or the new state is not finite (the twin's
         ILL_CONDITIONED flag).
     """
-    rhs = plant_rhs(model, np.asarray(torque_nm, dtype=float), np.asarray(current_m_s, dtype=float))
+    drive = torque_nm if isinstance(torque_nm, JointDrive) else np.asarray(torque_nm, dtype=float)
+    rhs = plant_rhs(model, drive, np.asarray(current_m_s, dtype=float))
     with np.errstate(all="ignore"):
         try:
             x_next = rk4_step(rhs, t_s, x, dt_s)
@@ -451,9 +459,12 @@ class LinkedJoints:
         servo_limits = self._options.loop.servo_limits
         torque_limit = joints.servo_max_torque_nm if servo_limits else NO_TORQUE_LIMIT_NM
         gait = self._gait
+        gains = pd_gains(joints)  # None with the servo model: the firmware's torques drive nothing
         self.link.send(protocol.Hello())
         self.link.send(
-            protocol.SetGains(joints.kp_nm_per_rad, joints.kd_nms_per_rad, torque_limit),
+            protocol.SetGains(*gains, torque_limit)
+            if gains is not None
+            else protocol.SetGains(torque_limit_nm=torque_limit),
             want_ack=True,
         )
         self.link.send(
@@ -496,13 +507,39 @@ class LinkedJoints:
         self.torque_nm.append(tick.torque_nm)
         self.firmware_state.append(robot_state)
 
-        held = np.asarray(tick.torque_nm, dtype=float)
-        if self._options.loop.servo_limits:
-            joints = self._robot.joints
-            held = servo_limited(
-                held, tick.phi_dot_rad_s, joints.servo_max_torque_nm, joints.servo_max_speed_rad_s
-            )
-        return JointDrive(held, tick.alpha_rad, offset)
+        return joint_drive(self._robot, tick, offset, self._options.loop.servo_limits)
+
+
+def joint_drive(robot: Robot, tick: RobotTick, offset_rad: float, servo_limits: bool) -> JointDrive:
+    """What drives the plant's joints over a step, from what the robot's side did in it.
+
+    The PD joint model: the driver's torques, held (clipped to the servos' torque-speed line when
+    ``servo_limits``). The servo joint model: the driver's commanded angles are the servo
+    references, held, and the servo law drives the joints
+    (:func:`eelsim.closed_loop.held_reference_drive`).
+
+    Parameters
+    ----------
+    robot : Robot
+    tick : RobotTick
+    offset_rad : float
+        The offset acting (recorded).
+    servo_limits : bool
+        The loop's option (PD model only).
+
+    Returns
+    -------
+    JointDrive
+    """
+    if robot.joint_model.kinematic:
+        return held_reference_drive(robot, tick.alpha_rad, offset_rad)
+    held = np.asarray(tick.torque_nm, dtype=float)
+    if servo_limits:
+        joints = robot.joints
+        held = servo_limited(
+            held, tick.phi_dot_rad_s, joints.servo_max_torque_nm, joints.servo_max_speed_rad_s
+        )
+    return JointDrive(held, tick.alpha_rad, offset_rad)
 
 
 def run_lockstep(

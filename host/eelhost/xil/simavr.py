@@ -35,6 +35,7 @@ from eelhost.wire import protocol
 from eelhost.xil.lockstep import FirmwareRunResult, LockstepOptions, run_lockstep
 from eelhost.xil.native_firmware import FIRMWARE_DIR
 from eelhost.xil.radio import RadioChannel, RadioModel
+from eelsim.joints import pd_gains
 from eelsim.robot import Robot
 from eelsim.scenario import Scenario
 
@@ -356,7 +357,9 @@ def run_processor_in_loop(
     servo = servo or ServoModel()
     sim = AvrSimulator(elf)
     try:
-        driver = AvrDriver(sim, robot.joints.kp_nm_per_rad, robot.joints.kd_nms_per_rad, servo)
+        # the servo joint model takes the pulses' angles as its references: no torques needed
+        kp, kd = pd_gains(robot.joints) or (0.0, 0.0)
+        driver = AvrDriver(sim, kp, kd, servo)
         res = run_lockstep(robot, scenario, driver, seed, radio, options)
     finally:
         crashed = sim.crashed

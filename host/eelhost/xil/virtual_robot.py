@@ -5,7 +5,8 @@ for a time, the robot steps there, one physics step (10 ms) at a time, with the 
 stepper (:class:`eelhost.xil.lockstep.Lockstep`): the firmware (:class:`eelhost.xil.drivers.
 NativeDriver`) reads the bytes the uplink has delivered, ticks with the plant's joint angles and
 returns its torques and transmitted bytes; the plant takes one RK4 step with the torques held
-(:func:`eelhost.xil.lockstep.plant_step`). Bytes travel through the radio model
+(:func:`eelhost.xil.lockstep.plant_step`), or, for a robot with the servo joint model, with the
+firmware's commanded angles as the servo references (:func:`eelhost.xil.lockstep.joint_drive`). Bytes travel through the radio model
 (:mod:`eelhost.xil.radio`, an XBee at 57600 baud by default).
 
 - :meth:`VirtualRobot.transport` is the host's end of the radio (the
@@ -31,7 +32,7 @@ from eelhost.link.sim_transport import SimTransport
 from eelhost.vision.synthetic import SyntheticCamera, TruePose
 from eelhost.wire import protocol
 from eelhost.xil.drivers import NativeDriver
-from eelhost.xil.lockstep import DT_US, Lockstep, SimClock, plant_step
+from eelhost.xil.lockstep import DT_US, Lockstep, SimClock, joint_drive, plant_step
 from eelhost.xil.native_firmware import BATTERY_INPUT, NativeFirmware
 from eelhost.xil.radio import RadioModel
 from eelsim.dynamics import straight_state
@@ -177,7 +178,7 @@ class VirtualRobot:
                 self._x_next = plant_step(
                     self.model,
                     self._x,
-                    tick.torque_nm,
+                    joint_drive(self.robot, tick, 0.0, servo_limits=False),
                     tick.t_us * 1e-6,
                     DT_US * 1e-6,
                     self.current_m_s,

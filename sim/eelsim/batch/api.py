@@ -55,6 +55,11 @@ class BatchResult:
         Index of that step.
     target_index : ndarray of int, shape (R,)
         Waypoints reached.
+    max_torque_ratio : ndarray, shape (R,)
+        The largest |u| over the run's recorded steps and joints, as a fraction of the stall
+        torque (``RunResult.max_torque_ratio``).
+    saturated_steps : ndarray of int, shape (R,)
+        Recorded steps outside the servo's torque-speed line (``RunResult.saturated_steps``).
     full_states : ndarray, shape (R, K + 1, 2 N + 4), or None
         Every step (NaN after the end), only with ``record_full=True``.
     spec : BatchSpec
@@ -76,6 +81,8 @@ class BatchResult:
     target_index: IntArray
     full_states: FloatArray | None
     spec: BatchSpec
+    max_torque_ratio: FloatArray
+    saturated_steps: IntArray
 
     def reason(self, run: int) -> str:
         """Human-readable reason of run ``run``'s flag, worded as ``RunResult.reason``.
@@ -97,12 +104,13 @@ class BatchResult:
                 f"reached {i} of {int(self.spec.n_waypoints[run])} waypoints by "
                 f"T_max = {float(self.spec.duration_s[run]):g} s"
             )
+        hint = self.spec.blow_up_hint(run)
         if code == Reason.NOT_FINITE:
-            return "state is not finite (the integration blew up)"
+            return "state is not finite (the integration blew up)" + hint
         if code == Reason.DIVERGED:
-            return "rates beyond any physical motion (the integration diverged)"
+            return "rates beyond any physical motion (the integration diverged)" + hint
         if code == Reason.NOT_POSITIVE_DEFINITE:
-            return "mass matrix is not positive definite"
+            return "mass matrix is not positive definite" + hint
         if code == Reason.CONDITION_NUMBER:
             return (
                 f"mass matrix condition number {value:.3g} is above {ILL_CONDITION_THRESHOLD:.0e}"
@@ -197,9 +205,12 @@ def run_spec(
     steps = _sample_steps(sample_steps, sample_times_s, dt)
     unique, inverse = np.unique(steps, return_inverse=True)
     if kernel is None:
-        kernel = kernel_module(n, lanes, stage, spec.fluid_law)
+        kernel = kernel_module(n, lanes, stage, spec.fluid_law, spec.joint_model)
     elif kernel.N_LINKS != n:
         raise ValueError(f"the kernel given is for N = {kernel.N_LINKS}, the batch has N = {n}")
+    elif getattr(kernel, "JOINT_MODEL", "pd") != spec.joint_model_name:
+        raise ValueError(f"the kernel given is for the {kernel.JOINT_MODEL!r} joint model, the "
+                         f"batch has {spec.joint_model_name!r}")
     timing = spec.options.timing
     cam = spec.options.camera
     runs_in = RunInputs(
@@ -228,6 +239,8 @@ def run_spec(
         final_step=np.zeros(runs, dtype=np.int64),
         target=np.zeros(runs, dtype=np.int64),
         distance=np.zeros(runs),
+        torque_ratio=np.zeros(runs),
+        saturated=np.zeros(runs, dtype=np.int64),
     )
     previous = numba.get_num_threads()
     if threads is not None:
@@ -255,6 +268,8 @@ def run_spec(
         target_index=out.target,
         full_states=out.full if record_full else None,
         spec=spec,
+        max_torque_ratio=out.torque_ratio,
+        saturated_steps=out.saturated,
     )
 
 

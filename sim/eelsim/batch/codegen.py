@@ -64,6 +64,8 @@ from eelsim.batch.records import Reason
 from eelsim.flags import DIVERGENCE_RATE, ILL_CONDITION_THRESHOLD, Failure
 from eelsim.fluid import DEFAULT_FLUID_LAW, FluidLaw, get_fluid_law
 from eelsim.fluid.base import KERNEL_INPUTS, KERNEL_OUTPUTS, KERNEL_TEMPORARY_PREFIX
+from eelsim.joints import DEFAULT_JOINT_MODEL, JointModel, get_joint_model
+from eelsim.joints import base as joint_base
 
 # Taylor coefficients of sin and cos; after reduction to |r| <= pi/4 the first omitted terms are
 # below 1e-19 (sin, r^19/19!) and 1e-20 (cos, r^20/20!), so rounding dominates (about 1 ulp).
@@ -133,6 +135,9 @@ class Layout:
         Runs per block.
     law : FluidLaw
         The fluid law whose forces the stage computes.
+    joints : JointModel
+        The joint model: its law's rows, and which dynamics the stage solves (free joints by
+        the articulated-body recursion, kinematic ones by the prescribed-shape system).
     work : dict
         Name -> first row in ``work``.
     work_rows : int
@@ -146,13 +151,15 @@ class Layout:
     n_links: int
     lanes: int
     law: FluidLaw
+    joints: JointModel
     work: dict[str, int]
     work_rows: int
     out: dict[str, int]
     out_rows: int
 
 
-def make_layout(n_links: int, lanes: int, law: FluidLaw | None = None) -> Layout:
+def make_layout(n_links: int, lanes: int, law: FluidLaw | None = None,
+                joints: JointModel | None = None) -> Layout:
     """Assign rows to every per-lane quantity the stage function reads or writes.
 
     Parameters
@@ -163,6 +170,8 @@ def make_layout(n_links: int, lanes: int, law: FluidLaw | None = None) -> Layout
         Runs per block.
     law : FluidLaw, optional
         The fluid law (default: the default law); its ``kernel_rows`` get one row per link.
+    joints : JointModel, optional
+        The joint model (default: the default model); its ``kernel_rows`` get one row each.
 
     Returns
     -------
@@ -170,6 +179,7 @@ def make_layout(n_links: int, lanes: int, law: FluidLaw | None = None) -> Layout
     """
     n = n_links
     law = law if law is not None else get_fluid_law(DEFAULT_FLUID_LAW)
+    joints = joints if joints is not None else get_joint_model(DEFAULT_JOINT_MODEL)
     sizes_work = [
         ("y", 2 * n + 4),  # the stage state (theta, p, theta_dot, p_dot)
         ("x", 2 * n + 4),  # the state at the start of the step
@@ -195,15 +205,15 @@ def make_layout(n_links: int, lanes: int, law: FluidLaw | None = None) -> Layout
         ("omega", 1),
         ("cos_whalf", 1),  # cos(omega dt / 2), sin: the gait phase's half step
         ("sin_whalf", 1),
-        ("kp", 1),
-        ("kd", 1),
+        *((name, 1) for name in joints.kernel_rows),  # the joint model's own rows
         ("limit", 1),  # mechanical joint limit (self-collision check)
         ("clamp", 1),  # joint references are clamped to +-this (JointSpec.command_limit_rad)
         ("half_length", n),
         # the screen's squared reach of each link pair (i, k >= i + 2), in screen_pairs' order
         ("reach", len(screen_pairs(n))),
-        ("stall", 1),  # servo stall torque (inf when the servo model is off)
-        ("stall_slope", 1),  # stall torque / no-load speed (0 when off)
+        # the servo's torque-speed line, against which the driver counts saturated steps
+        ("torque_limit", 1),  # stall torque
+        ("torque_slope", 1),  # stall torque / no-load speed
         ("vcx", 1),
         ("vcy", 1),
     ]
@@ -224,6 +234,10 @@ def make_layout(n_links: int, lanes: int, law: FluidLaw | None = None) -> Layout
         ("head_vy", 1),
         ("kc", n),
         ("torque", n - 1),  # joint j's torque u_j (on link j + 1, minus it on link j), loop 1c
+        # (kinematic joints: what the joints must give, from stage 1's solve)
+        ("jacc", n - 1),  # kinematic joints: joint j's acceleration phi_ddot_j, loop 1c
+        ("tqf", n),  # kinematic joints: the fluid torque on link j, loop 2a
+        ("centre", 4),  # kinematic joints: the chain's mean position and acceleration (2s)
         ("fxn", n),  # minus the fluid force on link j, x and y (loop 2a, for 2b)
         ("fyn", n),
         ("rho0", n),  # tau_j + h n.F_j: the part of rho_j that the recursion does not change
@@ -248,8 +262,9 @@ def make_layout(n_links: int, lanes: int, law: FluidLaw | None = None) -> Layout
     work, work_rows = assign(sizes_work)
     out, out_rows = assign(sizes_out)
     if len(work) != len(sizes_work):
-        raise ValueError(f"fluid law {law.name!r}: a kernel row name is taken by the kernel")
-    return Layout(n, lanes, law, work, work_rows, out, out_rows)
+        raise ValueError(f"fluid law {law.name!r} or joint model {joints.name!r}: a kernel row "
+                         f"name is taken by the kernel")
+    return Layout(n, lanes, law, joints, work, work_rows, out, out_rows)
 
 
 class _Emitter:
@@ -339,14 +354,18 @@ def _head_velocity(e: _Emitter) -> None:
     line(f"{o('head_vy')} = ({w('y', 2 * n + 3)} + ({gc})) - {w('vcy')}")
 
 
-def _joint_torques(e: _Emitter, plain: bool) -> None:
-    """Emit loop 1c, every joint's torque (control.gait_reference, joint_pd_torque, servo_limited).
+def _joint_law(e: _Emitter, plain: bool) -> None:
+    """Emit loop 1c: every joint's law (control.gait_reference, the joint model's drive).
 
-    ``plain``: for blocks whose lanes all have no servo line (see ``_backward_sweep``).
+    The torques u of a torque-driven model (the PD law, clipped to the servo line unless
+    ``plain``) or the accelerations phi_ddot of a kinematic one (the servo law).
     """
     n = e.layout.n_links
     line, w, o = e.line, e.w, e.o
-    e.loop("1c. joint torques" + (" (no servo line)" if plain else ""), indent=4)
+    model = e.layout.joints
+    target = "jacc" if model.kinematic else "torque"
+    title = "1c. joint accelerations" if model.kinematic else "1c. joint torques"
+    e.loop(title + (" (no servo line)" if plain and not model.kinematic else ""), indent=4)
     line("# the gait phase's sin and cos give each joint's by angle addition; joint jt lies")
     line("# between links jt and jt + 1 and acts +u on link jt + 1, -u on link jt")
     line(f"sp = {o('gait_sin')}")
@@ -359,17 +378,47 @@ def _joint_torques(e: _Emitter, plain: bool) -> None:
         line(f"sb = {w('sin_beta', jt)}")
         line(f"al = min(max({w('amp', jt)} * (sp * cb + cp * sb) + gam, -lim), lim)")
         line(f"ald = {w('amp_omega', jt)} * (cp * cb - sp * sb)")
+        line(f"ph = {w('y', j)} - {w('y', jt)}")
         line(f"phd = {w('y', n + 2 + j)} - {w('y', n + 2 + jt)}")
-        line(f"uu = {w('kp')} * (al - ({w('y', j)} - {w('y', jt)})) + {w('kd')} * (ald - phd)")
-        if plain:
-            line(f"{o('torque', jt)} = uu")
-        else:
-            # servo torque-speed line, |u| <= stall (1 -+ phd / no_load) on either side: stall =
-            # inf and the slope 0 when the servo model is off, which leaves the torque unchanged
-            # exactly (so ``plain`` gives the same numbers)
-            line(f"q = phd * {w('stall_slope')}")
-            line("stall = " + w("stall"))
-            line(f"{o('torque', jt)} = min(max(uu, max(-stall, -stall - q)), min(stall, stall - q))")
+        emit_joint_law(e, plain)
+        line(f"{o(target, jt)} = jout")
+
+
+def emit_joint_law(e: _Emitter, plain: bool) -> None:
+    """Emit the joint model's code for one joint, after checking what it assigns.
+
+    The model may assign only ``jout`` and ``jm_`` temporaries
+    (:meth:`eelsim.joints.JointModel.emit_joint`), and must assign ``jout``.
+
+    Raises
+    ------
+    ValueError
+        Naming the model and the offending name.
+    """
+    model = e.layout.joints
+    start = len(e.lines)
+    model.emit_joint(e, plain)
+    assigned = _assigned(e.lines[start:])
+    wrong = sorted(name for name in assigned if name != joint_base.KERNEL_OUTPUT
+                   and not name.startswith(joint_base.KERNEL_TEMPORARY_PREFIX))
+    if wrong or joint_base.KERNEL_OUTPUT not in assigned:
+        raise ValueError(
+            f"joint model {model.name!r}: its kernel code assigns {wrong} and "
+            f"{'sets' if joint_base.KERNEL_OUTPUT in assigned else 'leaves unset'} "
+            f"{joint_base.KERNEL_OUTPUT}; it must assign {joint_base.KERNEL_OUTPUT} and otherwise "
+            f"only {joint_base.KERNEL_TEMPORARY_PREFIX}... temporaries (reading "
+            f"{', '.join(joint_base.KERNEL_INPUTS)})"
+        )
+
+
+def _assigned(lines: list[str]) -> set[str]:
+    """The names the statements ``lines`` assign."""
+    names: set[str] = set()
+    for text in lines:
+        for node in ast.walk(ast.parse(text.strip())):
+            if isinstance(node, ast.Name) and isinstance(node.ctx, ast.Store):
+                names.add(node.id)
+    return names
 
 
 def emit_law_forces(e: _Emitter, link: int, still_water: bool) -> None:
@@ -396,11 +445,7 @@ def emit_law_forces(e: _Emitter, link: int, still_water: bool) -> None:
     law = e.layout.law
     start = len(e.lines)
     law.emit_link_forces(e, link, still_water)
-    assigned: set[str] = set()
-    for text in e.lines[start:]:
-        for node in ast.walk(ast.parse(text.strip())):
-            if isinstance(node, ast.Name) and isinstance(node.ctx, ast.Store):
-                assigned.add(node.id)
+    assigned = _assigned(e.lines[start:])
     wrong = sorted(name for name in assigned if name not in KERNEL_OUTPUTS
                    and not name.startswith(KERNEL_TEMPORARY_PREFIX))
     missing = sorted(set(KERNEL_OUTPUTS) - assigned)
@@ -443,19 +488,24 @@ def _backward_sweep(e: _Emitter, plain: bool) -> None:
         emit_law_forces(e, j, still_water=plain)
         line(f"{o('fxn', j)} = fxn")
         line(f"{o('fyn', j)} = fyn")
-        if 0 < j < n - 1:
-            joint = f"({o('torque', j - 1)} - {o('torque', j)})"
-        elif j > 0:
-            joint = o("torque", j - 1)
+        if e.layout.joints.kinematic:
+            line(f"{o('tqf', j)} = -tqn")
         else:
-            joint = f"-{o('torque', j)}"
-        line(f"tq = {joint} - tqn")
-        line("# n . F_j is -fnn")
-        line(f"{o('rho0', j)} = tq - h * fnn")
+            if 0 < j < n - 1:
+                joint = f"({o('torque', j - 1)} - {o('torque', j)})"
+            elif j > 0:
+                joint = o("torque", j - 1)
+            else:
+                joint = f"-{o('torque', j)}"
+            line(f"tq = {joint} - tqn")
+            line("# n . F_j is -fnn")
+            line(f"{o('rho0', j)} = tq - h * fnn")
         line(f"{o('kc', j)} = h * (om * om)")
         if j > 0:
             line("lvx = lvx + hws")
             line("lvy = lvy - hwc")
+    if e.layout.joints.kinematic:
+        return
     for j in reversed(range(n)):
         e.loop(f"2b. articulated-body recursion, link {j}", indent=4)
         if j == n - 1:
@@ -593,13 +643,28 @@ def _stage_body(layout: Layout) -> list[str]:
     e.indent = 0
 
     e.lines.append("    if plain:")
-    _joint_torques(e, True)
+    _joint_law(e, True)
     _backward_sweep(e, True)
     e.lines.append("    else:")
-    _joint_torques(e, False)
+    _joint_law(e, False)
     _backward_sweep(e, False)
     e.indent = 0
 
+    if layout.joints.kinematic:
+        _prescribed_shape(e)
+    else:
+        _forward_sweep(e)
+    _rk4_sums(e)
+    if layout.joints.kinematic:
+        e.lines.append("    if first:")
+        _prescribed_shape_torques(e)
+    return e.lines
+
+
+def _forward_sweep(e: _Emitter) -> None:
+    """Emit loop 3, the articulated-body recursion's forward sweep (see _stage_body)."""
+    n = e.layout.n_links
+    line, w, o = e.line, e.w, e.o
     e.loop("3. forward sweep")
     line("# tail to head: theta_ddot_j = rd_j - g_j . e_j, link centre acceleration a_j = e + d")
     line("# and the next joint point's e + 2 d, d = h theta_ddot n - k t; p_ddot = sum_j w_j a_j.")
@@ -630,6 +695,178 @@ def _stage_body(layout: Layout) -> list[str]:
             line("ey = (ey - (ks + ks)) + (hc + hc) * xj")
     line(f"{o('qdd', n)} = pdx")
     line(f"{o('qdd', n + 1)} = pdy")
+
+
+def _prescribed_shape(e: _Emitter) -> None:
+    """Emit loop 2s: kinematic joints, the 3 x 3 system of the body's force and moment balance.
+
+    docs/model.md section 4 ("Joint models") and ``eelsim.dynamics.prescribed_shape_accelerations``
+    solve (T^T M T) s_ddot = T^T (Q0 - M c) with the dense M; here the same balance is summed
+    link by link, O(N). With theta_ddot_j = th0 + beta_j (beta_j: the joint accelerations summed
+    from the tail), link j's centre accelerates as a_j = p_ddot + th0 g_j + b_j, where g_j is its
+    position relative to the centre of mass turned by 90 degrees and b_j its acceleration at
+    th0 = 0, p_ddot = 0. Force: sum A_j a_j = sum F_j; moment about the centre of mass:
+    sum (I_j theta_ddot_j + g_j . A_j a_j) = sum (tau_j + g_j . F_j) (A_j = m_j I + mu_j n n^T,
+    I_j = J_j + lambda_1,j; the joint torques cancel). The chain gives positions P_j and
+    accelerations C_j relative to the tail's centre in one pass, and the sums are corrected to
+    the centre of mass (Pm, Cm: their mass-weighted means) at the end: g_j = R (P_j - Pm),
+    b_j = C_j - Cm. The 3 x 3 matrix is factored L D L^T; a pivot <= 0 flags the run as the
+    reference's Cholesky does.
+    """
+    n = e.layout.n_links
+    line, w, o = e.line, e.w, e.o
+    e.loop("2s. prescribed shape: the body's force and moment balance (3 x 3)")
+    for name in ("px", "py", "ex", "ey", "beta", "axx", "axy", "ayy", "agx", "agy", "gag",
+                 "itot", "rsx", "rsy", "ge", "tb", "pmx", "pmy", "cmx", "cmy"):
+        line(f"{name} = 0.0")
+    for j in range(n):
+        line(f"s = {o('sin', j)}")
+        line(f"c = {o('cos', j)}")
+        line(f"k = {o('kc', j)}")
+        line(f"h = {w('half_length', j)}")
+        line("htx = h * c")
+        line("hty = h * s")
+        if j > 0:
+            line(f"beta = beta + {o('jacc', j - 1)}")
+            line("px = px + (phtx + htx)")
+            line("py = py + (phty + hty)")
+        line("phtx = htx")
+        line("phty = hty")
+        line("# the centre's acceleration at th0 = 0: back point + d, d = h beta n - k t")
+        line("hb = h * beta")
+        line("dx = -(hb * s) - k * c")
+        line("dy = hb * c - k * s")
+        line("cx = ex + dx")
+        line("cy = ey + dy")
+        line("ex = cx + dx")
+        line("ey = cy + dy")
+        line(f"m = {w('mass', j)}")
+        line(f"mus = {w('mu', j)} * s")
+        line(f"muc = {w('mu', j)} * c")
+        line("a11 = m + mus * s")
+        line("a12 = -(mus * c)")
+        line("a22 = m + muc * c")
+        line("gx = -py")
+        line("gy = px")
+        line("agxj = a11 * gx + a12 * gy")
+        line("agyj = a12 * gx + a22 * gy")
+        line(f"rx = -{o('fxn', j)} - (a11 * cx + a12 * cy)")
+        line(f"ry = -{o('fyn', j)} - (a12 * cx + a22 * cy)")
+        line(f"inert = {w('inertia', j)}")
+        line("axx = axx + a11")
+        line("axy = axy + a12")
+        line("ayy = ayy + a22")
+        line("agx = agx + agxj")
+        line("agy = agy + agyj")
+        line("gag = gag + (gx * agxj + gy * agyj)")
+        line("itot = itot + inert")
+        line("rsx = rsx + rx")
+        line("rsy = rsy + ry")
+        line("ge = ge + (gx * rx + gy * ry)")
+        line(f"tb = tb + ({o('tqf', j)} - inert * beta)")
+        line(f"wj = {w('mass_weight', j)}")
+        line("pmx = pmx + wj * px")
+        line("pmy = pmy + wj * py")
+        line("cmx = cmx + wj * cx")
+        line("cmy = cmy + wj * cy")
+    line("# to the centre of mass: Gm = R Pm, and A Gm, A Cm with A = sum A_j")
+    line("gmx = -pmy")
+    line("gmy = pmx")
+    line("agmx = axx * gmx + axy * gmy")
+    line("agmy = axy * gmx + ayy * gmy")
+    line("acmx = axx * cmx + axy * cmy")
+    line("acmy = axy * cmx + ayy * cmy")
+    line("spx = agx - agmx")
+    line("spy = agy - agmy")
+    line("saa = ((itot + gag) - 2.0 * (gmx * agx + gmy * agy)) + (gmx * agmx + gmy * agmy)")
+    line("bpx = rsx + acmx")
+    line("bpy = rsy + acmy")
+    line("ba = (((tb + ge) + (agx * cmx + agy * cmy)) - (gmx * rsx + gmy * rsy))"
+         " - (gmx * acmx + gmy * acmy)")
+    line("# L D L^T of [[axx, axy, spx], [axy, ayy, spy], [spx, spy, saa]]")
+    line("bad = 1.0 if axx <= 0.0 else 0.0")
+    line("i1 = 1.0 / axx")
+    line("l21 = axy * i1")
+    line("l31 = spx * i1")
+    line("d2 = ayy - l21 * axy")
+    line("bad = 1.0 if d2 <= 0.0 else bad")
+    line("i2 = 1.0 / d2")
+    line("l32 = (spy - l31 * axy) * i2")
+    line("d3 = (saa - l31 * spx) - l32 * l32 * d2")
+    line("bad = 1.0 if d3 <= 0.0 else bad")
+    line("y2 = bpy - l21 * bpx")
+    line("th0 = ((ba - l31 * bpx) - l32 * y2) / d3")
+    line("pdy = y2 * i2 - l32 * th0")
+    line("pdx = (bpx * i1 - l21 * pdy) - l31 * th0")
+    line(f"{o('bad_pivot')} = max({o('bad_pivot')}, bad)")
+    line("beta = 0.0")
+    for j in range(n):
+        if j > 0:
+            line(f"beta = beta + {o('jacc', j - 1)}")
+        line(f"{o('qdd', j)} = th0 + beta")
+    line(f"{o('qdd', n)} = pdx")
+    line(f"{o('qdd', n + 1)} = pdy")
+    for index, name in enumerate(("pmx", "pmy", "cmx", "cmy")):
+        line(f"{o('centre', index)} = {name}")
+
+
+def _prescribed_shape_torques(e: _Emitter) -> None:
+    """Emit loop 5 (stage 1 only): the torques the kinematic joints must give.
+
+    Newton-Euler from the tail: f_j, the force of link j + 1 on link j at joint j, is
+    f_(j-1) + A_j a_j - F_j, and joint j's torque u_j = u_(j-1) + tau_j + h_j t_j x (f_j +
+    f_(j-1)) - I_j theta_ddot_j (f_(-1) = 0, u_(-1) = 0); the reference gets the same from the
+    theta rows of the dense system.
+    """
+    n = e.layout.n_links
+    line, w, o = e.line, e.w, e.o
+    e.loop("5. the torques the joints must give (stage 1)", indent=4)
+    line(f"th0 = {o('qdd', 0)}")
+    line(f"pdx = {o('qdd', n)}")
+    line(f"pdy = {o('qdd', n + 1)}")
+    line(f"gmx = -{o('centre', 1)}")
+    line(f"gmy = {o('centre', 0)}")
+    line(f"cmx = {o('centre', 2)}")
+    line(f"cmy = {o('centre', 3)}")
+    for name in ("px", "py", "ex", "ey", "beta", "fbx", "fby", "uu"):
+        line(f"{name} = 0.0")
+    for j in range(n - 1):
+        line(f"s = {o('sin', j)}")
+        line(f"c = {o('cos', j)}")
+        line(f"k = {o('kc', j)}")
+        line(f"h = {w('half_length', j)}")
+        line("htx = h * c")
+        line("hty = h * s")
+        if j > 0:
+            line(f"beta = beta + {o('jacc', j - 1)}")
+            line("px = px + (phtx + htx)")
+            line("py = py + (phty + hty)")
+        line("phtx = htx")
+        line("phty = hty")
+        line("hb = h * beta")
+        line("dx = -(hb * s) - k * c")
+        line("dy = hb * c - k * s")
+        line("cx = ex + dx")
+        line("cy = ey + dy")
+        line("ex = cx + dx")
+        line("ey = cy + dy")
+        line("ajx = (pdx + th0 * (-py - gmx)) + (cx - cmx)")
+        line("ajy = (pdy + th0 * (px - gmy)) + (cy - cmy)")
+        line(f"m = {w('mass', j)}")
+        line(f"munv = {w('mu', j)} * (c * ajy - s * ajx)")
+        line(f"ffx = fbx + ((m * ajx - munv * s) + {o('fxn', j)})")
+        line(f"ffy = fby + ((m * ajy + munv * c) + {o('fyn', j)})")
+        line(f"uu = ((uu + {o('tqf', j)}) + h * (c * (ffy + fby) - s * (ffx + fbx)))"
+             f" - {w('inertia', j)} * {o('qdd', j)}")
+        line(f"{o('torque', j)} = uu")
+        line("fbx = ffx")
+        line("fby = ffy")
+
+
+def _rk4_sums(e: _Emitter) -> None:
+    """Emit loops 4a/4b: the RK4 sums of the accelerations in rows qdd (see _stage_body)."""
+    n = e.layout.n_links
+    line, w, o = e.line, e.w, e.o
     line("# RK4 bookkeeping of integrate.rk4_step, fused so that the state rows are touched once:")
     line("# stages 1-3: acc = k1, acc + 2 k2, acc + 2 k3 and the next stage's input y = x + a k;")
     line("# stage 4: the new state xn = x + dt/6 (acc + k4) only")
@@ -659,7 +896,6 @@ def _stage_body(layout: Layout) -> list[str]:
         line(f"{w('y', i)} = {w('x', i)} + a * d")
     offsets = ", ".join(f"abs({w('y', i)} - {o('ang', i)})" for i in range(n))
     line(f"{o('offset')} = max({offsets})")
-    return e.lines
 
 
 def _screen_body(layout: Layout) -> list[str]:
@@ -785,6 +1021,7 @@ def generate_stage_source(layout: Layout) -> str:
               f"DIVERGENCE_RATE = {float(DIVERGENCE_RATE)!r}"]
     consts += [f"FAIL_{code.name} = {int(code)}" for code in Failure]
     consts += [f"REASON_{code.name} = {int(code)}" for code in Reason]
+    consts += [f"FLUID_LAW = {layout.law.name!r}", f"JOINT_MODEL = {layout.joints.name!r}"]
     consts += [f"N_LINKS = {layout.n_links}", f"LANES = {layout.lanes}",
               f"ROTATE_LIMIT = {_ROTATE_LIMIT!r}", f"RESYNC_STEPS = {_RESYNC_STEPS}",
               f"WORK_ROWS = {layout.work_rows}", f"OUT_ROWS = {layout.out_rows}"]
@@ -794,7 +1031,7 @@ def generate_stage_source(layout: Layout) -> str:
         "",
         "",
         f"# ---- generated for N = {layout.n_links}, {layout.lanes} lanes, fluid law "
-        f"{layout.law.name!r} by eelsim.batch.codegen",
+        f"{layout.law.name!r}, joint model {layout.joints.name!r} by eelsim.batch.codegen",
         *consts,
         "",
         "",

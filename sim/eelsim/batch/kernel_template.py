@@ -93,8 +93,9 @@ N_LINKS = 2
 LANES = 16
 WORK_ROWS = OUT_ROWS = 1
 W_Y = W_X = W_ACC = W_XN = W_GAMMA = W_GEOMETRY = W_HALF_LENGTH = W_LIMIT = 0
-W_MASS = W_MU = W_INERTIA = 0
+W_MASS = W_MU = W_INERTIA = W_TORQUE_LIMIT = W_TORQUE_SLOPE = 0
 O_BAD_PIVOT = O_SIN = O_COS = O_NEAR = O_X_BAD = O_FASTEST = O_XN_BAD = O_COND_BOUND = 0
+O_TORQUE = 0
 O_OFFSET = O_KEEP = 0
 ROTATE_LIMIT = 0.1
 RESYNC_STEPS = 16
@@ -523,6 +524,34 @@ def _check_start(work, out):
 
 
 @numba.njit(cache=True)
+def _torque_use(work, alive, ratio, saturated):
+    """Each live lane's torques at the step's start (stage 1's rows torque), put to use.
+
+    The largest |u| as a fraction of the stall torque so far, and whether the step is outside
+    the torque-speed line: closed_loop.outside_torque_speed_line's expression, lane by lane; a torque that is not
+    finite counts for neither (as in the reference).
+    """
+    n = N_LINKS
+    for r in range(LANES):
+        stall = work[W_TORQUE_LIMIT * LANES + r]
+        slope = work[W_TORQUE_SLOPE * LANES + r]
+        tol = 1e-9 * stall
+        big = 0.0
+        out = 0
+        for j in range(n - 1):
+            u = work[(WORK_ROWS + O_TORQUE + j) * LANES + r]
+            q = (work[(W_X + n + 3 + j) * LANES + r] - work[(W_X + n + 2 + j) * LANES + r]) * slope
+            upper = min(stall, stall - q)
+            lower = max(-stall, -stall - q)
+            big = abs(u) if abs(u) > big else big
+            out += (u > upper + tol) | (u < lower - tol)
+        if alive[r]:
+            frac = big / stall
+            ratio[r] = frac if frac > ratio[r] else ratio[r]
+            saturated[r] += out > 0
+
+
+@numba.njit(cache=True)
 def _zeros_on_cache_lines(count):
     """np.zeros(count) that starts on a 64-byte boundary (numba's allocator aligns to 32).
 
@@ -558,7 +587,7 @@ def _run_block(block, runs, frames, loop, outputs):
     dt, pixel, window, stop_at_goal, pending_size, record_full, sample_steps = loop
     (states_out, full_out, arrival_out, failure_out, failure_time_out, reason_out,
      reason_index_out, reason_value_out, final_state_out, final_step_out, target_out,
-     distance_out) = outputs
+     distance_out, torque_ratio_out, saturated_out) = outputs
     n = N_LINKS
     ns = 2 * n + 4
     n_runs = x0.shape[0]
@@ -578,6 +607,8 @@ def _run_block(block, runs, frames, loop, outputs):
     reason_value = np.zeros(LANES)
     info = np.zeros(3)
     final_step = np.zeros(LANES, np.int64)
+    torque_ratio = np.zeros(LANES)  # max |u| / stall torque over the recorded steps
+    saturated = np.zeros(LANES, np.int64)  # recorded steps outside the torque-speed line
     target = np.zeros(LANES, np.int64)
     arrival = np.full(LANES, np.nan)
     gamma = np.zeros(LANES)
@@ -713,6 +744,7 @@ def _run_block(block, runs, frames, loop, outputs):
                 t_s, a, wk, rotate = t + dt, 0.0, 1.0, _rotates(out, alive)
             _stage(work, t_s, a, wk, st == 0, st == 3, sixth, rotate, st == 1 or st == 3, plain)
             if st == 0:
+                _torque_use(work, alive, torque_ratio, saturated)
                 _screen(work)
                 if any_update:
                     _cond_bound(work)
@@ -830,6 +862,8 @@ def _run_block(block, runs, frames, loop, outputs):
             final_state_out[run, row] = work[(W_X + row) * LANES + r]
         final_step_out[run] = final_step[r]
         target_out[run] = target[r]
+        torque_ratio_out[run] = torque_ratio[r]
+        saturated_out[run] = saturated[r]
         distance_out[run] = _distance_left(work[(W_X + n) * LANES + r],
                                            work[(W_X + n + 1) * LANES + r], waypoints[run],
                                            n_waypoints[run], target[r])

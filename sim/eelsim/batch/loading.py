@@ -1,6 +1,6 @@
 """Getting the compiled kernel: stage choice, kernel cache folder, module text, import.
 
-The kernel is one Python module per (N, lanes, stage, fluid law): the driver
+The kernel is one Python module per (N, lanes, stage, fluid law, joint model): the driver
 (``eelsim/batch/kernel_template.py``, read as text) followed by the generated part
 (``eelsim.batch.codegen``) and, when the stage is compiled as C, the binding to the C library
 (``eelsim.batch.c_stage``). The text is written to :func:`kernel_cache_dir` and imported from
@@ -27,6 +27,7 @@ from types import ModuleType
 
 from eelsim.batch import c_stage, codegen
 from eelsim.fluid import DEFAULT_FLUID_LAW, FluidLaw, get_fluid_law
+from eelsim.joints import DEFAULT_JOINT_MODEL, JointModel, get_joint_model
 
 logger = logging.getLogger(__name__)
 
@@ -44,7 +45,7 @@ CACHE_ENV = "EELSIM_KERNEL_CACHE"
 """Environment variable naming the kernel cache folder (:func:`kernel_cache_dir`)."""
 KERNELS_PACKAGE = "eelsim.batch.kernels"
 
-_KERNELS: dict[tuple[int, int, str, str], ModuleType] = {}
+_KERNELS: dict[tuple[int, int, str, str, str], ModuleType] = {}
 _C_UNAVAILABLE: list[str] = []  # why "auto" fell back to numba (said once per process)
 
 
@@ -110,7 +111,7 @@ def kernel_cache_dir() -> Path:
 
 
 def kernel_source(n_links: int, lanes: int, stage: str = "numba",
-                  law: FluidLaw | None = None) -> str:
+                  law: FluidLaw | None = None, joints: JointModel | None = None) -> str:
     """The kernel module's text: the driver template with the generated part appended.
 
     Parameters
@@ -122,13 +123,15 @@ def kernel_source(n_links: int, lanes: int, stage: str = "numba",
         raising its ``CStageError``) and append the binding that makes ``_stage`` call it.
     law : FluidLaw, optional
         The fluid law (default: the default law).
+    joints : JointModel, optional
+        The joint model (default: the default model).
 
     Returns
     -------
     str
     """
     template = (Path(__file__).parent / "kernel_template.py").read_text()
-    generated = codegen.generate_stage_source(codegen.make_layout(n_links, lanes, law))
+    generated = codegen.generate_stage_source(codegen.make_layout(n_links, lanes, law, joints))
     if stage == "numba":
         return template + generated
     library, symbols = c_stage.build(generated, C_FUNCTIONS, kernel_cache_dir())
@@ -173,7 +176,8 @@ def load_kernel_source(name: str, source: str) -> ModuleType:
 
 
 def kernel_module(n_links: int, lanes: int = DEFAULT_LANES, stage: str | None = None,
-                  law: FluidLaw | str | None = None) -> ModuleType:
+                  law: FluidLaw | str | None = None,
+                  joints: JointModel | str | None = None) -> ModuleType:
     """Return the compiled-on-demand kernel module for N links and ``lanes`` runs per block.
 
     The module's source is written to :func:`kernel_cache_dir` (:func:`load_kernel_source`).
@@ -190,29 +194,34 @@ def kernel_module(n_links: int, lanes: int = DEFAULT_LANES, stage: str | None = 
         an explicit ``"c"`` raises the compiler's error.
     law : FluidLaw or str, optional
         The fluid law (or its name); default: the default law.
+    joints : JointModel or str, optional
+        The joint model (or its name); default: the default model.
 
     Returns
     -------
     module
     """
     fluid = _law(law)
+    model = _joints(joints)
     requested = _requested_stage(stage)
     chosen = stage_backend(requested)
-    key = (n_links, lanes, chosen, fluid.name)
+    key = (n_links, lanes, chosen, fluid.name, model.name)
     if key in _KERNELS:
         return _KERNELS[key]
     if lanes < 4 or lanes % 4:
         raise ValueError(f"lanes must be a positive multiple of 4 (vectors), got {lanes}")
     try:
-        source = kernel_source(n_links, lanes, chosen, fluid)
+        source = kernel_source(n_links, lanes, chosen, fluid, model)
     except c_stage.CStageError as exc:
         if requested != "auto":
             raise
         _C_UNAVAILABLE.append(str(exc))
         warnings.warn(f"the batched kernel's C stage is unavailable, numba compiles it: {exc}",
                       RuntimeWarning, stacklevel=2)
-        return kernel_module(n_links, lanes, "numba", fluid)
-    module = load_kernel_source(f"n{n_links}_l{lanes}_{chosen}_{fluid.name}", source)
+        return kernel_module(n_links, lanes, "numba", fluid, model)
+    # (the default joint model's modules keep the names they had before joint models)
+    suffix = "" if model.name == DEFAULT_JOINT_MODEL else f"_{model.name}"
+    module = load_kernel_source(f"n{n_links}_l{lanes}_{chosen}_{fluid.name}{suffix}", source)
     _KERNELS[key] = module
     return module
 
@@ -221,6 +230,12 @@ def _law(law: FluidLaw | str | None) -> FluidLaw:
     if law is None:
         return get_fluid_law(DEFAULT_FLUID_LAW)
     return get_fluid_law(law) if isinstance(law, str) else law
+
+
+def _joints(joints: JointModel | str | None) -> JointModel:
+    if joints is None:
+        return get_joint_model(DEFAULT_JOINT_MODEL)
+    return get_joint_model(joints) if isinstance(joints, str) else joints
 
 
 def warm_up(n_links: int = 6, lanes: int = DEFAULT_LANES, stage: str | None = None) -> float:

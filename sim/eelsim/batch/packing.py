@@ -19,9 +19,10 @@ from numpy.typing import ArrayLike, NDArray
 
 from eelsim.batch import codegen
 from eelsim.batch.loading import DEFAULT_LANES
-from eelsim.closed_loop import LoopOptions
+from eelsim.closed_loop import LoopOptions, blow_up_hint
 from eelsim.fluid import FluidCoefficients, FluidLaw, get_fluid_law
-from eelsim.model import geometry_matrix
+from eelsim.joints import JointModel, get_joint_model
+from eelsim.model import SwimmerModel, geometry_matrix
 from eelsim.robot import Robot
 from eelsim.scenario import Scenario
 
@@ -75,6 +76,12 @@ class BatchSpec:
     joint_limit_rad : ndarray, shape (R,)
     fluid_law_name : str
         The fluid law of every run (its rows are part of ``params``).
+    joint_model_name : str
+        The joint model of every run (its rows are part of ``params``).
+    blow_up_hints : tuple of str
+        What the reason of a run that blows up adds, per distinct robot
+        (:func:`eelsim.closed_loop.blow_up_hint`); ``robot_index`` gives each run's.
+    robot_index : ndarray of int, shape (R,)
     """
 
     n_links: int
@@ -103,11 +110,24 @@ class BatchSpec:
     duration_s: FloatArray
     joint_limit_rad: FloatArray
     fluid_law_name: str = "morison"
+    joint_model_name: str = "pd"
+    blow_up_hints: tuple[str, ...] = ("",)
+    robot_index: IntArray | None = None
 
     @property
     def fluid_law(self) -> FluidLaw:
         """The fluid law of the batch."""
         return get_fluid_law(self.fluid_law_name)
+
+    @property
+    def joint_model(self) -> JointModel:
+        """The joint model of the batch."""
+        return get_joint_model(self.joint_model_name)
+
+    def blow_up_hint(self, run: int) -> str:
+        """What run ``run``'s reason adds when it blew up (see ``blow_up_hints``)."""
+        index = 0 if self.robot_index is None else int(self.robot_index[run])
+        return self.blow_up_hints[index]
 
     @property
     def n_runs(self) -> int:
@@ -146,8 +166,9 @@ class BatchSpec:
         Raises
         ------
         ValueError
-            When per-run sequences have different lengths, robots differ in N or fluid law, or
-            the coefficients do not fit the law.
+            When per-run sequences have different lengths, robots differ in N, fluid law or
+            joint model, the coefficients do not fit the law, or the joint model refuses the
+            physics step (as ``simulate_closed_loop``).
         """
         opts = options or LoopOptions()
         robot_list = [robots] if isinstance(robots, Robot) else list(robots)
@@ -157,6 +178,9 @@ class BatchSpec:
         law = robot_list[0].fluid_law
         if any(rb.fluid_law is not law for rb in robot_list):
             raise ValueError("all robots of a batch must use the same fluid law")
+        joints = robot_list[0].joint_model
+        if any(rb.joint_model is not joints for rb in robot_list):
+            raise ValueError("all robots of a batch must use the same joint model")
         coeff_arr = None if coefficients is None else _coefficient_array(coefficients, law)
         seed_arr = np.atleast_1d(np.asarray(seeds, dtype=np.int64))
         sizes = {len(robot_list), len(scen_list), seed_arr.shape[0]}
@@ -178,7 +202,13 @@ class BatchSpec:
         timing, camera = opts.timing, opts.camera
         dt = timing.dt_s
 
-        # -- robots: per-link geometry, gains (computed once per distinct robot)
+        # -- robots: per-link geometry, gains (computed once per distinct robot), and what the
+        # joint model says of the step (the servo model refuses an unstable one)
+        own_models = [SwimmerModel.from_robot(rb) for rb in robot_list]
+        for rb, own in zip(robot_list, own_models, strict=True):
+            joints.check_step(rb.joints, own, dt)
+        hints = tuple(blow_up_hint(rb, own, dt)
+                      for rb, own in zip(robot_list, own_models, strict=True))
         rob = [_robot_arrays(rb, opts) for rb in robot_list]
         per_robot = {k: np.stack([r[k] for r in rob]) for k in rob[0]}
         rsel = {k: v[robot_idx] for k, v in per_robot.items()}
@@ -199,7 +229,7 @@ class BatchSpec:
         # -- random draws, per distinct (seed, total) as the reference makes them
         updates, counts, noise = _random_draws(seed_of, total, timing, camera, frame_time.size)
 
-        layout = codegen.make_layout(n, DEFAULT_LANES, law)
+        layout = codegen.make_layout(n, DEFAULT_LANES, law, joints)
         params = np.zeros((n_runs, layout.work_rows - layout.work["geometry"]))
         spec = cls(
             n_links=n,
@@ -228,6 +258,9 @@ class BatchSpec:
             duration_s=ssel["duration"],
             joint_limit_rad=rsel["limit"],
             fluid_law_name=law.name,
+            joint_model_name=joints.name,
+            blow_up_hints=hints,
+            robot_index=robot_idx,
         )
         _fill_params(params, layout, rsel, ssel, n, dt)
         _fill_fluid(params, layout, spec, coeff_arr)
@@ -250,7 +283,7 @@ class BatchSpec:
         c = np.broadcast_to(given, (self.n_runs, given.shape[1])).copy()
         params = self.params.copy()
         out = replace(self, params=params, coefficients=c)
-        _fill_fluid(params, codegen.make_layout(self.n_links, DEFAULT_LANES, law), out, c)
+        _fill_fluid(params, _layout(self), out, c)
         return out
 
 
@@ -296,9 +329,15 @@ def _distinct(items: list, n_runs: int) -> tuple[list, IntArray]:
     return distinct, index
 
 
+def _layout(spec: BatchSpec) -> codegen.Layout:
+    """The kernel's row layout for the batch (its N, fluid law and joint model)."""
+    return codegen.make_layout(spec.n_links, DEFAULT_LANES, spec.fluid_law, spec.joint_model)
+
+
 def _robot_arrays(robot: Robot, opts: LoopOptions) -> dict[str, FloatArray]:
     links = robot.link_arrays()
     j = robot.joints
+    own = robot.joint_model.kernel_values(j, opts.servo_limits)
     return {
         "half": links.half_length_m,
         "mass": links.mass_kg,
@@ -307,13 +346,13 @@ def _robot_arrays(robot: Robot, opts: LoopOptions) -> dict[str, FloatArray]:
         "b": links.half_axis_horizontal_m,
         "rho": np.array(robot.water_density_kg_m3),
         "geometry": geometry_matrix(links.half_length_m, links.mass_kg),
-        "kp": np.array(j.kp_nm_per_rad),
-        "kd": np.array(j.kd_nms_per_rad),
         "limit": np.array(j.limit_rad),
         "clamp": np.array(j.command_limit_rad),
-        # the servo line with infinite stall torque and speed leaves the torque unchanged
-        "stall": np.array(j.servo_max_torque_nm if opts.servo_limits else np.inf),
-        "inv_no_load": np.array(1.0 / j.servo_max_speed_rad_s if opts.servo_limits else 0.0),
+        # the torque-speed line that saturation is counted against (stall * (1 / no-load), the
+        # expression of closed_loop.outside_torque_speed_line)
+        "torque_limit": np.array(j.servo_max_torque_nm),
+        "torque_slope": np.array(j.servo_max_torque_nm * (1.0 / j.servo_max_speed_rad_s)),
+        **{f"joint_{name}": np.array(value) for name, value in own.items()},
     }
 
 
@@ -409,14 +448,14 @@ def plain_runs(spec: BatchSpec) -> NDArray[np.bool_]:
     -------
     ndarray of bool, shape (R,)
     """
-    layout = codegen.make_layout(spec.n_links, DEFAULT_LANES, spec.fluid_law)
+    layout = _layout(spec)
     params = spec.params
-    return (
-        np.isinf(_rows(params, layout, "stall", 1)[:, 0])
-        & (_rows(params, layout, "stall_slope", 1)[:, 0] == 0.0)
-        & (_rows(params, layout, "vcx", 1)[:, 0] == 0.0)
-        & (_rows(params, layout, "vcy", 1)[:, 0] == 0.0)
-    )
+    plain = ((_rows(params, layout, "vcx", 1)[:, 0] == 0.0)
+             & (_rows(params, layout, "vcy", 1)[:, 0] == 0.0))
+    if "stall" in layout.joints.kernel_rows:  # the PD model's torque-speed clip
+        plain &= (np.isinf(_rows(params, layout, "stall", 1)[:, 0])
+                  & (_rows(params, layout, "stall_slope", 1)[:, 0] == 0.0))
+    return plain
 
 
 def _fill_params(params, layout, rsel, ssel, n, dt) -> None:
@@ -433,13 +472,10 @@ def _fill_params(params, layout, rsel, ssel, n, dt) -> None:
     _rows(params, layout, "four_h2", n)[:] = (2.0 * rsel["half"]) ** 2
     reach = codegen.screen_reach(rsel["half"])
     _rows(params, layout, "reach", reach.shape[1])[:] = reach
-    for name in ("kp", "kd", "limit", "clamp", "stall"):
+    for name in ("limit", "clamp", "torque_limit", "torque_slope"):
         _rows(params, layout, name, 1)[:, 0] = rsel[name]
-    # stall / no_load, 0 when the servo model is off (stall = inf, 1 / no_load = 0)
-    on = rsel["inv_no_load"] > 0.0
-    slope = np.zeros(len(on))
-    slope[on] = rsel["stall"][on] * rsel["inv_no_load"][on]
-    _rows(params, layout, "stall_slope", 1)[:, 0] = slope
+    for name in layout.joints.kernel_rows:  # the joint model's own (JointModel.kernel_values)
+        _rows(params, layout, name, 1)[:, 0] = rsel[f"joint_{name}"]
     for name in ("amp", "cos_beta", "sin_beta"):
         _rows(params, layout, name, n - 1)[:] = ssel[name]
     for name in ("omega", "vcx", "vcy"):

@@ -115,6 +115,8 @@ class RunOutputs(NamedTuple):
     final_step: IntArray
     target: IntArray
     distance: FloatArray
+    torque_ratio: FloatArray
+    saturated: IntArray
 
 
 class CameraState(NamedTuple):
