@@ -27,20 +27,24 @@ ROBOT = load_robot()
 PATH1 = load_scenario("path1")
 
 
-def virtual_run(uri: str, waypoints, stem, duration_s: float | None = None):
+def virtual_run(uri: str, waypoints, stem, duration_s: float | None = None, robot=ROBOT):
     """Run the host loop against the virtual robot; return (outcome, link)."""
-    link = open_link(uri, robot=ROBOT)
-    cam = SyntheticCamera(ROBOT, options=RenderOptions(noise_sigma=0.0, jpeg_quality=0))
+    link = open_link(uri, robot=robot)
+    cam = SyntheticCamera(robot, options=RenderOptions(noise_sigma=0.0, jpeg_quality=0))
     frames = VirtualCamera(link.transport.robot, cam, keep_truth=False)
     config = RunConfig(PATH1.gait, list(waypoints), duration_s=duration_s)
-    rec = Recorder(stem, PATH1.model_copy(update={"waypoints_m": list(waypoints)}), ROBOT.n_links)
-    out: RunOutcome = RunLoop(link, frames, Localiser(cam.calibration(), ROBOT), ROBOT, config,
+    rec = Recorder(stem, PATH1.model_copy(update={"waypoints_m": list(waypoints)}), robot.n_links)
+    out: RunOutcome = RunLoop(link, frames, Localiser(cam.calibration(), robot), robot, config,
                               rec).run()
     return out, link
 
 
-def test_virtual_path1_reaches_every_waypoint_and_matches_the_twin(tmp_path) -> None:
-    out, link = virtual_run("sim://?speed=0&seed=0", PATH1.waypoints_m, tmp_path / "path1")
+@pytest.mark.parametrize("robot_file", ["paper_robot.toml", "servo_robot.toml"])
+def test_virtual_path1_reaches_every_waypoint_and_matches_the_twin(tmp_path, robot_file) -> None:
+    # the paper's PD joints, and hobby servos whose references are the firmware's commanded angles
+    robot = load_robot(robot_file)
+    out, link = virtual_run("sim://?speed=0&seed=0", PATH1.waypoints_m, tmp_path / "path1",
+                            robot=robot)
     assert out.reason == "arrived" and out.waypoints_reached == 3
     assert out.stop_outcome == "ack"
     assert link.transport.robot.status()["state"] == protocol.State.IDLE
@@ -48,12 +52,12 @@ def test_virtual_path1_reaches_every_waypoint_and_matches_the_twin(tmp_path) -> 
     assert exp.source["recording"]["complete"] is True
     # The twin runs the recorded task from the recorded start pose.
     sc = exp.scenario.model_copy(update={"duration_s": exp.t_s[-1] + 0.1})
-    twin = simulate_closed_loop(ROBOT, sc, LoopOptions(stop_at_goal=False))
-    n = ROBOT.n_links
+    twin = simulate_closed_loop(robot, sc, LoopOptions(stop_at_goal=False))
+    n = robot.n_links
     ts = sample_times(exp.t_s[0], exp.t_s[-1], N_SAMPLES_VALIDATE)
     sim = np.c_[np.interp(ts, twin.t_s, twin.states[:, n]),
                 np.interp(ts, twin.t_s, twin.states[:, n + 1])]
-    err = validation_errors(ts, exp.position_at(ts), sim, ROBOT.body_length_m())
+    err = validation_errors(ts, exp.position_at(ts), sim, robot.body_length_m())
     assert err["Ex_mean_BL"] < 0.03
     sent = [r for r in read_commands_csv(tmp_path / "path1.commands.csv") if r["event"] == "sent"]
     assert sum(r["message"] == "SetOffset" for r in sent) == out.offsets_sent + 1  # + the initial 0
