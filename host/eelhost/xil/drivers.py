@@ -120,9 +120,10 @@ class NativeDriver:
     Attributes
     ----------
     servo_command_rad : ndarray, shape (N-1,)
-        The angle each servo is commanded to by its last pulse (1500 us straight, the setting
+        The angle each servo is commanded to at the last tick, what a position servo follows:
+        with joint feedback, the angle of its pulse (1500 us straight, the setting
         servo_us_per_rad's default per radian: the simulated servos are ideal, so a trim moves
-        the joint), what a position servo follows.
+        the joint); without, the reference alpha itself (the pulse less its 1 us rounding).
     """
 
     def __init__(
@@ -150,15 +151,17 @@ class NativeDriver:
             self.firmware.feed(data)
         self.firmware.set_joint_angles(phi_rad)
         out = self.firmware.tick(t_us, phi_rad, phi_dot_rad_s)
-        self.servo_command_rad = servo_command_rad(out.pulse_us)
+        alpha = out.alpha_rad.astype(np.float64)
         if out.measured:
+            self.servo_command_rad = servo_command_rad(out.pulse_us)
             torque = self._stiffness * (self.servo_command_rad - np.asarray(phi_rad, dtype=float))
         else:
+            self.servo_command_rad = alpha
             torque = out.torque_nm.astype(np.float64)
         if self._hook is not None:
             torque = self._hook(torque, phi_dot_rad_s)
         tx = self.firmware.take()
-        return torque, out.alpha_rad.astype(np.float64), [(t_us, tx)] if tx else []
+        return torque, alpha, [(t_us, tx)] if tx else []
 
     def observe(self) -> tuple[int, float]:
         """See :meth:`JointDriver.observe`."""

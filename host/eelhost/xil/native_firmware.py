@@ -396,6 +396,37 @@ class NativeFirmware:
         return dest
 
 
+def store_settings(firmware: NativeFirmware, values: dict[str, float]) -> None:
+    """Save settings into the firmware's EEPROM through its own commands, then power-cycle it.
+
+    The firmware boots with them, as a robot configured with ``eelbot robot config --save`` does.
+
+    Parameters
+    ----------
+    firmware : NativeFirmware
+        Booted, idle.
+    values : dict
+        Setting name to value (every joint's element for a per-joint setting).
+
+    Raises
+    ------
+    RuntimeError
+        When the firmware refuses one of them.
+    """
+    seq = 0
+    for name, value in values.items():
+        info = protocol.SETTINGS[name]
+        for index in range(info.count):
+            firmware.send(protocol.SetSetting(info.key, index, value), seq)
+            seq += 1
+    firmware.send(protocol.SaveSettings(), seq)
+    firmware.tick(0)
+    refused = [m for _, m in firmware.read_frames() if isinstance(m, protocol.Refuse)]
+    if refused:
+        raise RuntimeError(f"the firmware refused settings {values}: {refused}")
+    firmware.reset(0)
+
+
 def _u32(now_us: int) -> int:
     if now_us < 0:
         raise ValueError(f"times are non-negative microseconds, got {now_us}")

@@ -30,10 +30,9 @@ from numpy.typing import NDArray
 
 from eelhost.link.sim_transport import SimTransport
 from eelhost.vision.synthetic import SyntheticCamera, TruePose
-from eelhost.wire import protocol
 from eelhost.xil.drivers import NativeDriver
 from eelhost.xil.lockstep import DT_US, Lockstep, SimClock, joint_drive, plant_step
-from eelhost.xil.native_firmware import BATTERY_INPUT, NativeFirmware
+from eelhost.xil.native_firmware import BATTERY_INPUT, NativeFirmware, store_settings
 from eelhost.xil.radio import RadioModel
 from eelsim.dynamics import straight_state
 from eelsim.model import SwimmerModel
@@ -53,37 +52,6 @@ ADC_REFERENCE_V = 5.0
 def battery_counts(battery_v: float, divider: float) -> int:
     """The ADC reading of a battery voltage behind a divider (clamped to 0..1023)."""
     return int(min(max(round(battery_v / divider / ADC_REFERENCE_V * 1023), 0), 1023))
-
-
-def store_settings(firmware: NativeFirmware, values: dict[str, float]) -> None:
-    """Save settings into the firmware's EEPROM through its own commands, then power-cycle it.
-
-    The firmware boots with them, as a robot configured with ``eelbot robot config --save`` does.
-
-    Parameters
-    ----------
-    firmware : NativeFirmware
-        Booted, idle.
-    values : dict
-        Setting name to value (every joint's element for a per-joint setting).
-
-    Raises
-    ------
-    RuntimeError
-        When the firmware refuses one of them.
-    """
-    seq = 0
-    for name, value in values.items():
-        info = protocol.SETTINGS[name]
-        for index in range(info.count):
-            firmware.send(protocol.SetSetting(info.key, index, value), seq)
-            seq += 1
-    firmware.send(protocol.SaveSettings(), seq)
-    firmware.tick(0)
-    refused = [m for _, m in firmware.read_frames() if isinstance(m, protocol.Refuse)]
-    if refused:
-        raise RuntimeError(f"the firmware refused settings {values}: {refused}")
-    firmware.reset(0)
 
 
 class VirtualRobot:
