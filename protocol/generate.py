@@ -7,15 +7,19 @@ Usage::
 
 The definition is ``protocol/eelbot.toml``. It renders into a C++ header (constants, message
 structs and one field table per message, read by the generic codec of
-``firmware/core/message_codec.h``), a Python module (one generic codec driven by each message's
-field metadata), and three places of hand-written files, spliced between marker comments: the
-``EEL_JOINTS`` line of the native library's C header, the tables of constants and messages of
-``docs/firmware.md`` and the serial monitor's baud in ``platformio.ini``.
+``firmware/core/message_codec.h``; the settings struct and its table, read by
+``firmware/core/settings_codec.h``), a Python module (one generic codec driven by each message's
+field metadata, and the settings table), and three places of hand-written files, spliced between
+marker comments: the ``EEL_JOINTS`` line of the native library's C header, the tables of
+constants, messages and settings of ``docs/firmware.md`` and the serial monitor's baud in
+``platformio.ini``.
 
 The schema hash is the first two bytes of the SHA-256 of a canonical JSON form of everything that
-changes the meaning of bytes on the wire (ids, names, types, counts, ranges, enum values, frame
-constants, baud, max_frame_bytes, n_joints); documentation strings, defaults and periods are left
-out so that editing them does not break compatibility with robots already flashed.
+changes the meaning of bytes on the wire (ids, names, types, counts, ranges, enum values, setting
+keys, frame constants, baud, max_frame_bytes, n_joints); documentation strings, defaults and
+periods are left out so that editing them does not break compatibility with robots already
+flashed. The settings version, stored with the settings in the robot's EEPROM, is the same for the
+settings' names, keys, types and counts: the layout of the stored bytes.
 """
 
 from __future__ import annotations
@@ -39,11 +43,15 @@ PY_OUT = ROOT / "host" / "eelhost" / "wire" / "protocol.py"
 TYPES = {
     "u8": (1, "B", "uint8_t"),
     "u16": (2, "H", "uint16_t"),
+    "i16": (2, "h", "int16_t"),
     "u32": (4, "I", "uint32_t"),
     "f32": (4, "f", "float"),
 }
+# The whole range of each integer type (a setting's range must lie inside it).
+INT_RANGES = {"u8": (0, 255), "u16": (0, 65535), "i16": (-32768, 32767), "u32": (0, 2**32 - 1)}
 HEADER_BYTES = 4  # schema_hash u16, msg_id u8, seq u8 (frozen, see eelbot.toml)
 CRC_BYTES = 2
+COMMAND_CRC_BYTES = 4  # the CRC-32 of frames sent to the robot
 
 
 NATIVE_H_OUT = ROOT / "firmware" / "hal" / "native" / "eel_native.h"
@@ -133,9 +141,15 @@ class Message:
         return sum(f.size for f in self.fields)
 
     @property
+    def check_bytes(self) -> int:
+        """Bytes of the command CRC-32 in this message's frames (0 for messages to the host)."""
+        return COMMAND_CRC_BYTES if self.direction == "to_robot" else 0
+
+    @property
     def encoded_bytes(self) -> int:
         """Largest encoded frame of this message, zero delimiter included."""
-        return cobs_worst_case(HEADER_BYTES + self.payload_bytes + CRC_BYTES) + 1
+        body = HEADER_BYTES + self.payload_bytes + self.check_bytes + CRC_BYTES
+        return cobs_worst_case(body) + 1
 
     @property
     def upper(self) -> str:
@@ -146,6 +160,31 @@ class Message:
                 out += "_"
             out += ch.upper()
         return out
+
+
+@dataclass(frozen=True)
+class Setting:
+    """One of the robot's stored settings (a field of the settings struct, with its key)."""
+
+    name: str
+    key: int
+    type: str
+    count: int
+    min: float
+    max: float
+    default: float
+    doc: str
+    count_name: str | None = None
+
+    @property
+    def size(self) -> int:
+        """Bytes in the stored image."""
+        return TYPES[self.type][0] * self.count
+
+    @property
+    def camel(self) -> str:
+        """The key's C++ enumerator name."""
+        return _camel(self.name)
 
 
 def cobs_worst_case(n: int) -> int:
@@ -263,6 +302,7 @@ def load(path: Path | None = None) -> dict:
         "msg_id": "u8",
         "seq": "u8",
         "crc": "crc16_ccitt_false",
+        "command_crc": "crc32_iso_hdlc",
         "delimiter": 0,
     }
     if frame != want_frame:
@@ -275,7 +315,19 @@ def load(path: Path | None = None) -> dict:
         ]
         if len({v for _, v, _ in values}) != len(values):
             raise DefinitionError(f"enum {e['name']}: duplicate values")
-        enums[e["name"]] = {"doc": e.get("doc", ""), "values": values}
+        kind = e.get("kind", "values")
+        if kind not in ("values", "flags"):
+            raise DefinitionError(f"enum {e['name']}: kind must be values or flags")
+        if kind == "flags" and any(v <= 0 or v & (v - 1) for _, v, _ in values):
+            raise DefinitionError(f"enum {e['name']}: each flag must be one bit")
+        enums[e["name"]] = {"doc": e.get("doc", ""), "values": values, "kind": kind}
+    raw_messages = {m["name"]: m for m in raw["message"]}
+    settings = _load_settings(raw.get("setting", []), raw_messages, consts)
+    enums["SettingKey"] = {
+        "doc": "Keys of the robot's settings (GetSetting, SetSetting, Setting).",
+        "values": [(s.name.upper(), s.key, s.doc) for s in settings],
+        "kind": "values",
+    }
     messages = []
     for m in raw["message"]:
         fields = tuple(_load_field(m, f, consts, enums) for f in m["fields"])
@@ -293,6 +345,7 @@ def load(path: Path | None = None) -> dict:
             raise DefinitionError(
                 f"{m.name}: {m.encoded_bytes} encoded bytes exceed max_frame_bytes"
             )
+    layout = [[s.name, s.key, s.type, s.count] for s in settings]
     canonical = {
         "protocol": {k: proto[k] for k in ("name", "version", *WIRE_CONSTANTS)},
         "frame": frame,
@@ -306,16 +359,67 @@ def load(path: Path | None = None) -> dict:
             ]
             for m in messages
         ],
+        "settings": [[*row, s.min, s.max] for row, s in zip(layout, settings, strict=True)],
     }
-    digest = hashlib.sha256(json.dumps(canonical, sort_keys=True).encode()).digest()
     return {
         "protocol": proto,
         "constants": consts,
         "frame": frame,
         "enums": enums,
         "messages": messages,
-        "schema_hash": int.from_bytes(digest[:2], "big"),
+        "settings": settings,
+        "schema_hash": _hash16(canonical),
+        "settings_version": _hash16(layout),
     }
+
+
+def _hash16(canonical: object) -> int:
+    """The first two bytes of the SHA-256 of a canonical JSON form."""
+    digest = hashlib.sha256(json.dumps(canonical, sort_keys=True).encode()).digest()
+    return int.from_bytes(digest[:2], "big")
+
+
+def _load_settings(raw: list, messages: dict, consts: dict[str, Constant]) -> list[Setting]:
+    """The [[setting]] tables, checked, those with ``from`` completed from the command field."""
+    settings = []
+    for s in raw:
+        where = f"setting {s.get('name', s.get('from', '?'))}"
+        s = dict(s)
+        if "from" in s:
+            msg_name, _, field_name = s.pop("from").partition(".")
+            fields = {f["name"]: f for f in messages.get(msg_name, {}).get("fields", [])}
+            if field_name not in fields or "min" not in fields[field_name]:
+                raise DefinitionError(f"{where}: from names no ranged field of a message")
+            f = fields[field_name]
+            s = {k: f[k] for k in ("name", "type", "min", "max", "default", "doc")} | s
+        need = {"name", "key", "type", "min", "max", "default", "doc"}
+        if not need <= set(s) <= need | {"count"}:
+            raise DefinitionError(f"{where}: needs name, key, type, min, max, default and doc")
+        if s["type"] not in TYPES or s["type"] == "u32":
+            raise DefinitionError(f"{where}: type must be u8, u16, i16 or f32")
+        count, count_name = s.get("count", 1), None
+        if isinstance(count, str):
+            if count not in consts:
+                raise DefinitionError(f"{where}: count names {count!r}, which is not a constant")
+            count, count_name = consts[count].value, count
+        lo, hi, default = s["min"], s["max"], s["default"]
+        if not lo <= default <= hi:
+            raise DefinitionError(f"{where}: needs min <= default <= max")
+        if s["type"] != "f32":
+            tlo, thi = INT_RANGES[s["type"]]
+            if not all(isinstance(v, int) for v in (lo, hi, default)) or lo < tlo or hi > thi:
+                raise DefinitionError(f"{where}: an integer setting needs whole bounds in its type")
+        if not 0 < s["key"] < 256:
+            raise DefinitionError(f"{where}: key must be in 1..255")
+        doc = _quote_constants(" ".join(s["doc"].split()), consts, where)
+        settings.append(
+            Setting(s["name"], s["key"], s["type"], count, lo, hi, default, doc, count_name)
+        )
+    if len({s.key for s in settings}) != len(settings):
+        raise DefinitionError("setting keys must be unique")
+    if len({s.name for s in settings}) != len(settings):
+        raise DefinitionError("setting names must be unique")
+    return settings
 
 
 def _camel(name: str) -> str:
@@ -349,7 +453,10 @@ def render_cpp(d: dict) -> str:
         "// GENERATED by protocol/generate.py from protocol/eelbot.toml. Do not edit: edit the",
         "// definition and run `python protocol/generate.py`.",
         "#pragma once",
+        "#include <stddef.h>",
         "#include <stdint.h>",
+        "",
+        '#include "flash_table.h"',
         "",
         "namespace eelproto {",
         "",
@@ -357,6 +464,9 @@ def render_cpp(d: dict) -> str:
         f"constexpr uint8_t kProtocolVersion = {p['version']};",
         f"constexpr uint8_t kHeaderBytes = {HEADER_BYTES};",
         f"constexpr uint8_t kCrcBytes = {CRC_BYTES};",
+        "// Bytes of the CRC-32 that frames sent to the robot carry before their CRC-16.",
+        f"constexpr uint8_t kCommandCrcBytes = {COMMAND_CRC_BYTES};",
+        f"constexpr uint16_t kSettingsVersion = 0x{d['settings_version']:04X};",
         "",
     ]
     for c in d["constants"].values():
@@ -395,8 +505,58 @@ def render_cpp(d: dict) -> str:
         if m.direction == "to_robot":
             out.append(f"    case 0x{m.id:02X}:")
     out += ["      return true;", "    default:", "      return false;", "  }", "}", ""]
+    out += _cpp_settings(d)
     out.append("}  // namespace eelproto")
     return "\n".join(out) + "\n"
+
+
+SETTING_TYPES = {"u8": "U8", "u16": "U16", "i16": "I16", "f32": "F32"}
+
+
+def _cpp_settings(d: dict) -> list[str]:
+    """The settings struct and the settings table (read by settings_codec.cpp)."""
+    settings = d["settings"]
+    out = [
+        "// The robot's settings (the settings table of docs/firmware.md).",
+        "struct Settings {",
+    ]
+    for s in settings:
+        arr = (
+            f"[{d['constants'][s.count_name].cpp_name}]"
+            if s.count_name
+            else (f"[{s.count}]" if s.count > 1 else "")
+        )
+        out += _comment("  // ", s.doc)
+        out.append(f"  {TYPES[s.type][2]} {s.name}{arr};")
+    out += [
+        "};",
+        "",
+        "enum class SettingType : uint8_t { U8, U16, I16, F32 };",
+        "",
+        "// One row of the settings table: how a setting is stored and checked.",
+        "struct SettingInfo {",
+        "  uint8_t key;",
+        "  SettingType type;",
+        "  uint8_t count;   // elements (per joint: kNJoints)",
+        "  uint8_t offset;  // of element 0 in struct Settings",
+        "  float min, max, default_value;",
+        "};",
+        "",
+        f"constexpr uint8_t kSettingCount = {len(settings)};",
+        "// Bytes of the settings in the EEPROM image: each row's elements, little-endian, in order.",
+        f"constexpr uint8_t kSettingsBytes = {sum(s.size for s in settings)};",
+        "// In program memory on the AVR (flash_table.h): read rows with flash_read().",
+        "EEL_FLASH_TABLE constexpr SettingInfo kSettingTable[kSettingCount] = {",
+    ]
+    for s in settings:
+        count = d["constants"][s.count_name].cpp_name if s.count_name else str(s.count)
+        bounds = ", ".join(_cpp_float(x) for x in (s.min, s.max, s.default))
+        out.append(
+            f"    {{{s.key}, SettingType::{SETTING_TYPES[s.type]}, {count}, "
+            f"offsetof(Settings, {s.name}), {bounds}}},"
+        )
+    out += ["};", ""]
+    return out
 
 
 def _cpp_message(d: dict, m: Message) -> list[str]:
@@ -547,6 +707,54 @@ def _message(msg_id: MsgId, *, to_robot: bool) -> Callable[[type[_M]], type[_M]]
 '''
 
 
+# Emitted once into the Python module, before the settings table.
+PY_SETTINGS_BASE = '''
+
+
+@dataclass(frozen=True)
+class SettingInfo:
+    """One of the robot's settings (GetSetting, SetSetting): how the robot stores and checks it.
+
+    Attributes
+    ----------
+    name : str
+        Its name (``SETTINGS`` is keyed by it).
+    key : int
+        Its key on the wire (:class:`SettingKey`).
+    wire_type : str
+        How the robot stores it: u8, u16, i16 (whole values) or f32. Values travel as f32.
+    count : int
+        Elements: N_JOINTS for a per-joint setting (index 0 = joint 1), else 1.
+    lo, hi : float
+        The range the robot accepts.
+    default : float
+        The value a robot with a blank or corrupt EEPROM uses.
+    doc : str
+        What it means.
+    """
+
+    name: str
+    key: int
+    wire_type: str
+    count: int
+    lo: float
+    hi: float
+    default: float
+    doc: str
+
+    def check(self, value: float, index: int = 0) -> None:
+        """Raise ValueError, naming the setting, when the robot would refuse this value or index."""
+        if not 0 <= index < self.count:
+            raise ValueError(f"{self.name}: index {index} outside 0..{self.count - 1}")
+        if not (math.isfinite(value) and self.lo <= value <= self.hi):
+            raise ValueError(f"{self.name}={value} outside [{self.lo}, {self.hi}]")
+        if self.wire_type != "f32" and value != int(value):
+            raise ValueError(f"{self.name}={value}: a whole number is needed")
+
+
+'''
+
+
 def _py_count(d: dict, f: Field) -> str:
     """A field's count as the Python module spells it: the constant's name, if one sets it."""
     return d["constants"][f.count_name].py_name if f.count_name else str(f.count)
@@ -605,8 +813,9 @@ def render_python(d: dict) -> str:
         '"""The eelbot wire protocol, GENERATED by protocol/generate.py: do not edit.',
         "",
         "Edit ``protocol/eelbot.toml`` and run ``python protocol/generate.py``.",
-        "Frames are ``COBS(schema_hash:u16 | msg_id:u8 | seq:u8 | payload | crc16:u16) 0x00``,",
-        "little-endian, CRC-16/CCITT-FALSE over header and payload.",
+        "Frames are ``COBS(schema_hash:u16 | msg_id:u8 | seq:u8 | payload | [crc32:u32] |",
+        "crc16:u16) 0x00``, little-endian, CRC-16/CCITT-FALSE over everything before it; frames",
+        "sent to the robot carry the CRC-32 (ISO-HDLC, as zlib.crc32) of header and payload.",
         '"""',
         "",
         "from __future__ import annotations",
@@ -615,7 +824,7 @@ def render_python(d: dict) -> str:
         "import struct",
         "from collections.abc import Callable",
         "from dataclasses import dataclass, field, fields",
-        "from enum import IntEnum",
+        "from enum import IntEnum, IntFlag",
         "from typing import TYPE_CHECKING, Any, ClassVar, Self, TypeVar",
         "",
         "from eelhost.wire import framing as _framing",
@@ -630,13 +839,16 @@ def render_python(d: dict) -> str:
         f"PROTOCOL_VERSION = {p['version']}",
         f"HEADER_BYTES = {HEADER_BYTES}",
         f"CRC_BYTES = {CRC_BYTES}",
+        f"COMMAND_CRC_BYTES = {COMMAND_CRC_BYTES}",
+        f"SETTINGS_VERSION = 0x{d['settings_version']:04X}",
     ]
     for c in d["constants"].values():
         out += _comment("#: ", c.doc)
         out.append(f"{c.py_name} = {c.value}")
     out.append("")
     for name, e in d["enums"].items():
-        out += ["", f"class {name}(IntEnum):", f'    """{e["doc"]}"""', ""]
+        base = "IntFlag" if e["kind"] == "flags" else "IntEnum"
+        out += ["", f"class {name}({base}):", f'    """{e["doc"]}"""', ""]
         for n, v, doc in e["values"]:
             out += [f"    #: {line}" for line in textwrap.wrap(doc, 90)]
             out.append(f"    {n} = {v}")
@@ -652,6 +864,20 @@ def render_python(d: dict) -> str:
     out.append("MESSAGES: dict[int, type] = {")
     for m in d["messages"]:
         out.append(f"    MsgId.{m.upper}: {m.name},")
+    out.append("}")
+    out.append(PY_SETTINGS_BASE.rstrip("\n"))
+    out.append("SETTINGS: dict[str, SettingInfo] = {")
+    for s in d["settings"]:
+        count = d["constants"][s.count_name].py_name if s.count_name else str(s.count)
+        args = f'"{s.name}", {s.key}, "{s.type}", {count}, {s.min!r}, {s.max!r}, {s.default!r}'
+        out.append(f'    "{s.name}": SettingInfo(')
+        out.append(f"        {args},")
+        doc = textwrap.wrap(s.doc, 84)
+        out += [
+            f"        {json.dumps(line + (' ' if k < len(doc) - 1 else ''))}"
+            for k, line in enumerate(doc)
+        ]
+        out.append("    ),")
     out.append("}")
     return "\n".join(out) + PY_RUNTIME
 
@@ -682,7 +908,9 @@ def _docs_field(d: dict, f: Field) -> str:
         text += f" [{_number(f.min)}, {_number(f.max)}]"
     if f.default is not None:
         text += f" ({_number(f.default)})"
-    if f.enum:
+    if f.enum == "SettingKey":
+        text += " (a key of the settings table)"
+    elif f.enum:
         values = d["enums"][f.enum]["values"]
         text += " (" + ", ".join(f"{n} {v}" for n, v, _ in values) + ")"
     return text
@@ -702,6 +930,23 @@ def _docs_messages(d: dict) -> str:
         out.append(
             f"| 0x{m.id:02X} | {m.name} | {m.direction.replace('_', ' ')} | {m.payload_bytes} "
             f"| {m.encoded_bytes} | {fields} | {m.doc} |"
+        )
+    return "\n".join(out) + "\n"
+
+
+def _docs_settings(d: dict) -> str:
+    """The settings version and the Markdown table of settings, one row per setting."""
+    out = [
+        f"Settings version of this definition: **0x{d['settings_version']:04X}**.",
+        "",
+        "| key | name | stored as | range | default | meaning |",
+        "| --- | --- | --- | --- | --- | --- |",
+    ]
+    for s in d["settings"]:
+        kind = s.type + (f" x {s.count_name} ({s.count})" if s.count_name else "")
+        out.append(
+            f"| {s.key} | `{s.name}` | {kind} | [{_number(s.min)}, {_number(s.max)}] "
+            f"| {_number(s.default)} | {s.doc.replace('|', chr(92) + '|')} |"
         )
     return "\n".join(out) + "\n"
 
@@ -762,6 +1007,7 @@ def render_all() -> dict[Path, str]:
     docs = DOCS_OUT.read_text(encoding="utf-8")
     docs = splice(docs, "constants", _docs_constants(d), ("<!--", "-->"), DOCS_OUT)
     docs = splice(docs, "messages", _docs_messages(d), ("<!--", "-->"), DOCS_OUT)
+    docs = splice(docs, "settings", _docs_settings(d), ("<!--", "-->"), DOCS_OUT)
     native = NATIVE_H_OUT.read_text(encoding="utf-8")
     native = splice(native, "joints", _native_joints(d), ("/*", "*/"), NATIVE_H_OUT)
     pio = PLATFORMIO_OUT.read_text(encoding="utf-8")

@@ -13,7 +13,10 @@ extern "C" void loop();
 
 void setup() {
   g_hal.begin();
-  g_robot.reset(g_hal.now_us());
+  uint8_t image[kSettingsImageBytes];
+  g_hal.eeprom_load(kSettingsEepromAddress, image, sizeof image);
+  g_robot.reset(g_hal.now_us(), g_hal.boot_info(), image);
+  g_hal.start_watchdog();
 }
 
 void loop() { app_tick(g_robot, g_hal, g_hal.now_us()); }

@@ -24,20 +24,14 @@ size_t cobs_encode(const uint8_t* src, size_t n, uint8_t* dst, size_t cap) {
 }
 
 int cobs_decode(const uint8_t* src, size_t n, uint8_t* dst, size_t cap) {
-  size_t in = 0;
+  CobsStream stream;
   size_t out = 0;
-  while (in < n) {
-    const uint8_t code = src[in++];
-    if (code == 0 || in + code - 1 > n) return -1;
-    for (uint8_t k = 1; k < code; ++k) {
-      const uint8_t b = src[in++];
-      if (b == 0 || out >= cap) return -1;
-      dst[out++] = b;
-    }
-    if (code != 0xFF && in < n) {  // the implied zero, except after the last block
-      if (out >= cap) return -1;
-      dst[out++] = 0;
-    }
+  for (size_t i = 0; i < n; ++i) {
+    uint8_t b;
+    if (src[i] == 0) return -1;
+    if (!stream.push(src[i], b)) continue;
+    if (out >= cap) return -1;
+    dst[out++] = b;
   }
-  return static_cast<int>(out);
+  return stream.complete() ? static_cast<int>(out) : -1;
 }

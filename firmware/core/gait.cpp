@@ -22,6 +22,12 @@ struct AmplitudeRatios {
 };
 constexpr AmplitudeRatios kAmplitudeRatio;
 
+// Phase increments per microsecond at omega. On the AVR double is float: omega then carries a
+// relative error of 6e-8 (0.2 ms an hour).
+uint64_t phase_step(float omega_rad_s) {
+  return static_cast<uint64_t>(static_cast<double>(omega_rad_s) * kStepPerRadS);
+}
+
 float clamp_joint(float v) {
   if (v > cfg::kJointLimitRad) return cfg::kJointLimitRad;
   if (v < -cfg::kJointLimitRad) return -cfg::kJointLimitRad;
@@ -30,36 +36,65 @@ float clamp_joint(float v) {
 }  // namespace
 
 void Gait::reset(uint32_t now_us) {
+  step_q_per_us_ = phase_step(target_.omega_rad_s);
+  omega_pending_ = false;
   phase_q_ = 0;
+  phase_us_ = now_us;
   last_us_ = now_us;
+  updates_ = 0;
   amplitude_rad_ = 0.0f;
   offset_rad_ = 0.0f;
   beta_rad_ = target_.beta_rad;
   compute_references();
 }
 
-void Gait::set_targets(const GaitTargets& t) {
+void Gait::set_targets(const GaitTargets& t, uint32_t now_us) {
+  if (t.omega_rad_s != target_.omega_rad_s && !omega_pending_) {
+    omega_set_us_ = now_us;  // the first change since the last update: the old rate holds to here
+    omega_pending_ = true;
+  }
   target_ = t;
-  // On the AVR double is float: omega then carries a relative error of 6e-8 (0.2 ms an hour).
-  step_q_per_us_ = static_cast<uint64_t>(static_cast<double>(t.omega_rad_s) * kStepPerRadS);
 }
 
 bool Gait::restart_phase(uint32_t now_us) {
   if (amplitude_rad_ != 0.0f) return false;
   phase_q_ = 0;
-  last_us_ = now_us;
+  phase_us_ = now_us;
+  if (omega_pending_) omega_set_us_ = now_us;  // a new omega counts from the restart
   return true;
 }
 
-void Gait::update(uint32_t now_us) {
-  const uint32_t dt_us = elapsed_us(now_us, last_us_);
+void Gait::advance_phase(uint32_t now_us) {
+  phase_q_ += step_q_per_us_ * elapsed_us(now_us, phase_us_);  // wraps modulo one cycle, by design
+  phase_us_ = now_us;
+}
+
+bool Gait::update(uint32_t now_us, float cap_rad) {
+  if (omega_pending_) {
+    advance_phase(omega_set_us_);
+    step_q_per_us_ = phase_step(target_.omega_rad_s);
+    omega_pending_ = false;
+  }
+  advance_phase(now_us);
+  const float dt_s = static_cast<float>(elapsed_us(now_us, last_us_)) * 1e-6f;
   last_us_ = now_us;
-  phase_q_ += step_q_per_us_ * dt_us;  // wraps modulo one cycle, by design
-  const float dt_s = static_cast<float>(dt_us) * 1e-6f;
   amplitude_rad_ = slew_towards(amplitude_rad_, target_.amplitude_rad, rates_.amplitude_rad_s, dt_s);
   beta_rad_ = slew_towards(beta_rad_, target_.beta_rad, rates_.beta_rad_s, dt_s);
   offset_rad_ = slew_towards(offset_rad_, target_.offset_rad, rates_.offset_rad_s, dt_s);
+  // The cap moves the present values themselves, so that a cap lifted again (the link is back)
+  // lets them slew up from where they are: nothing jumps unless its rate is 0 (no limit).
+  bool capped = false;
+  if (amplitude_rad_ > cap_rad) {
+    amplitude_rad_ = cap_rad;
+    capped = true;
+  }
+  if (offset_rad_ > cap_rad || offset_rad_ < -cap_rad) {
+    offset_rad_ = offset_rad_ > 0.0f ? cap_rad : -cap_rad;
+    capped = true;
+  }
   compute_references();
+  ++updates_;
+  return capped;
 }
 
 float Gait::phase_rad() const {

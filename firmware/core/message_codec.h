@@ -1,9 +1,10 @@
 // The one codec of every message: pack, unpack, validate and defaults walk a message's field
 // table (its each_field() in protocol_gen.h, generated from protocol/eelbot.toml) and encode or
-// decode each field with the wire:: function for its type. Everything inlines to the same straight-line code a
-// hand-written codec per message would be, so the table costs neither flash nor time on the AVR.
+// decode each field with the wire:: function for its type, or copy a whole struct that has no
+// padding (every message on the AVR).
 #pragma once
 #include <stdint.h>
+#include <string.h>
 
 #include "protocol_gen.h"
 #include "wire.h"
@@ -53,15 +54,32 @@ struct Defaults {
 
 }  // namespace codec
 
+// A struct without padding holds its fields exactly as the payload does (the generator declares
+// them in wire order, the wire is little-endian as the machine is): then packing is one copy. So
+// it is for every message on the AVR (alignment 1), which keeps the codec's flash small there; on
+// a PC most structs have padding and go field by field.
+template <typename M>
+constexpr bool is_wire_image() {
+  return sizeof(M) == M::kPayloadBytes && __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__;
+}
+
 // Payload bytes of a message (M::kPayloadBytes of them).
 template <typename M>
 inline void pack(const M& m, uint8_t* p) {
+  if (is_wire_image<M>()) {
+    memcpy(p, &m, M::kPayloadBytes);
+    return;
+  }
   codec::Packer visit{p};
   each_field(const_cast<M&>(m), visit);  // the packer only reads: one field table serves both ways
 }
 
 template <typename M>
 inline void unpack(M& m, const uint8_t* p) {
+  if (is_wire_image<M>()) {
+    memcpy(&m, p, M::kPayloadBytes);
+    return;
+  }
   codec::Unpacker visit{p};
   each_field(m, visit);
 }

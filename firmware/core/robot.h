@@ -1,75 +1,105 @@
 // The robot's program without its board: commands in (bytes), state machine, gait, failsafe,
-// references and servo pulses out, telemetry and replies out (bytes). Time is always an argument.
-// The board layer (hal/avr or hal/native) moves the bytes and pulses; app/app.h wires the two.
+// joint loop, settings, health, servo pulses out, telemetry and replies out (bytes). Time is
+// always an argument. The board layer (hal/avr or hal/native) moves the bytes, pulses, analog
+// readings and EEPROM bytes; app/app.h wires the two.
 #pragma once
 #include <stdint.h>
 
-#include "byte_queue.h"
+#include "battery.h"
+#include "boot.h"
+#include "command_link.h"
 #include "config.h"
-#include "frame_codec.h"
 #include "gait.h"
-#include "link_counters.h"
-#include "link_watchdog.h"
-#include "pd.h"
+#include "joint_loop.h"
 #include "protocol_gen.h"
+#include "settings_store.h"
 
 class Robot {
  public:
   using State = eelproto::State;
-  // Room for a telemetry frame and a couple of replies between two drains of the UART.
-  using TxQueue = ByteQueue<128>;
+  using TxQueue = CommandLink::TxQueue;
 
-  // Boot state: IDLE, straight, default gait/gains from protocol/eelbot.toml, counters zero.
-  void reset(uint32_t now_us);
+  // Boot state: IDLE, straight, settings from the stored image (the defaults when it is blank,
+  // corrupt or of another settings version), counters zero.
+  void reset(uint32_t now_us, const BootInfo& boot, const uint8_t* settings_image);
+  // One received byte; a completed command is executed at once (it only sets parameters: the
+  // gait is computed in control_update, once per control period, however many commands come).
   void on_rx_byte(uint8_t byte, uint32_t now_us);
-  // Failsafe check and telemetry; call every loop.
-  void service(uint32_t now_us);
   bool control_due(uint32_t now_us) const;
-  // Gait update at now_us: references, clamps, servo pulses.
+  // The board samples the analog inputs (cfg::kAdcInputs) for joint_update when this is true.
+  bool wants_adc() const;
+  // Control update at now_us: failsafe, link-loss envelope, the gait.
   void control_update(uint32_t now_us);
-  // Joint PD torques for measured joint angles and rates (the native build's plant).
-  void joint_torques(const float* phi_rad, const float* phi_dot_rad_s, float* torque_nm) const;
+  // Then the rest of it with this update's analog readings (nullptr when wants_adc() was false):
+  // measured angles, joint loop, servo pulses.
+  void joint_update(const uint16_t* adc_counts);
+  // After the update: the battery's reading of it, Telemetry and Status frames when due.
+  void service(uint32_t now_us);
 
+  // SaveSettings: the board writes this image to the EEPROM (at kSettingsEepromAddress) and says
+  // whether it read back; the robot then answers the command.
+  bool save_requested() const { return save_requested_; }
+  void settings_image(uint8_t* image) const { settings_to_image(settings_, image); }
+  void save_done(bool ok);
+
+  // Joint PD torques for plant joint angles and rates (the native build's simulated plant).
+  void joint_torques(const float* phi_rad, const float* phi_dot_rad_s, float* torque_nm) const;
   // 0 runs the control update on every call of control_due (the native build's lockstep option).
   void set_control_period_us(uint32_t period_us) { control_period_us_ = period_us; }
 
   State state() const { return state_; }
+  uint8_t flags() const;
   const Gait& gait() const { return gait_; }
-  const PdGains& gains() const { return gains_; }
-  const uint16_t* pulse_us() const { return pulse_us_; }
-  const LinkCounters& counters() const { return counters_; }
-  const LinkWatchdog& watchdog() const { return watchdog_; }
-  TxQueue& tx() { return tx_; }
+  const eelproto::Settings& settings() const { return settings_; }
+  eelproto::SettingsSource settings_source() const { return settings_source_; }
+  const JointLoop& joints() const { return joints_; }
+  const BatteryMonitor& battery() const { return battery_; }
+  const uint16_t* pulse_us() const { return joints_.pulse_us(); }
+  const LinkCounters& counters() const { return link_.counters(); }
+  const LinkWatchdog& watchdog() const { return link_.watchdog(); }
+  const BootInfo& boot() const { return boot_; }
+  uint16_t control_updates() const { return control_updates_; }
+  uint16_t control_late_max_us() const { return control_late_max_us_; }
+  TxQueue& tx() { return link_.tx(); }
 
  private:
   void handle(const Frame& f, uint32_t now_us);
-  bool accept_seq(uint8_t msg_id, uint8_t seq);
-  // Decode a command's payload into m; refuse it (and return false) when a field is not valid.
   template <typename M>
   bool accept(const Frame& f, M& m);
-  void apply_targets();
-  template <typename M>
-  void send(const M& m);
-  void send(uint8_t msg_id, const uint8_t* payload, uint8_t len);
-  void ack(const Frame& f);
-  void refuse(const Frame& f, uint8_t reason);
+  void apply_targets(uint32_t now_us);
+  void enter(State s, uint32_t now_us);
+  void update_battery(uint32_t now_us);
+  bool settings_locked(const Frame& f);
+  void set_rate_settings(const eelproto::SetGait& m);
+  void set_gain_settings(const eelproto::SetGains& m);
+  void store_setting(float& field, float value);
   void send_version();
   void send_telemetry(uint32_t now_us);
+  void send_status(uint32_t now_us);
 
   State state_ = State::Idle;
   Gait gait_;
-  eelproto::SetGait gait_cmd_{};  // what the host asked for (targets apply while running)
-  float offset_cmd_rad_ = 0.0f;
-  PdGains gains_{};
-  uint16_t pulse_us_[cfg::kJoints] = {};
-  FrameDecoder decoder_;
-  LinkCounters counters_{};
-  LinkWatchdog watchdog_;
-  TxQueue tx_;
+  GaitTargets gait_cmd_{};      // what the host asked for (applies while running)
+  eelproto::Settings settings_{};
+  eelproto::SettingsSource settings_source_ = eelproto::SettingsSource::Eeprom;
+  JointLoop joints_;
+  BatteryMonitor battery_;
+  CommandLink link_;
+  BootInfo boot_{};
   uint32_t control_period_us_ = 0;  // set by reset(): a zero initialiser keeps the object in .bss
   uint32_t next_control_us_ = 0;
+  uint32_t last_control_us_ = 0;
+  uint32_t control_dt_us_ = 0;     // since the update before
+  uint16_t battery_counts_ = 0;    // the battery's reading at the last update
   uint32_t next_telemetry_us_ = 0;
-  uint8_t tx_seq_ = 0;
-  uint8_t last_rx_seq_ = 0;
-  bool have_rx_seq_ = false;
+  uint32_t next_status_us_ = 0;
+  uint16_t control_updates_ = 0;
+  uint16_t control_late_max_us_ = 0;
+  uint8_t save_msg_seq_ = 0;       // the SaveSettings being written
+  bool save_requested_ = false;
+  bool settings_dirty_ = false;
+  bool fading_ = false;
+  bool report_now_ = false;        // a state change: Telemetry at the next service
+  bool status_requested_ = false;
+  bool battery_sampled_ = false;   // battery_counts_ is of the last update
 };

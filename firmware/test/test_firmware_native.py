@@ -83,18 +83,37 @@ def test_pd_torque_is_clamped_to_the_commanded_limit():
     assert np.all(out.torque_nm == np.float32(-0.5))
 
 
-def test_without_frames_for_one_second_the_robot_reports_failsafe_and_straightens():
+def test_with_the_default_rates_the_joints_are_straight_0_9_s_after_the_last_frame():
+    # The largest gait and offset, the default slew rates; the last command at 3 s.
+    d = p.SetGait()
+    fw = NativeFirmware(now_us=0)
+    fw.send(p.SetGait(1.5, d.omega_rad_s, d.beta_rad, d.amplitude_rate_rad_s,
+                      d.beta_rate_rad_s, d.offset_rate_rad_s), 0)  # fmt: skip
+    fw.send(p.Start(), 1)
+    states = {}
+    for t_ms in range(0, 5001, 10):
+        if t_ms <= 3000 and t_ms % 300 == 0:
+            fw.send(p.SetOffset(-1.0), 2 + t_ms // 300)
+        out = fw.tick(t_ms * 1000)
+        states[t_ms] = fw.status()["state"], float(np.abs(out.alpha_rad).max())
+    assert states[2990] == (p.State.RUNNING, pytest.approx(1.2))  # at the joint limit
+    assert states[3500][0] == p.State.RUNNING and states[3500][1] > 0.5
+    assert all(states[t][1] == 0.0 for t in range(3900, 5001, 10))
+    assert all(states[t][0] == p.State.RUNNING for t in range(3000, 4000, 10))
+    assert all(states[t][0] == p.State.FAILSAFE for t in range(4000, 5001, 10))
+
+
+def test_an_echo_of_the_robots_own_frames_does_not_keep_the_link_alive():
     fw = NativeFirmware(now_us=0)
     fw.send(p.Start(), 0)
-    states = {}
-    for t_ms in range(0, 4001, 10):
+    for t_ms in range(0, 1200, 10):
         fw.tick(t_ms * 1000)
-        for _, m in fw.read_frames():
-            if isinstance(m, p.Telemetry):
-                states[m.time_us // 1000] = (p.State(m.state), max(map(abs, m.alpha_rad)))
-    assert states[900][0] == p.State.RUNNING
-    assert states[1100][0] == p.State.FAILSAFE
-    assert states[4000] == (p.State.FAILSAFE, 0.0)
+        fw.feed(fw.take())  # a radio that echoes everything the robot sends
+        if t_ms == 990:
+            assert fw.status()["state"] == p.State.RUNNING
+    s = fw.status()
+    assert s["state"] == p.State.FAILSAFE
+    assert s["bad_direction"] > 10 and s["frames_ok"] == 1
 
 
 def test_bad_frames_from_python_are_counted_and_ignored():

@@ -6,6 +6,7 @@ import re
 import struct
 import subprocess
 import sys
+import zlib
 from pathlib import Path
 
 import pytest
@@ -86,19 +87,30 @@ def with_constant(text, name, value):
 
 def test_the_joint_count_is_set_in_one_place_and_reaches_every_output(tmp_path, monkeypatch):
     gen = load_generator()
-    seven = tmp_path / "seven.toml"
-    seven.write_text(with_constant((ROOT / "protocol" / "eelbot.toml").read_text(), "n_joints", 7))
-    monkeypatch.setattr(gen, "DEFINITION", seven)
+    six = tmp_path / "six.toml"
+    six.write_text(with_constant((ROOT / "protocol" / "eelbot.toml").read_text(), "n_joints", 6))
+    monkeypatch.setattr(gen, "DEFINITION", six)
     out = outputs_copied_to(tmp_path, gen, monkeypatch)
     assert gen.main([]) == 0
     cpp = out["CPP_OUT"].read_text()
-    assert "constexpr uint8_t kNJoints = 7;" in cpp and "float alpha_rad[kNJoints];" in cpp
-    assert f"kPayloadBytes = {p.Telemetry.PAYLOAD_BYTES + 2 * 4};" in cpp  # two more f32
-    assert "\nN_JOINTS = 7\n" in out["PY_OUT"].read_text()
-    assert "\n#define EEL_JOINTS 7\n" in out["NATIVE_H_OUT"].read_text()
+    assert "constexpr uint8_t kNJoints = 6;" in cpp and "float alpha_rad[kNJoints];" in cpp
+    # one more joint: an f32 reference and an i16 measured angle
+    assert f"kPayloadBytes = {p.Telemetry.PAYLOAD_BYTES + 4 + 2};" in cpp
+    assert "\nN_JOINTS = 6\n" in out["PY_OUT"].read_text()
+    assert "\n#define EEL_JOINTS 6\n" in out["NATIVE_H_OUT"].read_text()
     docs = out["DOCS_OUT"].read_text()
-    assert "| `n_joints` | 7 |" in docs and "alpha_rad f32 x n_joints (7)" in docs
+    assert "| `n_joints` | 6 |" in docs and "alpha_rad f32 x n_joints (6)" in docs
+    assert "trim_us` | i16 x n_joints (6)" in docs
     assert f"**0x{p.SCHEMA_HASH:04X}**" not in docs  # the telemetry layout changed the hash
+    assert f"**0x{p.SETTINGS_VERSION:04X}**" not in docs  # and the settings' layout
+
+
+def test_a_body_whose_telemetry_outgrows_a_radio_frame_is_refused(tmp_path):
+    gen = load_generator()
+    seven = tmp_path / "seven.toml"
+    seven.write_text(with_constant((ROOT / "protocol" / "eelbot.toml").read_text(), "n_joints", 7))
+    with pytest.raises(gen.DefinitionError, match="Telemetry: 70 encoded bytes exceed"):
+        gen.load(seven)
 
 
 def test_periods_are_shared_constants_outside_the_schema_hash(tmp_path):
@@ -138,7 +150,16 @@ def test_schema_hash_follows_wire_changes_but_not_doc_changes(tmp_path):
             "[constants.n_joints]\nvalue = 15",
             "exceed max_frame_bytes",
         ),
-        ('count = "n_joints"', 'count = "n_links"', "Telemetry.alpha_rad: count names 'n_links'"),
+        (
+            '"alpha_rad", type = "f32", count = "n_joints"',
+            '"alpha_rad", type = "f32", count = "n_links"',
+            "Telemetry.alpha_rad: count names 'n_links'",
+        ),
+        ("key = 2\n", "key = 1\n", "setting keys must be unique"),
+        ("min = -500\nmax = 500", "min = -500.5\nmax = 500", "setting trim_us: an integer setting"),
+        ("min = 0\nmax = 65535", "min = 0\nmax = 65536", "setting radio_id: an integer setting"),
+        ('from = "SetGains.kd_nms_per_rad"', 'from = "SetGains.kd"', "from names no ranged field"),
+        ('["HW_WATCHDOG", 8,', '["HW_WATCHDOG", 6,', "enum Flags: each flag must be one bit"),
         ("{telemetry_period_us}", "{telemetry_rate}", "Telemetry: the doc quotes {telemetry_rate}"),
         ("[constants.baud]\nvalue = 57600", "[constants.baud]\nvalue = -1", "constants.baud"),
         (
@@ -180,10 +201,28 @@ ALL_MESSAGES = [
     p.Start(),
     p.Stop(),
     p.SetGains(kp_nm_per_rad=3.0, kd_nms_per_rad=0.125, torque_limit_nm=1.0),
-    p.Version(0, 1, 1, p.N_JOINTS, p.SCHEMA_HASH, p.CONTROL_PERIOD_US),
-    p.Telemetry(123, 2, tuple(0.125 * j - 0.25 for j in range(p.N_JOINTS)), 0.25, 0.5, 7, 8, 9),
+    p.GetSetting(p.SettingKey.TRIM_US, 4),
+    p.SetSetting(p.SettingKey.ADC_COUNTS_PER_RAD, 2, 97.5),
+    p.SaveSettings(),
+    p.DefaultSettings(),
+    p.GetStatus(),
+    p.Version(0, 1, 1, p.N_JOINTS, p.SCHEMA_HASH, p.CONTROL_PERIOD_US, p.SETTINGS_VERSION, 7),
+    p.Telemetry(
+        123,
+        2,
+        int(p.Flags.FADING | p.Flags.JOINT_FEEDBACK),
+        tuple(0.125 * j - 0.25 for j in range(p.N_JOINTS)),
+        0.25,
+        0.5,
+        7,
+        8,
+        9,
+        tuple(-32768 + 9000 * j for j in range(p.N_JOINTS)),
+    ),
     p.Ack(2, 17),
     p.Refuse(2, 18, int(p.RefuseReason.OUT_OF_RANGE)),
+    p.Setting(p.SettingKey.RADIO_ID, 0, 65535.0),
+    p.Status(*range(1, 7), 6.5, *range(7, 21)),
 ]
 
 
@@ -195,8 +234,10 @@ def test_every_message_round_trips_within_the_radio_frame_size(msg):
     assert p.decode_frame(frame[:-1]) == (200, msg)
 
 
-def body(msg_id, seq, payload, schema=p.SCHEMA_HASH, crc_xor=0):
+def body(msg_id, seq, payload, schema=p.SCHEMA_HASH, crc_xor=0, crc32_xor=None):
     b = struct.pack("<HBB", schema, msg_id, seq) + payload
+    if crc32_xor is not None:
+        b += struct.pack("<I", zlib.crc32(b) ^ crc32_xor)
     return p.cobs_encode(b + struct.pack("<H", p.crc16_ccitt_false(b) ^ crc_xor))
 
 
@@ -210,6 +251,8 @@ def body(msg_id, seq, payload, schema=p.SCHEMA_HASH, crc_xor=0):
         (body(0x04, 0, b"", schema=p.SCHEMA_HASH ^ 0xFFFF), "schema"),
         (body(0x44, 0, b""), "unknown_id"),
         (body(0x03, 0, b"\x00\x00"), "length"),
+        (body(0x03, 0, b"\x00\x00\x00\x00"), "length"),  # a command without its CRC-32
+        (body(0x03, 0, b"\x00\x00\x00\x00", crc32_xor=0x100), "crc32"),
     ],
 )
 def test_every_kind_of_bad_frame_raises_its_kind(encoded, kind):

@@ -86,7 +86,7 @@ TEST(wrong_crc_frame_is_counted_and_ignored) {
   FrameDecoder d;
   LinkCounters c{};
   uint8_t p[4] = {0, 0, 0x80, 0x3E};
-  CHECK_EQ(feed(d, c, raw_frame(eelproto::kSchemaHash, 0x03, 0, p, 4, true)).frames, 0);
+  CHECK_EQ(feed(d, c, raw_frame(eelproto::kSchemaHash, 0x03, 0, p, 4, Spoil::Crc16)).frames, 0);
   CHECK_EQ(c.bad_crc, 1);
   CHECK_EQ(c.bad_total(), 1);
 }
@@ -149,4 +149,70 @@ TEST(encoder_refuses_a_payload_too_large_for_a_frame) {
   uint8_t out[128];
   CHECK_EQ(encode_frame(0x03, 0, p, sizeof p, out, sizeof out), 0u);
   CHECK(encode_frame(0x03, 0, p, frame::kMaxPayload, out, sizeof out) <= eelproto::kMaxFrameBytes);
+}
+
+TEST(a_command_whose_crc32_fails_is_counted_and_ignored_though_its_crc16_holds) {
+  FrameDecoder d;
+  LinkCounters c{};
+  uint8_t p[4] = {0, 0, 0x80, 0x3E};
+  CHECK_EQ(feed(d, c, raw_frame(eelproto::kSchemaHash, 0x03, 0, p, 4, Spoil::Crc32)).frames, 0);
+  CHECK_EQ(c.bad_crc32, 1);
+  CHECK_EQ(c.bad_total(), 1);
+}
+
+TEST(a_command_without_its_crc32_has_the_wrong_length) {
+  FrameDecoder d;
+  LinkCounters c{};
+  uint8_t p[4] = {0, 0, 0x80, 0x3E};
+  CHECK_EQ(feed(d, c, raw_frame(eelproto::kSchemaHash, 0x03, 0, p, 4, Spoil::NoCrc32)).frames, 0);
+  CHECK_EQ(c.bad_length, 1);
+}
+
+TEST(frames_to_the_host_carry_no_crc32_and_decode_too) {
+  FrameDecoder d;
+  LinkCounters c{};
+  const eelproto::Ack a{3, 9};
+  const Bytes b = frame_of(a, 4);
+  CHECK_EQ(b.n, 10u);  // COBS(4 + 2 + 2) + delimiter
+  const Fed r = feed(d, c, b);
+  CHECK_EQ(r.frames, 1);
+  CHECK_EQ(r.last.msg_id, static_cast<uint8_t>(eelproto::MsgId::Ack));
+  CHECK_EQ(c.bad_total(), 0);
+}
+
+TEST(the_frame_check_is_the_crc32_of_a_command_so_a_repeat_has_the_same) {
+  FrameDecoder d;
+  LinkCounters c{};
+  const Fed a = feed(d, c, frame_of(offset_msg(0.25f), 7));
+  const Fed b = feed(d, c, frame_of(offset_msg(0.25f), 7));
+  const Fed other = feed(d, c, frame_of(offset_msg(0.5f), 7));
+  CHECK_EQ(a.last.check, b.last.check);
+  CHECK(a.last.check != other.last.check);
+  uint8_t body[8];
+  wire::put_u16(body, eelproto::kSchemaHash);
+  body[2] = 0x03;
+  body[3] = 7;
+  wire::put_f32(body + 4, 0.25f);
+  CHECK_EQ(a.last.check, crc32_iso_hdlc(body, sizeof body));
+}
+
+TEST(the_decoder_finds_a_frame_after_every_split_of_a_garbled_stream) {
+  // Whatever garbage ends at a delimiter, the next frame decodes: the decoder keeps no state
+  // across a delimiter.
+  const Bytes good = frame_of(offset_msg(0.3f), 5);
+  for (uint8_t junk_len = 0; junk_len < 70; ++junk_len) {
+    FrameDecoder d;
+    LinkCounters c{};
+    Bytes b;
+    for (uint8_t i = 0; i < junk_len; ++i) {
+      const uint8_t x = static_cast<uint8_t>(1 + (i * 37) % 255);
+      b.append(&x, 1);
+    }
+    const uint8_t zero = 0;
+    b.append(&zero, 1);
+    b.append(good.data, good.n);
+    const Fed r = feed(d, c, b);
+    CHECK_EQ(r.frames, 1);
+    CHECK_EQ(r.last.seq, 5);
+  }
 }

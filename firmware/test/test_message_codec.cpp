@@ -5,10 +5,11 @@
 #include "message_codec.h"
 
 TEST(mixed_width_fields_are_packed_little_endian_at_their_offsets) {
-  const eelproto::Version v{0, 1, 2, eelproto::kNJoints, 0xBEEF, 0x01020304UL};
+  const eelproto::Version v{0, 1, 2, eelproto::kNJoints, 0xBEEF, 0x01020304UL, 0x1234, 0xA0B0};
   uint8_t p[eelproto::Version::kPayloadBytes];
   eelproto::pack(v, p);
-  const uint8_t want[] = {0, 1, 2, eelproto::kNJoints, 0xEF, 0xBE, 0x04, 0x03, 0x02, 0x01};
+  const uint8_t want[] = {0,    1,    2,    eelproto::kNJoints, 0xEF, 0xBE, 0x04,
+                          0x03, 0x02, 0x01, 0x34,               0x12, 0xB0, 0xA0};
   static_assert(sizeof(want) == sizeof(p), "Version's layout changed: update this test");
   for (uint8_t i = 0; i < sizeof(p); ++i) CHECK_EQ(p[i], want[i]);
 }
@@ -23,6 +24,8 @@ TEST(every_field_of_a_message_with_an_array_round_trips) {
   t.frames_ok = 65535;
   t.frames_bad = 7;
   t.frames_lost = 300;
+  for (uint8_t j = 0; j < eelproto::kNJoints; ++j) t.phi_mrad[j] = static_cast<int16_t>(-1200 + 500 * j);
+  t.flags = 0x15;
   uint8_t p[eelproto::Telemetry::kPayloadBytes];
   eelproto::pack(t, p);
   eelproto::Telemetry u{};
@@ -35,6 +38,33 @@ TEST(every_field_of_a_message_with_an_array_round_trips) {
   CHECK_EQ(u.frames_ok, t.frames_ok);
   CHECK_EQ(u.frames_bad, t.frames_bad);
   CHECK_EQ(u.frames_lost, t.frames_lost);
+  CHECK_EQ(u.flags, t.flags);
+  for (uint8_t j = 0; j < eelproto::kNJoints; ++j) CHECK_EQ(u.phi_mrad[j], t.phi_mrad[j]);
+  // The negative i16 travels as two's complement, little-endian, after everything else.
+  CHECK_EQ(p[eelproto::Telemetry::kPayloadBytes - 2 * eelproto::kNJoints], 0x50);
+  CHECK_EQ(p[eelproto::Telemetry::kPayloadBytes - 2 * eelproto::kNJoints + 1], 0xFB);
+}
+
+TEST(a_struct_without_padding_packs_exactly_as_field_by_field) {
+  // Ack (two u8) has no padding anywhere: packed by one copy. Status has padding on a PC: packed
+  // field by field. Both give the documented layout.
+  static_assert(eelproto::is_wire_image<eelproto::Ack>(), "Ack has no padding");
+  const eelproto::Ack a{0x83, 0x07};
+  uint8_t p[2];
+  eelproto::pack(a, p);
+  CHECK_EQ(p[0], 0x83);
+  CHECK_EQ(p[1], 0x07);
+  eelproto::Status s{};
+  s.time_us = 0x11223344UL;
+  s.resets = 0x5566;
+  s.battery_v = 7.25f;
+  s.tx_dropped = 0xA1B2;
+  uint8_t q[eelproto::Status::kPayloadBytes];
+  eelproto::pack(s, q);
+  CHECK_EQ(wire::get_u32(q), 0x11223344UL);
+  CHECK_EQ(wire::get_u16(q + 7), 0x5566);
+  CHECK_EQ(wire::get_f32(q + 10), 7.25f);
+  CHECK_EQ(wire::get_u16(q + eelproto::Status::kPayloadBytes - 2), 0xA1B2);
 }
 
 TEST(the_documented_defaults_are_valid_commands) {

@@ -5,13 +5,19 @@
  *   - times the high pulses on pins (--pulse-pins D2,D3,..., --pulses FILE, lines
  *     "<rise_us> <pin> <width_us>"),
  *   - times a busy pin (--busy-pin D7: high while one control update runs) and reports the cycles,
- *     failing (exit 1) when the longest exceeds --budget-us.
+ *     failing (exit 1) when the longest exceeds --budget-us,
+ *   - sets analog inputs at given times (--adc FILE, lines "<t_us> <input 0..7> <millivolts>"; the
+ *     reference AVCC is 5000 mV),
+ *   - loads and saves the EEPROM (--eeprom-in FILE, --eeprom-out FILE: raw bytes, 1024),
+ *   - resets the AVR through its reset pin at given times (--reset-at-us T[,T...]: MCUSR EXTRF),
+ *   - makes the main loop hang at a time (--hang-at-us T: the program counter is sent to an endless
+ *     loop, interrupts still on, as a firmware bug would), to see the watchdog reset it.
  *
  * Times are simulated microseconds from reset at --freq (16 MHz). Used by `make bench` and by the
  * tests.
  *
  * Built with -DEEL_AVRSIM_LIBRARY -shared (build/tools/libeelavrsim.so) the same code is a library
- * for the processor-in-the-loop driver (host/eelhost/pil.py, through ctypes): the caller queues
+ * for the processor-in-the-loop driver (host/eelhost/xil/simavr.py, through ctypes): the caller queues
  * UART bytes at times, runs the AVR up to a time, and takes what it sent and the pulses it made
  * (the eas_* functions below).
  */
@@ -22,6 +28,8 @@
 #include <string.h>
 #include <time.h>
 
+#include <avr_adc.h>
+#include <avr_eeprom.h>
 #include <avr_ioport.h>
 #include <avr_uart.h>
 #include <sim_avr.h>
@@ -50,6 +58,18 @@ typedef struct {
   int pin;
 } pulse_t;
 
+typedef struct {
+  avr_cycle_count_t at;
+  int input;         /* analog input 0..7 */
+  uint32_t millivolts;
+} adc_event_t;
+
+#define MAX_RESETS 16
+#define MCUSR_ADDR 0x54 /* data address of MCUSR on the ATmega328P */
+#define MCUSR_EXTRF 0x02
+/* Last word of the 32 KB flash, beyond any image: where a hang is sent (an "rjmp ." there). */
+#define HANG_ADDR 0x7FFE
+
 /* One emulated AVR with its observers. Outputs go to files (command line) or to buffers that the
  * library caller drains (eas_take_*). */
 typedef struct EasSim {
@@ -70,6 +90,15 @@ typedef struct EasSim {
   /* UART input: bytes queued by time, delivered in order when the UART takes them (XON) */
   timed_byte_t* in;
   size_t nin, cap_in, next_in;
+  /* analog inputs by time, applied in order */
+  adc_event_t* adc;
+  size_t nadc, cap_adc, next_adc;
+  /* resets through the reset pin, and a hang, by time (cycles; 0 = none) */
+  avr_cycle_count_t resets[MAX_RESETS];
+  int nresets, next_reset;
+  avr_cycle_count_t hang_at;
+  int hung;
+  uint64_t watchdog_resets;
   /* buffered outputs (library) */
   int buffer_outputs;
   timed_byte_t* out;
@@ -192,6 +221,7 @@ EasSim* eas_create(const char* elf, const char* mcu, unsigned long freq) {
   avr_init(avr);
   avr_load_firmware(avr, &fw);
   avr->log = LOG_ERROR;
+  avr->vcc = avr->avcc = avr->aref = 5000;  // the Nano's 5 V: the ADC's AVCC reference
   uint32_t uart_flags = 0;
   avr_ioctl(avr, AVR_IOCTL_UART_GET_FLAGS('0'), &uart_flags);
   uart_flags &= ~(uint32_t)AVR_UART_FLAG_STDIO;  // we log the bytes ourselves
@@ -210,6 +240,7 @@ void eas_destroy(EasSim* s) {
   if (!s) return;
   avr_terminate(s->avr);
   free(s->in);
+  free(s->adc);
   free(s->out);
   free(s->pulses);
   free(s);
@@ -249,14 +280,72 @@ int eas_uart_push(EasSim* s, double t_us, uint8_t byte) {
   return 0;
 }
 
+/* Set analog input `input` (0..7) to `millivolts` at t_us (not before earlier ones). Returns -1
+ * for a bad input or when out of memory. */
+int eas_adc_push(EasSim* s, double t_us, int input, uint32_t millivolts) {
+  if (input < 0 || input > 7) return -1;
+  if (grow((void**)&s->adc, &s->cap_adc, s->nadc, sizeof(adc_event_t)) != 0) return -1;
+  s->adc[s->nadc++] = (adc_event_t){(avr_cycle_count_t)(t_us * s->cycles_per_us), input,
+                                    millivolts};
+  return 0;
+}
+
+/* Reset through the reset pin at t_us (MCUSR shows EXTRF, RAM and EEPROM are kept). */
+int eas_reset_at(EasSim* s, double t_us) {
+  if (s->nresets == MAX_RESETS) return -1;
+  s->resets[s->nresets++] = (avr_cycle_count_t)(t_us * s->cycles_per_us);
+  return 0;
+}
+
+/* Make the main loop hang at t_us: the first instruction after it with interrupts enabled (so not
+ * inside an interrupt) jumps to an endless loop. Interrupts go on; only a reset ends it. */
+void eas_hang_at(EasSim* s, double t_us) { s->hang_at = (avr_cycle_count_t)(t_us * s->cycles_per_us); }
+
+/* Copy the first n bytes of the EEPROM (at most 1024) from (to_avr 0) or to (to_avr 1) buf.
+ * Returns 0, or -1 for a bad size. (simavr's EEPROM ioctl reports -1 whether or not it worked.) */
+int eas_eeprom(EasSim* s, uint8_t* buf, uint32_t n, int to_avr) {
+  if (n == 0 || n > 1024) return -1;
+  avr_eeprom_desc_t d = {buf, 0, n};
+  avr_ioctl(s->avr, to_avr ? AVR_IOCTL_EEPROM_SET : AVR_IOCTL_EEPROM_GET, &d);
+  return 0;
+}
+
+static void apply_due_events(EasSim* s) {
+  avr_t* avr = s->avr;
+  while (s->xon && s->next_in < s->nin && s->in[s->next_in].at <= avr->cycle) {
+    avr_raise_irq(s->uart_input, s->in[s->next_in++].byte);
+  }
+  while (s->next_adc < s->nadc && s->adc[s->next_adc].at <= avr->cycle) {
+    const adc_event_t* e = &s->adc[s->next_adc++];
+    avr_raise_irq(avr_io_getirq(avr, AVR_IOCTL_ADC_GETIRQ, ADC_IRQ_ADC0 + e->input), e->millivolts);
+  }
+  if (s->next_reset < s->nresets && s->resets[s->next_reset] <= avr->cycle) {
+    ++s->next_reset;
+    s->hung = 0;
+    avr_reset(avr);
+    avr->data[MCUSR_ADDR] = MCUSR_EXTRF;
+  }
+  if (s->hang_at && s->hang_at <= avr->cycle && avr->sreg[S_I]) {
+    avr->flash[HANG_ADDR] = 0xFF;  // rjmp . (0xCFFF), little-endian
+    avr->flash[HANG_ADDR + 1] = 0xCF;
+    avr->pc = HANG_ADDR;
+    s->hung = 1;
+    s->hang_at = 0;  // once: the reset ends it
+  }
+}
+
 /* Run until the simulated time reaches t_us. Returns 0, or 1 when the AVR crashed or stopped. */
 int eas_run_until(EasSim* s, double t_us) {
   const avr_cycle_count_t end = (avr_cycle_count_t)(t_us * s->cycles_per_us);
   while (s->avr->cycle < end && s->state != cpu_Done && s->state != cpu_Crashed) {
-    while (s->xon && s->next_in < s->nin && s->in[s->next_in].at <= s->avr->cycle) {
-      avr_raise_irq(s->uart_input, s->in[s->next_in++].byte);
-    }
+    apply_due_events(s);
+    const avr_flashaddr_t pc = s->avr->pc;
     s->state = avr_run(s->avr);
+    // The watchdog's reset sends the program counter to 0 from wherever it was.
+    if (s->avr->pc == 0 && pc != 0 && (s->avr->data[MCUSR_ADDR] & 0x08)) {
+      ++s->watchdog_resets;
+      s->hung = 0;
+    }
   }
   return s->state == cpu_Done || s->state == cpu_Crashed;
 }
@@ -287,6 +376,9 @@ size_t eas_take_pulses(EasSim* s, double* rise_us, double* width_us, int32_t* pi
   s->npulses -= n;
   return n;
 }
+
+/* Watchdog resets so far. */
+uint64_t eas_watchdog_resets(const EasSim* s) { return s->watchdog_resets; }
 
 /* UART input bytes delivered to the AVR so far. */
 size_t eas_uart_delivered(const EasSim* s) { return s->next_in; }
@@ -332,17 +424,55 @@ static void read_uart_input(EasSim* sim, const char* path) {
   fclose(f);
 }
 
+static void read_adc_input(EasSim* sim, const char* path) {
+  FILE* f = fopen(path, "r");
+  if (!f) die("cannot open --adc", path);
+  char line[256];
+  int lineno = 0;
+  while (fgets(line, sizeof line, f)) {
+    ++lineno;
+    double t_us;
+    int input;
+    unsigned mv;
+    if (line[0] == '#' || line[0] == '\n') continue;
+    if (sscanf(line, "%lf %d %u", &t_us, &input, &mv) != 3 || t_us < 0 ||
+        eas_adc_push(sim, t_us, input, mv) != 0) {
+      fprintf(stderr, "eel_avrsim: %s:%d: expected '<t_us> <input 0..7> <millivolts>'\n", path,
+              lineno);
+      exit(2);
+    }
+  }
+  fclose(f);
+}
+
+static void eeprom_file(EasSim* sim, const char* path, int load) {
+  uint8_t buf[1024];
+  memset(buf, 0xFF, sizeof buf);
+  FILE* f = fopen(path, load ? "rb" : "wb");
+  if (!f) die(load ? "cannot open --eeprom-in" : "cannot write --eeprom-out", path);
+  if (load) {
+    const size_t n = fread(buf, 1, sizeof buf, f);
+    if (n == 0 || eas_eeprom(sim, buf, (uint32_t)n, 1) != 0) die("cannot load EEPROM from", path);
+  } else if (eas_eeprom(sim, buf, sizeof buf, 0) != 0 || fwrite(buf, 1, sizeof buf, f) != sizeof buf) {
+    die("cannot save EEPROM to", path);
+  }
+  fclose(f);
+}
+
 static void usage(void) {
   fprintf(stderr,
           "usage: eel_avrsim --elf FILE [--mcu atmega328p] [--freq 16000000] [--run-ms 1000]\n"
           "       [--uart-in FILE] [--uart-out FILE] [--pulse-pins D2,D3,...] [--pulses FILE]\n"
-          "       [--busy-pin D7] [--budget-us N]\n");
+          "       [--busy-pin D7] [--budget-us N] [--adc FILE] [--eeprom-in FILE]\n"
+          "       [--eeprom-out FILE] [--reset-at-us T[,T...]] [--hang-at-us T]\n");
   exit(2);
 }
 
 int main(int argc, char** argv) {
   const char *elf = NULL, *mcu = "atmega328p", *uart_in = NULL, *uart_out = NULL;
-  const char *pulses = NULL, *pulse_pins = NULL, *busy = NULL;
+  const char *pulses = NULL, *pulse_pins = NULL, *busy = NULL, *adc = NULL;
+  const char *eeprom_in = NULL, *eeprom_out = NULL, *reset_at = NULL;
+  double hang_at_us = 0.0;
   unsigned long freq = 16000000UL;
   double run_ms = 1000.0, budget_us = 0.0;
   for (int i = 1; i < argc; ++i) {
@@ -359,6 +489,11 @@ int main(int argc, char** argv) {
     else if (!strcmp(a, "--pulse-pins")) pulse_pins = v;
     else if (!strcmp(a, "--busy-pin")) busy = v;
     else if (!strcmp(a, "--budget-us")) budget_us = strtod(v, NULL);
+    else if (!strcmp(a, "--adc")) adc = v;
+    else if (!strcmp(a, "--eeprom-in")) eeprom_in = v;
+    else if (!strcmp(a, "--eeprom-out")) eeprom_out = v;
+    else if (!strcmp(a, "--reset-at-us")) reset_at = v;
+    else if (!strcmp(a, "--hang-at-us")) hang_at_us = strtod(v, NULL);
     else usage();
   }
   if (!elf || freq == 0 || run_ms <= 0) usage();
@@ -366,6 +501,16 @@ int main(int argc, char** argv) {
   EasSim* sim = eas_create(elf, mcu, freq);
   if (!sim) exit(2);
   if (uart_in) read_uart_input(sim, uart_in);
+  if (adc) read_adc_input(sim, adc);
+  if (eeprom_in) eeprom_file(sim, eeprom_in, 1);
+  if (hang_at_us > 0) eas_hang_at(sim, hang_at_us);
+  if (reset_at) {
+    char buf[256];
+    snprintf(buf, sizeof buf, "%s", reset_at);
+    for (char* tok = strtok(buf, ","); tok; tok = strtok(NULL, ",")) {
+      if (eas_reset_at(sim, strtod(tok, NULL)) != 0) die("too many resets", tok);
+    }
+  }
   if (uart_out) {
     sim->uart_out = !strcmp(uart_out, "-") ? stdout : fopen(uart_out, "w");
     if (!sim->uart_out) die("cannot write --uart-out", uart_out);
@@ -393,6 +538,8 @@ int main(int argc, char** argv) {
   printf("uart: %zu of %zu input bytes delivered, %" PRIu64 " output bytes\n", sim->next_in,
          sim->nin, sim->uart_out_n);
   if (sim->npins) printf("pulses: %" PRIu64 " on %d pins\n", sim->pulses_n, sim->npins);
+  printf("watchdog resets: %" PRIu64 "\n", sim->watchdog_resets);
+  if (eeprom_out) eeprom_file(sim, eeprom_out, 0);
   int status = 0;
   if (sim->state == cpu_Crashed) {
     printf("FAIL: the AVR crashed\n");

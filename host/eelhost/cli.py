@@ -25,6 +25,7 @@ from eelhost.commands import (
     plan,
     ports,
     report,
+    robot,
     run,
     simulate,
     speeds,
@@ -50,6 +51,7 @@ COMMANDS = (
     campaign,
     bench,
     run,
+    robot,
     ports,
     plan,
 )

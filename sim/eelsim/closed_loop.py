@@ -486,7 +486,7 @@ def simulate_closed_loop(
             while pending and pending[0][0] <= step:
                 offset_command = pending.pop(0)[1]
             # The joints' torques for this step: the twin's PD law by default; in
-            # eelhost.cosim the robot's firmware, ticked once, with its torques held.
+            # eelhost.xil.lockstep the robot's firmware, ticked once, with its torques held.
             drive = joints.on_step(step, t, x, offset_command)
             rhs = plant_rhs(model, drive, vc)
             # the torque at the step's start (for the servo model the first RK4 stage's

@@ -2,13 +2,31 @@
 #pragma once
 #include <stdint.h>
 
+#include "boot.h"
+#include "config.h"
+
 struct Hal {
-  // UART to the XBee at eelproto::kBaud, servo timer, busy pin.
+  // UART to the XBee at eelproto::kBaud, servo timer, busy pin, ADC. Not yet the watchdog.
   void begin();
+  // The hardware watchdog on, last thing in setup(): from then on every pass must kick it.
+  void start_watchdog();
+  // The reset cause (MCUSR, read before anything else ran) and the resets since power-on.
+  BootInfo boot_info();
   uint32_t now_us();  // micros(): 4 us resolution, wraps every 71.6 min
   bool uart_read(uint8_t& byte);
   bool uart_can_write();  // room in the UART's transmit buffer: writing never blocks the loop
   void uart_write(uint8_t byte);
   void servo_write_us(const uint16_t* pulse_us);
   void busy_pin(bool on);
+  // One conversion of each analog input (cfg::kAdcInputs), interrupt-driven (~0.1 ms each) while
+  // the control update runs; adc_wait() returns the readings (at most 2 ms later).
+  void adc_start();
+  const uint16_t* adc_wait();
+  void eeprom_load(uint16_t address, uint8_t* out, uint8_t n);
+  // Writes the bytes that differ (3.4 ms each, kicking the watchdog), then reads back.
+  bool eeprom_store(uint16_t address, const uint8_t* data, uint8_t n);
+  void kick_watchdog();
+
+ private:
+  uint16_t adc_[cfg::kAdcInputs];
 };

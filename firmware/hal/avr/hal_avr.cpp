@@ -1,29 +1,77 @@
 #include <Arduino.h>
+#include <avr/eeprom.h>
+#include <avr/wdt.h>
+#include <util/atomic.h>
 
 #include "hal.h"
 #include "pins.h"
 #include "protocol_gen.h"
+#include "servo_map.h"
 #include "servo_timer1.h"
+#include "uart.h"
+
+namespace {
+// RAM the C runtime does not clear, so that a reset (not a power cycle) leaves it as it was.
+uint8_t g_mcusr_at_boot __attribute__((section(".noinit")));
+ResetRecord g_reset_record __attribute__((section(".noinit")));
+
+volatile uint16_t g_adc[cfg::kAdcInputs];
+volatile uint8_t g_adc_next;  // input being converted; cfg::kAdcInputs when the sweep is done
+
+// 16 MHz / 128 = 125 kHz, within the 50..200 kHz of full 10-bit resolution: 13 ADC clocks, 104 us
+// a conversion. Reference AVCC (REFS0).
+constexpr uint8_t kAdcControl = _BV(ADEN) | _BV(ADIE) | _BV(ADPS2) | _BV(ADPS1) | _BV(ADPS0);
+constexpr uint32_t kAdcTimeoutUs = 2000;
+}  // namespace
+
+// Runs before the C runtime sets RAM up (section .init3, right after the stack): the reset cause
+// must be read before anything clears it, and the watchdog stopped, because after a watchdog
+// reset it stays on (WDRF forces WDE) at its shortest period, 16 ms.
+extern "C" void eel_capture_reset_cause() __attribute__((naked, used, section(".init3")));
+void eel_capture_reset_cause() {
+  g_mcusr_at_boot = MCUSR;
+  MCUSR = 0;
+  wdt_disable();
+}
+
+// One conversion done: store it, start the next input's.
+ISR(ADC_vect) {
+  const uint8_t i = g_adc_next;
+  g_adc[i] = ADC;
+  const uint8_t next = static_cast<uint8_t>(i + 1);
+  g_adc_next = next;
+  if (next < cfg::kAdcInputs) {
+    ADMUX = static_cast<uint8_t>(_BV(REFS0) | pins::kAdcChannel[next]);
+    ADCSRA = kAdcControl | _BV(ADSC);
+  }
+}
 
 void Hal::begin() {
-  Serial.begin(eelproto::kBaud);  // 57600: U2X, UBRR 34, -0.8 % error at 16 MHz
+  uart::begin();
   servo_timer1::begin();
   DDRD |= _BV(pins::kBusyBit);
   PORTD &= static_cast<uint8_t>(~_BV(pins::kBusyBit));
+  g_adc_next = cfg::kAdcInputs;
+  ADCSRA = kAdcControl;
+}
+
+void Hal::start_watchdog() { wdt_enable(WDTO_250MS); }
+
+void Hal::kick_watchdog() { wdt_reset(); }
+
+BootInfo Hal::boot_info() {
+  // MCUSR's PORF, EXTRF, BORF, WDRF are the bits of eelproto::ResetFlags.
+  const uint8_t flags = g_mcusr_at_boot & 0x0F;
+  return BootInfo{flags, count_reset(g_reset_record, flags), true};
 }
 
 uint32_t Hal::now_us() { return micros(); }
 
-bool Hal::uart_read(uint8_t& out) {
-  const int c = Serial.read();
-  if (c < 0) return false;
-  out = static_cast<uint8_t>(c);
-  return true;
-}
+bool Hal::uart_read(uint8_t& out) { return uart::read(out); }
 
-bool Hal::uart_can_write() { return Serial.availableForWrite() > 0; }
+bool Hal::uart_can_write() { return uart::can_write(); }
 
-void Hal::uart_write(uint8_t b) { Serial.write(b); }
+void Hal::uart_write(uint8_t b) { uart::write(b); }
 
 void Hal::servo_write_us(const uint16_t* pulse_us) { servo_timer1::write_us(pulse_us); }
 
@@ -33,4 +81,35 @@ void Hal::busy_pin(bool on) {
   } else {
     PORTD &= static_cast<uint8_t>(~_BV(pins::kBusyBit));
   }
+}
+
+void Hal::adc_start() {
+  g_adc_next = 0;
+  ADMUX = static_cast<uint8_t>(_BV(REFS0) | pins::kAdcChannel[0]);
+  ADCSRA = kAdcControl | _BV(ADSC);
+}
+
+const uint16_t* Hal::adc_wait() {
+  const uint32_t t0 = micros();
+  while (g_adc_next < cfg::kAdcInputs && micros() - t0 < kAdcTimeoutUs) {
+  }
+  ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
+    for (uint8_t i = 0; i < cfg::kAdcInputs; ++i) adc_[i] = g_adc[i];
+  }
+  return adc_;
+}
+
+void Hal::eeprom_load(uint16_t address, uint8_t* out, uint8_t n) {
+  eeprom_read_block(out, reinterpret_cast<const void*>(address), n);
+}
+
+bool Hal::eeprom_store(uint16_t address, const uint8_t* data, uint8_t n) {
+  bool ok = true;
+  for (uint8_t i = 0; i < n; ++i) {
+    uint8_t* at = reinterpret_cast<uint8_t*>(address + i);
+    eeprom_update_byte(at, data[i]);
+    wdt_reset();
+    ok = ok && eeprom_read_byte(at) == data[i];
+  }
+  return ok;
 }

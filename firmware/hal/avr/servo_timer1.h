@@ -7,11 +7,12 @@
 #include <stdint.h>
 
 #include "protocol_gen.h"
+#include "servo_map.h"
 
 namespace servo_timer1 {
 constexpr uint16_t kFrameUs = eelproto::kServoFrameUs;
-constexpr uint16_t kMinUs = 500;   // widths are clamped to what any hobby servo accepts
-constexpr uint16_t kMaxUs = 2500;
+constexpr uint16_t kMinUs = kServoMinUs;  // widths are clamped to what any hobby servo accepts
+constexpr uint16_t kMaxUs = kServoMaxUs;
 static_assert(static_cast<uint32_t>(eelproto::kNJoints) * kMaxUs < kFrameUs,
               "the joints' longest pulses, one after the other, must fit in one servo frame");
 

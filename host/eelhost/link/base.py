@@ -211,6 +211,9 @@ class Link:
         self.last_rx_s: float | None = None
         self.telemetry: protocol.Telemetry | None = None
         self.version: protocol.Version | None = None
+        self.status: protocol.Status | None = None
+        self._refusals: dict[int, int] = {}
+        self._flags: int | None = None
         self._reader = protocol.FrameReader()
         self._seq = 0
         self._by_seq: dict[int, protocol.Message] = {}
@@ -274,6 +277,26 @@ class Link:
             return self._answered[seq]
         return "pending" if seq in self._pending else "unknown"
 
+    def refusal(self, seq: int) -> protocol.RefuseReason | None:
+        """Why the robot refused the command sent under ``seq`` (None if it did not)."""
+        reason = self._refusals.get(seq) if self.outcome(seq) == "refused" else None
+        if reason is None:
+            return None
+        try:
+            return protocol.RefuseReason(reason)
+        except ValueError:
+            return None
+
+    @property
+    def joint_feedback(self) -> bool | None:
+        """Whether the robot has joint feedback (analog-feedback servos, the PD on the robot).
+
+        From the flags of its last Telemetry or Status; None before either arrived.
+        """
+        if self._flags is None:
+            return None
+        return bool(self._flags & protocol.Flags.JOINT_FEEDBACK)
+
     def pending(self) -> list[protocol.Message]:
         """The commands sent with ``want_ack`` that are still being resent, oldest first."""
         return [p.message for p in self._pending.values()]
@@ -319,6 +342,10 @@ class Link:
     def _handle(self, now: float, msg: protocol.Message) -> None:
         if isinstance(msg, protocol.Telemetry):
             self.telemetry = msg
+            self._flags = msg.flags
+        elif isinstance(msg, protocol.Status):
+            self.status = msg
+            self._flags = msg.flags
         elif isinstance(msg, protocol.Version):
             self.version = msg
         elif isinstance(msg, protocol.Ack | protocol.Refuse):
@@ -334,6 +361,7 @@ class Link:
             self._pending.pop(first, None)
             detail = ""
             if isinstance(msg, protocol.Refuse):
+                self._refusals[first] = self._refusals[msg.seq] = msg.reason
                 detail = _refuse_reason(msg.reason)
                 log.warning("the robot refused %s: %s", type(sent).__name__, detail)
             self._emit(LinkEvent(now, kind, msg.seq, sent, detail))

@@ -11,7 +11,9 @@ over either.
 possible; default 1), ``seed``, ``radio`` (``xbee`` or ``ideal``), ``loss`` (byte loss
 probability), ``drop=START:END`` (the link is down over that window, s; repeat or separate with
 commas), ``start=x,y,heading_deg`` (where the robot starts in the virtual tank),
-``current=speed,direction_deg``.
+``current=speed,direction_deg``, ``feedback`` (1: analog-feedback servos, the robot measures its
+joint angles and runs the PD itself; 0 by default), ``battery`` (volts of a battery behind the
+robot's divider, measured by the firmware; none by default).
 """
 
 from __future__ import annotations
@@ -146,6 +148,13 @@ def _virtual_robot(u: LinkURI, robot: Robot) -> VirtualRobot:
     if c_speed < 0:
         raise LinkURIError(f"{u.text!r}: current speed {c_speed:g} must be >= 0")
     c = math.radians(c_dir)
+    feedback = u.one("feedback", "0")
+    if feedback not in ("0", "1"):
+        raise LinkURIError(f"{u.text!r}: feedback={feedback!r} (expected 0 or 1)")
+    battery = u.one("battery")
+    battery_v = u.number("battery", 0.0) if battery is not None else None
+    if battery_v is not None and not 0.0 < battery_v <= 30.0:
+        raise LinkURIError(f"{u.text!r}: battery={battery_v:g} V must be in (0, 30]")
     return VirtualRobot(
         robot,
         start_position_m=(x, y),
@@ -155,6 +164,8 @@ def _virtual_robot(u: LinkURI, robot: Robot) -> VirtualRobot:
         drops_s=drops,
         seed=seed,
         speed=speed,
+        joint_feedback=feedback == "1",
+        battery_v=battery_v,
     )
 
 
@@ -165,7 +176,9 @@ def _list_sim_ports() -> list[Port]:
 register_transport(
     TransportScheme(
         name="sim",
-        parameters=("speed", "seed", "radio", "loss", "drop", "start", "current"),
+        parameters=(
+            "speed", "seed", "radio", "loss", "drop", "start", "current", "feedback", "battery"
+        ),
         target="",
         open=_open_sim,
         list_ports=_list_sim_ports,

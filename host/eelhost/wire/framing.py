@@ -1,27 +1,30 @@
 """Framing of the wire protocol: CRC-16, COBS, and frames of header | payload | CRC.
 
 Hand-written and shared by every message set: the generated ``eelhost.wire.protocol`` binds these
-to its schema hash and message table (``encode_frame``, ``decode_frame``, ``FrameReader``). A frame is
-``COBS(schema_hash u16 | msg_id u8 | seq u8 | payload | crc16 u16)`` followed by a zero byte,
-little-endian, CRC-16/CCITT-FALSE over everything before it.
+to its schema hash and message table (``encode_frame``, ``decode_frame``, ``FrameReader``). A frame
+is ``COBS(schema_hash u16 | msg_id u8 | seq u8 | payload | [crc32 u32] | crc16 u16)`` followed by a
+zero byte, little-endian, CRC-16/CCITT-FALSE over everything before it; messages to the robot
+carry the CRC-32 (zlib's) of header and payload (docs/firmware.md, "Command integrity").
 """
 
 from __future__ import annotations
 
 import struct
+import zlib
 from collections.abc import Callable, Mapping
 from typing import Any
 
 HEADER_FORMAT = "<HBB"  # schema hash, message id, sequence number
 HEADER_BYTES = struct.calcsize(HEADER_FORMAT)
 CRC_BYTES = 2
+COMMAND_CRC_BYTES = 4
 
 
 class FrameError(ValueError):
     """A frame that must be dropped; ``kind`` names the counter it goes to.
 
     Kinds: ``cobs`` (garbage), ``short`` (truncated), ``oversize``, ``crc``, ``schema``,
-    ``unknown_id``, ``length``.
+    ``unknown_id``, ``length``, ``crc32`` (of a message to the robot).
     """
 
     def __init__(self, kind: str, detail: str) -> None:
@@ -137,6 +140,8 @@ def encode(message: Any, seq: int, schema_hash: int) -> bytes:
     if not 0 <= seq <= 255:
         raise ValueError(f"seq must be in 0..255, got {seq}")
     body = struct.pack(HEADER_FORMAT, schema_hash, message.MSG_ID, seq) + message.pack()
+    if message.TO_ROBOT:
+        body += struct.pack("<I", zlib.crc32(body))
     body += struct.pack("<H", crc16_ccitt_false(body))
     return cobs_encode(body) + b"\x00"
 
@@ -181,10 +186,13 @@ def decode(
     cls = messages.get(msg_id)
     if cls is None:
         raise FrameError("unknown_id", f"id 0x{msg_id:02X}")
-    payload = body[HEADER_BYTES:-CRC_BYTES]
-    if len(payload) != cls.PAYLOAD_BYTES:
+    check = COMMAND_CRC_BYTES if cls.TO_ROBOT else 0
+    if len(body) != HEADER_BYTES + cls.PAYLOAD_BYTES + check + CRC_BYTES:
         raise FrameError("length", f"{cls.__name__} needs {cls.PAYLOAD_BYTES} bytes")
-    return seq, cls.unpack(payload)
+    end = HEADER_BYTES + cls.PAYLOAD_BYTES
+    if check and struct.unpack_from("<I", body, end)[0] != zlib.crc32(body[:end]):
+        raise FrameError("crc32", "command CRC-32 mismatch")
+    return seq, cls.unpack(body[HEADER_BYTES:end])
 
 
 class StreamDecoder:

@@ -16,14 +16,34 @@ from collections.abc import Callable
 from typing import Any, Protocol
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from eelhost.wire import protocol
-from eelhost.xil.native_firmware import NativeFirmware
+from eelhost.xil.native_firmware import N_JOINTS, NativeFirmware
 from eelhost.xil.radio import RadioChannel
 from eelsim.control import Gait, gait_reference, joint_pd_torque
 
-__all__ = ["HeldTwinDriver", "JointDriver", "NativeDriver", "Transmission"]
+__all__ = ["HeldTwinDriver", "JointDriver", "NativeDriver", "Transmission", "servo_command_rad"]
+
+#: Pulse width of a straight joint, us (docs/firmware.md, "Settings": trim_us).
+SERVO_CENTRE_US = 1500.0
+
+
+def servo_command_rad(pulse_us: ArrayLike) -> FloatArray:
+    """The angle an ideal servo turns to for a pulse width (1500 us straight, untrimmed).
+
+    Parameters
+    ----------
+    pulse_us : array_like
+        Pulse widths, us.
+
+    Returns
+    -------
+    ndarray
+        Angles, rad, at the default ``servo_us_per_rad`` (docs/firmware.md, "Settings").
+    """
+    us_per_rad = protocol.SETTINGS["servo_us_per_rad"].default
+    return (np.asarray(pulse_us, dtype=float) - SERVO_CENTRE_US) / us_per_rad
 
 FloatArray = NDArray[np.float64]
 #: What the robot transmitted during a step: (time, bytes) chunks.
@@ -79,6 +99,14 @@ class JointDriver(Protocol):
 class NativeDriver:
     """The native firmware as a :class:`JointDriver`: feed, tick at ``t_us``, take.
 
+    The plant's joint angles also go to the firmware's feedback inputs (the potentiometers of
+    analog-feedback servos, through the robot's calibration), which it reads when its setting
+    ``joint_feedback`` is on. Then the firmware runs the PD itself and its pulses command each
+    servo to phi + u / k_s; the servo, a spring of stiffness k_s about its commanded angle, gives
+    the joint the torque k_s (command - phi), which is u plus what the ADC got wrong. Without
+    feedback the torques are the firmware's PD law on the plant's angles (docs/firmware.md,
+    "Joint loop").
+
     Parameters
     ----------
     firmware : NativeFirmware
@@ -86,15 +114,28 @@ class NativeDriver:
     torque_hook : callable, optional
         ``torque_hook(torque_nm, phi_dot_rad_s) -> torque_nm`` applied to the firmware's torques
         (the servo torque-speed limit).
+    servo_stiffness_nm_per_rad : float
+        k_s of the simulated servos (the setting's default, which the firmware assumes).
+
+    Attributes
+    ----------
+    servo_command_rad : ndarray, shape (N-1,)
+        The angle each servo is commanded to at the last tick, what a position servo follows:
+        with joint feedback, the angle of its pulse (1500 us straight, the setting
+        servo_us_per_rad's default per radian: the simulated servos are ideal, so a trim moves
+        the joint); without, the reference alpha itself (the pulse less its 1 us rounding).
     """
 
     def __init__(
         self,
         firmware: NativeFirmware,
         torque_hook: Callable[[FloatArray, FloatArray], FloatArray] | None = None,
+        servo_stiffness_nm_per_rad: float = protocol.SETTINGS["servo_stiffness_nm_per_rad"].default,
     ) -> None:
         self.firmware = firmware
         self._hook = torque_hook
+        self._stiffness = servo_stiffness_nm_per_rad
+        self.servo_command_rad = np.zeros(N_JOINTS)
 
     def step(
         self,
@@ -108,12 +149,19 @@ class NativeDriver:
         data = uplink.deliver_bytes(t_us)
         if data:
             self.firmware.feed(data)
+        self.firmware.set_joint_angles(phi_rad)
         out = self.firmware.tick(t_us, phi_rad, phi_dot_rad_s)
-        torque = out.torque_nm.astype(np.float64)
+        alpha = out.alpha_rad.astype(np.float64)
+        if out.measured:
+            self.servo_command_rad = servo_command_rad(out.pulse_us)
+            torque = self._stiffness * (self.servo_command_rad - np.asarray(phi_rad, dtype=float))
+        else:
+            self.servo_command_rad = alpha
+            torque = out.torque_nm.astype(np.float64)
         if self._hook is not None:
             torque = self._hook(torque, phi_dot_rad_s)
         tx = self.firmware.take()
-        return torque, out.alpha_rad.astype(np.float64), [(t_us, tx)] if tx else []
+        return torque, alpha, [(t_us, tx)] if tx else []
 
     def observe(self) -> tuple[int, float]:
         """See :meth:`JointDriver.observe`."""

@@ -52,7 +52,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 import numpy as np
@@ -63,7 +63,7 @@ from eelhost.link.base import Link, LinkEvent
 from eelhost.link.sim_transport import SimTransport
 from eelhost.wire import protocol
 from eelhost.xil.drivers import JointDriver, NativeDriver
-from eelhost.xil.native_firmware import N_JOINTS, NativeFirmware
+from eelhost.xil.native_firmware import N_JOINTS, NativeFirmware, store_settings
 from eelhost.xil.radio import ChannelCounters, RadioModel
 from eelsim.closed_loop import (
     JointDrive,
@@ -162,12 +162,16 @@ class RobotTick:
         The joint references in force at ``t_us``.
     phi_dot_rad_s : ndarray, shape (N-1,)
         The plant's joint rates the driver was given.
+    servo_command_rad : ndarray, shape (N-1,)
+        The angles the robot commands its servos to (the references, or with joint feedback
+        phi + u / k_s: the driver's ``servo_command_rad`` where it has one).
     """
 
     t_us: int
     torque_nm: FloatArray
     alpha_rad: FloatArray
     phi_dot_rad_s: FloatArray
+    servo_command_rad: FloatArray
 
 
 class Lockstep:
@@ -226,7 +230,8 @@ class Lockstep:
             self.downlink.send(t_tx, data)
             if self.on_transmit is not None:
                 self.on_transmit(t_tx, data)
-        return RobotTick(t_us, torque, alpha, phi_dot)
+        command = getattr(self.driver, "servo_command_rad", alpha)
+        return RobotTick(t_us, torque, alpha, phi_dot, np.array(command, dtype=float))
 
     def host_transport(self, clock: SimClock) -> SimTransport:
         """The host's end of this radio, stamped by ``clock``."""
@@ -253,6 +258,10 @@ class LockstepOptions:
     host_silent_after_us : int or None
         The host stops from this time on, neither sending nor reading (a host that hangs), or
         never.
+    joint_feedback : bool
+        The native firmware boots with analog joint feedback on (setting ``joint_feedback`` saved
+        in its EEPROM): it measures the plant's joint angles through its ADC and runs the PD
+        itself (:class:`eelhost.xil.drivers.NativeDriver`).
     """
 
     loop: LoopOptions = field(default_factory=LoopOptions)
@@ -260,6 +269,7 @@ class LockstepOptions:
     restart_on_failsafe: bool = True
     firmware_control_period_us: int = 0
     host_silent_after_us: int | None = None
+    joint_feedback: bool = False
 
 
 @dataclass(frozen=True)
@@ -532,7 +542,8 @@ def joint_drive(robot: Robot, tick: RobotTick, offset_rad: float, servo_limits: 
     JointDrive
     """
     if robot.joint_model.kinematic:
-        return held_reference_drive(robot, tick.alpha_rad, offset_rad)
+        drive = held_reference_drive(robot, tick.servo_command_rad, offset_rad)
+        return replace(drive, alpha_rad=tick.alpha_rad)
     held = np.asarray(tick.torque_nm, dtype=float)
     if servo_limits:
         joints = robot.joints
@@ -658,4 +669,6 @@ def run_firmware_in_loop(
     """
     opts = options or LockstepOptions()
     fw = firmware or NativeFirmware(now_us=0, control_period_us=opts.firmware_control_period_us)
+    if opts.joint_feedback:
+        store_settings(fw, {"joint_feedback": 1.0})
     return run_lockstep(robot, scenario, NativeDriver(fw), seed, radio, opts)

@@ -19,7 +19,7 @@ import re
 import shutil
 import subprocess
 import threading
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -52,6 +52,8 @@ def _cdef_from_header(path: Path) -> tuple[str, int, int]:
 
 
 _CDEF, N_JOINTS, ABI_VERSION = _cdef_from_header(HEADER_PATH)
+#: The analog input of the battery divider (the joints' potentiometers are 0 .. N_JOINTS - 1).
+BATTERY_INPUT = int(re.findall(r"#define\s+EEL_BATTERY_INPUT\s+(\d+)", HEADER_PATH.read_text())[0])
 
 _ffi = FFI()
 _ffi.cdef(_CDEF)
@@ -150,6 +152,11 @@ class TickOutputs:
         Servo pulse widths the Nano would output.
     control_ran : bool
         Whether this tick ran a control update (else the references are held).
+    measured : bool
+        Whether the update measured the joint angles (joint feedback on): the robot then runs the
+        PD itself and its pulses command phi + u / k_s (docs/firmware.md, "Joint loop").
+    phi_measured_rad : ndarray, shape (5,)
+        The angles it measured through the ADC (zeros without feedback).
     """
 
     alpha_rad: NDArray[np.float32]
@@ -157,6 +164,10 @@ class TickOutputs:
     torque_nm: NDArray[np.float32]
     pulse_us: NDArray[np.uint16]
     control_ran: bool
+    measured: bool = False
+    phi_measured_rad: NDArray[np.float32] = field(
+        default_factory=lambda: np.zeros(N_JOINTS, dtype=np.float32)
+    )
 
 
 class NativeFirmware:
@@ -203,6 +214,70 @@ class NativeFirmware:
         self._lib.eel_reset(self._fw, _u32(now_us))
         self._lib.eel_set_control_period_us(self._fw, _u32(self._period))
         self._reader = protocol.FrameReader()
+
+    def reboot(self, now_us: int, reset_flags: int) -> None:
+        """Reset without a power cycle (watchdog, brown-out, reset pin): the reset count goes up.
+
+        Parameters
+        ----------
+        now_us : int
+            The clock at the new boot.
+        reset_flags : int
+            :class:`eelhost.wire.protocol.ResetFlags` bits the robot finds at boot.
+        """
+        self._lib.eel_reboot(self._fw, _u32(now_us), int(reset_flags) & 0xFF)
+        self._lib.eel_set_control_period_us(self._fw, _u32(self._period))
+        self._reader = protocol.FrameReader()
+
+    def set_adc(self, analog_input: int, counts: int) -> None:
+        """Hold an analog input at a reading (0..1023 over 0..5 V) from now on.
+
+        Parameters
+        ----------
+        analog_input : int
+            0 .. N_JOINTS - 1: a joint's feedback potentiometer; ``BATTERY_INPUT``: the battery.
+        counts : int
+            The reading.
+
+        Raises
+        ------
+        ValueError
+            For an input or a reading the ADC does not have.
+        """
+        if self._lib.eel_set_adc(self._fw, int(analog_input), int(counts)) != 0:
+            raise ValueError(f"no analog input {analog_input} with reading {counts} (0..1023)")
+
+    def set_joint_angles(self, phi_rad: ArrayLike) -> None:
+        """Set the joints' feedback inputs to what their potentiometers read at these angles.
+
+        Parameters
+        ----------
+        phi_rad : array_like, shape (5,)
+            Joint angles, joint 1 first (through the robot's feedback calibration settings).
+        """
+        self._lib.eel_set_joint_angles(self._fw, self._fill(self._phi, phi_rad, "phi_rad"))
+
+    def eeprom_write(self, address: int, data: bytes) -> None:
+        """Write bytes into the emulated EEPROM (as a programmer would, not through the robot).
+
+        Raises
+        ------
+        ValueError
+            When they do not fit in the EEPROM from ``address``.
+        """
+        n = self._lib.eel_eeprom_write(self._fw, int(address), data, len(data))
+        if n != len(data):
+            raise ValueError(f"{len(data)} bytes at {address} do not fit in the EEPROM")
+
+    def eeprom_read(self, address: int, n: int) -> bytes:
+        """Read ``n`` bytes of the emulated EEPROM from ``address`` (fewer at its end)."""
+        buf = _ffi.new(f"uint8_t[{max(int(n), 1)}]")
+        got = self._lib.eel_eeprom_read(self._fw, int(address), buf, int(n))
+        return bytes(_ffi.buffer(buf, got))
+
+    def set_uart_tx_stalled(self, stalled: bool) -> None:
+        """Stop (or restart) the UART's transmitter: the robot's queue fills and frames drop."""
+        self._lib.eel_set_uart_tx_stalled(self._fw, 1 if stalled else 0)
 
     def feed(self, data: bytes) -> None:
         """Deliver bytes to the firmware's UART, as if they came from the radio.
@@ -293,6 +368,8 @@ class NativeFirmware:
             torque_nm=np.frombuffer(_ffi.buffer(o.torque_nm), dtype=np.float32).copy(),
             pulse_us=np.frombuffer(_ffi.buffer(o.pulse_us), dtype=np.uint16).copy(),
             control_ran=bool(o.control_ran),
+            measured=bool(o.measured),
+            phi_measured_rad=np.frombuffer(_ffi.buffer(o.phi_measured_rad), dtype=np.float32).copy(),
         )
 
     def status(self) -> dict[str, float | int]:
@@ -317,6 +394,37 @@ class NativeFirmware:
             raise ValueError(f"{name} must have shape ({N_JOINTS},), got {a.shape}")
         _ffi.memmove(dest, a.tobytes(), 4 * N_JOINTS)
         return dest
+
+
+def store_settings(firmware: NativeFirmware, values: dict[str, float]) -> None:
+    """Save settings into the firmware's EEPROM through its own commands, then power-cycle it.
+
+    The firmware boots with them, as a robot configured with ``eelbot robot config --save`` does.
+
+    Parameters
+    ----------
+    firmware : NativeFirmware
+        Booted, idle.
+    values : dict
+        Setting name to value (every joint's element for a per-joint setting).
+
+    Raises
+    ------
+    RuntimeError
+        When the firmware refuses one of them.
+    """
+    seq = 0
+    for name, value in values.items():
+        info = protocol.SETTINGS[name]
+        for index in range(info.count):
+            firmware.send(protocol.SetSetting(info.key, index, value), seq)
+            seq += 1
+    firmware.send(protocol.SaveSettings(), seq)
+    firmware.tick(0)
+    refused = [m for _, m in firmware.read_frames() if isinstance(m, protocol.Refuse)]
+    if refused:
+        raise RuntimeError(f"the firmware refused settings {values}: {refused}")
+    firmware.reset(0)
 
 
 def _u32(now_us: int) -> int:

@@ -416,11 +416,15 @@ def expected_pulse_widths_us(
     valid : ndarray of bool, shape (P,)
         False for pulses whose update or frame is ambiguous.
     """
-    # Frames as the AVR received them: (time the delimiter entered the UART, message).
+    # Frames as the AVR received them: (time the delimiter entered the UART, message). simavr's
+    # UART takes the queued bytes one after the other, 11 bit times each (it counts a parity bit):
+    # 192.5 us at 57600 baud (U2X, UBRR 34).
     reader = protocol.FrameReader()
     frames: list[tuple[float, protocol.Message]] = []
+    entered = -np.inf
     for t, byte in result.uart_in:
-        frames.extend((t, m) for _, m in reader.feed(bytes([byte])))
+        entered = max(t, entered + 11 * 8 * 35 / 16.0)
+        frames.extend((entered, m) for _, m in reader.feed(bytes([byte])))
     upd = result.control_updates_us
     rise_u, end_u = upd[:, 0], upd[:, 0] + upd[:, 1]
     k_start = None

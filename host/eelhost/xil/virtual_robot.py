@@ -33,7 +33,7 @@ from eelhost.link.sim_transport import SimTransport
 from eelhost.vision.synthetic import SyntheticCamera, TruePose
 from eelhost.xil.drivers import NativeDriver
 from eelhost.xil.lockstep import DT_US, Lockstep, SimClock, joint_drive, plant_step
-from eelhost.xil.native_firmware import NativeFirmware
+from eelhost.xil.native_firmware import BATTERY_INPUT, NativeFirmware, store_settings
 from eelhost.xil.radio import RadioModel
 from eelsim.dynamics import straight_state
 from eelsim.model import SwimmerModel
@@ -42,6 +42,17 @@ from eelsim.robot import Robot
 __all__ = ["VirtualCamera", "VirtualRobot"]
 
 FloatArray = NDArray[np.float64]
+
+
+#: Volts of battery per volt at the ADC pin of the virtual robot's divider (22k over 10k).
+BATTERY_DIVIDER = 3.2
+#: The ADC's reference: readings 0..1023 over 0..ADC_REFERENCE_V.
+ADC_REFERENCE_V = 5.0
+
+
+def battery_counts(battery_v: float, divider: float) -> int:
+    """The ADC reading of a battery voltage behind a divider (clamped to 0..1023)."""
+    return int(min(max(round(battery_v / divider / ADC_REFERENCE_V * 1023), 0), 1023))
 
 
 class VirtualRobot:
@@ -65,6 +76,12 @@ class VirtualRobot:
         Seed of the radio's loss and corruption.
     speed : float
         Speed of the clock (see :class:`SimClock`).
+    joint_feedback : bool
+        Analog-feedback servos: the firmware boots with the setting ``joint_feedback`` on (saved
+        in its EEPROM), measures the plant's joint angles through its ADC and runs the PD itself.
+    battery_v : float, optional
+        A battery of this voltage behind the default divider (the firmware boots with
+        ``battery_divider`` set and measures it); None: no divider fitted.
     """
 
     def __init__(
@@ -77,6 +94,8 @@ class VirtualRobot:
         drops_s: list[tuple[float, float]] | None = None,
         seed: int = 0,
         speed: float = 0.0,
+        joint_feedback: bool = False,
+        battery_v: float | None = None,
     ) -> None:
         self.robot = robot
         self.model = SwimmerModel.from_robot(robot)
@@ -86,6 +105,15 @@ class VirtualRobot:
         self.drops_us = [(round(a * 1e6), round(b * 1e6)) for a, b in (drops_s or [])]
         link = (radio or RadioModel.xbee()).with_outages(tuple(self.drops_us))
         self.firmware = NativeFirmware(now_us=0, control_period_us=0)
+        saved: dict[str, float] = {}
+        if joint_feedback:
+            saved["joint_feedback"] = 1.0
+        if battery_v is not None:
+            saved["battery_divider"] = BATTERY_DIVIDER
+        if saved:
+            store_settings(self.firmware, saved)
+        if battery_v is not None:
+            self.firmware.set_adc(BATTERY_INPUT, battery_counts(battery_v, BATTERY_DIVIDER))
         self.driver = NativeDriver(self.firmware)
         self.lockstep = Lockstep(self.driver, link, seed, self.model.n_links, DT_US)
         self.uplink, self.downlink = self.lockstep.uplink, self.lockstep.downlink

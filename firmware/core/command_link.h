@@ -1,0 +1,69 @@
+// The robot's end of the radio link: decodes the bytes from the host into commands, keeps the
+// sequence numbers, answers duplicates, feeds the failsafe timer and queues what the robot sends.
+// docs/firmware.md, "Link".
+#pragma once
+#include <stdint.h>
+
+#include "byte_queue.h"
+#include "frame_codec.h"
+#include "link_counters.h"
+#include "link_watchdog.h"
+#include "message_codec.h"
+
+class CommandLink {
+ public:
+  using TxQueue = ByteQueue<128>;
+  // Room that replies leave free in the queue: the largest frame the robot sends on its own
+  // (Telemetry). A flood of commands can fill the queue with acknowledgements, never starve the
+  // telemetry; periodic frames are spread so that one at a time needs the room.
+  static constexpr uint8_t kReserveBytes = eelproto::kMaxFrameBytes;
+
+  void reset(uint32_t now_us);
+  // One received byte. Returns the command to execute, or nullptr: nothing complete yet, a bad
+  // frame (counted), a frame of a message only the robot sends (counted as bad_direction and
+  // ignored: an echoing radio must not keep the link alive), or a repeat of the previous command
+  // (counted as a duplicate and answered as the first copy was, not executed again; a query has
+  // no stored answer and is returned to be answered again). Only commands feed the watchdog.
+  const Frame* push(uint8_t byte, uint32_t now_us);
+
+  // Answers to the command last returned by push() (or, for a save, the command that asked).
+  void ack(uint8_t msg_id, uint8_t seq);
+  void refuse(uint8_t msg_id, uint8_t seq, uint8_t reason);
+  // An answer with data (Version, Setting): queued only with kReserveBytes to spare.
+  template <typename M>
+  void reply(const M& m) {
+    send(m, kReserveBytes);
+  }
+  // A frame the robot sends on its own (Telemetry, Status): may use the whole queue.
+  template <typename M>
+  void send_periodic(const M& m) {
+    send(m, 0);
+  }
+
+  const LinkCounters& counters() const { return counters_; }
+  const LinkWatchdog& watchdog() const { return watchdog_; }
+  TxQueue& tx() { return tx_; }
+
+ private:
+  static constexpr uint8_t kNoAnswer = 0xFF;  // last_answer_: nothing stored (a query, or none)
+  template <typename M>
+  void send(const M& m, uint8_t spare) {
+    uint8_t p[M::kPayloadBytes];
+    eelproto::pack(m, p);
+    send_frame(static_cast<uint8_t>(M::kId), p, sizeof(p), spare);
+  }
+  void send_frame(uint8_t msg_id, const uint8_t* payload, uint8_t len, uint8_t spare);
+  void answer(uint8_t msg_id, uint8_t seq, uint8_t reason);
+  // Sequence check of a new command: counts lost frames, tells a duplicate.
+  bool is_duplicate(const Frame& f);
+
+  FrameDecoder decoder_;
+  LinkCounters counters_{};
+  LinkWatchdog watchdog_;
+  TxQueue tx_;
+  uint32_t last_check_ = 0;    // CRC of the last command: a duplicate is the same frame again
+  uint8_t tx_seq_ = 0;
+  uint8_t last_rx_seq_ = 0;
+  uint8_t last_answer_ = 0;    // 0: Ack; a RefuseReason; kNoAnswer
+  bool have_rx_seq_ = false;
+};
