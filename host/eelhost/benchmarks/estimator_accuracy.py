@@ -26,7 +26,7 @@ from typing import Any
 from eelhost.benchmarks.machine import cpu_model
 from eelhost.data.experiments import BUNDLED_DATASET, Dataset, load_dataset
 from eelhost.data.virtual_tank import TABLE3, TankSettings, generate_dataset
-from eelhost.estimation.optimise import NAMES, FitResult
+from eelhost.estimation.optimise import FitResult
 from eelhost.estimation.pipeline import FitSettings, fit_motion
 from eelhost.estimation.validate import validate
 
@@ -53,7 +53,7 @@ def _fit_and_validate(ds: Dataset, settings: FitSettings) -> dict[str, Any]:
         out["fits"][motion] = res
         out["simulations"] += ev.simulations
         out["truth_fitness"][motion] = float(ev.fitness(TABLE3[motion].as_array()[None])[0])
-    fitted = {m: r.coefficients for m, r in out["fits"].items()}
+    fitted = {m: r.model for m, r in out["fits"].items()}
     tests = [e for exps in ds.test.values() for e in exps]
     runs = validate(ds.robot, fitted, tests, backend=settings.backend)
     out["seconds"] = time.perf_counter() - t0
@@ -157,7 +157,7 @@ def estimator_report(
             "",
             f"{r['simulations']} simulations, {r['seconds']:.0f} s for both fits and the validation.",
             "",
-            "| fit | fitness | truth's fitness | " + " | ".join(NAMES) + " |",
+            "| fit | fitness | truth's fitness | C_f | C_d | C_a | C_m |",
             "|---|---|---|" + "---|" * 4,
         ]
         lines += _recovery_rows(r)

@@ -16,12 +16,11 @@ import numpy as np
 
 from eelhost.data.experiments import Dataset
 from eelhost.estimation.evaluate import ALIGN_S
-from eelhost.estimation.identify import bootstrap, identifiability
-from eelhost.estimation.optimise import NAMES, FitResult
+from eelhost.estimation.identify import identifiability
+from eelhost.estimation.optimise import FitResult
 from eelhost.estimation.pipeline import (
     FitSettings,
     fit_motion,
-    training_experiments,
     write_coefficients,
 )
 from eelhost.estimation.validate import ValidationRun, table_csv, table_markdown, validate
@@ -81,27 +80,15 @@ def run_report(
         extra["simulations"][motion] = ev.simulations
         say(
             f"{motion}: {res.method} fitness {res.fitness:.4f} after {ev.simulations} simulations: "
-            + ", ".join(
-                f"{n} {v:.4g}" for n, v in zip(NAMES, res.coefficients.as_array(), strict=True)
-            )
+            + ", ".join(f"{n} {v:.4g}" for n, v in res.space.as_dict(res.values).items())
         )
-        ident = identifiability(ev, res.coefficients)
+        ident = identifiability(ev, res.values)
         extra["identifiability"][motion] = ident.to_json()
-        if bootstrap_replicates > 0:
-            boot = bootstrap(
-                dataset.robot,
-                training_experiments(dataset, motion),
-                res.coefficients,
-                bootstrap_replicates,
-                settings.seed,
-                settings.backend,
-            )
-            extra["uncertainty"][motion] = boot.to_json()
         extra["seconds"][motion] = time.perf_counter() - t0
     if dataset.truth:
         extra["truth"] = {m: c.model_dump() for m, c in dataset.truth.items()}
     write_coefficients(out / "coefficients.json", fits, extra)
-    fitted = {m: r.coefficients for m, r in fits.items()}
+    fitted = {m: r.model for m, r in fits.items()}
     tests = [e for exps in dataset.test.values() for e in exps] + list(dataset.paths)
     runs = validate(dataset.robot, fitted, tests, backend=settings.backend)
     (out / "table4.md").write_text(table_markdown([r.row for r in runs]) + "\n")
@@ -138,17 +125,18 @@ def _report_text(
         f"Dataset: `{dataset.folder}` ({dataset.manifest.get('description', '')})",
         "",
     ]
+    names = next(iter(fits.values())).space.names
     lines += [
         "## Fitted coefficients",
         "",
-        "| fit | method | fitness | simulations | " + " | ".join(NAMES) + " |",
-        "|---|---|---|---|" + "---|" * 4,
+        "| fit | method | fitness | simulations | " + " | ".join(names) + " |",
+        "|---|---|---|---|" + "---|" * len(names),
     ]
     for m, r in fits.items():
         boot = extra["uncertainty"].get(m, {}).get("std", {})
         vals = [
             f"{v:.4g}" + (f" ± {boot[n]:.2g}" if n in boot else "")
-            for n, v in zip(NAMES, r.coefficients.as_array(), strict=True)
+            for n, v in zip(names, r.values, strict=True)
         ]
         lines.append(
             f"| {m} | {r.method} | {r.fitness:.4f} | {extra['simulations'][m]} | "
@@ -172,7 +160,7 @@ def _report_text(
                 )
                 lines.append(
                     f"- {m}: relative error "
-                    + ", ".join(f"{n} {e * 100:+.1f} %" for n, e in zip(NAMES, rel, strict=True))
+                    + ", ".join(f"{n} {e * 100:+.1f} %" for n, e in zip(names, rel, strict=True))
                 )
     lines += [
         "",
@@ -186,7 +174,7 @@ def _report_text(
             f"- **{m}**: "
             + "; ".join(
                 f"{n} {ident['verdict'][n]} (rel. std. error {ident['rel_std_error'][n]:.2g})"
-                for n in NAMES
+                for n in names
             )
         )
     worst: dict[str, list[float]] = {}
