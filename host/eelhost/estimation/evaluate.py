@@ -31,6 +31,7 @@ from eelhost.estimation.fitness import (
     N_SAMPLES_FIT,
     VELOCITY_WEIGHT,
     sample_times,
+    sampled_velocity,
     trajectory_error,
 )
 from eelhost.estimation.parameters import ParameterSpace
@@ -209,6 +210,10 @@ class Simulated:
     failure_time_s: np.ndarray
     steps: np.ndarray
 
+    def take(self, rows: slice) -> Simulated:
+        """The simulations of some candidates (rows of every array)."""
+        return Simulated(*(getattr(self, f.name)[rows] for f in dataclasses.fields(self)))
+
     def counted_failure(self, prepared: Sequence[PreparedExperiment]) -> np.ndarray:
         """Failure codes that count against a candidate, shape (C, E).
 
@@ -286,9 +291,8 @@ class Evaluator:
             raise EstimationError("no experiments to evaluate on")
         self.space = space or ParameterSpace.for_robot(robot)
         self.robot = self.space.model_robot(robot)
-        self.prepared = [
-            prepare(e, n_samples, align_s=align_s, observe=observe) for e in experiments
-        ]
+        self.n_samples, self.align_s, self.observe = n_samples, align_s, observe
+        self.prepared = self.prepare_like(experiments)
         self.weight = weight
         self.backend = _choose_backend(backend)
         self.workers = workers
@@ -296,6 +300,11 @@ class Evaluator:
         self.simulations = 0  # closed-loop runs done so far
         self.steps = 0  # and the RK4 steps they took
         self._lengths: RunLengths | None = None  # the batch backend's guesses of run lengths
+
+    def prepare_like(self, experiments: Sequence[Experiment]) -> list[PreparedExperiment]:
+        """Experiments prepared as this evaluator prepares its own (samples, clock search)."""
+        return [prepare(e, self.n_samples, align_s=self.align_s, observe=self.observe)
+                for e in experiments]
 
     def simulate(self, parameters: np.ndarray) -> Simulated:
         """Simulate every experiment for every candidate.
@@ -361,12 +370,20 @@ class Evaluator:
         sim = self.simulate(parameters)
         return self.errors_of(sim)
 
-    def errors_of(self, sim: Simulated) -> np.ndarray:
-        """Per-experiment error of already simulated candidates, shape (C, E)."""
+    def errors_of(
+        self, sim: Simulated, prepared: Sequence[PreparedExperiment] | None = None
+    ) -> np.ndarray:
+        """Per-experiment error of already simulated candidates, shape (C, E).
+
+        ``prepared`` compares them with other recordings of the same tasks (the parametric
+        bootstrap's regenerated data: same frame times, other positions); default: this
+        evaluator's.
+        """
+        prepared = self.prepared if prepared is None else prepared
         c, e = sim.failure.shape
-        counted = sim.counted_failure(self.prepared)
+        counted = sim.counted_failure(prepared)
         out = np.empty((c, e))
-        for j, p in enumerate(self.prepared):
+        for j, p in enumerate(prepared):
             err = self.aligned_errors(p, sim.positions_m[:, j]).min(axis=1)
             for i in range(c):
                 f = Failure(int(counted[i, j]))
@@ -389,30 +406,43 @@ class Evaluator:
         """Minimax fitness max_j error_j of each candidate, shape (C,)."""
         return self.errors(parameters).max(axis=1)
 
+    def residual_vectors_of(
+        self, sim: Simulated, prepared: Sequence[PreparedExperiment] | None = None
+    ) -> np.ndarray:
+        """The 2-vectors whose norms the errors sum, shape (C, E, 2 n, 2).
+
+        Per experiment: the position differences at the n samples, then ``weight`` times the
+        velocity differences, each against the recording at the candidate's best clock offset
+        (error_j is the sum of their norms). NaN where a run failed (it scores its penalty).
+        """
+        prepared = self.prepared if prepared is None else prepared
+        counted = sim.counted_failure(prepared)
+        blocks = []
+        for j, p in enumerate(prepared):
+            simp = sim.positions_m[:, j]
+            # each candidate is compared with the recording at its own best clock offset
+            idx = np.argmin(np.nan_to_num(self.aligned_errors(p, simp), nan=np.inf), axis=1)
+            exp = p.shifted_positions_m[idx]
+            dv = sampled_velocity(p.times_s, simp) - sampled_velocity(p.times_s, exp)
+            block = np.concatenate([simp - exp, self.weight * dv], axis=1)
+            block[counted[:, j] != int(Failure.NONE)] = np.nan
+            blocks.append(block)
+        return np.stack(blocks, axis=1)
+
+    def evaluate(
+        self, parameters: np.ndarray, prepared: Sequence[PreparedExperiment] | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Errors (C, E) and residual vectors (C, E, 2 n, 2) of candidates (one simulation)."""
+        sim = self.simulate(parameters)
+        return self.errors_of(sim, prepared), self.residual_vectors_of(sim, prepared)
+
     def residuals(self, parameters: np.ndarray) -> np.ndarray:
         """Stacked position and weighted velocity differences, shape (C, E * n * 4).
 
         The least-squares form of the same data (failed runs give large constant residuals).
         """
-        from eelhost.estimation.fitness import sampled_velocity
-
-        sim = self.simulate(parameters)
-        counted = sim.counted_failure(self.prepared)
-        blocks = []
-        for j, p in enumerate(self.prepared):
-            simp = sim.positions_m[:, j]
-            # each candidate is compared with the recording at its own best clock offset
-            idx = np.argmin(np.nan_to_num(self.aligned_errors(p, simp), nan=np.inf), axis=1)
-            exp = p.shifted_positions_m[idx]
-            dp = simp - exp
-            dv = sampled_velocity(p.times_s, simp) - sampled_velocity(p.times_s, exp)
-            block = np.concatenate(
-                [dp.reshape(len(simp), -1), self.weight * dv.reshape(len(simp), -1)], axis=1
-            )
-            failed = counted[:, j] != int(Failure.NONE)
-            block[failed] = 10.0  # far worse than any real trajectory error (metres)
-            blocks.append(np.nan_to_num(block, nan=10.0))
-        return np.concatenate(blocks, axis=1)
+        vectors = self.residual_vectors_of(self.simulate(parameters))
+        return np.nan_to_num(vectors.reshape(len(vectors), -1), nan=10.0)  # 10 m: far worse
 
 
 def _choose_backend(backend: str) -> str:

@@ -150,7 +150,7 @@ def _fit_cmaes(problem: FitProblem) -> FitResult:
     res = _global_cmaes(problem, settings.restarts)
     if settings.polish_iterations <= 0:
         return res
-    pol = polish_minimax(ev.errors, ev.space, res.values, settings.polish_iterations,
+    pol = polish_minimax(ev.evaluate, ev.space, res.values, settings.polish_iterations,
                          simulations=problem.simulations)
     return _then(res, pol, f"{res.method}+minimax", ev.simulations)
 
@@ -183,7 +183,7 @@ def _fit_ga(problem: FitProblem) -> FitResult:
 
 def _fit_minimax(problem: FitProblem) -> FitResult:
     ev = problem.evaluator
-    return polish_minimax(ev.errors, ev.space, problem.start,
+    return polish_minimax(ev.evaluate, ev.space, problem.start,
                           max(1, problem.settings.polish_iterations),
                           simulations=problem.simulations)
 
