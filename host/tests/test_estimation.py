@@ -198,14 +198,17 @@ def test_validate_refuses_a_malformed_coefficients_argument(tiny_dataset, capsys
     assert "expected 4 numbers (C_f,C_d,C_a,C_m)" in capsys.readouterr().err
 
 
-def test_truth_scores_zero_when_the_twin_is_seen_through_the_recordings_camera(tmp_path):
+@pytest.mark.parametrize("median", ["causal", "centred"])
+def test_truth_scores_zero_when_the_twin_is_seen_through_the_recordings_camera(median):
     robot = load_robot()
     s = load_scenario("turning_A0.61_w2.7").model_copy(update={"waypoints_m": [(0.4, 0.2)]})
     # no clock offset, no jitter, no pixel rounding: only the camera's frames and median filter
-    clean = TankSettings(timestamp_jitter_s=0.0, control_jitter_s=0.0, pixel_m=0.0)
+    clean = TankSettings(timestamp_jitter_s=0.0, control_jitter_s=0.0, pixel_m=0.0, median=median)
     exp = record_experiment(robot, s, "turning", TABLE3["turning"], clean, seed=4)
+    assert exp.recording_camera().median == median
     truth = TABLE3["turning"].as_array()[None]
     seen = Evaluator(robot, [exp], backend="batch").errors(truth)
     true_com = Evaluator(robot, [exp], backend="batch", observe=False).errors(truth)
     assert seen[0, 0] < 1e-12  # the estimator observes the twin exactly as the tank recorded it
-    assert true_com[0, 0] > 0.01  # the camera's lag would otherwise count as model error
+    # the causal median's lag would otherwise count as model error; the centred one has none
+    assert true_com[0, 0] > (0.01 if median == "causal" else 1e-4)
