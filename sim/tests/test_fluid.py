@@ -7,6 +7,7 @@ robot file, model, dynamics and the batched kernel all follow.
 """
 
 import dataclasses
+import math
 from typing import Annotated, ClassVar
 
 import numpy as np
@@ -18,7 +19,10 @@ from eelsim.closed_loop import simulate_closed_loop
 from eelsim.dynamics import accelerations, fluid_link_forces
 from eelsim.fluid import (
     FLUID_LAWS,
+    GALILEAN,
+    LINEAR_QUADRATIC,
     MORISON,
+    REYNOLDS,
     FluidCoefficients,
     FluidLaw,
     HydroCoefficients,
@@ -134,7 +138,7 @@ def _batched_forces(law, n, lanes, rng, still_water):
         for r in range(lanes):
             local = {"work": work, "r": r, "s": np.sin(theta[r, j]), "c": np.cos(theta[r, j]),
                      "om": omega[r, j], "h": half[r, j], "lvx": rel[r, j, 0], "lvy": rel[r, j, 1]}
-            exec(program, {"np": np}, local)
+            exec(program, {"np": np, "_vsqrt": math.sqrt}, local)
             got[r, j] = [-local["fxn"], -local["fyn"], -local["fnn"], -local["tqn"]]
     for r in range(lanes):
         one = type(fluid)(**{f.name: getattr(fluid, f.name)[r] for f in dataclasses.fields(fluid)})
@@ -146,7 +150,8 @@ def _batched_forces(law, n, lanes, rng, still_water):
     return got, want
 
 
-@pytest.mark.parametrize("law", [MORISON, TOY], ids=lambda law: law.name)
+@pytest.mark.parametrize("law", [MORISON, GALILEAN, LINEAR_QUADRATIC, REYNOLDS, TOY],
+                         ids=lambda law: law.name)
 @pytest.mark.parametrize("n_links", [3, 6, 8])
 @pytest.mark.parametrize("still_water", [False, True])
 def test_each_laws_kernel_code_computes_its_numpy_forces(law, n_links, still_water):
@@ -182,7 +187,8 @@ def test_coefficients_convert_to_arrays_and_back_with_their_names_in_errors():
 
 
 def test_an_unknown_law_is_refused_naming_the_known_ones():
-    with pytest.raises(ValueError, match="unknown fluid law 'potential_flow'; known laws: morison"):
+    with pytest.raises(ValueError, match="unknown fluid law 'potential_flow'; known laws: "
+                                         "galilean, linear_quadratic, morison, reynolds"):
         get_fluid_law("potential_flow")
 
 

@@ -8,9 +8,9 @@ LLVM's (numba's) on the GA generation and the stage alone (docs/kernel_history.m
 The C text is not written by hand: :func:`translate` reads the generated Python function with
 ``ast`` and writes the same statements in C, expression by expression (the generated code uses a
 small subset: assignments, ``for r in range(k)``, ``if``/``else``, arithmetic, comparisons,
-conditional expressions, ``abs``, ``min``, ``max``, ``np.floor``, ``np.inf``). So there is one
-generator and one physics; the numba function stays the fallback when no C compiler is found and
-the cross-check in the tests. ``min``/``max`` keep Python's (and numba's) rule
+conditional expressions, ``abs``, ``min``, ``max``, ``np.floor``, ``np.inf``, ``_vsqrt``). So
+there is one generator and one physics; the numba function stays the fallback when no C compiler
+is found and the cross-check in the tests. ``min``/``max`` keep Python's (and numba's) rule
 ``min(a, b) = b if b < a else a`` so that NaNs travel the same way.
 
 The library is built once per (text, compiler, flags, CPU) into the kernel cache folder and bound
@@ -96,6 +96,8 @@ class _Translator:
             args = [self.expr(a) for a in node.args]
             if name == "abs" and len(args) == 1:
                 return f"fabs({args[0]})"
+            if name == "_vsqrt" and len(args) == 1:  # the kernel's vectorising sqrt
+                return f"sqrt({args[0]})"
             if name == "floor" and len(args) == 1:
                 return f"floor({args[0]})"
             if name in ("min", "max") and len(args) >= 2:

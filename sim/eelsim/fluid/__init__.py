@@ -8,6 +8,11 @@ each registers itself here, at the bottom of this file.
 >>> from eelsim.fluid import get_fluid_law
 >>> law = get_fluid_law("morison")
 >>> law.coefficient_names, law.bounds
+
+The laws: ``"morison"`` (the paper's, the default), ``"galilean"`` (the paper's coefficients,
+Galilean-consistent), ``"linear_quadratic"`` (separate linear and quadratic drag,
+Galilean-consistent) are candidate models for fitting; ``"reynolds"`` (drag with
+Reynolds-number-dependent coefficients) is for test plants only (:func:`candidate_laws`).
 """
 
 from __future__ import annotations
@@ -101,22 +106,51 @@ def law_of(coefficients: FluidCoefficients) -> FluidLaw:
     return get_fluid_law(type(coefficients).law_name)
 
 
-# ---- the laws (one module each)
-from eelsim.fluid.morison import MORISON, HydroCoefficients  # noqa: E402
+def candidate_laws() -> tuple[str, ...]:
+    """Names of the laws meant as candidate models for fitting (``FluidLaw.candidate``).
 
-register_fluid_law(MORISON)
+    The others (e.g. ``"reynolds"``) are for test plants: virtual tanks whose water the fitted
+    model does not contain. The estimator fits any law asked for by name; this is its default
+    list of candidates.
+
+    Returns
+    -------
+    tuple of str
+        In registration order (the default law first).
+    """
+    return tuple(name for name, law in FLUID_LAWS.items() if law.candidate)
+
+
+# ---- the laws (one module each)
+from eelsim.fluid.galilean import GALILEAN, GalileanCoefficients  # noqa: E402
+from eelsim.fluid.linear_quadratic import (  # noqa: E402
+    LINEAR_QUADRATIC,
+    LinearQuadraticCoefficients,
+)
+from eelsim.fluid.morison import MORISON, HydroCoefficients  # noqa: E402
+from eelsim.fluid.reynolds import REYNOLDS, ReynoldsCoefficients  # noqa: E402
+
+for _law in (MORISON, GALILEAN, LINEAR_QUADRATIC, REYNOLDS):
+    register_fluid_law(_law)
 
 __all__ = [
     "DEFAULT_FLUID_LAW",
     "FLUID_LAWS",
+    "GALILEAN",
+    "LINEAR_QUADRATIC",
+    "MORISON",
+    "REYNOLDS",
     "FluidCoefficients",
     "FluidLaw",
+    "GalileanCoefficients",
     "HydroCoefficients",
     "KernelCode",
+    "LinearQuadraticCoefficients",
     "LinkFluid",
     "LinkForces",
     "LinkMotion",
-    "MORISON",
+    "ReynoldsCoefficients",
+    "candidate_laws",
     "get_fluid_law",
     "law_of",
     "register_fluid_law",

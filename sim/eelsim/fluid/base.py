@@ -185,12 +185,16 @@ class FluidLaw(abc.ABC):
     kernel_rows : tuple of str
         Names of the per-link rows the batched form reads (one row per link each), filled from
         :meth:`LinkFluid.kernel_values`.
+    candidate : bool
+        A candidate model for fitting (the default), or a law meant for test plants only, which
+        the estimator does not fit unless asked by name (:func:`eelsim.fluid.candidate_laws`).
     """
 
     name: ClassVar[str]
     coefficients: ClassVar[type[FluidCoefficients]]
     default_bounds: ClassVar[Sequence[tuple[float, float]]]
     kernel_rows: ClassVar[tuple[str, ...]]
+    candidate: ClassVar[bool] = True
 
     @property
     def coefficient_names(self) -> tuple[str, ...]:
@@ -258,8 +262,8 @@ class FluidLaw(abc.ABC):
         ``vcx``, ``vcy`` (the current). It must assign ``fxn``, ``fyn`` (minus the force, global
         x and y), ``fnn`` (minus its normal component n . F) and ``tqn`` (minus the torque), and
         may use temporaries named ``fl_...``; nothing else. Everything must vectorise across
-        lanes: arithmetic, ``abs``, ``min``, ``max``, conditional expressions (the subset
-        ``eelsim.batch.c_stage`` translates to C).
+        lanes: arithmetic, ``abs``, ``min``, ``max``, ``_vsqrt`` (the kernel's square root),
+        conditional expressions (the subset ``eelsim.batch.c_stage`` translates to C).
 
         Parameters
         ----------

@@ -41,8 +41,11 @@ from eelsim.fluid.base import (
 _NonNegative = Annotated[float, Field(ge=0.0, allow_inf_nan=False)]
 
 
-class HydroCoefficients(FluidCoefficients):
-    """Hydrodynamic parameters e = (C_f, C_d, C_a, C_m) of the Morison law, dimensionless.
+class PaperCoefficients(FluidCoefficients):
+    """The paper's hydrodynamic parameters e = (C_f, C_d, C_a, C_m), dimensionless.
+
+    The fields of the laws that take the paper's coefficients (Morison, and the Galilean law of
+    :mod:`eelsim.fluid.galilean`); each law's record subclasses this and names its law.
 
     Attributes
     ----------
@@ -56,12 +59,16 @@ class HydroCoefficients(FluidCoefficients):
         Added yaw inertia coefficient.
     """
 
-    law_name: ClassVar[str] = "morison"
-
     C_f: _NonNegative
     C_d: _NonNegative
     C_a: _NonNegative
     C_m: _NonNegative
+
+
+class HydroCoefficients(PaperCoefficients):
+    """Hydrodynamic parameters e = (C_f, C_d, C_a, C_m) of the Morison law (the paper's)."""
+
+    law_name: ClassVar[str] = "morison"
 
 
 @dataclass(frozen=True)
