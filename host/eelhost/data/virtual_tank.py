@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import tomllib
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
@@ -44,7 +45,7 @@ from eelhost.data.experiments import (
 )
 from eelsim.camera import CameraModel, observation_steps, observed_positions
 from eelsim.closed_loop import LoopOptions, RunResult, simulate_closed_loop
-from eelsim.fluid import FluidCoefficients
+from eelsim.fluid import FluidCoefficients, get_fluid_law
 from eelsim.robot import HydroCoefficients, Robot, load_robot
 from eelsim.scenario import TRAINING_CORNERS, Scenario, named_scenarios, paper_grid
 from eelsim.timing import LoopTiming
@@ -108,6 +109,106 @@ class TankSettings:
         if self.joints:
             out["joint_model"] = str(self.joints.get("model", "pd"))
         return out
+
+
+# Another law's truth: table 3's added mass and inertia, drag of the law's own form with typical
+# values (docs/estimation.md, "Test plants").
+_OTHER_LAW_DRAG: dict[str, dict[str, float]] = {
+    # Blasius skin friction; a circular cylinder's cross-flow drag
+    "reynolds": {"C_f_lam": 1.328, "C_d_inf": 1.0, "C_d_visc": 5.0},
+}
+
+
+def law_truths(law: str) -> dict[str, FluidCoefficients]:
+    """The true coefficients per motion type of a plant whose water follows ``law``.
+
+    Laws with the paper's four coefficients take table 3's rows; others take table 3's added
+    mass and inertia (C_a, C_m) and the drag values of ``_OTHER_LAW_DRAG``.
+
+    Raises
+    ------
+    ValueError
+        When the law is unknown or has no typical drag values here.
+    """
+    fluid = get_fluid_law(law)
+    out: dict[str, FluidCoefficients] = {}
+    for motion, row in TABLE3.items():
+        paper = row.model_dump()
+        # separate linear and quadratic drag equal to the paper's one coefficient: its law
+        split = {f"{n}_{part}": paper[n] for n in ("C_f", "C_d") for part in ("lin", "quad")}
+        known = {**paper, **split, **_OTHER_LAW_DRAG.get(law, {})}
+        missing = [n for n in fluid.coefficient_names if n not in known]
+        if missing:
+            raise ValueError(
+                f"plant law {law!r}: no true value for {', '.join(missing)} (give --truth)"
+            )
+        out[motion] = fluid.coefficients(**{n: known[n] for n in fluid.coefficient_names})
+    return out
+
+
+@dataclass(frozen=True)
+class Plant:
+    """A named test plant: how the tank records and which law its water follows.
+
+    Attributes
+    ----------
+    name : str
+    description : str
+    settings : TankSettings
+    law : str
+        The water's fluid law (its truth from :func:`law_truths`).
+    """
+
+    name: str
+    description: str
+    settings: TankSettings
+    law: str = "morison"
+
+    def truths(self) -> dict[str, FluidCoefficients]:
+        """The true coefficients per motion type."""
+        return law_truths(self.law)
+
+
+def _servo_joints() -> dict | None:
+    """The ``[joints]`` table of the bundled servo robot file, when the twin has one."""
+    try:
+        text = resources.files("eelsim.data").joinpath("servo_robot.toml").read_text()
+    except (FileNotFoundError, OSError):
+        return None
+    joints = tomllib.loads(text).get("joints")
+    return dict(joints) if isinstance(joints, dict) else None
+
+
+def mismatched_plants() -> dict[str, Plant]:
+    """The mismatched plants ``eelbot dataset --plant`` and ``estimate-bench`` know, by name.
+
+    Each differs from the fitted model (the paper's PD joints, Morison water, identical links,
+    causal median) in one way, and ``all`` in every way at once. ``stiff_servos`` is there only
+    when the twin bundles a servo robot file (``eelsim/data/servo_robot.toml``).
+    """
+    stray = 0.005
+    plants = [
+        Plant("head_tail", "bulkier head and pointed tail", TankSettings(head_tail=True)),
+        Plant("servo_limits", "joints on the servos' torque-speed line",
+              TankSettings(servo_limits=True)),
+        Plant("stray_current", f"{stray} m/s unmodelled current",
+              TankSettings(stray_current_m_s=stray)),
+        Plant("reynolds", "Reynolds-number-dependent drag (a law the estimator does not fit)",
+              TankSettings(), "reynolds"),
+        Plant("centred_median", "recording filtered by a centred median",
+              TankSettings(median="centred")),
+    ]
+    servo = _servo_joints()
+    if servo is not None:
+        plants.append(Plant("stiff_servos", "stiff position servos with lag",
+                            TankSettings(joints=servo)))
+    plants.append(Plant(
+        "all", "all of the above at once",
+        TankSettings(head_tail=True, servo_limits=True, stray_current_m_s=stray,
+                     median="centred", joints=servo),
+        "reynolds",
+    ))
+    return {p.name: p for p in plants}
 
 
 def true_robot(robot: Robot, settings: TankSettings) -> Robot:
@@ -188,6 +289,10 @@ def record_experiment(
         coefficients=truth,
     )
     frames = run.camera_t_s <= (run.t_s[-1] + 1e-9)
+    if camera.median == "centred":
+        # filtered afterwards from the stored states: a frame between the run's last two steps
+        # cannot be interpolated, and the recording ends before it
+        frames &= run.camera_t_s <= run.t_s[-1] - timing.dt_s + 1e-9
     t_frames = run.camera_t_s[frames]
     position, heading = _recorded(run, t_frames, camera, timing.dt_s)
     return Experiment(
