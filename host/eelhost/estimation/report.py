@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from eelhost.data.experiments import Dataset
+from eelhost.estimation.diagnostics import fit_warnings
 from eelhost.estimation.evaluate import ALIGN_S
 from eelhost.estimation.identify import identifiability
 from eelhost.estimation.optimise import FitResult
@@ -23,6 +24,9 @@ from eelhost.estimation.pipeline import (
     fit_motion,
     write_coefficients,
 )
+from eelhost.estimation.selection import cross_validate, recommend
+from eelhost.estimation.selection import table_markdown as comparison_markdown
+from eelhost.estimation.uncertainty import parametric_bootstrap
 from eelhost.estimation.validate import ValidationRun, table_csv, table_markdown, validate
 
 log = logging.getLogger(__name__)
@@ -37,6 +41,7 @@ def run_report(
     settings: FitSettings | None = None,
     bootstrap_replicates: int = 8,
     resume: bool = False,
+    compare_models: bool = True,
     say: Say | None = None,
     progress_factory: Callable[[str], Callable[[int, float, int], None]] | None = None,
 ) -> Path:
@@ -54,6 +59,9 @@ def run_report(
         Refits per motion for the uncertainty (0: skip).
     resume : bool
         Continue interrupted fits from their checkpoints.
+    compare_models : bool
+        Compare the candidate models (joint model x fluid law) by leave-one-gait-out
+        cross-validation (:mod:`eelhost.estimation.selection`).
     say : callable, optional
         Where progress messages go (default: this module's logger, at INFO).
     progress_factory : callable, optional
@@ -69,7 +77,8 @@ def run_report(
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     fits: dict[str, FitResult] = {}
-    extra: dict = {"uncertainty": {}, "identifiability": {}, "simulations": {}, "seconds": {}}
+    extra: dict = {"uncertainty": {}, "identifiability": {}, "simulations": {}, "seconds": {},
+                   "warnings": []}
     for motion in motions:
         t0 = time.perf_counter()
         prog = progress_factory(motion) if progress_factory else None
@@ -84,7 +93,27 @@ def run_report(
         )
         ident = identifiability(ev, res.values)
         extra["identifiability"][motion] = ident.to_json()
+        boot = None
+        if bootstrap_replicates > 0:
+            boot = parametric_bootstrap(ev, res.values, res.fitness, bootstrap_replicates,
+                                        seed=settings.seed)
+            extra["uncertainty"][motion] = boot.to_json()
+            say(f"{motion}: noise floor {boot.noise_floor:.4f} ({boot.excess:.1f}x below the fit)")
+        extra["warnings"] += fit_warnings(motion, res.space, res.values, boot)
+        extra["simulations"][motion] = ev.simulations
         extra["seconds"][motion] = time.perf_counter() - t0
+    separate = {m: (r.space, r.values) for m, r in fits.items() if m != "joint"}
+    comparison = None
+    if compare_models and separate:
+        comparison = cross_validate(dataset, separate, settings, say=say)
+        choice = recommend(comparison)
+        extra["model_comparison"] = {
+            "recommended": choice.model,
+            "candidates": {c.model: {"parameters": c.parameters, "fitness": c.fitness,
+                                     "held_out": {m: v.tolist() for m, v in c.held_out.items()}}
+                           for c in comparison},
+        }
+        say(f"recommended model: {choice.model}")
     if dataset.truth:
         extra["truth"] = {m: c.model_dump() for m, c in dataset.truth.items()}
     write_coefficients(out / "coefficients.json", fits, extra)
@@ -107,7 +136,22 @@ def run_report(
         if r.experiment.motion == "path":
             plot_time_series(r, out / f"timeseries_{r.experiment.name}.png")
     report = out / "report.md"
-    report.write_text(_report_text(dataset, fits, extra, runs, settings))
+    text = _report_text(dataset, fits, extra, runs, settings)
+    if comparison:
+        choice = recommend(comparison)
+        text += "\n".join([
+            "## Candidate models (leave-one-gait-out cross-validation)",
+            "",
+            "Each training gait held out in turn: the model refitted on the others, scored on it "
+            "(the fitness's per-experiment error, m; docs/estimation.md, \"Model comparison\").",
+            "",
+            comparison_markdown(comparison),
+            "",
+            f"Recommended: **{choice.model}** (lowest mean held-out error; within "
+            "2 % the model with fewer parameters).",
+            "",
+        ])
+    report.write_text(text)
     say(f"wrote {report}")
     return report
 
@@ -133,9 +177,10 @@ def _report_text(
         "|---|---|---|---|" + "---|" * len(names),
     ]
     for m, r in fits.items():
-        boot = extra["uncertainty"].get(m, {}).get("std", {})
+        unc = extra["uncertainty"].get(m, {})
+        lo, hi = unc.get("lower", {}), unc.get("upper", {})
         vals = [
-            f"{v:.4g}" + (f" ± {boot[n]:.2g}" if n in boot else "")
+            f"{v:.4g}" + (f" [{lo[n]:.3g}, {hi[n]:.3g}]" if n in lo else "")
             for n, v in zip(names, r.values, strict=True)
         ]
         lines.append(
@@ -162,11 +207,27 @@ def _report_text(
                     f"- {m}: relative error "
                     + ", ".join(f"{n} {e * 100:+.1f} %" for n, e in zip(names, rel, strict=True))
                 )
+    if extra["uncertainty"]:
+        u = next(iter(extra["uncertainty"].values()))
+        lines += [
+            "",
+            f"[low, high]: {u['level'] * 100:.0f} % intervals from the parametric bootstrap "
+            f"({u['replicates']} refits on data regenerated from the fit with the dataset's "
+            "declared noise), widened by the fit's excess over its noise floor and by the "
+            f"measured factor {u['widen']:g} (docs/estimation.md, \"Uncertainty\").",
+            "",
+            "| fit | noise floor | fitness / noise floor |",
+            "|---|---|---|",
+        ]
+        lines += [f"| {m} | {u['noise_floor']:.4f} | {u['excess']:.1f} |"
+                  for m, u in extra["uncertainty"].items()]
+    lines += ["", "## Warnings", ""]
+    lines += [f"- {w}" for w in extra["warnings"]] or ["None."]
     lines += [
         "",
-        "± is the bootstrap standard deviation over resampled training experiments.",
-        "",
         "## What the data pins down",
+        "",
+        "Linearised at the estimate (local sensitivities; not intervals: see above).",
         "",
     ]
     for m, ident in extra["identifiability"].items():
