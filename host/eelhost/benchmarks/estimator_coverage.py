@@ -25,6 +25,7 @@ from eelhost.data.virtual_tank import (
     record_experiment,
 )
 from eelhost.estimation.evaluate import Evaluator
+from eelhost.estimation.identify import identifiability
 from eelhost.estimation.methods import FitProblem, get_method
 from eelhost.estimation.parameters import ParameterSpace
 from eelhost.estimation.pipeline import FitSettings
@@ -114,7 +115,8 @@ def measure_coverage(
                        space=space)
         res = get_method(fit_settings.method)(
             FitProblem(ev, fit_settings, space.start(robot)))
-        boot = parametric_bootstrap(ev, res.values, res.fitness, replicates, seed=seed)
+        boot = parametric_bootstrap(ev, res.values, res.fitness, replicates, seed=seed,
+                                    unidentified=identifiability(ev, res.values).unidentified())
         results.append(boot)
         line = (f"seed {seed}: " + ", ".join(
             f"{n} {v:.4g} [{lo:.4g}, {hi:.4g}]{'' if c else ' MISSED'}"

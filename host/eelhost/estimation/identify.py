@@ -50,6 +50,10 @@ class Identifiability:
     rel_std_error: np.ndarray
     verdict: list[str]
 
+    def unidentified(self) -> list[str]:
+        """The parameters reported *not identified*."""
+        return [n for n, v in zip(self.names, self.verdict, strict=True) if v == "not identified"]
+
     def to_json(self) -> dict:
         """JSON-ready summary."""
         return {

@@ -96,7 +96,7 @@ def run_report(
         boot = None
         if bootstrap_replicates > 0:
             boot = parametric_bootstrap(ev, res.values, res.fitness, bootstrap_replicates,
-                                        seed=settings.seed)
+                                        seed=settings.seed, unidentified=ident.unidentified())
             extra["uncertainty"][motion] = boot.to_json()
             say(f"{motion}: noise floor {boot.noise_floor:.4f} ({boot.excess:.1f}x below the fit)")
         extra["warnings"] += fit_warnings(motion, res.space, res.values, boot)
