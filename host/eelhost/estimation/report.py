@@ -98,7 +98,7 @@ def run_report(
             boot = parametric_bootstrap(ev, res.values, res.fitness, bootstrap_replicates,
                                         seed=settings.seed, unidentified=ident.unidentified())
             extra["uncertainty"][motion] = boot.to_json()
-            say(f"{motion}: noise floor {boot.noise_floor:.4f} ({boot.excess:.1f}x below the fit)")
+            say(f"{motion}: noise floor {boot.noise_floor:.4f}, fitness / noise floor {boot.excess:.1f}")
         extra["warnings"] += fit_warnings(motion, res.space, res.values, boot)
         extra["simulations"][motion] = ev.simulations
         extra["seconds"][motion] = time.perf_counter() - t0
@@ -140,6 +140,7 @@ def run_report(
     if comparison:
         choice = recommend(comparison)
         text += "\n".join([
+            "",
             "## Candidate models (leave-one-gait-out cross-validation)",
             "",
             "Each training gait held out in turn: the model refitted on the others, scored on it "
