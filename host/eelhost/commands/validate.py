@@ -7,7 +7,7 @@ from pathlib import Path
 
 from eelhost.data.experiments import load_dataset
 from eelhost.estimation.evaluate import ALIGN_S
-from eelhost.estimation.pipeline import read_coefficients
+from eelhost.estimation.pipeline import CoefficientsError, read_coefficients
 from eelhost.estimation.validate import table_csv, table_markdown, validate
 
 
@@ -36,6 +36,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
+    coefficients = Path(args.coefficients)
+    if coefficients.suffix == ".json" and not coefficients.is_file():
+        # said before the dataset is read: reading the file needs the dataset's robot
+        raise CoefficientsError(f"{coefficients}: cannot read coefficients: no such file")
     dataset = load_dataset(args.dataset)
     fitted = read_coefficients(args.coefficients, dataset.robot)
     tests = [e for exps in dataset.test.values() for e in exps] + list(dataset.paths)
