@@ -54,6 +54,13 @@ def one_line_error(capsys, *named: str) -> str:
         (["simulate", "straight", "--fps", "0", "--out", "x"], ("--fps", "fps must be positive")),
         (["validate", "nowhere/coefficients.json", "nowhere"], ("nowhere/coefficients.json",)),
         (["plan", "nowhere_world.toml"], ("nowhere_world.toml",)),
+        (["dataset", "x", "--joints-from", "nowhere_robot.toml"],
+         ("--joints-from", "nowhere_robot.toml")),
+        (["dataset", "x", "--truth", "0.01,0.8"], ("--truth", "expected 4 numbers")),
+        (["dataset", "x", "--fluid-law", "reynolds", "--truth", "1,1,5,0.6"],
+         ("--truth", "C_f_lam", "expected 5 numbers")),
+        (["estimate-bench", "--tanks", "bundled,nosuch", "--write", "-"],
+         ("unknown tanks", "nosuch")),
     ],
 )
 def test_user_error_gives_one_line_naming_what_is_wrong_and_exit_2(argv, named, tmp_path, capsys):

@@ -1,18 +1,14 @@
 import numpy as np
 import pytest
 
-from eelhost.estimation.optimise import (
-    BOUNDS,
-    Checkpoint,
-    fit_cmaes,
-    fit_ga,
-    from_unit,
-    polish_least_squares,
-    to_unit,
-)
-from eelsim.robot import HydroCoefficients
+from eelhost.estimation.local import polish_least_squares
+from eelhost.estimation.optimise import Checkpoint, fit_cmaes, fit_ga
+from eelhost.estimation.parameters import ParameterSpace
+from eelsim.fluid import get_fluid_law
 
 TARGET = np.array([0.008, 0.776, 0.618, 0.007])
+SPACE = ParameterSpace(get_fluid_law("morison"))
+BOUNDS = SPACE.bounds
 
 
 def bowl(c):
@@ -35,17 +31,19 @@ def kill_after(generation):
 
 def test_bounds_hold_the_papers_table_3_and_unit_mapping_round_trips():
     for row in ([0.008, 0.776, 0.618, 0.007], [0.009, 0.978, 1.169, 0.001]):
-        u = to_unit(row)
+        u = SPACE.to_unit(row)
         assert np.all((u > 0) & (u < 1))
-        assert np.allclose(from_unit(u), row)
+        assert np.allclose(SPACE.from_unit(u), row)
 
 
 @pytest.mark.parametrize("method", ["ga", "cmaes"])
 def test_resume_after_a_kill_gives_the_same_result_as_an_uninterrupted_run(tmp_path, method):
     def run(checkpoint=None, resume=False, progress=None):
         if method == "ga":
-            return fit_ga(bowl, seed=5, pop_size=12, generations=6, checkpoint=checkpoint, resume=resume, progress=progress)
-        return fit_cmaes(bowl, seed=5, max_evaluations=96, popsize=8, checkpoint=checkpoint, resume=resume, progress=progress)
+            return fit_ga(bowl, SPACE, seed=5, pop_size=12, generations=6, checkpoint=checkpoint,
+                          resume=resume, progress=progress)
+        return fit_cmaes(bowl, SPACE, seed=5, max_evaluations=96, popsize=8,
+                         checkpoint=checkpoint, resume=resume, progress=progress)
 
     straight = run()
     settings = {"method": method, "seed": 5}
@@ -55,7 +53,7 @@ def test_resume_after_a_kill_gives_the_same_result_as_an_uninterrupted_run(tmp_p
     np.random.seed(12345)  # noqa: NPY002 (a new process starts with other global random state)
     resumed = run(checkpoint=Checkpoint(tmp_path / "ck.pkl", settings), resume=True)
     assert resumed.fitness == straight.fitness
-    assert resumed.coefficients == straight.coefficients
+    assert np.array_equal(resumed.values, straight.values)
     assert [h[:2] for h in resumed.history] == [h[:2] for h in straight.history]
 
 
@@ -66,8 +64,8 @@ def test_checkpoint_from_other_settings_is_refused(tmp_path):
 
 
 def test_cmaes_and_ga_approach_the_minimum_of_a_simple_bowl():
-    ga = fit_ga(bowl, seed=1, pop_size=30, generations=25)
-    es = fit_cmaes(bowl, seed=1, max_evaluations=600, popsize=10)
+    ga = fit_ga(bowl, SPACE, seed=1, pop_size=30, generations=25)
+    es = fit_cmaes(bowl, SPACE, seed=1, max_evaluations=600, popsize=10)
     assert es.fitness < 1e-6 and ga.fitness < 1e-2
     assert es.fitness < ga.fitness  # CMA-ES is the better method on smooth problems
     assert ga.history[-1][1] <= ga.history[0][1]
@@ -77,8 +75,9 @@ def test_least_squares_polish_finds_a_linear_least_squares_minimum_and_never_wor
     def residuals(c):
         return (np.atleast_2d(c) - TARGET) / (BOUNDS[:, 1] - BOUNDS[:, 0])
 
-    start = HydroCoefficients.from_array([0.02, 1.2, 0.9, 0.05])
-    res = polish_least_squares(residuals, bowl, start, float(bowl(start.as_array())[0]))
-    assert np.allclose(res.coefficients.as_array(), TARGET, atol=1e-5)
-    worse = polish_least_squares(lambda c: np.ones((len(np.atleast_2d(c)), 3)), bowl, start, 0.0)
-    assert worse.coefficients == start  # a polish that does not improve the minimax is not taken
+    start = np.array([0.02, 1.2, 0.9, 0.05])
+    res = polish_least_squares(residuals, bowl, SPACE, start, float(bowl(start)[0]))
+    assert np.allclose(res.values, TARGET, atol=1e-5)
+    worse = polish_least_squares(lambda c: np.ones((len(np.atleast_2d(c)), 3)), bowl, SPACE,
+                                 start, 0.0)
+    assert np.array_equal(worse.values, start)  # a polish that does not improve the minimax is not taken

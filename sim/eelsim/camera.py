@@ -8,6 +8,12 @@ both steps (all part of the state), which is accurate to a few micrometres here,
 Positions are quantised to pixel centres (0.0038 m per pixel in the paper's tank). The heading is
 taken as measured (optionally with Gaussian noise). A moving median over the last ``median_window``
 frames filters position and (unwrapped) heading.
+
+The controller's median is causal (it cannot see future frames). A *recording* may be filtered
+afterwards with a centred median instead (``median = "centred"``: the window of frame f holds
+frames f - (w - 1) // 2 .. f + w // 2, fewer at the recording's ends), which has no lag;
+:func:`observed_positions` reproduces either, so that the estimator sees the twin exactly as the
+recording's camera saw the robot.
 """
 
 from __future__ import annotations
@@ -18,6 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from eelsim.control import wrap_angle
+
+MEDIAN_PLACEMENTS = ("causal", "centred")
 
 
 @dataclass(frozen=True)
@@ -34,12 +42,17 @@ class CameraModel:
         Length of the moving median filter, in frames (1 disables it).
     heading_noise_rad : float
         Standard deviation of the heading measurement noise.
+    median : {"causal", "centred"}
+        How a recording's median filter is placed: over the last ``median_window`` frames (the
+        controller's, always) or centred on the frame (a recording filtered afterwards). Only
+        :func:`observed_positions` reads it; the closed loop's controller filters causally.
     """
 
     fps: float = 30.0
     pixel_m: float = 0.0038
     median_window: int = 5
     heading_noise_rad: float = 0.0
+    median: str = "causal"
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.fps) and self.fps > 0):
@@ -48,6 +61,13 @@ class CameraModel:
             raise ValueError(f"camera pixel size must be >= 0, got {self.pixel_m}")
         if self.median_window < 1:
             raise ValueError(f"median window must be at least 1 frame, got {self.median_window}")
+        if self.median not in MEDIAN_PLACEMENTS:
+            raise ValueError(f"median must be 'causal' or 'centred', got {self.median!r}")
+
+    def window_frames(self) -> tuple[int, int]:
+        """Frames before and after frame f that its median window holds."""
+        w = self.median_window
+        return (w - 1, 0) if self.median == "causal" else ((w - 1) // 2, w // 2)
 
     def frame_times(self, duration_s: float) -> np.ndarray:
         """Times of the frames in [0, duration_s]."""
@@ -109,7 +129,9 @@ def _frame_steps(frame: int, fps: float, dt_s: float) -> tuple[int, float]:
     return k, (t - k * dt_s) / dt_s
 
 
-def observation_steps(times_s: np.ndarray, camera: CameraModel, dt_s: float) -> np.ndarray:
+def observation_steps(
+    times_s: np.ndarray, camera: CameraModel, dt_s: float, last_time_s: float | None = None
+) -> np.ndarray:
     """Physics steps whose states :func:`observed_positions` needs for the given query times.
 
     Parameters
@@ -119,19 +141,31 @@ def observation_steps(times_s: np.ndarray, camera: CameraModel, dt_s: float) -> 
     camera : CameraModel
     dt_s : float
         Physics step.
+    last_time_s : float, optional
+        The recording's last frame time (a centred window ends there), as for
+        :func:`observed_positions`.
 
     Returns
     -------
     ndarray of int
         Sorted, unique step indices.
     """
+    before, after = camera.window_frames()
+    last = _last_frame(last_time_s, camera.fps)
     steps: set[int] = set()
     for t in np.asarray(times_s, dtype=float):
         f = int(np.floor(t * camera.fps + 1e-9))
-        for g in range(max(0, f - camera.median_window + 1), f + 2):
+        for g in range(max(0, f - before), max(f + 1, min(f + 1 + after, last)) + 1):
             k, _ = _frame_steps(g, camera.fps, dt_s)
             steps.update((k, k + 1))
     return np.array(sorted(steps), dtype=np.int64)
+
+
+def _last_frame(last_time_s: float | None, fps: float) -> int:
+    """Index of the recording's last frame (no end: a very large index)."""
+    if last_time_s is None:
+        return np.iinfo(np.int64).max // 2
+    return int(np.floor(last_time_s * fps + 1e-9))
 
 
 def observed_positions(
@@ -141,15 +175,17 @@ def observed_positions(
     velocity_m_s: np.ndarray,
     camera: CameraModel,
     dt_s: float,
+    last_time_s: float | None = None,
 ) -> np.ndarray:
     """What the camera pipeline reports for the centre of mass at the query times.
 
     The same model as the closed loop's camera: frames at ``fps``, each the cubic Hermite
     interpolant between physics steps, quantised to pixel centres, then the moving median over the
-    last ``median_window`` frames (fewer at the start); a query time between two frames gets the
-    linear interpolation of their filtered positions, as a recording read between frames does.
-    Any number of runs at once (leading axes of the states): estimation scores a whole
-    generation of candidates in one call.
+    last ``median_window`` frames (fewer at the start), or centred on the frame with
+    ``camera.median == "centred"`` (fewer at the recording's ends); a query time between two
+    frames gets the linear interpolation of their filtered positions, as a recording read between
+    frames does. Any number of runs at once (leading axes of the states): estimation scores a
+    whole generation of candidates in one call.
 
     Parameters
     ----------
@@ -161,6 +197,9 @@ def observed_positions(
         Centre of mass and its velocity at those steps.
     camera : CameraModel
     dt_s : float
+    last_time_s : float, optional
+        Time of the recording's last frame: a centred window holds no frame after it (a causal
+        one never does). Default: no end.
 
     Returns
     -------
@@ -179,8 +218,12 @@ def observed_positions(
     between = times * camera.fps - frame
     # the filtered frames the queries read, and the raw frames their windows hold
     wanted = np.unique(np.concatenate([frame, frame[between >= 1e-12] + 1]))
-    first = np.maximum(0, wanted - camera.median_window + 1)
-    spans = [np.arange(a, b + 1) for a, b in zip(first, wanted, strict=True)]
+    before, after = camera.window_frames()
+    first = np.maximum(0, wanted - before)
+    # no frame after the recording's last one (a frame past it, read only to interpolate up to
+    # the last sample, keeps at least itself)
+    last = np.maximum(wanted, np.minimum(wanted + after, _last_frame(last_time_s, camera.fps)))
+    spans = [np.arange(a, b + 1) for a, b in zip(first, last, strict=True)]
     raw_frames = np.unique(np.concatenate(spans))
     at, fraction = zip(*(_frame_steps(int(g), camera.fps, dt_s) for g in raw_frames), strict=True)
     try:
@@ -200,7 +243,7 @@ def observed_positions(
     # moving median by sorting each window, short windows padded with +inf (sorted last): the
     # middle value, or the mean of the two middle ones, as np.median gives
     slot = np.searchsorted(raw_frames, first[:, None] + np.arange(camera.median_window))
-    count = np.minimum(camera.median_window, wanted - first + 1)
+    count = np.minimum(camera.median_window, last - first + 1)
     padded = np.concatenate([raw, np.full(raw.shape[:-2] + (1, 2), np.inf)], axis=-2)
     slot = np.where(np.arange(camera.median_window) < count[:, None], slot, raw.shape[-2])
     ordered = np.sort(padded[..., slot, :], axis=-2)

@@ -1,15 +1,17 @@
 """The estimator measured against its targets: ``eelbot estimate-bench``.
 
-:func:`estimator_report` makes four measurements, each on a virtual tank whose truth is the paper's table 3:
+:func:`estimator_report` measures, each on a virtual tank whose truth is the paper's table 3
+(carried into the plant's fluid law):
 
 1. the bundled dataset (clock offsets up to 0.1 s, control jitter): recovery of the coefficients
-   and the worst test E_x with the default method;
+   and the worst held-out E_x with the default method;
 2. a clean tank (no clock offset, no control jitter, otherwise identical): the same, to separate the
    method's accuracy from the data's noise;
-3. a mismatched tank (bulkier head, pointed tail, servo limits, a 0.005 m/s stray current; the
-   fitted model keeps identical links): worst test E_x against the paper's table 4;
-4. the paper's genetic algorithm on the bundled dataset: its final fitness and simulations, and how
-   many simulations the default method needs to reach that fitness.
+3. every mismatched test plant of :func:`eelhost.data.virtual_tank.mismatched_plants` (the fitted
+   model keeps the paper's PD joints, Morison water, identical links and causal median): worst
+   held-out E_x on the tests and the paths against the targets (docs/estimation_benchmarks.md);
+4. on every tank, the paper's genetic algorithm: its final fitness and simulations, and how many
+   simulations the default method needed to reach that fitness.
 
 It returns the markdown of ``docs/estimation_benchmarks.md`` and reports its progress through a
 callback (the command prints it).
@@ -25,22 +27,32 @@ from typing import Any
 
 from eelhost.benchmarks.machine import cpu_model
 from eelhost.data.experiments import BUNDLED_DATASET, Dataset, load_dataset
-from eelhost.data.virtual_tank import TABLE3, TankSettings, generate_dataset
-from eelhost.estimation.optimise import NAMES, FitResult
+from eelhost.data.virtual_tank import (
+    TABLE3,
+    Plant,
+    TankSettings,
+    generate_dataset,
+    mismatched_plants,
+)
+from eelhost.errors import UserError
+from eelhost.estimation.optimise import FitResult
 from eelhost.estimation.pipeline import FitSettings, fit_motion
 from eelhost.estimation.validate import validate
 
-PAPER_WORST_EX = {"straight": 0.082, "turning": 0.183}
+PAPER_WORST_EX = {"straight": 0.082, "turning": 0.183, "path": 0.01}
+# Issue 19's targets for the worst held-out E_x (recorded clock, BL) on a mismatched tank.
+TARGET_WORST_EX = {"straight": 0.05, "turning": 0.05, "path": 0.03}
+MOTIONS = ("straight", "turning", "path")
 
 
 Progress = Callable[[str], None]
 
 
-def _tank(work: Path, name: str, settings: TankSettings, seed: int, say: Progress) -> Dataset:
-    folder = work / name
+def _tank(work: Path, plant: Plant, seed: int, say: Progress) -> Dataset:
+    folder = work / plant.name
     if not (folder / "manifest.toml").exists():
-        say(f"generating the {name} virtual tank in {folder} ...")
-        generate_dataset(folder, settings=settings, seed=seed)
+        say(f"generating the {plant.name} virtual tank in {folder} ...")
+        generate_dataset(folder, truth=plant.truths(), settings=plant.settings, seed=seed)
     return load_dataset(folder)
 
 
@@ -48,13 +60,17 @@ def _fit_and_validate(ds: Dataset, settings: FitSettings) -> dict[str, Any]:
     out: dict[str, Any] = {"fits": {}, "seconds": 0.0, "simulations": 0}
     t0 = time.perf_counter()
     out["truth_fitness"] = {}
+    out["sims"] = {}
     for motion in ("straight", "turning"):
         res, ev = fit_motion(ds, motion, settings)
         out["fits"][motion] = res
         out["simulations"] += ev.simulations
-        out["truth_fitness"][motion] = float(ev.fitness(TABLE3[motion].as_array()[None])[0])
-    fitted = {m: r.coefficients for m, r in out["fits"].items()}
-    tests = [e for exps in ds.test.values() for e in exps]
+        out["sims"][motion] = ev.simulations
+        truth = ds.truth.get(motion)
+        if truth is not None and type(truth) is type(res.coefficients):
+            out["truth_fitness"][motion] = float(ev.fitness(truth.as_array()[None])[0])
+    fitted = {m: r.model for m, r in out["fits"].items()}
+    tests = [e for exps in ds.test.values() for e in exps] + list(ds.paths)
     runs = validate(ds.robot, fitted, tests, backend=settings.backend)
     out["seconds"] = time.perf_counter() - t0
     out["worst_ex"] = {
@@ -62,7 +78,8 @@ def _fit_and_validate(ds: Dataset, settings: FitSettings) -> dict[str, Any]:
             max(r.row.Ex_mean_unaligned_BL for r in runs if r.experiment.motion == m),
             max(r.row.Ex_mean_BL for r in runs if r.experiment.motion == m),
         )
-        for m in ("straight", "turning")
+        for m in MOTIONS
+        if any(r.experiment.motion == m for r in runs)
     }
     return out
 
@@ -70,6 +87,8 @@ def _fit_and_validate(ds: Dataset, settings: FitSettings) -> dict[str, Any]:
 def _recovery_rows(result: dict[str, Any]) -> list[str]:
     rows = []
     for motion, res in result["fits"].items():
+        if motion not in result["truth_fitness"]:
+            continue
         truth = TABLE3[motion].as_array()
         rel = (res.coefficients.as_array() - truth) / truth
         rows.append(
@@ -90,12 +109,22 @@ def _sims_to_reach(res: FitResult, target: float) -> int | None:
     return None
 
 
+def _ga(ds: Dataset, seed: int, generations: int) -> dict[str, tuple[FitResult, int]]:
+    """The paper's GA on both fits: each result and its simulations."""
+    out = {}
+    for motion in ("straight", "turning"):
+        res, ev = fit_motion(ds, motion, FitSettings("ga", seed=seed, generations=generations))
+        out[motion] = (res, ev.simulations)
+    return out
+
+
 def estimator_report(
     work: Path,
     seed: int = 0,
     ga_generations: int = 130,
     ga: bool = True,
     progress: Progress | None = None,
+    only: tuple[str, ...] | None = None,
 ) -> str:
     """Measure the estimator on the virtual tanks and write the markdown report.
 
@@ -111,6 +140,9 @@ def estimator_report(
         Compare with the paper's GA.
     progress : callable, optional
         Gets a line of progress, and each table as it is measured.
+    only : tuple of str, optional
+        Measure only these tanks ("bundled", "clean" or a mismatched plant's name; default:
+        all).
 
     Returns
     -------
@@ -122,80 +154,114 @@ def estimator_report(
         if progress is not None:
             progress(text)
 
-    settings = FitSettings("cmaes", seed=seed)
+    settings = FitSettings(seed=seed)
     lines = [
         "# Estimation benchmarks",
         "",
-        f"Measured with `eelbot estimate-bench` on {cpu_model()}, "
+        f"Measured with `eelbot estimate-bench --seed {seed}` on {cpu_model()}, "
         f"{os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f} at the start. Truth: the "
-        "paper's table 3 (straight row for straight experiments, turning row for turning ones). "
-        "Default method: CMA-ES (at most 1500 candidates) + least-squares polish, the paper's fitness "
-        "(minimax, n = 7, w = 5). E_x is the paper's mean of norms over n = 35 samples, on the "
-        "recording's own clock and at the best clock offset within +-0.1 s.",
+        "paper's table 3 (straight row for straight experiments, turning row for turning ones), "
+        "carried into the plant's fluid law. Default method: "
+        f"`{settings.method}` (CMA-ES with {settings.restarts.upper()} restarts, at most "
+        f"{settings.budget} candidates, then the minimax cone polish), the paper's fitness "
+        "(minimax, n = 7, w = 5), the fitted model the paper's (PD joints, Morison water). E_x is "
+        "the paper's mean of norms over n = 35 samples, on the recording's own clock and at the "
+        "best clock offset within +-0.1 s; paths are predicted with the turning fit.",
         "",
     ]
-    cases = [
+    cases: list[tuple[str, str, Plant | None]] = [
         ("bundled", "bundled dataset (clock offsets <= 0.1 s, control jitter 0.03 s)", None),
         (
             "clean",
             "clean tank (no clock offset, no control jitter)",
-            TankSettings(timestamp_jitter_s=0.0, control_jitter_s=0.0),
-        ),
-        (
-            "mismatch",
-            "mismatched tank (head/tail shapes, servo limits, 0.005 m/s stray current)",
-            TankSettings(head_tail=True, servo_limits=True, stray_current_m_s=0.005),
+            Plant("clean", "", TankSettings(timestamp_jitter_s=0.0, control_jitter_s=0.0)),
         ),
     ]
+    plants = mismatched_plants()
+    cases += [(p.name, f"mismatched plant `{p.name}`: {p.description}", p)
+              for p in plants.values()]
+    unknown = set(only or ()) - {key for key, _, _ in cases}
+    if unknown:
+        raise UserError(f"estimate-bench: unknown tanks {sorted(unknown)}; known: "
+                         + ", ".join(key for key, _, _ in cases))
+    cases = [c for c in cases if only is None or c[0] in only]
     results = {}
-    for key, label, tank in cases:
-        ds = load_dataset(BUNDLED_DATASET) if tank is None else _tank(work, key, tank, seed, say)
+    for key, label, plant in cases:
+        ds = load_dataset(BUNDLED_DATASET) if plant is None else _tank(work, plant, seed, say)
         say(f"fitting the {label} ...")
         results[key] = r = _fit_and_validate(ds, settings)
+        if ga:
+            say(f"running the paper's GA on the {key} tank ...")
+            r["ga"] = _ga(ds, seed, ga_generations)
+            say(f"GA on {key}: " + ", ".join(
+                f"{m} fitness {f.fitness:.4f} after {n} simulations; default "
+                f"{r['fits'][m].fitness:.4f} after {r['sims'][m]}, reached the GA's after "
+                f"{_sims_to_reach(r['fits'][m], f.fitness)}"
+                for m, (f, n) in r["ga"].items()))
         lines += [
             f"## {label[0].upper() + label[1:]}",
             "",
             f"{r['simulations']} simulations, {r['seconds']:.0f} s for both fits and the validation.",
             "",
-            "| fit | fitness | truth's fitness | " + " | ".join(NAMES) + " |",
-            "|---|---|---|" + "---|" * 4,
         ]
-        lines += _recovery_rows(r)
+        if r["truth_fitness"]:
+            lines += [
+                "| fit | fitness | truth's fitness | C_f | C_d | C_a | C_m |",
+                "|---|---|---|" + "---|" * 4,
+            ]
+            lines += _recovery_rows(r)
+            lines.append("")
         lines += [
+            "| motion | fitness | worst held-out E_x, recorded clock (BL) | worst held-out E_x, "
+            "best clock offset (BL) | target (mismatched tanks) | paper (table 4) |",
+            "|---|---|---|---|---|---|",
+        ]
+        for m, (a, b) in r["worst_ex"].items():
+            fit = r["fits"].get(m)
+            met = "met" if a <= TARGET_WORST_EX[m] else f"missed by {a - TARGET_WORST_EX[m]:.4f}"
+            lines.append(
+                f"| {m} | {fit.fitness if fit else float('nan'):.4f} | {a:.4f} | {b:.4f} | "
+                f"<= {TARGET_WORST_EX[m]} ({met}) | {PAPER_WORST_EX[m]} |"
+            )
+        lines.append("")
+        say("\n".join(lines[-6:]))
+    if ga:
+        lines += [
+            "## The paper's GA against the default method, every tank",
             "",
-            "| motion | worst test E_x, recorded clock (BL) | worst test E_x, best clock offset (BL) | paper (table 4) |",
+            "The GA (population 150, the paper's settings) and the default method fit the same "
+            "training experiments; \"to reach\" is the simulations the default method had used "
+            "when its best fitness first reached the GA's final one.",
+            "",
+            "| tank | fit | GA final fitness | GA simulations | default fitness | default "
+            "simulations | default simulations to reach the GA's final fitness | ratio |",
+            "|---|---|---|---|---|---|---|---|",
+        ]
+        for key, r in results.items():
+            for motion in ("straight", "turning"):
+                ga_fit, ga_sims = r["ga"][motion]
+                default = r["fits"][motion]
+                reach = _sims_to_reach(default, ga_fit.fitness)
+                ratio = f"{ga_sims / reach:.1f}x fewer" if reach else "not reached"
+                lines.append(
+                    f"| {key} | {motion} | {ga_fit.fitness:.4f} | {ga_sims} | "
+                    f"{default.fitness:.4f} | {r['sims'][motion]} | {reach if reach else '-'} | "
+                    f"{ratio} |"
+                )
+        lines.append("")
+        say("\n".join(lines[-2 * len(results) - 1:]))
+    worst = {m: max((r["worst_ex"][m][0], k) for k, r in results.items()
+                    if k in plants and m in r["worst_ex"]) for m in MOTIONS
+             if any(k in plants for k in results)}
+    if worst:
+        lines += [
+            "## Targets on the mismatched tanks",
+            "",
+            "| motion | worst held-out E_x over the mismatched tanks (BL) | tank | target |",
             "|---|---|---|---|",
         ]
-        lines += [
-            f"| {m} | {a:.4f} | {b:.4f} | {PAPER_WORST_EX[m]} |"
-            for m, (a, b) in r["worst_ex"].items()
-        ]
-        lines.append("")
-        say("\n".join(lines[-8:]))
-    if ga:
-        ds = load_dataset(BUNDLED_DATASET)
-        lines += [
-            "## The paper's GA against the default method (bundled dataset)",
-            "",
-            "| fit | GA final fitness | GA simulations | GA time (s) | default fitness | default simulations "
-            "to reach the GA's final fitness | ratio |",
-            "|---|---|---|---|---|---|---|",
-        ]
-        for motion in ("straight", "turning"):
-            say(f"running the paper's GA on {motion} ...")
-            t0 = time.perf_counter()
-            ga_fit, ev = fit_motion(
-                ds, motion, FitSettings("ga", seed=seed, generations=ga_generations)
-            )
-            ga_s = time.perf_counter() - t0
-            default = results["bundled"]["fits"][motion]
-            reach = _sims_to_reach(default, ga_fit.fitness)
-            ratio = f"{ev.simulations / reach:.1f}x fewer" if reach else "not reached"
-            lines.append(
-                f"| {motion} | {ga_fit.fitness:.4f} | {ev.simulations} | {ga_s:.0f} | {default.fitness:.4f} | "
-                f"{reach if reach else '-'} | {ratio} |"
-            )
-            say(lines[-1])
+        lines += [f"| {m} | {v:.4f} | {k} | <= {TARGET_WORST_EX[m]} |"
+                  for m, (v, k) in worst.items()]
         lines.append("")
     lines += [
         "## Reading these figures",

@@ -3,12 +3,22 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import tomllib
+from pathlib import Path
 
 from tqdm import tqdm
 
 from eelhost.commands.common import add_robot_options, floats, rejected_as
-from eelhost.data.virtual_tank import TABLE3, TankSettings, generate_dataset
-from eelsim.robot import HydroCoefficients, load_robot
+from eelhost.data.virtual_tank import (
+    TankSettings,
+    generate_dataset,
+    law_truths,
+    mismatched_plants,
+)
+from eelhost.errors import UserError
+from eelsim.fluid import FLUID_LAWS
+from eelsim.robot import load_robot
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -23,14 +33,32 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_robot_options(p)
     p.add_argument(
         "--truth",
-        metavar="Cf,Cd,Ca,Cm",
-        type=lambda s: floats(s, 4, "--truth"),
-        help="one true coefficient set for every experiment (default: table 3 per motion)",
+        metavar="C1,C2,...",
+        help="one true coefficient set for every experiment, in the law's order "
+        "(default: table 3 per motion)",
     )
     p.add_argument(
         "--mismatch",
         action="store_true",
-        help="all mismatch knobs: head/tail shape, servo limits, stray current 0.005 m/s",
+        help="head/tail shape, servo limits, stray current 0.005 m/s",
+    )
+    p.add_argument(
+        "--plant",
+        choices=sorted(mismatched_plants()),
+        help="a named test plant (docs/estimation.md, 'Test plants'); other options add to it",
+    )
+    p.add_argument(
+        "--fluid-law",
+        choices=sorted(FLUID_LAWS),
+        help="the water's fluid law (truth: table 3 carried into it)",
+    )
+    p.add_argument(
+        "--median", choices=("causal", "centred"), help="the recording's median filter"
+    )
+    p.add_argument(
+        "--joints-from",
+        metavar="ROBOT.toml",
+        help="the plant's joints: the [joints] table of this robot file (e.g. stiff servos)",
     )
     p.add_argument(
         "--head-tail", action="store_true", help="true head and tail unlike the body links"
@@ -46,16 +74,29 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
     robot = load_robot(args.robot)
-    truth = TABLE3
+    plant = mismatched_plants()[args.plant] if args.plant else None
+    base = plant.settings if plant else TankSettings()
+    law = args.fluid_law or (plant.law if plant else "morison")
+    try:
+        truth = law_truths(law)
+    except ValueError as err:
+        if not args.truth:
+            raise UserError(f"--fluid-law: {err}") from None
     if args.truth:
+        names = FLUID_LAWS[law].coefficient_names
         with rejected_as("--truth"):
-            c = HydroCoefficients.from_array(args.truth)
+            c = FLUID_LAWS[law].coefficients.from_array(
+                floats(args.truth, len(names), f"--truth ({','.join(names)})"))
         truth = {"straight": c, "turning": c}
-    settings = TankSettings(
+    settings = dataclasses.replace(
+        base,
         timestamp_jitter_s=args.timestamp_jitter,
-        head_tail=args.head_tail or args.mismatch,
-        servo_limits=args.servo_limits or args.mismatch,
-        stray_current_m_s=args.stray_current or (0.005 if args.mismatch else 0.0),
+        head_tail=base.head_tail or args.head_tail or args.mismatch,
+        servo_limits=base.servo_limits or args.servo_limits or args.mismatch,
+        stray_current_m_s=args.stray_current
+        or (0.005 if args.mismatch else base.stray_current_m_s),
+        median=args.median or base.median,
+        joints=_joints_table(args.joints_from) if args.joints_from else base.joints,
     )
     bar = tqdm(total=34, unit="experiment", desc="virtual tank")
     manifest = generate_dataset(
@@ -70,3 +111,15 @@ def run(args: argparse.Namespace) -> int:
     bar.close()
     print(f"wrote {manifest}")
     return 0
+
+
+def _joints_table(path: str) -> dict:
+    """The ``[joints]`` table of a robot file (a plant's joint model)."""
+    try:
+        data = tomllib.loads(Path(path).read_text())
+    except (OSError, tomllib.TOMLDecodeError) as err:
+        raise UserError(f"--joints-from: cannot read {path}: {err}") from None
+    joints = data.get("joints")
+    if not isinstance(joints, dict):
+        raise UserError(f"--joints-from: {path} has no [joints] table")
+    return joints

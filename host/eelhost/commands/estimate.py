@@ -73,8 +73,7 @@ def run(args: argparse.Namespace) -> int:
         fits[motion] = res
         print(
             f"{motion}: fitness {res.fitness:.4f}, {ev.simulations} simulations, "
-            + " ".join(f"{name} {value:.4g}" for name, value in zip(
-                res.coefficients.names(), res.coefficients.as_array(), strict=True))
+            + " ".join(f"{name} {value:.4g}" for name, value in res.space.as_dict(res.values).items())
         )
     path = write_coefficients(Path(args.out) / "coefficients.json", fits)
     print(f"wrote {path}")

@@ -11,6 +11,8 @@ from pathlib import Path
 
 from eelhost.benchmarks.estimator_accuracy import estimator_report
 
+WRITE_DEFAULT = "docs/estimation_benchmarks.md"
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register the subcommand."""
@@ -21,24 +23,54 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--work", default="out/estimate-bench", help="folder for generated datasets")
     p.add_argument(
-        "--write", default="docs/estimation_benchmarks.md", help="markdown output ('-': none)"
+        "--write", default=WRITE_DEFAULT, help="markdown output ('-': none)"
     )
     p.add_argument(
         "--ga-generations", type=int, default=130, help="GA generations (the paper's 130)"
     )
     p.add_argument("--skip-ga", action="store_true", help="leave out the GA comparison")
+    p.add_argument(
+        "--tanks",
+        metavar="NAME,...",
+        help="measure only these tanks: bundled, clean, or mismatched plants (eelbot dataset "
+        "--plant; default: all)",
+    )
+    p.add_argument(
+        "--coverage",
+        type=int,
+        metavar="SEEDS",
+        help="instead: measure the report's interval coverage over SEEDS synthetic tanks "
+        "(written to docs/estimation_coverage.md unless --write says otherwise)",
+    )
+    p.add_argument("--replicates", type=int, default=8, help="bootstrap refits (--coverage)")
     p.add_argument("--seed", type=int, default=0)
     p.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
+    if args.coverage:
+        from eelhost.benchmarks.estimator_coverage import coverage_markdown, measure_coverage
+
+        cov = measure_coverage(args.coverage, args.seed, args.replicates,
+                               say=lambda line: print(line, flush=True))
+        text = "# Estimation: interval coverage\n\n" + coverage_markdown(
+            cov, f"eelbot estimate-bench --coverage {args.coverage} --seed {args.seed} "
+            f"--replicates {args.replicates}")
+        print(text)
+        if args.write != "-":
+            out = (Path("docs/estimation_coverage.md")
+                   if args.write == WRITE_DEFAULT else Path(args.write))
+            out.write_text(text)
+            print(f"wrote {out}")
+        return 0
     text = estimator_report(
         Path(args.work),
         seed=args.seed,
         ga_generations=args.ga_generations,
         ga=not args.skip_ga,
         progress=lambda line: print(line, flush=True),
+        only=tuple(args.tanks.split(",")) if args.tanks else None,
     )
     if args.write != "-":
         Path(args.write).parent.mkdir(parents=True, exist_ok=True)

@@ -27,6 +27,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", default="out/report", help="report folder")
     p.add_argument("--joint", action="store_true", help="also fit one joint set for the robot")
     p.add_argument("--bootstrap", type=int, default=8, help="bootstrap refits per fit (0: none)")
+    p.add_argument("--no-compare", action="store_true",
+                   help="skip the cross-validated comparison of candidate models")
     add_fit_options(p)
     p.set_defaults(run=run)
 
@@ -60,6 +62,7 @@ def run(args: argparse.Namespace) -> int:
         settings,
         args.bootstrap,
         args.resume,
+        compare_models=not args.no_compare,
         say=print,
         progress_factory=factory,
     )

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from eelhost.data.experiments import load_dataset
 from eelhost.estimation.evaluate import ALIGN_S
-from eelhost.estimation.pipeline import read_coefficients
+from eelhost.estimation.pipeline import CoefficientsError, read_coefficients
 from eelhost.estimation.validate import table_csv, table_markdown, validate
 
 
@@ -19,7 +19,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         description="E_x and E_v (paper's mean of norms and true RMS, BL and BL/s) for "
         "every test experiment and path, as tables (markdown, CSV) and figures.",
     )
-    p.add_argument("coefficients", help="coefficients.json from estimate, or Cf,Cd,Ca,Cm")
+    p.add_argument("coefficients", help="coefficients.json from estimate, or the robot's coefficients as numbers (C_f,C_d,C_a,C_m)")
     p.add_argument("dataset", help="dataset folder")
     p.add_argument("--out", default="out/validate", help="folder for tables and figures")
     p.add_argument("--backend", choices=["auto", "batch", "reference"], default="auto")
@@ -41,8 +41,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
-    fitted = read_coefficients(args.coefficients)
+    coefficients = Path(args.coefficients)
+    if coefficients.suffix == ".json" and not coefficients.is_file():
+        # said before the dataset is read: reading the file needs the dataset's robot
+        raise CoefficientsError(f"{coefficients}: cannot read coefficients: no such file")
     dataset = load_dataset(args.dataset, allow_incomplete=args.allow_incomplete)
+    fitted = read_coefficients(args.coefficients, dataset.robot)
     tests = [e for exps in dataset.test.values() for e in exps] + list(dataset.paths)
     runs = validate(dataset.robot, fitted, tests, backend=args.backend, align_s=args.align)
     out = Path(args.out)

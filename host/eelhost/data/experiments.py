@@ -33,7 +33,8 @@ import numpy as np
 from pydantic import ValidationError
 
 from eelhost.errors import UserError
-from eelsim.fluid import FluidCoefficients
+from eelsim.camera import MEDIAN_PLACEMENTS, CameraModel
+from eelsim.fluid import FluidCoefficients, get_fluid_law
 from eelsim.robot import HydroCoefficients, Robot, load_robot
 from eelsim.scenario import Scenario
 
@@ -72,7 +73,9 @@ class Experiment:
     motion : str
         Motion type: "straight", "turning" or "path".
     camera : dict
-        Camera facts: fps, pixel_m, median_window, timestamp_jitter_s.
+        Camera facts (docs/data.md): ``fps`` (absent: measured from the frame times),
+        ``pixel_m``, ``median_window``, ``median`` ("causal", the default, or "centred"),
+        ``timestamp_jitter_s``; :meth:`recording_camera` reads them.
     timing : dict
         Loop facts: control_period_s, extra_delay_s, jitter_s.
     source : dict
@@ -94,6 +97,34 @@ class Experiment:
     def span_s(self) -> tuple[float, float]:
         """First and last frame times."""
         return float(self.t_s[0]), float(self.t_s[-1])
+
+    def recording_camera(self) -> CameraModel:
+        """The camera that recorded the frames, as declared (docs/data.md).
+
+        ``fps`` absent means a real camera's measured rate: one over the median frame interval.
+        ``median`` absent reads as "causal" (what recordings made before the field did).
+
+        Raises
+        ------
+        DataError
+            For a declared value the camera model refuses, naming the experiment and the key.
+        """
+        cam = self.camera
+        try:
+            fps = float(cam["fps"]) if "fps" in cam else 1.0 / float(np.median(np.diff(self.t_s)))
+            return CameraModel(
+                fps=fps,
+                pixel_m=float(cam.get("pixel_m", 0.0038)),
+                median_window=int(cam.get("median_window", 5)),
+                median=str(cam.get("median", "causal")),
+            )
+        except (TypeError, ValueError) as err:
+            raise DataError(f"{self.name}: camera: {err}") from None
+
+    @property
+    def timestamp_jitter_s(self) -> float:
+        """Half-width of the recording's clock offset (its time stamps' uncertainty)."""
+        return float(self.camera.get("timestamp_jitter_s", 0.1))
 
     def position_at(self, times_s: np.ndarray) -> np.ndarray:
         """Centre of mass linearly interpolated at ``times_s`` (inside the recorded span)."""
@@ -292,6 +323,7 @@ def read_experiment(csv_or_stem: str | Path, allow_incomplete: bool = False) -> 
     motion = meta.get("motion", "straight")
     if motion not in ("straight", "turning", "path"):
         raise DataError(f"{json_path}: motion: expected straight, turning or path, got {motion!r}")
+    _check_camera(meta.get("camera", {}), json_path)
     return Experiment(
         name=meta.get("name", Path(stem).name),
         t_s=frames.t_s,
@@ -317,6 +349,31 @@ def recording_complete(meta: dict[str, Any]) -> bool:
     if not isinstance(recording, dict):
         return True
     return recording.get("complete") is True
+
+
+# The camera declaration's fields and what each must be (other keys are kept, unread).
+_CAMERA_NUMBERS = {"fps": "> 0", "pixel_m": ">= 0", "timestamp_jitter_s": ">= 0"}
+
+
+def _check_camera(camera: Any, where: Path) -> None:
+    """Refuse a camera declaration the estimator cannot use, naming the key."""
+    if not isinstance(camera, dict):
+        raise DataError(f"{where}: camera: expected a table of camera facts")
+    for key, rule in _CAMERA_NUMBERS.items():
+        if key not in camera:
+            continue
+        v = camera[key]
+        ok = isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+        if not ok or (v <= 0 if rule == "> 0" else v < 0):
+            raise DataError(f"{where}: camera.{key}: expected a number {rule}, got {v!r}")
+    window = camera.get("median_window", 5)
+    if not isinstance(window, int) or isinstance(window, bool) or window < 1:
+        raise DataError(f"{where}: camera.median_window: expected a whole number >= 1, got {window!r}")
+    median = camera.get("median", "causal")
+    if median not in MEDIAN_PLACEMENTS:
+        raise DataError(
+            f"{where}: camera.median: expected one of {', '.join(MEDIAN_PLACEMENTS)}, got {median!r}"
+        )
 
 
 def import_tracker_csv(
@@ -383,6 +440,8 @@ class Dataset:
         For virtual tanks: the coefficients the data was generated with, per motion type.
     manifest : dict
         The manifest as read.
+    plant : dict
+        For virtual tanks: what their physics were (fluid law, joints, mismatch knobs).
     """
 
     folder: Path
@@ -392,6 +451,7 @@ class Dataset:
     paths: list[Experiment]
     truth: dict[str, FluidCoefficients]
     manifest: dict[str, Any]
+    plant: dict[str, Any] = field(default_factory=dict)
 
 
 def manifest_text(
@@ -400,8 +460,14 @@ def manifest_text(
     paths: list[str],
     truth: dict[str, FluidCoefficients] | None = None,
     description: str = "",
+    plant: dict[str, Any] | None = None,
 ) -> str:
-    """Render a dataset manifest (TOML)."""
+    """Render a dataset manifest (TOML; docs/data.md).
+
+    ``truth`` (a virtual tank's coefficients per motion type) is written by name with its law;
+    ``plant`` (what the virtual tank's physics were: numbers, strings and booleans by name)
+    as its own table.
+    """
 
     def names(xs: list[str]) -> str:
         return "[" + ", ".join(f'"{x}"' for x in xs) + "]"
@@ -420,11 +486,24 @@ def manifest_text(
             "",
         ]
     lines += ["[validation]", f"paths = {names(paths)}", ""]
-    if truth:
-        lines.append("[truth]  # coefficients the data was generated with (C_f, C_d, C_a, C_m)")
-        for motion, c in truth.items():
-            lines.append(f"{motion} = [{', '.join(str(v) for v in c.as_array())}]")
-    return "\n".join(lines) + "\n"
+    for motion, c in (truth or {}).items():
+        lines.append(f"[truth.{motion}]  # the coefficients the data was generated with")
+        lines.append(f'law = "{type(c).law_name}"')
+        lines += [f"{n} = {v!r}" for n, v in zip(c.names(), c.as_array().tolist(), strict=True)]
+        lines.append("")
+    if plant:
+        lines.append("[plant]  # the virtual tank's physics (what the fitted model may not contain)")
+        lines += [f"{k} = {_toml_scalar(v)}" for k, v in plant.items()]
+        lines.append("")
+    return "\n".join(lines).rstrip("\n") + "\n"
+
+
+def _toml_scalar(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, str):
+        return json.dumps(v)
+    return repr(float(v)) if isinstance(v, float) else repr(v)
 
 
 def write_manifest(folder: str | Path, text: str) -> Path:
@@ -460,7 +539,7 @@ def load_dataset(folder: str | Path, allow_incomplete: bool = False) -> Dataset:
         raise DataError(f"{mpath}: not valid TOML: {err}") from None
     if manifest.get("format") != DATASET_FORMAT:
         raise DataError(f"{mpath}: format: expected {DATASET_FORMAT!r}")
-    allowed = {"format", "description", "robot", "motions", "validation", "truth"}
+    allowed = {"format", "description", "robot", "motions", "validation", "truth", "plant"}
     for key in manifest:
         if key not in allowed:
             raise DataError(f"{mpath}: {key}: unknown key")
@@ -484,15 +563,29 @@ def load_dataset(folder: str | Path, allow_incomplete: bool = False) -> Dataset:
         _load_named(folder, n, mpath, "validation.paths", allow_incomplete)
         for n in manifest.get("validation", {}).get("paths", [])
     ]
-    truth: dict[str, FluidCoefficients] = {}
-    for motion, values in manifest.get("truth", {}).items():
-        try:
-            truth[motion] = HydroCoefficients.from_array(values)
-        except (ValueError, ValidationError):
-            raise DataError(
-                f"{mpath}: truth.{motion}: expected four non-negative numbers"
-            ) from None
-    return Dataset(folder, robot, train, test, paths, truth, manifest)
+    truth = {m: _truth(v, f"{mpath}: truth.{m}") for m, v in manifest.get("truth", {}).items()}
+    plant = manifest.get("plant", {})
+    if not isinstance(plant, dict):
+        raise DataError(f"{mpath}: plant: expected a table")
+    return Dataset(folder, robot, train, test, paths, truth, manifest, plant)
+
+
+def _truth(value: Any, where: str) -> FluidCoefficients:
+    """A truth entry: a table (``law`` and the coefficients by name) or a list.
+
+    A list is how datasets made before coefficients were named wrote the Morison law's four.
+    """
+    try:
+        if isinstance(value, dict):
+            fields = dict(value)
+            law = get_fluid_law(str(fields.pop("law", "morison")))
+            return law.coefficients.model_validate(fields)
+        return HydroCoefficients.from_array(value)
+    except (TypeError, ValueError) as err:  # pydantic's ValidationError is a ValueError
+        raise DataError(
+            f"{where}: expected a table with law and its coefficients by name, or the Morison "
+            f"law's four non-negative numbers ({str(err).splitlines()[0]})"
+        ) from None
 
 
 def _load_named(

@@ -1,25 +1,34 @@
 """The virtual tank: the paper's experiments recorded from the twin instead of a real robot.
 
-Each experiment runs the closed-loop twin with a chosen *true* coefficient set and records what an
-overhead camera would: the median-filtered, pixel-quantised pose at 30 fps, with the time stamps'
-uncertainty (about 0.1 s in the paper) modelled as a per-experiment clock offset drawn uniformly
-from [-jitter, +jitter], and a jittered control period. The experiment ends when the robot reaches
-its last waypoint, as in the tank.
+Each experiment runs the closed-loop twin (the *plant*) with a chosen *true* coefficient set (of
+any fluid law: the truth's law is the plant's) and records what an overhead camera would: the
+pixel-quantised pose at 30 fps through a median filter (the controller's causal one, or centred
+as a recording filtered afterwards), with the time stamps' uncertainty (about 0.1 s in the paper)
+modelled as a per-experiment clock offset drawn uniformly from [-jitter, +jitter], and a jittered
+control period. The experiment ends when the robot reaches its last waypoint, as in the tank.
 
-Model-mismatch knobs make the data harder than the model that will be fitted to it:
+Test plants make the data harder than the model that will be fitted to it (the dataset's robot
+file keeps the paper's model; docs/estimation.md, "Test plants"):
 
+- a truth of another fluid law (e.g. a law the estimator does not fit);
 - ``head_tail``: the true robot has a bulkier head (battery, electronics) and a slim pointed tail,
   while the dataset's robot file, used for fitting, keeps identical links;
 - ``servo_limits``: the true joints obey the servos' torque-speed line;
+- ``joints``: the true joints are another joint model (e.g. stiff servos with lag), given as the
+  robot file's ``[joints]`` table;
 - ``stray_current_m_s``: a weak current in a random (seeded) direction that the metadata does not
-  mention.
+  mention;
+- ``median``: the recording's median filter is centred (declared in the camera facts, as a lab
+  would declare it).
 
 Everything is deterministic for a seed.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import logging
+import tomllib
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
@@ -34,9 +43,9 @@ from eelhost.data.experiments import (
     write_experiment,
     write_manifest,
 )
-from eelsim.camera import CameraModel
-from eelsim.closed_loop import LoopOptions, simulate_closed_loop
-from eelsim.fluid import FluidCoefficients
+from eelsim.camera import CameraModel, observation_steps, observed_positions
+from eelsim.closed_loop import LoopOptions, RunResult, simulate_closed_loop
+from eelsim.fluid import FluidCoefficients, get_fluid_law
 from eelsim.robot import HydroCoefficients, Robot, load_robot
 from eelsim.scenario import TRAINING_CORNERS, Scenario, named_scenarios, paper_grid
 from eelsim.timing import LoopTiming
@@ -70,6 +79,11 @@ class TankSettings:
         Speed of the unmodelled current (0: none).
     pixel_m : float
         The camera's pixel size on the water (0: no rounding).
+    median : {"causal", "centred"}
+        The recording's median filter (the controller's is causal either way).
+    joints : dict, optional
+        The plant's ``[joints]`` table (a robot file's; e.g. another joint model), replacing the
+        dataset robot's.
     """
 
     timestamp_jitter_s: float = 0.1
@@ -78,15 +92,135 @@ class TankSettings:
     servo_limits: bool = False
     stray_current_m_s: float = 0.0
     pixel_m: float = 0.0038
+    median: str = "causal"
+    joints: dict | None = None
+
+    def describe(self) -> dict[str, object]:
+        """The plant's knobs by name (the manifest's ``[plant]`` table)."""
+        out: dict[str, object] = {
+            "timestamp_jitter_s": self.timestamp_jitter_s,
+            "control_jitter_s": self.control_jitter_s,
+            "head_tail": self.head_tail,
+            "servo_limits": self.servo_limits,
+            "stray_current_m_s": self.stray_current_m_s,
+            "pixel_m": self.pixel_m,
+            "median": self.median,
+        }
+        if self.joints:
+            out["joint_model"] = str(self.joints.get("model", "pd"))
+        return out
+
+
+# Another law's truth: table 3's added mass and inertia, drag of the law's own form with typical
+# values (docs/estimation.md, "Test plants").
+_OTHER_LAW_DRAG: dict[str, dict[str, float]] = {
+    # Blasius skin friction; a circular cylinder's cross-flow drag
+    "reynolds": {"C_f_lam": 1.328, "C_d_inf": 1.0, "C_d_visc": 5.0},
+}
+
+
+def law_truths(law: str) -> dict[str, FluidCoefficients]:
+    """The true coefficients per motion type of a plant whose water follows ``law``.
+
+    Laws with the paper's four coefficients take table 3's rows; others take table 3's added
+    mass and inertia (C_a, C_m) and the drag values of ``_OTHER_LAW_DRAG``.
+
+    Raises
+    ------
+    ValueError
+        When the law is unknown or has no typical drag values here.
+    """
+    fluid = get_fluid_law(law)
+    out: dict[str, FluidCoefficients] = {}
+    for motion, row in TABLE3.items():
+        paper = row.model_dump()
+        # separate linear and quadratic drag equal to the paper's one coefficient: its law
+        split = {f"{n}_{part}": paper[n] for n in ("C_f", "C_d") for part in ("lin", "quad")}
+        known = {**paper, **split, **_OTHER_LAW_DRAG.get(law, {})}
+        missing = [n for n in fluid.coefficient_names if n not in known]
+        if missing:
+            raise ValueError(
+                f"plant law {law!r}: no true value for {', '.join(missing)} (give --truth)"
+            )
+        out[motion] = fluid.coefficients(**{n: known[n] for n in fluid.coefficient_names})
+    return out
+
+
+@dataclass(frozen=True)
+class Plant:
+    """A named test plant: how the tank records and which law its water follows.
+
+    Attributes
+    ----------
+    name : str
+    description : str
+    settings : TankSettings
+    law : str
+        The water's fluid law (its truth from :func:`law_truths`).
+    """
+
+    name: str
+    description: str
+    settings: TankSettings
+    law: str = "morison"
+
+    def truths(self) -> dict[str, FluidCoefficients]:
+        """The true coefficients per motion type."""
+        return law_truths(self.law)
+
+
+def _servo_joints() -> dict | None:
+    """The ``[joints]`` table of the bundled servo robot file, when the twin has one."""
+    try:
+        text = resources.files("eelsim.data").joinpath("servo_robot.toml").read_text()
+    except (FileNotFoundError, OSError):
+        return None
+    joints = tomllib.loads(text).get("joints")
+    return dict(joints) if isinstance(joints, dict) else None
+
+
+def mismatched_plants() -> dict[str, Plant]:
+    """The mismatched plants ``eelbot dataset --plant`` and ``estimate-bench`` know, by name.
+
+    Each differs from the fitted model (the paper's PD joints, Morison water, identical links,
+    causal median) in one way, and ``all`` in every way at once. ``stiff_servos`` is there only
+    when the twin bundles a servo robot file (``eelsim/data/servo_robot.toml``).
+    """
+    stray = 0.005
+    plants = [
+        Plant("head_tail", "bulkier head and pointed tail", TankSettings(head_tail=True)),
+        Plant("servo_limits", "joints on the servos' torque-speed line",
+              TankSettings(servo_limits=True)),
+        Plant("stray_current", f"{stray} m/s unmodelled current",
+              TankSettings(stray_current_m_s=stray)),
+        Plant("reynolds", "Reynolds-number-dependent drag (a law the estimator does not fit)",
+              TankSettings(), "reynolds"),
+        Plant("centred_median", "recording filtered by a centred median",
+              TankSettings(median="centred")),
+    ]
+    servo = _servo_joints()
+    if servo is not None:
+        plants.append(Plant("stiff_servos", "stiff position servos with lag",
+                            TankSettings(joints=servo)))
+    plants.append(Plant(
+        "all", "all of the above at once",
+        TankSettings(head_tail=True, servo_limits=True, stray_current_m_s=stray,
+                     median="centred", joints=servo),
+        "reynolds",
+    ))
+    return {p.name: p for p in plants}
 
 
 def true_robot(robot: Robot, settings: TankSettings) -> Robot:
-    """The robot that generates the data (the fitted robot plus any head/tail mismatch)."""
-    if not settings.head_tail:
+    """The robot that generates the data (the fitted robot plus the plant's differences)."""
+    if not settings.head_tail and not settings.joints:
         return robot
     data = robot.model_dump()
-    data["head"] = MISMATCH_HEAD
-    data["tail"] = MISMATCH_TAIL
+    if settings.head_tail:
+        data["head"] = MISMATCH_HEAD
+        data["tail"] = MISMATCH_TAIL
+    if settings.joints:
+        data["joints"] = dict(settings.joints)
     return Robot.model_validate(data)
 
 
@@ -145,7 +279,7 @@ def record_experiment(
             }
         )
     timing = LoopTiming(control_period_s=0.3, jitter_s=settings.control_jitter_s)
-    camera = CameraModel(pixel_m=settings.pixel_m)
+    camera = CameraModel(pixel_m=settings.pixel_m, median=settings.median)
     options = LoopOptions(timing=timing, camera=camera, servo_limits=settings.servo_limits)
     run = simulate_closed_loop(
         true_robot(robot, settings),
@@ -155,17 +289,24 @@ def record_experiment(
         coefficients=truth,
     )
     frames = run.camera_t_s <= (run.t_s[-1] + 1e-9)
+    if camera.median == "centred":
+        # filtered afterwards from the stored states: a frame between the run's last two steps
+        # cannot be interpolated, and the recording ends before it
+        frames &= run.camera_t_s <= run.t_s[-1] - timing.dt_s + 1e-9
+    t_frames = run.camera_t_s[frames]
+    position, heading = _recorded(run, t_frames, camera, timing.dt_s)
     return Experiment(
         name=scenario.name,
-        t_s=run.camera_t_s[frames] + offset_s,
-        position_m=run.camera_pose[frames, :2],
-        heading_rad=run.camera_pose[frames, 2],
+        t_s=t_frames + offset_s,
+        position_m=position,
+        heading_rad=heading,
         scenario=scenario,
         motion=motion,
         camera={
             "fps": camera.fps,
             "pixel_m": camera.pixel_m,
             "median_window": camera.median_window,
+            "median": camera.median,
             "timestamp_jitter_s": settings.timestamp_jitter_s,
         },
         timing={
@@ -179,13 +320,36 @@ def record_experiment(
             "seed": seed,
             "clock_offset_s": offset_s,
             "outcome": run.failure.name,
-            "mismatch": {
-                "head_tail": settings.head_tail,
-                "servo_limits": settings.servo_limits,
-                "stray_current_m_s": settings.stray_current_m_s,
-            },
+            "plant": {"fluid_law": type(truth).law_name, **settings.describe()},
         },
     )
+
+
+def _recorded(
+    run: RunResult, t_frames: np.ndarray, camera: CameraModel, dt_s: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """What the recording holds at each frame: the controller's causal view, or centred.
+
+    A centred median is the recording filtered afterwards: the same pixel-rounded frames
+    (:func:`eelsim.camera.observed_positions` reproduces the closed loop's camera), each the
+    median of the frames around it, none after the last. The heading goes through the same
+    filter (unrounded: the camera measures it as an angle).
+    """
+    if camera.median == "causal":
+        return run.camera_pose[: t_frames.size, :2], run.camera_pose[: t_frames.size, 2]
+    n = (run.states.shape[1] - 4) // 2
+    last = float(t_frames[-1])
+    steps = observation_steps(t_frames, camera, dt_s, last)
+    steps = steps[steps < len(run.states)]
+    st = run.states[steps]
+    position = observed_positions(t_frames, steps, st[:, n : n + 2], st[:, -2:], camera, dt_s,
+                                  last)
+    # the heading as a 2-vector (heading, 0) through the same filter, without pixel rounding
+    angle = np.column_stack([st[:, :n].mean(axis=1), np.zeros(len(st))])
+    rate = np.column_stack([st[:, n + 2 : 2 * n + 2].mean(axis=1), np.zeros(len(st))])
+    unrounded = dataclasses.replace(camera, pixel_m=0.0)
+    heading = observed_positions(t_frames, steps, angle, rate, unrounded, dt_s, last)[:, 0]
+    return position, heading
 
 
 def _record_job(args: tuple) -> Experiment:
@@ -248,10 +412,8 @@ def generate_dataset(
     for motion, split, s in plan:
         if motion != "path":
             motions.setdefault(motion, {"train": [], "test": []})[split].append(s.name)
-    desc = (
-        f"virtual tank, seed {seed}, mismatch head_tail={settings.head_tail} "
-        f"servo_limits={settings.servo_limits} stray_current={settings.stray_current_m_s}"
-    )
+    plant = {"fluid_law": type(truths["straight"]).law_name, **settings.describe()}
+    desc = f"virtual tank, seed {seed}, plant " + ", ".join(f"{k}={v}" for k, v in plant.items())
     return write_manifest(
         folder,
         manifest_text(
@@ -260,6 +422,7 @@ def generate_dataset(
             ["path1", "path2"],
             {"straight": truths["straight"], "turning": truths["turning"]},
             desc,
+            plant,
         ),
     )
 

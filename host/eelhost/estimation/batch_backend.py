@@ -19,6 +19,7 @@ from collections.abc import Sequence
 import numpy as np
 from scipy.spatial import cKDTree
 
+from eelhost.estimation.parameters import ParameterSpace
 from eelsim.batch import run_batch
 from eelsim.closed_loop import LoopOptions
 from eelsim.robot import Robot
@@ -28,7 +29,7 @@ class RunLengths:
     """Each (candidate, experiment) run's length guessed from the runs done before.
 
     The guess for a candidate is what the nearest earlier candidate (Euclidean distance of the
-    logarithms of the coefficients, C_m floored at 1e-4) took on each experiment.
+    logarithms of its parameters, floored at 1e-4) took on each experiment.
 
     Parameters
     ----------
@@ -40,7 +41,7 @@ class RunLengths:
 
     def __init__(self, experiments: int, memory: int = 3000) -> None:
         self.memory = memory
-        self._keys = np.zeros((0, 4))
+        self._keys: np.ndarray | None = None
         self._steps = np.zeros((0, experiments))
 
     @staticmethod
@@ -52,13 +53,14 @@ class RunLengths:
 
         Parameters
         ----------
-        coefficients : ndarray, shape (C, 4)
+        coefficients : ndarray, shape (C, K)
+            Candidates' parameters.
 
         Returns
         -------
         ndarray or None
         """
-        if not len(self._keys):
+        if self._keys is None or not len(self._keys):
             return None
         _, nearest = cKDTree(self._keys).query(self._key(coefficients))
         return self._steps[nearest]
@@ -68,27 +70,33 @@ class RunLengths:
 
         Parameters
         ----------
-        coefficients : ndarray, shape (C, 4)
+        coefficients : ndarray, shape (C, K)
         steps : ndarray, shape (C, E)
             Steps each run lasted.
         """
-        self._keys = np.concatenate([self._keys, self._key(coefficients)])[-self.memory :]
+        keys = self._key(coefficients)
+        before = np.zeros((0, keys.shape[1])) if self._keys is None else self._keys
+        self._keys = np.concatenate([before, keys])[-self.memory :]
         self._steps = np.concatenate([self._steps, steps])[-self.memory :]
 
 
 def simulate_batch(
-    robot: Robot,
+    robots: Sequence[Robot],
     prepared: Sequence,
-    coefficients: np.ndarray,
+    parameters: np.ndarray,
+    space: ParameterSpace,
     lengths: RunLengths | None = None,
 ):
     """Simulate every prepared experiment for every candidate with ``eelsim.batch``.
 
     Parameters
     ----------
-    robot : Robot
+    robots : sequence of Robot
+        Each candidate's robot (its joint parameters; the same object when none are fitted).
     prepared : sequence of PreparedExperiment
-    coefficients : ndarray, shape (C, 4)
+    parameters : ndarray, shape (C, K)
+        Candidates, vectors of ``space``.
+    space : ParameterSpace
     lengths : RunLengths, optional
         Guesses the runs' lengths for the kernel's packing, and learns them from this call.
 
@@ -98,16 +106,17 @@ def simulate_batch(
     """
     from eelhost.estimation.evaluate import Simulated
 
-    c, e = coefficients.shape[0], len(prepared)
+    c, e = parameters.shape[0], len(prepared)
+    coefficients = space.coefficient_array(parameters)
     n = prepared[0].times_s.size
-    n_links = robot.n_links
+    n_links = robots[0].n_links
     pos = np.full((c, e, n, 2), np.nan)
     heading = np.full((c, e, n), np.nan)
     failure = np.zeros((c, e), dtype=int)
     left = np.zeros((c, e))
     arrival = np.full((c, e), np.nan)
     failed = np.full((c, e), np.nan)
-    expected = lengths.predict(coefficients) if lengths is not None else None
+    expected = lengths.predict(parameters) if lengths is not None else None
     steps = np.zeros((c, e), dtype=np.int64)
     groups: dict[LoopOptions, list[int]] = {}
     for j, p in enumerate(prepared):
@@ -116,8 +125,9 @@ def simulate_batch(
         union = np.unique(np.concatenate([prepared[j].state_steps for j in members]))
         scenarios = [prepared[j].scenario for _ in range(c) for j in members]
         coeffs = np.repeat(coefficients, len(members), axis=0)
+        run_robots = [rb for rb in robots for _ in members]
         hint = None if expected is None else expected[:, members].reshape(-1)
-        res = run_batch(robot, scenarios, coeffs, options, seeds=0, sample_steps=union,
+        res = run_batch(run_robots, scenarios, coeffs, options, seeds=0, sample_steps=union,
                         expected_steps=hint)
         states = res.states.reshape(c, len(members), union.size, -1)
         for k, j in enumerate(members):
@@ -130,5 +140,5 @@ def simulate_batch(
         arrival[:, members] = res.arrival_time_s.reshape(shape)
         failed[:, members] = np.where(codes != 0, res.failure_time_s.reshape(shape), np.nan)
     if lengths is not None:
-        lengths.record(coefficients, steps)
+        lengths.record(parameters, steps)
     return Simulated(pos, heading, failure, left, arrival, failed, steps)

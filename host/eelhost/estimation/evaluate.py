@@ -1,9 +1,13 @@
-"""Simulating experiments for many candidate coefficient sets, and scoring them.
+"""Simulating experiments for many candidate parameter vectors, and scoring them.
 
 An :class:`Evaluator` holds a set of experiments (training or test) prepared for simulation: the
 task from each experiment's metadata, run for T_max = ``tmax_factor`` times the recorded span so that
 a slightly slow candidate is not flagged too slow by the clock's noise (but ended at its goal once
-the last state compared is simulated), with the sample times of the fitness. ``simulate`` runs every (candidate, experiment) pair through a backend:
+the last state compared is simulated), with the sample times of the fitness, seen through the
+camera the recording declares (frame rate, median filter causal or centred; docs/data.md). A
+candidate is a vector of its :class:`~eelhost.estimation.parameters.ParameterSpace` (the fluid
+law's coefficients and any fitted joint parameters, by name). ``simulate`` runs every
+(candidate, experiment) pair through a backend:
 
 - ``"reference"``: the readable closed loop (``eelsim.closed_loop``), spread over processes;
 - ``"batch"``: the fast batched kernel (``eelsim.batch``), the default when it is available.
@@ -27,12 +31,14 @@ from eelhost.estimation.fitness import (
     N_SAMPLES_FIT,
     VELOCITY_WEIGHT,
     sample_times,
+    sampled_velocity,
     trajectory_error,
 )
-from eelsim.camera import CameraModel, observation_steps, observed_positions
+from eelhost.estimation.parameters import ParameterSpace
+from eelsim.camera import observation_steps, observed_positions
 from eelsim.closed_loop import LoopOptions, simulate_closed_loop
 from eelsim.flags import Failure, penalty
-from eelsim.robot import HydroCoefficients, Robot
+from eelsim.robot import Robot
 from eelsim.scenario import Scenario
 from eelsim.timing import LoopTiming
 
@@ -71,8 +77,10 @@ class PreparedExperiment:
     state_steps : ndarray of int
         The physics steps whose simulated states are needed.
     observe : bool
-        Compare the simulation as the camera saw it (pixels, median filter) rather than its true
+        Compare the simulation as the camera saw it (frames, median filter) rather than its true
         centre of mass.
+    last_time_s : float
+        The recording's last frame time (a centred median holds no frame after it).
     """
 
     experiment: Experiment
@@ -84,6 +92,7 @@ class PreparedExperiment:
     shifted_positions_m: np.ndarray
     state_steps: np.ndarray
     observe: bool = True
+    last_time_s: float | None = None
 
     def positions(self, states: np.ndarray, n_links: int) -> tuple[np.ndarray, np.ndarray]:
         """Simulated centre of mass and heading at the sample times from states at ``state_steps``.
@@ -111,7 +120,8 @@ class PreparedExperiment:
         smooth_camera = dataclasses.replace(self.options.camera, pixel_m=0.0)
         com = states[:, :, n_links : n_links + 2]
         pos = observed_positions(
-            self.times_s, self.state_steps, com, states[:, :, -2:], smooth_camera, dt
+            self.times_s, self.state_steps, com, states[:, :, -2:], smooth_camera, dt,
+            self.last_time_s,
         )
         # a run that ended before the last state needed (its later rows are NaN) has no camera
         # view there
@@ -135,21 +145,16 @@ def prepare(
     experiment is shifted, so this costs no extra simulation.
 
     With ``observe`` (the default) the simulation is compared as the experiment's camera would
-    have seen it (:func:`eelsim.camera.observed_positions`: the same frames, pixels and median
-    filter as the recording), not by its true centre of mass, so that the camera's quantisation and
-    filter lag are not blamed on the coefficients.
+    have seen it (:func:`eelsim.camera.observed_positions` with the camera the recording declares:
+    the same frames and median filter, causal or centred), not by its true centre of mass, so that
+    the camera's filter lag is not blamed on the coefficients.
     """
     t0, t1 = exp.span_s
     times = sample_times(t0, t1, n_samples, dt_s)
     tmax = float(np.ceil(tmax_factor * t1 / dt_s)) * dt_s
     half = int(round(align_s / ALIGN_STEP_S))
     shifts = np.arange(-half, half + 1) * ALIGN_STEP_S
-    cam = exp.camera
-    camera = CameraModel(
-        fps=float(cam.get("fps", 30.0)),
-        pixel_m=float(cam.get("pixel_m", 0.0038)),
-        median_window=int(cam.get("median_window", 5)),
-    )
+    camera = exp.recording_camera()
     timing = LoopTiming(
         dt_s=dt_s,
         control_period_s=float(exp.timing.get("control_period_s", 0.3)),
@@ -157,7 +162,7 @@ def prepare(
     )
     state_steps = np.union1d(
         np.round(times / dt_s).astype(np.int64),
-        observation_steps(times, camera, dt_s) if observe else np.zeros(0, dtype=np.int64),
+        observation_steps(times, camera, dt_s, t1) if observe else np.zeros(0, dtype=np.int64),
     )
     # A run ends at T_max, or at its goal once the last state compared has been reached: after
     # both, nothing it does can count (see Simulated.counted_failure), so it need not be run.
@@ -172,6 +177,7 @@ def prepare(
         shifted_positions_m=np.stack([exp.position_at(times + d) for d in shifts]),
         state_steps=state_steps,
         observe=observe,
+        last_time_s=t1,
     )
 
 
@@ -204,6 +210,10 @@ class Simulated:
     failure_time_s: np.ndarray
     steps: np.ndarray
 
+    def take(self, rows: slice) -> Simulated:
+        """The simulations of some candidates (rows of every array)."""
+        return Simulated(*(getattr(self, f.name)[rows] for f in dataclasses.fields(self)))
+
     def counted_failure(self, prepared: Sequence[PreparedExperiment]) -> np.ndarray:
         """Failure codes that count against a candidate, shape (C, E).
 
@@ -222,7 +232,7 @@ class Simulated:
 
 
 def _reference_job(args: tuple) -> tuple[np.ndarray, int, float, float, float, int]:
-    robot, prepared, coeffs = args
+    robot, prepared, coeffs = args  # the candidate's robot (joint parameters) and coefficients
     run = simulate_closed_loop(
         robot, prepared.scenario, prepared.options, seed=0, coefficients=coeffs
     )
@@ -238,12 +248,13 @@ def _reference_job(args: tuple) -> tuple[np.ndarray, int, float, float, float, i
 
 
 class Evaluator:
-    """Scores candidate coefficient sets on a set of experiments (the paper's protocol).
+    """Scores candidate parameter vectors on a set of experiments (the paper's protocol).
 
     Parameters
     ----------
     robot : Robot
-        The robot model to fit (its coefficients are replaced by each candidate's).
+        The robot model to fit (its coefficients, and joint parameters when fitted, are
+        replaced by each candidate's).
     experiments : sequence of Experiment
     n_samples : int
         Samples per experiment (7 for fitting, 35 for validation).
@@ -259,6 +270,8 @@ class Evaluator:
         Processes for the reference backend.
     map_function : callable, optional
         Replaces the local process pool (e.g. a Dask client's map) for the reference backend.
+    space : ParameterSpace, optional
+        What a candidate vector holds (default: the robot's fluid law and joint model).
     """
 
     def __init__(
@@ -272,13 +285,14 @@ class Evaluator:
         backend: str = "auto",
         workers: int = 2,
         map_function: Callable | None = None,
+        space: ParameterSpace | None = None,
     ) -> None:
         if not experiments:
             raise EstimationError("no experiments to evaluate on")
-        self.robot = robot
-        self.prepared = [
-            prepare(e, n_samples, align_s=align_s, observe=observe) for e in experiments
-        ]
+        self.space = space or ParameterSpace.for_robot(robot)
+        self.robot = self.space.model_robot(robot)
+        self.n_samples, self.align_s, self.observe = n_samples, align_s, observe
+        self.prepared = self.prepare_like(experiments)
         self.weight = weight
         self.backend = _choose_backend(backend)
         self.workers = workers
@@ -287,35 +301,48 @@ class Evaluator:
         self.steps = 0  # and the RK4 steps they took
         self._lengths: RunLengths | None = None  # the batch backend's guesses of run lengths
 
-    def simulate(self, coefficients: np.ndarray) -> Simulated:
+    def prepare_like(self, experiments: Sequence[Experiment]) -> list[PreparedExperiment]:
+        """Experiments prepared as this evaluator prepares its own (samples, clock search)."""
+        return [prepare(e, self.n_samples, align_s=self.align_s, observe=self.observe)
+                for e in experiments]
+
+    def simulate(self, parameters: np.ndarray) -> Simulated:
         """Simulate every experiment for every candidate.
 
         Parameters
         ----------
-        coefficients : ndarray, shape (C, 4)
-            Candidates (C_f, C_d, C_a, C_m).
+        parameters : ndarray, shape (C, K)
+            Candidates, vectors of :attr:`space` (Morison alone: C_f, C_d, C_a, C_m).
 
         Returns
         -------
         Simulated
         """
-        coeffs = np.atleast_2d(np.asarray(coefficients, dtype=float))
+        x = np.atleast_2d(np.asarray(parameters, dtype=float))
+        if x.shape[1] != self.space.size:
+            raise EstimationError(
+                f"candidates have {x.shape[1]} parameters; model {self.space.model_name} has "
+                f"{self.space.size} ({', '.join(self.space.names)})"
+            )
+        robots = self.space.robots(self.robot, x)
         if self.backend == "batch":
             from eelhost.estimation.batch_backend import RunLengths, simulate_batch
 
             if self._lengths is None:
                 self._lengths = RunLengths(len(self.prepared))
-            sim = simulate_batch(self.robot, self.prepared, coeffs, self._lengths)
+            sim = simulate_batch(robots, self.prepared, x, self.space, self._lengths)
         else:
-            sim = self._simulate_reference(coeffs)
-        self.simulations += coeffs.shape[0] * len(self.prepared)
+            sim = self._simulate_reference(robots, x)
+        self.simulations += x.shape[0] * len(self.prepared)
         self.steps += int(sim.steps.sum())
         return sim
 
-    def _simulate_reference(self, coeffs: np.ndarray) -> Simulated:
+    def _simulate_reference(self, robots: list[Robot], x: np.ndarray) -> Simulated:
         """The reference backend: one readable closed-loop run per (candidate, experiment)."""
         jobs = [
-            (self.robot, p, HydroCoefficients.from_array(c)) for c in coeffs for p in self.prepared
+            (rb, p, self.space.coefficients(c))
+            for rb, c in zip(robots, x, strict=True)
+            for p in self.prepared
         ]
         if self.map_function is not None:
             results = list(self.map_function(_reference_job, jobs))
@@ -324,7 +351,7 @@ class Evaluator:
                 results = list(pool.map(_reference_job, jobs))
         else:
             results = [_reference_job(j) for j in jobs]
-        c, e = coeffs.shape[0], len(self.prepared)
+        c, e = x.shape[0], len(self.prepared)
         n = self.prepared[0].times_s.size
         pos = np.empty((c, e, n, 2))
         heading = np.empty((c, e, n))
@@ -338,17 +365,25 @@ class Evaluator:
         steps = np.array([r[5] for r in results]).reshape(c, e)
         return Simulated(pos, heading, fail, left, arrival, failed, steps)
 
-    def errors(self, coefficients: np.ndarray) -> np.ndarray:
+    def errors(self, parameters: np.ndarray) -> np.ndarray:
         """Per-experiment error (with the failure penalties), shape (C, E)."""
-        sim = self.simulate(coefficients)
+        sim = self.simulate(parameters)
         return self.errors_of(sim)
 
-    def errors_of(self, sim: Simulated) -> np.ndarray:
-        """Per-experiment error of already simulated candidates, shape (C, E)."""
+    def errors_of(
+        self, sim: Simulated, prepared: Sequence[PreparedExperiment] | None = None
+    ) -> np.ndarray:
+        """Per-experiment error of already simulated candidates, shape (C, E).
+
+        ``prepared`` compares them with other recordings of the same tasks (the parametric
+        bootstrap's regenerated data: same frame times, other positions); default: this
+        evaluator's.
+        """
+        prepared = self.prepared if prepared is None else prepared
         c, e = sim.failure.shape
-        counted = sim.counted_failure(self.prepared)
+        counted = sim.counted_failure(prepared)
         out = np.empty((c, e))
-        for j, p in enumerate(self.prepared):
+        for j, p in enumerate(prepared):
             err = self.aligned_errors(p, sim.positions_m[:, j]).min(axis=1)
             for i in range(c):
                 f = Failure(int(counted[i, j]))
@@ -367,34 +402,47 @@ class Evaluator:
         """The clock offset that fits each simulation best, shape (C,)."""
         return p.shifts_s[np.argmin(self.aligned_errors(p, sim_positions_m), axis=1)]
 
-    def fitness(self, coefficients: np.ndarray) -> np.ndarray:
+    def fitness(self, parameters: np.ndarray) -> np.ndarray:
         """Minimax fitness max_j error_j of each candidate, shape (C,)."""
-        return self.errors(coefficients).max(axis=1)
+        return self.errors(parameters).max(axis=1)
 
-    def residuals(self, coefficients: np.ndarray) -> np.ndarray:
-        """Stacked position and weighted velocity differences, shape (C, E * n * 4).
+    def residual_vectors_of(
+        self, sim: Simulated, prepared: Sequence[PreparedExperiment] | None = None
+    ) -> np.ndarray:
+        """The 2-vectors whose norms the errors sum, shape (C, E, 2 n, 2).
 
-        The least-squares form of the same data (failed runs give large constant residuals).
+        Per experiment: the position differences at the n samples, then ``weight`` times the
+        velocity differences, each against the recording at the candidate's best clock offset
+        (error_j is the sum of their norms). NaN where a run failed (it scores its penalty).
         """
-        from eelhost.estimation.fitness import sampled_velocity
-
-        sim = self.simulate(coefficients)
-        counted = sim.counted_failure(self.prepared)
+        prepared = self.prepared if prepared is None else prepared
+        counted = sim.counted_failure(prepared)
         blocks = []
-        for j, p in enumerate(self.prepared):
+        for j, p in enumerate(prepared):
             simp = sim.positions_m[:, j]
             # each candidate is compared with the recording at its own best clock offset
             idx = np.argmin(np.nan_to_num(self.aligned_errors(p, simp), nan=np.inf), axis=1)
             exp = p.shifted_positions_m[idx]
-            dp = simp - exp
             dv = sampled_velocity(p.times_s, simp) - sampled_velocity(p.times_s, exp)
-            block = np.concatenate(
-                [dp.reshape(len(simp), -1), self.weight * dv.reshape(len(simp), -1)], axis=1
-            )
-            failed = counted[:, j] != int(Failure.NONE)
-            block[failed] = 10.0  # far worse than any real trajectory error (metres)
-            blocks.append(np.nan_to_num(block, nan=10.0))
-        return np.concatenate(blocks, axis=1)
+            block = np.concatenate([simp - exp, self.weight * dv], axis=1)
+            block[counted[:, j] != int(Failure.NONE)] = np.nan
+            blocks.append(block)
+        return np.stack(blocks, axis=1)
+
+    def evaluate(
+        self, parameters: np.ndarray, prepared: Sequence[PreparedExperiment] | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Errors (C, E) and residual vectors (C, E, 2 n, 2) of candidates (one simulation)."""
+        sim = self.simulate(parameters)
+        return self.errors_of(sim, prepared), self.residual_vectors_of(sim, prepared)
+
+    def residuals(self, parameters: np.ndarray) -> np.ndarray:
+        """Stacked position and weighted velocity differences, shape (C, E * n * 4).
+
+        The least-squares form of the same data (failed runs give large constant residuals).
+        """
+        vectors = self.residual_vectors_of(self.simulate(parameters))
+        return np.nan_to_num(vectors.reshape(len(vectors), -1), nan=10.0)  # 10 m: far worse
 
 
 def _choose_backend(backend: str) -> str:

@@ -7,8 +7,12 @@ FitResult`. :func:`eelhost.estimation.pipeline.fit_motion` looks the method up h
 
 The bundled methods (docs/estimation.md):
 
-- ``cmaes`` (default): CMA-ES from the middle of the bounds, then a least-squares polish;
+- ``cmaes`` (default): CMA-ES from the middle of the bounds, restarted (BIPOP) while budget is
+  left, then the minimax trust-region polish (:func:`eelhost.estimation.local.polish_minimax`);
+- ``cmaes-lsq``: one CMA-ES run, then a least-squares polish (the default before the minimax
+  polish; kept to compare);
 - ``ga``: the paper's genetic algorithm (population 150, 130 generations, uniform crossover);
+- ``minimax``: the minimax polish alone, from ``start``;
 - ``lsq``: the least-squares polish alone, from ``start``.
 
 To add one: write ``def fit_mine(problem: FitProblem) -> FitResult`` and call
@@ -22,16 +26,11 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+import numpy as np
+
 from eelhost.estimation.evaluate import EstimationError, Evaluator
-from eelhost.estimation.optimise import (
-    Checkpoint,
-    FitResult,
-    Progress,
-    fit_cmaes,
-    fit_ga,
-    polish_least_squares,
-)
-from eelsim.fluid import FluidCoefficients
+from eelhost.estimation.local import polish_least_squares, polish_minimax
+from eelhost.estimation.optimise import Checkpoint, FitResult, Progress, fit_cmaes, fit_ga
 
 if TYPE_CHECKING:  # pipeline imports this module
     from eelhost.estimation.pipeline import FitSettings
@@ -49,8 +48,9 @@ class FitProblem:
         Fitness and residuals of candidate coefficients on the training experiments.
     settings : FitSettings
         Seed, budgets, polish iterations.
-    start : FluidCoefficients
-        Where a local method starts (default: the robot file's coefficients).
+    start : ndarray, shape (K,)
+        Where a local method starts, a vector of ``evaluator.space`` (default: the robot file's
+        values).
     checkpoint : Checkpoint or None
         Where a method that can resume keeps its state.
     resume : bool
@@ -61,7 +61,7 @@ class FitProblem:
 
     evaluator: Evaluator
     settings: FitSettings
-    start: FluidCoefficients
+    start: np.ndarray
     checkpoint: Checkpoint | None = None
     resume: bool = False
     progress: Progress | None = None
@@ -117,35 +117,60 @@ def get_method(name: str) -> FitMethod:
     return entry.fit
 
 
-def _fit_cmaes(problem: FitProblem) -> FitResult:
+def _global_cmaes(problem: FitProblem, restarts: str) -> FitResult:
     ev, settings = problem.evaluator, problem.settings
-    res = fit_cmaes(
+    return fit_cmaes(
         ev.fitness,
+        ev.space,
         settings.seed,
         settings.budget,
+        restarts=restarts,
         checkpoint=problem.checkpoint,
         resume=problem.resume,
         progress=problem.progress,
         simulations=problem.simulations,
     )
+
+
+def _then(first: FitResult, polished: FitResult, method: str, simulations: int) -> FitResult:
+    """The global result followed by its polish, as one result (the better of the two)."""
+    best = polished if polished.fitness <= first.fitness else first
+    return FitResult(
+        method,
+        first.space,
+        best.values,
+        best.fitness,
+        first.history + [(len(first.history), best.fitness, simulations)],
+        first.evaluations + polished.evaluations,
+    )
+
+
+def _fit_cmaes(problem: FitProblem) -> FitResult:
+    ev, settings = problem.evaluator, problem.settings
+    res = _global_cmaes(problem, settings.restarts)
+    if settings.polish_iterations <= 0:
+        return res
+    pol = polish_minimax(ev.evaluate, ev.space, res.values, settings.polish_iterations,
+                         simulations=problem.simulations)
+    return _then(res, pol, f"{res.method}+minimax", ev.simulations)
+
+
+def _fit_cmaes_lsq(problem: FitProblem) -> FitResult:
+    ev, settings = problem.evaluator, problem.settings
+    res = _global_cmaes(problem, "none")
     if settings.polish_iterations <= 0:
         return res
     pol = polish_least_squares(
-        ev.residuals, ev.fitness, res.coefficients, res.fitness, settings.polish_iterations
+        ev.residuals, ev.fitness, ev.space, res.values, res.fitness, settings.polish_iterations
     )
-    return FitResult(
-        "cmaes+lsq",
-        pol.coefficients,
-        pol.fitness,
-        res.history + [(len(res.history), pol.fitness, ev.simulations)],
-        res.evaluations + pol.evaluations,
-    )
+    return _then(res, pol, "cmaes+lsq", ev.simulations)
 
 
 def _fit_ga(problem: FitProblem) -> FitResult:
     settings = problem.settings
     return fit_ga(
         problem.evaluator.fitness,
+        problem.evaluator.space,
         settings.seed,
         settings.pop_size,
         settings.generations,
@@ -156,14 +181,23 @@ def _fit_ga(problem: FitProblem) -> FitResult:
     )
 
 
+def _fit_minimax(problem: FitProblem) -> FitResult:
+    ev = problem.evaluator
+    return polish_minimax(ev.evaluate, ev.space, problem.start,
+                          max(1, problem.settings.polish_iterations),
+                          simulations=problem.simulations)
+
+
 def _fit_lsq(problem: FitProblem) -> FitResult:
     ev, begin = problem.evaluator, problem.start
-    f0 = float(ev.fitness(begin.as_array()[None, :])[0])
+    f0 = float(ev.fitness(begin[None, :])[0])
     return polish_least_squares(
-        ev.residuals, ev.fitness, begin, f0, max(1, problem.settings.polish_iterations)
+        ev.residuals, ev.fitness, ev.space, begin, f0, max(1, problem.settings.polish_iterations)
     )
 
 
-register_method("cmaes", _fit_cmaes, "CMA-ES + least-squares polish (default)")
+register_method("cmaes", _fit_cmaes, "CMA-ES with restarts + minimax polish (default)")
+register_method("cmaes-lsq", _fit_cmaes_lsq, "one CMA-ES run + least-squares polish")
 register_method("ga", _fit_ga, "the paper's genetic algorithm")
-register_method("lsq", _fit_lsq, "least-squares polish only, from the robot file's coefficients")
+register_method("minimax", _fit_minimax, "minimax polish only, from the robot file's values")
+register_method("lsq", _fit_lsq, "least-squares polish only, from the robot file's values")

@@ -1,9 +1,11 @@
-"""Optimisers for the coefficients: the paper's GA, CMA-ES, and a least-squares polish.
+"""Global optimisers for a model's parameters: the paper's GA and CMA-ES with restarts.
 
-All search in the unit cube mapped linearly onto :data:`BOUNDS` (documented in docs/estimation.md;
-wide enough for the paper's table 3). The objective is any function mapping candidates (C, 4) to
-fitness values (C,), normally :meth:`Evaluator.fitness`, evaluated a whole generation at a time so
-that the batched kernel sees one big batch.
+All search the unit cube mapped linearly onto the bounds of a
+:class:`~eelhost.estimation.parameters.ParameterSpace` (the fluid law's coefficients and any
+fitted joint parameters, by name; docs/estimation.md). The objective is any function mapping
+candidates (C, K) to fitness values (C,), normally :meth:`Evaluator.fitness`, evaluated a whole
+generation at a time so that the batched kernel sees one big batch. The local polishes are in
+:mod:`eelhost.estimation.local`.
 
 Long runs checkpoint after a generation at most every few seconds and after the last (an atomic
 pickle of the optimiser, its random state and the history: about 30 ms for the GA, a tenth of
@@ -29,27 +31,11 @@ import cloudpickle
 import numpy as np
 
 from eelhost.errors import UserError
+from eelhost.estimation.parameters import FittedModel, ParameterSpace
 from eelsim.fluid import FluidCoefficients
-from eelsim.robot import HydroCoefficients
-
-# Search bounds (C_f, C_d, C_a, C_m). Table 3: C_f 0.008-0.009, C_d 0.78-0.98, C_a 0.62-1.17,
-# C_m 0.001-0.007; slender-body estimates (Kelasidi) put C_f near 0.03 and C_a, C_m near 1.
-BOUNDS = np.array([[0.0005, 0.1], [0.05, 3.0], [0.05, 3.0], [0.0, 1.0]])
-NAMES = ("C_f", "C_d", "C_a", "C_m")
 
 Objective = Callable[[np.ndarray], np.ndarray]
 Progress = Callable[[int, float, int], None]  # (generation, best fitness, simulations so far)
-
-
-def from_unit(u: np.ndarray) -> np.ndarray:
-    """Map unit-cube points to coefficients."""
-    u = np.clip(np.asarray(u, dtype=float), 0.0, 1.0)
-    return BOUNDS[:, 0] + u * (BOUNDS[:, 1] - BOUNDS[:, 0])
-
-
-def to_unit(c: np.ndarray) -> np.ndarray:
-    """Map coefficients to the unit cube."""
-    return (np.asarray(c, dtype=float) - BOUNDS[:, 0]) / (BOUNDS[:, 1] - BOUNDS[:, 0])
 
 
 class CheckpointError(UserError, ValueError):
@@ -63,7 +49,9 @@ class FitResult:
     Attributes
     ----------
     method : str
-    coefficients : FluidCoefficients
+    space : ParameterSpace
+        What the values are.
+    values : ndarray, shape (K,)
         Best candidate found.
     fitness : float
         Its fitness.
@@ -74,16 +62,27 @@ class FitResult:
     """
 
     method: str
-    coefficients: FluidCoefficients
+    space: ParameterSpace
+    values: np.ndarray
     fitness: float
     history: list[tuple[int, float, int]] = field(default_factory=list)
     evaluations: int = 0
 
+    @property
+    def coefficients(self) -> FluidCoefficients:
+        """The fluid law's coefficients of the best candidate."""
+        return self.space.coefficients(self.values)
+
+    @property
+    def model(self) -> FittedModel:
+        """The best candidate as a fitted model."""
+        return FittedModel(self.space, np.asarray(self.values, dtype=float))
+
     def to_json(self) -> dict[str, Any]:
-        """JSON-ready summary."""
+        """JSON-ready summary: the model by name (law, joint model, parameters) and the search."""
         return {
             "method": self.method,
-            "coefficients": self.coefficients.model_dump(),
+            **self.model.to_json(),
             "fitness": self.fitness,
             "evaluations": self.evaluations,
             "history": [list(h) for h in self.history],
@@ -174,6 +173,7 @@ def _seeded_gaussian_mutation(sigma: float = 0.1):
 
 def fit_ga(
     objective: Objective,
+    space: ParameterSpace,
     seed: int = 0,
     pop_size: int = 150,
     generations: int = 130,
@@ -187,7 +187,9 @@ def fit_ga(
     Parameters
     ----------
     objective : callable
-        Candidates (C, 4) -> fitness (C,).
+        Candidates (C, K) -> fitness (C,).
+    space : ParameterSpace
+        The parameters and their bounds.
     seed : int
     pop_size, generations : int
         150 and 130 in the paper.
@@ -209,7 +211,7 @@ def fit_ga(
     from pymoo.operators.crossover.ux import UniformCrossover
     from pymoo.problems.static import StaticProblem
 
-    problem = Problem(n_var=4, n_obj=1, xl=0.0, xu=1.0)
+    problem = Problem(n_var=space.size, n_obj=1, xl=0.0, xu=1.0)
     state = _start(checkpoint, resume)
     if state is None:
         algo = GA(
@@ -225,7 +227,7 @@ def fit_ga(
         algo, history, evaluations = state["algorithm"], state["history"], state["evaluations"]
     while algo.has_next():
         pop = algo.ask()
-        f = np.asarray(objective(from_unit(pop.get("X"))), dtype=float)
+        f = np.asarray(objective(space.from_unit(pop.get("X"))), dtype=float)
         evaluations += len(f)
         PymooEvaluator().eval(StaticProblem(problem, F=f.reshape(-1, 1)), pop)
         algo.tell(infills=pop)
@@ -238,45 +240,107 @@ def fit_ga(
             )
         if progress:
             progress(*history[-1])
-    best_x = from_unit(algo.opt.get("X")[0])
-    return FitResult(
-        "ga",
-        HydroCoefficients.from_array(best_x),
-        float(algo.opt.get("F").min()),
-        history,
-        evaluations,
-    )
+    best_x = space.from_unit(algo.opt.get("X")[0])
+    return FitResult("ga", space, best_x, float(algo.opt.get("F").min()), history, evaluations)
+
+
+RESTART_SCHEMES = ("none", "ipop", "bipop")
+
+
+@dataclass
+class _Restarts:
+    """Where a restarted CMA-ES is: the run under way, the best so far, the budget spent.
+
+    Kept whole in the checkpoint, so that a resumed fit continues the same sequence of runs.
+    """
+
+    scheme: str
+    base_popsize: int
+    sigma0: float
+    rng: np.random.Generator
+    runs: int = 0
+    kind: str = "first"
+    large_runs: int = 0
+    large_evaluations: int = 0
+    small_evaluations: int = 0
+    evaluations: int = 0
+    best_u: np.ndarray | None = None
+    best_f: float = math.inf
+    history: list[tuple[int, float, int]] = field(default_factory=list)
+
+    def next_run(self, dimension: int, start_u: np.ndarray) -> tuple[np.ndarray, float, int]:
+        """Start point, step and population of the next run.
+
+        IPOP doubles the population; BIPOP (Hansen 2009) alternates such large runs with cheap
+        small runs of smaller steps.
+        """
+        first = self.runs == 0
+        self.runs += 1
+        x0 = start_u if first else self.rng.uniform(0.0, 1.0, dimension)
+        if first or self.scheme == "none":
+            self.kind = "first"
+            return x0, self.sigma0, self.base_popsize
+        large = self.base_popsize * 2 ** (self.large_runs + 1)
+        if self.scheme == "ipop" or self.small_evaluations >= self.large_evaluations:
+            self.kind = "large"
+            self.large_runs += 1
+            return x0, self.sigma0, large
+        self.kind = "small"
+        u = self.rng.uniform()
+        popsize = int(self.base_popsize * (0.5 * large / self.base_popsize) ** (u * u))
+        return x0, self.sigma0 * 10.0 ** (-2.0 * self.rng.uniform()), max(self.base_popsize, popsize)
+
+    def spent(self, count: int) -> None:
+        """Count ``count`` evaluations against the run under way."""
+        self.evaluations += count
+        if self.kind == "large":
+            self.large_evaluations += count
+        elif self.kind == "small":
+            self.small_evaluations += count
 
 
 def fit_cmaes(
     objective: Objective,
+    space: ParameterSpace,
     seed: int = 0,
-    max_evaluations: int = 1200,
+    max_evaluations: int = 1500,
     popsize: int = 12,
     start: np.ndarray | None = None,
     sigma0: float = 0.25,
+    restarts: str = "none",
     checkpoint: Checkpoint | None = None,
     resume: bool = False,
     progress: Progress | None = None,
     simulations: Callable[[], int] = lambda: 0,
+    tolerance: float = 1e-7,
 ) -> FitResult:
-    """CMA-ES (pycma) in the unit cube, a generation per batch.
+    """CMA-ES (pycma) in the unit cube, a generation per batch, optionally restarted.
 
     Parameters
     ----------
     objective : callable
-        Candidates (C, 4) -> fitness (C,).
+        Candidates (C, K) -> fitness (C,).
+    space : ParameterSpace
+        The parameters and their bounds.
     seed : int
     max_evaluations : int
-        Budget of candidates.
+        Budget of candidates over all runs.
     popsize : int
-        Candidates per generation.
+        Candidates per generation of the first run.
     start : ndarray, optional
-        Initial mean (coefficients); default the middle of the bounds.
+        Initial mean (parameters); default the middle of the bounds. Restarts start at seeded
+        uniform points of the cube.
     sigma0 : float
         Initial step in the unit cube.
+    restarts : {"none", "ipop", "bipop"}
+        After a run converges, start another while budget is left: "ipop" doubles the
+        population each time; "bipop" alternates such large runs with small runs of smaller
+        steps, spending about as much on each kind.
     checkpoint, resume, progress, simulations
         As for :func:`fit_ga`.
+    tolerance : float
+        A run ends when its steps fall below this in the unit cube (pycma's ``tolx``) or its
+        fitness values stop changing by more than this (``tolfun``).
 
     Returns
     -------
@@ -284,107 +348,56 @@ def fit_cmaes(
     """
     import cma
 
+    if restarts not in RESTART_SCHEMES:
+        raise ValueError(f"restarts must be one of {', '.join(RESTART_SCHEMES)}, got {restarts!r}")
     state = _start(checkpoint, resume)
+    start_u = np.clip(space.to_unit(start) if start is not None else np.full(space.size, 0.5),
+                      0.0, 1.0)
     if state is None:
-        x0 = to_unit(start) if start is not None else np.full(4, 0.5)
-        es = cma.CMAEvolutionStrategy(
-            np.clip(x0, 0.0, 1.0).tolist(),
-            sigma0,
-            {
-                "bounds": [0.0, 1.0],
-                "seed": seed + 1,
-                "popsize": popsize,
-                "verbose": -9,
-                "maxfevals": max_evaluations,
-                "tolfun": 1e-9,
-                "tolx": 1e-7,
-            },
-        )
-        history: list[tuple[int, float, int]] = []
-        best_u, best_f, evaluations = None, np.inf, 0
+        run = _Restarts(restarts, popsize, sigma0, np.random.default_rng(seed + 7919))
+        es = None
     else:
-        es, history = state["es"], state["history"]
-        best_u, best_f, evaluations = state["best_u"], state["best_f"], state["evaluations"]
-    while not es.stop():
+        run, es = state["run"], state["es"]
+    while True:
+        if es is None or es.stop():
+            left = max_evaluations - run.evaluations
+            if es is not None and (restarts == "none" or left < 2 * popsize):
+                break
+            if left <= 0:
+                break
+            x0, sigma, lam = run.next_run(space.size, start_u)
+            es = cma.CMAEvolutionStrategy(
+                x0.tolist(),
+                sigma,
+                {
+                    "bounds": [0.0, 1.0],
+                    "seed": seed + run.runs,
+                    "popsize": lam,
+                    "verbose": -9,
+                    "maxfevals": left,
+                    "tolfun": tolerance,
+                    "tolx": tolerance,
+                },
+            )
+            if es.stop():  # no budget even for one generation
+                break
         xs = np.array(es.ask())
-        f = np.asarray(objective(from_unit(xs)), dtype=float)
-        evaluations += len(f)
+        f = np.asarray(objective(space.from_unit(xs)), dtype=float)
+        run.spent(len(f))
         es.tell(list(xs), f.tolist())
         i = int(np.argmin(f))
-        if f[i] < best_f:
-            best_u, best_f = xs[i].copy(), float(f[i])
-        history.append((len(history), best_f, simulations()))
+        if f[i] < run.best_f:
+            run.best_u, run.best_f = xs[i].copy(), float(f[i])
+        run.history.append((len(run.history), run.best_f, simulations()))
         if checkpoint is not None:
-            checkpoint.save(
-                {
-                    "es": es,
-                    "history": history,
-                    "best_u": best_u,
-                    "best_f": best_f,
-                    "evaluations": evaluations,
-                },
-                force=bool(es.stop()),
-            )
+            checkpoint.save({"run": run, "es": es}, force=False)
         if progress:
-            progress(*history[-1])
-    if best_u is None:
+            progress(*run.history[-1])
+    if checkpoint is not None:
+        checkpoint.save({"run": run, "es": es}, force=True)
+    if run.best_u is None:
         raise RuntimeError("CMA-ES stopped before evaluating a candidate")
+    method = "cmaes" if restarts == "none" else f"cmaes-{restarts}"
     return FitResult(
-        "cmaes", HydroCoefficients.from_array(from_unit(best_u)), best_f, history, evaluations
+        method, space, space.from_unit(run.best_u), run.best_f, run.history, run.evaluations
     )
-
-
-def polish_least_squares(
-    residuals: Callable[[np.ndarray], np.ndarray],
-    objective: Objective,
-    start: FluidCoefficients,
-    start_fitness: float,
-    max_iterations: int = 20,
-) -> FitResult:
-    """Local least-squares polish (scipy ``least_squares``, trust region, finite differences).
-
-    The polished point is kept only if its minimax fitness is no worse than the start's (least
-    squares and minimax differ).
-
-    Parameters
-    ----------
-    residuals : callable
-        Candidates (C, 4) -> stacked residuals (C, M) (:meth:`Evaluator.residuals`).
-    objective : callable
-        Candidates -> minimax fitness, to judge the result.
-    start : FluidCoefficients
-    start_fitness : float
-    max_iterations : int
-        Jacobian evaluations at most.
-
-    Returns
-    -------
-    FitResult
-    """
-    from scipy.optimize import least_squares
-
-    u0 = np.clip(to_unit(start.as_array()), 1e-6, 1 - 1e-6)
-    step = 1e-3
-    evaluations = 0
-
-    def fun(u: np.ndarray) -> np.ndarray:
-        nonlocal evaluations
-        evaluations += 1
-        return residuals(from_unit(u)[None, :])[0]
-
-    def jac(u: np.ndarray) -> np.ndarray:
-        # One batch: the point's four forward perturbations (stepping inwards at the upper bound).
-        nonlocal evaluations
-        steps = np.where(u + step <= 1.0, step, -step)
-        pts = np.repeat(u[None, :], 4, axis=0) + np.diag(steps)
-        r = residuals(from_unit(np.vstack([u[None, :], pts])))
-        evaluations += 5
-        return ((r[1:] - r[0]) / steps[:, None]).T
-
-    sol = least_squares(fun, u0, jac=jac, bounds=(0.0, 1.0), max_nfev=max_iterations, x_scale="jac")
-    cand = from_unit(sol.x)
-    f = float(objective(cand[None, :])[0])
-    evaluations += 1
-    if f <= start_fitness:
-        return FitResult("lsq", HydroCoefficients.from_array(cand), f, [(0, f, 0)], evaluations)
-    return FitResult("lsq", start, start_fitness, [(0, start_fitness, 0)], evaluations)

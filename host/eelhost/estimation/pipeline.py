@@ -14,15 +14,22 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from eelhost.data.experiments import Dataset, Experiment
 from eelhost.errors import UserError
 from eelhost.estimation.evaluate import EstimationError, Evaluator
 from eelhost.estimation.methods import FitProblem, get_method, method_names
 from eelhost.estimation.optimise import Checkpoint, FitResult
-from eelsim.fluid import FluidCoefficients
-from eelsim.robot import HydroCoefficients
+from eelhost.estimation.parameters import FittedModel, ParameterError, ParameterSpace
+from eelsim.robot import Robot
 
 METHODS = method_names()  # as registered when this module is imported
+
+
+COEFFICIENTS_FORMAT = "eelbot-coefficients/2"
+# /1: Morison coefficients only, by name; still read.
+READABLE_COEFFICIENTS_FORMATS = ("eelbot-coefficients/1", COEFFICIENTS_FORMAT)
 
 
 class CoefficientsError(UserError, ValueError):
@@ -36,14 +43,16 @@ class FitSettings:
     Attributes
     ----------
     method : str
-        A registered method (:mod:`eelhost.estimation.methods`): "cmaes", "ga", "lsq".
+        A registered method (:mod:`eelhost.estimation.methods`): "cmaes", "ga", ...
     seed : int
     budget : int
-        Candidates for CMA-ES (the GA's is population x generations).
+        Candidates for CMA-ES over all its runs (the GA's is population x generations).
     pop_size, generations : int
         GA settings (the paper's 150 and 130).
     polish_iterations : int
-        Least-squares iterations after CMA-ES (0: none).
+        Iterations of the local polish after CMA-ES (0: none).
+    restarts : str
+        CMA-ES restarts: "none", "ipop" or "bipop" (:func:`eelhost.estimation.optimise.fit_cmaes`).
     backend : str
         Evaluator backend ("auto", "batch", "reference").
     align_s : float
@@ -57,9 +66,10 @@ class FitSettings:
     budget: int = 1500
     pop_size: int = 150
     generations: int = 130
-    polish_iterations: int = 10
+    polish_iterations: int = 30
     backend: str = "auto"
     align_s: float = 0.0
+    restarts: str = "bipop"
 
 
 def training_experiments(dataset: Dataset, motion: str) -> list[Experiment]:
@@ -80,10 +90,12 @@ def fit_motion(
     checkpoint_dir: str | Path | None = None,
     resume: bool = False,
     progress: Callable[[int, float, int], None] | None = None,
-    start: FluidCoefficients | None = None,
+    start: np.ndarray | None = None,
     map_function: Callable | None = None,
+    space: ParameterSpace | None = None,
+    experiments: list[Experiment] | None = None,
 ) -> tuple[FitResult, Evaluator]:
-    """Fit the coefficients of one motion type.
+    """Fit the parameters of one motion type.
 
     Parameters
     ----------
@@ -97,10 +109,14 @@ def fit_motion(
         Continue from a checkpoint.
     progress : callable, optional
         (generation, best fitness, simulations).
-    start : FluidCoefficients, optional
-        Start of the "lsq" method (default: the robot file's coefficients).
+    start : ndarray, optional
+        Start of the local methods, a vector of the space (default: the robot file's values).
     map_function : callable, optional
         Spreads the evaluation (e.g. a Dask client's map).
+    space : ParameterSpace, optional
+        The candidate model (default: the dataset robot's fluid law and joint model).
+    experiments : list of Experiment, optional
+        Fit these instead of the motion's training experiments (cross-validation folds).
 
     Returns
     -------
@@ -108,18 +124,25 @@ def fit_motion(
         The result (``evaluations`` counts candidates; the evaluator's ``simulations`` counts runs).
     """
     fit = get_method(settings.method)
+    space = space or ParameterSpace.for_robot(dataset.robot)
     ev = Evaluator(
         dataset.robot,
-        training_experiments(dataset, motion),
+        experiments if experiments is not None else training_experiments(dataset, motion),
         backend=settings.backend,
         align_s=settings.align_s,
         map_function=map_function,
+        space=space,
     )
     ck = None
     if checkpoint_dir is not None:
-        ident = {"dataset": str(dataset.folder.resolve()), "motion": motion, **settings.__dict__}
-        ck = Checkpoint(Path(checkpoint_dir) / f"checkpoint_{motion}_{settings.method}.pkl", ident)
-    problem = FitProblem(ev, settings, start or dataset.robot.hydrodynamics, ck, resume, progress)
+        ident = {"dataset": str(dataset.folder.resolve()), "motion": motion,
+                 "model": space.model_name, **settings.__dict__}
+        tag = space.model_name.replace(" x ", "_")
+        ck = Checkpoint(
+            Path(checkpoint_dir) / f"checkpoint_{motion}_{tag}_{settings.method}.pkl", ident
+        )
+    begin = space.start(dataset.robot) if start is None else np.asarray(start, dtype=float)
+    problem = FitProblem(ev, settings, begin, ck, resume, progress)
     res = fit(problem)
     return res, ev
 
@@ -127,8 +150,11 @@ def fit_motion(
 def write_coefficients(
     path: str | Path, fits: dict[str, FitResult], extra: dict | None = None
 ) -> Path:
-    """Write fitted coefficients as JSON (readable by ``eelbot validate``)."""
-    data = {"format": "eelbot-coefficients/1", "fits": {m: r.to_json() for m, r in fits.items()}}
+    """Write fitted models as JSON (readable by ``eelbot validate``; docs/estimation.md).
+
+    Each fit names its fluid law and joint model and gives every parameter by name.
+    """
+    data = {"format": COEFFICIENTS_FORMAT, "fits": {m: r.to_json() for m, r in fits.items()}}
     if extra:
         data.update(extra)
     path = Path(path)
@@ -137,10 +163,12 @@ def write_coefficients(
     return path
 
 
-def read_coefficients(spec: str) -> dict[str, FluidCoefficients]:
-    """Coefficients from a JSON file written by :func:`write_coefficients` or "Cf,Cd,Ca,Cm".
+def read_coefficients(spec: str, robot: Robot) -> dict[str, FittedModel]:
+    """Fitted models from a JSON file written by :func:`write_coefficients`, or numbers.
 
-    A single set applies to every motion type ("joint").
+    Files of the earlier format (Morison coefficients by name, no law) are read as the Morison
+    law on the robot's joints. Numbers ("0.008,0.776,0.618,0.007") are the robot's fluid law's
+    coefficients in its order, one set for every motion type ("joint").
     """
     path = Path(spec)
     if path.suffix == ".json":
@@ -148,17 +176,37 @@ def read_coefficients(spec: str) -> dict[str, FluidCoefficients]:
             data = json.loads(path.read_text())
         except (OSError, json.JSONDecodeError) as err:
             raise CoefficientsError(f"{path}: cannot read coefficients: {err}") from None
+        if not isinstance(data, dict):
+            raise CoefficientsError(f"{path}: expected a JSON object with fits")
+        fmt = data.get("format", READABLE_COEFFICIENTS_FORMATS[0])
+        if fmt not in READABLE_COEFFICIENTS_FORMATS:
+            raise CoefficientsError(
+                f"{path}: format: expected one of {', '.join(READABLE_COEFFICIENTS_FORMATS)}, "
+                f"got {fmt!r}"
+            )
         fits = data.get("fits")
         if not isinstance(fits, dict) or not fits:
             raise CoefficientsError(f"{path}: fits: expected fitted coefficient sets")
         try:
-            return {m: HydroCoefficients.model_validate(f["coefficients"]) for m, f in fits.items()}
-        except (KeyError, TypeError, ValueError) as err:
+            return {m: FittedModel.from_json(f, robot, f"{path}: fits.{m}") for m, f in fits.items()}
+        except ParameterError as err:
+            raise CoefficientsError(str(err)) from None
+        except ValueError as err:  # a coefficient the law refuses (pydantic)
             raise CoefficientsError(f"{path}: fits: malformed coefficient set ({err})") from None
+    space = ParameterSpace.for_robot(robot)
+    names = ",".join(space.names)
     try:
-        values = [float(v) for v in spec.split(",")]
-        return {"joint": HydroCoefficients.from_array(values)}
+        values = np.array([float(v) for v in spec.split(",")])
     except ValueError:
         raise CoefficientsError(
-            f"coefficients: expected a .json file or Cf,Cd,Ca,Cm, got {spec!r}"
+            f"coefficients: expected a .json file or {names}, got {spec!r}"
         ) from None
+    if values.size != space.size:
+        raise CoefficientsError(
+            f"coefficients: expected {space.size} numbers ({names}), got {values.size} in {spec!r}"
+        )
+    try:
+        space.coefficients(values)  # the law's own checks (e.g. non-negative)
+    except ValueError as err:
+        raise CoefficientsError(f"coefficients: {spec!r}: {str(err).splitlines()[0]}") from None
+    return {"joint": FittedModel(space, values)}

@@ -15,15 +15,18 @@ from pathlib import Path
 import numpy as np
 
 from eelhost.data.experiments import Dataset
+from eelhost.estimation.diagnostics import fit_warnings
 from eelhost.estimation.evaluate import ALIGN_S
-from eelhost.estimation.identify import bootstrap, identifiability
-from eelhost.estimation.optimise import NAMES, FitResult
+from eelhost.estimation.identify import identifiability
+from eelhost.estimation.optimise import FitResult
 from eelhost.estimation.pipeline import (
     FitSettings,
     fit_motion,
-    training_experiments,
     write_coefficients,
 )
+from eelhost.estimation.selection import cross_validate, recommend
+from eelhost.estimation.selection import table_markdown as comparison_markdown
+from eelhost.estimation.uncertainty import parametric_bootstrap
 from eelhost.estimation.validate import ValidationRun, table_csv, table_markdown, validate
 
 log = logging.getLogger(__name__)
@@ -38,6 +41,7 @@ def run_report(
     settings: FitSettings | None = None,
     bootstrap_replicates: int = 8,
     resume: bool = False,
+    compare_models: bool = True,
     say: Say | None = None,
     progress_factory: Callable[[str], Callable[[int, float, int], None]] | None = None,
 ) -> Path:
@@ -55,6 +59,9 @@ def run_report(
         Refits per motion for the uncertainty (0: skip).
     resume : bool
         Continue interrupted fits from their checkpoints.
+    compare_models : bool
+        Compare the candidate models (joint model x fluid law) by leave-one-gait-out
+        cross-validation (:mod:`eelhost.estimation.selection`).
     say : callable, optional
         Where progress messages go (default: this module's logger, at INFO).
     progress_factory : callable, optional
@@ -70,7 +77,8 @@ def run_report(
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     fits: dict[str, FitResult] = {}
-    extra: dict = {"uncertainty": {}, "identifiability": {}, "simulations": {}, "seconds": {}}
+    extra: dict = {"uncertainty": {}, "identifiability": {}, "simulations": {}, "seconds": {},
+                   "warnings": []}
     for motion in motions:
         t0 = time.perf_counter()
         prog = progress_factory(motion) if progress_factory else None
@@ -81,27 +89,35 @@ def run_report(
         extra["simulations"][motion] = ev.simulations
         say(
             f"{motion}: {res.method} fitness {res.fitness:.4f} after {ev.simulations} simulations: "
-            + ", ".join(
-                f"{n} {v:.4g}" for n, v in zip(NAMES, res.coefficients.as_array(), strict=True)
-            )
+            + ", ".join(f"{n} {v:.4g}" for n, v in res.space.as_dict(res.values).items())
         )
-        ident = identifiability(ev, res.coefficients)
+        ident = identifiability(ev, res.values)
         extra["identifiability"][motion] = ident.to_json()
+        boot = None
         if bootstrap_replicates > 0:
-            boot = bootstrap(
-                dataset.robot,
-                training_experiments(dataset, motion),
-                res.coefficients,
-                bootstrap_replicates,
-                settings.seed,
-                settings.backend,
-            )
+            boot = parametric_bootstrap(ev, res.values, res.fitness, bootstrap_replicates,
+                                        seed=settings.seed, unidentified=ident.unidentified())
             extra["uncertainty"][motion] = boot.to_json()
+            say(f"{motion}: noise floor {boot.noise_floor:.4f}, fitness / noise floor {boot.excess:.1f}")
+        extra["warnings"] += fit_warnings(motion, res.space, res.values, boot)
+        extra["simulations"][motion] = ev.simulations
         extra["seconds"][motion] = time.perf_counter() - t0
+    separate = {m: (r.space, r.values) for m, r in fits.items() if m != "joint"}
+    comparison = None
+    if compare_models and separate:
+        comparison = cross_validate(dataset, separate, settings, say=say)
+        choice = recommend(comparison)
+        extra["model_comparison"] = {
+            "recommended": choice.model,
+            "candidates": {c.model: {"parameters": c.parameters, "fitness": c.fitness,
+                                     "held_out": {m: v.tolist() for m, v in c.held_out.items()}}
+                           for c in comparison},
+        }
+        say(f"recommended model: {choice.model}")
     if dataset.truth:
         extra["truth"] = {m: c.model_dump() for m, c in dataset.truth.items()}
     write_coefficients(out / "coefficients.json", fits, extra)
-    fitted = {m: r.coefficients for m, r in fits.items()}
+    fitted = {m: r.model for m, r in fits.items()}
     tests = [e for exps in dataset.test.values() for e in exps] + list(dataset.paths)
     runs = validate(dataset.robot, fitted, tests, backend=settings.backend)
     (out / "table4.md").write_text(table_markdown([r.row for r in runs]) + "\n")
@@ -120,7 +136,23 @@ def run_report(
         if r.experiment.motion == "path":
             plot_time_series(r, out / f"timeseries_{r.experiment.name}.png")
     report = out / "report.md"
-    report.write_text(_report_text(dataset, fits, extra, runs, settings))
+    text = _report_text(dataset, fits, extra, runs, settings)
+    if comparison:
+        choice = recommend(comparison)
+        text += "\n".join([
+            "",
+            "## Candidate models (leave-one-gait-out cross-validation)",
+            "",
+            "Each training gait held out in turn: the model refitted on the others, scored on it "
+            "(the fitness's per-experiment error, m; docs/estimation.md, \"Model comparison\").",
+            "",
+            comparison_markdown(comparison),
+            "",
+            f"Recommended: **{choice.model}** (lowest mean held-out error; within "
+            "2 % the model with fewer parameters).",
+            "",
+        ])
+    report.write_text(text)
     say(f"wrote {report}")
     return report
 
@@ -138,17 +170,19 @@ def _report_text(
         f"Dataset: `{dataset.folder}` ({dataset.manifest.get('description', '')})",
         "",
     ]
+    names = next(iter(fits.values())).space.names
     lines += [
         "## Fitted coefficients",
         "",
-        "| fit | method | fitness | simulations | " + " | ".join(NAMES) + " |",
-        "|---|---|---|---|" + "---|" * 4,
+        "| fit | method | fitness | simulations | " + " | ".join(names) + " |",
+        "|---|---|---|---|" + "---|" * len(names),
     ]
     for m, r in fits.items():
-        boot = extra["uncertainty"].get(m, {}).get("std", {})
+        unc = extra["uncertainty"].get(m, {})
+        lo, hi = unc.get("lower", {}), unc.get("upper", {})
         vals = [
-            f"{v:.4g}" + (f" ± {boot[n]:.2g}" if n in boot else "")
-            for n, v in zip(NAMES, r.coefficients.as_array(), strict=True)
+            f"{v:.4g}" + (f" [{lo[n]:.3g}, {hi[n]:.3g}]" if n in lo else "")
+            for n, v in zip(names, r.values, strict=True)
         ]
         lines.append(
             f"| {m} | {r.method} | {r.fitness:.4f} | {extra['simulations'][m]} | "
@@ -172,13 +206,29 @@ def _report_text(
                 )
                 lines.append(
                     f"- {m}: relative error "
-                    + ", ".join(f"{n} {e * 100:+.1f} %" for n, e in zip(NAMES, rel, strict=True))
+                    + ", ".join(f"{n} {e * 100:+.1f} %" for n, e in zip(names, rel, strict=True))
                 )
+    if extra["uncertainty"]:
+        u = next(iter(extra["uncertainty"].values()))
+        lines += [
+            "",
+            f"[low, high]: {u['level'] * 100:.0f} % intervals from the parametric bootstrap "
+            f"({u['replicates']} refits on data regenerated from the fit with the dataset's "
+            "declared noise), widened by the fit's excess over its noise floor and by the "
+            f"measured factor {u['widen']:g} (docs/estimation.md, \"Uncertainty\").",
+            "",
+            "| fit | noise floor | fitness / noise floor |",
+            "|---|---|---|",
+        ]
+        lines += [f"| {m} | {u['noise_floor']:.4f} | {u['excess']:.1f} |"
+                  for m, u in extra["uncertainty"].items()]
+    lines += ["", "## Warnings", ""]
+    lines += [f"- {w}" for w in extra["warnings"]] or ["None."]
     lines += [
         "",
-        "± is the bootstrap standard deviation over resampled training experiments.",
-        "",
         "## What the data pins down",
+        "",
+        "Linearised at the estimate (local sensitivities; not intervals: see above).",
         "",
     ]
     for m, ident in extra["identifiability"].items():
@@ -186,7 +236,7 @@ def _report_text(
             f"- **{m}**: "
             + "; ".join(
                 f"{n} {ident['verdict'][n]} (rel. std. error {ident['rel_std_error'][n]:.2g})"
-                for n in NAMES
+                for n in names
             )
         )
     worst: dict[str, list[float]] = {}

@@ -1,4 +1,4 @@
-"""Validation: how well fitted coefficients predict experiments that were not used for fitting.
+"""Validation: how well fitted models predict experiments that were not used for fitting.
 
 For every test experiment and path the twin runs the same task with the coefficients of its motion
 type (paths use the turning set, or the joint set when there is one); both trajectories are sampled
@@ -16,8 +16,8 @@ import numpy as np
 from eelhost.data.experiments import Experiment
 from eelhost.estimation.evaluate import ALIGN_S, Evaluator, Simulated
 from eelhost.estimation.fitness import N_SAMPLES_VALIDATE, validation_errors
+from eelhost.estimation.parameters import FittedModel
 from eelsim.flags import Failure
-from eelsim.fluid import FluidCoefficients
 from eelsim.robot import Robot
 
 
@@ -49,7 +49,7 @@ class ValidationRun:
     row: ValidationRow
 
 
-def coefficient_set_for(motion: str, fitted: dict[str, FluidCoefficients]) -> str:
+def coefficient_set_for(motion: str, fitted: dict[str, FittedModel]) -> str:
     """Which fitted set predicts an experiment of this motion type."""
     if "joint" in fitted:
         return "joint"
@@ -60,7 +60,7 @@ def coefficient_set_for(motion: str, fitted: dict[str, FluidCoefficients]) -> st
 
 def validate(
     robot: Robot,
-    fitted: dict[str, FluidCoefficients],
+    fitted: dict[str, FittedModel],
     experiments: Sequence[Experiment],
     n_samples: int = N_SAMPLES_VALIDATE,
     backend: str = "auto",
@@ -72,7 +72,7 @@ def validate(
     ----------
     robot : Robot
     fitted : dict
-        Coefficients per motion type ("straight", "turning") or "joint".
+        Fitted models per motion type ("straight", "turning") or "joint".
     experiments : sequence of Experiment
     n_samples : int
         Samples per experiment (35 in the paper).
@@ -92,8 +92,10 @@ def validate(
     for exp in experiments:
         groups.setdefault(coefficient_set_for(exp.motion, fitted), []).append(exp)
     for key, exps in groups.items():
-        ev = Evaluator(robot, exps, n_samples=n_samples, backend=backend, align_s=align_s)
-        sim: Simulated = ev.simulate(fitted[key].as_array()[None, :])
+        model = fitted[key]
+        ev = Evaluator(robot, exps, n_samples=n_samples, backend=backend, align_s=align_s,
+                       space=model.space)
+        sim: Simulated = ev.simulate(model.values[None, :])
         counted = sim.counted_failure(ev.prepared)
         for j, p in enumerate(ev.prepared):
             failure = Failure(int(counted[0, j]))

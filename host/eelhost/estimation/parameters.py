@@ -1,0 +1,287 @@
+"""What a fit searches: the model's parameters by name, with bounds (docs/estimation.md).
+
+A fit's parameter vector is the fluid law's coefficients (names and default bounds from the law,
+``eelsim.fluid.get_fluid_law(name)``; docs/model.md section 6), followed by the joint model's
+fitted parameters, if any (names and bounds from the joint model). A :class:`ParameterSpace`
+names them, maps them to and from the unit cube the optimisers search (linearly onto the
+bounds), and turns a vector into what the twin runs: the coefficient record and the robot with
+the joint parameters set. A :class:`FittedModel` is one point of a space: what
+``coefficients.json`` stores and ``eelbot validate`` predicts with.
+
+Clock offsets, the other nuisance of the recordings, are not in the vector: they are profiled
+per experiment (:mod:`eelhost.estimation.evaluate`), which costs no simulation.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from eelsim.fluid import FluidCoefficients, FluidLaw, get_fluid_law, law_of
+from eelsim.robot import Robot
+
+
+class ParameterError(ValueError):
+    """Parameters that do not fit a model (unknown or missing names, wrong count)."""
+
+
+@dataclass(frozen=True, eq=False)
+class JointFit:
+    """The joint model's parameters a fit varies (none for the paper's PD with fixed gains).
+
+    Attributes
+    ----------
+    model : str
+        The joint model's name (as the robot file's ``[joints] model`` says; "pd" for the paper's).
+    names : tuple of str
+        The fitted parameters.
+    bounds : ndarray, shape (k, 2)
+    """
+
+    model: str = "pd"
+    names: tuple[str, ...] = ()
+    bounds: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+
+    def values_of(self, robot: Robot) -> np.ndarray:
+        """The fitted parameters' values in a robot file (its joint table), shape (k,)."""
+        if not self.names:
+            return np.zeros(0)
+        raise ParameterError(f"joint model {self.model!r} has no fittable parameters here")
+
+    def apply(self, robot: Robot, values: np.ndarray) -> Robot:
+        """The robot with the fitted joint parameters set to ``values``."""
+        if not self.names:
+            return robot
+        raise ParameterError(f"joint model {self.model!r} has no fittable parameters here")
+
+
+def joint_model_name(robot: Robot) -> str:
+    """The name of a robot's joint model ("pd": the paper's joint PD loop)."""
+    return str(getattr(robot.joints, "model_name", "") or "pd")
+
+
+def joint_fit(robot: Robot) -> JointFit:
+    """The joint parameters a fit of this robot varies (by default the joint model's own)."""
+    return JointFit(joint_model_name(robot))
+
+
+@dataclass(frozen=True, eq=False)
+class ParameterSpace:
+    """The parameters of a candidate model, by name, with search bounds.
+
+    Attributes
+    ----------
+    law : FluidLaw
+        The fluid law whose coefficients come first.
+    joints : JointFit
+        The joint model and its fitted parameters (after the coefficients).
+    law_bounds : ndarray, shape (k, 2)
+        Search bounds of the coefficients (the law's default bounds unless given).
+    """
+
+    law: FluidLaw
+    joints: JointFit = field(default_factory=JointFit)
+    law_bounds: np.ndarray | None = None
+
+    @classmethod
+    def for_robot(cls, robot: Robot, law: str | None = None) -> ParameterSpace:
+        """The space of a robot's model: its fluid law (or ``law``) and its joint model."""
+        fluid = robot.fluid_law if law is None else get_fluid_law(law)
+        return cls(fluid, joint_fit(robot))
+
+    @property
+    def model_name(self) -> str:
+        """"<joint model> x <fluid law>", how reports name the candidate."""
+        return f"{self.joints.model} x {self.law.name}"
+
+    @property
+    def coefficient_names(self) -> tuple[str, ...]:
+        """The fluid law's coefficients, in array order."""
+        return self.law.coefficient_names
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """Every parameter: the law's coefficients, then the joint model's fitted ones."""
+        return self.coefficient_names + self.joints.names
+
+    @property
+    def size(self) -> int:
+        """Number of parameters K."""
+        return len(self.names)
+
+    @property
+    def bounds(self) -> np.ndarray:
+        """Search bounds, shape (K, 2)."""
+        law = self.law.bounds if self.law_bounds is None else np.asarray(self.law_bounds, float)
+        return np.vstack([law, self.joints.bounds])
+
+    def from_unit(self, u: np.ndarray) -> np.ndarray:
+        """Map unit-cube points (..., K) to parameters (clipped to the cube first)."""
+        b = self.bounds
+        return b[:, 0] + np.clip(np.asarray(u, dtype=float), 0.0, 1.0) * (b[:, 1] - b[:, 0])
+
+    def to_unit(self, x: np.ndarray) -> np.ndarray:
+        """Map parameters (..., K) to the unit cube."""
+        b = self.bounds
+        return (np.asarray(x, dtype=float) - b[:, 0]) / (b[:, 1] - b[:, 0])
+
+    def coefficient_array(self, x: np.ndarray) -> np.ndarray:
+        """The fluid-law part of parameter vectors, shape (..., k)."""
+        return np.asarray(x, dtype=float)[..., : len(self.coefficient_names)]
+
+    def joint_array(self, x: np.ndarray) -> np.ndarray:
+        """The joint part of parameter vectors, shape (..., K - k)."""
+        return np.asarray(x, dtype=float)[..., len(self.coefficient_names) :]
+
+    def coefficients(self, x: np.ndarray) -> FluidCoefficients:
+        """The law's coefficient record of one parameter vector."""
+        return self.law.coefficients.from_array(self.coefficient_array(x))
+
+    def model_robot(self, robot: Robot) -> Robot:
+        """``robot`` with this space's fluid law (its coefficients the robot's, or the middle)."""
+        if robot.fluid_law is self.law:
+            return robot
+        middle = self.law.bounds.mean(axis=1)
+        return robot.with_coefficients(self.law.coefficients.from_array(middle))
+
+    def robots(self, robot: Robot, x: np.ndarray) -> list[Robot]:
+        """One robot per parameter vector with its joint parameters set (the coefficients apart).
+
+        Without fitted joint parameters every entry is the same object (the batched kernel lays
+        out a robot once per distinct object).
+        """
+        base = self.model_robot(robot)
+        x = np.atleast_2d(x)
+        if not self.joints.names:
+            return [base] * len(x)
+        return [self.joints.apply(base, j) for j in self.joint_array(x)]
+
+    def start(self, robot: Robot) -> np.ndarray:
+        """The robot file's values where it has this model's parameters, else the middle."""
+        middle = self.bounds.mean(axis=1)
+        k = len(self.coefficient_names)
+        if robot.fluid_law is self.law:
+            middle[:k] = robot.hydrodynamics.as_array()
+        if self.joints.names and joint_model_name(robot) == self.joints.model:
+            middle[k:] = self.joints.values_of(robot)
+        return middle
+
+    def as_dict(self, x: np.ndarray) -> dict[str, float]:
+        """Parameter values by name."""
+        return {n: float(v) for n, v in zip(self.names, np.asarray(x, float), strict=True)}
+
+    def from_dict(self, values: Mapping[str, Any], where: str = "parameters") -> np.ndarray:
+        """A vector from values by name; every name must be there and nothing else.
+
+        Raises
+        ------
+        ParameterError
+            Naming the missing or unknown parameter and ``where`` it was read.
+        """
+        missing = [n for n in self.names if n not in values]
+        unknown = [n for n in values if n not in self.names]
+        if missing or unknown:
+            what = (f"missing {', '.join(missing)}" if missing else "") + (
+                ("; " if missing and unknown else "") + f"unknown {', '.join(unknown)}"
+                if unknown
+                else ""
+            )
+            raise ParameterError(
+                f"{where}: {what} (model {self.model_name} has {', '.join(self.names)})"
+            )
+        try:
+            return np.array([float(values[n]) for n in self.names])
+        except (TypeError, ValueError):
+            raise ParameterError(f"{where}: every value must be a number") from None
+
+    def at_bound(self, x: np.ndarray, fraction: float = 0.01) -> list[str]:
+        """Parameters within ``fraction`` of their search range from a bound (by name).
+
+        A coefficient whose lower bound is 0 and which sits there is reported too: the data may
+        simply not need it, and the report says so rather than calling it an estimate.
+        """
+        u = self.to_unit(np.asarray(x, float))
+        return [n for n, v in zip(self.names, u, strict=True) if v <= fraction or v >= 1 - fraction]
+
+
+@dataclass(frozen=True, eq=False)
+class FittedModel:
+    """One fitted point of a parameter space: what ``coefficients.json`` stores per fit.
+
+    Attributes
+    ----------
+    space : ParameterSpace
+    values : ndarray, shape (K,)
+    """
+
+    space: ParameterSpace
+    values: np.ndarray
+
+    @property
+    def coefficients(self) -> FluidCoefficients:
+        """The fluid law's coefficients."""
+        return self.space.coefficients(self.values)
+
+    def parameters(self) -> dict[str, float]:
+        """Every parameter by name."""
+        return self.space.as_dict(self.values)
+
+    def robot(self, robot: Robot) -> Robot:
+        """``robot`` as this model: the law, its coefficients and the joint parameters."""
+        return self.space.robots(robot, self.values[None])[0].with_coefficients(self.coefficients)
+
+    def to_json(self) -> dict[str, Any]:
+        """JSON-ready: the model's names, the coefficients and the joint parameters by name."""
+        k = len(self.space.coefficient_names)
+        return {
+            "law": self.space.law.name,
+            "joint_model": self.space.joints.model,
+            "coefficients": {
+                n: float(v) for n, v in zip(self.space.names[:k], self.values[:k], strict=True)
+            },
+            "joint_parameters": {
+                n: float(v) for n, v in zip(self.space.names[k:], self.values[k:], strict=True)
+            },
+        }
+
+    @classmethod
+    def from_json(cls, entry: Any, robot: Robot, where: str) -> FittedModel:
+        """A fit as :meth:`to_json` writes it, or as files made before models were named.
+
+        Those have ``coefficients`` alone: the Morison law's, on the robot's joints.
+
+        Raises
+        ------
+        ParameterError
+            Naming ``where`` and what is wrong.
+        """
+        if not isinstance(entry, dict) or not isinstance(entry.get("coefficients"), dict):
+            raise ParameterError(f"{where}: expected a fit with its coefficients by name")
+        try:
+            law = get_fluid_law(str(entry.get("law", "morison")))
+        except ValueError as err:
+            raise ParameterError(f"{where}: law: {err}") from None
+        joints = entry.get("joint_parameters", {}) or {}
+        model = str(entry.get("joint_model", joint_model_name(robot)))
+        fit = joint_fit(robot) if model == joint_model_name(robot) else JointFit(model)
+        if tuple(joints) != fit.names:
+            raise ParameterError(
+                f"{where}: joint_parameters: {', '.join(joints) or 'none'} do not match the "
+                f"joint model {model!r} of the robot (fits {', '.join(fit.names) or 'none'})"
+            )
+        space = ParameterSpace(law, fit)
+        return cls(space, space.from_dict({**entry["coefficients"], **joints}, where))
+
+    @classmethod
+    def of_coefficients(cls, coefficients: FluidCoefficients, robot: Robot) -> FittedModel:
+        """The model of a coefficient record on a robot (its joint model, nothing fitted)."""
+        space = ParameterSpace(law_of(coefficients), JointFit(joint_model_name(robot)))
+        return cls(space, coefficients.as_array())
+
+
+def spaces_of(robot: Robot, laws: Sequence[str]) -> list[ParameterSpace]:
+    """The candidate models of a robot: its joint model with each of ``laws``."""
+    return [ParameterSpace.for_robot(robot, law) for law in laws]

@@ -1,0 +1,205 @@
+"""Which candidate model to trust: leave-one-gait-out cross-validation (docs/estimation.md).
+
+A candidate model is a joint model with a fluid law (:func:`eelhost.estimation.parameters.spaces_of`
+over the twin's candidate laws, ``eelsim.fluid.candidate_laws``). For each fit (straight, turning)
+every training experiment, one gait (amplitude, frequency), is held out in turn: the candidate is
+refitted on the others and scored on the held-out one by the fitness's per-experiment error
+(docs/estimation.md, "Fitness"). A model that only fits better because it has more freedom to
+absorb the training gaits' noise or the plant's missing physics predicts held-out gaits worse.
+
+Each refit is the minimax polish (:func:`eelhost.estimation.local.polish_minimax`) started from
+the candidate's fit on all training experiments; that fit itself starts from the main fit's
+parameters carried over by name (:func:`carry_over`) and is polished, so every candidate costs
+a few hundred simulations per fold instead of a global search; where the carried-over parameters
+fail in the candidate (the ``galilean`` law's reactive terms make the robot swim at less than half
+the speed with table 3's coefficients), the candidate gets a global fit of its own with the main
+fit's method. The warm start is shared by all candidates alike; it favours none.
+
+The recommendation is the candidate with the lowest mean held-out error over all folds of all
+fits; one within ``TIE`` of it with fewer parameters is preferred (the simpler model predicts as
+well).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from eelhost.data.experiments import Dataset
+from eelhost.estimation.evaluate import EstimationError, Evaluator
+from eelhost.estimation.local import FAILED, polish_minimax
+from eelhost.estimation.methods import FitProblem, get_method
+from eelhost.estimation.parameters import ParameterSpace, spaces_of
+from eelhost.estimation.pipeline import FitSettings, training_experiments
+
+log = logging.getLogger(__name__)
+
+TIE = 0.02  # relative: held-out errors this close count as equal
+POLISH_ITERATIONS = 12
+
+
+def carry_over(values: Mapping[str, float], space: ParameterSpace, default: np.ndarray) -> np.ndarray:
+    """A start in ``space`` from another model's parameters, by name.
+
+    A name the other model has is taken as it is; a law's split coefficient (``C_f_lin``,
+    ``C_f_quad``) takes its unsplit one (``C_f``), the paper's law being the split law with both
+    equal; anything else keeps ``default``. The result is clipped to the bounds.
+
+    Parameters
+    ----------
+    values : mapping of str to float
+    space : ParameterSpace
+    default : ndarray, shape (K,)
+
+    Returns
+    -------
+    ndarray, shape (K,)
+    """
+    out = np.array(default, dtype=float)
+    for i, name in enumerate(space.names):
+        base = name.rsplit("_", 1)[0] if name.endswith(("_lin", "_quad")) else name
+        if name in values:
+            out[i] = values[name]
+        elif base in values:
+            out[i] = values[base]
+    b = space.bounds
+    return np.clip(out, b[:, 0], b[:, 1])
+
+
+@dataclass
+class CandidateScore:
+    """One candidate model's cross-validation.
+
+    Attributes
+    ----------
+    model : str
+        "<joint model> x <fluid law>".
+    parameters : int
+        Its parameter count.
+    fitness : dict of str to float
+        Its fitness on all training experiments, per fit.
+    held_out : dict of str to ndarray
+        Per fit, the error of each held-out gait (in training order).
+    simulations : int
+    """
+
+    model: str
+    parameters: int
+    fitness: dict[str, float] = field(default_factory=dict)
+    held_out: dict[str, np.ndarray] = field(default_factory=dict)
+    simulations: int = 0
+
+    @property
+    def mean_held_out(self) -> float:
+        """Mean held-out error over every fold of every fit."""
+        return float(np.mean(np.concatenate(list(self.held_out.values()))))
+
+    @property
+    def worst_held_out(self) -> float:
+        """Largest held-out error."""
+        return float(np.max(np.concatenate(list(self.held_out.values()))))
+
+
+def recommend(scores: Sequence[CandidateScore]) -> CandidateScore:
+    """The candidate to trust (module docstring): lowest mean held-out error, ties to the simpler."""
+    best = min(scores, key=lambda c: c.mean_held_out)
+    close = [c for c in scores if c.mean_held_out <= best.mean_held_out * (1 + TIE)]
+    return min(close, key=lambda c: (c.parameters, c.mean_held_out))
+
+
+def cross_validate(
+    dataset: Dataset,
+    fitted: Mapping[str, tuple[ParameterSpace, np.ndarray]],
+    settings: FitSettings,
+    laws: Sequence[str] | None = None,
+    iterations: int = POLISH_ITERATIONS,
+    say: Callable[[str], None] | None = None,
+) -> list[CandidateScore]:
+    """Leave-one-gait-out cross-validation of the candidate models (module docstring).
+
+    Parameters
+    ----------
+    dataset : Dataset
+    fitted : mapping
+        Per fit ("straight", "turning"), the main fit's space and parameters.
+    settings : FitSettings
+        The evaluator's backend and clock search.
+    laws : sequence of str, optional
+        Fluid laws to try (default: the twin's candidate laws).
+    iterations : int
+        Polish iterations per refit.
+    say : callable, optional
+        Gets a line per candidate.
+
+    Returns
+    -------
+    list of CandidateScore
+        In the order of the candidates.
+
+    Raises
+    ------
+    EstimationError
+        When a fit has fewer than two training experiments.
+    """
+    from eelsim.fluid import candidate_laws
+
+    robot = dataset.robot
+    spaces = spaces_of(robot, list(laws) if laws is not None else list(candidate_laws()))
+    scores = []
+    for space in spaces:
+        score = CandidateScore(space.model_name, space.size)
+        for motion, (main_space, main_values) in fitted.items():
+            exps = training_experiments(dataset, motion)
+            if len(exps) < 2:
+                raise EstimationError(
+                    f"cross-validation of {motion!r} needs two training experiments or more"
+                )
+
+            def evaluator(chosen: list, space: ParameterSpace = space) -> Evaluator:
+                return Evaluator(robot, chosen, backend=settings.backend,
+                                 align_s=settings.align_s, space=space)
+
+            full_ev = evaluator(exps)
+            start = carry_over(main_space.as_dict(main_values), space, space.start(robot))
+            full = polish_minimax(full_ev.evaluate, space, start, iterations)
+            if full.fitness >= FAILED:
+                # the carried-over parameters fail in this model (e.g. it swims slower): a
+                # global fit of its own, as the main fit was made
+                log.info("%s, %s: carried-over start fails; fitting globally", space.model_name,
+                         motion)
+                full = get_method(settings.method)(FitProblem(full_ev, settings, start))
+            score.fitness[motion] = full.fitness
+            score.simulations += full_ev.simulations
+            errors = []
+            for j, held in enumerate(exps):
+                fold_ev = evaluator([e for i, e in enumerate(exps) if i != j])
+                refit = polish_minimax(fold_ev.evaluate, space, full.values, iterations)
+                test_ev = evaluator([held])
+                errors.append(float(test_ev.errors(refit.values[None])[0, 0]))
+                score.simulations += fold_ev.simulations + test_ev.simulations
+            score.held_out[motion] = np.array(errors)
+        log.info("%s: mean held-out error %.4g", score.model, score.mean_held_out)
+        if say:
+            say(f"cross-validation: {score.model}: mean held-out error {score.mean_held_out:.4f}")
+        scores.append(score)
+    return scores
+
+
+def table_markdown(scores: Sequence[CandidateScore]) -> str:
+    """The comparison as a markdown table, the recommended candidate marked."""
+    choice = recommend(scores)
+    motions = list(scores[0].held_out)
+    head = ("| model | parameters | " + " | ".join(f"fitness {m}" for m in motions)
+            + " | mean held-out error | worst held-out error | simulations |")
+    lines = [head, "|---|---|" + "---|" * len(motions) + "---|---|---|"]
+    for c in scores:
+        mark = " (recommended)" if c is choice else ""
+        lines.append(
+            f"| {c.model}{mark} | {c.parameters} | "
+            + " | ".join(f"{c.fitness[m]:.4f}" for m in motions)
+            + f" | {c.mean_held_out:.4f} | {c.worst_held_out:.4f} | {c.simulations} |"
+        )
+    return "\n".join(lines)

@@ -1,0 +1,170 @@
+"""Estimation under mismatch: honest intervals, warnings, model comparison, test plants."""
+
+import numpy as np
+import pytest
+
+from eelhost.data.experiments import load_dataset, manifest_text, write_experiment, write_manifest
+from eelhost.data.virtual_tank import (
+    TABLE3,
+    TankSettings,
+    law_truths,
+    mismatched_plants,
+    record_experiment,
+)
+from eelhost.estimation.diagnostics import NOISE_RATIO, at_bounds, fit_warnings
+from eelhost.estimation.evaluate import Evaluator
+from eelhost.estimation.parameters import FittedModel, ParameterSpace
+from eelhost.estimation.pipeline import FitSettings
+from eelhost.estimation.selection import (
+    CandidateScore,
+    carry_over,
+    cross_validate,
+    recommend,
+)
+from eelhost.estimation.uncertainty import BootstrapResult, parametric_bootstrap, regenerate
+from eelsim.robot import load_robot
+from eelsim.scenario import load_scenario
+
+TRUTH = TABLE3["straight"]
+CLEAN = TankSettings(timestamp_jitter_s=0.0, control_jitter_s=0.0, pixel_m=0.0)
+GAITS = ["straight_A0.87_w3.9", "straight_A0.61_w2.7", "straight_A0.78_w3.5"]
+
+
+def _short(name, far_m=0.4):
+    return load_scenario(name).model_copy(update={"waypoints_m": [(far_m, 0.0)]})
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return load_robot()
+
+
+@pytest.fixture(scope="module")
+def noisy_experiments(robot):
+    """Two short straight gaits recorded as the bundled tank records (offsets, jitter, pixels)."""
+    return [record_experiment(robot, _short(n), "straight", TRUTH, TankSettings(), seed=i)
+            for i, n in enumerate(GAITS[:2])]
+
+
+@pytest.mark.parametrize("median", ["causal", "centred"])
+def test_regenerated_recording_is_the_tanks_when_no_noise_is_declared(robot, median):
+    # the bootstrap's recorder (batched kernel, camera applied afterwards) and the virtual
+    # tank's (reference closed loop) are independent implementations of the same recording
+    settings = TankSettings(timestamp_jitter_s=0.0, control_jitter_s=0.0, pixel_m=0.0,
+                            median=median)
+    exp = record_experiment(robot, _short(GAITS[0]), "straight", TRUTH, settings, seed=3)
+    model = FittedModel.of_coefficients(TRUTH, robot)
+    again = regenerate(robot, model, [exp], 2, np.random.default_rng(0))
+    for replica in again:
+        assert replica is not None
+        np.testing.assert_allclose(replica[0].position_m, exp.position_m, rtol=0, atol=1e-6)
+        np.testing.assert_array_equal(replica[0].t_s, exp.t_s)
+
+
+def test_bootstrap_intervals_hold_the_estimate_and_widen_by_the_excess_over_the_noise_floor(
+    robot, noisy_experiments
+):
+    ev = Evaluator(robot, noisy_experiments, backend="batch")
+    x = TRUTH.as_array()
+    fitness = float(ev.fitness(x[None])[0])
+    near = parametric_bootstrap(ev, x, fitness, replicates=4, seed=1, max_iterations=3)
+    assert near.noise_floor > 0 and near.failed == 0
+    assert np.all(near.lower <= x) and np.all(x <= near.upper)
+    assert np.any(near.upper > near.lower)
+    far = parametric_bootstrap(ev, x, 10 * near.noise_floor * max(near.excess, 1.0),
+                               replicates=4, seed=1, max_iterations=3, unidentified=["C_m"])
+    assert far.excess == pytest.approx(10 * max(near.excess, 1.0))
+    # a parameter the data does not identify gets its whole search range
+    assert (far.lower[3], far.upper[3]) == tuple(ev.space.bounds[3])
+    free_k = np.arange(4) < 3
+    # half-widths grow by the ratio of the excesses wherever no bound cuts them
+    half_near = near.estimate - near.lower
+    half_far = far.estimate - far.lower
+    free = (far.lower > ev.space.bounds[:, 0]) & (half_near > 0) & free_k
+    np.testing.assert_allclose(half_far[free] / half_near[free], far.excess / near.excess)
+
+
+def test_coefficients_at_a_bound_are_warned_about_and_middle_ones_are_not(robot):
+    space = ParameterSpace.for_robot(robot)
+    b = space.bounds
+    x = b.mean(axis=1)
+    assert at_bounds(space, x) == []
+    x[2] = b[2, 1]  # C_a at its upper bound
+    (name, value, bound), = at_bounds(space, x)
+    assert (name, value, bound) == ("C_a", b[2, 1], b[2, 1])
+    warnings = fit_warnings("straight", space, x, None)
+    assert len(warnings) == 1 and "C_a" in warnings[0] and "bound" in warnings[0]
+
+
+def _boot(fitness, floor, names=("C_f",)):
+    k = len(names)
+    return BootstrapResult(names, np.ones(k), np.ones((3, k)), np.full(3, floor), fitness,
+                           np.zeros(k), np.full(k, 2.0))
+
+
+def test_a_fit_far_above_its_noise_floor_is_warned_about(robot):
+    space = ParameterSpace.for_robot(robot)
+    x = space.bounds.mean(axis=1)
+    high = fit_warnings("turning", space, x, _boot(fitness=0.5, floor=0.5 / (NOISE_RATIO + 1)))
+    assert len(high) == 1 and "noise floor" in high[0]
+    assert fit_warnings("turning", space, x, _boot(fitness=0.1, floor=0.05)) == []
+
+
+def test_a_split_law_starts_from_the_papers_coefficients_carried_over_by_name(robot):
+    space = ParameterSpace.for_robot(robot, "linear_quadratic")
+    start = carry_over(TRUTH.model_dump(), space, space.start(robot))
+    got = space.as_dict(start)
+    assert got["C_f_lin"] == got["C_f_quad"] == TRUTH.C_f
+    assert got["C_d_lin"] == got["C_d_quad"] == TRUTH.C_d
+    assert got["C_a"] == TRUTH.C_a
+
+
+def test_recommendation_is_the_lowest_held_out_error_and_ties_go_to_the_simpler_model():
+    def score(model, k, err):
+        return CandidateScore(model, k, {"straight": 0.1}, {"straight": np.array(err)})
+
+    simple, rich, bad = score("a", 4, [0.100, 0.102]), score("b", 6, [0.100, 0.100]), score(
+        "c", 3, [0.3, 0.3])
+    assert recommend([rich, simple, bad]) is simple  # within 2 %: fewer parameters
+    much_better = score("d", 6, [0.05, 0.05])
+    assert recommend([simple, much_better, bad]) is much_better
+
+
+def test_cross_validation_holds_out_each_gait_and_keeps_the_law_that_made_the_tank(
+    robot, tmp_path
+):
+    names = []
+    for i, n in enumerate(GAITS):
+        write_experiment(record_experiment(robot, _short(n), "straight", TRUTH, CLEAN, seed=i),
+                         tmp_path)
+        names.append(n)
+    write_manifest(tmp_path, manifest_text("paper_robot.toml",
+                                           {"straight": {"train": names, "test": []}}, []))
+    ds = load_dataset(tmp_path)
+    space = ParameterSpace.for_robot(robot)
+    scores = cross_validate(ds, {"straight": (space, TRUTH.as_array())}, FitSettings(),
+                            laws=["morison", "linear_quadratic"], iterations=2)
+    assert [s.model for s in scores] == ["pd x morison", "pd x linear_quadratic"]
+    for s in scores:
+        assert s.held_out["straight"].shape == (3,)
+        assert np.all(np.isfinite(s.held_out["straight"])) and s.simulations > 0
+    assert recommend(scores).model == "pd x morison"
+
+
+def test_every_test_plant_differs_from_the_fitted_model_and_has_a_truth():
+    plants = mismatched_plants()
+    assert {"head_tail", "servo_limits", "stray_current", "reynolds", "centred_median",
+            "all"} <= set(plants)
+    default = TankSettings()
+    for p in plants.values():
+        assert p.settings != default or p.law != "morison", p.name
+        truths = p.truths()
+        assert set(truths) == {"straight", "turning"}
+        assert type(truths["straight"]).law_name == p.law
+
+
+def test_another_laws_truth_keeps_table_3s_added_mass():
+    r = law_truths("reynolds")
+    assert r["turning"].C_a == TABLE3["turning"].C_a
+    with pytest.raises(ValueError, match="unknown fluid law .nosuch."):
+        law_truths("nosuch")
