@@ -16,9 +16,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import os
 import pickle
-import tempfile
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -29,6 +27,7 @@ import cloudpickle
 import numpy as np
 
 from eelhost.errors import UserError
+from eelhost.files import atomic_writer
 from eelsim.fluid import FluidCoefficients
 from eelsim.robot import HydroCoefficients
 
@@ -121,18 +120,23 @@ class Checkpoint:
             return
         self._saved_at = time.monotonic()
         state = {**state, "fingerprint": self.fingerprint, "np_random": np.random.get_state()}  # noqa: NPY002
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=self.path.parent, prefix=f".{self.path.name}.")
-        with os.fdopen(fd, "wb") as f:
+        with atomic_writer(self.path, "wb") as f:  # readable as the umask says
             cloudpickle.dump(state, f)  # pymoo holds local functions plain pickle refuses
-        os.replace(tmp, self.path)
 
     def load(self) -> dict[str, Any] | None:
         """Return the saved state (restoring numpy's global random state), or None if none."""
         if not self.path.exists():
             return None
-        with open(self.path, "rb") as f:
-            state = pickle.load(f)
+        try:
+            with open(self.path, "rb") as f:
+                state = pickle.load(f)
+        except (pickle.UnpicklingError, EOFError, AttributeError, ImportError, IndexError) as err:
+            raise CheckpointError(
+                f"{self.path}: not a readable checkpoint ({type(err).__name__}: {err}); it may "
+                "be truncated or from another version: remove it, or run without --resume"
+            ) from None
+        if not isinstance(state, dict):
+            raise CheckpointError(f"{self.path}: not a checkpoint of eelbot (remove it)")
         if state.get("fingerprint") != self.fingerprint:
             raise CheckpointError(
                 f"{self.path}: checkpoint was made with other settings (dataset, method, seed or "
