@@ -91,6 +91,12 @@ class SerialTransport:
 
 
 def _open_serial(u: LinkURI, robot: Robot | None, clock: Clock | None) -> Link:
+    if "/" in u.target and not u.target.startswith("/"):
+        # serial://dev/ttyUSB0 has two slashes, so the URI names the relative path dev/ttyUSB0
+        raise LinkURIError(
+            f"{u.text!r}: port {u.target!r} is a relative path; a device path needs three "
+            f"slashes: serial:///{u.target}"
+        )
     baud = int(u.number("baud", protocol.BAUD, int))
     if baud <= 0:
         raise LinkURIError(f"{u.text!r}: baud={baud} must be positive")
