@@ -24,7 +24,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--truth",
         metavar="Cf,Cd,Ca,Cm",
-        type=lambda s: floats(s, 4, "--truth"),
+        type=lambda s: floats(s, 4),
         help="one true coefficient set for every experiment (default: table 3 per motion)",
     )
     p.add_argument(

@@ -6,11 +6,19 @@ import argparse
 import signal
 import time
 
-from eelhost.commands.common import OptionError, floats, rejected_as
+from eelhost.commands.common import (
+    FINITE,
+    NON_NEGATIVE,
+    POSITIVE,
+    SCENARIO_OPTIONS,
+    OptionError,
+    gait_values,
+    rejected_as,
+    waypoints,
+)
 from eelhost.field.runloop import RunConfig
 from eelhost.field.session import TankSession, open_camera, virtual_robot
 from eelhost.link.uri import open_link, parse_link_uri
-from eelhost.wire import protocol
 from eelsim.control import Gait
 from eelsim.robot import load_robot
 
@@ -41,67 +49,46 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--calibration", metavar="FILE", help="calibration JSON (docs/vision.md)")
     p.add_argument("--robot-file", metavar="FILE", help="robot TOML (default: the paper robot)")
-    p.add_argument("--waypoints", required=True, metavar="x,y;x,y", help="waypoints, m")
+    p.add_argument(
+        "--waypoints", required=True, metavar="x,y;x,y", type=waypoints, help="waypoints, m"
+    )
     p.add_argument(
         "--gait",
         required=True,
         metavar="A,omega[,beta]",
-        type=lambda s: floats(s, None, "--gait"),
+        type=gait_values,
         help="gait amplitude (rad), frequency (rad/s), optionally phase shift (rad, 1.04)",
     )
-    p.add_argument("--k-theta", type=float, default=0.37, help="heading gain (default 0.37)")
-    p.add_argument("--radius", type=float, default=0.15, help="acceptance radius, m (0.15)")
-    p.add_argument("--control-period", type=float, default=0.3, help="offset period, s (0.3)")
-    p.add_argument("--duration", type=float, help="stop after this long, s (default: no limit)")
+    p.add_argument("--k-theta", type=FINITE, default=0.37, help="heading gain")
+    p.add_argument("--radius", type=POSITIVE, default=0.15, help="acceptance radius, m")
+    p.add_argument("--control-period", type=POSITIVE, default=0.3, help="offset period, s")
+    p.add_argument("--duration", type=POSITIVE, help="stop after this long, s (default: no limit)")
     p.add_argument(
         "--speed",
-        type=float,
+        type=NON_NEGATIVE,
         help="sim:// only: simulated s per wall s, 0 = as fast as possible (overrides the URI)",
     )
     p.add_argument("--out", required=True, metavar="STEM", help="output path without extension")
     p.set_defaults(run=run)
 
 
-def parse_waypoints(text: str) -> list[tuple[float, float]]:
-    """Parse ``"x,y;x,y"`` into waypoints (metres)."""
-    out = []
-    for part in text.split(";"):
-        if part.strip():
-            try:
-                x, y = floats(part, 2, "--waypoints")
-            except argparse.ArgumentTypeError as err:
-                raise OptionError(str(err)) from None
-            out.append((x, y))
-    if not out:
-        raise OptionError("--waypoints: give at least one x,y")
-    return out
-
-
 def _gait(values: list[float], k_theta: float) -> Gait:
-    if len(values) not in (2, 3):
-        raise OptionError("--gait: give A,omega or A,omega,beta")
+    """The gait of ``--gait`` (checked against the robot's ranges when parsed), beta 1.04 rad."""
     beta = values[2] if len(values) == 3 else 1.04
-    gait = Gait(values[0], values[1], beta, k_theta)
-    try:  # the robot would refuse it: say so before anything is opened
-        protocol.SetGait(gait.amplitude_rad, gait.omega_rad_s, gait.beta_rad, 0, 0, 0).validate()
-    except ValueError as err:
-        raise OptionError(f"--gait: {err}") from None
-    return gait
+    return Gait(values[0], values[1], beta, k_theta)
 
 
 def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
     parse_link_uri(args.robot)  # a bad URI is reported before anything is opened
     robot = load_robot(args.robot_file)
-    waypoints = parse_waypoints(args.waypoints)
+    waypoints = args.waypoints
     gait = _gait(args.gait, args.k_theta)
     link = open_link(args.robot, robot=robot)
     virtual = virtual_robot(link)
     if args.speed is not None:
         if virtual is None:
             raise OptionError("--speed: only a sim:// robot can run faster than real time")
-        if args.speed < 0:
-            raise OptionError("--speed: must be >= 0")
         virtual.clock.speed = args.speed
     camera = open_camera(link, robot, args.camera, args.calibration)
     config = RunConfig(
@@ -111,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
         control_period_s=args.control_period,
         duration_s=args.duration,
     )
-    with rejected_as("--waypoints/--gait/--radius/--duration"):  # the task's record checks them
+    with rejected_as("--waypoints/--gait/--radius/--duration", SCENARIO_OPTIONS):
         session = TankSession(link, camera, robot, config, args.out, args.robot)
     previous = signal.signal(signal.SIGINT, lambda *_: session.loop.request_stop("interrupted"))
     wall0 = time.monotonic()
