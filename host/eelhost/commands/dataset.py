@@ -4,10 +4,9 @@ from __future__ import annotations
 
 import argparse
 
-from tqdm import tqdm
-
 from eelhost.commands.common import add_robot_options, floats, rejected_as
 from eelhost.data.virtual_tank import TABLE3, TankSettings, generate_dataset
+from eelhost.progress import Progress
 from eelsim.robot import HydroCoefficients, load_robot
 
 
@@ -57,16 +56,15 @@ def run(args: argparse.Namespace) -> int:
         servo_limits=args.servo_limits or args.mismatch,
         stray_current_m_s=args.stray_current or (0.005 if args.mismatch else 0.0),
     )
-    bar = tqdm(total=34, unit="experiment", desc="virtual tank")
-    manifest = generate_dataset(
-        args.out,
-        robot,
-        truth,
-        settings,
-        args.seed,
-        args.workers,
-        progress=lambda d, _t: bar.update(d - bar.n),
-    )
-    bar.close()
+    with Progress("virtual tank", 34, "experiment") as bar:
+        manifest = generate_dataset(
+            args.out,
+            robot,
+            truth,
+            settings,
+            args.seed,
+            args.workers,
+            progress=lambda done, _total: bar.set(done),
+        )
     print(f"wrote {manifest}")
     return 0

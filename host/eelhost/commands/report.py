@@ -5,12 +5,11 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from tqdm import tqdm
-
 from eelhost.commands.common import add_fit_options, fit_settings
 from eelhost.data.experiments import BUNDLED_DATASET, load_dataset
 from eelhost.data.virtual_tank import generate_dataset
 from eelhost.estimation.report import run_report
+from eelhost.progress import Progress
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -45,11 +44,11 @@ def run(args: argparse.Namespace) -> int:
     settings = fit_settings(args)
 
     def factory(motion: str):
-        bar = tqdm(unit="gen", desc=f"fit {motion}", leave=False)
+        bar = Progress(f"fit {motion}", unit="gen")  # closed by the next or at exit
 
         def progress(gen: int, best: float, sims: int) -> None:
-            bar.update(1)
             bar.set_postfix(best=f"{best:.4g}", sims=sims)
+            bar.set(gen)
 
         return progress
 

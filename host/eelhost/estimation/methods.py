@@ -19,7 +19,7 @@ before the fit).
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 from eelhost.estimation.evaluate import EstimationError, Evaluator
@@ -130,6 +130,7 @@ def _fit_cmaes(problem: FitProblem) -> FitResult:
     )
     if settings.polish_iterations <= 0:
         return res
+    before = ev.simulations
     pol = polish_least_squares(
         ev.residuals, ev.fitness, res.coefficients, res.fitness, settings.polish_iterations
     )
@@ -137,7 +138,7 @@ def _fit_cmaes(problem: FitProblem) -> FitResult:
         "cmaes+lsq",
         pol.coefficients,
         pol.fitness,
-        res.history + [(len(res.history), pol.fitness, ev.simulations)],
+        res.history + [(len(res.history), pol.fitness, res.simulations + ev.simulations - before)],
         res.evaluations + pol.evaluations,
     )
 
@@ -159,9 +160,10 @@ def _fit_ga(problem: FitProblem) -> FitResult:
 def _fit_lsq(problem: FitProblem) -> FitResult:
     ev, begin = problem.evaluator, problem.start
     f0 = float(ev.fitness(begin.as_array()[None, :])[0])
-    return polish_least_squares(
+    res = polish_least_squares(
         ev.residuals, ev.fitness, begin, f0, max(1, problem.settings.polish_iterations)
     )
+    return replace(res, history=[(0, res.fitness, ev.simulations)])  # the polish's runs counted
 
 
 register_method("cmaes", _fit_cmaes, "CMA-ES + least-squares polish (default)")

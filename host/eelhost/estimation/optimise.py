@@ -67,9 +67,10 @@ class FitResult:
     fitness : float
         Its fitness.
     history : list of (generation, best fitness, simulations)
-        Progress per generation (for the fitness-against-generation figure).
+        Progress per generation (for the fitness-against-generation figure); the count of
+        closed-loop runs is the whole fit's, across a resume.
     evaluations : int
-        Candidates evaluated.
+        Candidates evaluated (each is one simulation per training experiment).
     """
 
     method: str
@@ -78,6 +79,11 @@ class FitResult:
     history: list[tuple[int, float, int]] = field(default_factory=list)
     evaluations: int = 0
 
+    @property
+    def simulations(self) -> int:
+        """Closed-loop runs of the whole fit (the last count of the history; 0 without one)."""
+        return int(self.history[-1][2]) if self.history else 0
+
     def to_json(self) -> dict[str, Any]:
         """JSON-ready summary."""
         return {
@@ -85,6 +91,7 @@ class FitResult:
             "coefficients": self.coefficients.model_dump(),
             "fitness": self.fitness,
             "evaluations": self.evaluations,
+            "simulations": self.simulations,
             "history": [list(h) for h in self.history],
         }
 
@@ -150,6 +157,20 @@ def _start(checkpoint: Checkpoint | None, resume: bool) -> dict[str, Any] | None
     if checkpoint is None or not resume:
         return None
     return checkpoint.load()
+
+
+def _count_across_resume(
+    simulations: Callable[[], int], state: dict[str, Any] | None
+) -> Callable[[], int]:
+    """The simulations count of the whole fit: a resumed one goes on from its checkpoint's count.
+
+    The evaluator of a new process starts at 0; without this the count in the history and the
+    progress would restart at every resume while the candidates' count (``evaluations``) goes on.
+    """
+    if state is None or not state["history"]:
+        return simulations
+    base, start = int(state["history"][-1][2]), simulations()
+    return lambda: base + simulations() - start
 
 
 def _seeded_gaussian_mutation(sigma: float = 0.1):
@@ -227,6 +248,7 @@ def fit_ga(
         evaluations = 0
     else:
         algo, history, evaluations = state["algorithm"], state["history"], state["evaluations"]
+    simulations = _count_across_resume(simulations, state)
     while algo.has_next():
         pop = algo.ask()
         f = np.asarray(objective(from_unit(pop.get("X"))), dtype=float)
@@ -309,6 +331,7 @@ def fit_cmaes(
     else:
         es, history = state["es"], state["history"]
         best_u, best_f, evaluations = state["best_u"], state["best_f"], state["evaluations"]
+    simulations = _count_across_resume(simulations, state)
     while not es.stop():
         xs = np.array(es.ask())
         f = np.asarray(objective(from_unit(xs)), dtype=float)

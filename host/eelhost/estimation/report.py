@@ -78,9 +78,9 @@ def run_report(
             dataset, motion, settings, checkpoint_dir=out, resume=resume, progress=prog
         )
         fits[motion] = res
-        extra["simulations"][motion] = ev.simulations
+        extra["simulations"][motion] = res.simulations
         say(
-            f"{motion}: {res.method} fitness {res.fitness:.4f} after {ev.simulations} simulations: "
+            f"{motion}: {res.method} fitness {res.fitness:.4f} after {res.simulations} simulations: "
             + ", ".join(
                 f"{n} {v:.4g}" for n, v in zip(NAMES, res.coefficients.as_array(), strict=True)
             )
