@@ -270,6 +270,35 @@ def add_fit_options(p: argparse.ArgumentParser) -> None:
     )
 
 
+def add_write_option(p: argparse.ArgumentParser, page: str) -> None:
+    """--write [FILE]: a benchmark's report goes to stdout, and to a file only when asked.
+
+    Parameters
+    ----------
+    p : ArgumentParser
+    page : str
+        The documentation page the report is, written by a bare ``--write``.
+    """
+    p.add_argument(
+        "--write",
+        nargs="?",
+        const=page,
+        metavar="FILE",
+        help=f"also write the report to FILE (bare --write: {page}, the page in the docs); "
+        "without it the report only goes to stdout",
+    )
+
+
+def write_report(path: str | None, text: str) -> str | None:
+    """Write a report where ``--write`` said (atomically); return the path, or None if not asked."""
+    if not path:
+        return None
+    from eelhost.files import atomic_write
+
+    atomic_write(path, text)
+    return path
+
+
 def add_backend_option(p: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
     """--backend: which implementation of the twin evaluates the candidates."""
     p.add_argument(

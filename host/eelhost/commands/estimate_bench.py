@@ -1,7 +1,7 @@
 """``eelbot estimate-bench``: measure the estimator against its targets and write the figures.
 
 The measurements are :func:`eelhost.benchmarks.estimator_accuracy.estimator_report`'s; results go
-to stdout and to a markdown file (default ``docs/estimation_benchmarks.md``).
+to stdout, and with ``--write`` to a markdown file (``docs/estimation_benchmarks.md``).
 """
 
 from __future__ import annotations
@@ -10,6 +10,7 @@ import argparse
 from pathlib import Path
 
 from eelhost.benchmarks.estimator_accuracy import estimator_report
+from eelhost.commands.common import COUNT, SEED, add_write_option, write_report
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -20,14 +21,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         description="Measure the estimator against its targets and write the figures.",
     )
     p.add_argument("--work", default="out/estimate-bench", help="folder for generated datasets")
+    add_write_option(p, "docs/estimation_benchmarks.md")
     p.add_argument(
-        "--write", default="docs/estimation_benchmarks.md", help="markdown output ('-': none)"
-    )
-    p.add_argument(
-        "--ga-generations", type=int, default=130, help="GA generations (the paper's 130)"
+        "--ga-generations", type=COUNT, default=130, help="GA generations (the paper's 130)"
     )
     p.add_argument("--skip-ga", action="store_true", help="leave out the GA comparison")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=SEED, default=0, help="seed of the datasets and the fits")
     p.set_defaults(run=run)
 
 
@@ -40,8 +39,6 @@ def run(args: argparse.Namespace) -> int:
         ga=not args.skip_ga,
         progress=lambda line: print(line, flush=True),
     )
-    if args.write != "-":
-        Path(args.write).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.write).write_text(text)
-        print(f"wrote {args.write}")
+    if write_report(args.write, text):
+        print(f"wrote {args.write}")  # the tables went to stdout as they were measured
     return 0

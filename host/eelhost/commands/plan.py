@@ -4,7 +4,8 @@
 primitive library for the robot, coefficients and current speed, runs A*, prints and writes the
 plan (``<out>/plan.json``), executes it in the twin and reports whether it reached the goal without
 a collision. ``--plot`` writes ``<out>/plan.png`` (figure 11 style); ``--bench`` also times a fresh
-library build and the planning and writes ``docs/planning.md`` (or ``--bench-out``).
+library build and the planning and prints the report; ``--write`` also writes it to
+``docs/planning.md`` (or the file given), with the figure beside it.
 """
 
 from __future__ import annotations
@@ -18,7 +19,13 @@ import time
 from pathlib import Path
 
 from eelhost.benchmarks.machine import cpu_model
-from eelhost.commands.common import add_robot_options, robot_and_coefficients
+from eelhost.commands.common import (
+    COUNT,
+    add_robot_options,
+    add_write_option,
+    robot_and_coefficients,
+    write_report,
+)
 from eelhost.planning.execute import execute_plan
 from eelhost.planning.primitives import default_cache_dir, load_or_build
 from eelhost.planning.search import plan_path
@@ -37,20 +44,20 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("world", help="world TOML file, or 'tank_5_obstacles'")
     add_robot_options(p)
-    p.add_argument("--out", default="out/plan", help="output folder (default out/plan)")
+    p.add_argument("--out", default="out/plan", help="output folder")
     p.add_argument(
         "--cache", metavar="DIR", help=f"primitive cache (default {default_cache_dir()})"
     )
     p.add_argument("--rebuild", action="store_true", help="rebuild the library even if cached")
     p.add_argument("--plot", action="store_true", help="write <out>/plan.png (figure 11 style)")
     p.add_argument("--no-execute", action="store_true", help="plan only; do not swim the plan")
-    p.add_argument("--threads", type=int, default=1, help="threads of the batched twin (1)")
+    p.add_argument("--threads", type=COUNT, default=1, help="threads of the batched twin")
     p.add_argument(
         "--bench",
         action="store_true",
-        help="time a fresh library build and the planning (5 repeats); write --bench-out",
+        help="time a fresh library build and the planning (5 repeats); print the report",
     )
-    p.add_argument("--bench-out", default="docs/planning.md", help="benchmark report (markdown)")
+    add_write_option(p, "docs/planning.md")
     p.set_defaults(run=run)
 
 
@@ -137,8 +144,8 @@ def run(args: argparse.Namespace) -> int:
         from eelhost.planning.figures import plot_plan
 
         target = out / "plan.png"
-        if args.bench:
-            target = Path(args.bench_out).with_suffix(".png")
+        if args.bench and args.write:
+            target = Path(args.write).with_suffix(".png")
         figure = plot_plan(
             world, lib, plan, execution, SwimmerModel.from_robot(robot, coeffs), target
         )
@@ -149,14 +156,18 @@ def run(args: argparse.Namespace) -> int:
             t0 = time.perf_counter()
             plan_path(world, lib)
             times.append(time.perf_counter() - t0)
-        _write_bench(Path(args.bench_out), world, lib, plan, execution, times, figure)
-        print(f"planning time median {statistics.median(times):.3f} s; wrote {args.bench_out}")
+        report = _bench_report(world, lib, plan, execution, times, figure)
+        print(f"planning time median {statistics.median(times):.3f} s")
+        if write_report(args.write, report):
+            print(f"wrote {args.write}")
+        else:
+            print(report)
     if not plan.found:
         return 1
     return 0 if execution is None or (execution.reached and execution.collision_free) else 1
 
 
-def _write_bench(path: Path, world, lib, plan, execution, times, figure) -> None:
+def _bench_report(world, lib, plan, execution, times, figure) -> str:
     cpu = cpu_model()
     d = lib.discretisation
     ex = "not executed" if execution is None else execution.message
@@ -165,7 +176,7 @@ def _write_bench(path: Path, world, lib, plan, execution, times, figure) -> None
         "",
         "`eelbot plan WORLD.toml` plans with motion primitives simulated in the twin (paper "
         "section 8.3, docs/model.md section 9) and swims the plan in the twin. Regenerate this page with "
-        f"`eelbot plan {world.name} --bench`.",
+        f"`eelbot plan {world.name} --bench --write`.",
         "",
         "## How it works",
         "",
@@ -208,5 +219,4 @@ def _write_bench(path: Path, world, lib, plan, execution, times, figure) -> None
     ]
     if figure is not None:
         lines += [f"![plan]({Path(figure).name})", ""]
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("\n".join(lines))
+    return "\n".join(lines)
