@@ -77,8 +77,8 @@ class Progress:
         The count at which the task is done (None: unknown, only the count is shown).
     unit : str
         What is counted (``"step"``, ``"experiment"``, ``"gen"``).
-    interval_s : float
-        In ``plain`` form, the seconds between two lines.
+    interval_s : float, optional
+        In ``plain`` form, the seconds between two lines (default :data:`PLAIN_INTERVAL_S`).
     stream : file, optional
         Where it goes (default stderr, read when the progress starts).
     """
@@ -88,14 +88,14 @@ class Progress:
         desc: str,
         total: int | None = None,
         unit: str = "it",
-        interval_s: float = PLAIN_INTERVAL_S,
+        interval_s: float | None = None,
         stream: TextIO | None = None,
     ) -> None:
         self.desc = desc
         self.total = total
         self.unit = unit
         self.n = 0
-        self.interval_s = interval_s
+        self.interval_s = PLAIN_INTERVAL_S if interval_s is None else interval_s
         self._stream = stream or sys.stderr
         self._form = mode(self._stream)
         self._postfix: dict[str, Any] = {}
@@ -133,7 +133,7 @@ class Progress:
             self._bar.update(done - self._bar.n)
         elif self._form == "plain":
             now = time.monotonic()
-            if now - self._last_line >= self.interval_s:
+            if now - self._last_line >= self.interval_s and done != self.total:  # close says it
                 self._last_line = now
                 self._line()
 

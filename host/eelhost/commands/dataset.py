@@ -4,7 +4,14 @@ from __future__ import annotations
 
 import argparse
 
-from eelhost.commands.common import add_robot_options, floats, rejected_as
+from eelhost.commands.common import (
+    COUNT,
+    NON_NEGATIVE,
+    SEED,
+    add_robot_options,
+    floats,
+    rejected_as,
+)
 from eelhost.data.virtual_tank import TABLE3, TankSettings, generate_dataset
 from eelhost.progress import Progress
 from eelsim.robot import HydroCoefficients, load_robot
@@ -35,10 +42,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--head-tail", action="store_true", help="true head and tail unlike the body links"
     )
     p.add_argument("--servo-limits", action="store_true", help="true joints obey the servo limits")
-    p.add_argument("--stray-current", type=float, default=0.0, help="unmodelled current speed, m/s")
-    p.add_argument("--timestamp-jitter", type=float, default=0.1, help="clock offset half-width, s")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--workers", type=int, default=2)
+    p.add_argument(
+        "--stray-current", type=NON_NEGATIVE, default=0.0, help="unmodelled current speed, m/s"
+    )
+    p.add_argument(
+        "--timestamp-jitter", type=NON_NEGATIVE, default=0.1, help="clock offset half-width, s"
+    )
+    p.add_argument("--seed", type=SEED, default=0, help="seed of the recordings' noise")
+    p.add_argument("--workers", type=COUNT, default=2, help="processes simulating experiments")
     p.set_defaults(run=run)
 
 

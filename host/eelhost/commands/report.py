@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from eelhost.commands.common import add_fit_options, fit_settings
+from eelhost.commands.common import add_fit_options, fit_settings, number
 from eelhost.data.experiments import BUNDLED_DATASET, load_dataset
 from eelhost.data.virtual_tank import generate_dataset
 from eelhost.estimation.report import run_report
@@ -25,7 +25,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--out", default="out/report", help="report folder")
     p.add_argument("--joint", action="store_true", help="also fit one joint set for the robot")
-    p.add_argument("--bootstrap", type=int, default=8, help="bootstrap refits per fit (0: none)")
+    p.add_argument(
+        "--bootstrap", type=number(int, minimum=0), default=8, help="bootstrap refits per fit (0: none)"
+    )
     add_fit_options(p)
     p.set_defaults(run=run)
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from eelhost.commands.common import NON_NEGATIVE, add_backend_option
 from eelhost.data.experiments import load_dataset
 from eelhost.estimation.evaluate import ALIGN_S
 from eelhost.estimation.pipeline import read_coefficients
@@ -22,10 +23,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("coefficients", help="coefficients.json from estimate, or Cf,Cd,Ca,Cm")
     p.add_argument("dataset", help="dataset folder")
     p.add_argument("--out", default="out/validate", help="folder for tables and figures")
-    p.add_argument("--backend", choices=["auto", "batch", "reference"], default="auto")
+    add_backend_option(p)
     p.add_argument(
         "--align",
-        type=float,
+        type=NON_NEGATIVE,
         default=ALIGN_S,
         metavar="SECONDS",
         help="also report each experiment at the clock offset of its recording that fits best, "

@@ -15,7 +15,7 @@ class ClusterError(UserError, ConnectionError):
 
 
 def dask_map(
-    address: str, timeout_s: float = CONNECT_TIMEOUT_S
+    address: str, timeout_s: float | None = None
 ) -> Callable[[Callable, Iterable], list[Any]]:
     """A map function that runs jobs on the Dask scheduler at ``address``.
 
@@ -23,8 +23,9 @@ def dask_map(
     ----------
     address : str
         Scheduler address, e.g. ``tcp://10.0.0.5:8786``; a ``distributed.Client`` works too.
-    timeout_s : float
-        How long to try to reach the scheduler before :class:`ClusterError`.
+    timeout_s : float, optional
+        How long to try to reach the scheduler before :class:`ClusterError` (default
+        :data:`CONNECT_TIMEOUT_S`).
 
     Returns
     -------
@@ -33,6 +34,7 @@ def dask_map(
     """
     from distributed import Client
 
+    timeout_s = CONNECT_TIMEOUT_S if timeout_s is None else timeout_s
     if isinstance(address, Client):
         client = address
     else:
