@@ -34,10 +34,13 @@ def run(args: argparse.Namespace) -> int:
         speeds = grid_speeds(robot, args.duration, coeffs, lambda done, _total: bar.set(done))
     table = speed_table_markdown(speeds, robot.body_length_m())
     print(table)
-    print(
-        f"fastest {np.nanmax(speeds):.4f} m/s, slowest {np.nanmin(speeds):.4f} m/s; "
-        f"NaN = failed or swam backwards"
-    )
+    if np.isnan(speeds).all():
+        print(f"no gait swam forward steadily within {args.duration:g} s (NaN: failed or backwards)")
+    else:
+        print(
+            f"fastest {np.nanmax(speeds):.4f} m/s, slowest {np.nanmin(speeds):.4f} m/s; "
+            f"NaN = failed or swam backwards"
+        )
     if args.write:
         atomic_write(Path(args.write), table + "\n")
         print(f"wrote {args.write}")
