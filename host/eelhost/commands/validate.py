@@ -46,15 +46,9 @@ def run(args: argparse.Namespace) -> int:
     md = table_markdown([r.row for r in runs])
     (out / "table4.md").write_text(md + "\n")
     (out / "table4.csv").write_text(table_csv([r.row for r in runs]))
-    from eelhost.estimation.figures import plot_paths, plot_time_series  # matplotlib: slow import
+    from eelhost.estimation.figures import plot_validation  # matplotlib: slow import
 
-    for motion in ("straight", "turning", "path"):
-        group = [r for r in runs if r.experiment.motion == motion]
-        if group:
-            plot_paths(group, out / f"paths_{motion}.png")
-    for r in runs:
-        if r.experiment.motion == "path":
-            plot_time_series(r, out / f"timeseries_{r.experiment.name}.png")
+    plot_validation(runs, out)
     print(md)
     print(f"wrote {out}/table4.md, table4.csv and figures")
     return 0

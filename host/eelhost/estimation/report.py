@@ -107,18 +107,10 @@ def run_report(
     (out / "table4.md").write_text(table_markdown([r.row for r in runs]) + "\n")
     (out / "table4.csv").write_text(table_csv([r.row for r in runs]))
     # matplotlib only now: importing it costs half a second of every command's start
-    from eelhost.estimation.figures import plot_fitness_history, plot_paths, plot_time_series
+    from eelhost.estimation.figures import plot_fitness_history, plot_validation
 
     plot_fitness_history(fits, out / "fitness_history.png")
-    for motion in ("straight", "turning", "path"):
-        group = [r for r in runs if r.experiment.motion == motion]
-        if group:
-            plot_paths(
-                group, out / f"paths_{motion}.png", f"{motion}: experiment (black) and twin (red)"
-            )
-    for r in runs:
-        if r.experiment.motion == "path":
-            plot_time_series(r, out / f"timeseries_{r.experiment.name}.png")
+    plot_validation(runs, out)
     report = out / "report.md"
     report.write_text(_report_text(dataset, fits, extra, runs, settings))
     say(f"wrote {report}")

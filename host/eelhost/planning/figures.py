@@ -22,7 +22,7 @@ from eelhost.planning.execute import Execution  # noqa: E402
 from eelhost.planning.primitives import REST, SWIMMING, PrimitiveLibrary  # noqa: E402
 from eelhost.planning.search import Plan  # noqa: E402
 from eelhost.planning.world import CircleObstacle, World  # noqa: E402
-from eelhost.plots import robot_outline  # noqa: E402
+from eelhost.plots import draw_current, label_axes, legend_once, robot_outline  # noqa: E402
 from eelsim.model import SwimmerModel  # noqa: E402
 
 
@@ -43,11 +43,13 @@ def _hulls_by_current(ax: plt.Axes, lib: PrimitiveLibrary) -> None:
     for ci, (d, colour) in enumerate(zip(dirs, colours, strict=True)):
         rows = [i for i in lib.group(SWIMMING, ci)
                 if lib.bearing_deg[i] == 0 and lib.distance_m[i] == dist]
-        for i in rows:
+        for k, i in enumerate(rows):  # one legend entry per direction
+            label = f"{d:g} ({lib.current_rel_deg[i]:.0f} after the lead-in)" if k == 0 else None
             ax.add_patch(Polygon(lib.hulls[i], closed=True, fill=False, ec=colour, lw=1.2,
-                                 label=f"{d:g} ({lib.current_rel_deg[i]:.0f} felt)"))
+                                 label=label))
             ax.plot(*lib.paths[i].T, color=colour, lw=0.8)
-    ax.legend(fontsize=5, loc="upper left", title="current (deg)", title_fontsize=6)
+    legend_once(ax, fontsize=5, loc="upper left", title="current vs heading (deg)",
+                title_fontsize=6)
     ax.set_title(f"(b) hulls, swimming, {dist:g} m ahead", fontsize=9)
 
 
@@ -59,15 +61,12 @@ def _obstacles(ax: plt.Axes, world: World) -> None:
             ax.add_patch(Circle(o.centre_m, o.radius_m, fc="0.35", ec="black"))
         else:
             ax.add_patch(Polygon(o.vertices_m, closed=True, fc="0.35", ec="black"))
-    ax.add_patch(Circle(world.goal.position_m, world.goal.radius_m, fc="tab:green", alpha=0.3))
-    ax.plot(*world.start.position_m, "o", color="tab:blue", ms=6)
-    if world.current.speed_m_s > 0:
-        a = np.radians(world.current.direction_deg)
-        x0, y0 = 0.08 * w, 0.92 * h
-        ax.annotate("", (x0 + 0.25 * np.cos(a), y0 + 0.25 * np.sin(a)), (x0, y0),
-                    arrowprops={"arrowstyle": "->", "color": "tab:cyan", "lw": 2})
-        ax.text(x0, y0 - 0.1, f"current {world.current.speed_m_s:g} m/s", fontsize=7,
-                color="tab:cyan")
+    ax.add_patch(Circle(world.goal.position_m, world.goal.radius_m, fc="tab:green", alpha=0.3,
+                        label="goal region"))
+    ax.plot(*world.start.position_m, "o", color="tab:blue", ms=6, label="start")
+    ax.add_patch(Rectangle((0, 0), 0, 0, fc="0.35", ec="black", label="obstacles"))  # legend key
+    draw_current(ax, world.current.speed_m_s, world.current.direction_deg, colour="tab:cyan",
+                 at=(0.12, 0.93))
 
 
 def plot_plan(
@@ -122,12 +121,11 @@ def plot_plan(
                       alpha=0.6)
     status = plan.message if execution is None else f"{plan.message}\n{execution.message}"
     ax_c.set_title(f"(c) {world.name}: {status}", fontsize=8)
-    ax_c.legend(fontsize=7, loc="lower right")
-    for ax in (ax_a, ax_b, ax_c):
+    legend_once(ax_c, fontsize=7, loc="lower right")
+    for ax, frame in ((ax_a, "robot frame"), (ax_b, "robot frame"), (ax_c, "tank")):
         ax.set_aspect("equal")
         ax.autoscale_view()
-        ax.set_xlabel("x (m)")
-        ax.set_ylabel("y (m)")
+        label_axes(ax, f"x, {frame} (m)", f"y, {frame} (m)")
     w, h = world.tank.size_m
     ax_c.set_xlim(-0.05, w + 0.05)
     ax_c.set_ylim(-0.05, h + 0.05)
