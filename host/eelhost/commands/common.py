@@ -153,7 +153,7 @@ def gait_values(text: str) -> list[float]:
         lo, hi = ranges[name]
         if name != "beta_rad" and value <= 0.0:
             raise argparse.ArgumentTypeError(f"{name} must be positive, got {value:g}")
-        if not lo <= value <= hi:
+        if lo is not None and hi is not None and not lo <= value <= hi:
             raise argparse.ArgumentTypeError(
                 f"{name} {value:g} outside the robot's range [{lo:g}, {hi:g}]"
             )

@@ -18,7 +18,9 @@ from eelhost.commands.common import (
 )
 from eelhost.field.runloop import RunConfig
 from eelhost.field.session import TankSession, open_camera, virtual_robot
+from eelhost.link.base import LinkEvent
 from eelhost.link.uri import open_link, parse_link_uri
+from eelhost.progress import Progress
 from eelsim.control import Gait
 from eelsim.robot import load_robot
 
@@ -102,8 +104,16 @@ def run(args: argparse.Namespace) -> int:
         session = TankSession(link, camera, robot, config, args.out, args.robot)
     previous = signal.signal(signal.SIGINT, lambda *_: session.loop.request_stop("interrupted"))
     wall0 = time.monotonic()
+    loop = session.loop
     try:
-        out = session.run()
+        with Progress("run", len(waypoints), "waypoint") as bar:
+
+            def show(_event: LinkEvent) -> None:  # at each command sent: every control period
+                bar.set_postfix(t=f"{loop.outcome.t_end_s:.0f} s")
+                bar.set(loop.target)
+
+            session.link.listeners.append(show)
+            out = session.run()
     finally:
         signal.signal(signal.SIGINT, previous)
     wall = time.monotonic() - wall0

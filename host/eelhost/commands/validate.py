@@ -10,6 +10,7 @@ from eelhost.data.experiments import load_dataset
 from eelhost.estimation.evaluate import ALIGN_S
 from eelhost.estimation.pipeline import read_coefficients
 from eelhost.estimation.validate import table_csv, table_markdown, validate
+from eelhost.progress import Progress
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -40,8 +41,17 @@ def run(args: argparse.Namespace) -> int:
     fitted = read_coefficients(args.coefficients)
     dataset = load_dataset(args.dataset)
     tests = [e for exps in dataset.test.values() for e in exps] + list(dataset.paths)
-    runs = validate(dataset.robot, fitted, tests, backend=args.backend, align_s=args.align)
-    out = Path(args.out)
+    with Progress("validate", 2, "stage") as bar:  # the simulations, then the figures
+        runs = validate(dataset.robot, fitted, tests, backend=args.backend, align_s=args.align)
+        bar.set(1)
+        _write_tables_and_figures(runs, Path(args.out))
+        bar.set(2)
+    print(table_markdown([r.row for r in runs]))
+    print(f"wrote {args.out}/table4.md, table4.csv and figures")
+    return 0
+
+
+def _write_tables_and_figures(runs: list, out: Path) -> None:
     out.mkdir(parents=True, exist_ok=True)
     md = table_markdown([r.row for r in runs])
     (out / "table4.md").write_text(md + "\n")
@@ -49,6 +59,3 @@ def run(args: argparse.Namespace) -> int:
     from eelhost.estimation.figures import plot_validation  # matplotlib: slow import
 
     plot_validation(runs, out)
-    print(md)
-    print(f"wrote {out}/table4.md, table4.csv and figures")
-    return 0

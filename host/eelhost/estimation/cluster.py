@@ -35,6 +35,7 @@ def dask_map(
     from distributed import Client
 
     timeout_s = CONNECT_TIMEOUT_S if timeout_s is None else timeout_s
+    client: Client
     if isinstance(address, Client):
         client = address
     else:
