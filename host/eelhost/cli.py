@@ -183,7 +183,8 @@ def main(argv: list[str] | None = None) -> int:
     logging.getLogger().setLevel(log_level(args.verbose, args.quiet))
     progress.set_mode(args.progress)
     try:
-        return int(args.run(args) or 0)
+        with progress.console():
+            return int(args.run(args) or 0)
     except USER_ERRORS as err:
         progress.close_all()
         if args.debug:

@@ -10,8 +10,9 @@ Every ``eelbot`` command that can take more than a few seconds reports its progr
 - ``auto`` (default): ``bar`` when stderr is a terminal, else ``plain``.
 
 :func:`message` prints a line to stderr without gluing it to a bar being drawn (the command line
-prints its error messages with it), and :func:`close_all` ends every bar still open (before an
-error message, when a command fails half-way).
+prints its error messages with it), :func:`console` does the same for everything a command prints
+and logs while bars are drawn, and :func:`close_all` ends every bar still open (before an error
+message, when a command fails half-way).
 """
 
 from __future__ import annotations
@@ -19,12 +20,24 @@ from __future__ import annotations
 import sys
 import time
 import weakref
+from collections.abc import Iterator
+from contextlib import contextmanager
 from types import TracebackType
 from typing import Any, TextIO
 
 from tqdm import tqdm
+from tqdm.contrib.logging import logging_redirect_tqdm
 
-__all__ = ["MODES", "PLAIN_INTERVAL_S", "Progress", "close_all", "message", "mode", "set_mode"]
+__all__ = [
+    "MODES",
+    "PLAIN_INTERVAL_S",
+    "Progress",
+    "close_all",
+    "console",
+    "message",
+    "mode",
+    "set_mode",
+]
 
 MODES = ("auto", "bar", "plain", "none")
 PLAIN_INTERVAL_S = 5.0  # seconds between two plain lines: a log stays short and still shows life
@@ -62,6 +75,60 @@ def message(text: str) -> None:
         tqdm.write(text, file=sys.stderr)
     else:
         print(text, file=sys.stderr, flush=True)
+
+
+def _bars() -> list[tqdm]:
+    return [p._bar for p in list(_open) if p._bar is not None]
+
+
+class _AboveBars:
+    """A text stream that writes whole lines above the bars being drawn (bars redrawn after)."""
+
+    def __init__(self, wrapped: TextIO) -> None:
+        self._wrapped = wrapped
+        self._partial = ""
+
+    def write(self, text: str) -> int:
+        head, newline, self._partial = (self._partial + text).rpartition("\n")
+        if newline:
+            bars = _bars()
+            for bar in bars:
+                bar.clear()
+            self._wrapped.write(head + newline)
+            self._wrapped.flush()
+            for bar in bars:
+                bar.refresh()
+        return len(text)
+
+    def flush(self) -> None:
+        if self._partial:
+            self._wrapped.write(self._partial)
+            self._partial = ""
+        self._wrapped.flush()
+
+    def __getattr__(self, name: str) -> Any:  # isatty, fileno, encoding ... of the real stream
+        return getattr(self._wrapped, name)
+
+
+@contextmanager
+def console() -> Iterator[None]:
+    """While bars may be drawn, print and log above them instead of onto their line.
+
+    In ``bar`` form, stdout is wrapped so that each whole line is written above the bars and
+    log records go through tqdm; in the other forms nothing changes.
+    """
+    if mode() != "bar":
+        yield
+        return
+    real = sys.stdout
+    above = _AboveBars(real)
+    sys.stdout = above  # type: ignore[assignment]
+    try:
+        with logging_redirect_tqdm():
+            yield
+    finally:
+        above.flush()
+        sys.stdout = real
 
 
 class Progress:

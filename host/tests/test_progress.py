@@ -89,3 +89,18 @@ def test_speeds_shows_progress_per_gait_and_says_when_no_gait_swam(capsys, monke
     out, err = capsys.readouterr()
     assert "gait grid: at 1/16 gait" in err and "gait grid: done 16/16 gait (100 %)" in err
     assert "no gait swam forward steadily within 0.5 s" in out  # 0.5 s is too short to tell
+
+
+def test_lines_printed_during_a_bar_start_a_line_of_their_own(monkeypatch):
+    screen = Terminal()  # stdout and stderr on one terminal, as a user sees them
+    monkeypatch.setattr("sys.stdout", screen)
+    monkeypatch.setattr("sys.stderr", screen)
+    progress.set_mode("bar")
+    with progress.console(), Progress("fit straight", 3, "gen") as bar:
+        bar.update(1)
+        print("straight: fitness 0.0123")
+        bar.update(1)
+    text = screen.getvalue()
+    before = text[: text.index("straight: fitness")]
+    assert before.endswith(("\r", "\n")) and "straight: fitness 0.0123\n" in text
+    assert text.endswith("\n")  # a closed bar leaves the line to what comes next

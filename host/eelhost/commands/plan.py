@@ -30,6 +30,7 @@ from eelhost.planning.execute import execute_plan
 from eelhost.planning.primitives import default_cache_dir, load_or_build
 from eelhost.planning.search import plan_path
 from eelhost.planning.world import load_world
+from eelhost.progress import Progress
 from eelsim.model import SwimmerModel
 
 
@@ -112,6 +113,7 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     cache = args.cache or default_cache_dir()
+    stages = Progress("plan", 3, "stage")  # library, search, swim; closed on an error by the CLI
     lib, built = load_or_build(
         robot,
         coeffs,
@@ -120,12 +122,14 @@ def run(args: argparse.Namespace) -> int:
         threads=args.threads,
         rebuild=args.rebuild or args.bench,
     )
+    stages.set(1)
     how = "built" if built else "loaded from cache"
     print(
         f"library {lib.key}: {len(lib)} primitives ({int(lib.success.sum())} completed), {how}"
         f"; build time {lib.build_time_s:.2f} s ({lib.backend})"
     )
     plan = plan_path(world, lib)
+    stages.set(2)
     print(f"{world.name}: {plan.message} in {plan.planning_time_s:.2f} s")
     for k, s in enumerate(plan.steps):
         print(
@@ -137,6 +141,8 @@ def run(args: argparse.Namespace) -> int:
     if plan.found and plan.steps and not args.no_execute:
         execution = execute_plan(world, plan, robot, coeffs, threads=args.threads)
         print(f"executed in the twin: {execution.message}")
+    stages.finish()
+    stages.close()
     (out / "plan.json").write_text(json.dumps(_plan_json(world, lib, plan, execution), indent=1))
     print(f"wrote {out / 'plan.json'}")
     figure = None

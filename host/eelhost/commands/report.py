@@ -40,13 +40,19 @@ def run(args: argparse.Namespace) -> int:
         print(
             f"no bundled dataset here; generating the default virtual-tank dataset in {folder} ..."
         )
-        generate_dataset(folder, seed=args.seed)
+        with Progress("virtual tank", 34, "experiment") as tank:
+            generate_dataset(folder, seed=args.seed, progress=lambda d, _t: tank.set(d))
     dataset = load_dataset(folder)
     motions = ("straight", "turning") + (("joint",) if args.joint else ())
     settings = fit_settings(args)
 
+    bars: list[Progress] = []
+
     def factory(motion: str):
-        bar = Progress(f"fit {motion}", unit="gen")  # closed by the next or at exit
+        for previous in bars:  # the fit before this one is done
+            previous.close()
+        bar = Progress(f"fit {motion}", unit="gen")
+        bars.append(bar)
 
         def progress(gen: int, best: float, sims: int) -> None:
             bar.set_postfix(best=f"{best:.4g}", sims=sims)
