@@ -185,20 +185,14 @@ def main(argv: list[str] | None = None) -> int:
     try:
         with progress.console():
             return int(args.run(args) or 0)
-    except USER_ERRORS as err:
-        progress.close_all()
+    except (*USER_ERRORS, KeyboardInterrupt) as err:
+        progress.close_all()  # the message goes on a line of its own, after what was printed
         if args.debug:
             raise
         sys.stdout.flush()
-        progress.message(f"eelbot {args.command}: error: {err}")
-        return EXIT_USER_ERROR
-    except KeyboardInterrupt:
-        progress.close_all()
-        if args.debug:
-            raise
-        sys.stdout.flush()
-        progress.message(f"eelbot {args.command}: interrupted")
-        return EXIT_INTERRUPTED
+        interrupted = isinstance(err, KeyboardInterrupt)
+        progress.message(f"eelbot {args.command}: " + ("interrupted" if interrupted else f"error: {err}"))
+        return EXIT_INTERRUPTED if interrupted else EXIT_USER_ERROR
     finally:
         progress.close_all()
 

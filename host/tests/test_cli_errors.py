@@ -93,3 +93,12 @@ def test_a_negative_waypoint_reaches_the_scenario(tmp_path):
     stem = tmp_path / "r"
     main(["simulate", "straight", "--waypoints", "-0.5,0.2", "--duration", "1", "--out", str(stem)])
     assert '"waypoints_m": [\n      [\n        -0.5,' in stem.with_suffix(".json").read_text()
+
+
+def test_ctrl_c_ends_with_a_line_and_status_130(monkeypatch, capsys):
+    def interrupted(args):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(speeds, "run", interrupted)
+    assert main(["speeds"]) == 130
+    assert capsys.readouterr().err.strip() == "eelbot speeds: interrupted"
