@@ -37,7 +37,7 @@ from eelhost.commands import (
     validate,
     vision_bench,
 )
-from eelhost.errors import EXIT_USER_ERROR, UserError, exit_status_table
+from eelhost.errors import EXIT_INTERRUPTED, EXIT_USER_ERROR, UserError, exit_status_table
 from eelsim.robot import RobotFileError
 from eelsim.scenario import ScenarioError
 from eelsim.timing import TimingError
@@ -58,7 +58,6 @@ COMMANDS = (
 )
 USER_ERRORS = (UserError, RobotFileError, ScenarioError, TimingError)
 LEVELS = (logging.ERROR, logging.WARNING, logging.INFO, logging.DEBUG)  # -q, default, -v, -vv
-EXIT_INTERRUPTED = 130  # the shell's status for a command ended by Ctrl-C (128 + SIGINT)
 # an option value that starts with a minus and a digit: -0.6,2.7  -.5  -1e3  "-0.5,0.2;1,0"
 NEGATIVE_VALUE = re.compile(r"^-(\d|\.\d)[\d.eE+\-,;\s]*$")
 
@@ -74,6 +73,7 @@ class DefaultsHelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
             or default is False
             or default is argparse.SUPPRESS
             or "%(default)" in text
+            or "default" in text
             or (text and str(default) in text)
             or not action.option_strings
         ):

@@ -9,10 +9,10 @@ exception is a bug and keeps its traceback.
 The subclasses also derive from ``ValueError`` (or ``ConnectionError`` for a transport), as they
 did before this base existed, so callers that catch those still do.
 
-Exit statuses (listed by ``eelbot --help`` and docs/host.md): 0 the command did what was asked;
+Exit statuses (listed by ``eelbot --help`` and docs/cli.md): 0 the command did what was asked;
 1 a run or plan ended without reaching its goal for a reason that is not a twin flag; 2 a user
 error; 3, 4, 5 a twin run that ended flagged TOO_SLOW, ILL_CONDITIONED or SELF_COLLISION
-(:func:`exit_status_for_flag`).
+(:func:`exit_status_for_flag`); 130 interrupted (Ctrl-C).
 """
 
 from __future__ import annotations
@@ -20,6 +20,7 @@ from __future__ import annotations
 from eelsim.flags import Failure
 
 __all__ = [
+    "EXIT_INTERRUPTED",
     "EXIT_NOT_REACHED",
     "EXIT_OK",
     "EXIT_USER_ERROR",
@@ -31,6 +32,7 @@ __all__ = [
 EXIT_OK = 0
 EXIT_NOT_REACHED = 1
 EXIT_USER_ERROR = 2
+EXIT_INTERRUPTED = 130  # the shell's status for a command ended by Ctrl-C (128 + SIGINT)
 _FLAG_BASE = 2  # TOO_SLOW (1) -> 3, ILL_CONDITIONED (2) -> 4, SELF_COLLISION (3) -> 5
 
 
@@ -66,4 +68,5 @@ def exit_status_table() -> str:
         for f in Failure
         if f != Failure.NONE
     ]
-    return "\n".join(f"  {code}  {text}" for code, text in rows)
+    rows.append((EXIT_INTERRUPTED, "interrupted (Ctrl-C)"))
+    return "\n".join(f"  {code:>3}  {text}" for code, text in rows)
