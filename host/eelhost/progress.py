@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import sys
 import time
-import weakref
 from collections.abc import Iterator
 from contextlib import contextmanager
 from types import TracebackType
@@ -43,7 +42,7 @@ MODES = ("auto", "bar", "plain", "none")
 PLAIN_INTERVAL_S = 5.0  # seconds between two plain lines: a log stays short and still shows life
 
 _mode = "auto"
-_open: weakref.WeakSet[Progress] = weakref.WeakSet()
+_open: set[Progress] = set()  # strong: a display dropped unclosed still ends at close_all
 
 
 def set_mode(new_mode: str) -> None:

@@ -134,11 +134,14 @@ def _fit_cmaes(problem: FitProblem) -> FitResult:
     pol = polish_least_squares(
         ev.residuals, ev.fitness, res.coefficients, res.fitness, settings.polish_iterations
     )
+    polished = (len(res.history), pol.fitness, res.simulations + ev.simulations - before)
+    if problem.progress:
+        problem.progress(*polished)  # the polish is the fit's last step: its count is the total
     return FitResult(
         "cmaes+lsq",
         pol.coefficients,
         pol.fitness,
-        res.history + [(len(res.history), pol.fitness, res.simulations + ev.simulations - before)],
+        res.history + [polished],
         res.evaluations + pol.evaluations,
     )
 
