@@ -49,7 +49,7 @@ PROBES = [
     Probe("serial port missing", "run --robot serial:///dev/eelbot-no-such-port " + RUN, 2,
           ("/dev/eelbot-no-such-port", "cannot open")),
     Probe("serial port not a tty", "run --robot serial:///dev/null " + RUN, 2,
-          ("/dev/null", "cannot open")),
+          ("/dev/null", "cannot open", "not a serial port")),
     Probe("serial relative path", "run --robot serial://dev/ttyUSB0 " + RUN, 2,
           ("relative path", "serial:///dev/ttyUSB0")),
     Probe("unknown scheme", "run --robot tcp://robot:5760 " + RUN, 2, ("unknown scheme",)),

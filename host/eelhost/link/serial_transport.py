@@ -57,7 +57,8 @@ class SerialTransport:
             )
         except (serial.SerialException, OSError, ValueError) as err:
             self._serial = None
-            raise TransportError(f"{self.port}: cannot open: {err}") from None
+            hint = " (a file or device that is not a serial port)" if "ioctl" in str(err) else ""
+            raise TransportError(f"{self.port}: cannot open: {err}{hint}") from None
 
     def close(self) -> None:
         """Close the port if open."""
