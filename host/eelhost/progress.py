@@ -172,7 +172,7 @@ class Progress:
         self._bar: tqdm | None = None
         if self._form == "bar":
             self._bar = tqdm(
-                total=total, unit=unit, desc=desc, file=self._stream, dynamic_ncols=True
+                total=total, unit=unit, desc=desc, file=self._stream
             )
         _open.add(self)
 
