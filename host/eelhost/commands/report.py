@@ -48,9 +48,12 @@ def run(args: argparse.Namespace) -> int:
 
     bars: list[Progress] = []
 
+    def say(text: str) -> None:  # a fit's summary comes after its progress has ended
+        for bar in bars:
+            bar.close()
+        print(text)
+
     def factory(motion: str):
-        for previous in bars:  # the fit before this one is done
-            previous.close()
         bar = Progress(f"fit {motion}", unit="gen")
         bars.append(bar)
 
@@ -67,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
         settings,
         args.bootstrap,
         args.resume,
-        say=print,
+        say=say,
         progress_factory=factory,
     )
     return 0

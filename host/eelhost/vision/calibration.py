@@ -375,6 +375,6 @@ def load_calibration(path: str | Path) -> Calibration:
     if len(points_m) != len(points_px):
         raise CalibrationFileError(f"{source}: 'points_m' and 'points_px' differ in length")
     rms = data.get("rms_reprojection_px")
-    if isinstance(rms, list) or not _all_numbers(rms) or not math.isfinite(rms) or rms < 0:
+    if not isinstance(rms, int | float) or isinstance(rms, bool) or not math.isfinite(rms) or rms < 0:
         raise CalibrationFileError(f"{source}: 'rms_reprojection_px' must be a number >= 0")
     return Calibration(h / h[2, 2], (size[0], size[1]), method, points_m, points_px, float(rms))
