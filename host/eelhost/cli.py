@@ -1,19 +1,28 @@
 """The ``eelbot`` command line: one entry point, a subcommand per job.
 
 Each subcommand lives in its own module under ``eelhost.commands`` and registers itself through
-``add_parser(subparsers)``; this file only wires them together, sets the level of the library's
-logging (``-v`` for more, ``-q`` for less), and turns user errors (bad files, bad options, a URI
-that cannot be opened: :class:`eelhost.errors.UserError` and eelsim's robot-file, scenario and
-timing errors) into a one-line message and exit status 2. Anything else is a bug and keeps its
-traceback.
+``add_parser(subparsers)``; this file only wires them together and owns what every command shares:
+
+- the level of the library's logging (``-v`` for more, ``-q`` for less);
+- the form of progress (``--progress``, :mod:`eelhost.progress`);
+- every ``--help`` shows the defaults (:class:`DefaultsHelpFormatter`) and the top-level one the
+  exit statuses (:mod:`eelhost.errors`);
+- negative numbers as option values: ``--gait -0.6,2.7`` works as ``--gait=-0.6,2.7`` does
+  (:func:`join_negative_values`; argparse alone takes ``-0.6,2.7`` for an option);
+- user errors (bad files, bad options, a URI that cannot be opened:
+  :class:`eelhost.errors.UserError` and eelsim's robot-file, scenario and timing errors) become a
+  one-line message and exit status 2 (``--debug`` adds their traceback). Anything else is a bug
+  and keeps its traceback.
 """
 
 from __future__ import annotations
 
 import argparse
 import logging
+import re
 import sys
 
+from eelhost import progress
 from eelhost.commands import (
     bench,
     calibrate,
@@ -32,7 +41,7 @@ from eelhost.commands import (
     validate,
     vision_bench,
 )
-from eelhost.errors import UserError
+from eelhost.errors import EXIT_INTERRUPTED, EXIT_USER_ERROR, UserError, exit_status_table
 from eelsim.robot import RobotFileError
 from eelsim.scenario import ScenarioError
 from eelsim.timing import TimingError
@@ -57,13 +66,83 @@ COMMANDS = (
 )
 USER_ERRORS = (UserError, RobotFileError, ScenarioError, TimingError)
 LEVELS = (logging.ERROR, logging.WARNING, logging.INFO, logging.DEBUG)  # -q, default, -v, -vv
+# an option value that starts with a minus and a digit: -0.6,2.7  -.5  -1e3  "-0.5,0.2;1,0"
+NEGATIVE_VALUE = re.compile(r"^-(\d|\.\d)[\d.eE+\-,;\s]*$")
+
+
+class DefaultsHelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Shows every option's default, unless its help already says it or there is none."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        text = action.help or ""
+        default = action.default
+        if (
+            default is None
+            or default is False
+            or default is argparse.SUPPRESS
+            or "%(default)" in text
+            or "default" in text
+            or (text and str(default) in text)
+            or not action.option_strings
+        ):
+            return text
+        return f"{text} (default: %(default)s)".lstrip()
+
+
+class TopHelpFormatter(argparse.RawDescriptionHelpFormatter, DefaultsHelpFormatter):
+    """The top level's: defaults shown, the epilog (exit statuses) kept as written."""
+
+
+class CommandParser(argparse.ArgumentParser):
+    """A parser whose ``--help`` shows the defaults and whose errors take one line.
+
+    argparse prints the whole usage before an error; here the message names the option and
+    points to ``--help``, as every other user error does (one line on stderr, exit status 2).
+    """
+
+    def __init__(self, *args, **kwargs) -> None:
+        kwargs.setdefault("formatter_class", DefaultsHelpFormatter)
+        super().__init__(*args, **kwargs)
+
+    def error(self, message: str):  # type: ignore[override]
+        """Raise :class:`UsageError`: ``PROG: error: MESSAGE (PROG --help ...)``."""
+        raise UsageError(f"{self.prog}: error: {message} ({self.prog} --help lists the options)")
+
+
+class UsageError(UserError):
+    """A command line argparse refuses; the message starts with the (sub)command's name."""
+
+
+def join_negative_values(argv: list[str]) -> list[str]:
+    """Join ``--opt -0.6,2.7`` into ``--opt=-0.6,2.7`` so that argparse reads it as a value.
+
+    argparse takes any word that starts with a minus for an option unless it is a plain number,
+    so a list of numbers that starts negative (``--gait -0.6,2.7``, ``--current -0.02,0``,
+    ``--waypoints "-0.5,0.2;1,0"``) would be refused. A word that looks like such a number right
+    after a long option without ``=`` is that option's value.
+    """
+    out: list[str] = []
+    for word in argv:
+        previous = out[-1] if out else ""
+        if (
+            NEGATIVE_VALUE.match(word)
+            and previous.startswith("--")
+            and "=" not in previous
+            and previous != "--"
+        ):
+            out[-1] = f"{previous}={word}"
+        else:
+            out.append(word)
+    return out
 
 
 def build_parser() -> argparse.ArgumentParser:
     """Build the argument parser with every subcommand."""
-    parser = argparse.ArgumentParser(
+    parser = CommandParser(
         prog="eelbot",
         description="eelbot: firmware, host and digital twin of an anguilliform swimming robot.",
+        epilog="exit status:\n" + exit_status_table(),
+        formatter_class=TopHelpFormatter,
     )
     parser.add_argument(
         "-v",
@@ -75,7 +154,19 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "-q", "--quiet", action="count", default=0, help="log errors only (no warnings)"
     )
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    parser.add_argument(
+        "--progress",
+        choices=progress.MODES,
+        default="auto",
+        help="progress of long commands: bar (a terminal), plain (timestamped lines every few "
+        "seconds, for a log), none; auto: bar on a terminal, else plain",
+    )
+    parser.add_argument(
+        "--debug", action="store_true", help="show the traceback of user errors too"
+    )
+    sub = parser.add_subparsers(
+        dest="command", metavar="COMMAND", required=True, parser_class=CommandParser
+    )
     for module in COMMANDS:
         module.add_parser(sub)
     return parser
@@ -90,15 +181,28 @@ def log_level(verbose: int, quiet: int) -> int:
 def main(argv: list[str] | None = None) -> int:
     """Run the ``eelbot`` command line; return the exit status."""
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(join_negative_values(sys.argv[1:] if argv is None else argv))
+    except UsageError as err:
+        print(err, file=sys.stderr)
+        return EXIT_USER_ERROR
     # a no-op where logging is already set up (an application embedding the CLI, pytest)
     logging.basicConfig(format="%(levelname)s %(name)s: %(message)s", stream=sys.stderr)
     logging.getLogger().setLevel(log_level(args.verbose, args.quiet))
+    progress.set_mode(args.progress)
     try:
-        return int(args.run(args) or 0)
-    except USER_ERRORS as err:
-        print(f"eelbot {args.command}: error: {err}", file=sys.stderr)
-        return 2
+        with progress.console():
+            return int(args.run(args) or 0)
+    except (*USER_ERRORS, KeyboardInterrupt) as err:
+        progress.close_all()  # the message goes on a line of its own, after what was printed
+        if args.debug:
+            raise
+        sys.stdout.flush()
+        interrupted = isinstance(err, KeyboardInterrupt)
+        progress.message(f"eelbot {args.command}: " + ("interrupted" if interrupted else f"error: {err}"))
+        return EXIT_INTERRUPTED if interrupted else EXIT_USER_ERROR
+    finally:
+        progress.close_all()
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -1,11 +1,19 @@
-"""Figures of runs: the path with the robot drawn at intervals, and x(t), y(t), heading(t).
+"""Figures of runs, and the pieces every figure of eelbot draws the same way.
 
-Like the paper's figure 9. Uses matplotlib's non-interactive Agg backend (no screen needed).
+:func:`plot_run`: the path with the robot drawn at intervals, and x(t), y(t), heading(t), like the
+paper's figure 9; :func:`plot_track_errors`: straight runs as the twin's along-track and
+cross-track error against time next to the tracks. The shared pieces: waypoints with their
+acceptance circles (:func:`draw_waypoints`), a labelled current arrow (:func:`draw_current`), axis
+labels with units (:func:`label_axes`), a legend without duplicate entries
+(:func:`legend_once`). Uses matplotlib's non-interactive Agg backend (no screen needed).
 """
 
 from __future__ import annotations
 
+import math
+from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 
@@ -13,7 +21,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib import animation  # noqa: E402
-from matplotlib.patches import Circle, FancyArrow  # noqa: E402
+from matplotlib.lines import Line2D  # noqa: E402
+from matplotlib.patches import Circle  # noqa: E402
 
 from eelsim.closed_loop import RunResult  # noqa: E402
 from eelsim.dynamics import link_positions  # noqa: E402
@@ -32,24 +41,169 @@ def robot_outline(model: SwimmerModel, state: np.ndarray) -> tuple[np.ndarray, n
     return xs, ys
 
 
-def _draw_task(ax: plt.Axes, scenario: Scenario) -> None:
-    wps = np.asarray(scenario.waypoints_m)
-    for i, (wx, wy) in enumerate(wps):
+def label_axes(ax: plt.Axes, x: str = "x (m)", y: str = "y (m)") -> None:
+    """Label both axes, with their units."""
+    ax.set_xlabel(x)
+    ax.set_ylabel(y)
+
+
+def legend_once(ax: plt.Axes, **kwargs: Any) -> None:
+    """A legend with each label once (artists drawn in a loop share one), none if no labels."""
+    entries: dict[str, Any] = {}
+    for handle, label in zip(*ax.get_legend_handles_labels(), strict=True):
+        if label and not label.startswith("_"):
+            entries.setdefault(label, handle)
+    if entries:
+        ax.legend(list(entries.values()), list(entries), **kwargs)
+
+
+def draw_waypoints(
+    ax: plt.Axes,
+    waypoints_m: Sequence[Sequence[float]],
+    radius_m: float,
+    colour: str = "tab:green",
+    numbered: bool = True,
+) -> None:
+    """Waypoints as crosses with their acceptance circles (labelled once for the legend)."""
+    for i, (wx, wy) in enumerate(np.asarray(waypoints_m, dtype=float)):
         ax.add_patch(
-            Circle((wx, wy), scenario.acceptance_radius_m, fill=False, ls="--", color="tab:green")
+            Circle(
+                (wx, wy),
+                radius_m,
+                fill=False,
+                ls="--",
+                color=colour,
+                label=f"acceptance radius {radius_m:g} m" if i == 0 else None,
+            )
         )
-        ax.plot(wx, wy, "x", color="tab:green")
-        ax.annotate(f"W{i + 1}", (wx, wy), textcoords="offset points", xytext=(4, 4), fontsize=8)
-    if scenario.current_speed_m_s > 0:
-        vx, vy = scenario.current_m_s
-        scale = 0.25 / scenario.current_speed_m_s
-        ax.add_patch(FancyArrow(-0.2, -0.35, vx * scale, vy * scale, width=0.01, color="tab:blue"))
-        ax.annotate(
-            f"current {scenario.current_speed_m_s:.2f} m/s",
-            (-0.2, -0.42),
+        ax.plot(wx, wy, "x", color=colour, label="waypoints" if i == 0 else None)
+        if numbered:
+            ax.annotate(
+                f"W{i + 1}", (wx, wy), textcoords="offset points", xytext=(4, 4), fontsize=8
+            )
+
+
+def draw_current(
+    ax: plt.Axes,
+    speed_m_s: float,
+    direction_deg: float,
+    colour: str = "tab:blue",
+    at: tuple[float, float] = (0.1, 0.9),
+) -> None:
+    """An arrow for the current, in a corner of the axes, labelled with speed and direction.
+
+    The arrow is drawn in points from a point given in axes fractions, so its direction is
+    true whatever the axes' scale; nothing is drawn without a current.
+    """
+    if speed_m_s <= 0:
+        return
+    length_pt = 28.0
+    a = math.radians(direction_deg)
+    ax.annotate(
+        "",
+        xy=at,
+        xycoords="axes fraction",
+        xytext=(-length_pt * math.cos(a), -length_pt * math.sin(a)),
+        textcoords="offset points",
+        arrowprops={"arrowstyle": "-|>", "color": colour, "lw": 1.8},
+    )
+    ax.annotate(
+        f"current {speed_m_s:g} m/s\ntowards {direction_deg:g} deg",
+        xy=at,
+        xycoords="axes fraction",
+        xytext=(length_pt * 0.6 + 6, 0),
+        textcoords="offset points",
+        va="center",
+        fontsize=7,
+        color=colour,
+    )
+
+
+def _draw_task(ax: plt.Axes, scenario: Scenario) -> None:
+    draw_waypoints(ax, scenario.waypoints_m, scenario.acceptance_radius_m)
+    draw_current(ax, scenario.current_speed_m_s, scenario.current_direction_deg)
+
+
+def track_frame(
+    start_m: Sequence[float], waypoint_m: Sequence[float]
+) -> tuple[np.ndarray, np.ndarray]:
+    """Unit vectors along the straight track from start to waypoint, and across it (to its left)."""
+    along = np.asarray(waypoint_m, dtype=float) - np.asarray(start_m, dtype=float)
+    along = along / np.linalg.norm(along)
+    return along, np.array([-along[1], along[0]])
+
+
+def plot_track_errors(runs: Sequence[Any], path: str | Path, title: str = "") -> Path:
+    """Straight runs: the tracks, and the twin's along- and cross-track error against time.
+
+    On a tank-sized scale every straight track looks the same; the error of the simulation
+    against the recording, split along the track (ahead > 0) and across it (left > 0), shows what
+    the fit gets wrong and when.
+
+    Parameters
+    ----------
+    runs : sequence of ValidationRun
+        Each with ``experiment`` (name, positions, scenario), ``times_s``, ``exp_positions_m``
+        and ``sim_positions_m`` (:class:`eelhost.estimation.validate.ValidationRun`).
+    path : str or Path
+        Output PNG.
+    title : str
+        Figure title.
+
+    Returns
+    -------
+    Path
+    """
+    fig = plt.figure(figsize=(12, 6.5), constrained_layout=True)
+    grid = fig.add_gridspec(2, 2, width_ratios=[1.1, 1])
+    ax_tracks = fig.add_subplot(grid[:, 0])
+    ax_along = fig.add_subplot(grid[0, 1])
+    ax_cross = fig.add_subplot(grid[1, 1], sharex=ax_along)
+    colours = plt.cm.tab20(np.linspace(0, 1, max(len(runs), 1), endpoint=False))
+    for run, colour in zip(runs, colours, strict=False):
+        e = run.experiment
+        start, goal = e.scenario.start_position_m, e.scenario.waypoints_m[-1]
+        along, across = track_frame(start, goal)
+        ax_tracks.plot(*e.position_m.T, color=colour, lw=1)
+        ax_tracks.plot(*np.asarray(run.sim_positions_m).T, "--", color=colour, lw=1)
+        error = np.asarray(run.sim_positions_m) - np.asarray(run.exp_positions_m)
+        ax_along.plot(run.times_s, error @ along, color=colour, lw=1, label=e.name)
+        ax_cross.plot(run.times_s, error @ across, color=colour, lw=1)
+    if runs:
+        first = runs[0].experiment.scenario
+        ax_tracks.plot(*first.start_position_m, "o", color="k", ms=4, label="start")
+        draw_waypoints(ax_tracks, first.waypoints_m, first.acceptance_radius_m, numbered=False)
+    ax_tracks.add_artist(
+        ax_tracks.legend(
+            [Line2D([], [], color="k"), Line2D([], [], color="k", ls="--")],
+            ["experiment", "simulation"],
+            loc="upper left",
             fontsize=8,
-            color="tab:blue",
         )
+    )
+    legend_once(ax_tracks, loc="lower right", fontsize=8)
+    ax_tracks.set_aspect("equal", adjustable="datalim")
+    label_axes(ax_tracks)
+    ax_tracks.set_title("tracks", fontsize=9)
+    for ax, what in ((ax_along, "along-track error (m)"), (ax_cross, "cross-track error (m)")):
+        ax.axhline(0.0, color="0.5", lw=0.8)
+        ax.set_ylabel(what)
+        ax.grid(alpha=0.3)
+    ax_along.set_title("simulation - experiment (ahead > 0, left of the track > 0)", fontsize=9)
+    ax_cross.set_xlabel("t (s)")
+    ax_along.legend(fontsize=6, ncol=2, loc="best")
+    if title:
+        fig.suptitle(title)
+    return save_figure(fig, path)
+
+
+def save_figure(fig: plt.Figure, path: str | Path, dpi: int = 110) -> Path:
+    """Save a figure as a PNG (creating its folder) and close it."""
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=dpi)
+    plt.close(fig)
+    return out
 
 
 def plot_run(
@@ -91,8 +245,10 @@ def plot_run(
     )
     for k in range(0, len(result.t_s), stride):
         ox, oy = robot_outline(model, result.states[k])
-        ax.plot(ox, oy, "-", color="tab:orange", lw=2, alpha=0.7)
-        ax.plot(ox[-1], oy[-1], "o", color="tab:red", ms=3)
+        first = k == 0
+        ax.plot(ox, oy, "-", color="tab:orange", lw=2, alpha=0.7,
+                label=f"robot every {outline_every_s:g} s" if first else None)
+        ax.plot(ox[-1], oy[-1], "o", color="tab:red", ms=3, label="head" if first else None)
     if result.camera_pose.size:
         ax.plot(
             result.camera_pose[:, 0],
@@ -104,15 +260,14 @@ def plot_run(
         )
     _draw_task(ax, scenario)
     ax.set_aspect("equal")
-    ax.set_xlabel("x (m)")
-    ax.set_ylabel("y (m)")
+    label_axes(ax)
     status = (
         "reached the goal"
         if result.failure.name == "NONE"
         else f"{result.failure.name}: {result.reason}"
     )
     ax.set_title(f"{scenario.name}: {status}", fontsize=9)
-    ax.legend(loc="upper left", fontsize=8)
+    legend_once(ax, loc="best", fontsize=8)
     heading = np.degrees(result.states[:, :n].mean(axis=1))
     for row, (vals, label) in enumerate([(x, "x (m)"), (y, "y (m)"), (heading, "heading (deg)")]):
         a = fig.add_subplot(grid[row, 1])
@@ -121,11 +276,7 @@ def plot_run(
         a.grid(alpha=0.3)
         if row == 2:
             a.set_xlabel("t (s)")
-    out = Path(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
-    return out
+    return save_figure(fig, path)
 
 
 def animate_run(
@@ -170,6 +321,7 @@ def animate_run(
         max(y.max(), np.max(np.asarray(scenario.waypoints_m)[:, 1])) + pad,
     )
     ax.set_aspect("equal")
+    label_axes(ax)
     _draw_task(ax, scenario)
     (trail,) = ax.plot([], [], color="k", lw=1)
     (body,) = ax.plot([], [], "-o", color="tab:orange", lw=3, ms=3)

@@ -1,4 +1,4 @@
-"""The command line: user errors give one line and exit 2, bugs keep their traceback; -v/-q."""
+"""The command line: bugs keep their traceback; -v/-q; help shows defaults; negative values."""
 
 from __future__ import annotations
 
@@ -20,53 +20,7 @@ def keep_the_root_loggers_level():
     logging.getLogger().setLevel(level)
 
 
-RUN = ["run", "--waypoints", "1,0", "--gait", "0.87,3.9", "--duration", "1"]
-
-
-def one_line_error(capsys, *named: str) -> str:
-    err = capsys.readouterr().err.strip()
-    assert err.startswith("eelbot ") and "\n" not in err, err
-    for part in named:
-        assert part in err, err
-    return err
-
-
-@pytest.mark.parametrize(
-    ("argv", "named"),
-    [
-        (["run", "--robot", "tcp://robot:5760", *RUN[1:], "--out", "x"], ("unknown scheme",)),
-        (["run", "--robot", "replay:///nowhere/run.rx.bin", *RUN[1:], "--out", "x"],
-         ("/nowhere/run.rx.bin", "no such replay log")),
-        (["run", "--robot", "serial:///dev/eelbot-no-such-port", *RUN[1:], "--out", "x"],
-         ("/dev/eelbot-no-such-port", "cannot open")),
-        (["run", "--robot", "sim://", "--waypoints", "1,0", "--gait", "2.0,3.9", "--out", "x"],
-         ("--gait", "amplitude_rad")),
-        (["run", "--robot", "sim://", *RUN[1:], "--camera", "take1.mp4", "--out", "x"],
-         ("--calibration",)),
-        (["run", "--robot", "sim://", "--waypoints", "1,0;2", "--gait", "0.87,3.9", "--out", "x"],
-         ("--waypoints", "expected 2 numbers")),
-        (["run", "--robot", "sim://", *RUN[1:], "--radius", "-1", "--out", "x"],
-         ("--radius", "acceptance_radius_m")),
-        (["simulate", "straight", "--coefficients=-1,0.7,0.6,0.01", "--out", "x"],
-         ("--coefficients", "C_f")),
-        (["simulate", "straight", "--gait", "0.8,-4", "--out", "x"], ("--gait", "omega_rad_s")),
-        (["simulate", "straight", "--waypoints", "1,0;2", "--out", "x"], ("--waypoints",)),
-        (["simulate", "straight", "--fps", "0", "--out", "x"], ("--fps", "fps must be positive")),
-        (["validate", "nowhere/coefficients.json", "nowhere"], ("nowhere/coefficients.json",)),
-        (["plan", "nowhere_world.toml"], ("nowhere_world.toml",)),
-        (["dataset", "x", "--joints-from", "nowhere_robot.toml"],
-         ("--joints-from", "nowhere_robot.toml")),
-        (["dataset", "x", "--truth", "0.01,0.8"], ("--truth", "expected 4 numbers")),
-        (["dataset", "x", "--fluid-law", "reynolds", "--truth", "1,1,5,0.6"],
-         ("--truth", "C_f_lam", "expected 5 numbers")),
-        (["estimate-bench", "--tanks", "bundled,nosuch", "--write", "-"],
-         ("unknown tanks", "nosuch")),
-    ],
-)
-def test_user_error_gives_one_line_naming_what_is_wrong_and_exit_2(argv, named, tmp_path, capsys):
-    argv = [str(tmp_path / a) if a == "x" else a for a in argv]
-    assert main(argv) == 2
-    one_line_error(capsys, *named)
+# The table of bad inputs and their messages is the probe suite (test_probe_suite.py).
 
 
 def test_a_bug_is_not_taken_for_a_user_error(monkeypatch):
@@ -97,3 +51,54 @@ def test_python_m_eelhost_runs_the_command_line():
         [sys.executable, "-m", "eelhost", "--help"], capture_output=True, text=True, check=False
     )
     assert proc.returncode == 0 and "simulate" in proc.stdout and "-v" in proc.stdout
+
+
+def test_every_option_of_every_command_has_help_and_shows_its_default():
+    parser = cli.build_parser()
+    commands = parser._subparsers._group_actions[0].choices  # the registered subcommands
+    for name, sub in commands.items():
+        for action in sub._actions:
+            if not action.option_strings or action.dest == "help":
+                continue
+            assert action.help, f"eelbot {name} {action.option_strings[0]} has no help"
+            if action.default not in (None, False):
+                shown = sub.formatter_class(prog="x")._get_help_string(action) % vars(action)
+                assert str(action.default) in shown, f"eelbot {name} {action.option_strings[0]}"
+
+
+def test_top_level_help_lists_the_exit_statuses(capsys):
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    out = capsys.readouterr().out
+    assert "exit status:" in out and "ILL_CONDITIONED" in out and "--progress" in out
+
+
+@pytest.mark.parametrize(
+    ("argv", "joined"),
+    [
+        (["--gait", "-0.6,2.7"], ["--gait=-0.6,2.7"]),
+        (["--current", "-0.02,0"], ["--current=-0.02,0"]),
+        (["--waypoints", "-0.5,0.2;1,0"], ["--waypoints=-0.5,0.2;1,0"]),
+        (["--k-theta", "-.5", "--dt", "0.01"], ["--k-theta=-.5", "--dt", "0.01"]),
+        (["--gait=-0.6,2.7"], ["--gait=-0.6,2.7"]),
+        (["-v", "simulate"], ["-v", "simulate"]),
+        (["--full", "-q"], ["--full", "-q"]),
+    ],
+)
+def test_negative_numbers_after_an_option_are_its_value(argv, joined):
+    assert cli.join_negative_values(argv) == joined
+
+
+def test_a_negative_waypoint_reaches_the_scenario(tmp_path):
+    stem = tmp_path / "r"
+    main(["simulate", "straight", "--waypoints", "-0.5,0.2", "--duration", "1", "--out", str(stem)])
+    assert '"waypoints_m": [\n      [\n        -0.5,' in stem.with_suffix(".json").read_text()
+
+
+def test_ctrl_c_ends_with_a_line_and_status_130(monkeypatch, capsys):
+    def interrupted(args):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(speeds, "run", interrupted)
+    assert main(["speeds"]) == 130
+    assert capsys.readouterr().err.strip() == "eelbot speeds: interrupted"

@@ -5,6 +5,7 @@ import json
 import numpy as np
 import pytest
 
+from eelhost import progress
 from eelhost.cli import main
 from eelhost.data.experiments import load_dataset, manifest_text, write_experiment, write_manifest
 from eelhost.data.virtual_tank import TABLE3, TankSettings, record_experiment
@@ -162,12 +163,15 @@ def test_evaluation_spread_over_a_local_dask_cluster_gives_the_same_fitness(tiny
 
 
 def test_estimate_and_validate_commands_write_coefficients_and_table(
-    tiny_dataset, tmp_path, capsys
+    tiny_dataset, tmp_path, capsys, monkeypatch
 ):
     out = tmp_path / "fit"
+    monkeypatch.setattr(progress, "PLAIN_INTERVAL_S", 0.0)  # a line per generation
     assert (
         main(
             [
+                "--progress",
+                "plain",
                 "estimate",
                 str(tiny_dataset),
                 "--motion",
@@ -182,6 +186,10 @@ def test_estimate_and_validate_commands_write_coefficients_and_table(
     )
     coeffs = json.loads((out / "coefficients.json").read_text())
     assert set(coeffs["fits"]) == {"straight"} and coeffs["fits"]["straight"]["fitness"] > 0
+    printed, progress_log = capsys.readouterr()
+    sims = coeffs["fits"]["straight"]["simulations"]  # one count: printed, logged and recorded
+    assert f"{coeffs['fits']['straight']['evaluations']} candidates, {sims} simulations" in printed
+    assert f"sims {sims}, " in progress_log.splitlines()[-1]
     assert "straight" in read_coefficients(str(out / "coefficients.json"), load_robot())
     val = tmp_path / "val"
     assert (

@@ -57,6 +57,35 @@ def test_resume_after_a_kill_gives_the_same_result_as_an_uninterrupted_run(tmp_p
     assert [h[:2] for h in resumed.history] == [h[:2] for h in straight.history]
 
 
+@pytest.mark.parametrize("method", ["ga", "cmaes"])
+def test_simulation_count_goes_on_across_a_resume_and_matches_the_candidates(tmp_path, method):
+    class Counting:  # a new one per "process", as the evaluator of a resumed fit is
+        def __init__(self):
+            self.runs = 0
+
+        def __call__(self, c):
+            self.runs += len(np.atleast_2d(c))
+            return bowl(c)
+
+    def run(objective, checkpoint=None, resume=False, progress=None):
+        common = dict(checkpoint=checkpoint, resume=resume, progress=progress,
+                      simulations=lambda: objective.runs)
+        if method == "ga":
+            return fit_ga(objective, SPACE, seed=5, pop_size=12, generations=6, **common)
+        return fit_cmaes(objective, SPACE, seed=5, max_evaluations=96, popsize=8, **common)
+
+    straight = run(Counting())
+    settings = {"method": method, "seed": 5}
+    with pytest.raises(Killed):
+        run(Counting(), checkpoint=Checkpoint(tmp_path / "ck.pkl", settings), progress=kill_after(2))
+    seen = []
+    resumed = run(Counting(), Checkpoint(tmp_path / "ck.pkl", settings), True,
+                  lambda gen, best, sims: seen.append(sims))
+    assert resumed.history == straight.history  # counts included
+    assert resumed.simulations == straight.simulations == straight.evaluations  # one run each
+    assert seen[-1] == resumed.simulations and resumed.to_json()["simulations"] == seen[-1]
+
+
 def test_checkpoint_from_other_settings_is_refused(tmp_path):
     Checkpoint(tmp_path / "ck.pkl", {"seed": 1}).save({"x": 1})
     with pytest.raises(ValueError, match="other settings"):

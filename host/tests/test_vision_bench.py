@@ -12,6 +12,8 @@ def test_vision_bench_prints_and_writes_figures_layout_and_calibration_howto(tmp
         assert part in text
 
 
-def test_vision_bench_refuses_zero_frames(capsys):
-    assert main(["vision-bench", "--frames", "0", "--write", "-"]) == 2
-    assert "--frames" in capsys.readouterr().err
+def test_vision_bench_without_write_prints_and_leaves_the_folder_alone(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    assert main(["vision-bench", "--frames", "2"]) == 0
+    assert "centre-of-mass error, rms" in capsys.readouterr().out
+    assert list(tmp_path.iterdir()) == []  # no docs/vision.md in the user's folder

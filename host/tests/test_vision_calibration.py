@@ -78,6 +78,9 @@ def _write(tmp_path, data):
         (lambda d: d.update(method="guess"), "method"),
         (lambda d: d.update(colour="blue"), "colour"),
         (lambda d: d.update(rms_reprojection_px=-1), "rms_reprojection_px"),
+        (lambda d: d.update(rms_reprojection_px=True), "rms_reprojection_px"),
+        (lambda d: d["points_px"][0].__setitem__(0, "1.5"), "points_px"),
+        (lambda d: d.update(image_size_px=[True, 720]), "image_size_px"),
     ],
 )
 def test_malformed_calibration_file_is_refused_naming_file_and_key(tmp_path, change, key):

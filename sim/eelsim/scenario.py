@@ -22,8 +22,8 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from eelsim.control import Gait
 from eelsim.tomlfile import read_toml, validation_message
 
-Finite = Annotated[float, Field(allow_inf_nan=False)]
-Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+Finite = Annotated[float, Field(allow_inf_nan=False, strict=True)]  # "1" or true refused
+Positive = Annotated[float, Field(gt=0, allow_inf_nan=False, strict=True)]
 
 GRID_AMPLITUDES_RAD = (0.61, 0.69, 0.78, 0.87)
 GRID_OMEGAS_RAD_S = (2.7, 3.1, 3.5, 3.9)
@@ -76,10 +76,10 @@ class Scenario(BaseModel):
     k_theta: Finite
     waypoints_m: list[tuple[Finite, Finite]] = Field(min_length=1)
     acceptance_radius_m: Positive = 0.15
-    current_speed_m_s: Annotated[float, Field(ge=0, allow_inf_nan=False)] = 0.0
+    current_speed_m_s: Annotated[float, Field(ge=0, allow_inf_nan=False, strict=True)] = 0.0
     current_direction_deg: Finite = 0.0
     duration_s: Positive = 60.0
-    min_duration_s: Annotated[float, Field(ge=0, allow_inf_nan=False)] = 0.0
+    min_duration_s: Annotated[float, Field(ge=0, allow_inf_nan=False, strict=True)] = 0.0
     start_position_m: tuple[Finite, Finite] = (0.0, 0.0)
     start_heading_deg: Finite = 0.0
 

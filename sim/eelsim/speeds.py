@@ -8,6 +8,8 @@ second half of the run divided by its duration, which averages over whole gait c
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from eelsim.closed_loop import LoopOptions, simulate_closed_loop
@@ -61,17 +63,23 @@ def steady_speed(
 
 
 def grid_speeds(
-    robot: Robot, duration_s: float = 20.0, coefficients: FluidCoefficients | None = None
+    robot: Robot,
+    duration_s: float = 20.0,
+    coefficients: FluidCoefficients | None = None,
+    progress: Callable[[int, int], None] | None = None,
 ) -> np.ndarray:
     """Steady speeds over the 4 x 4 grid, shape (4 amplitudes, 4 frequencies), m/s.
 
-    Backward or failed swimming is reported as NaN.
+    Backward or failed swimming is reported as NaN. ``progress(done, total)`` is called after
+    each gait.
     """
     out = np.empty((len(GRID_AMPLITUDES_RAD), len(GRID_OMEGAS_RAD_S)))
     for i, a in enumerate(GRID_AMPLITUDES_RAD):
         for j, w in enumerate(GRID_OMEGAS_RAD_S):
             v, forward = steady_speed(robot, a, w, duration_s, coefficients)
             out[i, j] = v if forward else float("nan")
+            if progress is not None:
+                progress(i * len(GRID_OMEGAS_RAD_S) + j + 1, out.size)
     return out
 
 

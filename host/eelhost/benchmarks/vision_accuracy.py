@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 import platform
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import cv2
@@ -77,6 +78,7 @@ def run_benchmark(
     n_frames: int = 300,
     seed: int = 0,
     options: RenderOptions | None = None,
+    progress: Callable[[int, int], None] | None = None,
 ) -> BenchResult:
     """Render ``n_frames`` frames of a run of ``scenario_name``, localise them, compare.
 
@@ -92,6 +94,8 @@ def run_benchmark(
         Seed of the camera noise.
     options : RenderOptions, optional
         Camera faults (default :class:`RenderOptions`).
+    progress : callable, optional
+        ``progress(done, total)`` after each frame.
 
     Returns
     -------
@@ -109,7 +113,9 @@ def run_benchmark(
     pos_mm: list[float] = []
     t_render = t_loc = 0.0
     found = rebuilt = markers = 0
-    for k in picks:
+    for done, k in enumerate(picks, start=1):
+        if progress is not None:
+            progress(done - 1, len(picks))
         t0 = time.perf_counter()
         frame, truth = camera.render(run.states[k], float(run.t_s[k]))
         t1 = time.perf_counter()

@@ -1,17 +1,22 @@
 """``eelbot bench``: how fast the twin runs (see :mod:`eelhost.benchmarks.twin_speed`).
 
-Prints the markdown report as it is measured and writes it to ``docs/benchmarks.md``
-(``--write`` to change).
+Prints the markdown report as it is measured; ``--write`` also writes it to ``docs/benchmarks.md``
+(or the file given).
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
 from eelhost.benchmarks.twin_speed import TwinBenchSettings, twin_speed_report
-from eelhost.commands.common import add_robot_options, robot_and_coefficients
+from eelhost.commands.common import (
+    COUNT,
+    add_robot_options,
+    add_write_option,
+    robot_and_coefficients,
+    write_report,
+)
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -20,14 +25,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "bench",
         help="speed of the twin: single run, one GA generation, MuJoCo comparison",
         description="Benchmark the batched closed-loop kernel (and MuJoCo on the same robot) and "
-        "write docs/benchmarks.md. Run it on a quiet machine.",
+        "print the report (--write: also docs/benchmarks.md). Run it on a quiet machine.",
     )
     add_robot_options(p)
     p.add_argument(
-        "--runs", type=int, default=600, help="runs in the batch (600: one GA generation)"
+        "--runs", type=COUNT, default=600, help="runs in the batch (600: one GA generation)"
     )
-    p.add_argument("--steps", type=int, default=3000, help="RK4 steps per run (3000)")
-    p.add_argument("--threads", type=int, default=None, help="threads for 'all cores' (nproc)")
+    p.add_argument("--steps", type=COUNT, default=3000, help="RK4 steps per run")
+    p.add_argument("--threads", type=COUNT, default=None, help="threads for 'all cores' (nproc)")
     p.add_argument("--no-mujoco", action="store_true", help="skip the MuJoCo comparison")
     p.add_argument(
         "--no-cold-compile",
@@ -38,14 +43,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--no-ga", action="store_true", help="skip the end-to-end GA (it takes about 40 s)"
     )
     p.add_argument("--note", default="", help="a remark for the report (e.g. other load)")
-    p.add_argument(
-        "--write",
-        default="docs/benchmarks.md",
-        metavar="FILE",
-        help="markdown file to write ('' to skip)",
-    )
+    add_write_option(p, "docs/benchmarks.md")
     p.set_defaults(run=run)
-
 
 
 def run(args: argparse.Namespace) -> int:
@@ -62,8 +61,6 @@ def run(args: argparse.Namespace) -> int:
         command=" ".join(["eelbot bench", *sys.argv[2:]]),
     )
     lines = twin_speed_report(robot, coeffs, settings, emit=lambda line: print(line, flush=True))
-    if args.write:
-        Path(args.write).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.write).write_text("\n".join(lines) + "\n")
+    if write_report(args.write, "\n".join(lines) + "\n"):
         print(f"wrote {args.write}")
     return 0

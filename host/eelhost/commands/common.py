@@ -1,14 +1,23 @@
-"""Options shared by several subcommands (robot, coefficients, loop timing)."""
+"""Options shared by several subcommands (robot, coefficients, loop timing) and their checks.
+
+The argparse types here refuse a value when it is read, so argparse names the option in its
+message: :func:`number` (finite, within bounds), :func:`floats` (a list of finite numbers),
+:func:`gait_values` (within the robot's protocol ranges), :func:`current_values` and
+:func:`waypoints`. :func:`rejected_as` turns the twin's own model checks into a message naming
+the option a value came from.
+"""
 
 from __future__ import annotations
 
 import argparse
-from collections.abc import Iterator
+import math
+from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 
 from pydantic import ValidationError
 
 from eelhost.errors import UserError
+from eelhost.wire import protocol
 from eelsim.camera import CameraModel
 from eelsim.closed_loop import LoopOptions
 from eelsim.fluid import FluidCoefficients
@@ -20,9 +29,26 @@ class OptionError(UserError, ValueError):
     """A command-line option that cannot be used; the message names the option."""
 
 
+# Which option a field of a scenario (or of a run's task) comes from, for the messages.
+SCENARIO_OPTIONS = {
+    "amplitude_rad": "--gait",
+    "omega_rad_s": "--gait",
+    "beta_rad": "--gait",
+    "k_theta": "--k-theta",
+    "waypoints_m": "--waypoints",
+    "acceptance_radius_m": "--radius",
+    "current_speed_m_s": "--current",
+    "current_direction_deg": "--current",
+    "duration_s": "--duration",
+}
+# The fastest current the twin is asked to swim in: ten times the robot's fastest steady speed
+# (about 0.1 m/s, docs/model.md section 7); faster water only makes the integration diverge.
+MAX_CURRENT_M_S = 1.0
+
+
 @contextmanager
-def rejected_as(options: str) -> Iterator[None]:
-    """Report values the twin's models reject as an :class:`OptionError` naming the options.
+def rejected_as(options: str, fields: Mapping[str, str] | None = None) -> Iterator[None]:
+    """Report values the twin's models reject as an :class:`OptionError` naming the option.
 
     Wraps the building of a model from command-line values: a pydantic ``ValidationError`` (the
     model's own checks) or an ``argparse.ArgumentTypeError`` (a list of numbers that does not
@@ -32,32 +58,140 @@ def rejected_as(options: str) -> Iterator[None]:
     ----------
     options : str
         The options the values came from, as the message names them.
+    fields : mapping of str to str, optional
+        The option each field of the model comes from (e.g. :data:`SCENARIO_OPTIONS`); a field
+        found here is reported under its own option instead of ``options``.
     """
     try:
         yield
     except ValidationError as err:
-        fields = "; ".join(
-            f"{'.'.join(str(p) for p in e['loc'])}: {e['msg']} (got {e.get('input')!r})"
-            for e in err.errors()
-        )
-        raise OptionError(f"{options}: {fields}") from None
+        parts = []
+        for e in err.errors():
+            loc = [str(p) for p in e["loc"]]
+            option = (fields or {}).get(loc[0] if loc else "", options)
+            msg = e["msg"].replace("Input should be", "should be")
+            parts.append(f"{option}: {'.'.join(loc)} {msg} (got {e.get('input')!r})")
+        raise OptionError("; ".join(parts)) from None
     except argparse.ArgumentTypeError as err:
         raise OptionError(str(err)) from None
 
 
-def floats(text: str, count: int | None = None, what: str = "value") -> list[float]:
-    """Parse "a,b,c" into floats, checking the count; errors name ``what``."""
+def number(
+    kind: type = float,
+    *,
+    minimum: float | None = None,
+    above: float | None = None,
+    maximum: float | None = None,
+) -> Callable[[str], float]:
+    """An argparse ``type``: a finite number, at least ``minimum`` / above ``above`` / at most.
+
+    argparse reports a refusal as ``argument --OPTION: <why>``, so the option is named.
+
+    Parameters
+    ----------
+    kind : type
+        ``float`` or ``int``.
+    minimum, above, maximum : float, optional
+        Bounds: ``value >= minimum``, ``value > above``, ``value <= maximum``.
+    """
+
+    def parse(text: str) -> float:
+        try:
+            value = kind(text)
+        except ValueError:
+            what = "an integer" if kind is int else "a number"
+            raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
+        if not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f"must be a finite number, got {text!r}")
+        if minimum is not None and value < minimum:
+            raise argparse.ArgumentTypeError(f"must be at least {minimum:g}, got {text}")
+        if above is not None and value <= above:
+            raise argparse.ArgumentTypeError(f"must be greater than {above:g}, got {text}")
+        if maximum is not None and value > maximum:
+            raise argparse.ArgumentTypeError(f"must be at most {maximum:g}, got {text}")
+        return value
+
+    parse.__name__ = kind.__name__
+    return parse
+
+
+POSITIVE = number(above=0.0)
+NON_NEGATIVE = number(minimum=0.0)
+FINITE = number()
+COUNT = number(int, minimum=1)
+SEED = number(int, minimum=0)
+PORT = number(int, minimum=0, maximum=65535)
+
+
+def floats(text: str, count: int | None = None, what: str | None = None) -> list[float]:
+    """Parse "a,b,c" into finite floats, checking the count (an argparse ``type``).
+
+    ``what`` (an option's name) starts the message, for values parsed after argparse, whose own
+    messages name the option already.
+    """
+    where = f"{what}: " if what else ""
     try:
         values = [float(v) for v in text.split(",") if v.strip()]
     except ValueError:
         raise argparse.ArgumentTypeError(
-            f"{what}: expected comma-separated numbers, got {text!r}"
+            f"{where}expected comma-separated numbers, got {text!r}"
         ) from None
     if count is not None and len(values) != count:
         raise argparse.ArgumentTypeError(
-            f"{what}: expected {count} numbers, got {len(values)} in {text!r}"
+            f"{where}expected {count} numbers, got {len(values)} in {text!r}"
         )
+    if not all(math.isfinite(v) for v in values):
+        raise argparse.ArgumentTypeError(f"{where}numbers must be finite, got {text!r}")
     return values
+
+
+def gait_values(text: str) -> list[float]:
+    """An argparse ``type`` for ``--gait A,omega[,beta]``: within the robot's protocol ranges.
+
+    The ranges are those the firmware accepts (``eelhost.wire.protocol.SetGait``, docs/firmware.md),
+    so the twin is never asked for a gait the robot would refuse.
+    """
+    values = floats(text)
+    if len(values) not in (2, 3):
+        raise argparse.ArgumentTypeError(f"give A,omega or A,omega,beta, got {text!r}")
+    ranges = {name: (lo, hi) for name, _, lo, hi in protocol.SetGait.LAYOUT}
+    for name, value in zip(("amplitude_rad", "omega_rad_s", "beta_rad"), values, strict=False):
+        lo, hi = ranges[name]
+        if name != "beta_rad" and value <= 0.0:
+            raise argparse.ArgumentTypeError(f"{name} must be positive, got {value:g}")
+        if lo is not None and hi is not None and not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(
+                f"{name} {value:g} outside the robot's range [{lo:g}, {hi:g}]"
+            )
+    return values
+
+
+def current_values(text: str) -> list[float]:
+    """An argparse ``type`` for ``--current speed,direction_deg`` (speed 0 to 1 m/s)."""
+    speed, direction = floats(text, 2)
+    if speed < 0.0:
+        raise argparse.ArgumentTypeError(
+            f"speed must be >= 0 (a direction turns it: {-speed:g},"
+            f"{(direction + 180.0) % 360.0:g}), got {text!r}"
+        )
+    if speed > MAX_CURRENT_M_S:
+        raise argparse.ArgumentTypeError(
+            f"speed {speed:g} m/s is beyond any tank current the twin is made for "
+            f"(at most {MAX_CURRENT_M_S:g} m/s, ten times the robot's fastest speed)"
+        )
+    return [speed, direction]
+
+
+def waypoints(text: str) -> list[tuple[float, float]]:
+    """An argparse ``type`` for ``--waypoints "x,y;x,y"`` (metres): at least one, finite."""
+    out = []
+    for part in text.split(";"):
+        if part.strip():
+            x, y = floats(part, 2)
+            out.append((x, y))
+    if not out:
+        raise argparse.ArgumentTypeError(f"give at least one x,y, got {text!r}")
+    return out
 
 
 def add_robot_options(p: argparse.ArgumentParser) -> None:
@@ -68,7 +202,7 @@ def add_robot_options(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--coefficients",
         metavar="Cf,Cd,Ca,Cm",
-        type=lambda s: floats(s, 4, "--coefficients"),
+        type=lambda s: floats(s, 4),
         help="hydrodynamic coefficients (default: the robot file's)",
     )
 
@@ -85,15 +219,15 @@ def robot_and_coefficients(args: argparse.Namespace) -> tuple[Robot, FluidCoeffi
 def add_loop_options(p: argparse.ArgumentParser) -> None:
     """Timing, camera and servo options of the closed loop."""
     g = p.add_argument_group("closed-loop timing")
-    g.add_argument("--dt", type=float, default=0.01, help="physics step, s (default 0.01)")
+    g.add_argument("--dt", type=POSITIVE, default=0.01, help="physics step, s")
+    g.add_argument("--control-period", type=POSITIVE, default=0.3, help="offset update period, s")
     g.add_argument(
-        "--control-period", type=float, default=0.3, help="offset update period, s (0.3)"
+        "--delay", type=NON_NEGATIVE, default=0.0, help="extra delay before an offset acts, s"
     )
-    g.add_argument("--delay", type=float, default=0.0, help="extra delay before an offset acts, s")
-    g.add_argument("--jitter", type=float, default=0.0, help="control period jitter, +- s")
-    g.add_argument("--fps", type=float, default=30.0, help="camera frame rate (30)")
-    g.add_argument("--pixel", type=float, default=0.0038, help="camera pixel size, m (0.0038)")
-    g.add_argument("--median", type=int, default=5, help="median filter length, frames (5)")
+    g.add_argument("--jitter", type=NON_NEGATIVE, default=0.0, help="control period jitter, +- s")
+    g.add_argument("--fps", type=FINITE, default=30.0, help="camera frame rate, 1/s")
+    g.add_argument("--pixel", type=FINITE, default=0.0038, help="camera pixel size, m")
+    g.add_argument("--median", type=number(int), default=5, help="median filter length, frames")
     g.add_argument(
         "--servo-limits", action="store_true", help="limit joints by the servos' torque-speed line"
     )
@@ -124,16 +258,14 @@ def add_fit_options(p: argparse.ArgumentParser) -> None:
         default="cmaes",
         help="cmaes (+ least-squares polish; default), ga (the paper's), lsq (polish only)",
     )
-    g.add_argument("--seed", type=int, default=0)
-    g.add_argument(
-        "--budget", type=int, default=1500, help="CMA-ES candidates per fit at most (1500)"
-    )
-    g.add_argument("--pop-size", type=int, default=150, help="GA population (150)")
-    g.add_argument("--generations", type=int, default=130, help="GA generations (130)")
-    g.add_argument("--backend", choices=["auto", "batch", "reference"], default="auto")
+    g.add_argument("--seed", type=SEED, default=0, help="seed of the optimiser")
+    g.add_argument("--budget", type=COUNT, default=1500, help="CMA-ES candidates per fit at most")
+    g.add_argument("--pop-size", type=number(int, minimum=2), default=150, help="GA population")
+    g.add_argument("--generations", type=COUNT, default=130, help="GA generations")
+    add_backend_option(g)
     g.add_argument(
         "--align",
-        type=float,
+        type=NON_NEGATIVE,
         default=0.0,
         metavar="SECONDS",
         help="while fitting, search each recording's clock offset within +-SECONDS "
@@ -141,6 +273,46 @@ def add_fit_options(p: argparse.ArgumentParser) -> None:
     )
     g.add_argument(
         "--resume", action="store_true", help="continue interrupted fits from their checkpoints"
+    )
+
+
+def add_write_option(p: argparse.ArgumentParser, page: str) -> None:
+    """--write [FILE]: a benchmark's report goes to stdout, and to a file only when asked.
+
+    Parameters
+    ----------
+    p : ArgumentParser
+    page : str
+        The documentation page the report is, written by a bare ``--write``.
+    """
+    p.add_argument(
+        "--write",
+        nargs="?",
+        const=page,
+        metavar="FILE",
+        help=f"also write the report to FILE (bare --write: {page}, the page in the docs); "
+        "without it the report only goes to stdout",
+    )
+
+
+def write_report(path: str | None, text: str) -> str | None:
+    """Write a report where ``--write`` said (atomically); return the path, or None if not asked."""
+    if not path:
+        return None
+    from eelhost.files import atomic_write
+
+    atomic_write(path, text)
+    return path
+
+
+def add_backend_option(p: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
+    """--backend: which implementation of the twin evaluates the candidates."""
+    p.add_argument(
+        "--backend",
+        choices=["auto", "batch", "reference"],
+        default="auto",
+        help="batch: the compiled batched kernel; reference: the readable closed-loop twin, one "
+        "run per candidate and experiment (slow, for cross-checks); auto: batch when it loads",
     )
 
 

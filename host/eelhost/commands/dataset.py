@@ -7,9 +7,14 @@ import dataclasses
 import tomllib
 from pathlib import Path
 
-from tqdm import tqdm
-
-from eelhost.commands.common import add_robot_options, floats, rejected_as
+from eelhost.commands.common import (
+    COUNT,
+    NON_NEGATIVE,
+    SEED,
+    add_robot_options,
+    floats,
+    rejected_as,
+)
 from eelhost.data.virtual_tank import (
     TankSettings,
     generate_dataset,
@@ -17,6 +22,7 @@ from eelhost.data.virtual_tank import (
     mismatched_plants,
 )
 from eelhost.errors import UserError
+from eelhost.progress import Progress
 from eelsim.fluid import FLUID_LAWS
 from eelsim.robot import load_robot
 
@@ -64,10 +70,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--head-tail", action="store_true", help="true head and tail unlike the body links"
     )
     p.add_argument("--servo-limits", action="store_true", help="true joints obey the servo limits")
-    p.add_argument("--stray-current", type=float, default=0.0, help="unmodelled current speed, m/s")
-    p.add_argument("--timestamp-jitter", type=float, default=0.1, help="clock offset half-width, s")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--workers", type=int, default=2)
+    p.add_argument(
+        "--stray-current", type=NON_NEGATIVE, default=0.0, help="unmodelled current speed, m/s"
+    )
+    p.add_argument(
+        "--timestamp-jitter", type=NON_NEGATIVE, default=0.1, help="clock offset half-width, s"
+    )
+    p.add_argument("--seed", type=SEED, default=0, help="seed of the recordings' noise")
+    p.add_argument("--workers", type=COUNT, default=2, help="processes simulating experiments")
     p.set_defaults(run=run)
 
 
@@ -84,9 +94,9 @@ def run(args: argparse.Namespace) -> int:
             raise UserError(f"--fluid-law: {err}") from None
     if args.truth:
         names = FLUID_LAWS[law].coefficient_names
-        with rejected_as("--truth"):
-            c = FLUID_LAWS[law].coefficients.from_array(
-                floats(args.truth, len(names), f"--truth ({','.join(names)})"))
+        option = f"--truth ({','.join(names)})"
+        with rejected_as(option):
+            c = FLUID_LAWS[law].coefficients.from_array(floats(args.truth, len(names), option))
         truth = {"straight": c, "turning": c}
     settings = dataclasses.replace(
         base,
@@ -98,17 +108,16 @@ def run(args: argparse.Namespace) -> int:
         median=args.median or base.median,
         joints=_joints_table(args.joints_from) if args.joints_from else base.joints,
     )
-    bar = tqdm(total=34, unit="experiment", desc="virtual tank")
-    manifest = generate_dataset(
-        args.out,
-        robot,
-        truth,
-        settings,
-        args.seed,
-        args.workers,
-        progress=lambda d, _t: bar.update(d - bar.n),
-    )
-    bar.close()
+    with Progress("virtual tank", 34, "experiment") as bar:
+        manifest = generate_dataset(
+            args.out,
+            robot,
+            truth,
+            settings,
+            args.seed,
+            args.workers,
+            progress=lambda done, _total: bar.set(done),
+        )
     print(f"wrote {manifest}")
     return 0
 

@@ -5,11 +5,10 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from tqdm import tqdm
-
 from eelhost.commands.common import add_fit_options, fit_settings
 from eelhost.data.experiments import load_dataset
 from eelhost.estimation.pipeline import fit_motion, write_coefficients
+from eelhost.progress import Progress
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -54,25 +53,25 @@ def run(args: argparse.Namespace) -> int:
     fits = {}
     for motion in motions:
         total = settings.generations if settings.method == "ga" else None
-        bar = tqdm(total=total, unit="gen", desc=f"{motion} ({settings.method})")
+        with Progress(f"{motion} ({settings.method})", total, "gen") as bar:
 
-        def progress(gen: int, best: float, sims: int, bar: tqdm = bar) -> None:
-            bar.update(1)
-            bar.set_postfix(best=f"{best:.4g}", sims=sims)
+            def progress(gen: int, best: float, sims: int, bar: Progress = bar) -> None:
+                bar.set_postfix(best=f"{best:.4g}", sims=sims)
+                bar.set(gen)
 
-        res, ev = fit_motion(
-            dataset,
-            motion,
-            settings,
-            Path(args.out),
-            args.resume,
-            progress,
-            map_function=map_function,
-        )
-        bar.close()
+            res, ev = fit_motion(
+                dataset,
+                motion,
+                settings,
+                Path(args.out),
+                args.resume,
+                progress,
+                map_function=map_function,
+            )
         fits[motion] = res
         print(
-            f"{motion}: fitness {res.fitness:.4f}, {ev.simulations} simulations, "
+            f"{motion}: fitness {res.fitness:.4f}, {res.evaluations} candidates, "
+            f"{res.simulations} simulations, "
             + " ".join(f"{name} {value:.4g}" for name, value in res.space.as_dict(res.values).items())
         )
     path = write_coefficients(Path(args.out) / "coefficients.json", fits)

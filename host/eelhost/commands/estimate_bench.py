@@ -1,7 +1,7 @@
 """``eelbot estimate-bench``: measure the estimator against its targets and write the figures.
 
 The measurements are :func:`eelhost.benchmarks.estimator_accuracy.estimator_report`'s; results go
-to stdout and to a markdown file (default ``docs/estimation_benchmarks.md``).
+to stdout, and with ``--write`` to a markdown file (``docs/estimation_benchmarks.md``).
 """
 
 from __future__ import annotations
@@ -10,6 +10,7 @@ import argparse
 from pathlib import Path
 
 from eelhost.benchmarks.estimator_accuracy import estimator_report
+from eelhost.commands.common import COUNT, SEED, add_write_option, write_report
 
 WRITE_DEFAULT = "docs/estimation_benchmarks.md"
 
@@ -22,11 +23,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         description="Measure the estimator against its targets and write the figures.",
     )
     p.add_argument("--work", default="out/estimate-bench", help="folder for generated datasets")
+    add_write_option(p, WRITE_DEFAULT)
     p.add_argument(
-        "--write", default=WRITE_DEFAULT, help="markdown output ('-': none)"
-    )
-    p.add_argument(
-        "--ga-generations", type=int, default=130, help="GA generations (the paper's 130)"
+        "--ga-generations", type=COUNT, default=130, help="GA generations (the paper's 130)"
     )
     p.add_argument("--skip-ga", action="store_true", help="leave out the GA comparison")
     p.add_argument(
@@ -37,13 +36,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--coverage",
-        type=int,
+        type=COUNT,
         metavar="SEEDS",
-        help="instead: measure the report's interval coverage over SEEDS synthetic tanks "
-        "(written to docs/estimation_coverage.md unless --write says otherwise)",
+        help="instead: measure the report's interval coverage over SEEDS synthetic tanks (a bare "
+        "--write then writes docs/estimation_coverage.md)",
     )
-    p.add_argument("--replicates", type=int, default=8, help="bootstrap refits (--coverage)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--replicates", type=COUNT, default=8, help="bootstrap refits (--coverage)")
+    p.add_argument("--seed", type=SEED, default=0, help="seed of the datasets and the fits")
     p.set_defaults(run=run)
 
 
@@ -58,10 +57,9 @@ def run(args: argparse.Namespace) -> int:
             cov, f"eelbot estimate-bench --coverage {args.coverage} --seed {args.seed} "
             f"--replicates {args.replicates}")
         print(text)
-        if args.write != "-":
-            out = (Path("docs/estimation_coverage.md")
-                   if args.write == WRITE_DEFAULT else Path(args.write))
-            out.write_text(text)
+        if args.write:
+            out = "docs/estimation_coverage.md" if args.write == WRITE_DEFAULT else args.write
+            write_report(out, text)
             print(f"wrote {out}")
         return 0
     text = estimator_report(
@@ -72,8 +70,6 @@ def run(args: argparse.Namespace) -> int:
         progress=lambda line: print(line, flush=True),
         only=tuple(args.tanks.split(",")) if args.tanks else None,
     )
-    if args.write != "-":
-        Path(args.write).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.write).write_text(text)
-        print(f"wrote {args.write}")
+    if write_report(args.write, text):
+        print(f"wrote {args.write}")  # the tables went to stdout as they were measured
     return 0

@@ -6,7 +6,8 @@ reason), searches with every leg swum in the twin, checks the plan over the coef
 uncertainty, and writes ``<out>/plan.json`` (``--plot``: ``<out>/plan.png``). ``--replan`` also
 swims it in the twin with closed-loop replanning (:mod:`eelhost.planning.replan`).
 ``eelbot plan --bench`` runs the benchmark of docs/planning.md over ``--worlds`` generated worlds
-and writes its figures into ``--bench-out``.
+and prints its figures; ``--write`` also rewrites the benchmark section of docs/planning.md (or the
+file given).
 """
 
 from __future__ import annotations
@@ -19,7 +20,13 @@ import re
 from pathlib import Path
 
 from eelhost.benchmarks.machine import cpu_model
-from eelhost.commands.common import OptionError, add_robot_options, robot_and_coefficients
+from eelhost.commands.common import (
+    COUNT,
+    SEED,
+    OptionError,
+    add_robot_options,
+    robot_and_coefficients,
+)
 from eelhost.planning.coverage import action_coverage
 from eelhost.planning.planner import Outcome, Planner, PlanRefused
 from eelhost.planning.uncertainty import (
@@ -56,15 +63,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--plot", action="store_true", help="write <out>/plan.png")
     p.add_argument("--replan", action="store_true",
                    help="also swim the plan in the twin with closed-loop replanning")
-    p.add_argument("--threads", type=int, default=1, help="threads of the batched twin (1)")
+    p.add_argument("--threads", type=COUNT, default=1, help="threads of the batched twin")
     p.add_argument("--bench", action="store_true",
-                   help="run the benchmark over --worlds generated worlds; write --bench-out")
-    p.add_argument("--worlds", type=int, default=100, help="benchmark worlds (100)")
-    p.add_argument("--seed", type=int, default=0, help="first benchmark world's seed (0)")
-    p.add_argument("--jobs", type=int, default=1,
-                   help="benchmark worlds planned at once, one process each (1)")
-    p.add_argument("--bench-out", default="docs/planning.md",
-                   help="markdown file whose benchmark section is rewritten (docs/planning.md)")
+                   help="run the benchmark over --worlds generated worlds and print its figures")
+    p.add_argument("--worlds", type=COUNT, default=100, help="benchmark worlds")
+    p.add_argument("--seed", type=SEED, default=0, help="first benchmark world's seed")
+    p.add_argument("--jobs", type=COUNT, default=1,
+                   help="benchmark worlds planned at once, one process each")
+    p.add_argument("--write", nargs="?", const="docs/planning.md", metavar="FILE",
+                   help="with --bench, also rewrite the benchmark section of FILE (bare --write: "
+                   "docs/planning.md)")
     p.set_defaults(run=run)
 
 
@@ -163,9 +171,6 @@ def run(args: argparse.Namespace) -> int:
 def _bench(args: argparse.Namespace, robot: Robot, model: CoefficientModel) -> int:
     from eelhost.planning.bench import run_bench
 
-    if args.worlds < 1:
-        raise OptionError("--worlds: give at least 1")
-
     def progress(k: int, r) -> None:  # noqa: ANN001
         extra = ("" if r.reached is None else
                  f" reached={r.reached} collision={r.collision} "
@@ -194,9 +199,10 @@ def _bench(args: argparse.Namespace, robot: Robot, model: CoefficientModel) -> i
         *lines,
         BENCH_END,
     ]
-    _write_block(Path(args.bench_out), block)
     print("\n".join(lines))
-    print(f"wrote {args.bench_out}")
+    if args.write:
+        _write_block(Path(args.write), block)
+        print(f"wrote {args.write}")
     return 0
 
 

@@ -5,12 +5,11 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from tqdm import tqdm
-
-from eelhost.commands.common import add_fit_options, fit_settings
+from eelhost.commands.common import add_fit_options, fit_settings, number
 from eelhost.data.experiments import BUNDLED_DATASET, load_dataset
 from eelhost.data.virtual_tank import generate_dataset
 from eelhost.estimation.report import run_report
+from eelhost.progress import Progress
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -26,7 +25,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--out", default="out/report", help="report folder")
     p.add_argument("--joint", action="store_true", help="also fit one joint set for the robot")
-    p.add_argument("--bootstrap", type=int, default=8, help="bootstrap refits per fit (0: none)")
+    p.add_argument(
+        "--bootstrap", type=number(int, minimum=0), default=8, help="bootstrap refits per fit (0: none)"
+    )
     p.add_argument("--no-compare", action="store_true",
                    help="skip the cross-validated comparison of candidate models")
     add_fit_options(p)
@@ -41,17 +42,26 @@ def run(args: argparse.Namespace) -> int:
         print(
             f"no bundled dataset here; generating the default virtual-tank dataset in {folder} ..."
         )
-        generate_dataset(folder, seed=args.seed)
+        with Progress("virtual tank", 34, "experiment") as tank:
+            generate_dataset(folder, seed=args.seed, progress=lambda d, _t: tank.set(d))
     dataset = load_dataset(folder)
     motions = ("straight", "turning") + (("joint",) if args.joint else ())
     settings = fit_settings(args)
 
+    bars: list[Progress] = []
+
+    def say(text: str) -> None:  # a fit's summary comes after its progress has ended
+        for bar in bars:
+            bar.close()
+        print(text)
+
     def factory(motion: str):
-        bar = tqdm(unit="gen", desc=f"fit {motion}", leave=False)
+        bar = Progress(f"fit {motion}", unit="gen")
+        bars.append(bar)
 
         def progress(gen: int, best: float, sims: int) -> None:
-            bar.update(1)
             bar.set_postfix(best=f"{best:.4g}", sims=sims)
+            bar.set(gen)
 
         return progress
 
@@ -63,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
         args.bootstrap,
         args.resume,
         compare_models=not args.no_compare,
-        say=print,
+        say=say,
         progress_factory=factory,
     )
     return 0

@@ -5,14 +5,24 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from eelhost.commands.common import OptionError, floats, rejected_as
+from eelhost.commands.common import (
+    FINITE,
+    NON_NEGATIVE,
+    PORT,
+    POSITIVE,
+    SCENARIO_OPTIONS,
+    OptionError,
+    current_values,
+    gait_values,
+    rejected_as,
+    waypoints,
+)
 from eelhost.field.recorder import MOTIONS
 from eelhost.field.runloop import RunConfig
 from eelhost.field.session import TakeNotes
 from eelhost.field.take import TakeRequest, refuse_overwrite, run_take
 from eelhost.link.uri import parse_link_uri
 from eelhost.vision.markerfile import load_marker_file
-from eelhost.wire import protocol
 from eelsim.control import Gait
 from eelsim.robot import load_robot
 
@@ -47,7 +57,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--markers", metavar="FILE", help="markers.json from eelbot markers "
                    "(default: ids 0..N-1, tail first)")
     p.add_argument("--robot-file", metavar="FILE", help="robot TOML (default: the paper robot)")
-    p.add_argument("--waypoints", metavar="x,y;x,y", help="waypoints, m (or --plan)")
+    p.add_argument("--waypoints", metavar="x,y;x,y", type=waypoints, help="waypoints, m (or --plan)")
     p.add_argument(
         "--plan",
         metavar="WORLD",
@@ -58,20 +68,20 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--gait",
         metavar="A,omega[,beta]",
-        type=lambda s: floats(s, None, "--gait"),
+        type=gait_values,
         help="gait amplitude (rad), frequency (rad/s), optionally phase shift (rad, 1.04)",
     )
-    p.add_argument("--k-theta", type=float, default=0.37, help="heading gain (default 0.37)")
-    p.add_argument("--radius", type=float, default=0.15, help="acceptance radius, m (0.15)")
-    p.add_argument("--control-period", type=float, default=0.3, help="offset period, s (0.3)")
-    p.add_argument("--duration", type=float, help="stop after this long, s (default: no limit)")
+    p.add_argument("--k-theta", type=FINITE, default=0.37, help="heading gain")
+    p.add_argument("--radius", type=POSITIVE, default=0.15, help="acceptance radius, m")
+    p.add_argument("--control-period", type=POSITIVE, default=0.3, help="offset period, s")
+    p.add_argument("--duration", type=POSITIVE, help="stop after this long, s (default: no limit)")
     p.add_argument("--motion", choices=MOTIONS, default="auto",
                    help="what the take is, for a dataset: straight, turning, path, or auto "
                    "(path for several waypoints; one waypoint within 10 deg of the start heading "
                    "is straight, else turning)")
     p.add_argument(
         "--speed",
-        type=float,
+        type=NON_NEGATIVE,
         help="sim:// only: simulated s per wall s, 0 = as fast as possible (overrides the URI)",
     )
     add_take_options(p)
@@ -84,13 +94,13 @@ def add_take_options(p: argparse.ArgumentParser) -> None:
     """What a take records beyond the task, and the live view (shared with ``campaign``)."""
     p.add_argument("--note", default="", help="operator's note, kept in the record")
     p.add_argument("--current", metavar="SPEED,DIR",
-                   type=lambda s: floats(s, 2, "--current"),
+                   type=current_values,
                    help="the water's current if known: m/s, direction in degrees (sim:// has "
                    "its own)")
     p.add_argument("--no-view", action="store_true",
                    help="no live view (headless); by default a web page on localhost shows the "
                    "camera, the markers, the track, the waypoints and the twin's prediction")
-    p.add_argument("--view-port", type=int, default=8765,
+    p.add_argument("--view-port", type=PORT, default=8765,
                    help="port of the live view on 127.0.0.1 (8765; 0: any free port)")
 
 
@@ -98,31 +108,10 @@ def add_take_options(p: argparse.ArgumentParser) -> None:
 STOPPED_ON_PURPOSE = ("arrived", "duration", "interrupted")
 
 
-def parse_waypoints(text: str) -> list[tuple[float, float]]:
-    """Parse ``"x,y;x,y"`` into waypoints (metres)."""
-    out = []
-    for part in text.split(";"):
-        if part.strip():
-            try:
-                x, y = floats(part, 2, "--waypoints")
-            except argparse.ArgumentTypeError as err:
-                raise OptionError(str(err)) from None
-            out.append((x, y))
-    if not out:
-        raise OptionError("--waypoints: give at least one x,y")
-    return out
-
-
 def _gait(values: list[float], k_theta: float) -> Gait:
-    if len(values) not in (2, 3):
-        raise OptionError("--gait: give A,omega or A,omega,beta")
+    """The gait of ``--gait`` (checked against the robot's ranges when parsed), beta 1.04 rad."""
     beta = values[2] if len(values) == 3 else 1.04
-    gait = Gait(values[0], values[1], beta, k_theta)
-    try:  # the robot would refuse it: say so before anything is opened
-        protocol.SetGait(gait.amplitude_rad, gait.omega_rad_s, gait.beta_rad, 0, 0, 0).validate()
-    except ValueError as err:
-        raise OptionError(f"--gait: {err}") from None
-    return gait
+    return Gait(values[0], values[1], beta, k_theta)
 
 
 def current_option(value: list[float] | None, virtual: bool) -> tuple[float, float] | None:
@@ -161,7 +150,7 @@ def run(args: argparse.Namespace) -> int:
         print(planned.outcome.message)
         waypoints, monitor, uri = planned.waypoints_m, planned.monitor, planned.uri
     else:
-        waypoints = parse_waypoints(args.waypoints)
+        waypoints = args.waypoints
         gait = _gait(args.gait, args.k_theta)
     config = RunConfig(
         gait,
@@ -173,7 +162,7 @@ def run(args: argparse.Namespace) -> int:
     notes = TakeNotes(uri, args.robot_file, args.motion, current, args.note)
     request = TakeRequest(robot, config, args.out, notes, args.camera, args.calibration,
                           markers.layout, args.speed, monitor)
-    with rejected_as("--waypoints/--gait/--radius/--duration"):  # the task's record checks them
+    with rejected_as("--waypoints/--gait/--radius/--duration", SCENARIO_OPTIONS):
         result = run_take(request, None if args.no_view else args.view_port,
                           announce=lambda msg: print(msg, flush=True))
     out = result.outcome

@@ -5,17 +5,22 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from tqdm import tqdm
-
 from eelhost.commands.common import (
-    OptionError,
+    FINITE,
+    POSITIVE,
+    SCENARIO_OPTIONS,
+    SEED,
     add_loop_options,
     add_robot_options,
-    floats,
+    current_values,
+    gait_values,
     loop_options,
     rejected_as,
     robot_and_coefficients,
+    waypoints,
 )
+from eelhost.errors import exit_status_for_flag
+from eelhost.progress import Progress
 from eelsim.closed_loop import simulate_closed_loop
 from eelsim.model import SwimmerModel
 from eelsim.record import write_run
@@ -38,23 +43,23 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     g.add_argument(
         "--gait",
         metavar="A,omega[,beta]",
-        type=lambda s: floats(s, None, "--gait"),
+        type=gait_values,
         help="gait amplitude (rad), frequency (rad/s) and optionally phase shift (rad)",
     )
-    g.add_argument("--k-theta", type=float, help="heading controller gain")
-    g.add_argument("--waypoints", metavar="x,y;x,y", help="waypoints, m")
+    g.add_argument("--k-theta", type=FINITE, help="heading controller gain")
+    g.add_argument("--waypoints", metavar="x,y;x,y", type=waypoints, help="waypoints, m")
     g.add_argument(
         "--current",
         metavar="speed,direction_deg",
-        type=lambda s: floats(s, 2, "--current"),
+        type=current_values,
         help="current speed (m/s) and the direction it flows towards (deg)",
     )
-    g.add_argument("--duration", type=float, help="T_max, s")
+    g.add_argument("--duration", type=POSITIVE, help="T_max, s")
     g.add_argument(
         "--full", action="store_true", help="run until T_max even after the last waypoint"
     )
     add_loop_options(p)
-    p.add_argument("--seed", type=int, default=0, help="seed of jitter and noise (default 0)")
+    p.add_argument("--seed", type=SEED, default=0, help="seed of jitter and noise")
     p.add_argument("--out", default="out/simulate/run", help="output path without extension")
     p.add_argument(
         "--plot", action="store_true", help="write <out>.png (path, x(t), y(t), heading)"
@@ -66,17 +71,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def _overrides(args: argparse.Namespace) -> dict:
     upd: dict = {}
     if args.gait:
-        if len(args.gait) not in (2, 3):
-            raise OptionError("--gait: give A,omega or A,omega,beta")
         upd["amplitude_rad"], upd["omega_rad_s"] = args.gait[:2]
         if len(args.gait) == 3:
             upd["beta_rad"] = args.gait[2]
     if args.k_theta is not None:
         upd["k_theta"] = args.k_theta
     if args.waypoints:
-        upd["waypoints_m"] = [
-            tuple(floats(w, 2, "--waypoints")) for w in args.waypoints.split(";") if w.strip()
-        ]
+        upd["waypoints_m"] = args.waypoints
     if args.current:
         upd["current_speed_m_s"], upd["current_direction_deg"] = args.current
     if args.duration is not None:
@@ -88,23 +89,22 @@ def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
     robot, coeffs = robot_and_coefficients(args)
     scenario = load_scenario(args.scenario)
-    with rejected_as("--gait/--k-theta/--waypoints/--current/--duration"):
+    with rejected_as("scenario overrides", SCENARIO_OPTIONS):
         upd = _overrides(args)
         if upd:
             scenario = type(scenario).model_validate({**scenario.model_dump(), **upd})
     options = loop_options(args, stop_at_goal=not args.full)
-    total = scenario.total_steps(options.timing.dt_s)
-    bar = tqdm(
-        total=total, unit="step", desc=scenario.name, disable=scenario.duration_s < 5.0, leave=False
-    )
-
-    def progress(step: int, _total: int) -> None:
-        bar.update(step - bar.n)
-
-    result = simulate_closed_loop(
-        robot, scenario, options, seed=args.seed, coefficients=coeffs, progress=progress
-    )
-    bar.close()
+    with Progress(scenario.name, scenario.total_steps(options.timing.dt_s), "step") as bar:
+        result = simulate_closed_loop(
+            robot,
+            scenario,
+            options,
+            seed=args.seed,
+            coefficients=coeffs,
+            progress=lambda step, _total: bar.set(step),
+        )
+        if result.arrival_time_s is not None:
+            bar.finish()  # the run ends at the goal: its task is done
     csv_path, json_path = write_run(result, robot, scenario, options, args.seed, args.out, coeffs)
     outcome = "reached the last waypoint" if result.arrival_time_s is not None else "did not arrive"
     print(
@@ -129,4 +129,4 @@ def run(args: argparse.Namespace) -> int:
             print(
                 f"wrote {animate_run(result, model, scenario, Path(args.out).with_suffix('.gif'))}"
             )
-    return 0
+    return exit_status_for_flag(result.failure)

@@ -7,7 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
-from eelhost.commands.common import add_robot_options, robot_and_coefficients
+from eelhost.commands.common import POSITIVE, add_robot_options, robot_and_coefficients
+from eelhost.files import atomic_write
+from eelhost.progress import Progress
 from eelsim.speeds import grid_speeds, speed_table_markdown
 
 
@@ -20,7 +22,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "print the steady speeds (m/s and BL/s) as a markdown table.",
     )
     add_robot_options(p)
-    p.add_argument("--duration", type=float, default=20.0, help="length of each run, s (20)")
+    p.add_argument("--duration", type=POSITIVE, default=20.0, help="length of each run, s")
     p.add_argument("--write", metavar="FILE", help="also write the table to this markdown file")
     p.set_defaults(run=run)
 
@@ -28,14 +30,18 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
     robot, coeffs = robot_and_coefficients(args)
-    speeds = grid_speeds(robot, args.duration, coeffs)
+    with Progress("gait grid", 16, "gait") as bar:
+        speeds = grid_speeds(robot, args.duration, coeffs, lambda done, _total: bar.set(done))
     table = speed_table_markdown(speeds, robot.body_length_m())
     print(table)
-    print(
-        f"fastest {np.nanmax(speeds):.4f} m/s, slowest {np.nanmin(speeds):.4f} m/s; "
-        f"NaN = failed or swam backwards"
-    )
+    if np.isnan(speeds).all():
+        print(f"no gait swam forward steadily within {args.duration:g} s (NaN: failed or backwards)")
+    else:
+        print(
+            f"fastest {np.nanmax(speeds):.4f} m/s, slowest {np.nanmin(speeds):.4f} m/s; "
+            f"NaN = failed or swam backwards"
+        )
     if args.write:
-        Path(args.write).write_text(table + "\n")
+        atomic_write(Path(args.write), table + "\n")
         print(f"wrote {args.write}")
     return 0

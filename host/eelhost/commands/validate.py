@@ -5,10 +5,12 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from eelhost.commands.common import NON_NEGATIVE, add_backend_option
 from eelhost.data.experiments import load_dataset
 from eelhost.estimation.evaluate import ALIGN_S
 from eelhost.estimation.pipeline import CoefficientsError, read_coefficients
 from eelhost.estimation.validate import table_csv, table_markdown, validate
+from eelhost.progress import Progress
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -22,10 +24,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("coefficients", help="coefficients.json from estimate, or the robot's coefficients as numbers (C_f,C_d,C_a,C_m)")
     p.add_argument("dataset", help="dataset folder")
     p.add_argument("--out", default="out/validate", help="folder for tables and figures")
-    p.add_argument("--backend", choices=["auto", "batch", "reference"], default="auto")
+    add_backend_option(p)
     p.add_argument(
         "--align",
-        type=float,
+        type=NON_NEGATIVE,
         default=ALIGN_S,
         metavar="SECONDS",
         help="also report each experiment at the clock offset of its recording that fits best, "
@@ -48,21 +50,21 @@ def run(args: argparse.Namespace) -> int:
     dataset = load_dataset(args.dataset, allow_incomplete=args.allow_incomplete)
     fitted = read_coefficients(args.coefficients, dataset.robot)
     tests = [e for exps in dataset.test.values() for e in exps] + list(dataset.paths)
-    runs = validate(dataset.robot, fitted, tests, backend=args.backend, align_s=args.align)
-    out = Path(args.out)
+    with Progress("validate", 2, "stage") as bar:  # the simulations, then the figures
+        runs = validate(dataset.robot, fitted, tests, backend=args.backend, align_s=args.align)
+        bar.set(1)
+        _write_tables_and_figures(runs, Path(args.out))
+        bar.set(2)
+    print(table_markdown([r.row for r in runs]))
+    print(f"wrote {args.out}/table4.md, table4.csv and figures")
+    return 0
+
+
+def _write_tables_and_figures(runs: list, out: Path) -> None:
     out.mkdir(parents=True, exist_ok=True)
     md = table_markdown([r.row for r in runs])
     (out / "table4.md").write_text(md + "\n")
     (out / "table4.csv").write_text(table_csv([r.row for r in runs]))
-    from eelhost.estimation.figures import plot_paths, plot_time_series  # matplotlib: slow import
+    from eelhost.estimation.figures import plot_validation  # matplotlib: slow import
 
-    for motion in ("straight", "turning", "path"):
-        group = [r for r in runs if r.experiment.motion == motion]
-        if group:
-            plot_paths(group, out / f"paths_{motion}.png")
-    for r in runs:
-        if r.experiment.motion == "path":
-            plot_time_series(r, out / f"timeseries_{r.experiment.name}.png")
-    print(md)
-    print(f"wrote {out}/table4.md, table4.csv and figures")
-    return 0
+    plot_validation(runs, out)

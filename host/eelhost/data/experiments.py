@@ -22,8 +22,6 @@ from __future__ import annotations
 import csv
 import json
 import math
-import os
-import tempfile
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -33,6 +31,7 @@ import numpy as np
 from pydantic import ValidationError
 
 from eelhost.errors import UserError
+from eelhost.files import atomic_write
 from eelsim.camera import MEDIAN_PLACEMENTS, CameraModel
 from eelsim.fluid import FluidCoefficients, get_fluid_law
 from eelsim.robot import HydroCoefficients, Robot, load_robot
@@ -138,15 +137,7 @@ class Experiment:
 
 
 def _atomic_write(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    atomic_write(path, text)  # readable by the group as the umask says (eelhost.files)
 
 
 def experiment_csv_text(exp: Experiment) -> str:
@@ -219,7 +210,13 @@ def read_frames_csv(path: str | Path, allow_truncated_tail: bool = False) -> Fra
         text = path.read_text()
     except OSError as err:
         raise DataError(f"{path}: cannot read: {err.strerror}") from None
-    if allow_truncated_tail and text and not text.endswith("\n"):
+    if text and not text.endswith("\n"):
+        if not allow_truncated_tail:  # a finished file ends with a newline; this one may be cut
+            raise DataError(
+                f"{path}:{text.count(chr(10)) + 1}: the last line has no newline, so the file "
+                "may be cut mid-number (a writer stopped); if the line is whole, end it with a "
+                "newline"
+            )
         text = text[: text.rfind("\n") + 1]
     rows = list(csv.reader(text.splitlines()))
     if not rows or not any(c.strip() for c in rows[0]):
@@ -548,6 +545,7 @@ def load_dataset(folder: str | Path, allow_incomplete: bool = False) -> Dataset:
     robot = load_robot(robot_path if robot_path.exists() else robot_ref)
     train: dict[str, list[Experiment]] = {}
     test: dict[str, list[Experiment]] = {}
+    _refuse_reused_experiments(manifest, mpath)
     for motion, split in manifest.get("motions", {}).items():
         if not isinstance(split, dict) or set(split) - {"train", "test"}:
             raise DataError(f"{mpath}: motions.{motion}: expected only 'train' and 'test' lists")
@@ -586,6 +584,26 @@ def _truth(value: Any, where: str) -> FluidCoefficients:
             f"{where}: expected a table with law and its coefficients by name, or the Morison "
             f"law's four non-negative numbers ({str(err).splitlines()[0]})"
         ) from None
+
+
+def _refuse_reused_experiments(manifest: dict[str, Any], mpath: Path) -> None:
+    """An experiment named twice (train and test, two motions, a path) would be tested on itself."""
+    seen: dict[str, str] = {}
+    lists = [
+        (f"motions.{motion}.{part}", split.get(part, []))
+        for motion, split in manifest.get("motions", {}).items()
+        if isinstance(split, dict)
+        for part in ("train", "test")
+    ]
+    lists.append(("validation.paths", manifest.get("validation", {}).get("paths", [])))
+    for key, names in lists:
+        for name in names:
+            if name in seen:
+                raise DataError(
+                    f"{mpath}: {key}: experiment {name!r} is already in {seen[name]}; an "
+                    "experiment is used once (fitting on a test experiment hides the error)"
+                )
+            seen[name] = key
 
 
 def _load_named(

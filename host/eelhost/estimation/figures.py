@@ -13,6 +13,13 @@ import numpy as np  # noqa: E402
 
 from eelhost.estimation.optimise import FitResult  # noqa: E402
 from eelhost.estimation.validate import ValidationRun  # noqa: E402
+from eelhost.plots import (  # noqa: E402
+    draw_current,
+    draw_waypoints,
+    label_axes,
+    plot_track_errors,
+    save_figure,
+)
 
 
 def plot_fitness_history(fits: dict[str, FitResult], path: str | Path) -> Path:
@@ -49,11 +56,14 @@ def plot_paths(runs: Sequence[ValidationRun], path: str | Path, title: str = "")
             lw=1.2,
             label="simulation",
         )
-        wps = np.asarray(e.scenario.waypoints_m)
-        ax.plot(wps[:, 0], wps[:, 1], "x", color="tab:green")
+        draw_waypoints(ax, e.scenario.waypoints_m, e.scenario.acceptance_radius_m)
+        draw_current(
+            ax, e.scenario.current_speed_m_s, e.scenario.current_direction_deg, at=(0.55, 0.12)
+        )
         ax.set_title(f"{e.name}\nE_x {run.row.Ex_mean_BL:.3f} BL", fontsize=8)
         ax.set_aspect("equal", adjustable="datalim")
         ax.tick_params(labelsize=7)
+        label_axes(ax)
     for ax in list(axes.flat)[n:]:
         ax.axis("off")
     axes.flat[0].legend(fontsize=7)
@@ -86,9 +96,28 @@ def plot_time_series(run: ValidationRun, path: str | Path) -> Path:
     return _save(fig, path)
 
 
+def plot_validation(runs: Sequence[ValidationRun], out: str | Path) -> list[Path]:
+    """The figures of a validation in folder ``out``: one per motion, a time series per path.
+
+    Straight runs as along- and cross-track error against time next to their tracks (every
+    straight track looks alike at tank scale); turning runs and paths as experiment against
+    simulation in the plane; each path also as x(t), y(t), heading(t).
+    """
+    folder = Path(out)
+    written = []
+    for motion in ("straight", "turning", "path"):
+        group = [r for r in runs if r.experiment.motion == motion]
+        if motion == "straight" and group:
+            title = "straight runs: the twin against the recordings"
+            written.append(plot_track_errors(group, folder / "paths_straight.png", title))
+        elif group:
+            title = f"{motion}: experiment (black) and twin (red)"
+            written.append(plot_paths(group, folder / f"paths_{motion}.png", title))
+    for r in runs:
+        if r.experiment.motion == "path":
+            written.append(plot_time_series(r, folder / f"timeseries_{r.experiment.name}.png"))
+    return written
+
+
 def _save(fig: plt.Figure, path: str | Path) -> Path:
-    out = Path(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=100)
-    plt.close(fig)
-    return out
+    return save_figure(fig, path, dpi=100)

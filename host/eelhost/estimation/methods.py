@@ -23,7 +23,7 @@ before the fit).
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -132,15 +132,25 @@ def _global_cmaes(problem: FitProblem, restarts: str) -> FitResult:
     )
 
 
-def _then(first: FitResult, polished: FitResult, method: str, simulations: int) -> FitResult:
-    """The global result followed by its polish, as one result (the better of the two)."""
+def _then(
+    problem: FitProblem, first: FitResult, polished: FitResult, method: str, polish_runs: int
+) -> FitResult:
+    """The global result followed by its polish, as one result (the better of the two).
+
+    The polish is the fit's last step: its simulations count (the global search's, which goes on
+    across a resume, plus the polish's ``polish_runs``) is the fit's total, reported to the
+    progress too.
+    """
     best = polished if polished.fitness <= first.fitness else first
+    last = (len(first.history), best.fitness, first.simulations + polish_runs)
+    if problem.progress:
+        problem.progress(*last)
     return FitResult(
         method,
         first.space,
         best.values,
         best.fitness,
-        first.history + [(len(first.history), best.fitness, simulations)],
+        first.history + [last],
         first.evaluations + polished.evaluations,
     )
 
@@ -150,9 +160,10 @@ def _fit_cmaes(problem: FitProblem) -> FitResult:
     res = _global_cmaes(problem, settings.restarts)
     if settings.polish_iterations <= 0:
         return res
+    before = ev.simulations
     pol = polish_minimax(ev.evaluate, ev.space, res.values, settings.polish_iterations,
                          simulations=problem.simulations)
-    return _then(res, pol, f"{res.method}+minimax", ev.simulations)
+    return _then(problem, res, pol, f"{res.method}+minimax", ev.simulations - before)
 
 
 def _fit_cmaes_lsq(problem: FitProblem) -> FitResult:
@@ -160,10 +171,11 @@ def _fit_cmaes_lsq(problem: FitProblem) -> FitResult:
     res = _global_cmaes(problem, "none")
     if settings.polish_iterations <= 0:
         return res
+    before = ev.simulations
     pol = polish_least_squares(
         ev.residuals, ev.fitness, ev.space, res.values, res.fitness, settings.polish_iterations
     )
-    return _then(res, pol, "cmaes+lsq", ev.simulations)
+    return _then(problem, res, pol, "cmaes+lsq", ev.simulations - before)
 
 
 def _fit_ga(problem: FitProblem) -> FitResult:
@@ -191,9 +203,10 @@ def _fit_minimax(problem: FitProblem) -> FitResult:
 def _fit_lsq(problem: FitProblem) -> FitResult:
     ev, begin = problem.evaluator, problem.start
     f0 = float(ev.fitness(begin[None, :])[0])
-    return polish_least_squares(
+    res = polish_least_squares(
         ev.residuals, ev.fitness, ev.space, begin, f0, max(1, problem.settings.polish_iterations)
     )
+    return replace(res, history=[(0, res.fitness, ev.simulations)])  # the polish's runs counted
 
 
 register_method("cmaes", _fit_cmaes, "CMA-ES with restarts + minimax polish (default)")

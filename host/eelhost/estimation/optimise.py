@@ -18,9 +18,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import os
 import pickle
-import tempfile
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -32,6 +30,7 @@ import numpy as np
 
 from eelhost.errors import UserError
 from eelhost.estimation.parameters import FittedModel, ParameterSpace
+from eelhost.files import atomic_writer
 from eelsim.fluid import FluidCoefficients
 
 Objective = Callable[[np.ndarray], np.ndarray]
@@ -56,9 +55,10 @@ class FitResult:
     fitness : float
         Its fitness.
     history : list of (generation, best fitness, simulations)
-        Progress per generation (for the fitness-against-generation figure).
+        Progress per generation (for the fitness-against-generation figure); the count of
+        closed-loop runs is the whole fit's, across a resume.
     evaluations : int
-        Candidates evaluated.
+        Candidates evaluated (each is one simulation per training experiment).
     """
 
     method: str
@@ -78,6 +78,11 @@ class FitResult:
         """The best candidate as a fitted model."""
         return FittedModel(self.space, np.asarray(self.values, dtype=float))
 
+    @property
+    def simulations(self) -> int:
+        """Closed-loop runs of the whole fit (the last count of the history; 0 without one)."""
+        return int(self.history[-1][2]) if self.history else 0
+
     def to_json(self) -> dict[str, Any]:
         """JSON-ready summary: the model by name (law, joint model, parameters) and the search."""
         return {
@@ -85,6 +90,7 @@ class FitResult:
             **self.model.to_json(),
             "fitness": self.fitness,
             "evaluations": self.evaluations,
+            "simulations": self.simulations,
             "history": [list(h) for h in self.history],
         }
 
@@ -120,18 +126,23 @@ class Checkpoint:
             return
         self._saved_at = time.monotonic()
         state = {**state, "fingerprint": self.fingerprint, "np_random": np.random.get_state()}  # noqa: NPY002
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=self.path.parent, prefix=f".{self.path.name}.")
-        with os.fdopen(fd, "wb") as f:
+        with atomic_writer(self.path, "wb") as f:  # readable as the umask says
             cloudpickle.dump(state, f)  # pymoo holds local functions plain pickle refuses
-        os.replace(tmp, self.path)
 
     def load(self) -> dict[str, Any] | None:
         """Return the saved state (restoring numpy's global random state), or None if none."""
         if not self.path.exists():
             return None
-        with open(self.path, "rb") as f:
-            state = pickle.load(f)
+        try:
+            with open(self.path, "rb") as f:
+                state = pickle.load(f)
+        except (pickle.UnpicklingError, EOFError, AttributeError, ImportError, IndexError) as err:
+            raise CheckpointError(
+                f"{self.path}: not a readable checkpoint ({type(err).__name__}: {err}); it may "
+                "be truncated or from another version: remove it, or run without --resume"
+            ) from None
+        if not isinstance(state, dict):
+            raise CheckpointError(f"{self.path}: not a checkpoint of eelbot (remove it)")
         if state.get("fingerprint") != self.fingerprint:
             raise CheckpointError(
                 f"{self.path}: checkpoint was made with other settings (dataset, method, seed or "
@@ -145,6 +156,20 @@ def _start(checkpoint: Checkpoint | None, resume: bool) -> dict[str, Any] | None
     if checkpoint is None or not resume:
         return None
     return checkpoint.load()
+
+
+def _count_across_resume(
+    simulations: Callable[[], int], state: dict[str, Any] | None
+) -> Callable[[], int]:
+    """The simulations count of the whole fit: a resumed one goes on from its checkpoint's count.
+
+    The evaluator of a new process starts at 0; without this the count in the history and the
+    progress would restart at every resume while the candidates' count (``evaluations``) goes on.
+    """
+    if state is None or not state["history"]:
+        return simulations
+    base, start = int(state["history"][-1][2]), simulations()
+    return lambda: base + simulations() - start
 
 
 def _seeded_gaussian_mutation(sigma: float = 0.1):
@@ -225,6 +250,7 @@ def fit_ga(
         evaluations = 0
     else:
         algo, history, evaluations = state["algorithm"], state["history"], state["evaluations"]
+    simulations = _count_across_resume(simulations, state)
     while algo.has_next():
         pop = algo.ask()
         f = np.asarray(objective(space.from_unit(pop.get("X"))), dtype=float)
@@ -358,6 +384,10 @@ def fit_cmaes(
         es = None
     else:
         run, es = state["run"], state["es"]
+    # a resumed fit's simulations count goes on from its checkpoint's
+    simulations = _count_across_resume(
+        simulations, None if state is None else {"history": state["run"].history}
+    )
     while True:
         if es is None or es.stop():
             left = max_evaluations - run.evaluations

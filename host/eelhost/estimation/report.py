@@ -86,9 +86,9 @@ def run_report(
             dataset, motion, settings, checkpoint_dir=out, resume=resume, progress=prog
         )
         fits[motion] = res
-        extra["simulations"][motion] = ev.simulations
+        extra["simulations"][motion] = res.simulations
         say(
-            f"{motion}: {res.method} fitness {res.fitness:.4f} after {ev.simulations} simulations: "
+            f"{motion}: {res.method} fitness {res.fitness:.4f} after {res.simulations} simulations: "
             + ", ".join(f"{n} {v:.4g}" for n, v in res.space.as_dict(res.values).items())
         )
         ident = identifiability(ev, res.values)
@@ -100,7 +100,6 @@ def run_report(
             extra["uncertainty"][motion] = boot.to_json()
             say(f"{motion}: noise floor {boot.noise_floor:.4f}, fitness / noise floor {boot.excess:.1f}")
         extra["warnings"] += fit_warnings(motion, res.space, res.values, boot)
-        extra["simulations"][motion] = ev.simulations
         extra["seconds"][motion] = time.perf_counter() - t0
     separate = {m: (r.space, r.values) for m, r in fits.items() if m != "joint"}
     comparison = None
@@ -123,18 +122,10 @@ def run_report(
     (out / "table4.md").write_text(table_markdown([r.row for r in runs]) + "\n")
     (out / "table4.csv").write_text(table_csv([r.row for r in runs]))
     # matplotlib only now: importing it costs half a second of every command's start
-    from eelhost.estimation.figures import plot_fitness_history, plot_paths, plot_time_series
+    from eelhost.estimation.figures import plot_fitness_history, plot_validation
 
     plot_fitness_history(fits, out / "fitness_history.png")
-    for motion in ("straight", "turning", "path"):
-        group = [r for r in runs if r.experiment.motion == motion]
-        if group:
-            plot_paths(
-                group, out / f"paths_{motion}.png", f"{motion}: experiment (black) and twin (red)"
-            )
-    for r in runs:
-        if r.experiment.motion == "path":
-            plot_time_series(r, out / f"timeseries_{r.experiment.name}.png")
+    plot_validation(runs, out)
     report = out / "report.md"
     text = _report_text(dataset, fits, extra, runs, settings)
     if comparison:

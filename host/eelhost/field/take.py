@@ -17,7 +17,9 @@ from eelhost.field.recorder import take_paths
 from eelhost.field.runloop import Monitor, RunConfig, RunOutcome
 from eelhost.field.session import TakeNotes, TankSession, open_camera, virtual_robot
 from eelhost.field.signals import stop_on_signals
+from eelhost.link.base import LinkEvent
 from eelhost.link.uri import open_link
+from eelhost.progress import Progress
 from eelhost.vision.markers import MarkerLayout
 from eelsim.robot import Robot
 
@@ -155,7 +157,16 @@ def run_take(request: TakeRequest, view_port: int | None = None,
             if stop_flag is not None:
                 stop_flag.append(name)
 
-        with stop_on_signals(stop) as received:
+        loop = session.loop
+        with stop_on_signals(stop) as received, Progress(
+            "run", len(request.config.waypoints_m), "waypoint"
+        ) as bar:
+
+            def show(_event: LinkEvent) -> None:  # at each command sent: every control period
+                bar.set_postfix(t=f"{loop.outcome.t_end_s:.0f} s")
+                bar.set(loop.target)
+
+            session.link.listeners.append(show)
             outcome = session.run()
     finally:
         if view is not None:

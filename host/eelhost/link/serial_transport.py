@@ -57,7 +57,8 @@ class SerialTransport:
             )
         except (serial.SerialException, OSError, ValueError) as err:
             self._serial = None
-            raise TransportError(f"{self.port}: cannot open: {err}") from None
+            hint = " (a file or device that is not a serial port)" if "ioctl" in str(err) else ""
+            raise TransportError(f"{self.port}: cannot open: {err}{hint}") from None
 
     def close(self) -> None:
         """Close the port if open."""
@@ -91,6 +92,12 @@ class SerialTransport:
 
 
 def _open_serial(u: LinkURI, robot: Robot | None, clock: Clock | None) -> Link:
+    if "/" in u.target and not u.target.startswith("/"):
+        # serial://dev/ttyUSB0 has two slashes, so the URI names the relative path dev/ttyUSB0
+        raise LinkURIError(
+            f"{u.text!r}: port {u.target!r} is a relative path; a device path needs three "
+            f"slashes: serial:///{u.target}"
+        )
     baud = int(u.number("baud", protocol.BAUD, int))
     if baud <= 0:
         raise LinkURIError(f"{u.text!r}: baud={baud} must be positive")

@@ -20,7 +20,7 @@ from matplotlib.patches import Circle, Polygon, Rectangle  # noqa: E402
 from eelhost.planning.execute import Swim  # noqa: E402
 from eelhost.planning.search import Plan  # noqa: E402
 from eelhost.planning.world import CircleObstacle, World  # noqa: E402
-from eelhost.plots import robot_outline  # noqa: E402
+from eelhost.plots import draw_current, label_axes, legend_once, robot_outline  # noqa: E402
 from eelsim.model import SwimmerModel  # noqa: E402
 
 
@@ -32,15 +32,12 @@ def _obstacles(ax: plt.Axes, world: World) -> None:
             ax.add_patch(Circle(o.centre_m, o.radius_m, fc="0.35", ec="black"))
         else:
             ax.add_patch(Polygon(o.vertices_m, closed=True, fc="0.35", ec="black"))
-    ax.add_patch(Circle(world.goal.position_m, world.goal.radius_m, fc="tab:green", alpha=0.3))
-    ax.plot(*world.start.position_m, "o", color="tab:blue", ms=6)
-    if world.current.speed_m_s > 0:
-        a = np.radians(world.current.direction_deg)
-        x0, y0 = 0.08 * w, 0.92 * h
-        ax.annotate("", (x0 + 0.25 * np.cos(a), y0 + 0.25 * np.sin(a)), (x0, y0),
-                    arrowprops={"arrowstyle": "->", "color": "tab:cyan", "lw": 2})
-        ax.text(x0, y0 - 0.1, f"current {world.current.speed_m_s:g} m/s", fontsize=7,
-                color="tab:cyan")
+    ax.add_patch(Circle(world.goal.position_m, world.goal.radius_m, fc="tab:green", alpha=0.3,
+                        label="goal region"))
+    ax.plot(*world.start.position_m, "o", color="tab:blue", ms=6, label="start")
+    ax.add_patch(Rectangle((0, 0), 0, 0, fc="0.35", ec="black", label="obstacles"))  # legend key
+    draw_current(ax, world.current.speed_m_s, world.current.direction_deg, colour="tab:cyan",
+                 at=(0.12, 0.93))
 
 
 def plot_plan(
@@ -88,10 +85,9 @@ def plot_plan(
             ax.plot(*robot_outline(model, swim.states[k]), color="tab:blue", lw=1.0, alpha=0.6)
     status = plan.message if swim is None else f"{plan.message}\n{swim.message}"
     ax.set_title(f"{world.name}: {status}", fontsize=8)
-    ax.legend(fontsize=7, loc="lower right")
+    legend_once(ax, fontsize=7, loc="lower right")
     ax.set_aspect("equal")
-    ax.set_xlabel("x (m)")
-    ax.set_ylabel("y (m)")
+    label_axes(ax, "x, tank (m)", "y, tank (m)")
     w, h = world.tank.size_m
     ax.set_xlim(-0.05, w + 0.05)
     ax.set_ylim(-0.05, h + 0.05)

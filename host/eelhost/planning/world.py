@@ -56,8 +56,8 @@ from eelhost.planning.geometry import (
 )
 from eelsim.tomlfile import read_toml, validation_message
 
-Finite = Annotated[float, Field(allow_inf_nan=False)]
-Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+Finite = Annotated[float, Field(allow_inf_nan=False, strict=True)]  # "1" or true refused
+Positive = Annotated[float, Field(gt=0, allow_inf_nan=False, strict=True)]
 Point = tuple[Finite, Finite]
 
 EXAMPLES = ("tank_5_obstacles",)
@@ -94,7 +94,7 @@ class Goal(_Strict):
 class Current(_Strict):
     """Uniform steady current: speed and the direction it flows towards."""
 
-    speed_m_s: Annotated[float, Field(ge=0, allow_inf_nan=False)] = 0.0
+    speed_m_s: Annotated[float, Field(ge=0, allow_inf_nan=False, strict=True)] = 0.0
     direction_deg: Finite = 0.0
 
 
@@ -138,7 +138,7 @@ class World(_Strict):
     goal: Goal
     current: Current = Current()
     obstacles: list[Obstacle] = Field(default_factory=list)
-    clearance_m: Annotated[float, Field(ge=0, allow_inf_nan=False)] = 0.03
+    clearance_m: Annotated[float, Field(ge=0, allow_inf_nan=False, strict=True)] = 0.03
 
     @model_validator(mode="after")
     def _start_and_goal_in_tank(self) -> World:

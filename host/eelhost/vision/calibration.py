@@ -531,10 +531,19 @@ def save_calibration(calibration: Calibration, path: str | Path) -> Path:
     return out
 
 
+def _all_numbers(value: Any) -> bool:
+    """Whether a nested list holds only JSON numbers (not strings, not true/false)."""
+    if isinstance(value, list):
+        return all(_all_numbers(v) for v in value)
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
 def _matrix(data: dict[str, Any], key: str, shape: tuple[int | None, int], source: str) -> FloatArray:
     if key not in data:
         raise CalibrationFileError(f"{source}: missing key '{key}'")
     try:
+        if not _all_numbers(data[key]):  # numpy would read "1.5" and true as numbers
+            raise TypeError
         m = np.asarray(data[key], dtype=float)
     except (TypeError, ValueError):
         raise CalibrationFileError(f"{source}: '{key}' must be an array of numbers") from None
@@ -577,7 +586,8 @@ def load_calibration(path: str | Path) -> Calibration:
     if method not in ("tank_corners", "charuco"):
         raise CalibrationFileError(f"{source}: 'method' must be 'tank_corners' or 'charuco', got {method!r}")
     size = data.get("image_size_px")
-    if not (isinstance(size, list) and len(size) == 2 and all(isinstance(v, int) and v > 0 for v in size)):
+    if not (isinstance(size, list) and len(size) == 2 and all(
+        isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in size)):
         raise CalibrationFileError(f"{source}: 'image_size_px' must be [width, height], got {size!r}")
     h = _matrix(data, "homography_m_to_px", (3, 3), source)
     if abs(np.linalg.det(h)) < 1e-12:
@@ -587,7 +597,7 @@ def load_calibration(path: str | Path) -> Calibration:
     if len(points_m) != len(points_px):
         raise CalibrationFileError(f"{source}: 'points_m' and 'points_px' differ in length")
     rms = data.get("rms_reprojection_px")
-    if not isinstance(rms, int | float) or not math.isfinite(rms) or rms < 0:
+    if not isinstance(rms, int | float) or isinstance(rms, bool) or not math.isfinite(rms) or rms < 0:
         raise CalibrationFileError(f"{source}: 'rms_reprojection_px' must be a number >= 0")
     lens = _load_lens(data["lens"], source) if "lens" in data else None
     return Calibration(h / h[2, 2], (size[0], size[1]), method, points_m, points_px, float(rms),

@@ -40,7 +40,7 @@ class FluidCoefficients(BaseModel):
     order, and sets :attr:`law_name`. Unknown keys are refused; values are frozen.
     """
 
-    model_config = ConfigDict(extra="forbid", frozen=True, strict=False)
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
 
     law_name: ClassVar[str] = ""
 
