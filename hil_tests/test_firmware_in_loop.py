@@ -40,22 +40,31 @@ def path_deviation_m(a, b):
     return float(np.linalg.norm(a.states[:k, 6:8] - b.states[:k, 6:8], axis=1).max())
 
 
-@pytest.fixture(scope="module", params=["straight", "turning"])
-def runs(request, robot):
-    scenario = load_scenario(request.param)
+def three_runs(robot, scenario_name):
+    """The scenario, then the twin alone, the native firmware and the twin's law held per step."""
+    scenario = load_scenario(scenario_name)
     twin = simulate_closed_loop(robot, scenario, seed=0)
     native = run_firmware_in_loop(robot, scenario, seed=0)
     held = run_lockstep(robot, scenario, HeldTwinDriver(6, robot.joints.command_limit_rad), seed=0)
     return scenario, twin, native, held
 
 
-def test_native_firmware_reaches_the_waypoint(runs):
-    scenario, _, native, _ = runs
+def assert_reaches_the_waypoint_with_every_command_executed(scenario, native):
     assert native.failure == Failure.NONE, native.reason
     goal = np.array(scenario.waypoints_m[-1])
     assert np.linalg.norm(native.states[-1, 6:8] - goal) < 2 * scenario.acceptance_radius_m
     assert all(cmd.matches for cmd in native.executed)
     assert native.host_bad_frames == {}
+
+
+@pytest.fixture(scope="module", params=["straight", "turning"])
+def runs(request, robot):
+    return three_runs(robot, request.param)
+
+
+def test_native_firmware_reaches_the_waypoint(runs):
+    scenario, _, native, _ = runs
+    assert_reaches_the_waypoint_with_every_command_executed(scenario, native)
 
 
 def test_native_firmware_follows_the_twins_path_within_the_torque_hold_tolerance(runs):

@@ -21,11 +21,14 @@ derivative term and ADC rounding move the joints a little away from the twin's: 
 
 import numpy as np
 import pytest
-from test_firmware_in_loop import path_deviation_m
+from test_firmware_in_loop import (
+    assert_reaches_the_waypoint_with_every_command_executed,
+    path_deviation_m,
+    three_runs,
+)
 
 from eelhost.wire import protocol
-from eelhost.xil.drivers import HeldTwinDriver
-from eelhost.xil.lockstep import LockstepOptions, run_firmware_in_loop, run_lockstep
+from eelhost.xil.lockstep import LockstepOptions, run_firmware_in_loop
 from eelsim.closed_loop import simulate_closed_loop
 from eelsim.flags import Failure
 from eelsim.robot import load_robot
@@ -50,20 +53,12 @@ def robot():
 
 @pytest.fixture(scope="module", params=["straight", "turning"])
 def runs(request, robot):
-    scenario = load_scenario(request.param)
-    twin = simulate_closed_loop(robot, scenario, seed=0)
-    native = run_firmware_in_loop(robot, scenario, seed=0)
-    held = run_lockstep(robot, scenario, HeldTwinDriver(6, robot.joints.command_limit_rad), seed=0)
-    return scenario, twin, native, held
+    return three_runs(robot, request.param)
 
 
 def test_native_firmware_with_servo_joints_reaches_the_waypoint(runs):
     scenario, _, native, _ = runs
-    assert native.failure == Failure.NONE, native.reason
-    goal = np.array(scenario.waypoints_m[-1])
-    assert np.linalg.norm(native.states[-1, 6:8] - goal) < 2 * scenario.acceptance_radius_m
-    assert all(cmd.matches for cmd in native.executed)
-    assert native.host_bad_frames == {}
+    assert_reaches_the_waypoint_with_every_command_executed(scenario, native)
 
 
 def test_servo_joints_follow_the_firmwares_commanded_angles_as_the_twin_follows_its_gait(runs):
