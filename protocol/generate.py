@@ -617,140 +617,17 @@ class FrameReader(_framing.StreamDecoder):
 # Emitted once into the Python module, after MsgId: what every message shares.
 PY_MESSAGE_BASE = '''
 
-_M = TypeVar("_M", bound="_Message")
 _STRUCT_CODES = {STRUCT_CODES}
 
 
-def _wire(
-    wire_type: str,
-    default: float = 0,
-    *,
-    count: int = 1,
-    lo: float | None = None,
-    hi: float | None = None,
-) -> Any:
-    """A message field: its default, with its wire format in the dataclass field's metadata.
-
-    Parameters
-    ----------
-    wire_type : str
-        The type of one value on the wire: u8, u16, u32 or f32.
-    default : float
-        The default (of every element when ``count > 1``).
-    count : int
-        Number of values; more than one makes the field a tuple.
-    lo, hi : float, optional
-        The range that :meth:`_Message.validate` enforces.
-    """
-    value = (default,) * count if count > 1 else default
-    code = _STRUCT_CODES[wire_type]
-    return field(default=value, metadata={"code": code, "count": count, "range": (lo, hi)})
-
-
-class _Message:
-    """What every message shares: pack, unpack and validate, driven by its fields' metadata."""
-
-    MSG_ID: ClassVar[MsgId]
-    TO_ROBOT: ClassVar[bool]
-    FORMAT: ClassVar[str]
-    PAYLOAD_BYTES: ClassVar[int]
-    # (name, count, lo, hi) of each field in wire order, set by _message from the metadata.
-    LAYOUT: ClassVar[tuple[tuple[str, int, float | None, float | None], ...]]
-
-    if TYPE_CHECKING:
-
-        def __init__(self, *values: Any) -> None: ...
-
-    def pack(self) -> bytes:
-        """Payload bytes of this message."""
-        values: list[Any] = []
-        for name, count, _, _ in self.LAYOUT:
-            if count > 1:
-                values.extend(getattr(self, name))
-            else:
-                values.append(getattr(self, name))
-        return struct.pack(self.FORMAT, *values)
-
-    @classmethod
-    def unpack(cls, payload: bytes) -> Self:
-        """Message from its payload bytes (struct.error on a wrong size)."""
-        flat = struct.unpack(cls.FORMAT, payload)
-        values: list[Any] = []
-        for _, count, _, _ in cls.LAYOUT:
-            values.append(tuple(flat[:count]) if count > 1 else flat[0])
-            flat = flat[count:]
-        return cls(*values)
-
-    def validate(self) -> None:
-        """Raise ValueError when a field is not finite or out of range."""
-        for name, _, lo, hi in self.LAYOUT:
-            v = getattr(self, name)
-            if lo is not None and hi is not None and not (math.isfinite(v) and lo <= v <= hi):
-                raise ValueError(f"{type(self).__name__}.{name}={v} outside [{lo}, {hi}]")
-
-
-def _message(msg_id: MsgId, *, to_robot: bool) -> Callable[[type[_M]], type[_M]]:
-    """Class decorator: bind a message dataclass to its id and derive its wire format."""
-
-    def bind(cls: type[_M]) -> type[_M]:
-        wire = fields(cls)  # type: ignore[arg-type]
-        cls.MSG_ID, cls.TO_ROBOT = msg_id, to_robot
-        cls.LAYOUT = tuple((f.name, f.metadata["count"], *f.metadata["range"]) for f in wire)
-        cls.FORMAT = "<" + "".join(
-            (str(f.metadata["count"]) if f.metadata["count"] > 1 else "") + f.metadata["code"]
-            for f in wire
-        )
-        cls.PAYLOAD_BYTES = struct.calcsize(cls.FORMAT)
-        return cls
-
-    return bind
+def _wire(wire_type: str, default: float = 0, **layout: Any) -> Any:
+    """A field of this schema's ``wire_type`` (:func:`eelhost.wire.messages.wire_field`)."""
+    return wire_field(_STRUCT_CODES[wire_type], default, **layout)
 '''
 
 
 # Emitted once into the Python module, before the settings table.
 PY_SETTINGS_BASE = '''
-
-
-@dataclass(frozen=True)
-class SettingInfo:
-    """One of the robot's settings (GetSetting, SetSetting): how the robot stores and checks it.
-
-    Attributes
-    ----------
-    name : str
-        Its name (``SETTINGS`` is keyed by it).
-    key : int
-        Its key on the wire (:class:`SettingKey`).
-    wire_type : str
-        How the robot stores it: u8, u16, i16 (whole values) or f32. Values travel as f32.
-    count : int
-        Elements: N_JOINTS for a per-joint setting (index 0 = joint 1), else 1.
-    lo, hi : float
-        The range the robot accepts.
-    default : float
-        The value a robot with a blank or corrupt EEPROM uses.
-    doc : str
-        What it means.
-    """
-
-    name: str
-    key: int
-    wire_type: str
-    count: int
-    lo: float
-    hi: float
-    default: float
-    doc: str
-
-    def check(self, value: float, index: int = 0) -> None:
-        """Raise ValueError, naming the setting, when the robot would refuse this value or index."""
-        if not 0 <= index < self.count:
-            raise ValueError(f"{self.name}: index {index} outside 0..{self.count - 1}")
-        if not (math.isfinite(value) and self.lo <= value <= self.hi):
-            raise ValueError(f"{self.name}={value} outside [{self.lo}, {self.hi}]")
-        if self.wire_type != "f32" and value != int(value):
-            raise ValueError(f"{self.name}={value}: a whole number is needed")
-
 
 '''
 
@@ -763,8 +640,8 @@ def _py_count(d: dict, f: Field) -> str:
 def _py_message(d: dict, m: Message) -> list[str]:
     """The dataclass of one message: its docstring and one line per field."""
     to_robot = m.direction == "to_robot"
-    out = ["", "", f"@_message(MsgId.{m.upper}, to_robot={to_robot})", "@dataclass(frozen=True)"]
-    out.append(f"class {m.name}(_Message):")
+    out = ["", "", f"@bind_message(MsgId.{m.upper}, to_robot={to_robot})", "@dataclass(frozen=True)"]
+    out.append(f"class {m.name}(WireMessage):")
     doc = textwrap.wrap(m.doc, 92)
     if not m.fields and len(doc) == 1:
         return out + [f'    """{doc[0]}"""']
@@ -820,12 +697,9 @@ def render_python(d: dict) -> str:
         "",
         "from __future__ import annotations",
         "",
-        "import math",
-        "import struct",
-        "from collections.abc import Callable",
-        "from dataclasses import dataclass, field, fields",
+        "from dataclasses import dataclass",
         "from enum import IntEnum, IntFlag",
-        "from typing import TYPE_CHECKING, Any, ClassVar, Self, TypeVar",
+        "from typing import Any",
         "",
         "from eelhost.wire import framing as _framing",
         "from eelhost.wire.framing import (  # noqa: F401 (part of this module's interface)",
@@ -834,6 +708,7 @@ def render_python(d: dict) -> str:
         "    cobs_encode,",
         "    crc16_ccitt_false,",
         ")",
+        "from eelhost.wire.messages import SettingInfo, WireMessage, bind_message, wire_field",
         "",
         f"SCHEMA_HASH = 0x{d['schema_hash']:04X}",
         f"PROTOCOL_VERSION = {p['version']}",

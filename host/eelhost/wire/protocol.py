@@ -8,12 +8,9 @@ sent to the robot carry the CRC-32 (ISO-HDLC, as zlib.crc32) of header and paylo
 
 from __future__ import annotations
 
-import math
-import struct
-from collections.abc import Callable
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass
 from enum import IntEnum, IntFlag
-from typing import TYPE_CHECKING, Any, ClassVar, Self, TypeVar
+from typing import Any
 
 from eelhost.wire import framing as _framing
 from eelhost.wire.framing import (  # noqa: F401 (part of this module's interface)
@@ -22,6 +19,7 @@ from eelhost.wire.framing import (  # noqa: F401 (part of this module's interfac
     cobs_encode,
     crc16_ccitt_false,
 )
+from eelhost.wire.messages import SettingInfo, WireMessage, bind_message, wire_field
 
 SCHEMA_HASH = 0xB684
 PROTOCOL_VERSION = 2
@@ -200,104 +198,23 @@ class MsgId(IntEnum):
     STATUS = 0x86
 
 
-_M = TypeVar("_M", bound="_Message")
 _STRUCT_CODES = {"u8": "B", "u16": "H", "i16": "h", "u32": "I", "f32": "f"}
 
 
-def _wire(
-    wire_type: str,
-    default: float = 0,
-    *,
-    count: int = 1,
-    lo: float | None = None,
-    hi: float | None = None,
-) -> Any:
-    """A message field: its default, with its wire format in the dataclass field's metadata.
-
-    Parameters
-    ----------
-    wire_type : str
-        The type of one value on the wire: u8, u16, u32 or f32.
-    default : float
-        The default (of every element when ``count > 1``).
-    count : int
-        Number of values; more than one makes the field a tuple.
-    lo, hi : float, optional
-        The range that :meth:`_Message.validate` enforces.
-    """
-    value = (default,) * count if count > 1 else default
-    code = _STRUCT_CODES[wire_type]
-    return field(default=value, metadata={"code": code, "count": count, "range": (lo, hi)})
+def _wire(wire_type: str, default: float = 0, **layout: Any) -> Any:
+    """A field of this schema's ``wire_type`` (:func:`eelhost.wire.messages.wire_field`)."""
+    return wire_field(_STRUCT_CODES[wire_type], default, **layout)
 
 
-class _Message:
-    """What every message shares: pack, unpack and validate, driven by its fields' metadata."""
-
-    MSG_ID: ClassVar[MsgId]
-    TO_ROBOT: ClassVar[bool]
-    FORMAT: ClassVar[str]
-    PAYLOAD_BYTES: ClassVar[int]
-    # (name, count, lo, hi) of each field in wire order, set by _message from the metadata.
-    LAYOUT: ClassVar[tuple[tuple[str, int, float | None, float | None], ...]]
-
-    if TYPE_CHECKING:
-
-        def __init__(self, *values: Any) -> None: ...
-
-    def pack(self) -> bytes:
-        """Payload bytes of this message."""
-        values: list[Any] = []
-        for name, count, _, _ in self.LAYOUT:
-            if count > 1:
-                values.extend(getattr(self, name))
-            else:
-                values.append(getattr(self, name))
-        return struct.pack(self.FORMAT, *values)
-
-    @classmethod
-    def unpack(cls, payload: bytes) -> Self:
-        """Message from its payload bytes (struct.error on a wrong size)."""
-        flat = struct.unpack(cls.FORMAT, payload)
-        values: list[Any] = []
-        for _, count, _, _ in cls.LAYOUT:
-            values.append(tuple(flat[:count]) if count > 1 else flat[0])
-            flat = flat[count:]
-        return cls(*values)
-
-    def validate(self) -> None:
-        """Raise ValueError when a field is not finite or out of range."""
-        for name, _, lo, hi in self.LAYOUT:
-            v = getattr(self, name)
-            if lo is not None and hi is not None and not (math.isfinite(v) and lo <= v <= hi):
-                raise ValueError(f"{type(self).__name__}.{name}={v} outside [{lo}, {hi}]")
-
-
-def _message(msg_id: MsgId, *, to_robot: bool) -> Callable[[type[_M]], type[_M]]:
-    """Class decorator: bind a message dataclass to its id and derive its wire format."""
-
-    def bind(cls: type[_M]) -> type[_M]:
-        wire = fields(cls)  # type: ignore[arg-type]
-        cls.MSG_ID, cls.TO_ROBOT = msg_id, to_robot
-        cls.LAYOUT = tuple((f.name, f.metadata["count"], *f.metadata["range"]) for f in wire)
-        cls.FORMAT = "<" + "".join(
-            (str(f.metadata["count"]) if f.metadata["count"] > 1 else "") + f.metadata["code"]
-            for f in wire
-        )
-        cls.PAYLOAD_BYTES = struct.calcsize(cls.FORMAT)
-        return cls
-
-    return bind
-
-
-@_message(MsgId.HELLO, to_robot=True)
+@bind_message(MsgId.HELLO, to_robot=True)
 @dataclass(frozen=True)
-class Hello(_Message):
+class Hello(WireMessage):
     """Ask who the robot is (it answers Version); also resynchronises the sequence check."""
 
 
-@_message(MsgId.SET_GAIT, to_robot=True)
+@bind_message(MsgId.SET_GAIT, to_robot=True)
 @dataclass(frozen=True)
-class SetGait(_Message):
+class SetGait(WireMessage):
     """Set the gait (A, omega, beta) and the slew-rate settings; no joint reference jumps.
 
     Attributes
@@ -325,9 +242,9 @@ class SetGait(_Message):
     offset_rate_rad_s: float = _wire("f32", 2.0, lo=0.0, hi=100.0)
 
 
-@_message(MsgId.SET_OFFSET, to_robot=True)
+@bind_message(MsgId.SET_OFFSET, to_robot=True)
 @dataclass(frozen=True)
-class SetOffset(_Message):
+class SetOffset(WireMessage):
     """Set the steering offset gamma added to every joint (the host sends it every ~0.3 s).
 
     Attributes
@@ -339,21 +256,21 @@ class SetOffset(_Message):
     offset_rad: float = _wire("f32", 0.0, lo=-1.0, hi=1.0)
 
 
-@_message(MsgId.START, to_robot=True)
+@bind_message(MsgId.START, to_robot=True)
 @dataclass(frozen=True)
-class Start(_Message):
+class Start(WireMessage):
     """Start undulating (from IDLE or FAILSAFE); the amplitude ramps up from its present value."""
 
 
-@_message(MsgId.STOP, to_robot=True)
+@bind_message(MsgId.STOP, to_robot=True)
 @dataclass(frozen=True)
-class Stop(_Message):
+class Stop(WireMessage):
     """Stop undulating and straighten (amplitude and offset ramp to zero)."""
 
 
-@_message(MsgId.SET_GAINS, to_robot=True)
+@bind_message(MsgId.SET_GAINS, to_robot=True)
 @dataclass(frozen=True)
-class SetGains(_Message):
+class SetGains(WireMessage):
     """Set the joint PD gains and torque limit (settings: SaveSettings stores them).
 
     Attributes
@@ -371,9 +288,9 @@ class SetGains(_Message):
     torque_limit_nm: float = _wire("f32", 1.26, lo=0.0, hi=10.0)
 
 
-@_message(MsgId.GET_SETTING, to_robot=True)
+@bind_message(MsgId.GET_SETTING, to_robot=True)
 @dataclass(frozen=True)
-class GetSetting(_Message):
+class GetSetting(WireMessage):
     """Ask for one setting's value (one element of a per-joint setting); the answer is Setting.
 
     Attributes
@@ -388,9 +305,9 @@ class GetSetting(_Message):
     index: int = _wire("u8")
 
 
-@_message(MsgId.SET_SETTING, to_robot=True)
+@bind_message(MsgId.SET_SETTING, to_robot=True)
 @dataclass(frozen=True)
-class SetSetting(_Message):
+class SetSetting(WireMessage):
     """Change one setting in RAM (SaveSettings stores it); refused while RUNNING.
 
     Attributes
@@ -408,27 +325,27 @@ class SetSetting(_Message):
     value: float = _wire("f32", 0.0)
 
 
-@_message(MsgId.SAVE_SETTINGS, to_robot=True)
+@bind_message(MsgId.SAVE_SETTINGS, to_robot=True)
 @dataclass(frozen=True)
-class SaveSettings(_Message):
+class SaveSettings(WireMessage):
     """Write the settings in use to the EEPROM (Ack once written and read back)."""
 
 
-@_message(MsgId.DEFAULT_SETTINGS, to_robot=True)
+@bind_message(MsgId.DEFAULT_SETTINGS, to_robot=True)
 @dataclass(frozen=True)
-class DefaultSettings(_Message):
+class DefaultSettings(WireMessage):
     """Put every setting back to its default in RAM (SaveSettings stores them)."""
 
 
-@_message(MsgId.GET_STATUS, to_robot=True)
+@bind_message(MsgId.GET_STATUS, to_robot=True)
 @dataclass(frozen=True)
-class GetStatus(_Message):
+class GetStatus(WireMessage):
     """Ask for a Status frame now (it also comes every 1 s)."""
 
 
-@_message(MsgId.VERSION, to_robot=False)
+@bind_message(MsgId.VERSION, to_robot=False)
 @dataclass(frozen=True)
-class Version(_Message):
+class Version(WireMessage):
     """Answer to Hello.
 
     Attributes
@@ -461,9 +378,9 @@ class Version(_Message):
     radio_id: int = _wire("u16")
 
 
-@_message(MsgId.TELEMETRY, to_robot=False)
+@bind_message(MsgId.TELEMETRY, to_robot=False)
 @dataclass(frozen=True)
-class Telemetry(_Message):
+class Telemetry(WireMessage):
     """Sent every 100 ms: time, state, references, measured angles, counters.
 
     Attributes
@@ -503,9 +420,9 @@ class Telemetry(_Message):
     phi_mrad: tuple[int, ...] = _wire("i16", count=N_JOINTS)
 
 
-@_message(MsgId.ACK, to_robot=False)
+@bind_message(MsgId.ACK, to_robot=False)
 @dataclass(frozen=True)
-class Ack(_Message):
+class Ack(WireMessage):
     """The command with this id and sequence number was applied.
 
     Attributes
@@ -520,9 +437,9 @@ class Ack(_Message):
     seq: int = _wire("u8")
 
 
-@_message(MsgId.REFUSE, to_robot=False)
+@bind_message(MsgId.REFUSE, to_robot=False)
 @dataclass(frozen=True)
-class Refuse(_Message):
+class Refuse(WireMessage):
     """The command with this id and sequence number was refused and had no effect.
 
     Attributes
@@ -540,9 +457,9 @@ class Refuse(_Message):
     reason: int = _wire("u8")
 
 
-@_message(MsgId.SETTING, to_robot=False)
+@bind_message(MsgId.SETTING, to_robot=False)
 @dataclass(frozen=True)
-class Setting(_Message):
+class Setting(WireMessage):
     """Answer to GetSetting: one setting's value as the robot holds it.
 
     Attributes
@@ -560,9 +477,9 @@ class Setting(_Message):
     value: float = _wire("f32", 0.0)
 
 
-@_message(MsgId.STATUS, to_robot=False)
+@bind_message(MsgId.STATUS, to_robot=False)
 @dataclass(frozen=True)
-class Status(_Message):
+class Status(WireMessage):
     """Health, sent every 1 s and on GetStatus: boot, battery, every counter.
 
     Attributes
@@ -656,47 +573,6 @@ MESSAGES: dict[int, type] = {
     MsgId.STATUS: Status,
 }
 
-
-
-@dataclass(frozen=True)
-class SettingInfo:
-    """One of the robot's settings (GetSetting, SetSetting): how the robot stores and checks it.
-
-    Attributes
-    ----------
-    name : str
-        Its name (``SETTINGS`` is keyed by it).
-    key : int
-        Its key on the wire (:class:`SettingKey`).
-    wire_type : str
-        How the robot stores it: u8, u16, i16 (whole values) or f32. Values travel as f32.
-    count : int
-        Elements: N_JOINTS for a per-joint setting (index 0 = joint 1), else 1.
-    lo, hi : float
-        The range the robot accepts.
-    default : float
-        The value a robot with a blank or corrupt EEPROM uses.
-    doc : str
-        What it means.
-    """
-
-    name: str
-    key: int
-    wire_type: str
-    count: int
-    lo: float
-    hi: float
-    default: float
-    doc: str
-
-    def check(self, value: float, index: int = 0) -> None:
-        """Raise ValueError, naming the setting, when the robot would refuse this value or index."""
-        if not 0 <= index < self.count:
-            raise ValueError(f"{self.name}: index {index} outside 0..{self.count - 1}")
-        if not (math.isfinite(value) and self.lo <= value <= self.hi):
-            raise ValueError(f"{self.name}={value} outside [{self.lo}, {self.hi}]")
-        if self.wire_type != "f32" and value != int(value):
-            raise ValueError(f"{self.name}={value}: a whole number is needed")
 SETTINGS: dict[str, SettingInfo] = {
     "trim_us": SettingInfo(
         "trim_us", 1, "i16", N_JOINTS, -500, 500, 0,
