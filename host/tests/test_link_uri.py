@@ -50,6 +50,8 @@ class ManualClock:
         ("sim://?drop=3:2", "drop='3:2'"),
         ("sim://?radio=wifi", "radio='wifi'"),
         ("sim://?start=1,2", "start='1,2'"),
+        ("sim://?coefficients=0.01,0.8,0.6", "coefficients='0.01,0.8,0.6'.*C_f, C_d, C_a, C_m"),
+        ("sim://?coefficients=0.01,-0.8,0.6,0.01", "coefficients='0.01,-0.8,0.6,0.01'"),
         ("replay://", "no log file path"),
     ],
 )

@@ -13,7 +13,10 @@ probability), ``drop=START:END`` (the link is down over that window, s; repeat o
 commas), ``start=x,y,heading_deg`` (where the robot starts in the virtual tank),
 ``current=speed,direction_deg``, ``feedback`` (1: analog-feedback servos, the robot measures its
 joint angles and runs the PD itself; 0 by default), ``battery`` (volts of a battery behind the
-robot's divider, measured by the firmware; none by default).
+robot's divider, measured by the firmware; none by default), ``coefficients=C_f,C_d,C_a,C_m``
+(the water the virtual robot swims in, in the order of the robot file's fluid law; by default the
+robot file's ``[hydrodynamics]``: the host's model and the virtual tank's truth are then the same
+numbers, docs/host.md "The virtual robot and replays").
 """
 
 from __future__ import annotations
@@ -22,9 +25,12 @@ import math
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Protocol
 
+from pydantic import ValidationError
+
 from eelhost.link.base import Clock, Link, TransportError
 from eelhost.link.uri import LinkURI, LinkURIError, Port, TransportScheme, register_transport
 from eelsim.robot import Robot, load_robot
+from eelsim.tomlfile import validation_message
 
 if TYPE_CHECKING:
     from eelhost.xil.virtual_robot import VirtualRobot
@@ -110,8 +116,24 @@ class SimTransport:
 
 def _open_sim(u: LinkURI, robot: Robot | None, clock: Clock | None) -> Link:
     """A link to a new virtual robot; its clock, not ``clock``, times the link."""
-    vr = _virtual_robot(u, robot or load_robot())
+    vr = _virtual_robot(u, _in_the_water(u, robot or load_robot()))
     return Link(vr.transport(), vr.clock)
+
+
+def _in_the_water(u: LinkURI, robot: Robot) -> Robot:
+    """The robot with the URI's ``coefficients`` as its water (the robot file's without them)."""
+    raw = u.one("coefficients")
+    if raw is None:
+        return robot
+    values = u.numbers("coefficients", raw, None)
+    law = type(robot.hydrodynamics)
+    try:
+        return robot.with_coefficients(law.from_array(values))
+    except ValidationError as err:  # a value out of the law's range
+        where = f"{u.text!r}: coefficients={raw!r}"
+        raise LinkURIError(validation_message(where, err, f"{law.law_name} coefficients")) from None
+    except ValueError as err:  # the wrong count; the message names the law's coefficients
+        raise LinkURIError(f"{u.text!r}: coefficients={raw!r}: {err}") from None
 
 
 def _virtual_robot(u: LinkURI, robot: Robot) -> VirtualRobot:
@@ -177,7 +199,8 @@ register_transport(
     TransportScheme(
         name="sim",
         parameters=(
-            "speed", "seed", "radio", "loss", "drop", "start", "current", "feedback", "battery"
+            "speed", "seed", "radio", "loss", "drop", "start", "current", "feedback", "battery",
+            "coefficients",
         ),
         target="",
         open=_open_sim,
