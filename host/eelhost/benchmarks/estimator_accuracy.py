@@ -209,6 +209,7 @@ def estimator_report(
                 f"{r['fits'][m].fitness:.4f} after {r['sims'][m]}, reached the GA's after "
                 f"{_sims_to_reach(r['fits'][m], f.fitness)}"
                 for m, (f, n) in r["ga"].items()))
+        section_start = len(lines)
         lines += [
             f"## {label[0].upper() + label[1:]}",
             "",
@@ -222,7 +223,6 @@ def estimator_report(
             ]
             lines += _recovery_rows(r)
             lines.append("")
-        table_start = len(lines)
         if fit_current:
             lines += ["Fitted ambient current: " + "; ".join(
                 f"{m} {res.model.current_text()}" for m, res in r["fits"].items()) + ".", ""]
@@ -239,7 +239,7 @@ def estimator_report(
                 f"<= {TARGET_WORST_EX[m]} ({met}) | {PAPER_WORST_EX[m]} |"
             )
         lines.append("")
-        say("\n".join(lines[table_start:]))
+        say("\n".join(lines[section_start:]))  # the tank's section, recovery included
     if ga:
         lines += [
             "## The paper's GA against the default method, every tank",
