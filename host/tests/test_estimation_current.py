@@ -199,3 +199,21 @@ def test_the_command_line_turns_the_current_off(stray_tank, tmp_path, capsys):
     stored = json.loads((out / "coefficients.json").read_text())["fits"]["straight"]
     assert set(stored["ambient_current"]) >= set(CURRENT_NAMES)
     assert "ambient current" in capsys.readouterr().out
+
+
+def test_the_report_bounds_and_judges_the_current_like_the_coefficients(stray_tank, tmp_path):
+    from eelhost.estimation.report import run_report
+
+    settings = FitSettings("cmaes", seed=0, budget=60, polish_iterations=4)
+    report = run_report(stray_tank, tmp_path, motions=("straight",), settings=settings,
+                        bootstrap_replicates=3, compare_models=True)
+    data = json.loads((tmp_path / "coefficients.json").read_text())
+    fit = data["fits"]["straight"]
+    est = [fit["ambient_current"][n] for n in CURRENT_NAMES]
+    unc = data["uncertainty"]["straight"]
+    for n, v in zip(CURRENT_NAMES, est, strict=True):
+        assert unc["lower"][n] <= v <= unc["upper"][n]
+        assert n in data["identifiability"]["straight"]["verdict"]
+    # every candidate model of the comparison fits the current too: Morison's 4 + 2
+    assert data["model_comparison"]["candidates"]["pd x morison"]["parameters"] == 6
+    assert "Ambient current of the tank" in report.read_text()
