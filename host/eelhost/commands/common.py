@@ -283,9 +283,10 @@ def add_current_option(p: argparse.ArgumentParser | argparse._ArgumentGroup) -> 
         "--fit-current",
         action=argparse.BooleanOptionalAction,
         default=True,
-        help="fit an unknown uniform current in the tank (v_x, v_y within +-0.03 m/s, shared by "
-        "every experiment and added to the current each declares) with the coefficients "
-        "(default: on; --no-fit-current: the paper's protocol, the declared currents only)",
+        help="fit an unknown uniform current in the tank (v_x, v_y within +-0.03 m/s, shared by a "
+        "fit's experiments and added to the current each declares) with the coefficients "
+        "(default: %(default)s; --no-fit-current: the paper's protocol, the declared currents "
+        "only)",
     )
 
 
