@@ -217,3 +217,17 @@ def test_the_report_bounds_and_judges_the_current_like_the_coefficients(stray_ta
     # every candidate model of the comparison fits the current too: Morison's 4 + 2
     assert data["model_comparison"]["candidates"]["pd x morison"]["parameters"] == 6
     assert "Ambient current of the tank" in report.read_text()
+
+
+@pytest.mark.parametrize("method", ["cmaes", "cmaes-lsq", "ga", "minimax", "lsq"])
+def test_every_method_fits_the_current_after_the_coefficients(stray_tank, method):
+    settings = FitSettings(method, seed=0, budget=24, pop_size=6, generations=2,
+                           polish_iterations=2)
+    res, ev = fit_motion(stray_tank, "straight", settings)
+    assert res.space.names[-2:] == CURRENT_NAMES and ev.space is res.space
+    # the second stage starts from the still-water fit, so it can only improve on it
+    still, _ = fit_motion(stray_tank, "straight", FitSettings(
+        method, seed=0, budget=24, pop_size=6, generations=2, polish_iterations=2,
+        fit_current=False))
+    assert res.fitness <= still.fitness
+    assert res.simulations == ev.simulations > still.simulations
