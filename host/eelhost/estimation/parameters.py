@@ -4,12 +4,12 @@ A fit's parameter vector is the fluid law's coefficients (names and default boun
 ``eelsim.fluid.get_fluid_law(name)``; docs/model.md section 6), followed by the joint model's
 fitted parameters, if any (names and bounds from the joint model), followed, when the space
 fits one, by the tank's unknown ambient current (``current_x_m_s``, ``current_y_m_s``: a nuisance
-shared by every experiment of a dataset and added to the current each declares; docs/estimation.md,
-"Nuisance parameters"). A :class:`ParameterSpace`
-names them, maps them to and from the unit cube the optimisers search (linearly onto the
-bounds), and turns a vector into what the twin runs: the coefficient record, the robot with
-the joint parameters set and the ambient current. A :class:`FittedModel` is one point of a space: what
-``coefficients.json`` stores and ``eelbot validate`` predicts with.
+shared by the fit's experiments and added to the current each declares; docs/estimation.md,
+"Nuisance parameters"). A :class:`ParameterSpace` names them, maps them to and from the unit cube
+the optimisers search (linearly onto the bounds), and turns a vector into what the twin runs: the
+coefficient record, the robot with the joint parameters set and the ambient current. A
+:class:`FittedModel` is one point of a space: what ``coefficients.json`` stores and
+``eelbot validate`` predicts with.
 
 Clock offsets, the other nuisance of the recordings, are not in the vector: they are profiled
 per experiment (:mod:`eelhost.estimation.evaluate`), which costs no simulation.
