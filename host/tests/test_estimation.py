@@ -98,7 +98,8 @@ def test_default_method_recovers_the_truth_on_a_small_dataset(tiny_dataset):
     res, ev = fit_motion(
         ds, "straight", FitSettings("cmaes", seed=0, budget=600, polish_iterations=8)
     )
-    truth_fitness = float(ev.fitness(TRUTH.as_array()[None])[0])
+    # the truth: table 3 in still water (the fit's ambient current is a nuisance it also fits)
+    truth_fitness = float(ev.fitness(ev.space.vector(TRUTH.as_array(), ds.robot)[None])[0])
     assert res.fitness <= truth_fitness * 1.05 + 1e-3
     got, want = res.coefficients.as_array(), TRUTH.as_array()
     assert abs(got[1] - want[1]) / want[1] < 0.15  # C_d: the best pinned-down coefficient

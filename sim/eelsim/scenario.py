@@ -102,6 +102,23 @@ class Scenario(BaseModel):
         a = math.radians(self.current_direction_deg)
         return (self.current_speed_m_s * math.cos(a), self.current_speed_m_s * math.sin(a))
 
+    def with_added_current(self, extra_m_s: tuple[float, float]) -> Scenario:
+        """The task in water whose current also has ``extra_m_s`` (v_x, v_y) added to it.
+
+        Uniform currents add as vectors (docs/model.md): estimation adds a tank's fitted
+        ambient current to the one an experiment declares. Returns ``self`` when nothing is
+        added, so that runs without current keep the kernel's sweep without current terms.
+        """
+        dx, dy = float(extra_m_s[0]), float(extra_m_s[1])
+        if dx == 0.0 and dy == 0.0:
+            return self
+        vx, vy = self.current_m_s
+        vx, vy = vx + dx, vy + dy
+        return self.model_copy(update={
+            "current_speed_m_s": math.hypot(vx, vy),
+            "current_direction_deg": math.degrees(math.atan2(vy, vx)),
+        })
+
 
 def grid_scenario(motion: str, amplitude_rad: float, omega_rad_s: float) -> Scenario:
     """A straight or turning experiment of the paper for one gait of the grid.

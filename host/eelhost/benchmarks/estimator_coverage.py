@@ -26,7 +26,7 @@ from eelhost.data.virtual_tank import (
 )
 from eelhost.estimation.evaluate import Evaluator
 from eelhost.estimation.identify import identifiability
-from eelhost.estimation.methods import FitProblem, get_method
+from eelhost.estimation.methods import FitProblem, run_fit
 from eelhost.estimation.parameters import ParameterSpace
 from eelhost.estimation.pipeline import FitSettings
 from eelhost.estimation.uncertainty import WIDEN, BootstrapResult, parametric_bootstrap
@@ -101,31 +101,32 @@ def measure_coverage(
     Coverage
     """
     robot = load_robot()
-    truth = TABLE3[MOTION]
-    space = ParameterSpace.for_robot(robot)
+    # the fit's parameters (with the ambient current when the settings fit it: still water here)
+    space = ParameterSpace.for_robot(robot, current=(settings or FitSettings()).fit_current)
+    truth = np.concatenate([TABLE3[MOTION].as_array(), np.zeros(len(space.current_names))])
     gaits = [s for motion, split, s in paper_experiment_plan()
              if motion == MOTION and split == "train"]
     results = []
     for k in range(seeds):
         seed = first_seed + k
-        exps = [record_experiment(robot, s, MOTION, truth, TankSettings(), seed=1000 * seed + i)
+        exps = [record_experiment(robot, s, MOTION, TABLE3[MOTION], TankSettings(),
+                                  seed=1000 * seed + i)
                 for i, s in enumerate(gaits)]
         fit_settings = settings or FitSettings(seed=seed)
         ev = Evaluator(robot, exps, backend=fit_settings.backend, align_s=fit_settings.align_s,
                        space=space)
-        res = get_method(fit_settings.method)(
-            FitProblem(ev, fit_settings, space.start(robot)))
+        res = run_fit(FitProblem(ev, fit_settings, space.start(robot)))
         boot = parametric_bootstrap(ev, res.values, res.fitness, replicates, seed=seed,
                                     unidentified=identifiability(ev, res.values).unidentified())
         results.append(boot)
         line = (f"seed {seed}: " + ", ".join(
             f"{n} {v:.4g} [{lo:.4g}, {hi:.4g}]{'' if c else ' MISSED'}"
             for n, v, lo, hi, c in zip(space.names, boot.estimate, boot.lower, boot.upper,
-                                       boot.covers(truth.as_array()), strict=True)))
+                                       boot.covers(truth), strict=True)))
         log.info("%s", line)
         if say:
             say(line)
-    return Coverage(space.names, truth.as_array(), results)
+    return Coverage(space.names, truth, results)
 
 
 def coverage_markdown(cov: Coverage, seeds_command: str) -> str:

@@ -271,8 +271,22 @@ def add_fit_options(p: argparse.ArgumentParser) -> None:
         help="while fitting, search each recording's clock offset within +-SECONDS "
         "(default 0: the paper's protocol; with few experiments the offsets absorb model error)",
     )
+    add_current_option(g)
     g.add_argument(
         "--resume", action="store_true", help="continue interrupted fits from their checkpoints"
+    )
+
+
+def add_current_option(p: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
+    """--fit-current / --no-fit-current: fit the tank's unknown ambient current as a nuisance."""
+    p.add_argument(
+        "--fit-current",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="fit an unknown uniform current in the tank (v_x, v_y within +-0.03 m/s, shared by a "
+        "fit's experiments and added to the current each declares) with the coefficients "
+        "(default: %(default)s; --no-fit-current: the paper's protocol, the declared currents "
+        "only)",
     )
 
 
@@ -328,4 +342,5 @@ def fit_settings(args: argparse.Namespace):
         args.generations,
         backend=args.backend,
         align_s=args.align,
+        fit_current=args.fit_current,
     )

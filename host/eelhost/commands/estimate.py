@@ -73,6 +73,7 @@ def run(args: argparse.Namespace) -> int:
             f"{motion}: fitness {res.fitness:.4f}, {res.evaluations} candidates, "
             f"{res.simulations} simulations, "
             + " ".join(f"{name} {value:.4g}" for name, value in res.space.as_dict(res.values).items())
+            + (f" (ambient current {res.model.current_text()})" if res.space.current else "")
         )
     path = write_coefficients(Path(args.out) / "coefficients.json", fits)
     print(f"wrote {path}")

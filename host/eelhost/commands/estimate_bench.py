@@ -10,7 +10,13 @@ import argparse
 from pathlib import Path
 
 from eelhost.benchmarks.estimator_accuracy import estimator_report
-from eelhost.commands.common import COUNT, SEED, add_write_option, write_report
+from eelhost.commands.common import (
+    COUNT,
+    SEED,
+    add_current_option,
+    add_write_option,
+    write_report,
+)
 
 WRITE_DEFAULT = "docs/estimation_benchmarks.md"
 
@@ -43,6 +49,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--replicates", type=COUNT, default=8, help="bootstrap refits (--coverage)")
     p.add_argument("--seed", type=SEED, default=0, help="seed of the datasets and the fits")
+    add_current_option(p)  # one setting for every tank
     p.set_defaults(run=run)
 
 
@@ -69,6 +76,7 @@ def run(args: argparse.Namespace) -> int:
         ga=not args.skip_ga,
         progress=lambda line: print(line, flush=True),
         only=tuple(args.tanks.split(",")) if args.tanks else None,
+        fit_current=args.fit_current,
     )
     if write_report(args.write, text):
         print(f"wrote {args.write}")  # the tables went to stdout as they were measured

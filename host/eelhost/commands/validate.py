@@ -50,6 +50,10 @@ def run(args: argparse.Namespace) -> int:
     dataset = load_dataset(args.dataset, allow_incomplete=args.allow_incomplete)
     fitted = read_coefficients(args.coefficients, dataset.robot)
     tests = [e for exps in dataset.test.values() for e in exps] + list(dataset.paths)
+    for name, model in fitted.items():
+        if model.current_text() is not None:
+            print(f"{name}: simulated in the fitted ambient current, {model.current_text()}, "
+                  "added to each experiment's declared current")
     with Progress("validate", 2, "stage") as bar:  # the simulations, then the figures
         runs = validate(dataset.robot, fitted, tests, backend=args.backend, align_s=args.align)
         bar.set(1)

@@ -16,8 +16,10 @@ file keeps the paper's model; docs/estimation.md, "Test plants"):
 - ``servo_limits``: the true joints obey the servos' torque-speed line;
 - ``joints``: the true joints are another joint model (e.g. stiff servos with lag), given as the
   robot file's ``[joints]`` table;
-- ``stray_current_m_s``: a weak current in a random (seeded) direction that the metadata does not
-  mention;
+- ``stray_current_m_s``: a weak current that the metadata does not mention, in a random (seeded)
+  direction drawn anew for every experiment, or with ``stray_current_direction_deg`` one steady
+  current of the whole tank (the residual current of a lab tank, which estimation can fit as a
+  nuisance: docs/estimation.md, "Nuisance parameters");
 - ``median``: the recording's median filter is centred (declared in the camera facts, as a lab
   would declare it).
 
@@ -77,6 +79,9 @@ class TankSettings:
         Mismatch knobs (see the module docstring).
     stray_current_m_s : float
         Speed of the unmodelled current (0: none).
+    stray_current_direction_deg : float, optional
+        The direction it flows towards, the same in every experiment (default: a random one per
+        experiment).
     pixel_m : float
         The camera's pixel size on the water (0: no rounding).
     median : {"causal", "centred"}
@@ -91,6 +96,7 @@ class TankSettings:
     head_tail: bool = False
     servo_limits: bool = False
     stray_current_m_s: float = 0.0
+    stray_current_direction_deg: float | None = None
     pixel_m: float = 0.0038
     median: str = "causal"
     joints: dict | None = None
@@ -106,6 +112,8 @@ class TankSettings:
             "pixel_m": self.pixel_m,
             "median": self.median,
         }
+        if self.stray_current_direction_deg is not None:
+            out["stray_current_direction_deg"] = self.stray_current_direction_deg
         if self.joints:
             out["joint_model"] = str(self.joints.get("model", "pd"))
         return out
@@ -191,8 +199,11 @@ def mismatched_plants() -> dict[str, Plant]:
         Plant("head_tail", "bulkier head and pointed tail", TankSettings(head_tail=True)),
         Plant("servo_limits", "joints on the servos' torque-speed line",
               TankSettings(servo_limits=True)),
-        Plant("stray_current", f"{stray} m/s unmodelled current",
+        Plant("stray_current", f"{stray} m/s unmodelled current, a new direction in every experiment",
               TankSettings(stray_current_m_s=stray)),
+        Plant("steady_current", f"{stray} m/s unmodelled current towards 120 deg in every "
+              "experiment (a tank's residual current)",
+              TankSettings(stray_current_m_s=stray, stray_current_direction_deg=120.0)),
         Plant("reynolds", "Reynolds-number-dependent drag (a law the estimator does not fit)",
               TankSettings(), "reynolds"),
         Plant("centred_median", "recording filtered by a centred median",
@@ -268,15 +279,11 @@ def record_experiment(
     offset_s = float(rng.uniform(-settings.timestamp_jitter_s, settings.timestamp_jitter_s))
     task = scenario
     if settings.stray_current_m_s > 0:
-        stray = settings.stray_current_m_s * np.array(
-            [np.cos(a := rng.uniform(0, 2 * np.pi)), np.sin(a)]
-        )
-        vc = np.asarray(scenario.current_m_s) + stray
-        task = scenario.model_copy(
-            update={
-                "current_speed_m_s": float(np.hypot(*vc)),
-                "current_direction_deg": float(np.degrees(np.arctan2(vc[1], vc[0]))),
-            }
+        a = rng.uniform(0, 2 * np.pi)  # drawn either way: the later draws stay the same
+        if settings.stray_current_direction_deg is not None:
+            a = np.radians(settings.stray_current_direction_deg)
+        task = scenario.with_added_current(
+            (settings.stray_current_m_s * np.cos(a), settings.stray_current_m_s * np.sin(a))
         )
     timing = LoopTiming(control_period_s=0.3, jitter_s=settings.control_jitter_s)
     camera = CameraModel(pixel_m=settings.pixel_m, median=settings.median)

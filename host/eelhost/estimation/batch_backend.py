@@ -29,7 +29,7 @@ class RunLengths:
     """Each (candidate, experiment) run's length guessed from the runs done before.
 
     The guess for a candidate is what the nearest earlier candidate (Euclidean distance of the
-    logarithms of its parameters, floored at 1e-4) took on each experiment.
+    logarithms of its parameters' magnitudes over 1e-4, signed) took on each experiment.
 
     Parameters
     ----------
@@ -46,7 +46,10 @@ class RunLengths:
 
     @staticmethod
     def _key(coefficients: np.ndarray) -> np.ndarray:
-        return np.log(np.maximum(np.asarray(coefficients, dtype=float), 1e-4))
+        # a symmetric logarithm: the coefficients' logarithms (above 1e-4), and parameters of
+        # either sign (the ambient current) kept apart by their sign
+        x = np.asarray(coefficients, dtype=float)
+        return np.sign(x) * np.log1p(np.abs(x) / 1e-4)
 
     def predict(self, coefficients: np.ndarray) -> np.ndarray | None:
         """Expected steps of each candidate on each experiment, shape (C, E); None before any.
@@ -108,6 +111,7 @@ def simulate_batch(
 
     c, e = parameters.shape[0], len(prepared)
     coefficients = space.coefficient_array(parameters)
+    currents = space.current_array(parameters)  # (C, 2), added to each experiment's own
     n = prepared[0].times_s.size
     n_links = robots[0].n_links
     pos = np.full((c, e, n, 2), np.nan)
@@ -123,7 +127,7 @@ def simulate_batch(
         groups.setdefault(p.options, []).append(j)
     for options, members in groups.items():
         union = np.unique(np.concatenate([prepared[j].state_steps for j in members]))
-        scenarios = [prepared[j].scenario for _ in range(c) for j in members]
+        scenarios = [prepared[j].scenario_in(v) for v in currents for j in members]
         coeffs = np.repeat(coefficients, len(members), axis=0)
         run_robots = [rb for rb in robots for _ in members]
         hint = None if expected is None else expected[:, members].reshape(-1)

@@ -6,7 +6,9 @@ a slightly slow candidate is not flagged too slow by the clock's noise (but ende
 the last state compared is simulated), with the sample times of the fitness, seen through the
 camera the recording declares (frame rate, median filter causal or centred; docs/data.md). A
 candidate is a vector of its :class:`~eelhost.estimation.parameters.ParameterSpace` (the fluid
-law's coefficients and any fitted joint parameters, by name). ``simulate`` runs every
+law's coefficients, any fitted joint parameters and the ambient current if fitted, by name: each
+run's scenario gets the candidate's current added to the one its experiment declares). ``simulate``
+runs every
 (candidate, experiment) pair through a backend:
 
 - ``"reference"``: the readable closed loop (``eelsim.closed_loop``), spread over processes;
@@ -17,6 +19,7 @@ Both return the centre of mass at the sample times, the failure flag and the pat
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
@@ -128,6 +131,13 @@ class PreparedExperiment:
         pos[np.isnan(com).any(axis=(1, 2))] = np.nan
         return pos, heading
 
+    def scenario_in(self, current_m_s: np.ndarray) -> Scenario:
+        """The task in a tank with an ambient current ``current_m_s`` (v_x, v_y, m/s).
+
+        It adds to the current the experiment declares.
+        """
+        return self.scenario.with_added_current((current_m_s[0], current_m_s[1]))
+
 
 def prepare(
     exp: Experiment,
@@ -232,9 +242,10 @@ class Simulated:
 
 
 def _reference_job(args: tuple) -> tuple[np.ndarray, int, float, float, float, int]:
-    robot, prepared, coeffs = args  # the candidate's robot (joint parameters) and coefficients
+    # the candidate's robot (joint parameters), coefficients and ambient current
+    robot, prepared, coeffs, current = args
     run = simulate_closed_loop(
-        robot, prepared.scenario, prepared.options, seed=0, coefficients=coeffs
+        robot, prepared.scenario_in(current), prepared.options, seed=0, coefficients=coeffs
     )
     states = np.full((prepared.state_steps.size, run.states.shape[1]), np.nan)
     ok = prepared.state_steps < len(run.t_s)
@@ -301,6 +312,16 @@ class Evaluator:
         self.steps = 0  # and the RK4 steps they took
         self._lengths: RunLengths | None = None  # the batch backend's guesses of run lengths
 
+    def with_space(self, space: ParameterSpace) -> Evaluator:
+        """The same experiments and settings, for candidates of another space of the same robot.
+
+        Its counts of simulations and steps start at 0.
+        """
+        other = copy.copy(self)
+        other.space, other.robot = space, space.model_robot(self.robot)
+        other.simulations, other.steps, other._lengths = 0, 0, None
+        return other
+
     def prepare_like(self, experiments: Sequence[Experiment]) -> list[PreparedExperiment]:
         """Experiments prepared as this evaluator prepares its own (samples, clock search)."""
         return [prepare(e, self.n_samples, align_s=self.align_s, observe=self.observe)
@@ -340,7 +361,7 @@ class Evaluator:
     def _simulate_reference(self, robots: list[Robot], x: np.ndarray) -> Simulated:
         """The reference backend: one readable closed-loop run per (candidate, experiment)."""
         jobs = [
-            (rb, p, self.space.coefficients(c))
+            (rb, p, self.space.coefficients(c), self.space.current_array(c))
             for rb, c in zip(robots, x, strict=True)
             for p in self.prepared
         ]

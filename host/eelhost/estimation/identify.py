@@ -4,7 +4,9 @@ From the Jacobian of the stacked residuals (positions and weighted velocities at
 times) in the unit cube of the search bounds: the sensitivity of the fit to a step of 1 % of each
 parameter's range, the singular values, the correlation matrix and the linearised standard errors
 (residual variance times (J^T J)^-1). A parameter is *pinned down* when its relative standard
-error is below 10 %, *weakly* below 50 %, otherwise *not identified*.
+error is below 10 %, *weakly* below 50 %, otherwise *not identified*. The error is relative to the
+value, except for a parameter whose search range holds both signs (the ambient current's
+components, rightly 0 in still water): relative to half its range.
 
 These linearised errors treat the residuals as independent noise; they are not intervals that
 hold (measured: docs/estimation_benchmarks.md): the report's intervals come from the parametric
@@ -38,7 +40,7 @@ class Identifiability:
     correlation : ndarray, shape (K, K)
         Linearised correlation of the estimates.
     rel_std_error : ndarray, shape (K,)
-        Linearised standard error over the value.
+        Linearised standard error over the value (over half the range for a signed parameter).
     verdict : list of str
         "pinned down", "weakly identified" or "not identified" per parameter.
     """
@@ -102,8 +104,10 @@ def identifiability(evaluator: Evaluator, estimate: np.ndarray) -> Identifiabili
     cov_u = sigma2 * (vt.T * inv_s2) @ vt
     var_u = np.einsum("ij,j,ij->i", vt.T, inv_s2, vt.T) * sigma2  # diagonal, inf-safe
     std = np.sqrt(np.where(np.isnan(var_u), np.inf, var_u)) * ranges
+    signed = (space.bounds[:, 0] < 0) & (space.bounds[:, 1] > 0)
+    scale = np.where(signed, ranges / 2, np.abs(c0))
     with np.errstate(divide="ignore", invalid="ignore"):
-        rel = np.where(np.abs(c0) > 0, std / np.abs(c0), np.inf)
+        rel = np.where(scale > 0, std / scale, np.inf)
         corr = np.nan_to_num(cov_u / np.sqrt(np.outer(np.diag(cov_u), np.diag(cov_u))))
     verdict = [
         "pinned down" if e < PINNED else "weakly identified" if e < WEAK else "not identified"

@@ -2,11 +2,14 @@
 
 A fit's parameter vector is the fluid law's coefficients (names and default bounds from the law,
 ``eelsim.fluid.get_fluid_law(name)``; docs/model.md section 6), followed by the joint model's
-fitted parameters, if any (names and bounds from the joint model). A :class:`ParameterSpace`
-names them, maps them to and from the unit cube the optimisers search (linearly onto the
-bounds), and turns a vector into what the twin runs: the coefficient record and the robot with
-the joint parameters set. A :class:`FittedModel` is one point of a space: what
-``coefficients.json`` stores and ``eelbot validate`` predicts with.
+fitted parameters, if any (names and bounds from the joint model), followed, when the space
+fits one, by the tank's unknown ambient current (``current_x_m_s``, ``current_y_m_s``: a nuisance
+shared by the fit's experiments and added to the current each declares; docs/estimation.md,
+"Nuisance parameters"). A :class:`ParameterSpace` names them, maps them to and from the unit cube
+the optimisers search (linearly onto the bounds), and turns a vector into what the twin runs: the
+coefficient record, the robot with the joint parameters set and the ambient current. A
+:class:`FittedModel` is one point of a space: what ``coefficients.json`` stores and
+``eelbot validate`` predicts with.
 
 Clock offsets, the other nuisance of the recordings, are not in the vector: they are profiled
 per experiment (:mod:`eelhost.estimation.evaluate`), which costs no simulation.
@@ -26,6 +29,15 @@ from eelsim.robot import Robot
 
 class ParameterError(ValueError):
     """Parameters that do not fit a model (unknown or missing names, wrong count)."""
+
+
+# The ambient current's components in the tank frame, m/s (docs/model.md: v_c, the direction it
+# flows towards). Cartesian rather than speed and direction: the fitness is smooth in them, with
+# no wrap-around and no undefined direction at the still water a clean tank should give.
+CURRENT_NAMES = ("current_x_m_s", "current_y_m_s")
+# Search bound of each component: residual tank currents (pumps, convection) are mm/s to cm/s;
+# the paper's declared current is 0.03 m/s.
+CURRENT_BOUND_M_S = 0.03
 
 
 @dataclass(frozen=True, eq=False)
@@ -80,17 +92,26 @@ class ParameterSpace:
         The joint model and its fitted parameters (after the coefficients).
     law_bounds : ndarray, shape (k, 2)
         Search bounds of the coefficients (the law's default bounds unless given).
+    current : bool
+        Whether the tank's ambient current is fitted too (:data:`CURRENT_NAMES`, last, each
+        within +-:data:`CURRENT_BOUND_M_S`).
     """
 
     law: FluidLaw
     joints: JointFit = field(default_factory=JointFit)
     law_bounds: np.ndarray | None = None
+    current: bool = False
 
     @classmethod
-    def for_robot(cls, robot: Robot, law: str | None = None) -> ParameterSpace:
-        """The space of a robot's model: its fluid law (or ``law``) and its joint model."""
+    def for_robot(
+        cls, robot: Robot, law: str | None = None, current: bool = False
+    ) -> ParameterSpace:
+        """The space of a robot's model.
+
+        Its fluid law (or ``law``), its joint model, and the ambient current when ``current``.
+        """
         fluid = robot.fluid_law if law is None else get_fluid_law(law)
-        return cls(fluid, joint_fit(robot))
+        return cls(fluid, joint_fit(robot), current=current)
 
     @property
     def model_name(self) -> str:
@@ -103,9 +124,14 @@ class ParameterSpace:
         return self.law.coefficient_names
 
     @property
+    def current_names(self) -> tuple[str, ...]:
+        """The ambient current's components when fitted (else none)."""
+        return CURRENT_NAMES if self.current else ()
+
+    @property
     def names(self) -> tuple[str, ...]:
-        """Every parameter: the law's coefficients, then the joint model's fitted ones."""
-        return self.coefficient_names + self.joints.names
+        """Every parameter: the law's coefficients, the joint model's, then the current's."""
+        return self.coefficient_names + self.joints.names + self.current_names
 
     @property
     def size(self) -> int:
@@ -116,7 +142,8 @@ class ParameterSpace:
     def bounds(self) -> np.ndarray:
         """Search bounds, shape (K, 2)."""
         law = self.law.bounds if self.law_bounds is None else np.asarray(self.law_bounds, float)
-        return np.vstack([law, self.joints.bounds])
+        current = np.tile([-CURRENT_BOUND_M_S, CURRENT_BOUND_M_S], (len(self.current_names), 1))
+        return np.vstack([law, self.joints.bounds, current.reshape(-1, 2)])
 
     def from_unit(self, u: np.ndarray) -> np.ndarray:
         """Map unit-cube points (..., K) to parameters (clipped to the cube first)."""
@@ -133,8 +160,19 @@ class ParameterSpace:
         return np.asarray(x, dtype=float)[..., : len(self.coefficient_names)]
 
     def joint_array(self, x: np.ndarray) -> np.ndarray:
-        """The joint part of parameter vectors, shape (..., K - k)."""
-        return np.asarray(x, dtype=float)[..., len(self.coefficient_names) :]
+        """The joint part of parameter vectors, shape (..., number of joint parameters)."""
+        k = len(self.coefficient_names)
+        return np.asarray(x, dtype=float)[..., k : k + len(self.joints.names)]
+
+    def current_array(self, x: np.ndarray) -> np.ndarray:
+        """The ambient current (v_x, v_y) of parameter vectors, m/s, shape (..., 2).
+
+        Zero when the space does not fit a current.
+        """
+        x = np.asarray(x, dtype=float)
+        if not self.current:
+            return np.zeros(x.shape[:-1] + (2,))
+        return x[..., self.size - len(CURRENT_NAMES) :]
 
     def coefficients(self, x: np.ndarray) -> FluidCoefficients:
         """The law's coefficient record of one parameter vector."""
@@ -161,13 +199,22 @@ class ParameterSpace:
 
     def start(self, robot: Robot) -> np.ndarray:
         """The robot file's values where it has this model's parameters, else the middle."""
-        middle = self.bounds.mean(axis=1)
+        middle = self.bounds.mean(axis=1)  # still water for the current
         k = len(self.coefficient_names)
         if robot.fluid_law is self.law:
             middle[:k] = robot.hydrodynamics.as_array()
         if self.joints.names and joint_model_name(robot) == self.joints.model:
-            middle[k:] = self.joints.values_of(robot)
+            middle[k : k + len(self.joints.names)] = self.joints.values_of(robot)
         return middle
+
+    def vector(self, coefficients: np.ndarray, robot: Robot) -> np.ndarray:
+        """A vector of this space with the law's ``coefficients``, the rest as :meth:`start`.
+
+        The robot file's joint parameters, and still water (besides the declared currents).
+        """
+        x = self.start(robot)
+        x[: len(self.coefficient_names)] = np.asarray(coefficients, dtype=float)
+        return x
 
     def as_dict(self, x: np.ndarray) -> dict[str, float]:
         """Parameter values by name."""
@@ -193,9 +240,13 @@ class ParameterSpace:
                 f"{where}: {what} (model {self.model_name} has {', '.join(self.names)})"
             )
         try:
-            return np.array([float(values[n]) for n in self.names])
+            out = np.array([float(values[n]) for n in self.names])
         except (TypeError, ValueError):
             raise ParameterError(f"{where}: every value must be a number") from None
+        bad = [n for n, v in zip(self.names, out, strict=True) if not np.isfinite(v)]
+        if bad:
+            raise ParameterError(f"{where}: {', '.join(bad)} must be finite")
+        return out
 
     def at_bound(self, x: np.ndarray, fraction: float = 0.01) -> list[str]:
         """Parameters within ``fraction`` of their search range from a bound (by name).
@@ -225,6 +276,19 @@ class FittedModel:
         """The fluid law's coefficients."""
         return self.space.coefficients(self.values)
 
+    @property
+    def current_m_s(self) -> tuple[float, float]:
+        """The fitted ambient current (v_x, v_y), m/s ((0, 0) when none is fitted)."""
+        vx, vy = self.space.current_array(self.values)
+        return float(vx), float(vy)
+
+    def current_text(self) -> str | None:
+        """The fitted ambient current in words ("0.0049 m/s towards 123 deg"), None if not fitted."""
+        if not self.space.current:
+            return None
+        vx, vy = self.current_m_s
+        return f"{np.hypot(vx, vy):.4f} m/s towards {np.degrees(np.arctan2(vy, vx)):.0f} deg"
+
     def parameters(self) -> dict[str, float]:
         """Every parameter by name."""
         return self.space.as_dict(self.values)
@@ -234,18 +298,27 @@ class FittedModel:
         return self.space.robots(robot, self.values[None])[0].with_coefficients(self.coefficients)
 
     def to_json(self) -> dict[str, Any]:
-        """JSON-ready: the model's names, the coefficients and the joint parameters by name."""
-        k = len(self.space.coefficient_names)
-        return {
+        """JSON-ready: the model's names and its parameters by name.
+
+        The coefficients, the joint parameters and, when fitted, the ambient current (with its
+        speed and direction for the reader; docs/data.md, "coefficients.json").
+        """
+        values = self.parameters()
+        out: dict[str, Any] = {
             "law": self.space.law.name,
             "joint_model": self.space.joints.model,
-            "coefficients": {
-                n: float(v) for n, v in zip(self.space.names[:k], self.values[:k], strict=True)
-            },
-            "joint_parameters": {
-                n: float(v) for n, v in zip(self.space.names[k:], self.values[k:], strict=True)
-            },
+            "coefficients": {n: values[n] for n in self.space.coefficient_names},
+            "joint_parameters": {n: values[n] for n in self.space.joints.names},
         }
+        if self.space.current:
+            vx, vy = self.current_m_s
+            out["ambient_current"] = {
+                **{n: values[n] for n in CURRENT_NAMES},
+                # for the reader: the same current as speed and the direction it flows towards
+                "speed_m_s": float(np.hypot(vx, vy)),
+                "direction_deg": float(np.degrees(np.arctan2(vy, vx))),
+            }
+        return out
 
     @classmethod
     def from_json(cls, entry: Any, robot: Robot, where: str) -> FittedModel:
@@ -272,8 +345,23 @@ class FittedModel:
                 f"{where}: joint_parameters: {', '.join(joints) or 'none'} do not match the "
                 f"joint model {model!r} of the robot (fits {', '.join(fit.names) or 'none'})"
             )
-        space = ParameterSpace(law, fit)
-        return cls(space, space.from_dict({**entry["coefficients"], **joints}, where))
+        current = entry.get("ambient_current")
+        if current is None:
+            current = {}
+        elif not isinstance(current, dict):
+            raise ParameterError(f"{where}: ambient_current: expected {', '.join(CURRENT_NAMES)}")
+        else:  # the speed and direction are a reading aid, derived from the components
+            current = {k: v for k, v in current.items() if k not in ("speed_m_s", "direction_deg")}
+            missing = [n for n in CURRENT_NAMES if n not in current]
+            unknown = [n for n in current if n not in CURRENT_NAMES]
+            if missing or unknown:
+                raise ParameterError(
+                    f"{where}: ambient_current: expected {', '.join(CURRENT_NAMES)}"
+                    + (f"; missing {', '.join(missing)}" if missing else "")
+                    + (f"; unknown {', '.join(unknown)}" if unknown else "")
+                )
+        space = ParameterSpace(law, fit, current=bool(current))
+        return cls(space, space.from_dict({**entry["coefficients"], **joints, **current}, where))
 
     @classmethod
     def of_coefficients(cls, coefficients: FluidCoefficients, robot: Robot) -> FittedModel:
@@ -282,6 +370,9 @@ class FittedModel:
         return cls(space, coefficients.as_array())
 
 
-def spaces_of(robot: Robot, laws: Sequence[str]) -> list[ParameterSpace]:
-    """The candidate models of a robot: its joint model with each of ``laws``."""
-    return [ParameterSpace.for_robot(robot, law) for law in laws]
+def spaces_of(robot: Robot, laws: Sequence[str], current: bool = False) -> list[ParameterSpace]:
+    """The candidate models of a robot: its joint model with each of ``laws``.
+
+    Each fits the ambient current too when ``current``.
+    """
+    return [ParameterSpace.for_robot(robot, law, current) for law in laws]

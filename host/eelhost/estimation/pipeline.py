@@ -19,7 +19,7 @@ import numpy as np
 from eelhost.data.experiments import Dataset, Experiment
 from eelhost.errors import UserError
 from eelhost.estimation.evaluate import EstimationError, Evaluator
-from eelhost.estimation.methods import FitProblem, get_method, method_names
+from eelhost.estimation.methods import FitProblem, method_names, run_fit
 from eelhost.estimation.optimise import Checkpoint, FitResult
 from eelhost.estimation.parameters import FittedModel, ParameterError, ParameterSpace
 from eelsim.robot import Robot
@@ -27,9 +27,13 @@ from eelsim.robot import Robot
 METHODS = method_names()  # as registered when this module is imported
 
 
-COEFFICIENTS_FORMAT = "eelbot-coefficients/2"
-# /1: Morison coefficients only, by name; still read.
-READABLE_COEFFICIENTS_FORMATS = ("eelbot-coefficients/1", COEFFICIENTS_FORMAT)
+COEFFICIENTS_FORMAT = "eelbot-coefficients/3"
+# /1: Morison coefficients only, by name; /2: no ambient current (still water besides the
+# declared currents); both still read. /3 is new so that readers of /2, which would ignore a
+# fitted current and predict in the wrong water, refuse the file instead.
+READABLE_COEFFICIENTS_FORMATS = (
+    "eelbot-coefficients/1", "eelbot-coefficients/2", COEFFICIENTS_FORMAT
+)
 
 
 class CoefficientsError(UserError, ValueError):
@@ -59,6 +63,10 @@ class FitSettings:
         Half-width of each experiment's clock-offset search during fitting (default 0: the
         paper's protocol). With few training experiments the offsets trade off against the
         coefficients (measured: C_a 48 % off on the bundled dataset), so it is off by default.
+    fit_current : bool
+        Fit the tank's unknown ambient current (v_x, v_y) with the coefficients, a nuisance
+        shared by the experiments (:class:`~eelhost.estimation.parameters.ParameterSpace`;
+        docs/estimation.md, "Nuisance parameters").
     """
 
     method: str = "cmaes"
@@ -70,6 +78,7 @@ class FitSettings:
     backend: str = "auto"
     align_s: float = 0.0
     restarts: str = "bipop"
+    fit_current: bool = True
 
 
 def training_experiments(dataset: Dataset, motion: str) -> list[Experiment]:
@@ -114,7 +123,8 @@ def fit_motion(
     map_function : callable, optional
         Spreads the evaluation (e.g. a Dask client's map).
     space : ParameterSpace, optional
-        The candidate model (default: the dataset robot's fluid law and joint model).
+        The candidate model (default: the dataset robot's fluid law and joint model, with the
+        ambient current when ``settings.fit_current``).
     experiments : list of Experiment, optional
         Fit these instead of the motion's training experiments (cross-validation folds).
 
@@ -123,8 +133,7 @@ def fit_motion(
     (FitResult, Evaluator)
         The result (``evaluations`` counts candidates; the evaluator's ``simulations`` counts runs).
     """
-    fit = get_method(settings.method)
-    space = space or ParameterSpace.for_robot(dataset.robot)
+    space = space or ParameterSpace.for_robot(dataset.robot, current=settings.fit_current)
     ev = Evaluator(
         dataset.robot,
         experiments if experiments is not None else training_experiments(dataset, motion),
@@ -143,7 +152,7 @@ def fit_motion(
         )
     begin = space.start(dataset.robot) if start is None else np.asarray(start, dtype=float)
     problem = FitProblem(ev, settings, begin, ck, resume, progress)
-    res = fit(problem)
+    res = run_fit(problem)
     return res, ev
 
 
@@ -152,7 +161,8 @@ def write_coefficients(
 ) -> Path:
     """Write fitted models as JSON (readable by ``eelbot validate``; docs/estimation.md).
 
-    Each fit names its fluid law and joint model and gives every parameter by name.
+    Each fit names its fluid law and joint model and gives every parameter by name (the
+    ambient current, when fitted, under ``ambient_current``).
     """
     data = {"format": COEFFICIENTS_FORMAT, "fits": {m: r.to_json() for m, r in fits.items()}}
     if extra:

@@ -90,6 +90,7 @@ def run_report(
         say(
             f"{motion}: {res.method} fitness {res.fitness:.4f} after {res.simulations} simulations: "
             + ", ".join(f"{n} {v:.4g}" for n, v in res.space.as_dict(res.values).items())
+            + (f" (ambient current {res.model.current_text()})" if res.space.current else "")
         )
         ident = identifiability(ev, res.values)
         extra["identifiability"][motion] = ident.to_json()
@@ -168,6 +169,7 @@ def _report_text(
         "| fit | method | fitness | simulations | " + " | ".join(names) + " |",
         "|---|---|---|---|" + "---|" * len(names),
     ]
+    currents = [f"{m}: {r.model.current_text()}" for m, r in fits.items() if r.space.current]
     for m, r in fits.items():
         unc = extra["uncertainty"].get(m, {})
         lo, hi = unc.get("lower", {}), unc.get("upper", {})
@@ -180,6 +182,13 @@ def _report_text(
             + " | ".join(vals)
             + " |"
         )
+    if currents:
+        lines += [
+            "",
+            "Ambient current of the tank, fitted as a nuisance shared by a fit's experiments and "
+            "added to the current each declares (docs/estimation.md, \"Nuisance parameters\"); "
+            "validation simulates in it: " + "; ".join(currents) + ".",
+        ]
     if "truth" in extra:
         lines += [
             "",
@@ -197,7 +206,8 @@ def _report_text(
                 )
                 lines.append(
                     f"- {m}: relative error "
-                    + ", ".join(f"{n} {e * 100:+.1f} %" for n, e in zip(names, rel, strict=True))
+                    + ", ".join(f"{n} {e * 100:+.1f} %"
+                                for n, e in zip(r.space.coefficient_names, rel, strict=True))
                 )
     if extra["uncertainty"]:
         u = next(iter(extra["uncertainty"].values()))

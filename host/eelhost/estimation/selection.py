@@ -31,7 +31,7 @@ import numpy as np
 from eelhost.data.experiments import Dataset
 from eelhost.estimation.evaluate import EstimationError, Evaluator
 from eelhost.estimation.local import FAILED, polish_minimax
-from eelhost.estimation.methods import FitProblem, get_method
+from eelhost.estimation.methods import FitProblem, run_fit
 from eelhost.estimation.parameters import ParameterSpace, spaces_of
 from eelhost.estimation.pipeline import FitSettings, training_experiments
 
@@ -147,7 +147,9 @@ def cross_validate(
     from eelsim.fluid import candidate_laws
 
     robot = dataset.robot
-    spaces = spaces_of(robot, list(laws) if laws is not None else list(candidate_laws()))
+    # every candidate fits the tank's ambient current when the main fits do: compared on equal terms
+    current = any(space.current for space, _ in fitted.values())
+    spaces = spaces_of(robot, list(laws) if laws is not None else list(candidate_laws()), current)
     scores = []
     for space in spaces:
         score = CandidateScore(space.model_name, space.size)
@@ -170,7 +172,7 @@ def cross_validate(
                 # global fit of its own, as the main fit was made
                 log.info("%s, %s: carried-over start fails; fitting globally", space.model_name,
                          motion)
-                full = get_method(settings.method)(FitProblem(full_ev, settings, start))
+                full = run_fit(FitProblem(full_ev, settings, start))
             score.fitness[motion] = full.fitness
             score.simulations += full_ev.simulations
             errors = []

@@ -66,7 +66,8 @@ def regenerate(
     Parameters
     ----------
     robot : Robot
-        The dataset's robot (the model sets its law, coefficients and joint parameters).
+        The dataset's robot (the model sets its law, coefficients and joint parameters; its
+        ambient current, if fitted, adds to each experiment's).
     model : FittedModel
         What generates the data.
     experiments : sequence of Experiment
@@ -99,7 +100,8 @@ def regenerate(
         steps = np.unique(np.concatenate(
             [observation_steps(t, camera, dt, float(t[-1])) for t in true_times]))
         duration = float(steps[-1] + 2) * dt
-        scenario = exp.scenario.model_copy(
+        # in the model's tank: its fitted ambient current, if any, adds to the declared one
+        scenario = exp.scenario.with_added_current(model.current_m_s).model_copy(
             update={"duration_s": duration, "min_duration_s": 0.0})
         options = LoopOptions(timing=timing, camera=camera, stop_at_goal=False)
         res = run_batch(plant, [scenario] * replicates, model.coefficients.as_array(), options,
