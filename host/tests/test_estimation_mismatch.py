@@ -10,6 +10,7 @@ from eelhost.data.virtual_tank import (
     law_truths,
     mismatched_plants,
     record_experiment,
+    true_robot,
 )
 from eelhost.estimation.diagnostics import NOISE_RATIO, at_bounds, fit_warnings
 from eelhost.estimation.evaluate import Evaluator
@@ -161,6 +162,11 @@ def test_every_test_plant_differs_from_the_fitted_model_and_has_a_truth():
         truths = p.truths()
         assert set(truths) == {"straight", "turning"}
         assert type(truths["straight"]).law_name == p.law
+        # the plant's robot is a valid robot file (the paper robot's reasons for its PD gains
+        # must not follow it onto servo joints)
+        plant_robot = true_robot(load_robot(), p.settings)
+        if p.settings.joints:
+            assert plant_robot.joints.model_name == p.settings.joints.get("model", "pd")
 
 
 def test_another_laws_truth_keeps_table_3s_added_mass():
