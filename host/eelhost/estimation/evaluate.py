@@ -346,6 +346,9 @@ class Evaluator:
                 f"{self.space.size} ({', '.join(self.space.names)})"
             )
         robots = self.space.robots(self.robot, x)
+        stable = self._integrable(robots)
+        if not stable.all():
+            return self._failing_unstable(x, stable)
         if self.backend == "batch":
             from eelhost.estimation.batch_backend import RunLengths, simulate_batch
 
@@ -356,6 +359,44 @@ class Evaluator:
             sim = self._simulate_reference(robots, x)
         self.simulations += x.shape[0] * len(self.prepared)
         self.steps += int(sim.steps.sum())
+        return sim
+
+    def _integrable(self, robots: list[Robot]) -> np.ndarray:
+        """Whether explicit RK4 at every experiment's step is stable on each robot's joints (C,).
+
+        A fitted joint model's bounds hold parameters the step cannot integrate (the servo's
+        lag and motor time constant together; docs/model.md section 4, "Joint models"): such a
+        candidate is a failed run, as an ill-conditioned one is, not an error.
+        """
+        from eelsim.model import SwimmerModel
+
+        steps = sorted({p.options.timing.dt_s for p in self.prepared})
+        verdict: dict[int, bool] = {}
+        out = np.ones(len(robots), dtype=bool)
+        for i, rb in enumerate(robots):
+            if id(rb) not in verdict:
+                model = SwimmerModel.from_robot(rb)
+                try:
+                    for dt in steps:
+                        rb.joint_model.check_step(rb.joints, model, dt)
+                    verdict[id(rb)] = True
+                except ValueError:
+                    verdict[id(rb)] = False
+            out[i] = verdict[id(rb)]
+        return out
+
+    def _failing_unstable(self, x: np.ndarray, stable: np.ndarray) -> Simulated:
+        """Simulate the integrable candidates; the others fail as ill-conditioned (no run)."""
+        c, e = x.shape[0], len(self.prepared)
+        n = self.prepared[0].times_s.size
+        nan = np.full((c, e), np.nan)
+        sim = Simulated(np.full((c, e, n, 2), np.nan), np.full((c, e, n), np.nan),
+                        np.full((c, e), int(Failure.ILL_CONDITIONED)), nan.copy(), nan.copy(),
+                        np.zeros((c, e)), np.zeros((c, e), dtype=int))
+        if stable.any():
+            part = self.simulate(x[stable])
+            for f in dataclasses.fields(Simulated):
+                getattr(sim, f.name)[stable] = getattr(part, f.name)
         return sim
 
     def _simulate_reference(self, robots: list[Robot], x: np.ndarray) -> Simulated:
