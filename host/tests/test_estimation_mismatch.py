@@ -14,7 +14,7 @@ from eelhost.data.virtual_tank import (
 )
 from eelhost.estimation.diagnostics import NOISE_RATIO, at_bounds, fit_warnings
 from eelhost.estimation.evaluate import Evaluator
-from eelhost.estimation.parameters import FittedModel, ParameterSpace
+from eelhost.estimation.parameters import FittedModel, ParameterSpace, spaces_of
 from eelhost.estimation.pipeline import FitSettings
 from eelhost.estimation.selection import (
     CandidateScore,
@@ -23,7 +23,8 @@ from eelhost.estimation.selection import (
     recommend,
 )
 from eelhost.estimation.uncertainty import BootstrapResult, parametric_bootstrap, regenerate
-from eelsim.robot import load_robot
+from eelsim.flags import PENALTY_ILL_CONDITIONED
+from eelsim.robot import SERVO_ROBOT, load_robot
 from eelsim.scenario import load_scenario
 
 TRUTH = TABLE3["straight"]
@@ -144,12 +145,84 @@ def test_cross_validation_holds_out_each_gait_and_keeps_the_law_that_made_the_ta
     ds = load_dataset(tmp_path)
     space = ParameterSpace.for_robot(robot)
     scores = cross_validate(ds, {"straight": (space, TRUTH.as_array())}, FitSettings(),
-                            laws=["morison", "linear_quadratic"], iterations=2)
+                            laws=["morison", "linear_quadratic"], iterations=2,
+                            joint_models=["pd"])
     assert [s.model for s in scores] == ["pd x morison", "pd x linear_quadratic"]
     for s in scores:
         assert s.held_out["straight"].shape == (3,)
         assert np.all(np.isfinite(s.held_out["straight"])) and s.simulations > 0
     assert recommend(scores).model == "pd x morison"
+
+
+def test_candidates_are_the_robots_joints_with_every_law_and_each_other_joint_model_with_its_law():
+    laws = ["morison", "galilean", "linear_quadratic"]
+    paper = [s.model_name for s in spaces_of(load_robot(), laws)]
+    assert paper == ["pd x morison", "pd x galilean", "pd x linear_quadratic", "servo x morison"]
+    servo = [s.model_name for s in spaces_of(load_robot(SERVO_ROBOT), laws)]
+    assert servo == ["servo x morison", "servo x galilean", "servo x linear_quadratic",
+                     "pd x morison"]
+
+
+def test_another_joint_model_brings_its_bundled_table_onto_the_datasets_robot(robot):
+    servo_file = load_robot(SERVO_ROBOT)
+    # a robot of another geometry and coefficients than either bundled file: they must stay
+    robot = robot.model_copy(update={
+        "n_links": 5, "link": robot.link.model_copy(update={"half_length_m": 0.07})})
+    servo = next(s for s in spaces_of(robot, ["morison"]) if s.model_name == "servo x morison")
+    model_robot = servo.model_robot(robot)
+    assert model_robot.joints == servo_file.joints
+    assert (model_robot.n_links, model_robot.link, model_robot.hydrodynamics) == (
+        robot.n_links, robot.link, robot.hydrodynamics)
+    # the fitted joint parameters start at the bundled file's and are set on the robot by name
+    start = servo.as_dict(servo.start(robot))
+    assert start["lag_s"] == pytest.approx(1 / servo_file.joints.position_gain_1_s)
+    assert start["motor_time_constant_s"] == servo_file.joints.motor_time_constant_s
+    x = servo.from_dict({**start, "lag_s": 0.05})
+    fitted = FittedModel(servo, x).robot(robot)
+    assert fitted.joints.position_gain_1_s == pytest.approx(20.0)
+    assert fitted.joints.deadband_rad == servo_file.joints.deadband_rad
+    assert fitted.n_links == 5
+    # coefficients.json names the joint model and reads back into the same model
+    again = FittedModel.from_json(FittedModel(servo, x).to_json(), robot, "fits.straight")
+    assert again.space.model_name == "servo x morison"
+    assert again.robot(robot).joints == fitted.joints
+    # the PD candidate of a servo robot has the paper robot's gains and nothing to fit
+    pd = next(s for s in spaces_of(load_robot(SERVO_ROBOT), ["morison"]) if s.model_name ==
+              "pd x morison")
+    assert pd.model_robot(load_robot(SERVO_ROBOT)).joints == robot.joints and not pd.joints.names
+
+
+def test_cross_validation_on_a_stiff_servo_tank_recommends_the_servo_model(robot, tmp_path):
+    # the tank's joints are the bundled servo robot's; the dataset's robot file has PD joints
+    plant = mismatched_plants()["stiff_servos"]
+    settings = TankSettings(joints=plant.settings.joints, timestamp_jitter_s=0.0,
+                            control_jitter_s=0.0, pixel_m=0.0)
+    for i, n in enumerate(GAITS):
+        write_experiment(record_experiment(robot, _short(n), "straight", TRUTH, settings, seed=i),
+                         tmp_path)
+    write_manifest(tmp_path, manifest_text("paper_robot.toml",
+                                           {"straight": {"train": GAITS, "test": []}}, []))
+    ds = load_dataset(tmp_path)
+    scores = cross_validate(ds, {"straight": (ParameterSpace.for_robot(robot), TRUTH.as_array())},
+                            FitSettings(method="minimax", polish_iterations=2), laws=["morison"],
+                            iterations=2)
+    by_model = {s.model: s for s in scores}
+    assert set(by_model) == {"pd x morison", "servo x morison"}
+    assert by_model["servo x morison"].mean_held_out < 0.1 * by_model["pd x morison"].mean_held_out
+    assert recommend(scores).model == "servo x morison"
+
+
+def test_a_servo_candidate_rk4_cannot_integrate_fails_as_ill_conditioned_beside_a_good_one(robot):
+    servo = next(s for s in spaces_of(robot, ["morison"]) if s.model_name == "servo x morison")
+    task = _short(GAITS[0])
+    exp = record_experiment(servo.model_robot(robot), task, "straight", TRUTH, CLEAN, seed=0)
+    ev = Evaluator(robot, [exp], space=servo)
+    start = servo.as_dict(servo.vector(TRUTH.as_array(), robot))
+    # K = 18.9 1/s with tau_m = 3.2 ms: inside the bounds, unstable for RK4 at dt = 0.01 s
+    unstable = servo.from_dict({**start, "lag_s": 1 / 18.9, "motor_time_constant_s": 0.0032})
+    errors = ev.errors(np.stack([servo.from_dict(start), unstable]))[:, 0]
+    assert errors[0] < 0.01
+    assert errors[1] == PENALTY_ILL_CONDITIONED
 
 
 def test_every_test_plant_differs_from_the_fitted_model_and_has_a_truth():

@@ -2,12 +2,15 @@
 
 A fit's parameter vector is the fluid law's coefficients (names and default bounds from the law,
 ``eelsim.fluid.get_fluid_law(name)``; docs/model.md section 6), followed by the joint model's
-fitted parameters, if any (names and bounds from the joint model), followed, when the space
+fitted parameters, if any (names and bounds from the joint model's ``fit_parameters``; the
+paper's PD gains stay fixed), followed, when the space
 fits one, by the tank's unknown ambient current (``current_x_m_s``, ``current_y_m_s``: a nuisance
 shared by the fit's experiments and added to the current each declares; docs/estimation.md,
 "Nuisance parameters"). A :class:`ParameterSpace` names them, maps them to and from the unit cube
 the optimisers search (linearly onto the bounds), and turns a vector into what the twin runs: the
-coefficient record, the robot with the joint parameters set and the ambient current. A
+coefficient record, the robot with the joint parameters set and the ambient current. A space
+may impose another joint model than the robot file's (a candidate of the model comparison): it
+carries that model's ``[joints]`` table, from the bundled robot file that uses it. A
 :class:`FittedModel` is one point of a space: what ``coefficients.json`` stores and
 ``eelbot validate`` predicts with.
 
@@ -19,12 +22,14 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import cache
 from typing import Any
 
 import numpy as np
 
 from eelsim.fluid import FluidCoefficients, FluidLaw, get_fluid_law, law_of
-from eelsim.robot import Robot
+from eelsim.joints import JOINT_MODELS, JointParameters, get_joint_model
+from eelsim.robot import BUNDLED_ROBOTS, Robot, load_robot
 
 
 class ParameterError(ValueError):
@@ -38,11 +43,15 @@ CURRENT_NAMES = ("current_x_m_s", "current_y_m_s")
 # Search bound of each component: residual tank currents (pumps, convection) are mm/s to cm/s;
 # the paper's declared current is 0.03 m/s.
 CURRENT_BOUND_M_S = 0.03
+# Joint models whose parameters a fit keeps as the robot file has them: the paper's PD gains are
+# its own (docs/estimation.md, "Fitness"); the twin's other joint models fit their
+# ``fit_parameters`` (the servo's lag and motor time constant).
+FIXED_JOINT_MODELS = frozenset({"pd"})
 
 
 @dataclass(frozen=True, eq=False)
 class JointFit:
-    """The joint model's parameters a fit varies (none for the paper's PD with fixed gains).
+    """The joint model of a space and the parameters a fit varies (none for the paper's PD).
 
     Attributes
     ----------
@@ -51,33 +60,78 @@ class JointFit:
     names : tuple of str
         The fitted parameters.
     bounds : ndarray, shape (k, 2)
+    table : JointParameters or None
+        The ``[joints]`` table the space puts on the robot (another joint model than the robot
+        file's: its fixed parameters and the start of its fitted ones); None keeps the robot's.
     """
 
     model: str = "pd"
     names: tuple[str, ...] = ()
     bounds: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    table: JointParameters | None = None
+
+    def impose(self, robot: Robot) -> Robot:
+        """``robot`` with this space's joint table (the same object when it has it already)."""
+        if self.table is None or robot.joints is self.table or robot.joints == self.table:
+            return robot
+        return robot.with_joints(self.table)
 
     def values_of(self, robot: Robot) -> np.ndarray:
-        """The fitted parameters' values in a robot file (its joint table), shape (k,)."""
+        """The fitted parameters' values in a robot's joint table (of this model), shape (k,)."""
         if not self.names:
             return np.zeros(0)
-        raise ParameterError(f"joint model {self.model!r} has no fittable parameters here")
+        return np.asarray(get_joint_model(self.model).fit_values(robot.joints), dtype=float)
 
     def apply(self, robot: Robot, values: np.ndarray) -> Robot:
-        """The robot with the fitted joint parameters set to ``values``."""
+        """The robot (with this model's joint table) with the fitted parameters set to ``values``."""
         if not self.names:
             return robot
-        raise ParameterError(f"joint model {self.model!r} has no fittable parameters here")
+        model = get_joint_model(self.model)
+        return robot.with_joints(model.with_fit_values(robot.joints, values))
 
 
 def joint_model_name(robot: Robot) -> str:
     """The name of a robot's joint model ("pd": the paper's joint PD loop)."""
-    return str(getattr(robot.joints, "model_name", "") or "pd")
+    return joint_model_name_of(robot.joints)
 
 
-def joint_fit(robot: Robot) -> JointFit:
-    """The joint parameters a fit of this robot varies (by default the joint model's own)."""
-    return JointFit(joint_model_name(robot))
+@cache
+def bundled_joints(model: str) -> JointParameters:
+    """The ``[joints]`` table of the bundled robot file that uses joint model ``model``.
+
+    Raises
+    ------
+    ParameterError
+        When no bundled robot file uses it.
+    """
+    for name in BUNDLED_ROBOTS:
+        joints = load_robot(name).joints
+        if joint_model_name_of(joints) == model:
+            return joints
+    raise ParameterError(
+        f"joint model {model!r}: no bundled robot file uses it ({', '.join(BUNDLED_ROBOTS)})"
+    )
+
+
+def joint_model_name_of(joints: JointParameters) -> str:
+    """The name of the joint model of a ``[joints]`` table."""
+    return str(getattr(joints, "model_name", "") or "pd")
+
+
+def joint_fit(robot: Robot, model: str | None = None) -> JointFit:
+    """The joint model ``model`` (default: the robot's) on ``robot``, and what a fit varies.
+
+    The robot's own model keeps its joint table; another one brings the table of the bundled
+    robot file that uses it (:func:`bundled_joints`). The fitted parameters are the model's
+    ``fit_parameters``, none for :data:`FIXED_JOINT_MODELS`.
+    """
+    own = joint_model_name(robot)
+    name = own if model is None else model
+    table = None if name == own else bundled_joints(name)
+    if name in FIXED_JOINT_MODELS:
+        return JointFit(name, table=table)
+    joints = get_joint_model(name)
+    return JointFit(name, joints.fit_names, joints.fit_bounds, table)
 
 
 @dataclass(frozen=True, eq=False)
@@ -179,7 +233,11 @@ class ParameterSpace:
         return self.law.coefficients.from_array(self.coefficient_array(x))
 
     def model_robot(self, robot: Robot) -> Robot:
-        """``robot`` with this space's fluid law (its coefficients the robot's, or the middle)."""
+        """``robot`` as this space's model: its joint table, if it imposes one, and its fluid law.
+
+        The coefficients are the robot's if it has the law, else the middle of the bounds.
+        """
+        robot = self.joints.impose(robot)
         if robot.fluid_law is self.law:
             return robot
         middle = self.law.bounds.mean(axis=1)
@@ -198,13 +256,17 @@ class ParameterSpace:
         return [self.joints.apply(base, j) for j in self.joint_array(x)]
 
     def start(self, robot: Robot) -> np.ndarray:
-        """The robot file's values where it has this model's parameters, else the middle."""
+        """The robot file's values where it has this model's parameters, else the middle.
+
+        The joint parameters start from the joint table the space imposes, if it does.
+        """
         middle = self.bounds.mean(axis=1)  # still water for the current
         k = len(self.coefficient_names)
         if robot.fluid_law is self.law:
             middle[:k] = robot.hydrodynamics.as_array()
-        if self.joints.names and joint_model_name(robot) == self.joints.model:
-            middle[k : k + len(self.joints.names)] = self.joints.values_of(robot)
+        joints_robot = self.joints.impose(robot)
+        if self.joints.names and joint_model_name(joints_robot) == self.joints.model:
+            middle[k : k + len(self.joints.names)] = self.joints.values_of(joints_robot)
         return middle
 
     def vector(self, coefficients: np.ndarray, robot: Robot) -> np.ndarray:
@@ -339,7 +401,12 @@ class FittedModel:
             raise ParameterError(f"{where}: law: {err}") from None
         joints = entry.get("joint_parameters", {}) or {}
         model = str(entry.get("joint_model", joint_model_name(robot)))
-        fit = joint_fit(robot) if model == joint_model_name(robot) else JointFit(model)
+        if model not in JOINT_MODELS:
+            raise ParameterError(
+                f"{where}: joint_model: unknown joint model {model!r} "
+                f"(known: {', '.join(sorted(JOINT_MODELS))})"
+            )
+        fit = joint_fit(robot, model)
         if tuple(joints) != fit.names:
             raise ParameterError(
                 f"{where}: joint_parameters: {', '.join(joints) or 'none'} do not match the "
@@ -370,9 +437,22 @@ class FittedModel:
         return cls(space, coefficients.as_array())
 
 
-def spaces_of(robot: Robot, laws: Sequence[str], current: bool = False) -> list[ParameterSpace]:
-    """The candidate models of a robot: its joint model with each of ``laws``.
+def spaces_of(
+    robot: Robot,
+    laws: Sequence[str],
+    current: bool = False,
+    joint_models: Sequence[str] | None = None,
+) -> list[ParameterSpace]:
+    """The candidate models of a robot (docs/estimation.md, "Model comparison").
 
-    Each fits the ambient current too when ``current``.
+    Its joint model with each of ``laws``, then each other joint model (of ``joint_models``,
+    default every one the twin has) with the robot's fluid law, on the joint table of the
+    bundled robot file that uses it (:func:`joint_fit`). Each fits the ambient current too when
+    ``current``.
     """
-    return [ParameterSpace.for_robot(robot, law, current) for law in laws]
+    own = joint_model_name(robot)
+    others = sorted(JOINT_MODELS) if joint_models is None else list(joint_models)
+    spaces = [ParameterSpace.for_robot(robot, law, current) for law in laws]
+    spaces += [ParameterSpace(robot.fluid_law, joint_fit(robot, model), current=current)
+               for model in others if model != own]
+    return spaces

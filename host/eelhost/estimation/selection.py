@@ -1,7 +1,9 @@
 """Which candidate model to trust: leave-one-gait-out cross-validation (docs/estimation.md).
 
-A candidate model is a joint model with a fluid law (:func:`eelhost.estimation.parameters.spaces_of`
-over the twin's candidate laws, ``eelsim.fluid.candidate_laws``). For each fit (straight, turning)
+A candidate model is a joint model with a fluid law (:func:`eelhost.estimation.parameters.spaces_of`):
+the robot's joint model with each of the twin's candidate laws (``eelsim.fluid.candidate_laws``),
+and each other joint model of the twin with the robot's law, on the joints of the bundled robot
+file that uses it. For each fit (straight, turning)
 every training experiment, one gait (amplitude, frequency), is held out in turn: the candidate is
 refitted on the others and scored on the held-out one by the fitness's per-experiment error
 (docs/estimation.md, "Fitness"). A model that only fits better because it has more freedom to
@@ -117,6 +119,7 @@ def cross_validate(
     laws: Sequence[str] | None = None,
     iterations: int = POLISH_ITERATIONS,
     say: Callable[[str], None] | None = None,
+    joint_models: Sequence[str] | None = None,
 ) -> list[CandidateScore]:
     """Leave-one-gait-out cross-validation of the candidate models (module docstring).
 
@@ -128,11 +131,14 @@ def cross_validate(
     settings : FitSettings
         The evaluator's backend and clock search.
     laws : sequence of str, optional
-        Fluid laws to try (default: the twin's candidate laws).
+        Fluid laws to try with the robot's joint model (default: the twin's candidate laws).
     iterations : int
         Polish iterations per refit.
     say : callable, optional
         Gets a line per candidate.
+    joint_models : sequence of str, optional
+        Joint models to try besides the robot's, each with its fluid law (default: every one
+        the twin has; :func:`eelhost.estimation.parameters.spaces_of`).
 
     Returns
     -------
@@ -149,7 +155,8 @@ def cross_validate(
     robot = dataset.robot
     # every candidate fits the tank's ambient current when the main fits do: compared on equal terms
     current = any(space.current for space, _ in fitted.values())
-    spaces = spaces_of(robot, list(laws) if laws is not None else list(candidate_laws()), current)
+    spaces = spaces_of(robot, list(laws) if laws is not None else list(candidate_laws()), current,
+                       joint_models)
     scores = []
     for space in spaces:
         score = CandidateScore(space.model_name, space.size)
