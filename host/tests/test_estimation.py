@@ -221,3 +221,10 @@ def test_truth_scores_zero_when_the_twin_is_seen_through_the_recordings_camera(m
     assert seen[0, 0] < 1e-12  # the estimator observes the twin exactly as the tank recorded it
     # the causal median's lag would otherwise count as model error; the centred one has none
     assert true_com[0, 0] > (0.01 if median == "causal" else 1e-4)
+
+
+def test_coefficients_given_as_numbers_are_the_laws_alone_on_a_servo_robots_own_joints():
+    servo = load_robot("servo_robot.toml")
+    fit = read_coefficients("0.008,0.776,0.618,0.007", servo)["joint"]
+    assert fit.space.names == ("C_f", "C_d", "C_a", "C_m")
+    assert fit.robot(servo).joints == servo.joints

@@ -21,7 +21,13 @@ from eelhost.errors import UserError
 from eelhost.estimation.evaluate import EstimationError, Evaluator
 from eelhost.estimation.methods import FitProblem, method_names, run_fit
 from eelhost.estimation.optimise import Checkpoint, FitResult
-from eelhost.estimation.parameters import FittedModel, ParameterError, ParameterSpace
+from eelhost.estimation.parameters import (
+    FittedModel,
+    JointFit,
+    ParameterError,
+    ParameterSpace,
+    joint_model_name,
+)
 from eelsim.robot import Robot
 
 METHODS = method_names()  # as registered when this module is imported
@@ -203,7 +209,8 @@ def read_coefficients(spec: str, robot: Robot) -> dict[str, FittedModel]:
             raise CoefficientsError(str(err)) from None
         except ValueError as err:  # a coefficient the law refuses (pydantic)
             raise CoefficientsError(f"{path}: fits: malformed coefficient set ({err})") from None
-    space = ParameterSpace.for_robot(robot)
+    # the law's coefficients alone, on the robot file's joints as they are (none fitted)
+    space = ParameterSpace(robot.fluid_law, JointFit(joint_model_name(robot)))
     names = ",".join(space.names)
     try:
         values = np.array([float(v) for v in spec.split(",")])
