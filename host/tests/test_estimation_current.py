@@ -231,3 +231,23 @@ def test_every_method_fits_the_current_after_the_coefficients(stray_tank, method
         fit_current=False))
     assert res.fitness <= still.fitness
     assert res.simulations == ev.simulations > still.simulations
+
+
+def test_a_report_on_a_tank_whose_truth_is_in_another_law_says_so_instead_of_comparing(
+        stray_tank, tmp_path):
+    """A virtual tank's truth may follow another law than the fitted model (a test plant)."""
+    import shutil
+
+    from eelhost.data.virtual_tank import law_truths
+    from eelhost.estimation.report import run_report
+
+    folder = tmp_path / "tank"
+    shutil.copytree(stray_tank.folder, folder)
+    write_manifest(folder, manifest_text(
+        "paper_robot.toml", {"straight": {"train": GAITS[:2], "test": GAITS[2:]}}, [],
+        {"straight": law_truths("reynolds")["straight"]}))
+    settings = FitSettings("cmaes", seed=0, budget=24, polish_iterations=1, fit_current=False)
+    report = run_report(load_dataset(folder), tmp_path / "out", motions=("straight",),
+                        settings=settings, bootstrap_replicates=0, compare_models=False)
+    assert ("straight: the truth is in the reynolds law, the fit in morison"
+            in report.read_text())
