@@ -17,11 +17,17 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-import numpy as np
 from numpy.typing import ArrayLike
 
 from eelsim.fluid.base import FloatArray, FluidCoefficients, KernelCode, LinkFluid
-from eelsim.fluid.morison import MORISON, MorisonLinkFluid, PaperCoefficients, _morison
+from eelsim.fluid.morison import (
+    MORISON,
+    MorisonLinkFluid,
+    PaperCoefficients,
+    _morison,
+    emit_paper_drag,
+    paper_drag,
+)
 from eelsim.fluid.relative import RelativeMotionLaw
 
 
@@ -55,17 +61,12 @@ class GalileanLaw(RelativeMotionLaw):
     def drag(
         self, fluid: LinkFluid, vt: FloatArray, vn: FloatArray, omega: FloatArray
     ) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """The paper's linear plus quadratic drag and yaw damping (its eqs. 9-11)."""
-        f = _morison(fluid)
-        return (-f.c_t * (vt + np.abs(vt) * vt), -f.c_n * (vn + np.abs(vn) * vn),
-                -f.lambda_2 * omega - f.lambda_3 * np.abs(omega) * omega)
+        """The paper's drag and yaw damping (:func:`eelsim.fluid.morison.paper_drag`)."""
+        return paper_drag(_morison(fluid), vt, vn, omega)
 
     def emit_drag(self, code: KernelCode, link: int) -> tuple[str, str, str]:
         """The same, negated, as expressions."""
-        w = code.w
-        return (f"{w('ct', link)} * (fl_vt + abs(fl_vt) * fl_vt)",
-                f"{w('cn', link)} * (fl_vn + abs(fl_vn) * fl_vn)",
-                f"{w('lambda2', link)} * om + {w('lambda3', link)} * abs(om) * om")
+        return emit_paper_drag(code, link)
 
 
 GALILEAN = GalileanLaw()

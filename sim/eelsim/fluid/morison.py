@@ -135,8 +135,7 @@ class MorisonLaw(FluidLaw):
         s, c, w = motion.sin, motion.cos, motion.omega
         vt = c * motion.rel_vx + s * motion.rel_vy
         vn = -s * motion.rel_vx + c * motion.rel_vy
-        ft = -f.c_t * (vt + np.abs(vt) * vt)
-        fn = -f.c_n * (vn + np.abs(vn) * vn)
+        ft, fn, torque = paper_drag(f, vt, vn, w)
         drag_x = ft * c - fn * s
         drag_y = ft * s + fn * c
         cur_n = -f.mu_n * w * (c * current_m_s[0] + s * current_m_s[1])
@@ -144,21 +143,53 @@ class MorisonLaw(FluidLaw):
         return LinkForces(
             fx=drag_x + cur_x,
             fy=drag_y + cur_y,
-            torque=-f.lambda_2 * w - f.lambda_3 * np.abs(w) * w,
+            torque=torque,
             parts={"drag": (drag_x, drag_y), "current": (cur_x, cur_y)},
         )
 
     def emit_link_forces(self, code: KernelCode, link: int, still_water: bool) -> None:
         """The same in the link's frame, negated so that no instruction is spent on signs."""
         line, w = code.line, code.w
+        tangential, normal, torque = emit_paper_drag(code, link)
         line("fl_vt = c * lvx + s * lvy")
         line("fl_vn = c * lvy - s * lvx")
-        line(f"fl_ftn = {w('ct', link)} * (fl_vt + abs(fl_vt) * fl_vt)")
+        line(f"fl_ftn = {tangential}")
         current = "" if still_water else f" + {w('mu', link)} * om * (c * {w('vcx')} + s * {w('vcy')})"
-        line(f"fnn = {w('cn', link)} * (fl_vn + abs(fl_vn) * fl_vn){current}")
+        line(f"fnn = {normal}{current}")
         line("fxn = fl_ftn * c - fnn * s")
         line("fyn = fl_ftn * s + fnn * c")
-        line(f"tqn = {w('lambda2', link)} * om + {w('lambda3', link)} * abs(om) * om")
+        line(f"tqn = {torque}")
+
+
+def paper_drag(
+    f: MorisonLinkFluid, vt: FloatArray, vn: FloatArray, omega: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The paper's linear plus quadratic drag and yaw damping (its eqs. 9-11), on each link.
+
+    Parameters
+    ----------
+    f : MorisonLinkFluid
+        The per-link values.
+    vt, vn : ndarray
+        Tangential and normal velocity of each link's centre relative to the water, m/s.
+    omega : ndarray
+        Link rates theta_dot, rad/s.
+
+    Returns
+    -------
+    (f_t, f_n, torque) : ndarrays
+        Force along t and n, N, and torque, N m, of the water on each link.
+    """
+    return (-f.c_t * (vt + np.abs(vt) * vt), -f.c_n * (vn + np.abs(vn) * vn),
+            -f.lambda_2 * omega - f.lambda_3 * np.abs(omega) * omega)
+
+
+def emit_paper_drag(code: KernelCode, link: int) -> tuple[str, str, str]:
+    """:func:`paper_drag` negated, as the batched kernel's expressions (``fl_vt``, ``fl_vn``, ``om``)."""
+    w = code.w
+    return (f"{w('ct', link)} * (fl_vt + abs(fl_vt) * fl_vt)",
+            f"{w('cn', link)} * (fl_vn + abs(fl_vn) * fl_vn)",
+            f"{w('lambda2', link)} * om + {w('lambda3', link)} * abs(om) * om")
 
 
 def _morison(fluid: LinkFluid) -> MorisonLinkFluid:
