@@ -127,13 +127,15 @@ def _sims_to_reach(res: FitResult, target: float) -> int | None:
     return None
 
 
-def _ga(
-    ds: Dataset, seed: int, generations: int, fit_current: bool
-) -> dict[str, tuple[FitResult, int]]:
-    """The paper's GA on both fits: each result and its simulations."""
+def _ga(ds: Dataset, seed: int, generations: int) -> dict[str, tuple[FitResult, int]]:
+    """The paper's GA on both fits, as the paper ran it: each result and its simulations.
+
+    The coefficients alone, in still water, with no polish (fitting the current too would add
+    the second stage's minimax polish to it).
+    """
     out = {}
     for motion in ("straight", "turning"):
-        settings = FitSettings("ga", seed=seed, generations=generations, fit_current=fit_current)
+        settings = FitSettings("ga", seed=seed, generations=generations, fit_current=False)
         res, ev = fit_motion(ds, motion, settings)
         out[motion] = (res, ev.simulations)
     return out
@@ -220,9 +222,7 @@ def estimator_report(
         results[key] = r = _fit_and_validate(ds, settings)
         if ga:
             say(f"running the paper's GA on the {key} tank ...")
-            # the paper's GA as the paper ran it: the coefficients alone, in still water, with no
-            # polish (fitting the current too would add the second stage's minimax polish to it)
-            r["ga"] = _ga(ds, seed, ga_generations, fit_current=False)
+            r["ga"] = _ga(ds, seed, ga_generations)
             say(f"GA on {key}: " + ", ".join(
                 f"{m} fitness {f.fitness:.4f} after {n} simulations; default "
                 f"{r['fits'][m].fitness:.4f} after {r['sims'][m]}, reached the GA's after "

@@ -241,7 +241,8 @@ def true_robot(robot: Robot, settings: TankSettings) -> Robot:
         data["joints"] = dict(settings.joints)
         # the fitted robot's reasons for its own joint values do not describe the plant's joints
         data["assumptions"] = {key: why for key, why in data.get("assumptions", {}).items()
-                               if not key.startswith("joints.") or key[7:] in settings.joints}
+                               if key.removeprefix("joints.") == key
+                               or key.removeprefix("joints.") in settings.joints}
     return Robot.model_validate(data)
 
 
