@@ -120,9 +120,7 @@ def current_option(value: list[float] | None, virtual: bool) -> tuple[float, flo
         return None
     if virtual:
         raise OptionError("--current: a sim:// robot's current is set in its URI (current=)")
-    if value[0] < 0:
-        raise OptionError(f"--current: the speed must be >= 0, got {value[0]:g}")
-    return (value[0], value[1])
+    return (value[0], value[1])  # a negative speed is refused when parsed (current_values)
 
 
 def run(args: argparse.Namespace) -> int:
