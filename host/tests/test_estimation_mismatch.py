@@ -1,5 +1,7 @@
 """Estimation under mismatch: honest intervals, warnings, model comparison, test plants."""
 
+import json
+
 import numpy as np
 import pytest
 
@@ -12,6 +14,7 @@ from eelhost.data.virtual_tank import (
     record_experiment,
     true_robot,
 )
+from eelhost.estimation.adopt import fit_and_choose
 from eelhost.estimation.diagnostics import NOISE_RATIO, at_bounds, fit_warnings
 from eelhost.estimation.evaluate import Evaluator
 from eelhost.estimation.parameters import FittedModel, ParameterSpace, spaces_of
@@ -23,6 +26,7 @@ from eelhost.estimation.selection import (
     recommend,
 )
 from eelhost.estimation.uncertainty import BootstrapResult, parametric_bootstrap, regenerate
+from eelhost.estimation.validate import validate, worst_ex
 from eelsim.flags import PENALTY_ILL_CONDITIONED
 from eelsim.robot import SERVO_ROBOT, load_robot
 from eelsim.scenario import load_scenario
@@ -262,3 +266,85 @@ def test_another_laws_truth_keeps_table_3s_added_mass():
     assert r["turning"].C_a == TABLE3["turning"].C_a
     with pytest.raises(ValueError, match="unknown fluid law .nosuch."):
         law_truths("nosuch")
+
+
+@pytest.fixture(scope="module")
+def stiff_servo_tank(robot, tmp_path_factory):
+    """A small clean tank swum on stiff servo joints, its robot file the paper's (PD joints)."""
+    folder = tmp_path_factory.mktemp("stiff_servo_tank")
+    plant = mismatched_plants()["stiff_servos"]
+    settings = TankSettings(joints=plant.settings.joints, timestamp_jitter_s=0.0,
+                            control_jitter_s=0.0, pixel_m=0.0)
+    held_out = "straight_A0.69_w3.1"
+    for i, n in enumerate([*GAITS, held_out]):
+        write_experiment(record_experiment(robot, _short(n), "straight", TRUTH, settings, seed=i),
+                         folder)
+    write_manifest(folder, manifest_text("paper_robot.toml",
+                                         {"straight": {"train": GAITS, "test": [held_out]}}, []))
+    return load_dataset(folder)
+
+
+CHEAP = FitSettings(method="minimax", polish_iterations=3, fit_current=False)
+
+
+def test_the_recommended_model_is_fitted_in_place_of_the_robot_files_and_predicts_better(
+    stiff_servo_tank
+):
+    chosen = fit_and_choose(stiff_servo_tank, ("straight",), CHEAP, laws=["morison"])
+    assert chosen.adopted and chosen.model == "servo x morison"
+    assert chosen.robot_file_fits is not None
+    assert chosen.robot_file_fits["straight"].space.model_name == "pd x morison"
+    assert chosen.fits["straight"].fitness < 0.1 * chosen.robot_file_fits["straight"].fitness
+    assert chosen.evaluators["straight"].space.model_name == "servo x morison"
+    tests = stiff_servo_tank.test["straight"]
+    adopted = worst_ex(validate(stiff_servo_tank.robot,
+                                {m: r.model for m, r in chosen.fits.items()}, tests))
+    kept = worst_ex(validate(stiff_servo_tank.robot,
+                             {m: r.model for m, r in chosen.robot_file_fits.items()}, tests))
+    assert adopted["straight"] < 0.2 * kept["straight"]
+    # asked to keep the robot file's model, the comparison is made and only reported
+    kept_model = fit_and_choose(stiff_servo_tank, ("straight",), CHEAP, adopt=False,
+                                laws=["morison"])
+    assert not kept_model.adopted and kept_model.model == "pd x morison"
+    assert kept_model.comparison is not None
+    assert recommend(kept_model.comparison).model == "servo x morison"
+
+
+def test_a_model_the_comparison_does_not_prefer_is_not_adopted(robot, tmp_path):
+    # a tank made by the robot file's own model: the comparison keeps it, nothing is refitted
+    for i, n in enumerate(GAITS):
+        write_experiment(record_experiment(robot, _short(n), "straight", TRUTH, CLEAN, seed=i),
+                         tmp_path)
+    write_manifest(tmp_path, manifest_text("paper_robot.toml",
+                                           {"straight": {"train": GAITS, "test": []}}, []))
+    chosen = fit_and_choose(load_dataset(tmp_path), ("straight",), CHEAP, laws=["morison"])
+    assert not chosen.adopted and chosen.model == "pd x morison"
+    assert chosen.robot_file_fits is None
+
+
+def test_the_report_fits_and_writes_the_recommended_model_and_validate_reads_it_back(
+    stiff_servo_tank, tmp_path, capsys
+):
+    from eelhost.cli import main
+
+    out = tmp_path / "report"
+    folder = str(stiff_servo_tank.folder)
+    assert main(["report", folder, "--out", str(out), "--method", "minimax", "--bootstrap", "0",
+                 "--no-fit-current"]) == 0
+    data = json.loads((out / "coefficients.json").read_text())
+    assert data["fits"]["straight"]["joint_model"] == "servo"
+    assert data["model_comparison"] == {**data["model_comparison"], "recommended":
+                                        "servo x morison", "adopted": True}
+    assert data["robot_file_fits"]["fits"]["straight"]["joint_model"] == "pd"
+    text = (out / "report.md").read_text()
+    assert "Fitted: **servo x morison**" in text and "; adopted: the fits above" in text
+    # the file written is a model validate can run: the servo joints come with it
+    capsys.readouterr()
+    assert main(["validate", str(out / "coefficients.json"), folder]) == 0
+    assert "straight_A0.69_w3.1" in capsys.readouterr().out
+    kept = tmp_path / "kept"
+    assert main(["report", folder, "--out", str(kept), "--method", "minimax", "--bootstrap", "0",
+                 "--no-fit-current", "--keep-model"]) == 0
+    data = json.loads((kept / "coefficients.json").read_text())
+    assert data["fits"]["straight"]["joint_model"] == "pd" and "robot_file_fits" not in data
+    assert "not adopted (`--keep-model`)" in (kept / "report.md").read_text()

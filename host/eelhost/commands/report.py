@@ -8,6 +8,7 @@ from pathlib import Path
 from eelhost.commands.common import add_fit_options, fit_settings, number
 from eelhost.data.experiments import BUNDLED_DATASET, load_dataset
 from eelhost.data.virtual_tank import generate_dataset
+from eelhost.errors import UserError
 from eelhost.estimation.report import run_report
 from eelhost.progress import Progress
 
@@ -29,7 +30,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--bootstrap", type=number(int, minimum=0), default=8, help="bootstrap refits per fit (0: none)"
     )
     p.add_argument("--no-compare", action="store_true",
-                   help="skip the cross-validated comparison of candidate models")
+                   help="skip the cross-validated comparison of candidate models (the robot "
+                   "file's model is fitted)")
+    p.add_argument("--keep-model", action="store_true",
+                   help="report the robot file's model even when the comparison recommends "
+                   "another (default: fit the recommended model and report its fits)")
     add_fit_options(p)
     p.set_defaults(run=run)
 
@@ -45,7 +50,12 @@ def run(args: argparse.Namespace) -> int:
         with Progress("virtual tank", 34, "experiment") as tank:
             generate_dataset(folder, seed=args.seed, progress=lambda d, _t: tank.set(d))
     dataset = load_dataset(folder)
-    motions = ("straight", "turning") + (("joint",) if args.joint else ())
+    # the paper's separate fits, of the motion types the dataset has training experiments for
+    motions = tuple(m for m in ("straight", "turning") if dataset.train.get(m))
+    if not motions:
+        raise UserError(f"{folder}: the manifest names no training experiments "
+                        "(straight or turning) to fit")
+    motions += ("joint",) if args.joint else ()
     settings = fit_settings(args)
 
     bars: list[Progress] = []
@@ -73,6 +83,7 @@ def run(args: argparse.Namespace) -> int:
         args.bootstrap,
         args.resume,
         compare_models=not args.no_compare,
+        adopt_recommended=not args.keep_model,
         say=say,
         progress_factory=factory,
     )

@@ -101,8 +101,11 @@ def identifiability(evaluator: Evaluator, estimate: np.ndarray) -> Identifiabili
     sigma2 = float(r[0] @ r[0]) / max(1, m - k)
     with np.errstate(divide="ignore"):
         inv_s2 = np.where(sing > 1e-9 * sing[0], 1.0 / sing**2, np.inf)
-    cov_u = sigma2 * (vt.T * inv_s2) @ vt
-    var_u = np.einsum("ij,j,ij->i", vt.T, inv_s2, vt.T) * sigma2  # diagonal, inf-safe
+    # an unidentified direction has an infinite variance; 0 x inf (a parameter with no share in
+    # it) is NaN here and read as infinite below, or as no correlation
+    with np.errstate(invalid="ignore"):
+        cov_u = sigma2 * (vt.T * inv_s2) @ vt
+        var_u = np.einsum("ij,j,ij->i", vt.T, inv_s2, vt.T) * sigma2  # diagonal
     std = np.sqrt(np.where(np.isnan(var_u), np.inf, var_u)) * ranges
     signed = (space.bounds[:, 0] < 0) & (space.bounds[:, 1] > 0)
     scale = np.where(signed, ranges / 2, np.abs(c0))

@@ -15,19 +15,27 @@ from pathlib import Path
 import numpy as np
 
 from eelhost.data.experiments import Dataset
+from eelhost.estimation.adopt import fit_and_choose
 from eelhost.estimation.diagnostics import fit_warnings
-from eelhost.estimation.evaluate import ALIGN_S
+from eelhost.estimation.evaluate import ALIGN_S, Evaluator
 from eelhost.estimation.identify import identifiability
 from eelhost.estimation.optimise import FitResult
+from eelhost.estimation.parameters import ParameterSpace
 from eelhost.estimation.pipeline import (
     FitSettings,
     fit_motion,
     write_coefficients,
 )
-from eelhost.estimation.selection import cross_validate, recommend
+from eelhost.estimation.selection import recommend
 from eelhost.estimation.selection import table_markdown as comparison_markdown
 from eelhost.estimation.uncertainty import parametric_bootstrap
-from eelhost.estimation.validate import ValidationRun, table_csv, table_markdown, validate
+from eelhost.estimation.validate import (
+    ValidationRun,
+    table_csv,
+    table_markdown,
+    validate,
+    worst_ex,
+)
 
 log = logging.getLogger(__name__)
 
@@ -42,6 +50,7 @@ def run_report(
     bootstrap_replicates: int = 8,
     resume: bool = False,
     compare_models: bool = True,
+    adopt_recommended: bool = True,
     say: Say | None = None,
     progress_factory: Callable[[str], Callable[[int, float, int], None]] | None = None,
 ) -> Path:
@@ -62,6 +71,10 @@ def run_report(
     compare_models : bool
         Compare the candidate models (joint model x fluid law) by leave-one-gait-out
         cross-validation (:mod:`eelhost.estimation.selection`).
+    adopt_recommended : bool
+        When the comparison recommends another model than the robot file's, fit it and report
+        and validate its fits (:mod:`eelhost.estimation.adopt`); the robot file's fits are kept
+        in ``coefficients.json`` under ``robot_file_fits``.
     say : callable, optional
         Where progress messages go (default: this module's logger, at INFO).
     progress_factory : callable, optional
@@ -76,22 +89,32 @@ def run_report(
     settings = settings or FitSettings()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    fits: dict[str, FitResult] = {}
-    extra: dict = {"uncertainty": {}, "identifiability": {}, "simulations": {}, "seconds": {},
-                   "warnings": []}
-    for motion in motions:
+    seconds: dict[str, float] = {}
+
+    def fit(motion: str, space: ParameterSpace | None,
+            start: np.ndarray | None) -> tuple[FitResult, Evaluator]:
         t0 = time.perf_counter()
         prog = progress_factory(motion) if progress_factory else None
-        res, ev = fit_motion(
-            dataset, motion, settings, checkpoint_dir=out, resume=resume, progress=prog
-        )
-        fits[motion] = res
-        extra["simulations"][motion] = res.simulations
+        res, ev = fit_motion(dataset, motion, settings, checkpoint_dir=out, resume=resume,
+                             progress=prog, space=space, start=start)
+        seconds[motion] = seconds.get(motion, 0.0) + time.perf_counter() - t0
         say(
-            f"{motion}: {res.method} fitness {res.fitness:.4f} after {res.simulations} simulations: "
+            f"{motion}, {res.space.model_name}: {res.method} fitness {res.fitness:.4f} after "
+            f"{res.simulations} simulations: "
             + ", ".join(f"{n} {v:.4g}" for n, v in res.space.as_dict(res.values).items())
             + (f" (ambient current {res.model.current_text()})" if res.space.current else "")
         )
+        return res, ev
+
+    chosen = fit_and_choose(dataset, motions, settings, compare_models, adopt_recommended,
+                            fit=fit, say=say)
+    fits = chosen.fits
+    extra: dict = {"model": chosen.model, "uncertainty": {}, "identifiability": {},
+                   "simulations": {}, "seconds": seconds, "warnings": []}
+    for motion, res in fits.items():
+        ev = chosen.evaluators[motion]
+        t0 = time.perf_counter()
+        extra["simulations"][motion] = res.simulations
         ident = identifiability(ev, res.values)
         extra["identifiability"][motion] = ident.to_json()
         boot = None
@@ -101,25 +124,30 @@ def run_report(
             extra["uncertainty"][motion] = boot.to_json()
             say(f"{motion}: noise floor {boot.noise_floor:.4f}, fitness / noise floor {boot.excess:.1f}")
         extra["warnings"] += fit_warnings(motion, res.space, res.values, boot)
-        extra["seconds"][motion] = time.perf_counter() - t0
-    separate = {m: (r.space, r.values) for m, r in fits.items() if m != "joint"}
-    comparison = None
-    if compare_models and separate:
-        comparison = cross_validate(dataset, separate, settings, say=say)
+        seconds[motion] = seconds.get(motion, 0.0) + time.perf_counter() - t0
+    comparison = chosen.comparison
+    if comparison:
         choice = recommend(comparison)
         extra["model_comparison"] = {
             "recommended": choice.model,
+            "adopted": chosen.adopted,
             "candidates": {c.model: {"parameters": c.parameters, "fitness": c.fitness,
                                      "held_out": {m: v.tolist() for m, v in c.held_out.items()}}
                            for c in comparison},
         }
-        say(f"recommended model: {choice.model}")
+    tests = [e for exps in dataset.test.values() for e in exps] + list(dataset.paths)
+    if chosen.robot_file_fits:
+        own_runs = validate(dataset.robot, {m: r.model for m, r in chosen.robot_file_fits.items()},
+                            tests, backend=settings.backend)
+        extra["robot_file_fits"] = {
+            "fits": {m: r.to_json() for m, r in chosen.robot_file_fits.items()},
+            "worst_Ex_unaligned_BL": worst_ex(own_runs),
+        }
     if dataset.truth:
         extra["truth"] = {m: c.model_dump() for m, c in dataset.truth.items()}
+    runs = validate(dataset.robot, {m: r.model for m, r in fits.items()}, tests,
+                    backend=settings.backend)
     write_coefficients(out / "coefficients.json", fits, extra)
-    fitted = {m: r.model for m, r in fits.items()}
-    tests = [e for exps in dataset.test.values() for e in exps] + list(dataset.paths)
-    runs = validate(dataset.robot, fitted, tests, backend=settings.backend)
     (out / "table4.md").write_text(table_markdown([r.row for r in runs]) + "\n")
     (out / "table4.csv").write_text(table_csv([r.row for r in runs]))
     # matplotlib only now: importing it costs half a second of every command's start
@@ -141,7 +169,10 @@ def run_report(
             comparison_markdown(comparison),
             "",
             f"Recommended: **{choice.model}** (lowest mean held-out error; within "
-            "2 % the model with fewer parameters).",
+            "2 % the model with fewer parameters)"
+            + ("; adopted: the fits above are its own." if chosen.adopted else
+               "." if choice.model == chosen.model else
+               f"; not adopted (`--keep-model`): the fits above are {chosen.model}'s."),
             "",
         ])
     report.write_text(text)
@@ -163,7 +194,27 @@ def _report_text(
         "",
     ]
     names = next(iter(fits.values())).space.names
+    lines += ["## Model", "", f"Fitted: **{extra['model']}** (joint model x fluid law)."]
+    own = extra.get("robot_file_fits")
+    if own:
+        first = next(iter(own["fits"].values()))
+        lines += [
+            "",
+            f"The robot file's model, {first['joint_model']} x {first['law']}, was fitted first; "
+            "the leave-one-gait-out comparison (end of this report) recommends another model, so "
+            "that model was fitted and its fits are the ones below, validated and written to "
+            "`coefficients.json` (docs/estimation.md, \"Model choice\"). The robot file's fits, "
+            "kept under `robot_file_fits`, for comparison:",
+            "",
+            "| fit | fitness (robot file's model) | fitness (fitted model) |",
+            "|---|---|---|",
+        ]
+        lines += [f"| {m} | {f['fitness']:.4f} | {fits[m].fitness:.4f} |"
+                  for m, f in own["fits"].items() if m in fits]
+        lines += [""] + [f"- worst held-out E_x ({m}), recorded clock, with the robot file's "
+                         f"model: {v:.4f} BL" for m, v in own["worst_Ex_unaligned_BL"].items()]
     lines += [
+        "",
         "## Fitted coefficients",
         "",
         "| fit | method | fitness | simulations | " + " | ".join(names) + " |",
@@ -244,9 +295,6 @@ def _report_text(
                 for n in names
             )
         )
-    worst: dict[str, list[float]] = {}
-    for run in runs:
-        worst.setdefault(run.experiment.motion, []).append(run.row.Ex_mean_BL)
     lines += [
         "",
         "## Validation on held-out experiments",
@@ -255,19 +303,15 @@ def _report_text(
         "calls RMS) and as true RMS, in body lengths (BL) and BL/s.",
         "",
     ]
-    lines += [f"- worst E_x ({m}): {np.nanmax(v):.4f} BL" for m, v in worst.items()]
+    lines += [f"- worst E_x ({m}): {v:.4f} BL" for m, v in worst_ex(runs, aligned=True).items()]
     if runs:  # validation reports the best clock offset besides the recorded clock
         lines.append(
             f"\nEach experiment is compared at the clock offset of its recording that fits best "
             f"(searched within +-{ALIGN_S:g} s; the paper's time stamps are good to +-0.1 s). "
             "On the recordings' own clocks:"
         )
-        raw: dict[str, list[float]] = {}
-        for run in runs:
-            raw.setdefault(run.experiment.motion, []).append(run.row.Ex_mean_unaligned_BL)
-        lines += [
-            f"- worst E_x ({m}), recorded clock: {np.nanmax(v):.4f} BL" for m, v in raw.items()
-        ]
+        lines += [f"- worst E_x ({m}), recorded clock: {v:.4f} BL"
+                  for m, v in worst_ex(runs).items()]
     lines += [
         "",
         table_markdown([r.row for r in runs]),

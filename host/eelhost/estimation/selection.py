@@ -47,8 +47,9 @@ def carry_over(values: Mapping[str, float], space: ParameterSpace, default: np.n
     """A start in ``space`` from another model's parameters, by name.
 
     A name the other model has is taken as it is; a law's split coefficient (``C_f_lin``,
-    ``C_f_quad``) takes its unsplit one (``C_f``), the paper's law being the split law with both
-    equal; anything else keeps ``default``. The result is clipped to the bounds.
+    ``C_f_quad``) takes its unsplit one (``C_f``), the ``galilean`` law being the split law with
+    both equal (from the paper's law this is only a start: the split law adds the reactive
+    terms); anything else keeps ``default``. The result is clipped to the bounds.
 
     Parameters
     ----------
@@ -86,6 +87,10 @@ class CandidateScore:
     held_out : dict of str to ndarray
         Per fit, the error of each held-out gait (in training order).
     simulations : int
+    space : ParameterSpace or None
+        The candidate's parameter space (what a refit with it fits).
+    values : dict of str to ndarray
+        Per fit, its parameters fitted on all training experiments (a refit's start).
     """
 
     model: str
@@ -93,6 +98,8 @@ class CandidateScore:
     fitness: dict[str, float] = field(default_factory=dict)
     held_out: dict[str, np.ndarray] = field(default_factory=dict)
     simulations: int = 0
+    space: ParameterSpace | None = None
+    values: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def mean_held_out(self) -> float:
@@ -159,7 +166,7 @@ def cross_validate(
                        joint_models)
     scores = []
     for space in spaces:
-        score = CandidateScore(space.model_name, space.size)
+        score = CandidateScore(space.model_name, space.size, space=space)
         for motion, (main_space, main_values) in fitted.items():
             exps = training_experiments(dataset, motion)
             if len(exps) < 2:
@@ -181,6 +188,7 @@ def cross_validate(
                          motion)
                 full = run_fit(FitProblem(full_ev, settings, start))
             score.fitness[motion] = full.fitness
+            score.values[motion] = np.asarray(full.values, dtype=float)
             score.simulations += full_ev.simulations
             errors = []
             for j, held in enumerate(exps):

@@ -128,6 +128,29 @@ def validate(
     return sorted(runs, key=lambda r: order[r.experiment.name])
 
 
+def worst_ex(runs: Sequence[ValidationRun], aligned: bool = False) -> dict[str, float]:
+    """The worst E_x (BL) per motion type of validation runs.
+
+    Parameters
+    ----------
+    runs : sequence of ValidationRun
+    aligned : bool
+        At each experiment's best clock offset instead of on the recording's own clock (the
+        paper's E_x).
+
+    Returns
+    -------
+    dict of str to float
+        Motion ("straight", "turning", "path") -> worst E_x, in the runs' order of motions; runs
+        without an E_x (NaN) are passed over, as the table's failure column reports them.
+    """
+    worst: dict[str, float] = {}
+    for run in runs:
+        ex = run.row.Ex_mean_BL if aligned else run.row.Ex_mean_unaligned_BL
+        worst[run.experiment.motion] = float(np.fmax(worst.get(run.experiment.motion, np.nan), ex))
+    return worst
+
+
 def table_markdown(rows: Sequence[ValidationRow]) -> str:
     """A table like the paper's table 4 (both error definitions, labelled)."""
     head = (
