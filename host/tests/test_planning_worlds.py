@@ -80,7 +80,11 @@ def test_coefficient_file_gives_fits_and_bootstrap_std_and_names_bad_keys(tmp_pa
     drawn = model.draw(np.random.default_rng(1), "straight")
     assert np.all(np.abs(drawn.as_array() - model.fits["straight"].as_array()) <= 0.004 + 1e-12)
     path.write_text('{"fits": {"straight": {"coefficients": {"C_f": "x"}}}}')
-    with pytest.raises(ValueError, match="fits.straight.coefficients"):
+    with pytest.raises(ValueError, match="fits.straight: missing C_d, C_a, C_m"):
+        read_coefficient_model(path, ROBOT)
+    path.write_text(json.dumps({"fits": {"straight": {"coefficients": {**fit, "C_f": -0.1}}}}))
+    with pytest.raises(ValueError, match="fits.straight.coefficients: not a morison coefficient "
+                                         "set .*C_f.*greater than or equal to 0"):
         read_coefficient_model(path, ROBOT)
 
 

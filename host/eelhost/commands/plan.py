@@ -152,7 +152,8 @@ def run(args: argparse.Namespace) -> int:
               f"({leg.waypoint_m[0]:.2f}, {leg.waypoint_m[1]:.2f}) m"
               + (" (goal)" if leg.goal else ""))
     print(f"coefficients: {model.describe()}")
-    coverage = action_coverage(robot, model, world.current.speed_m_s, planner.settings)
+    coverage = action_coverage(planner.robot, model, planner.world.current.speed_m_s,
+                               planner.settings)
     print(f"action coverage: {coverage.line()}")
     print(f"wrote {out / 'plan.json'}")
     if args.plot and outcome.found:
@@ -183,7 +184,7 @@ def _bench(args: argparse.Namespace, robot: Robot, model: CoefficientModel) -> i
     lines = summary.lines()
     lines += ["- action coverage (successful actions per current direction relative to the "
               "heading):"]
-    lines += [f"  - {action_coverage(robot, model, speed).line()}"
+    lines += [f"  - {action_coverage(model.robot_for(robot), model, speed).line()}"
               for speed in (0.0, 0.02, 0.04, 0.06)]
     command = (f"nice eelbot plan --bench --worlds {args.worlds} --seed {args.seed}"
                + (f" --threads {args.threads}" if args.threads != 1 else "")

@@ -50,8 +50,10 @@ from eelsim.timing import LoopTiming
 log = logging.getLogger(__name__)
 
 LEVEL = 0.95
-# Interval widening measured by the coverage benchmark (docs/estimation_benchmarks.md).
-WIDEN = 1.0
+# Interval widening measured by the coverage benchmark (docs/estimation_coverage.md): over 20
+# seeds with the ambient current fitted, C_f, C_d and C_a were covered in 95 % of the seeds at
+# 1.0, the current's x component in 85 %; 1.05 is the factor that component needed for 90 %.
+WIDEN = 1.05
 
 
 def regenerate(

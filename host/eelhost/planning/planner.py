@@ -146,7 +146,9 @@ class Planner:
     world : World
     robot : Robot
     coefficients : CoefficientModel
-        Straight and turning fits with their standard deviations.
+        Straight and turning fits with their standard deviations. A fitted model's robot
+        (law and joints) replaces ``robot`` and its tank's current is added to the world's
+        (:meth:`CoefficientModel.robot_for`, :meth:`CoefficientModel.in_tank`).
     gait : Gait
     options : LoopOptions, optional
         The loop's timing and camera (the tank's by default).
@@ -174,6 +176,8 @@ class Planner:
         check: bool = True,
         threads: int | None = 1,
     ) -> None:
+        world = coefficients.in_tank(world)
+        robot = coefficients.robot_for(robot)
         self.world = world
         self.robot = robot
         self.coefficients = coefficients

@@ -34,6 +34,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from eelhost.errors import UserError
+from eelhost.estimation.parameters import FittedModel, ParameterError
+from eelhost.planning.world import Current, World
 from eelsim.fluid import FluidCoefficients
 from eelsim.robot import Robot
 
@@ -69,6 +71,26 @@ class CoefficientModel:
     fits: dict[str, FluidCoefficients]
     std: dict[str, FloatArray]
     source: str
+    robot: Robot | None = None
+    ambient_current_m_s: tuple[float, float] = (0.0, 0.0)
+
+    def robot_for(self, robot: Robot) -> Robot:
+        """The robot the planner swims: the fitted model's (its law and joints), else ``robot``."""
+        return self.robot if self.robot is not None else robot
+
+    def in_tank(self, world: World) -> World:
+        """``world`` with the fitted ambient current of the tank added to its own current.
+
+        The estimation fits the tank's unknown current as a nuisance added to each experiment's
+        declared current (docs/estimation.md, "Nuisance parameters"); a world's current is
+        the declared one, so the planner swims in their sum.
+        """
+        if self.ambient_current_m_s == (0.0, 0.0):
+            return world
+        vx, vy = np.add(world.current_m_s, self.ambient_current_m_s)
+        current = Current(speed_m_s=float(math.hypot(vx, vy)),
+                          direction_deg=float(math.degrees(math.atan2(vy, vx))))
+        return world.model_copy(update={"current": current})
 
     @property
     def sets(self) -> list[FluidCoefficients]:
@@ -133,6 +155,10 @@ class CoefficientModel:
             lines.append(f"{m}: " + ", ".join(
                 f"{n} {v:.4g} +- {s:.2g}" for n, v, s in zip(names, vals, self.std[m], strict=True)
             ))
+        if self.ambient_current_m_s != (0.0, 0.0):
+            vx, vy = self.ambient_current_m_s
+            lines.append(f"tank's fitted current {math.hypot(vx, vy):.4f} m/s towards "
+                         f"{math.degrees(math.atan2(vy, vx)):.0f} deg")
         return "; ".join(lines) + f" ({self.source})"
 
 
@@ -172,11 +198,13 @@ def read_coefficient_model(path: str | Path, robot: Robot) -> CoefficientModel:
     ----------
     path : str or Path
     robot : Robot
-        Its fluid law reads the coefficient records.
+        The robot file the fits are of (its law reads records that name none).
 
     Returns
     -------
     CoefficientModel
+        With the file's model: its law's coefficients, the robot with its joint model and fitted
+        joint parameters (:attr:`CoefficientModel.robot`), and the tank's fitted current.
 
     Raises
     ------
@@ -193,14 +221,23 @@ def read_coefficient_model(path: str | Path, robot: Robot) -> CoefficientModel:
     fits_in = data.get("fits")
     if not isinstance(fits_in, dict) or not fits_in:
         raise CoefficientsFileError(f"{path}: fits: expected fitted coefficient sets")
-    law = robot.fluid_law
+    models: dict[str, FittedModel] = {}
     fits: dict[str, FluidCoefficients] = {}
     for motion, record in fits_in.items():
+        where = f"{path}: fits.{motion}"
+        if isinstance(record, dict) and "law" not in record:
+            # a file that names no model holds the robot's law (checked by it below)
+            record = {**record, "law": robot.fluid_law.name}
         try:
-            fits[motion] = law.coefficients.model_validate(record["coefficients"])
-        except (KeyError, TypeError, ValueError) as err:
+            models[motion] = FittedModel.from_json(record, robot, where)
+            fits[motion] = models[motion].coefficients  # the law's own checks (pydantic)
+        except ParameterError as err:
+            raise CoefficientsFileError(str(err)) from None
+        except (TypeError, ValueError) as err:
+            first = str(err).splitlines()[0:3]
             raise CoefficientsFileError(
-                f"{path}: fits.{motion}.coefficients: not a {law.name} coefficient set ({err})"
+                f"{where}.coefficients: not a {record.get('law')} coefficient set "
+                f"({'; '.join(x.strip() for x in first)})"
             ) from None
     chosen: dict[str, FluidCoefficients] = {}
     from_key: dict[str, str] = {}
@@ -233,4 +270,10 @@ def read_coefficient_model(path: str | Path, robot: Robot) -> CoefficientModel:
         f"; no reported std for {', '.join(notes)}: {DEFAULT_RELATIVE_STD:.0%} of the value"
         if notes else "; bootstrap std"
     )
-    return CoefficientModel(chosen, std, source)
+    # the fitted model's robot: its law, joint model and fitted joint parameters (those of the
+    # straight fit: one robot swims every leg); and the tank's current, the fits' mean
+    straight = models[from_key["straight"]]
+    used = {models[from_key[m]] for m in MOTIONS}
+    current = tuple(float(v) for v in np.mean([f.current_m_s for f in used], axis=0))
+    source += f"; model {straight.space.model_name}"
+    return CoefficientModel(chosen, std, source, straight.robot(robot), (current[0], current[1]))
