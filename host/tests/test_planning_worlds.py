@@ -119,3 +119,39 @@ def test_bench_gives_the_same_outcomes_in_worker_processes():
     assert (a.status, a.reached, a.collision) == (b.status, b.reached, b.collision)
     assert a.status == "found" and a.reached and not a.collision
     assert a.min_clearance_m == pytest.approx(b.min_clearance_m)
+
+
+def test_a_coefficient_file_of_another_model_is_planned_in_as_fitted(tmp_path):
+    # what `eelbot report` writes when it adopted another model than the robot file's
+    from eelhost.estimation.parameters import FittedModel, joint_model_name, spaces_of
+    from eelhost.planning.planner import Planner
+
+    space = next(s for s in spaces_of(ROBOT, ["linear_quadratic"], current=True)
+                 if s.model_name == "pd x linear_quadratic")
+    servo = next(s for s in spaces_of(ROBOT, ["morison"], current=True)
+                 if s.model_name == "servo x morison")
+    straight = servo.from_dict({**servo.as_dict(servo.start(ROBOT)), "lag_s": 0.04,
+                                "current_x_m_s": 0.01, "current_y_m_s": 0.0})
+    turning = servo.from_dict({**servo.as_dict(servo.start(ROBOT)), "current_x_m_s": 0.0,
+                               "current_y_m_s": 0.02})
+    path = tmp_path / "coefficients.json"
+    path.write_text(json.dumps({"fits": {
+        "straight": FittedModel(servo, straight).to_json(),
+        "turning": FittedModel(servo, turning).to_json()}}))
+    model = read_coefficient_model(path, ROBOT)
+    assert model.robot is not None and joint_model_name(model.robot) == "servo"
+    assert model.robot.joints.position_gain_1_s == pytest.approx(25.0)  # 1 / lag
+    assert model.ambient_current_m_s == pytest.approx((0.005, 0.01))  # the fits' mean
+    assert "servo x morison" in model.source and "fitted current" in model.describe()
+    world = generate_world(3)
+    planner = Planner(world, ROBOT, model, check=False)
+    assert planner.robot is model.robot
+    assert planner.world.current_m_s == pytest.approx(
+        tuple(np.add(world.current_m_s, (0.005, 0.01))))
+    assert planner.twin.current_m_s == pytest.approx(planner.world.current_m_s)
+    # another law's coefficients are read by that law, not the robot file's
+    lq = space.start(ROBOT)
+    path.write_text(json.dumps({"fits": {"joint": FittedModel(space, lq).to_json()}}))
+    model = read_coefficient_model(path, ROBOT)
+    assert type(model.fits["straight"]).law_name == "linear_quadratic"
+    assert model.robot is not None and model.robot.fluid_law.name == "linear_quadratic"
