@@ -348,3 +348,14 @@ def test_the_report_fits_and_writes_the_recommended_model_and_validate_reads_it_
     data = json.loads((kept / "coefficients.json").read_text())
     assert data["fits"]["straight"]["joint_model"] == "pd" and "robot_file_fits" not in data
     assert "not adopted (`--keep-model`)" in (kept / "report.md").read_text()
+
+
+def test_a_joint_model_that_predicts_better_is_then_tried_with_every_law(stiff_servo_tank):
+    scores = cross_validate(stiff_servo_tank, {"straight": (ParameterSpace.for_robot(
+        stiff_servo_tank.robot), TRUTH.as_array())}, CHEAP, laws=["morison", "linear_quadratic"],
+        iterations=2)
+    # first the robot file's joints with each law and the servo with the robot file's law;
+    # the servo predicting best, then the servo with the other law
+    assert [s.model for s in scores] == ["pd x morison", "pd x linear_quadratic",
+                                         "servo x morison", "servo x linear_quadratic"]
+    assert all(np.all(np.isfinite(s.held_out["straight"])) for s in scores)

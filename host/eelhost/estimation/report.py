@@ -78,7 +78,8 @@ def run_report(
     say : callable, optional
         Where progress messages go (default: this module's logger, at INFO).
     progress_factory : callable, optional
-        Gives a per-generation progress callback for a motion.
+        Gives a per-generation progress callback for a fit, named by its motion (and by the
+        model, for the fits of a model the comparison recommended).
 
     Returns
     -------
@@ -94,7 +95,8 @@ def run_report(
     def fit(motion: str, space: ParameterSpace | None,
             start: np.ndarray | None) -> tuple[FitResult, Evaluator]:
         t0 = time.perf_counter()
-        prog = progress_factory(motion) if progress_factory else None
+        label = motion if space is None else f"{motion}, {space.model_name}"
+        prog = progress_factory(label) if progress_factory else None
         res, ev = fit_motion(dataset, motion, settings, checkpoint_dir=out, resume=resume,
                              progress=prog, space=space, start=start)
         seconds[motion] = seconds.get(motion, 0.0) + time.perf_counter() - t0

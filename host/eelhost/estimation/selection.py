@@ -3,7 +3,10 @@
 A candidate model is a joint model with a fluid law (:func:`eelhost.estimation.parameters.spaces_of`):
 the robot's joint model with each of the twin's candidate laws (``eelsim.fluid.candidate_laws``),
 and each other joint model of the twin with the robot's law, on the joints of the bundled robot
-file that uses it. For each fit (straight, turning)
+file that uses it; when another joint model predicts best, it is then tried with every law (a
+step of a search over the joint model x law grid: the robot file's own joint model is tried with
+every law from the start, so a second step is only paid for where the joints are wrong). For
+each fit (straight, turning)
 every training experiment, one gait (amplitude, frequency), is held out in turn: the candidate is
 refitted on the others and scored on the held-out one by the fitness's per-experiment error
 (docs/estimation.md, "Fitness"). A model that only fits better because it has more freedom to
@@ -34,7 +37,7 @@ from eelhost.data.experiments import Dataset
 from eelhost.estimation.evaluate import EstimationError, Evaluator
 from eelhost.estimation.local import FAILED, polish_minimax
 from eelhost.estimation.methods import FitProblem, run_fit
-from eelhost.estimation.parameters import ParameterSpace, spaces_of
+from eelhost.estimation.parameters import ParameterSpace, joint_model_name, spaces_of
 from eelhost.estimation.pipeline import FitSettings, training_experiments
 
 log = logging.getLogger(__name__)
@@ -145,64 +148,92 @@ def cross_validate(
         Gets a line per candidate.
     joint_models : sequence of str, optional
         Joint models to try besides the robot's, each with its fluid law (default: every one
-        the twin has; :func:`eelhost.estimation.parameters.spaces_of`).
+        the twin has; :func:`eelhost.estimation.parameters.spaces_of`). When one of them
+        predicts best, it is then tried with each of ``laws`` too.
 
     Returns
     -------
     list of CandidateScore
-        In the order of the candidates.
+        In the order of the candidates (those of the second step last).
 
     Raises
     ------
     EstimationError
         When a fit has fewer than two training experiments.
     """
-    from eelsim.fluid import candidate_laws
+    from eelsim.fluid import candidate_laws, get_fluid_law
 
     robot = dataset.robot
+    laws = list(laws) if laws is not None else list(candidate_laws())
     # every candidate fits the tank's ambient current when the main fits do: compared on equal terms
     current = any(space.current for space, _ in fitted.values())
-    spaces = spaces_of(robot, list(laws) if laws is not None else list(candidate_laws()), current,
-                       joint_models)
-    scores = []
-    for space in spaces:
-        score = CandidateScore(space.model_name, space.size, space=space)
-        for motion, (main_space, main_values) in fitted.items():
-            exps = training_experiments(dataset, motion)
-            if len(exps) < 2:
-                raise EstimationError(
-                    f"cross-validation of {motion!r} needs two training experiments or more"
-                )
-
-            def evaluator(chosen: list, space: ParameterSpace = space) -> Evaluator:
-                return Evaluator(robot, chosen, backend=settings.backend,
-                                 align_s=settings.align_s, space=space)
-
-            full_ev = evaluator(exps)
-            start = carry_over(main_space.as_dict(main_values), space, space.start(robot))
-            full = polish_minimax(full_ev.evaluate, space, start, iterations)
-            if full.fitness >= FAILED:
-                # the carried-over parameters fail in this model (e.g. it swims slower): a
-                # global fit of its own, as the main fit was made
-                log.info("%s, %s: carried-over start fails; fitting globally", space.model_name,
-                         motion)
-                full = run_fit(FitProblem(full_ev, settings, start))
-            score.fitness[motion] = full.fitness
-            score.values[motion] = np.asarray(full.values, dtype=float)
-            score.simulations += full_ev.simulations
-            errors = []
-            for j, held in enumerate(exps):
-                fold_ev = evaluator([e for i, e in enumerate(exps) if i != j])
-                refit = polish_minimax(fold_ev.evaluate, space, full.values, iterations)
-                test_ev = evaluator([held])
-                errors.append(float(test_ev.errors(refit.values[None])[0, 0]))
-                score.simulations += fold_ev.simulations + test_ev.simulations
-            score.held_out[motion] = np.array(errors)
-        log.info("%s: mean held-out error %.4g", score.model, score.mean_held_out)
-        if say:
-            say(f"cross-validation: {score.model}: mean held-out error {score.mean_held_out:.4f}")
-        scores.append(score)
+    for motion in fitted:
+        if len(training_experiments(dataset, motion)) < 2:
+            raise EstimationError(
+                f"cross-validation of {motion!r} needs two training experiments or more"
+            )
+    scores = [_score(dataset, space, fitted, settings, iterations)
+              for space in spaces_of(robot, laws, current, joint_models)]
+    for score in scores:
+        _said(score, say)
+    best = recommend(scores)
+    if best.space is not None and best.space.joints.model != joint_model_name(robot):
+        # another joint model predicts better: try it with every other law too (one step of a
+        # search over the joint model x law grid), started from its own fit
+        tried = {score.model for score in scores}
+        start = {m: (best.space, best.values[m]) for m in fitted}
+        for law in laws:
+            space = ParameterSpace(get_fluid_law(law), best.space.joints, current=current)
+            if space.model_name not in tried:
+                scores.append(_score(dataset, space, start, settings, iterations))
+                _said(scores[-1], say)
     return scores
+
+
+def _said(score: CandidateScore, say: Callable[[str], None] | None) -> None:
+    log.info("%s: mean held-out error %.4g", score.model, score.mean_held_out)
+    if say:
+        say(f"cross-validation: {score.model}: mean held-out error {score.mean_held_out:.4f}")
+
+
+def _score(
+    dataset: Dataset,
+    space: ParameterSpace,
+    fitted: Mapping[str, tuple[ParameterSpace, np.ndarray]],
+    settings: FitSettings,
+    iterations: int,
+) -> CandidateScore:
+    """One candidate's fit on all training experiments and its leave-one-gait-out errors."""
+    robot = dataset.robot
+    score = CandidateScore(space.model_name, space.size, space=space)
+
+    def evaluator(chosen: list) -> Evaluator:
+        return Evaluator(robot, chosen, backend=settings.backend, align_s=settings.align_s,
+                         space=space)
+
+    for motion, (main_space, main_values) in fitted.items():
+        exps = training_experiments(dataset, motion)
+        full_ev = evaluator(exps)
+        start = carry_over(main_space.as_dict(main_values), space, space.start(robot))
+        full = polish_minimax(full_ev.evaluate, space, start, iterations)
+        if full.fitness >= FAILED:
+            # the carried-over parameters fail in this model (e.g. it swims slower): a global
+            # fit of its own, as the main fit was made
+            log.info("%s, %s: carried-over start fails; fitting globally", space.model_name,
+                     motion)
+            full = run_fit(FitProblem(full_ev, settings, start))
+        score.fitness[motion] = full.fitness
+        score.values[motion] = np.asarray(full.values, dtype=float)
+        score.simulations += full_ev.simulations
+        errors = []
+        for j, held in enumerate(exps):
+            fold_ev = evaluator([e for i, e in enumerate(exps) if i != j])
+            refit = polish_minimax(fold_ev.evaluate, space, full.values, iterations)
+            test_ev = evaluator([held])
+            errors.append(float(test_ev.errors(refit.values[None])[0, 0]))
+            score.simulations += fold_ev.simulations + test_ev.simulations
+        score.held_out[motion] = np.array(errors)
+    return score
 
 
 def table_markdown(scores: Sequence[CandidateScore]) -> str:
