@@ -222,7 +222,8 @@ def test_a_servo_candidate_rk4_cannot_integrate_fails_as_ill_conditioned_beside_
     exp = record_experiment(servo.model_robot(robot), task, "straight", TRUTH, CLEAN, seed=0)
     ev = Evaluator(robot, [exp], space=servo)
     start = servo.as_dict(servo.vector(TRUTH.as_array(), robot))
-    # K = 18.9 1/s with tau_m = 3.2 ms: inside the bounds, unstable for RK4 at dt = 0.01 s
+    # K = 18.9 1/s with tau_m = 3.2 ms (below the fit's bound, which keeps out of it): unstable for
+    # RK4 at dt = 0.01 s
     unstable = servo.from_dict({**start, "lag_s": 1 / 18.9, "motor_time_constant_s": 0.0032})
     errors = ev.errors(np.stack([servo.from_dict(start), unstable]))[:, 0]
     assert errors[0] < 0.01
