@@ -331,7 +331,7 @@ def test_the_report_fits_and_writes_the_recommended_model_and_validate_reads_it_
     out = tmp_path / "report"
     folder = str(stiff_servo_tank.folder)
     assert main(["report", folder, "--out", str(out), "--method", "minimax", "--bootstrap", "0",
-                 "--no-fit-current"]) == 0
+                 "--no-fit-current", "--laws", "morison"]) == 0
     data = json.loads((out / "coefficients.json").read_text())
     assert data["fits"]["straight"]["joint_model"] == "servo"
     assert data["model_comparison"] == {**data["model_comparison"], "recommended":
@@ -345,7 +345,7 @@ def test_the_report_fits_and_writes_the_recommended_model_and_validate_reads_it_
     assert "straight_A0.69_w3.1" in capsys.readouterr().out
     kept = tmp_path / "kept"
     assert main(["report", folder, "--out", str(kept), "--method", "minimax", "--bootstrap", "0",
-                 "--no-fit-current", "--keep-model"]) == 0
+                 "--no-fit-current", "--keep-model", "--laws", "morison"]) == 0
     data = json.loads((kept / "coefficients.json").read_text())
     assert data["fits"]["straight"]["joint_model"] == "pd" and "robot_file_fits" not in data
     assert "not adopted (`--keep-model`)" in (kept / "report.md").read_text()

@@ -193,6 +193,8 @@ PROBES = [
     Probe("dataset jitter negative", "dataset {tmp}/tank --timestamp-jitter -0.1", 2,
           ("--timestamp-jitter", "at least 0")),
     Probe("report bootstrap negative", "report --bootstrap -1", 2, ("--bootstrap", "at least 0")),
+    Probe("report unknown law", "report --laws morison,water", 2,
+          ("--laws", "expected fluid laws from", "'morison,water'")),
     Probe("estimate budget 0", "estimate {lab}/ds_good --budget 0", 2, ("--budget", "at least 1")),
     Probe("estimate budget not an integer", "estimate {lab}/ds_good --budget 1.5", 2,
           ("--budget", "expected an integer")),

@@ -11,6 +11,7 @@ from eelhost.data.virtual_tank import generate_dataset
 from eelhost.errors import UserError
 from eelhost.estimation.report import run_report
 from eelhost.progress import Progress
+from eelsim.fluid import FLUID_LAWS, candidate_laws
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -32,11 +33,24 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-compare", action="store_true",
                    help="skip the cross-validated comparison of candidate models (the robot "
                    "file's model is fitted)")
+    p.add_argument("--laws", type=law_names, metavar="LAW,...",
+                   help="fluid laws the comparison tries (default: "
+                   + ",".join(candidate_laws()) + ")")
     p.add_argument("--keep-model", action="store_true",
                    help="report the robot file's model even when the comparison recommends "
                    "another (default: fit the recommended model and report its fits)")
     add_fit_options(p)
     p.set_defaults(run=run)
+
+
+def law_names(text: str) -> tuple[str, ...]:
+    """``--laws``: comma-separated names of registered fluid laws."""
+    names = tuple(n.strip() for n in text.split(",") if n.strip())
+    unknown = [n for n in names if n not in FLUID_LAWS]
+    if not names or unknown:
+        raise argparse.ArgumentTypeError(
+            f"expected fluid laws from {', '.join(FLUID_LAWS)}, got {text!r}")
+    return names
 
 
 def run(args: argparse.Namespace) -> int:
@@ -84,6 +98,7 @@ def run(args: argparse.Namespace) -> int:
         args.resume,
         compare_models=not args.no_compare,
         adopt_recommended=not args.keep_model,
+        laws=args.laws,
         say=say,
         progress_factory=factory,
     )

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -51,6 +51,7 @@ def run_report(
     resume: bool = False,
     compare_models: bool = True,
     adopt_recommended: bool = True,
+    laws: Sequence[str] | None = None,
     say: Say | None = None,
     progress_factory: Callable[[str], Callable[[int, float, int], None]] | None = None,
 ) -> Path:
@@ -75,6 +76,8 @@ def run_report(
         When the comparison recommends another model than the robot file's, fit it and report
         and validate its fits (:mod:`eelhost.estimation.adopt`); the robot file's fits are kept
         in ``coefficients.json`` under ``robot_file_fits``.
+    laws : sequence of str, optional
+        Fluid laws the comparison tries (default: the twin's candidate laws).
     say : callable, optional
         Where progress messages go (default: this module's logger, at INFO).
     progress_factory : callable, optional
@@ -109,7 +112,7 @@ def run_report(
         return res, ev
 
     chosen = fit_and_choose(dataset, motions, settings, compare_models, adopt_recommended,
-                            fit=fit, say=say)
+                            fit=fit, say=say, laws=laws)
     fits = chosen.fits
     extra: dict = {"model": chosen.model, "uncertainty": {}, "identifiability": {},
                    "simulations": {}, "seconds": seconds, "warnings": []}
