@@ -238,7 +238,13 @@ def _joints(joints: JointModel | str | None) -> JointModel:
     return get_joint_model(joints) if isinstance(joints, str) else joints
 
 
-def warm_up(n_links: int = 6, lanes: int = DEFAULT_LANES, stage: str | None = None) -> float:
+def warm_up(
+    n_links: int = 6,
+    lanes: int = DEFAULT_LANES,
+    stage: str | None = None,
+    law: str | None = None,
+    robot_file: str | None = None,
+) -> float:
     """Compile (or load from the disk cache) the kernel for N links; return the seconds it took.
 
     Parameters
@@ -249,6 +255,11 @@ def warm_up(n_links: int = 6, lanes: int = DEFAULT_LANES, stage: str | None = No
         Runs per block.
     stage : str, optional
         How the stage is compiled (:func:`stage_backend`).
+    law : str, optional
+        The fluid law (default: the robot file's); the kernel depends on the law, not on its
+        coefficients, so the middle of the law's bounds serves.
+    robot_file : str, optional
+        A bundled robot file, for its joint model (default: the paper robot's PD joints).
 
     Returns
     -------
@@ -256,11 +267,15 @@ def warm_up(n_links: int = 6, lanes: int = DEFAULT_LANES, stage: str | None = No
         Wall time of loading or compiling, s.
     """
     from eelsim.batch.api import run_batch
+    from eelsim.fluid import get_fluid_law
     from eelsim.robot import load_robot
     from eelsim.scenario import load_scenario
 
     start = time.perf_counter()
-    robot = load_robot()
+    robot = load_robot(robot_file) if robot_file else load_robot()
+    if law is not None:
+        fluid = get_fluid_law(law)
+        robot = robot.with_coefficients(fluid.coefficients.from_array(fluid.bounds.mean(axis=1)))
     if robot.n_links != n_links:
         robot = robot.model_copy(update={"n_links": n_links})
     scenario = load_scenario("straight").model_copy(update={"duration_s": 0.05})
