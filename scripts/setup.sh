@@ -42,13 +42,9 @@ fi
 if [ -f firmware/Makefile ]; then
   make -s -C firmware native
 fi
-# 4. The twin's batched kernel, compiled into numba's on-disk cache (half a minute to a minute
-# the first time, half a second once cached), so that no command pays for it: with its stage
-# compiled by the C compiler (the default when there is one) and by numba (the fallback, which
-# the tests cross-check).
-.venv/bin/python - <<'PY'
-from eelsim.batch import stage_backend, warm_up
-for stage in dict.fromkeys([stage_backend(), "numba"]):
-    print(f"setup: batched kernel ready, stage by {stage} ({warm_up(stage=stage):.1f} s)")
-PY
+# 4. The twin's batched kernels the main job uses (its fits and the model comparison's
+# candidates), compiled into the on-disk cache two at a time (20-30 s each the first time, under
+# a second once cached), so that the main job does not pay for them; the stage compiled by the C
+# compiler when there is one, else by numba. The test command warms the tests' own variants.
+.venv/bin/python scripts/warm_kernels.py main 2 | sed 's/^kernels:/setup: kernel/'
 echo "setup: ready ($root/.venv)"

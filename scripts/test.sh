@@ -20,8 +20,8 @@ if [ -f firmware/Makefile ]; then
   echo "== firmware (AVR image with budget, native unit tests, sanitizers, fuzzing)"
   suite firmware make -s -C firmware check
 fi
-echo "== batched kernels the tests use, compiled two at a time (scripts/warm_test_kernels.py)"
-suite kernels python scripts/warm_test_kernels.py 2
+echo "== batched kernels the tests use, compiled two at a time (scripts/warm_kernels.py)"
+suite kernels python scripts/warm_kernels.py tests 2
 echo "== pytest"
 suite pytest python -m pytest "$@"
 if [ ${#failed[@]} -gt 0 ]; then

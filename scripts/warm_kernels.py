@@ -1,0 +1,64 @@
+"""Compile batched-kernel variants into the kernel disk cache, two at a time.
+
+Each variant (links x fluid law x joint model x stage) takes 20-60 s to compile on first use.
+The main job needs five (its fits, and the model comparison's candidates), the test suite
+thirteen; compiled one after another inside the command that needs them they were most of its
+time from a fresh clone. Compiled here in parallel into the cache
+(``eelsim.batch.kernel_cache_dir``), the command loads each in under a second. A variant missing
+from a list is still compiled by the code that needs it: the lists only save time.
+
+    python scripts/warm_kernels.py main [JOBS]     # scripts/setup.sh: the main job's
+    python scripts/warm_kernels.py tests [JOBS]    # scripts/test.sh: the test suite's
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+
+Variant = tuple[int, str | None, str, str]
+"""(links, stage or None for the machine's default, fluid law, bundled robot file)."""
+
+PAPER, SERVO = "paper_robot.toml", "servo_robot.toml"
+
+# eelbot report on the bundled dataset: the fits, then the candidates of the comparison
+MAIN: list[Variant] = [(6, None, law, PAPER) for law in ("morison", "galilean", "linear_quadratic")]
+MAIN += [(6, None, "morison", SERVO)]
+
+# sim/tests and host/tests: 3, 6 and 8 links, every candidate law with both joint models, the
+# test plants' law, and the numba stage the C stage is checked against
+TESTS: list[Variant] = [(n, "c", "morison", robot) for n in (3, 6, 8) for robot in (PAPER, SERVO)]
+TESTS += [(6, "c", law, robot) for law in ("galilean", "linear_quadratic") for robot in (PAPER, SERVO)]
+TESTS += [(6, "c", "reynolds", PAPER), (6, "numba", "morison", PAPER), (6, "numba", "morison", SERVO)]
+
+
+def _warm(variant: Variant) -> str:
+    from eelsim.batch import stage_backend, warm_up
+
+    n, stage, law, robot = variant
+    stage = stage or stage_backend()
+    if stage == "c" and stage_backend() != "c":
+        stage = "numba"  # no C compiler here: the numba stage is what runs
+    seconds = warm_up(n_links=n, stage=stage, law=law, robot_file=robot)
+    return f"N = {n}, {stage} stage, {law}, {robot}: {seconds:.0f} s"
+
+
+def main() -> int:
+    """Compile the named list's variants, JOBS processes at a time; a line per variant."""
+    lists = {"main": MAIN, "tests": TESTS}
+    if len(sys.argv) < 2 or sys.argv[1] not in lists:
+        print(f"usage: warm_kernels.py {'|'.join(lists)} [JOBS]", file=sys.stderr)
+        return 2
+    variants = lists[sys.argv[1]]
+    jobs = int(sys.argv[2]) if len(sys.argv) > 2 else 2
+    start = time.perf_counter()
+    with ProcessPoolExecutor(max_workers=jobs) as pool:
+        for line in pool.map(_warm, list(dict.fromkeys(variants))):
+            print(f"kernels: {line}", flush=True)
+    print(f"kernels: {len(variants)} variants ready in {time.perf_counter() - start:.0f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
