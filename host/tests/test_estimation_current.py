@@ -188,6 +188,17 @@ def test_a_malformed_stored_current_is_refused_naming_the_fit_and_the_field(
     assert message in str(err.value)
 
 
+def test_a_coefficient_its_law_refuses_is_refused_when_the_file_is_read(robot, tmp_path):
+    # before anything swims with it: validate and the planner read fits through one reader
+    fit = _fit_with_current(robot, [0.001, 0.002]).to_json()
+    fit["coefficients"]["C_d"] = -0.5
+    path = tmp_path / "bad.json"
+    path.write_text(json.dumps({"format": "eelbot-coefficients/3", "fits": {"turning": fit}}))
+    with pytest.raises(CoefficientsError, match=r"fits.turning.coefficients: not a morison "
+                                                r"coefficient set .*C_d.*greater than or equal"):
+        read_coefficients(str(path), robot)
+
+
 def test_the_command_line_turns_the_current_off(stray_tank, tmp_path, capsys):
     out = tmp_path / "fit"
     args = ["estimate", str(stray_tank.folder), "--motion", "straight", "--budget", "12",

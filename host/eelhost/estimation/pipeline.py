@@ -13,6 +13,7 @@ import json
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -179,6 +180,60 @@ def write_coefficients(
     return path
 
 
+def read_coefficients_file(path: Path) -> dict[str, Any]:
+    """The JSON object of a ``coefficients.json`` of a readable format.
+
+    Raises
+    ------
+    CoefficientsError
+        An unreadable file, not an object, or a format this version does not read.
+    """
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as err:
+        raise CoefficientsError(f"{path}: cannot read coefficients: {err}") from None
+    if not isinstance(data, dict):
+        raise CoefficientsError(f"{path}: expected a JSON object with fits")
+    fmt = data.get("format", READABLE_COEFFICIENTS_FORMATS[0])
+    if fmt not in READABLE_COEFFICIENTS_FORMATS:
+        raise CoefficientsError(
+            f"{path}: format: expected one of {', '.join(READABLE_COEFFICIENTS_FORMATS)}, "
+            f"got {fmt!r}"
+        )
+    return data
+
+
+def fitted_models(data: dict[str, Any], robot: Robot, path: Path) -> dict[str, FittedModel]:
+    """The fits of a ``coefficients.json`` object, each in the model it names, checked.
+
+    Every coefficient passes its law's own checks here (e.g. non-negative), so a bad value is
+    refused naming the file and the key before anything swims with it.
+
+    Raises
+    ------
+    CoefficientsError
+        Naming the file, the fit and what is wrong.
+    """
+    fits = data.get("fits")
+    if not isinstance(fits, dict) or not fits:
+        raise CoefficientsError(f"{path}: fits: expected fitted coefficient sets")
+    models = {}
+    for motion, entry in fits.items():
+        where = f"{path}: fits.{motion}"
+        try:
+            models[motion] = model = FittedModel.from_json(entry, robot, where)
+            model.coefficients  # noqa: B018 (the law's checks, pydantic)
+        except ParameterError as err:
+            raise CoefficientsError(str(err)) from None
+        except ValueError as err:
+            first = "; ".join(line.strip() for line in str(err).splitlines()[:3])
+            raise CoefficientsError(
+                f"{where}.coefficients: not a {entry.get('law', 'morison')} coefficient set "
+                f"({first})"
+            ) from None
+    return models
+
+
 def read_coefficients(spec: str, robot: Robot) -> dict[str, FittedModel]:
     """Fitted models from a JSON file written by :func:`write_coefficients`, or numbers.
 
@@ -188,27 +243,7 @@ def read_coefficients(spec: str, robot: Robot) -> dict[str, FittedModel]:
     """
     path = Path(spec)
     if path.suffix == ".json":
-        try:
-            data = json.loads(path.read_text())
-        except (OSError, json.JSONDecodeError) as err:
-            raise CoefficientsError(f"{path}: cannot read coefficients: {err}") from None
-        if not isinstance(data, dict):
-            raise CoefficientsError(f"{path}: expected a JSON object with fits")
-        fmt = data.get("format", READABLE_COEFFICIENTS_FORMATS[0])
-        if fmt not in READABLE_COEFFICIENTS_FORMATS:
-            raise CoefficientsError(
-                f"{path}: format: expected one of {', '.join(READABLE_COEFFICIENTS_FORMATS)}, "
-                f"got {fmt!r}"
-            )
-        fits = data.get("fits")
-        if not isinstance(fits, dict) or not fits:
-            raise CoefficientsError(f"{path}: fits: expected fitted coefficient sets")
-        try:
-            return {m: FittedModel.from_json(f, robot, f"{path}: fits.{m}") for m, f in fits.items()}
-        except ParameterError as err:
-            raise CoefficientsError(str(err)) from None
-        except ValueError as err:  # a coefficient the law refuses (pydantic)
-            raise CoefficientsError(f"{path}: fits: malformed coefficient set ({err})") from None
+        return fitted_models(read_coefficients_file(path), robot, path)
     # the law's coefficients alone, on the robot file's joints as they are (none fitted)
     space = ParameterSpace(robot.fluid_law, JointFit(joint_model_name(robot)))
     names = ",".join(space.names)

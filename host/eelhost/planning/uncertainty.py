@@ -25,7 +25,6 @@ around its fit with its standard deviation, truncated at +-``sigmas``).
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,7 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from eelhost.errors import UserError
-from eelhost.estimation.parameters import FittedModel, ParameterError
+from eelhost.estimation.pipeline import CoefficientsError, fitted_models, read_coefficients_file
 from eelhost.planning.world import Current, World
 from eelsim.fluid import FluidCoefficients
 from eelsim.robot import Robot
@@ -198,7 +197,8 @@ def read_coefficient_model(path: str | Path, robot: Robot) -> CoefficientModel:
     ----------
     path : str or Path
     robot : Robot
-        The robot file the fits are of (its law reads records that name none).
+        The robot file the fits are of (records that name no law are the Morison law's, as
+        in the first format).
 
     Returns
     -------
@@ -213,32 +213,11 @@ def read_coefficient_model(path: str | Path, robot: Robot) -> CoefficientModel:
     """
     path = Path(path)
     try:
-        data = json.loads(path.read_text())
-    except (OSError, json.JSONDecodeError) as err:
-        raise CoefficientsFileError(f"{path}: cannot read coefficients: {err}") from None
-    if not isinstance(data, dict):
-        raise CoefficientsFileError(f"{path}: expected a JSON object")
-    fits_in = data.get("fits")
-    if not isinstance(fits_in, dict) or not fits_in:
-        raise CoefficientsFileError(f"{path}: fits: expected fitted coefficient sets")
-    models: dict[str, FittedModel] = {}
-    fits: dict[str, FluidCoefficients] = {}
-    for motion, record in fits_in.items():
-        where = f"{path}: fits.{motion}"
-        if isinstance(record, dict) and "law" not in record:
-            # a file that names no model holds the robot's law (checked by it below)
-            record = {**record, "law": robot.fluid_law.name}
-        try:
-            models[motion] = FittedModel.from_json(record, robot, where)
-            fits[motion] = models[motion].coefficients  # the law's own checks (pydantic)
-        except ParameterError as err:
-            raise CoefficientsFileError(str(err)) from None
-        except (TypeError, ValueError) as err:
-            first = str(err).splitlines()[0:3]
-            raise CoefficientsFileError(
-                f"{where}.coefficients: not a {record.get('law')} coefficient set "
-                f"({'; '.join(x.strip() for x in first)})"
-            ) from None
+        data = read_coefficients_file(path)
+        models = fitted_models(data, robot, path)
+    except CoefficientsError as err:
+        raise CoefficientsFileError(str(err)) from None
+    fits = {m: f.coefficients for m, f in models.items()}
     chosen: dict[str, FluidCoefficients] = {}
     from_key: dict[str, str] = {}
     for m in MOTIONS:
