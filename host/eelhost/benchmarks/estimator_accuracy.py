@@ -105,12 +105,12 @@ def _fit_and_validate(ds: Dataset, plant: Plant | None, settings: FitSettings,
     """
     out: dict[str, Any] = {"truth_fitness": {}, "sims": {}}
     t0 = time.perf_counter()
-    sims: dict[str, int] = {}
+    fit_runs: list[int] = []  # every fit's simulations, both models'
 
     def fit(motion: str, space: ParameterSpace | None,
             start: np.ndarray | None) -> tuple[FitResult, Evaluator]:
         res, ev = fit_motion(ds, motion, settings, space=space, start=start)
-        sims[motion] = sims.get(motion, 0) + ev.simulations
+        fit_runs.append(ev.simulations)
         if space is None:
             out["sims"][motion] = ev.simulations
         return res, ev
@@ -129,7 +129,7 @@ def _fit_and_validate(ds: Dataset, plant: Plant | None, settings: FitSettings,
             if ev.space.current:
                 x[-2:] = _true_current(ds)
             out["truth_fitness"][motion] = float(ev.fitness(x[None])[0])
-    tests = [e for exps in ds.test.values() for e in exps] + list(ds.paths)
+    tests = ds.held_out
 
     def worst(fits: dict[str, FitResult]) -> dict[str, tuple[float, float]]:
         runs = validate(ds.robot, {m: r.model for m, r in fits.items()}, tests,
@@ -142,7 +142,7 @@ def _fit_and_validate(ds: Dataset, plant: Plant | None, settings: FitSettings,
     own = chosen.robot_file_fits
     out["own_worst_ex"] = worst(own) if own is not None else out["worst_ex"]
     out["seconds"] = time.perf_counter() - t0
-    out["simulations"] = sum(sims.values()) + sum(c.simulations for c in chosen.comparison or [])
+    out["simulations"] = sum(fit_runs) + sum(c.simulations for c in chosen.comparison or [])
     return out
 
 

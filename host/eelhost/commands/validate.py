@@ -49,7 +49,7 @@ def run(args: argparse.Namespace) -> int:
         raise CoefficientsError(f"{coefficients}: cannot read coefficients: no such file")
     dataset = load_dataset(args.dataset, allow_incomplete=args.allow_incomplete)
     fitted = read_coefficients(args.coefficients, dataset.robot)
-    tests = [e for exps in dataset.test.values() for e in exps] + list(dataset.paths)
+    tests = dataset.held_out
     for name, model in fitted.items():
         if model.current_text() is not None:
             print(f"{name}: simulated in the fitted ambient current, {model.current_text()}, "

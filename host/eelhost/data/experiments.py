@@ -450,6 +450,11 @@ class Dataset:
     manifest: dict[str, Any]
     plant: dict[str, Any] = field(default_factory=dict)
 
+    @property
+    def held_out(self) -> list[Experiment]:
+        """Every experiment validation predicts: the test experiments of each motion, then the paths."""
+        return [e for exps in self.test.values() for e in exps] + list(self.paths)
+
 
 def manifest_text(
     robot_file: str,

@@ -131,8 +131,8 @@ def run_report(
         extra["warnings"] += fit_warnings(motion, res.space, res.values, boot)
         seconds[motion] = seconds.get(motion, 0.0) + time.perf_counter() - t0
     comparison = chosen.comparison
-    if comparison:
-        choice = recommend(comparison)
+    choice = recommend(comparison) if comparison else None
+    if comparison and choice:
         extra["model_comparison"] = {
             "recommended": choice.model,
             "adopted": chosen.adopted,
@@ -140,7 +140,7 @@ def run_report(
                                      "held_out": {m: v.tolist() for m, v in c.held_out.items()}}
                            for c in comparison},
         }
-    tests = [e for exps in dataset.test.values() for e in exps] + list(dataset.paths)
+    tests = dataset.held_out
     if chosen.robot_file_fits:
         own_runs = validate(dataset.robot, {m: r.model for m, r in chosen.robot_file_fits.items()},
                             tests, backend=settings.backend)
@@ -162,8 +162,7 @@ def run_report(
     plot_validation(runs, out)
     report = out / "report.md"
     text = _report_text(dataset, fits, extra, runs, settings)
-    if comparison:
-        choice = recommend(comparison)
+    if comparison and choice:
         text += "\n".join([
             "",
             "## Candidate models (leave-one-gait-out cross-validation)",
