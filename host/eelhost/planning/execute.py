@@ -125,6 +125,7 @@ def swim(
     state: FloatArray | None = None,
     start_step: int = 0,
     clearance: ClearanceField | None = None,
+    currents: Sequence[tuple[float, float]] | None = None,
 ) -> list[Swim]:
     """Swim waypoints in the twin with each coefficient set and check every step.
 
@@ -145,6 +146,9 @@ def swim(
     clearance : ClearanceField, optional
         The world's clearance field (built when not given); it only decides which steps need
         the exact distance.
+    currents : sequence of (vx, vy), optional
+        The current of each run, one per coefficient set (default: the twin's for all); the
+        planner's check swims its draws of the water (coefficients and current) in one batch.
 
     Returns
     -------
@@ -166,6 +170,7 @@ def swim(
         coefficient_index=list(range(r)),
         stride=1,
         starts=[start] * r,
+        currents=currents,
     )
     model = SwimmerModel.from_robot(twin.robot, sets[0][1])
     n = model.n_links

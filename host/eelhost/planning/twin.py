@@ -146,6 +146,7 @@ class Twin:
         waypoints: Sequence[tuple[float, float]],
         duration_s: float,
         start: tuple[float, float, float] = (0.0, 0.0, 0.0),
+        current_m_s: tuple[float, float] | None = None,
     ) -> Scenario:
         """The scenario of a run from rest: the gait, the waypoints, the current.
 
@@ -156,12 +157,18 @@ class Twin:
             T_max.
         start : (x, y, heading_rad)
             Start pose of the straight robot at rest.
+        current_m_s : (float, float), optional
+            This run's current velocity (default: the twin's).
 
         Returns
         -------
         Scenario
         """
         g = self.gait
+        speed, direction = self._speed, self._direction_deg
+        if current_m_s is not None:
+            speed = math.hypot(*current_m_s)
+            direction = math.degrees(math.atan2(current_m_s[1], current_m_s[0])) if speed else 0.0
         return Scenario(
             name="planning",
             amplitude_rad=g.amplitude_rad,
@@ -170,8 +177,8 @@ class Twin:
             k_theta=g.k_theta,
             waypoints_m=[(float(x), float(y)) for x, y in waypoints],
             acceptance_radius_m=self.acceptance_radius_m,
-            current_speed_m_s=self._speed,
-            current_direction_deg=self._direction_deg,
+            current_speed_m_s=speed,
+            current_direction_deg=direction,
             duration_s=duration_s,
             start_position_m=(float(start[0]), float(start[1])),
             start_heading_deg=math.degrees(start[2]),
@@ -190,6 +197,7 @@ class Twin:
         coefficient_index: Sequence[int] | IntArray | None = None,
         stride: int = 3,
         starts: Sequence[tuple[float, float, float]] | None = None,
+        currents: Sequence[tuple[float, float]] | None = None,
     ) -> Runs:
         """Run R closed-loop manoeuvres at once.
 
@@ -209,6 +217,9 @@ class Twin:
             Steps between samples.
         starts : sequence of R (x, y, heading_rad), optional
             Start poses of runs from rest (ignored where ``states`` is given).
+        currents : sequence of R (vx, vy), optional
+            Each run's current velocity, m/s (default: the twin's for every run); the planner's
+            check swims its draws of the water this way, many currents in one batch.
 
         Returns
         -------
@@ -217,8 +228,9 @@ class Twin:
         r = len(waypoints)
         durations = np.broadcast_to(np.asarray(duration_s, dtype=float), (r,))
         poses = list(starts) if starts is not None else [(0.0, 0.0, 0.0)] * r
-        scenarios = [self.scenario(w, float(d), p)
-                     for w, d, p in zip(waypoints, durations, poses, strict=True)]
+        flows = list(currents) if currents is not None else [None] * r
+        scenarios = [self.scenario(w, float(d), p, c)
+                     for w, d, p, c in zip(waypoints, durations, poses, flows, strict=True)]
         index = (np.zeros(r, dtype=np.int64) if coefficient_index is None
                  else np.asarray(coefficient_index, dtype=np.int64))
         coeffs = [self.coefficients[i] for i in index]
