@@ -120,7 +120,7 @@ def test_ga_resumed_after_a_kill_equals_the_uninterrupted_run_on_real_simulation
         if gen == 1:
             raise Killed
 
-    ck = tmp_path / "ck.pkl"
+    ck = tmp_path / "ck.npz"
     with pytest.raises(Killed):
         fit_ga(
             ev.fitness,

@@ -35,7 +35,7 @@ def test_atomic_writes_follow_the_umask_as_open_does(tmp_path, umask_022):
 
 
 def test_checkpoints_and_recordings_are_readable_by_the_group(tmp_path, umask_022):
-    ck = Checkpoint(tmp_path / "ck.pkl", {"seed": 0})
+    ck = Checkpoint(tmp_path / "ck.npz", {"seed": 0})
     ck.save({"history": []}, force=True)
     assert mode_of(ck.path) == 0o644
     from eelhost.data.experiments import _atomic_write  # what datasets and recordings use

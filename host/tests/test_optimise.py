@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from eelhost.estimation.local import polish_least_squares
-from eelhost.estimation.optimise import Checkpoint, fit_cmaes, fit_ga
+from eelhost.estimation.optimise import Checkpoint, CheckpointError, fit_cmaes, fit_ga
 from eelhost.estimation.parameters import ParameterSpace
 from eelsim.fluid import get_fluid_law
 
@@ -47,11 +47,11 @@ def test_resume_after_a_kill_gives_the_same_result_as_an_uninterrupted_run(tmp_p
 
     straight = run()
     settings = {"method": method, "seed": 5}
-    ck = Checkpoint(tmp_path / "ck.pkl", settings)
+    ck = Checkpoint(tmp_path / "ck.npz", settings)
     with pytest.raises(Killed):
         run(checkpoint=ck, progress=kill_after(2))
     np.random.seed(12345)  # noqa: NPY002 (a new process starts with other global random state)
-    resumed = run(checkpoint=Checkpoint(tmp_path / "ck.pkl", settings), resume=True)
+    resumed = run(checkpoint=Checkpoint(tmp_path / "ck.npz", settings), resume=True)
     assert resumed.fitness == straight.fitness
     assert np.array_equal(resumed.values, straight.values)
     assert [h[:2] for h in resumed.history] == [h[:2] for h in straight.history]
@@ -77,9 +77,9 @@ def test_simulation_count_goes_on_across_a_resume_and_matches_the_candidates(tmp
     straight = run(Counting())
     settings = {"method": method, "seed": 5}
     with pytest.raises(Killed):
-        run(Counting(), checkpoint=Checkpoint(tmp_path / "ck.pkl", settings), progress=kill_after(2))
+        run(Counting(), checkpoint=Checkpoint(tmp_path / "ck.npz", settings), progress=kill_after(2))
     seen = []
-    resumed = run(Counting(), Checkpoint(tmp_path / "ck.pkl", settings), True,
+    resumed = run(Counting(), Checkpoint(tmp_path / "ck.npz", settings), True,
                   lambda gen, best, sims: seen.append(sims))
     assert resumed.history == straight.history  # counts included
     assert resumed.simulations == straight.simulations == straight.evaluations  # one run each
@@ -87,9 +87,9 @@ def test_simulation_count_goes_on_across_a_resume_and_matches_the_candidates(tmp
 
 
 def test_checkpoint_from_other_settings_is_refused(tmp_path):
-    Checkpoint(tmp_path / "ck.pkl", {"seed": 1}).save({"x": 1})
+    Checkpoint(tmp_path / "ck.npz", {"seed": 1}).save({"x": 1})
     with pytest.raises(ValueError, match="other settings"):
-        Checkpoint(tmp_path / "ck.pkl", {"seed": 2}).load()
+        Checkpoint(tmp_path / "ck.npz", {"seed": 2}).load()
 
 
 def test_cmaes_and_ga_approach_the_minimum_of_a_simple_bowl():
@@ -110,3 +110,78 @@ def test_least_squares_polish_finds_a_linear_least_squares_minimum_and_never_wor
     worse = polish_least_squares(lambda c: np.ones((len(np.atleast_2d(c)), 3)), bowl, SPACE,
                                  start, 0.0)
     assert np.array_equal(worse.values, start)  # a polish that does not improve the minimax is not taken
+
+
+class _RunsAShellCommand:
+    """What a crafted pickle holds: unpickling it runs ``touch MARKER``."""
+
+    def __init__(self, marker):
+        self.marker = str(marker)
+
+    def __reduce__(self):
+        import os
+
+        return (os.system, (f"touch {self.marker}",))
+
+
+def _planted(path, kind, marker, fingerprint="x"):
+    import pickle
+
+    payload = _RunsAShellCommand(marker)
+    if kind == "pickle named .npz":
+        path.write_bytes(pickle.dumps({"fingerprint": "x", "payload": payload}))
+    else:  # an archive whose arrays are pickled objects (np.save pickles object arrays)
+        x = np.empty(1, dtype=object)
+        x[0] = payload
+        with open(path, "wb") as f:
+            np.savez(f, format=np.array("eelbot-checkpoint/2"), fingerprint=np.array(fingerprint),
+                     x=x)
+    return path
+
+
+@pytest.mark.parametrize("kind", ["pickle named .npz", "npz of object arrays"])
+def test_a_planted_pickle_checkpoint_runs_nothing_and_is_refused_naming_the_file(tmp_path, kind):
+    marker = tmp_path / "ran"
+    checkpoint = Checkpoint(tmp_path / "ck.npz", {"seed": 5})
+    ck = _planted(checkpoint.path, kind, marker, checkpoint.fingerprint)  # fingerprint right
+    with pytest.raises(CheckpointError, match="not a readable checkpoint") as err:
+        fit_cmaes(bowl, SPACE, seed=5, max_evaluations=48, popsize=8, checkpoint=checkpoint,
+                  resume=True)
+    assert str(ck) in str(err.value) and "pickles are never read" in str(err.value)
+    assert not marker.exists()
+    import pickle
+
+    pickle.loads(pickle.dumps(_RunsAShellCommand(tmp_path / "live")))  # the payload is live
+    assert (tmp_path / "live").exists()
+
+
+def test_an_old_pickle_checkpoint_is_not_read_and_named(tmp_path):
+    marker = tmp_path / "ran"
+    old = _planted(tmp_path / "ck.pkl", "pickle named .npz", marker)
+    with pytest.raises(CheckpointError, match="earlier eelbot") as err:
+        fit_ga(bowl, SPACE, seed=5, pop_size=12, generations=3,
+               checkpoint=Checkpoint(tmp_path / "ck.npz", {"seed": 5}), resume=True)
+    assert str(old) in str(err.value) and not marker.exists()
+
+
+def test_a_checkpoint_is_plain_numbers_checked_against_its_fingerprint_first(tmp_path):
+    ck = Checkpoint(tmp_path / "ck.npz", {"seed": 5})
+    fit_ga(bowl, SPACE, seed=5, pop_size=12, generations=3, checkpoint=ck)
+    with np.load(ck.path, allow_pickle=False) as z:  # readable with pickle refused
+        assert {"x", "f", "sizes", "simulations", "fingerprint"} <= set(z.files)
+        assert z["x"].shape == (int(z["sizes"].sum()), SPACE.size)
+    with pytest.raises(CheckpointError, match="other settings"):
+        fit_ga(bowl, SPACE, seed=5, pop_size=12, generations=3,
+               checkpoint=Checkpoint(ck.path, {"seed": 6}), resume=True)
+
+
+def test_a_checkpoint_whose_candidates_the_optimiser_does_not_ask_again_is_refused(tmp_path):
+    ck = Checkpoint(tmp_path / "ck.npz", {"seed": 5})
+    fit_cmaes(bowl, SPACE, seed=5, max_evaluations=48, popsize=8, checkpoint=ck)
+    with np.load(ck.path, allow_pickle=False) as z:
+        arrays = {n: z[n] for n in ("x", "f", "sizes", "simulations")}
+    arrays["x"][3] += 0.01  # edited by hand, or made by another version of pycma
+    ck.save(arrays, force=True)
+    with pytest.raises(CheckpointError, match="generation 0 of the checkpoint asked for other"):
+        fit_cmaes(bowl, SPACE, seed=5, max_evaluations=48, popsize=8,
+                  checkpoint=Checkpoint(ck.path, {"seed": 5}), resume=True)

@@ -11,6 +11,8 @@ where the output must hold no traceback and no escape codes.
 from __future__ import annotations
 
 import logging
+import os
+import pickle
 import shlex
 import subprocess
 import sys
@@ -163,7 +165,12 @@ PROBES = [
     Probe("coefficients too few", "validate 0.1,0.2 {lab}/ds_good", 2, ("coefficients",)),
     # checkpoints and the cluster
     Probe("checkpoint truncated", "estimate {lab}/ds_good --motion straight --resume "
-          "--out {lab}/ck", 2, ("checkpoint_straight_pd_morison_cmaes.pkl", "not a readable checkpoint")),
+          "--out {lab}/ck", 2, ("checkpoint_straight_pd_morison_cmaes.npz", "not a readable checkpoint")),
+    Probe("checkpoint a planted pickle", "estimate {lab}/ds_good --motion straight --resume "
+          "--out {lab}/ck_pickle", 2, ("checkpoint_straight_pd_morison_cmaes.npz",
+                                       "pickles are never read")),
+    Probe("checkpoint an old pickle", "estimate {lab}/ds_good --motion straight --resume "
+          "--out {lab}/ck_old", 2, ("checkpoint_straight_pd_morison_cmaes.pkl", "not read")),
     Probe("scheduler unreachable", "estimate {lab}/ds_good --scheduler tcp://127.0.0.1:1 "
           "--out {tmp}/fit", 2, ("--scheduler tcp://127.0.0.1:1", "no Dask scheduler")),
     Probe("scheduler not an address", "estimate {lab}/ds_good --scheduler foo --out {tmp}/fit",
@@ -266,10 +273,23 @@ def _write_lab(lab: Path) -> None:
     dataset("ds_missing", test="nowhere")
     dataset("ds_unknown_key", extra="colour = 1")
     dataset("ds_broken", fmt="")
-    ck = Checkpoint(lab / "ck" / "checkpoint_straight_pd_morison_cmaes.pkl", {"x": 1})
+    ck = Checkpoint(lab / "ck" / "checkpoint_straight_pd_morison_cmaes.npz", {"x": 1})
     ck.save({"history": [], "payload": list(range(1000))}, force=True)
     whole = ck.path.read_bytes()
     ck.path.write_bytes(whole[: len(whole) // 2])  # a checkpoint cut by a full disk or a kill
+    # a colleague's fit folder holding a crafted pickle: reading it would create lab/ran
+    planted = pickle.dumps(_RunsAShellCommand(lab / "ran"))
+    for folder, name in (("ck_pickle", "cmaes.npz"), ("ck_old", "cmaes.pkl")):
+        (lab / folder).mkdir()
+        (lab / folder / f"checkpoint_straight_pd_morison_{name}").write_bytes(planted)
+
+
+class _RunsAShellCommand:
+    def __init__(self, marker: Path) -> None:
+        self.marker = marker
+
+    def __reduce__(self):
+        return (os.system, (f"touch {self.marker}",))
 
 
 @pytest.fixture(scope="module")
@@ -305,6 +325,7 @@ def test_probe_ends_with_its_status_and_a_message_naming_what_is_wrong(probe, la
         first = err.strip().splitlines()[0]
         assert first.startswith("eelbot") and "error:" in first, err
         assert "usage:" not in err  # the message, not argparse's usage block
+    assert not (lab / "ran").exists()  # nothing a planted file holds has run
 
 
 def test_the_table_covers_every_kind_of_input():

@@ -7,10 +7,12 @@ candidates (C, K) to fitness values (C,), normally :meth:`Evaluator.fitness`, ev
 generation at a time so that the batched kernel sees one big batch. The local polishes are in
 :mod:`eelhost.estimation.local`.
 
-Long runs checkpoint after a generation at most every few seconds and after the last (an atomic
-pickle of the optimiser, its random state and the history: about 30 ms for the GA, a tenth of
-one of its generations); ``resume=True`` continues from the checkpoint, replaying the generations
-since, and gives the same result as an uninterrupted run with the same seed.
+Long runs checkpoint after a generation at most every few seconds and after the last: an atomic
+``.npz`` of numbers only (each generation's candidates, their fitness values and the simulation
+counts), never a pickle, so that a fit folder received from someone else cannot run code.
+``resume=True`` starts the optimiser afresh with the same seed, feeds it the checkpoint's
+generations (checking that it asks for the same candidates), then goes on evaluating; the result is
+that of an uninterrupted run with the same seed (docs/estimation.md, "Checkpoints").
 """
 
 from __future__ import annotations
@@ -18,14 +20,13 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import pickle
 import time
+import zipfile
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import cloudpickle
 import numpy as np
 
 from eelhost.errors import UserError
@@ -35,6 +36,9 @@ from eelsim.fluid import FluidCoefficients
 
 Objective = Callable[[np.ndarray], np.ndarray]
 Progress = Callable[[int, float, int], None]  # (generation, best fitness, simulations so far)
+
+
+CHECKPOINT_FORMAT = "eelbot-checkpoint/2"  # /1 was a pickle, no longer read
 
 
 class CheckpointError(UserError, ValueError):
@@ -96,7 +100,12 @@ class FitResult:
 
 
 class Checkpoint:
-    """An atomic pickle file holding an optimiser's state between generations.
+    """An atomic ``.npz`` file of plain arrays holding an optimiser's generations so far.
+
+    The file holds numbers only (the candidates each generation asked, their fitness values and
+    the simulation counts; docs/estimation.md, "Checkpoints"), is read with pickle refused, and
+    its fingerprint of the settings is checked before anything is built from it: a checkpoint
+    from another person's folder can at worst be refused, never run code.
 
     Parameters
     ----------
@@ -115,61 +124,182 @@ class Checkpoint:
             json.dumps(settings, sort_keys=True, default=str).encode()
         ).hexdigest()
 
-    # numpy's legacy global generator is saved because pycma draws from it (NPY002 is about new
-    # code choosing it; here we must follow what the libraries use).
-    def save(self, state: dict[str, Any], force: bool = False) -> None:
-        """Write the state (with the fingerprint and numpy's global random state).
+    def save(self, arrays: dict[str, Any], force: bool = False) -> None:
+        """Write the arrays (numbers only) with the format and the fingerprint.
 
         Skipped when the last write was less than ``every_s`` ago, unless ``force``.
+
+        Raises
+        ------
+        TypeError
+            An array of Python objects (it would need pickle to be read back).
         """
         if not force and time.monotonic() - self._saved_at < self.every_s:
             return
+        data = {name: np.asarray(value) for name, value in arrays.items()}
+        for name, value in data.items():
+            if value.dtype.kind not in "biuf":
+                raise TypeError(f"checkpoint array {name!r} is {value.dtype}, not numbers")
         self._saved_at = time.monotonic()
-        state = {**state, "fingerprint": self.fingerprint, "np_random": np.random.get_state()}  # noqa: NPY002
         with atomic_writer(self.path, "wb") as f:  # readable as the umask says
-            cloudpickle.dump(state, f)  # pymoo holds local functions plain pickle refuses
+            np.savez(f, format=np.array(CHECKPOINT_FORMAT), fingerprint=np.array(self.fingerprint),
+                     **data)
 
-    def load(self) -> dict[str, Any] | None:
-        """Return the saved state (restoring numpy's global random state), or None if none."""
+    def load(self) -> dict[str, np.ndarray] | None:
+        """Return the saved arrays, or None if there is no checkpoint.
+
+        Raises
+        ------
+        CheckpointError
+            Naming the file: not a checkpoint of this format (a pickle included: it is never
+            read), or one made with other settings.
+        """
+        legacy = self.path.with_suffix(".pkl")
         if not self.path.exists():
+            if legacy.exists():
+                raise CheckpointError(
+                    f"{legacy}: a checkpoint of an earlier eelbot (a pickle, which can run code, "
+                    "so it is not read): remove it, or run without --resume"
+                )
             return None
         try:
-            with open(self.path, "rb") as f:
-                state = pickle.load(f)
-        except (pickle.UnpicklingError, EOFError, AttributeError, ImportError, IndexError) as err:
+            with np.load(self.path, allow_pickle=False) as z:
+                if not isinstance(z, np.lib.npyio.NpzFile):
+                    raise ValueError("a single array, not an archive of arrays")
+                fmt = str(z["format"]) if "format" in z.files else None
+                if fmt != CHECKPOINT_FORMAT:
+                    raise CheckpointError(
+                        f"{self.path}: not a checkpoint of eelbot (format {fmt!r}, expected "
+                        f"{CHECKPOINT_FORMAT!r}): remove it, or run without --resume"
+                    )
+                if "fingerprint" not in z.files or str(z["fingerprint"]) != self.fingerprint:
+                    raise CheckpointError(
+                        f"{self.path}: checkpoint was made with other settings (dataset, method, "
+                        "seed or budget); remove it or run with the same settings"
+                    )
+                arrays = {n: z[n] for n in z.files if n not in ("format", "fingerprint")}
+        except CheckpointError:
+            raise
+        except (ValueError, OSError, EOFError, KeyError, zipfile.BadZipFile) as err:
             raise CheckpointError(
                 f"{self.path}: not a readable checkpoint ({type(err).__name__}: {err}); it may "
-                "be truncated or from another version: remove it, or run without --resume"
+                "be truncated or not eelbot's (pickles are never read): remove it, or run "
+                "without --resume"
             ) from None
-        if not isinstance(state, dict):
-            raise CheckpointError(f"{self.path}: not a checkpoint of eelbot (remove it)")
-        if state.get("fingerprint") != self.fingerprint:
-            raise CheckpointError(
-                f"{self.path}: checkpoint was made with other settings (dataset, method, seed or "
-                "budget); remove it or run with the same settings"
-            )
-        np.random.set_state(state["np_random"])  # noqa: NPY002
-        return state
+        for name, value in arrays.items():
+            if value.dtype.kind not in "biuf":
+                raise CheckpointError(f"{self.path}: array {name!r} is not numbers")
+        return arrays
 
 
-def _start(checkpoint: Checkpoint | None, resume: bool) -> dict[str, Any] | None:
-    if checkpoint is None or not resume:
-        return None
-    return checkpoint.load()
+class _Generations:
+    """The generations of a fit: replayed from a checkpoint, then evaluated and recorded.
 
+    A resumed fit starts its optimiser afresh with the same seed and feeds it, generation by
+    generation, the fitness values the checkpoint holds, after checking that it asks for the same
+    candidates; the optimiser then stands exactly where it stood when the checkpoint was written
+    (its state is a function of the seed and of what it was told), with nothing but numbers read.
 
-def _count_across_resume(
-    simulations: Callable[[], int], state: dict[str, Any] | None
-) -> Callable[[], int]:
-    """The simulations count of the whole fit: a resumed one goes on from its checkpoint's count.
-
-    The evaluator of a new process starts at 0; without this the count in the history and the
-    progress would restart at every resume while the candidates' count (``evaluations``) goes on.
+    Parameters
+    ----------
+    objective : callable
+        Candidates (C, K) in the space's units -> fitness (C,).
+    space : ParameterSpace
+    checkpoint : Checkpoint or None
+    resume : bool
+    simulations : callable
+        The evaluator's count of closed-loop runs.
     """
-    if state is None or not state["history"]:
-        return simulations
-    base, start = int(state["history"][-1][2]), simulations()
-    return lambda: base + simulations() - start
+
+    def __init__(
+        self,
+        objective: Objective,
+        space: ParameterSpace,
+        checkpoint: Checkpoint | None,
+        resume: bool,
+        simulations: Callable[[], int],
+    ) -> None:
+        self.objective, self.space, self.checkpoint = objective, space, checkpoint
+        self._simulations = simulations
+        self.xs: list[np.ndarray] = []
+        self.fs: list[np.ndarray] = []
+        self.counts: list[int] = []  # the fit's closed-loop runs after each generation
+        self._stored: tuple[list[np.ndarray], list[np.ndarray], list[int]] = ([], [], [])
+        if checkpoint is not None and resume:
+            arrays = checkpoint.load()
+            if arrays is not None:
+                self._stored = self._split(arrays, checkpoint.path, space.size)
+        # a resumed fit's count goes on from its checkpoint's (the evaluator of a new process
+        # starts at 0, and replaying runs nothing)
+        self._base = self._stored[2][-1] if self._stored[2] else 0
+        self._start = simulations() if self._stored[2] else 0
+
+    @staticmethod
+    def _split(
+        arrays: dict[str, np.ndarray], path: Path, size: int
+    ) -> tuple[list[np.ndarray], list[np.ndarray], list[int]]:
+        try:
+            x, f = arrays["x"].astype(float), arrays["f"].astype(float)
+            sizes, counts = arrays["sizes"].astype(np.int64), arrays["simulations"].astype(np.int64)
+        except KeyError as err:
+            raise CheckpointError(f"{path}: checkpoint has no array {err}: remove it") from None
+        if (x.ndim != 2 or x.shape[1] != size or f.shape != (len(x),) or sizes.ndim != 1
+                or counts.shape != sizes.shape or (sizes < 0).any() or sizes.sum() != len(x)):
+            raise CheckpointError(
+                f"{path}: checkpoint arrays do not fit together (candidates {x.shape}, fitness "
+                f"{f.shape}, generations {sizes.shape}, {size} parameters expected): remove it"
+            )
+        cuts = np.cumsum(sizes)[:-1]
+        return list(np.split(x, cuts)), list(np.split(f, cuts)), [int(c) for c in counts]
+
+    @property
+    def replaying(self) -> bool:
+        """Whether the next generation comes from the checkpoint."""
+        return len(self.xs) < len(self._stored[0])
+
+    def evaluate(self, unit: np.ndarray) -> np.ndarray:
+        """Fitness of a generation's candidates (in the unit cube), replayed or evaluated."""
+        unit = np.asarray(unit, dtype=float)
+        g = len(self.xs)
+        if self.replaying:
+            x, f, count = (s[g] for s in self._stored)
+            if x.shape != unit.shape or not np.allclose(x, unit, rtol=0.0, atol=1e-9):
+                assert self.checkpoint is not None
+                raise CheckpointError(
+                    f"{self.checkpoint.path}: generation {g} of the checkpoint asked for other "
+                    "candidates than this run does (another version of numpy, pymoo or pycma?): "
+                    "remove it, or run without --resume"
+                )
+        else:
+            f = np.asarray(self.objective(self.space.from_unit(unit)), dtype=float)
+            count = self._base + self._simulations() - self._start
+        self.xs.append(unit.copy())
+        self.fs.append(f)
+        self.counts.append(count)
+        return f
+
+    @property
+    def simulations(self) -> int:
+        """The fit's closed-loop runs so far (across a resume)."""
+        return self.counts[-1] if self.counts else 0
+
+    @property
+    def evaluations(self) -> int:
+        """Candidates evaluated so far (across a resume)."""
+        return int(sum(len(f) for f in self.fs))
+
+    def save(self, force: bool = False) -> None:
+        """Checkpoint the generations (not while replaying: the file already holds them)."""
+        if self.checkpoint is None or (self.replaying and not force):
+            return
+        if not self.xs:
+            return
+        self.checkpoint.save(
+            {"x": np.concatenate(self.xs), "f": np.concatenate(self.fs),
+             "sizes": np.array([len(f) for f in self.fs], dtype=np.int64),
+             "simulations": np.array(self.counts, dtype=np.int64)},
+            force=force,
+        )
 
 
 def _seeded_gaussian_mutation(sigma: float = 0.1):
@@ -237,37 +367,28 @@ def fit_ga(
     from pymoo.problems.static import StaticProblem
 
     problem = Problem(n_var=space.size, n_obj=1, xl=0.0, xu=1.0)
-    state = _start(checkpoint, resume)
-    if state is None:
-        algo = GA(
-            pop_size=pop_size,
-            crossover=UniformCrossover(prob=0.8),
-            mutation=_seeded_gaussian_mutation(sigma=0.1),
-            eliminate_duplicates=True,
-        )
-        algo.setup(problem, seed=seed, termination=("n_gen", generations))
-        history: list[tuple[int, float, int]] = []
-        evaluations = 0
-    else:
-        algo, history, evaluations = state["algorithm"], state["history"], state["evaluations"]
-    simulations = _count_across_resume(simulations, state)
+    generations_ = _Generations(objective, space, checkpoint, resume, simulations)
+    algo = GA(
+        pop_size=pop_size,
+        crossover=UniformCrossover(prob=0.8),
+        mutation=_seeded_gaussian_mutation(sigma=0.1),
+        eliminate_duplicates=True,
+    )
+    algo.setup(problem, seed=seed, termination=("n_gen", generations))
+    history: list[tuple[int, float, int]] = []
     while algo.has_next():
         pop = algo.ask()
-        f = np.asarray(objective(space.from_unit(pop.get("X"))), dtype=float)
-        evaluations += len(f)
+        f = generations_.evaluate(pop.get("X"))
         PymooEvaluator().eval(StaticProblem(problem, F=f.reshape(-1, 1)), pop)
         algo.tell(infills=pop)
         best = float(algo.opt.get("F").min())
-        history.append((algo.n_gen - 1, best, simulations()))
-        if checkpoint is not None:
-            checkpoint.save(
-                {"algorithm": algo, "history": history, "evaluations": evaluations},
-                force=not algo.has_next(),
-            )
+        history.append((algo.n_gen - 1, best, generations_.simulations))
+        generations_.save(force=not algo.has_next())
         if progress:
             progress(*history[-1])
     best_x = space.from_unit(algo.opt.get("X")[0])
-    return FitResult("ga", space, best_x, float(algo.opt.get("F").min()), history, evaluations)
+    return FitResult("ga", space, best_x, float(algo.opt.get("F").min()), history,
+                     generations_.evaluations)
 
 
 RESTART_SCHEMES = ("none", "ipop", "bipop")
@@ -277,7 +398,8 @@ RESTART_SCHEMES = ("none", "ipop", "bipop")
 class _Restarts:
     """Where a restarted CMA-ES is: the run under way, the best so far, the budget spent.
 
-    Kept whole in the checkpoint, so that a resumed fit continues the same sequence of runs.
+    Rebuilt on a resume by replaying the checkpoint's generations, so that a resumed fit continues
+    the same sequence of runs.
     """
 
     scheme: str
@@ -376,18 +498,11 @@ def fit_cmaes(
 
     if restarts not in RESTART_SCHEMES:
         raise ValueError(f"restarts must be one of {', '.join(RESTART_SCHEMES)}, got {restarts!r}")
-    state = _start(checkpoint, resume)
+    generations = _Generations(objective, space, checkpoint, resume, simulations)
     start_u = np.clip(space.to_unit(start) if start is not None else np.full(space.size, 0.5),
                       0.0, 1.0)
-    if state is None:
-        run = _Restarts(restarts, popsize, sigma0, np.random.default_rng(seed + 7919))
-        es = None
-    else:
-        run, es = state["run"], state["es"]
-    # a resumed fit's simulations count goes on from its checkpoint's
-    simulations = _count_across_resume(
-        simulations, None if state is None else {"history": state["run"].history}
-    )
+    run = _Restarts(restarts, popsize, sigma0, np.random.default_rng(seed + 7919))
+    es = None
     while True:
         if es is None or es.stop():
             left = max_evaluations - run.evaluations
@@ -412,19 +527,17 @@ def fit_cmaes(
             if es.stop():  # no budget even for one generation
                 break
         xs = np.array(es.ask())
-        f = np.asarray(objective(space.from_unit(xs)), dtype=float)
+        f = generations.evaluate(xs)
         run.spent(len(f))
         es.tell(list(xs), f.tolist())
         i = int(np.argmin(f))
         if f[i] < run.best_f:
             run.best_u, run.best_f = xs[i].copy(), float(f[i])
-        run.history.append((len(run.history), run.best_f, simulations()))
-        if checkpoint is not None:
-            checkpoint.save({"run": run, "es": es}, force=False)
+        run.history.append((len(run.history), run.best_f, generations.simulations))
+        generations.save()
         if progress:
             progress(*run.history[-1])
-    if checkpoint is not None:
-        checkpoint.save({"run": run, "es": es}, force=True)
+    generations.save(force=True)
     if run.best_u is None:
         raise RuntimeError("CMA-ES stopped before evaluating a candidate")
     method = "cmaes" if restarts == "none" else f"cmaes-{restarts}"

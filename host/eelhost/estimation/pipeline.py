@@ -155,7 +155,7 @@ def fit_motion(
                  "model": space.model_name, **settings.__dict__}
         tag = space.model_name.replace(" x ", "_")
         ck = Checkpoint(
-            Path(checkpoint_dir) / f"checkpoint_{motion}_{tag}_{settings.method}.pkl", ident
+            Path(checkpoint_dir) / f"checkpoint_{motion}_{tag}_{settings.method}.npz", ident
         )
     begin = space.start(dataset.robot) if start is None else np.asarray(start, dtype=float)
     problem = FitProblem(ev, settings, begin, ck, resume, progress)
