@@ -142,8 +142,9 @@ class Checkpoint:
                 raise TypeError(f"checkpoint array {name!r} is {value.dtype}, not numbers")
         self._saved_at = time.monotonic()
         with atomic_writer(self.path, "wb") as f:  # readable as the umask says
-            np.savez(f, format=np.array(CHECKPOINT_FORMAT), fingerprint=np.array(self.fingerprint),
-                     **data)
+            named: dict[str, Any] = {"format": np.array(CHECKPOINT_FORMAT),
+                                     "fingerprint": np.array(self.fingerprint), **data}
+            np.savez(f, allow_pickle=False, **named)
 
     def load(self) -> dict[str, np.ndarray] | None:
         """Return the saved arrays, or None if there is no checkpoint.
@@ -262,7 +263,7 @@ class _Generations:
         unit = np.asarray(unit, dtype=float)
         g = len(self.xs)
         if self.replaying:
-            x, f, count = (s[g] for s in self._stored)
+            x, f, count = self._stored[0][g], self._stored[1][g], self._stored[2][g]
             if x.shape != unit.shape or not np.allclose(x, unit, rtol=0.0, atol=1e-9):
                 assert self.checkpoint is not None
                 raise CheckpointError(
