@@ -75,6 +75,6 @@ def run(args: argparse.Namespace) -> int:
             + " ".join(f"{name} {value:.4g}" for name, value in res.space.as_dict(res.values).items())
             + (f" (ambient current {res.model.current_text()})" if res.space.current else "")
         )
-    path = write_coefficients(Path(args.out) / "coefficients.json", fits)
+    path = write_coefficients(Path(args.out) / "coefficients.json", fits, robot=dataset.robot)
     print(f"wrote {path}")
     return 0

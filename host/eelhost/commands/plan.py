@@ -83,12 +83,18 @@ def add_coefficient_model_option(p: argparse.ArgumentParser) -> None:
         help="coefficients.json from 'eelbot report' (straight and turning fits with bootstrap "
         "std); default: the robot's coefficients with 10%% std (docs/planning.md)",
     )
+    p.add_argument(
+        "--allow-other-robot", action="store_true",
+        help="use a coefficients file fitted on another robot than --robot (refused by default: "
+        "its name, N or geometry differ)",
+    )
 
 
 def coefficient_model(args: argparse.Namespace, robot: Robot) -> CoefficientModel:
     """The coefficient model chosen on the command line."""
     if getattr(args, "coefficients_file", None):
-        return read_coefficient_model(args.coefficients_file, robot)
+        return read_coefficient_model(args.coefficients_file, robot,
+                                      getattr(args, "allow_other_robot", False))
     _, coeffs = robot_and_coefficients(args)
     return default_model(robot, coeffs)
 

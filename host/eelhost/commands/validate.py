@@ -34,6 +34,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "searched within +-SECONDS (default 0.1, the paper's time-stamp uncertainty)",
     )
     p.add_argument(
+        "--allow-other-robot",
+        action="store_true",
+        help="use a coefficients.json fitted on another robot than the dataset's (refused by "
+        "default: its name, N or geometry differ)",
+    )
+    p.add_argument(
         "--allow-incomplete",
         action="store_true",
         help="use recordings that were never closed (killed runs); refused by default",
@@ -48,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
         # said before the dataset is read: reading the file needs the dataset's robot
         raise CoefficientsError(f"{coefficients}: cannot read coefficients: no such file")
     dataset = load_dataset(args.dataset, allow_incomplete=args.allow_incomplete)
-    fitted = read_coefficients(args.coefficients, dataset.robot)
+    fitted = read_coefficients(args.coefficients, dataset.robot, args.allow_other_robot)
     tests = dataset.held_out
     for name, model in fitted.items():
         if model.current_text() is not None:

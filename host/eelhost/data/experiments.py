@@ -24,6 +24,7 @@ import json
 import math
 import tomllib
 from dataclasses import dataclass, field
+from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -34,8 +35,16 @@ from eelhost.errors import UserError
 from eelhost.files import atomic_write
 from eelsim.camera import MEDIAN_PLACEMENTS, CameraModel
 from eelsim.fluid import FluidCoefficients, get_fluid_law
-from eelsim.robot import HydroCoefficients, Robot, load_robot
+from eelsim.robot import (
+    BUNDLED_ROBOTS,
+    HydroCoefficients,
+    Robot,
+    RobotFileError,
+    load_robot,
+    parse_robot,
+)
 from eelsim.scenario import Scenario
+from eelsim.tomlfile import parse_toml
 
 EXPERIMENT_FORMAT = "eelbot-experiment/1"
 DATASET_FORMAT = "eelbot-dataset/1"
@@ -515,6 +524,35 @@ def write_manifest(folder: str | Path, text: str) -> Path:
     return path
 
 
+def _dataset_robot(folder: Path, robot_ref: Any, mpath: Path) -> Robot:
+    """The dataset's robot: a file in its folder, or a bundled robot it names.
+
+    Never the working folder's robot.toml: a dataset validated silently against another robot's
+    file gave wrong figures with no error (docs/data.md, "A dataset").
+    """
+    bundled = ", ".join(BUNDLED_ROBOTS)
+    if robot_ref is None:
+        if not (folder / "robot.toml").exists():
+            raise DataError(
+                f"{mpath}: robot: the manifest names no robot file and {folder} holds no "
+                f"robot.toml; name one (a file in the dataset folder, or bundled: {bundled})"
+            )
+        robot_ref = "robot.toml"
+    if not isinstance(robot_ref, str) or not robot_ref:
+        raise DataError(f"{mpath}: robot: expected a file name, got {robot_ref!r}")
+    robot_path = folder / robot_ref
+    if robot_path.exists():
+        return load_robot(robot_path.resolve())
+    if robot_ref in BUNDLED_ROBOTS:  # bundled with eelsim, whatever the working folder holds
+        text = resources.files("eelsim.data").joinpath(robot_ref).read_text()
+        return parse_robot(parse_toml(text, f"<bundled {robot_ref}>", RobotFileError),
+                           f"<bundled {robot_ref}>")
+    raise DataError(
+        f"{mpath}: robot: {robot_path} does not exist (the robot file is looked for in the "
+        f"dataset folder only; bundled robots: {bundled})"
+    )
+
+
 def load_dataset(folder: str | Path, allow_incomplete: bool = False) -> Dataset:
     """Load a dataset folder: its manifest, robot and every experiment it names.
 
@@ -545,9 +583,7 @@ def load_dataset(folder: str | Path, allow_incomplete: bool = False) -> Dataset:
     for key in manifest:
         if key not in allowed:
             raise DataError(f"{mpath}: {key}: unknown key")
-    robot_ref = manifest.get("robot", "paper_robot.toml")
-    robot_path = folder / robot_ref
-    robot = load_robot(robot_path if robot_path.exists() else robot_ref)
+    robot = _dataset_robot(folder, manifest.get("robot"), mpath)
     train: dict[str, list[Experiment]] = {}
     test: dict[str, list[Experiment]] = {}
     _refuse_reused_experiments(manifest, mpath)

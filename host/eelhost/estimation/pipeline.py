@@ -9,7 +9,9 @@ for the robot, fitted on the training experiments of both motion types).
 
 from __future__ import annotations
 
+import hashlib
 import json
+import logging
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,6 +32,8 @@ from eelhost.estimation.parameters import (
     joint_model_name,
 )
 from eelsim.robot import Robot
+
+log = logging.getLogger(__name__)
 
 METHODS = method_names()  # as registered when this module is imported
 
@@ -163,15 +167,72 @@ def fit_motion(
     return res, ev
 
 
+def robot_record(robot: Robot) -> dict[str, Any]:
+    """What ``coefficients.json`` records of the robot fitted: name, N and a geometry fingerprint.
+
+    The fingerprint is the SHA-256 of the links' geometry, masses and inertias and the water's
+    density (what the coefficients were fitted through; docs/data.md, "Fitted models"), not of
+    the coefficients or joint parameters, which a fit replaces.
+    """
+    arrays = robot.link_arrays()
+    geometry = {"n_links": robot.n_links, "water_density_kg_m3": robot.water_density_kg_m3,
+                **{name: [repr(float(v)) for v in getattr(arrays, name)]
+                   for name in ("half_length_m", "half_axis_vertical_m",
+                                "half_axis_horizontal_m", "mass_kg", "yaw_inertia_kg_m2")}}
+    digest = hashlib.sha256(json.dumps(geometry, sort_keys=True).encode()).hexdigest()
+    return {"name": robot.name, "n_links": robot.n_links, "geometry_sha256": digest}
+
+
+def check_robot(
+    data: dict[str, Any], robot: Robot, path: Path, allow_other_robot: bool = False
+) -> None:
+    """Refuse coefficients fitted on another robot than ``robot`` (unless allowed).
+
+    Raises
+    ------
+    CoefficientsError
+        Naming both robots (name, N, geometry fingerprint) and the option that allows it.
+    """
+    recorded = data.get("robot")
+    if recorded is None:
+        log.warning("%s records no robot (written before eelbot recorded one); not checked "
+                    "against %s", path, robot.name)
+        return
+    if not isinstance(recorded, dict):
+        raise CoefficientsError(f"{path}: robot: expected a table (name, n_links, geometry_sha256)")
+    here = robot_record(robot)
+    same = (recorded.get("n_links") == here["n_links"]
+            and recorded.get("geometry_sha256") == here["geometry_sha256"])
+    if same or allow_other_robot:
+        if not same:
+            log.warning("%s: fitted on robot %r, used on %r (--allow-other-robot)", path,
+                        recorded.get("name"), robot.name)
+        return
+
+    def text(r: dict[str, Any]) -> str:
+        return (f"{r.get('name')!r} (N = {r.get('n_links')}, geometry "
+                f"{str(r.get('geometry_sha256'))[:12]})")
+
+    raise CoefficientsError(
+        f"{path}: fitted on robot {text(recorded)}, not on this robot {text(here)}; give the "
+        "dataset or --robot it was fitted on, or --allow-other-robot to use it anyway"
+    )
+
+
 def write_coefficients(
-    path: str | Path, fits: dict[str, FitResult], extra: dict | None = None
+    path: str | Path, fits: dict[str, FitResult], extra: dict | None = None,
+    robot: Robot | None = None,
 ) -> Path:
     """Write fitted models as JSON (readable by ``eelbot validate``; docs/estimation.md).
 
     Each fit names its fluid law and joint model and gives every parameter by name (the
-    ambient current, when fitted, under ``ambient_current``).
+    ambient current, when fitted, under ``ambient_current``); ``robot``, the robot fitted, is
+    recorded by :func:`robot_record` so that readers refuse coefficients of another robot.
     """
-    data = {"format": COEFFICIENTS_FORMAT, "fits": {m: r.to_json() for m, r in fits.items()}}
+    data: dict[str, Any] = {"format": COEFFICIENTS_FORMAT}
+    if robot is not None:
+        data["robot"] = robot_record(robot)
+    data["fits"] = {m: r.to_json() for m, r in fits.items()}
     if extra:
         data.update(extra)
     path = Path(path)
@@ -203,17 +264,22 @@ def read_coefficients_file(path: Path) -> dict[str, Any]:
     return data
 
 
-def fitted_models(data: dict[str, Any], robot: Robot, path: Path) -> dict[str, FittedModel]:
+def fitted_models(
+    data: dict[str, Any], robot: Robot, path: Path, allow_other_robot: bool = False
+) -> dict[str, FittedModel]:
     """The fits of a ``coefficients.json`` object, each in the model it names, checked.
 
-    Every coefficient passes its law's own checks here (e.g. non-negative), so a bad value is
-    refused naming the file and the key before anything swims with it.
+    The robot the file records must be ``robot`` (:func:`check_robot`) unless
+    ``allow_other_robot``. Every coefficient passes its law's own checks here (e.g.
+    non-negative), so a bad value is refused naming the file and the key before anything swims
+    with it.
 
     Raises
     ------
     CoefficientsError
         Naming the file, the fit and what is wrong.
     """
+    check_robot(data, robot, path, allow_other_robot)
     fits = data.get("fits")
     if not isinstance(fits, dict) or not fits:
         raise CoefficientsError(f"{path}: fits: expected fitted coefficient sets")
@@ -234,7 +300,9 @@ def fitted_models(data: dict[str, Any], robot: Robot, path: Path) -> dict[str, F
     return models
 
 
-def read_coefficients(spec: str, robot: Robot) -> dict[str, FittedModel]:
+def read_coefficients(
+    spec: str, robot: Robot, allow_other_robot: bool = False
+) -> dict[str, FittedModel]:
     """Fitted models from a JSON file written by :func:`write_coefficients`, or numbers.
 
     Files of the earlier format (Morison coefficients by name, no law) are read as the Morison
@@ -243,7 +311,7 @@ def read_coefficients(spec: str, robot: Robot) -> dict[str, FittedModel]:
     """
     path = Path(spec)
     if path.suffix == ".json":
-        return fitted_models(read_coefficients_file(path), robot, path)
+        return fitted_models(read_coefficients_file(path), robot, path, allow_other_robot)
     # the law's coefficients alone, on the robot file's joints as they are (none fitted)
     space = ParameterSpace(robot.fluid_law, JointFit(joint_model_name(robot)))
     names = ",".join(space.names)

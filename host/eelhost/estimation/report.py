@@ -152,7 +152,7 @@ def run_report(
         extra["truth"] = {m: c.model_dump() for m, c in dataset.truth.items()}
     runs = validate(dataset.robot, {m: r.model for m, r in fits.items()}, tests,
                     backend=settings.backend)
-    write_coefficients(out / "coefficients.json", fits, extra)
+    write_coefficients(out / "coefficients.json", fits, extra, robot=dataset.robot)
     (out / "table4.md").write_text(table_markdown([r.row for r in runs]) + "\n")
     (out / "table4.csv").write_text(table_csv([r.row for r in runs]))
     # matplotlib only now: importing it costs half a second of every command's start

@@ -190,7 +190,9 @@ def default_model(robot: Robot, coefficients: FluidCoefficients | None = None) -
                             f"{source}; std {DEFAULT_RELATIVE_STD:.0%} of each value (default)")
 
 
-def read_coefficient_model(path: str | Path, robot: Robot) -> CoefficientModel:
+def read_coefficient_model(
+    path: str | Path, robot: Robot, allow_other_robot: bool = False
+) -> CoefficientModel:
     """Read fits and bootstrap standard deviations from a ``coefficients.json``.
 
     Parameters
@@ -198,7 +200,8 @@ def read_coefficient_model(path: str | Path, robot: Robot) -> CoefficientModel:
     path : str or Path
     robot : Robot
         The robot file the fits are of (records that name no law are the Morison law's, as
-        in the first format).
+        in the first format). A file recording another robot is refused unless
+        ``allow_other_robot`` (:func:`eelhost.estimation.pipeline.check_robot`).
 
     Returns
     -------
@@ -214,7 +217,7 @@ def read_coefficient_model(path: str | Path, robot: Robot) -> CoefficientModel:
     path = Path(path)
     try:
         data = read_coefficients_file(path)
-        models = fitted_models(data, robot, path)
+        models = fitted_models(data, robot, path, allow_other_robot)
     except CoefficientsError as err:
         raise CoefficientsFileError(str(err)) from None
     fits = {m: f.coefficients for m, f in models.items()}
