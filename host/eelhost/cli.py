@@ -12,13 +12,18 @@ Each subcommand lives in its own module under ``eelhost.commands`` and registers
 - user errors (bad files, bad options, a URI that cannot be opened:
   :class:`eelhost.errors.UserError` and eelsim's robot-file, scenario and timing errors) become a
   one-line message and exit status 2 (``--debug`` adds their traceback). Anything else is a bug
-  and keeps its traceback.
+  and keeps its traceback;
+- an output that cannot be written (a read-only folder, a full disk, ``--out`` naming a file, a
+  closed or full stdout: :func:`eelhost.files.output_failure`) is said on one line too, with exit
+  status 2; stdout is flushed before the command returns, so a full stdout is found while the
+  message can still be given, not in Python's shutdown.
 """
 
 from __future__ import annotations
 
 import argparse
 import logging
+import os
 import re
 import sys
 
@@ -42,6 +47,7 @@ from eelhost.commands import (
     vision_bench,
 )
 from eelhost.errors import EXIT_INTERRUPTED, EXIT_USER_ERROR, UserError, exit_status_table
+from eelhost.files import output_failure
 from eelsim.robot import RobotFileError
 from eelsim.scenario import ScenarioError
 from eelsim.timing import TimingError
@@ -190,19 +196,49 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(format="%(levelname)s %(name)s: %(message)s", stream=sys.stderr)
     logging.getLogger().setLevel(log_level(args.verbose, args.quiet))
     progress.set_mode(args.progress)
+    if sys.stdout is None:  # started with stdout closed (`eelbot ports >&-`): print would drop
+        progress.message(f"eelbot {args.command}: error: stdout is closed; eelbot prints its "
+                         "results there (redirect it to a file, or to /dev/null)")
+        return EXIT_USER_ERROR
     try:
         with progress.console():
-            return int(args.run(args) or 0)
-    except (*USER_ERRORS, KeyboardInterrupt) as err:
+            status = int(args.run(args) or 0)
+            sys.stdout.flush()  # a full or closed stdout fails here, where it can be said
+            return status
+    except (*USER_ERRORS, KeyboardInterrupt, OSError) as err:
+        failure = output_failure(err)
+        if isinstance(err, OSError) and not isinstance(err, USER_ERRORS) and failure is None:
+            raise  # an OSError that is not about an output: a bug, with its traceback
         progress.close_all()  # the message goes on a line of its own, after what was printed
         if args.debug:
             raise
-        sys.stdout.flush()
+        if not _flush_stdout() and failure is None:
+            failure = "cannot write stdout: it is closed or full"
         interrupted = isinstance(err, KeyboardInterrupt)
-        progress.message(f"eelbot {args.command}: " + ("interrupted" if interrupted else f"error: {err}"))
+        text = "interrupted" if interrupted else f"error: {failure or err}"
+        progress.message(f"eelbot {args.command}: {text}")
         return EXIT_INTERRUPTED if interrupted else EXIT_USER_ERROR
     finally:
         progress.close_all()
+
+
+def _flush_stdout() -> bool:
+    """Flush stdout; if it cannot be written, point it at /dev/null and say False.
+
+    Python flushes stdout once more when it exits; a stdout that is full or whose reader is gone
+    would then print its own traceback-like report. Pointing the descriptor at /dev/null (what
+    Python's documentation advises for a broken pipe) leaves only eelbot's one line.
+    """
+    try:
+        sys.stdout.flush()
+        return True
+    except OSError:
+        try:
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, sys.stdout.fileno())
+        except (OSError, ValueError, AttributeError):  # a stream without a descriptor (a test's)
+            pass
+        return False
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -1,63 +1,149 @@
-"""Writing output files whole and readable: atomic replacement that follows the user's umask.
+"""Writing output files whole and readable, and saying on one line when they cannot be written.
 
-An output is written to a temporary file beside it and renamed into place, so a reader (or a run
-killed half-way) never sees half a file. ``tempfile.mkstemp`` creates that file with mode 0600
-whatever the umask; :func:`atomic_writer` gives it the mode a plain ``open`` would have had
-(0666 less the umask), so other lab users can read recordings, checkpoints and datasets.
+:func:`atomic_writer` and :func:`atomic_write` (from :mod:`eelsim.files`, which the twin's own
+writer uses too): an output is written to a temporary file beside it and renamed into place, so a
+reader (or a run killed half-way, or a full disk) never sees half a file, with the mode a plain
+``open`` gives (0666 less the umask), so other lab users can read recordings, checkpoints and
+datasets.
+
+An output that cannot be written (a read-only folder, a full disk, ``--out`` naming a file where a
+folder is meant, a closed or full stdout) is the user's situation, not a bug: :func:`output_failure`
+tells such an ``OSError`` from others and words it on one line, and the command line prints that
+line (docs/cli.md, "Outputs"). :func:`check_output_folder` and :func:`check_output_stem` try a
+command's output place before any long work starts, so a read-only folder is said at once, not
+after an hour of fitting.
 """
 
 from __future__ import annotations
 
+import errno
 import os
 import tempfile
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
-from typing import IO, Any
 
-__all__ = ["atomic_write", "atomic_writer", "default_file_mode"]
+from eelhost.errors import UserError
+from eelsim.files import atomic_write, atomic_writer, default_file_mode
+
+__all__ = [
+    "OutputError",
+    "atomic_write",
+    "atomic_writer",
+    "check_output_folder",
+    "check_output_stem",
+    "default_file_mode",
+    "output_failure",
+]
+
+# The errors of writing an output that come from where it is written, not from eelbot: each with
+# what the user can do about it.
+OUTPUT_ERRNOS = {
+    errno.EACCES: "permission denied (a read-only or another user's folder)",
+    errno.EPERM: "not permitted",
+    errno.EROFS: "the file system is read-only",
+    errno.ENOSPC: "no space left on the device (the disk is full)",
+    errno.EDQUOT: "the disk quota is used up",
+    errno.EFBIG: "the file is too large for the file system",
+    errno.EISDIR: "a folder is there, where a file is to be written",
+    errno.ENOTDIR: "a file is there, where a folder is needed",
+    errno.EEXIST: "a file is there, where a folder is needed",
+    errno.ENAMETOOLONG: "the name is too long",
+    errno.EPIPE: "the reader went away (a closed pipe)",
+}
 
 
-def default_file_mode() -> int:
-    """The mode ``open(path, "w")`` gives a new file: 0666 less the process's umask."""
-    mask = os.umask(0o022)  # reading the umask means setting it; restore it at once
-    os.umask(mask)
-    return 0o666 & ~mask
+class OutputError(UserError, OSError):
+    """An output that cannot be written; the message names the file or folder and why."""
 
 
-@contextmanager
-def atomic_writer(path: str | Path, mode: str = "w", **open_args: Any) -> Iterator[IO[Any]]:
-    """Open a temporary file beside ``path``; on success it replaces ``path`` whole.
+def output_failure(err: BaseException) -> str | None:
+    """The one-line account of an output that could not be written, or None for other errors.
 
     Parameters
     ----------
-    path : str or Path
-        The file to write (its folder is created).
-    mode : str
-        ``"w"`` (text) or ``"wb"`` (bytes).
-    **open_args
-        Passed to ``os.fdopen`` (``encoding``, ``newline``).
+    err : BaseException
+        Any exception; only an ``OSError`` whose errno is one of :data:`OUTPUT_ERRNOS` counts.
 
-    Yields
-    ------
-    file
-        The open temporary file; on an exception it is removed and ``path`` is left as it was.
+    Returns
+    -------
+    str or None
+        ``cannot write PATH: why`` (``stdout`` when the error names no file).
     """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    if isinstance(err, OutputError):
+        return str(err)
+    if not isinstance(err, OSError) or err.errno not in OUTPUT_ERRNOS:
+        return None
+    where = err.filename if err.filename is not None else "stdout"
+    return f"cannot write {where}: {OUTPUT_ERRNOS[err.errno]}"
+
+
+def check_output_folder(folder: str | Path, option: str = "--out") -> Path:
+    """Create ``folder`` if needed and check that a file can be written in it, before any work.
+
+    Parameters
+    ----------
+    folder : str or Path
+        The output folder.
+    option : str
+        The option it came from, for the message.
+
+    Returns
+    -------
+    Path
+        The folder.
+
+    Raises
+    ------
+    OutputError
+        ``--out`` names a file, or the folder cannot be created or written (read-only, full).
+    """
+    folder = Path(folder)
+    if folder.exists() and not folder.is_dir():
+        raise OutputError(f"{option}: {folder} is a file, not a folder; choose another {option}")
     try:
-        os.fchmod(fd, default_file_mode())
-        with os.fdopen(fd, mode, **open_args) as f:
-            yield f
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+        folder.mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(dir=folder, prefix=".eelbot-write-check.", suffix=".tmp")
+        try:
+            os.write(fd, b"x")
+        finally:
+            os.close(fd)
+            Path(probe).unlink(missing_ok=True)
+    except OSError as err:
+        why = OUTPUT_ERRNOS.get(err.errno or 0, err.strerror or str(err))
+        where = folder if err.filename is None or ".eelbot-write-check." in str(err.filename) \
+            else err.filename
+        raise OutputError(f"{option}: cannot write in {where}: {why}") from None
+    return folder
 
 
-def atomic_write(path: str | Path, data: str | bytes) -> Path:
-    """Write ``data`` (text or bytes) to ``path`` atomically (:func:`atomic_writer`); return it."""
-    with atomic_writer(path, "wb" if isinstance(data, bytes) else "w") as f:
-        f.write(data)
-    return Path(path)
+def check_output_stem(stem: str | Path, suffixes: tuple[str, ...] = (), option: str = "--out") -> Path:
+    """Check the folder of an output path without extension (``--out out/run/path1``), before work.
+
+    Parameters
+    ----------
+    stem : str or Path
+        The output path without extension.
+    suffixes : tuple of str
+        The extensions written beside it; none of ``stem + suffix`` may be a folder.
+    option : str
+        The option it came from.
+
+    Returns
+    -------
+    Path
+        The stem.
+
+    Raises
+    ------
+    OutputError
+        As :func:`check_output_folder`, or a ``stem + suffix`` that is a folder.
+    """
+    stem = Path(stem)
+    if stem.name in ("", ".", ".."):
+        raise OutputError(f"{option}: {stem} names a folder; give a path without extension, "
+                          f"such as {stem / 'run'}")
+    check_output_folder(stem.parent, option)
+    for suffix in suffixes:
+        target = stem.with_name(stem.name + suffix)
+        if target.is_dir():
+            raise OutputError(f"{option}: {target} is a folder, where a file is to be written")
+    return stem

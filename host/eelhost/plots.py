@@ -11,6 +11,7 @@ labels with units (:func:`label_axes`), a legend without duplicate entries
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -24,6 +25,7 @@ from matplotlib import animation  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Circle  # noqa: E402
 
+from eelhost.files import atomic_writer, default_file_mode  # noqa: E402
 from eelsim.closed_loop import RunResult  # noqa: E402
 from eelsim.dynamics import link_positions  # noqa: E402
 from eelsim.model import SwimmerModel  # noqa: E402
@@ -197,12 +199,30 @@ def plot_track_errors(runs: Sequence[Any], path: str | Path, title: str = "") ->
     return save_figure(fig, path)
 
 
-def save_figure(fig: plt.Figure, path: str | Path, dpi: int = 110) -> Path:
-    """Save a figure as a PNG (creating its folder) and close it."""
+PRINT_DPI = 150  # the least a journal prints a figure at; the text sizes are set for it
+
+
+def save_figure(fig: plt.Figure, path: str | Path, dpi: int = PRINT_DPI) -> Path:
+    """Save a figure (PNG, or the format of the path's suffix) whole, creating its folder; close it.
+
+    Parameters
+    ----------
+    fig : Figure
+    path : str or Path
+    dpi : int
+        Resolution, at least :data:`PRINT_DPI`.
+
+    Returns
+    -------
+    Path
+        The file, written atomically (:func:`eelhost.files.atomic_writer`).
+    """
     out = Path(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=dpi)
-    plt.close(fig)
+    try:
+        with atomic_writer(out, "wb") as f:
+            fig.savefig(f, dpi=max(dpi, PRINT_DPI), format=out.suffix.lstrip(".") or "png")
+    finally:
+        plt.close(fig)
     return out
 
 
@@ -336,6 +356,12 @@ def animate_run(
     anim = animation.FuncAnimation(fig, draw, frames=frames, blit=True)
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
-    anim.save(out, writer=animation.PillowWriter(fps=fps))
-    plt.close(fig)
+    partial = out.with_name(f".{out.name}.partial{out.suffix}")  # Pillow writes to a named file
+    try:
+        anim.save(partial, writer=animation.PillowWriter(fps=fps))
+        os.chmod(partial, default_file_mode())
+        os.replace(partial, out)  # whole, as every output (eelhost.files)
+    finally:
+        partial.unlink(missing_ok=True)
+        plt.close(fig)
     return out

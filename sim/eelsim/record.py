@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from eelsim.closed_loop import LoopOptions, RunResult
+from eelsim.files import atomic_writer
 from eelsim.fluid import FluidCoefficients
 from eelsim.robot import Robot
 from eelsim.scenario import Scenario
@@ -114,7 +115,8 @@ def write_run(
     robot, scenario, options, seed, coefficients
         What produced the run (written as metadata).
     stem : str or Path
-        Output path without extension; parent folders are created.
+        Output path without extension; parent folders are created. Both files are written
+        whole (:mod:`eelsim.files`): a failed write leaves what was there before.
 
     Returns
     -------
@@ -122,17 +124,21 @@ def write_run(
         The CSV and JSON paths.
     """
     stem = Path(stem)
-    stem.parent.mkdir(parents=True, exist_ok=True)
     csv_path, json_path = stem.with_suffix(".csv"), stem.with_suffix(".json")
     cols = trajectory_columns(robot.n_links)
-    np.savetxt(
-        csv_path,
-        trajectory_table(result, robot.n_links),
-        delimiter=",",
-        header=",".join(cols),
-        comments="",
-        fmt="%.9g",
-    )
     meta = run_metadata(result, robot, scenario, options, seed, coefficients)
-    json_path.write_text(json.dumps(meta, indent=2) + "\n")
+    # Both files are written to temporaries and flushed before either is renamed into place: a
+    # full disk leaves the earlier pair (or nothing), never a cut CSV without its JSON.
+    with atomic_writer(json_path) as json_file, atomic_writer(csv_path) as csv_file:
+        np.savetxt(
+            csv_file,
+            trajectory_table(result, robot.n_links),
+            delimiter=",",
+            header=",".join(cols),
+            comments="",
+            fmt="%.9g",
+        )
+        json_file.write(json.dumps(meta, indent=2) + "\n")
+        csv_file.flush()
+        json_file.flush()
     return csv_path, json_path

@@ -12,12 +12,11 @@ start pose (the URI's ``start=`` is set for each take).
 from __future__ import annotations
 
 import argparse
-import shutil
 import time
 from pathlib import Path
 from urllib.parse import parse_qsl, urlencode
 
-from eelhost.commands.common import OptionError
+from eelhost.commands.common import NON_NEGATIVE, OptionError
 from eelhost.commands.run import add_take_options, current_option
 from eelhost.data.experiments import manifest_text, write_manifest
 from eelhost.field.campaign import CampaignPlan, Take, load_plan, plan_takes, take_done
@@ -25,6 +24,7 @@ from eelhost.field.provenance import robot_file_text
 from eelhost.field.runloop import RunConfig
 from eelhost.field.session import TakeNotes
 from eelhost.field.take import TakeRequest, refuse_overwrite, run_take
+from eelhost.files import OutputError, atomic_write, check_output_folder
 from eelhost.link.uri import parse_link_uri
 from eelhost.vision.markerfile import load_marker_file
 from eelsim.control import Gait
@@ -53,12 +53,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--robot-file", metavar="FILE", help="robot TOML (default: the paper robot)")
     p.add_argument("--no-prompt", action="store_true", help="real robot: do not ask for a reset "
                    "between takes (it is put back by other means)")
-    p.add_argument("--rest", type=float, metavar="S", help="rest between takes, s (the plan's "
+    p.add_argument("--rest", type=NON_NEGATIVE, metavar="S", help="rest between takes, s (the plan's "
                    "rest_s; a sim:// robot does not rest)")
-    p.add_argument("--speed", type=float, help="sim:// only: simulated s per wall s (0: as fast "
+    p.add_argument("--speed", type=NON_NEGATIVE, help="sim:// only: simulated s per wall s (0: as fast "
                    "as possible)")
     p.add_argument("--write-plan", metavar="FILE", help="write the plan (default: the paper's) "
-                   "as TOML to edit, and stop")
+                   "as TOML to edit, and stop (an existing FILE only with --force)")
+    p.add_argument("--force", action="store_true", help="with --write-plan: replace FILE (an "
+                   "edited plan is not overwritten without it)")
     add_take_options(p)
     p.set_defaults(run=run)
 
@@ -110,7 +112,14 @@ def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
     plan = load_plan(args.plan)
     if args.write_plan:
-        Path(args.write_plan).write_text(plan_toml(plan))
+        target = Path(args.write_plan)
+        if target.is_dir():
+            raise OutputError(f"--write-plan: {target} is a folder; give a file name such as "
+                              f"{target / 'plan.toml'}")
+        if target.exists() and not args.force:
+            raise OutputError(f"--write-plan: {target} exists (an edited plan?); choose another "
+                              "file or add --force to replace it")
+        atomic_write(target, plan_toml(plan))
         print(f"wrote {args.write_plan}")
         return 0
     for option, value in (("--robot", args.robot), ("--out", args.out)):
@@ -124,11 +133,10 @@ def run(args: argparse.Namespace) -> int:
     robot = load_robot(args.robot_file)
     markers = load_marker_file(args.markers)
     current = current_option(args.current, virtual)
-    folder = Path(args.out)
-    folder.mkdir(parents=True, exist_ok=True)
-    (folder / "robot.toml").write_text(robot_file_text(args.robot_file))
+    folder = check_output_folder(args.out)  # read-only or a file: said before the first take
+    atomic_write(folder / "robot.toml", robot_file_text(args.robot_file))
     if args.plan and Path(args.plan).resolve() != (folder / "plan.toml").resolve():
-        shutil.copyfile(args.plan, folder / "plan.toml")
+        atomic_write(folder / "plan.toml", Path(args.plan).read_bytes())
     takes = plan_takes(plan)
     rest = plan.rest_s if args.rest is None else args.rest
     stopped: list[str] = []

@@ -17,7 +17,7 @@ from contextlib import contextmanager
 from pydantic import ValidationError
 
 from eelhost.errors import UserError
-from eelhost.wire import protocol
+from eelhost.wire.limits import MAX_CURRENT_M_S, gait_problem
 from eelsim.camera import CameraModel
 from eelsim.closed_loop import LoopOptions
 from eelsim.fluid import FluidCoefficients
@@ -41,9 +41,6 @@ SCENARIO_OPTIONS = {
     "current_direction_deg": "--current",
     "duration_s": "--duration",
 }
-# The fastest current the twin is asked to swim in: ten times the robot's fastest steady speed
-# (about 0.1 m/s, docs/model.md section 7); faster water only makes the integration diverge.
-MAX_CURRENT_M_S = 1.0
 
 
 @contextmanager
@@ -148,21 +145,15 @@ def floats(text: str, count: int | None = None, what: str | None = None) -> list
 def gait_values(text: str) -> list[float]:
     """An argparse ``type`` for ``--gait A,omega[,beta]``: within the robot's protocol ranges.
 
-    The ranges are those the firmware accepts (``eelhost.wire.protocol.SetGait``, docs/firmware.md),
-    so the twin is never asked for a gait the robot would refuse.
+    The ranges are those the firmware accepts (:func:`eelhost.wire.limits.gait_problem`,
+    docs/firmware.md), so the twin is never asked for a gait the robot would refuse.
     """
     values = floats(text)
     if len(values) not in (2, 3):
         raise argparse.ArgumentTypeError(f"give A,omega or A,omega,beta, got {text!r}")
-    ranges = {name: (lo, hi) for name, _, lo, hi in protocol.SetGait.LAYOUT}
-    for name, value in zip(("amplitude_rad", "omega_rad_s", "beta_rad"), values, strict=False):
-        lo, hi = ranges[name]
-        if name != "beta_rad" and value <= 0.0:
-            raise argparse.ArgumentTypeError(f"{name} must be positive, got {value:g}")
-        if lo is not None and hi is not None and not lo <= value <= hi:
-            raise argparse.ArgumentTypeError(
-                f"{name} {value:g} outside the robot's range [{lo:g}, {hi:g}]"
-            )
+    problem = gait_problem(values)
+    if problem:
+        raise argparse.ArgumentTypeError(problem)
     return values
 
 

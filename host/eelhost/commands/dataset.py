@@ -22,6 +22,7 @@ from eelhost.data.virtual_tank import (
     mismatched_plants,
 )
 from eelhost.errors import UserError
+from eelhost.files import check_output_folder
 from eelhost.progress import Progress
 from eelsim.fluid import FLUID_LAWS
 from eelsim.robot import load_robot
@@ -84,6 +85,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
     robot = load_robot(args.robot)
+    check_output_folder(args.out, "OUT")  # before 34 experiments are simulated
     plant = mismatched_plants()[args.plant] if args.plant else None
     base = plant.settings if plant else TankSettings()
     law = args.fluid_law or (plant.law if plant else "morison")

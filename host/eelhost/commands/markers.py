@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 from eelhost.commands.common import OptionError, floats
+from eelhost.files import check_output_folder
 from eelhost.vision.calibration import CalibrationError, CharucoSpec
 from eelhost.vision.markerfile import MarkerFile, save_marker_file
 from eelhost.vision.markers import MarkerLayout, MarkerLayoutError
@@ -74,7 +74,7 @@ def markers_from_args(args: argparse.Namespace) -> MarkerFile:
 def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
     markers = markers_from_args(args)
-    out = Path(args.out)
+    out = check_output_folder(args.out)
     sheet = write_marker_sheet_pdf(out / "markers.pdf", markers.layout)
     board = write_board_pdf(out / "charuco.pdf", markers.board)
     layout_file = save_marker_file(markers, out / "markers.json")

@@ -27,6 +27,7 @@ from eelhost.commands.common import (
     add_robot_options,
     robot_and_coefficients,
 )
+from eelhost.files import atomic_write, check_output_folder
 from eelhost.planning.coverage import action_coverage
 from eelhost.planning.planner import Outcome, Planner, PlanRefused
 from eelhost.planning.uncertainty import (
@@ -145,11 +146,10 @@ def run(args: argparse.Namespace) -> int:
     if not args.world:
         raise OptionError("give a WORLD (or --bench)")
     world = world_from_name(args.world)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = check_output_folder(args.out)  # before the search, not after it
     planner = Planner(world, robot, model, threads=args.threads)
     outcome = planner.plan()
-    (out / "plan.json").write_text(json.dumps(plan_json(world, outcome), indent=1))
+    atomic_write(out / "plan.json", json.dumps(plan_json(world, outcome), indent=1))
     if outcome.status in REFUSALS:
         raise PlanRefused(outcome.status, f"{world.name}: {outcome.message}")
     print(f"{world.name}: {outcome.message} ({outcome.planning_time_s:.2f} s)")
@@ -223,5 +223,4 @@ def _write_block(path: Path, block: list[str]) -> None:
         text = head + new + tail
     else:
         text = text.rstrip("\n") + ("\n\n" if text else "") + new + "\n"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(text)
+    atomic_write(path, text)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 from eelhost.commands.common import (
     FINITE,
@@ -21,6 +20,7 @@ from eelhost.field.recorder import MOTIONS
 from eelhost.field.runloop import RunConfig
 from eelhost.field.session import TakeNotes
 from eelhost.field.take import TakeRequest, refuse_overwrite, run_take
+from eelhost.files import check_output_stem
 from eelhost.link.uri import parse_link_uri
 from eelhost.vision.markerfile import load_marker_file
 from eelsim.control import Gait
@@ -133,7 +133,7 @@ def run(args: argparse.Namespace) -> int:
     if args.gait is None and args.plan is None:
         raise OptionError("--gait: required with --waypoints")
     current = current_option(args.current, args.robot.startswith("sim:"))
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    check_output_stem(args.out)  # a read-only folder or a file is said before the link opens
     refuse_overwrite(args.out, args.force)
     monitor = None
     uri = args.robot

@@ -20,6 +20,7 @@ from eelhost.commands.common import (
     waypoints,
 )
 from eelhost.errors import exit_status_for_flag
+from eelhost.files import check_output_stem
 from eelhost.progress import Progress
 from eelsim.closed_loop import simulate_closed_loop
 from eelsim.model import SwimmerModel
@@ -89,6 +90,7 @@ def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
     robot, coeffs = robot_and_coefficients(args)
     scenario = load_scenario(args.scenario)
+    check_output_stem(args.out, (".csv", ".json", ".png", ".gif"))  # before the run, not after
     with rejected_as("scenario overrides", SCENARIO_OPTIONS):
         upd = _overrides(args)
         if upd:

@@ -10,6 +10,7 @@ from eelhost.data.experiments import load_dataset
 from eelhost.estimation.evaluate import ALIGN_S
 from eelhost.estimation.pipeline import CoefficientsError, read_coefficients
 from eelhost.estimation.validate import table_csv, table_markdown, validate
+from eelhost.files import atomic_write, check_output_folder
 from eelhost.progress import Progress
 
 
@@ -53,6 +54,7 @@ def run(args: argparse.Namespace) -> int:
     if coefficients.suffix == ".json" and not coefficients.is_file():
         # said before the dataset is read: reading the file needs the dataset's robot
         raise CoefficientsError(f"{coefficients}: cannot read coefficients: no such file")
+    check_output_folder(args.out)  # a folder that cannot be written is said before the runs
     dataset = load_dataset(args.dataset, allow_incomplete=args.allow_incomplete)
     fitted = read_coefficients(args.coefficients, dataset.robot, args.allow_other_robot)
     tests = dataset.held_out
@@ -71,10 +73,9 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _write_tables_and_figures(runs: list, out: Path) -> None:
-    out.mkdir(parents=True, exist_ok=True)
     md = table_markdown([r.row for r in runs])
-    (out / "table4.md").write_text(md + "\n")
-    (out / "table4.csv").write_text(table_csv([r.row for r in runs]))
+    atomic_write(out / "table4.md", md + "\n")
+    atomic_write(out / "table4.csv", table_csv([r.row for r in runs]))
     from eelhost.estimation.figures import plot_validation  # matplotlib: slow import
 
     plot_validation(runs, out)

@@ -45,6 +45,7 @@ from eelhost.data.experiments import (
     write_experiment,
     write_manifest,
 )
+from eelhost.files import atomic_write
 from eelsim.camera import CameraModel, observation_steps, observed_positions
 from eelsim.closed_loop import LoopOptions, RunResult, simulate_closed_loop
 from eelsim.fluid import FluidCoefficients, get_fluid_law
@@ -417,7 +418,7 @@ def generate_dataset(
         for i, (motion, _split, s) in enumerate(plan)
     ]
     folder.mkdir(parents=True, exist_ok=True)
-    (folder / "robot.toml").write_text(_robot_file_text(robot))
+    atomic_write(folder / "robot.toml", _robot_file_text(robot))
     done = 0
     log.info("recording %d virtual-tank experiments into %s", len(jobs), folder)
     with ProcessPoolExecutor(max_workers=max(1, workers)) as pool:

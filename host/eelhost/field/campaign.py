@@ -36,9 +36,17 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    ValidationInfo,
+    field_validator,
+)
 
 from eelhost.errors import UserError
+from eelhost.wire.limits import gait_value_problem
 from eelsim.scenario import (
     GRID_AMPLITUDES_RAD,
     GRID_BETA_RAD,
@@ -61,7 +69,7 @@ def _corners(amplitudes: list[float], omegas: list[float]) -> list[list[float]]:
 class CampaignPlan(BaseModel):
     """The protocol (see the module docstring for the keys and the paper's defaults)."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
     name: str = "paper protocol"
     motions: list[str] = Field(default_factory=lambda: ["straight", "turning"], min_length=1)
@@ -82,6 +90,19 @@ class CampaignPlan(BaseModel):
     duration_s: float = Field(60.0, gt=0)  # the slowest turning gaits need more than 40 s
     rest_s: float = Field(60.0, ge=0)
     control_period_s: float = Field(0.3, gt=0)
+
+    @field_validator("amplitudes_rad", "omegas_rad_s", "beta_rad")
+    @classmethod
+    def _gaits_the_robot_accepts(cls, v: list[float] | float, info: ValidationInfo):
+        # the same ranges as run --gait (eelhost.wire.limits): a plan is refused before its first
+        # take, not when the robot refuses a gait half-way through the campaign
+        name = {"amplitudes_rad": "amplitude_rad", "omegas_rad_s": "omega_rad_s"}.get(
+            info.field_name or "", "beta_rad")
+        for value in v if isinstance(v, list) else [v]:
+            problem = gait_value_problem(name, value)
+            if problem:
+                raise ValueError(problem)
+        return v
 
     @field_validator("motions")
     @classmethod

@@ -29,6 +29,7 @@ from pydantic import ValidationError
 
 from eelhost.link.base import Clock, Link, TransportError
 from eelhost.link.uri import LinkURI, LinkURIError, Port, TransportScheme, register_transport
+from eelhost.wire.limits import MAX_CURRENT_M_S
 from eelsim.robot import Robot, load_robot
 from eelsim.tomlfile import validation_message
 
@@ -136,26 +137,25 @@ def _in_the_water(u: LinkURI, robot: Robot) -> Robot:
         raise LinkURIError(f"{u.text!r}: coefficients={raw!r}: {err}") from None
 
 
-def _virtual_robot(u: LinkURI, robot: Robot) -> VirtualRobot:
-    # Imported here: eelhost.xil builds on the link layer, and a URI can be parsed without
-    # loading the native firmware.
-    from eelhost.xil.radio import RadioModel
-    from eelhost.xil.virtual_robot import VirtualRobot
+def _sim_settings(u: LinkURI) -> dict:
+    """The virtual robot's settings from a ``sim://`` URI, each checked as its option is.
 
+    Called when the URI is parsed (the scheme's ``check``), so a bad value is refused before
+    anything is opened or recorded: ``speed`` and ``seed`` at least 0 as ``--speed`` and
+    ``--seed``, ``current`` from 0 to 1 m/s as ``--current`` (:data:`eelhost.wire.limits.MAX_CURRENT_M_S`).
+    """
     speed = u.number("speed", 1.0)
     if speed < 0:
         raise LinkURIError(f"{u.text!r}: speed={speed:g} must be >= 0 (0 = as fast as possible)")
     seed = int(u.number("seed", 0, int))
+    if seed < 0:
+        raise LinkURIError(f"{u.text!r}: seed={seed} must be >= 0 (as --seed)")
     radio_name = u.one("radio", "xbee")
+    if radio_name not in ("xbee", "ideal"):
+        raise LinkURIError(f"{u.text!r}: radio={radio_name!r} (expected xbee or ideal)")
     loss = u.number("loss", 0.0)
     if not 0.0 <= loss <= 1.0:
         raise LinkURIError(f"{u.text!r}: loss={loss:g} must be in [0, 1]")
-    if radio_name == "xbee":
-        radio = RadioModel.xbee(loss_probability=loss)
-    elif radio_name == "ideal":
-        radio = RadioModel(loss_probability=loss)
-    else:
-        raise LinkURIError(f"{u.text!r}: radio={radio_name!r} (expected xbee or ideal)")
     drops = []
     for raw in u.params.get("drop", []):
         for window in raw.split(","):
@@ -167,8 +167,9 @@ def _virtual_robot(u: LinkURI, robot: Robot) -> VirtualRobot:
     x, y, heading = u.numbers("start", start, 3) if start else (0.0, 0.0, 0.0)
     current = u.one("current")
     c_speed, c_dir = u.numbers("current", current, 2) if current else (0.0, 0.0)
-    if c_speed < 0:
-        raise LinkURIError(f"{u.text!r}: current speed {c_speed:g} must be >= 0")
+    if not 0 <= c_speed <= MAX_CURRENT_M_S:
+        raise LinkURIError(f"{u.text!r}: current speed {c_speed:g} m/s must be from 0 to "
+                           f"{MAX_CURRENT_M_S:g} m/s (as --current)")
     c = math.radians(c_dir)
     feedback = u.one("feedback", "0")
     if feedback not in ("0", "1"):
@@ -177,18 +178,33 @@ def _virtual_robot(u: LinkURI, robot: Robot) -> VirtualRobot:
     battery_v = u.number("battery", 0.0) if battery is not None else None
     if battery_v is not None and not 0.0 < battery_v <= 30.0:
         raise LinkURIError(f"{u.text!r}: battery={battery_v:g} V must be in (0, 30]")
-    return VirtualRobot(
-        robot,
-        start_position_m=(x, y),
-        start_heading_deg=heading,
-        current_m_s=(c_speed * math.cos(c), c_speed * math.sin(c)),
-        radio=radio,
-        drops_s=drops,
-        seed=seed,
-        speed=speed,
-        joint_feedback=feedback == "1",
-        battery_v=battery_v,
-    )
+    coefficients = u.one("coefficients")
+    if coefficients is not None:
+        u.numbers("coefficients", coefficients, None)  # the law's own checks need the robot
+    return {
+        "start_position_m": (x, y),
+        "start_heading_deg": heading,
+        "current_m_s": (c_speed * math.cos(c), c_speed * math.sin(c)),
+        "radio": (radio_name, loss),
+        "drops_s": drops,
+        "seed": seed,
+        "speed": speed,
+        "joint_feedback": feedback == "1",
+        "battery_v": battery_v,
+    }
+
+
+def _virtual_robot(u: LinkURI, robot: Robot) -> VirtualRobot:
+    # Imported here: eelhost.xil builds on the link layer, and a URI can be parsed without
+    # loading the native firmware.
+    from eelhost.xil.radio import RadioModel
+    from eelhost.xil.virtual_robot import VirtualRobot
+
+    settings = _sim_settings(u)
+    radio_name, loss = settings.pop("radio")
+    radio = (RadioModel.xbee(loss_probability=loss) if radio_name == "xbee"
+             else RadioModel(loss_probability=loss))
+    return VirtualRobot(robot, radio=radio, **settings)
 
 
 def _list_sim_ports() -> list[Port]:
@@ -206,5 +222,6 @@ register_transport(
         open=_open_sim,
         list_ports=_list_sim_ports,
         example="sim://?speed=1&seed=0",
+        check=_sim_settings,
     )
 )

@@ -138,6 +138,10 @@ class TransportScheme:
         ``list_ports() -> list of Port``: what it can open now.
     example : str
         A URI to show in messages.
+    check : callable or None
+        ``check(uri)``: refuses parameter values the transport cannot use (raising
+        :class:`LinkURIError`), called by :func:`parse_link_uri`, so a bad value is said before
+        anything is opened or recorded.
     """
 
     name: str
@@ -146,6 +150,7 @@ class TransportScheme:
     open: Callable[[LinkURI, Robot | None, Clock | None], Link]
     list_ports: Callable[[], list[Port]]
     example: str
+    check: Callable[[LinkURI], object] | None = None
 
 
 _SCHEMES: dict[str, TransportScheme] = {}
@@ -192,7 +197,8 @@ def parse_link_uri(uri: str) -> LinkURI:
     Raises
     ------
     LinkURIError
-        Unknown scheme, missing port or path, unknown parameter.
+        Unknown scheme, missing port or path, unknown parameter, or a value the transport
+        refuses (``sim://?seed=-3``).
     """
     text = str(uri).strip()
     examples = ", ".join(s.example.split("?")[0] for s in _SCHEMES.values())
@@ -221,7 +227,10 @@ def parse_link_uri(uri: str) -> LinkURI:
             raise LinkURIError(
                 f"{text!r}: unknown parameter {name!r} for {scheme.name}:// (known: {known})"
             )
-    return LinkURI(scheme.name, target, params, text)
+    parsed = LinkURI(scheme.name, target, params, text)
+    if scheme.check is not None:
+        scheme.check(parsed)
+    return parsed
 
 
 def open_link(uri: str, robot: Robot | None = None, clock: Clock | None = None) -> Link:

@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from eelhost.errors import UserError
+from eelhost.files import atomic_write
 from eelhost.vision.calibration import CharucoSpec
 from eelhost.vision.markers import MarkerLayout, default_layout
 
@@ -84,10 +85,7 @@ class MarkerFile:
 
 def save_marker_file(markers: MarkerFile, path: str | Path) -> Path:
     """Write the marker file (JSON); return its path."""
-    out = Path(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(markers.as_dict(), indent=2) + "\n")
-    return out
+    return atomic_write(path, json.dumps(markers.as_dict(), indent=2) + "\n")
 
 
 def _section(data: dict[str, Any], key: str, keys: set[str], source: str) -> dict[str, Any]:

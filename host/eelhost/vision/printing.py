@@ -21,6 +21,7 @@ from matplotlib.axes import Axes  # noqa: E402
 from matplotlib.patches import Rectangle  # noqa: E402
 from numpy.typing import NDArray  # noqa: E402
 
+from eelhost.files import atomic_writer  # noqa: E402
 from eelhost.vision.calibration import CharucoSpec  # noqa: E402
 from eelhost.vision.markers import MarkerLayout, MarkerLayoutError  # noqa: E402
 
@@ -86,9 +87,11 @@ def _save(fig: plt.Figure, path: str | Path) -> Path:
     out = Path(path)
     if out.suffix.lower() != ".pdf":
         raise MarkerLayoutError(f"{out}: the printable file must be a .pdf")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, format="pdf")
-    plt.close(fig)
+    try:
+        with atomic_writer(out, "wb") as f:  # whole or not at all (eelhost.files)
+            fig.savefig(f, format="pdf")
+    finally:
+        plt.close(fig)
     return out
 
 
