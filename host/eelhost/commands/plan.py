@@ -29,8 +29,9 @@ from eelhost.commands.common import (
 )
 from eelhost.files import atomic_write, check_output_folder
 from eelhost.planning.coverage import action_coverage
-from eelhost.planning.planner import Outcome, Planner, PlanRefused
+from eelhost.planning.planner import CHECK_DRAWS, Outcome, Planner, PlanRefused
 from eelhost.planning.uncertainty import (
+    DEFAULT_UNKNOWN_CURRENT_M_S,
     CoefficientModel,
     default_model,
     read_coefficient_model,
@@ -39,7 +40,7 @@ from eelhost.planning.world import World, load_world
 from eelhost.planning.worlds import generate_world
 from eelsim.robot import Robot
 
-REFUSALS = ("blocked_start", "current_too_strong", "unreachable")
+REFUSALS = ("blocked_start", "current_too_strong", "goal_blocked", "unreachable")
 """Planner statuses the command reports as refusals (exit 2)."""
 
 BENCH_BEGIN = "<!-- bench: begin (written by eelbot plan --bench) -->"
@@ -55,11 +56,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "in the twin over the coefficients' uncertainty, repair or refuse it. WORLD is a world "
         "TOML file, the bundled example 'tank_5_obstacles', or 'bench:SEED' (a generated "
         "benchmark world). Exit status: 0 plan found, 1 none found, 2 refused (blocked start, "
-        "goal outside the tank, current too strong, no corridor) or bad input.",
+        "goal outside the tank or in an obstacle, current too strong, no corridor) or bad input.",
     )
     p.add_argument("world", nargs="?", help="world TOML file, 'tank_5_obstacles' or 'bench:SEED'")
     add_robot_options(p)
     add_coefficient_model_option(p)
+    add_check_options(p)
     p.add_argument("--out", default="out/plan", help="output folder (default out/plan)")
     p.add_argument("--plot", action="store_true", help="write <out>/plan.png")
     p.add_argument("--replan", action="store_true",
@@ -89,6 +91,40 @@ def add_coefficient_model_option(p: argparse.ArgumentParser) -> None:
         help="use a coefficients file fitted on another robot than --robot (refused by default: "
         "its name, N or geometry differ)",
     )
+
+
+def add_check_options(p: argparse.ArgumentParser) -> None:
+    """The check's draws of the water: how many, the unknown current's bound, the seed."""
+    p.add_argument("--draws", type=COUNT, default=CHECK_DRAWS,
+                   help=f"draws of the water the plan is checked over (default {CHECK_DRAWS}; 0 "
+                   "failures in n bound the collision probability by about 3/n)")
+    p.add_argument("--unknown-current", type=_unknown_current, default=DEFAULT_UNKNOWN_CURRENT_M_S,
+                   metavar="M_S",
+                   help="bound of a current the planner is not told of, checked in every draw "
+                   f"towards directions round the circle (default {DEFAULT_UNKNOWN_CURRENT_M_S} "
+                   "m/s, a lab tank's residual flow; 0 to leave it out)")
+    p.add_argument("--check-seed", type=SEED, default=0, help="seed of the check's draws")
+    p.add_argument("--robust-search", action="store_true",
+                   help="also swim every leg of the search in the unknown current (fewer plans "
+                   "fail their check, about 4 times the search's time)")
+
+
+def _unknown_current(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a speed in m/s, got {text!r}") from None
+    if not 0.0 <= value <= 1.0:
+        raise argparse.ArgumentTypeError(f"expected a speed from 0 to 1 m/s, got {text}")
+    return value
+
+
+def planner_options(args: argparse.Namespace) -> dict:
+    """The Planner's keyword arguments for the check options on the command line."""
+    return {"draws": getattr(args, "draws", CHECK_DRAWS),
+            "unknown_current_m_s": getattr(args, "unknown_current", DEFAULT_UNKNOWN_CURRENT_M_S),
+            "seed": getattr(args, "check_seed", 0),
+            "robust_search": getattr(args, "robust_search", False)}
 
 
 def coefficient_model(args: argparse.Namespace, robot: Robot) -> CoefficientModel:
@@ -121,6 +157,7 @@ def plan_json(world: World, outcome: Outcome) -> dict:
         "simulations": plan.simulations,
         "planning_time_s": outcome.planning_time_s,
         "repairs": outcome.repairs,
+        "check": _check_json(outcome),
         "waypoints_m": plan.waypoints_m if outcome.found else [],
         "legs": [
             {"waypoint_m": leg.waypoint_m, "distance_m": leg.distance_m,
@@ -137,6 +174,21 @@ def plan_json(world: World, outcome: Outcome) -> dict:
     }
 
 
+def _check_json(outcome: Outcome) -> dict:
+    """The check's confidence: draws, failures, collision probability, arrival spread."""
+    p, low, high = outcome.collision_probability
+    median, t5, t95 = outcome.arrival_s
+
+    def num(v: float) -> float | None:
+        return None if v != v else v  # NaN: not checked
+
+    return {"draws": outcome.draws,
+            "failures": sum(not r.ok for r in outcome.drawn_checks),
+            "collision_probability": num(p), "interval_95": [num(low), num(high)],
+            "arrival_s": {"median": num(median), "p5": num(t5), "p95": num(t95)},
+            "summary": outcome.confidence()}
+
+
 def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
     robot, _ = robot_and_coefficients(args)
@@ -147,7 +199,7 @@ def run(args: argparse.Namespace) -> int:
         raise OptionError("give a WORLD (or --bench)")
     world = world_from_name(args.world)
     out = check_output_folder(args.out)  # before the search, not after it
-    planner = Planner(world, robot, model, threads=args.threads)
+    planner = Planner(world, robot, model, threads=args.threads, **planner_options(args))
     outcome = planner.plan()
     atomic_write(out / "plan.json", json.dumps(plan_json(world, outcome), indent=1))
     if outcome.status in REFUSALS:
@@ -186,7 +238,7 @@ def _bench(args: argparse.Namespace, robot: Robot, model: CoefficientModel) -> i
               f"(cpu {r.cpu_time_s:.2f} s){extra}", flush=True)
 
     summary = run_bench(robot, model, args.worlds, args.seed, args.threads, progress,
-                        max(args.jobs, 1))
+                        max(args.jobs, 1), args.unknown_current)
     lines = summary.lines()
     lines += ["- action coverage (successful actions per current direction relative to the "
               "heading):"]
@@ -194,7 +246,9 @@ def _bench(args: argparse.Namespace, robot: Robot, model: CoefficientModel) -> i
               for speed in (0.0, 0.02, 0.04, 0.06)]
     command = (f"nice eelbot plan --bench --worlds {args.worlds} --seed {args.seed}"
                + (f" --threads {args.threads}" if args.threads != 1 else "")
-               + (f" --jobs {args.jobs}" if args.jobs > 1 else ""))
+               + (f" --jobs {args.jobs}" if args.jobs > 1 else "")
+               + (f" --unknown-current {args.unknown_current:g}"
+                  if args.unknown_current != DEFAULT_UNKNOWN_CURRENT_M_S else ""))
     block = [
         BENCH_BEGIN,
         f"Command: `{command}`",
@@ -203,6 +257,9 @@ def _bench(args: argparse.Namespace, robot: Robot, model: CoefficientModel) -> i
         f"{args.threads} thread(s) of the batched twin, {max(args.jobs, 1)} world(s) at once; "
         f"Python {platform.python_version()}",
         f"- coefficients: {model.describe()}",
+        f"- the check: the 2 fits and {CHECK_DRAWS} draws of the water per plan (coefficients "
+        f"jointly within the fit's 95 % region; unknown current {args.unknown_current:g} m/s "
+        "towards 8 directions)",
         *lines,
         BENCH_END,
     ]

@@ -5,10 +5,13 @@ docs/planning.md ("Benchmark") states what is measured. For each world of
 
 1. the planner runs (refusals, search, check over the uncertainty ensemble, repairs) and is timed
    (a warm-up plan first, so the batched kernel is loaded from its disk cache);
-2. a returned plan is swum in the twin from the start, once with a straight and once with a
-   turning coefficient set drawn within the reported uncertainty
-   (:meth:`eelhost.planning.uncertainty.CoefficientModel.draw`, seeded per world); a world counts
-   as reached when both runs enter the goal disc, and as a collision when either touches.
+2. a returned plan is swum in the twin from the start over ``BENCH_DRAWS`` fresh draws of the
+   water (:meth:`eelhost.planning.uncertainty.CoefficientModel.water_draws`, seeded per world
+   and apart from the check's own draws: coefficients jointly within the fit's 95 % region, the
+   unknown current at its bound in directions round the circle); a world counts as reached when
+   every run enters the goal disc, and as a collision when the independent audit
+   (:mod:`eelhost.planning.audit`, shapely's exact geometry) finds the body touching anything
+   in any run.
 """
 
 from __future__ import annotations
@@ -23,12 +26,19 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from eelhost.planning.audit import body_gaps_m
 from eelhost.planning.execute import swim
 from eelhost.planning.planner import Planner
-from eelhost.planning.uncertainty import CoefficientModel
+from eelhost.planning.uncertainty import DEFAULT_UNKNOWN_CURRENT_M_S, CoefficientModel
 from eelhost.planning.world import World
 from eelhost.planning.worlds import generate_world
 from eelsim.robot import Robot
+
+BENCH_DRAWS = 8
+"""Draws of the water each returned plan is swum in after planning (apart from the check's)."""
+
+AUDIT_SEED_OFFSET = 1_000_003
+"""Added to a world's seed for the bench's own draws, so they are not the check's."""
 
 
 @dataclass
@@ -51,11 +61,11 @@ class WorldResult:
         whatever else the machine is running).
     repairs : int
     reached : bool or None
-        Both drawn-coefficient runs entered the goal (None without a plan).
+        Every drawn-water run entered the goal (None without a plan).
     collision : bool or None
-        Either drawn-coefficient run touched an obstacle or wall (None without a plan).
+        The audit found contact in a drawn-water run (None without a plan).
     min_clearance_m : float
-        Smallest body clearance over the drawn-coefficient runs (NaN without a plan).
+        Smallest body gap over the drawn-water runs, by the audit (NaN without a plan).
     goal_distance_m : float
         Closest approach of the worse run to the goal centre (NaN without a plan).
     """
@@ -71,6 +81,9 @@ class WorldResult:
     collision: bool | None = None
     min_clearance_m: float = float("nan")
     goal_distance_m: float = float("nan")
+    collision_upper: float = float("nan")
+    arrival_spread_s: tuple[float, float, float] = (float("nan"),) * 3
+    planned_arrival_s: float = float("nan")
 
 
 @dataclass
@@ -117,8 +130,9 @@ class BenchSummary:
         out = [
             f"- worlds: {n}; with a plan: {p} ({p / n:.0%})",
             "- outcomes: " + ", ".join(f"{k} {v}" for k, v in sorted(self.statuses.items())),
-            f"- collisions in the drawn-coefficient runs: {self.collisions} of {p} planned worlds",
-            f"- goal reached in both drawn-coefficient runs: {self.reached} of {p} "
+            f"- collisions (independent audit, shapely) in {BENCH_DRAWS} fresh draws of the water "
+            f"per planned world: {self.collisions} of {p} planned worlds",
+            f"- goal reached in every drawn-water run: {self.reached} of {p} "
             f"({self.reached / max(p, 1):.1%})",
             f"- planning time (set-up, refusal checks, search, check runs, repairs): median "
             f"{statistics.median(times):.2f} s, 90th percentile {np.percentile(times, 90):.2f} s, "
@@ -131,12 +145,22 @@ class BenchSummary:
                    f"are when the machine is otherwise idle): median {statistics.median(cpu):.2f} s, "
                    f"90th percentile {np.percentile(cpu, 90):.2f} s")
         out.append(f"- plans repaired after a failed check: {repaired}")
+        if p:
+            upper = sorted(r.collision_upper for r in self.planned)
+            late = sorted(r.arrival_spread_s[2] / r.planned_arrival_s for r in self.planned)
+            out.append(f"- each plan's check: 0 failures in its draws, collision probability at "
+                       f"most {statistics.median(upper):.1%} (upper end of the 95 % "
+                       f"Clopper-Pearson interval, median over the planned worlds)")
+            out.append(f"- arrival: the 95th percentile of the check runs' arrival times over "
+                       f"the search's planned time, median {statistics.median(late):.2f} (max "
+                       f"{late[-1]:.2f})")
         return out
 
 
 def bench_world(world: World, robot: Robot, coefficients: CoefficientModel, seed: int,
-                threads: int | None = 1) -> WorldResult:
-    """Plan in one world and swim the plan with drawn coefficients (module docstring).
+                threads: int | None = 1,
+                unknown_current_m_s: float = DEFAULT_UNKNOWN_CURRENT_M_S) -> WorldResult:
+    """Plan in one world and swim the plan in fresh draws of the water (module docstring).
 
     Parameters
     ----------
@@ -144,43 +168,55 @@ def bench_world(world: World, robot: Robot, coefficients: CoefficientModel, seed
     robot : Robot
     coefficients : CoefficientModel
     seed : int
-        Seed of the coefficient draws.
+        Seed of the planner's check draws; the bench's own draws use ``seed +
+        AUDIT_SEED_OFFSET``.
     threads : int or None
+    unknown_current_m_s : float
+        The unknown current's bound, for the check and the bench's draws.
 
     Returns
     -------
     WorldResult
     """
     t0, c0 = time.perf_counter(), time.process_time()
-    planner = Planner(world, robot, coefficients, threads=threads)
+    planner = Planner(world, robot, coefficients, threads=threads, seed=seed,
+                      unknown_current_m_s=unknown_current_m_s)
     outcome = planner.plan()
     elapsed = time.perf_counter() - t0  # the planner's set-up (clearance and goal maps) too
     result = WorldResult(world.name, outcome.status, outcome.message, elapsed,
                          outcome.search_time_s, time.process_time() - c0, outcome.repairs)
     if not outcome.found:
         return result
-    rng = np.random.default_rng(seed)
-    drawn = [(f"drawn {m}", coefficients.draw(rng, m, planner.sigmas))
-             for m in ("straight", "turning")]
+    draws = coefficients.water_draws(np.random.default_rng(seed + AUDIT_SEED_OFFSET),
+                                     BENCH_DRAWS, unknown_current_m_s)
+    vx, vy = planner.world.current_m_s
     duration = 2.0 * outcome.plan.cost_s + 30.0
-    runs = swim(world, outcome.plan.waypoints_m, planner.twin, drawn, duration,
-                clearance=planner.clearance)
+    runs = swim(planner.world, outcome.plan.waypoints_m, planner.twin,
+                [(d.label, d.coefficients) for d in draws], duration,
+                clearance=planner.clearance,
+                currents=[(vx + d.current_offset_m_s[0], vy + d.current_offset_m_s[1])
+                          for d in draws])
+    gaps = [float(body_gaps_m(planner.world, planner.model, r.states).min()) for r in runs]
     result.reached = all(r.reached for r in runs)
-    result.collision = not all(r.collision_free for r in runs)
-    result.min_clearance_m = min(r.min_clearance_m for r in runs)
+    result.collision = min(gaps) <= 0.0
+    result.min_clearance_m = min(gaps)
     result.goal_distance_m = max(r.goal_distance_m for r in runs)
+    result.collision_upper = outcome.collision_probability[2]
+    result.arrival_spread_s = outcome.arrival_s
+    result.planned_arrival_s = outcome.plan.cost_s
     return result
 
 
 def _warm_up(robot: Robot, coefficients: CoefficientModel, seed: int,
-             threads: int | None) -> None:
+             threads: int | None, unknown_current_m_s: float) -> None:
     """Load the batched kernel and measure the swimming speed once (not timed)."""
-    bench_world(generate_world(seed), robot, coefficients, seed, threads)
+    bench_world(generate_world(seed), robot, coefficients, seed, threads, unknown_current_m_s)
 
 
 def _one(robot: Robot, coefficients: CoefficientModel, seed: int,
-         threads: int | None) -> WorldResult:
-    return bench_world(generate_world(seed), robot, coefficients, seed, threads)
+         threads: int | None, unknown_current_m_s: float) -> WorldResult:
+    return bench_world(generate_world(seed), robot, coefficients, seed, threads,
+                       unknown_current_m_s)
 
 
 def run_bench(
@@ -191,6 +227,7 @@ def run_bench(
     threads: int | None = 1,
     progress: Callable[[int, WorldResult], None] | None = None,
     jobs: int = 1,
+    unknown_current_m_s: float = DEFAULT_UNKNOWN_CURRENT_M_S,
 ) -> BenchSummary:
     """Run the benchmark over ``count`` generated worlds (seeds ``seed`` .. ``seed + count - 1``).
 
@@ -206,6 +243,8 @@ def run_bench(
     jobs : int
         Worlds planned at once, each in its own process (one per core: every plan still runs
         on one core, so its time is what one plan takes on an otherwise idle core).
+    unknown_current_m_s : float
+        The unknown current's bound (the check's and the bench's draws).
 
     Returns
     -------
@@ -214,16 +253,18 @@ def run_bench(
     seeds = list(range(seed, seed + count))
     summary = BenchSummary()
     if jobs <= 1:
-        _warm_up(robot, coefficients, seed + count, threads)
-        results: Iterable[WorldResult] = (_one(robot, coefficients, s, threads) for s in seeds)
+        _warm_up(robot, coefficients, seed + count, threads, unknown_current_m_s)
+        results: Iterable[WorldResult] = (_one(robot, coefficients, s, threads,
+                                               unknown_current_m_s) for s in seeds)
         _collect(summary, results, progress)
         return summary
     # spawned, not forked: a fork after the kernel's OpenMP runtime started is unsafe
     with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn"),
                              initializer=_warm_up,
-                             initargs=(robot, coefficients, seed + count, threads)) as pool:
-        results = pool.map(_one, *zip(*[(robot, coefficients, s, threads) for s in seeds],
-                                       strict=True))
+                             initargs=(robot, coefficients, seed + count, threads,
+                                       unknown_current_m_s)) as pool:
+        results = pool.map(_one, *zip(*[(robot, coefficients, s, threads, unknown_current_m_s)
+                                        for s in seeds], strict=True))
         _collect(summary, results, progress)
     return summary
 

@@ -4,26 +4,36 @@ docs/planning.md ("The planner") is the long form. :meth:`Planner.plan`:
 
 1. **Refusals**, each with its reason (:class:`PlanRefused`; the CLI exits 2): the start pose
    puts the body into an obstacle or a wall (``blocked_start``); the current is at least the
-   robot's own swimming speed, so no leg can be swum against it (``current_too_strong``); no
-   corridor wide enough for the body joins start and goal (``unreachable``). A goal outside the
+   robot's own swimming speed, so no leg can be swum against it (``current_too_strong``); the
+   goal's centre inside an obstacle or a wall, or closer to one than the body's half width
+   (``goal_blocked``); no corridor wide enough for the body joins start and goal
+   (``unreachable``). A goal outside the
    tank is refused when the world is read (:class:`eelhost.planning.world.WorldError`).
 2. **Search** (:class:`eelhost.planning.search.Search`): every leg swum in the twin from the state
    the previous one left, with the straight coefficients for straight legs and the turning ones
    for turns.
 3. **Check**: the plan's waypoints are swum in the twin as the tank would give them to the robot
-   (one task from the start), once per coefficient set of the uncertainty ensemble
-   (:meth:`eelhost.planning.uncertainty.CoefficientModel.ensemble`: both fits, and each with one
-   coefficient at +-2 standard deviations). Every run must enter the goal disc
-   (:func:`eelhost.planning.search.in_goal`) without any contact.
-4. **Repair**: a leg that failed a check run (the leg being swum at the first contact, or the last
-   leg when the goal was missed) is banned and the search runs again (it keeps what it swam);
-   after ``repairs`` attempts the plan is refused with the reason of the last failure.
+   (one task from the start), with both fits as fitted and over ``draws`` draws of the water
+   (:meth:`eelhost.planning.uncertainty.CoefficientModel.water_draws`: every coefficient of a
+   fit drawn jointly within the fit's 95 % region, the fitted current within its own, and an
+   unknown current of ``unknown_current_m_s`` in directions round the circle), all in a few
+   batches. Every run must enter the goal disc (:func:`eelhost.planning.search.in_goal`) without
+   any contact. A plan that passes carries an estimated collision probability of 0 in ``draws``
+   with its Clopper-Pearson interval, and its arrival time is the check runs' (median and range).
+   The first ``SCREEN_DRAWS`` draws are swum first: a plan most draws fail is repaired without
+   swimming the rest.
+4. **Repair**: the leg most check runs failed on (the leg being swum at the first contact, or
+   the last leg when the goal was missed) is banned and the search runs again (it keeps what it
+   swam); after ``repairs`` attempts the plan is refused with the reason of the last failure.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
+import time
+from collections import Counter
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -31,11 +41,16 @@ import numpy as np
 from eelhost.errors import UserError
 from eelhost.planning.body import body_points
 from eelhost.planning.execute import Swim, swim
-from eelhost.planning.field import ClearanceField, GoalDistance
+from eelhost.planning.field import ClearanceField, GoalDistance, signed_clearance
 from eelhost.planning.geometry import FloatArray
 from eelhost.planning.search import Plan, Search, SearchSettings
 from eelhost.planning.twin import Twin
-from eelhost.planning.uncertainty import CoefficientModel
+from eelhost.planning.uncertainty import (
+    DEFAULT_UNKNOWN_CURRENT_M_S,
+    CoefficientModel,
+    WaterDraw,
+    clopper_pearson,
+)
 from eelhost.planning.world import World
 from eelsim.closed_loop import LoopOptions
 from eelsim.control import Gait
@@ -49,6 +64,16 @@ log = logging.getLogger(__name__)
 
 SPEED_RUN_S = 20.0
 """Length of the twin run that measures the swimming speed, s."""
+
+CHECK_DRAWS = 60
+"""Draws of the water a plan is checked over by default (0 failures in 60: collision probability
+at most 6.0 %, the upper end of its two-sided 95 % Clopper-Pearson interval)."""
+
+SCREEN_DRAWS = 12
+"""Draws swum first; a plan that fails one is repaired without swimming the others."""
+
+BATCH_RUNS = 16
+"""Check runs swum in one batch (each holds every physics step of its run)."""
 
 LEG_TIME_FACTOR = 1.6
 """A leg's time limit per metre, as a multiple of the time the robot needs against the current."""
@@ -122,6 +147,9 @@ class Outcome:
         Search and check time, all attempts.
     search_time_s : float
         Search time alone, all attempts.
+    draws : int
+        Draws of the water the returned plan was checked over (the first two check runs, the
+        fits as fitted, come on top).
     """
 
     plan: Plan
@@ -131,6 +159,51 @@ class Outcome:
     repairs: int = 0
     planning_time_s: float = 0.0
     search_time_s: float = 0.0
+    draws: int = 0
+
+    @property
+    def drawn_checks(self) -> list[Swim]:
+        """The check runs over the draws of the water (without the two fits as fitted)."""
+        return self.checks[len(self.checks) - self.draws:] if self.draws else []
+
+    @property
+    def collision_probability(self) -> tuple[float, float, float]:
+        """Estimated probability that the plan fails (contact or goal missed) in the check's water.
+
+        Returns
+        -------
+        (float, float, float)
+            Failures over draws, and the two-sided 95 % Clopper-Pearson interval
+            (NaNs when the plan was not checked over draws).
+        """
+        runs = self.drawn_checks
+        if not runs:
+            return (math.nan, math.nan, math.nan)
+        bad = sum(not r.ok for r in runs)
+        low, high = clopper_pearson(bad, len(runs))
+        return (bad / len(runs), low, high)
+
+    @property
+    def arrival_s(self) -> tuple[float, float, float]:
+        """Arrival time over the check runs that reached the goal: median, 5th and 95th percentile.
+
+        NaNs without such runs.
+        """
+        times = [r.goal_time_s for r in self.checks if r.goal_time_s is not None]
+        if not times:
+            return (math.nan, math.nan, math.nan)
+        return (float(np.median(times)), float(np.percentile(times, 5)),
+                float(np.percentile(times, 95)))
+
+    def confidence(self) -> str:
+        """One line: the check's estimated collision probability and the arrival time's spread."""
+        p, low, high = self.collision_probability
+        if math.isnan(p):
+            return "not checked over draws of the water"
+        median, t5, t95 = self.arrival_s
+        return (f"collision probability {p:.1%} ({sum(not r.ok for r in self.drawn_checks)} of "
+                f"{self.draws} draws of the water; 95 % interval {low:.1%}-{high:.1%}); arrival "
+                f"{median:.1f} s (90 % of the check runs {t5:.1f}-{t95:.1f} s)")
 
     @property
     def found(self) -> bool:
@@ -153,8 +226,17 @@ class Planner:
     options : LoopOptions, optional
         The loop's timing and camera (the tank's by default).
     settings : SearchSettings, optional
-    sigmas : float
-        The check ensemble's coefficients at +-``sigmas`` standard deviations.
+    draws : int
+        Draws of the water the check swims (:data:`CHECK_DRAWS`).
+    unknown_current_m_s : float
+        Bound of the current the planner is not told of, checked in every draw at that speed in
+        directions round the circle.
+    seed : int
+        Seed of the draws (the same draws for every repair and replan of this planner).
+    robust_search : bool
+        Also swim every leg of the search in the unknown current towards 4 directions
+        (:class:`eelhost.planning.search.SearchSettings`, ``robust_current_m_s``): fewer plans
+        fail the check, for about 4 times the search's time (docs/planning.md, "The search").
     repairs : int
         Re-searches after a failed check before refusing.
     check : bool
@@ -171,7 +253,10 @@ class Planner:
         gait: Gait = PATH_GAIT,
         options: LoopOptions | None = None,
         settings: SearchSettings | None = None,
-        sigmas: float = 2.0,
+        draws: int = CHECK_DRAWS,
+        unknown_current_m_s: float = DEFAULT_UNKNOWN_CURRENT_M_S,
+        seed: int = 0,
+        robust_search: bool = False,
         repairs: int = 4,
         check: bool = True,
         threads: int | None = 1,
@@ -183,7 +268,9 @@ class Planner:
         self.coefficients = coefficients
         self.gait = gait
         self.options = options or LoopOptions()
-        self.sigmas = sigmas
+        self.unknown_current_m_s = float(unknown_current_m_s)
+        self.water = coefficients.water_draws(np.random.default_rng(seed), draws,
+                                              self.unknown_current_m_s)
         self.repairs = repairs
         self.check = check
         straight = coefficients.fits["straight"]
@@ -200,8 +287,13 @@ class Planner:
         # current would: a run still going then is circling its waypoint and is cut short
         slowest = max(self.swimming_speed_m_s - world.current.speed_m_s, 1e-3)
         leg_time = min(base.leg_time_s, LEG_TIME_FACTOR / slowest)
-        self.settings = SearchSettings(**{**base.__dict__, "margin_m": margin,
-                                          "leg_time_s": leg_time})
+        # robust_search: every leg is also swum in the unknown current (search module docstring),
+        # its body kept off everything by its half width and some
+        self.settings = dataclasses.replace(base, margin_m=margin, leg_time_s=leg_time)
+        if robust_search:
+            self.settings = dataclasses.replace(
+                self.settings, robust_current_m_s=self.unknown_current_m_s,
+                robust_margin_m=self.body_half_width_m + 0.01)
         self.twin = Twin(robot, coefficients.sets, gait, self.options, world.current_m_s,
                          threads=threads)
         self.clearance = ClearanceField(world)
@@ -246,6 +338,16 @@ class Planner:
                 f"current too strong: {current:.3f} m/s is at least the robot's swimming speed "
                 f"({self.swimming_speed_m_s:.3f} m/s with this gait in the twin), so no leg can "
                 "be swum against it",
+            )
+        goal = np.asarray(world.goal.position_m, dtype=float)
+        goal_clear = float(signed_clearance(world, goal[None])[0])
+        if goal_clear < self.body_half_width_m:
+            where = "inside an obstacle or wall" if goal_clear < 0 else (
+                f"{goal_clear * 1000:.0f} mm from an obstacle or wall")
+            return PlanRefused(
+                "goal_blocked",
+                f"goal blocked: its centre ({goal[0]:.2f}, {goal[1]:.2f}) m is {where}, closer "
+                f"than the body's half width ({self.body_half_width_m * 1000:.0f} mm)",
             )
         if not math.isfinite(self.goal_distance(state[n : n + 2])):
             return PlanRefused(
@@ -299,16 +401,23 @@ class Planner:
             total += elapsed
             bad = [c for c in checks if not c.ok]
             if not bad:
-                msg = (f"{plan.message}; checked in the twin over {len(checks)} coefficient sets"
-                       f" (min clearance {min(c.min_clearance_m for c in checks) * 1000:.0f} mm)")
-                return Outcome(plan, "found", msg, checks, attempt, total, searching)
-            worst = bad[0]
-            leg = plan.legs[worst.failed_leg if worst.failed_leg is not None else -1]
+                outcome = Outcome(plan, "found", "", checks, attempt, total, searching,
+                                  len(self.water))
+                outcome.message = (
+                    f"{plan.message}; checked in the twin over the 2 fits and {len(self.water)} "
+                    f"draws of the water (min clearance "
+                    f"{min(c.min_clearance_m for c in checks) * 1000:.0f} mm): "
+                    f"{outcome.confidence()}")
+                return outcome
+            # the leg most failing runs failed on
+            blamed = Counter(c.failed_leg if c.failed_leg is not None else -1 for c in bad)
+            index = blamed.most_common(1)[0][0]
+            leg = plan.legs[index]
             banned.add((leg.parent_key, leg.action))
-            log.info("plan failed its check with %s (%s); banning leg to (%.2f, %.2f)",
-                     worst.label, worst.message, *leg.waypoint_m)
+            log.info("plan failed its check in %d runs (e.g. %s: %s); banning leg to (%.2f, %.2f)",
+                     len(bad), bad[0].label, bad[0].message, *leg.waypoint_m)
         msg = (f"check failed: after {self.repairs} repairs the plan still fails in the twin with "
-               f"{len(bad)} of {len(checks)} coefficient sets (e.g. {bad[0].label}: "
+               f"{len(bad)} of the {len(checks)} check runs swum (e.g. {bad[0].label}: "
                f"{bad[0].message})")
         return Outcome(Plan(False, "check_failed", msg, plan.legs, plan.cost_s, plan.expansions,
                             plan.simulations, plan.planning_time_s, plan.tree),
@@ -316,7 +425,10 @@ class Planner:
 
     def check_plan(self, plan: Plan, state: FloatArray | None = None,
                    step: int = 0) -> tuple[list[Swim], float]:
-        """Swim a plan over the uncertainty ensemble.
+        """Swim a plan with both fits and over the draws of the water (module docstring).
+
+        The fits and the first :data:`SCREEN_DRAWS` draws are swum first; when one of them fails,
+        the rest are not swum (the plan fails its check either way).
 
         Parameters
         ----------
@@ -328,13 +440,26 @@ class Planner:
         Returns
         -------
         list of Swim, float
-            The runs and the time they took, s.
+            The runs (the two fits first, then the draws in order) and the time they took, s.
         """
-        import time
-
         t0 = time.perf_counter()
         duration = 2.0 * (plan.cost_s - step * self.twin.dt_s) + 30.0
-        runs = swim(self.world, plan.waypoints_m, self.twin,
-                    self.coefficients.ensemble(self.sigmas), duration, state=state,
-                    start_step=step, clearance=self.clearance)
+        fits = [WaterDraw(f"{m} fit", m, self.coefficients.fits[m], (0.0, 0.0))
+                for m in ("straight", "turning")]
+        todo = fits + list(self.water)
+        screen = len(fits) + SCREEN_DRAWS
+        runs: list[Swim] = []
+        for lo, hi in [(0, screen)] + [(k, min(k + BATCH_RUNS, len(todo)))
+                                       for k in range(screen, len(todo), BATCH_RUNS)]:
+            part = todo[lo:hi]
+            if not part:
+                break
+            vx, vy = self.world.current_m_s
+            runs += swim(self.world, plan.waypoints_m, self.twin,
+                         [(d.label, d.coefficients) for d in part], duration, state=state,
+                         start_step=step, clearance=self.clearance,
+                         currents=[(vx + d.current_offset_m_s[0], vy + d.current_offset_m_s[1])
+                                   for d in part])
+            if not all(r.ok for r in runs):
+                break
         return runs, time.perf_counter() - t0

@@ -132,6 +132,14 @@ class SearchSettings:
         Body points per link (intervals; see :func:`eelhost.planning.body.body_points`).
     leg_time_s : float
         Time limit of one leg at the slowest expected ground speed, s (scaled by distance).
+    robust_current_m_s : float
+        A leg kept by the nominal run is swum again from the same state with a current of this
+        speed added, towards ``robust_directions`` directions relative to the leg's (0: off);
+        each such run must accept the waypoint (or enter the goal disc) with the body clear of
+        everything by ``robust_margin_m``.
+    robust_directions : int
+    robust_margin_m : float
+        Clearance of the body centre line the extra runs keep (the body's half width and some).
     """
 
     actions: Actions = Actions()
@@ -145,6 +153,9 @@ class SearchSettings:
     stride: int = 3
     per_link: int = 2
     leg_time_s: float = 40.0
+    robust_current_m_s: float = 0.0
+    robust_directions: int = 4
+    robust_margin_m: float = 0.03
 
 
 @dataclass
@@ -349,9 +360,60 @@ class Search:
         )
         self.simulations += len(jobs)
         clear = self._clearances(runs)
-        for j, (pos, a, wp, psi) in enumerate(jobs):
-            out[pos].append((a, self._child(nodes[pos], a, wp, psi, runs, j, clear[j])))
+        kids = [self._child(nodes[pos], a, wp, psi, runs, j, clear[j])
+                for j, (pos, a, wp, psi) in enumerate(jobs)]
+        if s.robust_current_m_s > 0:
+            kept = [j for j, kid in enumerate(kids) if kid is not None]
+            for j, ok in zip(kept, self._robust(jobs, kept, waypoints, durations, index, nodes),
+                             strict=True):
+                if not ok:
+                    kids[j] = None
+        for j, (pos, a, _, _) in enumerate(jobs):
+            out[pos].append((a, kids[j]))
         return out
+
+    def _robust(self, jobs: list, kept: list[int], waypoints: list, durations: list,
+                index: list[int], nodes: list[_Node]) -> list[bool]:
+        """Whether each kept leg stays clear and arrives in every extra current (settings)."""
+        s = self.settings
+        if not kept:
+            return []
+        k = s.robust_directions
+        vx, vy = self.twin.current_m_s
+        rows, currents = [], []
+        for j in kept:
+            psi = jobs[j][3]
+            for q in range(k):
+                a = psi + 2.0 * math.pi * q / k
+                rows.append(j)
+                currents.append((vx + s.robust_current_m_s * math.cos(a),
+                                 vy + s.robust_current_m_s * math.sin(a)))
+        runs = self.twin.run(
+            [waypoints[j] for j in rows],
+            [durations[j] for j in rows],
+            states=np.stack([nodes[jobs[j][0]].state for j in rows]),
+            start_steps=[nodes[jobs[j][0]].step for j in rows],
+            coefficient_index=[index[j] for j in rows],
+            stride=s.stride,
+            currents=currents,
+        )
+        self.simulations += len(rows)
+        clear = self._clearances(runs)
+        ok = np.ones(len(rows), dtype=bool)
+        for r, j in enumerate(rows):
+            end = int(runs.final_step[r]) // runs.stride
+            if jobs[j][1] == GOAL:
+                com = runs.states[r, : end + 1, self.n : self.n + 2]
+                inside = np.flatnonzero(goal_mask(self.world, com))
+                if not inside.size:
+                    ok[r] = False
+                    continue
+                end = int(inside[0])
+            elif runs.reasons[r] or runs.arrival_step[r] < 0:
+                ok[r] = False
+                continue
+            ok[r] = bool(np.nanmin(clear[r, : end + 1]) >= s.robust_margin_m)
+        return [bool(ok[k * i : k * (i + 1)].all()) for i in range(len(kept))]
 
     def _clearances(self, runs: Runs) -> FloatArray:
         """Clearance of the body centre line at every sample of every run, shape (R, S).

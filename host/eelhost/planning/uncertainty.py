@@ -17,10 +17,16 @@ standard deviation per coefficient:
 - the default standard deviation, when none is reported, is ``DEFAULT_RELATIVE_STD`` (10 %) of
   each coefficient's value.
 
-From these, :meth:`CoefficientModel.ensemble` gives the sets the planner checks a plan with (each
-fit, and each fit with one coefficient moved by +-``sigmas`` standard deviations), and
-:meth:`CoefficientModel.draw` the random sets the benchmark swims with (each coefficient normal
-around its fit with its standard deviation, truncated at +-``sigmas``).
+Draws of the water (docs/planning.md, "Coefficients and their uncertainty"): the planner checks a
+plan over joint draws of every coefficient of a fit, not one coefficient at a time. Each fit's
+coefficients are normal around the fit with covariance ``cov`` (the bootstrap replicates'
+correlation when the file stores them, else independent), restricted to the fit's 95 % region
+(the ellipsoid that holds 95 % of that normal: squared Mahalanobis distance at most the chi-square
+quantile with as many degrees of freedom as coefficients). A draw also has a current: the tank's
+fitted current moved within its own 95 % region, plus an unknown current the planner is not told
+of, of a speed the user bounds (``DEFAULT_UNKNOWN_CURRENT_M_S`` for a lab tank) towards one of
+``CURRENT_DIRECTIONS`` directions spread evenly round the circle. :meth:`CoefficientModel.water_draws`
+gives them, seeded; :meth:`CoefficientModel.draw` one coefficient set the same way.
 """
 
 from __future__ import annotations
@@ -31,6 +37,7 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.stats import chi2, norm
 
 from eelhost.errors import UserError
 from eelhost.estimation.pipeline import CoefficientsError, fitted_models, read_coefficients_file
@@ -44,6 +51,17 @@ DEFAULT_RELATIVE_STD = 0.10
 """Standard deviation assumed for a coefficient whose uncertainty is not reported, relative."""
 
 MOTIONS = ("straight", "turning")
+
+REGION_LEVEL = 0.95
+"""Probability mass of the region the draws are restricted to (the fit's 95 % region)."""
+
+DEFAULT_UNKNOWN_CURRENT_M_S = 0.02
+"""Bound of the current the planner is not told of: a lab tank's residual flow, m/s."""
+
+CURRENT_DIRECTIONS = 8
+"""The unknown current's directions: evenly spread, from a seeded random first one."""
+
+CURRENT_NAMES = ("current_x_m_s", "current_y_m_s")
 
 _TABLE3_STRAIGHT = (0.008, 0.776, 0.618, 0.007)
 _TABLE3_TURNING = (0.009, 0.978, 1.169, 0.001)
@@ -72,6 +90,14 @@ class CoefficientModel:
     source: str
     robot: Robot | None = None
     ambient_current_m_s: tuple[float, float] = (0.0, 0.0)
+    cov: dict[str, FloatArray] | None = None
+    current_cov: FloatArray | None = None
+
+    def covariance(self, motion: str) -> FloatArray:
+        """Covariance of a fit's coefficients (independent with ``std`` when none is given)."""
+        if self.cov is not None and motion in self.cov:
+            return np.asarray(self.cov[motion], dtype=float)
+        return np.diag(np.asarray(self.std[motion], dtype=float) ** 2)
 
     def robot_for(self, robot: Robot) -> Robot:
         """The robot the planner swims: the fitted model's (its law and joints), else ``robot``."""
@@ -102,48 +128,56 @@ class CoefficientModel:
         nominal = self.fits[motion].as_array()
         return cls.from_array(np.maximum(values, 0.05 * nominal))
 
-    def ensemble(self, sigmas: float = 2.0) -> list[tuple[str, FluidCoefficients]]:
-        """Each fit, and each fit with one coefficient at +-``sigmas`` standard deviations.
-
-        Parameters
-        ----------
-        sigmas : float
-
-        Returns
-        -------
-        list of (label, FluidCoefficients)
-            ``2 (1 + 2 k)`` sets for k coefficients, nominal ones first.
-        """
-        out = [(m, self.fits[m]) for m in MOTIONS]
-        for m in MOTIONS:
-            nominal = self.fits[m].as_array()
-            names = type(self.fits[m]).names()
-            for i, name in enumerate(names):
-                for sign in (-1.0, 1.0):
-                    v = nominal.copy()
-                    v[i] += sign * sigmas * self.std[m][i]
-                    out.append((f"{m} {name}{'+' if sign > 0 else '-'}{sigmas:g}sd",
-                                self._bounded(m, v)))
-        return out
-
-    def draw(self, rng: np.random.Generator, motion: str, sigmas: float = 2.0) -> FluidCoefficients:
-        """One random set around a fit.
-
-        Each coefficient normal with its standard deviation, truncated at +-``sigmas`` of them.
+    def draw(self, rng: np.random.Generator, motion: str,
+             sigmas: float | None = None) -> FluidCoefficients:
+        """One coefficient set drawn jointly within the fit's 95 % region (module docstring).
 
         Parameters
         ----------
         rng : numpy.random.Generator
         motion : {"straight", "turning"}
-        sigmas : float
+        sigmas : float, optional
+            Ignored (the region is the fit's 95 % one); kept for callers of the earlier form.
 
         Returns
         -------
         FluidCoefficients
         """
         nominal = self.fits[motion].as_array()
-        z = np.clip(rng.standard_normal(nominal.size), -sigmas, sigmas)
-        return self._bounded(motion, nominal + z * self.std[motion])
+        return self._bounded(motion, nominal + region_draw(rng, self.covariance(motion)))
+
+    def water_draws(self, rng: np.random.Generator, count: int,
+                    unknown_current_m_s: float = DEFAULT_UNKNOWN_CURRENT_M_S) -> list[WaterDraw]:
+        """``count`` draws of the water a plan is checked in (module docstring).
+
+        Straight and turning fits alternate; the unknown current's direction steps round
+        :data:`CURRENT_DIRECTIONS` directions from a random first one.
+
+        Parameters
+        ----------
+        rng : numpy.random.Generator
+        count : int
+        unknown_current_m_s : float
+            Speed of the current the planner is not told of (at the bound: the worst speed).
+
+        Returns
+        -------
+        list of WaterDraw
+        """
+        first = rng.uniform(0.0, 2.0 * math.pi)
+        cov = self.current_cov if self.current_cov is not None else np.zeros((2, 2))
+        out = []
+        for k in range(count):
+            motion = MOTIONS[k % 2]
+            coefficients = self.draw(rng, motion)
+            angle = first + 2.0 * math.pi * (k // 2 % CURRENT_DIRECTIONS) / CURRENT_DIRECTIONS
+            fitted = region_draw(rng, cov) if np.any(cov) else np.zeros(2)
+            offset = (float(fitted[0] + unknown_current_m_s * math.cos(angle)),
+                      float(fitted[1] + unknown_current_m_s * math.sin(angle)))
+            out.append(WaterDraw(
+                f"draw {k + 1} ({motion} fit; unknown current {unknown_current_m_s:g} m/s towards "
+                f"{math.degrees(angle) % 360:.0f} deg)", motion, coefficients, offset))
+        return out
 
     def describe(self) -> str:
         """One line per fit: values with their standard deviations, and the source."""
@@ -159,6 +193,79 @@ class CoefficientModel:
             lines.append(f"tank's fitted current {math.hypot(vx, vy):.4f} m/s towards "
                          f"{math.degrees(math.atan2(vy, vx)):.0f} deg")
         return "; ".join(lines) + f" ({self.source})"
+
+
+@dataclass(frozen=True)
+class WaterDraw:
+    """One draw of the water a plan is checked in.
+
+    Attributes
+    ----------
+    label : str
+    motion : str
+        Whose fit's region the coefficients come from.
+    coefficients : FluidCoefficients
+    current_offset_m_s : (float, float)
+        Added to the planner's current: the fitted current's deviation and the unknown current.
+    """
+
+    label: str
+    motion: str
+    coefficients: FluidCoefficients
+    current_offset_m_s: tuple[float, float]
+
+
+def region_draw(rng: np.random.Generator, cov: FloatArray,
+                level: float = REGION_LEVEL) -> FloatArray:
+    """A deviation normal with covariance ``cov``, restricted to its ``level`` region.
+
+    The region is {x : x^T cov^-1 x <= chi2_k(level)}, k the dimension (the directions of zero
+    variance are left at 0); drawn by rejection (``level`` of the draws are kept).
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+    cov : ndarray, shape (k, k)
+    level : float
+
+    Returns
+    -------
+    ndarray, shape (k,)
+    """
+    values, vectors = np.linalg.eigh(np.asarray(cov, dtype=float))
+    scale = np.sqrt(np.clip(values, 0.0, None))
+    dims = int(np.count_nonzero(scale > 0))
+    if dims == 0:
+        return np.zeros(len(values))
+    limit = chi2.ppf(level, dims)
+    while True:
+        z = rng.standard_normal(len(values)) * (scale > 0)
+        if z @ z <= limit:
+            return np.asarray(vectors @ (scale * z), dtype=float)
+
+
+def clopper_pearson(failures: int, draws: int, level: float = 0.95) -> tuple[float, float]:
+    """The exact (Clopper-Pearson) interval of a probability from ``failures`` in ``draws``.
+
+    Parameters
+    ----------
+    failures, draws : int
+    level : float
+        Two-sided confidence level.
+
+    Returns
+    -------
+    (float, float)
+        Lower and upper bound (with 0 failures the upper bound is 1 - ((1 - level) / 2)^(1/n),
+        close to the rule of three's 3 / n).
+    """
+    from scipy.stats import beta
+
+    alpha = 1.0 - level
+    lower = 0.0 if failures == 0 else float(beta.ppf(alpha / 2, failures, draws - failures + 1))
+    upper = (1.0 if failures == draws
+             else float(beta.ppf(1 - alpha / 2, failures + 1, draws - failures)))
+    return lower, upper
 
 
 def _default_std(c: FluidCoefficients) -> FloatArray:
@@ -230,32 +337,91 @@ def read_coefficient_model(
                 f"{path}: fits: no {m!r} (or 'joint') set; found {', '.join(sorted(fits))}"
             )
         chosen[m], from_key[m] = fits[key], key
-    uncertainty = data.get("uncertainty") if isinstance(data.get("uncertainty"), dict) else {}
+    reported = data.get("uncertainty")
+    uncertainty: dict = reported if isinstance(reported, dict) else {}
     std: dict[str, FloatArray] = {}
-    notes = []
+    cov: dict[str, FloatArray] = {}
+    notes: list[str] = []
+    correlated: list[str] = []
     for m in MOTIONS:
         names = type(chosen[m]).names()
-        reported = (uncertainty.get(from_key[m]) or {}).get("std") if uncertainty else None
-        default = _default_std(chosen[m])
-        values = default.copy()
-        if isinstance(reported, dict):
-            for i, name in enumerate(names):
-                v = reported.get(name)
-                if isinstance(v, int | float) and math.isfinite(v) and v >= 0:
-                    values[i] = float(v)
-                else:
-                    notes.append(f"{m} {name}")
-        else:
-            notes.append(m)
+        found = uncertainty.get(from_key[m])
+        entry: dict = found if isinstance(found, dict) else {}
+        values = _marginal_sigmas(entry, names, chosen[m].as_array(), f"{m}", notes)
         std[m] = values
+        corr = _sample_correlation(entry, names, f"{path}: uncertainty.{from_key[m]}.samples")
+        if corr is not None:
+            correlated.append(m)
+        cov[m] = (corr if corr is not None else np.eye(len(names))) * np.outer(values, values)
     source = f"{path}" + (
-        f"; no reported std for {', '.join(notes)}: {DEFAULT_RELATIVE_STD:.0%} of the value"
-        if notes else "; bootstrap std"
-    )
+        f"; no reported uncertainty for {', '.join(notes)}: {DEFAULT_RELATIVE_STD:.0%} of the value"
+        if notes else "; bootstrap intervals"
+    ) + (f"; correlation from the bootstrap replicates ({', '.join(correlated)})" if correlated
+         else "; no bootstrap replicates stored: coefficients drawn independently")
     # the fitted model's robot: its law, joint model and fitted joint parameters (those of the
     # straight fit: one robot swims every leg); and the tank's current, the fits' mean
     straight = models[from_key["straight"]]
     used = {models[from_key[m]] for m in MOTIONS}
     current = tuple(float(v) for v in np.mean([f.current_m_s for f in used], axis=0))
     source += f"; model {straight.space.model_name}"
-    return CoefficientModel(chosen, std, source, straight.robot(robot), (current[0], current[1]))
+    found = uncertainty.get(from_key["straight"])
+    current_sigma = (_marginal_sigmas(found, CURRENT_NAMES, np.asarray(straight.current_m_s), "",
+                                      [], default=0.0)
+                     if isinstance(found, dict) and straight.space.current else np.zeros(2))
+    return CoefficientModel(chosen, std, source, straight.robot(robot), (current[0], current[1]),
+                            cov, np.diag(current_sigma**2))
+
+
+def _marginal_sigmas(entry: dict | None, names: tuple[str, ...], estimate: FloatArray, label: str,
+                     notes: list[str], default: float | None = None) -> FloatArray:
+    """Standard deviation of each named parameter, from a bootstrap entry of coefficients.json.
+
+    From the reported interval when there is one (``lower``, ``upper`` at ``level``): its wider
+    side over the normal quantile, so the excess and widening the report applied are kept;
+    else the replicates' ``std``; else ``default`` (None: :data:`DEFAULT_RELATIVE_STD` of the
+    value), and ``label name`` is added to ``notes``.
+    """
+    entry = entry if isinstance(entry, dict) else {}
+    level = entry.get("level", REGION_LEVEL)
+    level = float(level) if isinstance(level, int | float) and 0 < level < 1 else REGION_LEVEL
+    z = float(norm.ppf(0.5 + level / 2))
+    out = np.empty(len(names))
+    for i, name in enumerate(names):
+        lo, hi, sd = (entry.get(k, {}).get(name) if isinstance(entry.get(k), dict) else None
+                      for k in ("lower", "upper", "std"))
+        if (isinstance(lo, int | float) and isinstance(hi, int | float)
+                and math.isfinite(lo) and math.isfinite(hi) and lo <= hi):
+            out[i] = max(hi - estimate[i], estimate[i] - lo, 0.0) / z
+        elif isinstance(sd, int | float) and math.isfinite(sd) and sd >= 0:
+            out[i] = float(sd)
+        else:
+            out[i] = DEFAULT_RELATIVE_STD * abs(estimate[i]) if default is None else default
+            notes.append(f"{label} {name}".strip())
+    return out
+
+
+def _sample_correlation(entry: dict, names: tuple[str, ...], where: str) -> FloatArray | None:
+    """Correlation of the named parameters over the stored bootstrap replicates, if any.
+
+    ``samples`` is a list of replicates, each the parameters by name (or one list of values per
+    name). None without replicates, or with fewer than the parameters plus two.
+    """
+    raw = entry.get("samples") if isinstance(entry, dict) else None
+    if raw is None:
+        return None
+    try:
+        if isinstance(raw, dict):
+            rows = np.column_stack([np.asarray(raw[n], dtype=float) for n in names])
+        else:
+            rows = np.asarray([[float(r[n]) for n in names] for r in raw], dtype=float)
+    except (KeyError, TypeError, ValueError) as err:
+        raise CoefficientsFileError(f"{where}: expected replicates by name ({err})") from None
+    if rows.ndim != 2 or len(rows) < len(names) + 2 or not np.all(np.isfinite(rows)):
+        return None
+    sd = rows.std(axis=0, ddof=1)
+    corr = np.eye(len(names))
+    live = sd > 0
+    if live.sum() > 1:
+        sub = np.corrcoef(rows[:, live], rowvar=False)
+        corr[np.ix_(live, live)] = np.atleast_2d(sub)
+    return np.asarray(corr, dtype=float)
