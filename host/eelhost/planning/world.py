@@ -62,6 +62,9 @@ Point = tuple[Finite, Finite]
 
 EXAMPLES = ("tank_5_obstacles",)
 
+MIN_POLYGON_AREA_M2 = 1e-6
+"""A polygon obstacle enclosing less (1 mm^2) is refused as degenerate."""
+
 
 class WorldError(UserError, ValueError):
     """An invalid or unreadable world file."""
@@ -107,10 +110,29 @@ class CircleObstacle(_Strict):
 
 
 class PolygonObstacle(_Strict):
-    """A simple polygon obstacle (vertices in order, not repeated, at least 3)."""
+    """A simple polygon obstacle (vertices in order, not repeated, at least 3).
+
+    Refused when read: a polygon whose edges cross or touch other than at shared corners
+    (self-intersecting), or with no area (fewer than 3 distinct corners, all on one line): the
+    inside test and the distances of the planner assume a simple polygon with an inside.
+    """
 
     kind: Literal["polygon"]
     vertices_m: list[Point] = Field(min_length=3)
+
+    @model_validator(mode="after")
+    def _simple(self) -> PolygonObstacle:
+        from shapely.geometry import Polygon
+        from shapely.validation import explain_validity
+
+        shape = Polygon(self.vertices_m)
+        if shape.convex_hull.area < MIN_POLYGON_AREA_M2:
+            raise ValueError(f"degenerate polygon: its vertices enclose no area "
+                             f"({shape.area:.2g} m^2); give at least 3 corners not on one line")
+        if not shape.is_valid or shape.area < MIN_POLYGON_AREA_M2:
+            raise ValueError(f"self-intersecting polygon: {explain_validity(shape)} (its edges "
+                             "may meet only at shared corners, in order round the outline)")
+        return self
 
 
 Obstacle = Annotated[CircleObstacle | PolygonObstacle, Field(discriminator="kind")]
