@@ -64,3 +64,27 @@ def test_campaign_rest_and_speed_below_zero_are_refused(option, tmp_path, capsys
     assert cli.main(argv) == 2
     assert option in capsys.readouterr().err
     assert not (tmp_path / "c").exists()
+
+
+@pytest.mark.parametrize(("budget", "popsize", "restarts"), [(100, 8, "bipop"), (1500, 10, "ipop"),
+                                                            (37, 10, "none")])
+def test_the_cmaes_budget_is_at_most_what_was_asked(budget, popsize, restarts):
+    import numpy as np
+
+    from eelhost.estimation.optimise import fit_cmaes
+    from eelhost.estimation.parameters import ParameterSpace
+    from eelsim.fluid import get_fluid_law
+
+    space = ParameterSpace(get_fluid_law("morison"))
+    target = np.array([0.008, 0.776, 0.618, 0.007])
+    seen = []
+
+    def bowl(c):
+        seen.append(len(c))
+        return np.sum(((np.atleast_2d(c) - target) / target) ** 2, axis=1) + 1e-3
+
+    res = fit_cmaes(bowl, space, seed=3, max_evaluations=budget, popsize=popsize,
+                    restarts=restarts)
+    assert res.evaluations == sum(seen) <= budget
+    if restarts != "none":
+        assert res.evaluations > budget / 2  # restarts spend the budget, up to the last whole run

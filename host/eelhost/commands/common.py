@@ -250,7 +250,9 @@ def add_fit_options(p: argparse.ArgumentParser) -> None:
         help="cmaes (+ least-squares polish; default), ga (the paper's), lsq (polish only)",
     )
     g.add_argument("--seed", type=SEED, default=0, help="seed of the optimiser")
-    g.add_argument("--budget", type=COUNT, default=1500, help="CMA-ES candidates per fit at most")
+    g.add_argument("--budget", type=COUNT, default=1500,
+                   help="candidates of the global search (CMA-ES) per fit, at most; the polish "
+                   "after it adds its own (up to 30 iterations)")
     g.add_argument("--pop-size", type=number(int, minimum=2), default=150, help="GA population")
     g.add_argument("--generations", type=COUNT, default=130, help="GA generations")
     add_backend_option(g)

@@ -158,6 +158,7 @@ def _then(
         best.fitness,
         first.history + [last],
         first.evaluations + polished.evaluations,
+        search_evaluations=first.evaluations,
     )
 
 

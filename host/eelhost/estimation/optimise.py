@@ -63,6 +63,9 @@ class FitResult:
         closed-loop runs is the whole fit's, across a resume.
     evaluations : int
         Candidates evaluated (each is one simulation per training experiment).
+    search_evaluations : int or None
+        Of these, the global search's (CMA-ES, within ``--budget``), when a polish followed it;
+        None when the fit is one search.
     """
 
     method: str
@@ -71,6 +74,7 @@ class FitResult:
     fitness: float
     history: list[tuple[int, float, int]] = field(default_factory=list)
     evaluations: int = 0
+    search_evaluations: int | None = None
 
     @property
     def coefficients(self) -> FluidCoefficients:
@@ -473,7 +477,8 @@ def fit_cmaes(
         The parameters and their bounds.
     seed : int
     max_evaluations : int
-        Budget of candidates over all runs.
+        Budget of candidates over all runs, at most: a generation that would go beyond it is
+        not started (pycma's own ``maxfevals`` stops only after it), except the very first.
     popsize : int
         Candidates per generation of the first run.
     start : ndarray, optional
@@ -527,6 +532,8 @@ def fit_cmaes(
             )
             if es.stop():  # no budget even for one generation
                 break
+        if run.evaluations and run.evaluations + es.popsize > max_evaluations:
+            break  # the budget is "at most" (docs/estimation.md): no generation beyond it
         xs = np.array(es.ask())
         f = generations.evaluate(xs)
         run.spent(len(f))
