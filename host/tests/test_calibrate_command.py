@@ -156,3 +156,48 @@ def test_charuco_fit_with_the_true_lens_matches_the_board_in_a_distorted_view(vi
     spec = CharucoSpec()
     cal = from_charuco(views[4], spec, lens=LENS)
     assert cal.rms_reprojection_px < 0.2
+
+
+def _half_size_calibration(tmp_path):
+    """A calibration made on the synthetic tank's frame scaled to 640x360 (its corners halved)."""
+    big = tmp_path / "frame.png"
+    assert main(["calibrate", "--camera", "synthetic", "--calibration", str(tmp_path / "big.json"),
+                 "--save-frame", str(big)]) == 0
+    small = tmp_path / "small.png"
+    cv2.imwrite(str(small), cv2.resize(cv2.imread(str(big)), (640, 360)))
+    halved = ";".join(f"{float(u) / 2:g},{float(v) / 2:g}"
+                      for u, v in (p.split(",") for p in TANK_CORNERS.split(";")))
+    cal = tmp_path / "small.json"
+    assert main(["calibrate", "--image", str(small), "--corners", halved,
+                 f"--corners-m={TANK_CORNERS_M}", "--calibration", str(cal)]) == 0
+    assert load_calibration(cal).image_size_px == (640, 360)
+    return cal, big
+
+
+def test_check_on_a_frame_of_another_size_names_both_sizes(tmp_path, capsys):
+    cal, big = _half_size_calibration(tmp_path)
+    capsys.readouterr()
+    assert main(["calibrate", "--check", "--image", str(big), "--calibration", str(cal),
+                 "--board-origin", "0.2,0.6"]) == 2
+    err = capsys.readouterr().err
+    assert str(cal) in err and "640x360" in err and "1280x720" in err
+    assert "moved" not in err  # the size, not a guess about the camera
+
+
+def test_run_refuses_frames_of_another_size_than_its_calibration(tmp_path, capsys):
+    cal, _ = _half_size_calibration(tmp_path)
+    capsys.readouterr()
+    status = main(["run", "--robot", "sim://", "--calibration", str(cal), "--waypoints", "1,0",
+                   "--gait", "0.87,3.9", "--duration", "2", "--out", str(tmp_path / "run")])
+    err = capsys.readouterr().err
+    assert status == 2, err
+    assert "640x360" in err and "1280x720" in err and str(cal) in err
+
+
+def test_the_localiser_makes_no_pose_from_a_frame_of_another_size():
+    from eelhost.vision.calibration import FrameSizeError
+    from eelhost.vision.localise import Localiser
+
+    localiser = Localiser(TRUTH, load_robot())
+    with pytest.raises(FrameSizeError, match="made for 1280x720 px frames.*gives 640x360"):
+        localiser.localise(0.0, np.zeros((360, 640, 3), np.uint8))

@@ -186,6 +186,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"wrote {args.save_frame}")
     if args.check:
         cal = load_calibration(args.calibration)
+        cal.check_frame(frame, f"--camera {args.camera}" if args.camera else f"--image {args.image}")
         if corners_mode:
             points_m, points_px = np.array(_world_corners(args)), np.array(_corner_pixels(args, frame))
         else:

@@ -27,7 +27,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, cast
 
@@ -48,6 +48,10 @@ class CalibrationError(UserError, ValueError):
 
 class CalibrationFileError(CalibrationError):
     """A calibration file that cannot be used; the message names the file and the key."""
+
+
+class FrameSizeError(CalibrationError):
+    """Frames of another size than the calibration's: its pixels are not the camera's pixels."""
 
 
 UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-10)
@@ -137,6 +141,28 @@ class Calibration:
     points_px: FloatArray
     rms_reprojection_px: float
     lens: Lens | None = None
+    source: str = field(default="calibration", compare=False)  # its file, for messages
+
+    def check_frame(self, frame: NDArray[np.generic], where: str = "the camera") -> None:
+        """Refuse a frame of another size than :attr:`image_size_px`.
+
+        A homography fitted on 640x360 frames maps metres to pixels of those frames: on
+        1280x720 frames it puts the robot metres away from where it is (measured: (1.57, -1.58) m
+        for (0.08, 0) m), so no pose is made from such a frame (docs/vision.md).
+
+        Raises
+        ------
+        FrameSizeError
+            Naming the calibration, both sizes and where the frame came from.
+        """
+        height, width = frame.shape[:2]
+        want_w, want_h = self.image_size_px
+        if (width, height) != (want_w, want_h):
+            raise FrameSizeError(
+                f"{self.source}: made for {want_w}x{want_h} px frames, but {where} gives "
+                f"{width}x{height} px frames; calibrate at this size (eelbot calibrate) or set "
+                f"the camera to {want_w}x{want_h}"
+            )
 
     def to_px(self, xy_m: ArrayLike) -> FloatArray:
         """Map world points (..., 2) in metres to pixels (..., 2) of the camera's frames."""
@@ -601,7 +627,7 @@ def load_calibration(path: str | Path) -> Calibration:
         raise CalibrationFileError(f"{source}: 'rms_reprojection_px' must be a number >= 0")
     lens = _load_lens(data["lens"], source) if "lens" in data else None
     return Calibration(h / h[2, 2], (size[0], size[1]), method, points_m, points_px, float(rms),
-                       lens)
+                       lens, source)
 
 
 def _load_lens(data: Any, source: str) -> Lens:

@@ -205,7 +205,14 @@ class Localiser:
         return out
 
     def localise(self, t_s: float, frame: NDArray[np.uint8]) -> Localisation:
-        """Localise the robot in one frame taken at ``t_s``."""
+        """Localise the robot in one frame taken at ``t_s``.
+
+        Raises
+        ------
+        FrameSizeError
+            A frame of another size than the calibration's (no pose is made from it).
+        """
+        self.calibration.check_frame(frame)
         return self.from_sightings(t_s, self.detect(frame))
 
     def from_sightings(self, t_s: float, sightings: Iterable[MarkerSighting]) -> Localisation:
