@@ -35,6 +35,7 @@ from eelhost.commands import (
     dataset,
     estimate,
     estimate_bench,
+    export,
     markers,
     plan,
     ports,
@@ -69,6 +70,7 @@ COMMANDS = (
     robot,
     ports,
     plan,
+    export,
 )
 USER_ERRORS = (UserError, RobotFileError, ScenarioError, TimingError)
 LEVELS = (logging.ERROR, logging.WARNING, logging.INFO, logging.DEBUG)  # -q, default, -v, -vv
