@@ -257,7 +257,7 @@ def clopper_pearson(failures: int, draws: int, level: float = 0.95) -> tuple[flo
     -------
     (float, float)
         Lower and upper bound (with 0 failures the upper bound is 1 - ((1 - level) / 2)^(1/n),
-        close to the rule of three's 3 / n).
+        about 3.7 / n at 95 %; the one-sided rule of three gives 3 / n).
     """
     from scipy.stats import beta
 
