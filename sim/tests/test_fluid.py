@@ -20,8 +20,10 @@ from eelsim.dynamics import accelerations, fluid_link_forces
 from eelsim.fluid import (
     FLUID_LAWS,
     GALILEAN,
+    LIGHTHILL,
     LINEAR_QUADRATIC,
     MORISON,
+    RESISTIVE,
     REYNOLDS,
     FluidCoefficients,
     FluidLaw,
@@ -103,6 +105,13 @@ def toy_law():
     FLUID_LAWS.pop(TOY.name, None)
 
 
+def _lane(fluid, r):
+    """Run ``r``'s per-link coefficients (a lift variant's hold its base law's: recurse)."""
+    return type(fluid)(**{f.name: _lane(value, r) if isinstance(value, LinkFluid) else value[r]
+                          for f in dataclasses.fields(fluid)
+                          for value in [getattr(fluid, f.name)]})
+
+
 def _batched_forces(law, n, lanes, rng, still_water):
     """Random link states of ``lanes`` runs; the law's numpy forces and its kernel code's."""
     layout = codegen.make_layout(n, lanes, law)
@@ -141,7 +150,7 @@ def _batched_forces(law, n, lanes, rng, still_water):
             exec(program, {"np": np, "_vsqrt": math.sqrt}, local)
             got[r, j] = [-local["fxn"], -local["fyn"], -local["fnn"], -local["tqn"]]
     for r in range(lanes):
-        one = type(fluid)(**{f.name: getattr(fluid, f.name)[r] for f in dataclasses.fields(fluid)})
+        one = _lane(fluid, r)
         motion = LinkMotion(np.sin(theta[r]), np.cos(theta[r]), omega[r], rel[r, :, 0],
                             rel[r, :, 1])
         f = law.forces(one, motion, current[r])
@@ -150,7 +159,9 @@ def _batched_forces(law, n, lanes, rng, still_water):
     return got, want
 
 
-@pytest.mark.parametrize("law", [MORISON, GALILEAN, LINEAR_QUADRATIC, REYNOLDS, TOY],
+@pytest.mark.parametrize("law", [MORISON, GALILEAN, LINEAR_QUADRATIC, LIGHTHILL, RESISTIVE,
+                                 REYNOLDS, FLUID_LAWS["morison_lift"],
+                                 FLUID_LAWS["lighthill_lift"], FLUID_LAWS["resistive_lift"], TOY],
                          ids=lambda law: law.name)
 @pytest.mark.parametrize("n_links", [3, 6, 8])
 @pytest.mark.parametrize("still_water", [False, True])
@@ -188,7 +199,10 @@ def test_coefficients_convert_to_arrays_and_back_with_their_names_in_errors():
 
 def test_an_unknown_law_is_refused_naming_the_known_ones():
     with pytest.raises(ValueError, match="unknown fluid law 'potential_flow'; known laws: "
-                                         "galilean, linear_quadratic, morison, reynolds"):
+                                         "galilean, galilean_lift, lighthill, lighthill_lift, "
+                                         "linear_quadratic, linear_quadratic_lift, morison, "
+                                         "morison_lift, resistive, resistive_lift, reynolds, "
+                                         "reynolds_lift$"):
         get_fluid_law("potential_flow")
 
 

@@ -22,9 +22,12 @@ from eelsim.dynamics import (
 )
 from eelsim.energy import kinetic_energy, power_balance
 from eelsim.fluid import (
+    FLUID_LAWS,
     GalileanCoefficients,
     HydroCoefficients,
+    LighthillCoefficients,
     LinearQuadraticCoefficients,
+    ResistiveCoefficients,
     ReynoldsCoefficients,
     candidate_laws,
     get_fluid_law,
@@ -71,6 +74,9 @@ GALILEAN_LAWS = [
     LinearQuadraticCoefficients(C_f_lin=0.008, C_d_lin=0.776, C_f_quad=0.02, C_d_quad=1.2,
                                 C_a=0.618, C_m=0.007),
     ReynoldsCoefficients(C_f_lam=1.328, C_d_inf=1.0, C_d_visc=5.0, C_a=0.618, C_m=0.007),
+    LighthillCoefficients(C_f=0.008, C_d=0.776, C_a=0.618),
+    ResistiveCoefficients(C_t_lin=0.008, C_n_lin=0.776, C_t_quad=0.02, C_n_quad=1.2, C_a=0.618),
+    FLUID_LAWS["galilean_lift"].coefficients(**PAPER, C_L=1.2),
 ]
 
 
@@ -157,6 +163,7 @@ WITHOUT_DRAG = [
     LinearQuadraticCoefficients(C_f_lin=0.0, C_d_lin=0.0, C_f_quad=0.0, C_d_quad=0.0, C_a=0.9,
                                 C_m=0.5),
     ReynoldsCoefficients(C_f_lam=0.0, C_d_inf=0.0, C_d_visc=0.0, C_a=0.9, C_m=0.5),
+    ResistiveCoefficients(C_t_lin=0.0, C_n_lin=0.0, C_t_quad=0.0, C_n_quad=0.0, C_a=0.9),
 ]
 
 
@@ -223,10 +230,12 @@ def test_the_reynolds_law_drags_as_speed_to_the_power_one_and_a_half(robot):
     assert forces[0][0] < 0 and forces[0][1] < 0  # against the motion
 
 
-def test_only_the_plant_law_is_left_out_of_the_fitting_candidates():
-    assert candidate_laws() == ("morison", "galilean", "linear_quadratic")
+def test_only_the_plant_law_and_the_lift_variants_are_left_out_of_the_fitting_candidates():
+    assert candidate_laws() == ("morison", "galilean", "linear_quadratic", "lighthill",
+                                "resistive")
     assert not get_fluid_law("reynolds").candidate
-    for name in ("morison", "galilean", "linear_quadratic", "reynolds"):
+    assert not any(FLUID_LAWS[f"{name}_lift"].candidate for name in (*candidate_laws(), "reynolds"))
+    for name in FLUID_LAWS:
         law = get_fluid_law(name)
         assert law.bounds.shape == (len(law.coefficient_names), 2)
         assert np.all(law.bounds[:, 0] <= law.bounds[:, 1])
@@ -236,6 +245,9 @@ def test_only_the_plant_law_is_left_out_of_the_fitting_candidates():
     LinearQuadraticCoefficients(C_f_lin=0.008, C_d_lin=0.776, C_f_quad=0.02, C_d_quad=1.2,
                                 C_a=0.618, C_m=0.007),
     ReynoldsCoefficients(C_f_lam=1.328, C_d_inf=1.0, C_d_visc=5.0, C_a=0.618, C_m=0.007),
+    LighthillCoefficients(C_f=0.008, C_d=0.776, C_a=0.618),
+    ResistiveCoefficients(C_t_lin=0.008, C_n_lin=0.776, C_t_quad=0.02, C_n_quad=1.2, C_a=0.618),
+    FLUID_LAWS["lighthill_lift"].coefficients(C_f=0.008, C_d=0.776, C_a=0.618, C_L=1.2),
 ], ids=lambda c: c.law_name)
 def test_each_new_law_runs_in_the_batched_kernel_as_in_the_reference(robot, coefficients):
     # from the robot file's [hydrodynamics] table: law name and its coefficients

@@ -11,8 +11,11 @@ each registers itself here, at the bottom of this file.
 
 The laws: ``"morison"`` (the paper's, the default), ``"galilean"`` (the paper's coefficients,
 Galilean-consistent), ``"linear_quadratic"`` (separate linear and quadratic drag,
-Galilean-consistent) are candidate models for fitting; ``"reynolds"`` (drag with
-Reynolds-number-dependent coefficients) is for test plants only (:func:`candidate_laws`).
+Galilean-consistent), ``"lighthill"`` (Lighthill's elongated-body reactive law with the paper's
+drag) and ``"resistive"`` (resistive-force drag integrated along each link) are candidate models
+for fitting; ``"reynolds"`` (drag with Reynolds-number-dependent coefficients) is for test plants
+only (:func:`candidate_laws`). Each has a ``"<law>_lift"`` variant carrying a lift force
+(:mod:`eelsim.fluid.lift`), fitted only when named.
 """
 
 from __future__ import annotations
@@ -123,35 +126,47 @@ def candidate_laws() -> tuple[str, ...]:
 
 # ---- the laws (one module each)
 from eelsim.fluid.galilean import GALILEAN, GalileanCoefficients  # noqa: E402
+from eelsim.fluid.lift import LiftLaw, with_lift  # noqa: E402
+from eelsim.fluid.lighthill import LIGHTHILL, LighthillCoefficients  # noqa: E402
 from eelsim.fluid.linear_quadratic import (  # noqa: E402
     LINEAR_QUADRATIC,
     LinearQuadraticCoefficients,
 )
 from eelsim.fluid.morison import MORISON, HydroCoefficients  # noqa: E402
+from eelsim.fluid.resistive import RESISTIVE, ResistiveCoefficients  # noqa: E402
 from eelsim.fluid.reynolds import REYNOLDS, ReynoldsCoefficients  # noqa: E402
 
-for _law in (MORISON, GALILEAN, LINEAR_QUADRATIC, REYNOLDS):
+for _law in (MORISON, GALILEAN, LINEAR_QUADRATIC, LIGHTHILL, RESISTIVE, REYNOLDS):
     register_fluid_law(_law)
+# every law above can carry a lift (docs/model.md section 2, "Lift"): the <law>_lift variants
+for _base in tuple(FLUID_LAWS.values()):
+    register_fluid_law(with_lift(_base))
 
 __all__ = [
     "DEFAULT_FLUID_LAW",
     "FLUID_LAWS",
     "GALILEAN",
+    "LIGHTHILL",
     "LINEAR_QUADRATIC",
     "MORISON",
+    "RESISTIVE",
     "REYNOLDS",
     "FluidCoefficients",
     "FluidLaw",
     "GalileanCoefficients",
     "HydroCoefficients",
     "KernelCode",
+    "LiftLaw",
+    "LighthillCoefficients",
     "LinearQuadraticCoefficients",
     "LinkFluid",
     "LinkForces",
     "LinkMotion",
+    "ResistiveCoefficients",
     "ReynoldsCoefficients",
     "candidate_laws",
     "get_fluid_law",
     "law_of",
     "register_fluid_law",
+    "with_lift",
 ]
