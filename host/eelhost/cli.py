@@ -44,6 +44,7 @@ from eelhost.commands import (
     run,
     simulate,
     speeds,
+    track,
     validate,
     vision_bench,
 )
@@ -71,6 +72,7 @@ COMMANDS = (
     ports,
     plan,
     export,
+    track,
 )
 USER_ERRORS = (UserError, RobotFileError, ScenarioError, TimingError)
 LEVELS = (logging.ERROR, logging.WARNING, logging.INFO, logging.DEBUG)  # -q, default, -v, -vv
