@@ -1,8 +1,8 @@
 """Compile batched-kernel variants into the kernel disk cache, two at a time.
 
 Each variant (links x fluid law x joint model x stage) takes 20-60 s to compile on first use.
-The main job needs five (its fits, and the model comparison's candidates), the test suite
-thirteen; compiled one after another inside the command that needs them they were most of its
+The main job needs six (its fits, and the model comparison's candidates), the test suite
+sixteen; compiled one after another inside the command that needs them they were most of its
 time from a fresh clone. Compiled here in parallel into the cache
 (``eelsim.batch.kernel_cache_dir``), the command loads each in under a second. A variant missing
 from a list is still compiled by the code that needs it: the lists only save time.
@@ -23,13 +23,16 @@ Variant = tuple[int, str | None, str, str]
 PAPER, SERVO = "paper_robot.toml", "servo_robot.toml"
 
 # eelbot report on the bundled dataset: the fits, then the candidates of the comparison
-MAIN: list[Variant] = [(6, None, law, PAPER) for law in ("morison", "galilean", "linear_quadratic")]
+CANDIDATES = ("morison", "galilean", "linear_quadratic", "lighthill", "resistive")
+"""eelsim.fluid.candidate_laws(), written out: this script compiles in processes of its own."""
+MAIN: list[Variant] = [(6, None, law, PAPER) for law in CANDIDATES]
 MAIN += [(6, None, "morison", SERVO)]
 
 # sim/tests and host/tests: 3, 6 and 8 links, every candidate law with both joint models, the
 # test plants' law, and the numba stage the C stage is checked against
 TESTS: list[Variant] = [(n, "c", "morison", robot) for n in (3, 6, 8) for robot in (PAPER, SERVO)]
 TESTS += [(6, "c", law, robot) for law in ("galilean", "linear_quadratic") for robot in (PAPER, SERVO)]
+TESTS += [(6, "c", law, PAPER) for law in ("lighthill", "resistive", "lighthill_lift")]
 TESTS += [(6, "c", "reynolds", PAPER), (6, "numba", "morison", PAPER), (6, "numba", "morison", SERVO)]
 
 
