@@ -173,6 +173,11 @@ PROBES = [
           "--out {lab}/ck_old", 2, ("checkpoint_straight_pd_morison_cmaes.pkl", "not read")),
     Probe("scheduler unreachable", "estimate {lab}/ds_good --scheduler tcp://127.0.0.1:1 "
           "--out {tmp}/fit", 2, ("--scheduler tcp://127.0.0.1:1", "no Dask scheduler")),
+    Probe("scheduler plain tcp elsewhere", "estimate {lab}/ds_good --scheduler tcp://10.0.0.5:8786 "
+          "--out {tmp}/fit", 2, ("--scheduler tcp://10.0.0.5:8786", "plain TCP to another machine",
+                                 "--insecure")),
+    Probe("scheduler tls without certificates", "estimate {lab}/ds_good --scheduler "
+          "tls://10.0.0.5:8786 --out {tmp}/fit", 2, ("tls://10.0.0.5:8786", "--tls-ca-file")),
     Probe("scheduler not an address", "estimate {lab}/ds_good --scheduler foo --out {tmp}/fit",
           2, ("--scheduler foo", "not a scheduler address")),
     # plan worlds

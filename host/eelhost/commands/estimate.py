@@ -27,7 +27,20 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="separate straight and turning fits (both, the paper's), one of them, or "
         "one joint set for the robot",
     )
-    p.add_argument("--scheduler", metavar="ADDRESS", help="spread evaluation over a Dask cluster")
+    g = p.add_argument_group("Dask cluster (docs/cli.md, \"Security\": a cluster can run code here)")
+    g.add_argument("--scheduler", metavar="ADDRESS",
+                   help="spread the simulations over a Dask cluster: tls://host:8786 (with "
+                   "certificates), or tcp:// on this machine")
+    g.add_argument("--tls-ca-file", metavar="PEM",
+                   help="certificate authority of the cluster's certificates (default: the Dask "
+                   "config's distributed.comm.tls.ca-file)")
+    g.add_argument("--tls-cert", metavar="PEM", help="this client's certificate (default: the "
+                   "Dask config's distributed.comm.tls.client.cert)")
+    g.add_argument("--tls-key", metavar="PEM", help="this client's private key, if not in "
+                   "--tls-cert")
+    g.add_argument("--insecure", action="store_true",
+                   help="allow plain tcp:// to another machine (anyone who can reach the "
+                   "scheduler can then run code here)")
     p.add_argument(
         "--out", default="out/estimate", help="folder for coefficients.json and checkpoints"
     )
@@ -47,9 +60,10 @@ def run(args: argparse.Namespace) -> int:
     motions = ("straight", "turning") if args.motion == "both" else (args.motion,)
     map_function = None
     if args.scheduler:
-        from eelhost.estimation.cluster import dask_map
+        from eelhost.estimation.cluster import TLSFiles, dask_map
 
-        map_function = dask_map(args.scheduler)
+        tls = TLSFiles(args.tls_ca_file, args.tls_cert, args.tls_key)
+        map_function = dask_map(args.scheduler, tls=tls, insecure=args.insecure)
     fits = {}
     for motion in motions:
         total = settings.generations if settings.method == "ga" else None
@@ -79,6 +93,8 @@ def run(args: argparse.Namespace) -> int:
             + " ".join(f"{name} {value:.4g}" for name, value in res.space.as_dict(res.values).items())
             + (f" (ambient current {res.model.current_text()})" if res.space.current else "")
         )
+    if map_function is not None:
+        map_function.close()
     path = write_coefficients(Path(args.out) / "coefficients.json", fits, robot=dataset.robot)
     print(f"wrote {path}")
     return 0

@@ -14,7 +14,8 @@ length together: on the paper's GA this took the kernel's lane-steps from 243 M 
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import dataclasses
+from collections.abc import Callable, Sequence
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -89,6 +90,7 @@ def simulate_batch(
     parameters: np.ndarray,
     space: ParameterSpace,
     lengths: RunLengths | None = None,
+    expected: np.ndarray | None = None,
 ):
     """Simulate every prepared experiment for every candidate with ``eelsim.batch``.
 
@@ -102,6 +104,8 @@ def simulate_batch(
     space : ParameterSpace
     lengths : RunLengths, optional
         Guesses the runs' lengths for the kernel's packing, and learns them from this call.
+    expected : ndarray, shape (C, E), optional
+        The guesses themselves, when there is no ``lengths`` (a block run on a worker).
 
     Returns
     -------
@@ -120,7 +124,8 @@ def simulate_batch(
     left = np.zeros((c, e))
     arrival = np.full((c, e), np.nan)
     failed = np.full((c, e), np.nan)
-    expected = lengths.predict(parameters) if lengths is not None else None
+    if lengths is not None:
+        expected = lengths.predict(parameters)
     steps = np.zeros((c, e), dtype=np.int64)
     groups: dict[LoopOptions, list[int]] = {}
     for j, p in enumerate(prepared):
@@ -146,3 +151,63 @@ def simulate_batch(
     if lengths is not None:
         lengths.record(parameters, steps)
     return Simulated(pos, heading, failure, left, arrival, failed, steps)
+
+
+def _block_job(args: tuple):
+    """One block of candidates simulated on a worker (its process keeps the kernel loaded)."""
+    robots, prepared, parameters, space, expected = args
+    return simulate_batch(robots, prepared, parameters, space, expected=expected)
+
+
+def simulate_batch_spread(
+    map_function: Callable,
+    robots: Sequence[Robot],
+    prepared: Sequence,
+    parameters: np.ndarray,
+    space: ParameterSpace,
+    lengths: RunLengths | None = None,
+):
+    """:func:`simulate_batch` with the candidates cut into blocks, each a task of ``map_function``.
+
+    On a Dask cluster (:class:`~eelhost.estimation.cluster.ClusterMap`) each block is one task on
+    a worker, whose kernel runs its runs on all the worker's cores; the worker's process compiles
+    or loads the kernel once and keeps it. The blocks interleave the candidates by their guessed
+    run lengths (longest first, dealt round), so that they last about as long as each other; the
+    experiments are sent to every worker once (``map_function.share``). Results are those of
+    :func:`simulate_batch` on all the candidates at once (each run is independent).
+
+    Parameters
+    ----------
+    map_function : callable
+        ``map(function, jobs) -> results``; its ``blocks`` attribute, when it has one, says how
+        many blocks to cut (default 2).
+    robots, prepared, parameters, space, lengths
+        As for :func:`simulate_batch`.
+
+    Returns
+    -------
+    Simulated
+    """
+    from eelhost.estimation.evaluate import Simulated
+
+    c = parameters.shape[0]
+    blocks = max(1, min(c, int(getattr(map_function, "blocks", 2))))
+    expected = lengths.predict(parameters) if lengths is not None else None
+    order = (np.arange(c) if expected is None
+             else np.argsort(-expected.sum(axis=1), kind="stable"))
+    parts = [np.sort(order[b::blocks]) for b in range(blocks)]
+    share = getattr(map_function, "share", None)
+    sent = share(prepared) if share is not None else list(prepared)
+    jobs = [([robots[i] for i in idx], sent, parameters[idx], space,
+             None if expected is None else expected[idx]) for idx in parts]
+    results = map_function(_block_job, jobs)
+    merged = {}
+    for f in dataclasses.fields(Simulated):
+        first = getattr(results[0], f.name)
+        merged[f.name] = np.empty((c, *first.shape[1:]), dtype=first.dtype)
+        for idx, part in zip(parts, results, strict=True):
+            merged[f.name][idx] = getattr(part, f.name)
+    sim = Simulated(**merged)
+    if lengths is not None:
+        lengths.record(parameters, sim.steps)
+    return sim

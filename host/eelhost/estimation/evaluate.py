@@ -12,7 +12,8 @@ runs every
 (candidate, experiment) pair through a backend:
 
 - ``"reference"``: the readable closed loop (``eelsim.closed_loop``), spread over processes;
-- ``"batch"``: the fast batched kernel (``eelsim.batch``), the default when it is available.
+- ``"batch"``: the fast batched kernel (``eelsim.batch``), the default when it is available;
+  with a ``map_function`` (a Dask cluster), the candidates in blocks, one task each.
 
 Both return the centre of mass at the sample times, the failure flag and the path left.
 """
@@ -280,7 +281,10 @@ class Evaluator:
     workers : int
         Processes for the reference backend.
     map_function : callable, optional
-        Replaces the local process pool (e.g. a Dask client's map) for the reference backend.
+        Spreads the runs (e.g. :class:`~eelhost.estimation.cluster.ClusterMap` on a Dask
+        cluster): the batch backend's candidates in blocks, each block one task
+        (:func:`~eelhost.estimation.batch_backend.simulate_batch_spread`); the reference backend's
+        runs one task each, in place of the local process pool.
     space : ParameterSpace, optional
         What a candidate vector holds (default: the robot's fluid law and joint model).
     """
@@ -350,11 +354,19 @@ class Evaluator:
         if not stable.all():
             return self._failing_unstable(x, stable)
         if self.backend == "batch":
-            from eelhost.estimation.batch_backend import RunLengths, simulate_batch
+            from eelhost.estimation.batch_backend import (
+                RunLengths,
+                simulate_batch,
+                simulate_batch_spread,
+            )
 
             if self._lengths is None:
                 self._lengths = RunLengths(len(self.prepared))
-            sim = simulate_batch(robots, self.prepared, x, self.space, self._lengths)
+            if self.map_function is not None:  # blocks of runs as tasks on the cluster
+                sim = simulate_batch_spread(self.map_function, robots, self.prepared, x,
+                                            self.space, self._lengths)
+            else:
+                sim = simulate_batch(robots, self.prepared, x, self.space, self._lengths)
         else:
             sim = self._simulate_reference(robots, x)
         self.simulations += x.shape[0] * len(self.prepared)
