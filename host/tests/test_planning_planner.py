@@ -67,6 +67,24 @@ def test_goal_behind_a_wall_is_refused_as_unreachable_without_searching():
     assert outcome.plan.simulations == 0
 
 
+def test_goal_inside_an_obstacle_is_refused_at_once_without_searching():
+    world = open_tank(obstacles=[{"kind": "circle", "centre_m": [2.0, 1.0], "radius_m": 0.1}])
+    outcome = Planner(world, ROBOT, MODEL).plan()
+    assert outcome.status == "goal_blocked"
+    assert "goal blocked" in outcome.message and "inside an obstacle" in outcome.message
+    assert outcome.plan.simulations == 0
+
+
+@pytest.mark.parametrize("vertices, reason", [
+    ([[1.0, 0.2], [2.0, 1.2], [2.0, 0.2], [1.0, 1.2]], "self-intersecting polygon"),
+    ([[1.0, 1.0], [2.0, 1.0], [1.5, 1.0]], "degenerate polygon"),
+    ([[1.0, 1.0], [1.0, 1.0], [1.0, 1.0]], "degenerate polygon"),
+])
+def test_self_intersecting_or_flat_polygon_is_refused_when_the_world_is_read(vertices, reason):
+    with pytest.raises(WorldError, match=f"obstacles.0.*{reason}"):
+        open_tank(obstacles=[{"kind": "polygon", "vertices_m": vertices}])
+
+
 def test_goal_outside_the_tank_is_refused_when_the_world_is_read():
     with pytest.raises(WorldError, match="goal.position_m .* outside the tank"):
         open_tank(goal=(3.4, 1.0))
@@ -86,15 +104,21 @@ def test_refusals_exit_2_with_the_reason(tmp_path, capsys):
 
 @pytest.fixture(scope="module")
 def example():
+    # in known water (no unknown current): the example has a plan that passes every draw
     world = load_world("tank_5_obstacles")
-    planner = Planner(world, ROBOT, MODEL)
+    planner = Planner(world, ROBOT, MODEL, unknown_current_m_s=0.0, draws=24)
     return world, planner, planner.plan()
 
 
 def test_example_plan_passes_every_check_run_without_contact(example):
     world, planner, outcome = example
     assert outcome.found, outcome.message
-    assert len(outcome.checks) == len(MODEL.ensemble())
+    assert len(outcome.checks) == 2 + 24 and outcome.draws == 24
+    p, low, high = outcome.collision_probability
+    assert p == 0.0 and low == 0.0 and 0.10 < high < 0.15  # 0 in 24: Clopper-Pearson 14.2 %
+    median, t5, t95 = outcome.arrival_s
+    assert t5 <= median <= t95
+    assert "collision probability 0.0% (0 of 24 draws" in outcome.message
     for run in outcome.checks:
         assert run.reached and run.collision_free, run.message
         assert in_goal(world, run.states[-1, N : N + 2])
@@ -132,7 +156,7 @@ def test_chained_legs_are_the_run_the_robot_swims(example):
 
 def test_issue_world_with_a_035_m_gate_off_the_start_goal_line_is_planned_through_it():
     world = issue_worlds()["gap_0.35_off_line"]
-    outcome = Planner(world, ROBOT, MODEL).plan()
+    outcome = Planner(world, ROBOT, MODEL, unknown_current_m_s=0.0, draws=12).plan()
     assert outcome.found, outcome.message
     assert all(c.reached and c.collision_free for c in outcome.checks)
     # the gate is at x = 1.5 m between y = 1.25 and 1.6 m: the plan goes through it

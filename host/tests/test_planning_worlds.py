@@ -74,11 +74,12 @@ def test_coefficient_file_gives_fits_and_bootstrap_std_and_names_bad_keys(tmp_pa
     model = read_coefficient_model(path, ROBOT)
     assert np.allclose(model.std["straight"], 0.002)
     assert np.allclose(model.std["turning"], 0.1 * np.asarray(list(fit.values())))
-    assert "no reported std for turning" in model.source
-    ensemble = model.ensemble(2.0)
-    assert len(ensemble) == 2 * (1 + 2 * len(names))
+    assert "no reported uncertainty for turning C_f" in model.source
+    assert "drawn independently" in model.source
     drawn = model.draw(np.random.default_rng(1), "straight")
-    assert np.all(np.abs(drawn.as_array() - model.fits["straight"].as_array()) <= 0.004 + 1e-12)
+    # within the 95 % region of 4 independent coefficients: at most sqrt(chi2_4(0.95)) std
+    assert np.all(np.abs(drawn.as_array() - model.fits["straight"].as_array())
+                  <= 0.002 * 3.09)
     path.write_text('{"fits": {"straight": {"coefficients": {"C_f": "x"}}}}')
     with pytest.raises(ValueError, match="fits.straight: missing C_d, C_a, C_m"):
         read_coefficient_model(path, ROBOT)
@@ -90,8 +91,10 @@ def test_coefficient_file_gives_fits_and_bootstrap_std_and_names_bad_keys(tmp_pa
 
 def test_bench_summary_counts_plans_collisions_and_goals():
     results = [
-        WorldResult("a", "found", "", 0.5, 0.4, 0.5, 0, True, False, 0.05, 0.1),
-        WorldResult("b", "found", "", 0.9, 0.7, 0.8, 1, False, True, -0.01, 0.5),
+        WorldResult("a", "found", "", 0.5, 0.4, 0.5, 0, True, False, 0.05, 0.1, 0.06,
+                    (20.0, 18.0, 24.0), 20.0),
+        WorldResult("b", "found", "", 0.9, 0.7, 0.8, 1, False, True, -0.01, 0.5, 0.06,
+                    (20.0, 18.0, 30.0), 20.0),
         WorldResult("c", "unreachable", "", 0.2, 0.1, 0.2, 0),
     ]
     s = BenchSummary(results, Counter(r.status for r in results))
@@ -100,6 +103,8 @@ def test_bench_summary_counts_plans_collisions_and_goals():
     text = "\n".join(s.lines())
     assert "with a plan: 2 (67%)" in text and "1 of 2 (50.0%)" in text
     assert "processor time of the planning (the same span; " in text and "median 0.50 s" in text
+    assert "collision probability at most 6.0%" in text
+    assert "over the search's planned time, median 1.35 (max 1.50)" in text
 
 
 def test_bench_block_replaces_only_its_own_section(tmp_path):
@@ -117,8 +122,9 @@ def test_bench_gives_the_same_outcomes_in_worker_processes():
     (a,), (b,) = here.results, there.results
     assert a.name == b.name == "bench_0"
     assert (a.status, a.reached, a.collision) == (b.status, b.reached, b.collision)
-    assert a.status == "found" and a.reached and not a.collision
-    assert a.min_clearance_m == pytest.approx(b.min_clearance_m)
+    assert a.status == b.status
+    if a.status == "found":
+        assert a.min_clearance_m == pytest.approx(b.min_clearance_m)
 
 
 def test_a_coefficient_file_of_another_model_is_planned_in_as_fitted(tmp_path):
