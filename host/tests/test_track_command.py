@@ -9,6 +9,7 @@ instead of inventing poses, and write an experiment that the dataset reader and 
 
 from __future__ import annotations
 
+import base64
 import json
 from pathlib import Path
 
@@ -131,3 +132,25 @@ def test_a_calibration_for_other_frames_is_refused(filmed, tmp_path, capsys):
     err = capsys.readouterr().err
     assert "640x360" in err and "320x180" in err
     assert not list(tmp_path.glob("x.*"))
+
+
+def test_a_tracked_video_exports_with_its_own_frames_from_its_start(filmed, tmp_path, capsys):
+    from mcap.reader import make_reader
+
+    out = tmp_path / "late"
+    start = 10 / FPS  # the gait started at the 11th frame
+    assert cli.main(_track(filmed, filmed["video"], out, "--start", f"{start:.6f}")) == 0
+    assert "10 frames before --start not used" in capsys.readouterr().out
+    assert cli.main(["export", str(out), "--mcap"]) == 0  # the video named in the experiment
+    with open(f"{out}.mcap", "rb") as f:
+        images = [json.loads(m.data) for _s, c, m in make_reader(f).iter_messages()
+                  if c.topic == "/camera/image"]
+    n = len(filmed["truth"])
+    assert len(images) == n - 10
+    first = cv2.imdecode(np.frombuffer(base64.b64decode(images[0]["data"]), np.uint8),
+                         cv2.IMREAD_COLOR).astype(int)
+
+    def distance(k: int) -> float:
+        return float(np.abs(first - cv2.imread(str(filmed["images"] / f"img_{k}.png"))).mean())
+
+    assert distance(10) < min(distance(0), distance(9), distance(11))  # the 11th, as tracked

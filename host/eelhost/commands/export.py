@@ -35,19 +35,25 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(run=run)
 
 
-def _video_of(stem: str, given: str | None) -> str | None:
-    """The frames' source: ``--video``, else the take's camera source if it is a file or folder."""
-    if given is not None:
-        return given
+def _video_of(stem: str, given: str | None) -> tuple[str | None, int]:
+    """The frames' source and how many of its first frames the take did not see.
+
+    ``--video``, else the take's camera source if it is a file or folder (a take of ``eelbot
+    track`` names its video, and the frames before its ``--start`` it did not use).
+    """
     try:
-        camera = json.loads(Path(stem + ".json").read_text()).get("camera", {})
+        meta = json.loads(Path(stem + ".json").read_text())
     except (OSError, json.JSONDecodeError):
-        return None  # read_experiment names the problem
-    for key in ("video", "source"):
-        source = camera.get(key) if isinstance(camera, dict) else None
-        if isinstance(source, str) and Path(source).exists():
-            return source
-    return None
+        return given, 0  # read_experiment names the problem
+    tracked = meta.get("source", {}).get("tracked", {}) if isinstance(meta, dict) else {}
+    skip = int(tracked.get("frames_before_start", 0)) if isinstance(tracked, dict) else 0
+    if given is not None:
+        return given, skip
+    camera = meta.get("camera", {}) if isinstance(meta, dict) else {}
+    source = camera.get("source") if isinstance(camera, dict) else None
+    if isinstance(source, str) and not source.isdigit() and Path(source).exists():
+        return source, skip
+    return None, 0
 
 
 def run(args: argparse.Namespace) -> int:
@@ -58,13 +64,15 @@ def run(args: argparse.Namespace) -> int:
     if out.exists() and not args.force:
         raise OptionError(f"--out: {out} exists; choose another --out or add --force to "
                           "replace it")
-    video = _video_of(stem, args.video)
+    video, skip = _video_of(stem, args.video)
     frames = None
     if video is not None:
+        from itertools import islice
+
         from eelhost.vision.sources import open_source
 
         source = open_source(video)
-        frames = (frame for _t, frame in source)
+        frames = islice((frame for _t, frame in source), skip, None)
     with Progress("export", None, "frame") as bar:
         summary = export_take_mcap(stem, out, frames,
                                    progress=lambda done, _total: bar.set(done))
