@@ -20,6 +20,7 @@ from __future__ import annotations
 from eelsim.flags import Failure
 
 __all__ = [
+    "EXIT_CONTACT",
     "EXIT_INTERRUPTED",
     "EXIT_NOT_REACHED",
     "EXIT_OK",
@@ -34,6 +35,8 @@ EXIT_NOT_REACHED = 1
 EXIT_USER_ERROR = 2
 EXIT_INTERRUPTED = 130  # the shell's status for a command ended by Ctrl-C (128 + SIGINT)
 _FLAG_BASE = 2  # TOO_SLOW (1) -> 3, ILL_CONDITIONED (2) -> 4, SELF_COLLISION (3) -> 5
+EXIT_CONTACT = 6  # eelbot run --plan: the robot's body touched an obstacle or wall (after the flags)
+assert EXIT_CONTACT > _FLAG_BASE + max(Failure), "a twin flag's status would be the contact's"
 
 
 class UserError(Exception):
@@ -68,5 +71,7 @@ def exit_status_table() -> str:
         for f in Failure
         if f != Failure.NONE
     ]
+    rows.append((EXIT_CONTACT, "a run (eelbot run --plan) stopped: the body touched an obstacle "
+                               "or wall"))
     rows.append((EXIT_INTERRUPTED, "interrupted (Ctrl-C)"))
     return "\n".join(f"  {code:>3}  {text}" for code, text in rows)

@@ -1,13 +1,13 @@
-"""Closed-loop execution with replanning: in the twin, in the tank's monitor, and over sim://."""
+"""Closed-loop execution with replanning: in the twin, and over sim:// (test_tank_replanning.py
+has the tank's replanner in detail)."""
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 
 from eelhost.cli import main
 from eelhost.planning.planner import Planner
-from eelhost.planning.replan import PlanMonitor, corridor_path, execute_with_replanning
+from eelhost.planning.replan import execute_with_replanning
 from eelhost.planning.tank import sim_uri_for_world
 from eelhost.planning.uncertainty import default_model
 from eelhost.planning.world import parse_world
@@ -38,18 +38,6 @@ def test_robot_pushed_off_the_corridor_by_an_unknown_current_is_replanned_to_the
     assert run.reached and run.collision_free, run.message
     assert run.min_clearance_m > 0
     assert len(run.outcomes) == run.replans + 1
-
-
-def test_monitor_goes_on_in_the_corridor_replans_off_it_and_stops_in_the_goal(planner):
-    outcome = planner.plan()
-    assert outcome.found, outcome.message
-    monitor = PlanMonitor(planner, outcome)
-    on_path = corridor_path(outcome.plan)[5]
-    assert monitor(1.0, np.array([*on_path, 0.0])) is None
-    new = monitor(3.0, np.array([on_path[0], on_path[1] + 0.3, 0.0]))
-    assert isinstance(new, list) and new and monitor.replans == 1
-    assert new[-1] == tuple(planner.world.goal.position_m)
-    assert monitor(9.0, np.array([1.85, 1.05, 0.0])) == "arrived"
 
 
 def test_sim_uri_gets_the_worlds_start_and_current_unless_it_gives_them():

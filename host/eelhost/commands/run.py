@@ -16,6 +16,8 @@ from eelhost.commands.common import (
     rejected_as,
     waypoints,
 )
+from eelhost.commands.plan import add_coefficient_model_option
+from eelhost.errors import EXIT_CONTACT, EXIT_NOT_REACHED, EXIT_OK
 from eelhost.field.recorder import MOTIONS
 from eelhost.field.runloop import RunConfig
 from eelhost.field.session import TakeNotes
@@ -63,8 +65,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="WORLD",
         help="plan in WORLD (world TOML, 'tank_5_obstacles' or 'bench:SEED') from its start, "
         "follow the plan and replan when the robot leaves the planned corridor "
-        "(docs/planning.md); a sim:// robot is put at the world's start in its current",
+        "(docs/planning.md); a sim:// robot is put at the world's start in its current. "
+        "The planner runs beside the control loop; the run stops (exit 6) if the body touches "
+        "an obstacle, or (exit 1) when replanning finds no safe continuation",
     )
+    add_coefficient_model_option(p)
     p.add_argument(
         "--gait",
         metavar="A,omega[,beta]",
@@ -108,6 +113,13 @@ def add_take_options(p: argparse.ArgumentParser) -> None:
 STOPPED_ON_PURPOSE = ("arrived", "duration", "interrupted")
 
 
+def exit_status(reason: str) -> int:
+    """0 for an end on purpose, 6 for a contact (docs/cli.md), else 1."""
+    if reason in STOPPED_ON_PURPOSE:
+        return EXIT_OK
+    return EXIT_CONTACT if reason == "contact" else EXIT_NOT_REACHED
+
+
 def _gait(values: list[float], k_theta: float) -> Gait:
     """The gait of ``--gait`` (checked against the robot's ranges when parsed), beta 1.04 rad."""
     beta = values[2] if len(values) == 3 else 1.04
@@ -132,21 +144,32 @@ def run(args: argparse.Namespace) -> int:
         raise OptionError("give either --waypoints or --plan WORLD")
     if args.gait is None and args.plan is None:
         raise OptionError("--gait: required with --waypoints")
+    if args.coefficients_file is not None and args.plan is None:
+        raise OptionError("--coefficients-file: only with --plan (the planner's model)")
     current = current_option(args.current, args.robot.startswith("sim:"))
     check_output_stem(args.out)  # a read-only folder or a file is said before the link opens
     refuse_overwrite(args.out, args.force)
-    monitor = None
+    navigator = None
+    view = None
     uri = args.robot
     if args.plan is not None:
         from eelhost.commands.plan import world_from_name
         from eelhost.planning.tank import plan_for_run
+        from eelhost.planning.uncertainty import default_model, read_coefficient_model
+        from eelhost.vision.synthetic import TankView
         from eelsim.scenario import PATH_GAIT
 
         gait = PATH_GAIT if args.gait is None else _gait(args.gait, args.k_theta)
-        planned = plan_for_run(world_from_name(args.plan), robot, args.robot, gait,
+        world = world_from_name(args.plan)
+        # the fitted model as eelbot plan reads it (law, joints, current), or the robot file's
+        model = (read_coefficient_model(args.coefficients_file, robot)
+                 if args.coefficients_file else default_model(robot))
+        planned = plan_for_run(world, robot, args.robot, gait, coefficients=model,
                                acceptance_radius_m=args.radius)
         print(planned.outcome.message)
-        waypoints, monitor, uri = planned.waypoints_m, planned.monitor, planned.uri
+        print(f"coefficients: {model.describe()}")
+        waypoints, navigator, uri = planned.waypoints_m, planned.navigator, planned.uri
+        view = TankView.covering(world.tank.size_m)
     else:
         waypoints = args.waypoints
         gait = _gait(args.gait, args.k_theta)
@@ -159,7 +182,7 @@ def run(args: argparse.Namespace) -> int:
     )
     notes = TakeNotes(uri, args.robot_file, args.motion, current, args.note)
     request = TakeRequest(robot, config, args.out, notes, args.camera, args.calibration,
-                          markers.layout, args.speed, monitor)
+                          markers.layout, args.speed, navigator, view)
     with rejected_as("--waypoints/--gait/--radius/--duration", SCENARIO_OPTIONS):
         result = run_take(request, None if args.no_view else args.view_port,
                           announce=lambda msg: print(msg, flush=True))
@@ -172,7 +195,9 @@ def run(args: argparse.Namespace) -> int:
     if result.virtual and result.wall_s > 0:
         print(f"simulated {out.t_end_s:.1f} s in {result.wall_s:.1f} s "
               f"({out.t_end_s / result.wall_s:.1f}x real time)")
-    if monitor is not None:
+    if navigator is not None:
         print(f"replans: {result.replans}")
+        if out.failsafe_reports:
+            print(f"the robot reported FAILSAFE {out.failsafe_reports} times")
     print("wrote " + ", ".join(str(path) for path in result.paths))
-    return 0 if out.reason in STOPPED_ON_PURPOSE else 1
+    return exit_status(out.reason)

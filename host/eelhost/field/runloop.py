@@ -23,6 +23,15 @@ with acknowledgement and resends. Then, per camera frame:
 Steps 2 and 4 (filter, waypoint switch, line of sight, clipping) are the twin's own guidance
 object, :class:`eelsim.guidance.Guidance`, so the tank steers exactly as the twin does.
 
+With a navigator (``eelbot run --plan``: :class:`eelhost.planning.replan.TankReplanner`) every
+frame also goes to it after step 2; it may hand over new waypoints (a replan that is ready), end
+the run in the goal, or stop the robot (``contact``: its estimated body touches an obstacle;
+``no_safe_continuation``). The planner runs beside this loop, so steps 1-4 go on at the camera's
+rate while it thinks; after each frame the navigator may hold the loop back so that a virtual
+robot's clock does not run ahead of the planner's wall time (:meth:`Navigator.pace`). Every plan
+and replan is rewritten into the take's metadata (``source.planning``) as it happens. Telemetry
+reporting FAILSAFE is counted (``failsafe_reports``).
+
 Whatever ends the loop, even an exception, Stop is sent and waited for (with resends) for up to
 ``stop_timeout_s``, and the recording is closed with the outcome.
 """
@@ -33,6 +42,7 @@ import itertools
 import logging
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -48,14 +58,43 @@ from eelsim.robot import Robot
 
 log = logging.getLogger(__name__)
 
-__all__ = ["FrameReport", "Monitor", "RunConfig", "RunLoop", "RunOutcome"]
+__all__ = ["Decision", "FrameReport", "Navigator", "RunConfig", "RunLoop", "RunOutcome"]
 
 OFFSET_LIMIT_RAD = 1.0  # SetOffset's range
 EPS_S = 1e-9
 
-Monitor = Callable[[float, NDArray[np.float64]], list[tuple[float, float]] | str | None]
-"""``monitor(t_s, filtered_pose)`` (``eelbot run --plan``): new waypoints (a replan), ``"arrived"``
-(the planner's goal test holds), or None to go on."""
+
+class Decision(Protocol):
+    """What a navigator makes of a frame (:class:`eelhost.planning.replan.Decision`)."""
+
+    waypoints: list[tuple[float, float]] | None
+    stop: str | None
+    detail: str
+    arrived: bool
+    recorded: bool
+
+
+class Navigator(Protocol):
+    """Plans beside the loop (``eelbot run --plan``; :class:`eelhost.planning.replan.TankReplanner`)."""
+
+    replans: int
+
+    def on_frame(self, t_s: float, loc: Localisation, pose: NDArray[np.float64] | None,
+                 target: int, offset_rad: float) -> Decision:
+        """Take one frame; say whether to switch waypoints, stop, or that the goal holds."""
+        ...
+
+    def pace(self, t_s: float) -> None:
+        """Hold the loop while a virtual robot's clock is ahead of the planner's wall time."""
+        ...
+
+    def close(self) -> None:
+        """Stop planning."""
+        ...
+
+    def record(self) -> dict[str, Any]:
+        """Every plan and replan, for the take's metadata."""
+        ...
 
 
 @dataclass(frozen=True)
@@ -121,6 +160,8 @@ class RunOutcome:
         Frames that gave a pose (the recorded rows).
     offsets_sent : int
         SetOffset commands sent.
+    failsafe_reports : int
+        Telemetry messages that reported the robot in FAILSAFE.
     stop_outcome : str
         What became of the final Stop: ``ack``, ``refused``, ``lost``, ``pending``.
     events : list of LinkEvent
@@ -134,6 +175,7 @@ class RunOutcome:
     frames: int = 0
     frames_with_pose: int = 0
     offsets_sent: int = 0
+    failsafe_reports: int = 0
     stop_outcome: str = ""
     events: list[LinkEvent] = field(default_factory=list)
 
@@ -147,6 +189,7 @@ class RunOutcome:
             "frames_seen": self.frames,
             "frames_with_pose": self.frames_with_pose,
             "offsets_sent": self.offsets_sent,
+            "failsafe_reports": self.failsafe_reports,
             "stop": self.stop_outcome,
         }
 
@@ -212,10 +255,9 @@ class RunLoop:
         Time of the loop (default: the link's clock).
     observers : list of callable, optional
         Each called with a :class:`FrameReport` for every frame.
-    monitor : callable, optional
-        ``monitor(t_s, filtered_pose)`` after every pose (``eelbot run --plan``): new waypoints
-        to steer to from now on (a replan), ``"arrived"`` to end the run (the planner's goal
-        test), or None.
+    navigator : Navigator, optional
+        Given every frame (``eelbot run --plan``): new waypoints to steer to from now on (a
+        replan), the goal reached, or a stop with its reason.
     """
 
     def __init__(
@@ -228,7 +270,7 @@ class RunLoop:
         recorder: Recorder | None = None,
         clock: Clock | None = None,
         observers: list[Callable[[FrameReport], None]] | None = None,
-        monitor: Monitor | None = None,
+        navigator: Navigator | None = None,
     ) -> None:
         if not config.waypoints_m:
             raise ValueError("a run needs at least one waypoint")
@@ -251,7 +293,7 @@ class RunLoop:
         self._stop_request: str | None = None
         self._stop_detail = ""
         self._t_start = 0.0
-        self.monitor = monitor
+        self.navigator = navigator
         self.replans = 0
         self._goal_reached = False
         link.listeners.append(self._on_event)
@@ -319,6 +361,9 @@ class RunLoop:
         finally:
             out.waypoints_reached = self.target
             out.stop_outcome = self._stop_robot()
+            if self.navigator is not None:
+                self.navigator.close()
+                self._record_planning()
             log.info("run ended: %s (%s); Stop %s", out.reason, out.detail, out.stop_outcome)
             if out.stop_outcome != "ack":
                 log.warning("the final Stop was not acknowledged (%s)", out.stop_outcome)
@@ -339,7 +384,10 @@ class RunLoop:
                 next_control = now - self._t_start
                 last_pose_t = now - self._t_start
             t = t_src + offset_to_clock - self._t_start  # since the gait started
-            self.link.poll()
+            for msg in self.link.poll():
+                if (isinstance(msg, protocol.Telemetry)
+                        and msg.state == protocol.State.FAILSAFE):
+                    out.failsafe_reports += 1
             out.frames += 1
             out.t_end_s = t
             loc = self.localiser.localise(t, frame)
@@ -350,8 +398,8 @@ class RunLoop:
                 if self.recorder is not None:
                     self.recorder.frame(t, loc.com_m, loc.heading_rad, loc.link_angles_rad)
                 self.guidance.observe(t, float(loc.com_m[0]), float(loc.com_m[1]), loc.heading_rad)
-                if self.monitor is not None:
-                    self._consult_monitor(t, loc.com_m, loc.heading_rad)
+            if self.navigator is not None:
+                self._consult_navigator(t, loc)
             if self.recorder is not None:
                 self.recorder.frame_seen(t, loc.status, sum(loc.seen))
             if self.observers:
@@ -365,22 +413,37 @@ class RunLoop:
                 self.link.send(protocol.SetOffset(self.guidance.offset()))
                 out.offsets_sent += 1
                 next_control += c.control_period_s
+            if self.navigator is not None:
+                self.navigator.pace(t)
         out.reason, out.detail = "camera_ended", "the camera delivered no more frames"
 
-    def _consult_monitor(self, t: float, com_m: NDArray[np.float64], heading_rad: float) -> None:
-        """Ask the monitor about the filtered pose: go on, steer to new waypoints, or stop."""
-        pose = self.guidance.filtered_pose
-        assert self.monitor is not None and pose is not None
-        decision = self.monitor(t, pose)
-        if decision == "arrived":
+    def _consult_navigator(self, t: float, loc: Localisation) -> None:
+        """Hand the frame to the navigator: go on, steer to new waypoints, stop, or arrive."""
+        assert self.navigator is not None
+        decision = self.navigator.on_frame(t, loc, self.guidance.filtered_pose, self.target,
+                                           self.guidance.offset())
+        if decision.recorded:
+            self._record_planning()
+        if decision.stop is not None:
+            self.request_stop(decision.stop, decision.detail)
+        elif decision.arrived:
             self._goal_reached = True
-        elif isinstance(decision, list) and decision:
+        elif decision.waypoints:
             self.replans += 1
-            log.info("replanned at t = %.2f s: %d waypoints", t, len(decision))
+            log.info("new plan at t = %.2f s: %d waypoints", t, len(decision.waypoints))
             c = self.config
-            self.guidance = Guidance(decision, c.acceptance_radius_m, c.gait.k_theta,
+            pose = self.guidance.filtered_pose
+            self.guidance = Guidance(decision.waypoints, c.acceptance_radius_m, c.gait.k_theta,
                                      c.median_window, offset_limit_rad=OFFSET_LIMIT_RAD)
-            self.guidance.observe(t, float(com_m[0]), float(com_m[1]), heading_rad)
+            if loc.found and loc.com_m is not None and loc.heading_rad is not None:
+                self.guidance.observe(t, float(loc.com_m[0]), float(loc.com_m[1]),
+                                      loc.heading_rad)
+            elif pose is not None:
+                self.guidance.observe(t, float(pose[0]), float(pose[1]), float(pose[2]))
+
+    def _record_planning(self) -> None:
+        if self.recorder is not None and self.navigator is not None:
+            self.recorder.update_metadata(source={"planning": self.navigator.record()})
 
     def _should_stop(self, t: float, last_pose_t: float | None) -> bool:
         c, out = self.config, self.outcome

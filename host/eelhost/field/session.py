@@ -24,7 +24,14 @@ from numpy.typing import NDArray
 from eelhost.errors import UserError
 from eelhost.field.provenance import robot_file_text, software
 from eelhost.field.recorder import Recorder, take_paths
-from eelhost.field.runloop import FrameReport, Monitor, RunConfig, RunLoop, RunOutcome, open_frames
+from eelhost.field.runloop import (
+    FrameReport,
+    Navigator,
+    RunConfig,
+    RunLoop,
+    RunOutcome,
+    open_frames,
+)
 from eelhost.link.base import Link
 from eelhost.link.replay_transport import RxLogWriter
 from eelhost.link.sim_transport import SimTransport
@@ -32,7 +39,7 @@ from eelhost.vision.calibration import Calibration, load_calibration, save_calib
 from eelhost.vision.localise import Localiser
 from eelhost.vision.markers import MarkerLayout
 from eelhost.vision.sources import CameraSource, open_source
-from eelhost.vision.synthetic import RenderOptions, SyntheticCamera
+from eelhost.vision.synthetic import RenderOptions, SyntheticCamera, TankView
 from eelhost.xil.virtual_robot import VirtualCamera, VirtualRobot
 from eelsim.robot import Robot
 from eelsim.scenario import Scenario
@@ -88,6 +95,7 @@ def open_camera(
     camera: str | None,
     calibration: str | None,
     layout: MarkerLayout | None = None,
+    view: TankView | None = None,
 ) -> CameraSetup:
     """The frame source of a run, its localiser and the camera facts to record.
 
@@ -105,6 +113,9 @@ def open_camera(
         instead of the synthetic camera's exact one (to test a calibration in the loop).
     layout : MarkerLayout, optional
         The markers on the robot (default: one per link, ids 0..N-1).
+    view : TankView, optional
+        What the synthetic camera films (default: the paper's tank view); ``eelbot run --plan``
+        films the world's whole tank (:meth:`TankView.covering`).
 
     Returns
     -------
@@ -124,7 +135,7 @@ def open_camera(
             options = (
                 RenderOptions(noise_sigma=0.0, jpeg_quality=0) if spec.endswith("clean") else None
             )
-            cam = SyntheticCamera(robot, layout=layout, options=options, seed=0)
+            cam = SyntheticCamera(robot, layout=layout, view=view, options=options, seed=0)
             source = VirtualCamera(vr, cam, keep_truth=False)
             facts = {"fps": source.fps, "median_window": MEDIAN_WINDOW, "source": spec}
             cal = load_calibration(calibration) if calibration else cam.calibration()
@@ -193,8 +204,8 @@ class TankSession:
         The link URI, robot file, motion, current and note to record.
     observers : list of callable, optional
         Called with every frame's :class:`~eelhost.field.runloop.FrameReport` (the live view).
-    monitor : callable, optional
-        The run loop's monitor (``eelbot run --plan``; see :class:`RunLoop`).
+    navigator : Navigator, optional
+        Plans beside the run loop (``eelbot run --plan``; see :class:`RunLoop`).
     """
 
     def __init__(
@@ -206,7 +217,7 @@ class TankSession:
         out: str,
         notes: TakeNotes,
         observers: list[Callable[[FrameReport], None]] | None = None,
-        monitor: Monitor | None = None,
+        navigator: Navigator | None = None,
     ) -> None:
         self.link = link
         self.virtual = virtual_robot(link)
@@ -267,7 +278,7 @@ class TankSession:
         self.rx_log = RxLogWriter(f"{out}.rx.bin")
         link.rx_log = self.rx_log
         self.loop = RunLoop(link, camera.frames, camera.localiser, robot, config, self.recorder,
-                            observers=observers, monitor=monitor)
+                            observers=observers, navigator=navigator)
 
     @property
     def paths(self) -> list[Path]:

@@ -14,13 +14,15 @@ from pathlib import Path
 
 from eelhost.errors import UserError
 from eelhost.field.recorder import take_paths
-from eelhost.field.runloop import Monitor, RunConfig, RunOutcome
+from eelhost.field.runloop import Navigator, RunConfig, RunOutcome
 from eelhost.field.session import TakeNotes, TankSession, open_camera, virtual_robot
 from eelhost.field.signals import stop_on_signals
 from eelhost.link.base import LinkEvent
 from eelhost.link.uri import open_link
 from eelhost.progress import Progress
 from eelhost.vision.markers import MarkerLayout
+from eelhost.vision.synthetic import TankView
+from eelhost.xil.virtual_robot import VirtualRobot
 from eelsim.robot import Robot
 
 __all__ = ["TakeExistsError", "TakeOptionError", "TakeRequest", "TakeResult", "refuse_overwrite",
@@ -57,9 +59,11 @@ class TakeRequest:
         The robot's markers.
     speed : float or None
         ``sim://`` only: simulated seconds per wall second.
-    monitor : callable or None
-        The run loop's monitor (``eelbot run --plan``; see
+    navigator : Navigator or None
+        Plans beside the run loop (``eelbot run --plan``; see
         :class:`~eelhost.field.runloop.RunLoop`).
+    camera_view : TankView or None
+        What the synthetic camera of ``sim://`` films (default: the paper's tank view).
     """
 
     robot: Robot
@@ -70,12 +74,13 @@ class TakeRequest:
     calibration: str | None = None
     layout: MarkerLayout | None = None
     speed: float | None = None
-    monitor: Monitor | None = None
+    navigator: Navigator | None = None
+    camera_view: TankView | None = None
 
 
 @dataclass
 class TakeResult:
-    """How a take went: its outcome, files, wall time, whether the robot was virtual, replans."""
+    """How a take went: outcome, files, wall time, replans, the virtual robot (None: a real one)."""
 
     outcome: RunOutcome
     paths: list[Path]
@@ -83,6 +88,7 @@ class TakeResult:
     virtual: bool
     signals: list[str]
     replans: int = 0
+    virtual_robot: VirtualRobot | None = None
 
 
 def refuse_overwrite(stem: str | Path, force: bool) -> None:
@@ -131,7 +137,7 @@ def run_take(request: TakeRequest, view_port: int | None = None,
                 raise TakeOptionError("--speed: must be >= 0")
             virtual.clock.speed = request.speed
         camera = open_camera(link, request.robot, request.camera, request.calibration,
-                             request.layout)
+                             request.layout, request.camera_view)
         camera.prime()  # the camera opens and gives a frame before the robot is started
     except BaseException:
         link.close()
@@ -147,7 +153,7 @@ def run_take(request: TakeRequest, view_port: int | None = None,
         try:
             session = TankSession(link, camera, request.robot, request.config, request.out,
                                   request.notes, observers=[view.update] if view else None,
-                                  monitor=request.monitor)
+                                  navigator=request.navigator)
         except BaseException:
             link.close()
             raise
@@ -173,4 +179,4 @@ def run_take(request: TakeRequest, view_port: int | None = None,
             view.close()
     return TakeResult(outcome, [p for p in session.paths if p.exists()],
                       time.monotonic() - wall0, virtual is not None, list(received),
-                      session.loop.replans)
+                      session.loop.replans, virtual)

@@ -1,34 +1,44 @@
-"""Closed-loop execution: follow the plan, replan from the observed state off the corridor.
+"""Closed-loop execution: follow the plan, replan from the robot's state off the corridor.
 
 docs/planning.md ("Execution and replanning") is the long form. The corridor is the centre-of-mass
 path the search swam for the plan (its legs' ``com_m``), widened by ``corridor_m`` on each side.
 While the robot's centre of mass stays inside it, the robot follows the plan's waypoints under its
-own control stack; when it leaves, the planner runs again (re-running A* from the current state:
+own control stack; when it leaves, the planner runs again (re-running A* from the robot's state:
 :meth:`eelhost.planning.planner.Planner.plan` with that state) and the robot is given the new
 waypoints. The goal test is :func:`eelhost.planning.search.in_goal` throughout.
 
 - :func:`execute_with_replanning` does this in the twin: the "true" robot is the twin with
   coefficients (and optionally a current) the planner does not know; replans start from the true
   state at the last control update before the robot left (the twin's restarts are exact there).
-- :class:`PlanMonitor` does it at the tank, inside ``eelbot run --plan``: it sees only the
-  filtered camera pose, so it replans from the straight robot at that pose, with the gait's phase
-  at that time (docs/planning.md says what this approximation costs).
+- :class:`TankReplanner` does it at the tank, inside ``eelbot run --plan``, beside the control
+  loop: the planner runs on a worker thread while the robot swims its present leg on; a replan
+  starts from the whole body state (:mod:`eelhost.planning.state_estimate`) predicted by the twin
+  for the moment the plan will be ready, in the current estimated from the camera track; failed
+  replans back off, and the robot is stopped deliberately when no safe continuation exists or
+  its estimated body touches an obstacle.
 """
 
 from __future__ import annotations
 
 import logging
 import math
+import time
+from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor, wait
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
+from eelhost.planning.body import link_endpoints
 from eelhost.planning.execute import Swim, body_clearance_m, swim
 from eelhost.planning.geometry import FloatArray, point_segment_distance
 from eelhost.planning.planner import Outcome, Planner
 from eelhost.planning.search import Plan, in_goal
+from eelhost.planning.state_estimate import BodyEstimate, BodyStateEstimator, CurrentEstimator
 from eelhost.planning.twin import Twin
-from eelsim.dynamics import straight_state
+from eelhost.vision.localise import Localisation
+from eelsim.control import Gait
 from eelsim.fluid import FluidCoefficients
 
 log = logging.getLogger(__name__)
@@ -176,61 +186,453 @@ def _finish(planner: Planner, reached: bool, free: bool, replans: int, goal_time
                      goal_time, message, states, outcomes)
 
 
-class PlanMonitor:
-    """The tank's replanning: watch the filtered pose, replan off the corridor, stop in the goal.
 
-    Called by the run loop (``eelbot run --plan``) with every filtered pose.
+# -- at the tank -----------------------------------------------------------------------------------
+
+REFUSED_FROM_STATE = ("blocked_start", "current_too_strong", "unreachable")
+"""Planner statuses that no later replan from a nearby state can change: no safe continuation."""
+
+
+@dataclass
+class Decision:
+    """What the tank's replanner makes of one frame (the run loop acts on it).
+
+    Attributes
+    ----------
+    waypoints : list of (x, y) or None
+        Steer to these from now on (a replan that is ready and due).
+    stop : str or None
+        End the run now: ``contact`` (the estimated body touches an obstacle or wall) or
+        ``no_safe_continuation`` (replanning cannot give the robot a safe plan).
+    detail : str
+        Why, in one line.
+    arrived : bool
+        The goal test holds.
+    recorded : bool
+        The plan record changed (the loop rewrites it into the take).
+    """
+
+    waypoints: list[tuple[float, float]] | None = None
+    stop: str | None = None
+    detail: str = ""
+    arrived: bool = False
+    recorded: bool = False
+
+
+@dataclass
+class _Job:
+    """A replan running beside the loop."""
+
+    future: Future
+    t_request_s: float
+    wall_request_s: float
+    t_start_s: float
+    reason: str
+
+
+@dataclass
+class _Window:
+    """A current-estimation window: the estimate at its start and the waypoints then followed."""
+
+    estimate: BodyEstimate
+    waypoints: list[tuple[float, float]]
+
+
+class TankReplanner:
+    """The tank's replanning beside the control loop (docs/planning.md, "Execution and replanning").
+
+    The run loop calls :meth:`on_frame` with every frame and :meth:`pace` after it. Planning and
+    every twin run happen on one worker thread, so the loop keeps reading the camera and sending
+    offsets at the control rate while the planner thinks (the robot swims its present leg on).
 
     Parameters
     ----------
+    planner_for : callable
+        ``planner_for(extra_current_m_s)``: the planner in the world with that current added to
+        the world's (the current estimate); called on the worker thread, cached by the caller or
+        here (a new planner only when the estimate moved by ``replan_current_step_m_s``).
     planner : Planner
+        The planner that made the first plan (no extra current).
     outcome : Outcome
-        The plan being followed.
+        The first plan.
+    gait : Gait
+        The gait the robot swims (the estimator's reference for unseen links).
     corridor_m : float
-    max_replans : int
+        Half width of the corridor around the planned centre-of-mass path.
+    max_failures : int
+        Consecutive failed replans after which the robot is stopped (no safe continuation).
+    backoff_s : float
+        Wait after the first failed replan; it doubles with each further failure.
+    lead_s : float
+        First guess of the planner's wall time: a replan starts from the state predicted for this
+        long after the request (then 1.5 times the last replan's wall time, at least this and at
+        most 3 s), rounded up to the next control update and frame.
+    contact_frames : int
+        Consecutive frames whose estimated body touches something before the run is stopped.
+    estimate_current : bool
+        Estimate the current from the camera track against the twin and replan in it.
+    lookahead_s : float
+        Every ``lookahead_every_s`` the twin swims the robot on from its estimated state along
+        its present waypoints, in the estimated current, for this long; a body that comes within
+        ``lookahead_margin_m`` of an obstacle or wall there is replanned (``predicted_contact``)
+        even inside the corridor.
+    lookahead_every_s, lookahead_margin_m : float
     """
 
-    def __init__(self, planner: Planner, outcome: Outcome, corridor_m: float = 0.10,
-                 max_replans: int = 6) -> None:
+    def __init__(
+        self,
+        planner_for: Callable[[FloatArray], Planner],
+        planner: Planner,
+        outcome: Outcome,
+        gait: Gait,
+        corridor_m: float = 0.10,
+        max_failures: int = 3,
+        backoff_s: float = 1.0,
+        lead_s: float = 0.45,
+        contact_frames: int = 2,
+        estimate_current: bool = True,
+        lookahead_s: float = 3.0,
+        lookahead_every_s: float = 0.6,
+        lookahead_margin_m: float = 0.01,
+    ) -> None:
+        self.planner_for = planner_for
         self.planner = planner
         self.outcome = outcome
+        self.world = planner.world
+        self.model = planner.model
         self.corridor_m = corridor_m
-        self.max_replans = max_replans
-        self.replans = 0
+        self.max_failures = max_failures
+        self.backoff_s = backoff_s
+        self.lead_s = lead_s
+        self.contact_frames = contact_frames
+        self.estimate_current = estimate_current
+        self.lookahead_s = lookahead_s
+        self.lookahead_every_s = lookahead_every_s
+        self.lookahead_margin_m = lookahead_margin_m
+        self.half_width_m = float(self.model.half_axis_horizontal_m.max())
+        self.estimator = BodyStateEstimator(self.model, gait)
+        self.current = CurrentEstimator()
+        self.waypoints = list(outcome.plan.waypoints_m)
         self.path = corridor_path(outcome.plan)
+        self.replans = 0
+        self.failures = 0
+        self.events: list[dict[str, Any]] = [self._event(
+            "plan", "start", 0.0, 0.0, 0.0, None, outcome, outcome.planning_time_s, math.nan,
+            np.zeros(2))]
+        self._job: _Job | None = None
+        self._pending: tuple[float, list[tuple[float, float]]] | None = None  # (t_start, wps)
+        self._next_try_s = -math.inf
+        self._touching = 0
+        self._window: _Window | None = None
+        self._window_job: tuple[Future, _Window, BodyEstimate] | None = None
+        self._planner_current = np.zeros(2)
+        self._last_wall_s = 0.0
+        self._lookahead: Future | None = None
+        self._next_lookahead_s = 0.0
+        self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="eelbot-planner")
 
-    def __call__(self, t_s: float, pose: FloatArray) -> list[tuple[float, float]] | str | None:
-        """Decide on one filtered pose.
+    # -- the loop's calls ----------------------------------------------------------------------
+
+    def on_frame(self, t_s: float, loc: Localisation, pose: FloatArray | None, target: int,
+                 offset_rad: float) -> Decision:
+        """Take one frame: estimate, check contact and goal, start, collect or switch replans.
 
         Parameters
         ----------
         t_s : float
-            Time since the gait started.
-        pose : ndarray, shape (3,)
-            Filtered x, y, heading.
+            Frame time since the gait started.
+        loc : Localisation
+            The frame's localisation (link angles and centre of mass when found).
+        pose : ndarray (3,) or None
+            The guidance's filtered pose.
+        target : int
+            Index of the waypoint being steered to in the waypoints last handed over.
+        offset_rad : float
+            The offset the robot steers with.
 
         Returns
         -------
-        list of (x, y), str or None
-            New waypoints after a replan; ``"arrived"`` when the goal test holds; None to go on.
+        Decision
         """
-        world = self.planner.world
-        xy = (float(pose[0]), float(pose[1]))
-        if in_goal(world, xy):
-            return "arrived"
-        if self.replans >= self.max_replans:
+        d = Decision()
+        if loc.found and loc.com_m is not None:
+            self.estimator.observe(t_s, loc.com_m, loc.link_angles_rad, offset_rad)
+            stop = self._contact(t_s)
+            if stop is not None:
+                d.stop, d.detail = "contact", stop
+                return d
+        if pose is not None and in_goal(self.world, pose[:2]):
+            d.arrived = True
+            return d
+        d.recorded |= self._collect(t_s, d)
+        if d.stop is not None:
+            return d
+        if self._pending is not None and t_s >= self._pending[0] - 1e-9:
+            d.waypoints = self._pending[1]
+            self.waypoints = list(d.waypoints)
+            self._pending = None
+            self._window = None  # the prediction of a window spans no switch of waypoints
+            self._lookahead = None  # it followed the old waypoints
+            self.events[-1]["t_switch_s"] = round(t_s, 3)
+            d.recorded = True
+            return d
+        est = self.estimator.estimate()
+        if est is None or pose is None:
+            return d
+        left = self.waypoints[min(target, len(self.waypoints) - 1):]
+        d.recorded |= self._estimate_current(est, left)
+        busy = self._job is not None or self._pending is not None
+        reason = None
+        if float(distance_to_path(self.path, np.asarray([pose[:2]]))[0]) > self.corridor_m:
+            reason = "left_corridor"
+        elif self._lookahead is not None and self._lookahead.done():
+            gap = self._lookahead.result()
+            self._lookahead = None
+            if gap is not None and gap < self.lookahead_margin_m:
+                reason = "predicted_contact"
+                log.info("the twin predicts the body within %.0f mm of an obstacle in %.1f s",
+                         gap * 1000, self.lookahead_s)
+        if reason is not None and not busy and t_s >= self._next_try_s:
+            self._request(t_s, est, left, reason)
+        elif (not busy and self._lookahead is None and self.lookahead_s > 0
+              and t_s >= self._next_lookahead_s):
+            self._next_lookahead_s = t_s + self.lookahead_every_s
+            self._lookahead = self._worker.submit(self._look_ahead, est, list(left),
+                                                  self.current.value_m_s.copy())
+        return d
+
+    def pace(self, t_s: float) -> None:
+        """Keep the robot's clock from running ahead of the planner's wall time.
+
+        While a replan runs, the robot's time since the request may not exceed the wall time
+        since it: at the tank both are the same clock and this never waits; over ``sim://`` the
+        virtual robot then runs in real time while the planner thinks, so the planner's wall time
+        passes on the robot's clock (docs/planning.md).
+        """
+        job = self._job
+        if job is None:
+            return
+        lead = (t_s - job.t_request_s) - (time.monotonic() - job.wall_request_s)
+        if lead > 0.0 and not job.future.done():
+            wait([job.future], timeout=lead)  # wakes early when the plan is done
+
+    def close(self) -> None:
+        """Stop the worker (a replan in progress is left to finish on its own thread)."""
+        self._worker.shutdown(wait=False, cancel_futures=True)
+
+    def record(self) -> dict[str, Any]:
+        """What the take keeps of the planning: every plan and replan, and the current estimate."""
+        return {"plans": self.events, "replans": self.replans,
+                "current_estimate": self.current.history}
+
+    # -- contact ---------------------------------------------------------------------------------
+
+    def _contact(self, t_s: float) -> str | None:
+        """Whether the measured body touches the world, with the planner's geometry.
+
+        The link centre lines' exact distance less the body's half width
+        (:meth:`eelhost.planning.world.World.body_clearance`), as the planner's check.
+        """
+        pose = self.estimator.latest_pose()
+        assert pose is not None
+        n = self.model.n_links
+        state = np.concatenate([pose, np.zeros(n + 2)])
+        ends = link_endpoints(self.model, state[None])
+        gap = float(self.world.body_clearance(ends)[0]) - self.half_width_m
+        self._touching = self._touching + 1 if gap <= 0.0 else 0
+        if self._touching >= self.contact_frames:
+            return (f"the body touched an obstacle or wall at t = {t_s:.2f} s, at "
+                    f"({pose[n]:.2f}, {pose[n + 1]:.2f}) m ({-gap * 1000:.0f} mm deep, from the "
+                    "camera)")
+        return None
+
+    # -- replans -------------------------------------------------------------------------------
+
+    def _lead_steps(self) -> int:
+        """Steps from a request to the predicted start: a whole number of restart periods."""
+        period = self.planner.twin.restart_steps or 1
+        lead = min(max(self.lead_s, 1.5 * self._last_wall_s), 3.0)
+        steps = int(math.ceil(lead / self.planner.twin.dt_s / period)) * period
+        return max(steps, period)
+
+    def _request(self, t_s: float, est: BodyEstimate, left: list[tuple[float, float]],
+                 reason: str) -> None:
+        dt = self.planner.twin.dt_s
+        period = self.planner.twin.restart_steps or 1
+        # the predicted start: the first restart point (control update and frame) after the lead
+        now_step = int(round(est.t_s / dt))
+        start_step = int(math.ceil((now_step + self._lead_steps()) / period)) * period
+        extra = self.current.value_m_s.copy() if self.estimate_current else np.zeros(2)
+        future = self._worker.submit(self._replan, est, list(left), start_step, extra)
+        self._job = _Job(future, t_s, time.monotonic(), start_step * dt, reason)
+        log.info("left the corridor at t = %.2f s; replanning from the state predicted for "
+                 "t = %.2f s", t_s, start_step * dt)
+
+    def _replan(self, est: BodyEstimate, left: list[tuple[float, float]], start_step: int,
+                extra: FloatArray) -> tuple[Outcome, FloatArray, float, float, FloatArray, float]:
+        """On the worker: predict the state at the start step with the twin, then plan from it."""
+        wall0, cpu0 = time.perf_counter(), time.thread_time()
+        if float(np.hypot(*(extra - self._planner_current))) >= 0.005:
+            self.planner = self.planner_for(extra)
+            self._planner_current = extra
+        planner = self.planner
+        state = predict_state(planner.twin, est, left, start_step)
+        assert state is not None  # allow_end: the run's last state when it ends early
+        outcome = planner.plan(state, start_step)
+        return (outcome, state, time.perf_counter() - wall0, time.thread_time() - cpu0,
+                self._planner_current.copy(), time.monotonic())
+
+    def _collect(self, t_s: float, d: Decision) -> bool:
+        """Take a finished replan once the robot's clock has passed its wall time."""
+        job = self._job
+        if job is None or not job.future.done():
+            return False
+        outcome, state, _, cpu, extra, done = job.future.result()
+        wall = done - job.wall_request_s  # from the request: queueing and prediction included
+        if t_s - job.t_request_s < wall - 1e-9:
+            return False  # over sim://: the robot has not yet lived the planner's time
+        self._job = None
+        self._last_wall_s = wall
+        self.events.append(self._event("replan", job.reason, job.t_request_s, job.t_start_s,
+                                       job.t_request_s + wall, state, outcome, wall, cpu, extra))
+        if outcome.found:
+            self.failures = 0
+            self.replans += 1
+            self.outcome = outcome
+            self.path = corridor_path(outcome.plan)
+            self._pending = (job.t_start_s, list(outcome.plan.waypoints_m))
+            log.info("replanned at t = %.2f s (%.2f s wall): %s", t_s, wall, outcome.message)
+            return True
+        self.failures += 1
+        if outcome.status in REFUSED_FROM_STATE or self.failures >= self.max_failures:
+            d.stop = "no_safe_continuation"
+            d.detail = (f"replanning at t = {job.t_request_s:.2f} s found no safe continuation "
+                        f"({self.failures} failed in a row): {outcome.message}")
+            return True
+        wait = self.backoff_s * 2 ** (self.failures - 1)
+        self._next_try_s = t_s + wait
+        log.warning("replanning failed at t = %.2f s (%s); next try in %.1f s", t_s,
+                    outcome.message, wait)
+        return True
+
+    def _look_ahead(self, est: BodyEstimate, left: list[tuple[float, float]],
+                    extra: FloatArray) -> float | None:
+        """On the worker: the smallest body clearance the twin predicts over the look-ahead."""
+        twin = self._twin_in(extra)
+        now = int(round(est.t_s / twin.dt_s))
+        steps = int(round(self.lookahead_s / twin.dt_s))
+        runs = twin.run([left], steps * twin.dt_s, states=est.state[None], start_steps=[now],
+                        stride=3)
+        states = runs.states[0]
+        states = states[np.isfinite(states[:, 0])]
+        if not len(states):
             return None
-        if float(distance_to_path(self.path, np.asarray([xy]))[0]) <= self.corridor_m:
+        planner = self.planner
+        return float(body_clearance_m(planner.world, planner.clearance, planner.model,
+                                      states).min())
+
+    def _twin_in(self, extra: FloatArray) -> Twin:
+        """The planner's twin in the world's current plus the estimate ``extra``."""
+        twin = self.planner.twin
+        current = np.add(self.planner.world.current_m_s, extra - self._planner_current)
+        return Twin(twin.robot, twin.coefficients, twin.gait, twin.options,
+                    (float(current[0]), float(current[1])), twin.acceptance_radius_m, twin.threads)
+
+    # -- the current -----------------------------------------------------------------------------
+
+    def _estimate_current(self, est: BodyEstimate, left: list[tuple[float, float]]) -> bool:
+        """Start a window, or compare the camera with the twin over the last one."""
+        if not self.estimate_current:
+            return False
+        changed = False
+        if self._window_job is not None and self._window_job[0].done():
+            future, window, end = self._window_job
+            self._window_job = None
+            predicted = future.result()
+            if predicted is not None:
+                n = self.model.n_links
+                self.current.update(end.t_s, predicted, end.state[n : n + 2],
+                                    end.t_s - window.estimate.t_s)
+                changed = True
+        if self._window is None:
+            self._window = _Window(est, list(left))
+        elif (est.t_s - self._window.estimate.t_s >= self.current.window_s
+              and self._window_job is None and self._job is None):
+            window = self._window
+            future = self._worker.submit(self._window_prediction, window, est.t_s,
+                                         self.current.value_m_s.copy())
+            self._window_job = (future, window, est)
+            self._window = _Window(est, list(left))
+        return changed
+
+    def _window_prediction(self, window: _Window, t_end_s: float,
+                           extra: FloatArray) -> FloatArray | None:
+        """On the worker: where the twin puts the centre of mass at ``t_end_s``."""
+        twin = self._twin_in(extra)
+        step = int(round(t_end_s / twin.dt_s))
+        state = predict_state(twin, window.estimate, window.waypoints, step, allow_end=False)
+        if state is None:
             return None
-        state = straight_state(self.planner.model, float(pose[2]), xy)
-        step = int(round(t_s / self.planner.twin.dt_s))
-        outcome = self.planner.plan(state, step)
-        self.replans += 1
-        if not outcome.found:
-            log.warning("left the corridor at t = %.1f s and replanning failed: %s", t_s,
-                        outcome.message)
-            return None
-        log.info("left the corridor at t = %.1f s; replanned: %s", t_s, outcome.message)
-        self.outcome = outcome
-        self.path = corridor_path(outcome.plan)
-        return outcome.plan.waypoints_m
+        n = self.model.n_links
+        return state[n : n + 2]
+
+    # -- the record ------------------------------------------------------------------------------
+
+    def _event(self, kind: str, reason: str, t_request: float, t_start: float, t_used: float,
+               state: FloatArray | None, outcome: Outcome, wall: float, cpu: float,
+               extra: FloatArray) -> dict[str, Any]:
+        world_current = self.world.current_m_s
+        return {
+            "kind": kind,
+            "reason": reason,
+            "t_request_s": round(t_request, 3),
+            "t_start_s": round(t_start, 3),
+            "t_ready_s": round(t_used, 3),
+            "status": outcome.status,
+            "message": outcome.message,
+            "wall_s": round(wall, 3),
+            "cpu_s": None if math.isnan(cpu) else round(cpu, 3),
+            "start_state": None if state is None else [round(float(v), 5) for v in state],
+            "waypoints_m": [[round(x, 4), round(y, 4)] for x, y in outcome.plan.waypoints_m]
+            if outcome.found else [],
+            "planned_goal_s": round(outcome.plan.cost_s, 2) if outcome.found else None,
+            "current_m_s": [round(float(world_current[0] + extra[0]), 4),
+                            round(float(world_current[1] + extra[1]), 4)],
+        }
+
+
+def predict_state(twin: Twin, est: BodyEstimate, waypoints: list[tuple[float, float]],
+                  step: int, allow_end: bool = True) -> FloatArray | None:
+    """The twin's prediction of the robot's state at ``step``, from an estimate.
+
+    The robot swims on after the estimate under its own control stack, steering to
+    ``waypoints`` (those it has left), in the twin's current and with its first coefficient set.
+
+    Parameters
+    ----------
+    twin : Twin
+    est : BodyEstimate
+    waypoints : list of (x, y)
+    step : int
+        Step of the task to predict (at or after the estimate's).
+    allow_end : bool
+        When the run ends before ``step`` (the last waypoint accepted), return its last state;
+        else None.
+
+    Returns
+    -------
+    ndarray, shape (2 N + 4,) or None
+    """
+    now = int(round(est.t_s / twin.dt_s))
+    steps = max(step - now, 0)
+    if steps == 0 or not waypoints:
+        return est.state.copy()
+    runs = twin.run([waypoints], steps * twin.dt_s + 2 * twin.dt_s, states=est.state[None],
+                    start_steps=[now], stride=1)
+    states = runs.states[0]
+    if steps < len(states) and np.all(np.isfinite(states[steps])):
+        return np.asarray(states[steps], dtype=float)
+    if not allow_end:
+        return None
+    finite = np.flatnonzero(np.isfinite(states[:, 0]))
+    return np.asarray(states[finite[-1]], dtype=float)

@@ -1,23 +1,26 @@
-"""What ``eelbot run --plan WORLD`` needs from the planner: the plan, the monitor, the robot's URI.
+"""What ``eelbot run --plan WORLD`` needs from the planner: the plan, the navigator, the URI.
 
-docs/planning.md ("At the tank") is the long form. :func:`plan_for_run` plans in the world from its
-start (refusing with :class:`eelhost.planning.planner.PlanRefused`, which the CLI reports with
-exit 2), and returns the plan's waypoints for the run loop with a
-:class:`eelhost.planning.replan.PlanMonitor` that replans when the filtered pose leaves the
-corridor and ends the run when the goal test holds. For a ``sim://`` robot it puts the virtual
-robot at the world's start in the world's current (``start=`` and ``current=`` of the URI) unless
-the URI already says where; a ``serial://`` robot must be placed at the start by hand.
+docs/planning.md ("Execution and replanning") is the long form. :func:`plan_for_run` plans in the
+world from its start (refusing with :class:`eelhost.planning.planner.PlanRefused`, which the CLI
+reports with exit 2), and returns the plan's waypoints for the run loop with a
+:class:`eelhost.planning.replan.TankReplanner`, which replans beside the loop when the robot leaves
+the corridor, stops it on contact or when no safe continuation exists, and ends the run when the
+goal test holds. For a ``sim://`` robot it puts the virtual robot at the world's start in the
+world's current (``start=`` and ``current=`` of the URI) unless the URI already says where; a
+``serial://`` robot must be placed at the start by hand.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from urllib.parse import parse_qsl, urlencode, urlsplit
 
+from eelhost.planning.geometry import FloatArray
 from eelhost.planning.planner import Outcome, Planner, PlanRefused
-from eelhost.planning.replan import PlanMonitor
+from eelhost.planning.replan import TankReplanner
 from eelhost.planning.uncertainty import CoefficientModel, default_model
-from eelhost.planning.world import World
+from eelhost.planning.world import Current, World
 from eelsim.control import Gait
 from eelsim.robot import Robot
 from eelsim.scenario import PATH_GAIT
@@ -34,14 +37,14 @@ class RunPlan:
     Attributes
     ----------
     waypoints_m : list of (float, float)
-    monitor : PlanMonitor
+    navigator : TankReplanner
     uri : str
         The robot's URI (for ``sim://``: with the world's start and current).
     outcome : Outcome
     """
 
     waypoints_m: list[tuple[float, float]]
-    monitor: PlanMonitor
+    navigator: TankReplanner
     uri: str
     outcome: Outcome
 
@@ -108,6 +111,11 @@ def plan_for_run(
     """
     model = coefficients or default_model(robot)
     planner = Planner(world, robot, model, gait)
+
+    def planner_for(extra_m_s: FloatArray) -> Planner:
+        """The planner in the world with the estimated extra current added to its own."""
+        return Planner(with_extra_current(world, extra_m_s), robot, model, gait)
+
     if abs(planner.twin.acceptance_radius_m - acceptance_radius_m) > 1e-9:
         raise PlanRefused("acceptance_radius",
                           f"--radius {acceptance_radius_m:g}: the planner swims with "
@@ -115,5 +123,24 @@ def plan_for_run(
     outcome = planner.plan()
     if not outcome.found:
         raise NoPlanFound(outcome.status, f"{world.name}: {outcome.message}")
-    return RunPlan(outcome.plan.waypoints_m, PlanMonitor(planner, outcome),
-                   sim_uri_for_world(uri, world), outcome)
+    navigator = TankReplanner(planner_for, planner, outcome, gait)
+    return RunPlan(outcome.plan.waypoints_m, navigator, sim_uri_for_world(uri, world), outcome)
+
+
+def with_extra_current(world: World, extra_m_s: FloatArray) -> World:
+    """``world`` with a current velocity added to its own.
+
+    Parameters
+    ----------
+    world : World
+    extra_m_s : array_like, shape (2,)
+
+    Returns
+    -------
+    World
+    """
+    vx, vy = world.current_m_s
+    vx, vy = vx + float(extra_m_s[0]), vy + float(extra_m_s[1])
+    current = Current(speed_m_s=float(math.hypot(vx, vy)),
+                      direction_deg=float(math.degrees(math.atan2(vy, vx))))
+    return world.model_copy(update={"current": current})

@@ -53,6 +53,38 @@ class TankView:
         (35.0, 689.0), (1245.0, 689.0), (1237.0, 31.0), (43.0, 31.0)
     )
 
+    @classmethod
+    def covering(cls, size_m: tuple[float, float], margin_m: float = 0.3,
+                 image_size_px: tuple[int, int] = (1280, 720)) -> TankView:
+        """A view of a tank ``size_m`` (x from 0, y from 0) with ``margin_m`` around it.
+
+        The scale is the largest that fits the image with a 31 px border, equal in x and y; the
+        far edge is 8 px narrower (the default view's keystone). A planning world's tank
+        (docs/planning.md) is filmed whole this way, walls included.
+
+        Parameters
+        ----------
+        size_m : (float, float)
+            The tank's width and height, m.
+        margin_m : float
+            Floor shown beyond each wall, m.
+        image_size_px : (int, int)
+
+        Returns
+        -------
+        TankView
+        """
+        w, h = size_m
+        x0, y0, x1, y1 = -margin_m, -margin_m, w + margin_m, h + margin_m
+        iw, ih = image_size_px
+        border = 31.0
+        scale = min((iw - 2 * border) / (x1 - x0), (ih - 2 * border) / (y1 - y0))
+        cx, cy = iw / 2.0, ih / 2.0
+        half_x, half_y = (x1 - x0) * scale / 2.0, (y1 - y0) * scale / 2.0
+        corners_px = ((cx - half_x, cy + half_y), (cx + half_x, cy + half_y),
+                      (cx + half_x - 8.0, cy - half_y), (cx - half_x + 8.0, cy - half_y))
+        return cls(image_size_px, ((x0, y0), (x1, y0), (x1, y1), (x0, y1)), corners_px)
+
 
 @dataclass(frozen=True)
 class RenderOptions:

@@ -1,0 +1,213 @@
+"""``eelbot run --plan`` at the (virtual) tank: planning beside the loop, body state, contact, record.
+
+Over ``sim://`` at ``speed=0`` the virtual robot runs as fast as it can except while a replan is
+running: then the planner's wall time passes on the robot's clock (``TankReplanner.pace``), so a
+planner slower than the robot's watchdog is a real stall here, as it would be at the tank.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+
+import numpy as np
+import pytest
+
+from eelhost.cli import main
+from eelhost.commands.run import exit_status
+from eelhost.errors import EXIT_CONTACT
+from eelhost.field.recorder import read_commands_csv
+from eelhost.field.runloop import RunConfig
+from eelhost.field.session import TakeNotes
+from eelhost.field.take import TakeRequest, run_take
+from eelhost.planning.execute import body_clearance_m
+from eelhost.planning.field import ClearanceField
+from eelhost.planning.planner import Planner
+from eelhost.planning.replan import TankReplanner, predict_state
+from eelhost.planning.state_estimate import BodyStateEstimator
+from eelhost.planning.tank import plan_for_run, with_extra_current
+from eelhost.planning.uncertainty import default_model
+from eelhost.planning.world import parse_world
+from eelhost.vision.synthetic import TankView
+from eelhost.wire import protocol
+from eelsim.closed_loop import LoopOptions, simulate_closed_loop
+from eelsim.model import SwimmerModel
+from eelsim.robot import load_robot
+from eelsim.scenario import PATH_GAIT, Scenario
+
+ROBOT = load_robot()
+MODEL = default_model(ROBOT)
+N = ROBOT.n_links
+BODY = SwimmerModel.from_robot(ROBOT, MODEL.fits["straight"])
+
+OPEN = {
+    "name": "open",
+    "tank": {"size_m": [3.0, 2.0]},
+    "start": {"position_m": [0.6, 1.0], "heading_deg": 0.0},
+    "goal": {"position_m": [2.1, 1.0], "radius_m": 0.2},
+    "current": {"speed_m_s": 0.0, "direction_deg": 0.0},
+    "obstacles": [{"kind": "circle", "centre_m": [1.4, 0.25], "radius_m": 0.1}],
+}
+
+
+def swimming_state(t_s: float = 6.0):
+    """A state of the robot swimming a path: bent, moving, mid-stroke; and its run."""
+    sc = Scenario(name="swim", amplitude_rad=PATH_GAIT.amplitude_rad,
+                  omega_rad_s=PATH_GAIT.omega_rad_s, beta_rad=PATH_GAIT.beta_rad,
+                  k_theta=PATH_GAIT.k_theta, waypoints_m=[(2.5, 1.3)], duration_s=t_s + 0.5,
+                  start_position_m=(0.6, 1.0), start_heading_deg=0.0)
+    run = simulate_closed_loop(ROBOT, sc, LoopOptions(stop_at_goal=False))
+    return run
+
+
+def test_estimator_recovers_the_whole_body_state_of_a_swimming_robot_from_camera_poses():
+    run = swimming_state()
+    est = BodyStateEstimator(BODY, PATH_GAIT)
+    frames = np.arange(0.0, 6.0 + 1e-9, 1 / 30)
+    for t in frames:
+        x = np.array([np.interp(t, run.t_s, run.states[:, i]) for i in range(run.states.shape[1])])
+        est.observe(t, x[N : N + 2], x[:N])
+    e = est.estimate()
+    assert e is not None and e.t_s == pytest.approx(6.0)
+    k = int(np.argmin(np.abs(run.t_s - 6.0)))
+    truth = run.states[k]
+    body = truth[:N] - truth[:N].mean()
+    assert np.ptp(body) > 0.2  # the body is bent
+    assert np.hypot(*truth[2 * N + 2 :]) > 0.03  # and moving
+    assert np.allclose(e.state[: N + 2], truth[: N + 2], atol=2e-3)  # pose and shape as seen
+    assert np.abs(e.state[N + 2 : 2 * N + 2] - truth[N + 2 : 2 * N + 2]).max() < 0.15  # rad/s
+    assert np.abs(e.state[2 * N + 2 :] - truth[2 * N + 2 :]).max() < 0.01  # m/s
+
+
+def test_a_replan_starts_from_the_moving_bent_body_the_twin_predicts():
+    world = parse_world(OPEN, "open")
+    planner = Planner(world, ROBOT, MODEL)
+    run = swimming_state(4.5)
+    est = BodyStateEstimator(planner.model, PATH_GAIT)
+    for t in np.arange(0.0, 4.5 + 1e-9, 1 / 30):
+        x = np.array([np.interp(t, run.t_s, run.states[:, i]) for i in range(run.states.shape[1])])
+        est.observe(t, x[N : N + 2], x[:N])
+    e = est.estimate()
+    assert e is not None
+    step = 180  # 1.8 s after the estimate, a restart point (0.3 s periods)
+    start = predict_state(planner.twin, e, [(2.5, 1.3)], int(round(4.5 / 0.01)) + step)
+    assert start is not None
+    assert np.ptp(start[:N] - start[:N].mean()) > 0.1 and np.hypot(*start[2 * N + 2 :]) > 0.03
+    outcome = planner.plan(start, int(round(4.5 / 0.01)) + step)
+    assert outcome.found, outcome.message
+    first = outcome.plan.legs[0].com_m[0]
+    assert np.hypot(*(first - start[N : N + 2])) < 0.02  # the plan swims from that body
+
+
+def slow_replanner(delay_s: float):
+    """A TankReplanner whose every replan takes ``delay_s`` more wall time."""
+
+    class Slow(TankReplanner):
+        def _replan(self, *args):  # noqa: ANN002, ANN202
+            time.sleep(delay_s)
+            return super()._replan(*args)
+
+    return Slow
+
+
+@pytest.fixture(scope="module")
+def slow_take(tmp_path_factory):
+    """A run whose replans each take 1.5 s of wall time: longer than the robot's 1 s watchdog."""
+    world = parse_world(OPEN, "open")
+    planned = plan_for_run(world, ROBOT, "sim://?speed=0&current=0.05,90", PATH_GAIT, MODEL)
+    base = planned.navigator
+    navigator = slow_replanner(1.5)(base.planner_for, base.planner, base.outcome, PATH_GAIT)
+    stem = tmp_path_factory.mktemp("slow") / "take"
+    config = RunConfig(PATH_GAIT, planned.waypoints_m, duration_s=40.0)
+    request = TakeRequest(ROBOT, config, str(stem), TakeNotes(planned.uri), "synthetic:clean",
+                          navigator=navigator, camera_view=TankView.covering((3.0, 2.0)))
+    result = run_take(request)
+    return result, stem, navigator
+
+
+def test_no_failsafe_while_a_slow_replan_runs_beside_the_loop_in_lockstep(slow_take):
+    result, stem, navigator = slow_take
+    out = result.outcome
+    replans = [e for e in navigator.events if e["kind"] == "replan"]
+    assert replans, out.detail
+    for e in replans:
+        # the planner's wall time passed on the robot's clock before its plan was used
+        assert e["wall_s"] >= 1.5
+        assert e["t_ready_s"] - e["t_request_s"] >= 1.5 - 1e-3
+    # meanwhile the loop kept sending offsets at the control rate, and the watchdog never fired
+    sent = [float(r["t_s"]) for r in read_commands_csv(f"{stem}.commands.csv")
+            if r["event"] == "sent" and r["message"] == "SetOffset"]
+    e = replans[0]
+    during = [t for t in sent if e["t_request_s"] <= t <= e["t_ready_s"]]
+    assert len(during) >= 4 and np.diff(during).max() < 0.35
+    assert out.failsafe_reports == 0
+    assert result.virtual_robot is not None
+    assert out.reason in ("arrived", "duration"), out.detail
+
+
+def test_the_take_records_every_plan_and_replan(slow_take):
+    result, stem, navigator = slow_take
+    meta = json.loads(open(f"{stem}.json").read())
+    planning = meta["source"]["planning"]
+    plans = planning["plans"]
+    assert plans[0]["kind"] == "plan" and plans[0]["reason"] == "start"
+    assert planning["replans"] == result.replans == sum(
+        1 for p in plans if p["kind"] == "replan" and p["status"] == "found")
+    assert len(plans) == len(navigator.events) >= 2
+    for p in plans[1:]:
+        assert p["reason"] in ("left_corridor", "predicted_contact")
+        assert len(p["start_state"]) == 2 * N + 4
+        assert p["t_request_s"] < p["t_start_s"]
+        assert p["waypoints_m"] and p["wall_s"] > 0
+        assert len(p["current_m_s"]) == 2
+    # the current estimate (0.05 m/s towards +y, unknown to the planner) is recorded
+    last = planning["current_estimate"][-1]["current_m_s"]
+    assert last[1] > 0.02 and abs(last[0]) < 0.02
+
+
+def test_a_contact_stops_the_run_with_its_own_exit_status(tmp_path):
+    # the robot is put 4 cm short of a disc the plan goes round, facing it; the corridor is too
+    # wide and the look-ahead off, so nothing replans it away: it swims into the disc
+    world = parse_world(OPEN, "open")
+    planned = plan_for_run(world, ROBOT, "sim://?speed=0&start=1.0,0.25,0", PATH_GAIT, MODEL)
+    base = planned.navigator
+    navigator = TankReplanner(base.planner_for, base.planner, base.outcome, PATH_GAIT,
+                              corridor_m=10.0, lookahead_s=0.0)
+    config = RunConfig(PATH_GAIT, [(2.0, 0.25)], duration_s=20.0)
+    stem = tmp_path / "hit"
+    request = TakeRequest(ROBOT, config, str(stem), TakeNotes(planned.uri), "synthetic:clean",
+                          navigator=navigator, camera_view=TankView.covering((3.0, 2.0)))
+    result = run_take(request)
+    out = result.outcome
+    assert out.reason == "contact", out.detail
+    assert exit_status(out.reason) == EXIT_CONTACT == 6
+    assert out.stop_outcome == "ack"
+    assert result.virtual_robot is not None
+    assert result.virtual_robot.status()["state"] == protocol.State.IDLE
+    meta = json.loads(open(f"{stem}.json").read())
+    assert meta["source"]["recording"]["reason"] == "contact"
+    # the robot really was at the disc: its true body within a few mm of it
+    x = result.virtual_robot.state_at(out.t_end_s)
+    gap = body_clearance_m(world, ClearanceField(world), BODY, x[None])[0]
+    assert gap < 0.005
+
+
+def test_run_plan_reads_the_fitted_model_as_plan_does(tmp_path, capsys):
+    bad = tmp_path / "coefficients.json"
+    bad.write_text(json.dumps({"fits": {"joint": {"coefficients": {"C_f": 0.01, "C_d": -0.8,
+                                                                   "C_a": 0.6, "C_m": 0.01}}}}))
+    code = main(["run", "--robot", "sim://?speed=0", "--plan", "tank_5_obstacles",
+                 "--coefficients-file", str(bad), "--out", str(tmp_path / "x")])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert str(bad) in err and "C_d" in err
+    code = main(["run", "--robot", "sim://?speed=0", "--waypoints", "1,0", "--gait", "0.87,3.9",
+                 "--coefficients-file", str(bad), "--out", str(tmp_path / "y")])
+    assert code == 2 and "--coefficients-file" in capsys.readouterr().err
+
+
+def test_world_with_an_extra_current_adds_the_velocities():
+    world = parse_world({**OPEN, "current": {"speed_m_s": 0.02, "direction_deg": 0.0}}, "w")
+    moved = with_extra_current(world, np.array([0.0, 0.02]))
+    assert moved.current_m_s == pytest.approx((0.02, 0.02))
+    assert moved.obstacles == world.obstacles
