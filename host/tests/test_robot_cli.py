@@ -51,7 +51,7 @@ def test_status_of_a_fresh_robot_says_power_on_no_feedback_no_battery(capsys):
     assert r["joint feedback"].startswith("none")
     assert r["battery"].startswith("not measured")
     assert r["reset cause"] == "POWER_ON; resets since power-on: 0"
-    assert r["settings from"] == "BLANK"
+    assert r["settings from"] == "EEPROM"  # the virtual robot comes set up, its settings saved
     for counter in ("bad_crc", "bad_crc32", "duplicates", "tx_dropped", "bad_direction"):
         assert r[counter] == "0"
 

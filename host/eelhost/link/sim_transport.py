@@ -16,13 +16,16 @@ joint angles and runs the PD itself; 0 by default), ``battery`` (volts of a batt
 robot's divider, measured by the firmware; none by default), ``coefficients=C_f,C_d,C_a,C_m``
 (the water the virtual robot swims in, in the order of the robot file's fluid law; by default the
 robot file's ``[hydrodynamics]``: the host's model and the virtual tank's truth are then the same
-numbers, docs/host.md "The virtual robot and replays").
+numbers, docs/host.md "The virtual robot and replays"), ``eeprom=FILE`` (the robot's EEPROM kept in
+FILE between invocations, so saved settings persist: ``eelbot robot config --robot
+sim://?eeprom=robot.eeprom --set trim_us.1=20 --save``; by default each sim:// robot is new).
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from pathlib import Path
 from typing import TYPE_CHECKING, Protocol
 
 from pydantic import ValidationError
@@ -99,8 +102,10 @@ class SimTransport:
         self._open = True
 
     def close(self) -> None:
-        """Disconnect."""
+        """Disconnect (the virtual robot's EEPROM goes to its file, with ``eeprom=FILE``)."""
         self._open = False
+        if self.robot is not None:
+            self.robot.save_eeprom()
 
     def write(self, data: bytes) -> None:
         """Hand bytes to the uplink at the present time."""
@@ -181,6 +186,12 @@ def _sim_settings(u: LinkURI) -> dict:
     coefficients = u.one("coefficients")
     if coefficients is not None:
         u.numbers("coefficients", coefficients, None)  # the law's own checks need the robot
+    eeprom = u.one("eeprom")
+    eeprom_path = Path(eeprom).expanduser() if eeprom else None
+    if eeprom_path is not None and not eeprom_path.parent.is_dir():
+        raise LinkURIError(f"{u.text!r}: eeprom={eeprom!r}: no directory {eeprom_path.parent}")
+    if eeprom_path is not None and eeprom_path.exists() and eeprom_path.stat().st_size != 1024:
+        raise LinkURIError(f"{u.text!r}: eeprom={eeprom!r} is not an EEPROM image of 1024 bytes")
     return {
         "start_position_m": (x, y),
         "start_heading_deg": heading,
@@ -191,6 +202,7 @@ def _sim_settings(u: LinkURI) -> dict:
         "speed": speed,
         "joint_feedback": feedback == "1",
         "battery_v": battery_v,
+        "eeprom_path": eeprom_path,
     }
 
 
@@ -216,7 +228,7 @@ register_transport(
         name="sim",
         parameters=(
             "speed", "seed", "radio", "loss", "drop", "start", "current", "feedback", "battery",
-            "coefficients",
+            "coefficients", "eeprom",
         ),
         target="",
         open=_open_sim,

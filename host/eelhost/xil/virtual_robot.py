@@ -24,6 +24,7 @@ wall clock so that simulated time runs X times faster than real time.
 from __future__ import annotations
 
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -46,6 +47,7 @@ FloatArray = NDArray[np.float64]
 
 #: Volts of battery per volt at the ADC pin of the virtual robot's divider (22k over 10k).
 BATTERY_DIVIDER = 3.2
+EEPROM_BYTES = 1024  # the ATmega328P's (EEL_EEPROM_BYTES)
 #: The ADC's reference: readings 0..1023 over 0..ADC_REFERENCE_V.
 ADC_REFERENCE_V = 5.0
 
@@ -81,7 +83,13 @@ class VirtualRobot:
         in its EEPROM), measures the plant's joint angles through its ADC and runs the PD itself.
     battery_v : float, optional
         A battery of this voltage behind the default divider (the firmware boots with
-        ``battery_divider`` set and measures it); None: no divider fitted.
+        ``battery_divider`` set and measures it); None: no divider fitted (``battery_divider``
+        0 saved).
+    eeprom_path : Path, optional
+        A file that holds the firmware's EEPROM (1024 bytes) across runs: loaded at the start
+        when it exists (its settings then stand; ``joint_feedback`` and ``battery_v``'s divider
+        are saved only into a new file), written back by :meth:`save_eeprom` (the ``sim://``
+        transport does when it closes), so a ``--save`` persists between invocations.
     """
 
     def __init__(
@@ -96,6 +104,7 @@ class VirtualRobot:
         speed: float = 0.0,
         joint_feedback: bool = False,
         battery_v: float | None = None,
+        eeprom_path: Path | None = None,
     ) -> None:
         self.robot = robot
         self.model = SwimmerModel.from_robot(robot)
@@ -105,12 +114,18 @@ class VirtualRobot:
         self.drops_us = [(round(a * 1e6), round(b * 1e6)) for a, b in (drops_s or [])]
         link = (radio or RadioModel.xbee()).with_outages(tuple(self.drops_us))
         self.firmware = NativeFirmware(now_us=0, control_period_us=0)
-        saved: dict[str, float] = {}
-        if joint_feedback:
-            saved["joint_feedback"] = 1.0
-        if battery_v is not None:
-            saved["battery_divider"] = BATTERY_DIVIDER
-        if saved:
+        self.eeprom_path = eeprom_path
+        if eeprom_path is not None and eeprom_path.exists():
+            image = eeprom_path.read_bytes()
+            if len(image) != EEPROM_BYTES:
+                raise ValueError(f"{eeprom_path}: an EEPROM image is {EEPROM_BYTES} bytes, "
+                                 f"not {len(image)}")
+            self.firmware.eeprom_write(0, image)
+            self.firmware.reset(0)  # a power cycle: the firmware boots what the file holds
+        else:
+            saved = {"battery_divider": BATTERY_DIVIDER if battery_v is not None else 0.0}
+            if joint_feedback:
+                saved["joint_feedback"] = 1.0
             store_settings(self.firmware, saved)
         if battery_v is not None:
             self.firmware.set_adc(BATTERY_INPUT, battery_counts(battery_v, BATTERY_DIVIDER))
@@ -119,6 +134,8 @@ class VirtualRobot:
         self.uplink, self.downlink = self.lockstep.uplink, self.lockstep.downlink
         self.clock = SimClock(self.advance_to, speed)
         self.failure = ""
+        self.trace: list[FloatArray] | None = None
+        """Set to a list to keep the plant's true state at every step (benchmarks)."""
         self._k = -1  # last physics step ticked
         self._x = straight_state(
             self.model, np.radians(self.start_heading_deg), self.start_position_m
@@ -140,6 +157,8 @@ class VirtualRobot:
             self._k += 1
             if self._k > 0:
                 self._x = self._x_next
+            if self.trace is not None:
+                self.trace.append(self._x)
             if self.failure:
                 continue  # a blown-up plant stays where it was; the firmware is not ticked
             tick = self.lockstep.tick(self._k, self._x)
@@ -161,6 +180,11 @@ class VirtualRobot:
         t_k = max(self._k, 0) * DT_US * 1e-6
         s = float(np.clip((t_s - t_k) / (DT_US * 1e-6), 0.0, 1.0))
         return (1.0 - s) * self._x + s * self._x_next
+
+    def save_eeprom(self) -> None:
+        """Write the firmware's EEPROM to :attr:`eeprom_path` (nothing without one)."""
+        if self.eeprom_path is not None:
+            self.eeprom_path.write_bytes(self.firmware.eeprom_read(0, EEPROM_BYTES))
 
     def link_down(self, t_us: int) -> bool:
         """Whether ``t_us`` falls in a drop window."""
