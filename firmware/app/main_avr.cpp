@@ -13,9 +13,9 @@ extern "C" void loop();
 
 void setup() {
   g_hal.begin();
-  uint8_t image[kSettingsImageBytes];
-  g_hal.eeprom_load(kSettingsEepromAddress, image, sizeof image);
-  g_robot.reset(g_hal.now_us(), g_hal.boot_info(), image);
+  uint8_t eeprom[kSettingsEepromBytes];  // both slots
+  g_hal.eeprom_load(kSettingsEepromAddress, eeprom, sizeof eeprom);
+  g_robot.reset(g_hal.now_us(), g_hal.boot_info(), eeprom);
   g_hal.start_watchdog();
 }
 

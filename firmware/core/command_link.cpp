@@ -31,7 +31,11 @@ const Frame* CommandLink::push(uint8_t byte, uint32_t now_us) {
     ++counters_.bad_direction;
     return nullptr;
   }
-  watchdog_.feed(now_us);  // a command, even a repeated one, proves the host is there
+  // Only a command with a new sequence number, ahead of the last one, proves that the host is
+  // there: a replay of the last frame (a stuck radio, a host retrying in a loop) is answered but
+  // must not hold off the fade and FAILSAFE (docs/firmware.md, "Failsafe").
+  const uint8_t ahead = static_cast<uint8_t>(f.seq - last_rx_seq_);
+  if (!have_rx_seq_ || (ahead != 0 && ahead < 0x80)) watchdog_.feed(now_us);
   if (is_duplicate(f)) {
     ++counters_.duplicates;
     if (last_answer_ == kNoAnswer) return &f;

@@ -23,7 +23,8 @@ class CommandLink {
   // frame (counted), a frame of a message only the robot sends (counted as bad_direction and
   // ignored: an echoing radio must not keep the link alive), or a repeat of the previous command
   // (counted as a duplicate and answered as the first copy was, not executed again; a query has
-  // no stored answer and is returned to be answered again). Only commands feed the watchdog.
+  // no stored answer and is returned to be answered again). Only a command whose sequence number
+  // is ahead of the last one feeds the watchdog.
   const Frame* push(uint8_t byte, uint32_t now_us);
 
   // Answers to the command last returned by push() (or, for a save, the command that asked).

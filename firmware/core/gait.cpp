@@ -104,12 +104,18 @@ float Gait::phase_rad() const {
 
 void Gait::compute_references() {
   // sin/cos of phi + (j-1) beta by rotating (sin phi, cos phi) by beta: 4 trig calls instead of 10,
-  // which matters on an AVR without an FPU (about 1700 cycles each). Four rotations add a few ulp.
+  // which matters on an AVR without an FPU (about 1700 cycles each), and only 2 while beta holds
+  // still. Four rotations add a few ulp.
   const float phase = phase_rad();
   float s = sinf(phase);
   float c = cosf(phase);
-  const float sb = sinf(beta_rad_);
-  const float cb = cosf(beta_rad_);
+  if (beta_rad_ != trig_beta_rad_) {
+    trig_beta_rad_ = beta_rad_;
+    sin_beta_ = sinf(beta_rad_);
+    cos_beta_ = cosf(beta_rad_);
+  }
+  const float sb = sin_beta_;
+  const float cb = cos_beta_;
   const float omega = target_.omega_rad_s;
   for (uint8_t j = 0; j < cfg::kJoints; ++j) {
     const float amp = amplitude_rad_ * kAmplitudeRatio.of_joint[j];

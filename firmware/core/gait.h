@@ -70,6 +70,11 @@ class Gait {
   GaitRates rates_{};
   float amplitude_rad_ = 0.0f;
   float beta_rad_ = 0.0f;
+  // sin and cos of beta_rad_ as last computed: beta changes only while it slews to a new target,
+  // so most updates skip two of the four trig calls (~3400 cycles on the AVR).
+  float trig_beta_rad_ = 0.0f;
+  float sin_beta_ = 0.0f;
+  float cos_beta_ = 1.0f;
   float offset_rad_ = 0.0f;
   float alpha_rad_[cfg::kJoints] = {};
   float alpha_dot_rad_s_[cfg::kJoints] = {};

@@ -8,7 +8,7 @@
 
 namespace eelproto {
 
-constexpr uint16_t kSchemaHash = 0xB684;
+constexpr uint16_t kSchemaHash = 0x6695;
 constexpr uint8_t kProtocolVersion = 2;
 constexpr uint8_t kHeaderBytes = 4;
 constexpr uint8_t kCrcBytes = 2;
@@ -60,6 +60,7 @@ enum class RefuseReason : uint8_t {
   NotWhileRunning = 4,  // Settings are changed, reset and saved only while the robot does not undulate.
   LowBattery = 5,  // START while the battery is low (state LOW_BATTERY).
   StorageFailed = 6,  // The EEPROM did not read back what was written.
+  SettingsLost = 7,  // START while the stored settings were lost (flag SETTINGS_LOST): DefaultSettings or a SaveSettings first.
 };
 
 // What the robot can do and what it is doing, one bit each (Telemetry and Status).
@@ -69,6 +70,7 @@ enum class Flags : uint8_t {
   BatterySense = 4,  // A battery divider is configured: battery_v is measured, the low-voltage stop armed.
   HwWatchdog = 8,  // The AVR's hardware watchdog is running (the robot; not the native build).
   SettingsUnsaved = 16,  // Settings were changed since they were last loaded or saved.
+  SettingsLost = 32,  // No valid stored settings at boot: the defaults are in use and START is refused until the host acknowledges them (DefaultSettings, or a SaveSettings that succeeds).
 };
 
 // Why the robot last reset: the AVR's MCUSR bits as found at boot (0: a bootloader cleared them).
@@ -103,7 +105,7 @@ enum class SettingKey : uint8_t {
   AdcCentre = 12,  // ADC reading (0..1023 over 0..5 V) of a joint's feedback potentiometer with the joint straight.
   AdcCountsPerRad = 13,  // ADC counts per radian of a joint's feedback (130.4: 2 V over pi rad with the 5 V reference).
   ServoStiffnessNmPerRad = 14,  // Torque per radian of the servo's own position loop: with feedback, a PD torque u is commanded as phi + u / stiffness.
-  BatteryDivider = 15,  // Battery volts per volt at pin A6 (a 22k over 10k divider: 3.2); 0: none fitted, no battery reading, no low-voltage stop.
+  BatteryDivider = 15,  // Battery volts per volt at pin A6 (3.2: the 22k over 10k divider of the wiring); 0: none fitted, no battery reading, no low-voltage stop. The default keeps the stop armed: a robot without a divider sets 0 and saves.
   BatteryLowV = 16,  // Filtered battery voltage below which the robot straightens and stops (state LOW_BATTERY); 6.4 V: 3.2 V a cell of a 2S LiPo.
   BatteryHysteresisV = 17,  // LOW_BATTERY ends (to IDLE) once the filtered voltage is back above battery_low_v plus this.
 };
@@ -228,14 +230,14 @@ void each_field(SetSetting& m, Visit& visit) {
   visit(m.value, 2);
 }
 
-// Write the settings in use to the EEPROM (Ack once written and read back). (to robot)
+// Write the settings to the EEPROM slot not in use (Ack once written and read back). (to robot)
 struct SaveSettings {
   static constexpr MsgId kId = MsgId::SaveSettings;
   static constexpr uint8_t kPayloadBytes = 0;
 };
 template <typename Visit> void each_field(SaveSettings&, Visit&) {}
 
-// Put every setting back to its default in RAM (SaveSettings stores them). (to robot)
+// Every setting back to its default in RAM; acknowledges lost settings (SETTINGS_LOST). (to robot)
 struct DefaultSettings {
   static constexpr MsgId kId = MsgId::DefaultSettings;
   static constexpr uint8_t kPayloadBytes = 0;
@@ -475,8 +477,9 @@ struct Settings {
   // Torque per radian of the servo's own position loop: with feedback, a PD torque u is commanded
   // as phi + u / stiffness.
   float servo_stiffness_nm_per_rad;
-  // Battery volts per volt at pin A6 (a 22k over 10k divider: 3.2); 0: none fitted, no battery
-  // reading, no low-voltage stop.
+  // Battery volts per volt at pin A6 (3.2: the 22k over 10k divider of the wiring); 0: none fitted,
+  // no battery reading, no low-voltage stop. The default keeps the stop armed: a robot without a
+  // divider sets 0 and saves.
   float battery_divider;
   // Filtered battery voltage below which the robot straightens and stops (state LOW_BATTERY); 6.4
   // V: 3.2 V a cell of a 2S LiPo.
@@ -515,7 +518,7 @@ EEL_FLASH_TABLE constexpr SettingInfo kSettingTable[kSettingCount] = {
     {12, SettingType::U16, kNJoints, offsetof(Settings, adc_centre), 0.0f, 1023.0f, 512.0f},
     {13, SettingType::F32, kNJoints, offsetof(Settings, adc_counts_per_rad), 10.0f, 1000.0f, 130.4f},
     {14, SettingType::F32, 1, offsetof(Settings, servo_stiffness_nm_per_rad), 0.01f, 100.0f, 1.0f},
-    {15, SettingType::F32, 1, offsetof(Settings, battery_divider), 0.0f, 20.0f, 0.0f},
+    {15, SettingType::F32, 1, offsetof(Settings, battery_divider), 0.0f, 20.0f, 3.2f},
     {16, SettingType::F32, 1, offsetof(Settings, battery_low_v), 3.0f, 30.0f, 6.4f},
     {17, SettingType::F32, 1, offsetof(Settings, battery_hysteresis_v), 0.1f, 5.0f, 0.6f},
 };

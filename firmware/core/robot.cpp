@@ -34,11 +34,17 @@ int16_t to_mrad(float rad) {
 }
 }  // namespace
 
-void Robot::reset(uint32_t now_us, const BootInfo& boot, const uint8_t* settings_image) {
+void Robot::reset(uint32_t now_us, const BootInfo& boot, const uint8_t* eeprom) {
   state_ = State::Idle;
   boot_ = boot;
   control_period_us_ = cfg::kControlPeriodUs;
-  settings_source_ = settings_from_image(settings_image, settings_);
+  const StoredSettings stored = settings_from_eeprom(eeprom, settings_);
+  settings_source_ = stored.source;
+  stored_slot_ = stored.slot;
+  stored_generation_ = stored.generation;
+  stored_valid_ = stored.source == eelproto::SettingsSource::Eeprom;
+  settings_lost_ = stored.source != eelproto::SettingsSource::Eeprom;
+  writer_ = SettingsWriter{};
   settings_dirty_ = false;
   joints_.configure(settings_);
   const eelproto::SetGait g = eelproto::defaults<eelproto::SetGait>();
@@ -54,7 +60,6 @@ void Robot::reset(uint32_t now_us, const BootInfo& boot, const uint8_t* settings
   next_status_us_ = now_us + kStatusPhaseUs;
   control_updates_ = 0;
   control_late_max_us_ = 0;
-  save_requested_ = false;
   report_now_ = false;
   status_requested_ = false;
   control_update(now_us);
@@ -102,7 +107,7 @@ bool Robot::accept(const Frame& f, M& m) {
 }
 
 // Settings are changed, reset and saved only while the robot does not undulate: a new trim or
-// calibration mid-stroke would jerk the joints, and the EEPROM write stops the loop for ~0.3 s.
+// calibration mid-stroke would jerk the joints.
 bool Robot::settings_locked(const Frame& f) {
   if (state_ != State::Running) return false;
   link_.refuse(f.msg_id, f.seq, reason(RefuseReason::NotWhileRunning));
@@ -174,6 +179,12 @@ void Robot::handle(const Frame& f, uint32_t now_us) {
         link_.refuse(f.msg_id, f.seq, reason(RefuseReason::LowBattery));
         return;
       }
+      // Lost settings (trims, calibration, the battery divider) are not guessed at: the host
+      // says that the defaults will do first (docs/firmware.md, "Settings in the EEPROM").
+      if (settings_lost_) {
+        link_.refuse(f.msg_id, f.seq, reason(RefuseReason::SettingsLost));
+        return;
+      }
       // From straight, restart the phase so that t = 0 is now, as in the twin. From a
       // half-finished stop the phase runs on, so nothing jumps.
       if (state_ != State::Running) gait_.restart_phase(now_us);
@@ -200,13 +211,20 @@ void Robot::handle(const Frame& f, uint32_t now_us) {
       if (settings_locked(f)) return;
       settings_ = eelproto::settings_defaults();
       settings_dirty_ = true;
+      settings_lost_ = false;  // the host knows the defaults are in use
       joints_.configure(settings_);
       break;
-    case MsgId::SaveSettings:
+    case MsgId::SaveSettings: {
       if (settings_locked(f)) return;
-      save_requested_ = true;  // the board writes; save_done() answers
+      // Into the slot that does not boot now, one generation on; the board writes it byte by
+      // byte (app_tick) and save_done() answers.
+      save_slot_ = stored_valid_ ? static_cast<uint8_t>(1 - stored_slot_) : 0;
+      writer_.start(settings_, static_cast<uint16_t>(stored_generation_ + 1),
+                    settings_slot_address(save_slot_));
+      settings_dirty_ = false;  // set again by a change during the write, or by a failure
       save_msg_seq_ = f.seq;
       return;
+    }
     default:
       return;  // unreachable: the link passes only messages to the robot, all handled above
   }
@@ -215,12 +233,15 @@ void Robot::handle(const Frame& f, uint32_t now_us) {
 }
 
 void Robot::save_done(bool ok) {
-  save_requested_ = false;
   const uint8_t id = static_cast<uint8_t>(MsgId::SaveSettings);
   if (ok) {
-    settings_dirty_ = false;
+    stored_slot_ = save_slot_;
+    ++stored_generation_;
+    stored_valid_ = true;
+    settings_lost_ = false;  // what the host chose is stored: nothing is lost any more
     link_.ack(id, save_msg_seq_);
   } else {
+    settings_dirty_ = true;
     link_.refuse(id, save_msg_seq_, reason(RefuseReason::StorageFailed));
   }
 }
@@ -303,6 +324,7 @@ uint8_t Robot::flags() const {
   if (settings_.battery_divider > 0.0f) f |= bit(eelproto::Flags::BatterySense);
   if (boot_.hw_watchdog) f |= bit(eelproto::Flags::HwWatchdog);
   if (settings_dirty_) f |= bit(eelproto::Flags::SettingsUnsaved);
+  if (settings_lost_) f |= bit(eelproto::Flags::SettingsLost);
   return f;
 }
 

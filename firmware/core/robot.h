@@ -13,15 +13,17 @@
 #include "joint_loop.h"
 #include "protocol_gen.h"
 #include "settings_store.h"
+#include "settings_writer.h"
 
 class Robot {
  public:
   using State = eelproto::State;
   using TxQueue = CommandLink::TxQueue;
 
-  // Boot state: IDLE, straight, settings from the stored image (the defaults when it is blank,
-  // corrupt or of another settings version), counters zero.
-  void reset(uint32_t now_us, const BootInfo& boot, const uint8_t* settings_image);
+  // Boot state: IDLE, straight, settings from the newer valid EEPROM slot (`eeprom`: the
+  // kSettingsEepromBytes from kSettingsEepromAddress), or the defaults with the flag SETTINGS_LOST
+  // when neither slot is valid (blank, corrupt or of another settings version), counters zero.
+  void reset(uint32_t now_us, const BootInfo& boot, const uint8_t* eeprom);
   // One received byte; a completed command is executed at once (it only sets parameters: the
   // gait is computed in control_update, once per control period, however many commands come).
   void on_rx_byte(uint8_t byte, uint32_t now_us);
@@ -36,11 +38,14 @@ class Robot {
   // After the update: the battery's reading of it, Telemetry and Status frames when due.
   void service(uint32_t now_us);
 
-  // SaveSettings: the board writes this image to the EEPROM (at kSettingsEepromAddress) and says
-  // whether it read back; the robot then answers the command.
-  bool save_requested() const { return save_requested_; }
-  void settings_image(uint8_t* image) const { settings_to_image(settings_, image); }
+  // SaveSettings: the board steps this writer once a loop pass (a byte at a time, while control
+  // runs) and calls save_done with whether the slot read back; the robot then answers the command.
+  SettingsWriter& settings_writer() { return writer_; }
   void save_done(bool ok);
+  // The slot that boots next (the newer valid one), and whether the settings were lost at boot
+  // and not yet acknowledged (Start refused).
+  uint8_t stored_slot() const { return stored_slot_; }
+  bool settings_lost() const { return settings_lost_; }
 
   // Joint PD torques for plant joint angles and rates (the native build's simulated plant).
   void joint_torques(const float* phi_rad, const float* phi_dot_rad_s, float* torque_nm) const;
@@ -95,8 +100,13 @@ class Robot {
   uint32_t next_status_us_ = 0;
   uint16_t control_updates_ = 0;
   uint16_t control_late_max_us_ = 0;
+  SettingsWriter writer_;
+  uint16_t stored_generation_ = 0; // of the slot that boots next
+  uint8_t stored_slot_ = 0;
+  uint8_t save_slot_ = 0;          // the slot being written
+  bool stored_valid_ = false;      // a valid slot exists (else a save writes slot 0)
   uint8_t save_msg_seq_ = 0;       // the SaveSettings being written
-  bool save_requested_ = false;
+  bool settings_lost_ = false;     // no valid slot at boot, not yet acknowledged: Start refused
   bool settings_dirty_ = false;
   bool fading_ = false;
   bool report_now_ = false;        // a state change: Telemetry at the next service

@@ -57,6 +57,15 @@ struct Echo {
 // The robot's inputs that are not frames: its analog readings (feedback and battery) follow the
 // input's bytes too, so that the joint loop and the battery see garbage as well.
 uint16_t g_adc[cfg::kAdcInputs];
+// An EEPROM that takes every write at once, for the settings writer.
+struct InstantEeprom {
+  uint8_t bytes[kSettingsEepromBytes];
+  bool eeprom_ready() const { return true; }
+  uint8_t eeprom_read(uint16_t a) const { return a < sizeof bytes ? bytes[a] : 0xFF; }
+  void eeprom_write(uint16_t a, uint8_t v) {
+    if (a < sizeof bytes) bytes[a] = v;
+  }
+} g_eeprom;
 
 void step(Robot& r, Echo& echo, uint8_t byte, uint32_t& now_us) {
   echo.push(byte);
@@ -68,7 +77,10 @@ void step(Robot& r, Echo& echo, uint8_t byte, uint32_t& now_us) {
     r.joint_update(r.wants_adc() ? g_adc : nullptr);
     r.service(now_us);
   }
-  if (r.save_requested()) r.save_done(true);
+  SettingsWriter::Step st;
+  while ((st = r.settings_writer().step(g_eeprom)) == SettingsWriter::Step::Writing) {
+  }
+  if (st != SettingsWriter::Step::Idle) r.save_done(st == SettingsWriter::Step::Written);
   while (!r.tx().empty()) r.tx().pop();
   check_invariants(r);
 }
@@ -80,9 +92,11 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   static Echo echo;
   echo = Echo();
   uint32_t now_us = 0xFFFFFFFFu - 2000000u;  // every run crosses the micros() wrap
-  uint8_t blank[kSettingsImageBytes];
-  memset(blank, 0xFF, sizeof blank);
-  robot.reset(now_us, BootInfo{1, 0, false}, blank);
+  // A robot set up with the defaults saved, so that Start is reachable.
+  static uint8_t eeprom[kSettingsEepromBytes];
+  memset(eeprom, 0xFF, sizeof eeprom);
+  settings_to_image(eelproto::settings_defaults(), eeprom, 1);
+  robot.reset(now_us, BootInfo{1, 0, false}, eeprom);
   const bool framed = data[0] & 1;
   ++data;
   --size;

@@ -147,10 +147,14 @@ TEST(saved_settings_survive_a_power_cycle_and_a_corrupt_eeprom_gives_the_default
   eel_tick(fw, 10000, nullptr, nullptr, &out);
   CHECK_EQ(status_of(fw).settings_source, static_cast<uint8_t>(eelproto::SettingsSource::Eeprom));
   CHECK_EQ(out.pulse_us[4], 1420);
-  uint8_t byte;
-  CHECK_EQ(eel_eeprom_read(fw, 20, &byte, 1), 1u);
-  byte ^= 0x40;
-  eel_eeprom_write(fw, 20, &byte, 1);
+  // One bit of each slot (slot 0: the defaults it was created with; slot 1: the save).
+  for (uint8_t slot = 0; slot < kSettingsSlots; ++slot) {
+    const uint16_t at = static_cast<uint16_t>(settings_slot_address(slot) + 20);
+    uint8_t byte;
+    CHECK_EQ(eel_eeprom_read(fw, at, &byte, 1), 1u);
+    byte ^= 0x40;
+    eel_eeprom_write(fw, at, &byte, 1);
+  }
   eel_reboot(fw, 0, static_cast<uint8_t>(eelproto::ResetFlags::External));
   eel_tick(fw, 10000, nullptr, nullptr, &out);
   CHECK_EQ(status_of(fw).settings_source, static_cast<uint8_t>(eelproto::SettingsSource::Corrupt));

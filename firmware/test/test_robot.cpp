@@ -29,9 +29,10 @@ struct Bench {
   uint32_t now = 0;
   uint8_t seq = 0;
   uint16_t adc[cfg::kAdcInputs];
-  uint8_t eeprom[kSettingsImageBytes];
+  uint8_t eeprom[kSettingsEepromBytes];
   bool eeprom_fails = false;
-  int saves = 0;
+  int saves = 0;            // saves finished
+  int eeprom_writes = 0;    // bytes programmed
   FrameDecoder out_decoder;
   LinkCounters out_counters{};
   int acks = 0, refusals = 0, telemetry = 0, versions = 0, statuses = 0, settings = 0;
@@ -42,8 +43,10 @@ struct Bench {
   eelproto::Setting last_setting{};
 
   explicit Bench(uint32_t t0 = 0) : now(t0) {
-    for (uint16_t& a : adc) a = 512;
+    for (uint16_t& a : adc) a = 512;  // the battery input too: 8.0 V behind the default divider
+    // A robot that has been set up: the defaults saved in slot 0.
     memset(eeprom, 0xFF, sizeof eeprom);
+    settings_to_image(eelproto::settings_defaults(), eeprom + settings_slot_address(0), 1);
     boot(kPowerOn);
   }
   void boot(uint8_t reset_flags) {
@@ -79,13 +82,23 @@ struct Bench {
       pass_end();
     }
   }
+  // The board's EEPROM for the SettingsWriter (instant here; app.h's pass writes one byte).
+  bool eeprom_ready() const { return true; }
+  uint8_t eeprom_read(uint16_t a) const { return eeprom[a]; }
+  void eeprom_write(uint16_t a, uint8_t v) {
+    ++eeprom_writes;
+    last_write_address = a;
+    if (!eeprom_fails) eeprom[a] = v;
+  }
+  uint16_t last_write_address = 0;
+  // The end of a pass: a save in progress runs to its end (a byte a pass on the robot).
   void pass_end() {
-    if (robot.save_requested()) {
+    for (;;) {
+      const SettingsWriter::Step st = robot.settings_writer().step(*this);
+      if (st == SettingsWriter::Step::Idle) break;
+      if (st == SettingsWriter::Step::Writing) continue;
       ++saves;
-      uint8_t image[kSettingsImageBytes];
-      robot.settings_image(image);
-      if (!eeprom_fails) memcpy(eeprom, image, sizeof image);
-      robot.save_done(memcmp(eeprom, image, sizeof image) == 0);
+      robot.save_done(st == SettingsWriter::Step::Written);
     }
     drain();
   }
@@ -516,7 +529,9 @@ TEST(a_corrupt_eeprom_boots_the_defaults_and_status_says_so) {
   Bench b;
   b.set(SettingKey::TrimUs, 0, 40.0f);
   b.send(eelproto::SaveSettings{});
-  b.eeprom[9] ^= 0x01;  // one bit of the stored settings
+  // One bit of the stored settings in each slot (the save went to slot 1, slot 0 has the defaults).
+  b.eeprom[settings_slot_address(0) + 9] ^= 0x01;
+  b.eeprom[settings_slot_address(1) + 9] ^= 0x01;
   b.boot(static_cast<uint8_t>(eelproto::ResetFlags::Watchdog));
   CHECK(b.robot.settings_source() == eelproto::SettingsSource::Corrupt);
   CHECK_EQ(b.robot.settings().trim_us[0], 0);
@@ -531,7 +546,7 @@ TEST(without_feedback_the_robot_says_so_and_measures_nothing) {
   b.run(100000);
   CHECK_EQ(b.last_telemetry.flags & bit(eelproto::Flags::JointFeedback), 0);
   for (int j = 0; j < cfg::kJoints; ++j) CHECK_EQ(b.last_telemetry.phi_mrad[j], -32768);
-  CHECK(!b.robot.wants_adc());
+  CHECK(b.robot.wants_adc());  // for the battery only (the default divider)
 }
 
 TEST(with_feedback_the_measured_angles_go_into_telemetry) {
@@ -623,4 +638,156 @@ TEST(low_battery_stops_the_robot_and_it_recovers_above_the_hysteresis) {
   b.run(10000);
   CHECK_NEAR(b.last_status.battery_v, 490 * 5.0 / 1024 * 3.0, 0.01);
   CHECK((b.last_status.flags & bit(eelproto::Flags::BatterySense)) != 0);
+}
+
+// ---------------------------------------------------------------- replays and the link watchdog
+
+TEST(a_replayed_last_frame_is_answered_but_does_not_hold_off_the_fade_or_failsafe) {
+  Bench b;
+  b.send(gait(1.5f));
+  b.send(eelproto::Start{});
+  const Bytes last = frame_of(offset(0.1f), b.seq++);
+  b.feed(last);
+  const int acks = b.acks;
+  // A stuck radio repeats the last frame every 50 ms for 3 s.
+  bool faded = false;
+  for (int k = 0; k < 60; ++k) {
+    b.run(50000);
+    b.feed(last);
+    faded = faded || (b.last_telemetry.flags & bit(eelproto::Flags::Fading)) != 0;
+    if (k == 18) CHECK(b.max_abs_alpha() < 1e-6f);  // 0.95 s after the last new frame: straight
+  }
+  CHECK(faded);
+  CHECK(b.robot.state() == State::Failsafe);
+  CHECK_EQ(b.acks, acks + 60);  // every copy answered as the first was
+  CHECK_EQ(b.robot.counters().duplicates, 60);
+}
+
+TEST(only_a_sequence_number_ahead_of_the_last_feeds_the_link_watchdog) {
+  Bench b;
+  b.send(eelproto::Start{});
+  b.run(500000);
+  const uint32_t fed_at = b.robot.watchdog().last_valid_us();
+  b.feed(frame_of(offset(0.2f), static_cast<uint8_t>(b.seq - 1)));  // same number, new content
+  b.feed(frame_of(offset(0.2f), static_cast<uint8_t>(b.seq - 5)));  // behind: an old frame
+  CHECK_EQ(b.robot.watchdog().last_valid_us(), fed_at);
+  b.feed(frame_of(offset(0.2f), b.seq++));  // the next number: the host is there
+  CHECK_EQ(b.robot.watchdog().last_valid_us(), b.now);
+}
+
+// ---------------------------------------------------------------- power-safe settings
+
+namespace {
+struct Assign {
+  SettingKey key;
+  uint8_t index;
+  float value;
+};
+bool same_settings(const eelproto::Settings& a, const eelproto::Settings& b) {
+  uint8_t x[eelproto::kSettingsBytes], y[eelproto::kSettingsBytes];
+  eelproto::settings_pack(a, x);
+  eelproto::settings_pack(b, y);
+  return memcmp(x, y, sizeof x) == 0;
+}
+// A bench booted from this EEPROM with these settings changed through SetSetting.
+void prepare(Bench& b, const uint8_t* eeprom, const Assign* a, size_t n) {
+  memcpy(b.eeprom, eeprom, sizeof b.eeprom);
+  b.boot(kPowerOn);
+  for (size_t k = 0; k < n; ++k) {
+    b.send(eelproto::SetSetting{static_cast<uint8_t>(a[k].key), a[k].index, a[k].value});
+  }
+}
+}  // namespace
+
+TEST(a_reset_at_any_byte_of_a_save_boots_the_old_or_the_new_settings) {
+  // Two saves one after the other (the first writes slot 1, the second overwrites slot 0 with the
+  // generation after), each cut while programming each of its bytes, that byte left erased, as
+  // it was, garbage or as meant.
+  const Assign first[] = {{SettingKey::TrimUs, 0, -40.0f}, {SettingKey::TrimUs, 3, 25.0f},
+                          {SettingKey::KpNmPerRad, 0, 2.5f}, {SettingKey::BatteryDivider, 0, 2.9f},
+                          {SettingKey::RadioId, 0, 4242.0f}};
+  const Assign second[] = {{SettingKey::KpNmPerRad, 0, 7.0f}, {SettingKey::TrimUs, 2, 123.0f}};
+  const Assign* saves[] = {first, second};
+  const size_t counts[] = {sizeof first / sizeof first[0], sizeof second / sizeof second[0]};
+  Bench ref;  // its EEPROM: the settings before the save
+  int cuts = 0;
+  for (int k = 0; k < 2; ++k) {
+    const eelproto::Settings old_settings = ref.robot.settings();
+    Bench full;  // the whole save, for the new settings and the bytes it programs
+    prepare(full, ref.eeprom, saves[k], counts[k]);
+    const int writes_before = full.eeprom_writes;
+    const int acks_before = full.acks;
+    full.send(eelproto::SaveSettings{});
+    CHECK_EQ(full.acks, acks_before + 1);
+    const eelproto::Settings new_settings = full.robot.settings();
+    CHECK(!same_settings(old_settings, new_settings));
+    const int n_bytes = full.eeprom_writes - writes_before;
+    CHECK(n_bytes > 8);
+    for (int cut = 0; cut < n_bytes; ++cut) {
+      for (int damage = 0; damage < 4; ++damage) {
+        Bench b;
+        prepare(b, ref.eeprom, saves[k], counts[k]);
+        const Bytes save = frame_of(eelproto::SaveSettings{}, b.seq++);
+        for (size_t i = 0; i < save.n; ++i) b.robot.on_rx_byte(save.data[i], b.now);
+        const int start = b.eeprom_writes;
+        while (b.eeprom_writes - start <= cut) {
+          CHECK(b.robot.settings_writer().step(b) == SettingsWriter::Step::Writing);
+        }
+        // the power fails while byte `cut` is being programmed
+        const uint8_t left[] = {0xFF, ref.eeprom[b.last_write_address], 0x5A,
+                                b.eeprom[b.last_write_address]};
+        b.eeprom[b.last_write_address] = left[damage];
+        b.boot(kPowerOn);
+        CHECK(b.robot.settings_source() == eelproto::SettingsSource::Eeprom);
+        const bool is_old = same_settings(b.robot.settings(), old_settings);
+        const bool is_new = same_settings(b.robot.settings(), new_settings);
+        CHECK(is_old || is_new);
+        CHECK(!b.robot.settings_lost());
+        if (cut < n_bytes - 4) CHECK(is_old);  // the CRC-32 goes in last
+        ++cuts;
+      }
+    }
+    memcpy(ref.eeprom, full.eeprom, sizeof ref.eeprom);
+    ref.boot(kPowerOn);
+    CHECK(same_settings(ref.robot.settings(), new_settings));
+  }
+  CHECK(cuts > 4 * 2 * 10);
+}
+
+TEST(with_no_valid_slot_the_defaults_keep_the_battery_stop_and_start_waits_for_the_host) {
+  Bench b;
+  memset(b.eeprom, 0xFF, sizeof b.eeprom);  // blank (also what a corrupt pair of slots gives)
+  b.boot(kPowerOn);
+  CHECK(b.robot.settings_source() == eelproto::SettingsSource::Blank);
+  CHECK(b.robot.settings().battery_divider > 0.0f);  // the low-voltage stop is armed
+  b.run(100000);
+  CHECK((b.last_telemetry.flags & bit(eelproto::Flags::SettingsLost)) != 0);
+  CHECK((b.last_telemetry.flags & bit(eelproto::Flags::BatterySense)) != 0);
+  b.send(eelproto::Start{});
+  CHECK_EQ(b.last_refuse_reason, why(eelproto::RefuseReason::SettingsLost));
+  CHECK(b.robot.state() == State::Idle);
+  b.adc[cfg::kBatteryInput] = 300;  // 4.7 V: the stop works with the defaults
+  b.run(5000000);
+  CHECK(b.robot.state() == State::LowBattery);
+  b.adc[cfg::kBatteryInput] = 512;
+  b.run(5000000);
+  CHECK(b.robot.state() == State::Idle);
+  b.send(eelproto::DefaultSettings{});  // the host acknowledges the defaults
+  const int acks = b.acks;
+  b.send(eelproto::Start{});
+  CHECK_EQ(b.acks, acks + 1);
+  CHECK(b.robot.state() == State::Running);
+  b.run(100000);
+  CHECK_EQ(b.last_telemetry.flags & bit(eelproto::Flags::SettingsLost), 0);
+}
+
+TEST(a_successful_save_also_acknowledges_lost_settings) {
+  Bench b;
+  memset(b.eeprom, 0xFF, sizeof b.eeprom);
+  b.boot(kPowerOn);
+  b.send(eelproto::SaveSettings{});
+  CHECK(!b.robot.settings_lost());
+  b.boot(kPowerOn);
+  CHECK(b.robot.settings_source() == eelproto::SettingsSource::Eeprom);
+  CHECK(!b.robot.settings_lost());
 }

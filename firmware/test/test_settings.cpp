@@ -54,7 +54,7 @@ TEST(the_defaults_are_the_documented_ones_and_valid) {
     CHECK_EQ(s.adc_centre[j], 512);
   }
   CHECK_EQ(s.joint_feedback, 0);
-  CHECK_EQ(s.battery_divider, 0.0f);
+  CHECK_EQ(s.battery_divider, 3.2f);  // the low-voltage stop armed by default
 }
 
 TEST(a_setting_reads_back_what_was_set_element_by_element) {

@@ -9,7 +9,7 @@ set -- $(avr-size --format=berkeley "$elf" | tail -n 1)
 text=$1 data=$2 bss=$3
 flash=$((text + data))
 ram=$((data + bss))
-echo "flash: $flash bytes of $flash_budget budget (.text $text + .data $data; chip 32768 - 2048 bootloader)"
+echo "flash: $flash bytes of $flash_budget budget (.text $text + .data $data; chip 32768 - 2048 bootloader = 30720, $((30720 - flash)) free)"
 echo "static RAM: $ram bytes of $ram_budget budget (.data $data + .bss $bss; chip 2048, rest is stack)"
 status=0
 if [ "$flash" -gt "$flash_budget" ]; then echo "FAIL: flash over budget by $((flash - flash_budget)) bytes"; status=1; fi

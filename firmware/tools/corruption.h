@@ -14,6 +14,7 @@
 #include "frame_codec.h"
 #include "message_codec.h"
 #include "robot.h"
+#include "settings_codec.h"
 #include "settings_store.h"
 #include "wire.h"
 
@@ -36,8 +37,10 @@ class CorruptionBench {
       : threshold_(static_cast<uint64_t>(p * 18446744073709551616.0)),
         rng_(seed | 1),
         refresh_crc16_(refresh_crc16) {
-    memset(blank_, 0xFF, sizeof blank_);
-    robot_.reset(0, BootInfo{1, 0, false}, blank_);
+    // A robot set up with the defaults saved (a blank EEPROM would refuse Start).
+    memset(eeprom_, 0xFF, sizeof eeprom_);
+    settings_to_image(eelproto::settings_defaults(), eeprom_, 1);
+    robot_.reset(0, BootInfo{1, 0, false}, eeprom_);
   }
 
   void run(uint64_t frames) {
@@ -181,7 +184,7 @@ class CorruptionBench {
   }
 
   Robot robot_;
-  uint8_t blank_[kSettingsImageBytes];
+  uint8_t eeprom_[kSettingsEepromBytes];
   FrameDecoder replies_;
   LinkCounters reply_counters_{};
   CorruptionStats stats_;

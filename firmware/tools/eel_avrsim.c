@@ -11,7 +11,20 @@
  *   - loads and saves the EEPROM (--eeprom-in FILE, --eeprom-out FILE: raw bytes, 1024),
  *   - resets the AVR through its reset pin at given times (--reset-at-us T[,T...]: MCUSR EXTRF),
  *   - makes the main loop hang at a time (--hang-at-us T: the program counter is sent to an endless
- *     loop, interrupts still on, as a firmware bug would), to see the watchdog reset it.
+ *     loop, interrupts still on, as a firmware bug would), to see the watchdog reset it,
+ *   - paints the RAM between the static data and the top with a pattern before the AVR starts and
+ *     reports how deep the stack reached (--stack-paint-from ADDR: the ELF's _end),
+ *   - reports the control period (rise to rise of the busy pin), failing (exit 1) when one falls
+ *     outside 10 ms +- --period-tolerance-us.
+ *
+ * Two corrections to simavr 1.6 make the emulated board behave as the real one (docs/firmware.md,
+ * "Measured figures"):
+ *   - simavr's UART takes 11 bit times a byte for 8N1 (it counts a parity bit), so it could feed
+ *     the robot only 90 % of the line rate; the harness sets the receiver's byte time to the true
+ *     10 bits at 57600 baud (--line-bytes-per-s 5760), the rate at which the XBee delivers bytes;
+ *   - simavr programs an EEPROM byte at once; the harness keeps EECR's EEPE bit set for the real
+ *     programming time (--eeprom-write-us 3400, the datasheet's 3.3-3.4 ms), so a firmware that
+ *     waits for the EEPROM waits as long as on the chip.
  *
  * Times are simulated microseconds from reset at --freq (16 MHz). Used by `make bench` and by the
  * tests.
@@ -22,6 +35,7 @@
  * (the eas_* functions below).
  */
 #include <inttypes.h>
+#include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -65,6 +79,12 @@ typedef struct {
 } adc_event_t;
 
 #define MAX_RESETS 16
+#define EECR_ADDR 0x3F  /* data address of EECR */
+#define EECR_EEPE 0x02
+#define RAMEND_ADDR 0x8FF
+#define STACK_PAINT 0xA5
+#define BATTERY_INPUT 6          /* A6: firmware/hal/avr/pins.h */
+#define BATTERY_DEFAULT_MV 2312  /* 7.4 V (charged 2S) behind the default 3.2 divider */
 #define MCUSR_ADDR 0x54 /* data address of MCUSR on the ATmega328P */
 #define MCUSR_EXTRF 0x02
 /* Last word of the 32 KB flash, beyond any image: where a hang is sent (an "rjmp ." there). */
@@ -87,6 +107,18 @@ typedef struct EasSim {
   pin_t busy;
   int have_busy;
   uint64_t busy_n, busy_sum, busy_min, busy_max;
+  /* control period: rise to rise of the busy pin */
+  avr_cycle_count_t last_rise;
+  uint64_t period_n, period_min, period_max, period_outside;
+  double period_tolerance_us;
+  /* UART receiver's byte time (cycles; 0: simavr's own) */
+  avr_cycle_count_t uart_cycles_per_byte;
+  avr_uart_t* uart;
+  /* EEPROM programming time (cycles) and the end of the byte in progress */
+  avr_cycle_count_t eeprom_write_cycles, eeprom_busy_until;
+  uint64_t eeprom_writes;
+  /* stack painting: from this data address to RAMEND (0: off) */
+  uint32_t paint_from;
   /* UART input: bytes queued by time, delivered in order when the UART takes them (XON) */
   timed_byte_t* in;
   size_t nin, cap_in, next_in;
@@ -160,6 +192,17 @@ static void on_busy_pin(struct avr_irq_t* irq, uint32_t value, void* param) {
   EasSim* s = (EasSim*)param;
   if (value && !s->busy.high) {
     s->busy.rise = s->avr->cycle;
+    if (s->last_rise) {
+      const uint64_t d = s->avr->cycle - s->last_rise;
+      ++s->period_n;
+      if (d < s->period_min) s->period_min = d;
+      if (d > s->period_max) s->period_max = d;
+      if (s->period_tolerance_us > 0 &&
+          fabs(cycles_to_us(s, d) - 10000.0) > s->period_tolerance_us) {
+        ++s->period_outside;
+      }
+    }
+    s->last_rise = s->avr->cycle;
   } else if (!value && s->busy.high) {
     uint64_t d = s->avr->cycle - s->busy.rise;
     ++s->busy_n;
@@ -193,6 +236,34 @@ static void on_xoff(struct avr_irq_t* irq, uint32_t value, void* param) {
   ((EasSim*)param)->xon = 0;
 }
 
+/* The EEPROM's programming time: a write of EECR that sets EEPE starts it; until it ends, reads
+ * of EECR show EEPE set, as on the chip (simavr itself clears it at once). */
+static void on_eecr_write(struct avr_t* avr, avr_io_addr_t addr, uint8_t v, void* param) {
+  (void)addr;
+  EasSim* s = (EasSim*)param;
+  if ((v & EECR_EEPE) && s->eeprom_write_cycles) {
+    s->eeprom_busy_until = avr->cycle + s->eeprom_write_cycles;
+    ++s->eeprom_writes;
+  }
+}
+
+static uint8_t on_eecr_read(struct avr_t* avr, avr_io_addr_t addr, void* param) {
+  EasSim* s = (EasSim*)param;
+  uint8_t v = avr->data[addr] & (uint8_t)~EECR_EEPE;
+  if (avr->cycle < s->eeprom_busy_until) v |= EECR_EEPE;
+  return v;
+}
+
+/* The UART receiver module of simavr (its byte time is corrected in apply_due_events). */
+static avr_uart_t* find_uart0(avr_t* avr) {
+  for (avr_io_t* io = avr->io_port; io; io = io->next) {
+    if (io->kind && !strcmp(io->kind, "uart") && ((avr_uart_t*)io)->name == '0') {
+      return (avr_uart_t*)io;
+    }
+  }
+  return NULL;
+}
+
 /* ------------------------------------------------------------------ API (also used by main) */
 
 /* Load the ELF and reset the AVR; NULL (with a message on stderr) when that fails. */
@@ -217,6 +288,7 @@ EasSim* eas_create(const char* elf, const char* mcu, unsigned long freq) {
   s->avr = avr;
   s->cycles_per_us = (double)freq / 1e6;
   s->busy_min = UINT64_MAX;
+  s->period_min = UINT64_MAX;
   s->state = cpu_Running;
   avr_init(avr);
   avr_load_firmware(avr, &fw);
@@ -233,7 +305,43 @@ EasSim* eas_create(const char* elf, const char* mcu, unsigned long freq) {
   avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUT_XOFF),
                           on_xoff, s);
   s->uart_input = avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_INPUT);
+  s->uart = find_uart0(avr);
+  s->uart_cycles_per_byte = (avr_cycle_count_t)(freq / 5760.0);  /* 8N1 at 57600 baud */
+  s->eeprom_write_cycles = (avr_cycle_count_t)(3400.0 * s->cycles_per_us);
+  avr_register_io_write(avr, EECR_ADDR, on_eecr_write, s);
+  avr_register_io_read(avr, EECR_ADDR, on_eecr_read, s);
+  /* A charged battery behind the default divider, until told otherwise (--adc). */
+  avr_raise_irq(avr_io_getirq(avr, AVR_IOCTL_ADC_GETIRQ, ADC_IRQ_ADC0 + BATTERY_INPUT),
+                BATTERY_DEFAULT_MV);
   return s;
+}
+
+/* Byte time of the UART receiver: line_bytes_per_s (5760 for 8N1 at 57600 baud, the default),
+ * or 0 for simavr's own (11 bit times a byte). */
+void eas_set_line_rate(EasSim* s, double line_bytes_per_s) {
+  s->uart_cycles_per_byte =
+      line_bytes_per_s > 0 ? (avr_cycle_count_t)(s->cycles_per_us * 1e6 / line_bytes_per_s) : 0;
+}
+
+/* Programming time of an EEPROM byte, us (3400 by default; 0: at once, as simavr). */
+void eas_set_eeprom_write_us(EasSim* s, double us) {
+  s->eeprom_write_cycles = (avr_cycle_count_t)(us * s->cycles_per_us);
+}
+
+/* Fill the RAM from data address `from` (the ELF's _end) to RAMEND with a pattern, before the AVR
+ * runs; eas_stack_peak then tells how deep the stack went. */
+void eas_paint_stack(EasSim* s, uint32_t from) {
+  if (from < 0x100 || from > RAMEND_ADDR) return;
+  s->paint_from = from;
+  memset(s->avr->data + from, STACK_PAINT, RAMEND_ADDR + 1 - from);
+}
+
+/* Bytes of RAM below RAMEND that the stack has written (0 without painting). */
+uint32_t eas_stack_peak(const EasSim* s) {
+  if (!s->paint_from) return 0;
+  uint32_t a = s->paint_from;
+  while (a <= RAMEND_ADDR && s->avr->data[a] == STACK_PAINT) ++a;
+  return RAMEND_ADDR + 1 - a;
 }
 
 void eas_destroy(EasSim* s) {
@@ -312,6 +420,8 @@ int eas_eeprom(EasSim* s, uint8_t* buf, uint32_t n, int to_avr) {
 
 static void apply_due_events(EasSim* s) {
   avr_t* avr = s->avr;
+  /* simavr recomputes the byte time whenever the firmware sets the baud rate: correct it. */
+  if (s->uart && s->uart_cycles_per_byte) s->uart->cycles_per_byte = s->uart_cycles_per_byte;
   while (s->xon && s->next_in < s->nin && s->in[s->next_in].at <= avr->cycle) {
     avr_raise_irq(s->uart_input, s->in[s->next_in++].byte);
   }
@@ -464,7 +574,9 @@ static void usage(void) {
           "usage: eel_avrsim --elf FILE [--mcu atmega328p] [--freq 16000000] [--run-ms 1000]\n"
           "       [--uart-in FILE] [--uart-out FILE] [--pulse-pins D2,D3,...] [--pulses FILE]\n"
           "       [--busy-pin D7] [--budget-us N] [--adc FILE] [--eeprom-in FILE]\n"
-          "       [--eeprom-out FILE] [--reset-at-us T[,T...]] [--hang-at-us T]\n");
+          "       [--eeprom-out FILE] [--reset-at-us T[,T...]] [--hang-at-us T]\n"
+          "       [--line-bytes-per-s 5760] [--eeprom-write-us 3400] [--stack-paint-from ADDR]\n"
+          "       [--period-tolerance-us 300]\n");
   exit(2);
 }
 
@@ -472,7 +584,8 @@ int main(int argc, char** argv) {
   const char *elf = NULL, *mcu = "atmega328p", *uart_in = NULL, *uart_out = NULL;
   const char *pulses = NULL, *pulse_pins = NULL, *busy = NULL, *adc = NULL;
   const char *eeprom_in = NULL, *eeprom_out = NULL, *reset_at = NULL;
-  double hang_at_us = 0.0;
+  double hang_at_us = 0.0, line_rate = 5760.0, eeprom_write_us = 3400.0, tolerance_us = 0.0;
+  unsigned long paint_from = 0;
   unsigned long freq = 16000000UL;
   double run_ms = 1000.0, budget_us = 0.0;
   for (int i = 1; i < argc; ++i) {
@@ -494,12 +607,20 @@ int main(int argc, char** argv) {
     else if (!strcmp(a, "--eeprom-out")) eeprom_out = v;
     else if (!strcmp(a, "--reset-at-us")) reset_at = v;
     else if (!strcmp(a, "--hang-at-us")) hang_at_us = strtod(v, NULL);
+    else if (!strcmp(a, "--line-bytes-per-s")) line_rate = strtod(v, NULL);
+    else if (!strcmp(a, "--eeprom-write-us")) eeprom_write_us = strtod(v, NULL);
+    else if (!strcmp(a, "--stack-paint-from")) paint_from = strtoul(v, NULL, 0);
+    else if (!strcmp(a, "--period-tolerance-us")) tolerance_us = strtod(v, NULL);
     else usage();
   }
   if (!elf || freq == 0 || run_ms <= 0) usage();
 
   EasSim* sim = eas_create(elf, mcu, freq);
   if (!sim) exit(2);
+  eas_set_line_rate(sim, line_rate);
+  eas_set_eeprom_write_us(sim, eeprom_write_us);
+  sim->period_tolerance_us = tolerance_us;
+  if (paint_from) eas_paint_stack(sim, (uint32_t)paint_from);
   if (uart_in) read_uart_input(sim, uart_in);
   if (adc) read_adc_input(sim, adc);
   if (eeprom_in) eeprom_file(sim, eeprom_in, 1);
@@ -539,6 +660,11 @@ int main(int argc, char** argv) {
          sim->nin, sim->uart_out_n);
   if (sim->npins) printf("pulses: %" PRIu64 " on %d pins\n", sim->pulses_n, sim->npins);
   printf("watchdog resets: %" PRIu64 "\n", sim->watchdog_resets);
+  printf("eeprom writes: %" PRIu64 " bytes\n", sim->eeprom_writes);
+  if (sim->paint_from) {
+    printf("stack peak: %" PRIu32 " bytes (painted from 0x%04" PRIx32 " to RAMEND 0x%04x)\n",
+           eas_stack_peak(sim), sim->paint_from, RAMEND_ADDR);
+  }
   if (eeprom_out) eeprom_file(sim, eeprom_out, 0);
   int status = 0;
   if (sim->state == cpu_Crashed) {
@@ -557,9 +683,21 @@ int main(int argc, char** argv) {
       printf("control update time: min=%.1f us mean=%.1f us max=%.1f us at %.0f MHz\n",
              cycles_to_us(sim, sim->busy_min), mean / sim->cycles_per_us,
              cycles_to_us(sim, sim->busy_max), sim->cycles_per_us);
+      if (sim->period_n) {
+        printf("control period: n=%" PRIu64 " min=%.1f us max=%.1f us, %" PRIu64
+               " outside 10000 +- %.0f us\n",
+               sim->period_n, cycles_to_us(sim, sim->period_min),
+               cycles_to_us(sim, sim->period_max), sim->period_outside, sim->period_tolerance_us);
+      }
       if (budget_us > 0) {
         const int ok = cycles_to_us(sim, sim->busy_max) <= budget_us;
         printf("budget: %.0f us: %s\n", budget_us, ok ? "OK" : "FAIL (over budget)");
+        if (!ok) status = 1;
+      }
+      if (sim->period_tolerance_us > 0) {
+        const int ok = sim->period_outside == 0;
+        printf("period: 10000 +- %.0f us: %s\n", sim->period_tolerance_us,
+               ok ? "OK" : "FAIL (periods outside)");
         if (!ok) status = 1;
       }
     }

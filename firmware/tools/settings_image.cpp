@@ -39,7 +39,7 @@ int main(int argc, char** argv) {
   }
   uint8_t eeprom[1024];
   memset(eeprom, 0xFF, sizeof eeprom);
-  settings_to_image(s, eeprom + kSettingsEepromAddress);
+  settings_to_image(s, eeprom + settings_slot_address(0), 1);  // slot 1 stays erased
   FILE* f = fopen(argv[1], "wb");
   if (f == nullptr || fwrite(eeprom, 1, sizeof eeprom, f) != sizeof eeprom || fclose(f) != 0) {
     fprintf(stderr, "settings_image: cannot write %s\n", argv[1]);

@@ -22,9 +22,13 @@ struct Hal {
   // the control update runs; adc_wait() returns the readings (at most 2 ms later).
   void adc_start();
   const uint16_t* adc_wait();
-  void eeprom_load(uint16_t address, uint8_t* out, uint8_t n);
-  // Writes the bytes that differ (3.4 ms each, kicking the watchdog), then reads back.
-  bool eeprom_store(uint16_t address, const uint8_t* data, uint8_t n);
+  void eeprom_load(uint16_t address, uint8_t* out, uint16_t n);
+  // The EEPROM takes a byte (no write in progress); read one byte (only when ready: a read waits
+  // for a write in progress); start programming one byte (~3.4 ms, then ready again). Used by
+  // SettingsWriter, one byte a loop pass.
+  bool eeprom_ready();
+  uint8_t eeprom_read(uint16_t address);
+  void eeprom_write(uint16_t address, uint8_t value);
   void kick_watchdog();
 
  private:

@@ -99,17 +99,18 @@ const uint16_t* Hal::adc_wait() {
   return adc_;
 }
 
-void Hal::eeprom_load(uint16_t address, uint8_t* out, uint8_t n) {
+void Hal::eeprom_load(uint16_t address, uint8_t* out, uint16_t n) {
   eeprom_read_block(out, reinterpret_cast<const void*>(address), n);
 }
 
-bool Hal::eeprom_store(uint16_t address, const uint8_t* data, uint8_t n) {
-  bool ok = true;
-  for (uint8_t i = 0; i < n; ++i) {
-    uint8_t* at = reinterpret_cast<uint8_t*>(address + i);
-    eeprom_update_byte(at, data[i]);
-    wdt_reset();
-    ok = ok && eeprom_read_byte(at) == data[i];
-  }
-  return ok;
+bool Hal::eeprom_ready() { return eeprom_is_ready(); }
+
+uint8_t Hal::eeprom_read(uint16_t address) {
+  return eeprom_read_byte(reinterpret_cast<const uint8_t*>(address));
+}
+
+// avr-libc waits for the EEPROM to be ready first (it is: SettingsWriter asked), sets the address
+// and data, and starts the programming with interrupts off for the 4-cycle EEMPE/EEPE sequence.
+void Hal::eeprom_write(uint16_t address, uint8_t value) {
+  eeprom_write_byte(reinterpret_cast<uint8_t*>(address), value);
 }

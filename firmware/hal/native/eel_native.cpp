@@ -7,6 +7,7 @@
 
 #include "app.h"
 #include "joint_loop.h"
+#include "settings_codec.h"
 
 struct EelFw {
   Robot robot;
@@ -22,6 +23,9 @@ static_assert(EEL_BATTERY_INPUT == cfg::kBatteryInput, "eel_native.h: the batter
 static_assert(EEL_EEPROM_BYTES == kEepromBytes, "eel_native.h: the EEPROM size changed");
 
 namespace {
+// 7.4 V / 3.2 (the default divider) = 2.31 V at the pin: counts = V * 1024 / 5 V.
+constexpr uint16_t kChargedBatteryCounts = 474;
+
 void boot(EelFw* fw, uint32_t now_us, uint8_t reset_flags) {
   const Hal old = fw->hal;
   fw->hal = Hal();
@@ -29,9 +33,9 @@ void boot(EelFw* fw, uint32_t now_us, uint8_t reset_flags) {
   fw->hal.eeprom_failing = old.eeprom_failing;  // the hardware stays as it was
   for (uint8_t i = 0; i < cfg::kAdcInputs; ++i) fw->hal.adc[i] = old.adc[i];
   const BootInfo info{reset_flags, count_reset(fw->reset_record, reset_flags), false};
-  uint8_t image[kSettingsImageBytes];
-  fw->hal.eeprom_load(kSettingsEepromAddress, image, sizeof image);
-  fw->robot.reset(now_us, info, image);
+  uint8_t eeprom[kSettingsEepromBytes];
+  fw->hal.eeprom_load(kSettingsEepromAddress, eeprom, sizeof eeprom);
+  fw->robot.reset(now_us, info, eeprom);
   fw->robot.set_control_period_us(fw->control_period_us);
   fw->hal.servo_write_us(fw->robot.pulse_us());
 }
@@ -46,7 +50,12 @@ uint16_t eel_schema_hash(void) { return eelproto::kSchemaHash; }
 EelFw* eel_create(uint32_t now_us) {
   EelFw* fw = new (std::nothrow) EelFw();
   if (fw != nullptr) {
+    // A robot that has been set up: the defaults saved in slot 0 (a blank EEPROM would leave
+    // Start refused until the host acknowledged the defaults), and a charged 2S battery (7.4 V)
+    // behind the default divider, so that the default low-voltage stop sees a healthy battery.
     memset(fw->eeprom, 0xFF, sizeof fw->eeprom);
+    settings_to_image(eelproto::settings_defaults(), fw->eeprom + settings_slot_address(0), 1);
+    fw->hal.adc[cfg::kBatteryInput] = kChargedBatteryCounts;
     eel_reset(fw, now_us);
   }
   return fw;

@@ -52,7 +52,10 @@ typedef struct EelStatus {
 
 uint32_t eel_abi_version(void);
 uint16_t eel_schema_hash(void);
-/* A firmware instance in its boot state at now_us, EEPROM erased; NULL when out of memory. */
+/* A firmware instance in its boot state at now_us, as a robot that has been set up: the default
+ * settings saved in EEPROM slot 0 (erase the EEPROM with eel_eeprom_write for a factory-fresh one),
+ * a charged 2S battery (7.4 V) on the battery input behind the default divider. NULL when out of
+ * memory. */
 EelFw* eel_create(uint32_t now_us);
 void eel_destroy(EelFw* fw);
 /* Back to the boot state as after a power cycle: queues emptied, control period 10000 us, reset

@@ -21,6 +21,7 @@ struct Hal {
   uint32_t busy_edges = 0;    // counts busy_pin() calls, so tests can see control updates happen
   uint32_t adc_sweeps = 0;
   uint32_t watchdog_kicks = 0;
+  uint32_t eeprom_writes = 0;  // bytes programmed
   bool eeprom_failing = false;  // writes do not stick (a worn EEPROM)
   bool tx_stalled = false;      // the UART takes no bytes
 
@@ -37,15 +38,17 @@ struct Hal {
   void busy_pin(bool /*on*/) { ++busy_edges; }
   void adc_start() { ++adc_sweeps; }
   const uint16_t* adc_wait() { return adc; }
-  void eeprom_load(uint16_t address, uint8_t* out, uint8_t n) const {
-    for (uint8_t i = 0; i < n; ++i) {
-      out[i] = (eeprom != nullptr && address + i < kEepromBytes) ? eeprom[address + i] : 0xFF;
-    }
+  void eeprom_load(uint16_t address, uint8_t* out, uint16_t n) const {
+    for (uint16_t i = 0; i < n; ++i) out[i] = eeprom_read(static_cast<uint16_t>(address + i));
   }
-  bool eeprom_store(uint16_t address, const uint8_t* data, uint8_t n) {
-    if (eeprom == nullptr || address + n > kEepromBytes) return false;
-    if (!eeprom_failing) memcpy(eeprom + address, data, n);
-    return memcmp(eeprom + address, data, n) == 0;  // read back, as the AVR does
+  // Programming is instant here; a worn EEPROM (eeprom_failing) keeps its old bytes.
+  bool eeprom_ready() const { return true; }
+  uint8_t eeprom_read(uint16_t address) const {
+    return (eeprom != nullptr && address < kEepromBytes) ? eeprom[address] : 0xFF;
+  }
+  void eeprom_write(uint16_t address, uint8_t byte) {
+    ++eeprom_writes;
+    if (eeprom != nullptr && address < kEepromBytes && !eeprom_failing) eeprom[address] = byte;
   }
   void kick_watchdog() { ++watchdog_kicks; }
 };

@@ -21,7 +21,7 @@ from eelhost.wire.framing import (  # noqa: F401 (part of this module's interfac
 )
 from eelhost.wire.messages import SettingInfo, WireMessage, bind_message, wire_field
 
-SCHEMA_HASH = 0xB684
+SCHEMA_HASH = 0x6695
 PROTOCOL_VERSION = 2
 HEADER_BYTES = 4
 CRC_BYTES = 2
@@ -84,6 +84,9 @@ class RefuseReason(IntEnum):
     LOW_BATTERY = 5
     #: The EEPROM did not read back what was written.
     STORAGE_FAILED = 6
+    #: START while the stored settings were lost (flag SETTINGS_LOST): DefaultSettings or a
+    #: SaveSettings first.
+    SETTINGS_LOST = 7
 
 
 class Flags(IntFlag):
@@ -99,6 +102,9 @@ class Flags(IntFlag):
     HW_WATCHDOG = 8
     #: Settings were changed since they were last loaded or saved.
     SETTINGS_UNSAVED = 16
+    #: No valid stored settings at boot: the defaults are in use and START is refused until the
+    #: host acknowledges them (DefaultSettings, or a SaveSettings that succeeds).
+    SETTINGS_LOST = 32
 
 
 class ResetFlags(IntFlag):
@@ -165,8 +171,9 @@ class SettingKey(IntEnum):
     #: Torque per radian of the servo's own position loop: with feedback, a PD torque u is
     #: commanded as phi + u / stiffness.
     SERVO_STIFFNESS_NM_PER_RAD = 14
-    #: Battery volts per volt at pin A6 (a 22k over 10k divider: 3.2); 0: none fitted, no battery
-    #: reading, no low-voltage stop.
+    #: Battery volts per volt at pin A6 (3.2: the 22k over 10k divider of the wiring); 0: none
+    #: fitted, no battery reading, no low-voltage stop. The default keeps the stop armed: a robot
+    #: without a divider sets 0 and saves.
     BATTERY_DIVIDER = 15
     #: Filtered battery voltage below which the robot straightens and stops (state LOW_BATTERY);
     #: 6.4 V: 3.2 V a cell of a 2S LiPo.
@@ -328,13 +335,13 @@ class SetSetting(WireMessage):
 @bind_message(MsgId.SAVE_SETTINGS, to_robot=True)
 @dataclass(frozen=True)
 class SaveSettings(WireMessage):
-    """Write the settings in use to the EEPROM (Ack once written and read back)."""
+    """Write the settings to the EEPROM slot not in use (Ack once written and read back)."""
 
 
 @bind_message(MsgId.DEFAULT_SETTINGS, to_robot=True)
 @dataclass(frozen=True)
 class DefaultSettings(WireMessage):
-    """Put every setting back to its default in RAM (SaveSettings stores them)."""
+    """Every setting back to its default in RAM; acknowledges lost settings (SETTINGS_LOST)."""
 
 
 @bind_message(MsgId.GET_STATUS, to_robot=True)
@@ -638,9 +645,10 @@ SETTINGS: dict[str, SettingInfo] = {
         "commanded as phi + u / stiffness."
     ),
     "battery_divider": SettingInfo(
-        "battery_divider", 15, "f32", 1, 0.0, 20.0, 0.0,
-        "Battery volts per volt at pin A6 (a 22k over 10k divider: 3.2); 0: none fitted, no "
-        "battery reading, no low-voltage stop."
+        "battery_divider", 15, "f32", 1, 0.0, 20.0, 3.2,
+        "Battery volts per volt at pin A6 (3.2: the 22k over 10k divider of the wiring); 0: "
+        "none fitted, no battery reading, no low-voltage stop. The default keeps the stop "
+        "armed: a robot without a divider sets 0 and saves."
     ),
     "battery_low_v": SettingInfo(
         "battery_low_v", 16, "f32", 1, 3.0, 30.0, 6.4,
