@@ -13,13 +13,20 @@ Every ``eelbot`` command that can take more than a few seconds reports its progr
 prints its error messages with it), :func:`console` does the same for everything a command prints
 and logs while bars are drawn, and :func:`close_all` ends every bar still open (before an error
 message, when a command fails half-way).
+
+:func:`phase` is for a stage that has nothing to count as it goes (a cross-validation, a
+bootstrap, a validation whose work happens inside a library call): it shows the stage's name and
+the time it has taken, refreshed by a background thread (every second on a bar, a line every
+5 s in plain form), so that no stage of a command is silent for more than a few seconds
+(docs/cli.md, "Progress").
 """
 
 from __future__ import annotations
 
 import sys
+import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from types import TracebackType
 from typing import Any, TextIO
@@ -35,6 +42,7 @@ __all__ = [
     "console",
     "message",
     "mode",
+    "phase",
     "set_mode",
 ]
 
@@ -147,6 +155,8 @@ class Progress:
         In ``plain`` form, the seconds between two lines (default :data:`PLAIN_INTERVAL_S`).
     stream : file, optional
         Where it goes (default stderr, read when the progress starts).
+    elapsed_only : bool
+        Show the time taken instead of a count (:func:`phase`).
     """
 
     def __init__(
@@ -156,6 +166,7 @@ class Progress:
         unit: str = "it",
         interval_s: float | None = None,
         stream: TextIO | None = None,
+        elapsed_only: bool = False,
     ) -> None:
         self.desc = desc
         self.total = total
@@ -170,9 +181,11 @@ class Progress:
         self._closed = False
         self._failed = False
         self._bar: tqdm | None = None
+        self._elapsed_only = elapsed_only
         if self._form == "bar":
             self._bar = tqdm(
-                total=total, unit=unit, desc=desc, file=self._stream
+                total=total, unit=unit, desc=desc, file=self._stream,
+                bar_format="{desc}: {elapsed}{postfix}" if elapsed_only else None,
             )
         _open.add(self)
 
@@ -230,6 +243,13 @@ class Progress:
 
     def _line(self, final: bool = False) -> None:
         elapsed = time.monotonic() - self._t0
+        if self._elapsed_only:
+            state = ("stopped after" if self._failed else "done in") if final else "for"
+            extra = "".join(f", {k} {v}" for k, v in self._postfix.items())
+            self._stream.write(f"{time.strftime('%H:%M:%S')} {self.desc}: {state} "
+                               f"{elapsed:.0f} s{extra}\n")
+            self._stream.flush()
+            return
         count = f"{self.n}/{self.total}" if self.total is not None else f"{self.n}"
         percent = f" ({100.0 * self.n / self.total:.0f} %)" if self.total else ""
         extra = "".join(f", {k} {v}" for k, v in self._postfix.items())
@@ -239,3 +259,47 @@ class Progress:
             f"{extra}, {elapsed:.0f} s\n"
         )
         self._stream.flush()
+
+
+@contextmanager
+def phase(desc: str, status: Callable[[], dict[str, Any]] | None = None,
+          tick_s: float = 1.0) -> Iterator[Progress]:
+    """Show a stage that has nothing to count as it goes: its name and the time it has taken.
+
+    A background thread refreshes it every ``tick_s`` (a bar shows the time; the plain form
+    writes a line every :data:`PLAIN_INTERVAL_S`, and one at the end if it lasted that long).
+
+    Parameters
+    ----------
+    desc : str
+        The stage (``"cross-validation of 6 candidate models"``).
+    status : callable, optional
+        Called at each refresh; its values are shown after the time (``sims=1200``).
+    tick_s : float
+        Seconds between refreshes.
+
+    Yields
+    ------
+    Progress
+        Its display (``set_postfix`` works on it too).
+    """
+    shown = Progress(desc, None, "s", elapsed_only=True)
+    stop = threading.Event()
+
+    def tick() -> None:
+        while not stop.wait(tick_s):
+            if status is not None:
+                shown.set_postfix(**status())
+            shown.set(int(time.monotonic() - shown._t0))
+
+    thread = threading.Thread(target=tick, name=f"progress: {desc}", daemon=True)
+    thread.start()
+    try:
+        yield shown
+    except BaseException:
+        shown._failed = True
+        raise
+    finally:
+        stop.set()
+        thread.join()  # no refresh after the last line
+        shown.close()

@@ -104,3 +104,24 @@ def test_lines_printed_during_a_bar_start_a_line_of_their_own(monkeypatch):
     before = text[: text.index("straight: fitness")]
     assert before.endswith(("\r", "\n")) and "straight: fitness 0.0123\n" in text
     assert text.endswith("\n")  # a closed bar leaves the line to what comes next
+
+
+def test_a_phase_without_counts_still_says_every_few_seconds_how_long_it_has_taken(monkeypatch):
+    import io
+    import time as _time
+
+    from eelhost import progress as prog
+
+    monkeypatch.setattr(prog, "PLAIN_INTERVAL_S", 0.2)
+    prog.set_mode("plain")
+    stream = io.StringIO()
+    monkeypatch.setattr(prog.sys, "stderr", stream)
+    try:
+        with prog.phase("cross-validation", lambda: {"sims": 7}, tick_s=0.05):
+            _time.sleep(0.9)  # a library call that reports nothing
+    finally:
+        prog.set_mode("auto")
+    lines = stream.getvalue().splitlines()
+    assert len(lines) >= 3 and all("cross-validation:" in line for line in lines)
+    assert "for " in lines[0] and "sims 7" in lines[0]
+    assert "done in" in lines[-1] and "\x1b" not in stream.getvalue()

@@ -11,7 +11,7 @@ from eelhost.estimation.evaluate import ALIGN_S
 from eelhost.estimation.pipeline import CoefficientsError, read_coefficients
 from eelhost.estimation.validate import table_csv, table_markdown, validate
 from eelhost.files import atomic_write, check_output_folder
-from eelhost.progress import Progress
+from eelhost.progress import phase
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -62,11 +62,10 @@ def run(args: argparse.Namespace) -> int:
         if model.current_text() is not None:
             print(f"{name}: simulated in the fitted ambient current, {model.current_text()}, "
                   "added to each experiment's declared current")
-    with Progress("validate", 2, "stage") as bar:  # the simulations, then the figures
+    with phase(f"validate: {len(tests)} held-out experiments in the twin"):
         runs = validate(dataset.robot, fitted, tests, backend=args.backend, align_s=args.align)
-        bar.set(1)
+    with phase("validate: tables and figures"):
         _write_tables_and_figures(runs, Path(args.out))
-        bar.set(2)
     print(table_markdown([r.row for r in runs]))
     print(f"wrote {args.out}/table4.md, table4.csv and figures")
     return 0

@@ -27,6 +27,7 @@ from eelhost.estimation.optimise import FitResult
 from eelhost.estimation.parameters import ParameterSpace
 from eelhost.estimation.pipeline import FitSettings, fit_motion
 from eelhost.estimation.selection import CandidateScore, cross_validate, recommend
+from eelhost.progress import phase
 
 log = logging.getLogger(__name__)
 
@@ -116,7 +117,8 @@ def fit_and_choose(
     separate = {m: (r.space, r.values) for m, r in fits.items() if m != "joint"}
     if not (compare and separate):
         return ChosenFits(fits, evaluators)
-    comparison = cross_validate(dataset, separate, settings, laws=laws, say=say)
+    with phase(f"cross-validation of the candidate models ({', '.join(separate)})"):
+        comparison = cross_validate(dataset, separate, settings, laws=laws, say=say)
     choice = recommend(comparison)
     own = next(iter(fits.values())).space.model_name
     say(f"recommended model: {choice.model}")

@@ -36,6 +36,7 @@ from eelhost.estimation.validate import (
     validate,
     worst_ex,
 )
+from eelhost.progress import phase
 
 log = logging.getLogger(__name__)
 
@@ -120,12 +121,15 @@ def run_report(
         ev = chosen.evaluators[motion]
         t0 = time.perf_counter()
         extra["simulations"][motion] = res.simulations
-        ident = identifiability(ev, res.values)
+        with phase(f"identifiability of the {motion} fit"):
+            ident = identifiability(ev, res.values)
         extra["identifiability"][motion] = ident.to_json()
         boot = None
         if bootstrap_replicates > 0:
-            boot = parametric_bootstrap(ev, res.values, res.fitness, bootstrap_replicates,
-                                        seed=settings.seed, unidentified=ident.unidentified())
+            with phase(f"bootstrap of the {motion} fit ({bootstrap_replicates} refits)"):
+                boot = parametric_bootstrap(ev, res.values, res.fitness, bootstrap_replicates,
+                                            seed=settings.seed,
+                                            unidentified=ident.unidentified())
             extra["uncertainty"][motion] = boot.to_json()
             say(f"{motion}: noise floor {boot.noise_floor:.4f}, fitness / noise floor {boot.excess:.1f}")
         extra["warnings"] += fit_warnings(motion, res.space, res.values, boot)
@@ -142,16 +146,19 @@ def run_report(
         }
     tests = dataset.held_out
     if chosen.robot_file_fits:
-        own_runs = validate(dataset.robot, {m: r.model for m, r in chosen.robot_file_fits.items()},
-                            tests, backend=settings.backend)
+        with phase("validation of the robot file's model on the held-out experiments"):
+            own_runs = validate(dataset.robot,
+                                {m: r.model for m, r in chosen.robot_file_fits.items()},
+                                tests, backend=settings.backend)
         extra["robot_file_fits"] = {
             "fits": {m: r.to_json() for m, r in chosen.robot_file_fits.items()},
             "worst_Ex_unaligned_BL": worst_ex(own_runs),
         }
     if dataset.truth:
         extra["truth"] = {m: c.model_dump() for m, c in dataset.truth.items()}
-    runs = validate(dataset.robot, {m: r.model for m, r in fits.items()}, tests,
-                    backend=settings.backend)
+    with phase("validation on the held-out experiments"):
+        runs = validate(dataset.robot, {m: r.model for m, r in fits.items()}, tests,
+                        backend=settings.backend)
     write_coefficients(out / "coefficients.json", fits, extra, robot=dataset.robot)
     (out / "table4.md").write_text(table_markdown([r.row for r in runs]) + "\n")
     (out / "table4.csv").write_text(table_csv([r.row for r in runs]))
