@@ -62,7 +62,12 @@ class RobotLink:
 @pytest.fixture
 def link(rig):
     serial = pytest.importorskip("serial")
-    port = serial.Serial(rig["port"], rig["baud"], timeout=0.02)
+    try:
+        port = serial.Serial(rig["port"], rig["baud"], timeout=0.02)
+    except serial.SerialException as err:
+        # no robot there: one line for the whole run, not a traceback per test
+        pytest.exit(f"hardware tests: {err}; plug the robot in, or give its port with --port",
+                    returncode=2)
     time.sleep(rig["boot_wait_s"])  # opening the port may reset the Nano
     port.reset_input_buffer()
     robot = RobotLink(port)

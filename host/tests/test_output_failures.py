@@ -155,3 +155,16 @@ def test_campaign_write_plan_keeps_an_edited_plan_unless_forced(tmp_path, capsys
     assert plan.read_text().endswith("# edited\n")
     assert cli.main(["campaign", "--write-plan", str(plan), "--force"]) == 0
     assert "# edited" not in plan.read_text()
+
+
+def test_the_hardware_tests_without_a_robot_say_so_in_one_line():
+    repo = Path(__file__).resolve().parents[2]
+    port = "/dev/eelbot-no-robot-here"
+    proc = subprocess.run([sys.executable, "-m", "pytest", "hil_tests", "-m", "hardware",
+                           "--port", port, "-q", "-p", "no:cacheprovider"], cwd=repo,
+                          capture_output=True, text=True, check=False, env=ENV, timeout=300)
+    out = proc.stdout + proc.stderr
+    assert proc.returncode != 0
+    assert "hardware tests:" in out and f"could not open port {port}" in out
+    assert "plug the robot in" in out
+    assert "Traceback" not in out and "SerialException" not in out and len(out) < 1000
