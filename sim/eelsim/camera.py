@@ -211,8 +211,12 @@ def observed_positions(
         When ``steps`` lacks a step the query times need.
     """
     times = np.asarray(times_s, dtype=float)
+    # a run that blew up (infinite states) has no camera view there, as one that ended (NaN):
+    # NaN passes through the arithmetic below silently, where inf times a zero weight is invalid
     position = np.asarray(position_m, dtype=float)
     velocity = np.asarray(velocity_m_s, dtype=float)
+    position = np.where(np.isfinite(position), position, np.nan)
+    velocity = np.where(np.isfinite(velocity), velocity, np.nan)
     index = {int(s): i for i, s in enumerate(steps)}
     frame = np.floor(times * camera.fps + 1e-9).astype(np.int64)
     between = times * camera.fps - frame
@@ -246,9 +250,12 @@ def observed_positions(
     count = np.minimum(camera.median_window, last - first + 1)
     padded = np.concatenate([raw, np.full(raw.shape[:-2] + (1, 2), np.inf)], axis=-2)
     slot = np.where(np.arange(camera.median_window) < count[:, None], slot, raw.shape[-2])
-    ordered = np.sort(padded[..., slot, :], axis=-2)
+    window = padded[..., slot, :]
+    ordered = np.sort(window, axis=-2)
     rows = np.arange(wanted.size)
     filtered = (ordered[..., rows, (count - 1) // 2, :] + ordered[..., rows, count // 2, :]) / 2
+    # a window holding a frame without a view has no median (NaN sorts after the padding)
+    filtered[np.isnan(window).any(axis=-2)] = np.nan
     lo = np.searchsorted(wanted, frame)
     hi = np.minimum(lo + 1, wanted.size - 1)
     weight = between[:, None]

@@ -1,6 +1,7 @@
 """The camera as a recording declares it: a centred median filter, truncated at the ends."""
 
 import dataclasses
+import warnings
 
 import numpy as np
 import pytest
@@ -62,3 +63,20 @@ def test_centred_median_has_no_lag_where_the_causal_one_trails(run):
 def test_camera_refuses_an_unknown_median_placement():
     with pytest.raises(ValueError, match="median must be 'causal' or 'centred'"):
         CameraModel(median="ahead")
+
+
+def test_a_run_that_blew_up_has_no_camera_view_and_raises_no_numpy_warning():
+    # a failed candidate's states turn infinite (blow-up) or NaN (ended); the camera model must
+    # report no view there (NaN) without numpy's "invalid value" warning (inf times a zero weight)
+    camera = CameraModel(pixel_m=0.0)
+    times = np.array([0.5, 1.0, 1.55, 2.0])
+    steps = observation_steps(times, camera, 0.01, 2.0)
+    for bad in (np.inf, np.nan):
+        position = np.cumsum(np.full((1, steps.size, 2), 0.001), axis=1)
+        velocity = np.full((1, steps.size, 2), 0.1)
+        position[0, steps.size // 2:] = bad
+        velocity[0, steps.size // 2:] = bad
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            seen = observed_positions(times, steps, position, velocity, camera, 0.01, 2.0)
+        assert np.all(np.isfinite(seen[0, :2])) and np.all(np.isnan(seen[0, 2:]))
