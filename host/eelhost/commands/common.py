@@ -240,6 +240,7 @@ def loop_options(args: argparse.Namespace, stop_at_goal: bool = True) -> LoopOpt
 
 def add_fit_options(p: argparse.ArgumentParser) -> None:
     """Options of a coefficient fit (method, budgets, backend, clock offsets, resume)."""
+    from eelhost.estimation.methods import method_descriptions
     from eelhost.estimation.pipeline import METHODS
 
     g = p.add_argument_group("fitting")
@@ -247,7 +248,8 @@ def add_fit_options(p: argparse.ArgumentParser) -> None:
         "--method",
         choices=METHODS,
         default="cmaes",
-        help="cmaes (+ least-squares polish; default), ga (the paper's), lsq (polish only)",
+        # the registry's own descriptions, so the help says what the code does
+        help="; ".join(f"{name}: {text}" for name, text in method_descriptions().items()),
     )
     g.add_argument("--seed", type=SEED, default=0, help="seed of the optimiser")
     g.add_argument("--budget", type=COUNT, default=1500,

@@ -38,7 +38,8 @@ from eelhost.estimation.optimise import Checkpoint, FitResult, Progress, fit_cma
 if TYPE_CHECKING:  # pipeline imports this module
     from eelhost.estimation.pipeline import FitSettings
 
-__all__ = ["FitMethod", "FitProblem", "get_method", "method_names", "register_method", "run_fit"]
+__all__ = ["FitMethod", "FitProblem", "get_method", "method_descriptions", "method_names",
+           "register_method", "run_fit"]
 
 # Least iterations of the minimax polish that fits the ambient current (run_fit's second stage).
 CURRENT_POLISH_ITERATIONS = 10
@@ -107,6 +108,11 @@ def register_method(name: str, fit: FitMethod, description: str) -> None:
 def method_names() -> tuple[str, ...]:
     """The registered methods' names, in registration order."""
     return tuple(_METHODS)
+
+
+def method_descriptions() -> dict[str, str]:
+    """Each registered method's one-line description, by name (the ``--method`` help)."""
+    return {name: entry.description for name, entry in _METHODS.items()}
 
 
 def get_method(name: str) -> FitMethod:
