@@ -3,13 +3,18 @@
 from __future__ import annotations
 
 import argparse
+import os
+import time
+from pathlib import Path
 
 from eelhost.commands.common import (
+    COUNT,
     FINITE,
     NON_NEGATIVE,
     PORT,
     POSITIVE,
     SCENARIO_OPTIONS,
+    SEED,
     OptionError,
     current_values,
     gait_values,
@@ -44,7 +49,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--robot",
-        required=True,
         metavar="URI",
         help="serial:///dev/ttyUSB0?baud=57600, sim://?speed=1&seed=0, replay:///path/run.rx.bin",
     )
@@ -90,8 +94,18 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="sim:// only: simulated s per wall s, 0 = as fast as possible (overrides the URI)",
     )
     add_take_options(p)
-    p.add_argument("--out", required=True, metavar="STEM", help="output path without extension")
+    p.add_argument("--out", metavar="STEM", help="output path without extension (with --bench: "
+                   "the folder of results.jsonl, default out/run_bench)")
     p.add_argument("--force", action="store_true", help="replace an existing take at --out")
+    b = p.add_argument_group("closed-loop benchmark (docs/planning.md)")
+    b.add_argument("--bench", action="store_true",
+                   help="plan --worlds generated worlds and swim each plan over sim:// in water "
+                   "the planner does not know, replanning in real time; resumes from --out")
+    b.add_argument("--worlds", type=COUNT, default=100, help="benchmark worlds (100)")
+    b.add_argument("--seed", type=SEED, default=BENCH_SEED,
+                   help=f"first benchmark world's seed ({BENCH_SEED})")
+    b.add_argument("--write", nargs="?", const="docs/planning.md", metavar="FILE",
+                   help="with --bench, also rewrite its section of FILE (bare: docs/planning.md)")
     p.set_defaults(run=run)
 
 
@@ -108,6 +122,11 @@ def add_take_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--view-port", type=PORT, default=8765,
                    help="port of the live view on 127.0.0.1 (8765; 0: any free port)")
 
+
+BENCH_SEED = 5000
+"""First seed of the closed-loop benchmark: a range no planner setting was developed on."""
+BENCH_BEGIN = "<!-- run-bench: begin (written by eelbot run --bench) -->"
+BENCH_END = "<!-- run-bench: end -->"
 
 # Ends that are not failures: arrived, ran its --duration, or stopped by the operator (a signal).
 STOPPED_ON_PURPOSE = ("arrived", "duration", "interrupted")
@@ -137,6 +156,12 @@ def current_option(value: list[float] | None, virtual: bool) -> tuple[float, flo
 
 def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
+    if args.bench:
+        return _bench(args)
+    if args.robot is None:
+        raise OptionError("--robot: required (a URI: serial://..., sim://...)")
+    if args.out is None:
+        raise OptionError("--out: required (the take's path without extension)")
     parse_link_uri(args.robot)  # a bad URI is reported before anything is opened
     robot = load_robot(args.robot_file)
     markers = load_marker_file(args.markers)
@@ -201,3 +226,56 @@ def run(args: argparse.Namespace) -> int:
             print(f"the robot reported FAILSAFE {out.failsafe_reports} times")
     print("wrote " + ", ".join(str(path) for path in result.paths))
     return exit_status(out.reason)
+
+
+def _bench(args: argparse.Namespace) -> int:
+    """``eelbot run --bench``: the closed-loop benchmark (docs/planning.md)."""
+    from eelhost.benchmarks.closed_loop import run_closed_loop_bench, summary_lines
+    from eelhost.benchmarks.machine import cpu_model
+    from eelhost.planning.uncertainty import default_model, read_coefficient_model
+    from eelhost.progress import Progress
+
+    robot = load_robot(args.robot_file)
+    model = (read_coefficient_model(args.coefficients_file, robot)
+             if args.coefficients_file else default_model(robot))
+    out = Path(args.out or "out/run_bench")
+    seeds = range(args.seed, args.seed + args.worlds)
+    wall0 = time.monotonic()
+    with Progress("run --bench", len(seeds), "world") as bar:
+
+        def show(r) -> None:  # noqa: ANN001
+            print(f"seed {r.seed}: {r.status}" + (
+                f", {r.reason}, reached={r.reached}, contact={r.contact}, clearance "
+                f"{(r.min_clearance_m or 0) * 1000:.0f} mm, failsafe {r.failsafe_reports}, "
+                f"replans {r.replans} (+{r.failed_replans} failed)" if r.planned else ""),
+                flush=True)
+            bar.update(1)
+
+        results = run_closed_loop_bench(robot, model, seeds, out, show)
+    command = (f"nice eelbot run --bench --worlds {args.worlds} --seed {args.seed}"
+               + (f" --coefficients-file {args.coefficients_file}" if args.coefficients_file
+                  else ""))
+    lines = summary_lines(results)
+    block = [BENCH_BEGIN, f"Command: `{command}`", "",
+             f"- machine: {cpu_model()}, {os.cpu_count()} cores visible (shared with other "
+             f"work); this run took {time.monotonic() - wall0:.0f} s of wall time",
+             f"- coefficients of the planner: {model.describe()}", *lines, BENCH_END]
+    print("\n".join(lines))
+    if args.write:
+        _write_section(Path(args.write), block)
+        print(f"wrote {args.write}")
+    return 0
+
+
+def _write_section(path: Path, block: list[str]) -> None:
+    """Replace the run benchmark's block of a markdown file (append it when absent)."""
+    from eelhost.files import atomic_write
+
+    text = path.read_text() if path.exists() else ""
+    new = "\n".join(block)
+    if BENCH_BEGIN in text and BENCH_END in text:
+        head, rest = text.split(BENCH_BEGIN, 1)
+        text = head + new + rest.split(BENCH_END, 1)[1]
+    else:
+        text = text.rstrip("\n") + ("\n\n" if text else "") + new + "\n"
+    atomic_write(path, text)

@@ -64,6 +64,9 @@ class TakeRequest:
         :class:`~eelhost.field.runloop.RunLoop`).
     camera_view : TankView or None
         What the synthetic camera of ``sim://`` films (default: the paper's tank view).
+    trace_plant : bool
+        ``sim://`` only: keep the virtual robot's true state at every physics step
+        (:attr:`eelhost.xil.virtual_robot.VirtualRobot.trace`; benchmarks).
     """
 
     robot: Robot
@@ -76,6 +79,7 @@ class TakeRequest:
     speed: float | None = None
     navigator: Navigator | None = None
     camera_view: TankView | None = None
+    trace_plant: bool = False
 
 
 @dataclass
@@ -136,6 +140,8 @@ def run_take(request: TakeRequest, view_port: int | None = None,
             if request.speed < 0:
                 raise TakeOptionError("--speed: must be >= 0")
             virtual.clock.speed = request.speed
+        if request.trace_plant and virtual is not None:
+            virtual.trace = []
         camera = open_camera(link, request.robot, request.camera, request.calibration,
                              request.layout, request.camera_view)
         camera.prime()  # the camera opens and gives a frame before the robot is started

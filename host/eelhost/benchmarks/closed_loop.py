@@ -1,0 +1,334 @@
+"""The closed-loop planning benchmark: generated worlds planned, then swum over ``sim://``.
+
+docs/planning.md ("Closed-loop benchmark") is the long form. For each world of
+:func:`eelhost.planning.worlds.generate_world` on a seed range:
+
+1. the planner plans from the world's start, as ``eelbot run --plan`` does (with the same
+   coefficient model); a world without a plan is counted with the planner's status;
+2. the plan is executed by ``eelbot run --plan``'s own code (:func:`eelhost.field.take.run_take`
+   with the :class:`eelhost.planning.replan.TankReplanner`) over ``sim://`` at ``speed=0``, the
+   synthetic camera filming the world's tank, and the planner's wall time passing on the virtual
+   robot's clock while it replans. The virtual robot's water is not the planner's: its
+   coefficients are one draw of :meth:`eelhost.planning.uncertainty.CoefficientModel.draw`
+   (the straight fit's), and an unknown current of uniform speed up to ``unknown_current_m_s``
+   in a uniform random direction is added to the world's; both from a generator seeded with the
+   world's seed;
+3. the run is judged from the virtual robot's true state at every physics step, with geometry
+   written here, independently of the planner's (:func:`true_clearance_m`: each link a stadium
+   of its own length and width, shapely's exact distances to the discs, polygons and walls).
+
+Results go to ``<out>/results.jsonl`` one world per line as each finishes, so a killed benchmark
+resumes where it stopped.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import statistics
+import tempfile
+import time
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import shapely
+
+from eelhost.field.runloop import RunConfig
+from eelhost.field.session import TakeNotes
+from eelhost.field.take import TakeRequest, run_take
+from eelhost.planning.geometry import FloatArray
+from eelhost.planning.planner import PlanRefused
+from eelhost.planning.tank import plan_for_run
+from eelhost.planning.uncertainty import CoefficientModel
+from eelhost.planning.world import CircleObstacle, World
+from eelhost.planning.worlds import generate_world
+from eelhost.vision.synthetic import TankView
+from eelsim.control import Gait
+from eelsim.model import SwimmerModel
+from eelsim.robot import Robot
+from eelsim.scenario import PATH_GAIT
+
+log = logging.getLogger(__name__)
+
+UNKNOWN_CURRENT_M_S = 0.02
+"""Largest speed of the current the planner is not told of."""
+
+
+@dataclass
+class WorldResult:
+    """One world of the benchmark.
+
+    Attributes
+    ----------
+    seed : int
+    planned : bool
+        The planner returned a plan that passed its check.
+    status : str
+        The planner's status (``found`` or why not).
+    reason : str
+        How the run ended (``arrived``, ``contact``, ``no_safe_continuation``, ``duration``, ...);
+        ``""`` without a plan.
+    detail : str
+    reached : bool
+        The run ended in the goal.
+    min_clearance_m : float or None
+        Smallest true gap between the body and an obstacle or wall (independent geometry).
+    contact : bool
+        The true body overlapped an obstacle or wall at some step.
+    failsafe_reports : int
+        Telemetry reports of FAILSAFE during the run.
+    replans, failed_replans : int
+    replan_wall_s : list of float
+        Wall time of each replan, from its request to its plan.
+    plan_wall_s, plan_cpu_s : float
+        The first plan's wall and processor time.
+    t_end_s : float
+        Robot's time at the end of the run.
+    planned_goal_s : float or None
+        When the plan expected the goal.
+    water : dict
+        The virtual robot's coefficients and unknown current.
+    """
+
+    seed: int
+    planned: bool
+    status: str
+    reason: str = ""
+    detail: str = ""
+    reached: bool = False
+    min_clearance_m: float | None = None
+    contact: bool = False
+    failsafe_reports: int = 0
+    replans: int = 0
+    failed_replans: int = 0
+    replan_wall_s: list[float] = field(default_factory=list)
+    plan_wall_s: float = 0.0
+    plan_cpu_s: float = 0.0
+    t_end_s: float = 0.0
+    planned_goal_s: float | None = None
+    water: dict = field(default_factory=dict)
+
+
+def true_clearance_m(world: World, model: SwimmerModel, states: FloatArray) -> FloatArray:
+    """The true body's gap to the nearest obstacle or wall at each state (negative: overlap).
+
+    Written apart from the planner's check (which uses the link centre lines and the largest half
+    width): each link i is a stadium of length 2 l_i and width 2 b_i around its centre
+    (docs/model.md section 1: centre p + G cos(theta), p + G sin(theta)), built and measured
+    with shapely; a disc's gap is the distance to its centre less its radius, a polygon's the
+    exact distance (at most minus the link's half width when they overlap), a wall's the distance of the stadium's extent to the wall.
+
+    Parameters
+    ----------
+    world : World
+    model : SwimmerModel
+    states : ndarray, shape (K, 2 N + 4)
+
+    Returns
+    -------
+    ndarray, shape (K,)
+    """
+    k = len(states)
+    n = model.n_links
+    half_l, b = np.asarray(model.half_length_m), np.asarray(model.half_axis_horizontal_m)
+    gaps = np.full(k, np.inf)
+    for i in range(0, k, 2000):
+        chunk = states[i : i + 2000]
+        theta = chunk[:, :n]
+        px, py = chunk[:, n], chunk[:, n + 1]
+        cx = px[:, None] + np.cos(theta) @ model.geometry.T
+        cy = py[:, None] + np.sin(theta) @ model.geometry.T
+        reach = np.maximum(half_l - b, 1e-6)  # the stadium's core segment: its length less the caps
+        ax, ay = cx - reach * np.cos(theta), cy - reach * np.sin(theta)
+        bx, by = cx + reach * np.cos(theta), cy + reach * np.sin(theta)
+        coords = np.stack([np.stack([ax, ay], -1), np.stack([bx, by], -1)], axis=-2)
+        cores = shapely.linestrings(coords.reshape(-1, 2, 2))
+        width = np.broadcast_to(b, theta.shape).ravel()
+        best = np.full(cores.shape, np.inf)
+        w, h = world.tank.size_m
+        # walls: the core's extreme coordinates plus the cap radius
+        xs, ys = coords[..., 0].reshape(-1, 2), coords[..., 1].reshape(-1, 2)
+        best = np.minimum.reduce([best, xs.min(1) - width, w - xs.max(1) - width,
+                                  ys.min(1) - width, h - ys.max(1) - width])
+        for o in world.obstacles:
+            if isinstance(o, CircleObstacle):
+                d = shapely.distance(cores, shapely.points(*o.centre_m)) - o.radius_m - width
+            else:
+                poly = shapely.polygons(np.asarray(o.vertices_m, dtype=float))
+                d = shapely.distance(cores, poly) - width
+                # a core that meets the polygon overlaps it by at least the link's half width
+                inside = shapely.intersects(cores, poly)
+                d[inside] = -width[inside]
+            best = np.minimum(best, d)
+        gaps[i : i + 2000] = best.reshape(len(chunk), n).min(axis=1)
+    return gaps
+
+
+def water_for(seed: int, model: CoefficientModel,
+              unknown_current_m_s: float = UNKNOWN_CURRENT_M_S) -> dict:
+    """The virtual robot's water for a world: a coefficient draw and an unknown current.
+
+    Parameters
+    ----------
+    seed : int
+        The world's seed (the generator's).
+    model : CoefficientModel
+    unknown_current_m_s : float
+
+    Returns
+    -------
+    dict
+        ``coefficients`` (the law's order) and ``unknown_current_m_s`` (vx, vy).
+    """
+    rng = np.random.default_rng([seed, 28])
+    coefficients = model.draw(rng, "straight").as_array()
+    speed = unknown_current_m_s * float(rng.uniform())
+    angle = float(rng.uniform(0.0, 2.0 * math.pi))
+    return {"coefficients": [float(c) for c in coefficients],
+            "unknown_current_m_s": [speed * math.cos(angle), speed * math.sin(angle)]}
+
+
+def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PATH_GAIT,
+              unknown_current_m_s: float = UNKNOWN_CURRENT_M_S) -> WorldResult:
+    """Plan one generated world and swim the plan over ``sim://`` (module docstring).
+
+    Parameters
+    ----------
+    seed : int
+    robot : Robot
+    model : CoefficientModel
+    gait : Gait
+    unknown_current_m_s : float
+
+    Returns
+    -------
+    WorldResult
+    """
+    world = generate_world(seed)
+    water = water_for(seed, model, unknown_current_m_s)
+    vx, vy = np.add(model.in_tank(world).current_m_s, water["unknown_current_m_s"])
+    speed, direction = math.hypot(vx, vy), math.degrees(math.atan2(vy, vx))
+    s = world.start
+    uri = (f"sim://?speed=0&seed={seed}&coefficients="
+           + ",".join(f"{c:.6g}" for c in water["coefficients"])
+           + f"&current={speed:.6f},{direction:.3f}"
+           + f"&start={s.position_m[0]:g},{s.position_m[1]:g},{s.heading_deg:g}")
+    wall0, cpu0 = time.perf_counter(), time.process_time()
+    try:
+        planned = plan_for_run(world, robot, uri, gait, model)
+    except PlanRefused as err:
+        return WorldResult(seed, False, err.status, detail=str(err), water=water,
+                           plan_wall_s=time.perf_counter() - wall0,
+                           plan_cpu_s=time.process_time() - cpu0)
+    plan_wall, plan_cpu = time.perf_counter() - wall0, time.process_time() - cpu0
+    nav = planned.navigator
+    cost = planned.outcome.plan.cost_s
+    config = RunConfig(gait, planned.waypoints_m, duration_s=2.0 * cost + 30.0)
+    with tempfile.TemporaryDirectory() as tmp:
+        request = TakeRequest(robot, config, str(Path(tmp) / "take"), TakeNotes(planned.uri),
+                              "synthetic:clean", navigator=nav,
+                              camera_view=TankView.covering(world.tank.size_m), trace_plant=True)
+        result = run_take(request)
+    out = result.outcome
+    vr = result.virtual_robot
+    assert vr is not None and vr.trace is not None
+    clear = true_clearance_m(world, vr.model, np.asarray(vr.trace))
+    replans = [e for e in nav.events if e["kind"] == "replan"]
+    return WorldResult(
+        seed, True, "found", out.reason, out.detail, out.reason == "arrived",
+        float(clear.min()), bool(clear.min() < 0.0), out.failsafe_reports,
+        sum(e["status"] == "found" for e in replans),
+        sum(e["status"] != "found" for e in replans),
+        [e["wall_s"] for e in replans], plan_wall, plan_cpu, out.t_end_s, cost, water)
+
+
+def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, out: Path,
+                          progress: Callable[[WorldResult], None] | None = None
+                          ) -> list[WorldResult]:
+    """Run the benchmark over ``seeds``, resuming from ``<out>/results.jsonl``.
+
+    Parameters
+    ----------
+    robot : Robot
+    model : CoefficientModel
+    seeds : range
+    out : Path
+        Folder of ``results.jsonl``.
+    progress : callable, optional
+        Called with each world's result as it is finished (or read back).
+
+    Returns
+    -------
+    list of WorldResult
+    """
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / "results.jsonl"
+    done: dict[int, WorldResult] = {}
+    if path.exists():
+        for line in path.read_text().splitlines():
+            if line.strip():
+                r = WorldResult(**json.loads(line))
+                done[r.seed] = r
+    results = []
+    for seed in seeds:
+        if seed in done:
+            r = done[seed]
+        else:
+            r = run_world(seed, robot, model)
+            with path.open("a") as f:
+                f.write(json.dumps(asdict(r)) + "\n")
+        results.append(r)
+        if progress is not None:
+            progress(r)
+    return results
+
+
+def summary_lines(results: list[WorldResult]) -> list[str]:
+    """The benchmark's figures, as markdown list items."""
+    planned = [r for r in results if r.planned]
+    lines = [f"- worlds: {len(results)}; with a checked plan: {len(planned)} "
+             f"({100 * len(planned) / max(len(results), 1):.0f} %); without: "
+             + ", ".join(f"{k} {v}" for k, v in sorted(Counter(
+                 r.status for r in results if not r.planned).items()))]
+    if not planned:
+        return lines
+    reached = sum(r.reached for r in planned)
+    contacts = [r for r in planned if r.contact]
+    lines.append(f"- goal reached: {reached} of {len(planned)} planned worlds "
+                 f"({100 * reached / len(planned):.1f} %)")
+    lines.append(f"- body contacts (true state, independent geometry): {len(contacts)} of "
+                 f"{len(planned)} runs"
+                 + (f" (seeds {', '.join(str(r.seed) for r in contacts)}; deepest "
+                    f"{-min(r.min_clearance_m or 0.0 for r in contacts) * 1000:.0f} mm)"
+                    if contacts else ""))
+    clear = [r.min_clearance_m for r in planned if r.min_clearance_m is not None]
+    if clear:
+        lines.append(f"- smallest true clearance over a run: median {statistics.median(clear) * 1000:.0f}"
+                     f" mm, smallest {min(clear) * 1000:.0f} mm")
+    failsafe = [r for r in planned if r.failsafe_reports]
+    lines.append(f"- runs with the firmware in FAILSAFE: {len(failsafe)}")
+    ends = Counter(r.reason for r in planned)
+    lines.append("- how the runs ended: " + ", ".join(f"{k} {v}" for k, v in sorted(ends.items())))
+    walls = [w for r in planned for w in r.replan_wall_s]
+    lines.append(f"- replans: {sum(r.replans for r in planned)} ({sum(r.failed_replans for r in planned)}"
+                 " failed) in "
+                 f"{sum(1 for r in planned if r.replans or r.failed_replans)} runs"
+                 + (f"; wall time from request to plan: median {statistics.median(walls):.2f} s,"
+                    f" largest {max(walls):.2f} s" if walls else ""))
+    times = [r.t_end_s / r.planned_goal_s for r in planned if r.reached and r.planned_goal_s]
+    if times:
+        lines.append(f"- swum time over planned time (reached runs): median "
+                     f"{statistics.median(times):.2f}, largest {max(times):.2f}")
+    cpu = [r.plan_cpu_s for r in results]
+    lines.append(f"- first plan, processor time: median {statistics.median(cpu):.2f} s; wall "
+                 f"time median {statistics.median(r.plan_wall_s for r in results):.2f} s")
+    failures = [r for r in planned if not r.reached or r.contact]
+    if failures:
+        lines.append("- every failure:")
+        lines += [f"  - seed {r.seed}: {r.reason}"
+                  + (" with CONTACT" if r.contact else "") + f": {r.detail}" for r in failures]
+    return lines
