@@ -169,12 +169,15 @@ class MujocoTiming:
         Wall time.
     threads : int
         Threads used.
+    walls_s : tuple of float
+        Every repetition's wall time (``wall_s`` is the best), when repeated.
     """
 
     runs: int
     steps: int
     wall_s: float
     threads: int
+    walls_s: tuple[float, ...] = ()
 
     @property
     def steps_per_s(self) -> float:
@@ -208,15 +211,15 @@ def rollout_speed(robot: Robot, runs: int, steps: int, threads: int, dt_s: float
     initial = np.tile(state0, (runs, 1))
     control = gait_targets(robot, steps, dt_s)[None, :, :]
     out_state = np.empty((runs, steps, state0.size))
-    best = np.inf
+    walls = []
     with mj_rollout.Rollout(nthread=threads) as pool:
         for _ in range(repeats):
             start = time.perf_counter()
             pool.rollout(model, datas, initial, control, nstep=steps, state=out_state)
-            best = min(best, time.perf_counter() - start)
+            walls.append(time.perf_counter() - start)
     if not np.all(np.isfinite(out_state[:, -1])):
         raise RuntimeError("the MuJoCo rollout diverged")
-    return MujocoTiming(runs, steps, best, threads)
+    return MujocoTiming(runs, steps, min(walls), threads, tuple(walls))
 
 
 def morison_xfrc_speed(robot: Robot, coefficients: FluidCoefficients, runs: int, steps: int,

@@ -10,10 +10,13 @@
    end (``eelbot estimate --method ga`` on the bundled dataset's straight runs);
 4. where the time of a step goes (one thread): the generated RK4 stage, the collision screen and
    the condition-number bound timed alone, the camera by switching it off, the rest by difference;
-5. the same robot in MuJoCo: ``mujoco.rollout`` with the built-in ellipsoid fluid model on all
-   cores, and our Morison drag through ``xfrc_applied`` from Python; printed as ratios, beside
-   the batched kernel with each joint model (the PD loop of section 2, and the servo model's
-   prescribed-shape kernel on the same generation, measured in the same sitting).
+5. each candidate fluid law's kernel on the same generation, the laws in alternation;
+6. the same robot in MuJoCo: ``mujoco.rollout`` with the built-in ellipsoid fluid model on all
+   cores against the batched kernel with each joint model (the PD loop of section 2, and the
+   servo model's prescribed-shape kernel), every engine timed alone in a fresh process, in
+   rounds whose order rotates (:mod:`eelhost.benchmarks.engine_rounds`): the ratios are taken
+   within each round and reported as median and range; and our Morison drag through
+   ``xfrc_applied`` from Python.
 
 It returns a markdown report, handing each line to ``emit`` as soon as it is known (the command
 prints them and writes ``docs/benchmarks.md``).
@@ -43,6 +46,7 @@ from eelsim.scenario import TRAINING_CORNERS, grid_scenario, load_scenario
 
 GA_RUNS = 150 * 130 * 4
 REPEATS = 10  # timed runs of the GA generation per thread count (best and median reported)
+LAW_REPEATS = 5  # timed generations of each candidate law's kernel
 GA_STEPS = GA_RUNS * 3000
 
 
@@ -65,6 +69,8 @@ class TwinBenchSettings:
         Measure the cold compile (about a minute).
     ga : bool
         Run the paper's GA end to end (about 40 s).
+    rounds : int
+        Rounds of the engines timed each in its own process (the MuJoCo comparison).
     note : str
         A remark for the report.
     command : str
@@ -77,6 +83,7 @@ class TwinBenchSettings:
     mujoco: bool = True
     cold_compile: bool = True
     ga: bool = True
+    rounds: int = 5
     note: str = ""
     command: str = "eelbot bench"
 
@@ -279,14 +286,15 @@ def twin_speed_report(
             say(text)
     say()
 
-    # the same generation with the servo joint model (the robot's links, the bundled servo's
-    # joints), on all cores: best of a few, for the MuJoCo comparison below
+    # the same links with each joint model, for the engines' rounds below
     servo_robot = robot if robot.joint_model.kinematic else robot.with_joints(
         load_robot(SERVO_ROBOT).joints)
-    servo_spec = batch.BatchSpec.build(
-        servo_robot, [corners[i % 4] for i in range(settings.runs)], candidates, opts, 0
-    )
-    servo_rate = _best_rate(batch, servo_spec, threads)
+
+    say("### Each candidate fluid law's kernel (PD joints)")
+    say()
+    for text in _law_rates(batch, robot, settings):
+        say(text)
+    say()
 
     # 4. profile
     say("## 3. Where the time of a step goes (one thread)")
@@ -298,7 +306,6 @@ def twin_speed_report(
     # 5. MuJoCo
     say("## 4. The same robot in MuJoCo")
     say()
-    mj_rate = None
     if not settings.mujoco:
         say("Skipped (--no-mujoco).")
     else:
@@ -309,37 +316,9 @@ def twin_speed_report(
         except mujoco_compare.MujocoMissing as err:
             say(f"Skipped: {err}")
         else:
-            import mujoco
-
-            # MuJoCo's position actuator is a PD law: a servo robot is compared with its links
-            # on the bundled PD joints
-            pd_robot = robot if pd_gains(robot.joints) is not None else robot.with_joints(
-                load_robot().joints)
-            roll = mujoco_compare.rollout_speed(pd_robot, settings.runs, settings.steps, threads)
-            mj_rate = roll.steps_per_s
-            xf = mujoco_compare.morison_xfrc_speed(pd_robot, coeffs, 2, settings.steps)
-            say(
-                f"mujoco {mujoco.__version__}; ellipsoid fluid model, implicitfast, dt = "
-                f"{opts.timing.dt_s} s, PD as position actuator + joint damping; open-loop gait."
-            )
-            say()
-            say("| path | steps per second | our batched kernel is |")
-            say("|---|---|---|")
-            say(
-                f"| `mujoco.rollout`, {settings.runs} x {settings.steps}, {threads} threads | "
-                f"{mj_rate / 1e6:.3f} million | {rates[threads] / mj_rate:.1f} x faster "
-                f"(PD joints, section 2); **{servo_rate / mj_rate:.1f} x faster** with servo "
-                f"joints ({servo_rate / 1e6:.2f} million steps/s) |"
-            )
-            say(
-                f"| Morison drag via `xfrc_applied` from Python, 2 x {settings.steps}, 1 thread | "
-                f"{xf.steps_per_s / 1e6:.4f} million | {rates[1] / xf.steps_per_s:.0f} x faster "
-                "(vs our 1 thread) |"
-            )
-            say()
-            say("- target of issue 4: at least 15 x MuJoCo's fastest batched path; of issue 19: "
-                "at least 25 x with the servo joint model")
-    say()
+            for text in _mujoco_section(robot, servo_robot, coeffs, settings, threads,
+                                        rates[1], opts.timing.dt_s):
+                say(text)
     say(
         f"- load average after the benchmark: {load_average()}; numba threading layer used: "
         f"{numba.threading_layer()}"
@@ -358,15 +337,107 @@ def twin_speed_report(
     return lines
 
 
-def _best_rate(batch: ModuleType, spec: Any, threads: int, repeats: int = 3) -> float:
-    """RK4 steps per second of the batch ``spec`` on ``threads`` threads, best of ``repeats``."""
-    batch.run_spec(spec, threads=threads)  # compile or load, warm the threads
-    best = np.inf
-    for _ in range(repeats):
-        start = time.perf_counter()
-        res = batch.run_spec(spec, threads=threads)
-        best = min(best, time.perf_counter() - start)
-    return float(res.final_step.sum()) / best
+def _law_rates(batch: ModuleType, robot: Robot, settings: TwinBenchSettings) -> list[str]:
+    """Each candidate law's GA-generation rate beside the default law's, as markdown lines.
+
+    The same generation (the robot's PD joints, each law's coefficients at the middle of its
+    bounds times U(0.5, 1.5)), one thread (a thread's rate is what a law costs; several threads
+    on a loaded machine measure the scheduler), the laws in alternation, :data:`LAW_REPEATS`
+    times; a law's kernel is compiled on first use if the cache lacks it.
+    """
+    from eelhost.benchmarks.engine_rounds import generation_spec
+    from eelsim.fluid import candidate_laws, get_fluid_law
+
+    laws = list(candidate_laws())
+    pd_robot = robot if pd_gains(robot.joints) is not None else robot.with_joints(
+        load_robot().joints)
+    specs = {}
+    for law in laws:
+        fluid = get_fluid_law(law)
+        middle = fluid.coefficients.from_array(fluid.bounds.mean(axis=1))
+        specs[law] = generation_spec(pd_robot.with_coefficients(middle), settings.runs,
+                                     settings.steps)
+        batch.run_spec(specs[law], threads=1)  # compile or load, warm
+    rates: dict[str, list[float]] = {law: [] for law in laws}
+    flagged: dict[str, int] = {}
+    for _ in range(LAW_REPEATS):
+        for law in laws:
+            start = time.perf_counter()
+            res = batch.run_spec(specs[law], threads=1)
+            rates[law].append(float(res.final_step.sum()) / (time.perf_counter() - start))
+            flagged[law] = int(np.count_nonzero(res.failure >= 2))
+    first = laws[0]
+    lines = [f"One thread, the laws in alternation, best of {LAW_REPEATS} generations each; the "
+             f"rate ratio is the median of the paired repeats.", "",
+             f"| law | RK4 steps per second (best) | rate over {first}'s | runs flagged |",
+             "|---|---|---|---|"]
+    for law in laws:
+        ratio = np.median(np.array(rates[law]) / np.array(rates[first]))
+        lines.append(f"| {law} | {max(rates[law]) / 1e6:.2f} million | {ratio:.2f} "
+                     f"| {flagged[law]} of {settings.runs} |")
+    return lines
+
+
+def _mujoco_section(robot: Robot, servo_robot: Robot, coeffs: FluidCoefficients,
+                    settings: TwinBenchSettings, threads: int, one_thread_rate: float,
+                    dt_s: float) -> list[str]:
+    """MuJoCo against the kernel, each engine in its own process, in rounds; markdown lines."""
+    import mujoco
+
+    from eelhost.benchmarks import mujoco_compare
+    from eelhost.benchmarks.engine_rounds import engine_rounds, spread
+
+    # MuJoCo's position actuator is a PD law: a servo robot is compared with its links on the
+    # bundled PD joints
+    pd_robot = robot if pd_gains(robot.joints) is not None else robot.with_joints(
+        load_robot().joints)
+    counts = sorted({1, threads})
+    rounds = engine_rounds(pd_robot, servo_robot, settings.runs, settings.steps, counts,
+                           settings.rounds)
+    lines = [
+        f"mujoco {mujoco.__version__}; ellipsoid fluid model, implicitfast, dt = {dt_s} s, PD as "
+        "position actuator + joint damping; open-loop gait.",
+        "",
+        f"Each engine timed alone in a fresh process ({settings.runs} runs x {settings.steps} "
+        "steps; the kernels best of 2 after an untimed run, MuJoCo once): the PD kernel, the "
+        "servo kernel and `mujoco.rollout` one after the other, the order rotated each round, "
+        f"on {' and on '.join(str(n) for n in counts)} threads; {settings.rounds} rounds of each."
+        " The ratios are taken within each round, so that the machine's load, which changes "
+        "from minute to minute, divides out as far as it can.",
+        "",
+        "| round | threads | load before / after | MuJoCo (million steps/s) | PD kernel "
+        "| servo kernel | PD kernel / MuJoCo | servo kernel / MuJoCo | servo / PD |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for i, r in enumerate(rounds):
+        lines.append(
+            f"| {i // len(counts) + 1} | {r.threads} | {r.load_before.split()[0]} / "
+            f"{r.load_after.split()[0]} | {r.rates['mujoco'] / 1e6:.3f} "
+            f"| {r.rates['pd kernel'] / 1e6:.2f} | {r.rates['servo kernel'] / 1e6:.2f} "
+            f"| {r.ratio('pd kernel'):.1f} | {r.ratio('servo kernel'):.1f} "
+            f"| {r.ratio('servo kernel', 'pd kernel'):.2f} |")
+    lines.append("")
+    for n in counts:
+        mine = [r for r in rounds if r.threads == n]
+        servo_pd = [r.ratio("servo kernel", "pd kernel") for r in mine]
+        lines.append(
+            f"- {n} thread{'s' if n > 1 else ''}: **PD kernel / MuJoCo "
+            f"{spread([r.ratio('pd kernel') for r in mine])}; servo kernel / MuJoCo "
+            f"{spread([r.ratio('servo kernel') for r in mine])}** (median and range over the "
+            f"rounds); servo kernel / PD kernel {np.median(servo_pd):.2f} "
+            f"({min(servo_pd):.2f}-{max(servo_pd):.2f})")
+    xf = mujoco_compare.morison_xfrc_speed(pd_robot, coeffs, 2, settings.steps) if isinstance(
+        coeffs, mujoco_compare.HydroCoefficients) else None
+    if xf is not None:
+        lines.append(
+            f"- Morison drag via `xfrc_applied` from Python, 2 x {settings.steps}, 1 thread: "
+            f"{xf.steps_per_s / 1e6:.4f} million steps/s; our kernel on 1 thread (section 2) is "
+            f"{one_thread_rate / xf.steps_per_s:.0f} x faster (in this process, after the kernel "
+            "ran)")
+    lines += ["- target of issue 4: at least 15 x MuJoCo's fastest batched path; of issue 19: "
+              "at least 25 x with the servo joint model; of issue 32: at least 100 x, and the "
+              "servo kernel at least as fast as the PD kernel"]
+    return lines
 
 
 def _whole_ga(threads: int) -> list[str]:

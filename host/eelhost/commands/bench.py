@@ -24,8 +24,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "bench",
         help="speed of the twin: single run, one GA generation, MuJoCo comparison",
-        description="Benchmark the batched closed-loop kernel (and MuJoCo on the same robot) and "
-        "print the report (--write: also docs/benchmarks.md). Run it on a quiet machine.",
+        description="Benchmark the batched closed-loop kernel (and MuJoCo on the same robot, each "
+        "engine timed alone in its own process, in rounds) and print the report (--write: also "
+        "docs/benchmarks.md). Ratios are measured within each round: on a loaded machine they "
+        "hold better than the absolute figures.",
     )
     add_robot_options(p)
     p.add_argument(
@@ -42,6 +44,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--no-ga", action="store_true", help="skip the end-to-end GA (it takes about 40 s)"
     )
+    p.add_argument(
+        "--rounds", type=COUNT, default=5,
+        help="rounds of the engine comparison, each engine timed in its own process (5)",
+    )
     p.add_argument("--note", default="", help="a remark for the report (e.g. other load)")
     add_write_option(p, "docs/benchmarks.md")
     p.set_defaults(run=run)
@@ -57,6 +63,7 @@ def run(args: argparse.Namespace) -> int:
         mujoco=not args.no_mujoco,
         cold_compile=not args.no_cold_compile,
         ga=not args.no_ga,
+        rounds=args.rounds,
         note=args.note,
         command=" ".join(["eelbot bench", *sys.argv[2:]]),
     )
