@@ -24,6 +24,7 @@ import numpy as np  # noqa: E402
 from matplotlib import animation  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Circle  # noqa: E402
+from scipy.ndimage import uniform_filter1d  # noqa: E402
 
 from eelhost.files import atomic_writer, default_file_mode  # noqa: E402
 from eelsim.closed_loop import RunResult  # noqa: E402
@@ -109,14 +110,15 @@ def draw_current(
         textcoords="offset points",
         arrowprops={"arrowstyle": "-|>", "color": colour, "lw": 1.8},
     )
-    ax.annotate(
+    ax.annotate(  # centred under the arrow's head: inside the axes whichever way it points
         f"current {speed_m_s:g} m/s\ntowards {direction_deg:g} deg",
         xy=at,
         xycoords="axes fraction",
-        xytext=(length_pt * 0.6 + 6, 0),
+        xytext=(-length_pt * math.cos(a) / 2, -length_pt * abs(math.sin(a)) / 2 - 6),
         textcoords="offset points",
-        va="center",
-        fontsize=7,
+        ha="center",
+        va="top",
+        fontsize=8,
         color=colour,
     )
 
@@ -162,38 +164,56 @@ def plot_track_errors(runs: Sequence[Any], path: str | Path, title: str = "") ->
     ax_along = fig.add_subplot(grid[0, 1])
     ax_cross = fig.add_subplot(grid[1, 1], sharex=ax_along)
     colours = plt.cm.tab20(np.linspace(0, 1, max(len(runs), 1), endpoint=False))
+    distance = 0.0
     for run, colour in zip(runs, colours, strict=False):
         e = run.experiment
         start, goal = e.scenario.start_position_m, e.scenario.waypoints_m[-1]
         along, across = track_frame(start, goal)
-        ax_tracks.plot(*e.position_m.T, color=colour, lw=1)
-        ax_tracks.plot(*np.asarray(run.sim_positions_m).T, "--", color=colour, lw=1)
+        distance = max(distance, float(np.linalg.norm(np.subtract(goal, start))))
+        # the tracks in the track's own frame, the offset across it in mm: at tank scale a
+        # straight run is a flat line, and the sway and drift the fit must match are millimetres
+        # Each track as its mean over one tail beat (2 pi / omega): the sway is within a camera
+        # pixel or two, so the raw recording steps between pixel rows; the mean over a beat
+        # shows the drift across the track that the fit must match, for both alike.
+        beat_s = 2.0 * math.pi / e.scenario.omega_rad_s
+        for t, xy, style in ((e.t_s, e.position_m, "-"),  # every frame: the mean is finer
+                             (run.times_s, run.sim_positions_m, "--")):
+            rel = np.asarray(xy, dtype=float) - np.asarray(start, dtype=float)
+            step = float(np.median(np.diff(t))) if len(t) > 1 else beat_s
+            size = max(1, int(round(beat_s / step)))
+            inner = slice(size // 2, max(size // 2 + 1, len(rel) - size // 2))  # whole beats
+            ax_tracks.plot(uniform_filter1d(rel @ along, size, mode="nearest")[inner],
+                           1000.0 * uniform_filter1d(rel @ across, size, mode="nearest")[inner],
+                           style, color=colour, lw=1.2)
         error = np.asarray(run.sim_positions_m) - np.asarray(run.exp_positions_m)
-        ax_along.plot(run.times_s, error @ along, color=colour, lw=1, label=e.name)
-        ax_cross.plot(run.times_s, error @ across, color=colour, lw=1)
+        ax_along.plot(run.times_s, 1000.0 * (error @ along), color=colour, lw=1, label=e.name)
+        ax_cross.plot(run.times_s, 1000.0 * (error @ across), color=colour, lw=1)
     if runs:
-        first = runs[0].experiment.scenario
-        ax_tracks.plot(*first.start_position_m, "o", color="k", ms=4, label="start")
-        draw_waypoints(ax_tracks, first.waypoints_m, first.acceptance_radius_m, numbered=False)
+        radius = runs[0].experiment.scenario.acceptance_radius_m
+        ax_tracks.plot(0.0, 0.0, "o", color="k", ms=4, label="start")
+        ax_tracks.axvspan(distance - radius, distance, color="tab:green", alpha=0.12,
+                          label=f"within {radius:g} m of the waypoint ({distance:g} m ahead)")
     ax_tracks.add_artist(
         ax_tracks.legend(
             [Line2D([], [], color="k"), Line2D([], [], color="k", ls="--")],
             ["experiment", "simulation"],
             loc="upper left",
-            fontsize=8,
+            fontsize=9,
         )
     )
-    legend_once(ax_tracks, loc="lower right", fontsize=8)
-    ax_tracks.set_aspect("equal", adjustable="datalim")
-    label_axes(ax_tracks)
-    ax_tracks.set_title("tracks", fontsize=9)
-    for ax, what in ((ax_along, "along-track error (m)"), (ax_cross, "cross-track error (m)")):
+    legend_once(ax_tracks, loc="lower left", fontsize=9)
+    ax_tracks.axhline(0.0, color="0.5", lw=0.8)
+    label_axes(ax_tracks, "along the track (m)", "across the track, left > 0 (mm)")
+    ax_tracks.grid(alpha=0.3)
+    ax_tracks.set_title("tracks, each the mean over one tail beat (across magnified)",
+                        fontsize=10)
+    for ax, what in ((ax_along, "along-track error (mm)"), (ax_cross, "cross-track error (mm)")):
         ax.axhline(0.0, color="0.5", lw=0.8)
         ax.set_ylabel(what)
         ax.grid(alpha=0.3)
-    ax_along.set_title("simulation - experiment (ahead > 0, left of the track > 0)", fontsize=9)
+    ax_along.set_title("simulation - experiment (ahead > 0, left of the track > 0)", fontsize=10)
     ax_cross.set_xlabel("t (s)")
-    ax_along.legend(fontsize=6, ncol=2, loc="best")
+    ax_along.legend(fontsize=7, ncol=2, loc="best")
     if title:
         fig.suptitle(title)
     return save_figure(fig, path)

@@ -30,7 +30,7 @@ def fake_straight_run(name: str, drift_m: float):
     t = np.linspace(0.0, 10.0, 21)
     exp = np.column_stack([0.1 * t, np.zeros_like(t)])
     sim = exp + np.column_stack([np.full_like(t, 0.01), drift_m * t])  # ahead, drifting left
-    experiment = SimpleNamespace(name=name, position_m=exp, scenario=scenario)
+    experiment = SimpleNamespace(name=name, t_s=t, position_m=exp, scenario=scenario)
     return SimpleNamespace(experiment=experiment, times_s=t, exp_positions_m=exp,
                            sim_positions_m=sim)
 
@@ -46,12 +46,22 @@ def test_straight_runs_show_both_errors_against_time_with_units(captured, tmp_pa
                             tmp_path / "s.png")
     (fig,) = captured
     tracks, along, cross = fig.axes[:3]
-    for ax in (tracks, along, cross):
-        assert "(m)" in ax.get_ylabel()
-    assert tracks.get_xlabel() == "x (m)" and cross.get_xlabel() == "t (s)"
-    assert np.allclose(along.lines[1].get_ydata(), 0.01)  # the 1 cm ahead, constant
-    assert np.isclose(cross.lines[1].get_ydata()[-1], -0.02)  # run b drifts 2 cm right by 10 s
-    assert any("acceptance radius" in t.get_text() for t in tracks.get_legend().get_texts())
+    assert "(mm)" in tracks.get_ylabel() and "(m)" in tracks.get_xlabel()
+    for ax in (along, cross):
+        assert "(mm)" in ax.get_ylabel()
+    assert cross.get_xlabel() == "t (s)"
+    assert np.allclose(along.lines[1].get_ydata(), 10.0)  # the 1 cm ahead, constant
+    assert np.isclose(cross.lines[1].get_ydata()[-1], -20.0)  # run b drifts 2 cm right by 10 s
+    assert any("of the waypoint" in t.get_text() for t in tracks.get_legend().get_texts())
+
+
+def test_the_tracks_panel_shows_the_drift_across_the_track_not_a_flat_line(captured, tmp_path):
+    plots.plot_track_errors([fake_straight_run("b", -0.002)], tmp_path / "s.png")
+    tracks = captured[0].axes[0]
+    simulated = tracks.lines[1].get_ydata()  # the twin's track, mm across
+    assert simulated.min() < -10.0  # 2 mm/s for 10 s, a beat averaged out: clearly off zero
+    low, high = tracks.get_ylim()
+    assert high - low < 40.0  # the axis is scaled to the drift, not to the tank
 
 
 def test_legend_lists_each_label_once():

@@ -42,8 +42,11 @@ def plot_paths(runs: Sequence[ValidationRun], path: str | Path, title: str = "")
     n = len(runs)
     cols = min(4, n)
     rows = int(np.ceil(n / cols))
+    # a few panels get room (two paths: 10 x 4.2 in, 1500 x 630 px at 150 dpi); many, less each
+    width, height = (5.0, 4.2) if n <= 2 else (3.6, 3.0)
     fig, axes = plt.subplots(
-        rows, cols, figsize=(3.2 * cols, 2.6 * rows), squeeze=False, constrained_layout=True
+        rows, cols, figsize=(width * cols, height * rows + 0.4), squeeze=False,
+        constrained_layout=True,
     )
     for ax, run in zip(axes.flat, runs, strict=False):
         e = run.experiment
@@ -60,13 +63,13 @@ def plot_paths(runs: Sequence[ValidationRun], path: str | Path, title: str = "")
         draw_current(
             ax, e.scenario.current_speed_m_s, e.scenario.current_direction_deg, at=(0.55, 0.12)
         )
-        ax.set_title(f"{e.name}\nE_x {run.row.Ex_mean_BL:.3f} BL", fontsize=8)
+        ax.set_title(f"{e.name}\nE_x {run.row.Ex_mean_BL:.3f} BL", fontsize=9)
         ax.set_aspect("equal", adjustable="datalim")
-        ax.tick_params(labelsize=7)
+        ax.tick_params(labelsize=8)
         label_axes(ax)
     for ax in list(axes.flat)[n:]:
         ax.axis("off")
-    axes.flat[0].legend(fontsize=7)
+    axes.flat[0].legend(fontsize=8)
     if title:
         fig.suptitle(title)
     return _save(fig, path)
@@ -120,4 +123,4 @@ def plot_validation(runs: Sequence[ValidationRun], out: str | Path) -> list[Path
 
 
 def _save(fig: plt.Figure, path: str | Path) -> Path:
-    return save_figure(fig, path, dpi=100)
+    return save_figure(fig, path)  # at the print resolution (eelhost.plots.PRINT_DPI)
