@@ -90,7 +90,8 @@ def run(args: argparse.Namespace) -> int:
     base = plant.settings if plant else TankSettings()
     law = args.fluid_law or (plant.law if plant else "morison")
     try:
-        truth = law_truths(law)
+        # a named plant's own truth (it may set some of its law's coefficients otherwise)
+        truth = plant.truths() if plant and not args.fluid_law else law_truths(law)
     except ValueError as err:
         if not args.truth:
             raise UserError(f"--fluid-law: {err}") from None

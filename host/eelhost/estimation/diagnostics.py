@@ -6,7 +6,8 @@
 - **Far above the noise floor**: the fit's fitness more than ``NOISE_RATIO`` times the fitness its
   own model gets on data regenerated with the dataset's declared noise (the parametric
   bootstrap's noise floor). The model then lacks something the plant does; the coefficients
-  absorb it and predict the training gaits better than others.
+  absorb it and predict the training gaits better than others, and the intervals are dominated by
+  misfit, not by the declared noise (:mod:`eelhost.estimation.uncertainty`).
 """
 
 from __future__ import annotations
@@ -77,8 +78,10 @@ def fit_warnings(
         out.append(
             f"{motion}: fitness {boot.fitness:.4g} is {boot.excess:.1f} times the noise floor "
             f"{boot.noise_floor:.4g} (what the declared noise alone gives): the model misses "
-            "something the robot does, the coefficients absorb it, and predictions of other gaits "
-            f"are less sure (intervals widened {boot.excess:.1f}x)"
+            "something the robot does, the coefficients absorb it, and the intervals are "
+            "dominated by misfit (the declared noise's spread widened "
+            f"{boot.excess:.1f}x, or the residual bootstrap's, whichever is wider), as are "
+            "predictions of other gaits"
         )
     for line in out:
         log.warning("%s", line)

@@ -15,7 +15,7 @@ bootstrap of :mod:`eelhost.estimation.uncertainty`.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -41,6 +41,8 @@ class Identifiability:
         Linearised correlation of the estimates.
     rel_std_error : ndarray, shape (K,)
         Linearised standard error over the value (over half the range for a signed parameter).
+    std_error : ndarray, shape (K,)
+        The same in the parameter's own unit (inf where the data does not see it).
     verdict : list of str
         "pinned down", "weakly identified" or "not identified" per parameter.
     """
@@ -51,6 +53,7 @@ class Identifiability:
     correlation: np.ndarray
     rel_std_error: np.ndarray
     verdict: list[str]
+    std_error: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     def unidentified(self) -> list[str]:
         """The parameters reported *not identified*."""
@@ -73,7 +76,8 @@ def identifiability(evaluator: Evaluator, estimate: np.ndarray) -> Identifiabili
     The Jacobian is taken in the unit cube of the search bounds (a step of 1 % of each range), so a
     parameter near zero is probed as well as any other; standard errors come from its singular
     value decomposition, and a direction the data does not see at all (a singular value below 1e-9
-    of the largest) gets an infinite error instead of the zero a pseudo-inverse would give.
+    of the largest) gets an infinite error instead of the zero a pseudo-inverse would give. The residual variance is
+    never taken below the pixel rounding's (pixel^2 / 12).
 
     Parameters
     ----------
@@ -98,7 +102,10 @@ def identifiability(evaluator: Evaluator, estimate: np.ndarray) -> Identifiabili
     ranges = space.bounds[:, 1] - space.bounds[:, 0]
     sensitivity = np.sqrt(np.mean((jac * REL_STEP) ** 2, axis=0))
     _, sing, vt = np.linalg.svd(jac, full_matrices=False)
-    sigma2 = float(r[0] @ r[0]) / max(1, m - k)
+    # never below the pixel rounding's variance (a uniform half-pixel error): a fit that
+    # reproduces its recordings exactly still only knows them to a pixel
+    pixel = max(float(p.experiment.recording_camera().pixel_m) for p in evaluator.prepared)
+    sigma2 = max(float(r[0] @ r[0]) / max(1, m - k), pixel**2 / 12.0)
     with np.errstate(divide="ignore"):
         inv_s2 = np.where(sing > 1e-9 * sing[0], 1.0 / sing**2, np.inf)
     # an unidentified direction has an infinite variance; 0 x inf (a parameter with no share in
@@ -116,4 +123,4 @@ def identifiability(evaluator: Evaluator, estimate: np.ndarray) -> Identifiabili
         "pinned down" if e < PINNED else "weakly identified" if e < WEAK else "not identified"
         for e in rel
     ]
-    return Identifiability(space.names, sensitivity, sing, corr, rel, verdict)
+    return Identifiability(space.names, sensitivity, sing, corr, rel, verdict, std)

@@ -1,31 +1,42 @@
-"""Intervals that hold: a parametric bootstrap with the dataset's own noise (docs/estimation.md).
+"""Intervals that hold: bootstraps of the declared noise and of the fit's misfit (docs/estimation.md).
 
 The fitted model stands in for the robot: each replicate records the training experiments again
 from it, through the noise the dataset declares, and refits; the spread of the refits is the
-spread an estimate from data like these has.
+spread an estimate from data like these has, *if the model were right and the declaration
+complete*. Neither need hold (issue 32: a dataset declaring no jitter gave every refit the same
+data and intervals of zero width), so the fit's own residuals are resampled too.
 
 - **Regenerated recordings** (:func:`regenerate`): the fitted model runs every training task in
   the batched kernel with a new seeded control-period jitter (the timing's ``jitter_s``), is seen
   through the recording's camera (its frame rate, pixel rounding, median filter causal or
   centred), and is read at the recording's own frame times shifted by a new clock offset drawn
-  uniformly within the declared ``timestamp_jitter_s``. Only the positions differ from the
-  recording, so every replicate is scored on the same simulations.
+  uniformly within the declared ``timestamp_jitter_s``.
+- **Residual replicates** (:func:`misfit_replicates`): the fit's noise-free view of each training
+  recording (:func:`model_views`) plus the recording's residual curve times a random weight per
+  experiment (Webb's six-point weights): a wild cluster bootstrap, each experiment a cluster, so
+  the residuals' correlation in time is kept. It needs no declaration: what the model misses
+  (misfit, undeclared clock offsets or jitter) is in the residuals.
+- **The cluster jackknife**: each training experiment left out in turn and the rest refitted.
+  With few experiments the fit absorbs much of its residuals (six parameters, four curves), so
+  the residual bootstrap alone was narrow (measured on the zero-jitter copy of the bundled
+  dataset: C_d's wild spread 0.007, its jackknife error 0.030, its error 0.063).
 - **Refits** (:func:`parametric_bootstrap`): the minimax polish from the estimate, all
   replicates in lock step (one batch per iteration).
-- **The noise floor**: the fitness the refits reach, each on its regenerated data: what a model
-  that contains the plant reaches from data with this noise (the estimate's fitness on data it
-  was not fitted to would be higher: on the bundled tank's turning fit 0.142, with the refits'
-  near the fit's 0.040, the clock offsets being absorbed by the fit). A fit whose fitness is far above it is dominated by model error the noise does not
-  explain; its intervals are widened by the excess, the ratio of its fitness to the floor's
-  median (at least 1).
-- **Intervals**: estimate +- t(B - 1, 97.5 %) x bootstrap standard deviation x excess x
-  ``widen``, cut to the search bounds; a parameter the data does not identify (the linearised
-  analysis of :mod:`eelhost.estimation.identify`: ``unidentified``) gets its whole search range,
-  since refits from the estimate stay near it however little the data constrains it (measured:
-  C_m's refits of a straight tank stayed near the bound where the fit had put it, far from the
-  truth). ``widen`` is the factor the coverage benchmark
-  (``eelbot estimate-bench --coverage``) measured to be needed for the 95 % intervals to cover
-  the truth in at least 90 % of synthetic tanks whose model contains it.
+- **The noise floor**: the fitness the declared-noise refits reach, each on its regenerated data:
+  what a model that contains the plant reaches from data with this noise. A fit whose fitness
+  is far above it is dominated by model error the noise does not explain; the noise refits'
+  spread is widened by the excess, the ratio of its fitness to the floor's median (at least 1).
+- **Intervals**: the estimate +- the widest of the sources (each with its own Student quantile,
+  times ``widen``), never narrower than the linearised standard error
+  (:mod:`eelhost.estimation.identify`, whose residual variance is never below the pixel
+  rounding's), cut to the search bounds; a parameter the data does not identify gets its whole
+  search range, since refits from the estimate stay near it however little the data constrains
+  it. ``widen`` is the factor the coverage benchmark (``eelbot estimate-bench --coverage``)
+  measured to be needed for the 95 % intervals to cover the truth in at least 90 % of synthetic
+  tanks whose model contains it.
+- **Prediction bands** (:func:`eelhost.estimation.validate.prediction_bands`) swim the estimate
+  and every refit (:meth:`BootstrapResult.ensemble`) and add the residuals' growth along a
+  recording (:func:`misfit_growth`).
 """
 
 from __future__ import annotations
@@ -33,7 +44,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -42,7 +53,7 @@ from eelhost.data.experiments import Experiment
 from eelhost.estimation.evaluate import Evaluator
 from eelhost.estimation.local import polish_minimax_many
 from eelhost.estimation.parameters import FittedModel
-from eelsim.camera import observation_steps, observed_positions
+from eelsim.camera import CameraModel, observation_steps, observed_positions
 from eelsim.closed_loop import LoopOptions
 from eelsim.robot import Robot
 from eelsim.timing import LoopTiming
@@ -54,6 +65,51 @@ LEVEL = 0.95
 # seeds with the ambient current fitted, C_f, C_d and C_a were covered in 95 % of the seeds at
 # 1.0, the current's x component in 85 %; 1.05 is the factor that component needed for 90 %.
 WIDEN = 1.05
+
+
+def _record(
+    plant: Robot,
+    model: FittedModel,
+    exp: Experiment,
+    offsets: np.ndarray,
+    seeds: np.ndarray,
+    jitter_s: float,
+    camera: CameraModel,
+) -> list[np.ndarray | None]:
+    """What ``camera`` records of ``model`` swimming ``exp``'s task, once per clock offset.
+
+    The recordings are read at the experiment's own frame times shifted by each offset; the
+    control period's jitter is ``jitter_s`` (each run seeded by ``seeds``). None where the model
+    failed before the recording ended.
+    """
+    from eelsim.batch import run_batch
+
+    timing = LoopTiming(
+        control_period_s=float(exp.timing.get("control_period_s", 0.3)),
+        extra_delay_s=float(exp.timing.get("extra_delay_s", 0.0)),
+        jitter_s=jitter_s,
+    )
+    dt = timing.dt_s
+    true_times = [np.maximum(exp.t_s - o, 0.0) for o in offsets]
+    steps = np.unique(np.concatenate(
+        [observation_steps(t, camera, dt, float(t[-1])) for t in true_times]))
+    duration = float(steps[-1] + 2) * dt
+    # in the model's tank: its fitted ambient current, if any, adds to the declared one
+    scenario = exp.scenario.with_added_current(model.current_m_s).model_copy(
+        update={"duration_s": duration, "min_duration_s": 0.0})
+    options = LoopOptions(timing=timing, camera=camera, stop_at_goal=False)
+    res = run_batch(plant, [scenario] * len(offsets), model.coefficients.as_array(), options,
+                    seeds=seeds, sample_steps=steps)
+    n = plant.n_links
+    out: list[np.ndarray | None] = []
+    for b, t in enumerate(true_times):
+        states = res.states[b]
+        if np.isnan(states).any():
+            out.append(None)  # the model failed before the recording ended
+            continue
+        out.append(observed_positions(t, steps, states[:, n : n + 2], states[:, -2:], camera,
+                                      dt, float(t[-1])))
+    return out
 
 
 def regenerate(
@@ -84,58 +140,131 @@ def regenerate(
         Per replicate, the experiments recorded again (same names and frame times, new
         positions; no heading), or None where the model failed in one of them.
     """
-    from eelsim.batch import run_batch
-
     plant = model.robot(robot)
     out: list[list[Experiment] | None] = [[] for _ in range(replicates)]
     for exp in experiments:
-        camera = exp.recording_camera()
-        timing = LoopTiming(
-            control_period_s=float(exp.timing.get("control_period_s", 0.3)),
-            extra_delay_s=float(exp.timing.get("extra_delay_s", 0.0)),
-            jitter_s=float(exp.timing.get("jitter_s", 0.0)),
-        )
-        dt = timing.dt_s
         offsets = rng.uniform(-exp.timestamp_jitter_s, exp.timestamp_jitter_s, replicates)
         seeds = rng.integers(0, 2**31, replicates)
-        true_times = [np.maximum(exp.t_s - o, 0.0) for o in offsets]
-        steps = np.unique(np.concatenate(
-            [observation_steps(t, camera, dt, float(t[-1])) for t in true_times]))
-        duration = float(steps[-1] + 2) * dt
-        # in the model's tank: its fitted ambient current, if any, adds to the declared one
-        scenario = exp.scenario.with_added_current(model.current_m_s).model_copy(
-            update={"duration_s": duration, "min_duration_s": 0.0})
-        options = LoopOptions(timing=timing, camera=camera, stop_at_goal=False)
-        res = run_batch(plant, [scenario] * replicates, model.coefficients.as_array(), options,
-                        seeds=seeds, sample_steps=steps)
-        n = plant.n_links
-        for b in range(replicates):
-            if out[b] is None:
+        recorded = _record(plant, model, exp, offsets, seeds,
+                           float(exp.timing.get("jitter_s", 0.0)), exp.recording_camera())
+        for b, pos in enumerate(recorded):
+            kept = out[b]
+            if kept is None:
                 continue
-            states = res.states[b]
-            if np.isnan(states).any():
-                out[b] = None  # the model failed before the recording ended
+            if pos is None:
+                out[b] = None
                 continue
-            pos = observed_positions(true_times[b], steps, states[:, n : n + 2],
-                                     states[:, -2:], camera, dt, float(true_times[b][-1]))
-            replica = dataclasses.replace(exp, position_m=pos, heading_rad=None,
-                                          link_angles_rad=None)
-            out[b].append(replica)  # type: ignore[union-attr]
+            kept.append(dataclasses.replace(exp, position_m=pos, heading_rad=None,
+                                            link_angles_rad=None))
     return out
+
+
+def model_views(
+    robot: Robot, model: FittedModel, experiments: Sequence[Experiment]
+) -> list[np.ndarray | None]:
+    """The model's noise-free view of each experiment, at its frame times.
+
+    No clock offset, no control jitter, and the recording's camera without its pixel rounding
+    (a zero-mean noise of the recording, docs/estimation.md): what the fit predicts the
+    recording to be. None where the model failed.
+
+    Parameters
+    ----------
+    robot : Robot
+    model : FittedModel
+    experiments : sequence of Experiment
+
+    Returns
+    -------
+    list of ndarray, shape (F, 2), or None
+    """
+    plant = model.robot(robot)
+    return [_record(plant, model, exp, np.zeros(1), np.zeros(1, dtype=np.int64), 0.0,
+                    dataclasses.replace(exp.recording_camera(), pixel_m=0.0))[0]
+            for exp in experiments]
+
+
+def webb_weights(rng: np.random.Generator, shape: tuple[int, ...]) -> np.ndarray:
+    """Webb's six-point weights of the wild cluster bootstrap.
+
+    +-sqrt(1/2), +-1, +-sqrt(3/2), each with probability 1/6: mean 0, variance 1, and with four
+    clusters 6^4 = 1296 distinct patterns where Rademacher's +-1 gives 16 (Webb 2014, "Reworking
+    wild bootstrap based inference for clustered errors"; docs/estimation.md, "Uncertainty").
+    """
+    values = np.sqrt(np.array([0.5, 1.0, 1.5]))
+    return rng.choice(np.concatenate([-values, values]), size=shape)
+
+
+def misfit_replicates(
+    experiments: Sequence[Experiment],
+    views: Sequence[np.ndarray],
+    replicates: int,
+    rng: np.random.Generator,
+) -> list[list[Experiment]]:
+    """The wild cluster bootstrap's data sets: the fit's view plus reweighted residual curves.
+
+    Each experiment's residual curve (recording minus the fit's view, at every frame) is one
+    cluster: a replicate adds it back to the view times one weight (:func:`webb_weights`) per
+    experiment and replicate. The curve keeps everything the model misses (misfit, clock offset,
+    control jitter, pixels) with its correlation in time; the weight says it might as well have
+    been the other way or of another size.
+
+    Parameters
+    ----------
+    experiments : sequence of Experiment
+        The training recordings.
+    views : sequence of ndarray, shape (F, 2)
+        :func:`model_views` of them (none None).
+    replicates : int
+    rng : numpy Generator
+
+    Returns
+    -------
+    list of list of Experiment
+    """
+    w = webb_weights(rng, (replicates, len(experiments)))
+    return [[dataclasses.replace(exp, position_m=view + w[b, e] * (exp.position_m - view),
+                                 heading_rad=None, link_angles_rad=None)
+             for e, (exp, view) in enumerate(zip(experiments, views, strict=True))]
+            for b in range(replicates)]
+
+
+def misfit_growth(experiments: Sequence[Experiment], views: Sequence[np.ndarray]) -> np.ndarray:
+    """How the fit's residuals grow along a recording: (c0, c1) of s^2(t) = c0 + c1 t^2.
+
+    s^2 is the residual's variance per axis (half the squared norm), t the time since the
+    recording's first frame, fitted to every frame of the training recordings by non-negative
+    least squares: c0 for what does not grow (pixels, clock offsets, the camera), c1 for a
+    speed the model gets wrong, whose position error grows with time. The prediction band of a
+    held-out trajectory adds it to the parameters' spread (:mod:`eelhost.estimation.validate`).
+
+    Returns
+    -------
+    ndarray, shape (2,)
+        c0 in m^2, c1 in m^2/s^2.
+    """
+    from scipy.optimize import nnls
+
+    t = np.concatenate([exp.t_s - exp.t_s[0] for exp in experiments])
+    s2 = np.concatenate([0.5 * np.sum((exp.position_m - v) ** 2, axis=1)
+                         for exp, v in zip(experiments, views, strict=True)])
+    a = np.column_stack([np.ones_like(t), t**2])
+    coef, _ = nnls(a, s2)
+    return np.asarray(coef, dtype=float)
 
 
 @dataclass
 class BootstrapResult:
-    """The parametric bootstrap of one fit.
+    """The bootstrap of one fit: declared noise and the fit's own residuals.
 
     Attributes
     ----------
     names : tuple of str
     estimate : ndarray, shape (K,)
     samples : ndarray, shape (B, K)
-        The refits.
+        The refits on data regenerated with the declared noise.
     noise_fitness : ndarray, shape (B,)
-        The refits' fitness, each on its replicate: the noise floor's distribution.
+        Those refits' fitness, each on its replicate: the noise floor's distribution.
     fitness : float
         The fit's own fitness.
     lower, upper : ndarray, shape (K,)
@@ -144,6 +273,21 @@ class BootstrapResult:
     widen : float
     failed : int
         Replicates left out because the model failed in them.
+    misfit_samples : ndarray, shape (B', K)
+        The refits of the wild cluster bootstrap over the training experiments' residual curves
+        (:func:`misfit_replicates`); empty when the model's noise-free view failed.
+    growth : ndarray, shape (2,)
+        :func:`misfit_growth` (c0 m^2, c1 m^2/s^2) of the training experiments' leave-one-out
+        prediction errors (each predicted by its jackknife refit), or of their in-sample
+        residuals with fewer than three experiments.
+    growth_source : str
+        "leave-one-out" or "in-sample".
+    experiments : int
+        Training experiments of the fit.
+    linear_std : ndarray, shape (K,), optional
+        The linearised standard errors the interval is never narrower than.
+    jackknife : ndarray, shape (E, K)
+        The leave-one-experiment-out refits on the recordings (empty with fewer than three).
     """
 
     names: tuple[str, ...]
@@ -156,6 +300,18 @@ class BootstrapResult:
     level: float = LEVEL
     widen: float = WIDEN
     failed: int = 0
+    misfit_samples: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    growth: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    linear_std: np.ndarray | None = None
+    jackknife: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    growth_source: str = "in-sample"
+    experiments: int = 0
+
+    @property
+    def growth_dof(self) -> int:
+        """Degrees of freedom of :attr:`growth`: one less than the experiments behind it."""
+        n = len(self.jackknife) if self.growth_source == "leave-one-out" else self.experiments
+        return max(1, n - 1)
 
     @property
     def noise_floor(self) -> float:
@@ -168,6 +324,26 @@ class BootstrapResult:
         floor = self.noise_floor
         return max(1.0, self.fitness / floor) if floor > 0 else 1.0
 
+    def noise_std(self) -> np.ndarray:
+        """Standard deviation of the declared-noise refits, per parameter (0 with fewer than 2)."""
+        return _std(self.samples, len(self.names))
+
+    def misfit_std(self) -> np.ndarray:
+        """Standard deviation of the residual (wild cluster) refits, per parameter."""
+        return _std(self.misfit_samples, len(self.names))
+
+    def jackknife_std(self) -> np.ndarray:
+        """The cluster jackknife's standard error: sqrt((E - 1) / E sum_i (x_(i) - x)^2)."""
+        e = len(self.jackknife)
+        if e < 2:
+            return np.zeros(len(self.names))
+        return np.sqrt((e - 1) / e * np.sum((self.jackknife - self.estimate) ** 2, axis=0))
+
+    def misfit_dominated(self) -> np.ndarray:
+        """Per parameter, whether the residuals set the interval (not the declared noise)."""
+        return (np.maximum(self.misfit_std(), self.jackknife_std())
+                > self.noise_std() * self.excess)
+
     def relative_half_width(self) -> np.ndarray:
         """Half the interval over the estimate's magnitude (inf at 0)."""
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -179,24 +355,58 @@ class BootstrapResult:
         t = np.asarray(truth, dtype=float)
         return (self.lower <= t) & (t <= self.upper)
 
+    def ensemble(self, bounds: np.ndarray | None = None) -> np.ndarray:
+        """The estimate, every refit and the jackknife's pseudo-draws: what a band swims.
+
+        Parameters
+        ----------
+        bounds : ndarray, shape (K, 2), optional
+            Search bounds the pseudo-draws are cut to.
+
+        Returns
+        -------
+        ndarray, shape (M, K)
+            The estimate first.
+        """
+        parts = [self.estimate[None], self.samples.reshape(-1, len(self.names))]
+        if self.misfit_samples.size:
+            parts.append(self.misfit_samples)
+        if len(self.jackknife) >= 2:
+            # pseudo-draws whose mean square deviation is the jackknife's variance
+            e = len(self.jackknife)
+            parts.append(self.estimate + np.sqrt(e - 1) * (self.jackknife - self.estimate))
+        out = np.concatenate(parts)
+        return out if bounds is None else np.clip(out, bounds[:, 0], bounds[:, 1])
+
     def to_json(self) -> dict[str, Any]:
         """JSON-ready summary, parameters by name."""
         def by_name(v: np.ndarray) -> dict[str, float]:
             return {n: float(x) for n, x in zip(self.names, v, strict=True)}
 
         return {
-            "method": "parametric bootstrap (docs/estimation.md)",
+            "method": "parametric bootstrap of the declared noise and wild cluster bootstrap of "
+                      "the residuals (docs/estimation.md, \"Uncertainty\")",
             "replicates": int(len(self.samples)),
+            "misfit_replicates": int(len(self.misfit_samples)),
             "failed_replicates": self.failed,
             "level": self.level,
             "widen": self.widen,
             "noise_floor": self.noise_floor,
             "excess": self.excess,
-            "std": by_name(self.samples.std(axis=0, ddof=1) if len(self.samples) > 1
-                           else np.zeros(len(self.names))),
+            "std": by_name(self.noise_std()),
+            "misfit_std": by_name(self.misfit_std()),
+            "jackknife_std": by_name(self.jackknife_std()),
+            "misfit_dominated": [n for n, d in zip(self.names, self.misfit_dominated(),
+                                                    strict=True) if d],
+            "misfit_growth": {"c0_m2": float(self.growth[0]), "c1_m2_s2": float(self.growth[1]),
+                              "from": self.growth_source, "dof": self.growth_dof},
             "lower": by_name(self.lower),
             "upper": by_name(self.upper),
         }
+
+
+def _std(samples: np.ndarray, k: int) -> np.ndarray:
+    return samples.std(axis=0, ddof=1) if len(samples) > 1 else np.zeros(k)
 
 
 def parametric_bootstrap(
@@ -210,8 +420,25 @@ def parametric_bootstrap(
     level: float = LEVEL,
     progress: Callable[[str], None] | None = None,
     unidentified: Sequence[str] = (),
+    linear_std: np.ndarray | None = None,
+    misfit: bool = True,
 ) -> BootstrapResult:
-    """Intervals for a fit from refits on data regenerated with the dataset's declared noise.
+    """Intervals for a fit from refits: the declared noise, and the misfit the noise misses.
+
+    Refitted together by the minimax polish from the estimate, in lock step:
+
+    - ``replicates`` data sets recorded again from the fit with the noise the dataset declares
+      (:func:`regenerate`); their fitness is the noise floor;
+    - ``replicates`` data sets made of the fit's noise-free view plus its residual curves,
+      reweighted per experiment (:func:`misfit_replicates`, a wild cluster bootstrap);
+    - the recordings themselves with each experiment left out in turn (the cluster jackknife,
+      with at least three experiments).
+
+    The half-width is ``widen`` x the largest of: t(B - 1) x the noise refits' standard
+    deviation x the excess over the noise floor; t(B - 1) x the residual refits' standard
+    deviation; t(E - 1) x the jackknife's standard error; z x ``linear_std`` (97.5 % quantiles);
+    cut to the bounds. The declared noise alone gave zero width when a dataset declared none
+    (issue 32); the residuals carry whatever the model misses, declared or not.
 
     Parameters
     ----------
@@ -222,9 +449,9 @@ def parametric_bootstrap(
     fitness : float
         Their fitness on the training experiments.
     replicates : int
-        B, regenerated data sets.
+        B, data sets of each kind.
     seed : int
-        Seeds the clock offsets and control jitter of the replicates.
+        Seeds the clock offsets, control jitter and residual weights of the replicates.
     max_iterations : int
         Iterations of each refit's minimax polish.
     widen : float
@@ -235,11 +462,17 @@ def parametric_bootstrap(
         Gets a line when the replicates are recorded.
     unidentified : sequence of str
         Parameters the data does not identify: their interval is the search range.
+    linear_std : ndarray, shape (K,), optional
+        Linearised standard errors (:attr:`Identifiability.std_error`): the floor of the
+        half-widths, so that an interval is never of zero width where the refits all agree.
+    misfit : bool
+        Include the residual bootstrap (False: the declared noise alone, as before issue 32).
 
     Returns
     -------
     BootstrapResult
     """
+    from scipy.stats import norm
     from scipy.stats import t as student_t
 
     space = evaluator.space
@@ -253,32 +486,71 @@ def parametric_bootstrap(
     if failed:
         log.warning("%d of %d bootstrap replicates left out: the model failed in them",
                     failed, replicates)
+    wild: list[list[Experiment]] = []
+    growth = np.zeros(2)
+    if misfit:
+        views = model_views(evaluator.robot, model, experiments)
+        if any(v is None for v in views):
+            log.warning("the fit fails within a training recording: no residual bootstrap")
+        else:
+            full = [v for v in views if v is not None]
+            wild = misfit_replicates(experiments, full, replicates, np.random.default_rng(
+                [seed, 32]))
+            growth = misfit_growth(experiments, full)
+    # leave-one-experiment-out refits on the recordings themselves (the cluster jackknife)
+    n_exp = len(experiments)
+    drops = list(range(n_exp)) if misfit and n_exp >= 3 else []
     if progress:
-        progress(f"bootstrap: {len(kept)} replicates recorded, refitting")
-    prepared = [evaluator.prepare_like(r) for r in kept]
+        progress(f"bootstrap: {len(kept)} + {len(wild)} replicates recorded, refitting them and "
+                 f"{len(drops)} leave-one-out fits")
+    problems: list[tuple[list, np.ndarray]] = [
+        (evaluator.prepare_like(r), np.ones(n_exp, dtype=bool)) for r in kept + wild]
+    problems += [(evaluator.prepared, np.arange(n_exp) != i) for i in drops]
 
     def evaluate(asked: list[np.ndarray]) -> list[tuple[np.ndarray, np.ndarray]]:
         sizes = [len(a) for a in asked]
         sim = evaluator.simulate(np.concatenate(asked))
         out, at = [], 0
-        for size, prep in zip(sizes, prepared, strict=True):
+        for size, (prep, keep) in zip(sizes, problems, strict=True):
             part = sim.take(slice(at, at + size))
-            out.append((evaluator.errors_of(part, prep), evaluator.residual_vectors_of(part, prep)))
+            out.append((evaluator.errors_of(part, prep)[:, keep],
+                        evaluator.residual_vectors_of(part, prep)[:, keep]))
             at += size
         return out
 
-    refits = polish_minimax_many(evaluate, space, np.repeat(estimate[None], len(kept), axis=0),
+    refits = polish_minimax_many(evaluate, space, np.repeat(estimate[None], len(problems), axis=0),
                                  max_iterations)
-    samples = np.array([r.values for r in refits]).reshape(-1, space.size)
-    noise = np.array([r.fitness for r in refits])
-    boot = BootstrapResult(space.names, estimate, samples, noise, float(fitness),
-                           estimate.copy(), estimate.copy(), level, widen, failed)
-    if len(samples) > 1:
-        quantile = float(student_t.ppf(0.5 + level / 2, len(samples) - 1))
-        half = quantile * samples.std(axis=0, ddof=1) * boot.excess * widen
-        bounds = space.bounds
-        boot.lower = np.maximum(estimate - half, bounds[:, 0])
-        boot.upper = np.minimum(estimate + half, bounds[:, 1])
+    values = np.array([r.values for r in refits]).reshape(-1, space.size)
+    noise = np.array([r.fitness for r in refits[: len(kept)]])
+    n_boot = len(kept) + len(wild)
+    boot = BootstrapResult(space.names, estimate, values[: len(kept)], noise, float(fitness),
+                           estimate.copy(), estimate.copy(), level, widen, failed,
+                           misfit_samples=values[len(kept):n_boot], growth=growth,
+                           linear_std=None if linear_std is None else np.asarray(linear_std),
+                           jackknife=values[n_boot:], experiments=n_exp)
+    if len(drops) >= 2:
+        # the band's misfit from held-out predictions: each experiment predicted by the fit
+        # without it (in-sample residuals are shrunk by the fit: six parameters, few curves)
+        loo = [model_views(evaluator.robot, FittedModel(space, boot.jackknife[i]),
+                           [experiments[i]])[0] for i in drops]
+        if all(v is not None for v in loo):
+            boot.growth = misfit_growth(experiments, [v for v in loo if v is not None])
+            boot.growth_source = "leave-one-out"
+    # each source's spread times its own Student quantile (the jackknife has E - 1 degrees of
+    # freedom, not B - 1); the widest sets the half-width
+    def quantile(n: int) -> float:
+        return float(student_t.ppf(0.5 + level / 2, n - 1)) if n >= 2 else 0.0
+
+    half = np.maximum.reduce([
+        quantile(len(kept)) * boot.noise_std() * boot.excess,
+        quantile(len(wild)) * boot.misfit_std(),
+        quantile(len(drops)) * boot.jackknife_std(),
+        float(norm.ppf(0.5 + level / 2)) * (np.zeros(space.size) if boot.linear_std is None
+                                            else np.nan_to_num(boot.linear_std, posinf=0.0)),
+    ]) * widen
+    bounds = space.bounds
+    boot.lower = np.maximum(estimate - half, bounds[:, 0])
+    boot.upper = np.minimum(estimate + half, bounds[:, 1])
     whole = np.isin(np.array(space.names), list(unidentified))
     boot.lower[whole], boot.upper[whole] = space.bounds[whole, 0], space.bounds[whole, 1]
     return boot

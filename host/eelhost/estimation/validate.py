@@ -186,3 +186,165 @@ def table_csv(rows: Sequence[ValidationRow]) -> str:
     for r in rows:
         lines.append(",".join(str(getattr(r, c)) for c in cols))
     return "\n".join(lines) + "\n"
+
+
+# ---- prediction bands (docs/estimation.md, "Prediction bands")
+
+BAND_LEVEL = 0.95
+# Extra widening of the bands, as measured by the band coverage benchmark
+# (docs/estimation_coverage.md): 1, none.
+BAND_WIDEN = 1.0
+
+
+@dataclass
+class PredictionBand:
+    """The prediction band of one held-out experiment, and whether the recording stays in it.
+
+    Attributes
+    ----------
+    name, motion, coefficients : str
+        The experiment, its motion type and the fitted set that predicts it.
+    times_s : ndarray, shape (n,)
+        Sample times (the recording's clock).
+    centre_m : ndarray, shape (n, 2)
+        The fit's prediction (NaN where it failed).
+    radius_m : ndarray, shape (n,)
+        The band's radius around it.
+    inside : ndarray of bool, shape (n,)
+        Whether the recorded position lies within the band (False where the prediction failed).
+    """
+
+    name: str
+    motion: str
+    coefficients: str
+    times_s: np.ndarray
+    centre_m: np.ndarray
+    radius_m: np.ndarray
+    inside: np.ndarray
+
+    @property
+    def coverage(self) -> float:
+        """Fraction of the sampled positions inside the band."""
+        return float(self.inside.mean())
+
+
+def band_radius(
+    spread_m2: np.ndarray, t_s: np.ndarray, growth: np.ndarray, level: float = BAND_LEVEL,
+    widen: float = BAND_WIDEN, dof: int | None = None,
+) -> np.ndarray:
+    """The band's radius: a 2-D prediction region of per-axis variance spread + misfit.
+
+    The per-axis variance at time t since the recording's start is the ensemble's spread (half
+    the mean squared distance of the refits' predictions from the fit's) plus the misfit's
+    c0 + c1 t^2 (:func:`eelhost.estimation.uncertainty.misfit_growth`). With the variance known,
+    the radius is sqrt(chi2_2(level)) = sqrt(-2 ln(1 - level)) standard deviations; estimated from
+    ``dof`` + 1 independent curves (the training experiments), it is sqrt(2 F(level; 2, dof))
+    standard deviations, the prediction region of a 2-D normal whose variance is estimated
+    (Hotelling): with four experiments 4.37 instead of 2.45. Times ``widen``.
+
+    Parameters
+    ----------
+    spread_m2 : ndarray, shape (n,)
+    t_s : ndarray, shape (n,)
+    growth : ndarray, shape (2,)
+        (c0 m^2, c1 m^2/s^2).
+    level, widen : float
+    dof : int, optional
+        Degrees of freedom of the variance's estimate (None: known).
+
+    Returns
+    -------
+    ndarray, shape (n,)
+    """
+    if dof is None:
+        k = np.sqrt(-2.0 * np.log(1.0 - level))
+    else:
+        from scipy.stats import f as fisher
+
+        k = float(np.sqrt(2.0 * fisher.ppf(level, 2, max(1, dof))))
+    return widen * k * np.sqrt(spread_m2 + growth[0] + growth[1] * t_s**2)
+
+
+def prediction_bands(
+    robot: Robot,
+    fitted: dict[str, FittedModel],
+    ensembles: dict[str, np.ndarray],
+    growth: dict[str, np.ndarray],
+    experiments: Sequence[Experiment],
+    n_samples: int = N_SAMPLES_VALIDATE,
+    backend: str = "auto",
+    level: float = BAND_LEVEL,
+    widen: float = BAND_WIDEN,
+    dof: dict[str, int] | None = None,
+) -> list[PredictionBand]:
+    """95 % prediction bands of held-out experiments, and their coverage of the recordings.
+
+    Each experiment is swum by its fitted set's ensemble (the estimate and its bootstrap refits,
+    :meth:`eelhost.estimation.uncertainty.BootstrapResult.ensemble`): the spread of their
+    predictions is the parameters' share; the training residuals' growth is the misfit's
+    (:func:`band_radius`). The recording is compared on its own clock.
+
+    Parameters
+    ----------
+    robot : Robot
+    fitted : dict
+        Fitted models per motion type, as for :func:`validate`.
+    ensembles : dict
+        Per fitted set, parameter vectors of its space, shape (M, K), the estimate first.
+    growth : dict
+        Per fitted set, the misfit growth (c0, c1).
+    experiments : sequence of Experiment
+        The held-out experiments and paths.
+    n_samples, backend, level, widen
+        Samples per experiment, evaluator backend, the band's level and extra widening.
+    dof : dict, optional
+        Per fitted set, the degrees of freedom of its misfit's estimate (:func:`band_radius`;
+        default: the variance taken as known).
+
+    Returns
+    -------
+    list of PredictionBand
+        In the experiments' order; sets without an ensemble are left out.
+    """
+    bands: list[PredictionBand] = []
+    groups: dict[str, list[Experiment]] = {}
+    for exp in experiments:
+        key = coefficient_set_for(exp.motion, fitted)
+        if key in ensembles:
+            groups.setdefault(key, []).append(exp)
+    for key, exps in groups.items():
+        ev = Evaluator(robot, exps, n_samples=n_samples, backend=backend, space=fitted[key].space)
+        sim = ev.simulate(np.atleast_2d(ensembles[key]))
+        for j, p in enumerate(ev.prepared):
+            pos = sim.positions_m[:, j]  # (M, n, 2)
+            centre = pos[0]
+            members = pos[1:][~np.isnan(pos[1:]).any(axis=(1, 2))]
+            spread = (0.5 * np.mean(np.sum((members - centre) ** 2, axis=-1), axis=0)
+                      if len(members) else np.zeros(len(p.times_s)))
+            radius = band_radius(spread, p.times_s - p.experiment.t_s[0], growth[key], level,
+                                 widen, None if dof is None else dof.get(key))
+            gap = np.linalg.norm(p.exp_positions_m - centre, axis=-1)
+            inside = np.where(np.isnan(gap), False, gap <= radius)
+            bands.append(PredictionBand(p.experiment.name, p.experiment.motion, key, p.times_s,
+                                        centre, radius, inside))
+    order = {e.name: i for i, e in enumerate(experiments)}
+    return sorted(bands, key=lambda b: order[b.name])
+
+
+def band_coverage(bands: Sequence[PredictionBand]) -> dict[str, float]:
+    """Fraction of held-out positions inside their bands, per motion type and ``"all"``."""
+    out: dict[str, list[np.ndarray]] = {}
+    for b in bands:
+        out.setdefault(b.motion, []).append(b.inside)
+        out.setdefault("all", []).append(b.inside)
+    return {m: float(np.concatenate(v).mean()) for m, v in out.items()}
+
+
+def bands_markdown(bands: Sequence[PredictionBand], body_length_m: float) -> str:
+    """The bands as a table: per experiment, coverage and the radius at the start and end (BL)."""
+    lines = ["| experiment | motion | coefficients | positions inside | radius, first sample (BL) "
+             "| radius, last sample (BL) |", "|---|---|---|---|---|---|"]
+    lines += [f"| {b.name} | {b.motion} | {b.coefficients} | {b.coverage * 100:.0f} % | "
+              f"{b.radius_m[0] / body_length_m:.4f} | {b.radius_m[-1] / body_length_m:.4f} |"
+              for b in bands]
+    return "\n".join(lines)

@@ -1,0 +1,178 @@
+"""Fluid laws of test plants only: water the estimator has no candidate for (docs/estimation.md).
+
+A test plant is a test of the estimator only if its physics is not one of the models the
+estimator chooses among; these laws are registered for the virtual tank (``candidate = False``:
+:func:`eelsim.fluid.candidate_laws` leaves them out, so no comparison fits them) and live here,
+with the plants, not in the twin's own laws.
+
+The ``foil`` law: each link a slender foil in the flow w = (w_t, w_n) relative to the water
+(tangential and normal components), |w| its speed, alpha its angle of attack (sin alpha =
+w_n / |w|, cos alpha = w_t / |w|). With q = rho / 2, the wetted area S_t = pi (a + b) l (the
+paper's tangential area) and the lateral area S_n = 2 a 2 l:
+
+- drag along -w with an angle-of-attack-dependent coefficient,
+  D = q |w|^2 (S_t C_D0 + S_n C_D2 sin^2 alpha);
+- lift across w (a flat plate's, peaking at 45 degrees), L = q |w|^2 S_n C_L sin alpha cos alpha,
+  directed against the normal flow (it turns with the sign of alpha);
+
+which in the link's frame, with k_0 = q S_t C_D0, k_2 = q S_n C_D2, k_L = q S_n C_L, is
+
+    f_t = -(k_0 |w| + (k_2 - k_L) w_n^2 / |w|) w_t
+    f_n = -(k_0 |w| + (k_2 w_n^2 + k_L w_t^2) / |w|) w_n
+
+The lift does no work (f . w = -(k_0 |w| + k_2 w_n^2 / |w|) |w|^2 <= 0); at a small angle of
+attack the normal force is k_L |w_t| w_n, linear in w_n with a slope that grows with the
+swimming speed, where the Morison law's is c_n (w_n + |w_n| w_n) whatever the speed; the
+tangential drag depends on the normal flow. Yaw damping: the cross-flow drag integrated along the
+link turning about its centre, tau = -lambda_q |theta_dot| theta_dot, lambda_q = rho a C_D2 l^4 / 2.
+Added mass mu_n and added inertia lambda_1 from C_a and C_m as the paper's, with the reactive
+terms of the relative motion (:mod:`eelsim.fluid.relative`). With C_a = C_m = 0 the links carry no
+water along: no added-mass inertia, which no candidate law's bounds allow (C_a >= 0.05).
+
+Typical values (:data:`FOIL_DRAG`): C_D0 = 0.008 (table 3's C_f), C_D2 = 1.0 (a circular
+cylinder's cross-flow drag), C_L = 1.0 (a flat plate's sin alpha cos alpha form with 2 pi alpha
+at small alpha on the lateral area would give 2 pi; a slender body's is far smaller).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Annotated, ClassVar
+
+import numpy as np
+from numpy.typing import ArrayLike
+from pydantic import Field
+
+from eelsim.fluid import FLUID_LAWS, register_fluid_law
+from eelsim.fluid.base import (
+    FloatArray,
+    FluidCoefficients,
+    KernelCode,
+    LinkFluid,
+    law_coefficient_columns,
+)
+from eelsim.fluid.morison import MORISON
+from eelsim.fluid.relative import RelativeMotionLaw
+
+_NonNegative = Annotated[float, Field(ge=0.0, allow_inf_nan=False)]
+
+SPEED_FLOOR_M_S = 1e-9
+"""|w| below which the direction of the flow is taken as undefined (the forces are then 0)."""
+
+FOIL_DRAG = {"C_D0": 0.008, "C_D2": 1.0, "C_L": 1.0}
+"""The foil plants' drag and lift (module docstring)."""
+
+
+class FoilCoefficients(FluidCoefficients):
+    """Coefficients of the foil law, dimensionless (module docstring).
+
+    Attributes
+    ----------
+    C_D0 : float
+        Drag at zero angle of attack, on the wetted area.
+    C_D2 : float
+        Angle-of-attack drag, times sin^2 alpha, on the lateral area.
+    C_L : float
+        Lift, times sin alpha cos alpha, on the lateral area.
+    C_a, C_m : float
+        Added mass and added yaw inertia, as the paper's.
+    """
+
+    law_name: ClassVar[str] = "foil"
+
+    C_D0: _NonNegative
+    C_D2: _NonNegative
+    C_L: _NonNegative
+    C_a: _NonNegative
+    C_m: _NonNegative
+
+
+@dataclass(frozen=True)
+class FoilLinkFluid(LinkFluid):
+    """Per-link coefficients of the foil law (arrays of shape (..., N)).
+
+    Attributes
+    ----------
+    k_0, k_2, k_lift : ndarray
+        q S_t C_D0, q S_n C_D2 and q S_n C_L, kg/m.
+    lambda_q : ndarray
+        Yaw damping, kg m^2.
+    """
+
+    k_0: FloatArray
+    k_2: FloatArray
+    k_lift: FloatArray
+    lambda_q: FloatArray
+
+    def kernel_values(self) -> dict[str, FloatArray]:
+        """The rows ``fk0``, ``fk2``, ``fkl``, ``flamq``."""
+        return {"fk0": self.k_0, "fk2": self.k_2, "fkl": self.k_lift, "flamq": self.lambda_q}
+
+
+class FoilLaw(RelativeMotionLaw):
+    """Lift and angle-of-attack-dependent drag on each link, for test plants (module docstring)."""
+
+    name: ClassVar[str] = "foil"
+    coefficients: ClassVar[type[FluidCoefficients]] = FoilCoefficients
+    candidate: ClassVar[bool] = False
+    default_bounds: ClassVar[tuple[tuple[float, float], ...]] = (
+        (0.0, 0.1), (0.0, 3.0), (0.0, 3.0), (0.0, 3.0), (0.0, 1.0))
+    kernel_rows: ClassVar[tuple[str, ...]] = ("fk0", "fk2", "fkl", "flamq")
+
+    def link_coefficients(
+        self,
+        half_length_m: ArrayLike,
+        half_axis_vertical_m: ArrayLike,
+        half_axis_horizontal_m: ArrayLike,
+        coefficients: ArrayLike,
+        water_density_kg_m3: ArrayLike,
+    ) -> FoilLinkFluid:
+        """See the module docstring."""
+        l_ = np.asarray(half_length_m, dtype=float)
+        a = np.asarray(half_axis_vertical_m, dtype=float)
+        b = np.asarray(half_axis_horizontal_m, dtype=float)
+        rho = np.asarray(water_density_kg_m3, dtype=float)
+        c_d0, c_d2, c_l, c_a, c_m = law_coefficient_columns(coefficients, 5)
+        # the added mass and inertia are the paper's (its drag terms are not used)
+        paper = MORISON.link_coefficients(l_, a, b, np.stack([c_d0, c_d2, c_a, c_m], axis=-1),
+                                          rho)
+        lateral = 0.5 * rho * (2.0 * a) * (2.0 * l_)
+        return FoilLinkFluid(
+            mu_n=paper.mu_n,
+            lambda_1=paper.lambda_1,
+            k_0=0.5 * rho * np.pi * (a + b) * l_ * c_d0,
+            k_2=lateral * c_d2,
+            k_lift=lateral * c_l,
+            lambda_q=rho * a * c_d2 * l_**4 / 2.0,
+        )
+
+    def drag(
+        self, fluid: LinkFluid, vt: FloatArray, vn: FloatArray, omega: FloatArray
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Drag, lift and yaw damping (module docstring)."""
+        if not isinstance(fluid, FoilLinkFluid):
+            raise TypeError(f"the foil law needs its own link coefficients, got "
+                            f"{type(fluid).__name__}")
+        f = fluid
+        speed = np.sqrt(vt * vt + vn * vn)
+        inv = 1.0 / np.maximum(speed, SPEED_FLOOR_M_S)
+        return (-(f.k_0 * speed + (f.k_2 - f.k_lift) * vn * vn * inv) * vt,
+                -(f.k_0 * speed + (f.k_2 * vn * vn + f.k_lift * vt * vt) * inv) * vn,
+                -f.lambda_q * np.abs(omega) * omega)
+
+    def emit_drag(self, code: KernelCode, link: int) -> tuple[str, str, str]:
+        """The same, negated, for the batched kernel."""
+        w, line = code.w, code.line
+        line("fl_sp = _vsqrt(fl_vt * fl_vt + fl_vn * fl_vn)")
+        line(f"fl_inv = 1.0 / max(fl_sp, {SPEED_FLOOR_M_S!r})")
+        k0, k2, kl = w("fk0", link), w("fk2", link), w("fkl", link)
+        return (f"({k0} * fl_sp + ({k2} - {kl}) * fl_vn * fl_vn * fl_inv) * fl_vt",
+                f"({k0} * fl_sp + ({k2} * fl_vn * fl_vn + {kl} * fl_vt * fl_vt) * fl_inv) * fl_vn",
+                f"{w('flamq', link)} * abs(om) * om")
+
+
+FOIL = FoilLaw()
+"""The foil law (a plant law: never a candidate)."""
+
+if FOIL.name not in FLUID_LAWS:
+    register_fluid_law(FOIL)

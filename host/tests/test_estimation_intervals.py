@@ -1,0 +1,168 @@
+"""Intervals that tell the truth and bands that cover: the misfit in the uncertainty (issue 32)."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from eelhost.data.virtual_tank import TABLE3, TankSettings, record_experiment
+from eelhost.estimation.evaluate import Evaluator
+from eelhost.estimation.local import polish_minimax
+from eelhost.estimation.parameters import FittedModel
+from eelhost.estimation.uncertainty import (
+    BootstrapResult,
+    misfit_growth,
+    misfit_replicates,
+    model_views,
+    parametric_bootstrap,
+    webb_weights,
+)
+from eelhost.estimation.validate import band_coverage, band_radius, prediction_bands
+from eelsim.robot import load_robot
+from eelsim.scenario import load_scenario
+
+TRUTH = TABLE3["straight"]
+GAITS = ["straight_A0.87_w3.9", "straight_A0.61_w2.7", "straight_A0.78_w3.5"]
+
+
+def _short(name, far_m=0.4):
+    return load_scenario(name).model_copy(update={"waypoints_m": [(far_m, 0.0)]})
+
+
+def _declaring_no_noise(exp):
+    """The recording as a lab with a hardware-triggered camera would declare it: no jitter."""
+    return dataclasses.replace(exp, camera={**exp.camera, "timestamp_jitter_s": 0.0},
+                               timing={**exp.timing, "jitter_s": 0.0})
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return load_robot()
+
+
+@pytest.fixture(scope="module")
+def undeclared_noise_fit(robot):
+    """Three short gaits with the bundled tank's clock offsets and jitter, declared as none.
+
+    Fitted by the minimax polish from 30 % too much drag, as the report's polish would refine a
+    global fit: the estimate is off the truth by what the undeclared noise moves it.
+    """
+    exps = [_declaring_no_noise(record_experiment(robot, _short(n), "straight", TRUTH,
+                                                  TankSettings(), seed=10 + i))
+            for i, n in enumerate(GAITS)]
+    ev = Evaluator(robot, exps, backend="batch")
+    start = TRUTH.as_array() * np.array([1.0, 1.3, 1.0, 1.0])
+    fit = polish_minimax(ev.evaluate, ev.space, start, max_iterations=15)
+    return ev, fit
+
+
+def test_intervals_of_data_declaring_no_noise_have_width_and_cover_the_truth(
+    undeclared_noise_fit
+):
+    # issue 32: every declared-noise replicate was the same data set, every refit the estimate,
+    # and C_d read 0.839 [0.839, 0.839] against a truth of 0.776
+    ev, fit = undeclared_noise_fit
+    boot = parametric_bootstrap(ev, fit.values, fit.fitness, replicates=4, seed=2,
+                                max_iterations=6)
+    assert np.allclose(boot.noise_std()[:3], 0.0, atol=1e-12)  # the declared noise says nothing
+    assert len(boot.jackknife) == 3 and len(boot.misfit_samples) == 4
+    identified = slice(0, 3)  # C_f, C_d, C_a (C_m is not identified on any tank)
+    assert np.all(boot.upper[identified] > boot.lower[identified])
+    assert np.all(boot.covers(TRUTH.as_array())[identified]), (boot.lower, boot.upper)
+    assert boot.misfit_dominated()[identified].all()
+
+
+def test_an_interval_is_never_narrower_than_the_linearised_error(undeclared_noise_fit):
+    ev, fit = undeclared_noise_fit
+    floor = np.array([1e-3, 0.2, 0.3, 0.1])
+    boot = parametric_bootstrap(ev, fit.values, fit.fitness, replicates=2, seed=2,
+                                max_iterations=1, misfit=False, linear_std=floor)
+    half = np.minimum(boot.upper - fit.values, fit.values - boot.lower)
+    inside = (boot.lower > ev.space.bounds[:, 0]) & (boot.upper < ev.space.bounds[:, 1])
+    np.testing.assert_allclose(half[inside], (1.959964 * floor * boot.widen)[inside], rtol=1e-5)
+
+
+def test_residual_replicates_keep_each_experiments_curve_up_to_one_weight(robot):
+    exps = [record_experiment(robot, _short(n), "straight", TRUTH, TankSettings(), seed=i)
+            for i, n in enumerate(GAITS[:2])]
+    views = [np.zeros_like(e.position_m) + 0.1 for e in exps]
+    reps = misfit_replicates(exps, views, 5, np.random.default_rng(0))
+    for rep in reps:
+        for exp, view, again in zip(exps, views, rep, strict=True):
+            resid, new = exp.position_m - view, again.position_m - view
+            w = np.sum(new * resid) / np.sum(resid * resid)
+            np.testing.assert_allclose(new, w * resid, atol=1e-12)
+            assert abs(abs(w) - np.sqrt(0.5)) < 1e-9 or abs(abs(w) - 1) < 1e-9 \
+                or abs(abs(w) - np.sqrt(1.5)) < 1e-9
+            np.testing.assert_array_equal(again.t_s, exp.t_s)
+    w = webb_weights(np.random.default_rng(1), (20000,))
+    assert abs(w.mean()) < 0.02 and abs(w.var() - 1.0) < 0.02
+
+
+def test_the_models_noise_free_view_of_a_clean_tank_is_its_recording(robot):
+    clean = TankSettings(timestamp_jitter_s=0.0, control_jitter_s=0.0, pixel_m=0.0)
+    exp = record_experiment(robot, _short(GAITS[1]), "straight", TRUTH, clean, seed=4)
+    view, = model_views(robot, FittedModel.of_coefficients(TRUTH, robot), [exp])
+    np.testing.assert_allclose(view, exp.position_m, rtol=0, atol=1e-6)
+    # no residual: no growth
+    np.testing.assert_allclose(misfit_growth([exp], [view]), 0.0, atol=1e-12)
+
+
+def test_misfit_growth_separates_a_constant_offset_from_a_drift():
+    t = np.linspace(0.0, 10.0, 301)
+    exp = type("E", (), {})()
+    exp.t_s = t + 3.0  # the recording's clock need not start at 0
+    drift = np.column_stack([0.002 + 0.001 * t, np.zeros_like(t)])
+    exp.position_m = drift
+    c0, c1 = misfit_growth([exp], [np.zeros_like(drift)])
+    # 0.5 (0.002 + 0.001 t)^2 = 2e-6 + 2e-6 t + 5e-7 t^2: a line through it in (1, t^2)
+    assert c0 > 0 and c1 > 0
+    s2 = 0.5 * drift[:, 0] ** 2
+    assert np.abs(c0 + c1 * t**2 - s2).max() < 0.2 * s2.max()
+
+
+def test_band_radius_is_the_95_percent_circle_of_a_2d_normal():
+    rng = np.random.default_rng(0)
+    sigma = 0.01
+    r = band_radius(np.array([sigma**2]), np.array([0.0]), np.zeros(2))[0]
+    pts = rng.normal(0.0, sigma, (200000, 2))
+    assert abs(np.mean(np.linalg.norm(pts, axis=1) <= r) - 0.95) < 0.003
+    # the misfit's growth adds in variance
+    r2 = band_radius(np.array([0.0]), np.array([2.0]), np.array([0.0, sigma**2 / 4]))[0]
+    assert r2 == pytest.approx(r)
+
+
+def test_prediction_bands_cover_held_out_gaits_of_a_tank_the_model_contains(robot):
+    # the truth's own ensemble with the recordings' noise as its growth: its band holds the
+    # noisy recordings of gaits it was not fitted to
+    settings = TankSettings(control_jitter_s=0.0)
+    held = [record_experiment(robot, _short(n, 0.3), "straight", TRUTH, settings, seed=20 + i)
+            for i, n in enumerate(GAITS[:2])]
+    model = FittedModel.of_coefficients(TRUTH, robot)
+    ensemble = np.repeat(model.values[None], 3, axis=0)
+    views = model_views(robot, model, held)
+    growth = misfit_growth(held, views)
+    bands = prediction_bands(robot, {"straight": model}, {"straight": ensemble},
+                             {"straight": growth}, held, n_samples=15, backend="batch")
+    assert [b.name for b in bands] == [e.name for e in held]
+    cover = band_coverage(bands)
+    assert cover["all"] >= 0.9 and set(cover) == {"straight", "all"}
+    # a band with no width holds almost nothing of a noisy recording
+    none = prediction_bands(robot, {"straight": model}, {"straight": ensemble},
+                            {"straight": np.zeros(2)}, held, n_samples=15, backend="batch")
+    assert band_coverage(none)["all"] < 0.5
+
+
+def test_the_ensemble_is_the_estimate_first_then_refits_and_jackknife_pseudo_draws():
+    names = ("a", "b")
+    est = np.array([1.0, 2.0])
+    boot = BootstrapResult(names, est, np.array([[1.1, 2.0]]), np.ones(1), 1.0, est, est,
+                           misfit_samples=np.array([[0.9, 2.1]]),
+                           jackknife=np.array([[1.0, 2.2], [1.0, 1.8], [1.2, 2.0]]))
+    ens = boot.ensemble(np.array([[0.0, 5.0], [0.0, 2.3]]))
+    np.testing.assert_array_equal(ens[0], est)
+    assert len(ens) == 1 + 1 + 1 + 3
+    # pseudo-draws: mean square deviation = the jackknife variance (before cutting to bounds)
+    raw = boot.ensemble()[3:]
+    np.testing.assert_allclose(np.mean((raw - est) ** 2, axis=0), boot.jackknife_std() ** 2)
+    assert ens[:, 1].max() <= 2.3
