@@ -218,7 +218,9 @@ def run(args: argparse.Namespace) -> int:
         from eelhost.planning.figures import plot_plan
 
         check = outcome.checks[0] if outcome.checks else None
-        print(f"wrote {plot_plan(world, outcome.plan, check, planner.model, out / 'plan.png')}")
+        figure = plot_plan(world, outcome.plan, check, planner.model, out / "plan.png",
+                           checks=outcome.checks)  # the title: the worst over every check
+        print(f"wrote {figure}")
     if args.replan and outcome.found:
         from eelhost.planning.replan import execute_with_replanning
 
