@@ -145,7 +145,12 @@ int main(int argc, char** argv) {
   const double end_us = static_cast<double>(duration_ms) * 1000.0;
   while (g_t_us < end_us) {
     if (g_t_us >= next_keep_alive) {
-      Line keep = frame_of(eelproto::SetOffset{small_offset()}, g_seq++);
+      // After garbage the line may be mid-"frame": a delimiter first lets the keep-alive through.
+      Line keep;
+      keep.bytes[0] = 0;
+      const Line body = frame_of(eelproto::SetOffset{small_offset()}, g_seq++);
+      memcpy(keep.bytes + 1, body.bytes, body.n);
+      keep.n = body.n + 1;
       emit(keep);
       if (kind == Replays) last = keep;
       next_keep_alive += kKeepAliveUs;

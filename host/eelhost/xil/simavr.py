@@ -49,6 +49,7 @@ __all__ = [
     "ServoModel",
     "expected_pulse_widths_us",
     "run_processor_in_loop",
+    "setup_eeprom",
 ]
 
 ELF_PATH = FIRMWARE_DIR / "build" / "avr" / "eelbot.elf"
@@ -56,6 +57,20 @@ LIBRARY_PATH = FIRMWARE_DIR / "build" / "tools" / "libeelavrsim.so"
 SERVO_PINS = ("D2", "D3", "D4", "D5", "D6")  # joint 1 (tail) .. joint 5 (head); README wiring
 BUSY_PIN = "D7"
 FloatArray = NDArray[np.float64]
+
+
+EEPROM_BYTES = 1024  # the ATmega328P's
+
+
+def setup_eeprom() -> bytes:
+    """The EEPROM of a robot that has been set up: the default settings saved in slot 0.
+
+    Taken from the native build of the same firmware sources, whose new instances hold exactly
+    that (``eel_create``), so the image's layout is the firmware's own.
+    """
+    from eelhost.xil.native_firmware import NativeFirmware
+
+    return NativeFirmware(now_us=0).eeprom_read(0, EEPROM_BYTES)
 
 
 class AvrSimulatorError(RuntimeError):
@@ -105,6 +120,7 @@ def _load_library(path: Path) -> ctypes.CDLL:
     lib.eas_now_us.argtypes = [vp]
     lib.eas_take_uart.restype = sz
     lib.eas_take_uart.argtypes = [vp, ctypes.POINTER(d), ctypes.POINTER(ctypes.c_uint8), sz]
+    lib.eas_eeprom.argtypes = [vp, ctypes.POINTER(ctypes.c_uint8), ctypes.c_uint32, ctypes.c_int]
     lib.eas_take_pulses.restype = sz
     lib.eas_take_pulses.argtypes = [
         vp,
@@ -127,6 +143,15 @@ class AvrSimulator:
         Pins whose high pulses are timed, e.g. ``("D2", "D3")``; pulses report the pin's index here.
     freq_hz : int
         Clock of the AVR (the Nano's 16 MHz).
+    eeprom : bytes, optional
+        The EEPROM the AVR boots with (1024 bytes). By default that of a robot that has been set
+        up: the default settings saved (:func:`setup_eeprom`); an erased EEPROM (1024 bytes
+        0xFF) boots the defaults with Start refused until the host acknowledges them
+        (docs/firmware.md, "Settings in the EEPROM").
+
+    The harness feeds the UART at the true line rate (5760 bytes/s; simavr alone counts a parity
+    bit, 5195), keeps an EEPROM byte programming for the chip's 3.4 ms, and holds the battery
+    input at 7.4 V behind the default divider (``firmware/tools/eel_avrsim.c``).
     """
 
     _CAP = 4096
@@ -136,6 +161,7 @@ class AvrSimulator:
         elf: Path | None = None,
         pins: tuple[str, ...] = (*SERVO_PINS, BUSY_PIN),
         freq_hz: int = 16_000_000,
+        eeprom: bytes | None = None,
     ) -> None:
         if elf is None:
             # Bring the image and the harness up to date (fast when they are), as the native
@@ -147,6 +173,7 @@ class AvrSimulator:
             raise AvrSimulatorError(f"simavr cannot load {elf or ELF_PATH}")
         self._h: ctypes.c_void_p | None = ctypes.c_void_p(handle)
         self._lib.eas_buffer_outputs(self._h, 1)
+        self.write_eeprom(setup_eeprom() if eeprom is None else eeprom)
         for name in pins:
             if self._lib.eas_watch_pin(self._h, name.encode()) < 0:
                 raise ValueError(f"bad pin {name!r}")
@@ -164,6 +191,19 @@ class AvrSimulator:
 
     def __del__(self) -> None:
         self.close()
+
+    def write_eeprom(self, image: bytes) -> None:
+        """Put ``image`` (1024 bytes) into the AVR's EEPROM (before it boots, or for its next)."""
+        if len(image) != EEPROM_BYTES:
+            raise ValueError(f"an EEPROM image is {EEPROM_BYTES} bytes, not {len(image)}")
+        buf = (ctypes.c_uint8 * EEPROM_BYTES).from_buffer_copy(image)
+        self._lib.eas_eeprom(self._h, buf, EEPROM_BYTES, 1)
+
+    def read_eeprom(self) -> bytes:
+        """The AVR's EEPROM now (1024 bytes)."""
+        buf = (ctypes.c_uint8 * EEPROM_BYTES)()
+        self._lib.eas_eeprom(self._h, buf, EEPROM_BYTES, 0)
+        return bytes(buf)
 
     def push_uart(self, t_us: float, data: bytes) -> None:
         """Queue bytes for the AVR's UART receiver from ``t_us`` on (in order, at the UART's pace)."""
@@ -416,14 +456,14 @@ def expected_pulse_widths_us(
     valid : ndarray of bool, shape (P,)
         False for pulses whose update or frame is ambiguous.
     """
-    # Frames as the AVR received them: (time the delimiter entered the UART, message). simavr's
-    # UART takes the queued bytes one after the other, 11 bit times each (it counts a parity bit):
-    # 192.5 us at 57600 baud (U2X, UBRR 34).
+    # Frames as the AVR received them: (time the delimiter entered the UART, message). The
+    # harness's UART takes the queued bytes one after the other at the line rate, 10 bit times
+    # each: 173.6 us at 57600 baud.
     reader = protocol.FrameReader()
     frames: list[tuple[float, protocol.Message]] = []
     entered = -np.inf
     for t, byte in result.uart_in:
-        entered = max(t, entered + 11 * 8 * 35 / 16.0)
+        entered = max(t, entered + 1e6 / 5760)
         frames.extend((entered, m) for _, m in reader.feed(bytes([byte])))
     upd = result.control_updates_us
     rise_u, end_u = upd[:, 0], upd[:, 0] + upd[:, 1]
