@@ -1,26 +1,37 @@
-"""Do the report's intervals hold? ``eelbot estimate-bench --coverage N``.
+"""Do the report's intervals and bands hold? ``eelbot estimate-bench --coverage N``, ``--bands``.
 
-Over N seeds of a synthetic tank whose model contains the truth (the paper's law and joints,
-table 3's straight row, the bundled dataset's noise: clock offsets up to 0.1 s, control jitter,
-pixel rounding, causal median), each seed records the four training gaits of the straight fit,
-fits them with the default method, and computes the report's intervals
-(:func:`eelhost.estimation.uncertainty.parametric_bootstrap`). Coverage is the fraction of seeds
-whose interval holds the truth, per coefficient; the target is at least 90 % for 95 % intervals.
-:func:`needed_widening` is the smallest extra factor on the half-widths that would have reached
-the target on these seeds: the value ``uncertainty.WIDEN`` is set to.
+**Coefficient intervals** (:func:`measure_coverage`): over N seeds of a synthetic tank whose model
+contains the truth (the paper's law and joints, table 3's straight row, the bundled dataset's
+noise: clock offsets up to 0.1 s, control jitter, pixel rounding, causal median; or a named
+plant whose law is a candidate, e.g. ``steady_current``, ``centred_median``), each seed records
+the four training gaits of the straight fit, fits them with the default method, and computes the
+report's intervals (:func:`eelhost.estimation.uncertainty.parametric_bootstrap`). Coverage is
+the fraction of seeds whose interval holds the truth, per coefficient; the target is at least
+90 % for 95 % intervals. :func:`needed_widening` is the smallest extra factor on the half-widths
+that would have reached the target on these seeds: the value ``uncertainty.WIDEN`` is set to.
+
+**Prediction bands** (:func:`measure_bands`): for each named plant (typically one whose law is
+no candidate), the virtual tank records the paper's 34 experiments, ``eelbot report`` runs on
+them (straight and turning fits, bootstrap, validation), and the fraction of held-out positions
+inside their 95 % bands is read from its ``coefficients.json``; the target is at least 90 % on
+at least two mismatched plants.
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from eelhost.data.virtual_tank import (
     TABLE3,
+    Plant,
     TankSettings,
+    generate_dataset,
+    mismatched_plants,
     paper_experiment_plan,
     record_experiment,
 )
@@ -81,6 +92,7 @@ def measure_coverage(
     replicates: int = 8,
     settings: FitSettings | None = None,
     say: Callable[[str], None] | None = None,
+    plant: Plant | None = None,
 ) -> Coverage:
     """The intervals' coverage over ``seeds`` synthetic tanks (module docstring).
 
@@ -95,29 +107,40 @@ def measure_coverage(
         The fit (default: the default method with seed = the tank's).
     say : callable, optional
         Gets a line per seed.
+    plant : Plant, optional
+        A named plant whose model the fitted one contains (default: the bundled tank's noise).
 
     Returns
     -------
     Coverage
     """
     robot = load_robot()
+    tank = plant.settings if plant is not None else TankSettings()
+    true = plant.truths()[MOTION] if plant is not None else TABLE3[MOTION]
     # the fit's parameters (with the ambient current when the settings fit it: still water here)
     space = ParameterSpace.for_robot(robot, current=(settings or FitSettings()).fit_current)
-    truth = np.concatenate([TABLE3[MOTION].as_array(), np.zeros(len(space.current_names))])
+    current = np.zeros(len(space.current_names))
+    if (plant is not None and space.current_names
+            and tank.stray_current_direction_deg is not None):
+        # a steady current of the tank is the nuisance's truth
+        a = np.radians(tank.stray_current_direction_deg)
+        current = tank.stray_current_m_s * np.array([np.cos(a), np.sin(a)])
+    truth = np.concatenate([true.as_array(), current])
     gaits = [s for motion, split, s in paper_experiment_plan()
              if motion == MOTION and split == "train"]
     results = []
     for k in range(seeds):
         seed = first_seed + k
-        exps = [record_experiment(robot, s, MOTION, TABLE3[MOTION], TankSettings(),
-                                  seed=1000 * seed + i)
+        exps = [record_experiment(robot, s, MOTION, true, tank, seed=1000 * seed + i)
                 for i, s in enumerate(gaits)]
         fit_settings = settings or FitSettings(seed=seed)
         ev = Evaluator(robot, exps, backend=fit_settings.backend, align_s=fit_settings.align_s,
                        space=space)
         res = run_fit(FitProblem(ev, fit_settings, space.start(robot)))
+        ident = identifiability(ev, res.values)
         boot = parametric_bootstrap(ev, res.values, res.fitness, replicates, seed=seed,
-                                    unidentified=identifiability(ev, res.values).unidentified())
+                                    unidentified=ident.unidentified(),
+                                    linear_std=ident.std_error)
         results.append(boot)
         line = (f"seed {seed}: " + ", ".join(
             f"{n} {v:.4g} [{lo:.4g}, {hi:.4g}]{'' if c else ' MISSED'}"
@@ -129,15 +152,15 @@ def measure_coverage(
     return Coverage(space.names, truth, results)
 
 
-def coverage_markdown(cov: Coverage, seeds_command: str) -> str:
+def coverage_markdown(cov: Coverage, seeds_command: str, tank: str = "bundled noise") -> str:
     """The coverage as a markdown section."""
     rate = cov.rate()
     need = cov.needed_widening()
     lines = [
-        "## Coverage of the report's 95 % intervals",
+        f"## Coverage of the report's 95 % intervals: {tank}",
         "",
         f"`{seeds_command}`: {len(cov.results)} seeds of a straight tank whose model contains the "
-        f"truth (bundled noise), intervals with the widening factor {WIDEN:g} in use. Target: "
+        f"truth ({tank}), intervals with the widening factor {WIDEN:g} in use. Target: "
         f"the truth inside in at least {TARGET * 100:.0f} % of the seeds.",
         "",
         "| parameter | coverage | factor needed for 90 % |",
@@ -145,5 +168,109 @@ def coverage_markdown(cov: Coverage, seeds_command: str) -> str:
     ]
     lines += [f"| {n} | {r * 100:.0f} % | {f:.2f} |"
               for n, r, f in zip(cov.names, rate, need, strict=True)]
+    lines.append("")
+    return "\n".join(lines)
+
+
+@dataclass
+class BandCoverage:
+    """One plant's prediction bands, as its report measured them.
+
+    Attributes
+    ----------
+    plant : str
+    coverage : dict of str to float
+        Fraction of held-out positions inside their bands, per motion type and "all".
+    excess : dict of str to float
+        Each fit's fitness over its noise floor.
+    seconds : float
+        The report's wall time.
+    """
+
+    plant: str
+    coverage: dict[str, float]
+    excess: dict[str, float]
+    seconds: float
+
+
+def measure_bands(
+    plants: Sequence[str],
+    work: Path,
+    robot_file: str | None = None,
+    seed: int = 0,
+    replicates: int = 8,
+    say: Callable[[str], None] | None = None,
+) -> list[BandCoverage]:
+    """Band coverage of held-out positions on named plants (module docstring).
+
+    Parameters
+    ----------
+    plants : sequence of str
+        Names of :func:`eelhost.data.virtual_tank.mismatched_plants`.
+    work : Path
+        Folder of the generated datasets and reports (a dataset already there is reused).
+    robot_file : str, optional
+        The datasets' robot file (default: the paper's); the report fits its model (no model
+        comparison: the law is what differs).
+    seed : int
+        Seed of the recordings and the fits.
+    replicates : int
+        Bootstrap refits per fit.
+    say : callable, optional
+        Gets a line per plant.
+
+    Returns
+    -------
+    list of BandCoverage
+    """
+    import json
+    import time
+
+    from eelhost.data.experiments import load_dataset
+    from eelhost.estimation.report import run_report
+
+    robot = load_robot(robot_file) if robot_file else load_robot()
+    named = mismatched_plants()
+    out = []
+    for name in plants:
+        plant = named[name]
+        folder = work / f"{name}-seed{seed}"
+        if not (folder / "manifest.toml").exists():
+            generate_dataset(folder, robot, plant.truths(), plant.settings, seed)
+        t0 = time.perf_counter()
+        report_dir = work / f"{name}-seed{seed}-report"
+        run_report(load_dataset(folder), report_dir, settings=FitSettings(seed=seed),
+                   bootstrap_replicates=replicates, compare_models=False)
+        seconds = time.perf_counter() - t0
+        data = json.loads((report_dir / "coefficients.json").read_text())
+        band = BandCoverage(name, data["prediction_band"]["coverage"],
+                            {m: u["excess"] for m, u in data["uncertainty"].items()}, seconds)
+        out.append(band)
+        line = (f"{name}: held-out positions inside their 95 % bands: "
+                + ", ".join(f"{m} {v * 100:.0f} %" for m, v in band.coverage.items())
+                + "; fitness / noise floor " + ", ".join(f"{m} {v:.1f}"
+                                                         for m, v in band.excess.items())
+                + f"; report {seconds:.0f} s")
+        log.info("%s", line)
+        if say:
+            say(line)
+    return out
+
+
+def bands_markdown(bands: Sequence[BandCoverage], command: str) -> str:
+    """The band coverage as a markdown section."""
+    motions = sorted({m for b in bands for m in b.coverage if m != "all"}) + ["all"]
+    lines = [
+        "## Coverage of the report's 95 % prediction bands",
+        "",
+        f"`{command}`: held-out positions (on the recordings' own clocks) inside their bands. "
+        f"Target: at least {TARGET * 100:.0f} % on at least two mismatched plants.",
+        "",
+        "| plant | " + " | ".join(motions) + " | fitness / noise floor |",
+        "|---|" + "---|" * len(motions) + "---|",
+    ]
+    lines += [f"| {b.plant} | " + " | ".join(
+        f"{b.coverage[m] * 100:.0f} %" if m in b.coverage else "" for m in motions)
+        + " | " + ", ".join(f"{m} {v:.1f}" for m, v in b.excess.items()) + " |" for b in bands]
     lines.append("")
     return "\n".join(lines)

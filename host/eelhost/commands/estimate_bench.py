@@ -17,6 +17,8 @@ from eelhost.commands.common import (
     add_write_option,
     write_report,
 )
+from eelhost.data.virtual_tank import mismatched_plants
+from eelhost.errors import UserError
 
 WRITE_DEFAULT = "docs/estimation_benchmarks.md"
 
@@ -47,7 +49,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="instead: measure the report's interval coverage over SEEDS synthetic tanks (a bare "
         "--write then writes docs/estimation_coverage.md)",
     )
-    p.add_argument("--replicates", type=COUNT, default=8, help="bootstrap refits (--coverage)")
+    p.add_argument(
+        "--bands",
+        metavar="PLANT,...",
+        help="instead: measure the report's 95 %% prediction bands' coverage of held-out "
+        "positions on these plants (docs/estimation_coverage.md)",
+    )
+    p.add_argument("--robot", help="the robot file of the --bands datasets (default: the "
+                   "paper's)")
+    p.add_argument("--replicates", type=COUNT, default=8,
+                   help="bootstrap refits (--coverage, --bands)")
     p.add_argument("--seed", type=SEED, default=0, help="seed of the datasets and the fits")
     add_current_option(p)  # one setting for every tank
     p.set_defaults(run=run)
@@ -55,14 +66,35 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
+    if args.bands:
+        from eelhost.benchmarks.estimator_coverage import bands_markdown, measure_bands
+
+        names = args.bands.split(",")
+        known = mismatched_plants()
+        unknown = [n for n in names if n not in known]
+        if unknown:
+            raise UserError(f"--bands: unknown plant {unknown[0]!r}; known: "
+                            + ", ".join(sorted(known)))
+        bands = measure_bands(names, Path(args.work), args.robot, args.seed, args.replicates,
+                              say=lambda line: print(line, flush=True))
+        print(bands_markdown(bands, f"eelbot estimate-bench --bands {args.bands}"
+                             + (f" --robot {args.robot}" if args.robot else "")
+                             + f" --seed {args.seed}"))
+        return 0
     if args.coverage:
         from eelhost.benchmarks.estimator_coverage import coverage_markdown, measure_coverage
 
+        tank = args.tanks or "bundled"
+        plant = None if tank == "bundled" else mismatched_plants().get(tank)
+        if tank != "bundled" and plant is None:
+            raise UserError(f"--coverage takes one tank in --tanks: bundled or a plant, got "
+                            f"{tank!r}")
         cov = measure_coverage(args.coverage, args.seed, args.replicates,
-                               say=lambda line: print(line, flush=True))
+                               say=lambda line: print(line, flush=True), plant=plant)
         text = "# Estimation: interval coverage\n\n" + coverage_markdown(
             cov, f"eelbot estimate-bench --coverage {args.coverage} --seed {args.seed} "
-            f"--replicates {args.replicates}")
+            f"--replicates {args.replicates}" + (f" --tanks {tank}" if plant else ""),
+            "bundled noise" if plant is None else f"plant {tank}")
         print(text)
         if args.write:
             out = "docs/estimation_coverage.md" if args.write == WRITE_DEFAULT else args.write
