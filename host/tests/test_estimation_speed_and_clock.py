@@ -1,0 +1,69 @@
+"""The report's mean-speed error per gait and its check of clock offsets at their bound."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from eelhost.data.virtual_tank import TABLE3, TankSettings, record_experiment
+from eelhost.estimation.clock import WIDE_S, clock_check
+from eelhost.estimation.evaluate import ALIGN_S
+from eelhost.estimation.parameters import FittedModel
+from eelhost.estimation.speeds import mean_speed, speed_errors, speeds_markdown
+from eelhost.estimation.validate import validate
+from eelsim.robot import load_robot
+from eelsim.scenario import load_scenario
+
+TRUTH = TABLE3["straight"]
+CLEAN = TankSettings(timestamp_jitter_s=0.0, control_jitter_s=0.0, pixel_m=0.0)
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return load_robot()
+
+
+@pytest.fixture(scope="module")
+def recording(robot):
+    task = load_scenario("straight_A0.87_w3.9").model_copy(update={"waypoints_m": [(0.5, 0.0)]})
+    return record_experiment(robot, task, "straight", TRUTH, CLEAN, seed=0)
+
+
+def test_mean_speed_is_the_distance_along_the_samples_over_their_span():
+    t = np.linspace(0.0, 10.0, 35)
+    straight = np.column_stack([0.08 * t, np.zeros_like(t)])
+    assert mean_speed(t, straight) == pytest.approx(0.08)
+    # a quarter circle of radius 1 m swum in 10 s: along the curve, not the chord
+    a = np.linspace(0.0, np.pi / 2, 2001)
+    arc = np.column_stack([np.cos(a), np.sin(a)])
+    assert mean_speed(np.linspace(0, 10, 2001), arc) == pytest.approx(np.pi / 20, rel=1e-6)
+
+
+def test_the_truth_predicts_its_own_speed_and_a_slower_water_predicts_a_slower_robot(
+    robot, recording
+):
+    truth = FittedModel.of_coefficients(TRUTH, robot)
+    exact = speed_errors(validate(robot, {"straight": truth}, [recording]))[0]
+    assert exact.recorded_m_s > 0.02 and abs(exact.error_percent) < 0.5
+    assert exact.amplitude_rad == pytest.approx(0.87) and exact.omega_rad_s == pytest.approx(3.9)
+    draggy = FittedModel.of_coefficients(TRUTH.model_copy(update={"C_f": 3 * TRUTH.C_f}), robot)
+    slow = speed_errors(validate(robot, {"straight": draggy}, [recording]))[0]
+    assert slow.error_percent < -2.0
+    table = speeds_markdown([exact, slow])
+    assert f"{slow.error_percent:+.1f}" in table and "straight: mean" in table
+
+
+def test_offsets_at_their_bound_are_reported_with_where_a_wider_search_puts_them(
+    robot, recording
+):
+    truth = FittedModel.of_coefficients(TRUTH, robot)
+    on_time = clock_check(validate(robot, {"straight": truth}, [recording]))
+    assert on_time.at_bound == () and on_time.warning() is None
+    # the same recording with its clock 0.4 s late: the best offset within +-0.1 s sits on the
+    # bound, and the wider search finds the lag
+    late = replace(recording, t_s=recording.t_s + 0.4)
+    check = clock_check(validate(robot, {"straight": truth}, [late]))
+    assert check.at_bound == (recording.name,) and check.total == 1
+    assert check.wide_offsets_s[recording.name] == pytest.approx(0.4, abs=0.02)
+    assert 0.4 < WIDE_S and check.most_at_bound
+    assert f"+-{ALIGN_S:g} s bound" in check.warning()
