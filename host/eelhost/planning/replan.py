@@ -374,6 +374,7 @@ class TankReplanner:
             self._window = None  # the prediction of a window spans no switch of waypoints
             self._lookahead = None  # it followed the old waypoints
             self.events[-1]["t_switch_s"] = round(t_s, 3)
+            self.replans += 1
             d.recorded = True
             return d
         est = self.estimator.estimate()
@@ -497,7 +498,6 @@ class TankReplanner:
                                        job.t_request_s + wall, state, outcome, wall, cpu, extra))
         if outcome.found:
             self.failures = 0
-            self.replans += 1
             self.outcome = outcome
             self.path = corridor_path(outcome.plan)
             self._pending = (job.t_start_s, list(outcome.plan.waypoints_m))
