@@ -27,7 +27,7 @@ from eelhost.planning.replan import TankReplanner, predict_state
 from eelhost.planning.search import Plan
 from eelhost.planning.state_estimate import BodyStateEstimator
 from eelhost.planning.tank import plan_for_run, with_extra_current
-from eelhost.planning.uncertainty import default_model
+from eelhost.planning.uncertainty import default_model, read_coefficient_model
 from eelhost.planning.world import parse_world
 from eelhost.vision.localise import Localisation
 from eelhost.vision.synthetic import TankView
@@ -299,3 +299,25 @@ def test_the_virtual_tanks_camera_films_the_worlds_whole_tank():
         found = loc.localise(0.0, frame)
         assert found.found, (x, y)
         assert np.hypot(*(found.com_m - truth.com_m)) < 0.003
+
+
+def test_run_plan_plans_with_the_fitted_model_and_its_tanks_current(tmp_path, capsys):
+    fitted = tmp_path / "coefficients.json"
+    fitted.write_text(json.dumps({"fits": {"joint": {
+        "coefficients": {"C_f": 0.008, "C_d": 0.7, "C_a": 0.6, "C_m": 0.007},
+        "ambient_current": {"current_x_m_s": 0.01, "current_y_m_s": 0.0}}}}))
+    world = tmp_path / "open.toml"
+    world.write_text(
+        'name = "open"\n[tank]\nsize_m = [3.0, 2.0]\n[start]\nposition_m = [0.6, 1.0]\n'
+        "heading_deg = 0.0\n[goal]\nposition_m = [2.1, 1.0]\nradius_m = 0.2\n[current]\n"
+        'speed_m_s = 0.0\ndirection_deg = 0.0\n[[obstacles]]\nkind = "circle"\n'
+        "centre_m = [1.4, 0.25]\nradius_m = 0.1\n")
+    code = main(["run", "--robot", "sim://?speed=0", "--plan", str(world), "--coefficients-file",
+                 str(fitted), "--duration", "1", "--camera", "synthetic:clean", "--no-view",
+                 "--out", str(tmp_path / "take")])
+    out = capsys.readouterr().out
+    assert code == 0, out
+    model = read_coefficient_model(fitted, ROBOT)
+    assert f"coefficients: {model.describe()}" in out  # the reader of eelbot plan, not a copy
+    plans = json.loads((tmp_path / "take.json").read_text())["source"]["planning"]["plans"]
+    assert plans[0]["current_m_s"] == pytest.approx([0.01, 0.0])  # the tank's fitted current
