@@ -35,8 +35,8 @@ data and intervals of zero width), so the fit's own residuals are resampled too.
   measured to be needed for the 95 % intervals to cover the truth in at least 90 % of synthetic
   tanks whose model contains it.
 - **Prediction bands** (:func:`eelhost.estimation.validate.prediction_bands`) swim the estimate
-  and every refit (:meth:`BootstrapResult.ensemble`) and add the residuals' growth along a
-  recording (:func:`misfit_growth`).
+  and every refit (:meth:`BootstrapResult.ensemble`) and add the misfit's growth along a
+  recording (:func:`misfit_growth` of each training experiment predicted by the fit without it).
 """
 
 from __future__ import annotations
