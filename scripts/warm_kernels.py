@@ -34,9 +34,12 @@ TESTS: list[Variant] = [(n, "c", "morison", robot) for n in (3, 6, 8) for robot 
 TESTS += [(6, "c", law, robot) for law in ("galilean", "linear_quadratic") for robot in (PAPER, SERVO)]
 TESTS += [(6, "c", law, PAPER) for law in ("lighthill", "resistive", "lighthill_lift")]
 TESTS += [(6, "c", "reynolds", PAPER), (6, "numba", "morison", PAPER), (6, "numba", "morison", SERVO)]
+# the plant-only foil law's plants swim on the servo joints (host/tests/test_plants.py)
+TESTS += [(6, "c", "foil", SERVO)]
 
 
 def _warm(variant: Variant) -> str:
+    import eelhost.data  # noqa: F401  (registers the plant-only fluid laws, e.g. "foil")
     from eelsim.batch import stage_backend, warm_up
 
     n, stage, law, robot = variant
