@@ -166,3 +166,18 @@ def test_the_ensemble_is_the_estimate_first_then_refits_and_jackknife_pseudo_dra
     raw = boot.ensemble()[3:]
     np.testing.assert_allclose(np.mean((raw - est) ** 2, axis=0), boot.jackknife_std() ** 2)
     assert ens[:, 1].max() <= 2.3
+
+
+def test_a_fit_far_above_its_noise_floor_says_its_intervals_are_dominated_by_misfit(robot):
+    from eelhost.estimation.diagnostics import NOISE_RATIO, fit_warnings
+    from eelhost.estimation.parameters import ParameterSpace
+
+    space = ParameterSpace.for_robot(robot)
+    x = space.bounds.mean(axis=1)
+    k = space.size
+    far = BootstrapResult(space.names, x, np.tile(x, (3, 1)), np.full(3, 0.01),
+                          0.01 * (NOISE_RATIO + 1), x, x)
+    near = dataclasses.replace(far, fitness=0.01 * (NOISE_RATIO - 1))
+    assert any("dominated by misfit" in w for w in fit_warnings("straight", space, x, far))
+    assert not any("misfit" in w for w in fit_warnings("straight", space, x, near))
+    assert k == 4
