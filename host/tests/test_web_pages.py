@@ -158,3 +158,54 @@ def test_calibrate_click_takes_the_corners_clicked_on_the_synthetic_tank(tmp_pat
     area = np.stack(np.meshgrid(np.linspace(-0.5, 2.0, 6), np.linspace(-0.5, 1.0, 4)), -1)
     # Clicks land on whole CSS pixels: the map is within a pixel of the camera's.
     assert np.abs(cal.to_px(area.reshape(-1, 2)) - truth.to_px(area.reshape(-1, 2))).max() < 1.0
+
+
+def test_live_view_has_a_legend_a_scale_bar_a_visible_prediction_and_a_stop_that_stops():
+    import urllib.error
+    import urllib.request
+
+    calibration, reports = _reports(4)
+    view = LiveView(calibration, ROBOT, RunConfig(PATH1.gait, list(PATH1.waypoints_m)),
+                    predict_every_s=0.05)
+    stops: list[str] = []
+    try:
+        for r in reports:
+            view.update(r)
+        # a POST from elsewhere (no session token) stops nothing
+        forged = urllib.request.Request(view.url.split("?")[0] + "stop", data=b"", method="POST")
+        with pytest.raises(urllib.error.HTTPError):
+            urllib.request.urlopen(forged, timeout=10)
+        view.on_stop = stops.append
+        with headless_chromium() as browser:
+            browser.get(view.url)
+            wait = WebDriverWait(browser, 30)
+            wait.until(lambda b: b.execute_script(
+                "return document.getElementById('predicted').getAttribute('points').length > 0"))
+            page = browser.execute_script("""
+                const q = (s) => document.querySelectorAll(s);
+                const order = [...document.getElementById('overlay').children].map((e) => e.id);
+                return {legend: document.getElementById('legend').textContent,
+                        scale: document.getElementById('scale-label').textContent,
+                        order: order};""")
+            state = view.state()
+            browser.find_element(By.ID, "stop").click()
+            wait.until(lambda b: stops)
+            wait.until(lambda b: "Stop sent" in b.find_element(By.ID, "status").text
+                       or b.find_element(By.ID, "stop").text == "Stopping...")
+    finally:
+        view.close()
+    for entry in ("twin's prediction, next 20 s", "track", "markers found", "acceptance",
+                  "reached"):
+        assert entry in page["legend"], page["legend"]
+    # drawn over the markers, and from the head on: not hidden under the body
+    assert page["order"].index("predicted") > page["order"].index("markers")
+    origin_m = calibration.to_m(np.asarray(state["predicted_from"]))  # the pose it swam from
+    first_m = calibration.to_m(np.asarray(state["predicted"][0]))
+    assert np.linalg.norm(first_m - origin_m) > 0.45 * ROBOT.body_length_m()
+    # the scale bar is as long on the frame as its label says
+    (a, b), label = state["scale"]["ends"], state["scale"]["label"]
+    assert page["scale"] == label
+    length_m = float(label.split()[0])
+    span = np.linalg.norm(calibration.to_m(np.asarray(b)) - calibration.to_m(np.asarray(a)))
+    assert span == pytest.approx(length_m, rel=0.02) and 80 < np.linalg.norm(np.subtract(b, a)) < 300
+    assert stops == ["Stop from the live view"]

@@ -169,6 +169,8 @@ def run_take(request: TakeRequest, view_port: int | None = None,
             if stop_flag is not None:
                 stop_flag.append(name)
 
+        if view is not None:
+            view.on_stop = stop  # the page's Stop button stops as Ctrl-C does
         loop = session.loop
         with stop_on_signals(stop) as received, Progress(
             "run", len(request.config.waypoints_m), "waypoint"

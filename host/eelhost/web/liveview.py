@@ -6,10 +6,15 @@ and serves at ``http://127.0.0.1:<port>/``:
 - ``/``: the page: the latest camera frame with an SVG overlay (the markers found, outlined and
   labelled with their ids; the track of filtered positions; each waypoint with its acceptance
   circle, drawn through the calibration so perspective bends it as the camera does; the twin's
-  predicted path from the present pose) and a status line. The page polls ``/state.json`` five times
-  a second and reloads the frame when it changed.
+  predicted path from the present pose, drawn from the robot's head on, over everything else,
+  with its end marked), a legend of what is drawn, a scale bar of a round length in metres
+  (drawn through the calibration at the frame's lower left), a status line and a Stop button.
+  The page polls ``/state.json`` five times a second and reloads the frame when it changed.
 - ``/frame.jpg``: the latest frame (encoded only when asked for);
-- ``/state.json``: the overlay in image pixels.
+- ``/state.json``: the overlay in image pixels;
+- ``POST /stop``: the Stop button: calls :attr:`LiveView.on_stop` (``eelbot run`` stops the robot
+  as on Ctrl-C: Stop sent, the record closed). Like every POST it needs the session's token
+  (:mod:`eelhost.web.server`), which only the page's own script sends.
 
 The prediction is the twin's closed loop (:func:`eelsim.closed_loop.simulate_closed_loop`) over
 the next ``horizon_s`` from the latest filtered pose, straight and at rest there (the camera gives
@@ -24,6 +29,7 @@ import logging
 import math
 import threading
 import time
+from collections.abc import Callable
 
 import cv2
 import numpy as np
@@ -58,11 +64,18 @@ class LiveView:
     port : int
         Port on 127.0.0.1 (0: any free one).
     horizon_s, predict_every_s : float
-        Length of the predicted path, and how often it is recomputed (wall time).
+        Length of the predicted path, and how often it is recomputed (wall time). 20 s by
+        default: the robot swims about a body length in 6 s, so a shorter path would lie under
+        its own body.
+
+    Attributes
+    ----------
+    on_stop : callable or None
+        ``on_stop(why)``: what the page's Stop button does (set by the run once it can stop).
     """
 
     def __init__(self, calibration: Calibration, robot: Robot, config: RunConfig, port: int = 0,
-                 horizon_s: float = 6.0, predict_every_s: float = 1.0) -> None:
+                 horizon_s: float = 20.0, predict_every_s: float = 1.0) -> None:
         self.calibration = calibration
         self.robot = robot
         self.config = config
@@ -76,8 +89,13 @@ class LiveView:
         self._closed = threading.Event()
         self._wake = threading.Event()
         self._circles = [self._circle_px(w) for w in config.waypoints_m]
+        self._head_m = robot.body_length_m() / 2.0  # the path is drawn from about the head on
+        self._scale = self._scale_bar()
+        self.on_stop: Callable[[str], None] | None = None
+        self.stop_requests = 0
         self.server = LocalServer(
-            {"/": self._page, "/state.json": self._state, "/frame.jpg": self._frame}, port=port
+            {"/": self._page, "/state.json": self._state, "/frame.jpg": self._frame},
+            post={"/stop": self._stop}, port=port,
         )
         self._predictor = threading.Thread(target=self._predict_loop, name="eelbot-predict",
                                            daemon=True)
@@ -114,6 +132,31 @@ class LiveView:
         ring = np.c_[centre[0] + r * np.cos(a), centre[1] + r * np.sin(a)]
         return np.round(self.calibration.to_px(ring), 1).tolist()
 
+    def _scale_bar(self) -> dict:
+        """A bar of a round length (0.1, 0.2, 0.5, 1, 2 m) about 150 px long at the lower left."""
+        width, height = self.calibration.image_size_px
+        start_m = self.calibration.to_m(np.array([0.06 * width, 0.93 * height]))
+        per_m = 1.0 / max(self.calibration.pixel_size_m(start_m), 1e-9)  # px per metre there
+        length = min((0.1, 0.2, 0.5, 1.0, 2.0, 5.0), key=lambda m: abs(m * per_m - 150.0))
+        ends = self._px([tuple(start_m), (start_m[0] + length, start_m[1])])
+        return {"ends": ends, "label": f"{length:g} m"}
+
+    def _ahead(self, predicted: FloatArray) -> FloatArray:
+        """The predicted path from where it leaves the body: the points beyond the head."""
+        if len(predicted) < 2:
+            return predicted
+        far = np.linalg.norm(predicted - predicted[0], axis=1) > self._head_m
+        return predicted[np.argmax(far):] if far.any() else predicted[-1:]
+
+    def _stop(self, _body: bytes) -> tuple[str, bytes]:
+        self.stop_requests += 1
+        if self.on_stop is None:
+            answer = {"stopping": False, "why": "the run has not started or has ended"}
+        else:
+            self.on_stop("Stop from the live view")
+            answer = {"stopping": True, "why": "Stop sent; the run ends and its record is closed"}
+        return "application/json", json.dumps(answer).encode()
+
     def _px(self, points_m: FloatArray | list[tuple[float, float]]) -> list[list[float]]:
         pts = np.asarray(points_m, dtype=float).reshape(-1, 2)
         return np.round(self.calibration.to_px(pts), 1).tolist() if len(pts) else []
@@ -143,9 +186,14 @@ class LiveView:
                       f"markers) | {where} | waypoint {min(target + 1, len(waypoints))}/"
                       f"{len(waypoints)}")
             height, width = report.frame.shape[:2]
+        ahead = self._px(self._ahead(predicted))
+        origin = self._px(predicted[:1])
         return {"t_s": report.t_s if report else None, "frame_id": frame_id,
                 "size": [width, height], "markers": markers, "track": self._px(track),
-                "waypoints": waypoints, "predicted": self._px(predicted), "status": status}
+                "waypoints": waypoints, "predicted": ahead,
+                "predicted_end": ahead[-1] if ahead else None,
+                "predicted_from": origin[0] if origin else None,  # the pose it started from
+                "horizon_s": self.horizon_s, "scale": self._scale, "status": status}
 
     def _state(self) -> tuple[str, bytes]:
         return "application/json", json.dumps(self.state()).encode()
@@ -206,7 +254,11 @@ PAGE = """<!doctype html>
 <html><head><meta charset="utf-8"><title>eelbot live view</title>
 <style>
  body { margin: 0; background: #222; color: #eee; font: 14px sans-serif; }
- #status { padding: 6px 10px; }
+ #bar { display: flex; align-items: center; gap: 12px; padding: 6px 10px; }
+ #status { flex: 1; }
+ #stop { background: #d32f2f; color: #fff; border: 0; border-radius: 4px; padding: 8px 18px;
+         font: bold 16px sans-serif; cursor: pointer; }
+ #stop:disabled { background: #777; cursor: default; }
  #view { position: relative; display: inline-block; }
  #frame { display: block; max-width: 100vw; }
  #overlay { position: absolute; left: 0; top: 0; width: 100%; height: 100%; }
@@ -216,49 +268,101 @@ PAGE = """<!doctype html>
  .acceptance { fill: rgba(255, 0, 200, 0.12); stroke: #ff00c8; stroke-width: 2; }
  .acceptance.reached { stroke: #3ddc84; fill: rgba(61, 220, 132, 0.12); }
  .waypoint { fill: #ff00c8; }
- #predicted { fill: none; stroke: #ff7a00; stroke-width: 3; stroke-dasharray: 8 5; }
+ #predicted-under { fill: none; stroke: #000; stroke-width: 7; stroke-opacity: 0.6; }
+ #predicted { fill: none; stroke: #ff7a00; stroke-width: 4; stroke-dasharray: 10 6; }
+ #predicted-end { fill: #ff7a00; stroke: #000; stroke-width: 2; }
+ #scale line { stroke: #fff; stroke-width: 4; }
+ #scale .tick { stroke-width: 3; }
+ #scale text { fill: #fff; font: bold 16px sans-serif; paint-order: stroke; stroke: #000;
+               stroke-width: 3; }
+ #legend { position: absolute; right: 8px; top: 8px; background: rgba(0, 0, 0, 0.65);
+           padding: 6px 10px; border-radius: 4px; font-size: 13px; line-height: 1.6; }
+ #legend svg { vertical-align: middle; margin-right: 6px; }
 </style></head>
 <body>
-<div id="status">connecting...</div>
+<div id="bar"><div id="status">connecting...</div>
+ <button id="stop" type="button" title="stop the robot now (as Ctrl-C does)">Stop</button></div>
 <div id="view">
  <img id="frame" alt="camera frame">
  <svg id="overlay" xmlns="http://www.w3.org/2000/svg">
-  <g id="waypoints"></g><polyline id="track" points=""></polyline>
-  <polyline id="predicted" points=""></polyline><g id="markers"></g>
+  <g id="waypoints"></g><polyline id="track" points=""></polyline><g id="markers"></g>
+  <polyline id="predicted-under" points=""></polyline><polyline id="predicted" points="">
+  </polyline><circle id="predicted-end" r="0" cx="0" cy="0"></circle>
+  <g id="scale"><line id="scale-bar"></line><line class="tick" id="scale-tick0"></line>
+   <line class="tick" id="scale-tick1"></line><text id="scale-label"></text></g>
  </svg>
+ <div id="legend">
+  <div class="entry"><svg width="26" height="10"><line x1="0" y1="5" x2="26" y2="5"
+   stroke="#ff7a00" stroke-width="4" stroke-dasharray="8 4"/></svg><span
+   id="legend-predicted">twin's prediction</span></div>
+  <div class="entry"><svg width="26" height="10"><line x1="0" y1="5" x2="26" y2="5"
+   stroke="#ffd400" stroke-width="2"/></svg>track (filtered positions)</div>
+  <div class="entry"><svg width="26" height="12"><rect x="6" y="1" width="10" height="10"
+   fill="none" stroke="#00e5ff" stroke-width="2"/></svg>markers found (id)</div>
+  <div class="entry"><svg width="26" height="14"><circle cx="13" cy="7" r="6"
+   fill="rgba(255,0,200,0.12)" stroke="#ff00c8" stroke-width="2"/></svg>waypoint, acceptance
+   radius</div>
+  <div class="entry"><svg width="26" height="14"><circle cx="13" cy="7" r="6"
+   fill="rgba(61,220,132,0.12)" stroke="#3ddc84" stroke-width="2"/></svg>waypoint reached</div>
+ </div>
 </div>
 <script>
 const NS = "http://www.w3.org/2000/svg";
 let shown = -1;
 const pts = (list) => list.map((p) => p[0] + "," + p[1]).join(" ");
+const byId = (id) => document.getElementById(id);
 function el(name, attrs, text) {
   const e = document.createElementNS(NS, name);
   for (const [k, v] of Object.entries(attrs)) e.setAttribute(k, v);
   if (text !== undefined) e.textContent = text;
   return e;
 }
+function set(id, attrs) { for (const [k, v] of Object.entries(attrs)) byId(id).setAttribute(k, v); }
+function drawScale(scale) {
+  const [a, b] = scale.ends;
+  set("scale-bar", {x1: a[0], y1: a[1], x2: b[0], y2: b[1]});
+  set("scale-tick0", {x1: a[0], y1: a[1] - 8, x2: a[0], y2: a[1] + 8});
+  set("scale-tick1", {x1: b[0], y1: b[1] - 8, x2: b[0], y2: b[1] + 8});
+  set("scale-label", {x: (a[0] + b[0]) / 2, y: Math.min(a[1], b[1]) - 12, "text-anchor": "middle"});
+  byId("scale-label").textContent = scale.label;
+}
+byId("stop").addEventListener("click", async () => {
+  byId("stop").disabled = true;
+  try {
+    const answer = await (await fetch("/stop", {method: "POST"})).json();
+    byId("stop").textContent = answer.stopping ? "Stopping..." : "Stop";
+    byId("stop").disabled = answer.stopping;
+    byId("status").textContent = answer.why;
+  } catch (e) {
+    byId("stop").disabled = false;
+    byId("status").textContent = "Stop not sent: the run is not reachable";
+  }
+});
 async function tick() {
   try {
     const s = await (await fetch("/state.json", {cache: "no-store"})).json();
-    document.getElementById("status").textContent = s.status;
-    document.getElementById("overlay").setAttribute("viewBox", "0 0 " + s.size[0] + " " + s.size[1]);
+    byId("status").textContent = s.status;
+    byId("overlay").setAttribute("viewBox", "0 0 " + s.size[0] + " " + s.size[1]);
     if (s.frame_id !== shown) {
       shown = s.frame_id;
-      document.getElementById("frame").src = "/frame.jpg?k=" + s.frame_id;
+      byId("frame").src = "/frame.jpg?k=" + s.frame_id;
     }
-    const wp = document.getElementById("waypoints");
-    wp.replaceChildren(...s.waypoints.flatMap((w) => [
+    byId("waypoints").replaceChildren(...s.waypoints.flatMap((w) => [
       el("polygon", {class: "acceptance" + (w.reached ? " reached" : ""), points: pts(w.circle)}),
       el("circle", {class: "waypoint", cx: w.centre[0], cy: w.centre[1], r: 4}),
     ]));
-    document.getElementById("track").setAttribute("points", pts(s.track));
-    document.getElementById("predicted").setAttribute("points", pts(s.predicted));
-    document.getElementById("markers").replaceChildren(...s.markers.flatMap((m) => [
+    byId("track").setAttribute("points", pts(s.track));
+    byId("predicted-under").setAttribute("points", pts(s.predicted));
+    byId("predicted").setAttribute("points", pts(s.predicted));
+    if (s.predicted_end) set("predicted-end", {cx: s.predicted_end[0], cy: s.predicted_end[1], r: 6});
+    byId("legend-predicted").textContent = "twin's prediction, next " + s.horizon_s + " s";
+    byId("markers").replaceChildren(...s.markers.flatMap((m) => [
       el("polygon", {class: "marker", points: pts(m.corners)}),
       el("text", {class: "marker-id", x: m.corners[0][0], y: m.corners[0][1] - 4}, String(m.id)),
     ]));
+    drawScale(s.scale);
   } catch (e) {
-    document.getElementById("status").textContent = "run ended or not reachable";
+    byId("status").textContent = "run ended or not reachable";
   }
   setTimeout(tick, 200);
 }
