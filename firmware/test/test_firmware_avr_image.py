@@ -11,6 +11,7 @@ that has been set up); BLANK is an erased one.
 """
 
 import functools
+import os
 import subprocess
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -21,7 +22,8 @@ import pytest
 from eelhost.wire import protocol as p
 
 FIRMWARE = Path(__file__).resolve().parents[1]
-ELF = FIRMWARE / "build" / "avr" / "eelbot.elf"
+# EEL_AVR_ELF runs the tests against another image (e.g. an older firmware, to see a test fail).
+ELF = Path(os.environ.get("EEL_AVR_ELF", FIRMWARE / "build" / "avr" / "eelbot.elf"))
 SIM = FIRMWARE / "build" / "tools" / "eel_avrsim"
 SETTINGS_IMAGE = FIRMWARE / "build" / "tools" / "settings_image"
 pytestmark = pytest.mark.slow  # a few seconds of emulated AVR per test

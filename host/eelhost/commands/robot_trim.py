@@ -91,10 +91,16 @@ def trim_session(
 
 
 def _new_trim(cmd: str, now: int) -> int:
-    if cmd[0] in "+-":
-        return now + int(cmd)
-    if cmd[0] == "=":
-        return int(cmd[1:])
+    """The trim a command asks for: ``+N``/``-N`` from ``now``, ``=N`` absolute (us)."""
+    if cmd[0] in "+-=":
+        number = cmd[1:].strip() if cmd[0] == "=" else cmd
+        try:
+            value = int(number)
+        except ValueError:
+            raise ValueError(
+                f"{cmd!r}: the trim is a whole number of microseconds, not {number or 'nothing'!r}"
+            ) from None
+        return now + value if cmd[0] in "+-" else value
     raise ValueError(f"{cmd!r} is not a command")
 
 
@@ -115,7 +121,7 @@ def run(args: argparse.Namespace) -> int:
 
     link, session = open_maintenance(args)
     try:
-        saved = trim_session(session, read_line, print)
+        trim_session(session, read_line, print)
     finally:
         link.close()
-    return 0 if saved is not None else 1
+    return 0  # saved, or quit with the trims put back: both a normal end (errors raise)

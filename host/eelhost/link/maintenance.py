@@ -253,6 +253,9 @@ class Maintenance:
         return {
             protocol.RefuseReason.NOT_WHILE_RUNNING: "not while it undulates (stop it first)",
             protocol.RefuseReason.STORAGE_FAILED: "the EEPROM did not read back what was written",
+            protocol.RefuseReason.SETTINGS_LOST: "SETTINGS_LOST: its stored settings were lost "
+            "and it runs on the defaults; check them, then acknowledge with `eelbot robot config "
+            "--defaults --save` (docs/firmware.md, 'Settings in the EEPROM')",
         }.get(reason, reason.name)
 
     def hello(self) -> protocol.Version:
@@ -300,6 +303,10 @@ class Maintenance:
     def defaults(self) -> None:
         """Put every setting back to its default in the robot's RAM."""
         self._command(protocol.DefaultSettings())
+
+    def start(self) -> None:
+        """Start undulating (refused with the settings lost, or on a low battery)."""
+        self._command(protocol.Start())
 
     def stop(self) -> None:
         """Stop undulating (settings can only change while the robot does not undulate)."""
