@@ -84,6 +84,8 @@ class WorldResult:
     replans, failed_replans : int
     replan_wall_s : list of float
         Wall time of each replan, from its request to its plan.
+    replan_delay_s : list of float
+        Robot's time from each replan's request to its plan being switched in.
     plan_wall_s, plan_cpu_s : float
         The first plan's wall and processor time.
     t_end_s : float
@@ -106,6 +108,7 @@ class WorldResult:
     replans: int = 0
     failed_replans: int = 0
     replan_wall_s: list[float] = field(default_factory=list)
+    replan_delay_s: list[float] = field(default_factory=list)
     plan_wall_s: float = 0.0
     plan_cpu_s: float = 0.0
     t_end_s: float = 0.0
@@ -243,7 +246,9 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
         float(clear.min()), bool(clear.min() < 0.0), out.failsafe_reports,
         sum(e["status"] == "found" for e in replans),
         sum(e["status"] != "found" for e in replans),
-        [e["wall_s"] for e in replans], plan_wall, plan_cpu, out.t_end_s, cost, water)
+        [e["wall_s"] for e in replans],
+        [e["t_switch_s"] - e["t_request_s"] for e in replans if "t_switch_s" in e],
+        plan_wall, plan_cpu, out.t_end_s, cost, water)
 
 
 def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, out: Path,
@@ -319,6 +324,11 @@ def summary_lines(results: list[WorldResult]) -> list[str]:
                  f"{sum(1 for r in planned if r.replans or r.failed_replans)} runs"
                  + (f"; wall time from request to plan: median {statistics.median(walls):.2f} s,"
                     f" largest {max(walls):.2f} s" if walls else ""))
+    delays = [d for r in planned for d in r.replan_delay_s]
+    if delays:
+        lines.append(f"- robot's time from a replan's request to its plan steering: median "
+                     f"{statistics.median(delays):.2f} s, largest {max(delays):.2f} s "
+                     f"({sum(d <= 1.0 for d in delays)} of {len(delays)} within 1 s)")
     times = [r.t_end_s / r.planned_goal_s for r in planned if r.reached and r.planned_goal_s]
     if times:
         lines.append(f"- swum time over planned time (reached runs): median "
