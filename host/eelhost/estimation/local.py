@@ -133,6 +133,9 @@ class _TrustRegion:
     done: bool = False
     # the step under trial: (step d, its point and perturbations, their steps, predicted decrease)
     trial: tuple[np.ndarray, np.ndarray, np.ndarray, float] | None = None
+    # the parameters whose forward perturbation failed, probed backwards (points, columns)
+    probe: tuple[np.ndarray, np.ndarray] | None = None
+    probed: bool = False  # the current point's failed perturbations were probed backwards
 
     @property
     def fitness(self) -> float:
@@ -217,13 +220,17 @@ def polish_minimax_many(
         for tr in states:
             if not tr.done:
                 _propose(tr, it, simulations())
-        asked = [space.from_unit(tr.trial[1]) if tr.trial is not None else empty for tr in states]
+        asked = [space.from_unit(tr.trial[1]) if tr.trial is not None else
+                 space.from_unit(tr.probe[0]) if tr.probe is not None else empty
+                 for tr in states]
         if not any(len(a) for a in asked):
             break
         got = evaluate(asked)
         for tr, (e_new, v_new) in zip(states, got, strict=True):
             if tr.trial is not None:
                 _judge(tr, e_new, v_new, min_radius)
+            elif tr.probe is not None:
+                _take_probe(tr, e_new, v_new)
     out = []
     for tr in states:
         tr.history.append((len(tr.history), tr.fitness, simulations()))
@@ -236,14 +243,23 @@ def _propose(tr: _TrustRegion, iteration: int, simulations: int) -> None:
     """Solve the trust region's cone programme and set the step to try (or finish)."""
     tr.history.append((iteration, tr.fitness, simulations))
     tr.trial = None
+    tr.probe = None
     v = tr.vectors
     if tr.fitness >= FAILED or not np.all(np.isfinite(v[0])):  # a failed run: no slopes
         tr.done = True
         return
     jac = np.moveaxis((v[1:] - v[0]) / tr.steps[:, None, None, None], 0, -1)  # (E, m, 2, K)
-    # a perturbation that failed (e.g. a joint at its stop) gives no slope: this step keeps
-    # that parameter where it is
     blind = ~np.isfinite(jac).all(axis=(0, 1, 2))
+    if blind.any() and not tr.probed:
+        # a forward perturbation failed (e.g. a run pushed over the too-slow limit, a joint at
+        # its stop): probe those parameters backwards before giving up their slope; freezing
+        # them had kept a fitted current at exactly its still-water start
+        cols = np.flatnonzero(blind)
+        back = np.clip(tr.u[None, :] - np.diag(tr.steps)[cols], 0.0, 1.0)
+        tr.probe, tr.probed = (back, cols), True
+        return
+    # a perturbation that failed both ways gives no slope: this step keeps that parameter
+    # where it is
     jac[..., blind] = 0.0
     lower = np.where(blind, 0.0, np.maximum(-tr.radius, -tr.u))
     upper = np.where(blind, 0.0, np.minimum(tr.radius, 1.0 - tr.u))
@@ -260,6 +276,18 @@ def _propose(tr: _TrustRegion, iteration: int, simulations: int) -> None:
     tr.trial = (d, pts, steps, predicted)
 
 
+def _take_probe(tr: _TrustRegion, errors: np.ndarray, vectors: np.ndarray) -> None:
+    """Use the backward perturbations that ran in place of the forward ones that failed."""
+    assert tr.probe is not None
+    _, cols = tr.probe
+    tr.evaluations += len(cols)
+    for row, col in enumerate(cols):
+        if np.all(np.isfinite(vectors[row])) and errors[row].max() < FAILED:
+            tr.errors[1 + col], tr.vectors[1 + col] = errors[row], vectors[row]
+            tr.steps[col] = -tr.steps[col]
+    tr.probe = None
+
+
 def _judge(tr: _TrustRegion, errors: np.ndarray, vectors: np.ndarray, min_radius: float) -> None:
     """Take or refuse the step tried, and resize the trust region."""
     assert tr.trial is not None
@@ -269,6 +297,7 @@ def _judge(tr: _TrustRegion, errors: np.ndarray, vectors: np.ndarray, min_radius
     ratio = (tr.fitness - f_new) / predicted
     if ratio > 0.01:
         tr.u, tr.errors, tr.vectors, tr.steps = pts[0], errors, vectors, steps
+        tr.probed = False
         if ratio > 0.75 and np.max(np.abs(d)) > 0.99 * tr.radius:
             tr.radius = min(2.0 * tr.radius, 0.5)
     if ratio < 0.25:
