@@ -321,3 +321,20 @@ def test_run_plan_plans_with_the_fitted_model_and_its_tanks_current(tmp_path, ca
     assert f"coefficients: {model.describe()}" in out  # the reader of eelbot plan, not a copy
     plans = json.loads((tmp_path / "take.json").read_text())["source"]["planning"]["plans"]
     assert plans[0]["current_m_s"] == pytest.approx([0.01, 0.0])  # the tank's fitted current
+
+
+def test_failed_replans_keep_a_present_plan_the_twin_swims_clear(open_plan):
+    planner, outcome = open_plan
+
+    class ClearAhead(failing_replanner("exhausted")):  # type: ignore[misc]
+        def _look_ahead(self, est, left, extra):  # noqa: ANN001, ANN202
+            return 0.2  # the present waypoints are swum 200 mm clear
+
+    nav = ClearAhead(lambda extra: planner, planner, outcome, PATH_GAIT)
+    nav.requests.clear()
+    try:
+        t_stop, d = drive_off_corridor(nav, 14.0)
+    finally:
+        nav.close()
+    assert d is None  # never stopped: it keeps its plan
+    assert len(nav.requests) >= 4 and np.diff(nav.requests)[2:].min() >= 4.0 - 0.05

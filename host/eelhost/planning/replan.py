@@ -260,7 +260,9 @@ class TankReplanner:
     corridor_m : float
         Half width of the corridor around the planned centre-of-mass path.
     max_failures : int
-        Consecutive failed replans after which the robot is stopped (no safe continuation).
+        Consecutive failed replans after which the robot is stopped (no safe continuation),
+        unless the latest look-ahead swam its present waypoints clear of contact: it then keeps
+        them, and replanning is tried again every ``backoff_s`` 2^(max_failures - 1).
     backoff_s : float
         Wait after the first failed replan; it doubles with each further failure.
     lead_s : float
@@ -328,6 +330,7 @@ class TankReplanner:
         self._planner_current = np.zeros(2)
         self._last_wall_s = 0.0
         self._lookahead: Future | None = None
+        self._last_gap: tuple[float, float | None] = (-math.inf, None)
         self._next_lookahead_s = 0.0
         self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="eelbot-planner")
 
@@ -383,16 +386,19 @@ class TankReplanner:
         left = self.waypoints[min(target, len(self.waypoints) - 1):]
         d.recorded |= self._estimate_current(est, left)
         busy = self._job is not None or self._pending is not None
+        predicted = False
+        if self._lookahead is not None and self._lookahead.done():
+            gap = self._lookahead.result()
+            self._lookahead = None
+            self._last_gap = (t_s, gap)
+            predicted = gap is not None and gap < self.lookahead_margin_m
         reason = None
         if float(distance_to_path(self.path, np.asarray([pose[:2]]))[0]) > self.corridor_m:
             reason = "left_corridor"
-        elif self._lookahead is not None and self._lookahead.done():
-            gap = self._lookahead.result()
-            self._lookahead = None
-            if gap is not None and gap < self.lookahead_margin_m:
-                reason = "predicted_contact"
-                log.info("the twin predicts the body within %.0f mm of an obstacle in %.1f s",
-                         gap * 1000, self.lookahead_s)
+        elif predicted:
+            reason = "predicted_contact"
+            log.info("the twin predicts the body within %.0f mm of an obstacle or wall within "
+                     "%.1f s", self._last_gap[1] * 1000, self.lookahead_s)  # type: ignore[operator]
         if reason is not None and not busy and t_s >= self._next_try_s:
             self._request(t_s, est, left, reason)
         elif (not busy and self._lookahead is None and self.lookahead_s > 0
@@ -504,6 +510,12 @@ class TankReplanner:
             log.info("replanned at t = %.2f s (%.2f s wall): %s", t_s, wall, outcome.message)
             return True
         self.failures += 1
+        if self.failures >= self.max_failures and self._present_plan_safe(t_s):
+            # no new plan, but the twin swims the present one on without contact: keep it
+            log.warning("replanning failed %d times; the present plan is predicted clear, so "
+                        "the robot keeps it", self.failures)
+            self._next_try_s = t_s + self.backoff_s * 2 ** (self.max_failures - 1)
+            return True
         if outcome.status in REFUSED_FROM_STATE or self.failures >= self.max_failures:
             d.stop = "no_safe_continuation"
             d.detail = (f"replanning at t = {job.t_request_s:.2f} s found no safe continuation "
@@ -537,6 +549,11 @@ class TankReplanner:
         current = np.add(self.planner.world.current_m_s, extra - self._planner_current)
         return Twin(twin.robot, twin.coefficients, twin.gait, twin.options,
                     (float(current[0]), float(current[1])), twin.acceptance_radius_m, twin.threads)
+
+    def _present_plan_safe(self, t_s: float) -> bool:
+        """The last look-ahead, at most 1.5 s old, swam the present waypoints clear of contact."""
+        t_gap, gap = self._last_gap
+        return gap is not None and t_s - t_gap <= 1.5 and gap >= self.lookahead_margin_m
 
     # -- the current -----------------------------------------------------------------------------
 
