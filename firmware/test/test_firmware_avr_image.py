@@ -80,7 +80,7 @@ def run_avr(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("avrsim")
 
     def run(frames_at_us, run_ms, *, adc=(), eeprom=None, reset_at_us=(), hang_at_us=None,
-            uart_file=None):
+            uart_file=None, bootloader="none", elf=None):
         uart_in, uart_out, pulses = tmp / "in.txt", tmp / "out.txt", tmp / "pulses.txt"
         eeprom_out, adc_in = tmp / "eeprom_out.bin", tmp / "adc.txt"
         if uart_file is not None:
@@ -91,7 +91,8 @@ def run_avr(tmp_path_factory):
             )
         adc_in.write_text("".join(f"{t} {i} {mv}\n" for t, i, mv in adc), encoding="ascii")
         args = [
-            str(SIM), "--elf", str(ELF), "--run-ms", str(run_ms), "--uart-in", str(uart_in),
+            str(SIM), "--elf", str(elf or ELF), "--run-ms", str(run_ms), "--uart-in", str(uart_in),
+            "--bootloader", bootloader,
             "--uart-out", str(uart_out), "--pulse-pins", ",".join([*SERVO_PINS, BUSY_PIN]),
             "--pulses", str(pulses), "--adc", str(adc_in), "--eeprom-out", str(eeprom_out),
         ]  # fmt: skip
@@ -479,3 +480,28 @@ def test_avr_stack_peak_is_measured_and_the_build_fails_over_the_ram_limit():
                           capture_output=True, text=True)  # fmt: skip
     assert over.returncode != 0
     assert "FAIL: static RAM plus the stack's peak exceeds 1200" in over.stdout
+
+
+def test_avr_behind_the_old_bootloader_still_tells_a_watchdog_reset_and_a_power_on(run_avr):
+    """The old Nano bootloader clears MCUSR: the watchdog's interrupt marks its reset in RAM and
+    a power-on shows as a reset record that does not check out; the reset pin reads 0 (unknown)."""
+    frames = [(900_000, p.encode_frame(p.GetStatus(), 0))]
+    run = run_avr(frames, 1300, hang_at_us=300_000, bootloader="old")
+    assert run.watchdog_resets == 1
+    statuses = run.messages(p.Status)
+    assert statuses[0].reset_flags == p.ResetFlags.POWER_ON and statuses[0].resets == 0
+    assert statuses[-1].reset_flags == p.ResetFlags.WATCHDOG and statuses[-1].resets == 1
+    run = run_avr(frames, 1000, reset_at_us=(500_000,), bootloader="old")
+    assert run.messages(p.Status)[-1].reset_flags == 0 and run.messages(p.Status)[-1].resets == 1
+
+
+def test_avr_built_for_optiboot_reads_the_reset_cause_it_leaves_in_r2(run_avr):
+    build = FIRMWARE / "build" / "optiboot"
+    subprocess.run(["make", "-s", "-C", str(FIRMWARE), "avr", "B=build/optiboot",
+                    "BOOTLOADER=optiboot"], check=True, capture_output=True)  # fmt: skip
+    elf = build / "avr" / "eelbot.elf"
+    frames = [(900_000, p.encode_frame(p.GetStatus(), 0))]
+    run = run_avr(frames, 1000, reset_at_us=(500_000,), bootloader="optiboot", elf=elf)
+    statuses = run.messages(p.Status)
+    assert statuses[0].reset_flags == p.ResetFlags.POWER_ON
+    assert statuses[-1].reset_flags == p.ResetFlags.EXTERNAL and statuses[-1].resets == 1

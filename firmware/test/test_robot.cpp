@@ -791,3 +791,16 @@ TEST(a_successful_save_also_acknowledges_lost_settings) {
   CHECK(b.robot.settings_source() == eelproto::SettingsSource::Eeprom);
   CHECK(!b.robot.settings_lost());
 }
+
+// ---------------------------------------------------------------- reset cause behind a bootloader
+
+TEST(a_cleared_mcusr_is_read_from_the_watchdog_mark_and_the_reset_record) {
+  using eelproto::ResetFlags;
+  ResetRecord r{0, 0};  // RAM as a power-on leaves it: the record does not check out
+  CHECK_EQ(infer_reset_flags(0, false, r), static_cast<uint8_t>(ResetFlags::PowerOn));
+  count_reset(r, static_cast<uint8_t>(ResetFlags::PowerOn));  // the record now checks out
+  CHECK_EQ(infer_reset_flags(0, true, r), static_cast<uint8_t>(ResetFlags::Watchdog));
+  CHECK_EQ(infer_reset_flags(0, false, r), 0);  // the reset pin or a brown-out: unknown
+  const uint8_t ext = static_cast<uint8_t>(ResetFlags::External);
+  CHECK_EQ(infer_reset_flags(ext, true, r), ext);  // bits MCUSR kept are taken as they are
+}

@@ -10,6 +10,8 @@
  *     reference AVCC is 5000 mV),
  *   - loads and saves the EEPROM (--eeprom-in FILE, --eeprom-out FILE: raw bytes, 1024),
  *   - resets the AVR through its reset pin at given times (--reset-at-us T[,T...]: MCUSR EXTRF),
+ *   - does to MCUSR at each reset what a bootloader does (--bootloader old: cleared, as the old
+ *     Nano bootloader; optiboot: cleared, its value left in r2; none by default: as ISP-flashed),
  *   - makes the main loop hang at a time (--hang-at-us T: the program counter is sent to an endless
  *     loop, interrupts still on, as a firmware bug would), to see the watchdog reset it,
  *   - paints the RAM between the static data and the top with a pattern before the AVR starts and
@@ -117,6 +119,9 @@ typedef struct EasSim {
   /* EEPROM programming time (cycles) and the end of the byte in progress */
   avr_cycle_count_t eeprom_write_cycles, eeprom_busy_until;
   uint64_t eeprom_writes;
+  /* what a bootloader does to MCUSR at each reset: 0 none, 1 clears it (the old Nano bootloader),
+   * 2 clears it and leaves its value in r2 (Optiboot 4.6 and later) */
+  int bootloader;
   /* stack painting: from this data address to RAMEND (0: off) */
   uint32_t paint_from;
   /* UART input: bytes queued by time, delivered in order when the UART takes them (XON) */
@@ -264,6 +269,13 @@ static avr_uart_t* find_uart0(avr_t* avr) {
   return NULL;
 }
 
+/* The reset vector is about to run: do to MCUSR what the bootloader would have. */
+static void bootloader_ran(EasSim* s) {
+  if (!s->bootloader) return;
+  if (s->bootloader == 2) s->avr->data[2] = s->avr->data[MCUSR_ADDR];
+  s->avr->data[MCUSR_ADDR] = 0;
+}
+
 /* ------------------------------------------------------------------ API (also used by main) */
 
 /* Load the ELF and reset the AVR; NULL (with a message on stderr) when that fails. */
@@ -342,6 +354,13 @@ uint32_t eas_stack_peak(const EasSim* s) {
   uint32_t a = s->paint_from;
   while (a <= RAMEND_ADDR && s->avr->data[a] == STACK_PAINT) ++a;
   return RAMEND_ADDR + 1 - a;
+}
+
+/* Emulate a bootloader's effect on the reset cause (0 none, 1 old Nano bootloader, 2 Optiboot),
+ * from the power-on on: call before running. */
+void eas_set_bootloader(EasSim* s, int mode) {
+  s->bootloader = mode;
+  bootloader_ran(s);
 }
 
 void eas_destroy(EasSim* s) {
@@ -434,6 +453,7 @@ static void apply_due_events(EasSim* s) {
     s->hung = 0;
     avr_reset(avr);
     avr->data[MCUSR_ADDR] = MCUSR_EXTRF;
+    bootloader_ran(s);
   }
   if (s->hang_at && s->hang_at <= avr->cycle && avr->sreg[S_I]) {
     avr->flash[HANG_ADDR] = 0xFF;  // rjmp . (0xCFFF), little-endian
@@ -455,6 +475,7 @@ int eas_run_until(EasSim* s, double t_us) {
     if (s->avr->pc == 0 && pc != 0 && (s->avr->data[MCUSR_ADDR] & 0x08)) {
       ++s->watchdog_resets;
       s->hung = 0;
+      bootloader_ran(s);
     }
   }
   return s->state == cpu_Done || s->state == cpu_Crashed;
@@ -576,7 +597,7 @@ static void usage(void) {
           "       [--busy-pin D7] [--budget-us N] [--adc FILE] [--eeprom-in FILE]\n"
           "       [--eeprom-out FILE] [--reset-at-us T[,T...]] [--hang-at-us T]\n"
           "       [--line-bytes-per-s 5760] [--eeprom-write-us 3400] [--stack-paint-from ADDR]\n"
-          "       [--period-tolerance-us 300]\n");
+          "       [--period-tolerance-us 300] [--bootloader none|old|optiboot]\n");
   exit(2);
 }
 
@@ -586,6 +607,7 @@ int main(int argc, char** argv) {
   const char *eeprom_in = NULL, *eeprom_out = NULL, *reset_at = NULL;
   double hang_at_us = 0.0, line_rate = 5760.0, eeprom_write_us = 3400.0, tolerance_us = 0.0;
   unsigned long paint_from = 0;
+  int bootloader = 0;
   unsigned long freq = 16000000UL;
   double run_ms = 1000.0, budget_us = 0.0;
   for (int i = 1; i < argc; ++i) {
@@ -611,6 +633,12 @@ int main(int argc, char** argv) {
     else if (!strcmp(a, "--eeprom-write-us")) eeprom_write_us = strtod(v, NULL);
     else if (!strcmp(a, "--stack-paint-from")) paint_from = strtoul(v, NULL, 0);
     else if (!strcmp(a, "--period-tolerance-us")) tolerance_us = strtod(v, NULL);
+    else if (!strcmp(a, "--bootloader")) {
+      if (!strcmp(v, "none")) bootloader = 0;
+      else if (!strcmp(v, "old")) bootloader = 1;
+      else if (!strcmp(v, "optiboot")) bootloader = 2;
+      else usage();
+    }
     else usage();
   }
   if (!elf || freq == 0 || run_ms <= 0) usage();
@@ -620,6 +648,7 @@ int main(int argc, char** argv) {
   eas_set_line_rate(sim, line_rate);
   eas_set_eeprom_write_us(sim, eeprom_write_us);
   sim->period_tolerance_us = tolerance_us;
+  eas_set_bootloader(sim, bootloader);
   if (paint_from) eas_paint_stack(sim, (uint32_t)paint_from);
   if (uart_in) read_uart_input(sim, uart_in);
   if (adc) read_adc_input(sim, adc);

@@ -8,7 +8,8 @@
 struct Hal {
   // UART to the XBee at eelproto::kBaud, servo timer, busy pin, ADC. Not yet the watchdog.
   void begin();
-  // The hardware watchdog on, last thing in setup(): from then on every pass must kick it.
+  // The hardware watchdog on, last thing in setup(): from then on every pass must kick it. 120 ms
+  // without a kick: its interrupt marks the cause in RAM; 120 ms more: the reset.
   void start_watchdog();
   // The reset cause (MCUSR, read before anything else ran) and the resets since power-on.
   BootInfo boot_info();

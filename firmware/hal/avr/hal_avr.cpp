@@ -14,6 +14,11 @@ namespace {
 // RAM the C runtime does not clear, so that a reset (not a power cycle) leaves it as it was.
 uint8_t g_mcusr_at_boot __attribute__((section(".noinit")));
 ResetRecord g_reset_record __attribute__((section(".noinit")));
+// Set by the watchdog's interrupt just before the watchdog resets the AVR: the cause survives a
+// bootloader that clears MCUSR. A 32-bit mark, so that RAM's random state at power-on is taken
+// for it with probability 2^-32.
+uint32_t g_watchdog_mark __attribute__((section(".noinit")));
+constexpr uint32_t kWatchdogFired = 0xDEAD50F7UL;
 
 volatile uint16_t g_adc[cfg::kAdcInputs];
 volatile uint8_t g_adc_next;  // input being converted; cfg::kAdcInputs when the sweep is done
@@ -26,12 +31,27 @@ constexpr uint32_t kAdcTimeoutUs = 2000;
 
 // Runs before the C runtime sets RAM up (section .init3, right after the stack): the reset cause
 // must be read before anything clears it, and the watchdog stopped, because after a watchdog
-// reset it stays on (WDRF forces WDE) at its shortest period, 16 ms.
+// reset it stays on (WDRF forces WDE) at its shortest period, 16 ms. Behind a bootloader that
+// clears MCUSR the bits read 0 (docs/firmware.md, "Reset cause"); Optiboot 4.6 and later leave
+// them in r2 (build with `make BOOTLOADER=optiboot`), which nothing before .init3 touches.
 extern "C" void eel_capture_reset_cause() __attribute__((naked, used, section(".init3")));
 void eel_capture_reset_cause() {
-  g_mcusr_at_boot = MCUSR;
+  uint8_t flags = MCUSR;
+#ifdef EEL_BOOTLOADER_OPTIBOOT
+  if (flags == 0) __asm__ __volatile__("mov %0, r2" : "=r"(flags));
+#endif
+  g_mcusr_at_boot = flags;
   MCUSR = 0;
   wdt_disable();
+}
+
+// The main loop stopped kicking the watchdog for 120 ms: mark it in RAM that a reset keeps. The
+// watchdog, now in reset mode (the hardware clears WDIE as this runs; cleared here as well), resets
+// the AVR 120 ms later unless the loop kicks it meanwhile. Returning keeps the servo interrupt
+// (and the pulses it holds) running until then.
+ISR(WDT_vect) {
+  g_watchdog_mark = kWatchdogFired;
+  WDTCSR &= static_cast<uint8_t>(~_BV(WDIE));
 }
 
 // One conversion done: store it, start the next input's.
@@ -55,13 +75,27 @@ void Hal::begin() {
   ADCSRA = kAdcControl;
 }
 
-void Hal::start_watchdog() { wdt_enable(WDTO_250MS); }
+// Interrupt and reset mode: the interrupt after 120 ms without a kick (WDT_vect marks the cause),
+// the reset after 120 ms more: a hung loop resets 240 ms after its last pass.
+void Hal::start_watchdog() {
+  wdt_enable(WDTO_120MS);
+  WDTCSR |= _BV(WDIE);
+}
 
-void Hal::kick_watchdog() { wdt_reset(); }
+// A kick also arms the interrupt again and wipes its mark, in case a late pass came between
+// interrupt and reset: the loop runs, and no reset is on its way.
+void Hal::kick_watchdog() {
+  wdt_reset();
+  WDTCSR |= _BV(WDIE);
+  g_watchdog_mark = 0;
+}
+
 
 BootInfo Hal::boot_info() {
   // MCUSR's PORF, EXTRF, BORF, WDRF are the bits of eelproto::ResetFlags.
-  const uint8_t flags = g_mcusr_at_boot & 0x0F;
+  const bool marked = g_watchdog_mark == kWatchdogFired;
+  g_watchdog_mark = 0;
+  const uint8_t flags = infer_reset_flags(g_mcusr_at_boot & 0x0F, marked, g_reset_record);
   return BootInfo{flags, count_reset(g_reset_record, flags), true};
 }
 
