@@ -10,8 +10,8 @@ An output that cannot be written (a read-only folder, a full disk, ``--out`` nam
 folder is meant, a closed or full stdout) is the user's situation, not a bug: :func:`output_failure`
 tells such an ``OSError`` from others and words it on one line, and the command line prints that
 line (docs/cli.md, "Outputs"). :func:`check_output_folder` and :func:`check_output_stem` try a
-command's output place before any long work starts, so a read-only folder is said at once, not
-after an hour of fitting.
+command's output place before any long work starts (creating nothing), so a read-only folder is
+said at once, not after an hour of fitting.
 """
 
 from __future__ import annotations
@@ -77,7 +77,12 @@ def output_failure(err: BaseException) -> str | None:
 
 
 def check_output_folder(folder: str | Path, option: str = "--out") -> Path:
-    """Create ``folder`` if needed and check that a file can be written in it, before any work.
+    """Check, before any work, that files can be written in ``folder``; create nothing.
+
+    The folder itself, or the nearest folder above it that exists (the writers create the rest
+    when they write), must be a folder in which a file can be created: a small file is written
+    and removed there. Nothing is left behind, so a command refused later for another reason
+    leaves no empty output folder.
 
     Parameters
     ----------
@@ -94,14 +99,17 @@ def check_output_folder(folder: str | Path, option: str = "--out") -> Path:
     Raises
     ------
     OutputError
-        ``--out`` names a file, or the folder cannot be created or written (read-only, full).
+        ``--out`` (or a folder above it) names a file, or the place cannot be written
+        (read-only, full, not permitted).
     """
     folder = Path(folder)
-    if folder.exists() and not folder.is_dir():
-        raise OutputError(f"{option}: {folder} is a file, not a folder; choose another {option}")
+    existing = folder
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():  # the folder, or one above it, is a file
+        raise OutputError(f"{option}: {existing} is a file, not a folder; choose another {option}")
     try:
-        folder.mkdir(parents=True, exist_ok=True)
-        fd, probe = tempfile.mkstemp(dir=folder, prefix=".eelbot-write-check.", suffix=".tmp")
+        fd, probe = tempfile.mkstemp(dir=existing, prefix=".eelbot-write-check.", suffix=".tmp")
         try:
             os.write(fd, b"x")
         finally:
@@ -109,9 +117,7 @@ def check_output_folder(folder: str | Path, option: str = "--out") -> Path:
             Path(probe).unlink(missing_ok=True)
     except OSError as err:
         why = OUTPUT_ERRNOS.get(err.errno or 0, err.strerror or str(err))
-        where = folder if err.filename is None or ".eelbot-write-check." in str(err.filename) \
-            else err.filename
-        raise OutputError(f"{option}: cannot write in {where}: {why}") from None
+        raise OutputError(f"{option}: cannot write in {folder}: {why}") from None
     return folder
 
 
