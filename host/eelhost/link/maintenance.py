@@ -254,8 +254,8 @@ class Maintenance:
             protocol.RefuseReason.NOT_WHILE_RUNNING: "not while it undulates (stop it first)",
             protocol.RefuseReason.STORAGE_FAILED: "the EEPROM did not read back what was written",
             protocol.RefuseReason.SETTINGS_LOST: "SETTINGS_LOST: its stored settings were lost "
-            "and it runs on the defaults; check them, then acknowledge with `eelbot robot config "
-            "--defaults --save` (docs/firmware.md, 'Settings in the EEPROM')",
+            "and it runs on the defaults; acknowledge with `eelbot robot config --defaults "
+            "[--set NAME=VALUE ...] --save` (docs/firmware.md, 'Settings in the EEPROM')",
         }.get(reason, reason.name)
 
     def hello(self) -> protocol.Version:
