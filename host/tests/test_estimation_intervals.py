@@ -66,6 +66,7 @@ def test_intervals_of_data_declaring_no_noise_have_width_and_cover_the_truth(
                                 max_iterations=6)
     assert np.allclose(boot.noise_std()[:3], 0.0, atol=1e-12)  # the declared noise says nothing
     assert len(boot.jackknife) == 3 and len(boot.misfit_samples) == 4
+    assert boot.growth_source == "leave-one-out"
     identified = slice(0, 3)  # C_f, C_d, C_a (C_m is not identified on any tank)
     assert np.all(boot.upper[identified] > boot.lower[identified])
     assert np.all(boot.covers(TRUTH.as_array())[identified]), (boot.lower, boot.upper)
@@ -153,19 +154,19 @@ def test_prediction_bands_cover_held_out_gaits_of_a_tank_the_model_contains(robo
     assert band_coverage(none)["all"] < 0.5
 
 
-def test_the_ensemble_is_the_estimate_first_then_refits_and_jackknife_pseudo_draws():
+def test_the_ensemble_is_the_estimate_first_then_every_bootstrap_refit_cut_to_the_bounds():
     names = ("a", "b")
     est = np.array([1.0, 2.0])
     boot = BootstrapResult(names, est, np.array([[1.1, 2.0]]), np.ones(1), 1.0, est, est,
-                           misfit_samples=np.array([[0.9, 2.1]]),
+                           misfit_samples=np.array([[0.9, 2.1], [1.0, 2.6]]),
                            jackknife=np.array([[1.0, 2.2], [1.0, 1.8], [1.2, 2.0]]))
     ens = boot.ensemble(np.array([[0.0, 5.0], [0.0, 2.3]]))
     np.testing.assert_array_equal(ens[0], est)
-    assert len(ens) == 1 + 1 + 1 + 3
-    # pseudo-draws: mean square deviation = the jackknife variance (before cutting to bounds)
-    raw = boot.ensemble()[3:]
-    np.testing.assert_allclose(np.mean((raw - est) ** 2, axis=0), boot.jackknife_std() ** 2)
-    assert ens[:, 1].max() <= 2.3
+    assert len(ens) == 1 + 1 + 2  # the jackknife's refits are not draws of the estimate
+    assert ens[:, 1].max() == 2.3
+    # the jackknife's standard error, reported beside the intervals
+    np.testing.assert_allclose(boot.jackknife_std(),
+                               np.sqrt(2 / 3 * np.array([0.04, 0.08])))
 
 
 def test_a_fit_far_above_its_noise_floor_says_its_intervals_are_dominated_by_misfit(robot):

@@ -274,8 +274,9 @@ class BootstrapResult:
     failed : int
         Replicates left out because the model failed in them.
     misfit_samples : ndarray, shape (B', K)
-        The refits of the wild cluster bootstrap over the training experiments' residual curves
-        (:func:`misfit_replicates`); empty when the model's noise-free view failed.
+        The refits of the wild cluster bootstrap over the training experiments' leave-one-out
+        residual curves (:func:`misfit_replicates`); empty when the model's noise-free view
+        failed.
     growth : ndarray, shape (2,)
         :func:`misfit_growth` (c0 m^2, c1 m^2/s^2) of the training experiments' leave-one-out
         prediction errors (each predicted by its jackknife refit), or of their in-sample
@@ -287,7 +288,9 @@ class BootstrapResult:
     linear_std : ndarray, shape (K,), optional
         The linearised standard errors the interval is never narrower than.
     jackknife : ndarray, shape (E, K)
-        The leave-one-experiment-out refits on the recordings (empty with fewer than three).
+        The leave-one-experiment-out refits on the recordings (empty with fewer than three):
+        their predictions of the experiment left out give the residual curves; their own spread
+        is reported (:meth:`jackknife_std`), not used.
     """
 
     names: tuple[str, ...]
@@ -341,8 +344,7 @@ class BootstrapResult:
 
     def misfit_dominated(self) -> np.ndarray:
         """Per parameter, whether the residuals set the interval (not the declared noise)."""
-        return (np.maximum(self.misfit_std(), self.jackknife_std())
-                > self.noise_std() * self.excess)
+        return self.misfit_std() > self.noise_std() * self.excess
 
     def relative_half_width(self) -> np.ndarray:
         """Half the interval over the estimate's magnitude (inf at 0)."""
@@ -356,7 +358,7 @@ class BootstrapResult:
         return (self.lower <= t) & (t <= self.upper)
 
     def ensemble(self, bounds: np.ndarray | None = None) -> np.ndarray:
-        """The estimate, every refit and the jackknife's pseudo-draws: what a band swims.
+        """The estimate and every bootstrap refit: what a prediction band swims.
 
         Parameters
         ----------
@@ -371,10 +373,6 @@ class BootstrapResult:
         parts = [self.estimate[None], self.samples.reshape(-1, len(self.names))]
         if self.misfit_samples.size:
             parts.append(self.misfit_samples)
-        if len(self.jackknife) >= 2:
-            # pseudo-draws whose mean square deviation is the jackknife's variance
-            e = len(self.jackknife)
-            parts.append(self.estimate + np.sqrt(e - 1) * (self.jackknife - self.estimate))
         out = np.concatenate(parts)
         return out if bounds is None else np.clip(out, bounds[:, 0], bounds[:, 1])
 
@@ -486,65 +484,85 @@ def parametric_bootstrap(
     if failed:
         log.warning("%d of %d bootstrap replicates left out: the model failed in them",
                     failed, replicates)
-    wild: list[list[Experiment]] = []
-    growth = np.zeros(2)
+    n_exp = len(experiments)
+
+    def refit(problems: list[tuple[list, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+        """Minimax polish of each (prepared data, experiments kept) from the estimate.
+
+        Returns the refits (P, K) and their fitness on their own data (P,).
+        """
+        if not problems:
+            return np.zeros((0, space.size)), np.zeros(0)
+
+        def evaluate(asked: list[np.ndarray]) -> list[tuple[np.ndarray, np.ndarray]]:
+            sizes = [len(a) for a in asked]
+            sim = evaluator.simulate(np.concatenate(asked))
+            out, at = [], 0
+            for size, (prep, keep) in zip(sizes, problems, strict=True):
+                part = sim.take(slice(at, at + size))
+                out.append((evaluator.errors_of(part, prep)[:, keep],
+                            evaluator.residual_vectors_of(part, prep)[:, keep]))
+                at += size
+            return out
+
+        fits = polish_minimax_many(evaluate, space,
+                                   np.repeat(estimate[None], len(problems), axis=0),
+                                   max_iterations)
+        return (np.array([r.values for r in fits]).reshape(-1, space.size),
+                np.array([r.fitness for r in fits]))
+
+    # round 1: the declared noise's replicates and, on the recordings themselves, each
+    # experiment left out in turn (the cluster jackknife)
+    everything = np.ones(n_exp, dtype=bool)
+    drops = list(range(n_exp)) if misfit and n_exp >= 3 else []
+    if progress:
+        progress(f"bootstrap: {len(kept)} replicates recorded, refitting them and "
+                 f"{len(drops)} leave-one-out fits")
+    first, first_fitness = refit([(evaluator.prepare_like(r), everything) for r in kept]
+                                 + [(evaluator.prepared, np.arange(n_exp) != i) for i in drops])
+    # the refits' fitness on their own replicates: the noise floor
+    boot = BootstrapResult(space.names, estimate, first[: len(kept)], first_fitness[: len(kept)],
+                           float(fitness), estimate.copy(), estimate.copy(), level, widen,
+                           failed, linear_std=None if linear_std is None
+                           else np.asarray(linear_std),
+                           jackknife=first[len(kept):], experiments=n_exp)
     if misfit:
+        # round 2: the wild cluster bootstrap of the residual curves. Each experiment's curve is
+        # its recording minus the prediction of the fit without it (leave-one-out), when there
+        # is a jackknife: the fit has absorbed part of its in-sample residuals (six parameters,
+        # four curves), and resampling those alone gave a tenth of the spread the estimate has
+        # (docs/estimation.md, "Uncertainty")
         views = model_views(evaluator.robot, model, experiments)
+        loo: list[np.ndarray | None] = list(views)
+        if len(drops) == n_exp:
+            loo = [model_views(evaluator.robot, FittedModel(space, boot.jackknife[i]),
+                               [experiments[i]])[0] for i in drops]
         if any(v is None for v in views):
             log.warning("the fit fails within a training recording: no residual bootstrap")
         else:
-            full = [v for v in views if v is not None]
-            wild = misfit_replicates(experiments, full, replicates, np.random.default_rng(
-                [seed, 32]))
-            growth = misfit_growth(experiments, full)
-    # leave-one-experiment-out refits on the recordings themselves (the cluster jackknife)
-    n_exp = len(experiments)
-    drops = list(range(n_exp)) if misfit and n_exp >= 3 else []
-    if progress:
-        progress(f"bootstrap: {len(kept)} + {len(wild)} replicates recorded, refitting them and "
-                 f"{len(drops)} leave-one-out fits")
-    problems: list[tuple[list, np.ndarray]] = [
-        (evaluator.prepare_like(r), np.ones(n_exp, dtype=bool)) for r in kept + wild]
-    problems += [(evaluator.prepared, np.arange(n_exp) != i) for i in drops]
-
-    def evaluate(asked: list[np.ndarray]) -> list[tuple[np.ndarray, np.ndarray]]:
-        sizes = [len(a) for a in asked]
-        sim = evaluator.simulate(np.concatenate(asked))
-        out, at = [], 0
-        for size, (prep, keep) in zip(sizes, problems, strict=True):
-            part = sim.take(slice(at, at + size))
-            out.append((evaluator.errors_of(part, prep)[:, keep],
-                        evaluator.residual_vectors_of(part, prep)[:, keep]))
-            at += size
-        return out
-
-    refits = polish_minimax_many(evaluate, space, np.repeat(estimate[None], len(problems), axis=0),
-                                 max_iterations)
-    values = np.array([r.values for r in refits]).reshape(-1, space.size)
-    noise = np.array([r.fitness for r in refits[: len(kept)]])
-    n_boot = len(kept) + len(wild)
-    boot = BootstrapResult(space.names, estimate, values[: len(kept)], noise, float(fitness),
-                           estimate.copy(), estimate.copy(), level, widen, failed,
-                           misfit_samples=values[len(kept):n_boot], growth=growth,
-                           linear_std=None if linear_std is None else np.asarray(linear_std),
-                           jackknife=values[n_boot:], experiments=n_exp)
-    if len(drops) >= 2:
-        # the band's misfit from held-out predictions: each experiment predicted by the fit
-        # without it (in-sample residuals are shrunk by the fit: six parameters, few curves)
-        loo = [model_views(evaluator.robot, FittedModel(space, boot.jackknife[i]),
-                           [experiments[i]])[0] for i in drops]
-        if all(v is not None for v in loo):
-            boot.growth = misfit_growth(experiments, [v for v in loo if v is not None])
-            boot.growth_source = "leave-one-out"
-    # each source's spread times its own Student quantile (the jackknife has E - 1 degrees of
-    # freedom, not B - 1); the widest sets the half-width
+            if any(v is None for v in loo):
+                loo = list(views)  # a leave-one-out fit fails there: the in-sample residuals
+            else:
+                boot.growth_source = "leave-one-out" if len(drops) == n_exp else "in-sample"
+            residual_views = [v for v in loo if v is not None]
+            boot.growth = misfit_growth(experiments, residual_views)
+            shifted = [dataclasses.replace(exp, position_m=exp.position_m - r + v)
+                       for exp, r, v in zip(experiments, residual_views,
+                                            [v for v in views if v is not None], strict=True)]
+            # recording - loo view + fit view = fit view + residual: reweighted around the view
+            wild = misfit_replicates(shifted, [v for v in views if v is not None], replicates,
+                                     np.random.default_rng([seed, 32]))
+            boot.misfit_samples = refit([(evaluator.prepare_like(r), everything)
+                                         for r in wild])[0]
+    # each source's spread times its Student quantile; the widest sets the half-width (the
+    # jackknife's own spread is reported, not used: a minimax fit is not smooth in its data, and
+    # its leave-one-out refits jumped between the experiments that set the maximum)
     def quantile(n: int) -> float:
         return float(student_t.ppf(0.5 + level / 2, n - 1)) if n >= 2 else 0.0
 
     half = np.maximum.reduce([
         quantile(len(kept)) * boot.noise_std() * boot.excess,
-        quantile(len(wild)) * boot.misfit_std(),
-        quantile(len(drops)) * boot.jackknife_std(),
+        quantile(len(boot.misfit_samples)) * boot.misfit_std(),
         float(norm.ppf(0.5 + level / 2)) * (np.zeros(space.size) if boot.linear_std is None
                                             else np.nan_to_num(boot.linear_std, posinf=0.0)),
     ]) * widen
