@@ -23,6 +23,7 @@ from eelhost.data.experiments import read_experiment
 from eelhost.field.mcap_export import TOPICS, received_messages
 from eelhost.field.recorder import read_commands_csv
 from eelhost.wire import protocol
+from eelsim.robot import load_robot
 
 
 @pytest.fixture(scope="module")
@@ -79,7 +80,9 @@ def test_a_take_exported_as_mcap_reads_back_whole(take, tmp_path, capsys):
 
     exp = read_experiment(take)
     poses = topics["/robot/pose"]
-    assert len(poses) == len(exp.t_s) == len(topics["/tf"]) == len(topics["/robot/joints"])
+    robot_tf = [m for m in topics["/tf"] if m[1]["child_frame_id"] == "robot"]
+    assert len(poses) == len(exp.t_s) == len(robot_tf) == len(topics["/robot/joints"])
+    _links_join_up(topics["/tf"], exp)
     for k, (log_time, msg) in enumerate(poses):
         assert seconds(log_time) == pytest.approx(exp.t_s[k] - exp.t_s[0], abs=1e-6)
         stamp = msg["timestamp"]["sec"] * 10**9 + msg["timestamp"]["nsec"]
@@ -90,7 +93,7 @@ def test_a_take_exported_as_mcap_reads_back_whole(take, tmp_path, capsys):
         joints = topics["/robot/joints"][k][1]
         assert joints["theta_rad"] == pytest.approx(list(exp.link_angles_rad[k]), abs=1e-12)
         assert joints["phi_rad"] == pytest.approx(list(np.diff(exp.link_angles_rad[k])), abs=1e-12)
-        tf = topics["/tf"][k][1]
+        tf = robot_tf[k][1]
         assert (tf["parent_frame_id"], tf["child_frame_id"]) == ("tank", "robot")
 
     commands = read_commands_csv(f"{take}.commands.csv")
@@ -120,6 +123,24 @@ def test_a_take_exported_as_mcap_reads_back_whole(take, tmp_path, capsys):
 
     assert {"t.json", "t.robot.toml", "t.calibration.json"} <= set(attachments)
     assert metadata["eelbot.take"]["take"] == "t"
+
+
+def _links_join_up(transforms: list[tuple[int, dict]], exp) -> None:
+    """Each link frame sits at its link's centre: neighbouring links meet at their joint."""
+    half = np.array([link.half_length_m for link in load_robot().links()])
+    by_time: dict[int, dict[str, dict]] = {}
+    for log_time, msg in transforms:
+        by_time.setdefault(log_time, {})[msg["child_frame_id"]] = msg
+    n = len(half)
+    assert len(by_time) == len(exp.t_s)
+    for frames in by_time.values():
+        links = [frames[f"link_{i + 1}"] for i in range(n)]
+        centre = np.array([[m["translation"]["x"], m["translation"]["y"]] for m in links])
+        angle = np.array([2 * math.atan2(m["rotation"]["z"], m["rotation"]["w"]) for m in links])
+        u = np.column_stack([np.cos(angle), np.sin(angle)])
+        head_end = centre[:-1] + half[:-1, None] * u[:-1]
+        tail_end = centre[1:] - half[1:, None] * u[1:]
+        assert np.abs(head_end - tail_end).max() < 1e-9
 
 
 def test_export_keeps_an_existing_file_unless_forced(take, tmp_path, capsys):

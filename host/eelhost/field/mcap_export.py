@@ -7,7 +7,9 @@ which Foxglove reads).
 
 The topics and their schemas are listed in docs/host.md ("Takes as MCAP, for Foxglove") and in
 :data:`TOPICS`: the pose (``foxglove.PoseInFrame``) and frame transform
-(``foxglove.FrameTransform``) of every frame with a pose, the joint angles, every link event,
+(``foxglove.FrameTransform``) of every frame with a pose, a frame ``link_i`` at each link's
+centre along its axis (the centres from the centre of mass and the link angles through the robot's
+geometry, docs/model.md; the robot file is the take's copy), the joint angles, every link event,
 the robot's telemetry and other messages decoded from the byte log, every frame's localisation
 status, and the camera frames (``foxglove.CompressedImage``, JPEG).
 
@@ -41,8 +43,12 @@ from eelhost.field.recorder import read_commands_csv
 from eelhost.files import atomic_writer
 from eelhost.link.replay_transport import read_rx_log
 from eelhost.wire import protocol
+from eelsim.dynamics import link_positions
+from eelsim.model import SwimmerModel
+from eelsim.robot import load_robot
 
-__all__ = ["ExportError", "ExportSummary", "export_take_mcap", "take_stem", "TOPICS"]
+__all__ = ["ExportError", "ExportSummary", "TOPICS", "export_take_mcap", "link_centres",
+           "take_stem"]
 
 log = logging.getLogger(__name__)
 
@@ -276,6 +282,7 @@ def export_take_mcap(
 
         messages: list[tuple[float, str, dict[str, Any]]] = []
         heading = exp.heading_rad if exp.heading_rad is not None else np.zeros(len(exp.t_s))
+        model = _model_of(stem, exp.link_angles_rad)
         for k, t_s in enumerate(exp.t_s):
             x, y = (float(v) for v in exp.position_m[k])
             h = float(heading[k])
@@ -287,6 +294,12 @@ def export_take_mcap(
                                           "translation": position, "rotation": _yaw(h)}))
             if exp.link_angles_rad is not None:
                 theta = exp.link_angles_rad[k]
+                if model is not None:
+                    for i, (cx, cy) in enumerate(link_centres(model, exp.position_m[k], theta)):
+                        messages.append((t_s, "/tf", {
+                            "parent_frame_id": TANK_FRAME, "child_frame_id": f"link_{i + 1}",
+                            "translation": {"x": float(cx), "y": float(cy), "z": 0.0},
+                            "rotation": _yaw(float(theta[i]))}))
                 messages.append((t_s, "/robot/joints", {
                     "theta_rad": _plain(list(theta)), "phi_rad": _plain(list(np.diff(theta))),
                     "heading_rad": h}))
@@ -330,6 +343,28 @@ def export_take_mcap(
             "clock_offset_s": "" if offset is None else f"{offset:.6f}"})
         writer.finish()
     return ExportSummary(out_path, counts, offset)
+
+
+def link_centres(model: SwimmerModel, com_m: np.ndarray, theta_rad: np.ndarray) -> np.ndarray:
+    """Centres of the links (N, 2), tail first, of a body at ``com_m`` with link angles ``theta``."""
+    n = model.n_links
+    state = np.concatenate([np.asarray(theta_rad, dtype=float), np.asarray(com_m, dtype=float),
+                            np.zeros(n + 2)])
+    x, y = link_positions(model, state)
+    return np.column_stack([x, y])
+
+
+def _model_of(stem: str, link_angles: np.ndarray | None) -> SwimmerModel | None:
+    """The take's robot (its copy beside it, else the bundled one) if its links match the CSV."""
+    copy = Path(stem + ".robot.toml")
+    try:
+        robot = load_robot(copy if copy.exists() else None)
+    except (OSError, ValueError) as err:
+        log.warning("%s: no link frames in the export: %s", copy, err)
+        return None
+    if link_angles is None or link_angles.shape[1] != robot.n_links:
+        return None
+    return SwimmerModel.from_robot(robot)
 
 
 def _frame_rows(path: Path) -> list[tuple[float, str, int]]:
