@@ -168,3 +168,21 @@ def test_the_hardware_tests_without_a_robot_say_so_in_one_line():
     assert "hardware tests:" in out and f"could not open port {port}" in out
     assert "plug the robot in" in out
     assert "Traceback" not in out and "SerialException" not in out and len(out) < 1000
+
+
+FULL_DISK = {
+    "markers": ("markers --out {tmp}/lab", "markers.pdf"),
+    "campaign --write-plan": ("campaign --write-plan {tmp}/lab/plan.toml", "plan.toml"),
+}
+
+
+@pytest.mark.parametrize("command", list(FULL_DISK))
+def test_a_disk_that_fills_up_gives_one_line_and_no_part_file(command, monkeypatch, tmp_path,
+                                                             capsys):
+    line, first_file = FULL_DISK[command]
+    real = os.fdopen
+    monkeypatch.setattr(sim_files.os, "fdopen", lambda *a, **k: _FullDisk(real(*a, **k), 100))
+    assert cli.main(line.format(tmp=tmp_path).split()) == 2
+    message = one_line_error(capsys.readouterr().err, command.split()[0])
+    assert first_file in message and "disk is full" in message
+    assert not [p for p in tmp_path.rglob("*") if p.is_file()]  # no part file, no temporary
