@@ -76,8 +76,8 @@ def identifiability(evaluator: Evaluator, estimate: np.ndarray) -> Identifiabili
     The Jacobian is taken in the unit cube of the search bounds (a step of 1 % of each range), so a
     parameter near zero is probed as well as any other; standard errors come from its singular
     value decomposition, and a direction the data does not see at all (a singular value below 1e-9
-    of the largest) gets an infinite error instead of the zero a pseudo-inverse would give. The residual variance is
-    never taken below the pixel rounding's (pixel^2 / 12).
+    of the largest) gets an infinite error instead of the zero a pseudo-inverse would give. The
+    residual variance is never taken below the pixel rounding's (pixel^2 / 12).
 
     Parameters
     ----------

@@ -318,15 +318,14 @@ def _report_text(
         u = next(iter(extra["uncertainty"].values()))
         lines += [
             "",
-            f"[low, high]: {u['level'] * 100:.0f} % intervals from three sources, refitted "
-            f"together: {u['replicates']} data sets regenerated from the fit with the dataset's "
-            f"declared noise (their spread widened by the fit's excess over its noise floor), "
-            f"{u.get('misfit_replicates', 0)} made of the fit's noise-free view plus its own "
-            "residual curves, reweighted per experiment (a wild cluster bootstrap: what the "
-            "model misses, whatever its cause), and the fits with each training experiment left "
-            "out (the jackknife); the widest sets the interval, never narrower than the "
-            f"linearised standard error, times the measured factor {u['widen']:g} "
-            "(docs/estimation.md, \"Uncertainty\").",
+            f"[low, high]: {u['level'] * 100:.0f} % intervals from two bootstraps: "
+            f"{u['replicates']} data sets regenerated from the fit with the dataset's declared "
+            "noise (their spread widened by the fit's excess over its noise floor), and "
+            f"{u.get('misfit_replicates', 0)} made of the fit's noise-free view plus each "
+            "training experiment's residual curve against the fit without it, reweighted per "
+            "experiment (a wild cluster bootstrap: what the model misses, whatever its cause); "
+            "the wider sets the interval, never narrower than the linearised standard error, "
+            f"times the measured factor {u['widen']:g} (docs/estimation.md, \"Uncertainty\").",
             "",
             "| fit | noise floor | fitness / noise floor | intervals set by the misfit |",
             "|---|---|---|---|",

@@ -12,22 +12,24 @@ data and intervals of zero width), so the fit's own residuals are resampled too.
   centred), and is read at the recording's own frame times shifted by a new clock offset drawn
   uniformly within the declared ``timestamp_jitter_s``.
 - **Residual replicates** (:func:`misfit_replicates`): the fit's noise-free view of each training
-  recording (:func:`model_views`) plus the recording's residual curve times a random weight per
-  experiment (Webb's six-point weights): a wild cluster bootstrap, each experiment a cluster, so
-  the residuals' correlation in time is kept. It needs no declaration: what the model misses
-  (misfit, undeclared clock offsets or jitter) is in the residuals.
-- **The cluster jackknife**: each training experiment left out in turn and the rest refitted.
-  With few experiments the fit absorbs much of its residuals (six parameters, four curves), so
-  the residual bootstrap alone was narrow (measured on the zero-jitter copy of the bundled
-  dataset: C_d's wild spread 0.007, its jackknife error 0.030, its error 0.063).
+  recording (:func:`model_views`) plus a residual curve times a random weight per experiment
+  (Webb's six-point weights): a wild cluster bootstrap, each experiment a cluster, so the
+  residuals' correlation in time is kept. It needs no declaration: what the model misses
+  (misfit, undeclared clock offsets or jitter) is in the residuals. The curve is the recording
+  minus the prediction of the fit *without* that experiment (the cluster jackknife's refit):
+  with few experiments the fit absorbs much of its in-sample residuals (six parameters, four
+  curves), and resampling those gave a tenth of the estimate's error (measured on the
+  zero-jitter copy of the bundled dataset: straight C_d's spread 0.007, its error 0.063; with
+  the leave-one-out curves 0.05). The jackknife's own spread is reported, not used: a minimax
+  fit is not smooth in its data, and its leave-one-out refits jumped (C_d +-50 % on one seed).
 - **Refits** (:func:`parametric_bootstrap`): the minimax polish from the estimate, all
   replicates in lock step (one batch per iteration).
 - **The noise floor**: the fitness the declared-noise refits reach, each on its regenerated data:
   what a model that contains the plant reaches from data with this noise. A fit whose fitness
   is far above it is dominated by model error the noise does not explain; the noise refits'
   spread is widened by the excess, the ratio of its fitness to the floor's median (at least 1).
-- **Intervals**: the estimate +- the widest of the sources (each with its own Student quantile,
-  times ``widen``), never narrower than the linearised standard error
+- **Intervals**: the estimate +- the wider of the two bootstraps' spreads (each times its
+  Student quantile and ``widen``), never narrower than the linearised standard error
   (:mod:`eelhost.estimation.identify`, whose residual variance is never below the pixel
   rounding's), cut to the search bounds; a parameter the data does not identify gets its whole
   search range, since refits from the estimate stay near it however little the data constrains
@@ -363,7 +365,7 @@ class BootstrapResult:
         Parameters
         ----------
         bounds : ndarray, shape (K, 2), optional
-            Search bounds the pseudo-draws are cut to.
+            Search bounds the refits are cut to.
 
         Returns
         -------
@@ -423,20 +425,20 @@ def parametric_bootstrap(
 ) -> BootstrapResult:
     """Intervals for a fit from refits: the declared noise, and the misfit the noise misses.
 
-    Refitted together by the minimax polish from the estimate, in lock step:
+    Refitted by the minimax polish from the estimate, each round in lock step:
 
-    - ``replicates`` data sets recorded again from the fit with the noise the dataset declares
-      (:func:`regenerate`); their fitness is the noise floor;
-    - ``replicates`` data sets made of the fit's noise-free view plus its residual curves,
-      reweighted per experiment (:func:`misfit_replicates`, a wild cluster bootstrap);
-    - the recordings themselves with each experiment left out in turn (the cluster jackknife,
-      with at least three experiments).
+    1. ``replicates`` data sets recorded again from the fit with the noise the dataset declares
+       (:func:`regenerate`; their fitness is the noise floor), and the recordings with each
+       experiment left out in turn (the cluster jackknife, with at least three experiments);
+    2. ``replicates`` data sets made of the fit's noise-free view plus each experiment's
+       leave-one-out residual curve (recording minus the jackknife refit's prediction of it),
+       reweighted per experiment (:func:`misfit_replicates`, a wild cluster bootstrap).
 
     The half-width is ``widen`` x the largest of: t(B - 1) x the noise refits' standard
     deviation x the excess over the noise floor; t(B - 1) x the residual refits' standard
-    deviation; t(E - 1) x the jackknife's standard error; z x ``linear_std`` (97.5 % quantiles);
-    cut to the bounds. The declared noise alone gave zero width when a dataset declared none
-    (issue 32); the residuals carry whatever the model misses, declared or not.
+    deviation; z x ``linear_std`` (97.5 % quantiles); cut to the bounds. The declared noise
+    alone gave zero width when a dataset declared none (issue 32); the residuals carry whatever
+    the model misses, declared or not.
 
     Parameters
     ----------
