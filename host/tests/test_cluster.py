@@ -142,3 +142,17 @@ def test_the_estimate_command_refuses_plain_tcp_elsewhere_before_connecting(smal
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert "plain TCP to another machine is refused" in err and "--insecure" in err
+
+
+def test_the_cluster_benchmark_block_is_replaced_in_place_and_survives_a_bench_rewrite(tmp_path):
+    from eelhost.benchmarks.cluster_speed import BEGIN, END, keep_block, write_block
+
+    page = tmp_path / "benchmarks.md"
+    page.write_text("# Benchmarks\n\nsection 1\n")
+    write_block(page, f"{BEGIN}\nfirst\n{END}")
+    write_block(page, f"{BEGIN}\nsecond\n{END}")
+    text = page.read_text()
+    assert text.count(BEGIN) == 1 and "second" in text and "first" not in text
+    assert text.startswith("# Benchmarks\n\nsection 1\n")
+    rewritten = keep_block(page, "# Benchmarks\n\nnew section 1\n")  # what eelbot bench writes
+    assert rewritten.startswith("# Benchmarks\n\nnew section 1\n") and "second" in rewritten

@@ -192,6 +192,19 @@ def write_block(path: Path, block: str) -> None:
     atomic_write(path, text)
 
 
+def keep_block(path: str | Path, text: str) -> str:
+    """``text`` (a new page) with the cluster block of the page at ``path`` kept at its end.
+
+    ``eelbot bench --write`` rewrites docs/benchmarks.md whole; this block is measured by another
+    command, so the page keeps it.
+    """
+    old = Path(path).read_text() if Path(path).exists() else ""
+    if BEGIN not in old or END not in old or BEGIN in text:
+        return text
+    block = BEGIN + old.split(BEGIN, 1)[1].split(END, 1)[0] + END
+    return text.rstrip("\n") + "\n\n" + block + "\n"
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the benchmark and print (``--write``: also write) its report."""
     p = argparse.ArgumentParser(prog="python -m eelhost.benchmarks.cluster_speed",
