@@ -36,3 +36,9 @@ def test_rounds_rotate_the_engines_and_cover_every_thread_count(monkeypatch):
     assert all(r.ratio("pd kernel") == pytest.approx(20.0) for r in rounds)
     assert {o for o in order if o[0] == "mujoco"} == {("mujoco", "pd", 1), ("mujoco", "pd", 2)}
     assert er.spread([20.0, 10.0, 40.0]) == "20.0 (10.0-40.0)"
+
+
+def test_mujoco_is_timed_in_windows_of_a_fraction_of_the_runs():
+    # the bench extra is installed by scripts/setup.sh; five windows of a fifth of the runs
+    steps, walls = er.time_engine(er.EngineJob("mujoco", load_robot(), 10, 20, 1, repeats=5))
+    assert steps == 2 * 20 and len(walls) == 5 and min(walls) > 0

@@ -50,6 +50,8 @@ class EngineJob:
     threads : int
     repeats : int
         Timed repetitions (the kernel's after one untimed run: cache load, thread start-up).
+        MuJoCo's repetitions each run ``runs / repeats`` of the runs (it has nothing to warm):
+        both engines are then timed as the best of ``repeats`` short windows.
     """
 
     engine: str
@@ -57,7 +59,7 @@ class EngineJob:
     runs: int
     steps: int
     threads: int
-    repeats: int = 2
+    repeats: int = 5
 
 
 def generation_spec(robot: Robot, runs: int, steps: int) -> BatchSpec:
@@ -95,9 +97,10 @@ def time_engine(job: EngineJob) -> tuple[float, list[float]]:
     if job.engine == "mujoco":
         from eelhost.benchmarks import mujoco_compare
 
-        timing = mujoco_compare.rollout_speed(job.robot, job.runs, job.steps, job.threads,
+        chunk = max(job.threads, job.runs // job.repeats)
+        timing = mujoco_compare.rollout_speed(job.robot, chunk, job.steps, job.threads,
                                               repeats=job.repeats)
-        return float(job.runs * job.steps), list(timing.walls_s)
+        return float(chunk * job.steps), list(timing.walls_s)
     if job.engine != "kernel":
         raise ValueError(f"unknown engine {job.engine!r}; expected 'kernel' or 'mujoco'")
     from eelsim import batch
@@ -166,8 +169,9 @@ def engine_rounds(pd_robot: Robot, servo_robot: Robot, runs: int, steps: int,
     """Time the PD kernel, the servo kernel and MuJoCo, each in its own process, in rounds.
 
     Every round times the three engines with each thread count; the engines' order rotates
-    from round to round. MuJoCo is timed once per process (it has nothing to compile or warm),
-    the kernels best of two after an untimed run.
+    from round to round. Each process reports its engine's best of five short windows (the
+    kernel: five generations after an untimed one; MuJoCo: five rollouts of a fifth of the
+    runs), the estimate of its speed least touched by the other processes' load.
 
     Parameters
     ----------
@@ -192,7 +196,7 @@ def engine_rounds(pd_robot: Robot, servo_robot: Robot, runs: int, steps: int,
             for threads in thread_counts:
                 jobs = {"pd kernel": EngineJob("kernel", pd_robot, runs, steps, threads),
                         "servo kernel": EngineJob("kernel", servo_robot, runs, steps, threads),
-                        "mujoco": EngineJob("mujoco", pd_robot, runs, steps, threads, 1)}
+                        "mujoco": EngineJob("mujoco", pd_robot, runs, steps, threads)}
                 order = ENGINES[r % 3:] + ENGINES[: r % 3]
                 before = load_average()
                 rates = {}

@@ -399,7 +399,8 @@ def _mujoco_section(robot: Robot, servo_robot: Robot, coeffs: FluidCoefficients,
         "position actuator + joint damping; open-loop gait.",
         "",
         f"Each engine timed alone in a fresh process ({settings.runs} runs x {settings.steps} "
-        "steps; the kernels best of 2 after an untimed run, MuJoCo once): the PD kernel, the "
+        "steps; each process reports the best of 5 short windows: the kernels 5 generations "
+        "after an untimed one, MuJoCo 5 rollouts of a fifth of the runs): the PD kernel, the "
         "servo kernel and `mujoco.rollout` one after the other, the order rotated each round, "
         f"on {' and on '.join(str(n) for n in counts)} threads; {settings.rounds} rounds of each."
         " The ratios are taken within each round, so that the machine's load, which changes "
