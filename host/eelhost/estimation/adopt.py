@@ -1,12 +1,14 @@
 """Fit a dataset with the model its own comparison recommends (docs/estimation.md, "Model choice").
 
-The robot file names a joint model and a fluid law; a real tank may follow neither. The fits are
-made first with the robot file's model; the leave-one-gait-out comparison
-(:mod:`eelhost.estimation.selection`) then scores every candidate model on gaits it was not fitted
-to. When it recommends another model, that model is fitted again with the full method (the
-comparison's own fit of it is only a short polish from a carried-over start); the better of that
-fit and the comparison's is kept, and these fits are the ones reported and validated. The robot file's fits are kept
-beside them, so a reader sees what the choice changed.
+The robot file names a joint model and a fluid law; a real tank may follow neither. The
+leave-one-gait-out comparison (:mod:`eelhost.estimation.selection`) then scores every
+candidate of the joint model x law grid, each fitted from its own starts, on gaits it was not
+fitted to, with separate straight and turning sets and with one set for every motion. When it
+recommends another model, that model is fitted again with the full method; the better of that
+fit and the comparison's is kept, and these fits are the ones reported and validated. The robot
+file's fits are kept beside them, so a reader sees what the choice changed. Nothing of the choice
+starts from the robot file's values, so the same tank gives the same model from either bundled
+robot file.
 
 A model is adopted only on the held-out evidence, never on the training fitness: a richer model
 always fits its training gaits at least as well, and the comparison prefers the simpler one within
@@ -26,7 +28,7 @@ from eelhost.estimation.evaluate import Evaluator
 from eelhost.estimation.optimise import FitResult
 from eelhost.estimation.parameters import ParameterSpace
 from eelhost.estimation.pipeline import FitSettings, fit_motion
-from eelhost.estimation.selection import CandidateScore, cross_validate, recommend
+from eelhost.estimation.selection import ONE_SET, CandidateScore, cross_validate, recommend
 from eelhost.progress import phase
 
 log = logging.getLogger(__name__)
@@ -58,8 +60,9 @@ class ChosenFits:
 
     @property
     def model(self) -> str:
-        """The chosen model's name ("<joint model> x <fluid law>")."""
-        return next(iter(self.fits.values())).space.model_name
+        """The chosen model's name ("<joint model> x <fluid law>", ", one set" for one set)."""
+        name = next(iter(self.fits.values())).space.model_name
+        return f"{name}, {ONE_SET}" if set(self.fits) == {"joint"} else name
 
     @property
     def adopted(self) -> bool:
@@ -76,15 +79,21 @@ def fit_and_choose(
     fit: Fit | None = None,
     say: Callable[[str], None] | None = None,
     laws: Sequence[str] | None = None,
+    joint_models: Sequence[str] | None = None,
 ) -> ChosenFits:
-    """Fit each motion, compare the candidate models and refit with the recommended one.
+    """Compare the candidate models, then fit the recommended one with the full method.
+
+    Without the comparison the robot file's model is fitted. With it, the recommended model is
+    fitted with the full method (the comparison's own fit kept where lower); when that is not the
+    robot file's model, the comparison's fits of the robot file's model are kept beside it.
 
     Parameters
     ----------
     dataset : Dataset
     motions : sequence of str
-        "straight", "turning" and/or "joint" ("joint" is refitted with the chosen model but
-        takes no part in the comparison, whose folds are gaits of one motion type).
+        "straight", "turning" and/or "joint" ("joint", one set for every motion, asked for by
+        the caller, is fitted with the chosen model; the comparison tries one set for every
+        motion on its own and, when it predicts best, fits only that).
     settings : FitSettings
     compare : bool
         Run the cross-validated comparison (without it the robot file's model is kept).
@@ -98,6 +107,8 @@ def fit_and_choose(
         Gets a line per step.
     laws : sequence of str, optional
         The fluid laws the comparison tries (default: the twin's candidate laws).
+    joint_models : sequence of str, optional
+        The joint models it tries (default: every one the twin has).
 
     Returns
     -------
@@ -110,28 +121,56 @@ def fit_and_choose(
         return fit_motion(dataset, motion, settings, space=space, start=start)
 
     fit = fit or default_fit
+    own = ParameterSpace.for_robot(dataset.robot, current=settings.fit_current)
+    separate = [m for m in motions if m != "joint"]
+    if not (compare and separate):
+        return _fit_all(fit, motions, None, None)
+    with phase(f"cross-validation of the candidate models ({', '.join(separate)})"):
+        comparison = cross_validate(dataset, separate, settings, laws=laws, say=say,
+                                    joint_models=joint_models)
+    choice = recommend(comparison)
+    if choice is None or choice.space is None:
+        say("every candidate model failed its cross-validation: the robot file's model is fitted")
+        return replace(_fit_all(fit, motions, None, None), comparison=comparison)
+    say(f"recommended model: {choice.model}")
+    kept = next((c for c in comparison if c.model == own.model_name), None)
+    if choice.model == own.model_name or not adopt:
+        # the robot file's model: fitted with the full method (the comparison's fit of it kept
+        # where lower; with --keep-model, also when another model is recommended)
+        return replace(_fit_all(fit, motions, None, kept), comparison=comparison)
+    say(f"the recommended model {choice.model} is not the robot file's ({own.model_name}): "
+        "fitting it")
+    chosen = _fit_all(fit, ["joint"] if choice.one_set else list(motions), choice.space, choice)
+    chosen.comparison = comparison
+    if kept is not None and not kept.failed:
+        # the robot file's model as the comparison fitted it (from its own starts)
+        chosen.robot_file_fits = {
+            m: FitResult("multi-start (comparison)", own, v, kept.fitness[m],
+                         [(0, kept.fitness[m], kept.simulations)]) for m, v in kept.values.items()}
+    else:
+        chosen.robot_file_fits = _fit_all(fit, motions, None, None).fits
+    return chosen
+
+
+def _fit_all(fit: Fit, motions: Sequence[str], space: ParameterSpace | None,
+             choice: CandidateScore | None) -> ChosenFits:
+    """Each motion fitted with the full method, the comparison's fit kept where lower."""
     fits: dict[str, FitResult] = {}
     evaluators: dict[str, Evaluator] = {}
     for motion in motions:
-        fits[motion], evaluators[motion] = fit(motion, None, None)
-    separate = {m: (r.space, r.values) for m, r in fits.items() if m != "joint"}
-    if not (compare and separate):
-        return ChosenFits(fits, evaluators)
-    with phase(f"cross-validation of the candidate models ({', '.join(separate)})"):
-        comparison = cross_validate(dataset, separate, settings, laws=laws, say=say)
-    choice = recommend(comparison)
-    own = next(iter(fits.values())).space.model_name
-    say(f"recommended model: {choice.model}")
-    if choice.model == own or not adopt or choice.space is None:
-        return ChosenFits(fits, evaluators, comparison)
-    say(f"the recommended model {choice.model} is not the robot file's ({own}): fitting it")
-    chosen: dict[str, FitResult] = {}
-    chosen_evaluators: dict[str, Evaluator] = {}
-    for motion in motions:
-        res, ev = fit(motion, choice.space, choice.values.get(motion))
-        if motion in choice.values and choice.fitness[motion] < res.fitness:
-            # the comparison's polish found the lower point: keep it (same space, same data)
-            res = replace(res, values=choice.values[motion], fitness=choice.fitness[motion],
-                          method=f"{res.method}, comparison's fit kept")
-        chosen[motion], chosen_evaluators[motion] = res, ev
-    return ChosenFits(chosen, chosen_evaluators, comparison, robot_file_fits=fits)
+        start = choice.values.get(motion) if choice is not None else None
+        res, evaluators[motion] = fit(motion, space, start)
+        fits[motion] = _lower(res, choice, motion) if choice is not None else res
+    return ChosenFits(fits, evaluators)
+
+
+def _lower(res: FitResult, choice: CandidateScore, motion: str) -> FitResult:
+    """The full method's fit, or the comparison's own fit of the model where that is lower.
+
+    Both are fits of the same model to the same training experiments, each from starts that
+    owe nothing to the robot file.
+    """
+    if motion in choice.values and choice.fitness[motion] < res.fitness:
+        return replace(res, values=choice.values[motion], fitness=choice.fitness[motion],
+                       method=f"{res.method}, comparison's fit kept")
+    return res

@@ -1,49 +1,53 @@
 """Which candidate model to trust: leave-one-gait-out cross-validation (docs/estimation.md).
 
-A candidate model is a joint model with a fluid law (:func:`eelhost.estimation.parameters.spaces_of`):
-the robot's joint model with each of the twin's candidate laws (``eelsim.fluid.candidate_laws``),
-and each other joint model of the twin with the robot's law, on the joints of the bundled robot
-file that uses it; when another joint model predicts best, it is then tried with every law (a
-step of a search over the joint model x law grid: the robot file's own joint model is tried with
-every law from the start, so a second step is only paid for where the joints are wrong). For
-each fit (straight, turning)
-every training experiment, one gait (amplitude, frequency), is held out in turn: the candidate is
-refitted on the others and scored on the held-out one by the fitness's per-experiment error
-(docs/estimation.md, "Fitness"). A model that only fits better because it has more freedom to
-absorb the training gaits' noise or the plant's missing physics predicts held-out gaits worse.
+The candidates are the whole grid of the twin's joint models and candidate fluid laws
+(:func:`candidate_spaces`), each with separate straight and turning coefficient sets (the paper's
+e_1*, e_2*); the best of them (:data:`ONE_SET_CANDIDATES`) are tried with one coefficient set for
+every motion too. For each fit every training experiment, one gait (amplitude, frequency), is held
+out in turn: the candidate is refitted on the others and scored on the held-out one by the
+fitness's per-experiment error (docs/estimation.md, "Fitness"). A model that only fits better
+because it has more freedom to absorb the training gaits' noise or the plant's missing physics
+predicts held-out gaits worse.
 
-Each refit is the minimax polish (:func:`eelhost.estimation.local.polish_minimax`) started from
-the candidate's fit on all training experiments; that fit itself starts from the main fit's
-parameters carried over by name (:func:`carry_over`) and is polished, so every candidate costs
-a few hundred simulations per fold instead of a global search; where the carried-over parameters
-fail in the candidate (the ``galilean`` law's reactive terms make the robot swim at less than half
-the speed with table 3's coefficients), the candidate gets a global fit of its own with the main
-fit's method. The warm start is shared by all candidates alike; it favours none.
+**The choice does not depend on the robot file.** Every candidate is fitted from its own starts
+(:func:`multi_start_fit`): the middle of its bounds and a scrambled Sobol design in them, the
+best few polished by the minimax trust region, then again from every other candidate's fit
+carried over by name (:func:`carry_over`); never from the robot file's values. The other joint
+model's fixed parameters are the bundled robot file's that uses it, so from either bundled robot
+file the grid, the starts and therefore the scores are the same (tested).
 
-The recommendation is the candidate with the lowest mean held-out error over all folds of all
-fits; one within ``TIE`` of it with fewer parameters is preferred (the simpler model predicts as
-well).
+**A failure is not a score.** A fold whose refit fails (a penalty on a training gait or on the
+held-out one) is refitted from the candidate's next start; a candidate whose fold still fails is
+marked failed, shown as such, and never ranked by a penalty-inflated mean.
+
+The recommendation is the candidate with the lowest mean held-out error over every held-out gait;
+one within ``TIE`` of it with fewer parameters is preferred (the simpler model predicts as well).
 """
 
 from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from eelhost.data.experiments import Dataset
+from eelhost.data.experiments import Dataset, Experiment
 from eelhost.estimation.evaluate import EstimationError, Evaluator
-from eelhost.estimation.local import FAILED, polish_minimax
-from eelhost.estimation.methods import FitProblem, run_fit
-from eelhost.estimation.parameters import ParameterSpace, joint_model_name, spaces_of
+from eelhost.estimation.local import FAILED, polish_minimax_many
+from eelhost.estimation.methods import CURRENT_POLISH_ITERATIONS
+from eelhost.estimation.parameters import ParameterSpace, joint_fit
 from eelhost.estimation.pipeline import FitSettings, training_experiments
 
 log = logging.getLogger(__name__)
 
 TIE = 0.02  # relative: held-out errors this close count as equal
-POLISH_ITERATIONS = 12
+POLISH_ITERATIONS = 8  # minimax iterations of every fit of the comparison
+FOLD_ITERATIONS = 4  # and of a fold's refit, which starts from the fit on every gait
+SCREEN_LOG2 = 4  # 2**4 = 16 Sobol points (and the middle) screened per candidate and fit
+POLISHED_STARTS = 1  # the best screened starts polished (the others' fits are polished too)
+ONE_SET_CANDIDATES = 1  # the best separate-set models also tried with one set for all motions
+ONE_SET = "one set"  # the suffix of a one-set candidate's name
 
 
 def carry_over(values: Mapping[str, float], space: ParameterSpace, default: np.ndarray) -> np.ndarray:
@@ -82,18 +86,22 @@ class CandidateScore:
     Attributes
     ----------
     model : str
-        "<joint model> x <fluid law>".
+        "<joint model> x <fluid law>", with ", one set" for one coefficient set for every motion.
     parameters : int
-        Its parameter count.
+        Its parameter count over all its coefficient sets.
     fitness : dict of str to float
-        Its fitness on all training experiments, per fit.
+        Its fitness on all training experiments, per fit ("straight", "turning"; "joint" for
+        one set).
     held_out : dict of str to ndarray
-        Per fit, the error of each held-out gait (in training order).
+        Per fit, the error of each held-out gait (in training order); NaN for a fold whose
+        every refit failed.
     simulations : int
     space : ParameterSpace or None
         The candidate's parameter space (what a refit with it fits).
     values : dict of str to ndarray
-        Per fit, its parameters fitted on all training experiments (a refit's start).
+        Per fit, its parameters fitted on all training experiments.
+    failed : str or None
+        Why the candidate failed (a fold none of whose refits ran), None when it did not.
     """
 
     model: str
@@ -103,151 +111,355 @@ class CandidateScore:
     simulations: int = 0
     space: ParameterSpace | None = None
     values: dict[str, np.ndarray] = field(default_factory=dict)
+    failed: str | None = None
+
+    @property
+    def one_set(self) -> bool:
+        """Whether the candidate fits one coefficient set for every motion."""
+        return "joint" in self.values or self.model.endswith(ONE_SET)
 
     @property
     def mean_held_out(self) -> float:
-        """Mean held-out error over every fold of every fit."""
-        return float(np.mean(np.concatenate(list(self.held_out.values()))))
+        """Mean held-out error over every fold of every fit (inf for a failed candidate)."""
+        errors = np.concatenate(list(self.held_out.values()))
+        if self.failed or not np.all(np.isfinite(errors)):
+            return float("inf")
+        return float(np.mean(errors))
 
     @property
     def worst_held_out(self) -> float:
-        """Largest held-out error."""
-        return float(np.max(np.concatenate(list(self.held_out.values()))))
+        """Largest held-out error (inf for a failed candidate)."""
+        errors = np.concatenate(list(self.held_out.values()))
+        if self.failed or not np.all(np.isfinite(errors)):
+            return float("inf")
+        return float(np.max(errors))
 
 
-def recommend(scores: Sequence[CandidateScore]) -> CandidateScore:
-    """The candidate to trust (module docstring): lowest mean held-out error, ties to the simpler."""
-    best = min(scores, key=lambda c: c.mean_held_out)
-    close = [c for c in scores if c.mean_held_out <= best.mean_held_out * (1 + TIE)]
+def recommend(scores: Sequence[CandidateScore]) -> CandidateScore | None:
+    """The candidate to trust (module docstring): lowest mean held-out error, ties to the simpler.
+
+    Failed candidates are never recommended; None when every candidate failed.
+    """
+    ran = [c for c in scores if np.isfinite(c.mean_held_out)]
+    if not ran:
+        return None
+    best = min(ran, key=lambda c: c.mean_held_out)
+    close = [c for c in ran if c.mean_held_out <= best.mean_held_out * (1 + TIE)]
     return min(close, key=lambda c: (c.parameters, c.mean_held_out))
+
+
+def candidate_spaces(
+    dataset: Dataset, laws: Sequence[str], current: bool, joint_models: Sequence[str] | None
+) -> list[ParameterSpace]:
+    """The joint model x law grid, in a fixed order (joint models, then laws, by name).
+
+    Every joint model other than the robot file's brings the ``[joints]`` table of the bundled
+    robot file that uses it (:func:`eelhost.estimation.parameters.joint_fit`), so the grid is the
+    same from either bundled robot file.
+    """
+    from eelsim.fluid import get_fluid_law
+    from eelsim.joints import JOINT_MODELS
+
+    models = sorted(JOINT_MODELS) if joint_models is None else sorted(set(joint_models))
+    return [ParameterSpace(get_fluid_law(law), joint_fit(dataset.robot, model), current=current)
+            for model in models for law in sorted(set(laws))]
+
+
+@dataclass
+class _Fitted:
+    """A candidate's fits on one set of experiments, best first."""
+
+    values: list[np.ndarray]
+    fitness: list[float]
+
+
+def _many(ev: Evaluator, drop: Sequence[int | None] = ()) -> Callable:
+    """A ManyEvaluate over one evaluator, problem b leaving out experiment ``drop[b]``.
+
+    The candidates of every problem are simulated as one batch (all experiments: a left-out
+    one is simulated too and ignored, which costs less than a batch per problem).
+    """
+
+    def evaluate(xs: list[np.ndarray]) -> list[tuple[np.ndarray, np.ndarray]]:
+        sizes = [len(x) for x in xs]
+        if not sum(sizes):
+            return [(np.zeros((0, len(ev.prepared))), np.zeros((0,)))] * len(xs)
+        errors, vectors = ev.evaluate(np.concatenate([x for x in xs if len(x)]))
+        out, at = [], 0
+        for b, n in enumerate(sizes):
+            e, v = errors[at:at + n], vectors[at:at + n]
+            j = drop[b] if b < len(drop) else None
+            if j is not None:
+                keep = [i for i in range(e.shape[1]) if i != j]
+                e, v = e[:, keep], v[:, keep]
+            out.append((e, v))
+            at += n
+        return out
+
+    return evaluate
+
+
+def screen_design(size: int, seed: int, log2: int = SCREEN_LOG2) -> np.ndarray:
+    """The middle of the unit cube and ``2**log2`` scrambled Sobol points in it (seeded)."""
+    from scipy.stats import qmc
+
+    sobol = qmc.Sobol(size, scramble=True, seed=seed).random_base2(log2)
+    return np.vstack([np.full(size, 0.5), sobol])
+
+
+def multi_start_fit(
+    ev: Evaluator,
+    seed: int,
+    extra_starts: Sequence[np.ndarray] = (),
+    iterations: int = POLISH_ITERATIONS,
+    polished: int = POLISHED_STARTS,
+    screen_log2: int = SCREEN_LOG2,
+) -> _Fitted:
+    """Fit ``ev.space``'s law and joints in still water from its own starts (module docstring).
+
+    The parameters are screened in still water (the declared currents) at
+    :func:`screen_design`'s points (never the robot file's values) and at ``extra_starts``;
+    the ``polished`` best are polished by the minimax trust region together.
+
+    Returns
+    -------
+    _Fitted
+        The polished fits in the still-water space (without the current), best first.
+    """
+    still = replace(ev.space, current=False)
+    still_ev = ev.with_space(still) if ev.space.current else ev
+    k = still.size
+    pts = still.from_unit(screen_design(k, seed, screen_log2)) if screen_log2 >= 0 else (
+        np.zeros((0, k)))
+    if len(extra_starts):
+        pts = np.vstack([pts, np.asarray(extra_starts, dtype=float)[:, :k]])
+    screened = still_ev.fitness(pts)
+    order = [int(i) for i in np.argsort(screened, kind="stable") if screened[i] < FAILED]
+    chosen = order[:polished] or [int(np.argmin(screened))]
+    results = polish_minimax_many(_many(still_ev, [None] * len(chosen)), still, pts[chosen],
+                                  iterations)
+    if still_ev is not ev:
+        ev.simulations += still_ev.simulations
+        ev.steps += still_ev.steps
+    ranked = sorted(results, key=lambda r: r.fitness)
+    return _Fitted([np.asarray(r.values, float) for r in ranked], [r.fitness for r in ranked])
+
+
+def _with_current(ev: Evaluator, still: _Fitted, iterations: int) -> _Fitted:
+    """The still-water fits in ``ev.space``: the best polished with the ambient current.
+
+    The current is fitted from still water after the law and joints (the two stages of
+    :func:`eelhost.estimation.methods.run_fit`); the other fits follow in still water, as starts
+    for a failing fold.
+    """
+    if not ev.space.current:
+        return still
+    zeros = np.zeros(len(ev.space.current_names))
+    begins = [np.concatenate([v, zeros]) for v in still.values]
+    best = polish_minimax_many(_many(ev, [None]), ev.space, np.array(begins[:1]),
+                               max(iterations, CURRENT_POLISH_ITERATIONS))[0]
+    return _merge(_Fitted([np.asarray(best.values, float)], [best.fitness]),
+                  _Fitted(begins[1:], still.fitness[1:]))
+
+
+def _folds(
+    ev: Evaluator, fitted: _Fitted, iterations: int
+) -> tuple[np.ndarray, str | None]:
+    """Leave-one-out errors of a candidate on ``ev``'s experiments, refitting failing folds.
+
+    Every fold is refitted from the candidate's best fit first (all folds polished together);
+    a fold whose refit fails on a training gait or whose held-out run fails is refitted from the
+    candidate's next fit, and so on. Returns the held-out errors (NaN where every start failed)
+    and why the candidate failed (None if no fold did).
+    """
+    n = len(ev.prepared)
+    errors = np.full(n, np.nan)
+    todo = list(range(n))
+    for start in fitted.values:
+        if not todo:
+            break
+        refits = polish_minimax_many(_many(ev, todo), ev.space,
+                                     np.tile(start, (len(todo), 1)), iterations)
+        held = ev.errors(np.array([r.values for r in refits]))
+        still_failing = []
+        for j, refit in zip(todo, refits, strict=True):
+            if refit.fitness < FAILED and held[todo.index(j), j] < FAILED:
+                errors[j] = held[todo.index(j), j]
+            else:
+                still_failing.append(j)
+        todo = still_failing
+    if todo:
+        names = ", ".join(ev.prepared[j].experiment.name for j in todo)
+        return errors, f"held out {names}: every refit fails (penalty)"
+    return errors, None
 
 
 def cross_validate(
     dataset: Dataset,
-    fitted: Mapping[str, tuple[ParameterSpace, np.ndarray]],
+    fits: Sequence[str] | Mapping[str, object],
     settings: FitSettings,
     laws: Sequence[str] | None = None,
     iterations: int = POLISH_ITERATIONS,
     say: Callable[[str], None] | None = None,
     joint_models: Sequence[str] | None = None,
+    one_set: int = ONE_SET_CANDIDATES,
+    screen_log2: int = SCREEN_LOG2,
+    fold_iterations: int = FOLD_ITERATIONS,
 ) -> list[CandidateScore]:
     """Leave-one-gait-out cross-validation of the candidate models (module docstring).
 
     Parameters
     ----------
     dataset : Dataset
-    fitted : mapping
-        Per fit ("straight", "turning"), the main fit's space and parameters.
+    fits : sequence of str
+        The separate fits to compare on ("straight", "turning"); a mapping's keys are taken.
     settings : FitSettings
-        The evaluator's backend and clock search.
+        The evaluator's backend and clock search, the seed of the starts, and whether the
+        ambient current is fitted.
     laws : sequence of str, optional
-        Fluid laws to try with the robot's joint model (default: the twin's candidate laws).
+        Fluid laws of the grid (default: the twin's candidate laws).
     iterations : int
-        Polish iterations per refit.
+        Polish iterations per fit on every training gait.
     say : callable, optional
         Gets a line per candidate.
     joint_models : sequence of str, optional
-        Joint models to try besides the robot's, each with its fluid law (default: every one
-        the twin has; :func:`eelhost.estimation.parameters.spaces_of`). When one of them
-        predicts best, it is then tried with each of ``laws`` too.
+        Joint models of the grid (default: every one the twin has).
+    one_set : int
+        How many of the best separate-set models are tried with one set for every motion too
+        (needs two fits; 0: none).
+    screen_log2 : int
+        log2 of the Sobol points screened per candidate and fit.
+    fold_iterations : int
+        Polish iterations of a fold's refit.
 
     Returns
     -------
     list of CandidateScore
-        In the order of the candidates (those of the second step last).
+        The grid's candidates in order, then the one-set ones.
 
     Raises
     ------
     EstimationError
         When a fit has fewer than two training experiments.
     """
-    from eelsim.fluid import candidate_laws, get_fluid_law
+    from eelsim.fluid import candidate_laws
 
-    robot = dataset.robot
+    motions = list(fits)
     laws = list(laws) if laws is not None else list(candidate_laws())
-    # every candidate fits the tank's ambient current when the main fits do: compared on equal terms
-    current = any(space.current for space, _ in fitted.values())
-    for motion in fitted:
+    for motion in motions:
         if len(training_experiments(dataset, motion)) < 2:
             raise EstimationError(
                 f"cross-validation of {motion!r} needs two training experiments or more"
             )
-    scores = [_score(dataset, space, fitted, settings, iterations)
-              for space in spaces_of(robot, laws, current, joint_models)]
-    for score in scores:
+    spaces = candidate_spaces(dataset, laws, settings.fit_current, joint_models)
+
+    def evaluator(space: ParameterSpace, experiments: list[Experiment]) -> Evaluator:
+        return Evaluator(dataset.robot, experiments, backend=settings.backend,
+                         align_s=settings.align_s, space=space)
+
+    evs = {(i, m): evaluator(s, training_experiments(dataset, m))
+           for i, s in enumerate(spaces) for m in motions}
+    # every candidate in still water from its own starts, then from every other candidate's
+    # best fit so far carried over by name (in the grid's fixed order, and once more for any
+    # candidate whose fit still fails); then the ambient current from the best
+    still = {key: multi_start_fit(ev, settings.seed, (), iterations, screen_log2=screen_log2)
+             for key, ev in evs.items()}
+
+    def cross_seed(i: int, m: str) -> None:
+        others = [carry_over(replace(spaces[o], current=False).as_dict(still[(o, m)].values[0]),
+                             spaces[i], spaces[i].bounds.mean(axis=1))
+                  for o in range(len(spaces)) if o != i]
+        if others:
+            again = multi_start_fit(evs[(i, m)], settings.seed, others, iterations, 1,
+                                    screen_log2=-1)
+            still[(i, m)] = _merge(still[(i, m)], again)
+
+    for key in evs:
+        cross_seed(*key)
+    for key in evs:
+        if still[key].fitness[0] >= FAILED:
+            cross_seed(*key)
+    fitted = {key: _with_current(ev, still[key], iterations) for key, ev in evs.items()}
+    scores = []
+    for i, space in enumerate(spaces):
+        score = CandidateScore(space.model_name, space.size * len(motions), space=space)
+        for m in motions:
+            ev = evs[(i, m)]
+            score.fitness[m] = fitted[(i, m)].fitness[0]
+            score.values[m] = fitted[(i, m)].values[0]
+            score.held_out[m], why = _folds(ev, fitted[(i, m)], fold_iterations)
+            score.failed = score.failed or (f"{m}: {why}" if why else None)
+            score.simulations += ev.simulations
         _said(score, say)
-    best = recommend(scores)
-    if best.space is not None and best.space.joints.model != joint_model_name(robot):
-        # another joint model predicts better: try it with every other law too (one step of a
-        # search over the joint model x law grid), started from its own fit
-        tried = {score.model for score in scores}
-        start = {m: (best.space, best.values[m]) for m in fitted}
-        for law in laws:
-            space = ParameterSpace(get_fluid_law(law), best.space.joints, current=current)
-            if space.model_name not in tried:
-                scores.append(_score(dataset, space, start, settings, iterations))
-                _said(scores[-1], say)
+        scores.append(score)
+    if one_set and len(motions) > 1:
+        ranked = sorted((s for s in scores if np.isfinite(s.mean_held_out)),
+                        key=lambda s: s.mean_held_out)
+        for best in ranked[:one_set]:
+            scores.append(_one_set(dataset, best, motions, evaluator, settings.seed,
+                                   iterations, fold_iterations, screen_log2))
+            _said(scores[-1], say)
     return scores
 
 
-def _said(score: CandidateScore, say: Callable[[str], None] | None) -> None:
-    log.info("%s: mean held-out error %.4g", score.model, score.mean_held_out)
-    if say:
-        say(f"cross-validation: {score.model}: mean held-out error {score.mean_held_out:.4f}")
+def _merge(a: _Fitted, b: _Fitted | None) -> _Fitted:
+    """Two sets of fits as one, best first."""
+    if b is None:
+        return a
+    pairs = sorted(zip(a.fitness + b.fitness, a.values + b.values, strict=True),
+                   key=lambda p: p[0])
+    return _Fitted([v for _, v in pairs], [f for f, _ in pairs])
 
 
-def _score(
+def _one_set(
     dataset: Dataset,
-    space: ParameterSpace,
-    fitted: Mapping[str, tuple[ParameterSpace, np.ndarray]],
-    settings: FitSettings,
+    separate: CandidateScore,
+    motions: list[str],
+    evaluator: Callable[[ParameterSpace, list[Experiment]], Evaluator],
+    seed: int,
     iterations: int,
+    fold_iterations: int,
+    screen_log2: int,
 ) -> CandidateScore:
-    """One candidate's fit on all training experiments and its leave-one-gait-out errors."""
-    robot = dataset.robot
-    score = CandidateScore(space.model_name, space.size, space=space)
+    """A model with one coefficient set for every motion, scored on the same held-out gaits.
 
-    def evaluator(chosen: list) -> Evaluator:
-        return Evaluator(robot, chosen, backend=settings.backend, align_s=settings.align_s,
-                         space=space)
-
-    for motion, (main_space, main_values) in fitted.items():
-        exps = training_experiments(dataset, motion)
-        full_ev = evaluator(exps)
-        start = carry_over(main_space.as_dict(main_values), space, space.start(robot))
-        full = polish_minimax(full_ev.evaluate, space, start, iterations)
-        if full.fitness >= FAILED:
-            # the carried-over parameters fail in this model (e.g. it swims slower): a global
-            # fit of its own, as the main fit was made
-            log.info("%s, %s: carried-over start fails; fitting globally", space.model_name,
-                     motion)
-            full = run_fit(FitProblem(full_ev, settings, start))
-        score.fitness[motion] = full.fitness
-        score.values[motion] = np.asarray(full.values, dtype=float)
-        score.simulations += full_ev.simulations
-        errors = []
-        for j, held in enumerate(exps):
-            fold_ev = evaluator([e for i, e in enumerate(exps) if i != j])
-            refit = polish_minimax(fold_ev.evaluate, space, full.values, iterations)
-            test_ev = evaluator([held])
-            errors.append(float(test_ev.errors(refit.values[None])[0, 0]))
-            score.simulations += fold_ev.simulations + test_ev.simulations
-        score.held_out[motion] = np.array(errors)
+    Fitted from its own starts and from the separate sets' fits; its folds hold out every
+    training experiment of every motion in turn, in the order of ``motions``.
+    """
+    space = separate.space
+    assert space is not None
+    ev = evaluator(space, [e for m in motions for e in training_experiments(dataset, m)])
+    own = _with_current(ev, multi_start_fit(ev, seed, [separate.values[m] for m in motions],
+                                            iterations, screen_log2=screen_log2), iterations)
+    score = CandidateScore(f"{space.model_name}, {ONE_SET}", space.size, space=space)
+    score.fitness["joint"] = own.fitness[0]
+    score.values["joint"] = own.values[0]
+    score.held_out["joint"], why = _folds(ev, own, fold_iterations)
+    score.failed = f"joint: {why}" if why else None
+    score.simulations = ev.simulations
     return score
 
 
+def _said(score: CandidateScore, say: Callable[[str], None] | None) -> None:
+    text = ("failed: " + score.failed) if score.failed else (
+        f"mean held-out error {score.mean_held_out:.4f}")
+    log.info("%s: %s", score.model, text)
+    if say:
+        say(f"cross-validation: {score.model}: {text}")
+
+
 def table_markdown(scores: Sequence[CandidateScore]) -> str:
-    """The comparison as a markdown table, the recommended candidate marked."""
+    """The comparison as a markdown table, the recommended candidate marked, failures shown."""
     choice = recommend(scores)
-    motions = list(scores[0].held_out)
+    motions = list(dict.fromkeys(m for c in scores for m in c.fitness))
     head = ("| model | parameters | " + " | ".join(f"fitness {m}" for m in motions)
             + " | mean held-out error | worst held-out error | simulations |")
     lines = [head, "|---|---|" + "---|" * len(motions) + "---|---|---|"]
     for c in scores:
         mark = " (recommended)" if c is choice else ""
-        lines.append(
-            f"| {c.model}{mark} | {c.parameters} | "
-            + " | ".join(f"{c.fitness[m]:.4f}" for m in motions)
-            + f" | {c.mean_held_out:.4f} | {c.worst_held_out:.4f} | {c.simulations} |"
-        )
+        fitness = " | ".join(f"{c.fitness[m]:.4f}" if m in c.fitness else "-" for m in motions)
+        held = (f"failed ({c.failed}) | failed" if c.failed
+                else f"{c.mean_held_out:.4f} | {c.worst_held_out:.4f}")
+        lines.append(f"| {c.model}{mark} | {c.parameters} | {fitness} | {held} | "
+                     f"{c.simulations} |")
     return "\n".join(lines)

@@ -1,0 +1,126 @@
+"""The model choice: the joint model x law grid, each candidate from its own starts.
+
+docs/estimation.md, "Model comparison" and "Model choice".
+"""
+
+import shutil
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from eelhost.data.experiments import load_dataset, manifest_text, write_experiment, write_manifest
+from eelhost.data.virtual_tank import mismatched_plants, record_experiment
+from eelhost.estimation.pipeline import FitSettings
+from eelhost.estimation.selection import (
+    CandidateScore,
+    candidate_spaces,
+    cross_validate,
+    recommend,
+    table_markdown,
+)
+from eelsim.robot import SERVO_ROBOT, load_robot
+from eelsim.scenario import load_scenario
+
+GAITS = ["straight_A0.87_w3.9", "straight_A0.61_w2.7", "straight_A0.78_w3.5"]
+
+
+def _short(name, far_m):
+    return load_scenario(name).model_copy(update={"waypoints_m": [(far_m, 0.0)]})
+
+
+def test_a_failed_candidate_is_shown_failed_and_never_ranked_by_a_penalty():
+    ok = CandidateScore("pd x morison", 4, {"straight": 0.1}, {"straight": np.array([0.2, 0.3])})
+    # one fold whose every refit failed: its error is unknown, not a penalty
+    failed = CandidateScore("servo x morison", 6, {"straight": 0.05},
+                            {"straight": np.array([0.01, np.nan])},
+                            failed="straight: held out g2: every refit fails (penalty)")
+    assert failed.mean_held_out == np.inf and failed.worst_held_out == np.inf
+    assert recommend([failed, ok]) is ok
+    assert recommend([failed]) is None
+    table = table_markdown([ok, failed])
+    assert "failed (straight: held out g2" in table
+    assert "e+" not in table and "inf" not in table and "nan" not in table
+
+
+
+
+def test_every_joint_model_is_tried_with_every_law_in_the_same_order_from_either_robot_file(
+    tmp_path
+):
+    laws = ["morison", "linear_quadratic"]
+    pd_file = _small_tank(tmp_path / "pd", "head_tail", "paper_robot.toml")
+    servo_file = replace(pd_file, robot=load_robot(SERVO_ROBOT))
+    grid = candidate_spaces(pd_file, laws, True, None)
+    assert [s.model_name for s in grid] == ["pd x linear_quadratic", "pd x morison",
+                                            "servo x linear_quadratic", "servo x morison"]
+    for a, b in zip(grid, candidate_spaces(servo_file, laws, True, None), strict=True):
+        assert a.names == b.names and np.array_equal(a.bounds, b.bounds)
+        assert a.model_robot(pd_file.robot).joints == b.model_robot(servo_file.robot).joints
+
+
+def _small_tank(folder, plant, robot_file, turning=()):
+    """Three short straight gaits (and ``turning`` ones) of a plant, under a bundled robot file."""
+    p = mismatched_plants()[plant]
+    truths = p.truths()
+    for i, n in enumerate(GAITS):
+        write_experiment(record_experiment(load_robot(), _short(n, 0.3), "straight",
+                                           truths["straight"], p.settings, seed=i), folder)
+    for i, n in enumerate(turning):
+        task = load_scenario(n)
+        (x, y), = task.waypoints_m
+        task = task.model_copy(update={"waypoints_m": [(0.3 * x, 0.3 * y)]})
+        write_experiment(record_experiment(load_robot(), task, "turning", truths["turning"],
+                                           p.settings, seed=10 + i), folder)
+    motions = {"straight": {"train": GAITS, "test": []}}
+    if turning:
+        motions["turning"] = {"train": list(turning), "test": []}
+    write_manifest(folder, manifest_text(robot_file, motions, [], truths))
+    return load_dataset(folder)
+
+
+TINY = FitSettings(method="minimax", polish_iterations=2)
+
+
+def _compare(ds, motions):
+    return cross_validate(ds, motions, TINY, laws=["morison", "linear_quadratic"], iterations=2,
+                          fold_iterations=2, screen_log2=2)
+
+
+@pytest.mark.parametrize("plant", sorted(mismatched_plants()))
+def test_the_chosen_model_is_the_same_from_either_bundled_robot_file_on_every_test_plant(
+    plant, tmp_path
+):
+    # the comparison starts nothing from the robot file: the PD file and the servo file give the
+    # same candidates, fits and held-out errors, so the same choice
+    scores = {}
+    pd_tank = _small_tank(tmp_path / "pd", plant, "paper_robot.toml")
+    # the same recordings under the servo robot file
+    shutil.copytree(tmp_path / "pd", tmp_path / "servo")
+    manifest = (tmp_path / "servo" / "manifest.toml").read_text()
+    (tmp_path / "servo" / "manifest.toml").write_text(
+        manifest.replace('robot = "paper_robot.toml"', f'robot = "{SERVO_ROBOT}"'))
+    servo_tank = load_dataset(tmp_path / "servo")
+    for robot_file, ds in (("paper_robot.toml", pd_tank), (SERVO_ROBOT, servo_tank)):
+        assert ds.robot.joints.model_name == ("servo" if robot_file == SERVO_ROBOT else "pd")
+        scores[robot_file] = _compare(ds, ["straight"])
+    pd_file, servo_file = scores.values()
+    assert [s.model for s in pd_file] == [s.model for s in servo_file]
+    for a, b in zip(pd_file, servo_file, strict=True):
+        assert a.failed == b.failed
+        np.testing.assert_array_equal(a.held_out["straight"], b.held_out["straight"])
+    assert recommend(pd_file) is not None
+    assert recommend(pd_file).model == recommend(servo_file).model
+
+
+def test_one_set_for_every_motion_is_a_candidate_scored_on_the_same_held_out_gaits(tmp_path):
+    turning = ["turning_A0.87_w3.9", "turning_A0.61_w2.7"]
+    ds = _small_tank(tmp_path, "head_tail", "paper_robot.toml", turning)
+    scores = _compare(ds, ["straight", "turning"])
+    one = [s for s in scores if s.one_set]
+    assert [s.model for s in one] == [f"{recommend(scores[:4]).model}, one set"]
+    # its folds hold out every training gait of both motions, as the separate sets' do
+    assert one[0].held_out["joint"].shape == (len(GAITS) + len(turning),)
+    assert one[0].parameters == one[0].space.size and scores[0].parameters == 2 * scores[
+        0].space.size
+    assert recommend(scores) is not None
