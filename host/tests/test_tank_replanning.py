@@ -253,6 +253,7 @@ def drive_off_corridor(nav: TankReplanner, seconds: float):
         d = nav.on_frame(t, pose_at(t, (0.8, 1.4)), np.array([0.8, 1.4, 0.0]), 0, 0.0)
         if d.stop is not None:
             return t, d
+        nav._worker.submit(lambda: None).result()  # the worker's jobs are done: deterministic
     return None, None
 
 
