@@ -33,7 +33,7 @@ def plot_fitness_history(fits: dict[str, FitResult], path: str | Path) -> Path:
     ax.set_xlabel("generation")
     ax.set_ylabel("best fitness (minimax error)")
     ax.grid(alpha=0.3)
-    ax.legend()
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.14), fontsize=9)  # below: off the curves
     return _save(fig, path)
 
 
