@@ -27,7 +27,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from eelhost.planning.audit import body_gaps_m
-from eelhost.planning.execute import swim
 from eelhost.planning.planner import Planner
 from eelhost.planning.uncertainty import DEFAULT_UNKNOWN_CURRENT_M_S, CoefficientModel
 from eelhost.planning.world import World
@@ -189,13 +188,7 @@ def bench_world(world: World, robot: Robot, coefficients: CoefficientModel, seed
         return result
     draws = coefficients.water_draws(np.random.default_rng(seed + AUDIT_SEED_OFFSET),
                                      BENCH_DRAWS, unknown_current_m_s)
-    vx, vy = planner.world.current_m_s
-    duration = 2.0 * outcome.plan.cost_s + 30.0
-    runs = swim(planner.world, outcome.plan.waypoints_m, planner.twin,
-                [(d.label, d.coefficients) for d in draws], duration,
-                clearance=planner.clearance,
-                currents=[(vx + d.current_offset_m_s[0], vy + d.current_offset_m_s[1])
-                          for d in draws])
+    runs = planner.swim_waters(outcome.plan, draws)
     gaps = [float(body_gaps_m(planner.world, planner.model, r.states).min()) for r in runs]
     result.reached = all(r.reached for r in runs)
     result.collision = min(gaps) <= 0.0

@@ -12,12 +12,12 @@ docs/planning.md ("The planner") is the long form. :meth:`Planner.plan`:
 2. **Search** (:class:`eelhost.planning.search.Search`): every leg swum in the twin from the state
    the previous one left, with the straight coefficients for straight legs and the turning ones
    for turns.
-3. **Check**: the plan's waypoints are swum in the twin as the tank would give them to the robot
-   (one task from the start), with both fits as fitted and over ``draws`` draws of the water
-   (:meth:`eelhost.planning.uncertainty.CoefficientModel.water_draws`: every coefficient of a
-   fit drawn jointly within the fit's 95 % region, the fitted current within its own, and an
-   unknown current of ``unknown_current_m_s`` in directions round the circle), all in a few
-   batches. Every run must enter the goal disc (:func:`eelhost.planning.search.in_goal`) without
+3. **Check**: the plan is swum in the twin leg by leg as the search swam it
+   (:func:`eelhost.planning.check.swim_legs`), with the fits as fitted and in ``draws`` draws
+   of the water (:meth:`eelhost.planning.uncertainty.CoefficientModel.water_draws`: every
+   coefficient of both fits drawn jointly within its fit's 95 % region, the fitted current
+   within its own, and an unknown current of ``unknown_current_m_s`` in directions round the
+   circle), all waters of a leg in one batch. Every run must enter the goal disc (:func:`eelhost.planning.search.in_goal`) without
    any contact. A plan that passes carries an estimated collision probability of 0 in ``draws``
    with its Clopper-Pearson interval, and its arrival time is the check runs' (median and range).
    The first ``SCREEN_DRAWS`` draws are swum first: a plan most draws fail is repaired without
@@ -40,7 +40,8 @@ import numpy as np
 
 from eelhost.errors import UserError
 from eelhost.planning.body import body_points
-from eelhost.planning.execute import Swim, swim
+from eelhost.planning.check import swim_legs
+from eelhost.planning.execute import Swim
 from eelhost.planning.field import ClearanceField, GoalDistance, signed_clearance
 from eelhost.planning.geometry import FloatArray
 from eelhost.planning.search import Plan, Search, SearchSettings
@@ -74,6 +75,9 @@ SCREEN_DRAWS = 12
 
 BATCH_RUNS = 16
 """Check runs swum in one batch (each holds every physics step of its run)."""
+
+ROBUST_MARGIN_M = 0.002
+"""With ``robust_search``, the body's gap every extra water's run keeps (over its half width)."""
 
 LEG_TIME_FACTOR = 1.6
 """A leg's time limit per metre, as a multiple of the time the robot needs against the current."""
@@ -148,8 +152,8 @@ class Outcome:
     search_time_s : float
         Search time alone, all attempts.
     draws : int
-        Draws of the water the returned plan was checked over (the first two check runs, the
-        fits as fitted, come on top).
+        Draws of the water the returned plan was checked over (the first check run, the fits
+        as fitted, comes on top).
     """
 
     plan: Plan
@@ -163,7 +167,7 @@ class Outcome:
 
     @property
     def drawn_checks(self) -> list[Swim]:
-        """The check runs over the draws of the water (without the two fits as fitted)."""
+        """The check runs over the draws of the water (without the fits as fitted)."""
         return self.checks[len(self.checks) - self.draws:] if self.draws else []
 
     @property
@@ -293,7 +297,7 @@ class Planner:
         if robust_search:
             self.settings = dataclasses.replace(
                 self.settings, robust_current_m_s=self.unknown_current_m_s,
-                robust_margin_m=self.body_half_width_m + 0.01)
+                robust_margin_m=self.body_half_width_m + ROBUST_MARGIN_M)
         self.twin = Twin(robot, coefficients.sets, gait, self.options, world.current_m_s,
                          threads=threads)
         self.clearance = ClearanceField(world)
@@ -404,7 +408,7 @@ class Planner:
                 outcome = Outcome(plan, "found", "", checks, attempt, total, searching,
                                   len(self.water))
                 outcome.message = (
-                    f"{plan.message}; checked in the twin over the 2 fits and {len(self.water)} "
+                    f"{plan.message}; checked in the twin with the fits and over {len(self.water)} "
                     f"draws of the water (min clearance "
                     f"{min(c.min_clearance_m for c in checks) * 1000:.0f} mm): "
                     f"{outcome.confidence()}")
@@ -423,12 +427,33 @@ class Planner:
                             plan.simulations, plan.planning_time_s, plan.tree),
                        "check_failed", msg, checks, self.repairs, total, searching)
 
+    def swim_waters(self, plan: Plan, waters: list[WaterDraw], state: FloatArray | None = None,
+                    step: int = 0) -> list[Swim]:
+        """Swim a plan leg by leg in each water, as the search swam it, and judge each run.
+
+        Parameters
+        ----------
+        plan : Plan
+        waters : list of WaterDraw
+        state : ndarray, optional
+            Start state (default: the world's start).
+        step : int
+
+        Returns
+        -------
+        list of Swim
+        """
+        legs = [self.search.leg_coefficients(leg.goal, leg.bearing_deg) for leg in plan.legs]
+        return swim_legs(self.world, plan, self.twin, self.model, waters, legs, self.clearance,
+                         state, step)
+
     def check_plan(self, plan: Plan, state: FloatArray | None = None,
                    step: int = 0) -> tuple[list[Swim], float]:
-        """Swim a plan with both fits and over the draws of the water (module docstring).
+        """Swim a plan with the fits and over the draws of the water (module docstring).
 
-        The fits and the first :data:`SCREEN_DRAWS` draws are swum first; when one of them fails,
-        the rest are not swum (the plan fails its check either way).
+        Leg by leg, as the search swam it (:func:`eelhost.planning.check.swim_legs`). The fits
+        as fitted and the first :data:`SCREEN_DRAWS` draws are swum first; when one of them
+        fails, the rest are not swum (the plan fails its check either way).
 
         Parameters
         ----------
@@ -440,26 +465,20 @@ class Planner:
         Returns
         -------
         list of Swim, float
-            The runs (the two fits first, then the draws in order) and the time they took, s.
+            The runs (the fits as fitted first, then the draws in order) and the time they took,
+            s.
         """
         t0 = time.perf_counter()
-        duration = 2.0 * (plan.cost_s - step * self.twin.dt_s) + 30.0
-        fits = [WaterDraw(f"{m} fit", m, self.coefficients.fits[m], (0.0, 0.0))
-                for m in ("straight", "turning")]
-        todo = fits + list(self.water)
-        screen = len(fits) + SCREEN_DRAWS
+        nominal = WaterDraw("the fits as fitted", self.coefficients.fits["straight"],
+                            self.coefficients.fits["turning"], (0.0, 0.0))
+        todo = [nominal, *self.water]
+        screen = 1 + SCREEN_DRAWS
         runs: list[Swim] = []
-        for lo, hi in [(0, screen)] + [(k, min(k + BATCH_RUNS, len(todo)))
-                                       for k in range(screen, len(todo), BATCH_RUNS)]:
-            part = todo[lo:hi]
+        for lo in [0, *range(screen, len(todo), BATCH_RUNS)]:
+            part = todo[lo : screen if lo == 0 else lo + BATCH_RUNS]
             if not part:
                 break
-            vx, vy = self.world.current_m_s
-            runs += swim(self.world, plan.waypoints_m, self.twin,
-                         [(d.label, d.coefficients) for d in part], duration, state=state,
-                         start_step=step, clearance=self.clearance,
-                         currents=[(vx + d.current_offset_m_s[0], vy + d.current_offset_m_s[1])
-                                   for d in part])
+            runs += self.swim_waters(plan, part, state, step)
             if not all(r.ok for r in runs):
                 break
         return runs, time.perf_counter() - t0

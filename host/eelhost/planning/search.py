@@ -13,7 +13,9 @@ docs/planning.md ("The search") is the long form. In short:
   is taken from that run at the last control update at least one median-filter window before the
   acceptance, so the next run starts with the same guidance as the uninterrupted run would.
 - **A child is kept** when the twin raised no failure flag and every sampled body point keeps
-  ``margin_m`` from every obstacle and wall (:class:`eelhost.planning.field.ClearanceField`).
+  ``margin_m`` from every obstacle and wall (:class:`eelhost.planning.field.ClearanceField`);
+  with ``robust_current_m_s`` also when the same plan, swum from the start in each of a few
+  other currents (each node carries the robot's state in each), stays clear there.
 - **The goal test** (:func:`in_goal`, the one used by execution and at the tank too): the centre
   of mass is inside the goal disc. A child whose run enters the disc shrunk by ``goal_margin_m``
   is a goal node; its cost is the time it enters.
@@ -133,17 +135,18 @@ class SearchSettings:
     leg_time_s : float
         Time limit of one leg at the slowest expected ground speed, s (scaled by distance).
     robust_current_m_s : float
-        A leg kept by the nominal run is swum again from the same state with a current of this
-        speed added, towards ``robust_directions`` directions relative to the leg's (0: off);
-        each such run must accept the waypoint (or enter the goal disc) with the body clear of
-        everything by ``robust_margin_m``.
+        Extra waters (0: none): the world's current plus this speed towards each of
+        ``robust_directions`` directions of the tank. Every node also holds the robot's state
+        in each extra water, the same legs swum there from the start; a leg kept by the nominal
+        run is swum in each extra water from that state and must accept its waypoint (or enter
+        the goal disc) with the body centre line ``robust_margin_m`` clear of everything.
     robust_directions : int
     robust_margin_m : float
         Clearance of the body centre line the extra runs keep (the body's half width and some).
     """
 
     actions: Actions = Actions()
-    margin_m: float = 0.07
+    margin_m: float = 0.05
     goal_margin_m: float = 0.03
     weight: float = 2.0
     cell_m: float = 0.1
@@ -247,6 +250,9 @@ class _Node:
     leg: Leg | None
     key: tuple[int, int, int]
     goal: bool = False
+    # (state, step) of the robot in each extra water (SearchSettings.robust_current_m_s), the
+    # same plan swum there from the start
+    particles: list[tuple[FloatArray, int]] = field(default_factory=list)
 
 
 class Search:
@@ -327,6 +333,15 @@ class Search:
                 jobs.append((pos, GOAL, (float(goal[0]), float(goal[1])), psi))
         return jobs
 
+    def leg_coefficients(self, goal: bool, bearing_deg: float) -> int:
+        """The coefficient set a leg is swum with: 0 straight, 1 turning (Actions).
+
+        The leg to the goal's centre counts as straight within 15 degrees of the last leg.
+        """
+        if goal and abs(bearing_deg) < 15:
+            return 0
+        return self.settings.actions.coefficient_index(bearing_deg)
+
     def _bearing_deg(self, node: _Node, psi: float) -> float:
         return math.degrees(float(wrap_angle(psi - node.psi)))
 
@@ -344,9 +359,7 @@ class Search:
         for pos, a, wp, psi in jobs:
             node = nodes[pos]
             waypoints.append([wp] if node.waypoint is None else [node.waypoint, wp])
-            bearing = self._bearing_deg(node, psi)
-            index.append(s.actions.coefficient_index(bearing if a != GOAL else
-                                                     (0.0 if abs(bearing) < 15 else bearing)))
+            index.append(self.leg_coefficients(a == GOAL, self._bearing_deg(node, psi)))
             origin = node.state[self.n : self.n + 2]
             durations.append(s.leg_time_s * (math.hypot(wp[0] - origin[0], wp[1] - origin[1])
                                              + 0.3))
@@ -363,57 +376,75 @@ class Search:
         kids = [self._child(nodes[pos], a, wp, psi, runs, j, clear[j])
                 for j, (pos, a, wp, psi) in enumerate(jobs)]
         if s.robust_current_m_s > 0:
-            kept = [j for j, kid in enumerate(kids) if kid is not None]
-            for j, ok in zip(kept, self._robust(jobs, kept, waypoints, durations, index, nodes),
-                             strict=True):
-                if not ok:
-                    kids[j] = None
+            self._swim_particles(jobs, kids, waypoints, durations, index, nodes)
         for j, (pos, a, _, _) in enumerate(jobs):
             out[pos].append((a, kids[j]))
         return out
 
-    def _robust(self, jobs: list, kept: list[int], waypoints: list, durations: list,
-                index: list[int], nodes: list[_Node]) -> list[bool]:
-        """Whether each kept leg stays clear and arrives in every extra current (settings)."""
+    def _particle_currents(self) -> list[tuple[float, float]]:
+        """The extra waters' currents: the twin's plus the robust current round the circle."""
         s = self.settings
-        if not kept:
+        if s.robust_current_m_s <= 0:
             return []
-        k = s.robust_directions
         vx, vy = self.twin.current_m_s
-        rows, currents = [], []
-        for j in kept:
-            psi = jobs[j][3]
-            for q in range(k):
-                a = psi + 2.0 * math.pi * q / k
-                rows.append(j)
-                currents.append((vx + s.robust_current_m_s * math.cos(a),
-                                 vy + s.robust_current_m_s * math.sin(a)))
+        return [(vx + s.robust_current_m_s * math.cos(2 * math.pi * q / s.robust_directions),
+                 vy + s.robust_current_m_s * math.sin(2 * math.pi * q / s.robust_directions))
+                for q in range(s.robust_directions)]
+
+    def _swim_particles(self, jobs: list, kids: list, waypoints: list, durations: list,
+                        index: list[int], nodes: list[_Node]) -> None:
+        """Swim each kept leg in every extra water from the parent's state there (settings).
+
+        A leg whose run in some extra water raises a flag, misses its waypoint (or the goal
+        disc) or comes closer than ``robust_margin_m`` to anything is dropped (its entry in
+        ``kids`` set to None); a kept child gets its state in each water, taken at the last
+        control update a median-filter window before that run accepted the waypoint.
+        """
+        s = self.settings
+        waters = self._particle_currents()
+        kept = [j for j, kid in enumerate(kids) if kid is not None]
+        if not kept:
+            return
+        rows = [(j, q) for j in kept for q in range(len(waters))]
+        parent = [nodes[jobs[j][0]] for j, _ in rows]
         runs = self.twin.run(
-            [waypoints[j] for j in rows],
-            [durations[j] for j in rows],
-            states=np.stack([nodes[jobs[j][0]].state for j in rows]),
-            start_steps=[nodes[jobs[j][0]].step for j in rows],
-            coefficient_index=[index[j] for j in rows],
+            [waypoints[j] for j, _ in rows],
+            [durations[j] for j, _ in rows],
+            states=np.stack([p.particles[q][0] for p, (_, q) in zip(parent, rows, strict=True)]),
+            start_steps=[p.particles[q][1] for p, (_, q) in zip(parent, rows, strict=True)],
+            coefficient_index=[index[j] for j, _ in rows],
             stride=s.stride,
-            currents=currents,
+            currents=[waters[q] for _, q in rows],
         )
         self.simulations += len(rows)
         clear = self._clearances(runs)
-        ok = np.ones(len(rows), dtype=bool)
-        for r, j in enumerate(rows):
+        period = self.twin.restart_steps or s.stride
+        states: dict[int, list[tuple[FloatArray, int]]] = {j: [] for j in kept}
+        for r, (j, q) in enumerate(rows):
+            if kids[j] is None:
+                continue
             end = int(runs.final_step[r]) // runs.stride
+            start_step = parent[r].particles[q][1]
             if jobs[j][1] == GOAL:
                 com = runs.states[r, : end + 1, self.n : self.n + 2]
                 inside = np.flatnonzero(goal_mask(self.world, com))
-                if not inside.size:
-                    ok[r] = False
-                    continue
-                end = int(inside[0])
-            elif runs.reasons[r] or runs.arrival_step[r] < 0:
-                ok[r] = False
+                at = int(inside[0]) if inside.size else -1
+                sample = at
+                step = start_step + at * runs.stride
+            else:
+                arrival = int(runs.arrival_step[r])
+                restart = ((arrival - self.warm_steps) // period) * period
+                at = end if not runs.reasons[r] and arrival >= 0 and restart > 0 else -1
+                sample = restart // runs.stride
+                step = start_step + restart
+            if at < 0 or not np.nanmin(clear[r, : at + 1]) >= s.robust_margin_m:
+                kids[j] = None
                 continue
-            ok[r] = bool(np.nanmin(clear[r, : end + 1]) >= s.robust_margin_m)
-        return [bool(ok[k * i : k * (i + 1)].all()) for i in range(len(kept))]
+            states[j].append((runs.states[r, sample], step))
+        for j in kept:
+            kid = kids[j]
+            if kid is not None:
+                kid.particles = states[j]
 
     def _clearances(self, runs: Runs) -> FloatArray:
         """Clearance of the body centre line at every sample of every run, shape (R, S).
@@ -535,7 +566,8 @@ class Search:
                                                        s.per_link)).min()) - self._slack_m
         self._start_margin_m = min(s.margin_m, max(start_clear - 0.01, self.body_half_width_m))
         root = _Node(None, heading_rad, start_state, start_step, start_step * self.twin.dt_s, -1,
-                     None, (REST_KEY, REST_KEY, REST_KEY))
+                     None, (REST_KEY, REST_KEY, REST_KEY),
+                     particles=[(start_state, start_step)] * len(self._particle_currents()))
         nodes = [root]
         best_g: dict = {root.key: root.g}
         closed: set = set()
@@ -640,4 +672,4 @@ class Search:
 
 def _copy(node: _Node) -> _Node:
     return _Node(node.waypoint, node.psi, node.state, node.step, node.g, -1, node.leg, node.key,
-                 node.goal)
+                 node.goal, node.particles)

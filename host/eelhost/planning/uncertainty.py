@@ -150,7 +150,7 @@ class CoefficientModel:
                     unknown_current_m_s: float = DEFAULT_UNKNOWN_CURRENT_M_S) -> list[WaterDraw]:
         """``count`` draws of the water a plan is checked in (module docstring).
 
-        Straight and turning fits alternate; the unknown current's direction steps round
+        Each draw has a straight and a turning set; the unknown current's direction steps round
         :data:`CURRENT_DIRECTIONS` directions from a random first one.
 
         Parameters
@@ -168,15 +168,14 @@ class CoefficientModel:
         cov = self.current_cov if self.current_cov is not None else np.zeros((2, 2))
         out = []
         for k in range(count):
-            motion = MOTIONS[k % 2]
-            coefficients = self.draw(rng, motion)
-            angle = first + 2.0 * math.pi * (k // 2 % CURRENT_DIRECTIONS) / CURRENT_DIRECTIONS
+            straight, turning = self.draw(rng, "straight"), self.draw(rng, "turning")
+            angle = first + 2.0 * math.pi * (k % CURRENT_DIRECTIONS) / CURRENT_DIRECTIONS
             fitted = region_draw(rng, cov) if np.any(cov) else np.zeros(2)
             offset = (float(fitted[0] + unknown_current_m_s * math.cos(angle)),
                       float(fitted[1] + unknown_current_m_s * math.sin(angle)))
             out.append(WaterDraw(
-                f"draw {k + 1} ({motion} fit; unknown current {unknown_current_m_s:g} m/s towards "
-                f"{math.degrees(angle) % 360:.0f} deg)", motion, coefficients, offset))
+                f"draw {k + 1} (unknown current {unknown_current_m_s:g} m/s towards "
+                f"{math.degrees(angle) % 360:.0f} deg)", straight, turning, offset))
         return out
 
     def describe(self) -> str:
@@ -202,16 +201,16 @@ class WaterDraw:
     Attributes
     ----------
     label : str
-    motion : str
-        Whose fit's region the coefficients come from.
-    coefficients : FluidCoefficients
+    straight, turning : FluidCoefficients
+        The straight and turning sets, each drawn within its fit's region: the robot swims
+        straight legs with the first and turns with the second, as the search does.
     current_offset_m_s : (float, float)
         Added to the planner's current: the fitted current's deviation and the unknown current.
     """
 
     label: str
-    motion: str
-    coefficients: FluidCoefficients
+    straight: FluidCoefficients
+    turning: FluidCoefficients
     current_offset_m_s: tuple[float, float]
 
 

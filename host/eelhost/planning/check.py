@@ -1,0 +1,157 @@
+"""Swim a plan in drawn waters leg by leg, as the search swam it, and judge every run.
+
+docs/planning.md ("The planner", step 3) is the long form. The search swims straight legs with
+the straight coefficients and turns with the turning ones, each leg restarted from the state
+the previous one left (:mod:`eelhost.planning.twin`); a water of the check
+(:class:`eelhost.planning.uncertainty.WaterDraw`) has its own straight and turning sets and its
+own current, so the check swims the plan the same way in each water: all waters' runs of leg k
+in one batch, each from the state its own run of leg k - 1 left, taken at the last control
+update a median-filter window before that run accepted its waypoint (the search's restart, exact
+but for the first offset's median filter holding one frame). The last leg runs until the
+centre of mass enters the goal disc (:func:`eelhost.planning.search.in_goal`).
+
+Each run is then judged as :func:`eelhost.planning.execute.swim` judges one: the goal reached,
+and the body clear of everything at every physics step (the exact link distances against the
+body's half width, :func:`eelhost.planning.execute.body_clearance_m`). A leg whose waypoint a
+run never accepts ends that run there (the goal missed, blamed on that leg).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from eelhost.planning.execute import Swim, body_clearance_m
+from eelhost.planning.field import ClearanceField
+from eelhost.planning.geometry import FloatArray
+from eelhost.planning.search import Plan, goal_mask
+from eelhost.planning.twin import Twin
+from eelhost.planning.uncertainty import WaterDraw
+from eelhost.planning.world import World
+from eelsim.dynamics import straight_state
+from eelsim.model import SwimmerModel
+
+LEG_TIME_FACTOR = 3.0
+"""A check run's time limit for a leg, as a multiple of the time the search's run took."""
+
+
+def swim_legs(
+    world: World,
+    plan: Plan,
+    twin: Twin,
+    model: SwimmerModel,
+    waters: Sequence[WaterDraw],
+    leg_coefficients: Sequence[int],
+    clearance: ClearanceField,
+    state: FloatArray | None = None,
+    start_step: int = 0,
+) -> list[Swim]:
+    """Swim a plan leg by leg in each water and judge each run (module docstring).
+
+    Parameters
+    ----------
+    world : World
+    plan : Plan
+    twin : Twin
+        Robot, gait, loop options and the planner's current (each water adds its offset).
+    model : SwimmerModel
+        The robot's model (body dimensions).
+    waters : sequence of WaterDraw
+    leg_coefficients : sequence of int
+        Per leg, 0 (swum with the water's straight set) or 1 (its turning set), as the search.
+    clearance : ClearanceField
+    state : ndarray, optional
+        Start state (default: the straight robot at rest at the world's start).
+    start_step : int
+        Step of the task at ``state``.
+
+    Returns
+    -------
+    list of Swim
+        One per water, in order.
+    """
+    r = len(waters)
+    n = model.n_links
+    if state is None:
+        state = straight_state(model, math.radians(world.start.heading_deg),
+                               world.start.position_m)
+    sets = [c for w in waters for c in (w.straight, w.turning)]
+    runner = Twin(twin.robot, sets, twin.gait, twin.options, twin.current_m_s,
+                  twin.acceptance_radius_m, twin.threads)
+    vx, vy = twin.current_m_s
+    currents = [(vx + w.current_offset_m_s[0], vy + w.current_offset_m_s[1]) for w in waters]
+    period = runner.restart_steps or 1
+    warm = int(math.ceil(twin.options.camera.median_window / twin.options.camera.fps
+                         / twin.dt_s - 1e-9))
+    states = np.repeat(np.asarray(state, dtype=float)[None], r, axis=0)
+    steps = np.full(r, int(start_step), dtype=np.int64)
+    pieces: list[list[FloatArray]] = [[] for _ in range(r)]
+    leg_of: list[list[int]] = [[] for _ in range(r)]
+    live = list(range(r))
+    reached = np.zeros(r, dtype=bool)
+    missed_leg: list[int | None] = [None] * r
+    reasons = [""] * r
+    last = len(plan.legs) - 1
+    for k, leg in enumerate(plan.legs):
+        if not live:
+            break
+        wps = [leg.waypoint_m] if k == 0 else [plan.legs[k - 1].waypoint_m, leg.waypoint_m]
+        took = max(leg.end_step - leg.start_step, period) * twin.dt_s
+        runs = runner.run(
+            [wps] * len(live), LEG_TIME_FACTOR * took + 10.0,
+            states=states[live], start_steps=steps[live],
+            coefficient_index=[2 * i + leg_coefficients[k] for i in live], stride=1,
+            currents=[currents[i] for i in live],
+        )
+        still = []
+        for j, i in enumerate(live):
+            end = int(runs.final_step[j])
+            path = runs.states[j, : end + 1]
+            if k == last:
+                inside = np.flatnonzero(goal_mask(world, path[:, n : n + 2]))
+                cut = int(inside[0]) + 1 if inside.size else end + 1
+                reached[i] = bool(inside.size)
+            else:
+                arrival = int(runs.arrival_step[j])
+                restart = ((arrival - warm) // period) * period
+                if runs.reasons[j] or arrival < 0:
+                    cut = end + 1
+                else:
+                    cut = restart if restart > 0 else arrival
+            if k != last and (runs.reasons[j] or runs.arrival_step[j] < 0):
+                missed_leg[i], reasons[i] = k, runs.reasons[j] or "waypoint never accepted"
+            elif k == last and not reached[i]:
+                missed_leg[i], reasons[i] = k, runs.reasons[j]
+            pieces[i].append(path[:cut])
+            leg_of[i] += [k] * cut
+            if k != last and missed_leg[i] is None:
+                states[i] = path[cut]
+                steps[i] += cut
+                still.append(i)
+        live = still
+    out = []
+    goal = np.asarray(world.goal.position_m)
+    t0 = start_step * twin.dt_s
+    for i, w in enumerate(waters):
+        run_states = np.concatenate(pieces[i])
+        com = run_states[:, n : n + 2]
+        clear = body_clearance_m(world, clearance, model, run_states)
+        touching = np.flatnonzero(clear <= 0.0)
+        first = int(touching[0]) if touching.size else None
+        failed = leg_of[i][first] if first is not None else missed_leg[i]
+        out.append(Swim(
+            label=w.label,
+            reached=bool(reached[i]),
+            goal_time_s=t0 + (len(run_states) - 1) * twin.dt_s if reached[i] else None,
+            collision_free=first is None,
+            min_clearance_m=float(clear.min()),
+            first_collision_s=None if first is None else t0 + first * twin.dt_s,
+            goal_distance_m=float(np.hypot(*(com - goal).T).min()),
+            failed_leg=failed,
+            reason=reasons[i],
+            t_s=np.asarray(t0 + np.arange(len(run_states)) * twin.dt_s, dtype=np.float64),
+            states=run_states,
+        ))
+    return out
