@@ -204,6 +204,8 @@ def main(argv: list[str] | None = None) -> int:
         progress.message(f"eelbot {args.command}: error: stdout is closed; eelbot prints its "
                          "results there (redirect it to a file, or to /dev/null)")
         return EXIT_USER_ERROR
+    real_stdout = sys.stdout
+    sys.stdout = _NamedStdout(real_stdout)  # type: ignore[assignment]
     try:
         with progress.console():
             status = int(args.run(args) or 0)
@@ -224,6 +226,29 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_INTERRUPTED if interrupted else EXIT_USER_ERROR
     finally:
         progress.close_all()
+        sys.stdout = real_stdout
+
+
+class _NamedStdout:
+    """stdout, whose write errors name it: ``cannot write stdout: ...`` rather than no file."""
+
+    def __init__(self, wrapped: object) -> None:
+        self._wrapped = wrapped
+
+    def write(self, text: str) -> int:
+        try:
+            return self._wrapped.write(text)  # type: ignore[attr-defined,no-any-return]
+        except OSError as err:
+            raise OSError(err.errno, err.strerror, "stdout") from err
+
+    def flush(self) -> None:
+        try:
+            self._wrapped.flush()  # type: ignore[attr-defined]
+        except OSError as err:
+            raise OSError(err.errno, err.strerror, "stdout") from err
+
+    def __getattr__(self, name: str) -> object:  # fileno, isatty, encoding ... of the real one
+        return getattr(self._wrapped, name)
 
 
 def _flush_stdout() -> bool:

@@ -66,13 +66,14 @@ def output_failure(err: BaseException) -> str | None:
     Returns
     -------
     str or None
-        ``cannot write PATH: why`` (``stdout`` when the error names no file).
+        ``cannot write PATH: why`` (``an output`` when the error names no file; the command line
+        says ``stdout`` when that is what cannot be written).
     """
     if isinstance(err, OutputError):
         return str(err)
     if not isinstance(err, OSError) or err.errno not in OUTPUT_ERRNOS:
         return None
-    where = err.filename if err.filename is not None else "stdout"
+    where = err.filename if err.filename is not None else "an output"
     return f"cannot write {where}: {OUTPUT_ERRNOS[err.errno]}"
 
 

@@ -142,10 +142,15 @@ class Recorder:
 
     def _append(self, f: TextIO, line: str) -> None:
         # One write per line: a kill leaves at most one incomplete line, at the end.
-        f.write(line)
-        f.flush()
-        if self.fsync:
-            os.fsync(f.fileno())
+        try:
+            f.write(line)
+            f.flush()
+            if self.fsync:
+                os.fsync(f.fileno())
+        except OSError as err:  # a full disk: name the file (the command line says it in a line)
+            if err.filename is None:
+                raise OSError(err.errno, err.strerror, f.name) from err
+            raise
 
     def frame(
         self, t_s: float, com_m: ArrayLike, heading_rad: float, link_angles_rad: ArrayLike
