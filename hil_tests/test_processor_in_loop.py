@@ -57,7 +57,11 @@ def test_emulated_avr_servo_pulses_match_the_gait_references_within_10us(straigh
 def test_emulated_avr_executes_the_hosts_commands_and_reports_running(straight_runs):
     _, pil, _ = straight_runs
     kinds = [type(cmd.sent) for cmd in pil.executed]
-    assert kinds[:4] == [p.SetGains, p.SetGait, p.SetOffset, p.Start]
+    # All four configuration commands acknowledged first. Not always in the order sent: the host
+    # sends them at once at boot, and an Ack that finds the transmit queue holding the Version and
+    # the first Telemetry is dropped (counted as tx_dropped, docs/firmware.md "Link") and comes
+    # when the host sends the command again 200 ms later (a duplicate, not executed twice).
+    assert sorted(k.__name__ for k in kinds[:4]) == ["SetGains", "SetGait", "SetOffset", "Start"]
     assert all(cmd.matches for cmd in pil.executed)
     assert pil.telemetry and pil.telemetry[-1][1].state == p.State.RUNNING
     assert pil.host_bad_frames == {}
