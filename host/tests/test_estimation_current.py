@@ -262,3 +262,30 @@ def test_a_report_on_a_tank_whose_truth_is_in_another_law_says_so_instead_of_com
                         settings=settings, bootstrap_replicates=0, compare_models=False)
     assert ("straight: the truth is in the reynolds law, the fit in morison"
             in report.read_text())
+
+
+@pytest.mark.parametrize("joint_model", ["pd", "servo"])
+def test_a_steady_current_is_recovered_within_a_mm_s_and_15_degrees_by_either_joint_model(
+    joint_model, robot, tmp_path
+):
+    # the tank swims on the joints of the model fitted (the paper's PD joints, or the bundled
+    # servo file's), in a steady 5 mm/s current towards 120 deg that its metadata does not declare
+    from eelhost.data.virtual_tank import mismatched_plants
+    from eelhost.estimation.parameters import spaces_of
+
+    joints = None if joint_model == "pd" else mismatched_plants()["stiff_servos"].settings.joints
+    settings = TankSettings(timestamp_jitter_s=0.0, control_jitter_s=0.0, joints=joints,
+                            stray_current_m_s=STRAY_M_S, stray_current_direction_deg=STRAY_DEG)
+    names = ["straight_A0.87_w3.9", "straight_A0.61_w2.7", "straight_A0.61_w3.9"]
+    for i, name in enumerate(names):
+        write_experiment(record_experiment(robot, _short(name), "straight", TRUTH, settings,
+                                           seed=i), tmp_path)
+    write_manifest(tmp_path, manifest_text(
+        "paper_robot.toml", {"straight": {"train": names, "test": []}}, [], {"straight": TRUTH}))
+    ds = load_dataset(tmp_path)
+    space = next(s for s in spaces_of(ds.robot, ["morison"], current=True)
+                 if s.joints.model == joint_model)
+    fit, _ = fit_motion(ds, "straight", FitSettings(budget=600), space=space)
+    speed, direction = _speed_direction(fit.model.current_m_s)
+    assert abs(speed - STRAY_M_S) < 0.001
+    assert abs((direction - STRAY_DEG + 180) % 360 - 180) < 15
