@@ -84,12 +84,12 @@ def run(args: argparse.Namespace) -> int:
             )
         fits[motion] = res
         print(
-            f"{motion}: fitness {res.fitness:.4f}, {res.evaluations} candidates"
-            + (f" ({res.search_evaluations} in the search, --budget {settings.budget}; "
-               f"{res.evaluations - res.search_evaluations} in the polish)"
+            f"{motion}: fitness {res.fitness:.4f}, {res.evaluations} candidates, "
+            f"{res.simulations} simulations"
+            + (f" (candidates: {res.search_evaluations} in the search, --budget "
+               f"{settings.budget}; {res.evaluations - res.search_evaluations} in the polishes)"
                if res.search_evaluations is not None else "")
             + ", "
-            f"{res.simulations} simulations, "
             + " ".join(f"{name} {value:.4g}" for name, value in res.space.as_dict(res.values).items())
             + (f" (ambient current {res.model.current_text()})" if res.space.current else "")
         )

@@ -164,7 +164,8 @@ def _then(
         best.fitness,
         first.history + [last],
         first.evaluations + polished.evaluations,
-        search_evaluations=first.evaluations,
+        search_evaluations=(first.search_evaluations if first.search_evaluations is not None
+                            else first.evaluations),
     )
 
 
@@ -255,7 +256,7 @@ def run_fit(problem: FitProblem) -> FitResult:
     ev.steps += still_ev.steps
     begin = np.concatenate([first.values, np.zeros(len(space.current_names))])
     in_space = FitResult(first.method, space, begin, first.fitness, first.history,
-                         first.evaluations)
+                         first.evaluations, search_evaluations=first.search_evaluations)
     before = ev.simulations
     iterations = max(problem.settings.polish_iterations, CURRENT_POLISH_ITERATIONS)
     pol = polish_minimax(ev.evaluate, space, begin, iterations, simulations=problem.simulations)
