@@ -4,10 +4,14 @@ from __future__ import annotations
 
 import argparse
 import json
+from collections.abc import Iterator
 from pathlib import Path
+
+import numpy as np
 
 from eelhost.commands.common import OptionError
 from eelhost.field.mcap_export import export_take_mcap, take_stem
+from eelhost.field.session import SYNTHETIC
 from eelhost.files import check_output_stem
 from eelhost.progress import Progress
 
@@ -29,8 +33,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", metavar="FILE", help="the MCAP file (default: <take>.mcap)")
     p.add_argument("--video", metavar="SOURCE",
                    help="the video file or image folder the take was filmed from, for the camera "
-                   "frames (default: the take's camera source when it is a file or folder; a "
-                   "synthetic or live camera kept no images)")
+                   "frames (default: the take's camera source when it is a file or folder; the "
+                   "synthetic camera's frames are drawn again at the recorded poses; a live "
+                   "camera kept no images)")
     p.add_argument("--force", action="store_true", help="replace an existing MCAP file")
     p.set_defaults(run=run)
 
@@ -66,7 +71,13 @@ def run(args: argparse.Namespace) -> int:
                           "replace it")
     video, skip = _video_of(stem, args.video)
     frames = None
-    if video is not None:
+    times = None
+    note = "the video the take was filmed from"
+    if video is None and _camera_source(stem) in SYNTHETIC:
+        times, frames = _rendered(stem)
+        note = ("drawn again by the synthetic camera at the recorded poses (it keeps no "
+                "images; frames without a pose are not drawn)")
+    elif video is not None:
         from itertools import islice
 
         from eelhost.vision.sources import open_source
@@ -75,9 +86,54 @@ def run(args: argparse.Namespace) -> int:
         frames = islice((frame for _t, frame in source), skip, None)
     with Progress("export", None, "frame") as bar:
         summary = export_take_mcap(stem, out, frames,
-                                   progress=lambda done, _total: bar.set(done))
+                                   progress=lambda done, _total: bar.set(done),
+                                   frame_times_s=times, frames_note=note)
     print(f"wrote {summary.path}: {summary.line()}")
-    if video is None:
+    if frames is None:
         print("no camera frames: the take's camera kept no images (give --video SOURCE, the "
               "video it was filmed from)")
+    elif times is not None:
+        print(f"camera frames: {note}")
     return 0
+
+
+def _camera_source(stem: str) -> str | None:
+    try:
+        camera = json.loads(Path(stem + ".json").read_text()).get("camera", {})
+    except (OSError, json.JSONDecodeError, AttributeError):
+        return None
+    source = camera.get("source") if isinstance(camera, dict) else None
+    return source if isinstance(source, str) else None
+
+
+def _rendered(stem: str) -> tuple[list[float], Iterator[np.ndarray]]:
+    """The synthetic camera's frames drawn again at the take's recorded poses, and their times.
+
+    The view is the one the take's calibration copy was made for (the synthetic camera's exact
+    calibration: the tank's four corners in metres and pixels); the robot is the take's copy.
+    """
+    from eelhost.data.experiments import read_experiment
+    from eelhost.vision.calibration import load_calibration
+    from eelhost.vision.synthetic import RenderOptions, SyntheticCamera, TankView
+    from eelsim.robot import load_robot
+
+    exp = read_experiment(stem, allow_incomplete=True)
+    calibration = load_calibration(stem + ".calibration.json")
+    if exp.link_angles_rad is None or len(calibration.points_m) != 4:
+        return [], iter(())
+    copy = Path(stem + ".robot.toml")
+    robot = load_robot(copy if copy.exists() else None)
+    width, height = calibration.image_size_px
+    view = TankView((int(width), int(height)),
+                    tuple(map(tuple, calibration.points_m)), tuple(map(tuple, calibration.points_px)))
+    camera = SyntheticCamera(robot, view=view, options=RenderOptions(noise_sigma=0.0,
+                                                                     jpeg_quality=0))
+    n = robot.n_links
+    angles = exp.link_angles_rad
+
+    def frames() -> Iterator[np.ndarray]:
+        for k in range(len(exp.t_s)):
+            state = np.concatenate([angles[k], exp.position_m[k], np.zeros(n + 2)])
+            yield camera.render(state, float(exp.t_s[k]))[0]
+
+    return [float(t) for t in exp.t_s], frames()

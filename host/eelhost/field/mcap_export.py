@@ -29,7 +29,7 @@ import base64
 import json
 import logging
 import math
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
@@ -221,6 +221,8 @@ def export_take_mcap(
     out: str | Path | None = None,
     frames: Iterable[np.ndarray] | None = None,
     progress: Any = None,
+    frame_times_s: Sequence[float] | None = None,
+    frames_note: str = "the video the take was filmed from",
 ) -> ExportSummary:
     """Write a take as an MCAP file (the topics of the module's table).
 
@@ -235,6 +237,11 @@ def export_take_mcap(
         stamped with the n-th row of ``<take>.frames.csv``.
     progress : callable, optional
         ``progress(done, total)`` over the frames seen.
+    frame_times_s : sequence of float, optional
+        The times (take's clock) of ``frames``, when they are not the rows of
+        ``<take>.frames.csv`` (frames re-rendered at the recorded poses).
+    frames_note : str
+        Where the frames came from, for the file's metadata.
 
     Returns
     -------
@@ -320,15 +327,17 @@ def export_take_mcap(
         for t_s, topic, body in messages:
             put(topic, t_s, body)
         if frames is not None:
+            times = (list(frame_times_s) if frame_times_s is not None
+                     else [row[0] for row in frame_rows])
             for n, frame in enumerate(frames):
-                if n >= len(frame_rows):
+                if n >= len(times):
                     log.info("the video has more frames than the take saw; the rest are left out")
                     break
-                put("/camera/image", frame_rows[n][0], {
+                put("/camera/image", times[n], {
                     "frame_id": CAMERA_FRAME, "format": "jpeg",
                     "data": base64.b64encode(_jpeg(frame)).decode("ascii")})
                 if progress:
-                    progress(n + 1, len(frame_rows))
+                    progress(n + 1, len(times))
         for suffix, media in ((".json", "application/json"), (".robot.toml", "application/toml"),
                               (".calibration.json", "application/json")):
             path = Path(stem + suffix)
@@ -340,6 +349,7 @@ def export_take_mcap(
             "take": Path(stem).name, "format": str(meta.get("format", "")),
             "date": str(meta.get("source", {}).get("run", {}).get("date", "")),
             "time_zero": "the gait's start, at the take's date",
+            "camera_frames": frames_note if frames is not None else "none",
             "clock_offset_s": "" if offset is None else f"{offset:.6f}"})
         writer.finish()
     return ExportSummary(out_path, counts, offset)
