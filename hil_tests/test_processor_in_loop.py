@@ -16,7 +16,7 @@ import pytest
 
 from eelhost.wire import protocol as p
 from eelhost.xil.lockstep import LockstepOptions, run_firmware_in_loop
-from eelhost.xil.simavr import expected_pulse_widths_us, run_processor_in_loop
+from eelhost.xil.simavr import AvrSimulator, expected_pulse_widths_us, run_processor_in_loop
 from eelsim.closed_loop import LoopOptions
 from eelsim.robot import load_robot
 from eelsim.scenario import load_scenario
@@ -32,13 +32,26 @@ def straight_runs():
     robot = load_robot()
     scenario = load_scenario("straight").model_copy(update={"duration_s": 5.0})
     options = LockstepOptions(LoopOptions(stop_at_goal=False))
-    pil = run_processor_in_loop(robot, scenario, seed=0, options=options)
+    # Every frame the emulated AVR sends, read off its UART as the run takes it (the run itself
+    # keeps only the Telemetry; the Status frames carry tx_dropped).
+    sent_by_robot: list[p.Message] = []
+    reader = p.FrameReader()
+    take_uart = AvrSimulator.take_uart
+
+    def take_uart_and_read(sim: AvrSimulator) -> list[tuple[float, int]]:
+        out = take_uart(sim)
+        sent_by_robot.extend(msg for _, msg in reader.feed(bytes(b for _, b in out)))
+        return out
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(AvrSimulator, "take_uart", take_uart_and_read)
+        pil = run_processor_in_loop(robot, scenario, seed=0, options=options)
     native = run_firmware_in_loop(robot, scenario, seed=0, options=options)
-    return scenario, pil, native
+    return scenario, pil, native, sent_by_robot
 
 
 def test_emulated_avr_servo_pulses_match_the_gait_references_within_10us(straight_runs):
-    scenario, pil, _ = straight_runs
+    scenario, pil, _, _ = straight_runs
     assert not pil.crashed
     # 5 servos at 50 Hz for 5 s, and a control update every 10 ms.
     assert len(pil.pulses_us) >= 5 * 50 * 5 - 10 and len(pil.control_updates_us) >= 495
@@ -55,13 +68,18 @@ def test_emulated_avr_servo_pulses_match_the_gait_references_within_10us(straigh
 
 
 def test_emulated_avr_executes_the_hosts_commands_and_reports_running(straight_runs):
-    _, pil, _ = straight_runs
+    _, pil, _, sent_by_robot = straight_runs
     kinds = [type(cmd.sent) for cmd in pil.executed]
-    # All four configuration commands acknowledged first. Not always in the order sent: the host
-    # sends them at once at boot, and an Ack that finds the transmit queue holding the Version and
-    # the first Telemetry is dropped (counted as tx_dropped, docs/firmware.md "Link") and comes
-    # when the host sends the command again 200 ms later (a duplicate, not executed twice).
-    assert sorted(k.__name__ for k in kinds[:4]) == ["SetGains", "SetGait", "SetOffset", "Start"]
+    # The host sends Hello and the four configuration commands at once at boot. Replies take
+    # precedence over Telemetry in the robot's transmit queue (docs/firmware.md, "Link"), so the
+    # Version and the first Telemetry leave room for every Ack: all four come, in the order sent,
+    # from the first copy (the host resends nothing), and no reply was ever dropped.
+    assert kinds[:4] == [p.SetGains, p.SetGait, p.SetOffset, p.Start]
+    config = [type(m) for _, _, m in pil.sent if not isinstance(m, p.SetOffset)]
+    assert config == [p.Hello, p.SetGains, p.SetGait, p.Start]
+    statuses = [m for m in sent_by_robot if isinstance(m, p.Status)]
+    assert len(statuses) >= 4  # one a second
+    assert statuses[-1].tx_dropped == 0
     assert all(cmd.matches for cmd in pil.executed)
     assert pil.telemetry and pil.telemetry[-1][1].state == p.State.RUNNING
     assert pil.host_bad_frames == {}
@@ -70,7 +88,7 @@ def test_emulated_avr_executes_the_hosts_commands_and_reports_running(straight_r
 def test_short_straight_run_driven_by_the_emulated_avr_moves_forward_like_the_native_one(
     straight_runs,
 ):
-    _, pil, native = straight_runs
+    _, pil, native, _ = straight_runs
     travelled_pil = pil.states[-1, 6] - pil.states[0, 6]
     travelled_native = native.states[-1, 6] - native.states[0, 6]
     assert travelled_native > 0.15

@@ -6,6 +6,7 @@
 template <uint16_t Capacity>
 class ByteQueue {
  public:
+  static constexpr uint16_t kCapacity = Capacity;
   uint16_t size() const { return count_; }
   uint16_t space() const { return static_cast<uint16_t>(Capacity - count_); }
   bool empty() const { return count_ == 0; }

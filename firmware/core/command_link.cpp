@@ -62,10 +62,10 @@ void CommandLink::refuse(uint8_t msg_id, uint8_t seq, uint8_t reason) {
   answer(msg_id, seq, reason);
 }
 
-void CommandLink::send_frame(uint8_t msg_id, const uint8_t* payload, uint8_t len, uint8_t spare) {
+void CommandLink::send_frame(uint8_t msg_id, const uint8_t* payload, uint8_t len) {
   uint8_t buf[eelproto::kMaxFrameBytes];
   const size_t n = encode_frame(msg_id, tx_seq_, payload, len, buf, sizeof(buf));
-  if (n == 0 || n + spare > tx_.space() || !tx_.push_all(buf, n)) {
+  if (n == 0 || !tx_.push_all(buf, n)) {
     ++counters_.tx_dropped;
     return;
   }

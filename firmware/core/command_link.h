@@ -13,10 +13,18 @@
 class CommandLink {
  public:
   using TxQueue = ByteQueue<128>;
-  // Room that replies leave free in the queue: the largest frame the robot sends on its own
-  // (Telemetry). A flood of commands can fill the queue with acknowledgements, never starve the
-  // telemetry; periodic frames are spread so that one at a time needs the room.
-  static constexpr uint8_t kReserveBytes = eelproto::kMaxFrameBytes;
+  // Replies first (docs/firmware.md, "Link"): an answer to a command may use the whole queue; a
+  // frame the robot sends on its own (Telemetry, the periodic Status) is queued only when it leaves
+  // this much free for the replies that may come while it goes out: the largest frame, so any one
+  // reply, and as much as the UART's receive buffer can hold of commands whose answers (Ack,
+  // Refuse, Setting) are no longer than they are.
+  static constexpr uint8_t kReplyRoomBytes = eelproto::kMaxFrameBytes;
+
+  // Bytes of a frame the robot sends with a payload of payload_bytes: header, payload, CRC-16,
+  // COBS's code byte (one: every frame is under 254 bytes) and the delimiter.
+  static constexpr uint8_t frame_bytes(uint8_t payload_bytes) {
+    return static_cast<uint8_t>(eelproto::kHeaderBytes + payload_bytes + eelproto::kCrcBytes + 2);
+  }
 
   void reset(uint32_t now_us);
   // One received byte. Returns the command to execute, or nullptr: nothing complete yet, a bad
@@ -30,15 +38,23 @@ class CommandLink {
   // Answers to the command last returned by push() (or, for a save, the command that asked).
   void ack(uint8_t msg_id, uint8_t seq);
   void refuse(uint8_t msg_id, uint8_t seq, uint8_t reason);
-  // An answer with data (Version, Setting): queued only with kReserveBytes to spare.
+  // An answer with data (Version, Setting, the Status asked for): may use the whole queue. A
+  // reply that finds no room is dropped and counted (tx_dropped): the queue then holds only
+  // replies and at most one frame of the robot's own queued while kReplyRoomBytes were free.
   template <typename M>
   void reply(const M& m) {
-    send(m, kReserveBytes);
+    send(m);
   }
-  // A frame the robot sends on its own (Telemetry, Status): may use the whole queue.
+  // Whether a frame the robot sends on its own with this payload may be queued now: it must leave
+  // kReplyRoomBytes free. When not, the robot keeps it for its next control update (nothing is
+  // dropped or counted), so a periodic frame never takes room a reply needs.
+  bool periodic_fits(uint8_t payload_bytes) const {
+    return tx_.space() >= static_cast<uint16_t>(frame_bytes(payload_bytes) + kReplyRoomBytes);
+  }
+  // A frame the robot sends on its own (Telemetry, Status), after periodic_fits said yes.
   template <typename M>
   void send_periodic(const M& m) {
-    send(m, 0);
+    send(m);
   }
 
   const LinkCounters& counters() const { return counters_; }
@@ -48,12 +64,12 @@ class CommandLink {
  private:
   static constexpr uint8_t kNoAnswer = 0xFF;  // last_answer_: nothing stored (a query, or none)
   template <typename M>
-  void send(const M& m, uint8_t spare) {
+  void send(const M& m) {
     uint8_t p[M::kPayloadBytes];
     eelproto::pack(m, p);
-    send_frame(static_cast<uint8_t>(M::kId), p, sizeof(p), spare);
+    send_frame(static_cast<uint8_t>(M::kId), p, sizeof(p));
   }
-  void send_frame(uint8_t msg_id, const uint8_t* payload, uint8_t len, uint8_t spare);
+  void send_frame(uint8_t msg_id, const uint8_t* payload, uint8_t len);
   void answer(uint8_t msg_id, uint8_t seq, uint8_t reason);
   // Sequence check of a new command: counts lost frames, tells a duplicate.
   bool is_duplicate(const Frame& f);

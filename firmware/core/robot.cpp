@@ -21,9 +21,18 @@ uint32_t next_deadline(uint32_t previous_us, uint32_t period_us, uint32_t now_us
 
 constexpr uint8_t reason(RefuseReason r) { return static_cast<uint8_t>(r); }
 constexpr uint8_t bit(eelproto::Flags f) { return static_cast<uint8_t>(f); }
-// The Status frames come half a telemetry period after the Telemetry frames, so that the two
-// never need the transmit queue's reserved room at once (CommandLink::kReserveBytes).
+// The Status frames come half a telemetry period after the Telemetry frames: the two together
+// would not leave the replies their room in the transmit queue (CommandLink::kReplyRoomBytes), so
+// one would wait for the other to go out.
 constexpr uint32_t kStatusPhaseUs = cfg::kTelemetryPeriodUs / 2;
+static_assert(CommandLink::frame_bytes(eelproto::Telemetry::kPayloadBytes) +
+                      CommandLink::kReplyRoomBytes <=
+                  CommandLink::TxQueue::kCapacity &&
+              CommandLink::frame_bytes(eelproto::Status::kPayloadBytes) +
+                      CommandLink::kReplyRoomBytes <=
+                  CommandLink::TxQueue::kCapacity,
+              "an empty transmit queue must take each periodic frame and still leave the replies "
+              "their room");
 constexpr int16_t kNotMeasuredMrad = -32768;
 
 // Milliradians, rounded. Within +-32.767 rad: the feedback's range (1023 counts at no less than
@@ -60,7 +69,8 @@ void Robot::reset(uint32_t now_us, const BootInfo& boot, const uint8_t* eeprom) 
   next_status_us_ = now_us + kStatusPhaseUs;
   control_updates_ = 0;
   control_late_max_us_ = 0;
-  report_now_ = false;
+  telemetry_due_ = false;
+  status_due_ = false;
   status_requested_ = false;
   control_update(now_us);
   joint_update(nullptr);
@@ -90,7 +100,7 @@ void Robot::enter(State s, uint32_t now_us) {
   if (s == state_) return;
   state_ = s;
   apply_targets(now_us);
-  report_now_ = true;  // say so at once, not up to 100 ms later
+  telemetry_due_ = true;  // say so at once, not up to 100 ms later
 }
 
 void Robot::on_rx_byte(uint8_t byte, uint32_t now_us) {
@@ -292,21 +302,29 @@ void Robot::update_battery(uint32_t now_us) {
   }
 }
 
+// Replies first (docs/firmware.md, "Link"): a due Telemetry or periodic Status is queued only
+// when it leaves the replies their room; otherwise it waits for the next control update, keeping
+// its cadence (a frame that waited is sent once, with the newer figures). The Status a GetStatus
+// asked for is a reply.
 void Robot::service(uint32_t now_us) {
   update_battery(now_us);
-  if (report_now_ || deadline_reached(now_us, next_telemetry_us_)) {
-    if (!report_now_) {
-      next_telemetry_us_ = next_deadline(next_telemetry_us_, cfg::kTelemetryPeriodUs, now_us);
-    }
-    report_now_ = false;
+  if (deadline_reached(now_us, next_telemetry_us_)) {
+    next_telemetry_us_ = next_deadline(next_telemetry_us_, cfg::kTelemetryPeriodUs, now_us);
+    telemetry_due_ = true;
+  }
+  if (telemetry_due_ && link_.periodic_fits(eelproto::Telemetry::kPayloadBytes)) {
+    telemetry_due_ = false;
     send_telemetry(now_us);
   }
-  if (status_requested_ || deadline_reached(now_us, next_status_us_)) {
-    if (!status_requested_) {
-      next_status_us_ = next_deadline(next_status_us_, cfg::kStatusPeriodUs, now_us);
-    }
+  if (deadline_reached(now_us, next_status_us_)) {
+    next_status_us_ = next_deadline(next_status_us_, cfg::kStatusPeriodUs, now_us);
+    status_due_ = true;
+  }
+  if (status_requested_ ||
+      (status_due_ && link_.periodic_fits(eelproto::Status::kPayloadBytes))) {
+    send_status(now_us, status_requested_);
     status_requested_ = false;
-    send_status(now_us);
+    status_due_ = false;
   }
 }
 
@@ -353,7 +371,7 @@ void Robot::send_telemetry(uint32_t now_us) {
   link_.send_periodic(m);
 }
 
-void Robot::send_status(uint32_t now_us) {
+void Robot::send_status(uint32_t now_us, bool asked) {
   eelproto::Status m;
   m.time_us = now_us;
   m.state = static_cast<uint8_t>(state_);
@@ -370,5 +388,9 @@ void Robot::send_status(uint32_t now_us) {
                     sizeof(LinkCounters) == offsetof(LinkCounters, tx_dropped) + sizeof(uint16_t),
                 "Status's counters must be LinkCounters' fields in order");
   memcpy(&m.frames_ok, &link_.counters(), sizeof(LinkCounters));
-  link_.send_periodic(m);
+  if (asked) {
+    link_.reply(m);
+  } else {
+    link_.send_periodic(m);
+  }
 }

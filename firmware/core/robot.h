@@ -35,7 +35,8 @@ class Robot {
   // Then the rest of it with this update's analog readings (nullptr when wants_adc() was false):
   // measured angles, joint loop, servo pulses.
   void joint_update(const uint16_t* adc_counts);
-  // After the update: the battery's reading of it, Telemetry and Status frames when due.
+  // After the update: the battery's reading of it, Telemetry and Status frames when due (each
+  // only with room left for the replies, else at a later update: docs/firmware.md, "Link").
   void service(uint32_t now_us);
 
   // SaveSettings: the board steps this writer once a loop pass (a byte at a time, while control
@@ -80,7 +81,7 @@ class Robot {
   void store_setting(float& field, float value);
   void send_version();
   void send_telemetry(uint32_t now_us);
-  void send_status(uint32_t now_us);
+  void send_status(uint32_t now_us, bool asked);
 
   State state_ = State::Idle;
   Gait gait_;
@@ -109,7 +110,8 @@ class Robot {
   bool settings_lost_ = false;     // no valid slot at boot, not yet acknowledged: Start refused
   bool settings_dirty_ = false;
   bool fading_ = false;
-  bool report_now_ = false;        // a state change: Telemetry at the next service
-  bool status_requested_ = false;
+  bool telemetry_due_ = false;     // due (its time, or a state change), waiting for room
+  bool status_due_ = false;        // the periodic Status due, waiting for room
+  bool status_requested_ = false;  // a GetStatus: answered (a reply) at the next service
   bool battery_sampled_ = false;   // battery_counts_ is of the last update
 };

@@ -102,9 +102,10 @@ struct Bench {
     }
     drain();
   }
+  bool uart_stalled = false;  // the UART takes nothing: what is queued stays queued
   void drain() {
     Robot::TxQueue& tx = robot.tx();
-    while (!tx.empty()) {
+    while (!uart_stalled && !tx.empty()) {
       if (!out_decoder.push(tx.pop(), out_counters)) continue;
       const Frame& f = out_decoder.frame();
       switch (static_cast<MsgId>(f.msg_id)) {
@@ -803,4 +804,111 @@ TEST(a_cleared_mcusr_is_read_from_the_watchdog_mark_and_the_reset_record) {
   CHECK_EQ(infer_reset_flags(0, false, r), 0);  // the reset pin or a brown-out: unknown
   const uint8_t ext = static_cast<uint8_t>(ResetFlags::External);
   CHECK_EQ(infer_reset_flags(ext, true, r), ext);  // bits MCUSR kept are taken as they are
+}
+
+// Replies first (docs/firmware.md, "Link"): an answer to a command may use the whole transmit
+// queue; Telemetry and the periodic Status go in only with CommandLink::kReplyRoomBytes left free,
+// else at a later control update.
+
+TEST(the_link_counts_each_frame_the_robot_sends_at_its_encoded_length) {
+  CHECK_EQ(CommandLink::frame_bytes(eelproto::Ack::kPayloadBytes), frame_of(eelproto::Ack{}, 0).n);
+  CHECK_EQ(CommandLink::frame_bytes(eelproto::Refuse::kPayloadBytes),
+           frame_of(eelproto::Refuse{}, 0).n);
+  CHECK_EQ(CommandLink::frame_bytes(eelproto::Version::kPayloadBytes),
+           frame_of(eelproto::Version{}, 0).n);
+  CHECK_EQ(CommandLink::frame_bytes(eelproto::Setting::kPayloadBytes),
+           frame_of(eelproto::Setting{}, 0).n);
+  CHECK_EQ(CommandLink::frame_bytes(eelproto::Telemetry::kPayloadBytes),
+           frame_of(eelproto::Telemetry{}, 0).n);
+  CHECK_EQ(CommandLink::frame_bytes(eelproto::Status::kPayloadBytes),
+           frame_of(eelproto::Status{}, 0).n);
+}
+
+TEST(a_periodic_frame_fits_only_when_it_leaves_room_for_any_reply) {
+  CommandLink link;
+  link.reset(0);
+  const uint16_t telemetry = frame_of(eelproto::Telemetry{}, 0).n;
+  const uint16_t largest_reply = frame_of(eelproto::Status{}, 0).n;
+  CHECK(CommandLink::kReplyRoomBytes >= largest_reply);
+  while (link.tx().space() > telemetry + CommandLink::kReplyRoomBytes) link.tx().push(0x55);
+  CHECK(link.periodic_fits(eelproto::Telemetry::kPayloadBytes));
+  link.tx().push(0x55);
+  CHECK(!link.periodic_fits(eelproto::Telemetry::kPayloadBytes));
+  // A reply still fits there, down to the last byte of the queue.
+  link.ack(static_cast<uint8_t>(MsgId::Start), 0);
+  CHECK_EQ(link.counters().tx_dropped, 0);
+  while (link.tx().space() > 0) link.tx().push(0x55);
+  link.ack(static_cast<uint8_t>(MsgId::Start), 1);
+  CHECK_EQ(link.counters().tx_dropped, 1);
+}
+
+TEST(the_boot_burst_is_answered_in_full_and_the_first_telemetry_waits_for_the_replies_room) {
+  // The host's burst at boot (Hello, then the configuration) while the UART is still busy: the
+  // Version takes 22 bytes, the first Telemetry (due at the first update) would take 58 and leave
+  // the four Acks no room under the old rule. Now the Telemetry waits and every Ack is queued.
+  Bench b;
+  b.uart_stalled = true;
+  b.send(eelproto::Hello{});
+  b.run(10000);  // the first control update: the Telemetry is due
+  CHECK_EQ(b.robot.tx().size(), frame_of(eelproto::Version{}, 0).n);
+  b.send(eelproto::defaults<eelproto::SetGains>());
+  b.send(gait(0.3f));
+  b.send(offset(0.1f));
+  b.send(eelproto::Start{});
+  CHECK_EQ(b.robot.counters().tx_dropped, 0);
+  b.uart_stalled = false;
+  b.drain();
+  CHECK_EQ(b.versions, 1);
+  CHECK_EQ(b.acks, 4);
+  CHECK_EQ(b.telemetry, 0);
+  b.run(10000);  // the next update sends the Telemetry that waited, with its figures
+  CHECK_EQ(b.telemetry, 1);
+  CHECK_EQ(b.last_telemetry.time_us, 20000u);
+  CHECK(b.last_telemetry.state == static_cast<uint8_t>(State::Running));
+  b.run(80000);  // and the cadence is kept: the next one at 100 ms, not 110
+  CHECK_EQ(b.telemetry, 2);
+  CHECK_EQ(b.last_telemetry.time_us, 100000u);
+  CHECK_EQ(b.robot.counters().tx_dropped, 0);
+}
+
+TEST(replies_fill_the_whole_queue_and_the_periodic_frames_wait_uncounted_until_it_drains) {
+  Bench b;
+  b.run(10000);
+  CHECK_EQ(b.telemetry, 1);
+  b.uart_stalled = true;
+  const uint16_t version = frame_of(eelproto::Version{}, 0).n;
+  const int fit = CommandLink::TxQueue::kCapacity / version;
+  for (int k = 0; k <= fit; ++k) b.send(eelproto::Hello{});
+  CHECK_EQ(b.robot.counters().tx_dropped, 1);  // the one Version the replies had no room for
+  b.send(eelproto::Start{});  // an Ack still takes what is left
+  CHECK_EQ(b.robot.tx().size(), fit * version + frame_of(eelproto::Ack{}, 0).n);
+  b.run(200000);  // Telemetry due at 100 and 200 ms, Status at 50 ms: all wait, none dropped
+  CHECK_EQ(b.robot.counters().tx_dropped, 1);
+  b.uart_stalled = false;
+  b.drain();
+  CHECK_EQ(b.versions, fit);
+  CHECK_EQ(b.acks, 1);
+  CHECK_EQ(b.telemetry, 1);
+  CHECK_EQ(b.statuses, 0);
+  b.run(10000);  // the Telemetry that waited (once, not once per missed period)
+  CHECK_EQ(b.telemetry, 2);
+  b.run(10000);  // then the Status (both at once would not leave the replies their room)
+  CHECK_EQ(b.statuses, 1);
+  CHECK_EQ(b.telemetry, 2);
+  CHECK_EQ(b.last_status.tx_dropped, 1);
+}
+
+TEST(the_status_a_host_asks_for_is_a_reply_and_takes_the_room_a_periodic_frame_leaves) {
+  Bench b;
+  b.run(10000);
+  b.uart_stalled = true;
+  b.send(eelproto::Hello{});  // 22 bytes queued: a periodic Status (50 + 64 free) would wait
+  CHECK(!b.robot.tx().empty());
+  b.send(eelproto::GetStatus{});
+  b.run(10000);
+  b.uart_stalled = false;
+  b.drain();
+  CHECK_EQ(b.statuses, 1);
+  CHECK_EQ(b.last_status.time_us, 20000u);
+  CHECK_EQ(b.robot.counters().tx_dropped, 0);
 }
