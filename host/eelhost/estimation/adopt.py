@@ -24,7 +24,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from eelhost.data.experiments import Dataset
-from eelhost.estimation.evaluate import Evaluator
+from eelhost.estimation.evaluate import Evaluator, simulations_counter
 from eelhost.estimation.optimise import FitResult
 from eelhost.estimation.parameters import ParameterSpace
 from eelhost.estimation.pipeline import FitSettings, fit_motion
@@ -125,7 +125,8 @@ def fit_and_choose(
     separate = [m for m in motions if m != "joint"]
     if not (compare and separate):
         return _fit_all(fit, motions, None, None)
-    with phase(f"cross-validation of the candidate models ({', '.join(separate)})"):
+    with phase(f"cross-validation of the candidate models ({', '.join(separate)})",
+               simulations_counter()):
         comparison = cross_validate(dataset, separate, settings, laws=laws, say=say,
                                     joint_models=joint_models)
     choice = recommend(comparison)

@@ -55,6 +55,24 @@ ALIGN_S = 0.1
 ALIGN_STEP_S = 0.01
 
 
+_ALL_RUNS = [0]  # closed-loop runs of every evaluator in this process, for progress
+
+
+def simulations_counter() -> Callable[[], dict[str, int]]:
+    """A status for :func:`eelhost.progress.phase`: the runs simulated since it was made.
+
+    Every evaluator counts its own runs; a stage that makes several (a cross-validation's
+    folds, a bootstrap's refits) is followed by this process-wide count (``sims=1200``).
+    """
+    start = _ALL_RUNS[0]
+
+    def status() -> dict[str, int]:
+        done = _ALL_RUNS[0] - start
+        return {"sims": done} if done else {}  # one batch of runs counts only when it is back
+
+    return status
+
+
 class EstimationError(UserError, ValueError):
     """A fit or validation that cannot be set up from what was given."""
 
@@ -370,6 +388,7 @@ class Evaluator:
         else:
             sim = self._simulate_reference(robots, x)
         self.simulations += x.shape[0] * len(self.prepared)
+        _ALL_RUNS[0] += x.shape[0] * len(self.prepared)
         self.steps += int(sim.steps.sum())
         return sim
 

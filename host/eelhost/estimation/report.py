@@ -18,7 +18,7 @@ from eelhost.data.experiments import Dataset
 from eelhost.estimation.adopt import fit_and_choose
 from eelhost.estimation.clock import clock_check
 from eelhost.estimation.diagnostics import fit_warnings
-from eelhost.estimation.evaluate import ALIGN_S, Evaluator
+from eelhost.estimation.evaluate import ALIGN_S, Evaluator, simulations_counter
 from eelhost.estimation.identify import identifiability
 from eelhost.estimation.optimise import FitResult
 from eelhost.estimation.parameters import ParameterSpace
@@ -130,12 +130,13 @@ def run_report(
         ev = chosen.evaluators[motion]
         t0 = time.perf_counter()
         extra["simulations"][motion] = res.simulations
-        with phase(f"identifiability of the {motion} fit"):
+        with phase(f"identifiability of the {motion} fit", simulations_counter()):
             ident = identifiability(ev, res.values)
         extra["identifiability"][motion] = ident.to_json()
         boot = None
         if bootstrap_replicates > 0:
-            with phase(f"bootstrap of the {motion} fit ({bootstrap_replicates} refits)"):
+            with phase(f"bootstrap of the {motion} fit ({bootstrap_replicates} refits)",
+                       simulations_counter()):
                 boot = parametric_bootstrap(ev, res.values, res.fitness, bootstrap_replicates,
                                             seed=settings.seed,
                                             unidentified=ident.unidentified(),
@@ -158,7 +159,8 @@ def run_report(
         }
     tests = dataset.held_out
     if chosen.robot_file_fits:
-        with phase("validation of the robot file's model on the held-out experiments"):
+        with phase("validation of the robot file's model on the held-out experiments",
+                   simulations_counter()):
             own_runs = validate(dataset.robot,
                                 {m: r.model for m, r in chosen.robot_file_fits.items()},
                                 tests, backend=settings.backend)
@@ -168,14 +170,15 @@ def run_report(
         }
     if dataset.truth:
         extra["truth"] = {m: c.model_dump() for m, c in dataset.truth.items()}
-    with phase("validation on the held-out experiments"):
+    with phase("validation on the held-out experiments", simulations_counter()):
         runs = validate(dataset.robot, {m: r.model for m, r in fits.items()}, tests,
                         backend=settings.backend)
-    bands = prediction_bands(dataset.robot, {m: r.model for m, r in fits.items()},
-                             {m: b.ensemble(fits[m].space.bounds) for m, b in boots.items()},
-                             {m: b.growth for m, b in boots.items()}, tests,
-                             backend=settings.backend,
-                             dof={m: b.growth_dof for m, b in boots.items()})
+    with phase("prediction bands of the held-out experiments", simulations_counter()):
+        bands = prediction_bands(dataset.robot, {m: r.model for m, r in fits.items()},
+                                 {m: b.ensemble(fits[m].space.bounds) for m, b in boots.items()},
+                                 {m: b.growth for m, b in boots.items()}, tests,
+                                 backend=settings.backend,
+                                 dof={m: b.growth_dof for m, b in boots.items()})
     if bands:
         extra["prediction_band"] = {
             "level": BAND_LEVEL, "widen": BAND_WIDEN, "coverage": band_coverage(bands),
