@@ -33,6 +33,7 @@ from collections import Counter
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import shapely
@@ -196,7 +197,8 @@ def water_for(seed: int, model: CoefficientModel,
 
 
 def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PATH_GAIT,
-              unknown_current_m_s: float = UNKNOWN_CURRENT_M_S) -> WorldResult:
+              unknown_current_m_s: float = UNKNOWN_CURRENT_M_S,
+              planner_options: dict[str, Any] | None = None) -> WorldResult:
     """Plan one generated world and swim the plan over ``sim://`` (module docstring).
 
     Parameters
@@ -206,6 +208,8 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
     model : CoefficientModel
     gait : Gait
     unknown_current_m_s : float
+    planner_options : dict, optional
+        More keyword arguments of the planner (``--check-unknown-current``).
 
     Returns
     -------
@@ -222,7 +226,7 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
            + f"&start={s.position_m[0]:g},{s.position_m[1]:g},{s.heading_deg:g}")
     wall0, cpu0 = time.perf_counter(), time.process_time()
     try:
-        planned = plan_for_run(world, robot, uri, gait, model)
+        planned = plan_for_run(world, robot, uri, gait, model, planner_options=planner_options)
     except PlanRefused as err:
         return WorldResult(seed, False, err.status, detail=str(err), water=water,
                            plan_wall_s=time.perf_counter() - wall0,
@@ -252,8 +256,8 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
 
 
 def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, out: Path,
-                          progress: Callable[[WorldResult], None] | None = None
-                          ) -> list[WorldResult]:
+                          progress: Callable[[WorldResult], None] | None = None,
+                          planner_options: dict[str, Any] | None = None) -> list[WorldResult]:
     """Run the benchmark over ``seeds``, resuming from ``<out>/results.jsonl``.
 
     Parameters
@@ -265,6 +269,8 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
         Folder of ``results.jsonl``.
     progress : callable, optional
         Called with each world's result as it is finished (or read back).
+    planner_options : dict, optional
+        More keyword arguments of the planner.
 
     Returns
     -------
@@ -283,7 +289,7 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
         if seed in done:
             r = done[seed]
         else:
-            r = run_world(seed, robot, model)
+            r = run_world(seed, robot, model, planner_options=planner_options)
             with path.open("a") as f:
                 f.write(json.dumps(asdict(r)) + "\n")
         results.append(r)

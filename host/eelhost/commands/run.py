@@ -104,6 +104,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     b.add_argument("--worlds", type=COUNT, default=100, help="benchmark worlds (100)")
     b.add_argument("--seed", type=SEED, default=BENCH_SEED,
                    help=f"first benchmark world's seed ({BENCH_SEED})")
+    b.add_argument("--check-unknown-current", type=NON_NEGATIVE, metavar="M_S",
+                   help="with --bench: the unknown current the planner's check allows for "
+                   "(default: the planner's, 0.02 m/s); the water still has up to 0.02 m/s")
     b.add_argument("--write", nargs="?", const="docs/planning.md", metavar="FILE",
                    help="with --bench, also rewrite its section of FILE (bare: docs/planning.md)")
     p.set_defaults(run=run)
@@ -251,8 +254,12 @@ def _bench(args: argparse.Namespace) -> int:
                 flush=True)
             bar.update(1)
 
-        results = run_closed_loop_bench(robot, model, seeds, out, show)
+        options = ({} if args.check_unknown_current is None
+                   else {"unknown_current_m_s": args.check_unknown_current})
+        results = run_closed_loop_bench(robot, model, seeds, out, show, options)
     command = (f"nice eelbot run --bench --worlds {args.worlds} --seed {args.seed}"
+               + ("" if args.check_unknown_current is None
+                  else f" --check-unknown-current {args.check_unknown_current:g}")
                + (f" --coefficients-file {args.coefficients_file}" if args.coefficients_file
                   else ""))
     lines = summary_lines(results)

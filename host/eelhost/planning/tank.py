@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 from urllib.parse import parse_qsl, urlencode, urlsplit
 
 from eelhost.planning.geometry import FloatArray
@@ -84,6 +85,7 @@ def plan_for_run(
     gait: Gait = PATH_GAIT,
     coefficients: CoefficientModel | None = None,
     acceptance_radius_m: float = 0.15,
+    planner_options: dict[str, Any] | None = None,
 ) -> RunPlan:
     """Plan in a world for ``eelbot run --plan`` (module docstring).
 
@@ -99,6 +101,9 @@ def plan_for_run(
         Default: the robot file's coefficients with the default uncertainty.
     acceptance_radius_m : float
         The run loop's acceptance radius (the planner's twin must use the same).
+    planner_options : dict, optional
+        More keyword arguments of :class:`Planner` (the benchmark's ``unknown_current_m_s``),
+        for the first plan and every replan.
 
     Returns
     -------
@@ -110,11 +115,12 @@ def plan_for_run(
         The planner refused the world, or found no plan that passes its check.
     """
     model = coefficients or default_model(robot)
-    planner = Planner(world, robot, model, gait)
+    options = planner_options or {}
+    planner = Planner(world, robot, model, gait, **options)
 
     def planner_for(extra_m_s: FloatArray) -> Planner:
         """The planner in the world with the estimated extra current added to its own."""
-        return Planner(with_extra_current(world, extra_m_s), robot, model, gait)
+        return Planner(with_extra_current(world, extra_m_s), robot, model, gait, **options)
 
     if abs(planner.twin.acceptance_radius_m - acceptance_radius_m) > 1e-9:
         raise PlanRefused("acceptance_radius",
