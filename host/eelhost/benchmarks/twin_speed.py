@@ -236,13 +236,27 @@ def twin_speed_report(
     counts = sorted({1, threads})
     cases = [(stage, n_threads) for stage in stages for n_threads in counts]
     walls: dict[tuple[str, int], list[float]] = {case: [] for case in cases}
+    # the same generation with the other joint model (the robot's links; the bundled servo's
+    # joints or PD's), timed in the same alternation: kernel against kernel in one process
+    other_robot = robot.with_joints(load_robot(
+        SERVO_ROBOT if pd_gains(robot.joints) is not None else None).joints)
+    other_spec = batch.BatchSpec.build(
+        other_robot, [corners[i % 4] for i in range(settings.runs)], candidates, opts, 0
+    )
+    other_walls: dict[int, list[float]] = {n: [] for n in counts}
     for stage, n_threads in cases:
         batch.run_spec(spec, threads=n_threads, stage=stage)  # warm the threads
+    for n_threads in counts:
+        batch.run_spec(other_spec, threads=n_threads)
     for _ in range(REPEATS):
         for stage, n_threads in cases:
             start = time.perf_counter()
             res = batch.run_spec(spec, threads=n_threads, stage=stage)
             walls[stage, n_threads].append(time.perf_counter() - start)
+        for n_threads in counts:
+            start = time.perf_counter()
+            other = batch.run_spec(other_spec, threads=n_threads)
+            other_walls[n_threads].append(time.perf_counter() - start)
     steps = float(res.final_step.sum())
     best_rate = {case: steps / min(walls[case]) for case in cases}
     median_rate = {case: steps / float(np.median(walls[case])) for case in cases}
@@ -266,6 +280,20 @@ def twin_speed_report(
         ]
         say("- time of the C-compiled stage's generation over numba's, median of the paired "
             f"repeats: {', '.join(ratios)}")
+    # servo over PD, whichever of the two the robot file has: rate ratio of the paired repeats
+    other_steps = float(other.final_step.sum())
+    robot_is_pd = pd_gains(robot.joints) is not None
+    servo_pd = []
+    for n in counts:
+        other_rate = other_steps / np.array(other_walls[n])
+        own_rate = steps / np.array(walls[default_stage, n])
+        paired = other_rate / own_rate if robot_is_pd else own_rate / other_rate
+        servo_pd.append(f"{np.median(paired):.2f} ({paired.min():.2f}-{paired.max():.2f}; "
+                        f"{max(other_rate if robot_is_pd else own_rate) / 1e6:.2f} million steps/s "
+                        f"best, {n} thr.)")
+    say("- the servo joint model's kernel over the PD kernel's rate (the same generation, "
+        f"{name[default_stage]}, timed in the same alternation), median (range) of the paired "
+        f"repeats: {', '.join(servo_pd)}")
     ga = GA_STEPS / rates[threads]
     say(
         f"- implied time of the paper's whole GA for one motion type (150 x 130 x 4 = {GA_RUNS:,}"

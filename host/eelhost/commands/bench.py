@@ -65,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
         ga=not args.no_ga,
         rounds=args.rounds,
         note=args.note,
-        command=" ".join(["eelbot bench", *sys.argv[2:]]),
+        command=" ".join(["eelbot", *sys.argv[1:]]),  # global options included
     )
     lines = twin_speed_report(robot, coeffs, settings, emit=lambda line: print(line, flush=True))
     text = "\n".join(lines) + "\n"
