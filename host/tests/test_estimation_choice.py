@@ -84,7 +84,7 @@ TINY = FitSettings(method="minimax", polish_iterations=2)
 
 def _compare(ds, motions):
     return cross_validate(ds, motions, TINY, laws=["morison", "linear_quadratic"], iterations=2,
-                          fold_iterations=2, screen_log2=2)
+                          fold_iterations=2, budget=24)
 
 
 @pytest.mark.parametrize("plant", sorted(mismatched_plants()))

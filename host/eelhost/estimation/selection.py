@@ -10,9 +10,10 @@ because it has more freedom to absorb the training gaits' noise or the plant's m
 predicts held-out gaits worse.
 
 **The choice does not depend on the robot file.** Every candidate is fitted from its own starts
-(:func:`multi_start_fit`): the middle of its bounds and a scrambled Sobol design in them, the
-best few polished by the minimax trust region, then again from every other candidate's fit
-carried over by name (:func:`carry_over`); never from the robot file's values. The other joint
+(:func:`multi_start_fit`): a short CMA-ES search from the middle of its bounds (its first
+generation spread over the whole box), polished by the minimax trust region, then again from
+every other candidate's fit carried over by name (:func:`carry_over`); never from the robot
+file's values. The other joint
 model's fixed parameters are the bundled robot file's that uses it, so from either bundled robot
 file the grid, the starts and therefore the scores are the same (tested).
 
@@ -36,6 +37,7 @@ from eelhost.data.experiments import Dataset, Experiment
 from eelhost.estimation.evaluate import EstimationError, Evaluator
 from eelhost.estimation.local import FAILED, polish_minimax_many
 from eelhost.estimation.methods import CURRENT_POLISH_ITERATIONS
+from eelhost.estimation.optimise import fit_cmaes
 from eelhost.estimation.parameters import ParameterSpace, joint_fit
 from eelhost.estimation.pipeline import FitSettings, training_experiments
 
@@ -44,8 +46,7 @@ log = logging.getLogger(__name__)
 TIE = 0.02  # relative: held-out errors this close count as equal
 POLISH_ITERATIONS = 8  # minimax iterations of every fit of the comparison
 FOLD_ITERATIONS = 4  # and of a fold's refit, which starts from the fit on every gait
-SCREEN_LOG2 = 4  # 2**4 = 16 Sobol points (and the middle) screened per candidate and fit
-POLISHED_STARTS = 1  # the best screened starts polished (the others' fits are polished too)
+SEARCH_BUDGET = 600  # CMA-ES candidates of a candidate model's own search, per fit
 ONE_SET_CANDIDATES = 1  # the best separate-set models also tried with one set for all motions
 ONE_SET = "one set"  # the suffix of a one-set candidate's name
 
@@ -199,45 +200,35 @@ def _many(ev: Evaluator, drop: Sequence[int | None] = ()) -> Callable:
     return evaluate
 
 
-def screen_design(size: int, seed: int, log2: int = SCREEN_LOG2) -> np.ndarray:
-    """The middle of the unit cube and ``2**log2`` scrambled Sobol points in it (seeded)."""
-    from scipy.stats import qmc
-
-    sobol = qmc.Sobol(size, scramble=True, seed=seed).random_base2(log2)
-    return np.vstack([np.full(size, 0.5), sobol])
-
-
 def multi_start_fit(
     ev: Evaluator,
     seed: int,
     extra_starts: Sequence[np.ndarray] = (),
     iterations: int = POLISH_ITERATIONS,
-    polished: int = POLISHED_STARTS,
-    screen_log2: int = SCREEN_LOG2,
+    budget: int = SEARCH_BUDGET,
 ) -> _Fitted:
     """Fit ``ev.space``'s law and joints in still water from its own starts (module docstring).
 
-    The parameters are screened in still water (the declared currents) at
-    :func:`screen_design`'s points (never the robot file's values) and at ``extra_starts``;
-    the ``polished`` best are polished by the minimax trust region together.
+    Never from the robot file's values: a CMA-ES search of ``budget`` candidates from the middle
+    of the bounds (its first generation spread over the whole box; seeded), and the best of
+    ``extra_starts`` (screened); each result polished by the minimax trust region.
 
     Returns
     -------
     _Fitted
-        The polished fits in the still-water space (without the current), best first.
+        The fits in the still-water space (without the current), best first.
     """
     still = replace(ev.space, current=False)
     still_ev = ev.with_space(still) if ev.space.current else ev
     k = still.size
-    pts = still.from_unit(screen_design(k, seed, screen_log2)) if screen_log2 >= 0 else (
-        np.zeros((0, k)))
+    begins = []
+    if budget > 0:
+        begins.append(fit_cmaes(still_ev.fitness, still, seed, budget).values)
     if len(extra_starts):
-        pts = np.vstack([pts, np.asarray(extra_starts, dtype=float)[:, :k]])
-    screened = still_ev.fitness(pts)
-    order = [int(i) for i in np.argsort(screened, kind="stable") if screened[i] < FAILED]
-    chosen = order[:polished] or [int(np.argmin(screened))]
-    results = polish_minimax_many(_many(still_ev, [None] * len(chosen)), still, pts[chosen],
-                                  iterations)
+        pts = np.asarray(extra_starts, dtype=float)[:, :k]
+        begins.append(pts[int(np.argmin(still_ev.fitness(pts)))])
+    results = polish_minimax_many(_many(still_ev, [None] * len(begins)), still,
+                                  np.array(begins), iterations)
     if still_ev is not ev:
         ev.simulations += still_ev.simulations
         ev.steps += still_ev.steps
@@ -303,7 +294,7 @@ def cross_validate(
     say: Callable[[str], None] | None = None,
     joint_models: Sequence[str] | None = None,
     one_set: int = ONE_SET_CANDIDATES,
-    screen_log2: int = SCREEN_LOG2,
+    budget: int = SEARCH_BUDGET,
     fold_iterations: int = FOLD_ITERATIONS,
 ) -> list[CandidateScore]:
     """Leave-one-gait-out cross-validation of the candidate models (module docstring).
@@ -327,8 +318,8 @@ def cross_validate(
     one_set : int
         How many of the best separate-set models are tried with one set for every motion too
         (needs two fits; 0: none).
-    screen_log2 : int
-        log2 of the Sobol points screened per candidate and fit.
+    budget : int
+        CMA-ES candidates of each candidate model's own search, per fit.
     fold_iterations : int
         Polish iterations of a fold's refit.
 
@@ -362,7 +353,7 @@ def cross_validate(
     # every candidate in still water from its own starts, then from every other candidate's
     # best fit so far carried over by name (in the grid's fixed order, and once more for any
     # candidate whose fit still fails); then the ambient current from the best
-    still = {key: multi_start_fit(ev, settings.seed, (), iterations, screen_log2=screen_log2)
+    still = {key: multi_start_fit(ev, settings.seed, (), iterations, budget)
              for key, ev in evs.items()}
 
     def cross_seed(i: int, m: str) -> None:
@@ -370,8 +361,7 @@ def cross_validate(
                              spaces[i], spaces[i].bounds.mean(axis=1))
                   for o in range(len(spaces)) if o != i]
         if others:
-            again = multi_start_fit(evs[(i, m)], settings.seed, others, iterations, 1,
-                                    screen_log2=-1)
+            again = multi_start_fit(evs[(i, m)], settings.seed, others, iterations, 0)
             still[(i, m)] = _merge(still[(i, m)], again)
 
     for key in evs:
@@ -397,7 +387,7 @@ def cross_validate(
                         key=lambda s: s.mean_held_out)
         for best in ranked[:one_set]:
             scores.append(_one_set(dataset, best, motions, evaluator, settings.seed,
-                                   iterations, fold_iterations, screen_log2))
+                                   iterations, fold_iterations, budget))
             _said(scores[-1], say)
     return scores
 
@@ -419,7 +409,7 @@ def _one_set(
     seed: int,
     iterations: int,
     fold_iterations: int,
-    screen_log2: int,
+    budget: int,
 ) -> CandidateScore:
     """A model with one coefficient set for every motion, scored on the same held-out gaits.
 
@@ -430,7 +420,7 @@ def _one_set(
     assert space is not None
     ev = evaluator(space, [e for m in motions for e in training_experiments(dataset, m)])
     own = _with_current(ev, multi_start_fit(ev, seed, [separate.values[m] for m in motions],
-                                            iterations, screen_log2=screen_log2), iterations)
+                                            iterations, budget), iterations)
     score = CandidateScore(f"{space.model_name}, {ONE_SET}", space.size, space=space)
     score.fitness["joint"] = own.fitness[0]
     score.values["joint"] = own.values[0]
