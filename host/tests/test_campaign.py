@@ -177,20 +177,23 @@ def test_campaign_serves_the_live_view_and_stops_cleanly_on_sigterm(tmp_path):
         assert proc.stdout is not None
         lines = [proc.stdout.readline(), proc.stdout.readline()]
         assert lines[1].startswith("live view: http://127.0.0.1:"), (lines, proc.poll())
-        url = lines[1].split(": ", 1)[1].strip()
-        page = urllib.request.urlopen(url, timeout=10).read().decode()
+        address = lines[1].split(": ", 1)[1].strip()  # the page, with the session's token
+        url = address.split("?", 1)[0]
+        # the page sets the token's cookie, which the page's own requests then carry
+        browser = urllib.request.build_opener(urllib.request.HTTPCookieProcessor())
+        page = browser.open(address, timeout=10).read().decode()
         assert 'id="frame"' in page
         # Poll the overlay until the robot is seen swimming and the twin's prediction is drawn.
         deadline = time.monotonic() + 120
         while True:
-            state = json.loads(urllib.request.urlopen(url + "state.json", timeout=10).read())
+            state = json.loads(browser.open(url + "state.json", timeout=10).read())
             if len(state["markers"]) == 6 and state["predicted"] and len(state["track"]) > 5:
                 break
             assert time.monotonic() < deadline and proc.poll() is None, state
             time.sleep(0.2)
         assert [len(w["circle"]) for w in state["waypoints"]] == [48]
         assert not state["waypoints"][0]["reached"]
-        jpeg = urllib.request.urlopen(url + "frame.jpg", timeout=10).read()
+        jpeg = browser.open(url + "frame.jpg", timeout=10).read()
         assert jpeg[:2] == b"\xff\xd8"
         os.kill(proc.pid, signal.SIGTERM)
         rest, err = proc.communicate(timeout=60)
