@@ -58,6 +58,10 @@ OUT_IS_A_FILE = {
     "dataset": "dataset {file}",
     "campaign": "campaign --robot sim:// --out {file}",
     "campaign --write-plan": "campaign --write-plan {tmp}",
+    "estimate": "estimate {tmp}/nowhere --out {file}",
+    "report": "report --out {file}",
+    "track": "track {tmp} --calibration c.json --markers m.json --gait 0.8,3 --out {file}/x",
+    "export": "export {tmp}/take --mcap --out {file}/take.mcap",
 }
 
 
@@ -97,6 +101,8 @@ READ_ONLY = {
     "dataset": "dataset {ro}/tank",
     "campaign": "campaign --robot sim:// --out {ro}/campaign",
     "campaign --write-plan": "campaign --write-plan {ro}/plan.toml",
+    "estimate": "estimate {tmp}/nowhere --out {ro}/fit",
+    "report": "report --out {ro}/report",
 }
 
 

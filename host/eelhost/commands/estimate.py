@@ -8,6 +8,7 @@ from pathlib import Path
 from eelhost.commands.common import add_fit_options, fit_settings
 from eelhost.data.experiments import load_dataset
 from eelhost.estimation.pipeline import fit_motion, write_coefficients
+from eelhost.files import check_output_folder
 from eelhost.progress import Progress
 
 
@@ -55,6 +56,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
+    check_output_folder(args.out)  # checkpoints and coefficients go there: said before the fit
     dataset = load_dataset(args.dataset, allow_incomplete=args.allow_incomplete)
     settings = fit_settings(args)
     motions = ("straight", "turning") if args.motion == "both" else (args.motion,)

@@ -10,6 +10,7 @@ from eelhost.data.experiments import BUNDLED_DATASET, load_dataset
 from eelhost.data.virtual_tank import generate_dataset
 from eelhost.errors import UserError
 from eelhost.estimation.report import run_report
+from eelhost.files import check_output_folder
 from eelhost.progress import Progress
 from eelsim.fluid import FLUID_LAWS, candidate_laws
 
@@ -55,6 +56,7 @@ def law_names(text: str) -> tuple[str, ...]:
 
 def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
+    check_output_folder(args.out)  # the report's folder: said before minutes of fitting
     folder = Path(args.dataset) if args.dataset else BUNDLED_DATASET
     if args.dataset is None and not (folder / "manifest.toml").exists():
         folder = Path("out/dataset")

@@ -71,10 +71,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
-    robot = load_robot(args.robot_file)
-    markers = load_marker_file(args.markers)
     check_output_stem(args.out)
     refuse_overwrite(args.out, args.force)
+    robot = load_robot(args.robot_file)
+    markers = load_marker_file(args.markers)
     gait = (args.gait[0], args.gait[1], args.gait[2] if len(args.gait) == 3 else DEFAULT_BETA_RAD)
     request = TrackRequest(
         video=args.video, calibration=args.calibration, robot=robot, robot_file=args.robot_file,
