@@ -31,6 +31,7 @@ from eelhost.estimation.parameters import (
     ParameterSpace,
     joint_model_name,
 )
+from eelhost.files import atomic_write
 from eelsim.robot import Robot
 
 log = logging.getLogger(__name__)
@@ -236,8 +237,7 @@ def write_coefficients(
     if extra:
         data.update(extra)
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(data, indent=2) + "\n")
+    atomic_write(path, json.dumps(data, indent=2) + "\n")  # a full disk keeps the earlier file
     return path
 
 

@@ -44,6 +44,7 @@ from eelhost.estimation.validate import (
     validate,
     worst_ex,
 )
+from eelhost.files import atomic_write
 from eelhost.progress import phase
 
 log = logging.getLogger(__name__)
@@ -189,8 +190,8 @@ def run_report(
     extra["clock_offsets_at_bound"] = list(clock.at_bound)
     extra["warnings"] += [w for w in [clock.warning()] if w]
     write_coefficients(out / "coefficients.json", fits, extra, robot=dataset.robot)
-    (out / "table4.md").write_text(table_markdown([r.row for r in runs]) + "\n")
-    (out / "table4.csv").write_text(table_csv([r.row for r in runs]))
+    atomic_write(out / "table4.md", table_markdown([r.row for r in runs]) + "\n")
+    atomic_write(out / "table4.csv", table_csv([r.row for r in runs]))
     # matplotlib only now: importing it costs half a second of every command's start
     from eelhost.estimation.figures import plot_fitness_history, plot_validation
 
@@ -218,7 +219,7 @@ def run_report(
                f"; not adopted (`--keep-model`): the fits above are {chosen.model}'s."),
             "",
         ])
-    report.write_text(text)
+    atomic_write(report, text)  # whole or not at all (eelhost.files)
     say(f"wrote {report}")
     return report
 
