@@ -32,6 +32,7 @@ from eelhost.field.runloop import (
     RunOutcome,
     open_frames,
 )
+from eelhost.files import atomic_write
 from eelhost.link.base import Link
 from eelhost.link.replay_transport import RxLogWriter
 from eelhost.link.sim_transport import SimTransport
@@ -241,8 +242,7 @@ class TankSession:
             duration_s=config.duration_s or 600.0,  # until the end: then the time it lasted
         )
         robot_copy = Path(f"{out}.robot.toml")
-        robot_copy.parent.mkdir(parents=True, exist_ok=True)
-        robot_copy.write_text(robot_file_text(notes.robot_file))
+        atomic_write(robot_copy, robot_file_text(notes.robot_file))
         calibration_copy = save_calibration(camera.calibration, f"{out}.calibration.json")
         j = robot.joints
         run_facts = {

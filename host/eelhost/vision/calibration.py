@@ -36,6 +36,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from eelhost.errors import UserError
+from eelhost.files import atomic_write
 
 FloatArray = NDArray[np.float64]
 FORMAT = "eelbot-camera-calibration"
@@ -532,9 +533,8 @@ def calibrate_lens(
 
 
 def save_calibration(calibration: Calibration, path: str | Path) -> Path:
-    """Write ``calibration`` as JSON; return the path."""
+    """Write ``calibration`` as JSON (whole: a temporary file renamed into place); return the path."""
     out = Path(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
     data = {
         "format": FORMAT,
         "version": VERSION,
@@ -553,8 +553,7 @@ def save_calibration(calibration: Calibration, path: str | Path) -> Path:
             "rms_px": lens.rms_px,
             "views": lens.views,
         }
-    out.write_text(json.dumps(data, indent=2) + "\n")
-    return out
+    return atomic_write(out, json.dumps(data, indent=2) + "\n")  # whole (eelhost.files)
 
 
 def _all_numbers(value: Any) -> bool:
