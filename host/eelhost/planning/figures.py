@@ -8,6 +8,7 @@ all the check runs, the figure ``eelbot plan`` prints.
 
 from __future__ import annotations
 
+import textwrap
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -76,7 +77,7 @@ def plot_plan(
     -------
     Path
     """
-    fig, ax = plt.subplots(figsize=(9, 6.6))
+    fig, ax = plt.subplots(figsize=(9, 7.4))
     _obstacles(ax, world)
     if len(plan.tree):
         segs = plan.tree.reshape(-1, 2, 2)
@@ -98,8 +99,10 @@ def plot_plan(
         for j, k in enumerate(np.linspace(0, len(swim.t_s) - 1, 12).round().astype(int)):
             ax.plot(*robot_outline(model, swim.states[k]), color="tab:blue", lw=1.0, alpha=0.6,
                     label="its body, 12 times along the run" if j == 0 else None)
-    ax.set_title(f"{world.name}: {plan.message}\n{_check_line(swim, checks)}", fontsize=9)
-    legend_once(ax, fontsize=8, loc="lower right", framealpha=0.9)
+    title = [f"{world.name}: {plan.message}", _check_line(swim, checks)]
+    ax.set_title("\n".join(textwrap.fill(line, 110) for line in title), fontsize=9)
+    # below the tank, not over its obstacles
+    legend_once(ax, fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.09), ncol=3)
     ax.set_aspect("equal")
     label_axes(ax, "x, tank (m)", "y, tank (m)")
     w, h = world.tank.size_m
