@@ -157,6 +157,17 @@ def test_plan_the_one_at_a_time_check_passed_touches_in_an_unknown_002_current(e
     assert not all(c.ok for c in checks)
 
 
+def test_plan_the_one_at_a_time_check_passed_collides_in_a_joint_draw(example_searched):
+    # the first failure: all coefficients off together, no unknown current at all
+    _, plan = example_searched
+    planner = Planner(load_world("tank_5_obstacles"), ROBOT, MODEL, unknown_current_m_s=0.0,
+                      seed=0)
+    checks, _ = planner.check_plan(plan)
+    bad = [c for c in checks if not c.ok]
+    assert bad and not bad[0].collision_free
+    assert body_gaps_m(planner.world, planner.model, bad[0].states).min() <= 0.0
+
+
 def test_every_run_of_a_passed_check_is_clear_of_everything_by_the_audit():
     # a 0.01 m/s unknown current: the example is planned (seeded draws), every check run audited
     planner = Planner(load_world("tank_5_obstacles"), ROBOT, MODEL, draws=16,
