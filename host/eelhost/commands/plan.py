@@ -38,6 +38,7 @@ from eelhost.planning.uncertainty import (
 )
 from eelhost.planning.world import World, load_world
 from eelhost.planning.worlds import generate_world
+from eelhost.progress import phase
 from eelsim.robot import Robot
 
 REFUSALS = ("blocked_start", "current_too_strong", "goal_blocked", "unreachable")
@@ -200,7 +201,8 @@ def run(args: argparse.Namespace) -> int:
     world = world_from_name(args.world)
     out = check_output_folder(args.out)  # before the search, not after it
     planner = Planner(world, robot, model, threads=args.threads, **planner_options(args))
-    outcome = planner.plan()
+    with phase(f"plan {world.name}: search and check in the twin"):
+        outcome = planner.plan()
     atomic_write(out / "plan.json", json.dumps(plan_json(world, outcome), indent=1))
     if outcome.status in REFUSALS:
         raise PlanRefused(outcome.status, f"{world.name}: {outcome.message}")

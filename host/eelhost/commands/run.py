@@ -29,6 +29,7 @@ from eelhost.field.session import TakeNotes
 from eelhost.field.take import TakeRequest, refuse_overwrite, run_take
 from eelhost.files import check_output_stem
 from eelhost.link.uri import parse_link_uri
+from eelhost.progress import phase
 from eelhost.vision.markerfile import load_marker_file
 from eelsim.control import Gait
 from eelsim.robot import load_robot
@@ -192,8 +193,9 @@ def run(args: argparse.Namespace) -> int:
         # the fitted model as eelbot plan reads it (law, joints, current), or the robot file's
         model = (read_coefficient_model(args.coefficients_file, robot)
                  if args.coefficients_file else default_model(robot))
-        planned = plan_for_run(world, robot, args.robot, gait, coefficients=model,
-                               acceptance_radius_m=args.radius)
+        with phase(f"plan {world.name}: search and check in the twin"):
+            planned = plan_for_run(world, robot, args.robot, gait, coefficients=model,
+                                   acceptance_radius_m=args.radius)
         print(planned.outcome.message)
         print(f"coefficients: {model.describe()}")
         waypoints, navigator, uri = planned.waypoints_m, planned.navigator, planned.uri
