@@ -261,7 +261,7 @@ def _bench(args: argparse.Namespace, robot: Robot, model: CoefficientModel) -> i
         f"{args.threads} thread(s) of the batched twin, {max(args.jobs, 1)} world(s) at once; "
         f"Python {platform.python_version()}",
         f"- coefficients: {model.describe()}",
-        f"- the check: the 2 fits and {CHECK_DRAWS} draws of the water per plan (coefficients "
+        f"- the check: the fits as fitted and {CHECK_DRAWS} draws of the water per plan (coefficients "
         f"jointly within the fit's 95 % region; unknown current {args.unknown_current:g} m/s "
         "towards 8 directions)",
         *lines,
