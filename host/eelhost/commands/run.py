@@ -245,6 +245,8 @@ def _bench(args: argparse.Namespace) -> int:
              if args.coefficients_file else default_model(robot))
     out = Path(args.out or "out/run_bench")
     seeds = range(args.seed, args.seed + args.worlds)
+    done_file = out / "results.jsonl"
+    resumed = len(done_file.read_text().splitlines()) if done_file.exists() else 0
     wall0 = time.monotonic()
     with Progress("run --bench", len(seeds), "world") as bar:
 
@@ -267,7 +269,9 @@ def _bench(args: argparse.Namespace) -> int:
     lines = summary_lines(results)
     block = [BENCH_BEGIN, f"Command: `{command}`", "",
              f"- machine: {cpu_model()}, {os.cpu_count()} cores visible (shared with other "
-             f"work); this run took {time.monotonic() - wall0:.0f} s of wall time",
+             f"work); this run took {time.monotonic() - wall0:.0f} s of wall time"
+             + (f" after reading {resumed} worlds' results back from {done_file}" if resumed
+                else ""),
              f"- coefficients of the planner: {model.describe()}", *lines, BENCH_END]
     print("\n".join(lines))
     if args.write:
