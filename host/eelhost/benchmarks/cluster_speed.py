@@ -28,6 +28,7 @@ import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -43,6 +44,43 @@ DATASET = Path(__file__).resolve().parents[3] / "datasets" / "paper_virtual_tank
 def _candidates(truth: np.ndarray, count: int, seed: int) -> np.ndarray:
     rng = np.random.default_rng(seed)
     return truth * rng.uniform(0.7, 1.3, size=(count, truth.size))
+
+
+class _Timed:
+    """A task function that also returns the CPU time it took and the worker process's id."""
+
+    def __init__(self, function: Callable) -> None:
+        self.function = function
+
+    def __call__(self, job: Any) -> tuple[Any, float, int]:
+        start = time.process_time()
+        out = self.function(job)
+        return out, time.process_time() - start, os.getpid()
+
+
+class _TimedMap:
+    """A cluster map that records each call's CPU time per worker process.
+
+    Load-independent: what each worker computed, not how long it waited.
+    """
+
+    def __init__(self, inner: Any) -> None:
+        self.inner = inner
+        self.blocks = inner.blocks
+        self.per_call: list[dict[int, float]] = []
+        self.tasks: list[list[float]] = []  # each call's blocks' CPU times
+
+    def share(self, value: Any) -> Any:
+        return self.inner.share(value)
+
+    def __call__(self, function: Callable, jobs: Any) -> list[Any]:
+        results = self.inner(_Timed(function), jobs)
+        per: dict[int, float] = {}
+        for _, cpu, pid in results:
+            per[pid] = per.get(pid, 0.0) + cpu
+        self.per_call.append(per)
+        self.tasks.append([cpu for _, cpu, _ in results])
+        return [r for r, _, _ in results]
 
 
 def _time(fitness: Callable[[np.ndarray], np.ndarray], cands: np.ndarray) -> tuple[float, np.ndarray]:
@@ -111,29 +149,40 @@ def measure(workers: int = 2, candidates: int = 150, repeats: int = 5, seed: int
     cases: dict[str, Callable[[np.ndarray], np.ndarray]] = {
         ONE: one_core, f"in process, {cores} cores": local.fitness}
     maps = []
+    timed: dict[str, _TimedMap] = {}
     try:
         for name, lab in clusters.items():
             spread = dask_map(lab.scheduler_address, tls=files if "TLS" in name else None)
             maps.append(spread)
-            ev = Evaluator(ds.robot, exps, backend="batch", map_function=spread)
+            timed[name] = _TimedMap(spread)
+            ev = Evaluator(ds.robot, exps, backend="batch", map_function=timed[name])
             if not np.array_equal(ev.fitness(cands), reference):  # warm-up, and the check
                 raise RuntimeError(f"{name}: fitness differs from one machine's")
             cases[name] = ev.fitness
         times: dict[str, list[float]] = {name: [] for name in cases}
+        cpu: dict[str, list[tuple[float, float]]] = {name: [] for name in cases}  # all, busiest
         for _ in range(repeats):
             for name, fitness in cases.items():
+                start = time.process_time()
                 dt, f = _time(fitness, cands)
+                own = time.process_time() - start
                 if not np.array_equal(f, reference):
                     raise RuntimeError(f"{name}: fitness differs from one machine's")
                 times[name].append(dt)
+                if name in timed:
+                    per = timed[name].per_call[-1]
+                    cpu[name].append((sum(per.values()), max(per.values())))
+                else:
+                    cpu[name].append((own, own))
     finally:
+        blocks = {name: t.tasks[1:] for name, t in timed.items()}  # the warm-up's left out
         for spread in maps:
             spread.close()
         for lab in clusters.values():
             lab.close()
-    return {"times": times, "workers": workers, "candidates": candidates,
+    return {"times": times, "cpu": cpu, "blocks": blocks, "workers": workers, "candidates": candidates,
             "experiments": len(exps), "cores": cores, "repeats": repeats,
-            "runs": candidates * len(exps), "load": load_average(), "cpu": cpu_model()}
+            "runs": candidates * len(exps), "load": load_average(), "processor": cpu_model()}
 
 
 def report(m: dict, note: str) -> str:
@@ -148,7 +197,7 @@ def report(m: dict, note: str) -> str:
         "",
         f"`python -m eelhost.benchmarks.cluster_speed --workers {w} --candidates "
         f"{m['candidates']} --repeats {m['repeats']} --write` on "
-        f"{time.strftime('%Y-%m-%d %H:%M')} ({m['cpu']}, {m['cores']} cores; load average "
+        f"{time.strftime('%Y-%m-%d %H:%M')} ({m['processor']}, {m['cores']} cores; load average "
         f"before: {m['load']}). {note}",
         "",
         f"A generation of {m['candidates']} candidates x {m['experiments']} straight training "
@@ -158,12 +207,17 @@ def report(m: dict, note: str) -> str:
         "cluster worker stands for a machine of one core (its kernel on one thread); the speed-up "
         "is over the same generation in one process on one core.",
         "",
-        "| case | median s | fastest s | slowest s | speed-up (medians) | speed-up (fastest) |",
-        "|---|---|---|---|---|---|",
+        "| case | median s | fastest s | slowest s | speed-up (medians) | speed-up (fastest) "
+        "| CPU s, all workers | CPU s, busiest worker | CPU bound of the speed-up |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
+    cpu = {name: np.median(np.array(v), axis=0) for name, v in m["cpu"].items()}
     for name, t in times.items():
+        busiest = (f"{cpu[name][1]:.2f} | {cpu[SINGLE][0] / cpu[name][1]:.2f} x"
+                   if name.startswith("cluster") else "- | -")
         lines.append(f"| {name} | {med[name]:.2f} | {best[name]:.2f} | {max(t):.2f} | "
-                     f"{med[ONE] / med[name]:.2f} x | {best[ONE] / best[name]:.2f} x |")
+                     f"{med[ONE] / med[name]:.2f} x | {best[ONE] / best[name]:.2f} x | "
+                     f"{cpu[name][0]:.2f} | {busiest} |")
     lines += [
         "",
         f"The rows '{w} workers' against '1 worker' are the scale-out: the generation's blocks "
@@ -173,6 +227,29 @@ def report(m: dict, note: str) -> str:
         "machines each worker has its own cores, and the kernel on each uses all of them. The "
         "cluster rows against the in-process row on one core show the cluster's own cost "
         "(sending the candidates, the blocks' separate tails); TLS adds the encryption.",
+        "",
+        "The CPU columns depend much less on the load: the processor time the worker processes "
+        "spent in their blocks (medians over the repeats; in process: this whole process's, its "
+        "Python work around the kernel included). 'CPU bound' is the 1-worker cluster's CPU time "
+        "over the busiest worker's: the speed-up on as many one-core machines as workers if "
+        "sending the work cost nothing, an upper bound set by how the blocks were shared out. "
+        "A block goes to whichever worker is free (2 blocks per worker and generation), so a "
+        "worker the machine starves of CPU takes fewer blocks and the other more.",
+        "",
+    ]
+    name = f"cluster, {w} workers x 1 core"
+    calls = m["blocks"][name]
+    largest = [max(call) / float(np.mean(call)) for call in calls]
+    mean_block = float(np.median([np.mean(call) for call in calls]))
+    lines += [
+        f"How evenly the blocks share the work ({name}): {len(calls[0])} blocks a generation of "
+        f"{m['candidates'] // len(calls[0])} candidates each, {mean_block:.2f} CPU s each (median "
+        f"over the generations); the largest block of a generation took "
+        f"{np.median(largest):.2f} x the blocks' mean (median; at worst {max(largest):.2f} x). "
+        f"With two blocks per worker on {w} idle one-core machines the busiest would compute "
+        "about twice the largest block: a bound of "
+        f"{cpu[SINGLE][0] / (2 * mean_block * float(np.median(largest))):.2f} x over one such "
+        "machine, less the cost of sending the work.",
         END,
     ]
     return "\n".join(lines)
