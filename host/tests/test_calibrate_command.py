@@ -188,7 +188,8 @@ def test_run_refuses_frames_of_another_size_than_its_calibration(tmp_path, capsy
     cal, _ = _half_size_calibration(tmp_path)
     capsys.readouterr()
     status = main(["run", "--robot", "sim://", "--calibration", str(cal), "--waypoints", "1,0",
-                   "--gait", "0.87,3.9", "--duration", "2", "--out", str(tmp_path / "run")])
+                   "--gait", "0.87,3.9", "--duration", "2", "--no-view", "--out",
+                   str(tmp_path / "run")])
     err = capsys.readouterr().err
     assert status == 2, err
     assert "640x360" in err and "1280x720" in err and str(cal) in err
