@@ -1,0 +1,64 @@
+"""The closed-loop benchmark's own contact geometry (written apart from the planner's)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from eelhost.benchmarks.closed_loop import true_clearance_m, water_for
+from eelhost.planning.body import link_endpoints
+from eelhost.planning.uncertainty import default_model
+from eelhost.planning.world import parse_world
+from eelsim.dynamics import straight_state
+from eelsim.model import SwimmerModel
+from eelsim.robot import load_robot
+
+ROBOT = load_robot()
+BODY = SwimmerModel.from_robot(ROBOT)
+WORLD = parse_world({
+    "name": "w", "tank": {"size_m": [3.0, 2.0]},
+    "start": {"position_m": [0.6, 1.0], "heading_deg": 0.0},
+    "goal": {"position_m": [2.4, 1.0], "radius_m": 0.2},
+    "current": {"speed_m_s": 0.0, "direction_deg": 0.0},
+    "obstacles": [{"kind": "circle", "centre_m": [1.5, 1.0], "radius_m": 0.15},
+                  {"kind": "polygon", "vertices_m": [[2.0, 0.2], [2.4, 0.2], [2.4, 0.5],
+                                                     [2.0, 0.5]]}],
+}, "w")
+
+
+def test_a_straight_body_beside_a_wall_is_its_distance_less_its_half_width():
+    for gap in (0.05, 0.01, -0.005):
+        y = float(BODY.half_axis_horizontal_m.max()) + gap
+        state = straight_state(BODY, 0.0, (0.8, y))
+        assert true_clearance_m(WORLD, BODY, state[None])[0] == pytest.approx(gap, abs=1e-9)
+
+
+def test_the_true_body_is_never_closer_than_the_planners_conservative_one():
+    # the planner's body: link centre lines widened by the largest half width all round; the
+    # benchmark's: each link its own stadium inside that, so never nearer to anything
+    rng = np.random.default_rng(3)
+    states = []
+    for _ in range(300):
+        s = straight_state(BODY, rng.uniform(-np.pi, np.pi), (rng.uniform(0.3, 2.7),
+                                                              rng.uniform(0.3, 1.7)))
+        s[: BODY.n_links] += np.cumsum(rng.normal(0, 0.25, BODY.n_links))
+        states.append(s)
+    states = np.asarray(states)
+    ours = true_clearance_m(WORLD, BODY, states)
+    b_max = float(BODY.half_axis_horizontal_m.max())
+    planner = WORLD.body_clearance(link_endpoints(BODY, states)) - b_max  # exact at every state
+    # (the planner's gap stops at minus its half width, where the centre line touches)
+    measured = planner > -b_max + 1e-9
+    assert np.all(ours[measured] >= planner[measured] - 1e-6)
+    assert (ours < 0).sum() > 10 and np.all(planner[ours < 0] < 0)  # contacts seen by both
+    # each stadium lies within 2 b_max of the planner's capsule around the same link (its caps
+    # end at the tip, b_max short of the capsule's; its width at most b_max less)
+    assert np.all((ours - planner)[measured & (ours > 0)] <= 2 * b_max + 1e-6)
+
+
+def test_the_virtual_robots_water_is_seeded_and_within_its_bounds():
+    model = default_model(ROBOT)
+    a, b = water_for(7, model), water_for(7, model)
+    assert a == b and water_for(8, model) != a
+    speeds = [np.hypot(*water_for(s, model)["unknown_current_m_s"]) for s in range(50)]
+    assert max(speeds) <= 0.02 and min(speeds) >= 0.0
