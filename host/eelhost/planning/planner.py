@@ -407,8 +407,11 @@ class Planner:
             if not bad:
                 outcome = Outcome(plan, "found", "", checks, attempt, total, searching,
                                   len(self.water))
+                repaired = (f" (searched again after {attempt} failed check(s), swimming only "
+                            "manoeuvres not swum before)" if attempt else "")
                 outcome.message = (
-                    f"{plan.message}; checked in the twin with the fits and over {len(self.water)} "
+                    f"{plan.message}{repaired}; checked in the twin with the fits and over "
+                    f"{len(self.water)} "
                     f"draws of the water (min clearance "
                     f"{min(c.min_clearance_m for c in checks) * 1000:.0f} mm): "
                     f"{outcome.confidence()}")
