@@ -162,8 +162,8 @@ def _resistive_by_quadrature(fluid, j, vt, vn, om):
         return -(fluid.k_n1[j] * wn + fluid.k_n2[j] * abs(wn) * wn)
 
     points = [-vn / om] if om != 0 and abs(vn / om) < h else None
-    fn = quad(normal, -h, h, points=points, epsabs=1e-18, epsrel=1e-12)[0]
-    torque = quad(lambda s: s * normal(s), -h, h, points=points, epsabs=1e-18, epsrel=1e-12)[0]
+    fn = quad(normal, -h, h, points=points, epsabs=1e-16, epsrel=1e-11)[0]
+    torque = quad(lambda s: s * normal(s), -h, h, points=points, epsabs=1e-16, epsrel=1e-11)[0]
     ft = -2 * h * (fluid.k_t1[j] * vt + fluid.k_t2[j] * abs(vt) * vt)
     return ft, fn, torque
 

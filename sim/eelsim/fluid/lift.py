@@ -164,10 +164,13 @@ def with_lift(base: FluidLaw) -> LiftLaw:
     }
     coefficients = type(record, (base.coefficients,), namespace)
     setattr(sys.modules[__name__], record, coefficients)  # importable by name: it pickles
-    law_class = type(f"{type(base).__name__}Lift", (LiftLaw,), {
+    law_name = f"{type(base).__name__}Lift"
+    law_class = type(law_name, (LiftLaw,), {
         "name": name, "coefficients": coefficients, "base": base, "candidate": False,
         "default_bounds": (*base.default_bounds, LIFT_BOUNDS),
         "kernel_rows": (*base.kernel_rows, "klift"),
         "__module__": __name__,
+        "__qualname__": law_name,
     })
+    setattr(sys.modules[__name__], law_name, law_class)
     return law_class()

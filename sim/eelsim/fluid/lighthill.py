@@ -88,11 +88,7 @@ class LighthillLinkFluid(MorisonLinkFluid):
         l of each link, m (the tail term acts at the tail tip, l_0 behind the centre).
     """
 
-    half_length: FloatArray
-
-    def kernel_values(self) -> dict[str, FloatArray]:
-        """The paper's drag rows (the kernel has the half-lengths already)."""
-        return super().kernel_values()
+    half_length: FloatArray  # not a kernel row: the kernel has the half-lengths already
 
 
 def tail_shedding(mu_n_tail: FloatArray, half_length_tail: FloatArray, vt: FloatArray,
