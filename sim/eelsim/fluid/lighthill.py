@@ -64,8 +64,8 @@ class LighthillCoefficients(FluidCoefficients):
     C_f, C_d : float
         The resistive part: the paper's tangential and normal drag (and its yaw damping from C_f).
     C_a : float
-        Lateral added mass per unit length m = rho pi C_a a^2 (C_a = 1: a flat ellipse's
-        potential-flow value); it sets the reactive force, the added yaw inertia and the tail
+        Lateral added mass per unit length m = rho pi C_a a^2 (C_a = 1: the potential-flow
+        value of an elliptic section moving across its a axis); it sets the reactive force, the added yaw inertia and the tail
         term.
     """
 
