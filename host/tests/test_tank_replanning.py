@@ -339,3 +339,20 @@ def test_failed_replans_keep_a_present_plan_the_twin_swims_clear(open_plan):
         nav.close()
     assert d is None  # never stopped: it keeps its plan
     assert len(nav.requests) >= 4 and np.diff(nav.requests)[2:].min() >= 4.0 - 0.05
+
+
+def test_a_failed_replan_with_contact_ahead_stops_the_robot_at_once(open_plan):
+    planner, outcome = open_plan
+
+    class HitAhead(failing_replanner("exhausted")):  # type: ignore[misc]
+        def _look_ahead(self, est, left, extra):  # noqa: ANN001, ANN202
+            return -0.01  # the present waypoints are swum 10 mm into something
+
+    nav = HitAhead(lambda extra: planner, planner, outcome, PATH_GAIT)
+    nav.requests.clear()
+    try:
+        t_stop, d = drive_off_corridor(nav, 5.0)
+    finally:
+        nav.close()
+    assert d is not None and d.stop == "no_safe_continuation"
+    assert "into an obstacle or wall" in d.detail and len(nav.requests) == 1

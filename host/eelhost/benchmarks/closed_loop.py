@@ -241,6 +241,8 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
                               camera_view=TankView.covering(world.tank.size_m), trace_plant=True)
         result = run_take(request)
     out = result.outcome
+    if result.signals:  # the take was stopped by a signal: so is the benchmark, unrecorded
+        raise KeyboardInterrupt(f"{', '.join(result.signals)} received")
     vr = result.virtual_robot
     assert vr is not None and vr.trace is not None
     clear = true_clearance_m(world, vr.model, np.asarray(vr.trace))

@@ -260,7 +260,9 @@ class TankReplanner:
     corridor_m : float
         Half width of the corridor around the planned centre-of-mass path.
     max_failures : int
-        Consecutive failed replans after which the robot is stopped (no safe continuation),
+        Consecutive failed replans after which the robot is stopped (no safe continuation); it
+        is stopped at once when a replan fails while the latest look-ahead swims the present
+        waypoints into contact, or when a look-ahead does so after a failed replan;
         unless the latest look-ahead swam its present waypoints clear of contact: it then keeps
         them, and replanning is tried again every ``backoff_s`` 2^(max_failures - 1).
     backoff_s : float
@@ -392,6 +394,15 @@ class TankReplanner:
             self._lookahead = None
             self._last_gap = (t_s, gap)
             predicted = gap is not None and gap < self.lookahead_margin_m
+        gap = self._last_gap[1]
+        if (predicted and self.failures > 0 and gap is not None and gap <= 0.0
+                and self._job is None and self._pending is None):
+            # the present plan swims into something and the last replan found nothing better
+            d.stop = "no_safe_continuation"
+            d.detail = (f"at t = {t_s:.2f} s the twin swims the present plan into an obstacle "
+                        f"or wall within {self.lookahead_s:g} s ({-gap * 1000:.0f} mm deep) and "
+                        f"the last replan failed: {self.events[-1]['message']}")
+            return d
         reason = None
         if float(distance_to_path(self.path, np.asarray([pose[:2]]))[0]) > self.corridor_m:
             reason = "left_corridor"
@@ -510,6 +521,11 @@ class TankReplanner:
             log.info("replanned at t = %.2f s (%.2f s wall): %s", t_s, wall, outcome.message)
             return True
         self.failures += 1
+        if self._present_plan_hits(t_s):
+            d.stop = "no_safe_continuation"
+            d.detail = (f"replanning at t = {job.t_request_s:.2f} s failed and the twin swims the "
+                        f"present plan into an obstacle or wall: {outcome.message}")
+            return True
         if self.failures >= self.max_failures and self._present_plan_safe(t_s):
             # no new plan, but the twin swims the present one on without contact: keep it
             log.warning("replanning failed %d times; the present plan is predicted clear, so "
@@ -549,6 +565,11 @@ class TankReplanner:
         current = np.add(self.planner.world.current_m_s, extra - self._planner_current)
         return Twin(twin.robot, twin.coefficients, twin.gait, twin.options,
                     (float(current[0]), float(current[1])), twin.acceptance_radius_m, twin.threads)
+
+    def _present_plan_hits(self, t_s: float) -> bool:
+        """The last look-ahead, at most 1.5 s old, swam the present waypoints into contact."""
+        t_gap, gap = self._last_gap
+        return gap is not None and t_s - t_gap <= 1.5 and gap <= 0.0
 
     def _present_plan_safe(self, t_s: float) -> bool:
         """The last look-ahead, at most 1.5 s old, swam the present waypoints clear of contact.
