@@ -347,6 +347,8 @@ def summary_lines(results: list[WorldResult]) -> list[str]:
     failures = [r for r in planned if not r.reached or r.contact]
     if failures:
         lines.append("- every failure:")
-        lines += [f"  - seed {r.seed}: {r.reason}"
-                  + (" with CONTACT" if r.contact else "") + f": {r.detail}" for r in failures]
+        lines += [f"  - seed {r.seed}: {r.reason} (true body "
+                  + (f"{-(r.min_clearance_m or 0.0) * 1000:.0f} mm into an obstacle or wall"
+                     if r.contact else f"{(r.min_clearance_m or 0.0) * 1000:.0f} mm clear")
+                  + f"): {r.detail}" for r in failures]
     return lines
