@@ -22,6 +22,7 @@ class CommandLink {
 
   // Bytes of a frame the robot sends with a payload of payload_bytes: header, payload, CRC-16,
   // COBS's code byte (one: every frame is under 254 bytes) and the delimiter.
+  static_assert(eelproto::kMaxFrameBytes < 254, "frame_bytes counts one COBS code byte");
   static constexpr uint8_t frame_bytes(uint8_t payload_bytes) {
     return static_cast<uint8_t>(eelproto::kHeaderBytes + payload_bytes + eelproto::kCrcBytes + 2);
   }
@@ -39,8 +40,8 @@ class CommandLink {
   void ack(uint8_t msg_id, uint8_t seq);
   void refuse(uint8_t msg_id, uint8_t seq, uint8_t reason);
   // An answer with data (Version, Setting, the Status asked for): may use the whole queue. A
-  // reply that finds no room is dropped and counted (tx_dropped): the queue then holds only
-  // replies and at most one frame of the robot's own queued while kReplyRoomBytes were free.
+  // reply that finds no room is dropped and counted (tx_dropped): the queue then holds other
+  // replies, and of the robot's own frames only what went in while kReplyRoomBytes were free.
   template <typename M>
   void reply(const M& m) {
     send(m);
