@@ -178,3 +178,21 @@ def test_every_run_of_a_passed_check_is_clear_of_everything_by_the_audit():
     for run in outcome.checks:
         assert run.reached
         assert body_gaps_m(planner.world, planner.model, run.states).min() > 0, run.label
+
+
+def test_plan_command_writes_the_checks_confidence_and_refuses_a_bad_bound(tmp_path, capsys):
+    from eelhost.cli import main
+
+    out = tmp_path / "plan"
+    assert main(["plan", "tank_5_obstacles", "--unknown-current", "0", "--draws", "8",
+                 "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "collision probability 0.0% (0 of 8 draws of the water; 95 % interval" in printed
+    check = json.loads((out / "plan.json").read_text())["check"]
+    assert check["draws"] == 8 and check["failures"] == 0
+    assert check["interval_95"][1] == pytest.approx(1 - 0.025 ** (1 / 8))
+    arrival = check["arrival_s"]
+    assert arrival["p5"] <= arrival["median"] <= arrival["p95"]
+    assert main(["plan", "tank_5_obstacles", "--unknown-current", "-0.01", "--out",
+                 str(out)]) == 2
+    assert "--unknown-current: expected a speed from 0 to 1 m/s" in capsys.readouterr().err
