@@ -149,9 +149,9 @@ def run_report(
         seconds[motion] = seconds.get(motion, 0.0) + time.perf_counter() - t0
     comparison = chosen.comparison
     choice = recommend(comparison) if comparison else None
-    if comparison and choice:
+    if comparison:
         extra["model_comparison"] = {
-            "recommended": choice.model,
+            "recommended": choice.model if choice else None,
             "adopted": chosen.adopted,
             "candidates": {c.model: {"parameters": c.parameters, "fitness": c.fitness,
                                      "held_out": {m: v.tolist() for m, v in c.held_out.items()},
@@ -202,7 +202,15 @@ def run_report(
     if bands:
         text += _bands_text(bands, extra["prediction_band"]["coverage"],
                             dataset.robot.body_length_m())
-    if comparison and choice:
+    if comparison:
+        verdict = (
+            "Recommended: none: every candidate failed, so the robot file's model was fitted."
+            if choice is None else
+            f"Recommended: **{choice.model}** (lowest mean held-out error; within "
+            "2 % the model with fewer parameters)"
+            + ("; adopted: the fits above are its own." if chosen.adopted else
+               "." if choice.model == chosen.model else
+               f"; not adopted (`--keep-model`): the fits above are {chosen.model}'s."))
         text += "\n".join([
             "",
             "## Candidate models (leave-one-gait-out cross-validation)",
@@ -212,11 +220,7 @@ def run_report(
             "",
             comparison_markdown(comparison),
             "",
-            f"Recommended: **{choice.model}** (lowest mean held-out error; within "
-            "2 % the model with fewer parameters)"
-            + ("; adopted: the fits above are its own." if chosen.adopted else
-               "." if choice.model == chosen.model else
-               f"; not adopted (`--keep-model`): the fits above are {chosen.model}'s."),
+            verdict,
             "",
         ])
     atomic_write(report, text)  # whole or not at all (eelhost.files)
