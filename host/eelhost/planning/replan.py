@@ -34,7 +34,7 @@ from eelhost.planning.body import link_endpoints
 from eelhost.planning.execute import Swim, body_clearance_m, swim
 from eelhost.planning.geometry import FloatArray, point_segment_distance
 from eelhost.planning.planner import Outcome, Planner
-from eelhost.planning.search import Plan, in_goal
+from eelhost.planning.search import Plan, goal_mask, in_goal
 from eelhost.planning.state_estimate import BodyEstimate, BodyStateEstimator, CurrentEstimator
 from eelhost.planning.twin import Twin
 from eelhost.vision.localise import Localisation
@@ -553,6 +553,12 @@ class TankReplanner:
                         stride=3)
         states = runs.states[0]
         states = states[np.isfinite(states[:, 0])]
+        # the run ends where the goal test first holds (the loop stops the robot there): a goal
+        # by a wall is not a contact of the twin swimming on to accept its last waypoint
+        n = self.model.n_links
+        inside = np.flatnonzero(goal_mask(self.world, states[:, n : n + 2]))
+        if inside.size:
+            states = states[: int(inside[0]) + 1]
         if not len(states):
             return None
         planner = self.planner
