@@ -234,8 +234,9 @@ def _bands_text(bands: list[PredictionBand], coverage: dict[str, float], bl_m: f
         "## Prediction bands of the held-out experiments",
         "",
         f"{BAND_LEVEL * 100:.0f} % bands around each prediction: the spread of the bootstrap's "
-        "refits swum on the held-out task plus the training residuals' growth along a recording "
-        "(docs/estimation.md, \"Prediction bands\"). Positions inside their band, on the "
+        "refits swum on the held-out task plus the misfit's growth along a recording (each "
+        "training experiment against the fit without it; docs/estimation.md, \"Prediction "
+        "bands\"). Positions inside their band, on the "
         "recordings' own clocks: "
         + ", ".join(f"{m} {v * 100:.0f} %" for m, v in coverage.items()) + ".",
         "",
