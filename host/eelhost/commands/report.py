@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 from pathlib import Path
 
 from eelhost.commands.common import add_fit_options, fit_settings, number
@@ -40,6 +41,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--keep-model", action="store_true",
                    help="report the robot file's model even when the comparison recommends "
                    "another (default: fit the recommended model and report its fits)")
+    p.add_argument("--jobs", type=number(int, minimum=1), default=None, metavar="N",
+                   help="worker processes of the comparison's independent fits (default: one "
+                   "per core; 1: none). The scores are the same for every N")
     add_fit_options(p)
     p.set_defaults(run=run)
 
@@ -72,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"{folder}: the manifest names no training experiments "
                         "(straight or turning) to fit")
     motions += ("joint",) if args.joint else ()
-    settings = fit_settings(args)
+    settings = replace(fit_settings(args), jobs=args.jobs)
 
     bars: list[Progress] = []
 

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
@@ -56,6 +57,18 @@ ALIGN_STEP_S = 0.01
 
 
 _ALL_RUNS = [0]  # closed-loop runs of every evaluator in this process, for progress
+_ALL_RUNS_LOCK = threading.Lock()  # evaluators may run in several threads at once
+
+
+def count_runs(runs: int) -> int:
+    """Add ``runs`` closed-loop runs to the process-wide count (thread-safe); the new total.
+
+    Evaluators count their own; work done in another process (the comparison's worker pool,
+    :mod:`eelhost.estimation.selection`) is added here when its result comes back.
+    """
+    with _ALL_RUNS_LOCK:
+        _ALL_RUNS[0] += int(runs)
+        return _ALL_RUNS[0]
 
 
 def simulations_counter() -> Callable[[], dict[str, int]]:
@@ -388,7 +401,7 @@ class Evaluator:
         else:
             sim = self._simulate_reference(robots, x)
         self.simulations += x.shape[0] * len(self.prepared)
-        _ALL_RUNS[0] += x.shape[0] * len(self.prepared)
+        count_runs(x.shape[0] * len(self.prepared))
         self.steps += int(sim.steps.sum())
         return sim
 

@@ -79,6 +79,10 @@ class FitSettings:
         Fit the tank's unknown ambient current (v_x, v_y) with the coefficients, a nuisance
         shared by the experiments (:class:`~eelhost.estimation.parameters.ParameterSpace`;
         docs/estimation.md, "Nuisance parameters").
+    jobs : int or None
+        Worker processes of the model comparison's independent fits (docs/estimation.md,
+        "Choosing the model"); None: one per core, 1: in this process. The scores do not
+        depend on it.
     """
 
     method: str = "cmaes"
@@ -91,6 +95,7 @@ class FitSettings:
     align_s: float = 0.0
     restarts: str = "bipop"
     fit_current: bool = True
+    jobs: int | None = None
 
 
 def training_experiments(dataset: Dataset, motion: str) -> list[Experiment]:
@@ -156,8 +161,10 @@ def fit_motion(
     )
     ck = None
     if checkpoint_dir is not None:
+        # (the comparison's worker count changes no result: a resume with another one continues)
         ident = {"dataset": str(dataset.folder.resolve()), "motion": motion,
-                 "model": space.model_name, **settings.__dict__}
+                 "model": space.model_name,
+                 **{k: v for k, v in settings.__dict__.items() if k != "jobs"}}
         tag = space.model_name.replace(" x ", "_")
         ck = Checkpoint(
             Path(checkpoint_dir) / f"checkpoint_{motion}_{tag}_{settings.method}.npz", ident

@@ -28,13 +28,17 @@ one within ``TIE`` of it with fewer parameters is preferred (the simpler model p
 from __future__ import annotations
 
 import logging
+import multiprocessing as mp
+import os
 from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
 from eelhost.data.experiments import Dataset, Experiment
-from eelhost.estimation.evaluate import EstimationError, Evaluator
+from eelhost.estimation.evaluate import EstimationError, Evaluator, count_runs
 from eelhost.estimation.local import FAILED, polish_minimax_many
 from eelhost.estimation.methods import CURRENT_POLISH_ITERATIONS
 from eelhost.estimation.optimise import fit_cmaes
@@ -305,8 +309,9 @@ def cross_validate(
     fits : sequence of str
         The separate fits to compare on ("straight", "turning"); a mapping's keys are taken.
     settings : FitSettings
-        The evaluator's backend and clock search, the seed of the starts, and whether the
-        ambient current is fitted.
+        The evaluator's backend and clock search, the seed of the starts, whether the
+        ambient current is fitted, and the worker processes of the independent fits
+        (``jobs``; the scores do not depend on it).
     laws : sequence of str, optional
         Fluid laws of the grid (default: the twin's candidate laws).
     iterations : int
@@ -350,26 +355,34 @@ def cross_validate(
 
     evs = {(i, m): evaluator(s, training_experiments(dataset, m))
            for i, s in enumerate(spaces) for m in motions}
+    keys = list(evs)
     # every candidate in still water from its own starts, then from every other candidate's
     # best fit so far carried over by name (in the grid's fixed order, and once more for any
-    # candidate whose fit still fails); then the ambient current from the best
-    still = {key: multi_start_fit(ev, settings.seed, (), iterations, budget)
-             for key, ev in evs.items()}
-
-    def cross_seed(i: int, m: str) -> None:
-        others = [carry_over(replace(spaces[o], current=False).as_dict(still[(o, m)].values[0]),
-                             spaces[i], spaces[i].bounds.mean(axis=1))
-                  for o in range(len(spaces)) if o != i]
-        if others:
-            again = multi_start_fit(evs[(i, m)], settings.seed, others, iterations, 0)
-            still[(i, m)] = _merge(still[(i, m)], again)
-
-    for key in evs:
-        cross_seed(*key)
-    for key in evs:
-        if still[key].fitness[0] >= FAILED:
-            cross_seed(*key)
-    fitted = {key: _with_current(ev, still[key], iterations) for key, ev in evs.items()}
+    # candidate whose fit still fails); then the ambient current from the best. The stages are
+    # barriers; within one, the fits are independent and may run in worker processes
+    # (settings.jobs): each gets its evaluator and gives it back with its counts, so every fit
+    # is the one the serial run makes.
+    with _Workers(settings.jobs, len(keys)) as workers:
+        done = workers.map(_still_stage, [(evs[k], settings.seed, iterations, budget)
+                                          for k in keys])
+        still: dict[tuple[int, str], _Fitted] = {}
+        for k, (own, ev) in zip(keys, done, strict=True):
+            still[k], evs[k] = own, ev
+        # the carried-over starts of a motion's candidate read the fits of the same motion's
+        # candidates before it in this stage, so each motion is one task
+        chains = workers.map(_cross_seed_chain, [
+            (spaces, [evs[(i, m)] for i in range(len(spaces))],
+             [still[(i, m)] for i in range(len(spaces))], settings.seed, iterations)
+            for m in motions])
+        for m, (fits_m, evs_m) in zip(motions, chains, strict=True):
+            for i in range(len(spaces)):
+                still[(i, m)], evs[(i, m)] = fits_m[i], evs_m[i]
+        scored = workers.map(_score_stage, [(evs[k], still[k], iterations, fold_iterations)
+                                            for k in keys])
+    fitted: dict[tuple[int, str], _Fitted] = {}
+    held_out: dict[tuple[int, str], tuple[np.ndarray, str | None]] = {}
+    for k, (with_current, held, ev) in zip(keys, scored, strict=True):
+        fitted[k], held_out[k], evs[k] = with_current, held, ev
     scores = []
     for i, space in enumerate(spaces):
         score = CandidateScore(space.model_name, space.size * len(motions), space=space)
@@ -377,7 +390,7 @@ def cross_validate(
             ev = evs[(i, m)]
             score.fitness[m] = fitted[(i, m)].fitness[0]
             score.values[m] = fitted[(i, m)].values[0]
-            score.held_out[m], why = _folds(ev, fitted[(i, m)], fold_iterations)
+            score.held_out[m], why = held_out[(i, m)]
             score.failed = score.failed or (f"{m}: {why}" if why else None)
             score.simulations += ev.simulations
         _said(score, say)
@@ -390,6 +403,104 @@ def cross_validate(
                                    iterations, fold_iterations, budget))
             _said(scores[-1], say)
     return scores
+
+
+def default_jobs() -> int:
+    """Worker processes of the comparison by default: the cores this process may use."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not on Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def _still_stage(ev: Evaluator, seed: int, iterations: int,
+                 budget: int) -> tuple[_Fitted, Evaluator]:
+    """A candidate's own still-water fits (first stage), and its evaluator with its counts."""
+    return multi_start_fit(ev, seed, (), iterations, budget), ev
+
+
+def _cross_seed_chain(
+    spaces: Sequence[ParameterSpace], evs: list[Evaluator], still: list[_Fitted], seed: int,
+    iterations: int,
+) -> tuple[list[_Fitted], list[Evaluator]]:
+    """One motion's candidates refitted from each other's best fits, in the grid's order.
+
+    Candidate i starts from every other's best fit so far (those before it already refitted
+    in this pass), then once more for any candidate whose fit still fails.
+    """
+    still = list(still)
+
+    def cross_seed(i: int) -> None:
+        others = [carry_over(replace(spaces[o], current=False).as_dict(still[o].values[0]),
+                             spaces[i], spaces[i].bounds.mean(axis=1))
+                  for o in range(len(spaces)) if o != i]
+        if others:
+            again = multi_start_fit(evs[i], seed, others, iterations, 0)
+            still[i] = _merge(still[i], again)
+
+    for i in range(len(spaces)):
+        cross_seed(i)
+    for i in range(len(spaces)):
+        if still[i].fitness[0] >= FAILED:
+            cross_seed(i)
+    return still, evs
+
+
+def _score_stage(
+    ev: Evaluator, still: _Fitted, iterations: int, fold_iterations: int
+) -> tuple[_Fitted, tuple[np.ndarray, str | None], Evaluator]:
+    """A candidate's fits with the current, its folds' held-out errors, and its evaluator."""
+    fitted = _with_current(ev, still, iterations)
+    return fitted, _folds(ev, fitted, fold_iterations), ev
+
+
+def _in_worker(job: tuple[Callable[..., Any], tuple[Any, ...]]) -> tuple[Any, int]:
+    """Run one stage's task in a worker process; its result and the closed-loop runs it made."""
+    task, args = job
+    before = count_runs(0)
+    out = task(*args)
+    return out, count_runs(0) - before
+
+
+def _worker_init() -> None:
+    # one numba thread per worker: the workers already share the cores between them
+    import numba
+
+    numba.set_num_threads(1)
+
+
+class _Workers:
+    """The comparison's independent fits in ``jobs`` worker processes, or in this one.
+
+    The workers are spawned, not forked: numba's OpenMP layer cannot run in a child forked
+    from a process that has used it. Results come back in the order of the tasks, and every
+    task's closed-loop runs are added to this process's count (progress) as it comes back.
+    """
+
+    def __init__(self, jobs: int | None, tasks: int) -> None:
+        self.jobs = min(default_jobs() if jobs is None else int(jobs), tasks)
+        self.pool: ProcessPoolExecutor | None = None
+
+    def __enter__(self) -> _Workers:
+        if self.jobs > 1:
+            self.pool = ProcessPoolExecutor(self.jobs, mp.get_context("spawn"),
+                                            initializer=_worker_init)
+            log.info("model comparison: %d worker processes", self.jobs)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self.pool is not None:
+            self.pool.shutdown(cancel_futures=True)
+
+    def map(self, task: Callable[..., Any], args: Sequence[tuple[Any, ...]]) -> list[Any]:
+        """``task(*a)`` for every ``a`` of ``args``, in order."""
+        if self.pool is None:
+            return [task(*a) for a in args]
+        out = []
+        for result, runs in self.pool.map(_in_worker, [(task, a) for a in args]):
+            count_runs(runs)
+            out.append(result)
+        return out
 
 
 def _merge(a: _Fitted, b: _Fitted | None) -> _Fitted:

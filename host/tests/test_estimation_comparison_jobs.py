@@ -1,0 +1,39 @@
+"""The model comparison in worker processes gives the serial run's scores, bit for bit.
+
+docs/estimation.md, "Model comparison" (worker processes).
+"""
+
+from dataclasses import replace
+
+import numpy as np
+
+from eelhost.data.experiments import BUNDLED_DATASET, load_dataset
+from eelhost.estimation.evaluate import simulations_counter
+from eelhost.estimation.pipeline import FitSettings
+from eelhost.estimation.selection import cross_validate
+
+SMALL = FitSettings(method="minimax", polish_iterations=1)
+
+
+def _compare(jobs):
+    counted = simulations_counter()
+    scores = cross_validate(load_dataset(BUNDLED_DATASET), ["straight", "turning"],
+                            replace(SMALL, jobs=jobs), laws=["morison", "linear_quadratic"],
+                            joint_models=["pd"], iterations=1, fold_iterations=1, budget=12,
+                            one_set=0)
+    return scores, counted().get("sims", 0)
+
+
+def test_the_comparison_in_two_worker_processes_scores_exactly_as_the_serial_run():
+    serial, serial_runs = _compare(1)
+    spread, spread_runs = _compare(2)
+    assert [c.model for c in spread] == [c.model for c in serial]
+    for a, b in zip(serial, spread, strict=True):
+        assert a.fitness == b.fitness
+        assert a.failed == b.failed
+        for m in a.values:
+            np.testing.assert_array_equal(b.values[m], a.values[m])
+            np.testing.assert_array_equal(b.held_out[m], a.held_out[m])
+        assert b.simulations == a.simulations > 0
+    # the workers' runs reach this process's count (the progress line's sims=)
+    assert spread_runs == serial_runs == sum(c.simulations for c in serial)
