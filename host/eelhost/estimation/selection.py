@@ -469,12 +469,17 @@ def _worker_init() -> None:
     numba.set_num_threads(1)
 
 
+_POOLS: dict[int, ProcessPoolExecutor] = {}  # by size, kept for the next comparison
+
+
 class _Workers:
     """The comparison's independent fits in ``jobs`` worker processes, or in this one.
 
     The workers are spawned, not forked: numba's OpenMP layer cannot run in a child forked
-    from a process that has used it. Results come back in the order of the tasks, and every
-    task's closed-loop runs are added to this process's count (progress) as it comes back.
+    from a process that has used it. Spawning and loading the kernels takes seconds, so a
+    pool is kept for the process's next comparison (the workers end with the process). Results
+    come back in the order of the tasks, and every task's closed-loop runs are added to this
+    process's count (progress) as it comes back.
     """
 
     def __init__(self, jobs: int | None, tasks: int) -> None:
@@ -483,14 +488,17 @@ class _Workers:
 
     def __enter__(self) -> _Workers:
         if self.jobs > 1:
-            self.pool = ProcessPoolExecutor(self.jobs, mp.get_context("spawn"),
-                                            initializer=_worker_init)
+            if self.jobs not in _POOLS:
+                _POOLS[self.jobs] = ProcessPoolExecutor(
+                    self.jobs, mp.get_context("spawn"), initializer=_worker_init)
+            self.pool = _POOLS[self.jobs]
             log.info("model comparison: %d worker processes", self.jobs)
         return self
 
-    def __exit__(self, *exc: object) -> None:
-        if self.pool is not None:
-            self.pool.shutdown(cancel_futures=True)
+    def __exit__(self, kind: type[BaseException] | None, *exc: object) -> None:
+        if self.pool is not None and kind is not None:  # interrupted or broken: not kept
+            _POOLS.pop(self.jobs, None)
+            self.pool.shutdown(wait=False, cancel_futures=True)
 
     def map(self, task: Callable[..., Any], args: Sequence[tuple[Any, ...]]) -> list[Any]:
         """``task(*a)`` for every ``a`` of ``args``, in order."""
