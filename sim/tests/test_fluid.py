@@ -198,12 +198,14 @@ def test_coefficients_convert_to_arrays_and_back_with_their_names_in_errors():
 
 
 def test_an_unknown_law_is_refused_naming_the_known_ones():
-    with pytest.raises(ValueError, match="unknown fluid law 'potential_flow'; known laws: "
-                                         "galilean, galilean_lift, lighthill, lighthill_lift, "
-                                         "linear_quadratic, linear_quadratic_lift, morison, "
-                                         "morison_lift, resistive, resistive_lift, reynolds, "
-                                         "reynolds_lift$"):
+    # the list is the registry's, sorted: a plant law registered by another module (the virtual
+    # tank's foil) may join it, so the twin's own laws are checked by name, not the whole list
+    with pytest.raises(ValueError, match="unknown fluid law 'potential_flow'; known laws: ") as info:
         get_fluid_law("potential_flow")
+    known = str(info.value).split("known laws: ")[1].split(", ")
+    assert known == sorted(known)
+    for law in ("galilean", "lighthill", "linear_quadratic", "morison", "resistive", "reynolds"):
+        assert law in known and f"{law}_lift" in known
 
 
 def test_a_second_law_under_a_taken_name_is_refused(toy_law):
