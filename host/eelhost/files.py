@@ -26,6 +26,7 @@ from eelsim.files import atomic_write, atomic_writer, default_file_mode
 
 __all__ = [
     "OutputError",
+    "replace_marked_block",
     "atomic_write",
     "atomic_writer",
     "check_output_folder",
@@ -154,3 +155,29 @@ def check_output_stem(stem: str | Path, suffixes: tuple[str, ...] = (), option: 
         if target.is_dir():
             raise OutputError(f"{option}: {target} is a folder, where a file is to be written")
     return stem
+
+
+def replace_marked_block(path: str | Path, begin: str, end: str, block: str) -> None:
+    """Put ``block`` (which starts with ``begin`` and ends with ``end``) in place of the page's.
+
+    A benchmark writes its figures into a docs page between two marker lines; the rest of the
+    page, written by hand, is kept. The block is appended when the page has no markers yet (or
+    does not exist). The page is written whole (:func:`atomic_write`).
+
+    Parameters
+    ----------
+    path : str or Path
+        The markdown page.
+    begin, end : str
+        The marker lines.
+    block : str
+        The new block, markers included.
+    """
+    path = Path(path)
+    text = path.read_text() if path.exists() else ""
+    if begin in text and end in text:
+        head, rest = text.split(begin, 1)
+        text = head + block + rest.split(end, 1)[1]
+    else:
+        text = text.rstrip("\n") + ("\n\n" if text else "") + block + "\n"
+    atomic_write(path, text)

@@ -51,3 +51,15 @@ def test_a_failed_write_leaves_the_old_file_and_no_temporary(tmp_path):
         f.write("half")
         raise RuntimeError
     assert target.read_text() == "old" and [p.name for p in tmp_path.iterdir()] == ["table.md"]
+
+
+def test_a_benchmark_block_replaces_its_own_and_keeps_the_hand_written_page(tmp_path):
+    from eelhost.files import replace_marked_block
+
+    page = tmp_path / "bench.md"
+    replace_marked_block(page, "<!-- b -->", "<!-- e -->", "<!-- b -->\nfirst\n<!-- e -->")
+    assert page.read_text() == "<!-- b -->\nfirst\n<!-- e -->\n"
+    page.write_text("# Title\n\nby hand\n\n" + page.read_text() + "\nafter, by hand\n")
+    replace_marked_block(page, "<!-- b -->", "<!-- e -->", "<!-- b -->\nsecond\n<!-- e -->")
+    assert page.read_text() == ("# Title\n\nby hand\n\n<!-- b -->\nsecond\n<!-- e -->\n"
+                                "\nafter, by hand\n")

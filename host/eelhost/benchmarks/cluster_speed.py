@@ -257,16 +257,9 @@ def report(m: dict, note: str) -> str:
 
 def write_block(path: Path, block: str) -> None:
     """Put ``block`` between its markers in ``path`` (appended the first time)."""
-    from eelhost.files import atomic_write
+    from eelhost.files import replace_marked_block
 
-    text = path.read_text() if path.exists() else ""
-    if BEGIN in text and END in text:
-        head, rest = text.split(BEGIN, 1)
-        tail = rest.split(END, 1)[1]
-        text = head + block + tail
-    else:
-        text = text.rstrip("\n") + "\n\n" + block + "\n"
-    atomic_write(path, text)
+    replace_marked_block(path, BEGIN, END, block)
 
 
 def keep_block(path: str | Path, text: str) -> str:

@@ -276,12 +276,6 @@ def _bench(args: argparse.Namespace, robot: Robot, model: CoefficientModel) -> i
 
 def _write_block(path: Path, block: list[str]) -> None:
     """Replace the benchmark block of a markdown file (append it when absent)."""
-    text = path.read_text() if path.exists() else ""
-    new = "\n".join(block)
-    if BENCH_BEGIN in text and BENCH_END in text:
-        head, rest = text.split(BENCH_BEGIN, 1)
-        tail = rest.split(BENCH_END, 1)[1]
-        text = head + new + tail
-    else:
-        text = text.rstrip("\n") + ("\n\n" if text else "") + new + "\n"
-    atomic_write(path, text)
+    from eelhost.files import replace_marked_block
+
+    replace_marked_block(path, BENCH_BEGIN, BENCH_END, "\n".join(block))

@@ -282,13 +282,6 @@ def _bench(args: argparse.Namespace) -> int:
 
 def _write_section(path: Path, block: list[str]) -> None:
     """Replace the run benchmark's block of a markdown file (append it when absent)."""
-    from eelhost.files import atomic_write
+    from eelhost.files import replace_marked_block
 
-    text = path.read_text() if path.exists() else ""
-    new = "\n".join(block)
-    if BENCH_BEGIN in text and BENCH_END in text:
-        head, rest = text.split(BENCH_BEGIN, 1)
-        text = head + new + rest.split(BENCH_END, 1)[1]
-    else:
-        text = text.rstrip("\n") + ("\n\n" if text else "") + new + "\n"
-    atomic_write(path, text)
+    replace_marked_block(path, BENCH_BEGIN, BENCH_END, "\n".join(block))
