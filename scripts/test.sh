@@ -22,8 +22,8 @@ if [ -f firmware/Makefile ]; then
 fi
 echo "== batched kernels the tests use, compiled two at a time (scripts/warm_kernels.py)"
 suite kernels python scripts/warm_kernels.py tests 2
-echo "== pytest"
-suite pytest python -m pytest "$@"
+echo "== pytest (two workers: pytest-xdist, a test file per worker at a time)"
+suite pytest python -m pytest -n 2 --dist loadfile "$@"
 if [ ${#failed[@]} -gt 0 ]; then
   echo "test: failed: ${failed[*]}" >&2
   exit 1
