@@ -52,6 +52,12 @@ def tls_files(tmp_path_factory):
     return sec, TLSFiles(str(folder / "cert.pem"), str(folder / "cert.pem"), str(folder / "key.pem"))
 
 
+def _worker_address(job: tuple) -> str:
+    shared, _ = job
+    assert shared.shape == (4, 1000)  # the shared value arrives, not its future
+    return distributed.get_worker().address
+
+
 def _kernels_loaded() -> int:
     from eelsim.batch import loading
 
@@ -111,6 +117,10 @@ def test_the_batched_kernel_over_a_tls_cluster_of_processes_gives_the_local_fitn
         assert lab.scheduler_address.startswith("tls://")
         spread_map = dask_map(lab.scheduler_address, tls=files)
         assert spread_map.workers == 2 and spread_map.blocks == 4
+        # blocks that all hold the shared experiments are dealt round the workers (left to
+        # itself, the scheduler put them all on one)
+        shared = spread_map.share(np.zeros((4, 1000)))
+        assert len(set(spread_map(_worker_address, [(shared, i) for i in range(4)]))) == 2
         spread = Evaluator(ds.robot, ds.train["straight"], backend="batch",
                            map_function=spread_map)
         assert np.array_equal(spread.fitness(cands), expected)

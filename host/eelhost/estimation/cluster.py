@@ -150,8 +150,19 @@ class ClusterMap:
         self.client.close()
 
     def __call__(self, function: Callable, jobs: Iterable) -> list[Any]:
-        """Run ``function`` on every job on the cluster; results in the jobs' order."""
-        futures = self.client.map(function, list(jobs), pure=False)
+        """Run ``function`` on every job on the cluster; results in the jobs' order.
+
+        The jobs are dealt round the workers connected now (another may take one when its own is
+        busy or gone). Left to itself the scheduler put a generation's blocks, all depending on
+        the same shared experiments, on one worker: on an idle machine the second worker of the
+        cluster benchmark got almost no work (docs/benchmarks.md, section 5).
+        """
+        workers = sorted(self.client.scheduler_info().get("workers", {}))
+        futures = [
+            self.client.submit(function, job, pure=False, allow_other_workers=True,
+                               workers=[workers[i % len(workers)]] if workers else None)
+            for i, job in enumerate(jobs)
+        ]
         return self.client.gather(futures)
 
 
