@@ -257,15 +257,21 @@ def drive_off_corridor(nav: TankReplanner, seconds: float):
     return None, None
 
 
-def test_failed_replans_back_off_then_stop_the_robot_with_the_reason(open_plan):
+def drive_with_failing_replans(open_plan, status: str, seconds: float):
+    """Drive off the corridor with every replan failing ``status``, without look-ahead."""
     planner, outcome = open_plan
-    nav = failing_replanner("exhausted")(lambda extra: planner, planner, outcome, PATH_GAIT,
-                                        lookahead_s=0.0)
+    nav = failing_replanner(status)(lambda extra: planner, planner, outcome, PATH_GAIT,
+                                    lookahead_s=0.0)
     nav.requests.clear()
     try:
-        t_stop, d = drive_off_corridor(nav, 12.0)
+        t_stop, d = drive_off_corridor(nav, seconds)
     finally:
         nav.close()
+    return nav, t_stop, d
+
+
+def test_failed_replans_back_off_then_stop_the_robot_with_the_reason(open_plan):
+    nav, _, d = drive_with_failing_replans(open_plan, "exhausted", 12.0)
     assert d is not None and d.stop == "no_safe_continuation"
     assert "3 failed in a row" in d.detail and "failed (exhausted)" in d.detail
     assert len(nav.requests) == 3  # not one per frame
@@ -275,14 +281,7 @@ def test_failed_replans_back_off_then_stop_the_robot_with_the_reason(open_plan):
 
 
 def test_a_refused_replan_stops_the_robot_at_once(open_plan):
-    planner, outcome = open_plan
-    nav = failing_replanner("blocked_start")(lambda extra: planner, planner, outcome, PATH_GAIT,
-                                            lookahead_s=0.0)
-    nav.requests.clear()
-    try:
-        t_stop, d = drive_off_corridor(nav, 5.0)
-    finally:
-        nav.close()
+    nav, t_stop, d = drive_with_failing_replans(open_plan, "blocked_start", 5.0)
     assert d is not None and d.stop == "no_safe_continuation" and len(nav.requests) == 1
     assert t_stop is not None and t_stop < 0.5
 
