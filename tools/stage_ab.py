@@ -1,6 +1,6 @@
 """Paired A/B of the generated RK4 stage alone, compiled as C and driven from C.
 
-Why: the GA generation (``eelhost.benchmarks.kernel_ab``) mixes the stage with the driver, the camera and
+Why: the GA generation (``tools/kernel_ab.py``) mixes the stage with the driver, the camera and
 numba's threads; to ask what bounds the stage itself (a wrong-maths variant, another GCC option,
 another block size) this script compiles each variant's stage with a small C loop that runs whole
 RK4 steps on one block (four stages, then the commit of the new state) and times them in
@@ -10,13 +10,13 @@ session 5, for what it decided.
 
 Usage (from the repo root, after ``bash scripts/setup.sh``)::
 
-    .venv/bin/python -m eelhost.benchmarks.stage_ab [--rounds 41] [--steps 1500] NAME=SPEC ...
+    .venv/bin/python tools/stage_ab.py [--rounds 41] [--steps 1500] NAME=SPEC ...
 
 SPEC is ``[FLAGS][@GENERATOR][%LANES]``: compiler options (default ``-O3 -march=native``), a copy
 of ``eelsim/batch/codegen.py`` to generate the stage with (default: the working tree's) and the
 runs per block (default 16). For example::
 
-    python -m eelhost.benchmarks.stage_ab base= mine=@/tmp/my_codegen.py \
+    python tools/stage_ab.py base= mine=@/tmp/my_codegen.py \
         unrolled='-O3 -march=native -funroll-loops'
 
 The state starts from random angles and rates with the bundled robot's per-run parameters; the

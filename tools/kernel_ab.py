@@ -15,7 +15,7 @@ when only the speed changed). Only one worker runs at a time.
 
 Usage (from the repo root, after ``bash scripts/setup.sh``)::
 
-    .venv/bin/python -m eelhost.benchmarks.kernel_ab [--base HEAD] [--rounds 15] [--threads 1]
+    .venv/bin/python tools/kernel_ab.py [--base HEAD] [--rounds 15] [--threads 1]
         [--stage c|numba] [--base-stage c|numba]
 
 ``--stage`` compiles the generated stage of both versions that way (default: as
@@ -41,7 +41,7 @@ import numpy as np
 
 from eelsim import batch
 
-_REPO = Path(__file__).resolve().parents[3]
+_REPO = Path(__file__).resolve().parents[1]
 
 # What a worker runs: build the GA generation with its own eelsim, run it once (compiling or
 # loading the kernel) and save its final states, then time one run per line read from stdin.

@@ -5,7 +5,7 @@ llvm-mca's estimate of its cycles per iteration (one iteration = one AVX2 vector
 
 Usage (from the repo root, after ``bash scripts/setup.sh``)::
 
-    .venv/bin/python -m eelhost.benchmarks.kernel_loops [--links 6] [--lanes 16] [--cpu znver3]
+    .venv/bin/python tools/kernel_loops.py [--links 6] [--lanes 16] [--cpu znver3]
         [--stage c|numba]
 
 ``--stage`` picks whose machine code: the C compiler's (the default when there is one, as in
