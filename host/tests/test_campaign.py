@@ -75,7 +75,7 @@ def _stand_in_take(ran: list[str]):
     from eelhost.field.runloop import RunOutcome
     from eelhost.field.take import TakeResult
 
-    def run_take(request, view_port=None, announce=None, stop_flag=None):
+    def run_take(request, open_view=None, announce=None, stop_flag=None):
         ran.append(request.out)
         meta = {"source": {"recording": {"complete": True, "reason": "arrived"}}}
         Path(f"{request.out}.json").write_text(json.dumps(meta))

@@ -17,7 +17,7 @@ from pathlib import Path
 from urllib.parse import parse_qsl, urlencode
 
 from eelhost.commands.common import NON_NEGATIVE, OptionError
-from eelhost.commands.run import add_take_options, current_option
+from eelhost.commands.run import add_take_options, current_option, view_opener
 from eelhost.data.experiments import manifest_text, write_manifest
 from eelhost.field.campaign import CampaignPlan, Take, load_plan, plan_takes, take_done
 from eelhost.field.provenance import robot_file_text
@@ -170,8 +170,8 @@ def run(args: argparse.Namespace) -> int:
         refuse_overwrite(stem, force=True)  # not done: a partial take is run again
         request = TakeRequest(robot, config, stem, notes, args.camera, args.calibration,
                               markers.layout, args.speed)
-        result = run_take(request, None if args.no_view else args.view_port,
-                          announce=lambda msg: print(msg, flush=True), stop_flag=stopped)
+        result = run_take(request, view_opener(args), announce=lambda msg: print(msg, flush=True),
+                          stop_flag=stopped)
         ran += 1
         out = result.outcome
         clock = (f", simulated {out.t_end_s:.1f} s in {result.wall_s:.1f} s" if result.virtual

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import functools
 import os
 import time
 from pathlib import Path
@@ -26,11 +27,12 @@ from eelhost.errors import EXIT_CONTACT, EXIT_NOT_REACHED, EXIT_OK
 from eelhost.field.recorder import MOTIONS
 from eelhost.field.runloop import RunConfig
 from eelhost.field.session import TakeNotes
-from eelhost.field.take import TakeRequest, refuse_overwrite, run_take
+from eelhost.field.take import TakeRequest, ViewOpener, refuse_overwrite, run_take
 from eelhost.files import check_output_stem
 from eelhost.link.uri import parse_link_uri
 from eelhost.progress import phase
 from eelhost.vision.markerfile import load_marker_file
+from eelhost.web.liveview import LiveView
 from eelsim.control import Gait
 from eelsim.robot import load_robot
 
@@ -127,6 +129,11 @@ def add_take_options(p: argparse.ArgumentParser) -> None:
                    help="port of the live view on 127.0.0.1 (8765; 0: any free port)")
 
 
+def view_opener(args: argparse.Namespace) -> ViewOpener | None:
+    """The live view a take opens (``--view-port``), or None with ``--no-view``."""
+    return None if args.no_view else functools.partial(LiveView, port=args.view_port)
+
+
 BENCH_SEED = 5000
 """First seed of the closed-loop benchmark: a range no planner setting was developed on."""
 BENCH_BEGIN = "<!-- run-bench: begin (written by eelbot run --bench) -->"
@@ -214,8 +221,7 @@ def run(args: argparse.Namespace) -> int:
     request = TakeRequest(robot, config, args.out, notes, args.camera, args.calibration,
                           markers.layout, args.speed, navigator, view)
     with rejected_as("--waypoints/--gait/--radius/--duration", SCENARIO_OPTIONS):
-        result = run_take(request, None if args.no_view else args.view_port,
-                          announce=lambda msg: print(msg, flush=True))
+        result = run_take(request, view_opener(args), announce=lambda msg: print(msg, flush=True))
     out = result.outcome
     print(
         f"{out.reason}: {out.detail}; {out.waypoints_reached}/{len(waypoints)} waypoints, "

@@ -11,22 +11,24 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Protocol
 
 from eelhost.errors import UserError
 from eelhost.field.recorder import take_paths
-from eelhost.field.runloop import Navigator, RunConfig, RunOutcome
+from eelhost.field.runloop import FrameReport, Navigator, RunConfig, RunOutcome
 from eelhost.field.session import TakeNotes, TankSession, open_camera, virtual_robot
 from eelhost.field.signals import stop_on_signals
 from eelhost.link.base import LinkEvent
 from eelhost.link.uri import open_link
 from eelhost.progress import Progress
+from eelhost.vision.calibration import Calibration
 from eelhost.vision.markers import MarkerLayout
 from eelhost.vision.synthetic import TankView
 from eelhost.xil.virtual_robot import VirtualRobot
 from eelsim.robot import Robot
 
-__all__ = ["TakeExistsError", "TakeOptionError", "TakeRequest", "TakeResult", "refuse_overwrite",
-           "run_take"]
+__all__ = ["LiveDisplay", "TakeExistsError", "TakeOptionError", "TakeRequest", "TakeResult",
+           "ViewOpener", "refuse_overwrite", "run_take"]
 
 
 class TakeExistsError(UserError, FileExistsError):
@@ -35,6 +37,36 @@ class TakeExistsError(UserError, FileExistsError):
 
 class TakeOptionError(UserError, ValueError):
     """A take's option that does not fit its link (``--speed`` for a real robot)."""
+
+
+class LiveDisplay(Protocol):
+    """A live view of a take: told every frame's report, closed after the take.
+
+    Attributes
+    ----------
+    on_stop : callable or None
+        ``on_stop(why)``: set by :func:`run_take` once the take can be stopped; the view calls it
+        when its operator asks for a stop (the page's Stop button).
+    """
+
+    on_stop: Callable[[str], None] | None
+
+    @property
+    def url(self) -> str:
+        """Where the operator looks at it (announced when the take starts)."""
+        ...
+
+    def update(self, report: FrameReport) -> None:
+        """Take one frame's report (called by the run loop; must be cheap)."""
+        ...
+
+    def close(self) -> None:
+        """Stop serving."""
+        ...
+
+
+ViewOpener = Callable[[Calibration, Robot, RunConfig], LiveDisplay]
+"""Opens a take's live view from the camera's calibration, the robot and the task."""
 
 
 @dataclass(frozen=True)
@@ -105,7 +137,7 @@ def refuse_overwrite(stem: str | Path, force: bool) -> None:
         p.unlink()
 
 
-def run_take(request: TakeRequest, view_port: int | None = None,
+def run_take(request: TakeRequest, open_view: ViewOpener | None = None,
              announce: Callable[[str], None] = lambda _msg: None,
              stop_flag: list[str] | None = None) -> TakeResult:
     """Run one take and close it, whatever happens.
@@ -114,8 +146,9 @@ def run_take(request: TakeRequest, view_port: int | None = None,
     ----------
     request : TakeRequest
         What to do.
-    view_port : int or None
-        Serve the live view on this port (0: any); None: no view.
+    open_view : callable or None
+        Opens the live view once the camera is open (``open_view(calibration, robot, config)``,
+        e.g. :class:`eelhost.web.liveview.LiveView` with its port bound); None: no view.
     announce : callable
         Told the live view's address.
     stop_flag : list of str, optional
@@ -149,10 +182,12 @@ def run_take(request: TakeRequest, view_port: int | None = None,
         link.close()
         raise
     view = None
-    if view_port is not None:
-        from eelhost.web.liveview import LiveView
-
-        view = LiveView(camera.calibration, request.robot, request.config, port=view_port)
+    if open_view is not None:
+        try:
+            view = open_view(camera.calibration, request.robot, request.config)
+        except BaseException:
+            link.close()
+            raise
         announce(f"live view: {view.url}")
     wall0 = time.monotonic()
     try:

@@ -20,6 +20,10 @@ The prediction is the twin's closed loop (:func:`eelsim.closed_loop.simulate_clo
 the next ``horizon_s`` from the latest filtered pose, straight and at rest there (the camera gives
 no joint rates), steering to the waypoints not yet reached; it runs in a background thread at most
 once per ``predict_every_s`` of wall time, so a slow prediction never holds up the run.
+
+It is a :class:`eelhost.field.take.LiveDisplay`: ``eelbot run`` and ``eelbot campaign`` hand
+:func:`eelhost.field.take.run_take` the way to open it, so the dependency goes one way, this
+package on the run loop (docs/architecture.md).
 """
 
 from __future__ import annotations
