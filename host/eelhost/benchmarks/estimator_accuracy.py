@@ -46,6 +46,7 @@ from eelhost.estimation.evaluate import Evaluator
 from eelhost.estimation.optimise import FitResult
 from eelhost.estimation.parameters import FittedModel, ParameterSpace
 from eelhost.estimation.pipeline import FitSettings, fit_motion
+from eelhost.estimation.tank_current import share_tank_current
 from eelhost.estimation.validate import validate, worst_ex
 
 PAPER_WORST_EX = {"straight": 0.082, "turning": 0.183, "path": 0.01}
@@ -119,6 +120,9 @@ def _fit_and_validate(ds: Dataset, plant: Plant | None, settings: FitSettings,
         return res, ev
 
     chosen = fit_and_choose(ds, ("straight", "turning"), settings, fit=fit, say=say)
+    # one current for the tank from both motions, as the report does (estimation/tank_current.py)
+    chosen.fits, chosen.evaluators, out["tank_current"] = share_tank_current(
+        chosen.fits, chosen.evaluators, say)
     out["fits"] = chosen.fits
     out["own"] = chosen.robot_file_fits or chosen.fits
     out["model"] = chosen.model
@@ -332,6 +336,15 @@ def estimator_report(
                 f"{m} {res.model.current_text()}" + (_current_error(res, true) if true.any()
                                                      else "")
                 for m, res in r["fits"].items()) + ".", ""]
+            tank = r.get("tank_current")
+            if tank is not None:
+                alone = "; ".join(
+                    f"{m} {1e3 * np.hypot(*c):.1f} mm/s towards "
+                    f"{np.degrees(np.arctan2(c[1], c[0])):.0f} deg"
+                    for m, c in tank.per_motion_m_s.items())
+                lines += [f"The tank's current from all {tank.experiments} training experiments: "
+                          f"{tank.text()}; held by both fits. Each fit alone had found: {alone}.",
+                          ""]
         lines += [
             "| motion | fitness | worst held-out E_x, recorded clock (BL) | worst held-out E_x, "
             "best clock offset (BL) | the plant itself, recorded clock (BL) | target "

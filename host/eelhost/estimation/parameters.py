@@ -149,12 +149,16 @@ class ParameterSpace:
     current : bool
         Whether the tank's ambient current is fitted too (:data:`CURRENT_NAMES`, last, each
         within +-:data:`CURRENT_BOUND_M_S`).
+    current_bounds : ndarray, shape (2, 2), optional
+        The current's bounds when a fit holds it within the interval of the tank's current
+        (:mod:`eelhost.estimation.tank_current`); default +-:data:`CURRENT_BOUND_M_S` each.
     """
 
     law: FluidLaw
     joints: JointFit = field(default_factory=JointFit)
     law_bounds: np.ndarray | None = None
     current: bool = False
+    current_bounds: np.ndarray | None = None
 
     @classmethod
     def for_robot(
@@ -197,6 +201,8 @@ class ParameterSpace:
         """Search bounds, shape (K, 2)."""
         law = self.law.bounds if self.law_bounds is None else np.asarray(self.law_bounds, float)
         current = np.tile([-CURRENT_BOUND_M_S, CURRENT_BOUND_M_S], (len(self.current_names), 1))
+        if self.current and self.current_bounds is not None:
+            current = np.asarray(self.current_bounds, dtype=float)
         return np.vstack([law, self.joints.bounds, current.reshape(-1, 2)])
 
     def from_unit(self, u: np.ndarray) -> np.ndarray:

@@ -30,6 +30,7 @@ from eelhost.estimation.pipeline import (
 from eelhost.estimation.selection import recommend
 from eelhost.estimation.selection import table_markdown as comparison_markdown
 from eelhost.estimation.speeds import speed_errors, speeds_markdown
+from eelhost.estimation.tank_current import share_tank_current
 from eelhost.estimation.uncertainty import BootstrapResult, parametric_bootstrap
 from eelhost.estimation.validate import (
     BAND_LEVEL,
@@ -123,9 +124,15 @@ def run_report(
 
     chosen = fit_and_choose(dataset, motions, settings, compare_models, adopt_recommended,
                             fit=fit, say=say, laws=laws)
+    # one current for the tank, from both motions' experiments (estimation/tank_current.py)
+    with phase("the tank's current from every training experiment", simulations_counter()):
+        chosen.fits, chosen.evaluators, tank = share_tank_current(chosen.fits,
+                                                                  chosen.evaluators, say)
     fits = chosen.fits
     extra: dict = {"model": chosen.model, "uncertainty": {}, "identifiability": {},
                    "simulations": {}, "seconds": seconds, "warnings": []}
+    if tank is not None:
+        extra["tank_current"] = tank.to_json()
     boots: dict[str, BootstrapResult] = {}
     for motion, res in fits.items():
         ev = chosen.evaluators[motion]
@@ -308,6 +315,20 @@ def _report_text(
             "Ambient current of the tank, fitted as a nuisance shared by a fit's experiments and "
             "added to the current each declares (docs/estimation.md, \"Nuisance parameters\"); "
             "validation simulates in it: " + "; ".join(currents) + ".",
+        ]
+    tank = extra.get("tank_current")
+    if tank:
+        alone = "; ".join(
+            f"{m} {1e3 * np.hypot(*c):.1f} mm/s towards {np.degrees(np.arctan2(c[1], c[0])):.0f} deg"
+            for m, c in tank["per_motion_alone"].items())
+        lines += [
+            "",
+            f"One current for the tank, estimated from all {tank['experiments']} training "
+            f"experiments together: {tank['speed_m_s']:.4f} m/s towards "
+            f"{tank['direction_deg']:.0f} deg (95 % interval +-"
+            f"{1e3 * tank['half_width_m_s'][0]:.1f} mm/s in v_x, "
+            f"+-{1e3 * tank['half_width_m_s'][1]:.1f} mm/s in v_y); each fit holds it within "
+            f"that interval. Each motion's fit alone had found: {alone}.",
         ]
     if "truth" in extra:
         lines += [

@@ -1,0 +1,231 @@
+"""One ambient current for the tank, estimated from every training experiment together.
+
+docs/estimation.md, "Nuisance parameters: the tank's ambient current". The straight and turning
+fits each fit a current (:func:`eelhost.estimation.methods.run_fit`), but the experiments were
+recorded in one tank. The straight experiments all swim along one axis, where a current trades
+against the coefficients that set the swimming speed, so a straight fit alone puts noise and
+misfit into an along-track current; the turning experiments swim every direction, where a current
+and a speed error differ. So, once both fits are made:
+
+1. **Joint fit.** The vector [straight's parameters, turning's parameters, one current] is
+   polished by the minimax trust region (:func:`eelhost.estimation.local.polish_minimax_many`) on
+   every training experiment of both motions, each motion's errors divided by its own fit's
+   fitness (so that both motions weigh alike whatever their misfit), from three starts in lock
+   step: the straight fit's current, the turning fit's and still water.
+2. **Its interval.** The current's linearised standard error s on the joint problem (the
+   residuals of both motions stacked, the Jacobian in the unit cube, the residual variance from
+   the residuals, never below the pixel rounding's: as :func:`eelhost.estimation.identify.
+   identifiability`), and the interval c +- z s (z = 1.96) per component.
+3. **Each motion's fit holds it.** Each motion's parameters are polished again from the joint
+   fit with the current bounded to that interval (``ParameterSpace.current_bounds``), so the
+   bootstrap, the identifiability analysis and the validation see the tank's current, and a fit
+   can move it only within what all the experiments allow.
+
+The currents each experiment declares still add to it as vectors (a stray current that changes
+per experiment is declared per experiment). With only one motion (or one set for every motion:
+its fit is already shared) nothing changes.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from typing import Any, cast
+
+import numpy as np
+
+from eelhost.estimation.evaluate import Evaluator
+from eelhost.estimation.identify import REL_STEP
+from eelhost.estimation.local import polish_minimax, polish_minimax_many
+from eelhost.estimation.optimise import FitResult
+from eelhost.estimation.parameters import CURRENT_BOUND_M_S, ParameterSpace
+
+log = logging.getLogger(__name__)
+
+# Iterations of the joint polish and of each motion's polish holding the tank's current.
+JOINT_ITERATIONS = 12
+HOLD_ITERATIONS = 8
+Z_95 = 1.959964  # the normal's 97.5 % quantile: the interval c +- z s
+# Least half-width of the held interval, m/s: a tenth of a mm/s, so that a polish's unit cube
+# keeps a range its finite differences can step in.
+MIN_HALF_WIDTH_M_S = 1e-4
+
+
+@dataclass(frozen=True)
+class TankCurrent:
+    """The tank's ambient current, from every training experiment of both motions.
+
+    Attributes
+    ----------
+    current_m_s : ndarray, shape (2,)
+        (v_x, v_y), m/s.
+    half_width_m_s : ndarray, shape (2,)
+        Half-width of its 95 % interval per component (the bounds each motion's fit holds).
+    per_motion_m_s : dict of str to ndarray
+        The current each motion's own fit had found alone, for the record.
+    experiments : int
+        Training experiments it was estimated from.
+    fitness : float
+        The joint fit's largest error relative to each motion's own fitness.
+    """
+
+    current_m_s: np.ndarray
+    half_width_m_s: np.ndarray
+    per_motion_m_s: dict[str, np.ndarray]
+    experiments: int
+    fitness: float
+
+    def text(self) -> str:
+        """"0.0050 m/s towards 120 deg (+-0.4, +-0.5 mm/s)"."""
+        vx, vy = self.current_m_s
+        hx, hy = 1e3 * self.half_width_m_s
+        return (f"{np.hypot(vx, vy):.4f} m/s towards {np.degrees(np.arctan2(vy, vx)):.0f} deg "
+                f"(v_x {1e3 * vx:+.1f} +- {hx:.1f} mm/s, v_y {1e3 * vy:+.1f} +- {hy:.1f} mm/s)")
+
+    def to_json(self) -> dict[str, Any]:
+        """JSON-ready (``coefficients.json``'s ``tank_current``; docs/data.md)."""
+        vx, vy = (float(v) for v in self.current_m_s)
+        return {
+            "current_x_m_s": vx, "current_y_m_s": vy,
+            "speed_m_s": float(np.hypot(vx, vy)),
+            "direction_deg": float(np.degrees(np.arctan2(vy, vx))),
+            "half_width_m_s": [float(h) for h in self.half_width_m_s],
+            "per_motion_alone": {m: [float(v) for v in c] for m, c in self.per_motion_m_s.items()},
+            "experiments": self.experiments,
+        }
+
+
+@dataclass(frozen=True, eq=False)
+class _JointCube:
+    """The joint vector's bounds and unit-cube mapping (all :func:`polish_minimax_many` uses)."""
+
+    bounds: np.ndarray
+
+    @property
+    def size(self) -> int:
+        return len(self.bounds)
+
+    def from_unit(self, u: np.ndarray) -> np.ndarray:
+        b = self.bounds
+        return b[:, 0] + np.clip(np.asarray(u, dtype=float), 0.0, 1.0) * (b[:, 1] - b[:, 0])
+
+    def to_unit(self, x: np.ndarray) -> np.ndarray:
+        b = self.bounds
+        return (np.asarray(x, dtype=float) - b[:, 0]) / (b[:, 1] - b[:, 0])
+
+
+def share_tank_current(
+    fits: dict[str, FitResult],
+    evaluators: dict[str, Evaluator],
+    say: Callable[[str], None] | None = None,
+) -> tuple[dict[str, FitResult], dict[str, Evaluator], TankCurrent | None]:
+    """Replace each motion's own current by the tank's, estimated from all motions (module doc).
+
+    Parameters
+    ----------
+    fits : dict of str to FitResult
+        Per motion, its fit (each with its own current).
+    evaluators : dict of str to Evaluator
+        Per motion, the evaluator of its training experiments.
+    say : callable, optional
+        Gets a line with the result.
+
+    Returns
+    -------
+    (fits, evaluators, TankCurrent or None)
+        The fits holding the tank's current and their evaluators (in the held spaces); the
+        inputs unchanged and None when fewer than two motions fit a current.
+    """
+    say = say or log.info
+    motions = [m for m in ("straight", "turning")
+               if m in fits and fits[m].space.current and m in evaluators]
+    if len(motions) < 2:
+        return fits, evaluators, None
+    evs = [evaluators[m] for m in motions]
+    own = [np.asarray(fits[m].values, dtype=float) for m in motions]
+    ks = [ev.space.size - 2 for ev in evs]  # each motion's parameters before the current
+    scale = [1.0 / max(float(fits[m].fitness), 1e-9) for m in motions]
+    cube = _JointCube(np.vstack(
+        [ev.space.bounds[:k] for ev, k in zip(evs, ks, strict=True)]
+        + [np.tile([-CURRENT_BOUND_M_S, CURRENT_BOUND_M_S], (2, 1))]))
+
+    def split(x: np.ndarray) -> list[np.ndarray]:
+        """The joint vectors (C, K) as each motion's vectors (C, k_m + 2)."""
+        out, at = [], 0
+        for k in ks:
+            out.append(np.hstack([x[:, at:at + k], x[:, -2:]]))
+            at += k
+        return out
+
+    def evaluate(xs: list[np.ndarray]) -> list[tuple[np.ndarray, np.ndarray]]:
+        # every start's candidates in one batch per motion
+        sizes = [len(x) for x in xs]
+        both = np.vstack(xs)
+        errors, vectors = [], []
+        for ev, part, s in zip(evs, split(both), scale, strict=True):
+            e, v = ev.evaluate(part)
+            errors.append(s * e)
+            vectors.append(s * v)
+        e_all, v_all = np.concatenate(errors, axis=1), np.concatenate(vectors, axis=1)
+        edges = np.cumsum([0] + sizes)
+        return [(e_all[a:b], v_all[a:b]) for a, b in zip(edges[:-1], edges[1:], strict=True)]
+
+    body = np.concatenate([x[:k] for x, k in zip(own, ks, strict=True)])
+    starts = np.array([np.concatenate([body, x[-2:]]) for x in own]
+                      + [np.concatenate([body, np.zeros(2)])])
+    results = polish_minimax_many(evaluate, cast(ParameterSpace, cube), starts, JOINT_ITERATIONS)
+    best = min(results, key=lambda r: r.fitness)
+    joint = np.asarray(best.values, dtype=float)
+    half = _half_width(evs, cube, split, joint)
+    current = joint[-2:]
+    new_fits, new_evs = dict(fits), dict(evaluators)
+    for m, ev, part in zip(motions, evs, split(joint[None]), strict=True):
+        held = replace(ev.space, current_bounds=np.column_stack(
+            [np.maximum(current - half, -CURRENT_BOUND_M_S),
+             np.minimum(current + half, CURRENT_BOUND_M_S)]))
+        held_ev = ev.with_space(held)
+        pol = polish_minimax(held_ev.evaluate, held, part[0], HOLD_ITERATIONS)
+        runs = held_ev.simulations
+        ev.simulations += runs  # the motion's count of simulations includes these
+        held_ev.simulations = ev.simulations
+        last = fits[m].history[-1] if fits[m].history else (0, pol.fitness, 0)
+        history = fits[m].history + [(int(last[0]) + 1, pol.fitness, int(last[2]) + runs)]
+        new_fits[m] = FitResult(f"{fits[m].method}, tank current held", held,
+                                np.asarray(pol.values, dtype=float), pol.fitness, history,
+                                fits[m].evaluations + pol.evaluations,
+                                search_evaluations=fits[m].search_evaluations)
+        new_evs[m] = held_ev
+    tank = TankCurrent(current, half, {m: x[-2:] for m, x in zip(motions, own, strict=True)},
+                       sum(len(ev.prepared) for ev in evs), best.fitness)
+    say(f"tank current from {tank.experiments} training experiments ({', '.join(motions)}): "
+        f"{tank.text()}; alone: " + "; ".join(
+            f"{m} {1e3 * np.hypot(*c):.1f} mm/s towards {np.degrees(np.arctan2(c[1], c[0])):.0f} deg"
+            for m, c in tank.per_motion_m_s.items()))
+    return new_fits, new_evs, tank
+
+
+def _half_width(evs: list[Evaluator], cube: _JointCube,
+                split: Callable[[np.ndarray], list[np.ndarray]], joint: np.ndarray) -> np.ndarray:
+    """The current's half-width: z times its's linearised standard error (joint problem), per component.
+
+    As :func:`eelhost.estimation.identify.identifiability`, on the residuals of both motions
+    stacked; an unidentified current gets the whole search bound.
+    """
+    k = cube.size
+    u0 = cube.to_unit(joint)
+    steps = np.where(u0 + REL_STEP <= 1.0, REL_STEP, -REL_STEP)
+    pts = np.vstack([joint] + [cube.from_unit(u0 + np.eye(k)[i] * steps[i]) for i in range(k)])
+    r = np.hstack([ev.residuals(part) for ev, part in zip(evs, split(pts), strict=True)])
+    jac = ((r[1:] - r[0]) / steps[:, None]).T
+    _, sing, vt = np.linalg.svd(jac, full_matrices=False)
+    pixel = max(float(p.experiment.recording_camera().pixel_m) for ev in evs for p in ev.prepared)
+    sigma2 = max(float(r[0] @ r[0]) / max(1, jac.shape[0] - k), pixel**2 / 12.0)
+    with np.errstate(divide="ignore"):
+        inv_s2 = np.where(sing > 1e-9 * sing[0], 1.0 / sing**2, np.inf)
+    with np.errstate(invalid="ignore"):
+        var_u = np.einsum("ij,j,ij->i", vt.T, inv_s2, vt.T) * sigma2
+    ranges = cube.bounds[:, 1] - cube.bounds[:, 0]
+    std = np.sqrt(np.where(np.isnan(var_u), np.inf, var_u)) * ranges
+    half = np.where(np.isfinite(std[-2:]), Z_95 * std[-2:], CURRENT_BOUND_M_S)
+    return np.clip(half, MIN_HALF_WIDTH_M_S, CURRENT_BOUND_M_S)

@@ -1,0 +1,70 @@
+"""One ambient current for the tank, from the straight and turning experiments together."""
+
+import numpy as np
+import pytest
+
+from eelhost.data.experiments import load_dataset, manifest_text, write_experiment, write_manifest
+from eelhost.data.virtual_tank import TABLE3, TankSettings, record_experiment
+from eelhost.estimation.pipeline import FitSettings, fit_motion
+from eelhost.estimation.tank_current import share_tank_current
+from eelsim.robot import load_robot
+from eelsim.scenario import load_scenario
+
+STRAIGHT = ["straight_A0.87_w3.9", "straight_A0.61_w2.7"]
+TURNING = ["turning_A0.87_w3.9", "turning_A0.61_w2.7"]
+STRAY_M_S, STRAY_DEG = 0.005, 120.0
+
+
+def _short(name):
+    far = (0.6, 0.0) if name.startswith("straight") else (0.52, 0.3)  # 0.6 m, the task's heading
+    return load_scenario(name).model_copy(update={"waypoints_m": [far]})
+
+
+@pytest.fixture(scope="module")
+def tank(tmp_path_factory):
+    """Two short straight and two short turning gaits in an undeclared steady current."""
+    folder = tmp_path_factory.mktemp("tank_current")
+    robot = load_robot()
+    settings = TankSettings(timestamp_jitter_s=0.0, control_jitter_s=0.0,
+                            stray_current_m_s=STRAY_M_S, stray_current_direction_deg=STRAY_DEG)
+    for i, name in enumerate(STRAIGHT + TURNING):
+        motion = name.split("_")[0]
+        write_experiment(record_experiment(robot, _short(name), motion, TABLE3[motion], settings,
+                                           seed=i), folder)
+    write_manifest(folder, manifest_text(
+        "paper_robot.toml", {"straight": {"train": STRAIGHT, "test": []},
+                             "turning": {"train": TURNING, "test": []}}, [],
+        {m: TABLE3[m] for m in ("straight", "turning")}))
+    ds = load_dataset(folder)
+    fits, evs = {}, {}
+    for motion in ("straight", "turning"):
+        fits[motion], evs[motion] = fit_motion(ds, motion, FitSettings(budget=300,
+                                                                       polish_iterations=6))
+    return fits, evs
+
+
+def test_both_motions_hold_one_tank_current_recovered_within_a_mm_s_and_15_degrees(tank):
+    fits, evs = tank
+    held, held_evs, current = share_tank_current(fits, evs)
+    assert current is not None and current.experiments == 4
+    speed = float(np.hypot(*current.current_m_s))
+    direction = float(np.degrees(np.arctan2(current.current_m_s[1], current.current_m_s[0])))
+    assert abs(speed - STRAY_M_S) < 0.001
+    assert abs((direction - STRAY_DEG + 180) % 360 - 180) < 15
+    # every fit's current lies in the tank current's interval, which has a width
+    assert np.all(current.half_width_m_s > 0) and np.all(current.half_width_m_s < 0.03)
+    for motion in ("straight", "turning"):
+        got = np.array(held[motion].model.current_m_s)
+        assert np.all(np.abs(got - current.current_m_s) <= current.half_width_m_s + 1e-12)
+        assert held_evs[motion].space is held[motion].space
+        # the held fit is scored on the same experiments as the motion's own
+        assert held[motion].fitness == pytest.approx(
+            float(held_evs[motion].fitness(held[motion].values[None])[0]))
+        assert held[motion].simulations > fits[motion].simulations
+
+
+def test_one_motion_alone_keeps_its_own_current(tank):
+    fits, evs = tank
+    only = {"straight": fits["straight"]}
+    out, out_evs, current = share_tank_current(only, {"straight": evs["straight"]})
+    assert current is None and out["straight"] is fits["straight"]
