@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from eelhost.benchmarks.machine import cpu_model, load_average
+from eelhost.machine import cpu_model, load_average
 
 BEGIN = "<!-- cluster: begin (written by python -m eelhost.benchmarks.cluster_speed --write) -->"
 END = "<!-- cluster: end -->"

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from eelhost.benchmarks.machine import load_average
+from eelhost.machine import load_average
 from eelhost.progress import Progress
 from eelsim.batch import BatchSpec
 from eelsim.closed_loop import LoopOptions

@@ -30,7 +30,6 @@ from typing import Any
 
 import numpy as np
 
-from eelhost.benchmarks.machine import cpu_model
 from eelhost.data.experiments import BUNDLED_DATASET, Dataset, load_dataset
 from eelhost.data.virtual_tank import (
     TABLE3,
@@ -48,6 +47,7 @@ from eelhost.estimation.parameters import FittedModel, ParameterSpace
 from eelhost.estimation.pipeline import FitSettings, fit_motion
 from eelhost.estimation.tank_current import share_tank_current
 from eelhost.estimation.validate import validate, worst_ex
+from eelhost.machine import cpu_model
 
 PAPER_WORST_EX = {"straight": 0.082, "turning": 0.183, "path": 0.01}
 # Issue 32's target for the worst held-out E_x (recorded clock, BL) on a mismatched tank, from

@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from eelhost.benchmarks.machine import cpu_model, load_average, simd_flags
+from eelhost.machine import cpu_model, load_average, simd_flags
 from eelsim.closed_loop import LoopOptions, simulate_closed_loop
 from eelsim.fluid import FluidCoefficients
 from eelsim.joints import pd_gains

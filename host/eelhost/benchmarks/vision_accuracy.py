@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from eelhost.benchmarks.machine import cpu_model
+from eelhost.machine import cpu_model
 from eelhost.vision.localise import REFINE_METHODS, Localiser
 from eelhost.vision.synthetic import RenderOptions, SyntheticCamera, sample_run
 from eelsim.closed_loop import simulate_closed_loop

@@ -19,7 +19,6 @@ import platform
 import re
 from pathlib import Path
 
-from eelhost.benchmarks.machine import cpu_model
 from eelhost.commands.common import (
     COUNT,
     SEED,
@@ -28,6 +27,7 @@ from eelhost.commands.common import (
     robot_and_coefficients,
 )
 from eelhost.files import atomic_write, check_output_folder
+from eelhost.machine import cpu_model
 from eelhost.planning.coverage import action_coverage
 from eelhost.planning.planner import CHECK_DRAWS, Outcome, Planner, PlanRefused
 from eelhost.planning.uncertainty import (

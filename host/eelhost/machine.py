@@ -1,4 +1,8 @@
-"""The machine a benchmark ran on, for the provenance of its figures."""
+"""The machine a figure was measured on (CPU, SIMD, load), for the provenance of benchmark figures.
+
+A library module: the benchmarks and the commands that write measured figures (`eelbot plan
+--bench`, `eelbot run --bench`) cite the machine with it.
+"""
 
 from __future__ import annotations
 
