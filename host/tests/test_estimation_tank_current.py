@@ -40,11 +40,11 @@ def tank(tmp_path_factory):
     for motion in ("straight", "turning"):
         fits[motion], evs[motion] = fit_motion(ds, motion, FitSettings(budget=300,
                                                                        polish_iterations=6))
-    return fits, evs
+    return ds, fits, evs
 
 
 def test_both_motions_hold_one_tank_current_recovered_within_a_mm_s_and_15_degrees(tank):
-    fits, evs = tank
+    _, fits, evs = tank
     held, held_evs, current = share_tank_current(fits, evs)
     assert current is not None and current.experiments == 4
     speed = float(np.hypot(*current.current_m_s))
@@ -64,7 +64,27 @@ def test_both_motions_hold_one_tank_current_recovered_within_a_mm_s_and_15_degre
 
 
 def test_one_motion_alone_keeps_its_own_current(tank):
-    fits, evs = tank
+    _, fits, evs = tank
     only = {"straight": fits["straight"]}
     out, out_evs, current = share_tank_current(only, {"straight": evs["straight"]})
     assert current is None and out["straight"] is fits["straight"]
+
+
+def test_the_report_writes_the_tank_current_and_validation_swims_each_fit_in_it(tank, tmp_path):
+    import json
+
+    from eelhost.estimation.pipeline import read_coefficients
+    from eelhost.estimation.report import run_report
+
+    ds = tank[0]
+    report = run_report(ds, tmp_path, settings=FitSettings(budget=150, polish_iterations=3),
+                        bootstrap_replicates=0, compare_models=False)
+    data = json.loads((tmp_path / "coefficients.json").read_text())
+    held = np.array([data["tank_current"]["current_x_m_s"], data["tank_current"]["current_y_m_s"]])
+    half = np.array(data["tank_current"]["half_width_m_s"])
+    assert data["tank_current"]["experiments"] == 4
+    models = read_coefficients(str(tmp_path / "coefficients.json"), ds.robot)
+    for motion in ("straight", "turning"):
+        got = np.array(models[motion].current_m_s)  # what validate swims in
+        assert np.all(np.abs(got - held) <= half + 1e-12)
+    assert "One current for the tank" in report.read_text()
