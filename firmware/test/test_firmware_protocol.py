@@ -33,10 +33,16 @@ def test_rendered_files_match_the_definition():
     assert proc.returncode == 0, proc.stderr
 
 
+OUTPUTS = (
+    "CPP_OUT", "PY_OUT", "SIM_TIMING_OUT", "C_TIMING_OUT", "NATIVE_H_OUT", "DOCS_OUT",
+    "PLATFORMIO_OUT",
+)
+
+
 def outputs_copied_to(tmp_path, gen, monkeypatch):
     """Point the generator at copies of its outputs in tmp_path; return name -> copy."""
     copies = {}
-    for name in ("CPP_OUT", "PY_OUT", "NATIVE_H_OUT", "DOCS_OUT", "PLATFORMIO_OUT"):
+    for name in OUTPUTS:
         copy = tmp_path / getattr(gen, name).name
         copy.write_text(getattr(gen, name).read_text())
         monkeypatch.setattr(gen, name, copy)
@@ -50,6 +56,8 @@ def outputs_copied_to(tmp_path, gen, monkeypatch):
     [
         ("CPP_OUT", "kBaud = 57600UL", "kBaud = 9600UL"),
         ("PY_OUT", "BAUD = 57600", "BAUD = 9600"),
+        ("SIM_TIMING_OUT", "CONTROL_PERIOD_US = 10000", "CONTROL_PERIOD_US = 20000"),
+        ("C_TIMING_OUT", "#define EEL_SERVO_FRAME_US 20000UL", "#define EEL_SERVO_FRAME_US 0UL"),
         ("NATIVE_H_OUT", "#define EEL_JOINTS ", "#define EEL_JOINTS 1"),
         ("DOCS_OUT", "| 0x04 | Start |", "| 0x07 | Start |"),
         ("PLATFORMIO_OUT", "monitor_speed = 57600", "monitor_speed = 115200"),
@@ -126,6 +134,34 @@ def test_periods_are_shared_constants_outside_the_schema_hash(tmp_path):
     assert "No valid frame for 1 s while running" in gen.render_cpp(gen.load())
 
 
+def test_the_control_period_is_set_in_one_place_and_reaches_the_firmware_and_the_twin(
+    tmp_path, monkeypatch
+):
+    gen = load_generator()
+    faster = tmp_path / "faster.toml"
+    text = (ROOT / "protocol" / "eelbot.toml").read_text()
+    faster.write_text(with_constant(text, "control_period_us", 5000))
+    monkeypatch.setattr(gen, "DEFINITION", faster)
+    out = outputs_copied_to(tmp_path, gen, monkeypatch)
+    assert gen.main([]) == 0
+    assert "constexpr uint32_t kControlPeriodUs = 5000UL;" in out["CPP_OUT"].read_text()
+    assert "\nCONTROL_PERIOD_US = 5000\n" in out["PY_OUT"].read_text()
+    assert "\nCONTROL_PERIOD_US = 5000\n" in out["SIM_TIMING_OUT"].read_text()
+    assert "\n#define EEL_CONTROL_PERIOD_US 5000UL\n" in out["C_TIMING_OUT"].read_text()
+    assert "| `control_period_us` | 5000 |" in out["DOCS_OUT"].read_text()
+    assert gen.load(faster)["schema_hash"] == p.SCHEMA_HASH  # a period, not a wire change
+
+
+def test_only_the_constants_marked_twin_reach_the_twins_module():
+    gen = load_generator()
+    d = gen.load()
+    twin = gen.render_sim_timing(d)
+    assert "\nBAUD = 57600\n" in twin and "\nSERVO_FRAME_US = 20000\n" in twin
+    assert "N_JOINTS" not in twin and "LINK_TIMEOUT_US" not in twin
+    imports = [line for line in twin.splitlines() if line.startswith(("import ", "from "))]
+    assert imports == ["from __future__ import annotations"]  # the twin imports nothing of eelhost
+
+
 def test_schema_hash_follows_wire_changes_but_not_doc_changes(tmp_path):
     gen = load_generator()
     text = (ROOT / "protocol" / "eelbot.toml").read_text()
@@ -162,6 +198,7 @@ def test_schema_hash_follows_wire_changes_but_not_doc_changes(tmp_path):
         ('["HW_WATCHDOG", 8,', '["HW_WATCHDOG", 6,', "enum Flags: each flag must be one bit"),
         ("{telemetry_period_us}", "{telemetry_rate}", "Telemetry: the doc quotes {telemetry_rate}"),
         ("[constants.baud]\nvalue = 57600", "[constants.baud]\nvalue = -1", "constants.baud"),
+        ("twin = true\n", "twin = 1\n", "twin must be true or false"),
         (
             "max = 1.5, default = 0.5",
             "default = 0.5",

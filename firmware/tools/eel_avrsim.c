@@ -51,6 +51,11 @@
 #include <sim_avr.h>
 #include <sim_elf.h>
 
+#include "timing_gen.h" /* EEL_BAUD, EEL_CONTROL_PERIOD_US: protocol/eelbot.toml */
+
+/* Bytes a second on the line: 8N1 takes 10 bit times a byte (5760 at 57600 baud). */
+#define LINE_BYTES_PER_S (EEL_BAUD / 10.0)
+
 #define MAX_PINS 8
 
 struct EasSim;
@@ -203,7 +208,7 @@ static void on_busy_pin(struct avr_irq_t* irq, uint32_t value, void* param) {
       if (d < s->period_min) s->period_min = d;
       if (d > s->period_max) s->period_max = d;
       if (s->period_tolerance_us > 0 &&
-          fabs(cycles_to_us(s, d) - 10000.0) > s->period_tolerance_us) {
+          fabs(cycles_to_us(s, d) - (double)EEL_CONTROL_PERIOD_US) > s->period_tolerance_us) {
         ++s->period_outside;
       }
     }
@@ -318,7 +323,7 @@ EasSim* eas_create(const char* elf, const char* mcu, unsigned long freq) {
                           on_xoff, s);
   s->uart_input = avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_INPUT);
   s->uart = find_uart0(avr);
-  s->uart_cycles_per_byte = (avr_cycle_count_t)(freq / 5760.0);  /* 8N1 at 57600 baud */
+  s->uart_cycles_per_byte = (avr_cycle_count_t)(freq / LINE_BYTES_PER_S);
   s->eeprom_write_cycles = (avr_cycle_count_t)(3400.0 * s->cycles_per_us);
   avr_register_io_write(avr, EECR_ADDR, on_eecr_write, s);
   avr_register_io_read(avr, EECR_ADDR, on_eecr_read, s);
@@ -605,7 +610,8 @@ int main(int argc, char** argv) {
   const char *elf = NULL, *mcu = "atmega328p", *uart_in = NULL, *uart_out = NULL;
   const char *pulses = NULL, *pulse_pins = NULL, *busy = NULL, *adc = NULL;
   const char *eeprom_in = NULL, *eeprom_out = NULL, *reset_at = NULL;
-  double hang_at_us = 0.0, line_rate = 5760.0, eeprom_write_us = 3400.0, tolerance_us = 0.0;
+  double hang_at_us = 0.0, line_rate = LINE_BYTES_PER_S, eeprom_write_us = 3400.0;
+  double tolerance_us = 0.0;
   unsigned long paint_from = 0;
   int bootloader = 0;
   unsigned long freq = 16000000UL;
@@ -714,9 +720,10 @@ int main(int argc, char** argv) {
              cycles_to_us(sim, sim->busy_max), sim->cycles_per_us);
       if (sim->period_n) {
         printf("control period: n=%" PRIu64 " min=%.1f us max=%.1f us, %" PRIu64
-               " outside 10000 +- %.0f us\n",
+               " outside %lu +- %.0f us\n",
                sim->period_n, cycles_to_us(sim, sim->period_min),
-               cycles_to_us(sim, sim->period_max), sim->period_outside, sim->period_tolerance_us);
+               cycles_to_us(sim, sim->period_max), sim->period_outside, EEL_CONTROL_PERIOD_US,
+               sim->period_tolerance_us);
       }
       if (budget_us > 0) {
         const int ok = cycles_to_us(sim, sim->busy_max) <= budget_us;
@@ -725,7 +732,7 @@ int main(int argc, char** argv) {
       }
       if (sim->period_tolerance_us > 0) {
         const int ok = sim->period_outside == 0;
-        printf("period: 10000 +- %.0f us: %s\n", sim->period_tolerance_us,
+        printf("period: %lu +- %.0f us: %s\n", EEL_CONTROL_PERIOD_US, sim->period_tolerance_us,
                ok ? "OK" : "FAIL (periods outside)");
         if (!ok) status = 1;
       }

@@ -21,7 +21,7 @@
 #include "message_codec.h"
 
 namespace {
-constexpr double kByteUs = 1e6 / 5760.0;  // 10 bit times at 57600 baud
+constexpr double kByteUs = 10 * 1e6 / eelproto::kBaud;  // 8N1: 10 bit times a byte
 constexpr uint32_t kFloodStartUs = 200000;
 constexpr uint32_t kKeepAliveUs = 300000;
 

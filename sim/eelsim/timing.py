@@ -3,6 +3,11 @@
 All periods that change what the plant receives are whole multiples of the physics step; this is
 checked here with a clear error, once, so that the loop itself counts integer steps. The camera's
 30 fps is not a multiple of 0.01 s; the camera observes between steps instead (see ``camera.py``).
+
+The default physics step is the firmware's control period, which like the servo frame and the
+baud is defined once in ``protocol/eelbot.toml`` and generated into
+:mod:`eelsim.firmware_timing` (docs/firmware.md, "Timing defined once"); the lockstep
+(``eelhost.xil.lockstep``) steps the firmware at the same period.
 """
 
 from __future__ import annotations
@@ -10,6 +15,25 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
+from eelsim.firmware_timing import BAUD, CONTROL_PERIOD_US, SERVO_FRAME_US
+
+__all__ = [
+    "BAUD",
+    "CONTROL_PERIOD_US",
+    "PHYSICS_STEP_S",
+    "PHYSICS_STEP_US",
+    "SERVO_FRAME_US",
+    "LoopTiming",
+    "TimingError",
+    "whole_steps",
+]
+
+#: The twin's default physics step, us: the firmware's control period, so that the robot and the
+#: twin sample the gait at the same instants and the lockstep ticks the firmware once a step.
+PHYSICS_STEP_US = CONTROL_PERIOD_US
+#: The same in seconds (10000 us -> 0.01 s exactly as a float: a correctly rounded division).
+PHYSICS_STEP_S = PHYSICS_STEP_US / 1_000_000
 
 
 class TimingError(ValueError):
@@ -50,7 +74,7 @@ class LoopTiming:
     Attributes
     ----------
     dt_s : float
-        Physics step of RK4.
+        Physics step of RK4 (default :data:`PHYSICS_STEP_S`, the firmware's control period).
     control_period_s : float
         The heading offset is recomputed every control period and held in between (zero-order hold).
     extra_delay_s : float
@@ -61,7 +85,7 @@ class LoopTiming:
         from [-jitter_s, +jitter_s] (seeded).
     """
 
-    dt_s: float = 0.01
+    dt_s: float = PHYSICS_STEP_S
     control_period_s: float = 0.3
     extra_delay_s: float = 0.0
     jitter_s: float = 0.0

@@ -58,13 +58,15 @@ uint16_t eel_schema_hash(void);
  * memory. */
 EelFw* eel_create(uint32_t now_us);
 void eel_destroy(EelFw* fw);
-/* Back to the boot state as after a power cycle: queues emptied, control period 10000 us, reset
- * count 0. The EEPROM keeps its bytes, so the settings saved before come back. */
+/* Back to the boot state as after a power cycle: queues emptied, control period the robot's
+ * (control_period_us of protocol/eelbot.toml), reset count 0. The EEPROM keeps its bytes, so the
+ * settings saved before come back. */
 void eel_reset(EelFw* fw, uint32_t now_us);
 /* A reset without a power cycle, with the flags the AVR's MCUSR would show (eelproto::ResetFlags:
  * 2 EXTERNAL, 4 BROWN_OUT, 8 WATCHDOG): as eel_reset, but the reset count goes up by one. */
 void eel_reboot(EelFw* fw, uint32_t now_us, uint8_t reset_flags);
-/* 0 = a control update on every tick (lockstep with a plant); default 10000 as on the AVR. */
+/* 0 = a control update on every tick (lockstep with a plant); default: the AVR's period
+ * (control_period_us of protocol/eelbot.toml). */
 void eel_set_control_period_us(EelFw* fw, uint32_t period_us);
 /* Bytes "received by the UART"; returns how many fit in the receive queue. */
 size_t eel_feed(EelFw* fw, const uint8_t* data, size_t n);

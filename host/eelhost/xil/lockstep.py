@@ -79,6 +79,7 @@ from eelsim.joints import pd_gains
 from eelsim.model import SwimmerModel
 from eelsim.robot import Robot
 from eelsim.scenario import Scenario
+from eelsim.timing import PHYSICS_STEP_US
 
 __all__ = [
     "DT_US",
@@ -97,7 +98,9 @@ __all__ = [
 ]
 
 FloatArray = NDArray[np.float64]
-DT_US = 10_000  # the twin's physics step
+# The twin's physics step: the firmware's control period, from protocol/eelbot.toml through the
+# generated eelsim.firmware_timing (docs/firmware.md, "Timing defined once").
+DT_US = PHYSICS_STEP_US
 # SetGains takes torque limits up to 10 N m; the twin's PD has no limit unless servo limits are on.
 NO_TORQUE_LIMIT_NM = 10.0
 

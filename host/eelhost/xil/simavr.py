@@ -458,12 +458,13 @@ def expected_pulse_widths_us(
     """
     # Frames as the AVR received them: (time the delimiter entered the UART, message). The
     # harness's UART takes the queued bytes one after the other at the line rate, 10 bit times
-    # each: 173.6 us at 57600 baud.
+    # each (8N1): 173.6 us at 57600 baud (protocol.BAUD).
+    byte_us = 10 * 1e6 / protocol.BAUD
     reader = protocol.FrameReader()
     frames: list[tuple[float, protocol.Message]] = []
     entered = -np.inf
     for t, byte in result.uart_in:
-        entered = max(t, entered + 1e6 / 5760)
+        entered = max(t, entered + byte_us)
         frames.extend((entered, m) for _, m in reader.feed(bytes([byte])))
     upd = result.control_updates_us
     rise_u, end_u = upd[:, 0], upd[:, 0] + upd[:, 1]
