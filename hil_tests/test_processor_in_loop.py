@@ -21,7 +21,8 @@ from eelsim.closed_loop import LoopOptions
 from eelsim.robot import load_robot
 from eelsim.scenario import load_scenario
 
-pytestmark = pytest.mark.processor_in_loop
+# slow: the emulated AVR costs 1-2 CPU s per simulated s (about 30 s for the file)
+pytestmark = [pytest.mark.processor_in_loop, pytest.mark.slow]
 
 PULSE_TOLERANCE_US = 10.0
 DISTANCE_TOLERANCE = 0.15
