@@ -23,7 +23,7 @@ from eelhost.field.take import TakeRequest, run_take
 from eelhost.planning.execute import body_clearance_m
 from eelhost.planning.field import ClearanceField
 from eelhost.planning.planner import Outcome, Planner
-from eelhost.planning.replan import TankReplanner, predict_state
+from eelhost.planning.replan import TankReplanner, outline_clearance_m, predict_state
 from eelhost.planning.search import Plan
 from eelhost.planning.state_estimate import BodyStateEstimator
 from eelhost.planning.tank import plan_for_run, with_extra_current
@@ -233,7 +233,7 @@ def failing_replanner(status: str):
             self.requests.append(est.t_s)
             plan = Plan(False, status, f"failed ({status})")
             return (Outcome(plan, status, plan.message), est.state, 0.0, 0.0, np.zeros(2),
-                    time.monotonic())
+                    time.monotonic(), start_step)
 
     return Failing
 
@@ -355,3 +355,126 @@ def test_a_failed_replan_with_contact_ahead_stops_the_robot_at_once(open_plan):
         nav.close()
     assert d is not None and d.stop == "no_safe_continuation"
     assert "into an obstacle or wall" in d.detail and len(nav.requests) == 1
+
+
+def test_the_lookaheads_outline_is_the_benchmarks_independent_true_body():
+    # two implementations of the same body (each link the stadium of its own length and width):
+    # the replanner's on the world's polyline distances, the benchmark's on shapely
+    from eelhost.benchmarks.closed_loop import true_clearance_m
+    from eelhost.planning.body import link_endpoints
+    from eelsim.dynamics import straight_state
+
+    world = parse_world({**OPEN, "obstacles": OPEN["obstacles"] + [
+        {"kind": "polygon", "vertices_m": [[2.0, 0.2], [2.4, 0.2], [2.4, 0.5], [2.0, 0.5]]}]},
+        "w")
+    rng = np.random.default_rng(11)
+    states = []
+    for _ in range(400):
+        s = straight_state(BODY, rng.uniform(-np.pi, np.pi), (rng.uniform(0.1, 2.9),
+                                                              rng.uniform(0.1, 0.9)))
+        s[:N] += np.cumsum(rng.normal(0, 0.25, N))
+        states.append(s)
+    states = np.asarray(states)
+    ours = outline_clearance_m(world, BODY, states)
+    truth = true_clearance_m(world, BODY, states)
+    assert (truth < 0).sum() > 20 and (truth > 0).sum() > 20
+    assert np.array_equal(ours <= 0, truth <= 0)  # the same contacts
+    clear = truth > 0
+    assert np.allclose(ours[clear], truth[clear], atol=1e-9)
+    # never nearer than the planner's capsule (the centre line widened by the largest half width)
+    b = float(BODY.half_axis_horizontal_m.max())
+    capsule = world.body_clearance(link_endpoints(BODY, states)) - b
+    assert np.all(ours >= capsule - 1e-9) and np.any(ours > capsule + 0.01)
+
+
+class _Scripted:
+    """A planner whose ``plan`` answers ``status`` before ``found_from_step``, else plans."""
+
+    def __init__(self, planner: Planner, status: str, found_from_step: float) -> None:
+        self._planner, self.status, self.found_from_step = planner, status, found_from_step
+        self.starts: list[int] = []
+
+    def __getattr__(self, name: str):  # noqa: ANN204
+        return getattr(self._planner, name)
+
+    def plan(self, state, start_step):  # noqa: ANN001, ANN201
+        self.starts.append(start_step)
+        if start_step < self.found_from_step:
+            plan = Plan(False, self.status, f"scripted {self.status}")
+            return Outcome(plan, self.status, plan.message)
+        return self._planner.plan(state, start_step)
+
+
+def estimate_at(t_s: float, shift_m=(0.0, 0.0)):
+    """The estimator's state of the swimming robot at ``t_s``, its whole run moved by ``shift_m``."""
+    run = swimming_state(t_s)
+    est = BodyStateEstimator(BODY, PATH_GAIT)
+    for t in np.arange(t_s - 0.5, t_s + 1e-9, 1 / 30):
+        x = np.array([np.interp(t, run.t_s, run.states[:, i]) for i in range(run.states.shape[1])])
+        est.observe(t, x[N : N + 2] + np.asarray(shift_m), x[:N])
+    e = est.estimate()
+    assert e is not None
+    return e
+
+
+def test_a_blocked_replan_start_is_retried_from_the_moving_body_further_on(open_plan):
+    planner, outcome = open_plan
+    e = estimate_at(3.0)
+    now = int(round(3.0 / 0.01))
+    scripted = _Scripted(planner, "blocked_start", now + 120)  # blocked until 1.2 s ahead
+    nav = TankReplanner(lambda extra: scripted, scripted, outcome, PATH_GAIT)  # type: ignore[arg-type]
+    try:
+        found, state, *_, start = nav._replan(e, [(2.1, 1.0)], now + 60, np.zeros(2))
+    finally:
+        nav.close()
+    assert scripted.starts == [now + 60, now + 90, now + 120]  # a restart period further each
+    assert found.found and start == now + 120
+    assert np.hypot(*(found.plan.legs[0].com_m[0] - state[N : N + 2])) < 0.02
+    # refused from every start tried: the refusal stands (the robot stops unless its plan is clear)
+    never = _Scripted(planner, "blocked_start", np.inf)
+    nav = TankReplanner(lambda extra: never, never, outcome, PATH_GAIT)  # type: ignore[arg-type]
+    try:
+        refused, *_ = nav._replan(e, [(2.1, 1.0)], now + 60, np.zeros(2))
+    finally:
+        nav.close()
+    assert refused.status == "blocked_start" and len(never.starts) == 1 + nav.blocked_retries
+
+
+def test_a_refused_replan_keeps_a_present_plan_the_twin_swims_clear(open_plan):
+    planner, outcome = open_plan
+
+    class ClearAhead(failing_replanner("blocked_start")):  # type: ignore[misc]
+        def _look_ahead(self, est, left, extra):  # noqa: ANN001, ANN202
+            return 0.2
+
+    nav = ClearAhead(lambda extra: planner, planner, outcome, PATH_GAIT)
+    nav.requests.clear()
+    try:
+        t_stop, d = drive_off_corridor(nav, 6.0)
+    finally:
+        nav.close()
+    assert d is None and len(nav.requests) >= 2  # kept its plan, and tried again later
+
+
+def test_near_the_goal_a_failed_replan_is_tried_with_the_goal_approachs_smaller_margin(open_plan):
+    planner, outcome = open_plan
+    failing = _Scripted(planner, "exhausted", np.inf)
+    approach: list[np.ndarray] = []
+
+    def goal_planner_for(extra):  # noqa: ANN001, ANN202
+        approach.append(extra)
+        return planner
+
+    nav = TankReplanner(lambda extra: failing, failing, outcome, PATH_GAIT,  # type: ignore[arg-type]
+                        goal_planner_for=goal_planner_for, goal_approach_m=0.5)
+    try:
+        far = estimate_at(3.0)  # about 1 m from the goal disc
+        now = int(round(3.0 / 0.01))
+        out, *_ = nav._replan(far, [(2.1, 1.0)], now + 60, np.zeros(2))
+        assert out.status == "exhausted" and not approach
+        near = estimate_at(3.0, (1.0, -0.1))  # its centre of mass some 0.2 m short of the disc
+        out, state, *_ = nav._replan(near, [(2.1, 1.0)], now + 60, np.zeros(2))
+    finally:
+        nav.close()
+    assert np.hypot(state[N] - 2.1, state[N + 1] - 1.0) - 0.2 < 0.5
+    assert len(approach) == 1 and out.found, out.message

@@ -30,18 +30,57 @@ from typing import Any
 
 import numpy as np
 
-from eelhost.planning.body import link_endpoints
 from eelhost.planning.execute import Swim, body_clearance_m, swim
 from eelhost.planning.geometry import FloatArray, point_segment_distance
 from eelhost.planning.planner import Outcome, Planner
 from eelhost.planning.search import Plan, goal_mask, in_goal
 from eelhost.planning.state_estimate import BodyEstimate, BodyStateEstimator, CurrentEstimator
 from eelhost.planning.twin import Twin
+from eelhost.planning.world import World
 from eelhost.vision.localise import Localisation
 from eelsim.control import Gait
 from eelsim.fluid import FluidCoefficients
+from eelsim.model import SwimmerModel
 
 log = logging.getLogger(__name__)
+
+
+def outline_clearance_m(world: World, model: SwimmerModel, states: FloatArray) -> FloatArray:
+    """Gap between the body's own outline and the nearest obstacle or wall (negative: overlap).
+
+    Each link i is the stadium its ellipse fits in: a core segment of half length
+    ``l_i - b_i`` along the link through its centre, widened by its own half width ``b_i``
+    (docs/model.md section 1), so the outline ends at the head and tail tips. The planner's
+    check (:func:`eelhost.planning.execute.body_clearance_m`) instead widens the whole centre
+    line by the largest half width, a capsule reaching that half width beyond both tips: the
+    right margin for planning, but a look-ahead or contact test judged with it sees contacts the
+    body never makes (docs/planning.md, "Execution and replanning"). A link can overlap by at
+    most its half width here (:meth:`World.body_clearance` is 0 when touching).
+
+    Parameters
+    ----------
+    world : World
+    model : SwimmerModel
+    states : ndarray, shape (K, 2 N + 4)
+
+    Returns
+    -------
+    ndarray, shape (K,)
+    """
+    states = np.asarray(states, dtype=float)
+    k, n = len(states), model.n_links
+    if k == 0:
+        return np.zeros(0)
+    theta = states[:, :n]
+    c, s = np.cos(theta), np.sin(theta)
+    xc = states[:, n : n + 1] + c @ model.geometry.T  # link centres (eelsim.dynamics)
+    yc = states[:, n + 1 : n + 2] + s @ model.geometry.T
+    b = np.asarray(model.half_axis_horizontal_m, dtype=float)
+    core = np.maximum(np.asarray(model.half_length_m, dtype=float) - b, 0.0)
+    ends = np.stack([np.stack([xc - core * c, yc - core * s], axis=-1),
+                     np.stack([xc + core * c, yc + core * s], axis=-1)], axis=2)  # (K, N, 2, 2)
+    gaps = world.body_clearance(ends.reshape(k * n, 2, 2)).reshape(k, n) - b[None]
+    return np.asarray(gaps.min(axis=1))
 
 
 def corridor_path(plan: Plan) -> FloatArray:
@@ -189,8 +228,13 @@ def _finish(planner: Planner, reached: bool, free: bool, replans: int, goal_time
 
 # -- at the tank -----------------------------------------------------------------------------------
 
+GOAL_APPROACH_CLEARANCE_M = 0.01
+"""The goal approach's search margin beyond the body's half width (docs/planning.md): its centre
+line this far plus the half width from everything, so the true outline at least this far."""
+
 REFUSED_FROM_STATE = ("blocked_start", "current_too_strong", "unreachable")
-"""Planner statuses that no later replan from a nearby state can change: no safe continuation."""
+"""Planner statuses that refuse the start state itself: no safe continuation from it, so the
+robot is stopped unless the look-ahead swims its present plan clear (then it keeps that plan)."""
 
 
 @dataclass
@@ -264,7 +308,8 @@ class TankReplanner:
         is stopped at once when a replan fails while the latest look-ahead swims the present
         waypoints into contact, or when a look-ahead does so after a failed replan;
         unless the latest look-ahead swam its present waypoints clear of contact: it then keeps
-        them, and replanning is tried again every ``backoff_s`` 2^(max_failures - 1).
+        them, and replanning is tried again every ``backoff_s`` 2^(max_failures - 1). A replan
+        refused from its start state (:data:`REFUSED_FROM_STATE`) counts as the last failure.
     backoff_s : float
         Wait after the first failed replan; it doubles with each further failure.
     lead_s : float
@@ -281,6 +326,15 @@ class TankReplanner:
         ``lookahead_margin_m`` of an obstacle or wall there is replanned (``predicted_contact``)
         even inside the corridor.
     lookahead_every_s, lookahead_margin_m : float
+    goal_planner_for : callable, optional
+        ``goal_planner_for(extra_current_m_s)``: a planner like ``planner_for``'s whose search
+        keeps a smaller margin (the goal approach); a replan that finds no plan from a start
+        within ``goal_approach_m`` of the goal disc's edge is tried again with it.
+    goal_approach_m : float
+    blocked_retries : int
+        A replan whose predicted start is refused as blocked (the body within its half width of
+        an obstacle) is tried again from the states the twin predicts one, two, ... restart
+        periods later along the present waypoints, this many times.
     """
 
     def __init__(
@@ -298,6 +352,9 @@ class TankReplanner:
         lookahead_s: float = 3.0,
         lookahead_every_s: float = 0.6,
         lookahead_margin_m: float = 0.01,
+        goal_planner_for: Callable[[FloatArray], Planner] | None = None,
+        goal_approach_m: float = 0.5,
+        blocked_retries: int = 3,
     ) -> None:
         self.planner_for = planner_for
         self.planner = planner
@@ -313,6 +370,10 @@ class TankReplanner:
         self.lookahead_s = lookahead_s
         self.lookahead_every_s = lookahead_every_s
         self.lookahead_margin_m = lookahead_margin_m
+        self.goal_planner_for = goal_planner_for
+        self.goal_approach_m = goal_approach_m
+        self.blocked_retries = blocked_retries
+        self._goal_planner: tuple[Planner, FloatArray] | None = None
         self.half_width_m = float(self.model.half_axis_horizontal_m.max())
         self.estimator = BodyStateEstimator(self.model, gait)
         self.current = CurrentEstimator()
@@ -330,11 +391,16 @@ class TankReplanner:
         self._window: _Window | None = None
         self._window_job: tuple[Future, _Window, BodyEstimate] | None = None
         self._planner_current = np.zeros(2)
+        # (planner, its extra current) swapped as one, read by the side worker
+        self._planned: tuple[Planner, FloatArray] = (planner, np.zeros(2))
         self._last_wall_s = 0.0
         self._lookahead: Future | None = None
         self._last_gap: tuple[float, float | None] = (-math.inf, None)
         self._next_lookahead_s = 0.0
         self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="eelbot-planner")
+        # look-aheads and the current's windows on their own thread, so a replan never queues
+        # behind them (the twin's kernel releases the interpreter: both run at once)
+        self._side = ThreadPoolExecutor(max_workers=1, thread_name_prefix="eelbot-lookahead")
 
     # -- the loop's calls ----------------------------------------------------------------------
 
@@ -415,7 +481,7 @@ class TankReplanner:
         elif (not busy and self._lookahead is None and self.lookahead_s > 0
               and t_s >= self._next_lookahead_s):
             self._next_lookahead_s = t_s + self.lookahead_every_s
-            self._lookahead = self._worker.submit(self._look_ahead, est, list(left),
+            self._lookahead = self._side.submit(self._look_ahead, est, list(left),
                                                   self.current.value_m_s.copy())
         return d
 
@@ -437,6 +503,7 @@ class TankReplanner:
     def close(self) -> None:
         """Stop the worker (a replan in progress is left to finish on its own thread)."""
         self._worker.shutdown(wait=False, cancel_futures=True)
+        self._side.shutdown(wait=False, cancel_futures=True)
 
     def record(self) -> dict[str, Any]:
         """What the take keeps of the planning: every plan and replan, and the current estimate."""
@@ -446,17 +513,16 @@ class TankReplanner:
     # -- contact ---------------------------------------------------------------------------------
 
     def _contact(self, t_s: float) -> str | None:
-        """Whether the measured body touches the world, with the planner's geometry.
+        """Whether the measured body touches the world: its own outline, as the look-ahead's.
 
-        The link centre lines' exact distance less the body's half width
-        (:meth:`eelhost.planning.world.World.body_clearance`), as the planner's check.
+        Each link the stadium of its own length and width (:func:`outline_clearance_m`), the
+        geometry the look-ahead judges the present plan with.
         """
         pose = self.estimator.latest_pose()
         assert pose is not None
         n = self.model.n_links
         state = np.concatenate([pose, np.zeros(n + 2)])
-        ends = link_endpoints(self.model, state[None])
-        gap = float(self.world.body_clearance(ends)[0]) - self.half_width_m
+        gap = float(outline_clearance_m(self.world, self.model, state[None])[0])
         self._touching = self._touching + 1 if gap <= 0.0 else 0
         if self._touching >= self.contact_frames:
             return (f"the body touched an obstacle or wall at t = {t_s:.2f} s, at "
@@ -481,31 +547,90 @@ class TankReplanner:
         now_step = int(round(est.t_s / dt))
         start_step = int(math.ceil((now_step + self._lead_steps()) / period)) * period
         extra = self.current.value_m_s.copy() if self.estimate_current else np.zeros(2)
-        future = self._worker.submit(self._replan, est, list(left), start_step, extra)
+        future = self._worker.submit(self._replan_and_judge, est, list(left), start_step, extra)
         self._job = _Job(future, t_s, time.monotonic(), start_step * dt, reason)
         log.info("left the corridor at t = %.2f s; replanning from the state predicted for "
                  "t = %.2f s", t_s, start_step * dt)
 
     def _replan(self, est: BodyEstimate, left: list[tuple[float, float]], start_step: int,
-                extra: FloatArray) -> tuple[Outcome, FloatArray, float, float, FloatArray, float]:
-        """On the worker: predict the state at the start step with the twin, then plan from it."""
+                extra: FloatArray) -> tuple[Outcome, FloatArray, float, float, FloatArray, float,
+                                            int]:
+        """On the worker: predict the state at the start step with the twin, then plan from it.
+
+        A start refused as blocked is tried again a restart period later along the present
+        waypoints (``blocked_retries`` times): the moving body swims on, and its predicted
+        state a moment later may be clear. A start near the goal that gives no plan is tried
+        again with the goal approach's planner. Returns the start step actually used.
+        """
         wall0, cpu0 = time.perf_counter(), time.thread_time()
         if float(np.hypot(*(extra - self._planner_current))) >= 0.005:
             self.planner = self.planner_for(extra)
             self._planner_current = extra
+            self._planned = (self.planner, extra)
         planner = self.planner
+        period = planner.twin.restart_steps or 1
         state = predict_state(planner.twin, est, left, start_step)
         assert state is not None  # allow_end: the run's last state when it ends early
         outcome = planner.plan(state, start_step)
+        for _ in range(self.blocked_retries):
+            if outcome.status != "blocked_start":
+                break
+            later = predict_state(planner.twin, est, left, start_step + period, allow_end=False)
+            if later is None:
+                break
+            log.info("replan start blocked at t = %.2f s; trying %.2f s",
+                     start_step * planner.twin.dt_s, (start_step + period) * planner.twin.dt_s)
+            start_step, state = start_step + period, later
+            outcome = planner.plan(state, start_step)
+        if not outcome.found and outcome.status not in REFUSED_FROM_STATE and self._near_goal(
+                state):
+            goal_planner = self._goal_planner_in(extra)
+            if goal_planner is not None:
+                approach = goal_planner.plan(state, start_step)
+                log.info("goal approach from t = %.2f s: %s", start_step * planner.twin.dt_s,
+                         approach.message)
+                if approach.found:
+                    outcome = approach
         return (outcome, state, time.perf_counter() - wall0, time.thread_time() - cpu0,
-                self._planner_current.copy(), time.monotonic())
+                self._planner_current.copy(), time.monotonic(), start_step)
+
+    def _replan_and_judge(self, est: BodyEstimate, left: list[tuple[float, float]],
+                          start_step: int, extra: FloatArray) -> tuple[tuple, float | None]:
+        """On the worker: the replan and, when it fails, a look-ahead of the present waypoints.
+
+        The look-ahead from the same estimate decides whether the robot may keep its present
+        plan (:meth:`_collect`), so a failure is never judged on a stale or missing one.
+        """
+        result = self._replan(est, left, start_step, extra)
+        if result[0].found or self.lookahead_s <= 0:
+            return result, None
+        return result, self._look_ahead(est, left, self.current.value_m_s.copy())
+
+    def _near_goal(self, state: FloatArray) -> bool:
+        """The state's centre of mass within ``goal_approach_m`` of the goal disc's edge."""
+        n = self.model.n_links
+        goal = self.world.goal
+        d = math.hypot(state[n] - goal.position_m[0], state[n + 1] - goal.position_m[1])
+        return d - goal.radius_m <= self.goal_approach_m
+
+    def _goal_planner_in(self, extra: FloatArray) -> Planner | None:
+        """The goal approach's planner in the world's current plus ``extra`` (cached)."""
+        if self.goal_planner_for is None:
+            return None
+        cached = self._goal_planner
+        if cached is None or float(np.hypot(*(extra - cached[1]))) >= 0.005:
+            cached = (self.goal_planner_for(extra), extra)
+            self._goal_planner = cached
+        return cached[0]
 
     def _collect(self, t_s: float, d: Decision) -> bool:
         """Take a finished replan once the robot's clock has passed its wall time."""
         job = self._job
         if job is None or not job.future.done():
             return False
-        outcome, state, _, cpu, extra, done = job.future.result()
+        result, judged_gap = job.future.result()
+        outcome, state, _, cpu, extra, done, start_step = result
+        job.t_start_s = start_step * self.planner.twin.dt_s
         wall = done - job.wall_request_s  # from the request: queueing and prediction included
         if t_s - job.t_request_s < wall - 1e-9:
             return False  # over sim://: the robot has not yet lived the planner's time
@@ -521,16 +646,21 @@ class TankReplanner:
             log.info("replanned at t = %.2f s (%.2f s wall): %s", t_s, wall, outcome.message)
             return True
         self.failures += 1
+        if judged_gap is not None:
+            self._last_gap = (t_s, judged_gap)
         if self._present_plan_hits(t_s):
             d.stop = "no_safe_continuation"
             d.detail = (f"replanning at t = {job.t_request_s:.2f} s failed and the twin swims the "
                         f"present plan into an obstacle or wall: {outcome.message}")
             return True
-        if self.failures >= self.max_failures and self._present_plan_safe(t_s):
-            # no new plan, but the twin swims the present one on without contact: keep it
-            log.warning("replanning failed %d times; the present plan is predicted clear, so "
-                        "the robot keeps it", self.failures)
-            self._next_try_s = t_s + self.backoff_s * 2 ** (self.max_failures - 1)
+        final = self.failures >= self.max_failures or outcome.status in REFUSED_FROM_STATE
+        if final and self._present_plan_safe(t_s):
+            # no new plan (or none from this state), but the twin swims the present one on
+            # without contact: keep it, and try again later from a state further on
+            log.warning("replanning failed %d times (%s); the present plan is predicted clear, "
+                        "so the robot keeps it", self.failures, outcome.status)
+            self._next_try_s = t_s + self.backoff_s * 2 ** (min(self.failures, self.max_failures)
+                                                            - 1)
             return True
         if outcome.status in REFUSED_FROM_STATE or self.failures >= self.max_failures:
             d.stop = "no_safe_continuation"
@@ -561,14 +691,15 @@ class TankReplanner:
             states = states[: int(inside[0]) + 1]
         if not len(states):
             return None
-        planner = self.planner
-        return float(body_clearance_m(planner.world, planner.clearance, planner.model,
-                                      states).min())
+        # the body's own outline, as the run's contact test (not the planner's capsule, which
+        # reaches a half width beyond the tips: docs/planning.md)
+        return float(outline_clearance_m(self.world, self.model, states).min())
 
     def _twin_in(self, extra: FloatArray) -> Twin:
         """The planner's twin in the world's current plus the estimate ``extra``."""
-        twin = self.planner.twin
-        current = np.add(self.planner.world.current_m_s, extra - self._planner_current)
+        planner, planner_extra = self._planned  # one read: the replan thread may swap it
+        twin = planner.twin
+        current = np.add(planner.world.current_m_s, extra - planner_extra)
         return Twin(twin.robot, twin.coefficients, twin.gait, twin.options,
                     (float(current[0]), float(current[1])), twin.acceptance_radius_m, twin.threads)
 
@@ -611,7 +742,7 @@ class TankReplanner:
         elif (est.t_s - self._window.estimate.t_s >= self.current.window_s
               and self._window_job is None and self._job is None):
             window = self._window
-            future = self._worker.submit(self._window_prediction, window, est.t_s,
+            future = self._side.submit(self._window_prediction, window, est.t_s,
                                          self.current.value_m_s.copy())
             self._window_job = (future, window, est)
             self._window = _Window(est, list(left))

@@ -12,6 +12,7 @@ world's current (``start=`` and ``current=`` of the URI) unless the URI already 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -19,7 +20,8 @@ from urllib.parse import parse_qsl, urlencode, urlsplit
 
 from eelhost.planning.geometry import FloatArray
 from eelhost.planning.planner import Outcome, Planner, PlanRefused
-from eelhost.planning.replan import TankReplanner
+from eelhost.planning.replan import GOAL_APPROACH_CLEARANCE_M, TankReplanner
+from eelhost.planning.search import SearchSettings
 from eelhost.planning.uncertainty import CoefficientModel, default_model
 from eelhost.planning.world import Current, World
 from eelsim.control import Gait
@@ -122,6 +124,17 @@ def plan_for_run(
         """The planner in the world with the estimated extra current added to its own."""
         return Planner(with_extra_current(world, extra_m_s), robot, model, gait, **options)
 
+    def goal_planner_for(extra_m_s: FloatArray) -> Planner:
+        """The goal approach's planner (docs/planning.md), its check unchanged.
+
+        Its search keeps the body's half width and GOAL_APPROACH_CLEARANCE_M from everything.
+        """
+        base = options.get("settings") or SearchSettings()
+        margin = planner.body_half_width_m + GOAL_APPROACH_CLEARANCE_M
+        approach = with_extra_current(world, extra_m_s).model_copy(update={"clearance_m": 0.0})
+        return Planner(approach, robot, model, gait, **{
+            **options, "settings": dataclasses.replace(base, margin_m=margin)})
+
     if abs(planner.twin.acceptance_radius_m - acceptance_radius_m) > 1e-9:
         raise PlanRefused("acceptance_radius",
                           f"--radius {acceptance_radius_m:g}: the planner swims with "
@@ -129,7 +142,8 @@ def plan_for_run(
     outcome = planner.plan()
     if not outcome.found:
         raise NoPlanFound(outcome.status, f"{world.name}: {outcome.message}")
-    navigator = TankReplanner(planner_for, planner, outcome, gait)
+    navigator = TankReplanner(planner_for, planner, outcome, gait,
+                              goal_planner_for=goal_planner_for)
     return RunPlan(outcome.plan.waypoints_m, navigator, sim_uri_for_world(uri, world), outcome)
 
 
