@@ -187,7 +187,7 @@ def test_check_on_a_frame_of_another_size_names_both_sizes(tmp_path, capsys):
 def test_run_refuses_frames_of_another_size_than_its_calibration(tmp_path, capsys):
     cal, _ = _half_size_calibration(tmp_path)
     capsys.readouterr()
-    status = main(["run", "--robot", "sim://", "--calibration", str(cal), "--waypoints", "1,0",
+    status = main(["run", "--link", "sim://", "--calibration", str(cal), "--waypoints", "1,0",
                    "--gait", "0.87,3.9", "--duration", "2", "--no-view", "--out",
                    str(tmp_path / "run")])
     err = capsys.readouterr().err

@@ -55,7 +55,7 @@ def test_the_paper_protocol_is_the_default_plan():
 def test_a_bad_plan_is_refused_naming_the_key(tmp_path, capsys):
     path = tmp_path / "bad.toml"
     path.write_text('motions = ["sideways"]\n')
-    assert main(["campaign", str(path), "--robot", "sim://", "--out", str(tmp_path / "d")]) == 2
+    assert main(["campaign", str(path), "--link", "sim://", "--out", str(tmp_path / "d")]) == 2
     assert "bad.toml: motions: Value error, motion 'sideways'" in capsys.readouterr().err
 
 
@@ -67,7 +67,7 @@ def test_the_written_plan_reads_back_as_the_same_plan(tmp_path, capsys):
     written.write_text(edited)
     assert len(plan_takes(load_plan(written))) == 64
     assert main(["campaign", str(written), "--out", str(tmp_path / "d")]) == 2
-    assert "--robot: required to run a campaign" in capsys.readouterr().err
+    assert "--link: required to run a campaign" in capsys.readouterr().err
 
 
 def _stand_in_take(ran: list[str]):
@@ -97,7 +97,7 @@ def test_a_real_robots_campaign_rests_and_asks_for_a_reset_between_takes(tmp_pat
     monkeypatch.setattr("builtins.input", lambda text: prompts.append(text) or "")
     plan = tmp_path / "plan.toml"
     plan.write_text(PLAN.format(duration=5.0) + "rest_s = 45.0\nstart = [0.3, 0.2, 10.0]\n")
-    argv = ["campaign", str(plan), "--robot", "serial:///dev/ttyUSB9", "--camera", "0",
+    argv = ["campaign", str(plan), "--link", "serial:///dev/ttyUSB9", "--camera", "0",
             "--out", str(tmp_path / "ds"), "--no-view"]
     assert main(argv) == 0
     assert [Path(p).name for p in ran] == ["straight_A0.61_w3.9", "straight_A0.87_w3.9"]
@@ -119,7 +119,7 @@ def test_a_campaign_without_a_terminal_to_ask_stops_naming_no_prompt(tmp_path, m
         raise EOFError
 
     monkeypatch.setattr("builtins.input", no_terminal)
-    argv = ["campaign", str(_plan(tmp_path)), "--robot", "serial:///dev/ttyUSB9", "--camera",
+    argv = ["campaign", str(_plan(tmp_path)), "--link", "serial:///dev/ttyUSB9", "--camera",
             "0", "--out", str(tmp_path / "ds"), "--no-view", "--rest", "0"]
     assert main(argv) == 2
     assert "run it in a terminal, or --no-prompt" in capsys.readouterr().err
@@ -130,7 +130,7 @@ def test_a_campaign_without_a_terminal_to_ask_stops_naming_no_prompt(tmp_path, m
 
 def test_campaign_resumes_after_a_kill_skipping_finished_takes_and_redoing_the_partial_one(tmp_path):
     plan, out = _plan(tmp_path, duration=3.0), tmp_path / "ds"
-    cmd = [sys.executable, "-m", "eelhost", "campaign", str(plan), "--robot", "sim://?speed=1",
+    cmd = [sys.executable, "-m", "eelhost", "campaign", str(plan), "--link", "sim://?speed=1",
            "--camera", "synthetic:clean", "--out", str(out), "--no-view"]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
@@ -170,7 +170,7 @@ def test_campaign_resumes_after_a_kill_skipping_finished_takes_and_redoing_the_p
 def test_campaign_serves_the_live_view_and_stops_cleanly_on_sigterm(tmp_path):
     plan, out = _plan(tmp_path, duration=30.0), tmp_path / "ds"
     proc = subprocess.Popen(
-        [sys.executable, "-m", "eelhost", "campaign", str(plan), "--robot", "sim://?speed=1",
+        [sys.executable, "-m", "eelhost", "campaign", str(plan), "--link", "sim://?speed=1",
          "--camera", "synthetic:clean", "--out", str(out), "--view-port", "0"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:

@@ -26,7 +26,7 @@ TAKE = "--waypoints 1,0 --gait 0.87,3.9 --duration 1 --no-view --out {tmp}/take"
     ],
 )
 def test_a_sim_uri_is_refused_with_the_options_limits_before_a_take(uri, words, tmp_path, capsys):
-    assert cli.main(["run", "--robot", uri, *TAKE.format(tmp=tmp_path).split()]) == 2
+    assert cli.main(["run", "--link", uri, *TAKE.format(tmp=tmp_path).split()]) == 2
     err = capsys.readouterr().err
     assert err.startswith("eelbot run: error:") and all(w in err for w in words), err
     assert not list(tmp_path.iterdir())  # nothing recorded
@@ -52,7 +52,7 @@ def test_a_campaign_plan_the_robot_would_refuse_stops_before_its_first_take(line
     plan = tmp_path / "plan.toml"
     plan.write_text(line + "\n")
     out = tmp_path / "campaign"
-    assert cli.main(["campaign", str(plan), "--robot", "sim://", "--out", str(out)]) == 2
+    assert cli.main(["campaign", str(plan), "--link", "sim://", "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert str(plan) in err and all(w in err for w in words), err
     assert not out.exists()
@@ -60,7 +60,7 @@ def test_a_campaign_plan_the_robot_would_refuse_stops_before_its_first_take(line
 
 @pytest.mark.parametrize("option", ["--rest", "--speed"])
 def test_campaign_rest_and_speed_below_zero_are_refused(option, tmp_path, capsys):
-    argv = ["campaign", "--robot", "sim://", "--out", str(tmp_path / "c"), f"{option}=-5"]
+    argv = ["campaign", "--link", "sim://", "--out", str(tmp_path / "c"), f"{option}=-5"]
     assert cli.main(argv) == 2
     assert option in capsys.readouterr().err
     assert not (tmp_path / "c").exists()

@@ -20,7 +20,7 @@ from eelhost.web.server import TOKEN_HEADER
 def test_the_stop_button_stops_the_robot_and_closes_the_take(tmp_path):
     stem = tmp_path / "take"
     proc = subprocess.Popen(
-        [sys.executable, "-m", "eelhost", "--progress", "none", "run", "--robot",
+        [sys.executable, "-m", "eelhost", "--progress", "none", "run", "--link",
          "sim://?speed=1", "--camera", "synthetic:clean", "--waypoints", "1.4,0", "--gait",
          "0.87,3.9", "--duration", "60", "--view-port", "0", "--out", str(stem)],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)

@@ -30,7 +30,7 @@ from eelsim.robot import load_robot
 def take(tmp_path_factory) -> Path:
     folder = tmp_path_factory.mktemp("take")
     stem = folder / "t"
-    status = cli.main(["run", "--robot", "sim://?speed=0", "--waypoints", "1,0", "--gait",
+    status = cli.main(["run", "--link", "sim://?speed=0", "--waypoints", "1,0", "--gait",
                        "0.87,3.9", "--duration", "2", "--no-view", "--out", str(stem)])
     assert status == 0
     return stem

@@ -58,7 +58,7 @@ def test_run_plan_over_sim_replans_in_an_unknown_current_and_arrives(tmp_path, c
         'speed_m_s = 0.0\ndirection_deg = 0.0\n[[obstacles]]\nkind = "circle"\n'
         "centre_m = [1.25, 1.4]\nradius_m = 0.12\n"
     )
-    code = main(["run", "--robot", "sim://?speed=0&current=0.04,270", "--plan", str(toml),
+    code = main(["run", "--link", "sim://?speed=0&current=0.04,270", "--plan", str(toml),
                  "--camera", "synthetic:clean", "--out", str(tmp_path / "run")])
     out = capsys.readouterr().out
     assert code == 0, out
@@ -68,5 +68,5 @@ def test_run_plan_over_sim_replans_in_an_unknown_current_and_arrives(tmp_path, c
 
 
 def test_run_needs_waypoints_or_a_plan(tmp_path, capsys):
-    assert main(["run", "--robot", "sim://", "--out", str(tmp_path / "x")]) == 2
+    assert main(["run", "--link", "sim://", "--out", str(tmp_path / "x")]) == 2
     assert "either --waypoints or --plan" in capsys.readouterr().err

@@ -47,34 +47,34 @@ class Probe:
 
 
 PROBES = [
-    # transports: the URI of --robot
-    Probe("serial port missing", "run --robot serial:///dev/eelbot-no-such-port " + RUN, 2,
+    # transports: the URI of --link
+    Probe("serial port missing", "run --link serial:///dev/eelbot-no-such-port " + RUN, 2,
           ("/dev/eelbot-no-such-port", "cannot open")),
-    Probe("serial port not a tty", "run --robot serial:///dev/null " + RUN, 2,
+    Probe("serial port not a tty", "run --link serial:///dev/null " + RUN, 2,
           ("/dev/null", "cannot open", "not a serial port")),
-    Probe("serial relative path", "run --robot serial://dev/ttyUSB0 " + RUN, 2,
+    Probe("serial relative path", "run --link serial://dev/ttyUSB0 " + RUN, 2,
           ("relative path", "serial:///dev/ttyUSB0")),
-    Probe("unknown scheme", "run --robot tcp://robot:5760 " + RUN, 2, ("unknown scheme",)),
-    Probe("not a URI", "run --robot ttyUSB0 " + RUN, 2, ("not a link URI", "serial://")),
-    Probe("replay log missing", "run --robot replay:///nowhere/run.rx.bin " + RUN, 2,
+    Probe("unknown scheme", "run --link tcp://robot:5760 " + RUN, 2, ("unknown scheme",)),
+    Probe("not a URI", "run --link ttyUSB0 " + RUN, 2, ("not a link URI", "serial://")),
+    Probe("replay log missing", "run --link replay:///nowhere/run.rx.bin " + RUN, 2,
           ("/nowhere/run.rx.bin", "no such replay log")),
-    Probe("sim unknown parameter", "run --robot sim://?bogus=1 " + RUN, 2,
+    Probe("sim unknown parameter", "run --link sim://?bogus=1 " + RUN, 2,
           ("unknown parameter", "bogus")),
-    Probe("sim speed not a number", "run --robot sim://?speed=fast " + RUN, 2, ("speed='fast'",)),
-    Probe("sim with a path", "run --robot sim://robot " + RUN, 2, ("takes no path",)),
-    Probe("video without calibration", "run --robot sim:// --camera take1.mp4 " + RUN, 2,
+    Probe("sim speed not a number", "run --link sim://?speed=fast " + RUN, 2, ("speed='fast'",)),
+    Probe("sim with a path", "run --link sim://robot " + RUN, 2, ("takes no path",)),
+    Probe("video without calibration", "run --link sim:// --camera take1.mp4 " + RUN, 2,
           ("--calibration",)),
     # waypoints
-    Probe("run waypoints not numbers", "run --robot sim:// --waypoints abc --gait 0.87,3.9 "
+    Probe("run waypoints not numbers", "run --link sim:// --waypoints abc --gait 0.87,3.9 "
           "--out {tmp}/r", 2, ("--waypoints", "comma-separated numbers", "'abc'")),
     Probe("simulate waypoints not numbers", "simulate straight --waypoints abc --out {tmp}/r", 2,
           ("--waypoints", "comma-separated numbers")),
     Probe("simulate waypoints empty", "simulate straight --waypoints '' --out {tmp}/r", 2,
           ("--waypoints", "at least one x,y")),
-    Probe("run waypoint with one number", "run --robot sim:// --waypoints '1,0;2' --gait 0.87,3.9 "
+    Probe("run waypoint with one number", "run --link sim:// --waypoints '1,0;2' --gait 0.87,3.9 "
           "--out {tmp}/r", 2, ("--waypoints", "expected 2 numbers")),
     # timing and durations
-    Probe("run control period 0", "run --robot sim:// --control-period 0 " + RUN, 2,
+    Probe("run control period 0", "run --link sim:// --control-period 0 " + RUN, 2,
           ("--control-period", "greater than 0")),
     Probe("simulate control period 0", "simulate straight --control-period 0 --out {tmp}/r", 2,
           ("--control-period", "greater than 0")),
@@ -82,7 +82,7 @@ PROBES = [
           "--out {tmp}/r", 2, ("not a whole multiple of the physics step",)),
     Probe("simulate duration negative", "simulate straight --duration -1 --out {tmp}/r", 2,
           ("--duration", "greater than 0")),
-    Probe("run duration negative", "run --robot sim:// --waypoints 1,0 --gait 0.87,3.9 "
+    Probe("run duration negative", "run --link sim:// --waypoints 1,0 --gait 0.87,3.9 "
           "--duration -1 --out {tmp}/r", 2, ("--duration", "greater than 0")),
     Probe("physics step not finite", "simulate straight --dt nan --out {tmp}/r", 2,
           ("--dt", "finite")),
@@ -91,8 +91,8 @@ PROBES = [
     Probe("gain not finite", "simulate straight --k-theta inf --out {tmp}/r", 2,
           ("--k-theta", "finite")),
     Probe("seed negative", "simulate straight --seed -1 --out {tmp}/r", 2, ("--seed", "at least 0")),
-    Probe("speed negative", "run --robot sim:// --speed -1 " + RUN, 2, ("--speed", "at least 0")),
-    Probe("radius negative", "run --robot sim:// --radius -1 " + RUN, 2,
+    Probe("speed negative", "run --link sim:// --speed -1 " + RUN, 2, ("--speed", "at least 0")),
+    Probe("radius negative", "run --link sim:// --radius -1 " + RUN, 2,
           ("--radius", "greater than 0")),
     # gait, current, coefficients (negative values given unjoined, as users type them)
     Probe("gait not finite", "simulate straight --gait nan,2.7 --out {tmp}/r", 2,
@@ -103,7 +103,7 @@ PROBES = [
           ("--gait", "amplitude_rad must be positive")),
     Probe("gait frequency negative", "simulate straight --gait 0.8,-4 --out {tmp}/r", 2,
           ("--gait", "omega_rad_s must be positive")),
-    Probe("gait amplitude beyond the robot", "run --robot sim:// --waypoints 1,0 --gait 2.0,3.9 "
+    Probe("gait amplitude beyond the robot", "run --link sim:// --waypoints 1,0 --gait 2.0,3.9 "
           "--out {tmp}/r", 2, ("--gait", "amplitude_rad", "robot's range")),
     Probe("gait with one number", "simulate straight --gait 0.6 --out {tmp}/r", 2,
           ("--gait", "A,omega")),
@@ -134,7 +134,7 @@ PROBES = [
           ("robot_broken.toml",)),
     Probe("robot file missing", "simulate straight --robot {lab}/nowhere.toml --out {tmp}/r", 2,
           ("nowhere.toml",)),
-    Probe("run robot file bad", "run --robot sim:// --robot-file {lab}/robot_bool_mass.toml "
+    Probe("run robot file bad", "run --link sim:// --robot {lab}/robot_bool_mass.toml "
           + RUN, 2, ("robot_bool_mass.toml", "link.mass_kg")),
     # scenarios
     Probe("scenario unknown", "simulate nowhere --out {tmp}/r", 2,
@@ -198,9 +198,9 @@ PROBES = [
           "reynolds --truth 1,1,5,0.6", 2, ("--truth", "C_f_lam", "expected 5 numbers")),
     Probe("estimate-bench unknown tank", "estimate-bench --tanks bundled,nosuch", 2,
           ("unknown tanks", "nosuch")),
-    Probe("run with both waypoints and a plan", "run --robot sim:// --plan tank_5_obstacles "
+    Probe("run with both waypoints and a plan", "run --link sim:// --plan tank_5_obstacles "
           + RUN, 2, ("--waypoints", "--plan")),
-    Probe("run waypoints without a gait", "run --robot sim:// --waypoints 1,0 --out {tmp}/r", 2,
+    Probe("run waypoints without a gait", "run --link sim:// --waypoints 1,0 --out {tmp}/r", 2,
           ("--gait", "required with --waypoints")),
     Probe("dataset jitter negative", "dataset {tmp}/tank --timestamp-jitter -0.1", 2,
           ("--timestamp-jitter", "at least 0")),
@@ -334,7 +334,7 @@ def test_probe_ends_with_its_status_and_a_message_naming_what_is_wrong(probe, la
 
 
 def test_the_table_covers_every_kind_of_input():
-    kinds = {"--robot", "--waypoints", "--gait", "--current", "--duration", "--control-period",
+    kinds = {"--link", "--waypoints", "--gait", "--current", "--duration", "--control-period",
              "--robot {lab}/robot", "{lab}/ds_", "--scheduler", "plan ", "--resume"}
     for kind in kinds:
         assert any(kind in p.command for p in PROBES), kind

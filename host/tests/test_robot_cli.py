@@ -44,7 +44,7 @@ def sim_link(uri: str = SIM) -> tuple[Link, VirtualRobot]:
 
 # ---------------------------------------------------------------- status
 def test_status_of_a_fresh_robot_says_power_on_no_feedback_no_battery(capsys):
-    rc, out, _ = eelbot(capsys, "robot", "status", "--robot", SIM)
+    rc, out, _ = eelbot(capsys, "robot", "status", "--link", SIM)
     assert rc == 0
     r = report(out)
     assert r["state"] == "IDLE"
@@ -57,7 +57,7 @@ def test_status_of_a_fresh_robot_says_power_on_no_feedback_no_battery(capsys):
 
 
 def test_status_of_a_robot_with_feedback_servos_and_a_battery_divider_says_so(capsys):
-    rc, out, _ = eelbot(capsys, "robot", "status", "--robot", SIM + "&feedback=1&battery=7.4")
+    rc, out, _ = eelbot(capsys, "robot", "status", "--link", SIM + "&feedback=1&battery=7.4")
     assert rc == 0
     r = report(out)
     assert r["joint feedback"].startswith("analog feedback")
@@ -152,7 +152,7 @@ def test_status_counters_equal_the_injected_faults():
 # ---------------------------------------------------------------- config
 def test_config_sets_saves_and_reads_back_settings(capsys):
     rc, out, _ = eelbot(
-        capsys, "robot", "config", "--robot", SIM,
+        capsys, "robot", "config", "--link", SIM,
         "--set", "kp_nm_per_rad=2.5", "--set", "trim_us.2=-40", "--set", "reversed=0,1,0,0,1",
         "--save", "--get", "kp_nm_per_rad", "--get", "trim_us", "--get", "reversed",
     )  # fmt: skip
@@ -164,7 +164,7 @@ def test_config_sets_saves_and_reads_back_settings(capsys):
 
 
 def test_config_without_options_prints_every_setting_at_its_default(capsys):
-    rc, out, _ = eelbot(capsys, "robot", "config", "--robot", SIM)
+    rc, out, _ = eelbot(capsys, "robot", "config", "--link", SIM)
     assert rc == 0
     lines = out.splitlines()
     assert [line.split(" = ")[0] for line in lines] == list(protocol.SETTINGS)
@@ -186,7 +186,7 @@ def test_config_without_options_prints_every_setting_at_its_default(capsys):
     ],
 )
 def test_config_rejects_a_bad_assignment_naming_what_is_wrong(capsys, assignment, named):
-    rc, _, err = eelbot(capsys, "robot", "config", "--robot", SIM, "--set", assignment)
+    rc, _, err = eelbot(capsys, "robot", "config", "--link", SIM, "--set", assignment)
     assert rc == 2
     assert named in err and assignment in err
 
@@ -229,7 +229,7 @@ def test_parse_assignment_gives_one_element_per_joint():
 def test_trim_from_scripted_input_through_the_cli_saves_the_trims(capsys, monkeypatch):
     script = "+20\n-5\nn\n=-30\nbogus\nn\nn\nn\nn\n"
     rc, out, _ = eelbot(
-        capsys, "robot", "trim", "--robot", SIM, stdin=script, monkeypatch=monkeypatch
+        capsys, "robot", "trim", "--link", SIM, stdin=script, monkeypatch=monkeypatch
     )
     assert rc == 0
     assert "saved trims (us, joint 1 first): 15, -30, 0, 0, 0" in out

@@ -20,7 +20,7 @@ def eelbot(capsys, monkeypatch, *argv: str, stdin: str = "") -> tuple[int, str]:
 
 
 def test_a_trim_that_is_not_a_number_gets_a_clear_message_and_changes_nothing(capsys, monkeypatch):
-    rc, out = eelbot(capsys, monkeypatch, "robot", "trim", "--robot", "sim://?speed=0",
+    rc, out = eelbot(capsys, monkeypatch, "robot", "trim", "--link", "sim://?speed=0",
                      stdin="=abc\n+1.5\n-\nq\n")  # fmt: skip
     assert rc == 0
     assert "'=abc': the trim is a whole number of microseconds, not 'abc'" in out
@@ -31,10 +31,10 @@ def test_a_trim_that_is_not_a_number_gets_a_clear_message_and_changes_nothing(ca
 
 
 def test_quitting_the_trim_dialogue_is_a_normal_end(capsys, monkeypatch):
-    rc, out = eelbot(capsys, monkeypatch, "robot", "trim", "--robot", "sim://?speed=0",
+    rc, out = eelbot(capsys, monkeypatch, "robot", "trim", "--link", "sim://?speed=0",
                      stdin="+20\nq\n")  # fmt: skip
     assert rc == 0 and "quit: trims put back" in out
-    rc, out = eelbot(capsys, monkeypatch, "robot", "trim", "--robot", "sim://?speed=0",
+    rc, out = eelbot(capsys, monkeypatch, "robot", "trim", "--link", "sim://?speed=0",
                      stdin="+20\n")  # end of input: also a quit
     assert rc == 0 and "quit: trims put back" in out
 
@@ -43,11 +43,11 @@ def test_settings_saved_over_sim_with_an_eeprom_file_are_there_in_the_next_invoc
     capsys, monkeypatch, tmp_path
 ):
     uri = f"sim://?speed=0&eeprom={tmp_path / 'robot.eeprom'}"
-    rc, _ = eelbot(capsys, monkeypatch, "robot", "trim", "--robot", uri, stdin="+25\n\n-10\ns\n")
+    rc, _ = eelbot(capsys, monkeypatch, "robot", "trim", "--link", uri, stdin="+25\n\n-10\ns\n")
     assert rc == 0
-    rc, out = eelbot(capsys, monkeypatch, "robot", "config", "--robot", uri, "--get", "trim_us")
+    rc, out = eelbot(capsys, monkeypatch, "robot", "config", "--link", uri, "--get", "trim_us")
     assert rc == 0 and "trim_us = 25, -10, 0, 0, 0" in out
-    rc, out = eelbot(capsys, monkeypatch, "robot", "config", "--robot", "sim://?speed=0",
+    rc, out = eelbot(capsys, monkeypatch, "robot", "config", "--link", "sim://?speed=0",
                      "--get", "trim_us")  # fmt: skip
     assert "trim_us = 0, 0, 0, 0, 0" in out  # without the file, a new robot
 
@@ -57,7 +57,7 @@ def test_a_blank_eeprom_refuses_start_until_the_host_takes_the_defaults(capsys, 
     blank = tmp_path / "blank.eeprom"
     blank.write_bytes(b"\xff" * 1024)
     uri = f"sim://?speed=0&eeprom={blank}"
-    rc, out = eelbot(capsys, monkeypatch, "robot", "status", "--robot", uri)
+    rc, out = eelbot(capsys, monkeypatch, "robot", "status", "--link", uri)
     assert "SETTINGS_LOST" in out and "BLANK" in out
     link = open_link(uri)
     session = Maintenance(link, timeout_s=2.0)
@@ -69,9 +69,9 @@ def test_a_blank_eeprom_refuses_start_until_the_host_takes_the_defaults(capsys, 
         assert "SETTINGS_LOST" in str(err)
     link.close()
     # `eelbot robot config --defaults --save` is the host's acknowledgement
-    rc, out = eelbot(capsys, monkeypatch, "robot", "config", "--robot", uri, "--defaults",
+    rc, out = eelbot(capsys, monkeypatch, "robot", "config", "--link", uri, "--defaults",
                      "--save", "--get", "battery_divider")  # fmt: skip
     assert rc == 0 and "battery_divider = 3.2" in out  # the low-voltage stop stays armed
-    rc, out = eelbot(capsys, monkeypatch, "robot", "status", "--robot", uri)
+    rc, out = eelbot(capsys, monkeypatch, "robot", "status", "--link", uri)
     assert "SETTINGS_LOST" not in out and "settings from: EEPROM" in out
     assert protocol.Flags.SETTINGS_LOST == 32

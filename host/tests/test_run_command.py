@@ -19,7 +19,7 @@ from eelhost.field.recorder import read_commands_csv
 from eelhost.link.base import Link
 from eelhost.vision.calibration import load_calibration
 
-FAST = ["--robot", "sim://?speed=0", "--camera", "synthetic:clean", "--gait", "0.87,3.9",
+FAST = ["--link", "sim://?speed=0", "--camera", "synthetic:clean", "--gait", "0.87,3.9",
         "--no-view"]
 
 
@@ -66,7 +66,7 @@ def test_a_camera_that_does_not_open_fails_before_anything_is_sent(tmp_path, cap
                         real_send(self, msg, want_ack))
     cal = tmp_path / "cal.json"
     assert main(["calibrate", "--camera", "synthetic", "--calibration", str(cal)]) == 0
-    assert main(["run", "--robot", "sim://?speed=0", "--camera", "7", "--calibration", str(cal),
+    assert main(["run", "--link", "sim://?speed=0", "--camera", "7", "--calibration", str(cal),
                  "--waypoints", "1,0", "--gait", "0.87,3.9", "--no-view",
                  "--out", str(tmp_path / "nocam")]) == 2
     assert "camera 7: cannot open" in capsys.readouterr().err
@@ -78,7 +78,7 @@ def test_a_camera_that_does_not_open_fails_before_anything_is_sent(tmp_path, cap
 def test_ctrl_c_sigterm_and_sighup_stop_the_robot_and_close_the_take(tmp_path, signum):
     stem = tmp_path / "sig"
     proc = subprocess.Popen(
-        [sys.executable, "-m", "eelhost", "run", "--robot", "sim://?speed=1", "--camera",
+        [sys.executable, "-m", "eelhost", "run", "--link", "sim://?speed=1", "--camera",
          "synthetic:clean", "--waypoints", "3,0", "--gait", "0.87,3.9", "--no-view", "--out",
          str(stem)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
@@ -111,7 +111,7 @@ def test_ctrl_c_sigterm_and_sighup_stop_the_robot_and_close_the_take(tmp_path, s
 
 def test_the_current_is_recorded_when_known_and_a_sim_robot_takes_its_own(tmp_path, capsys):
     stem = tmp_path / "drift"
-    assert main(["run", "--robot", "sim://?speed=0&current=0.03,180", "--camera",
+    assert main(["run", "--link", "sim://?speed=0&current=0.03,180", "--camera",
                  "synthetic:clean", "--gait", "0.87,3.9", "--no-view", "--waypoints", "1.4,0",
                  "--duration", "1", "--out", str(stem)]) == 0
     exp = read_experiment(stem)

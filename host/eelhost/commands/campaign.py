@@ -17,6 +17,7 @@ from pathlib import Path
 from urllib.parse import parse_qsl, urlencode
 
 from eelhost.commands.common import NON_NEGATIVE, OptionError
+from eelhost.commands.link_options import add_link_options, resolve_link_options
 from eelhost.commands.run import add_take_options, current_option, view_opener
 from eelhost.data.experiments import manifest_text, write_manifest
 from eelhost.field.campaign import CampaignPlan, Take, load_plan, plan_takes, take_done
@@ -39,18 +40,17 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         description="Run every take of the plan (default: the paper's 4 x 4 gait grid, straight "
         "and turning, the corner gaits for training) with eelbot run's loop and recording, into "
         "--out, a dataset folder eelbot estimate loads. Resumable: run it again to go on. "
-        "Example: eelbot campaign plan.toml --robot 'sim://?speed=0' --out lab/campaign",
+        "Example: eelbot campaign plan.toml --link 'sim://?speed=0' --out lab/campaign",
     )
     p.add_argument("plan", nargs="?", help="plan TOML (default: the paper's protocol; see "
                    "docs/host.md)")
-    p.add_argument("--robot", metavar="URI", help="serial:///dev/ttyUSB0?baud=57600, "
-                   "sim://?speed=0 ... (required unless --write-plan)")
+    add_link_options(p, "serial:///dev/ttyUSB0?baud=57600, sim://?speed=0 ... (required unless "
+                     "--write-plan)")
     p.add_argument("--out", metavar="FOLDER", help="the dataset folder (required unless "
                    "--write-plan)")
     p.add_argument("--camera", metavar="SOURCE", help="as eelbot run (sim://: synthetic)")
     p.add_argument("--calibration", metavar="FILE", help="calibration JSON")
     p.add_argument("--markers", metavar="FILE", help="markers.json from eelbot markers")
-    p.add_argument("--robot-file", metavar="FILE", help="robot TOML (default: the paper robot)")
     p.add_argument("--no-prompt", action="store_true", help="real robot: do not ask for a reset "
                    "between takes (it is put back by other means)")
     p.add_argument("--rest", type=NON_NEGATIVE, metavar="S", help="rest between takes, s (the plan's "
@@ -110,6 +110,7 @@ def _wait_rest(seconds: float, stopped: list[str]) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
+    resolve_link_options(args)
     plan = load_plan(args.plan)
     if args.write_plan:
         target = Path(args.write_plan)
@@ -122,12 +123,12 @@ def run(args: argparse.Namespace) -> int:
         atomic_write(target, plan_toml(plan))
         print(f"wrote {args.write_plan}")
         return 0
-    for option, value in (("--robot", args.robot), ("--out", args.out)):
+    for option, value in (("--link", args.link), ("--out", args.out)):
         if not value:
             raise OptionError(f"{option}: required to run a campaign (only --write-plan does "
                               "without)")
-    parse_link_uri(args.robot)
-    virtual = args.robot.startswith("sim:")
+    parse_link_uri(args.link)
+    virtual = args.link.startswith("sim:")
     if args.speed is not None and not virtual:
         raise OptionError("--speed: only a sim:// robot can run faster than real time")
     robot = load_robot(args.robot_file)
@@ -159,7 +160,7 @@ def run(args: argparse.Namespace) -> int:
                                       "between takes: run it in a terminal, or --no-prompt") from None
         if stopped:
             break
-        uri = sim_uri_at(args.robot, plan.start) if virtual else args.robot
+        uri = sim_uri_at(args.link, plan.start) if virtual else args.link
         gait = Gait(take.amplitude_rad, take.omega_rad_s, take.beta_rad, take.k_theta)
         config = RunConfig(gait, [take.waypoint_m], acceptance_radius_m=plan.radius_m,
                            control_period_s=plan.control_period_s, duration_s=plan.duration_s)

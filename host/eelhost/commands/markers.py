@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from eelhost.commands.common import OptionError, floats
+from eelhost.commands.link_options import add_robot_file_option, resolve_robot_file_option
 from eelhost.files import check_output_folder
 from eelhost.vision.calibration import CalibrationError, CharucoSpec
 from eelhost.vision.markerfile import MarkerFile, save_marker_file
@@ -24,8 +25,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--markers). Print both PDFs at 100 %% (actual size). Example: eelbot markers --out lab",
     )
     p.add_argument("--out", required=True, metavar="FOLDER", help="folder for the three files")
-    p.add_argument("--robot-file", metavar="FILE", help="robot TOML: one marker per link "
-                   "(default: the paper robot, 6 links)")
+    add_robot_file_option(p, "robot TOML: one marker per link (default: the paper robot, 6 "
+                          "links)")
     p.add_argument("--marker-size", type=float, default=0.060, help="black square, m (0.060)")
     p.add_argument("--margin", type=float, default=0.005, help="white quiet zone, m (0.005)")
     p.add_argument("--ids", metavar="I,J,...", help="marker id per link, tail first (0..N-1)")
@@ -48,6 +49,7 @@ def _ints(text: str, what: str) -> tuple[int, ...]:
 
 def markers_from_args(args: argparse.Namespace) -> MarkerFile:
     """The marker file the options describe (errors name the option)."""
+    resolve_robot_file_option(args)
     n_links = load_robot(args.robot_file).n_links
     try:
         ids = _ints(args.ids, "--ids") if args.ids else tuple(range(n_links))

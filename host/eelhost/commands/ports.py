@@ -1,4 +1,4 @@
-"""``eelbot ports``: the links the registered transports can open now, as URIs for ``--robot``."""
+"""``eelbot ports``: the links the registered transports can open now, as URIs for ``--link``."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "ports",
         help="list the links eelbot run can open (serial ports, the virtual robot)",
         description="List, transport by transport, the links that can be opened now, as URIs "
-        "for `eelbot run --robot`, and the URI schemes known.",
+        "for `eelbot run --link`, and the URI schemes known.",
     )
     p.set_defaults(run=run)
 

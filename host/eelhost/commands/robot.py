@@ -1,8 +1,8 @@
 """``eelbot robot``: the robot's settings, trims and health over its link (serial:// or sim://).
 
-- ``eelbot robot config --robot URI [--defaults] [--set NAME=VALUE ...] [--save] [--get NAME ...]``
-- ``eelbot robot trim --robot URI``: interactive trim calibration (:mod:`eelhost.commands.robot_trim`)
-- ``eelbot robot status --robot URI``: health counters, battery, reset cause, feedback mode
+- ``eelbot robot config --link URI [--defaults] [--set NAME=VALUE ...] [--save] [--get NAME ...]``
+- ``eelbot robot trim --link URI``: interactive trim calibration (:mod:`eelhost.commands.robot_trim`)
+- ``eelbot robot status --link URI``: health counters, battery, reset cause, feedback mode
 
 The settings and messages are those of docs/firmware.md ("Settings", "Messages").
 """
@@ -12,10 +12,12 @@ from __future__ import annotations
 import argparse
 
 from eelhost.commands import robot_trim
+from eelhost.commands.link_options import add_link_options, resolve_link_options
 from eelhost.link.base import Link
 from eelhost.link.maintenance import Maintenance, parse_assignment, setting_info
 from eelhost.link.uri import open_link
 from eelhost.wire import protocol
+from eelsim.robot import load_robot
 
 URI_HELP = "serial:///dev/ttyUSB0?baud=57600 or sim://?speed=0 (feedback=1, battery=7.4: see docs)"
 
@@ -38,7 +40,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "printed. NAME is a name of the settings table (docs/firmware.md); a per-joint setting "
         "takes NAME.J=VALUE for joint J (1 = tail), or one value for all joints, or one per "
         "joint: trim_us=0,10,-20,0,5. Settings change only while the robot does not undulate. "
-        "Example: eelbot robot config --robot sim://?speed=0 --set kp_nm_per_rad=2 "
+        "Example: eelbot robot config --link sim://?speed=0 --set kp_nm_per_rad=2 "
         "--set trim_us.2=-40 --save --get trim_us",
     )
     _link_arguments(c)
@@ -73,15 +75,18 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def _link_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--robot", required=True, metavar="URI", help=URI_HELP)
+    add_link_options(p, URI_HELP + " (required)",
+                     "the robot file of a sim:// robot (default: the bundled paper robot)")
     p.add_argument(
         "--timeout", type=float, default=2.0, help="seconds to wait for each answer (2)"
     )
 
 
 def open_maintenance(args: argparse.Namespace) -> tuple[Link, Maintenance]:
-    """The link of ``--robot`` and a :class:`Maintenance` session on it, the robot said hello."""
-    link = open_link(args.robot)
+    """The link of ``--link`` and a :class:`Maintenance` session on it, the robot said hello."""
+    resolve_link_options(args, required="to talk to the robot")
+    robot = load_robot(args.robot_file) if args.robot_file is not None else None
+    link = open_link(args.link, robot=robot)
     session = Maintenance(link, timeout_s=args.timeout)
     session.hello()
     return link, session

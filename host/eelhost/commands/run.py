@@ -22,6 +22,7 @@ from eelhost.commands.common import (
     rejected_as,
     waypoints,
 )
+from eelhost.commands.link_options import LINK_EXAMPLES, add_link_options, resolve_link_options
 from eelhost.commands.plan import add_coefficient_model_option
 from eelhost.errors import EXIT_CONTACT, EXIT_NOT_REACHED, EXIT_OK
 from eelhost.field.recorder import MOTIONS
@@ -47,14 +48,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         ".commands.csv, .rx.bin, and copies of the robot file and calibration). Stops the robot "
         "on Ctrl-C, SIGTERM or SIGHUP, when it is out of view for more than 1 s, when nothing "
         "comes from it for 1 s, at the last waypoint and after --duration. "
-        "Example: eelbot run --robot sim:// --waypoints '0.43,0.25;0.93,0.25;1.37,0.5' "
+        "Example: eelbot run --link sim:// --waypoints '0.43,0.25;0.93,0.25;1.37,0.5' "
         "--gait 0.87,3.9 --k-theta 0.37 --out out/run/path1 --speed 0",
     )
-    p.add_argument(
-        "--robot",
-        metavar="URI",
-        help="serial:///dev/ttyUSB0?baud=57600, sim://?speed=1&seed=0, replay:///path/run.rx.bin",
-    )
+    add_link_options(p, LINK_EXAMPLES)
     p.add_argument(
         "--camera",
         metavar="SOURCE",
@@ -65,7 +62,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    "with the synthetic camera, localise with it instead of the exact one")
     p.add_argument("--markers", metavar="FILE", help="markers.json from eelbot markers "
                    "(default: ids 0..N-1, tail first)")
-    p.add_argument("--robot-file", metavar="FILE", help="robot TOML (default: the paper robot)")
     p.add_argument("--waypoints", metavar="x,y;x,y", type=waypoints, help="waypoints, m (or --plan)")
     p.add_argument(
         "--plan",
@@ -167,13 +163,12 @@ def current_option(value: list[float] | None, virtual: bool) -> tuple[float, flo
 
 def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
+    resolve_link_options(args, required=None if args.bench else "to run")
     if args.bench:
         return _bench(args)
-    if args.robot is None:
-        raise OptionError("--robot: required (a URI: serial://..., sim://...)")
     if args.out is None:
         raise OptionError("--out: required (the take's path without extension)")
-    parse_link_uri(args.robot)  # a bad URI is reported before anything is opened
+    parse_link_uri(args.link)  # a bad URI is reported before anything is opened
     robot = load_robot(args.robot_file)
     markers = load_marker_file(args.markers)
     if (args.waypoints is None) == (args.plan is None):
@@ -182,12 +177,12 @@ def run(args: argparse.Namespace) -> int:
         raise OptionError("--gait: required with --waypoints")
     if args.coefficients_file is not None and args.plan is None:
         raise OptionError("--coefficients-file: only with --plan (the planner's model)")
-    current = current_option(args.current, args.robot.startswith("sim:"))
+    current = current_option(args.current, args.link.startswith("sim:"))
     check_output_stem(args.out)  # a read-only folder or a file is said before the link opens
     refuse_overwrite(args.out, args.force)
     navigator = None
     view = None
-    uri = args.robot
+    uri = args.link
     if args.plan is not None:
         from eelhost.commands.plan import world_from_name
         from eelhost.planning.tank import plan_for_run
@@ -201,7 +196,7 @@ def run(args: argparse.Namespace) -> int:
         model = (read_coefficient_model(args.coefficients_file, robot)
                  if args.coefficients_file else default_model(robot))
         with phase(f"plan {world.name}: search and check in the twin"):
-            planned = plan_for_run(world, robot, args.robot, gait, coefficients=model,
+            planned = plan_for_run(world, robot, args.link, gait, coefficients=model,
                                    acceptance_radius_m=args.radius)
         print(planned.outcome.message)
         print(f"coefficients: {model.describe()}")
@@ -242,7 +237,7 @@ def run(args: argparse.Namespace) -> int:
 def _bench(args: argparse.Namespace) -> int:
     """``eelbot run --bench``: the closed-loop benchmark (docs/planning.md)."""
     from eelhost.benchmarks.closed_loop import run_closed_loop_bench, summary_lines
-    from eelhost.benchmarks.machine import cpu_model
+    from eelhost.machine import cpu_model
     from eelhost.planning.uncertainty import default_model, read_coefficient_model
     from eelhost.progress import Progress
 

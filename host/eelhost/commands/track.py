@@ -13,6 +13,7 @@ from eelhost.commands.common import (
     number,
     waypoints,
 )
+from eelhost.commands.link_options import add_robot_file_option, resolve_robot_file_option
 from eelhost.field.recorder import MOTIONS
 from eelhost.field.take import refuse_overwrite
 from eelhost.field.track import TrackRequest, frame_count, track_video
@@ -47,7 +48,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="the gait the robot swam with: amplitude (rad), frequency (rad/s), "
                    "optionally phase shift (rad, 1.04)")
     p.add_argument("--out", required=True, metavar="STEM", help="output path without extension")
-    p.add_argument("--robot-file", metavar="FILE", help="robot TOML (default: the paper robot)")
+    add_robot_file_option(p)
     p.add_argument("--k-theta", type=FINITE, default=0.0,
                    help="heading gain the robot steered with (0: an open-loop gait)")
     p.add_argument("--waypoints", metavar="x,y;x,y", type=waypoints,
@@ -71,6 +72,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
+    resolve_robot_file_option(args)
     check_output_stem(args.out)
     refuse_overwrite(args.out, args.force)
     robot = load_robot(args.robot_file)

@@ -144,7 +144,7 @@ def open_camera(
     if spec is None:
         raise CameraChoiceError("--camera: give a camera index, video file or image folder")
     if spec in SYNTHETIC:
-        raise CameraChoiceError(f"--camera {spec}: the synthetic camera needs --robot sim://")
+        raise CameraChoiceError(f"--camera {spec}: the synthetic camera needs --link sim://")
     if calibration is None:
         raise CameraChoiceError("--calibration: needed to localise in a real camera's frames")
     cal = load_calibration(calibration)

@@ -17,7 +17,7 @@ robot's divider, measured by the firmware; none by default), ``coefficients=C_f,
 (the water the virtual robot swims in, in the order of the robot file's fluid law; by default the
 robot file's ``[hydrodynamics]``: the host's model and the virtual tank's truth are then the same
 numbers, docs/host.md "The virtual robot and replays"), ``eeprom=FILE`` (the robot's EEPROM kept in
-FILE between invocations, so saved settings persist: ``eelbot robot config --robot
+FILE between invocations, so saved settings persist: ``eelbot robot config --link
 sim://?eeprom=robot.eeprom --set trim_us.1=20 --save``; by default each sim:// robot is new).
 """
 
