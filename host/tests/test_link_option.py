@@ -87,3 +87,16 @@ def test_a_missing_link_is_a_usage_error_naming_link(argv, capsys):
     assert cli.main(argv) == 2
     err = capsys.readouterr().err
     assert "--link: required" in err and "sim://" in err
+
+
+def test_run_over_link_swims_the_robot_file_given_and_keeps_a_copy_of_it(tmp_path, capsys):
+    # a bundled robot by name (the working folder holds no such file): the take's copy is its text
+    from importlib import resources
+
+    stem = tmp_path / "take"
+    assert cli.main(["run", "--link", SIM, "--robot", "servo_robot.toml", "--waypoints", "1,0",
+                     "--gait", "0.87,3.9", "--no-view", "--camera", "synthetic:clean",
+                     "--duration", "1", "--out", str(stem)]) == 0
+    assert "deprecated" not in capsys.readouterr().err
+    bundled = resources.files("eelsim.data").joinpath("servo_robot.toml").read_text()
+    assert (tmp_path / "take.robot.toml").read_text() == bundled

@@ -61,8 +61,10 @@ __all__ = [
     "LinkSpec",
     "Robot",
     "RobotFileError",
+    "bundled_robot",
     "load_robot",
     "parse_robot",
+    "robot_file_text",
 ]
 
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
@@ -309,12 +311,39 @@ def load_robot(path: str | Path | None = None) -> Robot:
         When the file is missing, is not valid TOML, or fails validation; the message names the
         file and the offending key.
     """
+    bundled = bundled_robot(path)
+    if bundled is not None:
+        source = f"<bundled {bundled}>"
+        data = parse_toml(robot_file_text(path), source, RobotFileError)
+    else:
+        source = str(path)
+        data = read_toml(Path(source), RobotFileError, "robot file")
+    return parse_robot(data, source)
+
+
+def bundled_robot(path: str | Path | None) -> str | None:
+    """The bundled robot file a ``--robot`` value names, or None for a file of the user's.
+
+    ``None`` and ``paper_robot.toml`` name the bundled default; ``servo_robot.toml`` the bundled
+    servo robot when no such file is in the working folder (as :func:`load_robot` reads them).
+    """
     name = DEFAULT_ROBOT if path is None else str(path)
     if name == DEFAULT_ROBOT or (name in BUNDLED_ROBOTS and not Path(name).exists()):
-        text = resources.files("eelsim.data").joinpath(name).read_text()
-        source = f"<bundled {name}>"
-        data = parse_toml(text, source, RobotFileError)
-    else:
-        source = name
-        data = read_toml(Path(name), RobotFileError, "robot file")
-    return parse_robot(data, source)
+        return name
+    return None
+
+
+def robot_file_text(path: str | Path | None) -> str:
+    """The text of the robot file :func:`load_robot` reads for ``path``, bundled ones included.
+
+    Kept beside what was made with the robot (a take, a dataset), so the record names its robot.
+
+    Raises
+    ------
+    OSError
+        When a file of the user's cannot be read.
+    """
+    bundled = bundled_robot(path)
+    if bundled is not None:
+        return resources.files("eelsim.data").joinpath(bundled).read_text()
+    return Path(str(path)).read_text()

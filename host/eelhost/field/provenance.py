@@ -8,11 +8,11 @@ from __future__ import annotations
 
 import datetime
 import subprocess
-from importlib import metadata, resources
+from importlib import metadata
 from pathlib import Path
 from typing import Any
 
-from eelsim.robot import DEFAULT_ROBOT
+from eelsim.robot import robot_file_text
 
 __all__ = ["robot_file_text", "software"]
 
@@ -49,10 +49,3 @@ def software() -> dict[str, Any]:
         "git_dirty": bool(status) if status is not None else None,
         "date": datetime.datetime.now().astimezone().isoformat(timespec="seconds"),
     }
-
-
-def robot_file_text(path: str | Path | None) -> str:
-    """The text of a robot file (``None``: the bundled default), to keep a copy beside a take."""
-    if path is None or str(path) == DEFAULT_ROBOT:
-        return resources.files("eelsim.data").joinpath(DEFAULT_ROBOT).read_text()
-    return Path(path).read_text()
