@@ -14,8 +14,8 @@ and a speed error differ. So, once both fits are made:
    step: the straight fit's current, the turning fit's and still water.
 2. **Its interval.** The current's linearised standard error s on the joint problem (the
    residuals of both motions stacked, the Jacobian in the unit cube, the residual variance from
-   the residuals, never below the pixel rounding's: as :func:`eelhost.estimation.identify.
-   identifiability`), and the interval c +- z s (z = 1.96) per component.
+   the residuals, never below the pixel rounding's, the other parameters profiled out), and the
+   interval c +- z s (z = 1.96) per component.
 3. **Each motion's fit holds it.** Each motion's parameters are polished again from the joint
    fit with the current bounded to that interval (``ParameterSpace.current_bounds``), so the
    bootstrap, the identifiability analysis and the validation see the tank's current, and a fit
@@ -207,25 +207,35 @@ def share_tank_current(
 
 def _half_width(evs: list[Evaluator], cube: _JointCube,
                 split: Callable[[np.ndarray], list[np.ndarray]], joint: np.ndarray) -> np.ndarray:
-    """The current's half-width: z times its's linearised standard error (joint problem), per component.
+    """Half-width of the current's interval: z times its linearised standard error, per component.
 
-    As :func:`eelhost.estimation.identify.identifiability`, on the residuals of both motions
-    stacked; an unidentified current gets the whole search bound.
+    As :func:`eelhost.estimation.identify.identifiability` (Jacobian in the unit cube, residual
+    variance never below the pixel rounding's), on the residuals of both motions stacked, with
+    the other parameters profiled out; a current the other parameters can explain gets the whole
+    search bound.
     """
     k = cube.size
     u0 = cube.to_unit(joint)
     steps = np.where(u0 + REL_STEP <= 1.0, REL_STEP, -REL_STEP)
     pts = np.vstack([joint] + [cube.from_unit(u0 + np.eye(k)[i] * steps[i]) for i in range(k)])
     r = np.hstack([ev.residuals(part) for ev, part in zip(evs, split(pts), strict=True)])
-    jac = ((r[1:] - r[0]) / steps[:, None]).T
-    _, sing, vt = np.linalg.svd(jac, full_matrices=False)
+    jac = ((r[1:] - r[0]) / steps[:, None]).T  # (M, K), unit-cube coordinates
     pixel = max(float(p.experiment.recording_camera().pixel_m) for ev in evs for p in ev.prepared)
     sigma2 = max(float(r[0] @ r[0]) / max(1, jac.shape[0] - k), pixel**2 / 12.0)
-    with np.errstate(divide="ignore"):
-        inv_s2 = np.where(sing > 1e-9 * sing[0], 1.0 / sing**2, np.inf)
-    with np.errstate(invalid="ignore"):
-        var_u = np.einsum("ij,j,ij->i", vt.T, inv_s2, vt.T) * sigma2
-    ranges = cube.bounds[:, 1] - cube.bounds[:, 0]
-    std = np.sqrt(np.where(np.isnan(var_u), np.inf, var_u)) * ranges
-    half = np.where(np.isfinite(std[-2:]), Z_95 * std[-2:], CURRENT_BOUND_M_S)
+    # the current's covariance with the other parameters profiled out: its columns' part that
+    # no combination of the others' columns explains. A parameter no residual sees (C_m) has no
+    # column to trade against the current, so it widens nothing (a plain inverse of J^T J made
+    # every share of such a direction infinite)
+    others, current = jac[:, :-2], jac[:, -2:]
+    u, sing, _ = np.linalg.svd(others, full_matrices=False)
+    u = u[:, sing > 1e-9 * sing[0]] if sing.size and sing[0] > 0 else u[:, :0]
+    alone = current - u @ (u.T @ current)
+    info = alone.T @ alone
+    scale = float(np.sum(current**2)) or 1.0
+    ranges = cube.bounds[-2:, 1] - cube.bounds[-2:, 0]
+    if np.linalg.eigvalsh(info).min() <= 1e-12 * scale:  # the others explain the current
+        std = np.full(2, np.inf)
+    else:
+        std = np.sqrt(sigma2 * np.diag(np.linalg.inv(info))) * ranges
+    half = np.where(np.isfinite(std), Z_95 * std, CURRENT_BOUND_M_S)
     return np.clip(half, MIN_HALF_WIDTH_M_S, CURRENT_BOUND_M_S)
