@@ -199,12 +199,12 @@ def test_run_plan_reads_the_fitted_model_as_plan_does(tmp_path, capsys):
     bad = tmp_path / "coefficients.json"
     bad.write_text(json.dumps({"fits": {"joint": {"coefficients": {"C_f": 0.01, "C_d": -0.8,
                                                                    "C_a": 0.6, "C_m": 0.01}}}}))
-    code = main(["run", "--robot", "sim://?speed=0", "--plan", "tank_5_obstacles",
+    code = main(["run", "--link", "sim://?speed=0", "--plan", "tank_5_obstacles",
                  "--coefficients-file", str(bad), "--out", str(tmp_path / "x")])
     assert code == 2
     err = capsys.readouterr().err
     assert str(bad) in err and "C_d" in err
-    code = main(["run", "--robot", "sim://?speed=0", "--waypoints", "1,0", "--gait", "0.87,3.9",
+    code = main(["run", "--link", "sim://?speed=0", "--waypoints", "1,0", "--gait", "0.87,3.9",
                  "--coefficients-file", str(bad), "--out", str(tmp_path / "y")])
     assert code == 2 and "--coefficients-file" in capsys.readouterr().err
 
@@ -312,7 +312,7 @@ def test_run_plan_plans_with_the_fitted_model_and_its_tanks_current(tmp_path, ca
         "heading_deg = 0.0\n[goal]\nposition_m = [2.1, 1.0]\nradius_m = 0.2\n[current]\n"
         'speed_m_s = 0.0\ndirection_deg = 0.0\n[[obstacles]]\nkind = "circle"\n'
         "centre_m = [1.4, 0.25]\nradius_m = 0.1\n")
-    code = main(["run", "--robot", "sim://?speed=0", "--plan", str(world), "--coefficients-file",
+    code = main(["run", "--link", "sim://?speed=0", "--plan", str(world), "--coefficients-file",
                  str(fitted), "--duration", "1", "--camera", "synthetic:clean", "--no-view",
                  "--out", str(tmp_path / "take")])
     out = capsys.readouterr().out
