@@ -100,3 +100,19 @@ def test_run_over_link_swims_the_robot_file_given_and_keeps_a_copy_of_it(tmp_pat
     assert "deprecated" not in capsys.readouterr().err
     bundled = resources.files("eelsim.data").joinpath("servo_robot.toml").read_text()
     assert (tmp_path / "take.robot.toml").read_text() == bundled
+
+
+@pytest.mark.parametrize("command", LINK_COMMANDS)
+def test_a_transport_registered_later_is_in_the_link_help_and_message(command, monkeypatch,
+                                                                      capsys):
+    from eelhost.link import uri
+
+    toy = uri.TransportScheme(name="toy", parameters=(), target="", open=lambda *a: None,
+                              list_ports=list, example="toy://tank-3")
+    monkeypatch.setitem(uri._SCHEMES, "toy", toy)
+    with pytest.raises(SystemExit):
+        cli.main([*LINK_COMMANDS[command], "--help"])
+    assert "toy://tank-3" in capsys.readouterr().out
+    args = parsed(LINK_COMMANDS[command])
+    with pytest.raises(OptionError, match="toy://tank-3"):
+        resolve_link_options(args, required="here")

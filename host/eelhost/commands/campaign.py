@@ -44,8 +44,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("plan", nargs="?", help="plan TOML (default: the paper's protocol; see "
                    "docs/host.md)")
-    add_link_options(p, "serial:///dev/ttyUSB0?baud=57600, sim://?speed=0 ... (required unless "
-                     "--write-plan)")
+    add_link_options(p, "required unless --write-plan")
     p.add_argument("--out", metavar="FOLDER", help="the dataset folder (required unless "
                    "--write-plan)")
     p.add_argument("--camera", metavar="SOURCE", help="as eelbot run (sim://: synthetic)")

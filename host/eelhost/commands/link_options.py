@@ -16,14 +16,21 @@ import argparse
 
 from eelhost import progress
 from eelhost.commands.common import OptionError
+from eelhost.link.uri import transport_schemes
 
-__all__ = ["LINK_EXAMPLES", "add_link_options", "add_robot_file_option", "is_link_uri",
+__all__ = ["add_link_options", "add_robot_file_option", "is_link_uri", "link_examples",
            "resolve_link_options", "resolve_robot_file_option"]
 
-LINK_EXAMPLES = "serial:///dev/ttyUSB0?baud=57600, sim://?speed=1&seed=0, replay:///path/run.rx.bin"
-"""The link URIs the help texts show (docs/host.md lists every scheme's parameters)."""
-
 ROBOT_FILE_HELP = "robot TOML file (default: the bundled paper robot)"
+
+
+def link_examples() -> str:
+    """An example URI of every registered transport, for help texts and messages.
+
+    Read from the transport registry (:func:`eelhost.link.uri.transport_schemes`) when asked, so
+    a transport added later is shown too; docs/host.md lists every scheme's parameters.
+    """
+    return ", ".join(scheme.example for scheme in transport_schemes().values())
 
 
 def is_link_uri(value: str) -> bool:
@@ -39,10 +46,15 @@ def add_robot_file_option(p: argparse.ArgumentParser, help_text: str = ROBOT_FIL
                    help=argparse.SUPPRESS)
 
 
-def add_link_options(p: argparse.ArgumentParser, link_help: str,
+def add_link_options(p: argparse.ArgumentParser, link_note: str = "",
                      robot_help: str = ROBOT_FILE_HELP) -> None:
-    """``--link URI`` and ``--robot FILE`` (:func:`resolve_link_options` reads the old spellings)."""
-    p.add_argument("--link", metavar="URI", help=link_help)
+    """``--link URI`` and ``--robot FILE`` (:func:`resolve_link_options` reads the old spellings).
+
+    ``link_note`` is added to the link's help, after the registered transports' examples.
+    """
+    note = f"; {link_note}" if link_note else ""
+    p.add_argument("--link", metavar="URI", help="the link to the robot, a URI such as "
+                   f"{link_examples()}; eelbot ports lists the links that can be opened now{note}")
     add_robot_file_option(p, robot_help
                           + "; the old spelling --robot URI still names the link (deprecated)")
 
@@ -95,4 +107,4 @@ def resolve_link_options(args: argparse.Namespace, required: str | None = None) 
         args.link, args.robot_file = value, None
     resolve_robot_file_option(args)
     if args.link is None and required is not None:
-        raise OptionError(f"--link: required {required} (a URI: {LINK_EXAMPLES})")
+        raise OptionError(f"--link: required {required} (a URI: {link_examples()})")

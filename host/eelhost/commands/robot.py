@@ -19,7 +19,8 @@ from eelhost.link.uri import open_link
 from eelhost.wire import protocol
 from eelsim.robot import load_robot
 
-URI_HELP = "serial:///dev/ttyUSB0?baud=57600 or sim://?speed=0 (feedback=1, battery=7.4: see docs)"
+LINK_NOTE = ("required; sim://?feedback=1&battery=7.4 gives the virtual robot analog-feedback "
+             "servos and a battery (docs/host.md)")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -75,7 +76,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def _link_arguments(p: argparse.ArgumentParser) -> None:
-    add_link_options(p, URI_HELP + " (required)",
+    add_link_options(p, LINK_NOTE,
                      "the robot file of a sim:// robot (default: the bundled paper robot)")
     p.add_argument(
         "--timeout", type=float, default=2.0, help="seconds to wait for each answer (2)"

@@ -22,7 +22,7 @@ from eelhost.commands.common import (
     rejected_as,
     waypoints,
 )
-from eelhost.commands.link_options import LINK_EXAMPLES, add_link_options, resolve_link_options
+from eelhost.commands.link_options import add_link_options, resolve_link_options
 from eelhost.commands.plan import add_coefficient_model_option
 from eelhost.errors import EXIT_CONTACT, EXIT_NOT_REACHED, EXIT_OK
 from eelhost.field.recorder import MOTIONS
@@ -51,7 +51,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "Example: eelbot run --link sim:// --waypoints '0.43,0.25;0.93,0.25;1.37,0.5' "
         "--gait 0.87,3.9 --k-theta 0.37 --out out/run/path1 --speed 0",
     )
-    add_link_options(p, LINK_EXAMPLES)
+    add_link_options(p, "required unless --bench")
     p.add_argument(
         "--camera",
         metavar="SOURCE",
