@@ -185,6 +185,53 @@ class MujocoTiming:
         return self.runs * self.steps / self.wall_s
 
 
+class Rollouts:
+    """``runs`` copies of the robot in ``mujoco.rollout``, ready to be timed again and again.
+
+    The model, the data, the initial states, the gait and the output buffer are made once;
+    :meth:`time_once` times one rollout of all runs. MuJoCo's thread pool exists only inside
+    :meth:`time_once`, so that no thread of it runs while another engine is timed.
+
+    Parameters
+    ----------
+    robot : Robot
+    runs, steps : int
+    threads : int
+        Threads of MuJoCo's pool.
+    dt_s : float
+    """
+
+    def __init__(self, robot: Robot, runs: int, steps: int, threads: int,
+                 dt_s: float = 0.01) -> None:
+        require_mujoco()
+        self.runs, self.steps, self.threads = runs, steps, threads
+        self._model = mujoco.MjModel.from_xml_string(robot_mjcf(robot, dt_s, fluid=True))
+        self._datas = [mujoco.MjData(self._model) for _ in range(threads)]
+        spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+        state0 = np.zeros(mujoco.mj_stateSize(self._model, spec))
+        mujoco.mj_getState(self._model, self._datas[0], state0, spec)
+        self._initial = np.tile(state0, (runs, 1))
+        self._control = gait_targets(robot, steps, dt_s)[None, :, :]
+        self._out = np.empty((runs, steps, state0.size))
+
+    def time_once(self) -> float:
+        """Wall seconds of one rollout of every run.
+
+        Raises
+        ------
+        RuntimeError
+            When the rollout diverged.
+        """
+        with mj_rollout.Rollout(nthread=self.threads) as pool:
+            start = time.perf_counter()
+            pool.rollout(self._model, self._datas, self._initial, self._control,
+                         nstep=self.steps, state=self._out)
+            wall = time.perf_counter() - start
+        if not np.all(np.isfinite(self._out[:, -1])):
+            raise RuntimeError("the MuJoCo rollout diverged")
+        return wall
+
+
 def rollout_speed(robot: Robot, runs: int, steps: int, threads: int, dt_s: float = 0.01,
                   repeats: int = 2) -> MujocoTiming:
     """Time ``mujoco.rollout`` on ``runs`` copies of the robot for ``steps`` steps (best of repeats).
@@ -202,23 +249,8 @@ def rollout_speed(robot: Robot, runs: int, steps: int, threads: int, dt_s: float
     -------
     MujocoTiming
     """
-    require_mujoco()
-    model = mujoco.MjModel.from_xml_string(robot_mjcf(robot, dt_s, fluid=True))
-    datas = [mujoco.MjData(model) for _ in range(threads)]
-    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
-    state0 = np.zeros(mujoco.mj_stateSize(model, spec))
-    mujoco.mj_getState(model, datas[0], state0, spec)
-    initial = np.tile(state0, (runs, 1))
-    control = gait_targets(robot, steps, dt_s)[None, :, :]
-    out_state = np.empty((runs, steps, state0.size))
-    walls = []
-    with mj_rollout.Rollout(nthread=threads) as pool:
-        for _ in range(repeats):
-            start = time.perf_counter()
-            pool.rollout(model, datas, initial, control, nstep=steps, state=out_state)
-            walls.append(time.perf_counter() - start)
-    if not np.all(np.isfinite(out_state[:, -1])):
-        raise RuntimeError("the MuJoCo rollout diverged")
+    rollouts = Rollouts(robot, runs, steps, threads, dt_s)
+    walls = [rollouts.time_once() for _ in range(repeats)]
     return MujocoTiming(runs, steps, min(walls), threads, tuple(walls))
 
 

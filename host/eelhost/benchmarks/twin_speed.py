@@ -70,7 +70,8 @@ class TwinBenchSettings:
     ga : bool
         Run the paper's GA end to end (about 40 s).
     rounds : int
-        Rounds of the engines timed each in its own process (the MuJoCo comparison).
+        Rounds of the MuJoCo comparison per thread count: one window of each engine, each in
+        its own process, back to back.
     note : str
         A remark for the report.
     command : str
@@ -83,7 +84,7 @@ class TwinBenchSettings:
     mujoco: bool = True
     cold_compile: bool = True
     ga: bool = True
-    rounds: int = 5
+    rounds: int = 15
     note: str = ""
     command: str = "eelbot bench"
 
@@ -413,7 +414,13 @@ def _mujoco_section(robot: Robot, servo_robot: Robot, coeffs: FluidCoefficients,
     import mujoco
 
     from eelhost.benchmarks import mujoco_compare
-    from eelhost.benchmarks.engine_rounds import engine_rounds, spread
+    from eelhost.benchmarks.engine_rounds import (
+        MUJOCO_WINDOW_FRACTION,
+        engine_rounds,
+        mujoco_window_runs,
+        quartiles,
+        spread,
+    )
 
     # MuJoCo's position actuator is a PD law: a servo robot is compared with its links on the
     # bundled PD joints
@@ -426,13 +433,17 @@ def _mujoco_section(robot: Robot, servo_robot: Robot, coeffs: FluidCoefficients,
         f"mujoco {mujoco.__version__}; ellipsoid fluid model, implicitfast, dt = {dt_s} s, PD as "
         "position actuator + joint damping; open-loop gait.",
         "",
-        f"Each engine timed alone in a fresh process ({settings.runs} runs x {settings.steps} "
-        "steps; each process reports the best of 5 short windows: the kernels 5 generations "
-        "after an untimed one, MuJoCo 5 rollouts of a fifth of the runs): the PD kernel, the "
-        "servo kernel and `mujoco.rollout` one after the other, the order rotated each round, "
-        f"on {' and on '.join(str(n) for n in counts)} threads; {settings.rounds} rounds of each."
-        " The ratios are taken within each round, so that the machine's load, which changes "
-        "from minute to minute, divides out as far as it can.",
+        "Each engine runs in a worker process of its own, started and warmed up once (the "
+        "kernel loads its compiled code and starts its threads, MuJoCo builds its model); a "
+        "round then times one window of each engine, back to back, while the other workers "
+        "wait idle (no thread of theirs runs), the order rotated from round to round. A "
+        f"kernel's window is the whole generation ({settings.runs} runs x {settings.steps} "
+        f"steps), MuJoCo's `mujoco.rollout` of {mujoco_window_runs(settings.runs, 1)} runs "
+        f"(1/{MUJOCO_WINDOW_FRACTION} of them; at least 2 per thread) x {settings.steps} steps, "
+        "about as long. The ratios are taken within each round, so that the machine's load, "
+        f"which changes from second to second, divides out as far as it can: {settings.rounds} "
+        f"rounds on {' and on '.join(str(n) for n in counts)} threads; the figures are the "
+        "median of the rounds with the quartiles (and the range).",
         "",
         "| round | threads | load before / after | MuJoCo (million steps/s) | PD kernel "
         "| servo kernel | PD kernel / MuJoCo | servo kernel / MuJoCo | servo / PD |",
@@ -440,7 +451,7 @@ def _mujoco_section(robot: Robot, servo_robot: Robot, coeffs: FluidCoefficients,
     ]
     for i, r in enumerate(rounds):
         lines.append(
-            f"| {i // len(counts) + 1} | {r.threads} | {r.load_before.split()[0]} / "
+            f"| {i % settings.rounds + 1} | {r.threads} | {r.load_before.split()[0]} / "
             f"{r.load_after.split()[0]} | {r.rates['mujoco'] / 1e6:.3f} "
             f"| {r.rates['pd kernel'] / 1e6:.2f} | {r.rates['servo kernel'] / 1e6:.2f} "
             f"| {r.ratio('pd kernel'):.1f} | {r.ratio('servo kernel'):.1f} "
@@ -448,13 +459,18 @@ def _mujoco_section(robot: Robot, servo_robot: Robot, coeffs: FluidCoefficients,
     lines.append("")
     for n in counts:
         mine = [r for r in rounds if r.threads == n]
+        pd_mj = [r.ratio("pd kernel") for r in mine]
+        servo_mj = [r.ratio("servo kernel") for r in mine]
         servo_pd = [r.ratio("servo kernel", "pd kernel") for r in mine]
         lines.append(
-            f"- {n} thread{'s' if n > 1 else ''}: **PD kernel / MuJoCo "
-            f"{spread([r.ratio('pd kernel') for r in mine])}; servo kernel / MuJoCo "
-            f"{spread([r.ratio('servo kernel') for r in mine])}** (median and range over the "
-            f"rounds); servo kernel / PD kernel {np.median(servo_pd):.2f} "
-            f"({min(servo_pd):.2f}-{max(servo_pd):.2f})")
+            f"- {n} thread{'s' if n > 1 else ''}: **PD kernel / MuJoCo {quartiles(pd_mj)}; "
+            f"servo kernel / MuJoCo {quartiles(servo_mj)}** (median of the rounds and "
+            f"quartiles; range {spread(pd_mj).split(' ', 1)[1]} and "
+            f"{spread(servo_mj).split(' ', 1)[1]}); servo kernel / PD kernel "
+            f"{quartiles(servo_pd, 2)}; rates, medians: MuJoCo "
+            f"{np.median([r.rates['mujoco'] for r in mine]) / 1e6:.3f}, PD kernel "
+            f"{np.median([r.rates['pd kernel'] for r in mine]) / 1e6:.2f}, servo kernel "
+            f"{np.median([r.rates['servo kernel'] for r in mine]) / 1e6:.2f} million steps/s")
     xf = mujoco_compare.morison_xfrc_speed(pd_robot, coeffs, 2, settings.steps) if isinstance(
         coeffs, mujoco_compare.HydroCoefficients) else None
     if xf is not None:

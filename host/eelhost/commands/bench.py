@@ -45,8 +45,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--no-ga", action="store_true", help="skip the end-to-end GA (it takes about 40 s)"
     )
     p.add_argument(
-        "--rounds", type=COUNT, default=5,
-        help="rounds of the engine comparison, each engine timed in its own process (5)",
+        "--rounds", type=COUNT, default=15,
+        help="rounds of the engine comparison per thread count: one window of each engine, "
+        "each in its own process, back to back (15)",
     )
     p.add_argument("--note", default="", help="a remark for the report (e.g. other load)")
     add_write_option(p, "docs/benchmarks.md")
