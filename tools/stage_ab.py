@@ -10,7 +10,7 @@ session 5, for what it decided.
 
 Usage (from the repo root, after ``bash scripts/setup.sh``)::
 
-    .venv/bin/python tools/stage_ab.py [--rounds 41] [--steps 1500] NAME=SPEC ...
+    .venv/bin/python tools/stage_ab.py [--rounds 41] [--steps 1500] [--joints pd|servo] NAME=SPEC ...
 
 SPEC is ``[FLAGS][@GENERATOR][%LANES]``: compiler options (default ``-O3 -march=native``), a copy
 of ``eelsim/batch/codegen.py`` to generate the stage with (default: the working tree's) and the
@@ -41,7 +41,8 @@ import numpy as np
 from eelsim import batch
 from eelsim.batch import c_stage, codegen
 from eelsim.closed_loop import LoopOptions
-from eelsim.robot import load_robot
+from eelsim.joints import get_joint_model
+from eelsim.robot import SERVO_ROBOT, load_robot
 from eelsim.scenario import TRAINING_CORNERS, grid_scenario
 
 N_LINKS = 6
@@ -83,9 +84,10 @@ def _load_generator(path: str | None, name: str) -> ModuleType:
     return module
 
 
-def _build(name: str, flags: str, generator: ModuleType, lanes: int, folder: Path):
+def _build(name: str, flags: str, generator: ModuleType, lanes: int, folder: Path,
+           joints: str = "pd"):
     """Compile one variant; return its library (``bench``) and its layout."""
-    layout = generator.make_layout(N_LINKS, lanes)
+    layout = generator.make_layout(N_LINKS, lanes, joints=get_joint_model(joints))
     if layout.work["y"] != 0:
         raise SystemExit(f"{name}: the driver here assumes the stage state's rows come first")
     source = generator.generate_stage_source(layout)
@@ -101,9 +103,9 @@ def _build(name: str, flags: str, generator: ModuleType, lanes: int, folder: Pat
     return lib, layout
 
 
-def _initial(layout, lanes: int, seed: int) -> np.ndarray:
-    """A block's buffer: the bundled robot's per-run rows and random start states."""
-    robot = load_robot()
+def _initial(layout, lanes: int, seed: int, joints: str = "pd") -> np.ndarray:
+    """A block's buffer: the bundled robot's (or servo robot's) per-run rows, random states."""
+    robot = load_robot(SERVO_ROBOT if joints == "servo" else None)
     coeffs = robot.hydrodynamics
     corners = [grid_scenario("straight", a, w) for a, w in TRAINING_CORNERS]
     rng = np.random.default_rng(seed)
@@ -128,6 +130,9 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=41)
     parser.add_argument("--steps", type=int, default=1500, help="RK4 steps per timing (16 lanes)")
     parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--joints", choices=("pd", "servo"), default="pd",
+                        help="the joint model of every variant's stage and robot (pd: the "
+                        "bundled robot; servo: servo_robot.toml)")
     args = parser.parse_args()
     folder = Path(tempfile.mkdtemp(prefix="eelsim_stage_ab_"))
     variants = []
@@ -138,8 +143,9 @@ def main() -> None:
         flags, _, generator_path = spec.partition("@")
         lanes = int(lanes_text) if lanes_text else 16
         generator = _load_generator(generator_path or None, f"stage_ab_{name}")
-        lib, layout = _build(name, flags or " ".join(_TUNING), generator, lanes, folder)
-        init = _initial(layout, lanes, args.seed)
+        lib, layout = _build(name, flags or " ".join(_TUNING), generator, lanes, folder,
+                             args.joints)
+        init = _initial(layout, lanes, args.seed, args.joints)
         if lanes not in buffers:
             buffers[lanes] = np.zeros(init.size + 8192)  # room for variants with more rows
         buf = buffers[lanes]
