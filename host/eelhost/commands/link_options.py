@@ -3,9 +3,9 @@
 Every command spells the robot file ``--robot FILE``; ``eelbot run``, ``campaign`` and ``robot``
 name the link to the robot (a URI: ``serial://``, ``sim://``, ``replay://``) with ``--link URI``.
 
-In release 0.1 these three commands spelled the link ``--robot URI`` and the robot file
-``--robot-file FILE``. Both old spellings are still accepted until the next release (0.2), each
-with a deprecation message on stderr: a ``--robot`` value that is a link URI (it contains ``://``, which
+Until this release these three commands spelled the link ``--robot URI`` and the robot file
+``--robot-file FILE``. Both old spellings are still accepted in this release and go in the next,
+each with a deprecation message on stderr: a ``--robot`` value that is a link URI (it contains ``://``, which
 no robot file's path does) is taken as ``--link``, and ``--robot-file FILE`` as ``--robot FILE``
 (docs/cli.md, "Deprecated spellings").
 """
