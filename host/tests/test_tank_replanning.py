@@ -478,3 +478,31 @@ def test_near_the_goal_a_failed_replan_is_tried_with_the_goal_approachs_smaller_
         nav.close()
     assert np.hypot(state[N] - 2.1, state[N + 1] - 1.0) - 0.2 < 0.5
     assert len(approach) == 1 and out.found, out.message
+
+
+def test_a_plan_ready_long_after_its_start_with_the_robot_off_its_corridor_is_not_used(open_plan):
+    from concurrent.futures import Future
+
+    from eelhost.planning.replan import Decision, _Job
+
+    planner, outcome = open_plan
+    for com, used in (((0.8, 1.4), False), ((0.7, 1.0), True)):  # 0.4 m off / on its path
+        nav = TankReplanner(lambda extra: planner, planner, outcome, PATH_GAIT, lookahead_s=0.0)
+        try:
+            for t in np.arange(3.5, 4.0, 1 / 30):
+                nav.estimator.observe(t, np.asarray(com), np.zeros(N))
+            done: Future = Future()
+            state = np.zeros(2 * N + 4)
+            done.set_result(((outcome, state, 0.1, 0.1, np.zeros(2), time.monotonic(), 150),
+                             None))
+            nav._job = _Job(done, 1.0, time.monotonic(), 1.5, "left_corridor")
+            d = Decision()
+            assert nav._collect(4.0, d) and d.stop is None
+        finally:
+            nav.close()
+        if used:
+            assert nav._pending is not None and nav.failures == 0
+            assert nav.events[-1]["status"] == "found"
+        else:  # 2.5 s late and the robot off the new corridor: kept its plan, replans at once
+            assert nav._pending is None and nav.failures == 1 and nav._next_try_s == 4.0
+            assert nav.events[-1]["status"] == "stale" and "not used" in nav.events[-1]["message"]

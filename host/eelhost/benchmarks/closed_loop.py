@@ -87,6 +87,8 @@ class WorldResult:
         Wall time of each replan, from its request to its plan.
     replan_delay_s : list of float
         Robot's time from each replan's request to its plan being switched in.
+    replan_cpu_s : list of float
+        Processor time of each replan (its thread's), failed ones included.
     plan_wall_s, plan_cpu_s : float
         The first plan's wall and processor time.
     t_end_s : float
@@ -115,6 +117,7 @@ class WorldResult:
     t_end_s: float = 0.0
     planned_goal_s: float | None = None
     water: dict = field(default_factory=dict)
+    replan_cpu_s: list[float] = field(default_factory=list)
 
 
 def true_clearance_m(world: World, model: SwimmerModel, states: FloatArray) -> FloatArray:
@@ -254,7 +257,8 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
         sum(e["status"] != "found" for e in replans),
         [e["wall_s"] for e in replans],
         [e["t_switch_s"] - e["t_request_s"] for e in replans if "t_switch_s" in e],
-        plan_wall, plan_cpu, out.t_end_s, cost, water)
+        plan_wall, plan_cpu, out.t_end_s, cost, water,
+        [e["cpu_s"] for e in replans if e["cpu_s"] is not None])
 
 
 def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, out: Path,
@@ -332,6 +336,10 @@ def summary_lines(results: list[WorldResult]) -> list[str]:
                  f"{sum(1 for r in planned if r.replans or r.failed_replans)} runs"
                  + (f"; wall time from request to plan: median {statistics.median(walls):.2f} s,"
                     f" largest {max(walls):.2f} s" if walls else ""))
+    cpus = [c for r in planned for c in r.replan_cpu_s]
+    if cpus:
+        lines.append(f"- replans' processor time: median {statistics.median(cpus):.2f} s, "
+                     f"largest {max(cpus):.2f} s")
     delays = [d for r in planned for d in r.replan_delay_s]
     if delays:
         lines.append(f"- robot's time from a replan's request to its plan steering: median "

@@ -20,6 +20,7 @@ waypoints. The goal test is :func:`eelhost.planning.search.in_goal` throughout.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import time
@@ -285,9 +286,10 @@ class _Window:
 class TankReplanner:
     """The tank's replanning beside the control loop (docs/planning.md, "Execution and replanning").
 
-    The run loop calls :meth:`on_frame` with every frame and :meth:`pace` after it. Planning and
-    every twin run happen on one worker thread, so the loop keeps reading the camera and sending
-    offsets at the control rate while the planner thinks (the robot swims its present leg on).
+    The run loop calls :meth:`on_frame` with every frame and :meth:`pace` after it. Replans run on
+    a worker thread and the other twin runs (look-aheads, the current's windows) on a second, so
+    the loop keeps reading the camera and sending offsets at the control rate while the planner
+    thinks (the robot swims its present leg on), and a replan never queues behind a look-ahead.
 
     Parameters
     ----------
@@ -478,8 +480,9 @@ class TankReplanner:
                      "%.1f s", self._last_gap[1] * 1000, self.lookahead_s)  # type: ignore[operator]
         if reason is not None and not busy and t_s >= self._next_try_s:
             self._request(t_s, est, left, reason)
-        elif (not busy and self._lookahead is None and self.lookahead_s > 0
+        elif (self._pending is None and self._lookahead is None and self.lookahead_s > 0
               and t_s >= self._next_lookahead_s):
+            # also while a replan runs (on its own worker): a failure is then judged on it
             self._next_lookahead_s = t_s + self.lookahead_every_s
             self._lookahead = self._side.submit(self._look_ahead, est, list(left),
                                                   self.current.value_m_s.copy())
@@ -591,6 +594,9 @@ class TankReplanner:
                          approach.message)
                 if approach.found:
                     outcome = approach
+                else:
+                    outcome = dataclasses.replace(outcome, message=(
+                        f"{outcome.message}; with the goal approach's margin: {approach.message}"))
         return (outcome, state, time.perf_counter() - wall0, time.thread_time() - cpu0,
                 self._planner_current.copy(), time.monotonic(), start_step)
 
@@ -605,6 +611,15 @@ class TankReplanner:
         if result[0].found or self.lookahead_s <= 0:
             return result, None
         return result, self._look_ahead(est, left, self.current.value_m_s.copy())
+
+    def _stale(self, t_s: float, t_start_s: float, path: FloatArray) -> bool:
+        """A plan ready more than a restart period after its start, the robot off its corridor."""
+        period_s = (self.planner.twin.restart_steps or 1) * self.planner.twin.dt_s
+        pose = self.estimator.latest_pose()
+        if t_s - t_start_s <= period_s or pose is None:
+            return False
+        n = self.model.n_links
+        return float(distance_to_path(path, np.asarray([pose[n : n + 2]]))[0]) > self.corridor_m
 
     def _near_goal(self, state: FloatArray) -> bool:
         """The state's centre of mass within ``goal_approach_m`` of the goal disc's edge."""
@@ -638,6 +653,18 @@ class TankReplanner:
         self._last_wall_s = wall
         self.events.append(self._event("replan", job.reason, job.t_request_s, job.t_start_s,
                                        job.t_request_s + wall, state, outcome, wall, cpu, extra))
+        if outcome.found and self._stale(t_s, job.t_start_s, corridor_path(outcome.plan)):
+            # ready long after the state it was planned from, and the robot is no longer in its
+            # corridor: it would be left at once; the robot keeps its plan, and replans now
+            self.events[-1]["status"] = "stale"
+            self.events[-1]["message"] = (
+                f"ready at t = {t_s:.2f} s, {t_s - job.t_start_s:.2f} s after its start, with the "
+                f"robot outside its corridor: not used ({outcome.message})")
+            log.warning("replan ready %.2f s late, robot off its corridor: not used",
+                        t_s - job.t_start_s)
+            self.failures += 1  # a failure for the stops on contact ahead, but no back-off
+            self._next_try_s = t_s
+            return True
         if outcome.found:
             self.failures = 0
             self.outcome = outcome
