@@ -331,7 +331,8 @@ class TankReplanner:
     goal_planner_for : callable, optional
         ``goal_planner_for(extra_current_m_s)``: a planner like ``planner_for``'s whose search
         keeps a smaller margin (the goal approach); a replan that finds no plan from a start
-        within ``goal_approach_m`` of the goal disc's edge is tried again with it.
+        within ``goal_approach_m`` of the goal disc's edge, or whose search ran out of poses
+        (``exhausted``) anywhere, is tried again with it.
     goal_approach_m : float
     blocked_retries : int
         A replan whose predicted start is refused as blocked (the body within its half width of
@@ -585,8 +586,11 @@ class TankReplanner:
                      start_step * planner.twin.dt_s, (start_step + period) * planner.twin.dt_s)
             start_step, state = start_step + period, later
             outcome = planner.plan(state, start_step)
-        if not outcome.found and outcome.status not in REFUSED_FROM_STATE and self._near_goal(
-                state):
+        # the tighter margin: near the goal after any failure of the search or check; anywhere
+        # when the search ran out of poses (a start so close to an obstacle that every manoeuvre
+        # from it breaks the world's margin: the predicted start of a robot the water pushed on)
+        if not outcome.found and outcome.status not in REFUSED_FROM_STATE and (
+                outcome.status == "exhausted" or self._near_goal(state)):
             goal_planner = self._goal_planner_in(extra)
             if goal_planner is not None:
                 approach = goal_planner.plan(state, start_step)
