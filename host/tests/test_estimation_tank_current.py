@@ -1,5 +1,7 @@
 """One ambient current for the tank, from the straight and turning experiments together."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -67,6 +69,10 @@ def test_one_motion_alone_keeps_its_own_current(tank):
     _, fits, evs = tank
     only = {"straight": fits["straight"]}
     out, out_evs, current = share_tank_current(only, {"straight": evs["straight"]})
+    assert current is None and out["straight"] is fits["straight"]
+    # a fit that failed (scored a penalty) cannot tell the water either
+    failed = {**fits, "turning": replace(fits["turning"], fitness=6.2e5)}
+    out, _, current = share_tank_current(failed, evs)
     assert current is None and out["straight"] is fits["straight"]
 
 

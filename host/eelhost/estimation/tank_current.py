@@ -37,7 +37,7 @@ import numpy as np
 
 from eelhost.estimation.evaluate import Evaluator
 from eelhost.estimation.identify import REL_STEP
-from eelhost.estimation.local import polish_minimax, polish_minimax_many
+from eelhost.estimation.local import FAILED, polish_minimax, polish_minimax_many
 from eelhost.estimation.optimise import FitResult
 from eelhost.estimation.parameters import CURRENT_BOUND_M_S, ParameterSpace
 
@@ -135,11 +135,14 @@ def share_tank_current(
     -------
     (fits, evaluators, TankCurrent or None)
         The fits holding the tank's current and their evaluators (in the held spaces); the
-        inputs unchanged and None when fewer than two motions fit a current.
+        inputs unchanged and None when fewer than two motions fit a current without failing.
     """
     say = say or log.info
+    # a fit that scores a failure penalty (a run blew up or fell short) says nothing about the
+    # water: its motion keeps its own current
     motions = [m for m in ("straight", "turning")
-               if m in fits and fits[m].space.current and m in evaluators]
+               if m in fits and fits[m].space.current and m in evaluators
+               and fits[m].fitness < FAILED]
     if len(motions) < 2:
         return fits, evaluators, None
     evs = [evaluators[m] for m in motions]
