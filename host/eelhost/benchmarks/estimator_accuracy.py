@@ -120,6 +120,7 @@ def _fit_and_validate(ds: Dataset, plant: Plant | None, settings: FitSettings,
         return res, ev
 
     chosen = fit_and_choose(ds, ("straight", "turning"), settings, fit=fit, say=say)
+    alone = chosen.fits  # each motion with its own current, kept to show what the tank's changes
     # one current for the tank from both motions, as the report does (estimation/tank_current.py)
     chosen.fits, chosen.evaluators, out["tank_current"] = share_tank_current(
         chosen.fits, chosen.evaluators, say)
@@ -145,6 +146,7 @@ def _fit_and_validate(ds: Dataset, plant: Plant | None, settings: FitSettings,
         return {m: (recorded[m], aligned[m]) for m in MOTIONS if m in recorded}
 
     out["worst_ex"] = worst(chosen.fits)
+    out["alone_worst_ex"] = worst(alone) if out["tank_current"] is not None else None
     out["plant_worst_ex"] = _plant_itself(ds, plant, tests, settings.backend) if ds.truth else {}
     own = chosen.robot_file_fits
     out["own_worst_ex"] = worst(own) if own is not None else out["worst_ex"]
@@ -343,8 +345,10 @@ def estimator_report(
                     f"{np.degrees(np.arctan2(c[1], c[0])):.0f} deg"
                     for m, c in tank.per_motion_m_s.items())
                 lines += [f"The tank's current from all {tank.experiments} training experiments: "
-                          f"{tank.text()}; held by both fits. Each fit alone had found: {alone}.",
-                          ""]
+                          f"{tank.text()}; held by both fits. Each fit alone had found: {alone}; "
+                          "with those, worst held-out E_x, recorded clock: " + ", ".join(
+                              f"{m} {a:.4f} BL" for m, (a, _b) in r["alone_worst_ex"].items())
+                          + ".", ""]
         lines += [
             "| motion | fitness | worst held-out E_x, recorded clock (BL) | worst held-out E_x, "
             "best clock offset (BL) | the plant itself, recorded clock (BL) | target "
