@@ -456,28 +456,30 @@ def test_a_refused_replan_keeps_a_present_plan_the_twin_swims_clear(open_plan):
     assert d is None and len(nav.requests) >= 2  # kept its plan, and tried again later
 
 
-def test_near_the_goal_a_failed_replan_is_tried_with_the_goal_approachs_smaller_margin(open_plan):
+def test_the_goal_approachs_smaller_margin_is_tried_near_the_goal_or_when_no_pose_is_left(
+        open_plan):
     planner, outcome = open_plan
-    failing = _Scripted(planner, "exhausted", np.inf)
-    approach: list[np.ndarray] = []
+    tight = _Scripted(planner, "", -np.inf)  # the goal approach's planner: it plans (counted)
+    far = estimate_at(3.0)  # about 1 m from the goal disc
+    near = estimate_at(3.0, (1.0, -0.1))  # its centre of mass some 0.2 m short of the disc
+    step = int(round(3.0 / 0.01)) + 60
 
-    def goal_planner_for(extra):  # noqa: ANN001, ANN202
-        approach.append(extra)
-        return planner
+    def replan(status, est):  # noqa: ANN001, ANN202
+        failing = _Scripted(planner, status, np.inf)
+        nav = TankReplanner(lambda extra: failing, failing, outcome,  # type: ignore[arg-type]
+                            PATH_GAIT, goal_planner_for=lambda extra: tight, goal_approach_m=0.5)
+        try:
+            return nav._replan(est, [(2.1, 1.0)], step, np.zeros(2))
+        finally:
+            nav.close()
 
-    nav = TankReplanner(lambda extra: failing, failing, outcome, PATH_GAIT,  # type: ignore[arg-type]
-                        goal_planner_for=goal_planner_for, goal_approach_m=0.5)
-    try:
-        far = estimate_at(3.0)  # about 1 m from the goal disc
-        now = int(round(3.0 / 0.01))
-        out, *_ = nav._replan(far, [(2.1, 1.0)], now + 60, np.zeros(2))
-        assert out.status == "exhausted" and not approach
-        near = estimate_at(3.0, (1.0, -0.1))  # its centre of mass some 0.2 m short of the disc
-        out, state, *_ = nav._replan(near, [(2.1, 1.0)], now + 60, np.zeros(2))
-    finally:
-        nav.close()
+    out, *_ = replan("check_failed", far)  # a failed check far from the goal: no second try
+    assert out.status == "check_failed" and not tight.starts
+    out, state, *_ = replan("check_failed", near)
     assert np.hypot(state[N] - 2.1, state[N + 1] - 1.0) - 0.2 < 0.5
-    assert len(approach) == 1 and out.found, out.message
+    assert len(tight.starts) == 1 and out.found, out.message
+    out, *_ = replan("exhausted", far)  # no pose left with the world's margin: tried anywhere
+    assert len(tight.starts) == 2 and out.found, out.message
 
 
 def test_a_plan_ready_long_after_its_start_with_the_robot_off_its_corridor_is_not_used(open_plan):
