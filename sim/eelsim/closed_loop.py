@@ -29,6 +29,7 @@ This is the readable reference implementation; ``eelsim.batch`` runs the same ph
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Protocol
@@ -47,7 +48,7 @@ from eelsim.dynamics import (
 )
 from eelsim.flags import DIVERGENCE_RATE, ILL_CONDITION_THRESHOLD, Failure, penalty, self_collision
 from eelsim.fluid import FluidCoefficients
-from eelsim.guidance import Guidance
+from eelsim.guidance import PURSUIT, Guidance, GuidanceLaw
 from eelsim.integrate import rk4_step
 from eelsim.joints import PD, stiffness_hint
 from eelsim.model import SwimmerModel
@@ -75,12 +76,15 @@ class LoopOptions:
     stop_at_goal : bool
         End the run when the last waypoint is reached (not before the scenario's
         ``min_duration_s``).
+    guidance : GuidanceLaw
+        The line-of-sight law (default the paper's pure pursuit; docs/model.md section 4).
     """
 
     timing: LoopTiming = field(default_factory=LoopTiming)
     camera: CameraModel = field(default_factory=CameraModel)
     servo_limits: bool = False
     stop_at_goal: bool = True
+    guidance: GuidanceLaw = PURSUIT
 
 
 @dataclass
@@ -124,6 +128,9 @@ class RunResult:
         ``servo_limits`` the torque is clipped to the line and never counts.
     torque_limit_nm : float
         The stall torque that :attr:`max_torque_ratio` divides by.
+    integral_s : ndarray, shape (K, 2)
+        The guidance's ILOS integral vector at each recorded step, before that step's control
+        update (zero with pure pursuit; docs/model.md section 4).
     """
 
     t_s: FloatArray
@@ -141,6 +148,7 @@ class RunResult:
     joint_torque_nm: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
     saturated_steps: int = 0
     torque_limit_nm: float = float("inf")
+    integral_s: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
 
     @property
     def max_torque_ratio(self) -> float:
@@ -390,6 +398,7 @@ def simulate_closed_loop(
     coefficients: FluidCoefficients | None = None,
     progress: Callable[[int, int], None] | None = None,
     joints: JointController | None = None,
+    guidance_state: tuple[float, float, float, float] | None = None,
 ) -> RunResult:
     """Run the twin under its control stack on a scenario.
 
@@ -411,6 +420,10 @@ def simulate_closed_loop(
         Where the joint torques come from; by default :class:`TwinJoints` (the scenario's gait
         through the robot's joint model, servo limits as ``options`` says). Another controller
         applies any servo limits itself.
+    guidance_state : (x, y, I_x, I_y), optional
+        The guidance's state at the start: where the first leg starts (NaN: at the first
+        filtered pose, the default) and the ILOS integral vector (default zero). A run restarted
+        from another run's state and step carries that run's (``RunResult.integral_s``).
 
     Returns
     -------
@@ -436,7 +449,11 @@ def simulate_closed_loop(
     limit = robot.joints.limit_rad
     vc = np.asarray(scenario.current_m_s)
     waypoints = np.asarray(scenario.waypoints_m, dtype=float)
-    guide = Guidance(waypoints, scenario.acceptance_radius_m, gait.k_theta, cam.median_window)
+    g0 = (math.nan, math.nan, 0.0, 0.0) if guidance_state is None else guidance_state
+    guide = Guidance(waypoints, scenario.acceptance_radius_m, gait.k_theta, cam.median_window,
+                     law=opts.guidance,
+                     leg_start_m=None if math.isnan(g0[0] + g0[1]) else (g0[0], g0[1]),
+                     integral_s=(g0[2], g0[3]), control_period_s=timing.control_period_s)
     if joints is None:
         joints = TwinJoints(robot, gait, n, opts.servo_limits)
 
@@ -448,6 +465,7 @@ def simulate_closed_loop(
     failure, fail_t, reason = Failure.NONE, None, ""
 
     rec_t, rec_x, rec_g, rec_a, rec_w, rec_u = [], [], [], [], [], []
+    rec_i: list[FloatArray] = []
     stall, no_load = robot.joints.servo_max_torque_nm, robot.joints.servo_max_speed_rad_s
     saturated = 0
     cam_t: list[float] = []
@@ -479,6 +497,7 @@ def simulate_closed_loop(
     with np.errstate(all="ignore"):
         while True:
             t = step * dt
+            rec_i.append(guide.integral_s.copy())
             if step in updates:
                 pending.append((step + timing.delay_steps, guide.offset()))
             # An offset reaches the joints the loop's extra delay after its update.
@@ -558,6 +577,7 @@ def simulate_closed_loop(
         joint_torque_nm=np.array(rec_u, dtype=float).reshape(-1, n - 1),
         saturated_steps=saturated,
         torque_limit_nm=stall,
+        integral_s=np.array(rec_i, dtype=float).reshape(-1, 2),
     )
 
 

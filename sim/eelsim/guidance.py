@@ -10,9 +10,28 @@ against it):
 2. the target moves to the next waypoint when the filtered position is inside the acceptance
    circle, |p - w| < r; reaching the last one is the arrival, at that pose's time;
 3. when the caller's control period comes, :meth:`Guidance.offset` gives
-   gamma = k_theta wrap(theta_ref - theta_bar), theta_ref = atan2(y_w - p_y, x_w - p_x), from the
-   latest filtered pose towards the current waypoint (the last one once all are reached),
-   clipped to +-``offset_limit_rad`` when a limit is given (the radio command's range).
+   gamma = k_theta wrap(theta_ref - theta_bar) from the latest filtered pose, clipped to
+   +-``offset_limit_rad`` when a limit is given (the radio command's range). theta_ref comes from
+   the guidance law (:class:`GuidanceLaw`, docs/model.md section 4):
+
+   - ``pursuit`` (the paper's, the default): theta_ref = atan2(y_w - p_y, x_w - p_x) towards the
+     current waypoint (the last one once all are reached);
+   - ``ilos``, integral line-of-sight path following along the present leg, from the previous
+     waypoint (for the first, the leg's given start) to the current one, at angle alpha_k:
+     cross-track error e = -(p_x - x_0) sin alpha_k + (p_y - y_0) cos alpha_k,
+     theta_ref = alpha_k - atan((e + sigma y_i) / Delta), and at every control update the
+     integral state moves by T Delta e / ((e + sigma y_i)^2 + Delta^2) (Borhaug, Pavlov and
+     Pettersen 2008; Kelasidi et al., IEEE T-RO 2017). Delta is a length, sigma a speed (below
+     the robot's speed less the current's), y_i a time. y_i is the projection n_k . I of a
+     world-frame integral vector I (s) on the leg's left normal n_k, and each update adds its
+     increment along n_k to I: on a straight leg this is the published law, and at a waypoint
+     the integral carries over as the part of the current it has learnt that crosses the next
+     leg (our choice; the published law is for one straight path). Also ours: the look-ahead
+     point never passes the waypoint. With s the along-track distance and L the leg's length,
+     theta_ref = alpha_k + atan2(-(e + sigma y_i), min(Delta, L - s)), which is the published
+     law while the waypoint is more than Delta ahead; nearer, it aims at the waypoint offset by
+     -sigma y_i n_k, and past it back at it, so that a waypoint whose acceptance circle the body
+     missed is turned back to (an infinite line would lead it away for ever).
 
 Time is an argument: the object keeps no clock, so the same code runs in simulated time and in
 wall time.
@@ -20,15 +39,130 @@ wall time.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
 from eelsim.camera import MedianFilter
-from eelsim.control import heading_offset
+from eelsim.control import heading_offset, wrap_angle
 
 FloatArray = NDArray[np.float64]
+
+GUIDANCE_LAWS = ("pursuit", "ilos")
+"""The guidance laws by name: the paper's pure pursuit, integral line-of-sight path following."""
+
+
+@dataclass(frozen=True)
+class GuidanceLaw:
+    """Which line-of-sight law turns the filtered pose into theta_ref (module docstring).
+
+    Attributes
+    ----------
+    name : str
+        ``"pursuit"`` (the paper's, the default) or ``"ilos"``.
+    lookahead_m : float
+        Delta, the look-ahead distance along the leg, m (ILOS only).
+    integral_gain : float
+        sigma, the weight of the integral state, m/s (ILOS only; 0 gives plain LOS path
+        following). Borhaug et al.'s stability condition wants it below the robot's speed
+        less the current's.
+    heading_gain : float or None
+        k_theta, rad of offset per rad of heading error, used instead of the gait's (the heading
+        controller is the host's, like the law); ``None`` keeps the gait's.
+
+    Raises
+    ------
+    ValueError
+        An unknown name, a look-ahead that is not positive or a negative gain (ILOS), or a
+        heading gain that is not positive.
+    """
+
+    name: str = "pursuit"
+    lookahead_m: float = 0.4
+    integral_gain: float = 0.04
+    heading_gain: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.heading_gain is not None and not (math.isfinite(self.heading_gain)
+                                                  and self.heading_gain > 0):
+            raise ValueError(f"heading gain must be positive, got {self.heading_gain}")
+        if self.name not in GUIDANCE_LAWS:
+            raise ValueError(f"unknown guidance law {self.name!r}: one of {', '.join(GUIDANCE_LAWS)}")
+        if self.name == "ilos":
+            if not (math.isfinite(self.lookahead_m) and self.lookahead_m > 0):
+                raise ValueError(f"ILOS look-ahead must be positive, got {self.lookahead_m}")
+            if not (math.isfinite(self.integral_gain) and self.integral_gain >= 0):
+                raise ValueError(f"ILOS integral gain must be 0 or more, got {self.integral_gain}")
+
+    @property
+    def integral(self) -> bool:
+        """Whether the law has an integral state (ILOS)."""
+        return self.name == "ilos"
+
+    def describe(self) -> str:
+        """One line: the law and its gains."""
+        gain = ("" if self.heading_gain is None
+                else f", heading gain k_theta {self.heading_gain:g}")
+        if self.integral:
+            return (f"integral line-of-sight along each leg (look-ahead {self.lookahead_m:g} m, "
+                    f"integral gain {self.integral_gain:g} m/s{gain})")
+        return f"the paper's pure pursuit of each waypoint{gain}"
+
+    def gain(self, k_theta: float) -> float:
+        """The heading gain in force: this law's, else the gait's ``k_theta``."""
+        return float(k_theta) if self.heading_gain is None else self.heading_gain
+
+
+PURSUIT = GuidanceLaw()
+"""The paper's pure pursuit towards the current waypoint."""
+
+
+def ilos_reference(
+    position_m: Sequence[float] | FloatArray,
+    leg_start_m: Sequence[float] | FloatArray,
+    waypoint_m: Sequence[float] | FloatArray,
+    integral_s: Sequence[float] | FloatArray,
+    law: GuidanceLaw,
+    period_s: float,
+) -> tuple[float, float, float]:
+    """ILOS's reference heading along a leg, and its integral's increment (module docstring).
+
+    Parameters
+    ----------
+    position_m : (x, y)
+        The filtered centre of mass.
+    leg_start_m, waypoint_m : (x, y)
+        The leg's start and end; a leg shorter than 1 mm is steered as pure pursuit.
+    integral_s : (x, y)
+        The world-frame integral vector I, s.
+    law : GuidanceLaw
+    period_s : float
+        T, the control period: the integral is advanced by T times its rate.
+
+    Returns
+    -------
+    (theta_ref, dI_x, dI_y)
+        The reference heading, rad, and the integral's increment over one control period.
+    """
+    x0, y0 = float(leg_start_m[0]), float(leg_start_m[1])
+    dx, dy = float(waypoint_m[0]) - x0, float(waypoint_m[1]) - y0
+    px, py = float(position_m[0]), float(position_m[1])
+    if dx * dx + dy * dy < 1e-6:
+        return math.atan2(float(waypoint_m[1]) - py, float(waypoint_m[0]) - px), 0.0, 0.0
+    alpha = math.atan2(dy, dx)
+    tx, ty = math.cos(alpha), math.sin(alpha)
+    nx, ny = -ty, tx
+    e = (px - x0) * nx + (py - y0) * ny
+    # the look-ahead point stays on the leg: within Delta of the waypoint the law aims at the
+    # (offset) waypoint itself, and past it back at it, so the waypoint is always reached
+    ahead = min(law.lookahead_m, math.sqrt(dx * dx + dy * dy) - ((px - x0) * tx + (py - y0) * ty))
+    lateral = e + law.integral_gain * (float(integral_s[0]) * nx + float(integral_s[1]) * ny)
+    theta_ref = alpha + math.atan2(-lateral, ahead)
+    rate = law.lookahead_m * e / (lateral * lateral + law.lookahead_m * law.lookahead_m)
+    return theta_ref, period_s * rate * nx, period_s * rate * ny
 
 
 class Guidance:
@@ -41,11 +175,20 @@ class Guidance:
     acceptance_radius_m : float
         A waypoint is reached when the filtered position is closer than this (0.15 m).
     k_theta : float
-        Gain of the offset law, rad of offset per rad of heading error.
+        Gain of the offset law, rad of offset per rad of heading error (the law's own heading
+        gain replaces it when it has one).
     median_window : int
         Poses in the moving median (1: no filtering).
     offset_limit_rad : float, optional
         Clip the offset to +-this; ``None`` (the twin's default) does not clip.
+    law : GuidanceLaw
+        The line-of-sight law (default the paper's pure pursuit).
+    leg_start_m : (x, y), optional
+        Where the first leg starts (ILOS); default the first filtered position.
+    integral_s : (x, y)
+        The ILOS integral vector to start from (a run restarted from another's state carries it).
+    control_period_s : float
+        T, the period of the caller's control updates (ILOS's integral step; 0.3 s at the tank).
 
     Raises
     ------
@@ -60,6 +203,10 @@ class Guidance:
         k_theta: float,
         median_window: int = 5,
         offset_limit_rad: float | None = None,
+        law: GuidanceLaw = PURSUIT,
+        leg_start_m: Sequence[float] | None = None,
+        integral_s: Sequence[float] = (0.0, 0.0),
+        control_period_s: float = 0.3,
     ) -> None:
         waypoints = np.asarray(waypoints_m, dtype=float).reshape(-1, 2)
         if waypoints.shape[0] == 0:
@@ -72,18 +219,44 @@ class Guidance:
             raise ValueError(f"offset limit must be positive, got {offset_limit_rad}")
         self.waypoints_m = waypoints
         self.acceptance_radius_m = float(acceptance_radius_m)
-        self.k_theta = float(k_theta)
+        self.k_theta = law.gain(k_theta)
         self.offset_limit_rad = offset_limit_rad
         self._filter = MedianFilter(median_window)
         self._filtered: FloatArray | None = None
         self._target = 0
         self._arrival_s: float | None = None
         self._offset = 0.0
+        if law.integral and not control_period_s > 0:
+            raise ValueError(f"control period must be positive, got {control_period_s}")
+        self.law = law
+        self.control_period_s = float(control_period_s)
+        self._leg_start = None if leg_start_m is None else np.asarray(leg_start_m, dtype=float)
+        self.integral_s = np.asarray(integral_s, dtype=float).reshape(2).copy()
+
+    @property
+    def leg_start_m(self) -> FloatArray | None:
+        """Where the present leg starts: the previous waypoint, or the first leg's start."""
+        leg = min(self._target, len(self.waypoints_m) - 1)
+        return self.waypoints_m[leg - 1] if leg > 0 else self._leg_start
 
     @property
     def filtered_pose(self) -> FloatArray | None:
         """The latest filtered (x, y, heading), or ``None`` before the first pose."""
         return self._filtered
+
+    def state(self) -> tuple[float, float, float, float]:
+        """The guidance's own state, as a run restarted now must start with it.
+
+        Returns
+        -------
+        (x, y, I_x, I_y)
+            Where the present leg starts (NaN before the first pose when no start was given)
+            and the ILOS integral vector, s: ``Twin.run``'s ``guidance`` and
+            ``Planner.plan``'s ``guide`` (docs/planning.md, "The guidance").
+        """
+        start = self.leg_start_m
+        x, y = (math.nan, math.nan) if start is None else (float(start[0]), float(start[1]))
+        return (x, y, float(self.integral_s[0]), float(self.integral_s[1]))
 
     @property
     def target_index(self) -> int:
@@ -124,6 +297,8 @@ class Guidance:
         """
         filtered = self._filter.push(x_m, y_m, heading_rad)
         self._filtered = filtered
+        if self._leg_start is None:
+            self._leg_start = filtered[:2].copy()
         target = self.target_m
         if target is not None and np.linalg.norm(filtered[:2] - target) < self.acceptance_radius_m:
             self._target += 1
@@ -134,7 +309,8 @@ class Guidance:
     def offset(self) -> float:
         """The offset gamma for the joints from the latest filtered pose, rad.
 
-        Before any pose the last offset holds (0 at the start).
+        Before any pose the last offset holds (0 at the start). With ILOS every call is a
+        control update: it advances the integral by one period.
 
         Returns
         -------
@@ -143,7 +319,17 @@ class Guidance:
         if self._filtered is None:
             return self._offset
         waypoint = self.waypoints_m[min(self._target, len(self.waypoints_m) - 1)]
-        gamma = heading_offset(self._filtered[:2], float(self._filtered[2]), waypoint, self.k_theta)
+        if self.law.integral:
+            start = self.leg_start_m
+            assert start is not None  # set by the first pose
+            theta_ref, di_x, di_y = ilos_reference(self._filtered[:2], start, waypoint,
+                                                   self.integral_s, self.law,
+                                                   self.control_period_s)
+            self.integral_s += (di_x, di_y)
+            gamma = self.k_theta * float(wrap_angle(theta_ref - float(self._filtered[2])))
+        else:
+            gamma = heading_offset(self._filtered[:2], float(self._filtered[2]), waypoint,
+                                   self.k_theta)
         if self.offset_limit_rad is not None:
             gamma = float(np.clip(gamma, -self.offset_limit_rad, self.offset_limit_rad))
         self._offset = gamma

@@ -5,16 +5,20 @@ The kernel's camera step (``_observe``: median filter, waypoint switching, arriv
 the same filtered poses, targets, arrival times and offsets.
 """
 
+import dataclasses
 import math
 
 import numpy as np
 import pytest
 
-from eelsim.batch import DEFAULT_LANES, kernel_module
+from eelsim.batch import DEFAULT_LANES, BatchSpec, kernel_module, run_spec
 from eelsim.batch.records import CameraState, Targets
 from eelsim.camera import quantise_position
+from eelsim.closed_loop import LoopOptions, simulate_closed_loop
 from eelsim.control import wrap_angle
-from eelsim.guidance import Guidance
+from eelsim.flags import Failure
+from eelsim.guidance import PURSUIT, Guidance, GuidanceLaw
+from eelsim.scenario import load_scenario
 
 EDGES = [0.0, -0.0, 1e-300, math.pi, -math.pi, np.nextafter(math.pi, 4), np.nextafter(-math.pi, -4),
          np.nextafter(-math.pi, 0), 3 * math.pi, -3 * math.pi, 2 * math.pi, -2 * math.pi, 7.5, -7.5,
@@ -146,3 +150,106 @@ def test_kernels_camera_step_and_offset_agree_with_the_guidance(kernel, window):
                 offset = kernel._heading_offset(pose[0], pose[1], pose[2], w[0], w[1], k_theta)
                 assert offset == guides[r].offset()
     assert sum(g.arrived for g in guides) >= lanes // 2  # the paths did reach their waypoints
+
+
+# -- integral line-of-sight guidance (docs/model.md section 4) ---------------------------------
+
+ILOS = GuidanceLaw("ilos", lookahead_m=0.4, integral_gain=0.04)
+
+
+def test_ilos_steers_back_towards_the_leg_and_its_integral_grows_with_the_cross_track_error():
+    # a robot 0.1 m left of the leg (0,0) -> (1,0), heading along it: it must turn right
+    # (negative offset), and the integral grows along the leg's left normal
+    g = Guidance([(1.0, 0.0)], 0.15, 1.0, median_window=1, law=ILOS, leg_start_m=(0.0, 0.0),
+                 control_period_s=0.3)
+    g.observe(0.0, 0.5, 0.1, 0.0)
+    gamma = g.offset()
+    assert gamma == pytest.approx(-math.atan(0.1 / 0.4))
+    assert g.integral_s[0] == pytest.approx(0.0, abs=1e-15)
+    assert g.integral_s[1] == pytest.approx(0.3 * 0.4 * 0.1 / (0.1**2 + 0.4**2))
+    # on the leg with the integral grown, the law still steers right (the integral's doing)
+    g.observe(0.1, 0.5, 0.0, 0.0)
+    assert g.offset() < 0
+
+
+def test_ilos_leg_is_from_the_previous_waypoint_once_one_is_reached():
+    g = Guidance([(0.0, 0.0), (0.0, 1.0)], 0.15, 1.0, median_window=1, law=ILOS,
+                 leg_start_m=(-1.0, 0.0))
+    g.observe(0.0, 0.05, 0.0, math.pi / 2)  # inside the first circle: steering to the second
+    assert g.target_index == 1
+    assert np.array_equal(g.leg_start_m, (0.0, 0.0))
+    # 5 cm right of the leg x = 0 going up, heading up: turn left (positive offset)
+    assert g.offset() == pytest.approx(math.atan(0.05 / 0.4))
+
+
+def test_a_laws_own_heading_gain_replaces_the_gaits():
+    own = Guidance([(0.0, 1.0)], 0.15, 0.37, median_window=1,
+                   law=GuidanceLaw("pursuit", heading_gain=1.2))
+    own.observe(0.0, 0.0, 0.0, 0.0)
+    assert own.offset() == pytest.approx(1.2 * math.pi / 2)
+
+
+def test_ilos_aims_back_at_a_waypoint_it_passed_outside_its_circle():
+    # 0.2 m beside the leg's end and 0.1 m past it: an infinite line would lead on along +x;
+    # the law turns back towards the waypoint
+    g = Guidance([(1.0, 0.0)], 0.15, 1.0, median_window=1, law=ILOS, leg_start_m=(0.0, 0.0))
+    g.observe(0.0, 1.1, 0.2, 0.0)
+    assert not g.arrived
+    theta_ref = g.offset()  # k_theta 1, heading 0: the offset is the reference heading
+    assert abs(theta_ref) > math.pi / 2
+
+
+def test_a_law_is_refused_with_its_name_or_a_bad_look_ahead():
+    with pytest.raises(ValueError, match="unknown guidance law 'los'"):
+        GuidanceLaw("los")
+    with pytest.raises(ValueError, match="look-ahead"):
+        GuidanceLaw("ilos", lookahead_m=0.0)
+    with pytest.raises(ValueError, match="integral gain"):
+        GuidanceLaw("ilos", integral_gain=-1.0)
+    with pytest.raises(ValueError, match="heading gain"):
+        GuidanceLaw("ilos", heading_gain=0.0)
+
+
+def _cross_current_run(robot, law, **kw):
+    s = load_scenario("path2").model_copy(update={
+        "waypoints_m": [(1.6, 0.0)], "duration_s": 30.0,
+        "current_speed_m_s": 0.02, "current_direction_deg": 90.0})
+    return simulate_closed_loop(robot, s, LoopOptions(guidance=law), **kw), s
+
+
+def test_ilos_keeps_the_body_nearer_its_leg_than_pure_pursuit_in_a_cross_current(robot):
+    # the robot swims 0.086 m/s; a 0.02 m/s cross-current pushes pure pursuit off the straight
+    # leg (it aims at the waypoint and drifts), ILOS learns the crab angle and holds the leg
+    n = robot.n_links
+    ref, _ = _cross_current_run(robot, PURSUIT)
+    ilos, _ = _cross_current_run(robot, ILOS)
+    assert ref.failure == Failure.NONE and ilos.failure == Failure.NONE
+    off_pursuit = np.abs(ref.states[:, n + 1]).max()
+    off_ilos = np.abs(ilos.states[:, n + 1]).max()
+    assert off_ilos < 0.6 * off_pursuit, (off_ilos, off_pursuit)
+    assert np.abs(ilos.integral_s[-1]).max() > 0  # the integral learnt something
+
+
+@pytest.mark.parametrize("law", [ILOS, GuidanceLaw("ilos", 0.2, 0.03, heading_gain=1.1)],
+                         ids=["gait_gain", "own_gain"])
+def test_batched_kernel_runs_ilos_as_the_reference_does_and_samples_its_integral(robot, law):
+    ILOS = law  # noqa: N806
+    ref, s = _cross_current_run(robot, ILOS)
+    s2 = s.model_copy(update={"waypoints_m": [(0.5, 0.1), (1.0, -0.2), (1.6, 0.0)],
+                              "current_direction_deg": 120.0})
+    ref2 = simulate_closed_loop(robot, s2, LoopOptions(guidance=ILOS),
+                                guidance_state=(-0.2, 0.05, 0.01, -0.03))
+    spec = BatchSpec.build(robot, [s, s2], None, LoopOptions(guidance=ILOS), 0)
+    spec = dataclasses.replace(spec, guidance_state=np.array([[np.nan, np.nan, 0.0, 0.0],
+                                                              [-0.2, 0.05, 0.01, -0.03]]))
+    k = max(len(ref.t_s), len(ref2.t_s))
+    res = run_spec(spec, sample_steps=np.arange(k), threads=1)
+    for run, r in enumerate((ref, ref2)):
+        m = len(r.t_s)
+        assert np.allclose(res.states[run, :m], r.states, rtol=0, atol=1e-9 * np.maximum(
+            1.0, np.abs(r.states)).max())
+        assert np.allclose(res.integral_s[run, :m], r.integral_s, rtol=0, atol=1e-12)
+        if r.arrival_time_s is None:
+            assert np.isnan(res.arrival_time_s[run])
+        else:
+            assert res.arrival_time_s[run] == pytest.approx(r.arrival_time_s, abs=1e-9)

@@ -60,6 +60,10 @@ class BatchResult:
         torque (``RunResult.max_torque_ratio``).
     saturated_steps : ndarray of int, shape (R,)
         Recorded steps outside the servo's torque-speed line (``RunResult.saturated_steps``).
+    integral_s : ndarray, shape (R, S, 2) or None
+        The guidance's ILOS integral vector at each sample step, before that step's control
+        update (what a run restarted there starts from: ``BatchSpec.guidance_state``); zero
+        with pure pursuit. NaN where the run had ended.
     full_states : ndarray, shape (R, K + 1, 2 N + 4), or None
         Every step (NaN after the end), only with ``record_full=True``.
     spec : BatchSpec
@@ -83,6 +87,7 @@ class BatchResult:
     spec: BatchSpec
     max_torque_ratio: FloatArray
     saturated_steps: IntArray
+    integral_s: FloatArray | None = None
 
     def reason(self, run: int) -> str:
         """Human-readable reason of run ``run``'s flag, worded as ``RunResult.reason``.
@@ -217,14 +222,15 @@ def run_spec(
         block_order(spec, expected_steps), spec.params, spec.initial_state, spec.total_steps,
         spec.goal_steps, spec.waypoints_m, spec.n_waypoints, spec.acceptance_radius_m,
         spec.k_theta, spec.delay_steps, spec.update_steps, spec.update_count,
-        spec.heading_noise_rad, plain_runs(spec))
+        spec.heading_noise_rad, plain_runs(spec), spec.guidance_start())
     frames = FrameTable(spec.frame_step, spec.frame_fraction, spec.frame_time_s)
     loop = LoopSettings(
         dt=float(dt), pixel=float(cam.pixel_m), window=int(cam.median_window),
         stop_at_goal=bool(spec.options.stop_at_goal),
         pending_size=int(timing.delay_steps // max(1, timing.period_steps - timing.jitter_steps)
                          + 2),
-        record_full=bool(record_full), sample_steps=unique)
+        record_full=bool(record_full), sample_steps=unique,
+        guidance=guidance_settings(spec.options))
     out = RunOutputs(
         states=np.full((runs, unique.size, ns), np.nan),
         full=(np.full((runs, int(spec.total_steps.max()) + 1, ns), np.nan) if record_full
@@ -241,6 +247,7 @@ def run_spec(
         distance=np.zeros(runs),
         torque_ratio=np.zeros(runs),
         saturated=np.zeros(runs, dtype=np.int64),
+        integral=np.full((runs, unique.size, 2), np.nan),
     )
     previous = numba.get_num_threads()
     if threads is not None:
@@ -270,7 +277,28 @@ def run_spec(
         spec=spec,
         max_torque_ratio=out.torque_ratio,
         saturated_steps=out.saturated,
+        integral_s=(out.integral if np.array_equal(unique, steps)
+                    else out.integral[:, inverse.reshape(-1), :]),
     )
+
+
+def guidance_settings(options: LoopOptions) -> FloatArray:
+    """The kernel's guidance row (``records.LoopSettings.guidance``) for the loop's options.
+
+    Parameters
+    ----------
+    options : LoopOptions
+
+    Returns
+    -------
+    ndarray, shape (5,)
+        Law (0 pure pursuit, 1 ILOS), look-ahead, integral gain, control period, and the law's
+        heading gain (0: each run's k_theta).
+    """
+    law = options.guidance
+    return np.array([1.0 if law.integral else 0.0, law.lookahead_m, law.integral_gain,
+                     options.timing.control_period_s,
+                     0.0 if law.heading_gain is None else law.heading_gain])
 
 
 def run_batch(

@@ -144,6 +144,72 @@ def _heading_offset(px, py, heading, wx, wy, k_theta):
 
 
 @numba.njit(cache=True)
+def _guidance_offset(px, py, heading, r, run, target, waypoints, n_waypoints, k_theta, guide,
+                     lane_guide):
+    """guidance.Guidance.offset for lane r at a control update, the ILOS integral advanced.
+
+    ``guide`` is LoopSettings.guidance (law: 0 pursuit, 1 ILOS; look-ahead; integral gain;
+    control period; the law's heading gain, 0: the run's k_theta); ``lane_guide`` holds each lane's first-leg start (rows 0, 1) and integral
+    vector (rows 2, 3). Same expressions, in the same order, as ``guidance.ilos_reference``.
+    """
+    if guide[4] > 0.0:
+        k_theta = guide[4]
+    w = min(target, n_waypoints - 1)
+    wx = waypoints[run, w, 0]
+    wy = waypoints[run, w, 1]
+    if guide[0] == 0.0:
+        return _heading_offset(px, py, heading, wx, wy, k_theta)
+    if w > 0:
+        x0 = waypoints[run, w - 1, 0]
+        y0 = waypoints[run, w - 1, 1]
+    else:
+        x0 = lane_guide[0, r]
+        y0 = lane_guide[1, r]
+    dx = wx - x0
+    dy = wy - y0
+    if dx * dx + dy * dy < 1e-6:
+        return _heading_offset(px, py, heading, wx, wy, k_theta)
+    lookahead = guide[1]
+    alpha = math.atan2(dy, dx)
+    tx = math.cos(alpha)
+    ty = math.sin(alpha)
+    nx = -ty
+    ny = tx
+    e = (px - x0) * nx + (py - y0) * ny
+    ahead = min(lookahead, math.sqrt(dx * dx + dy * dy) - ((px - x0) * tx + (py - y0) * ty))
+    lateral = e + guide[2] * (lane_guide[2, r] * nx + lane_guide[3, r] * ny)
+    theta_ref = alpha + math.atan2(-lateral, ahead)
+    rate = lookahead * e / (lateral * lateral + lookahead * lookahead)
+    lane_guide[2, r] += guide[3] * rate * nx
+    lane_guide[3, r] += guide[3] * rate * ny
+    return k_theta * _wrap_angle(theta_ref - heading)
+
+
+@numba.njit(cache=True)
+def _start_guidance(alive, run_of, guidance_state, filtered, lane_guide):
+    """Each lane's first-leg start and ILOS integral from its run (a NaN start: the first pose)."""
+    for r in range(alive.shape[0]):
+        for row in range(4):
+            lane_guide[row, r] = guidance_state[run_of[r], row]
+        if np.isnan(lane_guide[0, r]) or np.isnan(lane_guide[1, r]):
+            lane_guide[0, r] = filtered[0, r]
+            lane_guide[1, r] = filtered[1, r]
+
+
+@numba.njit(cache=True)
+def _sample_guidance(step, sample, sample_steps, alive, run_of, lane_guide, integral_out):
+    """The lanes' ILOS integrals at a sample step, before its control update; the next sample."""
+    while sample < sample_steps.shape[0] and sample_steps[sample] < step:
+        sample += 1
+    if sample < sample_steps.shape[0] and sample_steps[sample] == step:
+        for r in range(alive.shape[0]):
+            if alive[r]:
+                integral_out[run_of[r], sample, 0] = lane_guide[2, r]
+                integral_out[run_of[r], sample, 1] = lane_guide[3, r]
+    return sample
+
+
+@numba.njit(cache=True)
 def _jacobi_condition(m):
     """Condition number (max |eig| / min |eig|) of a symmetric matrix by cyclic Jacobi rotations.
 
@@ -582,12 +648,12 @@ def _run_block(block, runs, frames, loop, outputs):
     that does not vectorise (control updates, checks, camera) reads single numbers from there.
     """
     (order, params, x0, total_steps, goal_steps, waypoints, n_waypoints, radius, k_theta,
-     delay_steps, update_steps, update_count, noise, plain_run) = runs
+     delay_steps, update_steps, update_count, noise, plain_run, guidance_state) = runs
     frame_step, frame_fraction, frame_time = frames
-    dt, pixel, window, stop_at_goal, pending_size, record_full, sample_steps = loop
+    dt, pixel, window, stop_at_goal, pending_size, record_full, sample_steps, guide = loop
     (states_out, full_out, arrival_out, failure_out, failure_time_out, reason_out,
      reason_index_out, reason_value_out, final_state_out, final_step_out, target_out,
-     distance_out, torque_ratio_out, saturated_out) = outputs
+     distance_out, torque_ratio_out, saturated_out, integral_out) = outputs
     n = N_LINKS
     ns = 2 * n + 4
     n_runs = x0.shape[0]
@@ -631,6 +697,7 @@ def _run_block(block, runs, frames, loop, outputs):
     lane_waypoints = np.zeros(LANES, np.int64)
     targets = Targets(target, arrival, np.full(LANES, np.nan), np.full(LANES, np.nan),
                       lane_radius, lane_waypoints)
+    lane_guide = np.zeros((4, LANES))  # guidance: first-leg start, ILOS integral
     seen_x = np.zeros(LANES)
     seen_y = np.zeros(LANES)
     seen_heading = np.zeros(LANES)
@@ -660,6 +727,7 @@ def _run_block(block, runs, frames, loop, outputs):
     _frame_poses(work, 0.0, dt, seen_x, seen_y, seen_heading)
     _observe(0, seen_x, seen_y, seen_heading, alive, run_of, noise, pixel, window, camera,
              targets, waypoints, frame_time[0])
+    _start_guidance(alive, run_of, guidance_state, filtered, lane_guide)
     _check_start(work, out)
     # no lane with a servo line or a current (batch.plain_runs): the stage leaves those out
     plain = True
@@ -667,6 +735,7 @@ def _run_block(block, runs, frames, loop, outputs):
         plain = plain and plain_run[run_of[r]]
     frame = 1
     sample = 0
+    guide_sample = 0
     n_samples = sample_steps.shape[0]
     n_frames = frame_step.shape[0]
     half = 0.5 * dt
@@ -683,6 +752,8 @@ def _run_block(block, runs, frames, loop, outputs):
             due += alive[r] & ((update_at[r] == step) | (pending_at[r] <= step))
         if live == 0:
             break
+        guide_sample = _sample_guidance(step, guide_sample, sample_steps, alive, run_of,
+                                        lane_guide, integral_out)
         any_update = False
         if due > 0:
             for r in range(LANES):
@@ -695,10 +766,9 @@ def _run_block(block, runs, frames, loop, outputs):
                     k = next_update[r] + 1
                     next_update[r] = k
                     update_at[r] = update_steps[run, k] if k < update_count[run] else NEVER
-                    w = min(target[r], n_waypoints[run] - 1)
-                    offset = _heading_offset(filtered[0, r], filtered[1, r], filtered[2, r],
-                                             waypoints[run, w, 0], waypoints[run, w, 1],
-                                             k_theta[run])
+                    offset = _guidance_offset(filtered[0, r], filtered[1, r], filtered[2, r],
+                                              r, run, target[r], waypoints, n_waypoints[run],
+                                              k_theta[run], guide, lane_guide)
                     slot = (pend_head[r] + pend_count[r]) % pending_size
                     pend_step[r, slot] = step + delay_steps[run]
                     pend_value[r, slot] = offset

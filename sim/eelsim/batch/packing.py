@@ -82,6 +82,10 @@ class BatchSpec:
         What the reason of a run that blows up adds, per distinct robot
         (:func:`eelsim.closed_loop.blow_up_hint`); ``robot_index`` gives each run's.
     robot_index : ndarray of int, shape (R,)
+    guidance_state : ndarray, shape (R, 4), optional
+        Each run's guidance state at its start (docs/model.md section 4): where its first leg
+        starts (NaN: at the first filtered pose) and the ILOS integral vector; ``None``: NaN and
+        zero for every run. A run restarted from another's state gets that run's here.
     """
 
     n_links: int
@@ -113,6 +117,16 @@ class BatchSpec:
     joint_model_name: str = "pd"
     blow_up_hints: tuple[str, ...] = ("",)
     robot_index: IntArray | None = None
+    guidance_state: FloatArray | None = None
+
+    def guidance_start(self) -> FloatArray:
+        """:attr:`guidance_state`, filled in: shape (R, 4), float."""
+        if self.guidance_state is None:
+            out = np.zeros((self.n_runs, 4))
+            out[:, :2] = np.nan
+            return out
+        return np.ascontiguousarray(np.asarray(self.guidance_state, dtype=float)
+                                    .reshape(self.n_runs, 4))
 
     @property
     def fluid_law(self) -> FluidLaw:

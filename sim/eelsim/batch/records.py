@@ -39,7 +39,8 @@ class RunInputs(NamedTuple):
     """Per-run inputs (R runs; see ``BatchSpec`` for each field's meaning).
 
     ``order`` is the order in which runs fill the blocks (``block_order``); ``plain_run`` says
-    which runs have neither current nor servo line (``plain_runs``).
+    which runs have neither current nor servo line (``plain_runs``); ``guidance_state`` (R, 4)
+    is each run's first-leg start (NaN: the first filtered pose) and ILOS integral vector.
     """
 
     order: IntArray
@@ -56,6 +57,7 @@ class RunInputs(NamedTuple):
     update_count: IntArray
     noise: FloatArray
     plain_run: BoolArray
+    guidance_state: FloatArray
 
 
 class FrameTable(NamedTuple):
@@ -89,6 +91,10 @@ class LoopSettings(NamedTuple):
         Keep every step's state.
     sample_steps : ndarray of int
         Sorted unique steps at which states are sampled.
+    guidance : ndarray, shape (5,)
+        The guidance law (``eelsim.guidance.GuidanceLaw``): 0 pure pursuit or 1 ILOS, the
+        look-ahead, the integral gain, the control period the integral advances by, and the
+        law's heading gain (0: each run's own k_theta).
     """
 
     dt: float
@@ -98,10 +104,15 @@ class LoopSettings(NamedTuple):
     pending_size: int
     record_full: bool
     sample_steps: IntArray
+    guidance: FloatArray
 
 
 class RunOutputs(NamedTuple):
-    """Where the kernel writes each run's answers (see ``BatchResult``)."""
+    """Where the kernel writes each run's answers (see ``BatchResult``).
+
+    ``integral`` (R, S, 2) is the ILOS integral vector at each sample step, before that step's
+    control update (what a run restarted there starts from).
+    """
 
     states: FloatArray
     full: FloatArray
@@ -117,6 +128,7 @@ class RunOutputs(NamedTuple):
     distance: FloatArray
     torque_ratio: FloatArray
     saturated: IntArray
+    integral: FloatArray
 
 
 class CameraState(NamedTuple):
