@@ -234,6 +234,8 @@ def make_layout(n_links: int, lanes: int, law: FluidLaw | None = None,
         ("head_vy", 1),
         ("kc", n),
         ("torque", n - 1),  # joint j's torque u_j (on link j + 1, minus it on link j), loop 1c
+        ("torque_peak", 1),  # max_j |u_j| / stall torque at the step's start (loop 6)
+        ("torque_outside", 1),  # 1.0: some u_j outside the torque-speed line (loop 6)
         # (kinematic joints: what the joints must give, from stage 1's solve)
         ("jacc", n - 1),  # kinematic joints: joint j's acceleration phi_ddot_j, loop 1c
         ("tqf", n),  # kinematic joints: the fluid torque on link j, loop 2a
@@ -655,10 +657,41 @@ def _stage_body(layout: Layout) -> list[str]:
     else:
         _forward_sweep(e)
     _rk4_sums(e)
+    e.lines.append("    if first:")
     if layout.joints.kinematic:
-        e.lines.append("    if first:")
         _prescribed_shape_torques(e)
+    _torque_use(e)
     return e.lines
+
+
+def _torque_use(e: _Emitter) -> None:
+    """Emit loop 6 (stage 1 only): the step's torques against the servo's torque-speed line.
+
+    Per lane, from stage 1's rows torque (the torques at the step's start x): the largest |u_j|
+    as a fraction of the stall torque (row torque_peak) and 1.0 when some joint is outside the
+    line (row torque_outside; closed_loop.outside_torque_speed_line's expression, a tolerance of
+    1e-9 of the stall torque). A torque that is not finite counts for neither, as in the
+    reference. The driver folds them into each live lane's record (kernel_template's
+    _torque_use); done here, the lane loop vectorises (it had cost about half of the driver).
+    """
+    n = e.layout.n_links
+    line, w, o = e.line, e.w, e.o
+    e.loop("6. the torques against the torque-speed line (stage 1)", indent=4)
+    line(f"stall = {w('torque_limit')}")
+    line(f"slope = {w('torque_slope')}")
+    line("tol = 1e-9 * stall")
+    line("big = 0.0")
+    line("outside = 0.0")
+    for j in range(n - 1):
+        line(f"u = {o('torque', j)}")
+        line(f"q = ({w('x', n + 3 + j)} - {w('x', n + 2 + j)}) * slope")
+        line("upper = min(stall, stall - q)")
+        line("lower = max(-stall, -stall - q)")
+        line("big = abs(u) if abs(u) > big else big")
+        line("outside = 1.0 if u > upper + tol else outside")
+        line("outside = 1.0 if u < lower - tol else outside")
+    line(f"{o('torque_peak')} = big / stall")
+    line(f"{o('torque_outside')} = outside")
 
 
 def _forward_sweep(e: _Emitter) -> None:

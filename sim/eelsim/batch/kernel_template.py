@@ -95,7 +95,7 @@ WORK_ROWS = OUT_ROWS = 1
 W_Y = W_X = W_ACC = W_XN = W_GAMMA = W_GEOMETRY = W_HALF_LENGTH = W_LIMIT = 0
 W_MASS = W_MU = W_INERTIA = W_TORQUE_LIMIT = W_TORQUE_SLOPE = 0
 O_BAD_PIVOT = O_SIN = O_COS = O_NEAR = O_X_BAD = O_FASTEST = O_XN_BAD = O_COND_BOUND = 0
-O_TORQUE = 0
+O_TORQUE = O_TORQUE_PEAK = O_TORQUE_OUTSIDE = 0
 O_OFFSET = O_KEEP = 0
 ROTATE_LIMIT = 0.1
 RESYNC_STEPS = 16
@@ -590,31 +590,19 @@ def _check_start(work, out):
 
 
 @numba.njit(cache=True)
-def _torque_use(work, alive, ratio, saturated):
-    """Each live lane's torques at the step's start (stage 1's rows torque), put to use.
+def _torque_use(out, alive, ratio, saturated):
+    """Each live lane's torques at the step's start, put to use (rows of the stage's loop 6).
 
-    The largest |u| as a fraction of the stall torque so far, and whether the step is outside
-    the torque-speed line: closed_loop.outside_torque_speed_line's expression, lane by lane; a
-    torque that is not finite counts for neither (as in the reference).
+    The largest |u| as a fraction of the stall torque so far, and the steps outside the
+    torque-speed line (closed_loop.outside_torque_speed_line's expression, computed by the
+    generated stage 1: eelsim.batch.codegen._torque_use); a torque that is not finite counts
+    for neither (as in the reference).
     """
-    n = N_LINKS
     for r in range(LANES):
-        stall = work[W_TORQUE_LIMIT * LANES + r]
-        slope = work[W_TORQUE_SLOPE * LANES + r]
-        tol = 1e-9 * stall
-        big = 0.0
-        out = 0
-        for j in range(n - 1):
-            u = work[(WORK_ROWS + O_TORQUE + j) * LANES + r]
-            q = (work[(W_X + n + 3 + j) * LANES + r] - work[(W_X + n + 2 + j) * LANES + r]) * slope
-            upper = min(stall, stall - q)
-            lower = max(-stall, -stall - q)
-            big = abs(u) if abs(u) > big else big
-            out += (u > upper + tol) | (u < lower - tol)
         if alive[r]:
-            frac = big / stall
+            frac = out[O_TORQUE_PEAK * LANES + r]
             ratio[r] = frac if frac > ratio[r] else ratio[r]
-            saturated[r] += out > 0
+            saturated[r] += out[O_TORQUE_OUTSIDE * LANES + r] > 0.0
 
 
 @numba.njit(cache=True)
@@ -814,7 +802,7 @@ def _run_block(block, runs, frames, loop, outputs):
                 t_s, a, wk, rotate = t + dt, 0.0, 1.0, _rotates(out, alive)
             _stage(work, t_s, a, wk, st == 0, st == 3, sixth, rotate, st == 1 or st == 3, plain)
             if st == 0:
-                _torque_use(work, alive, torque_ratio, saturated)
+                _torque_use(out, alive, torque_ratio, saturated)
                 _screen(work)
                 if any_update:
                     _cond_bound(work)
