@@ -182,3 +182,23 @@ def test_issue_world_with_a_035_m_gate_off_the_start_goal_line_is_planned_throug
     com = np.concatenate([leg.com_m for leg in outcome.plan.legs])
     at_wall = com[np.abs(com[:, 0] - 1.5) < 0.02]
     assert at_wall.size and np.all((at_wall[:, 1] > 1.25) & (at_wall[:, 1] < 1.6))
+
+
+def test_an_ilos_plan_is_checked_with_the_guidance_state_the_search_left_at_each_leg():
+    # integral line-of-sight: the controller's integral and leg are part of the state a leg
+    # restarts from; the check's run with the fits retraces the search's legs to the millimetre
+    # only if both carry them from leg to leg (docs/planning.md, "The guidance")
+    from eelhost.planning.planner import PLANNING_GUIDANCE
+    from eelhost.planning.replan import distance_to_path
+
+    world = open_tank(goal=(2.3, 1.3), speed=0.02, direction=100.0,
+                      obstacles=[{"kind": "circle", "centre_m": [1.4, 1.05], "radius_m": 0.12}])
+    planner = Planner(world, ROBOT, MODEL, unknown_current_m_s=0.0, draws=2,
+                      guidance=PLANNING_GUIDANCE)
+    assert planner.options.guidance == PLANNING_GUIDANCE
+    outcome = planner.plan()
+    assert outcome.found, outcome.message
+    assert outcome.plan.start_guide == (0.5, 1.0, 0.0, 0.0)
+    planned = np.concatenate([leg.com_m for leg in outcome.plan.legs])
+    nominal = outcome.checks[0]
+    assert distance_to_path(planned, nominal.states[:, N : N + 2]).max() < 0.001

@@ -98,3 +98,32 @@ def twin_model():
     from eelsim.model import SwimmerModel
 
     return SwimmerModel.from_robot(ROBOT, MODEL.sets[0])
+
+
+def test_an_ilos_run_restarted_with_its_guidance_state_continues_as_the_uninterrupted_one():
+    # ILOS's integral and leg are the host controller's state: a restart that carries them
+    # (Runs.guidance_state) continues the run; one that drops the integral does not
+    from eelhost.planning.planner import PLANNING_GUIDANCE
+
+    twin = Twin(ROBOT, MODEL.sets, PATH_GAIT, LoopOptions(guidance=PLANNING_GUIDANCE),
+                (0.0, 0.025))
+    waypoints = [(1.0, 0.0), (1.6, -0.3)]
+    lead = twin.run([waypoints], 40.0, stride=1, guidance=[(0.0, 0.0, 0.0, 0.0)])
+    # a restart step on the first leg, well short of its waypoint's circle
+    com_at = lead.states[0, :, N : N + 2]
+    step = next(k for k in range(0, len(com_at), twin.restart_steps) if com_at[k, 0] > 0.5)
+    assert np.hypot(*(com_at[step] - (1.0, 0.0))) > 0.3
+    assert np.abs(lead.integral_s[0, step]).max() > 0.05  # the integral has learnt the current
+    carried = lead.guidance_state(0, step, (0.0, 0.0))
+    dropped = (0.0, 0.0, 0.0, 0.0)
+    rest = twin.run([waypoints] * 2, 40.0 - step * twin.dt_s,
+                    states=np.repeat(lead.states[0, step][None], 2, axis=0),
+                    start_steps=[step, step], stride=1, guidance=[carried, dropped])
+    gaps = []
+    for r in range(2):
+        end = min(int(rest.final_step[r]), int(lead.final_step[0]) - step)
+        gaps.append(np.hypot(*(rest.states[r, : end + 1, N : N + 2]
+                               - lead.states[0, step : step + end + 1, N : N + 2]).T).max())
+    # the restart's first offset comes from a median filter holding one frame, not five
+    assert gaps[0] < 0.01, gaps
+    assert gaps[1] > 2 * gaps[0], gaps

@@ -29,7 +29,13 @@ from eelhost.commands.common import (
 from eelhost.files import atomic_write, check_output_folder
 from eelhost.machine import cpu_model
 from eelhost.planning.coverage import action_coverage
-from eelhost.planning.planner import CHECK_DRAWS, Outcome, Planner, PlanRefused
+from eelhost.planning.planner import (
+    CHECK_DRAWS,
+    PLANNING_GUIDANCE,
+    Outcome,
+    Planner,
+    PlanRefused,
+)
 from eelhost.planning.uncertainty import (
     DEFAULT_UNKNOWN_CURRENT_M_S,
     CoefficientModel,
@@ -39,6 +45,7 @@ from eelhost.planning.uncertainty import (
 from eelhost.planning.world import World, load_world
 from eelhost.planning.worlds import generate_world
 from eelhost.progress import phase
+from eelsim.guidance import GUIDANCE_LAWS, PURSUIT, GuidanceLaw
 from eelsim.robot import Robot
 
 REFUSALS = ("blocked_start", "current_too_strong", "goal_blocked", "unreachable")
@@ -108,6 +115,11 @@ def add_check_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--robust-search", action="store_true",
                    help="also swim every leg of the search in the unknown current (fewer plans "
                    "fail their check, about 4 times the search's time)")
+    p.add_argument("--guidance", choices=GUIDANCE_LAWS, default=PURSUIT.name,
+                   help="the robot's guidance law for the search and the check: 'pursuit', the "
+                   "paper's pure pursuit of each waypoint (default; the tank's run loop steers "
+                   "with it), or 'ilos', integral line-of-sight along each leg with a stiffer "
+                   "heading gain (docs/planning.md, \"The guidance\")")
 
 
 def _unknown_current(text: str) -> float:
@@ -125,7 +137,13 @@ def planner_options(args: argparse.Namespace) -> dict:
     return {"draws": getattr(args, "draws", CHECK_DRAWS),
             "unknown_current_m_s": getattr(args, "unknown_current", DEFAULT_UNKNOWN_CURRENT_M_S),
             "seed": getattr(args, "check_seed", 0),
-            "robust_search": getattr(args, "robust_search", False)}
+            "robust_search": getattr(args, "robust_search", False),
+            "guidance": guidance_law(getattr(args, "guidance", PURSUIT.name))}
+
+
+def guidance_law(name: str) -> GuidanceLaw:
+    """The planner's guidance law by name: ILOS with the planner's gains, or pure pursuit."""
+    return PLANNING_GUIDANCE if name == PLANNING_GUIDANCE.name else GuidanceLaw(name)
 
 
 def coefficient_model(args: argparse.Namespace, robot: Robot) -> CoefficientModel:
@@ -241,8 +259,9 @@ def _bench(args: argparse.Namespace, robot: Robot, model: CoefficientModel) -> i
         print(f"{k + 1:3d} {r.name}: {r.status} {r.planning_time_s:.2f} s "
               f"(cpu {r.cpu_time_s:.2f} s){extra}", flush=True)
 
+    guidance = guidance_law(args.guidance)
     summary = run_bench(robot, model, args.worlds, args.seed, args.threads, progress,
-                        max(args.jobs, 1), args.unknown_current)
+                        max(args.jobs, 1), args.unknown_current, guidance)
     lines = summary.lines()
     lines += ["- action coverage (successful actions per current direction relative to the "
               "heading):"]
@@ -252,7 +271,8 @@ def _bench(args: argparse.Namespace, robot: Robot, model: CoefficientModel) -> i
                + (f" --threads {args.threads}" if args.threads != 1 else "")
                + (f" --jobs {args.jobs}" if args.jobs > 1 else "")
                + (f" --unknown-current {args.unknown_current:g}"
-                  if args.unknown_current != DEFAULT_UNKNOWN_CURRENT_M_S else ""))
+                  if args.unknown_current != DEFAULT_UNKNOWN_CURRENT_M_S else "")
+               + (f" --guidance {args.guidance}" if args.guidance != PURSUIT.name else ""))
     block = [
         BENCH_BEGIN,
         f"Command: `{command}`",
@@ -264,6 +284,7 @@ def _bench(args: argparse.Namespace, robot: Robot, model: CoefficientModel) -> i
         f"- the check: the fits as fitted and {CHECK_DRAWS} draws of the water per plan (coefficients "
         f"jointly within the fit's 95 % region; unknown current {args.unknown_current:g} m/s "
         "towards 8 directions)",
+        f"- guidance: {guidance.describe()}",
         *lines,
         BENCH_END,
     ]

@@ -31,6 +31,7 @@ from eelhost.planning.planner import Planner
 from eelhost.planning.uncertainty import DEFAULT_UNKNOWN_CURRENT_M_S, CoefficientModel
 from eelhost.planning.world import World
 from eelhost.planning.worlds import generate_world
+from eelsim.guidance import PURSUIT, GuidanceLaw
 from eelsim.robot import Robot
 
 BENCH_DRAWS = 8
@@ -158,7 +159,8 @@ class BenchSummary:
 
 def bench_world(world: World, robot: Robot, coefficients: CoefficientModel, seed: int,
                 threads: int | None = 1,
-                unknown_current_m_s: float = DEFAULT_UNKNOWN_CURRENT_M_S) -> WorldResult:
+                unknown_current_m_s: float = DEFAULT_UNKNOWN_CURRENT_M_S,
+                guidance: GuidanceLaw = PURSUIT) -> WorldResult:
     """Plan in one world and swim the plan in fresh draws of the water (module docstring).
 
     Parameters
@@ -172,6 +174,8 @@ def bench_world(world: World, robot: Robot, coefficients: CoefficientModel, seed
     threads : int or None
     unknown_current_m_s : float
         The unknown current's bound, for the check and the bench's draws.
+    guidance : GuidanceLaw
+        The robot's guidance law (the planner's, and the bench's runs').
 
     Returns
     -------
@@ -179,7 +183,7 @@ def bench_world(world: World, robot: Robot, coefficients: CoefficientModel, seed
     """
     t0, c0 = time.perf_counter(), time.process_time()
     planner = Planner(world, robot, coefficients, threads=threads, seed=seed,
-                      unknown_current_m_s=unknown_current_m_s)
+                      unknown_current_m_s=unknown_current_m_s, guidance=guidance)
     outcome = planner.plan()
     elapsed = time.perf_counter() - t0  # the planner's set-up (clearance and goal maps) too
     result = WorldResult(world.name, outcome.status, outcome.message, elapsed,
@@ -201,15 +205,16 @@ def bench_world(world: World, robot: Robot, coefficients: CoefficientModel, seed
 
 
 def _warm_up(robot: Robot, coefficients: CoefficientModel, seed: int,
-             threads: int | None, unknown_current_m_s: float) -> None:
+             threads: int | None, unknown_current_m_s: float, guidance: GuidanceLaw) -> None:
     """Load the batched kernel and measure the swimming speed once (not timed)."""
-    bench_world(generate_world(seed), robot, coefficients, seed, threads, unknown_current_m_s)
+    bench_world(generate_world(seed), robot, coefficients, seed, threads, unknown_current_m_s,
+                guidance)
 
 
 def _one(robot: Robot, coefficients: CoefficientModel, seed: int,
-         threads: int | None, unknown_current_m_s: float) -> WorldResult:
+         threads: int | None, unknown_current_m_s: float, guidance: GuidanceLaw) -> WorldResult:
     return bench_world(generate_world(seed), robot, coefficients, seed, threads,
-                       unknown_current_m_s)
+                       unknown_current_m_s, guidance)
 
 
 def run_bench(
@@ -221,6 +226,7 @@ def run_bench(
     progress: Callable[[int, WorldResult], None] | None = None,
     jobs: int = 1,
     unknown_current_m_s: float = DEFAULT_UNKNOWN_CURRENT_M_S,
+    guidance: GuidanceLaw = PURSUIT,
 ) -> BenchSummary:
     """Run the benchmark over ``count`` generated worlds (seeds ``seed`` .. ``seed + count - 1``).
 
@@ -238,6 +244,8 @@ def run_bench(
         on one core, so its time is what one plan takes on an otherwise idle core).
     unknown_current_m_s : float
         The unknown current's bound (the check's and the bench's draws).
+    guidance : GuidanceLaw
+        The robot's guidance law.
 
     Returns
     -------
@@ -246,18 +254,18 @@ def run_bench(
     seeds = list(range(seed, seed + count))
     summary = BenchSummary()
     if jobs <= 1:
-        _warm_up(robot, coefficients, seed + count, threads, unknown_current_m_s)
+        _warm_up(robot, coefficients, seed + count, threads, unknown_current_m_s, guidance)
         results: Iterable[WorldResult] = (_one(robot, coefficients, s, threads,
-                                               unknown_current_m_s) for s in seeds)
+                                               unknown_current_m_s, guidance) for s in seeds)
         _collect(summary, results, progress)
         return summary
     # spawned, not forked: a fork after the kernel's OpenMP runtime started is unsafe
     with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn"),
                              initializer=_warm_up,
                              initargs=(robot, coefficients, seed + count, threads,
-                                       unknown_current_m_s)) as pool:
-        results = pool.map(_one, *zip(*[(robot, coefficients, s, threads, unknown_current_m_s)
-                                        for s in seeds], strict=True))
+                                       unknown_current_m_s, guidance)) as pool:
+        results = pool.map(_one, *zip(*[(robot, coefficients, s, threads, unknown_current_m_s,
+                                         guidance) for s in seeds], strict=True))
         _collect(summary, results, progress)
     return summary
 

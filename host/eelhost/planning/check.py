@@ -26,7 +26,7 @@ import numpy as np
 from eelhost.planning.execute import Swim, body_clearance_m
 from eelhost.planning.field import ClearanceField
 from eelhost.planning.geometry import FloatArray
-from eelhost.planning.search import Plan, goal_mask
+from eelhost.planning.search import Guide, Plan, goal_mask, leg_start_guide
 from eelhost.planning.twin import Twin
 from eelhost.planning.uncertainty import WaterDraw
 from eelhost.planning.world import World
@@ -47,6 +47,7 @@ def swim_legs(
     clearance: ClearanceField,
     state: FloatArray | None = None,
     start_step: int = 0,
+    guide: Guide | None = None,
 ) -> list[Swim]:
     """Swim a plan leg by leg in each water and judge each run (module docstring).
 
@@ -66,6 +67,10 @@ def swim_legs(
         Start state (default: the straight robot at rest at the world's start).
     start_step : int
         Step of the task at ``state``.
+    guide : (x, y, I_x, I_y), optional
+        The guidance's state at the start (default the plan's ``start_guide``, else the first
+        leg from the start state's centre of mass with the integral zero, as the search).
+        Each run's next leg starts with the state its previous leg left at the restart.
 
     Returns
     -------
@@ -85,6 +90,9 @@ def swim_legs(
     period = runner.restart_steps or 1
     warm = int(math.ceil(twin.options.camera.median_window / twin.options.camera.fps
                          / twin.dt_s - 1e-9))
+    if guide is None:
+        guide = plan.start_guide or leg_start_guide(np.asarray(state, dtype=float), n)
+    guides: list[Guide] = [guide] * r
     states = np.repeat(np.asarray(state, dtype=float)[None], r, axis=0)
     steps = np.full(r, int(start_step), dtype=np.int64)
     pieces: list[list[FloatArray]] = [[] for _ in range(r)]
@@ -104,7 +112,11 @@ def swim_legs(
             states=states[live], start_steps=steps[live],
             coefficient_index=[2 * i + leg_coefficients[k] for i in live], stride=1,
             currents=[currents[i] for i in live],
+            guidance=[guides[i] for i in live],
         )
+        # at a restart the guidance steers to this leg's waypoint along the leg from the one
+        # before (for the first leg, from the start's leg start)
+        origin = plan.legs[k - 1].waypoint_m if k > 0 else (guide[0], guide[1])
         still = []
         for j, i in enumerate(live):
             end = int(runs.final_step[j])
@@ -128,6 +140,7 @@ def swim_legs(
             leg_of[i] += [k] * cut
             if k != last and missed_leg[i] is None:
                 states[i] = path[cut]
+                guides[i] = runs.guidance_state(j, cut, origin)
                 steps[i] += cut
                 still.append(i)
         live = still

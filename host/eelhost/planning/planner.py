@@ -44,7 +44,7 @@ from eelhost.planning.check import swim_legs
 from eelhost.planning.execute import Swim
 from eelhost.planning.field import ClearanceField, GoalDistance, signed_clearance
 from eelhost.planning.geometry import FloatArray
-from eelhost.planning.search import Plan, Search, SearchSettings
+from eelhost.planning.search import Guide, Plan, Search, SearchSettings
 from eelhost.planning.twin import Twin
 from eelhost.planning.uncertainty import (
     DEFAULT_UNKNOWN_CURRENT_M_S,
@@ -57,6 +57,7 @@ from eelsim.closed_loop import LoopOptions
 from eelsim.control import Gait
 from eelsim.dynamics import straight_state
 from eelsim.fluid import FluidCoefficients
+from eelsim.guidance import PURSUIT, GuidanceLaw
 from eelsim.model import SwimmerModel
 from eelsim.robot import Robot
 from eelsim.scenario import PATH_GAIT
@@ -78,6 +79,12 @@ BATCH_RUNS = 16
 
 ROBUST_MARGIN_M = 0.002
 """With ``robust_search``, the body's gap every extra water's run keeps (over its half width)."""
+
+PLANNING_GUIDANCE = GuidanceLaw("ilos", lookahead_m=0.2, integral_gain=0.02, heading_gain=1.0)
+"""The integral line-of-sight law a plan may be searched, checked and followed with
+(``eelbot plan --guidance ilos``; docs/planning.md, "The guidance"): it holds each leg in a current
+the planner does not know, where the paper's pure pursuit drifts off it. Not the default: the
+tank's run loop steers with pure pursuit (docs/planning.md says what is missing)."""
 
 LEG_TIME_FACTOR = 1.6
 """A leg's time limit per metre, as a multiple of the time the robot needs against the current."""
@@ -247,6 +254,10 @@ class Planner:
         Swim the plan over the ensemble before returning it (off only to measure the search).
     threads : int or None
         Threads of the batched twin.
+    guidance : GuidanceLaw
+        The robot's guidance law, for the search and the check (default the paper's pure
+        pursuit, which the tank's run loop steers with; :data:`PLANNING_GUIDANCE` is the
+        integral line-of-sight law). It replaces the one of ``options``.
     """
 
     def __init__(
@@ -264,6 +275,7 @@ class Planner:
         repairs: int = 4,
         check: bool = True,
         threads: int | None = 1,
+        guidance: GuidanceLaw = PURSUIT,
     ) -> None:
         world = coefficients.in_tank(world)
         robot = coefficients.robot_for(robot)
@@ -271,7 +283,7 @@ class Planner:
         self.robot = robot
         self.coefficients = coefficients
         self.gait = gait
-        self.options = options or LoopOptions()
+        self.options = dataclasses.replace(options or LoopOptions(), guidance=guidance)
         self.unknown_current_m_s = float(unknown_current_m_s)
         self.water = coefficients.water_draws(np.random.default_rng(seed), draws,
                                               self.unknown_current_m_s)
@@ -363,7 +375,8 @@ class Planner:
 
     # -- planning --------------------------------------------------------------------------------
 
-    def plan(self, state: FloatArray | None = None, step: int = 0) -> Outcome:
+    def plan(self, state: FloatArray | None = None, step: int = 0,
+             guide: Guide | None = None) -> Outcome:
         """Plan from the start (or from ``state`` at ``step``), check the plan, repair it.
 
         Parameters
@@ -372,6 +385,10 @@ class Planner:
             The robot's state (replanning); default the straight robot at rest at the start.
         step : int
             Step of the task at ``state``.
+        guide : (x, y, I_x, I_y), optional
+            The guidance's state at ``state``: where the first leg starts and the controller's
+            ILOS integral (default: from the state's centre of mass, the integral zero). A
+            replan at the tank passes the controller's integral.
 
         Returns
         -------
@@ -386,7 +403,7 @@ class Planner:
         bad: list[Swim] = []
         plan = Plan(False, "gave_up", "")
         for attempt in range(self.repairs + 1):
-            plan = self.search.plan(banned, start_state=state, start_step=step)
+            plan = self.search.plan(banned, start_state=state, start_step=step, guide=guide)
             total += plan.planning_time_s
             searching += plan.planning_time_s
             if not plan.found and attempt > 0:

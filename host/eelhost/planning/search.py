@@ -221,6 +221,9 @@ class Plan:
     planning_time_s : float
     tree : ndarray, shape (E, 4)
         Every collision-free leg generated, (x0, y0, x1, y1) from waypoint to waypoint.
+    start_guide : (x, y, I_x, I_y) or None
+        The guidance state the plan was searched from (where its first leg starts, the ILOS
+        integral); the check swims it from the same.
     """
 
     found: bool
@@ -232,11 +235,35 @@ class Plan:
     simulations: int = 0
     planning_time_s: float = 0.0
     tree: FloatArray = field(default_factory=lambda: np.zeros((0, 4)))
+    start_guide: tuple[float, float, float, float] | None = None
 
     @property
     def waypoints_m(self) -> list[tuple[float, float]]:
         """The waypoints to give the robot, in order."""
         return [leg.waypoint_m for leg in self.legs]
+
+
+Guide = tuple[float, float, float, float]
+"""The guidance's state a run starts with: its first leg's start (x, y) and the ILOS integral."""
+
+
+def leg_start_guide(state: FloatArray, n_links: int,
+                    integral_s: tuple[float, float] = (0.0, 0.0)) -> Guide:
+    """The guidance state of a plan's start: its first leg from the centre of mass of ``state``.
+
+    Parameters
+    ----------
+    state : ndarray, shape (2 N + 4,)
+    n_links : int
+    integral_s : (I_x, I_y)
+        The ILOS integral the robot's controller holds (zero for a robot at rest).
+
+    Returns
+    -------
+    Guide
+    """
+    return (float(state[n_links]), float(state[n_links + 1]), float(integral_s[0]),
+            float(integral_s[1]))
 
 
 @dataclass
@@ -250,9 +277,12 @@ class _Node:
     leg: Leg | None
     key: tuple[int, int, int]
     goal: bool = False
-    # (state, step) of the robot in each extra water (SearchSettings.robust_current_m_s), the
-    # same plan swum there from the start
-    particles: list[tuple[FloatArray, int]] = field(default_factory=list)
+    # (state, step, guidance state) of the robot in each extra water
+    # (SearchSettings.robust_current_m_s), the same plan swum there from the start
+    particles: list[tuple[FloatArray, int, Guide]] = field(default_factory=list)
+    # the guidance's state at ``step``: where the leg to ``waypoint`` starts and the ILOS
+    # integral (Twin.run's ``guidance``), so a child's run continues the uninterrupted one
+    guide: Guide = (math.nan, math.nan, 0.0, 0.0)
 
 
 class Search:
@@ -370,6 +400,7 @@ class Search:
             start_steps=[nodes[pos].step for pos, _, _, _ in jobs],
             coefficient_index=index,
             stride=s.stride,
+            guidance=[nodes[pos].guide for pos, _, _, _ in jobs],
         )
         self.simulations += len(jobs)
         clear = self._clearances(runs)
@@ -415,11 +446,12 @@ class Search:
             coefficient_index=[index[j] for j, _ in rows],
             stride=s.stride,
             currents=[waters[q] for _, q in rows],
+            guidance=[p.particles[q][2] for p, (_, q) in zip(parent, rows, strict=True)],
         )
         self.simulations += len(rows)
         clear = self._clearances(runs)
         period = self.twin.restart_steps or s.stride
-        states: dict[int, list[tuple[FloatArray, int]]] = {j: [] for j in kept}
+        states: dict[int, list[tuple[FloatArray, int, Guide]]] = {j: [] for j in kept}
         for r, (j, q) in enumerate(rows):
             if kids[j] is None:
                 continue
@@ -440,7 +472,9 @@ class Search:
             if at < 0 or not np.nanmin(clear[r, : at + 1]) >= s.robust_margin_m:
                 kids[j] = None
                 continue
-            states[j].append((runs.states[r, sample], step))
+            origin = _leg_origin(parent[r], parent[r].particles[q][2])
+            states[j].append((runs.states[r, sample], step,
+                              runs.guidance_state(r, sample, origin)))
         for j in kept:
             kid = kids[j]
             if kid is not None:
@@ -514,8 +548,9 @@ class Search:
         step = parent.step + restart
         leg = Leg(wp, d, bearing, parent.step, parent.step + arrival, com, c, False, parent.key,
                   action)
+        guide = runs.guidance_state(j, restart // stride, _leg_origin(parent, parent.guide))
         return _Node(wp, psi, samples[restart // stride], step, step * self.twin.dt_s, -1,
-                     leg, self._key(wp, psi))
+                     leg, self._key(wp, psi), guide=guide)
 
     # -- the search ------------------------------------------------------------------------------
 
@@ -525,6 +560,7 @@ class Search:
         start_state: FloatArray | None = None,
         start_step: int = 0,
         heading_rad: float | None = None,
+        guide: Guide | None = None,
     ) -> Plan:
         """Search from the world's start, or from any state (see the module docstring).
 
@@ -540,6 +576,10 @@ class Search:
         heading_rad : float, optional
             Direction the first legs' bearings are measured from (default: the world's start
             heading when planning from the start, else the head link's direction).
+        guide : (x, y, I_x, I_y), optional
+            The guidance's state at the start: where the first leg starts and the ILOS integral
+            (default :func:`leg_start_guide` of the start state: from its centre of mass, the
+            integral zero). A replan passes the controller's own.
 
         Returns
         -------
@@ -565,9 +605,12 @@ class Search:
         start_clear = float(self.clearance(body_points(self.model, start_state[None],
                                                        s.per_link)).min()) - self._slack_m
         self._start_margin_m = min(s.margin_m, max(start_clear - 0.01, self.body_half_width_m))
+        if guide is None:
+            guide = leg_start_guide(start_state, self.n)
         root = _Node(None, heading_rad, start_state, start_step, start_step * self.twin.dt_s, -1,
                      None, (REST_KEY, REST_KEY, REST_KEY),
-                     particles=[(start_state, start_step)] * len(self._particle_currents()))
+                     particles=[(start_state, start_step, guide)]
+                     * len(self._particle_currents()), guide=guide)
         nodes = [root]
         best_g: dict = {root.key: root.g}
         closed: set = set()
@@ -642,7 +685,7 @@ class Search:
         cost = nodes[found].g
         msg = (f"plan found: {len(legs)} legs, goal entered at {cost:.1f} s, "
                f"{expansions} expansions, {sims} manoeuvres swum")
-        return Plan(True, "found", msg, legs, cost, expansions, sims, elapsed, tree_arr)
+        return Plan(True, "found", msg, legs, cost, expansions, sims, elapsed, tree_arr, guide)
 
     def twin_start_state(self) -> FloatArray:
         """The straight robot at rest at the world's start pose."""
@@ -667,9 +710,20 @@ class Search:
 
     @staticmethod
     def _path_key(ni: int, node: _Node) -> tuple:
-        return (node.step, node.state.tobytes())
+        return (node.step, node.state.tobytes(), node.guide)
+
+
+def _leg_origin(node: _Node, guide: Guide) -> tuple[float, float]:
+    """Where the leg from ``node`` to a child's waypoint starts, for the child's guidance state.
+
+    At a child's restart the guidance steers to the child's waypoint along the leg from the
+    node's waypoint (from the start: the leg start of ``guide``, the node's own).
+    """
+    if node.waypoint is not None:
+        return (float(node.waypoint[0]), float(node.waypoint[1]))
+    return (guide[0], guide[1])
 
 
 def _copy(node: _Node) -> _Node:
     return _Node(node.waypoint, node.psi, node.state, node.step, node.g, -1, node.leg, node.key,
-                 node.goal, node.particles)
+                 node.goal, node.particles, node.guide)

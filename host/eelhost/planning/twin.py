@@ -15,7 +15,9 @@ A run restarted at a step that is a whole number of control periods and camera f
 task sees its control updates and camera frames at the same times as the task's own run, so it
 reproduces that run except for its first offset, which it computes from a median filter holding
 one frame instead of five (a few millimetres over a manoeuvre; ``test_planning_twin`` checks it
-against an uninterrupted run). The twin has no public way to do this (yet); this module is the one
+against an uninterrupted run). With the integral line-of-sight guidance the restart also needs the
+guidance's own state (where the present leg starts, the integral vector: docs/model.md section 4):
+:meth:`Twin.run` takes it per run and :class:`Runs` returns it at every sample. The twin has no public way to do this (yet); this module is the one
 place that relies on the batch's row layout (``eelsim.batch.codegen.make_layout``).
 """
 
@@ -84,6 +86,10 @@ class Runs:
     reasons : list of str
         The twin's failure flag of each run ("" when none; a run that did not reach its last
         waypoint in time is flagged too slow).
+    integral_s : ndarray, shape (R, S, 2)
+        The guidance's ILOS integral vector at each sample, before that step's control update
+        (zero with pure pursuit; NaN after a run ended): with the sampled state, what a run
+        restarted there starts from.
     """
 
     stride: int
@@ -91,6 +97,25 @@ class Runs:
     arrival_step: IntArray
     final_step: IntArray
     reasons: list[str]
+    integral_s: FloatArray
+
+    def guidance_state(self, run: int, sample: int,
+                       leg_start_m: tuple[float, float]) -> tuple[float, float, float, float]:
+        """The guidance state to restart run ``run`` at sample ``sample`` (:meth:`Twin.run`).
+
+        Parameters
+        ----------
+        run, sample : int
+        leg_start_m : (x, y)
+            Where the leg being swum at that sample starts (the waypoint before the one steered
+            to, or the run's own first-leg start).
+
+        Returns
+        -------
+        (x, y, I_x, I_y)
+        """
+        g = self.integral_s[run, sample]
+        return (float(leg_start_m[0]), float(leg_start_m[1]), float(g[0]), float(g[1]))
 
 
 class Twin:
@@ -198,6 +223,7 @@ class Twin:
         stride: int = 3,
         starts: Sequence[tuple[float, float, float]] | None = None,
         currents: Sequence[tuple[float, float]] | None = None,
+        guidance: Sequence[Sequence[float]] | None = None,
     ) -> Runs:
         """Run R closed-loop manoeuvres at once.
 
@@ -220,6 +246,11 @@ class Twin:
         currents : sequence of R (vx, vy), optional
             Each run's current velocity, m/s (default: the twin's for every run); the planner's
             check swims its draws of the water this way, many currents in one batch.
+        guidance : sequence of R (x, y, I_x, I_y), optional
+            Each run's guidance state at its start (``eelsim.batch.BatchSpec.guidance_state``):
+            where the leg to its first waypoint starts and the ILOS integral vector, as the run
+            it continues left them (:meth:`Runs.guidance_state`). Default: the first leg from
+            the first filtered pose, the integral zero. Only the ILOS law reads it.
 
         Returns
         -------
@@ -249,6 +280,8 @@ class Twin:
                 params[:, self._rows("cos_beta", n - 1)] = np.cos(phase)
                 params[:, self._rows("sin_beta", n - 1)] = np.sin(phase)
                 changes["params"] = params
+        if guidance is not None:
+            changes["guidance_state"] = np.asarray(guidance, dtype=float).reshape(r, 4).copy()
         if changes:
             spec = dataclasses.replace(spec, **changes)
         longest = int(spec.total_steps.max())
@@ -258,5 +291,7 @@ class Twin:
             np.ceil(res.arrival_time_s / self.dt_s - 1e-6),
             -1,
         ).astype(np.int64)
+        integral = (res.integral_s if res.integral_s is not None
+                    else np.zeros((r, res.states.shape[1], 2)))
         return Runs(stride, res.states, arrival, res.final_step.astype(np.int64),
-                    [res.reason(i) for i in range(r)])
+                    [res.reason(i) for i in range(r)], integral)
