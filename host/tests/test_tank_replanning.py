@@ -328,7 +328,7 @@ def test_failed_replans_keep_a_present_plan_the_twin_swims_clear(open_plan):
 
     class ClearAhead(failing_replanner("exhausted")):  # type: ignore[misc]
         def _look_ahead(self, est, left, extra):  # noqa: ANN001, ANN202
-            return 0.2  # the present waypoints are swum 200 mm clear
+            return 0.2, 0.2  # the present waypoints are swum 200 mm clear
 
     nav = ClearAhead(lambda extra: planner, planner, outcome, PATH_GAIT)
     nav.requests.clear()
@@ -345,7 +345,7 @@ def test_a_failed_replan_with_contact_ahead_stops_the_robot_at_once(open_plan):
 
     class HitAhead(failing_replanner("exhausted")):  # type: ignore[misc]
         def _look_ahead(self, est, left, extra):  # noqa: ANN001, ANN202
-            return -0.01  # the present waypoints are swum 10 mm into something
+            return -0.01, -0.01  # the present waypoints are swum 10 mm into something
 
     nav = HitAhead(lambda extra: planner, planner, outcome, PATH_GAIT)
     nav.requests.clear()
@@ -445,7 +445,7 @@ def test_a_refused_replan_keeps_a_present_plan_the_twin_swims_clear(open_plan):
 
     class ClearAhead(failing_replanner("blocked_start")):  # type: ignore[misc]
         def _look_ahead(self, est, left, extra):  # noqa: ANN001, ANN202
-            return 0.2
+            return 0.2, 0.2
 
     nav = ClearAhead(lambda extra: planner, planner, outcome, PATH_GAIT)
     nav.requests.clear()

@@ -458,11 +458,15 @@ class TankReplanner:
         d.recorded |= self._estimate_current(est, left)
         busy = self._job is not None or self._pending is not None
         predicted = False
+        capsule = None
         if self._lookahead is not None and self._lookahead.done():
-            gap = self._lookahead.result()
+            judged = self._lookahead.result()
             self._lookahead = None
-            self._last_gap = (t_s, gap)
-            predicted = gap is not None and gap < self.lookahead_margin_m
+            self._last_gap = (t_s, None if judged is None else judged[0])
+            capsule = None if judged is None else judged[1]
+            # a new plan is asked for with the planner's capsule (the safer trigger); the robot is
+            # stopped, or keeps its plan, on its own outline
+            predicted = capsule is not None and capsule < self.lookahead_margin_m
         gap = self._last_gap[1]
         if (predicted and self.failures > 0 and gap is not None and gap <= 0.0
                 and self._job is None and self._pending is None):
@@ -477,8 +481,8 @@ class TankReplanner:
             reason = "left_corridor"
         elif predicted:
             reason = "predicted_contact"
-            log.info("the twin predicts the body within %.0f mm of an obstacle or wall within "
-                     "%.1f s", self._last_gap[1] * 1000, self.lookahead_s)  # type: ignore[operator]
+            log.info("the twin predicts the body's capsule within %.0f mm of an obstacle or wall "
+                     "within %.1f s", capsule * 1000, self.lookahead_s)  # type: ignore[operator]
         if reason is not None and not busy and t_s >= self._next_try_s:
             self._request(t_s, est, left, reason)
         elif (self._pending is None and self._lookahead is None and self.lookahead_s > 0
@@ -614,7 +618,8 @@ class TankReplanner:
         result = self._replan(est, left, start_step, extra)
         if result[0].found or self.lookahead_s <= 0:
             return result, None
-        return result, self._look_ahead(est, left, self.current.value_m_s.copy())
+        judged = self._look_ahead(est, left, self.current.value_m_s.copy())
+        return result, None if judged is None else judged[0]
 
     def _stale(self, t_s: float, t_start_s: float, path: FloatArray) -> bool:
         """A plan ready more than a restart period after its start, the robot off its corridor."""
@@ -705,8 +710,11 @@ class TankReplanner:
         return True
 
     def _look_ahead(self, est: BodyEstimate, left: list[tuple[float, float]],
-                    extra: FloatArray) -> float | None:
-        """On the worker: the smallest body clearance the twin predicts over the look-ahead."""
+                    extra: FloatArray) -> tuple[float, float] | None:
+        """On the worker: the smallest clearances the twin predicts over the look-ahead.
+
+        Returns (the body's own outline's, the planner's capsule's), or None without a run.
+        """
         twin = self._twin_in(extra)
         now = int(round(est.t_s / twin.dt_s))
         steps = int(round(self.lookahead_s / twin.dt_s))
@@ -722,9 +730,12 @@ class TankReplanner:
             states = states[: int(inside[0]) + 1]
         if not len(states):
             return None
-        # the body's own outline, as the run's contact test (not the planner's capsule, which
-        # reaches a half width beyond the tips: docs/planning.md)
-        return float(outline_clearance_m(self.world, self.model, states).min())
+        # the body's own outline, as the run's contact test, judges stops and keeping the plan;
+        # the planner's capsule (a half width beyond the tips) asks for replans: docs/planning.md
+        planner = self._planned[0]
+        return (float(outline_clearance_m(self.world, self.model, states).min()),
+                float(body_clearance_m(planner.world, planner.clearance, planner.model,
+                                       states).min()))
 
     def _twin_in(self, extra: FloatArray) -> Twin:
         """The planner's twin in the world's current plus the estimate ``extra``."""
