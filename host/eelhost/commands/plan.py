@@ -45,6 +45,7 @@ from eelhost.planning.uncertainty import (
 from eelhost.planning.world import World, load_world
 from eelhost.planning.worlds import generate_world
 from eelhost.progress import phase
+from eelsim.closed_loop import LoopOptions
 from eelsim.guidance import GUIDANCE_LAWS, PURSUIT, GuidanceLaw
 from eelsim.robot import Robot
 
@@ -260,12 +261,13 @@ def _bench(args: argparse.Namespace, robot: Robot, model: CoefficientModel) -> i
               f"(cpu {r.cpu_time_s:.2f} s){extra}", flush=True)
 
     guidance = guidance_law(args.guidance)
+    options = LoopOptions(guidance=guidance)  # the coverage's runs steer with the same law
     summary = run_bench(robot, model, args.worlds, args.seed, args.threads, progress,
                         max(args.jobs, 1), args.unknown_current, guidance)
     lines = summary.lines()
     lines += ["- action coverage (successful actions per current direction relative to the "
               "heading):"]
-    lines += [f"  - {action_coverage(model.robot_for(robot), model, speed).line()}"
+    lines += [f"  - {action_coverage(model.robot_for(robot), model, speed, options=options).line()}"
               for speed in (0.0, 0.02, 0.04, 0.06)]
     command = (f"nice eelbot plan --bench --worlds {args.worlds} --seed {args.seed}"
                + (f" --threads {args.threads}" if args.threads != 1 else "")
