@@ -508,3 +508,34 @@ def test_a_plan_ready_long_after_its_start_with_the_robot_off_its_corridor_is_no
         else:  # 2.5 s late and the robot off the new corridor: kept its plan, replans at once
             assert nav._pending is None and nav.failures == 1 and nav._next_try_s == 4.0
             assert nav.events[-1]["status"] == "stale" and "not used" in nav.events[-1]["message"]
+
+
+def test_a_late_replan_with_contact_ahead_stops_the_robot_without_waiting_for_it(open_plan):
+    import threading
+
+    planner, outcome = open_plan
+    release = threading.Event()
+
+    class Stuck(TankReplanner):
+        def _replan(self, *args):  # noqa: ANN002, ANN202
+            release.wait(30.0)  # a planner starved of processor time
+            return super()._replan(*args)
+
+        def _look_ahead(self, est, left, extra):  # noqa: ANN001, ANN202
+            return -0.005, -0.025  # the present waypoints swum 5 mm into something
+
+    nav = Stuck(lambda extra: planner, planner, outcome, PATH_GAIT)
+    d = None
+    try:
+        for k in range(5 * 30):
+            t = k / 30
+            d = nav.on_frame(t, pose_at(t, (0.8, 1.4)), np.array([0.8, 1.4, 0.0]), 0, 0.0)
+            if d.stop is not None:
+                break
+            nav._side.submit(lambda: None).result()  # the look-ahead's thread is done
+    finally:
+        release.set()
+        nav.close()
+    assert d is not None and d.stop == "no_safe_continuation", d
+    assert "has not come back" in d.detail and nav._job is not None
+    assert t > nav._job.t_start_s  # only once the replan was late

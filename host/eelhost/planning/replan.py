@@ -476,6 +476,18 @@ class TankReplanner:
                         f"or wall within {self.lookahead_s:g} s ({-gap * 1000:.0f} mm deep) and "
                         f"the last replan failed: {self.events[-1]['message']}")
             return d
+        job = self._job
+        if (predicted and gap is not None and gap <= 0.0 and job is not None
+                and t_s > job.t_start_s + 1e-9):
+            # the replan is late (past its start) and the twin swims the present plan into
+            # contact meanwhile: on a loaded machine replans took minutes of wall time, and the
+            # robot swam on into an obstacle before they came back
+            d.stop = "no_safe_continuation"
+            d.detail = (f"at t = {t_s:.2f} s the twin swims the present plan into an obstacle "
+                        f"or wall within {self.lookahead_s:g} s ({-gap * 1000:.0f} mm deep) and "
+                        f"the replan requested at t = {job.t_request_s:.2f} s has not come back "
+                        f"({time.monotonic() - job.wall_request_s:.1f} s of wall time)")
+            return d
         reason = None
         if float(distance_to_path(self.path, np.asarray([pose[:2]]))[0]) > self.corridor_m:
             reason = "left_corridor"
