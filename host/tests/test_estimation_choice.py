@@ -11,14 +11,19 @@ import pytest
 
 from eelhost.data.experiments import load_dataset, manifest_text, write_experiment, write_manifest
 from eelhost.data.virtual_tank import mismatched_plants, record_experiment
+from eelhost.estimation.parameters import ParameterSpace
 from eelhost.estimation.pipeline import FitSettings
 from eelhost.estimation.selection import (
     CandidateScore,
     candidate_spaces,
+    carry_over,
     cross_validate,
+    default_laws,
+    pass_screen,
     recommend,
     table_markdown,
 )
+from eelsim.fluid import get_fluid_law
 from eelsim.robot import SERVO_ROBOT, load_robot
 from eelsim.scenario import load_scenario
 
@@ -43,6 +48,34 @@ def test_a_failed_candidate_is_shown_failed_and_never_ranked_by_a_penalty():
     assert "e+" not in table and "inf" not in table and "nan" not in table
 
 
+
+def test_the_screen_passes_the_best_few_within_a_factor_of_the_best_and_never_a_failure():
+    def cand(name, errors, failed=None):
+        return CandidateScore(name, 4, {"straight": 0.1}, {"straight": np.array(errors)},
+                              failed=failed)
+
+    grid = [cand("a", [0.5, 0.7]), cand("b", [0.1, 0.1]), cand("c", [0.01, np.nan], "fold"),
+            cand("d", [0.15, 0.17]), cand("e", [0.19, 0.23]), cand("f", [0.3, 0.3])]
+    # b 0.1 best; d 0.16 and e 0.21 within twice it; a and f beyond; c failed
+    assert pass_screen(grid, survivors=4, factor=2.0) == [1, 3]
+    assert pass_screen(grid, survivors=4, factor=3.0) == [1, 3, 4, 5]
+    assert pass_screen(grid, survivors=2, factor=10.0) == [1, 3]
+    # a short search may fail where the full one does not: when all failed, all go on
+    assert pass_screen([grid[2], grid[2]], survivors=1) == [0, 1]
+    dropped = replace(grid[0], screened_out=True, held_out={"straight": np.array([0.01, 0.01])})
+    assert recommend([dropped, grid[1]]) is grid[1] and recommend([dropped]) is None
+    assert "a (screened out) | 4 | 0.1000 | 0.0100 (screen)" in table_markdown([dropped])
+
+
+def test_a_lift_variant_starts_from_its_base_laws_fit_with_the_lift_switched_off():
+    base = ParameterSpace(get_fluid_law("morison"))
+    lift = ParameterSpace(get_fluid_law("morison_lift"))
+    fitted = base.bounds[:, 0] + 0.3 * (base.bounds[:, 1] - base.bounds[:, 0])
+    start = carry_over(base.as_dict(fitted), lift, lift.bounds.mean(axis=1))
+    assert lift.names[-1] == "C_L" and start[-1] == 0.0
+    np.testing.assert_array_equal(start[:-1], fitted)
+    # the default grid tries every candidate law with and without its lift
+    assert {"morison_lift", "morison", "resistive_lift"} <= set(default_laws())
 
 
 def test_every_joint_model_is_tried_with_every_law_in_the_same_order_from_either_robot_file(
@@ -82,9 +115,11 @@ def _small_tank(folder, plant, robot_file, turning=()):
 TINY = FitSettings(method="minimax", polish_iterations=2)
 
 
-def _compare(ds, motions):
+def _compare(ds, motions, **screen):
+    # four candidates, two of which pass a short screen (docs/estimation.md, "Model comparison")
     return cross_validate(ds, motions, TINY, laws=["morison", "linear_quadratic"], iterations=2,
-                          fold_iterations=2, budget=24)
+                          fold_iterations=2, budget=24, **({"screen_budget": 12, "survivors": 2}
+                                                           | screen))
 
 
 @pytest.mark.parametrize("plant", sorted(mismatched_plants()))
@@ -107,7 +142,7 @@ def test_the_chosen_model_is_the_same_from_either_bundled_robot_file_on_every_te
     pd_file, servo_file = scores.values()
     assert [s.model for s in pd_file] == [s.model for s in servo_file]
     for a, b in zip(pd_file, servo_file, strict=True):
-        assert a.failed == b.failed
+        assert a.failed == b.failed and a.screened_out == b.screened_out
         np.testing.assert_array_equal(a.held_out["straight"], b.held_out["straight"])
     assert recommend(pd_file) is not None
     assert recommend(pd_file).model == recommend(servo_file).model
@@ -116,7 +151,7 @@ def test_the_chosen_model_is_the_same_from_either_bundled_robot_file_on_every_te
 def test_one_set_for_every_motion_is_a_candidate_scored_on_the_same_held_out_gaits(tmp_path):
     turning = ["turning_A0.87_w3.9", "turning_A0.61_w2.7"]
     ds = _small_tank(tmp_path, "head_tail", "paper_robot.toml", turning)
-    scores = _compare(ds, ["straight", "turning"])
+    scores = _compare(ds, ["straight", "turning"], screen_budget=0)
     one = [s for s in scores if s.one_set]
     assert [s.model for s in one] == [f"{recommend(scores[:4]).model}, one set"]
     # its folds hold out every training gait of both motions, as the separate sets' do

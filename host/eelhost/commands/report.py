@@ -11,9 +11,10 @@ from eelhost.data.experiments import BUNDLED_DATASET, load_dataset
 from eelhost.data.virtual_tank import generate_dataset
 from eelhost.errors import UserError
 from eelhost.estimation.report import run_report
+from eelhost.estimation.selection import default_laws
 from eelhost.files import check_output_folder
 from eelhost.progress import Progress
-from eelsim.fluid import FLUID_LAWS, candidate_laws
+from eelsim.fluid import FLUID_LAWS
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -37,7 +38,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    "file's model is fitted)")
     p.add_argument("--laws", type=law_names, metavar="LAW,...",
                    help="fluid laws the comparison tries (default: "
-                   + ",".join(candidate_laws()) + ")")
+                   + ",".join(default_laws()) + ")")
     p.add_argument("--keep-model", action="store_true",
                    help="report the robot file's model even when the comparison recommends "
                    "another (default: fit the recommended model and report its fits)")

@@ -106,7 +106,9 @@ def fit_and_choose(
     say : callable, optional
         Gets a line per step.
     laws : sequence of str, optional
-        The fluid laws the comparison tries (default: the twin's candidate laws).
+        The fluid laws the comparison tries (default:
+        :func:`eelhost.estimation.selection.default_laws`, the twin's candidate laws and their lift
+        variants).
     joint_models : sequence of str, optional
         The joint models it tries (default: every one the twin has).
 
@@ -144,9 +146,12 @@ def fit_and_choose(
     chosen = _fit_all(fit, ["joint"] if choice.one_set else list(motions), choice.space, choice)
     chosen.comparison = comparison
     if kept is not None and not kept.failed:
-        # the robot file's model as the comparison fitted it (from its own starts)
+        # the robot file's model as the comparison fitted it (from its own starts; the screen's
+        # short fits when the screen dropped it, and named so)
+        how = "multi-start (comparison's screen)" if kept.screened_out else \
+            "multi-start (comparison)"
         chosen.robot_file_fits = {
-            m: FitResult("multi-start (comparison)", own, v, kept.fitness[m],
+            m: FitResult(how, own, v, kept.fitness[m],
                          [(0, kept.fitness[m], kept.simulations)]) for m, v in kept.values.items()}
     else:
         chosen.robot_file_fits = _fit_all(fit, motions, None, None).fits

@@ -88,7 +88,9 @@ def run_report(
         and validate its fits (:mod:`eelhost.estimation.adopt`); the robot file's fits are kept
         in ``coefficients.json`` under ``robot_file_fits``.
     laws : sequence of str, optional
-        Fluid laws the comparison tries (default: the twin's candidate laws).
+        Fluid laws the comparison tries (default:
+        :func:`eelhost.estimation.selection.default_laws`, the twin's candidate laws and their lift
+        variants).
     say : callable, optional
         Where progress messages go (default: this module's logger, at INFO).
     progress_factory : callable, optional
@@ -162,7 +164,7 @@ def run_report(
             "adopted": chosen.adopted,
             "candidates": {c.model: {"parameters": c.parameters, "fitness": c.fitness,
                                      "held_out": {m: v.tolist() for m, v in c.held_out.items()},
-                                     "failed": c.failed}
+                                     "failed": c.failed, "screened_out": c.screened_out}
                            for c in comparison},
         }
     tests = dataset.held_out
@@ -223,7 +225,10 @@ def run_report(
             "## Candidate models (leave-one-gait-out cross-validation)",
             "",
             "Each training gait held out in turn: the model refitted on the others, scored on it "
-            "(the fitness's per-experiment error, m; docs/estimation.md, \"Model comparison\").",
+            "(the fitness's per-experiment error, m; docs/estimation.md, \"Model comparison\")."
+            + (" Every candidate was first screened with a short search; those marked screened "
+               "out were dropped there, and their figures are the screen's."
+               if any(c.screened_out for c in comparison) else ""),
             "",
             comparison_markdown(comparison),
             "",

@@ -17,6 +17,18 @@ file's values. The other joint
 model's fixed parameters are the bundled robot file's that uses it, so from either bundled robot
 file the grid, the starts and therefore the scores are the same (tested).
 
+**The screen: the budget where it matters.** The grid (every joint model x every candidate law
+and its lift variant: twenty candidates) is too large for every candidate's full search. So
+every candidate is first fitted and scored cheaply (:func:`_screen`: a :data:`SCREEN_BUDGET`
+CMA-ES search, polished :data:`SCREEN_ITERATIONS` times, restarted from every other candidate's
+screening fit carried over by name, its folds refitted :data:`SCREEN_FOLD_ITERATIONS` times);
+the :data:`SURVIVORS` best by the screen's mean held-out error, of those within
+:data:`SURVIVOR_FACTOR` of the best, get the full search (:func:`pass_screen`), which starts from
+their screening fits too. This is one rung of successive halving (Jamieson and Talwalkar,
+AISTATS 2016): the screen's errors come from shorter fits, and the factor and the survivors'
+count leave room for a candidate whose short fit fell short. Those dropped are shown with the
+screen's figures, marked, and never recommended.
+
 **A failure is not a score.** A fold whose refit fails (a penalty on a training gait or on the
 held-out one) is refitted from the candidate's next start; a candidate whose fold still fails is
 marked failed, shown as such, and never ranked by a penalty-inflated mean.
@@ -51,6 +63,12 @@ TIE = 0.02  # relative: held-out errors this close count as equal
 POLISH_ITERATIONS = 8  # minimax iterations of every fit of the comparison
 FOLD_ITERATIONS = 4  # and of a fold's refit, which starts from the fit on every gait
 SEARCH_BUDGET = 600  # CMA-ES candidates of a candidate model's own search, per fit
+SCREEN_BUDGET = 150  # CMA-ES candidates of every candidate's screening search, per fit
+SCREEN_ITERATIONS = 4  # minimax iterations of a screening fit (own search, carried-over starts)
+SCREEN_FOLD_ITERATIONS = 2  # and of a screening fold's refit
+SURVIVORS = 4  # at most this many candidates pass the screen to the full search
+SURVIVOR_FACTOR = 2.0  # and only those within this factor of the screen's best mean held-out error
+ABSENT = {"C_L": 0.0}  # a term the other model lacks starts switched off (a lift variant's C_L)
 ONE_SET_CANDIDATES = 1  # the best separate-set models also tried with one set for all motions
 ONE_SET = "one set"  # the suffix of a one-set candidate's name
 
@@ -61,7 +79,9 @@ def carry_over(values: Mapping[str, float], space: ParameterSpace, default: np.n
     A name the other model has is taken as it is; a law's split coefficient (``C_f_lin``,
     ``C_f_quad``) takes its unsplit one (``C_f``), the ``galilean`` law being the split law with
     both equal (from the paper's law this is only a start: the split law adds the reactive
-    terms); anything else keeps ``default``. The result is clipped to the bounds.
+    terms); a term the other model lacks and that can be switched off (:data:`ABSENT`: a lift
+    variant's ``C_L``) starts off, so a ``<law>_lift`` candidate starts from its base law's fit
+    exactly; anything else keeps ``default``. The result is clipped to the bounds.
 
     Parameters
     ----------
@@ -80,6 +100,8 @@ def carry_over(values: Mapping[str, float], space: ParameterSpace, default: np.n
             out[i] = values[name]
         elif base in values:
             out[i] = values[base]
+        elif name in ABSENT:
+            out[i] = ABSENT[name]
     b = space.bounds
     return np.clip(out, b[:, 0], b[:, 1])
 
@@ -107,6 +129,9 @@ class CandidateScore:
         Per fit, its parameters fitted on all training experiments.
     failed : str or None
         Why the candidate failed (a fold none of whose refits ran), None when it did not.
+    screened_out : bool
+        Whether the candidate was dropped by the screen: its figures are then the screen's
+        (short search, short polish), and it is never recommended.
     """
 
     model: str
@@ -117,6 +142,7 @@ class CandidateScore:
     space: ParameterSpace | None = None
     values: dict[str, np.ndarray] = field(default_factory=dict)
     failed: str | None = None
+    screened_out: bool = False
 
     @property
     def one_set(self) -> bool:
@@ -143,9 +169,10 @@ class CandidateScore:
 def recommend(scores: Sequence[CandidateScore]) -> CandidateScore | None:
     """The candidate to trust (module docstring): lowest mean held-out error, ties to the simpler.
 
-    Failed candidates are never recommended; None when every candidate failed.
+    Failed candidates and those the screen dropped are never recommended; None when every
+    candidate failed.
     """
-    ran = [c for c in scores if np.isfinite(c.mean_held_out)]
+    ran = [c for c in scores if np.isfinite(c.mean_held_out) and not c.screened_out]
     if not ran:
         return None
     best = min(ran, key=lambda c: c.mean_held_out)
@@ -240,7 +267,8 @@ def multi_start_fit(
     return _Fitted([np.asarray(r.values, float) for r in ranked], [r.fitness for r in ranked])
 
 
-def _with_current(ev: Evaluator, still: _Fitted, iterations: int) -> _Fitted:
+def _with_current(ev: Evaluator, still: _Fitted, iterations: int,
+                  current_iterations: int = CURRENT_POLISH_ITERATIONS) -> _Fitted:
     """The still-water fits in ``ev.space``: the best polished with the ambient current.
 
     The current is fitted from still water after the law and joints (the two stages of
@@ -252,7 +280,7 @@ def _with_current(ev: Evaluator, still: _Fitted, iterations: int) -> _Fitted:
     zeros = np.zeros(len(ev.space.current_names))
     begins = [np.concatenate([v, zeros]) for v in still.values]
     best = polish_minimax_many(_many(ev, [None]), ev.space, np.array(begins[:1]),
-                               max(iterations, CURRENT_POLISH_ITERATIONS))[0]
+                               max(iterations, current_iterations))[0]
     return _merge(_Fitted([np.asarray(best.values, float)], [best.fitness]),
                   _Fitted(begins[1:], still.fitness[1:]))
 
@@ -300,6 +328,8 @@ def cross_validate(
     one_set: int = ONE_SET_CANDIDATES,
     budget: int = SEARCH_BUDGET,
     fold_iterations: int = FOLD_ITERATIONS,
+    screen_budget: int = SCREEN_BUDGET,
+    survivors: int = SURVIVORS,
 ) -> list[CandidateScore]:
     """Leave-one-gait-out cross-validation of the candidate models (module docstring).
 
@@ -313,7 +343,7 @@ def cross_validate(
         ambient current is fitted, and the worker processes of the independent fits
         (``jobs``; the scores do not depend on it).
     laws : sequence of str, optional
-        Fluid laws of the grid (default: the twin's candidate laws).
+        Fluid laws of the grid (default: :func:`default_laws`).
     iterations : int
         Polish iterations per fit on every training gait.
     say : callable, optional
@@ -327,21 +357,26 @@ def cross_validate(
         CMA-ES candidates of each candidate model's own search, per fit.
     fold_iterations : int
         Polish iterations of a fold's refit.
+    screen_budget : int
+        CMA-ES candidates of every candidate's screening search, per fit (0: no screen, every
+        candidate gets the full search). The screen runs only when the grid has more than
+        ``survivors`` candidates.
+    survivors : int
+        At most this many candidates pass the screen (:func:`pass_screen`).
 
     Returns
     -------
     list of CandidateScore
-        The grid's candidates in order, then the one-set ones.
+        The grid's candidates in order (those the screen dropped with the screen's figures and
+        ``screened_out``), then the one-set ones.
 
     Raises
     ------
     EstimationError
         When a fit has fewer than two training experiments.
     """
-    from eelsim.fluid import candidate_laws
-
     motions = list(fits)
-    laws = list(laws) if laws is not None else list(candidate_laws())
+    laws = list(laws) if laws is not None else default_laws()
     for motion in motions:
         if len(training_experiments(dataset, motion)) < 2:
             raise EstimationError(
@@ -355,53 +390,156 @@ def cross_validate(
 
     evs = {(i, m): evaluator(s, training_experiments(dataset, m))
            for i, s in enumerate(spaces) for m in motions}
-    keys = list(evs)
-    # every candidate in still water from its own starts, then from every other candidate's
-    # best fit so far carried over by name (in the grid's fixed order, and once more for any
-    # candidate whose fit still fails); then the ambient current from the best. The stages are
-    # barriers; within one, the fits are independent and may run in worker processes
-    # (settings.jobs): each gets its evaluator and gives it back with its counts, so every fit
-    # is the one the serial run makes.
-    with _Workers(settings.jobs, len(keys)) as workers:
-        done = workers.map(_still_stage, [(evs[k], settings.seed, iterations, budget)
-                                          for k in keys])
-        still: dict[tuple[int, str], _Fitted] = {}
-        for k, (own, ev) in zip(keys, done, strict=True):
-            still[k], evs[k] = own, ev
-        # the carried-over starts of a motion's candidate read the fits of the same motion's
-        # candidates before it in this stage, so each motion is one task
-        chains = workers.map(_cross_seed_chain, [
-            (spaces, [evs[(i, m)] for i in range(len(spaces))],
-             [still[(i, m)] for i in range(len(spaces))], settings.seed, iterations)
-            for m in motions])
-        for m, (fits_m, evs_m) in zip(motions, chains, strict=True):
-            for i in range(len(spaces)):
-                still[(i, m)], evs[(i, m)] = fits_m[i], evs_m[i]
-        scored = workers.map(_score_stage, [(evs[k], still[k], iterations, fold_iterations)
-                                            for k in keys])
-    fitted: dict[tuple[int, str], _Fitted] = {}
-    held_out: dict[tuple[int, str], tuple[np.ndarray, str | None]] = {}
-    for k, (with_current, held, ev) in zip(keys, scored, strict=True):
-        fitted[k], held_out[k], evs[k] = with_current, held, ev
+    screen_scores: dict[int, CandidateScore] = {}
+    screen_fits: dict[tuple[int, str], _Fitted] = {}
+    with _Workers(settings.jobs, len(evs)) as workers:
+        alive = list(range(len(spaces)))
+        if screen_budget > 0 and len(spaces) > survivors:
+            screen_fits, screen_scores = _screen(workers, spaces, evs, motions, settings.seed,
+                                                 screen_budget)
+            alive = pass_screen(list(screen_scores.values()), survivors)
+            log.info("model comparison: %d of %d candidates pass the screen", len(alive),
+                     len(spaces))
+        full = _full(workers, spaces, evs, motions, alive, screen_fits, settings.seed,
+                     iterations, fold_iterations, budget, seed_offset=1 if screen_fits else 0)
     scores = []
-    for i, space in enumerate(spaces):
-        score = CandidateScore(space.model_name, space.size * len(motions), space=space)
-        for m in motions:
-            ev = evs[(i, m)]
-            score.fitness[m] = fitted[(i, m)].fitness[0]
-            score.values[m] = fitted[(i, m)].values[0]
-            score.held_out[m], why = held_out[(i, m)]
-            score.failed = score.failed or (f"{m}: {why}" if why else None)
-            score.simulations += ev.simulations
+    for i in range(len(spaces)):
+        if i in full:
+            score = full[i]
+        else:
+            score = screen_scores[i]
+            score.screened_out = True
         _said(score, say)
         scores.append(score)
     if one_set and len(motions) > 1:
-        ranked = sorted((s for s in scores if np.isfinite(s.mean_held_out)),
-                        key=lambda s: s.mean_held_out)
+        ranked = sorted((s for s in scores if np.isfinite(s.mean_held_out)
+                         and not s.screened_out), key=lambda s: s.mean_held_out)
         for best in ranked[:one_set]:
             scores.append(_one_set(dataset, best, motions, evaluator, settings.seed,
                                    iterations, fold_iterations, budget))
             _said(scores[-1], say)
+    return scores
+
+
+def default_laws() -> list[str]:
+    """The comparison's fluid laws by default: the twin's candidate laws and their lift variants.
+
+    The ``<law>_lift`` variants (:mod:`eelsim.fluid.lift`) are tried beside every candidate law;
+    the screen (:func:`pass_screen`) keeps the grid's cost near that of the full search of four
+    candidates.
+    """
+    from eelsim.fluid import FLUID_LAWS, candidate_laws
+
+    laws = list(candidate_laws())
+    return laws + [f"{law}_lift" for law in laws if f"{law}_lift" in FLUID_LAWS]
+
+
+def pass_screen(scores: Sequence[CandidateScore], survivors: int = SURVIVORS,
+                factor: float = SURVIVOR_FACTOR) -> list[int]:
+    """Which screened candidates get the full search: their positions in ``scores``, in order.
+
+    The ``survivors`` lowest mean held-out errors of the screen, of those within ``factor`` of
+    the lowest; a failed candidate never passes. When every candidate failed the screen, all
+    pass (a short search may fail where the full one does not).
+    """
+    ran = sorted((i for i, c in enumerate(scores) if np.isfinite(c.mean_held_out)),
+                 key=lambda i: scores[i].mean_held_out)
+    if not ran:
+        return list(range(len(scores)))
+    best = scores[ran[0]].mean_held_out
+    return sorted(i for i in ran[:survivors] if scores[i].mean_held_out <= factor * best)
+
+
+def _screen(
+    workers: _Workers, spaces: Sequence[ParameterSpace],
+    evs: dict[tuple[int, str], Evaluator], motions: Sequence[str], seed: int, budget: int,
+) -> tuple[dict[tuple[int, str], _Fitted], dict[int, CandidateScore]]:
+    """Every candidate fitted and scored cheaply (module docstring, "The screen").
+
+    Two stages: every (candidate, fit)'s own short search; then, every one at once, its
+    restart from every other candidate's screening fit, its current and its folds. Updates
+    ``evs`` with the workers' evaluators. Returns the still-water fits and the scores.
+    """
+    keys = list(evs)
+    done = workers.map(_still_stage, [(evs[k], seed, SCREEN_ITERATIONS, budget) for k in keys])
+    own: dict[tuple[int, str], _Fitted] = {}
+    for k, (fitted, ev) in zip(keys, done, strict=True):
+        own[k], evs[k] = fitted, ev
+
+    def others(i: int, m: str) -> list[np.ndarray]:
+        return [carry_over(replace(spaces[o], current=False).as_dict(own[(o, m)].values[0]),
+                           spaces[i], spaces[i].bounds.mean(axis=1))
+                for o in range(len(spaces)) if o != i]
+
+    scored = workers.map(_screen_stage, [(evs[(i, m)], own[(i, m)], others(i, m), seed)
+                                         for i, m in keys])
+    still: dict[tuple[int, str], _Fitted] = {}
+    scores: dict[int, CandidateScore] = {}
+    for (i, m), (fits_still, fitted, (held, why), ev) in zip(keys, scored, strict=True):
+        still[(i, m)], evs[(i, m)] = fits_still, ev
+        score = scores.setdefault(i, CandidateScore(spaces[i].model_name,
+                                                    spaces[i].size * len(motions),
+                                                    space=spaces[i]))
+        score.fitness[m], score.values[m], score.held_out[m] = (fitted.fitness[0],
+                                                                fitted.values[0], held)
+        score.failed = score.failed or (f"{m}: screen: {why}" if why else None)
+        score.simulations += ev.simulations
+    return still, scores
+
+
+def _screen_stage(
+    ev: Evaluator, own: _Fitted, others: list[np.ndarray], seed: int
+) -> tuple[_Fitted, _Fitted, tuple[np.ndarray, str | None], Evaluator]:
+    """A candidate's screening fit restarted from the others', with the current, and its folds."""
+    still = _merge(own, multi_start_fit(ev, seed, others, SCREEN_ITERATIONS, 0)) if others \
+        else own
+    fitted = _with_current(ev, still, SCREEN_ITERATIONS, SCREEN_ITERATIONS)
+    return still, fitted, _folds(ev, fitted, SCREEN_FOLD_ITERATIONS), ev
+
+
+def _full(
+    workers: _Workers, spaces: Sequence[ParameterSpace],
+    evs: dict[tuple[int, str], Evaluator], motions: Sequence[str], alive: Sequence[int],
+    screened: Mapping[tuple[int, str], _Fitted], seed: int, iterations: int,
+    fold_iterations: int, budget: int, seed_offset: int,
+) -> dict[int, CandidateScore]:
+    """The full comparison of the candidates ``alive`` (module docstring), by grid position.
+
+    Every candidate in still water from its own starts (a search seeded ``seed + seed_offset``,
+    and its screening fit where it has one), then from every other candidate's best fit so far
+    carried over by name (in the grid's fixed order, and once more for any candidate whose fit
+    still fails); then the ambient current from the best, and the folds. The stages are
+    barriers; within one, the fits are independent and may run in worker processes: each gets
+    its evaluator and gives it back with its counts, so every fit is the one the serial run
+    makes.
+    """
+    keys = [(i, m) for i in alive for m in motions]
+    done = workers.map(_still_stage, [
+        (evs[k], seed + seed_offset, iterations, budget,
+         [screened[k].values[0]] if k in screened else []) for k in keys])
+    still: dict[tuple[int, str], _Fitted] = {}
+    for k, (own, ev) in zip(keys, done, strict=True):
+        still[k], evs[k] = own, ev
+    # the carried-over starts of a motion's candidate read the fits of the same motion's
+    # candidates before it in this stage, so each motion is one task
+    chains = workers.map(_cross_seed_chain, [
+        ([spaces[i] for i in alive], [evs[(i, m)] for i in alive],
+         [still[(i, m)] for i in alive], seed, iterations) for m in motions])
+    for m, (fits_m, evs_m) in zip(motions, chains, strict=True):
+        for j, i in enumerate(alive):
+            still[(i, m)], evs[(i, m)] = fits_m[j], evs_m[j]
+    scored = workers.map(_score_stage, [(evs[k], still[k], iterations, fold_iterations)
+                                        for k in keys])
+    scores: dict[int, CandidateScore] = {}
+    for (i, m), (fitted, (held, why), ev) in zip(keys, scored, strict=True):
+        evs[(i, m)] = ev
+        score = scores.setdefault(i, CandidateScore(spaces[i].model_name,
+                                                    spaces[i].size * len(motions),
+                                                    space=spaces[i]))
+        score.fitness[m], score.values[m], score.held_out[m] = (fitted.fitness[0],
+                                                                fitted.values[0], held)
+        score.failed = score.failed or (f"{m}: {why}" if why else None)
+        score.simulations += ev.simulations
     return scores
 
 
@@ -413,10 +551,10 @@ def default_jobs() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-def _still_stage(ev: Evaluator, seed: int, iterations: int,
-                 budget: int) -> tuple[_Fitted, Evaluator]:
+def _still_stage(ev: Evaluator, seed: int, iterations: int, budget: int,
+                 extra_starts: Sequence[np.ndarray] = ()) -> tuple[_Fitted, Evaluator]:
     """A candidate's own still-water fits (first stage), and its evaluator with its counts."""
-    return multi_start_fit(ev, seed, (), iterations, budget), ev
+    return multi_start_fit(ev, seed, extra_starts, iterations, budget), ev
 
 
 def _cross_seed_chain(
@@ -552,6 +690,8 @@ def _one_set(
 def _said(score: CandidateScore, say: Callable[[str], None] | None) -> None:
     text = ("failed: " + score.failed) if score.failed else (
         f"mean held-out error {score.mean_held_out:.4f}")
+    if score.screened_out:
+        text = f"screened out ({text})"
     log.info("%s: %s", score.model, text)
     if say:
         say(f"cross-validation: {score.model}: {text}")
@@ -565,10 +705,11 @@ def table_markdown(scores: Sequence[CandidateScore]) -> str:
             + " | mean held-out error | worst held-out error | simulations |")
     lines = [head, "|---|---|" + "---|" * len(motions) + "---|---|---|"]
     for c in scores:
-        mark = " (recommended)" if c is choice else ""
+        mark = " (recommended)" if c is choice else " (screened out)" if c.screened_out else ""
         fitness = " | ".join(f"{c.fitness[m]:.4f}" if m in c.fitness else "-" for m in motions)
+        screen = " (screen)" if c.screened_out else ""
         held = (f"failed ({c.failed}) | failed" if c.failed
-                else f"{c.mean_held_out:.4f} | {c.worst_held_out:.4f}")
+                else f"{c.mean_held_out:.4f}{screen} | {c.worst_held_out:.4f}{screen}")
         lines.append(f"| {c.model}{mark} | {c.parameters} | {fitness} | {held} | "
                      f"{c.simulations} |")
     return "\n".join(lines)
