@@ -1,8 +1,9 @@
 """Compile batched-kernel variants into the kernel disk cache, two at a time.
 
 Each variant (links x fluid law x joint model x stage) takes 20-60 s to compile on first use.
-The main job needs six (its fits, and the model comparison's candidates), the test suite
-sixteen; compiled one after another inside the command that needs them they were most of its
+The main job needs twenty (its fits, and the model comparison's candidates: five laws and
+their lift variants, with either joint model), the test suite sixteen; compiled one after
+another inside the command that needs them they were most of its
 time from a fresh clone. Compiled here in parallel into the cache
 (``eelsim.batch.kernel_cache_dir``), the command loads each in under a second. A variant missing
 from a list is still compiled by the code that needs it: the lists only save time.
@@ -25,8 +26,9 @@ PAPER, SERVO = "paper_robot.toml", "servo_robot.toml"
 # eelbot report on the bundled dataset: the fits, then the candidates of the comparison
 CANDIDATES = ("morison", "galilean", "linear_quadratic", "lighthill", "resistive")
 """eelsim.fluid.candidate_laws(), written out: this script compiles in processes of its own."""
-MAIN: list[Variant] = [(6, None, law, PAPER) for law in CANDIDATES]
-MAIN += [(6, None, "morison", SERVO)]
+COMPARED = CANDIDATES + tuple(f"{law}_lift" for law in CANDIDATES)
+"""eelhost.estimation.selection.default_laws(): the comparison's grid, each with both joints."""
+MAIN: list[Variant] = [(6, None, law, robot) for robot in (PAPER, SERVO) for law in COMPARED]
 
 # sim/tests and host/tests: 3, 6 and 8 links, every candidate law with both joint models, the
 # test plants' law, and the numba stage the C stage is checked against
