@@ -740,8 +740,10 @@ def _run_block(block, runs, frames, loop, outputs):
             due += alive[r] & ((update_at[r] == step) | (pending_at[r] <= step))
         if live == 0:
             break
-        guide_sample = _sample_guidance(step, guide_sample, sample_steps, alive, run_of,
-                                        lane_guide, integral_out)
+        # the call only on a sample step: made every step it cost a fifth of the driver's time
+        if guide_sample < n_samples and sample_steps[guide_sample] <= step:
+            guide_sample = _sample_guidance(step, guide_sample, sample_steps, alive, run_of,
+                                            lane_guide, integral_out)
         any_update = False
         if due > 0:
             for r in range(LANES):
