@@ -496,6 +496,10 @@ class Evaluator:
                 out[i, j] = (
                     err[i] if f == Failure.NONE else penalty(f, float(sim.distance_left_m[i, j]))
                 )
+        # a run whose numbers went NaN without a flag (or a too-slow run without its distance
+        # left) failed numerically: it scores the ill-conditioned penalty, never NaN, which an
+        # optimiser's argmin would pick and CMA-ES could not rank (docs/model.md section 5)
+        out[~np.isfinite(out)] = penalty(Failure.ILL_CONDITIONED)
         return out
 
     def aligned_errors(self, p: PreparedExperiment, sim_positions_m: np.ndarray) -> np.ndarray:
