@@ -128,6 +128,7 @@ def test_a_campaign_without_a_terminal_to_ask_stops_naming_no_prompt(tmp_path, m
     assert len(ran) == 2
 
 
+@pytest.mark.slow
 def test_campaign_resumes_after_a_kill_skipping_finished_takes_and_redoing_the_partial_one(tmp_path):
     plan, out = _plan(tmp_path, duration=3.0), tmp_path / "ds"
     cmd = [sys.executable, "-m", "eelhost", "campaign", str(plan), "--link", "sim://?speed=1",
@@ -167,6 +168,7 @@ def test_campaign_resumes_after_a_kill_skipping_finished_takes_and_redoing_the_p
                                                 "split": "train", "repeat": 1}
 
 
+@pytest.mark.slow
 def test_campaign_serves_the_live_view_and_stops_cleanly_on_sigterm(tmp_path):
     plan, out = _plan(tmp_path, duration=30.0), tmp_path / "ds"
     proc = subprocess.Popen(
@@ -217,6 +219,7 @@ def documented_sequence() -> list[list[str]]:
     return [shlex.split(line) for line in block.replace("\\\n", " ").splitlines() if line.strip()]
 
 
+@pytest.mark.slow
 def test_the_documented_lab_sequence_gives_a_validation_report(tmp_path):
     sequence = documented_sequence()
     assert [argv[1] for argv in sequence] == ["markers", "calibrate", "calibrate", "campaign",

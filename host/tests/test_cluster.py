@@ -102,6 +102,7 @@ def test_tls_certificates_come_from_the_options_or_the_dask_config(tls_files):
     assert sec.tls_client_cert == files.cert and sec.tls_client_key == files.key
 
 
+@pytest.mark.slow
 def test_the_batched_kernel_over_a_tls_cluster_of_processes_gives_the_local_fitness(
     small_dataset, tls_files, tmp_path, capsys
 ):

@@ -43,6 +43,7 @@ def tiny_dataset(tmp_path_factory):
     return folder
 
 
+@pytest.mark.slow
 def test_batch_and_reference_backends_score_candidates_identically(tiny_dataset):
     ds = load_dataset(tiny_dataset)
     cands = np.array([TRUTH.as_array(), [0.02, 1.3, 0.3, 0.05]])
@@ -143,6 +144,7 @@ def test_ga_resumed_after_a_kill_equals_the_uninterrupted_run_on_real_simulation
     assert resumed.fitness == whole.fitness and np.array_equal(resumed.values, whole.values)
 
 
+@pytest.mark.slow
 def test_evaluation_spread_over_a_local_dask_cluster_gives_the_same_fitness(tiny_dataset):
     import distributed  # a dev dependency, installed by the test command
 

@@ -123,6 +123,7 @@ def _compare(ds, motions, **screen):
 
 
 @pytest.mark.parametrize("plant", sorted(mismatched_plants()))
+@pytest.mark.slow
 def test_the_chosen_model_is_the_same_from_either_bundled_robot_file_on_every_test_plant(
     plant, tmp_path
 ):
@@ -148,6 +149,7 @@ def test_the_chosen_model_is_the_same_from_either_bundled_robot_file_on_every_te
     assert recommend(pd_file).model == recommend(servo_file).model
 
 
+@pytest.mark.slow
 def test_one_set_for_every_motion_is_a_candidate_scored_on_the_same_held_out_gaits(tmp_path):
     turning = ["turning_A0.87_w3.9", "turning_A0.61_w2.7"]
     ds = _small_tank(tmp_path, "head_tail", "paper_robot.toml", turning)

@@ -6,6 +6,7 @@ docs/estimation.md, "Model comparison" (worker processes).
 from dataclasses import replace
 
 import numpy as np
+import pytest
 
 from eelhost.data.experiments import BUNDLED_DATASET, load_dataset
 from eelhost.estimation.evaluate import simulations_counter
@@ -24,6 +25,7 @@ def _compare(jobs):
     return scores, counted().get("sims", 0)
 
 
+@pytest.mark.slow
 def test_the_comparison_in_two_worker_processes_scores_exactly_as_the_serial_run():
     serial, serial_runs = _compare(1)
     spread, spread_runs = _compare(2)

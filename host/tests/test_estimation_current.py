@@ -212,6 +212,7 @@ def test_the_command_line_turns_the_current_off(stray_tank, tmp_path, capsys):
     assert "ambient current" in capsys.readouterr().out
 
 
+@pytest.mark.slow
 def test_the_report_bounds_and_judges_the_current_like_the_coefficients(stray_tank, tmp_path):
     from eelhost.estimation.report import run_report
 
@@ -265,6 +266,7 @@ def test_a_report_on_a_tank_whose_truth_is_in_another_law_says_so_instead_of_com
 
 
 @pytest.mark.parametrize("joint_model", ["pd", "servo"])
+@pytest.mark.slow
 def test_a_steady_current_is_recovered_within_a_mm_s_and_15_degrees_by_either_joint_model(
     joint_model, robot, tmp_path
 ):

@@ -140,6 +140,7 @@ def test_recommendation_is_the_lowest_held_out_error_and_ties_go_to_the_simpler_
     assert recommend([simple, much_better, bad]) is much_better
 
 
+@pytest.mark.slow
 def test_cross_validation_holds_out_each_gait_and_keeps_the_law_that_made_the_tank(
     robot, tmp_path
 ):
@@ -324,6 +325,7 @@ def test_a_model_the_comparison_does_not_prefer_is_not_adopted(robot, tmp_path):
     assert chosen.robot_file_fits is None
 
 
+@pytest.mark.slow
 def test_the_report_fits_and_writes_the_recommended_model_and_validate_reads_it_back(
     stiff_servo_tank, tmp_path, capsys
 ):

@@ -45,6 +45,7 @@ def tank(tmp_path_factory):
     return ds, fits, evs
 
 
+@pytest.mark.slow
 def test_both_motions_hold_one_tank_current_recovered_within_a_mm_s_and_15_degrees(tank):
     _, fits, evs = tank
     held, held_evs, current = share_tank_current(fits, evs)
@@ -76,6 +77,7 @@ def test_one_motion_alone_keeps_its_own_current(tank):
     assert current is None and out["straight"] is fits["straight"]
 
 
+@pytest.mark.slow
 def test_the_report_writes_the_tank_current_and_validation_swims_each_fit_in_it(tank, tmp_path):
     import json
 

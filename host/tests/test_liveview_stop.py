@@ -14,9 +14,12 @@ import time
 import urllib.request
 from urllib.parse import parse_qs, urlsplit
 
+import pytest
+
 from eelhost.web.server import TOKEN_HEADER
 
 
+@pytest.mark.slow
 def test_the_stop_button_stops_the_robot_and_closes_the_take(tmp_path):
     stem = tmp_path / "take"
     proc = subprocess.Popen(

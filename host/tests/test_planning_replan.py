@@ -50,6 +50,7 @@ def test_sim_uri_gets_the_worlds_start_and_current_unless_it_gives_them():
     assert sim_uri_for_world("serial:///dev/ttyUSB0", world) == "serial:///dev/ttyUSB0"
 
 
+@pytest.mark.slow
 def test_run_plan_over_sim_replans_in_an_unknown_current_and_arrives(tmp_path, capsys):
     toml = tmp_path / "short.toml"
     toml.write_text(

@@ -114,6 +114,7 @@ def test_bench_block_replaces_only_its_own_section(tmp_path):
     assert page.read_text() == f"# Title\n\nbefore\n{BENCH_BEGIN}\nnew\n{BENCH_END}\nafter\n"
 
 
+@pytest.mark.slow
 def test_bench_gives_the_same_outcomes_in_worker_processes():
     from eelhost.planning.bench import run_bench
 

@@ -75,6 +75,7 @@ def test_a_camera_that_does_not_open_fails_before_anything_is_sent(tmp_path, cap
 
 
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
+@pytest.mark.slow
 def test_ctrl_c_sigterm_and_sighup_stop_the_robot_and_close_the_take(tmp_path, signum):
     stem = tmp_path / "sig"
     proc = subprocess.Popen(

@@ -45,6 +45,7 @@ def virtual_run(uri: str, waypoints, stem, duration_s: float | None = None, robo
 
 
 @pytest.mark.parametrize("robot_file", ["paper_robot.toml", "servo_robot.toml"])
+@pytest.mark.slow
 def test_virtual_path1_reaches_every_waypoint_and_matches_the_twin(tmp_path, robot_file) -> None:
     # the paper's PD joints, and hobby servos whose references are the firmware's commanded angles
     robot = load_robot(robot_file)

@@ -127,6 +127,7 @@ def slow_take(tmp_path_factory):
     return result, stem, navigator
 
 
+@pytest.mark.slow
 def test_no_failsafe_while_a_slow_replan_runs_beside_the_loop_in_lockstep(slow_take):
     result, stem, navigator = slow_take
     out = result.outcome

@@ -43,6 +43,7 @@ def _reports(n_frames: int):
     return cam.calibration(), out
 
 
+@pytest.mark.slow
 def test_live_view_page_shows_the_frame_markers_track_waypoints_and_prediction():
     calibration, reports = _reports(6)
     view = LiveView(calibration, ROBOT, RunConfig(PATH1.gait, list(PATH1.waypoints_m)),
@@ -125,6 +126,7 @@ def test_picker_gives_up_with_a_clear_error_when_nobody_clicks():
         pick_points(np.zeros((10, 10), np.uint8), 4, timeout_s=0.2)
 
 
+@pytest.mark.slow
 def test_calibrate_click_takes_the_corners_clicked_on_the_synthetic_tank(tmp_path):
     # The synthetic tank's corners are at these pixels (the exact camera puts them there).
     corners_px = [(35, 689), (1245, 689), (1237, 31), (43, 31)]
@@ -160,6 +162,7 @@ def test_calibrate_click_takes_the_corners_clicked_on_the_synthetic_tank(tmp_pat
     assert np.abs(cal.to_px(area.reshape(-1, 2)) - truth.to_px(area.reshape(-1, 2))).max() < 1.0
 
 
+@pytest.mark.slow
 def test_live_view_has_a_legend_a_scale_bar_a_visible_prediction_and_a_stop_that_stops():
     import urllib.error
     import urllib.request

@@ -209,6 +209,7 @@ def test_runs_of_different_lengths_packed_into_blocks_keep_their_own_answers(rob
 
 
 @pytest.mark.parametrize("after_arrival_s", [-1.0, 0.8])
+@pytest.mark.slow
 def test_a_minimum_duration_holds_the_stop_at_goal_like_the_reference(robot, after_arrival_s):
     # stop at the goal, but not before min_duration_s: before the arrival it changes nothing,
     # after it the run goes on (the fit's last sample time comes after some candidates arrive)

@@ -22,6 +22,7 @@ def endpoint(result, n=6):
 
 
 @pytest.mark.parametrize("motion", ["straight", "turning"])
+@pytest.mark.slow
 def test_robot_reaches_the_waypoint_for_every_gait_of_the_grid(robot, motion):
     # all 16 gaits in one call of the batched kernel, which test_batch.py shows agrees with
     # simulate_closed_loop to 1e-9 (flags included); one reference run cross-checks here too
@@ -70,6 +71,7 @@ def test_extra_delay_shifts_offset_changes_by_the_delay(robot):
     assert changes.size > 5 and np.all(changes % 30 == 5)
 
 
+@pytest.mark.slow
 def test_jitter_varies_the_period_within_bounds_and_same_seed_gives_same_run(robot):
     opts = LoopOptions(timing=LoopTiming(control_period_s=0.3, jitter_s=0.05))
     s = load_scenario("turning")
@@ -143,6 +145,7 @@ def test_heading_offset_wraps_the_error_to_the_short_way_round():
     assert g == pytest.approx(math.radians(20))
 
 
+@pytest.mark.slow
 def test_current_drifts_path2_downstream_and_controller_still_reaches_every_waypoint(robot):
     with_current = load_scenario("path2")
     still = with_current.model_copy(update={"current_speed_m_s": 0.0})

@@ -225,6 +225,7 @@ def test_kernel_code_that_writes_the_sweeps_own_locals_is_refused():
         codegen.emit_law_forces(codegen._Emitter(layout), 0, False)
 
 
+@pytest.mark.slow
 def test_a_new_law_works_from_the_robot_description_to_the_batched_kernel(toy_law):
     # the robot's [hydrodynamics] names the law and its own coefficients; the model, the
     # dynamics and the batched kernel take them from there, and the kernel agrees with the

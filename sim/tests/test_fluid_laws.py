@@ -111,6 +111,7 @@ def test_the_batched_kernel_keeps_the_galilean_laws_drift(robot):
     assert np.allclose(res.states[0], ref.states[steps], rtol=0, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_galilean_added_mass_does_no_net_work_without_drag(robot):
     # the reactive terms and the Munk moment come from the links' fluid impulse: with the drag
     # and yaw damping off, kinetic energy (bodies, added mass, added inertia) changes only by

@@ -217,6 +217,7 @@ def _cross_current_run(robot, law, **kw):
     return simulate_closed_loop(robot, s, LoopOptions(guidance=law), **kw), s
 
 
+@pytest.mark.slow
 def test_ilos_keeps_the_body_nearer_its_leg_than_pure_pursuit_in_a_cross_current(robot):
     # the robot swims 0.086 m/s; a 0.02 m/s cross-current pushes pure pursuit off the straight
     # leg (it aims at the waypoint and drifts), ILOS learns the crab angle and holds the leg
@@ -232,6 +233,7 @@ def test_ilos_keeps_the_body_nearer_its_leg_than_pure_pursuit_in_a_cross_current
 
 @pytest.mark.parametrize("law", [ILOS, GuidanceLaw("ilos", 0.2, 0.03, heading_gain=1.1)],
                          ids=["gait_gain", "own_gain"])
+@pytest.mark.slow
 def test_batched_kernel_runs_ilos_as_the_reference_does_and_samples_its_integral(robot, law):
     ILOS = law  # noqa: N806
     ref, s = _cross_current_run(robot, ILOS)

@@ -258,6 +258,7 @@ def test_servo_swimming_in_a_current_is_still_water_plus_drift_with_the_galilean
     assert np.abs(moving.states - drift).max() < 1e-12
 
 
+@pytest.mark.slow
 def test_stiff_pd_joints_converge_to_exact_tracking_as_the_gains_grow(robot, model):
     # the prescribed-shape swimmer with phi = alpha(t) exactly is the limit of the PD loop as
     # k_p grows (k_d near critical for the median joint mode), started on the reference;
@@ -333,6 +334,7 @@ def test_the_default_pd_gains_are_inside_rk4s_limit_and_stiff_ones_are_not(robot
     assert PD.largest_stable_step_s(stiff, model) == pytest.approx(4e-4, rel=0.2)
 
 
+@pytest.mark.slow
 def test_stiff_pd_joints_are_flagged_with_a_reason_that_points_to_the_servo_model(robot):
     # the stiff joints: explicit RK4 at 0.01 s blows up at once (ill-conditioned at
     # t = 0.01 s); the reason says why and what to use instead, in the reference and the batch

@@ -114,6 +114,7 @@ def _energy_run(model, x0, torque_fn, duration, current=(0.0, 0.0)):
     return kinetic_energy(model, x0), kinetic_energy(model, z[:size]), z[size:]
 
 
+@pytest.mark.slow
 def test_kinetic_energy_change_equals_joint_work_minus_dissipation_when_added_mass_is_off(robot):
     model = SwimmerModel.from_robot(
         robot, HydroCoefficients(C_f=0.008, C_d=0.776, C_a=0.0, C_m=0.007)
@@ -125,6 +126,7 @@ def test_kinetic_energy_change_equals_joint_work_minus_dissipation_when_added_ma
     assert t1 - t0 == pytest.approx(w_joint + w_fluid, abs=1e-9 * w_joint)
 
 
+@pytest.mark.slow
 def test_energy_balance_with_added_mass_accounts_for_morison_exchange_term(model):
     x0 = make_state(np.zeros(model.n_links))
     t0, t1, (w_joint, w_fluid, w_am) = _energy_run(model, x0, wave_torques(model.n_links - 1), 4.0)
