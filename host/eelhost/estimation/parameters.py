@@ -49,6 +49,24 @@ CURRENT_BOUND_M_S = 0.03
 FIXED_JOINT_MODELS = frozenset({"pd"})
 
 
+
+def box_from_unit(bounds: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """Map unit-cube points (..., K) into the box ``bounds`` (K, 2), clipped to the cube first.
+
+    The optimisers search the unit cube; this is the one linear map back to parameters.
+    """
+    b = bounds
+    return b[:, 0] + np.clip(np.asarray(u, dtype=float), 0.0, 1.0) * (b[:, 1] - b[:, 0])
+
+
+def box_to_unit(bounds: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Map points (..., K) of the box ``bounds`` (K, 2) to the unit cube.
+
+    The inverse of :func:`box_from_unit` inside the box.
+    """
+    b = bounds
+    return (np.asarray(x, dtype=float) - b[:, 0]) / (b[:, 1] - b[:, 0])
+
 @dataclass(frozen=True, eq=False)
 class JointFit:
     """The joint model of a space and the parameters a fit varies (none for the paper's PD).
@@ -207,13 +225,11 @@ class ParameterSpace:
 
     def from_unit(self, u: np.ndarray) -> np.ndarray:
         """Map unit-cube points (..., K) to parameters (clipped to the cube first)."""
-        b = self.bounds
-        return b[:, 0] + np.clip(np.asarray(u, dtype=float), 0.0, 1.0) * (b[:, 1] - b[:, 0])
+        return box_from_unit(self.bounds, u)
 
     def to_unit(self, x: np.ndarray) -> np.ndarray:
         """Map parameters (..., K) to the unit cube."""
-        b = self.bounds
-        return (np.asarray(x, dtype=float) - b[:, 0]) / (b[:, 1] - b[:, 0])
+        return box_to_unit(self.bounds, x)
 
     def coefficient_array(self, x: np.ndarray) -> np.ndarray:
         """The fluid-law part of parameter vectors, shape (..., k)."""

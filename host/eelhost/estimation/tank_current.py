@@ -39,7 +39,12 @@ from eelhost.estimation.evaluate import Evaluator
 from eelhost.estimation.identify import REL_STEP
 from eelhost.estimation.local import FAILED, polish_minimax, polish_minimax_many
 from eelhost.estimation.optimise import FitResult
-from eelhost.estimation.parameters import CURRENT_BOUND_M_S, ParameterSpace
+from eelhost.estimation.parameters import (
+    CURRENT_BOUND_M_S,
+    ParameterSpace,
+    box_from_unit,
+    box_to_unit,
+)
 
 log = logging.getLogger(__name__)
 
@@ -107,12 +112,10 @@ class _JointCube:
         return len(self.bounds)
 
     def from_unit(self, u: np.ndarray) -> np.ndarray:
-        b = self.bounds
-        return b[:, 0] + np.clip(np.asarray(u, dtype=float), 0.0, 1.0) * (b[:, 1] - b[:, 0])
+        return box_from_unit(self.bounds, u)
 
     def to_unit(self, x: np.ndarray) -> np.ndarray:
-        b = self.bounds
-        return (np.asarray(x, dtype=float) - b[:, 0]) / (b[:, 1] - b[:, 0])
+        return box_to_unit(self.bounds, x)
 
 
 def share_tank_current(
