@@ -450,6 +450,23 @@ def pass_screen(scores: Sequence[CandidateScore], survivors: int = SURVIVORS,
     return sorted(i for i in ran[:survivors] if scores[i].mean_held_out <= factor * best)
 
 
+def _add_to_score(
+    scores: dict[int, CandidateScore], spaces: Sequence[ParameterSpace], motions: Sequence[str],
+    i: int, m: str, fitted: _Fitted, held: Any, why: str | None, ev: Evaluator,
+) -> None:
+    """Fold candidate ``i``'s fit of motion ``m`` into its score, made on first use.
+
+    The fit's best fitness and values, its held-out errors, why it failed if it did (named with
+    the motion) and its simulations.
+    """
+    score = scores.setdefault(i, CandidateScore(spaces[i].model_name,
+                                                spaces[i].size * len(motions), space=spaces[i]))
+    score.fitness[m], score.values[m], score.held_out[m] = (fitted.fitness[0],
+                                                            fitted.values[0], held)
+    score.failed = score.failed or (f"{m}: {why}" if why else None)
+    score.simulations += ev.simulations
+
+
 def _screen(
     workers: _Workers, spaces: Sequence[ParameterSpace],
     evs: dict[tuple[int, str], Evaluator], motions: Sequence[str], seed: int, budget: int,
@@ -477,13 +494,7 @@ def _screen(
     scores: dict[int, CandidateScore] = {}
     for (i, m), (fits_still, fitted, (held, why), ev) in zip(keys, scored, strict=True):
         still[(i, m)], evs[(i, m)] = fits_still, ev
-        score = scores.setdefault(i, CandidateScore(spaces[i].model_name,
-                                                    spaces[i].size * len(motions),
-                                                    space=spaces[i]))
-        score.fitness[m], score.values[m], score.held_out[m] = (fitted.fitness[0],
-                                                                fitted.values[0], held)
-        score.failed = score.failed or (f"{m}: screen: {why}" if why else None)
-        score.simulations += ev.simulations
+        _add_to_score(scores, spaces, motions, i, m, fitted, held, why and f"screen: {why}", ev)
     return still, scores
 
 
@@ -533,13 +544,7 @@ def _full(
     scores: dict[int, CandidateScore] = {}
     for (i, m), (fitted, (held, why), ev) in zip(keys, scored, strict=True):
         evs[(i, m)] = ev
-        score = scores.setdefault(i, CandidateScore(spaces[i].model_name,
-                                                    spaces[i].size * len(motions),
-                                                    space=spaces[i]))
-        score.fitness[m], score.values[m], score.held_out[m] = (fitted.fitness[0],
-                                                                fitted.values[0], held)
-        score.failed = score.failed or (f"{m}: {why}" if why else None)
-        score.simulations += ev.simulations
+        _add_to_score(scores, spaces, motions, i, m, fitted, held, why, ev)
     return scores
 
 
