@@ -239,6 +239,16 @@ def failing_replanner(status: str):
     return Failing
 
 
+def failing_with_clear_look_ahead(status: str):
+    """A :func:`failing_replanner` whose look-ahead swims the present waypoints 200 mm clear."""
+
+    class ClearAhead(failing_replanner(status)):  # type: ignore[misc]
+        def _look_ahead(self, est, left, extra):  # noqa: ANN001, ANN202
+            return 0.2, 0.2
+
+    return ClearAhead
+
+
 @pytest.fixture(scope="module")
 def open_plan():
     planner = Planner(parse_world(OPEN, "open"), ROBOT, MODEL)
@@ -327,11 +337,8 @@ def test_run_plan_plans_with_the_fitted_model_and_its_tanks_current(tmp_path, ca
 def test_failed_replans_keep_a_present_plan_the_twin_swims_clear(open_plan):
     planner, outcome = open_plan
 
-    class ClearAhead(failing_replanner("exhausted")):  # type: ignore[misc]
-        def _look_ahead(self, est, left, extra):  # noqa: ANN001, ANN202
-            return 0.2, 0.2  # the present waypoints are swum 200 mm clear
-
-    nav = ClearAhead(lambda extra: planner, planner, outcome, PATH_GAIT)
+    nav = failing_with_clear_look_ahead("exhausted")(lambda extra: planner, planner, outcome,
+                                                     PATH_GAIT)
     nav.requests.clear()
     try:
         t_stop, d = drive_off_corridor(nav, 14.0)
@@ -444,11 +451,8 @@ def test_a_blocked_replan_start_is_retried_from_the_moving_body_further_on(open_
 def test_a_refused_replan_keeps_a_present_plan_the_twin_swims_clear(open_plan):
     planner, outcome = open_plan
 
-    class ClearAhead(failing_replanner("blocked_start")):  # type: ignore[misc]
-        def _look_ahead(self, est, left, extra):  # noqa: ANN001, ANN202
-            return 0.2, 0.2
-
-    nav = ClearAhead(lambda extra: planner, planner, outcome, PATH_GAIT)
+    nav = failing_with_clear_look_ahead("blocked_start")(lambda extra: planner, planner, outcome,
+                                                     PATH_GAIT)
     nav.requests.clear()
     try:
         t_stop, d = drive_off_corridor(nav, 6.0)
