@@ -89,22 +89,19 @@ def _plant_itself(ds: Dataset, plant: Plant | None, tests: list,
     The tank's truth predicting its held-out experiments with everything a recording does not
     declare left unknown (clock offsets, control jitter, pixel noise, a current drawn anew per
     experiment; a steady stray current is given): the floor no fitted model can be expected
-    to beat, whatever its law and joints. None (an empty dict) for a plant on the servos'
-    torque-speed line, which the estimator's simulation does not have.
+    to beat, whatever its law and joints. A plant on the servos' torque-speed line
+    (``servo_limits``) is swum on its line, as the tank swam it (the loop's option,
+    ``LoopOptions.servo_limits``; it clips PD joints only, as in the tank).
     """
     settings = plant.settings if plant is not None else TankSettings()
-    if settings.servo_limits:
-        # the estimator's closed loop never applies the servos' torque-speed line (LoopOptions.
-        # servo_limits; the batched kernel has none), so this plant cannot be swum as it is:
-        # no floor rather than the unlimited robot's, and the target stays 0.03 BL
-        return {}
     robot = true_robot(ds.robot, settings)
     models = {}
     for motion, truth in ds.truth.items():
         base = FittedModel.of_coefficients(truth, robot)
         space = replace(base.space, current=True)
         models[motion] = FittedModel(space, np.concatenate([base.values, _true_current(ds)]))
-    return worst_ex(validate(robot, models, tests, backend=backend))
+    return worst_ex(validate(robot, models, tests, backend=backend,
+                             servo_limits=settings.servo_limits))
 
 
 def _fit_and_validate(ds: Dataset, plant: Plant | None, settings: FitSettings,
@@ -367,7 +364,7 @@ def estimator_report(
             itself = r["plant_worst_ex"].get(m, float("nan"))
             lines.append(
                 f"| {m} | {fit.fitness if fit else float('nan'):.4f} | {a:.4f} | {b:.4f} | "
-                + (f"{itself:.4f}" if np.isfinite(itself) else "not measured (servo limits)")
+                + (f"{itself:.4f}" if np.isfinite(itself) else "not measured")
                 + f" | <= {_target(m, itself):.4f} ({_met(a, m, itself)}) | "
                 f"{PAPER_WORST_EX[m]} |"
             )

@@ -178,6 +178,7 @@ def prepare(
     tmax_factor: float = TMAX_FACTOR,
     align_s: float = 0.0,
     observe: bool = True,
+    servo_limits: bool = False,
 ) -> PreparedExperiment:
     """Prepare an experiment for simulation with ``n_samples`` sample times.
 
@@ -190,6 +191,10 @@ def prepare(
     have seen it (:func:`eelsim.camera.observed_positions` with the camera the recording declares:
     the same frames and median filter, causal or centred), not by its true centre of mass, so that
     the camera's filter lag is not blamed on the coefficients.
+
+    With ``servo_limits`` the PD joints' torques are clipped to the servos' torque-speed line
+    (``LoopOptions.servo_limits``; docs/model.md section 4): a plant known to run on that line,
+    such as a test plant's own robot swum as the floor of ``eelbot estimate-bench``.
     """
     t0, t1 = exp.span_s
     times = sample_times(t0, t1, n_samples, dt_s)
@@ -212,7 +217,8 @@ def prepare(
     return PreparedExperiment(
         experiment=exp,
         scenario=exp.scenario.model_copy(update={"duration_s": tmax, "min_duration_s": last_s}),
-        options=LoopOptions(timing=timing, camera=camera, stop_at_goal=True),
+        options=LoopOptions(timing=timing, camera=camera, servo_limits=servo_limits,
+                            stop_at_goal=True),
         times_s=times,
         exp_positions_m=exp.position_at(times),
         shifts_s=shifts,
@@ -318,6 +324,10 @@ class Evaluator:
         runs one task each, in place of the local process pool.
     space : ParameterSpace, optional
         What a candidate vector holds (default: the robot's fluid law and joint model).
+    servo_limits : bool
+        Clip the PD joints' torques to the servos' torque-speed line in every run (the loop's
+        option, :func:`prepare`); default off, as the estimator's models assume. A joint model
+        with the line in its own law (``pd_limited``) has it either way.
     """
 
     def __init__(
@@ -332,12 +342,14 @@ class Evaluator:
         workers: int = 2,
         map_function: Callable | None = None,
         space: ParameterSpace | None = None,
+        servo_limits: bool = False,
     ) -> None:
         if not experiments:
             raise EstimationError("no experiments to evaluate on")
         self.space = space or ParameterSpace.for_robot(robot)
         self.robot = self.space.model_robot(robot)
         self.n_samples, self.align_s, self.observe = n_samples, align_s, observe
+        self.servo_limits = servo_limits
         self.prepared = self.prepare_like(experiments)
         self.weight = weight
         self.backend = _choose_backend(backend)
@@ -359,7 +371,8 @@ class Evaluator:
 
     def prepare_like(self, experiments: Sequence[Experiment]) -> list[PreparedExperiment]:
         """Experiments prepared as this evaluator prepares its own (samples, clock search)."""
-        return [prepare(e, self.n_samples, align_s=self.align_s, observe=self.observe)
+        return [prepare(e, self.n_samples, align_s=self.align_s, observe=self.observe,
+                        servo_limits=self.servo_limits)
                 for e in experiments]
 
     def simulate(self, parameters: np.ndarray) -> Simulated:

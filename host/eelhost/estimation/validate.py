@@ -65,6 +65,7 @@ def validate(
     n_samples: int = N_SAMPLES_VALIDATE,
     backend: str = "auto",
     align_s: float = ALIGN_S,
+    servo_limits: bool = False,
 ) -> list[ValidationRun]:
     """Predict each experiment with the fitted coefficients and measure the errors.
 
@@ -81,6 +82,9 @@ def validate(
     align_s : float
         Half-width of the clock-offset search: each experiment is compared at the offset of its
         recording's clock that fits best (reported), besides its own clock (the paper's E_x).
+    servo_limits : bool
+        Swim the robot with its PD joints on the servos' torque-speed line (the loop's option;
+        :class:`~eelhost.estimation.evaluate.Evaluator`).
 
     Returns
     -------
@@ -94,7 +98,7 @@ def validate(
     for key, exps in groups.items():
         model = fitted[key]
         ev = Evaluator(robot, exps, n_samples=n_samples, backend=backend, align_s=align_s,
-                       space=model.space)
+                       space=model.space, servo_limits=servo_limits)
         sim: Simulated = ev.simulate(model.values[None, :])
         counted = sim.counted_failure(ev.prepared)
         for j, p in enumerate(ev.prepared):

@@ -1,0 +1,44 @@
+"""The estimator's simulation on the servos' torque-speed line (issue 32, plant ``servo_limits``):
+the plant's own robot swum on its line reproduces its recording with either backend, so the
+bench's "plant itself" is the real plant.
+"""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from eelhost.data.virtual_tank import TABLE3, mismatched_plants, record_experiment, true_robot
+from eelhost.estimation.evaluate import Evaluator
+from eelhost.estimation.parameters import FittedModel
+from eelsim.robot import load_robot
+from eelsim.scenario import load_scenario
+
+
+@pytest.fixture(scope="module")
+def small_servo_tank():
+    """The servo_limits plant's robot and a 4 s recording of its fastest straight gait, no noise."""
+    plant = mismatched_plants()["servo_limits"]
+    settings = replace(plant.settings, timestamp_jitter_s=0.0, control_jitter_s=0.0, pixel_m=0.0)
+    task = load_scenario("straight_A0.87_w3.9").model_copy(
+        update={"duration_s": 4.0, "waypoints_m": [(0.6, 0.0)]})
+    robot = load_robot()
+    exp = record_experiment(robot, task, "straight", TABLE3["straight"], settings, seed=0)
+    return true_robot(robot, settings), exp
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("backend", ["reference", "batch"])
+def test_the_plant_swum_on_its_servo_line_reproduces_its_recording_and_without_it_does_not(
+        small_servo_tank, backend):
+    robot, exp = small_servo_tank
+    model = FittedModel.of_coefficients(TABLE3["straight"], robot)
+    gaps = {}
+    for on_line in (True, False):
+        ev = Evaluator(robot, [exp], n_samples=20, backend=backend, workers=1, space=model.space,
+                       servo_limits=on_line)
+        sim = ev.simulate(model.values[None])
+        gaps[on_line] = float(np.linalg.norm(sim.positions_m[0, 0] - ev.prepared[0].exp_positions_m,
+                                             axis=-1).max())
+    assert gaps[True] < 1e-6  # the same loop, the same camera: the recording itself
+    assert gaps[False] > 0.01  # the robot without its line swims centimetres further
