@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -105,7 +105,7 @@ def _plant_itself(ds: Dataset, plant: Plant | None, tests: list,
 
 
 def _fit_and_validate(ds: Dataset, plant: Plant | None, settings: FitSettings,
-                      say: Progress) -> dict[str, Any]:
+                      say: Progress, joint_models: Sequence[str] | None = None) -> dict[str, Any]:
     """Fit both motions, choose the model by the comparison, validate; the figures of a tank.
 
     ``fits`` are the chosen model's; ``own`` the robot file's model's fits (the same when it was
@@ -123,7 +123,8 @@ def _fit_and_validate(ds: Dataset, plant: Plant | None, settings: FitSettings,
             out["sims"][motion] = ev.simulations
         return res, ev
 
-    chosen = fit_and_choose(ds, ("straight", "turning"), settings, fit=fit, say=say)
+    chosen = fit_and_choose(ds, ("straight", "turning"), settings, fit=fit, say=say,
+                            joint_models=joint_models)
     alone = chosen.fits  # each motion with its own current, kept to show what the tank's changes
     # one current for the tank from both motions, as the report does (estimation/tank_current.py)
     chosen.fits, chosen.evaluators, out["tank_current"] = share_tank_current(
@@ -239,6 +240,7 @@ def estimator_report(
     progress: Progress | None = None,
     only: tuple[str, ...] | None = None,
     fit_current: bool = True,
+    joint_models: Sequence[str] | None = None,
 ) -> str:
     """Measure the estimator on the virtual tanks and write the markdown report.
 
@@ -259,6 +261,9 @@ def estimator_report(
         all).
     fit_current : bool
         Fit the tank's ambient current as a nuisance (the same setting on every tank).
+    joint_models : sequence of str, optional
+        The joint models the comparison tries on every tank (default: those offered by default
+        and the robot file's, ``eelsim.joints.default_grid_models``).
 
     Returns
     -------
@@ -287,7 +292,9 @@ def estimator_report(
         "truth's fitness is in the tank's steady stray current where it had one. Ambient "
         "current: " + ("fitted as a nuisance (v_x, v_y within +-0.03 m/s, every tank), and the "
                        "validation simulates in it" if fit_current else
-                       "not fitted (`--no-fit-current`): the declared currents only") + ".",
+                       "not fitted (`--no-fit-current`): the declared currents only") + "."
+        + ("" if joint_models is None else " Joint models the comparison tries: "
+           + ", ".join(sorted(set(joint_models))) + "."),
         "",
     ]
     cases: list[tuple[str, str, Plant | None]] = [
@@ -310,7 +317,7 @@ def estimator_report(
     for key, label, plant in cases:
         ds = load_dataset(BUNDLED_DATASET) if plant is None else _tank(work, plant, seed, say)
         say(f"fitting the {label} ...")
-        results[key] = r = _fit_and_validate(ds, plant, settings, say)
+        results[key] = r = _fit_and_validate(ds, plant, settings, say, joint_models)
         if ga:
             say(f"running the paper's GA on the {key} tank ...")
             r["ga"] = _ga(ds, seed, ga_generations)
