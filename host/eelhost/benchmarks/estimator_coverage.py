@@ -35,11 +35,12 @@ from eelhost.data.virtual_tank import (
     paper_experiment_plan,
     record_experiment,
 )
+from eelhost.estimation.coefficients_file import read_coefficients_file
 from eelhost.estimation.evaluate import Evaluator
 from eelhost.estimation.identify import identifiability
 from eelhost.estimation.methods import FitProblem, run_fit
-from eelhost.estimation.parameters import ParameterSpace
 from eelhost.estimation.pipeline import FitSettings
+from eelhost.estimation.space import ParameterSpace
 from eelhost.estimation.uncertainty import WIDEN, BootstrapResult, parametric_bootstrap
 from eelsim.robot import load_robot
 
@@ -223,7 +224,6 @@ def measure_bands(
     -------
     list of BandCoverage
     """
-    import json
     import time
 
     from eelhost.data.experiments import load_dataset
@@ -242,7 +242,7 @@ def measure_bands(
         run_report(load_dataset(folder), report_dir, settings=FitSettings(seed=seed),
                    bootstrap_replicates=replicates, compare_models=False)
         seconds = time.perf_counter() - t0
-        data = json.loads((report_dir / "coefficients.json").read_text())
+        data = read_coefficients_file(report_dir / "coefficients.json")
         band = BandCoverage(name, data["prediction_band"]["coverage"],
                             {m: u["excess"] for m, u in data["uncertainty"].items()}, seconds)
         out.append(band)

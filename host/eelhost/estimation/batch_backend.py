@@ -20,7 +20,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 from scipy.spatial import cKDTree
 
-from eelhost.estimation.parameters import ParameterSpace
+from eelhost.estimation.space import ParameterSpace
 from eelsim.batch import run_batch
 from eelsim.closed_loop import LoopOptions
 from eelsim.robot import Robot

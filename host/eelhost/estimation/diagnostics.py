@@ -16,7 +16,7 @@ import logging
 
 import numpy as np
 
-from eelhost.estimation.parameters import ParameterSpace
+from eelhost.estimation.space import ParameterSpace
 from eelhost.estimation.uncertainty import BootstrapResult
 
 log = logging.getLogger(__name__)

@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from eelhost.estimation.optimise import FitResult, Objective
-from eelhost.estimation.parameters import ParameterSpace
+from eelhost.estimation.space import ParameterSpace
 
 Evaluate = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 """Candidates (C, K) -> (errors (C, E), residual vectors (C, E, m, 2)), as

@@ -30,7 +30,8 @@ from typing import Any
 import numpy as np
 
 from eelhost.errors import UserError
-from eelhost.estimation.parameters import FittedModel, ParameterSpace
+from eelhost.estimation.coefficients_file import FittedModel, fit_entry
+from eelhost.estimation.space import ParameterSpace
 from eelhost.files import atomic_writer
 from eelsim.fluid import FluidCoefficients
 
@@ -92,15 +93,13 @@ class FitResult:
         return int(self.history[-1][2]) if self.history else 0
 
     def to_json(self) -> dict[str, Any]:
-        """JSON-ready summary: the model by name (law, joint model, parameters) and the search."""
-        return {
-            "method": self.method,
-            **self.model.to_json(),
-            "fitness": self.fitness,
-            "evaluations": self.evaluations,
-            "simulations": self.simulations,
-            "history": [list(h) for h in self.history],
-        }
+        """JSON-ready summary: the model by name (law, joint model, parameters) and the search.
+
+        Its entry under ``fits`` in ``coefficients.json`` (:func:`~eelhost.estimation.
+        coefficients_file.fit_entry`).
+        """
+        return fit_entry(self.method, self.model, self.fitness, self.evaluations,
+                         self.simulations, self.history)
 
 
 class Checkpoint:

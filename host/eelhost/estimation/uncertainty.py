@@ -52,9 +52,9 @@ from typing import Any
 import numpy as np
 
 from eelhost.data.experiments import Experiment
+from eelhost.estimation.coefficients_file import FittedModel
 from eelhost.estimation.evaluate import Evaluator
 from eelhost.estimation.local import polish_minimax_many
-from eelhost.estimation.parameters import FittedModel
 from eelsim.camera import CameraModel, observation_steps, observed_positions
 from eelsim.closed_loop import LoopOptions
 from eelsim.robot import Robot
