@@ -19,8 +19,10 @@ from eelhost.estimation.selection import (
     carry_over,
     cross_validate,
     default_laws,
+    family,
     pass_screen,
     recommend,
+    screen_rank,
     table_markdown,
 )
 from eelsim.fluid import get_fluid_law
@@ -49,22 +51,31 @@ def test_a_failed_candidate_is_shown_failed_and_never_ranked_by_a_penalty():
 
 
 
-def test_the_screen_passes_the_best_few_within_a_factor_of_the_best_and_never_a_failure():
-    def cand(name, errors, failed=None):
-        return CandidateScore(name, 4, {"straight": 0.1}, {"straight": np.array(errors)},
+def test_the_screen_passes_the_best_few_within_a_factor_and_every_familys_best():
+    def cand(name, errors, failed=None, fitness=0.1):
+        return CandidateScore(name, 4, {"straight": fitness}, {"straight": np.array(errors)},
                               failed=failed)
 
-    grid = [cand("a", [0.5, 0.7]), cand("b", [0.1, 0.1]), cand("c", [0.01, np.nan], "fold"),
-            cand("d", [0.15, 0.17]), cand("e", [0.19, 0.23]), cand("f", [0.3, 0.3])]
-    # b 0.1 best; d 0.16 and e 0.21 within twice it; a and f beyond; c failed
-    assert pass_screen(grid, survivors=4, factor=2.0) == [1, 3]
-    assert pass_screen(grid, survivors=4, factor=3.0) == [1, 3, 4, 5]
-    assert pass_screen(grid, survivors=2, factor=10.0) == [1, 3]
+    grid = [cand("pd x morison", [0.5, 0.7]), cand("pd x galilean", [0.1, 0.1]),
+            cand("pd x linear_quadratic", [0.15, 0.17]), cand("pd x resistive_lift", [0.19, 0.23]),
+            cand("pd x resistive", [0.3, 0.3]),
+            cand("servo x morison", [0.01, np.nan], "fold", fitness=1e9),
+            cand("servo x galilean", [np.nan, np.nan], "fit", fitness=1e8)]
+    # galilean 0.1 best; linear_quadratic 0.16 within twice it; the servo joints' best passes
+    # although every servo candidate failed the short screen (fewer of its folds failed)
+    assert pass_screen(grid, survivors=4, factor=2.0, family_factor=0.0) == [1, 2, 5]
+    assert pass_screen(grid, survivors=1, factor=10.0, family_factor=0.0) == [1, 5]
+    # every law family's best within four times the best: resistive by its lift variant
+    # (0.21), not morison (0.6); the family's second (pd x resistive) does not pass
+    assert pass_screen(grid, survivors=4, factor=2.0, family_factor=4.0) == [1, 2, 3, 5]
     # a short search may fail where the full one does not: when all failed, all go on
-    assert pass_screen([grid[2], grid[2]], survivors=1) == [0, 1]
+    assert pass_screen([grid[5], grid[6]], survivors=1) == [0, 1]
+    assert family("servo x morison_lift, one set") == ("servo", "morison")
+    assert screen_rank(grid[5]) < screen_rank(grid[6])
     dropped = replace(grid[0], screened_out=True, held_out={"straight": np.array([0.01, 0.01])})
     assert recommend([dropped, grid[1]]) is grid[1] and recommend([dropped]) is None
-    assert "a (screened out) | 4 | 0.1000 | 0.0100 (screen)" in table_markdown([dropped])
+    assert "pd x morison (screened out) | 4 | 0.1000 | 0.0100 (screen)" in table_markdown(
+        [dropped])
 
 
 def test_a_lift_variant_starts_from_its_base_laws_fit_with_the_lift_switched_off():

@@ -54,7 +54,7 @@ from eelhost.estimation.evaluate import EstimationError, Evaluator, count_runs
 from eelhost.estimation.local import FAILED, polish_minimax_many
 from eelhost.estimation.methods import CURRENT_POLISH_ITERATIONS
 from eelhost.estimation.optimise import fit_cmaes
-from eelhost.estimation.parameters import ParameterSpace, joint_fit
+from eelhost.estimation.parameters import ParameterSpace, joint_fit, joint_model_name
 from eelhost.estimation.pipeline import FitSettings, training_experiments
 
 log = logging.getLogger(__name__)
@@ -68,6 +68,7 @@ SCREEN_ITERATIONS = 4  # minimax iterations of a screening fit (own search, carr
 SCREEN_FOLD_ITERATIONS = 2  # and of a screening fold's refit
 SURVIVORS = 4  # at most this many candidates pass the screen to the full search
 SURVIVOR_FACTOR = 2.0  # and only those within this factor of the screen's best mean held-out error
+FAMILY_FACTOR = 4.0  # a law family's best passes too when within this factor of the screen's best
 ABSENT = {"C_L": 0.0}  # a term the other model lacks starts switched off (a lift variant's C_L)
 ONE_SET_CANDIDATES = 1  # the best separate-set models also tried with one set for all motions
 ONE_SET = "one set"  # the suffix of a one-set candidate's name
@@ -190,9 +191,11 @@ def candidate_spaces(
     same from either bundled robot file.
     """
     from eelsim.fluid import get_fluid_law
-    from eelsim.joints import JOINT_MODELS
+    from eelsim.joints import default_grid_models
 
-    models = sorted(JOINT_MODELS) if joint_models is None else sorted(set(joint_models))
+    # unless told which: the models offered by default and the robot file's own
+    models = (default_grid_models(joint_model_name(dataset.robot)) if joint_models is None
+              else sorted(set(joint_models)))
     return [ParameterSpace(get_fluid_law(law), joint_fit(dataset.robot, model), current=current)
             for model in models for law in sorted(set(laws))]
 
@@ -237,12 +240,15 @@ def multi_start_fit(
     extra_starts: Sequence[np.ndarray] = (),
     iterations: int = POLISH_ITERATIONS,
     budget: int = SEARCH_BUDGET,
+    warm: Sequence[np.ndarray] = (),
 ) -> _Fitted:
     """Fit ``ev.space``'s law and joints in still water from its own starts (module docstring).
 
     Never from the robot file's values: a CMA-ES search of ``budget`` candidates from the middle
-    of the bounds (its first generation spread over the whole box; seeded), and the best of
-    ``extra_starts`` (screened); each result polished by the minimax trust region.
+    of the bounds (its first generation spread over the whole box; seeded), the best of
+    ``extra_starts`` (screened: other candidates' fits carried over), and every ``warm`` start
+    (the candidate's own earlier fits, e.g. its screening fit); each polished by the minimax
+    trust region.
 
     Returns
     -------
@@ -255,6 +261,7 @@ def multi_start_fit(
     begins = []
     if budget > 0:
         begins.append(fit_cmaes(still_ev.fitness, still, seed, budget).values)
+    begins += [np.asarray(w, dtype=float)[:k] for w in warm]
     if len(extra_starts):
         pts = np.asarray(extra_starts, dtype=float)[:, :k]
         begins.append(pts[int(np.argmin(still_ev.fitness(pts)))])
@@ -422,32 +429,69 @@ def cross_validate(
 
 
 def default_laws() -> list[str]:
-    """The comparison's fluid laws by default: the twin's candidate laws and their lift variants.
+    """The comparison's fluid laws by default: the laws that declare themselves candidates.
 
-    The ``<law>_lift`` variants (:mod:`eelsim.fluid.lift`) are tried beside every candidate law;
-    the screen (:func:`pass_screen`) keeps the grid's cost near that of the full search of four
-    candidates.
+    :func:`eelsim.fluid.candidate_laws`: the twin's five candidate laws and their ``<law>_lift``
+    variants (:mod:`eelsim.fluid.lift`), which are candidates because their base law is; the
+    screen (:func:`pass_screen`) keeps the grid's cost near that of the full search of four
+    candidates. A law registered without ``candidate = True`` is fitted only when named.
     """
-    from eelsim.fluid import FLUID_LAWS, candidate_laws
+    from eelsim.fluid import candidate_laws
 
-    laws = list(candidate_laws())
-    return laws + [f"{law}_lift" for law in laws if f"{law}_lift" in FLUID_LAWS]
+    return list(candidate_laws())
 
 
 def pass_screen(scores: Sequence[CandidateScore], survivors: int = SURVIVORS,
-                factor: float = SURVIVOR_FACTOR) -> list[int]:
+                factor: float = SURVIVOR_FACTOR,
+                family_factor: float = FAMILY_FACTOR) -> list[int]:
     """Which screened candidates get the full search: their positions in ``scores``, in order.
 
     The ``survivors`` lowest mean held-out errors of the screen, of those within ``factor`` of
-    the lowest; a failed candidate never passes. When every candidate failed the screen, all
-    pass (a short search may fail where the full one does not).
+    the lowest; then every family's best, so that no family is dropped for lack of search
+    (module docstring, "The screen"): every joint model's best candidate (:func:`screen_rank`:
+    one that failed the screen too, when all of that joint model's did), and every law family's
+    best (a law and its ``<law>_lift`` variant, on either joint model) within ``family_factor``
+    of the lowest. When every candidate failed the screen, all pass (a short search may fail
+    where the full one does not).
     """
     ran = sorted((i for i, c in enumerate(scores) if np.isfinite(c.mean_held_out)),
                  key=lambda i: scores[i].mean_held_out)
     if not ran:
         return list(range(len(scores)))
     best = scores[ran[0]].mean_held_out
-    return sorted(i for i in ran[:survivors] if scores[i].mean_held_out <= factor * best)
+    passed = {i for i in ran[:survivors] if scores[i].mean_held_out <= factor * best}
+    joints: dict[str, int] = {}
+    laws: dict[str, int] = {}
+    for i in sorted(range(len(scores)), key=lambda i: screen_rank(scores[i])):
+        joint, law = family(scores[i].model)
+        joints.setdefault(joint, i)
+        if np.isfinite(scores[i].mean_held_out):
+            laws.setdefault(law, i)
+    passed |= set(joints.values())
+    passed |= {i for i in laws.values() if scores[i].mean_held_out <= family_factor * best}
+    return sorted(passed)
+
+
+def family(model: str) -> tuple[str, str]:
+    """A candidate's joint model and law family, from its name.
+
+    The name is "<joint model> x <law>[, one set]"; the law family of ``morison`` and of its
+    ``morison_lift`` variant is "morison".
+    """
+    joint, _, law = model.split(ONE_SET)[0].rstrip(", ").partition(" x ")
+    return joint, law.removesuffix("_lift")
+
+
+def screen_rank(score: CandidateScore) -> tuple[int, float, float]:
+    """How a screened candidate ranks, best first.
+
+    By its mean held-out error; one that failed after all that ran, by the share of its folds
+    that failed, then by its fitness summed over its fits (a failed fit's penalty counts).
+    """
+    if np.isfinite(score.mean_held_out):
+        return (0, score.mean_held_out, 0.0)
+    errors = np.concatenate(list(score.held_out.values()))
+    return (1, float(np.mean(~np.isfinite(errors))), float(sum(score.fitness.values())))
 
 
 def _add_to_score(
@@ -525,9 +569,19 @@ def _full(
     makes.
     """
     keys = [(i, m) for i in alive for m in motions]
+
+    def screened_starts(i: int, m: str) -> tuple[list[np.ndarray], list[np.ndarray]]:
+        # the candidate's own screening fit (a warm start), and every other candidate's
+        # screening fit carried over, the screened-out ones' too (the best of them is polished)
+        if (i, m) not in screened:
+            return [], []
+        others = [carry_over(replace(spaces[o], current=False).as_dict(screened[(o, m)].values[0]),
+                             spaces[i], spaces[i].bounds.mean(axis=1))
+                  for o in range(len(spaces)) if o != i and (o, m) in screened]
+        return others, [screened[(i, m)].values[0]]
+
     done = workers.map(_still_stage, [
-        (evs[k], seed + seed_offset, iterations, budget,
-         [screened[k].values[0]] if k in screened else []) for k in keys])
+        (evs[k], seed + seed_offset, iterations, budget, *screened_starts(*k)) for k in keys])
     still: dict[tuple[int, str], _Fitted] = {}
     for k, (own, ev) in zip(keys, done, strict=True):
         still[k], evs[k] = own, ev
@@ -557,9 +611,10 @@ def default_jobs() -> int:
 
 
 def _still_stage(ev: Evaluator, seed: int, iterations: int, budget: int,
-                 extra_starts: Sequence[np.ndarray] = ()) -> tuple[_Fitted, Evaluator]:
+                 extra_starts: Sequence[np.ndarray] = (),
+                 warm: Sequence[np.ndarray] = ()) -> tuple[_Fitted, Evaluator]:
     """A candidate's own still-water fits (first stage), and its evaluator with its counts."""
-    return multi_start_fit(ev, seed, extra_starts, iterations, budget), ev
+    return multi_start_fit(ev, seed, extra_starts, iterations, budget, warm), ev
 
 
 def _cross_seed_chain(
