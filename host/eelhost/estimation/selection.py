@@ -54,7 +54,7 @@ from eelhost.estimation.evaluate import EstimationError, Evaluator, count_runs
 from eelhost.estimation.local import FAILED, polish_minimax_many
 from eelhost.estimation.methods import CURRENT_POLISH_ITERATIONS
 from eelhost.estimation.optimise import fit_cmaes
-from eelhost.estimation.parameters import ParameterSpace, joint_fit, joint_model_name
+from eelhost.estimation.parameters import ParameterSpace, joint_fit
 from eelhost.estimation.pipeline import FitSettings, training_experiments
 
 log = logging.getLogger(__name__)
@@ -191,11 +191,9 @@ def candidate_spaces(
     same from either bundled robot file.
     """
     from eelsim.fluid import get_fluid_law
-    from eelsim.joints import default_grid_models
+    from eelsim.joints import JOINT_MODELS
 
-    # unless told which: the models offered by default and the robot file's own
-    models = (default_grid_models(joint_model_name(dataset.robot)) if joint_models is None
-              else sorted(set(joint_models)))
+    models = sorted(JOINT_MODELS) if joint_models is None else sorted(set(joint_models))
     return [ParameterSpace(get_fluid_law(law), joint_fit(dataset.robot, model), current=current)
             for model in models for law in sorted(set(laws))]
 
@@ -429,16 +427,16 @@ def cross_validate(
 
 
 def default_laws() -> list[str]:
-    """The comparison's fluid laws by default: the laws that declare themselves candidates.
+    """The comparison's fluid laws by default: the twin's candidate laws and their lift variants.
 
-    :func:`eelsim.fluid.candidate_laws`: the twin's five candidate laws and their ``<law>_lift``
-    variants (:mod:`eelsim.fluid.lift`), which are candidates because their base law is; the
-    screen (:func:`pass_screen`) keeps the grid's cost near that of the full search of four
-    candidates. A law registered without ``candidate = True`` is fitted only when named.
+    The ``<law>_lift`` variants (:mod:`eelsim.fluid.lift`) are tried beside every candidate law;
+    the screen (:func:`pass_screen`) keeps the grid's cost near that of the full search of four
+    candidates.
     """
-    from eelsim.fluid import candidate_laws
+    from eelsim.fluid import FLUID_LAWS, candidate_laws
 
-    return list(candidate_laws())
+    laws = list(candidate_laws())
+    return laws + [f"{law}_lift" for law in laws if f"{law}_lift" in FLUID_LAWS]
 
 
 def pass_screen(scores: Sequence[CandidateScore], survivors: int = SURVIVORS,
