@@ -23,10 +23,14 @@ every candidate is first fitted and scored cheaply (:func:`_screen`: a :data:`SC
 CMA-ES search, polished :data:`SCREEN_ITERATIONS` times, restarted from every other candidate's
 screening fit carried over by name, its folds refitted :data:`SCREEN_FOLD_ITERATIONS` times);
 the :data:`SURVIVORS` best by the screen's mean held-out error, of those within
-:data:`SURVIVOR_FACTOR` of the best, get the full search (:func:`pass_screen`), which starts from
-their screening fits too. This is one rung of successive halving (Jamieson and Talwalkar,
-AISTATS 2016): the screen's errors come from shorter fits, and the factor and the survivors'
-count leave room for a candidate whose short fit fell short. Those dropped are shown with the
+:data:`SURVIVOR_FACTOR` of the best, get the full search (:func:`pass_screen`). This is one rung
+of successive halving (Jamieson and Talwalkar, AISTATS 2016): the screen's errors come from
+shorter fits. **No family is dropped for lack of search**: every joint model's best candidate
+passes too (:func:`screen_rank`: one whose short search failed, when all of that joint model's
+did), and so does every law family's best (a law with or without its lift, :func:`family`)
+within :data:`FAMILY_FACTOR` of the best. The survivors' full search starts warm: from its own
+CMA-ES search, from the candidate's screening fit, and from the best of every candidate's
+screening fit carried over (the screened-out ones' too). Those dropped are shown with the
 screen's figures, marked, and never recommended.
 
 **A failure is not a score.** A fold whose refit fails (a penalty on a training gait or on the
@@ -54,7 +58,7 @@ from eelhost.estimation.evaluate import EstimationError, Evaluator, count_runs
 from eelhost.estimation.local import FAILED, polish_minimax_many
 from eelhost.estimation.methods import CURRENT_POLISH_ITERATIONS
 from eelhost.estimation.optimise import fit_cmaes
-from eelhost.estimation.parameters import ParameterSpace, joint_fit
+from eelhost.estimation.parameters import ParameterSpace, joint_fit, joint_model_name
 from eelhost.estimation.pipeline import FitSettings, training_experiments
 
 log = logging.getLogger(__name__)
@@ -191,9 +195,11 @@ def candidate_spaces(
     same from either bundled robot file.
     """
     from eelsim.fluid import get_fluid_law
-    from eelsim.joints import JOINT_MODELS
+    from eelsim.joints import default_grid_models
 
-    models = sorted(JOINT_MODELS) if joint_models is None else sorted(set(joint_models))
+    # unless told which: the models offered by default and the robot file's own
+    models = (default_grid_models(joint_model_name(dataset.robot)) if joint_models is None
+              else sorted(set(joint_models)))
     return [ParameterSpace(get_fluid_law(law), joint_fit(dataset.robot, model), current=current)
             for model in models for law in sorted(set(laws))]
 
