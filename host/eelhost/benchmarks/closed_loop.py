@@ -201,7 +201,8 @@ def water_for(seed: int, model: CoefficientModel,
 
 def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PATH_GAIT,
               unknown_current_m_s: float = UNKNOWN_CURRENT_M_S,
-              planner_options: dict[str, Any] | None = None) -> WorldResult:
+              planner_options: dict[str, Any] | None = None,
+              swimmer: SwimmerModel | None = None) -> WorldResult:
     """Plan one generated world and swim the plan over ``sim://`` (module docstring).
 
     Parameters
@@ -213,6 +214,10 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
     unknown_current_m_s : float
     planner_options : dict, optional
         More keyword arguments of the planner (``--check-unknown-current``).
+    swimmer : SwimmerModel, optional
+        The model of the robot the planner swims, built once by the command
+        (:meth:`CoefficientModel.swimmer_for`; built per world when not given). The virtual
+        robot builds its own: it is the water, not the planner.
 
     Returns
     -------
@@ -229,7 +234,8 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
            + f"&start={s.position_m[0]:g},{s.position_m[1]:g},{s.heading_deg:g}")
     wall0, cpu0 = time.perf_counter(), time.process_time()
     try:
-        planned = plan_for_run(world, robot, uri, gait, model, planner_options=planner_options)
+        planned = plan_for_run(world, robot, uri, gait, model, planner_options=planner_options,
+                               swimmer=swimmer)
     except PlanRefused as err:
         return WorldResult(seed, False, err.status, detail=str(err), water=water,
                            plan_wall_s=time.perf_counter() - wall0,
@@ -263,7 +269,8 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
 
 def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, out: Path,
                           progress: Callable[[WorldResult], None] | None = None,
-                          planner_options: dict[str, Any] | None = None) -> list[WorldResult]:
+                          planner_options: dict[str, Any] | None = None,
+                          swimmer: SwimmerModel | None = None) -> list[WorldResult]:
     """Run the benchmark over ``seeds``, resuming from ``<out>/results.jsonl``.
 
     Parameters
@@ -277,6 +284,9 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
         Called with each world's result as it is finished (or read back).
     planner_options : dict, optional
         More keyword arguments of the planner.
+    swimmer : SwimmerModel, optional
+        The model of the robot the planner swims, handed to every world's planner (built once
+        here when not given).
 
     Returns
     -------
@@ -291,11 +301,14 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
                 r = WorldResult(**json.loads(line))
                 done[r.seed] = r
     results = []
+    if swimmer is None:
+        swimmer = model.swimmer_for(robot)
     for seed in seeds:
         if seed in done:
             r = done[seed]
         else:
-            r = run_world(seed, robot, model, planner_options=planner_options)
+            r = run_world(seed, robot, model, planner_options=planner_options,
+                          swimmer=swimmer)
             with path.open("a") as f:
                 f.write(json.dumps(asdict(r)) + "\n")
         results.append(r)

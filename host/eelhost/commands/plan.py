@@ -47,6 +47,7 @@ from eelhost.planning.worlds import generate_world
 from eelhost.progress import phase
 from eelsim.closed_loop import LoopOptions
 from eelsim.guidance import GUIDANCE_LAWS, PURSUIT, GuidanceLaw
+from eelsim.model import SwimmerModel
 from eelsim.robot import Robot
 
 REFUSALS = ("blocked_start", "current_too_strong", "goal_blocked", "unreachable")
@@ -213,13 +214,16 @@ def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
     robot, _ = robot_and_coefficients(args)
     model = coefficient_model(args, robot)
+    # the robot's model, built once here and handed on (docs/architecture.md, "The planning room")
+    swimmer = model.swimmer_for(robot)
     if args.bench:
-        return _bench(args, robot, model)
+        return _bench(args, robot, model, swimmer)
     if not args.world:
         raise OptionError("give a WORLD (or --bench)")
     world = world_from_name(args.world)
     out = check_output_folder(args.out)  # before the search, not after it
-    planner = Planner(world, robot, model, threads=args.threads, **planner_options(args))
+    planner = Planner(world, robot, model, threads=args.threads, swimmer=swimmer,
+                      **planner_options(args))
     with phase(f"plan {world.name}: search and check in the twin"):
         outcome = planner.plan()
     atomic_write(out / "plan.json", json.dumps(plan_json(world, outcome), indent=1))
@@ -232,7 +236,7 @@ def run(args: argparse.Namespace) -> int:
               + (" (goal)" if leg.goal else ""))
     print(f"coefficients: {model.describe()}")
     coverage = action_coverage(planner.robot, model, planner.world.current.speed_m_s,
-                               planner.settings)
+                               planner.settings, swimmer=swimmer)
     print(f"action coverage: {coverage.line()}")
     print(f"wrote {out / 'plan.json'}")
     if args.plot and outcome.found:
@@ -250,7 +254,8 @@ def run(args: argparse.Namespace) -> int:
     return 0 if outcome.found else 1
 
 
-def _bench(args: argparse.Namespace, robot: Robot, model: CoefficientModel) -> int:
+def _bench(args: argparse.Namespace, robot: Robot, model: CoefficientModel,
+           swimmer: SwimmerModel) -> int:
     from eelhost.planning.bench import run_bench
 
     def progress(k: int, r) -> None:  # noqa: ANN001
@@ -263,12 +268,13 @@ def _bench(args: argparse.Namespace, robot: Robot, model: CoefficientModel) -> i
     guidance = guidance_law(args.guidance)
     options = LoopOptions(guidance=guidance)  # the coverage's runs steer with the same law
     summary = run_bench(robot, model, args.worlds, args.seed, args.threads, progress,
-                        max(args.jobs, 1), args.unknown_current, guidance)
+                        max(args.jobs, 1), args.unknown_current, guidance, swimmer)
     lines = summary.lines()
     lines += ["- action coverage (successful actions per current direction relative to the "
               "heading):"]
-    lines += [f"  - {action_coverage(model.robot_for(robot), model, speed, options=options).line()}"
-              for speed in (0.0, 0.02, 0.04, 0.06)]
+    coverage = [action_coverage(model.robot_for(robot), model, speed, options=options,
+                                swimmer=swimmer) for speed in (0.0, 0.02, 0.04, 0.06)]
+    lines += [f"  - {c.line()}" for c in coverage]
     command = (f"nice eelbot plan --bench --worlds {args.worlds} --seed {args.seed}"
                + (f" --threads {args.threads}" if args.threads != 1 else "")
                + (f" --jobs {args.jobs}" if args.jobs > 1 else "")

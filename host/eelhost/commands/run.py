@@ -195,9 +195,12 @@ def run(args: argparse.Namespace) -> int:
         # the fitted model as eelbot plan reads it (law, joints, current), or the robot file's
         model = (read_coefficient_model(args.coefficients_file, robot)
                  if args.coefficients_file else default_model(robot))
+        # the robot's model, built once here and handed to the planner, its twin, search and
+        # check, and every replan (docs/architecture.md, "The planning room")
+        swimmer = model.swimmer_for(robot)
         with phase(f"plan {world.name}: search and check in the twin"):
             planned = plan_for_run(world, robot, args.link, gait, coefficients=model,
-                                   acceptance_radius_m=args.radius)
+                                   acceptance_radius_m=args.radius, swimmer=swimmer)
         print(planned.outcome.message)
         print(f"coefficients: {model.describe()}")
         waypoints, navigator, uri = planned.waypoints_m, planned.navigator, planned.uri
@@ -261,7 +264,8 @@ def _bench(args: argparse.Namespace) -> int:
 
         options = ({} if args.check_unknown_current is None
                    else {"unknown_current_m_s": args.check_unknown_current})
-        results = run_closed_loop_bench(robot, model, seeds, out, show, options)
+        results = run_closed_loop_bench(robot, model, seeds, out, show, options,
+                                        model.swimmer_for(robot))
     command = (f"nice eelbot run --bench --worlds {args.worlds} --seed {args.seed}"
                + ("" if args.check_unknown_current is None
                   else f" --check-unknown-current {args.check_unknown_current:g}")

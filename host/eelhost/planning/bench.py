@@ -32,6 +32,7 @@ from eelhost.planning.uncertainty import DEFAULT_UNKNOWN_CURRENT_M_S, Coefficien
 from eelhost.planning.world import World
 from eelhost.planning.worlds import generate_world
 from eelsim.guidance import PURSUIT, GuidanceLaw
+from eelsim.model import SwimmerModel
 from eelsim.robot import Robot
 
 BENCH_DRAWS = 8
@@ -160,7 +161,8 @@ class BenchSummary:
 def bench_world(world: World, robot: Robot, coefficients: CoefficientModel, seed: int,
                 threads: int | None = 1,
                 unknown_current_m_s: float = DEFAULT_UNKNOWN_CURRENT_M_S,
-                guidance: GuidanceLaw = PURSUIT) -> WorldResult:
+                guidance: GuidanceLaw = PURSUIT,
+                swimmer: SwimmerModel | None = None) -> WorldResult:
     """Plan in one world and swim the plan in fresh draws of the water (module docstring).
 
     Parameters
@@ -176,6 +178,9 @@ def bench_world(world: World, robot: Robot, coefficients: CoefficientModel, seed
         The unknown current's bound, for the check and the bench's draws.
     guidance : GuidanceLaw
         The robot's guidance law (the planner's, and the bench's runs').
+    swimmer : SwimmerModel, optional
+        The model of the robot the planner swims, built once by the command
+        (:meth:`CoefficientModel.swimmer_for`; built here when not given).
 
     Returns
     -------
@@ -183,7 +188,8 @@ def bench_world(world: World, robot: Robot, coefficients: CoefficientModel, seed
     """
     t0, c0 = time.perf_counter(), time.process_time()
     planner = Planner(world, robot, coefficients, threads=threads, seed=seed,
-                      unknown_current_m_s=unknown_current_m_s, guidance=guidance)
+                      unknown_current_m_s=unknown_current_m_s, guidance=guidance,
+                      swimmer=swimmer)
     outcome = planner.plan()
     elapsed = time.perf_counter() - t0  # the planner's set-up (clearance and goal maps) too
     result = WorldResult(world.name, outcome.status, outcome.message, elapsed,
@@ -205,16 +211,18 @@ def bench_world(world: World, robot: Robot, coefficients: CoefficientModel, seed
 
 
 def _warm_up(robot: Robot, coefficients: CoefficientModel, seed: int,
-             threads: int | None, unknown_current_m_s: float, guidance: GuidanceLaw) -> None:
+             threads: int | None, unknown_current_m_s: float, guidance: GuidanceLaw,
+             swimmer: SwimmerModel | None = None) -> None:
     """Load the batched kernel and measure the swimming speed once (not timed)."""
     bench_world(generate_world(seed), robot, coefficients, seed, threads, unknown_current_m_s,
-                guidance)
+                guidance, swimmer)
 
 
 def _one(robot: Robot, coefficients: CoefficientModel, seed: int,
-         threads: int | None, unknown_current_m_s: float, guidance: GuidanceLaw) -> WorldResult:
+         threads: int | None, unknown_current_m_s: float, guidance: GuidanceLaw,
+         swimmer: SwimmerModel | None = None) -> WorldResult:
     return bench_world(generate_world(seed), robot, coefficients, seed, threads,
-                       unknown_current_m_s, guidance)
+                       unknown_current_m_s, guidance, swimmer)
 
 
 def run_bench(
@@ -227,6 +235,7 @@ def run_bench(
     jobs: int = 1,
     unknown_current_m_s: float = DEFAULT_UNKNOWN_CURRENT_M_S,
     guidance: GuidanceLaw = PURSUIT,
+    swimmer: SwimmerModel | None = None,
 ) -> BenchSummary:
     """Run the benchmark over ``count`` generated worlds (seeds ``seed`` .. ``seed + count - 1``).
 
@@ -246,6 +255,9 @@ def run_bench(
         The unknown current's bound (the check's and the bench's draws).
     guidance : GuidanceLaw
         The robot's guidance law.
+    swimmer : SwimmerModel, optional
+        The model of the robot the planner swims, built once by the command and handed to
+        every world's planner (built here once when not given; each process has its copy).
 
     Returns
     -------
@@ -253,19 +265,23 @@ def run_bench(
     """
     seeds = list(range(seed, seed + count))
     summary = BenchSummary()
+    if swimmer is None:
+        swimmer = coefficients.swimmer_for(robot)
     if jobs <= 1:
-        _warm_up(robot, coefficients, seed + count, threads, unknown_current_m_s, guidance)
+        _warm_up(robot, coefficients, seed + count, threads, unknown_current_m_s, guidance,
+                 swimmer)
         results: Iterable[WorldResult] = (_one(robot, coefficients, s, threads,
-                                               unknown_current_m_s, guidance) for s in seeds)
+                                               unknown_current_m_s, guidance, swimmer)
+                                          for s in seeds)
         _collect(summary, results, progress)
         return summary
     # spawned, not forked: a fork after the kernel's OpenMP runtime started is unsafe
     with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn"),
                              initializer=_warm_up,
                              initargs=(robot, coefficients, seed + count, threads,
-                                       unknown_current_m_s, guidance)) as pool:
+                                       unknown_current_m_s, guidance, swimmer)) as pool:
         results = pool.map(_one, *zip(*[(robot, coefficients, s, threads, unknown_current_m_s,
-                                         guidance) for s in seeds], strict=True))
+                                         guidance, swimmer) for s in seeds], strict=True))
         _collect(summary, results, progress)
     return summary
 

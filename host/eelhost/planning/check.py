@@ -84,7 +84,7 @@ def swim_legs(
                                world.start.position_m)
     sets = [c for w in waters for c in (w.straight, w.turning)]
     runner = Twin(twin.robot, sets, twin.gait, twin.options, twin.current_m_s,
-                  twin.acceptance_radius_m, twin.threads)
+                  twin.acceptance_radius_m, twin.threads, twin.model)
     vx, vy = twin.current_m_s
     currents = [(vx + w.current_offset_m_s[0], vy + w.current_offset_m_s[1]) for w in waters]
     period = runner.restart_steps or 1

@@ -21,6 +21,7 @@ from eelhost.planning.twin import Twin
 from eelhost.planning.uncertainty import CoefficientModel
 from eelsim.closed_loop import LoopOptions
 from eelsim.control import Gait
+from eelsim.model import SwimmerModel
 from eelsim.robot import Robot
 from eelsim.scenario import PATH_GAIT
 
@@ -72,6 +73,7 @@ def action_coverage(
     options: LoopOptions | None = None,
     lead_in_m: float = 0.4,
     threads: int | None = 1,
+    swimmer: SwimmerModel | None = None,
 ) -> Coverage:
     """Swim every action in each of 8 current directions (module docstring).
 
@@ -86,6 +88,9 @@ def action_coverage(
     options : LoopOptions, optional
     lead_in_m : float
     threads : int or None
+    swimmer : SwimmerModel, optional
+        The robot's model, built once by the command (:class:`eelhost.planning.twin.Twin`);
+        built once here when not given.
 
     Returns
     -------
@@ -98,7 +103,8 @@ def action_coverage(
         a = math.radians(direction)
         current = (current_speed_m_s * math.cos(a), current_speed_m_s * math.sin(a))
         twin = Twin(robot, coefficients.sets, gait, options or LoopOptions(), current,
-                    threads=threads)
+                    threads=threads, swimmer=swimmer)
+        swimmer = twin.model  # the next directions' twins share it
         waypoints = [[(lead_in_m, 0.0), (lead_in_m + d * math.cos(math.radians(b)),
                                          d * math.sin(math.radians(b)))] for d, b in legs]
         index = [s.actions.coefficient_index(b) for _, b in legs]

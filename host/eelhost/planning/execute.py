@@ -134,7 +134,8 @@ def swim(
     world : World
     waypoints : sequence of (x, y)
     twin : Twin
-        Robot, gait, loop options, current (its own coefficient sets are not used).
+        Robot and its model, gait, loop options, current (its own coefficient sets are not
+        used).
     coefficient_sets : sequence of (label, FluidCoefficients)
     duration_s : float
         Time limit of the runs.
@@ -159,7 +160,7 @@ def swim(
         raise ValueError("the plan has no waypoints to swim")
     sets = list(coefficient_sets)
     runner = Twin(twin.robot, [c for _, c in sets], twin.gait, twin.options, twin.current_m_s,
-                  twin.acceptance_radius_m, twin.threads)
+                  twin.acceptance_radius_m, twin.threads, twin.model)
     start = (*world.start.position_m, math.radians(world.start.heading_deg))
     r = len(sets)
     runs = runner.run(
@@ -172,7 +173,7 @@ def swim(
         starts=[start] * r,
         currents=currents,
     )
-    model = SwimmerModel.from_robot(twin.robot, sets[0][1])
+    model = twin.model  # the body: its dimensions, whatever the water
     n = model.n_links
     field = clearance if clearance is not None else ClearanceField(world)
     wps = np.asarray(waypoints, dtype=float)

@@ -102,8 +102,8 @@ _SPEEDS: dict[tuple, float] = {}
 
 
 def _swimming_speed(robot: Robot, coefficients: FluidCoefficients, gait: Gait,
-                    options: LoopOptions) -> float:
-    twin = Twin(robot, [coefficients], gait, options, (0.0, 0.0))
+                    options: LoopOptions, swimmer: SwimmerModel | None) -> float:
+    twin = Twin(robot, [coefficients], gait, options, (0.0, 0.0), swimmer=swimmer)
     runs = twin.run([[(10.0, 0.0)]], SPEED_RUN_S, stride=10)
     n = robot.n_links
     com = runs.states[0, :, n : n + 2]
@@ -114,7 +114,8 @@ def _swimming_speed(robot: Robot, coefficients: FluidCoefficients, gait: Gait,
 
 
 def swimming_speed_m_s(robot: Robot, coefficients: FluidCoefficients, gait: Gait = PATH_GAIT,
-                       options: LoopOptions | None = None) -> float:
+                       options: LoopOptions | None = None,
+                       swimmer: SwimmerModel | None = None) -> float:
     """The robot's steady straight swimming speed in still water, from a twin run.
 
     Parameters
@@ -123,6 +124,8 @@ def swimming_speed_m_s(robot: Robot, coefficients: FluidCoefficients, gait: Gait
     coefficients : FluidCoefficients
     gait : Gait
     options : LoopOptions, optional
+    swimmer : SwimmerModel, optional
+        The robot's model, handed to the twin (:class:`eelhost.planning.twin.Twin`).
 
     Returns
     -------
@@ -133,7 +136,7 @@ def swimming_speed_m_s(robot: Robot, coefficients: FluidCoefficients, gait: Gait
     key = (robot.model_dump_json(), type(coefficients).__name__,
            coefficients.as_array().tobytes(), repr(gait), repr(opts))
     if key not in _SPEEDS:  # one twin run per robot, coefficients, gait and loop
-        _SPEEDS[key] = _swimming_speed(robot, coefficients, gait, opts)
+        _SPEEDS[key] = _swimming_speed(robot, coefficients, gait, opts, swimmer)
     return _SPEEDS[key]
 
 
@@ -258,6 +261,11 @@ class Planner:
         The robot's guidance law, for the search and the check (default the paper's pure
         pursuit, which the tank's run loop steers with; :data:`PLANNING_GUIDANCE` is the
         integral line-of-sight law). It replaces the one of ``options``.
+    swimmer : SwimmerModel, optional
+        The model of the robot the planner swims, built once by the command
+        (:meth:`eelhost.planning.uncertainty.CoefficientModel.swimmer_for`) and handed on to the
+        twin, the search, the check and the executed swims, and to every replan's planner
+        (docs/architecture.md, "The planning room"); built here when not given.
     """
 
     def __init__(
@@ -276,6 +284,7 @@ class Planner:
         check: bool = True,
         threads: int | None = 1,
         guidance: GuidanceLaw = PURSUIT,
+        swimmer: SwimmerModel | None = None,
     ) -> None:
         world = coefficients.in_tank(world)
         robot = coefficients.robot_for(robot)
@@ -289,13 +298,15 @@ class Planner:
                                               self.unknown_current_m_s)
         self.repairs = repairs
         self.check = check
-        straight = coefficients.fits["straight"]
-        self.model = SwimmerModel.from_robot(robot, straight)
+        if swimmer is not None and swimmer.n_links != robot.n_links:
+            raise ValueError(f"the robot's model has {swimmer.n_links} links, the robot "
+                             f"{robot.n_links}")
+        self.model = swimmer if swimmer is not None else coefficients.swimmer_for(robot)
         self.body_half_width_m = float(self.model.half_axis_horizontal_m.max())
-        self.swimming_speed_m_s = min(
-            swimming_speed_m_s(robot, c, gait, self.options) for c in coefficients.sets
-        )
-        fastest = max(swimming_speed_m_s(robot, c, gait, self.options) for c in coefficients.sets)
+        speeds = [swimming_speed_m_s(robot, c, gait, self.options, self.model)
+                  for c in coefficients.sets]
+        self.swimming_speed_m_s = min(speeds)
+        fastest = max(speeds)
         base = settings or SearchSettings()
         # the body's half width and the world's clearance, never less than the settings ask
         margin = max(base.margin_m, self.body_half_width_m + world.clearance_m)
@@ -311,7 +322,7 @@ class Planner:
                 self.settings, robust_current_m_s=self.unknown_current_m_s,
                 robust_margin_m=self.body_half_width_m + ROBUST_MARGIN_M)
         self.twin = Twin(robot, coefficients.sets, gait, self.options, world.current_m_s,
-                         threads=threads)
+                         threads=threads, swimmer=self.model)
         self.clearance = ClearanceField(world)
         self.goal_distance = GoalDistance(world, self.clearance, self.body_half_width_m)
         # 1.3: the body's sway and a turn's cut corner let the centre of mass gain on the

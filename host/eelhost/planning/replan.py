@@ -170,7 +170,7 @@ def execute_with_replanning(
     world = planner.world
     truth = Twin(planner.robot, [coefficients], planner.gait, planner.options,
                  current_m_s if current_m_s is not None else world.current_m_s,
-                 planner.twin.acceptance_radius_m, planner.twin.threads)
+                 planner.twin.acceptance_radius_m, planner.twin.threads, planner.model)
     n = planner.model.n_links
     period = truth.restart_steps or 1
     state: FloatArray | None = None
@@ -755,7 +755,8 @@ class TankReplanner:
         twin = planner.twin
         current = np.add(planner.world.current_m_s, extra - planner_extra)
         return Twin(twin.robot, twin.coefficients, twin.gait, twin.options,
-                    (float(current[0]), float(current[1])), twin.acceptance_radius_m, twin.threads)
+                    (float(current[0]), float(current[1])), twin.acceptance_radius_m, twin.threads,
+                    twin.model)
 
     def _present_plan_hits(self, t_s: float) -> bool:
         """The last look-ahead, at most 1.5 s old, swam the present waypoints into contact."""

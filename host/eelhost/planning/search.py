@@ -43,7 +43,6 @@ from eelhost.planning.geometry import FloatArray
 from eelhost.planning.twin import Runs, Twin
 from eelhost.planning.world import World
 from eelsim.control import wrap_angle
-from eelsim.model import SwimmerModel
 
 REST_KEY = -1
 GOAL = -1
@@ -315,7 +314,7 @@ class Search:
         self.clearance = clearance
         self.goal_distance = goal_distance
         self.ground_speed_m_s = float(ground_speed_m_s)
-        self.model = SwimmerModel.from_robot(twin.robot, twin.coefficients[0])
+        self.model = twin.model  # the robot's, built once and handed on
         self.n = twin.n_links
         self.warm_steps = int(math.ceil(
             twin.options.camera.median_window / twin.options.camera.fps / twin.dt_s - 1e-9

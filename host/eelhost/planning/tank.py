@@ -25,6 +25,7 @@ from eelhost.planning.search import SearchSettings
 from eelhost.planning.uncertainty import CoefficientModel, default_model
 from eelhost.planning.world import Current, World
 from eelsim.control import Gait
+from eelsim.model import SwimmerModel
 from eelsim.robot import Robot
 from eelsim.scenario import PATH_GAIT
 
@@ -88,6 +89,7 @@ def plan_for_run(
     coefficients: CoefficientModel | None = None,
     acceptance_radius_m: float = 0.15,
     planner_options: dict[str, Any] | None = None,
+    swimmer: SwimmerModel | None = None,
 ) -> RunPlan:
     """Plan in a world for ``eelbot run --plan`` (module docstring).
 
@@ -106,6 +108,10 @@ def plan_for_run(
     planner_options : dict, optional
         More keyword arguments of :class:`Planner` (the benchmark's ``unknown_current_m_s``),
         for the first plan and every replan.
+    swimmer : SwimmerModel, optional
+        The model of the robot the planner swims, built once by the command
+        (:meth:`CoefficientModel.swimmer_for`; built here when not given) and handed to the
+        first plan's planner and every replan's.
 
     Returns
     -------
@@ -117,7 +123,8 @@ def plan_for_run(
         The planner refused the world, or found no plan that passes its check.
     """
     model = coefficients or default_model(robot)
-    options = planner_options or {}
+    options = {**(planner_options or {}),
+               "swimmer": swimmer if swimmer is not None else model.swimmer_for(robot)}
     planner = Planner(world, robot, model, gait, **options)
 
     def planner_for(extra_m_s: FloatArray) -> Planner:

@@ -36,6 +36,7 @@ from eelsim.batch import DEFAULT_LANES, BatchSpec, codegen, run_spec
 from eelsim.closed_loop import LoopOptions
 from eelsim.control import Gait
 from eelsim.fluid import FluidCoefficients
+from eelsim.model import SwimmerModel
 from eelsim.robot import Robot
 from eelsim.scenario import Scenario
 
@@ -136,6 +137,11 @@ class Twin:
         Waypoint acceptance radius of the guidance.
     threads : int or None
         Threads of the batched kernel.
+    swimmer : SwimmerModel, optional
+        The robot's model (:meth:`eelsim.model.SwimmerModel.from_robot`), built once by the
+        command and handed on (docs/architecture.md, "The planning room"); built from ``robot``
+        on first use when not given. Its body is the planner's and the check's, and the batch's
+        step check reads it (``BatchSpec.build``'s ``models``).
     """
 
     def __init__(
@@ -147,6 +153,7 @@ class Twin:
         current_m_s: tuple[float, float],
         acceptance_radius_m: float = 0.15,
         threads: int | None = 1,
+        swimmer: SwimmerModel | None = None,
     ) -> None:
         if not coefficients:
             raise ValueError("the twin needs at least one coefficient set")
@@ -157,6 +164,7 @@ class Twin:
         self.current_m_s = (float(current_m_s[0]), float(current_m_s[1]))
         self.acceptance_radius_m = float(acceptance_radius_m)
         self.threads = threads
+        self._model = swimmer
         self.dt_s = self.options.timing.dt_s
         self.restart_steps = restart_period_steps(self.options)
         self.n_links = robot.n_links
@@ -165,6 +173,13 @@ class Twin:
         self._direction_deg = (
             math.degrees(math.atan2(self.current_m_s[1], self.current_m_s[0])) if self._speed else 0
         )
+
+    @property
+    def model(self) -> SwimmerModel:
+        """The robot's model: the one handed in, else built from the robot once."""
+        if self._model is None:
+            self._model = SwimmerModel.from_robot(self.robot)
+        return self._model
 
     def scenario(
         self,
@@ -265,7 +280,7 @@ class Twin:
         index = (np.zeros(r, dtype=np.int64) if coefficient_index is None
                  else np.asarray(coefficient_index, dtype=np.int64))
         coeffs = [self.coefficients[i] for i in index]
-        spec = BatchSpec.build(self.robot, scenarios, coeffs, self.options, 0)
+        spec = BatchSpec.build(self.robot, scenarios, coeffs, self.options, 0, models=self.model)
         changes: dict = {}
         if states is not None:
             changes["initial_state"] = np.asarray(states, dtype=float).reshape(r, -1).copy()

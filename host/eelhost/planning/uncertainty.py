@@ -43,6 +43,7 @@ from eelhost.errors import UserError
 from eelhost.estimation.pipeline import CoefficientsError, fitted_models, read_coefficients_file
 from eelhost.planning.world import Current, World
 from eelsim.fluid import FluidCoefficients
+from eelsim.model import SwimmerModel
 from eelsim.robot import Robot
 
 FloatArray = NDArray[np.float64]
@@ -102,6 +103,25 @@ class CoefficientModel:
     def robot_for(self, robot: Robot) -> Robot:
         """The robot the planner swims: the fitted model's (its law and joints), else ``robot``."""
         return self.robot if self.robot is not None else robot
+
+    def swimmer_for(self, robot: Robot) -> SwimmerModel:
+        """The model of the robot the planner swims (:meth:`robot_for`) with the straight fit.
+
+        A command builds it once and hands it on to the planner, its twin, search and check,
+        and every replan (docs/architecture.md, "The planning room"): only the body's
+        dimensions are read from it, and the batch's step check when the fit is the robot's own
+        coefficients (the fitted model's robot has the straight fit's).
+
+        Parameters
+        ----------
+        robot : Robot
+            The robot file's robot.
+
+        Returns
+        -------
+        SwimmerModel
+        """
+        return SwimmerModel.from_robot(self.robot_for(robot), self.fits["straight"])
 
     def in_tank(self, world: World) -> World:
         """``world`` with the fitted ambient current of the tank added to its own current.

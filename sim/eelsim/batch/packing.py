@@ -156,6 +156,7 @@ class BatchSpec:
         coefficients: ArrayLike | FluidCoefficients | Sequence[FluidCoefficients] | None = None,
         options: LoopOptions | None = None,
         seeds: int | ArrayLike = 0,
+        models: SwimmerModel | Sequence[SwimmerModel] | None = None,
     ) -> BatchSpec:
         """Lay out a batch of runs.
 
@@ -172,6 +173,11 @@ class BatchSpec:
             Shared by all runs.
         seeds : int or array_like of int
             Seed of each run's jitter and heading noise (as ``simulate_closed_loop``'s ``seed``).
+        models : SwimmerModel or sequence of SwimmerModel, optional
+            The robots' models where the caller has built them (one per robot, in the order of
+            ``robots``), so that a batch does not rebuild them: the joint model's step check
+            and the blow-up hint read a robot's model with its own coefficients, so one with
+            other coefficients or other links is not used and the robot's own is built.
 
         Returns
         -------
@@ -186,6 +192,11 @@ class BatchSpec:
         """
         opts = options or LoopOptions()
         robot_list = [robots] if isinstance(robots, Robot) else list(robots)
+        model_list = ([] if models is None else [models] if isinstance(models, SwimmerModel)
+                      else list(models))
+        if model_list and len(model_list) != len(robot_list):
+            raise ValueError(f"{len(model_list)} models for {len(robot_list)} robots")
+        given = {id(rb): m for rb, m in zip(robot_list, model_list, strict=False)}
         scen_list = [scenarios] if isinstance(scenarios, Scenario) else list(scenarios)
         if not robot_list or not scen_list:
             raise ValueError("a batch needs at least one robot and one scenario")
@@ -218,12 +229,13 @@ class BatchSpec:
 
         # -- robots: per-link geometry, gains (computed once per distinct robot), and what the
         # joint model says of the step (the servo model refuses an unstable one)
-        own_models = [SwimmerModel.from_robot(rb) for rb in robot_list]
+        rob = [_robot_arrays(rb, opts) for rb in robot_list]
+        own_models = [_own_model(rb, given.get(id(rb)), arrays)
+                      for rb, arrays in zip(robot_list, rob, strict=True)]
         for rb, own in zip(robot_list, own_models, strict=True):
             joints.check_step(rb.joints, own, dt)
         hints = tuple(blow_up_hint(rb, own, dt)
                       for rb, own in zip(robot_list, own_models, strict=True))
-        rob = [_robot_arrays(rb, opts) for rb in robot_list]
         per_robot = {k: np.stack([r[k] for r in rob]) for k in rob[0]}
         rsel = {k: v[robot_idx] for k, v in per_robot.items()}
         if coeff_arr is None:
@@ -323,6 +335,24 @@ def _coefficient_array(coefficients: Any, law: FluidLaw) -> FloatArray:
             f"({', '.join(law.coefficient_names)}), got {arr.shape}"
         )
     return arr
+
+
+def _own_model(robot: Robot, model: SwimmerModel | None,
+               arrays: dict[str, FloatArray]) -> SwimmerModel:
+    """``robot``'s model with its own coefficients: ``model`` when it is one, else built.
+
+    ``model`` is checked against the robot's coefficients and its link arrays (``arrays``, from
+    :func:`_robot_arrays`), so a model of another robot is never used for it.
+    """
+    if (model is not None and model.n_links == robot.n_links
+            and model.coefficients == robot.hydrodynamics
+            and all(np.array_equal(mine, arrays[key]) for mine, key in (
+                (model.half_length_m, "half"), (model.mass_kg, "mass"),
+                (model.yaw_inertia_kg_m2, "inertia"),
+                (model.half_axis_vertical_m, "a"), (model.half_axis_horizontal_m, "b")))
+            and model.water_density_kg_m3 == float(arrays["rho"])):
+        return model
+    return SwimmerModel.from_robot(robot)
 
 
 def _distinct(items: list, n_runs: int) -> tuple[list, IntArray]:
