@@ -10,6 +10,11 @@ ones (a GA's children, CMA-ES's samples), so :class:`RunLengths` guesses each ru
 the nearest earlier candidate on the same experiment and the kernel packs runs of about the same
 length together: on the paper's GA this took the kernel's lane-steps from 243 M to about 197 M
 (lanes busy 75 % -> 93 % of the time). The guess changes the speed only, never a result.
+
+:class:`BatchBackend` is the backend an :class:`~eelhost.estimation.evaluate.Evaluator` holds: it
+keeps the run lengths of its evaluator's candidates, and with a ``map_function`` (a Dask
+cluster's :class:`~eelhost.estimation.cluster.ClusterMap`) spreads each call in blocks
+(:func:`simulate_batch_spread`).
 """
 
 from __future__ import annotations
@@ -20,6 +25,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 from scipy.spatial import cKDTree
 
+from eelhost.estimation.runs import PreparedExperiment, Simulated
 from eelhost.estimation.space import ParameterSpace
 from eelsim.batch import run_batch
 from eelsim.closed_loop import LoopOptions
@@ -86,12 +92,12 @@ class RunLengths:
 
 def simulate_batch(
     robots: Sequence[Robot],
-    prepared: Sequence,
+    prepared: Sequence[PreparedExperiment],
     parameters: np.ndarray,
     space: ParameterSpace,
     lengths: RunLengths | None = None,
     expected: np.ndarray | None = None,
-):
+) -> Simulated:
     """Simulate every prepared experiment for every candidate with ``eelsim.batch``.
 
     Parameters
@@ -111,8 +117,6 @@ def simulate_batch(
     -------
     Simulated
     """
-    from eelhost.estimation.evaluate import Simulated
-
     c, e = parameters.shape[0], len(prepared)
     coefficients = space.coefficient_array(parameters)
     currents = space.current_array(parameters)  # (C, 2), added to each experiment's own
@@ -153,7 +157,7 @@ def simulate_batch(
     return Simulated(pos, heading, failure, left, arrival, failed, steps)
 
 
-def _block_job(args: tuple):
+def _block_job(args: tuple) -> Simulated:
     """One block of candidates simulated on a worker (its process keeps the kernel loaded)."""
     robots, prepared, parameters, space, expected = args
     return simulate_batch(robots, prepared, parameters, space, expected=expected)
@@ -162,11 +166,11 @@ def _block_job(args: tuple):
 def simulate_batch_spread(
     map_function: Callable,
     robots: Sequence[Robot],
-    prepared: Sequence,
+    prepared: Sequence[PreparedExperiment],
     parameters: np.ndarray,
     space: ParameterSpace,
     lengths: RunLengths | None = None,
-):
+) -> Simulated:
     """:func:`simulate_batch` with the candidates cut into blocks, each a task of ``map_function``.
 
     On a Dask cluster (:class:`~eelhost.estimation.cluster.ClusterMap`) each block is one task on
@@ -188,8 +192,6 @@ def simulate_batch_spread(
     -------
     Simulated
     """
-    from eelhost.estimation.evaluate import Simulated
-
     c = parameters.shape[0]
     blocks = max(1, min(c, int(getattr(map_function, "blocks", 2))))
     expected = lengths.predict(parameters) if lengths is not None else None
@@ -211,3 +213,38 @@ def simulate_batch_spread(
     if lengths is not None:
         lengths.record(parameters, sim.steps)
     return sim
+
+
+class BatchBackend:
+    """The batched kernel as an evaluator's backend (a ``SimulationBackend``).
+
+    Parameters
+    ----------
+    map_function : callable, optional
+        Spreads each call's candidates in blocks, one task each (:func:`simulate_batch_spread`;
+        a Dask cluster's :class:`~eelhost.estimation.cluster.ClusterMap`); None: this machine's
+        kernel on all its cores.
+    """
+
+    def __init__(self, map_function: Callable | None = None) -> None:
+        self.map_function = map_function
+        self.lengths: RunLengths | None = None  # learned from the calls, for the kernel's packing
+
+    def fresh(self) -> BatchBackend:
+        """A backend on the same machines that has learned no run lengths yet."""
+        return BatchBackend(self.map_function)
+
+    def simulate(
+        self,
+        robots: Sequence[Robot],
+        prepared: Sequence[PreparedExperiment],
+        parameters: np.ndarray,
+        space: ParameterSpace,
+    ) -> Simulated:
+        """Every (candidate, experiment) run through the kernel (``SimulationBackend.simulate``)."""
+        if self.lengths is None:
+            self.lengths = RunLengths(len(prepared))
+        if self.map_function is not None:  # blocks of runs as tasks on the cluster
+            return simulate_batch_spread(self.map_function, robots, prepared, parameters, space,
+                                         self.lengths)
+        return simulate_batch(robots, prepared, parameters, space, self.lengths)
