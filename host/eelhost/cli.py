@@ -1,7 +1,8 @@
 """The ``eelbot`` command line: one entry point, a subcommand per job.
 
-Each subcommand lives in its own module under ``eelhost.commands`` and registers itself through
-``add_parser(subparsers)``; this file only wires them together and owns what every command shares:
+Each subcommand lives in its own module under ``eelhost.commands`` and registers its
+``add_parser(subparsers)`` in :data:`eelhost.commands.COMMANDS` (plug-ins: the ``eelbot.commands``
+entry-point group); this file only wires them together and owns what every command shares:
 
 - the level of the library's logging (``-v`` for more, ``-q`` for less);
 - the form of progress (``--progress``, :mod:`eelhost.progress`);
@@ -28,53 +29,17 @@ import re
 import sys
 
 from eelhost import progress
-from eelhost.commands import (
-    bench,
-    calibrate,
-    campaign,
-    dataset,
-    estimate,
-    estimate_bench,
-    export,
-    markers,
-    plan,
-    ports,
-    report,
-    robot,
-    run,
-    simulate,
-    speeds,
-    track,
-    validate,
-    vision_bench,
-)
+from eelhost.commands import COMMANDS, AddParser
 from eelhost.errors import EXIT_INTERRUPTED, EXIT_USER_ERROR, UserError, exit_status_table
 from eelhost.files import output_failure
+from eelsim.registry import PluginError, RegistryError, UnknownNameError
 from eelsim.robot import RobotFileError
 from eelsim.scenario import ScenarioError
 from eelsim.timing import TimingError
 
-COMMANDS = (
-    simulate,
-    speeds,
-    dataset,
-    estimate,
-    estimate_bench,
-    validate,
-    report,
-    vision_bench,
-    markers,
-    calibrate,
-    campaign,
-    bench,
-    run,
-    robot,
-    ports,
-    plan,
-    export,
-    track,
-)
-USER_ERRORS = (UserError, RobotFileError, ScenarioError, TimingError)
+log = logging.getLogger(__name__)
+
+USER_ERRORS = (UserError, RobotFileError, ScenarioError, TimingError, UnknownNameError)
 LEVELS = (logging.ERROR, logging.WARNING, logging.INFO, logging.DEBUG)  # -q, default, -v, -vv
 # an option value that starts with a minus and a digit: -0.6,2.7  -.5  -1e3  "-0.5,0.2;1,0"
 NEGATIVE_VALUE = re.compile(r"^-(\d|\.\d)[\d.eE+\-,;\s]*$")
@@ -177,9 +142,30 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(
         dest="command", metavar="COMMAND", required=True, parser_class=CommandParser
     )
-    for module in COMMANDS:
-        module.add_parser(sub)
+    for name, add_parser in sorted(COMMANDS.items()):  # alphabetical, plug-ins among them
+        _add_command(sub, name, add_parser)
     return parser
+
+
+def _add_command(sub: argparse._SubParsersAction, name: str, add_parser: AddParser) -> None:
+    """Add one registered subcommand; a plug-in's that fails is said and left out.
+
+    A bundled command's failure is a bug and raises; a plug-in's (``eelbot.commands`` entry
+    point) must not take the whole command line down with it, so it is logged, naming the entry
+    point, and the other commands work.
+    """
+    origin = COMMANDS.entry(name).origin
+    if origin == "built-in":
+        add_parser(sub)
+        return
+    try:
+        add_parser(sub)
+        if name not in sub.choices:
+            raise RegistryError(f"its add_parser added no subcommand named {name!r}")
+    except Exception as err:  # a plug-in's bug: said, and the rest of the CLI works
+        sub.choices.pop(name, None)
+        sub._choices_actions[:] = [a for a in sub._choices_actions if a.dest != name]
+        log.warning("%s", PluginError(str(COMMANDS.group), origin, f"{type(err).__name__}: {err}"))
 
 
 def log_level(verbose: int, quiet: int) -> int:

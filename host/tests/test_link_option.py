@@ -108,8 +108,9 @@ def test_a_transport_registered_later_is_in_the_link_help_and_message(command, m
     from eelhost.link import uri
 
     toy = uri.TransportScheme(name="toy", parameters=(), target="", open=lambda *a: None,
-                              list_ports=list, example="toy://tank-3")
-    monkeypatch.setitem(uri._SCHEMES, "toy", toy)
+                              list_ports=list, example="toy://tank-3", description="a toy")
+    monkeypatch.setattr(uri.TRANSPORTS, "_entries", dict(uri.TRANSPORTS._entries))
+    uri.register_transport(toy)
     with pytest.raises(SystemExit):
         cli.main([*LINK_COMMANDS[command], "--help"])
     assert "toy://tank-3" in capsys.readouterr().out

@@ -144,7 +144,7 @@ def test_serial_port_that_comes_back_is_reconnected(tmp_path) -> None:
 
 
 def test_a_registered_transport_opens_by_its_scheme_and_lists_its_ports(monkeypatch) -> None:
-    monkeypatch.setattr(uri, "_SCHEMES", dict(uri._SCHEMES))  # the registration ends with the test
+    monkeypatch.setattr(uri.TRANSPORTS, "_entries", dict(uri.TRANSPORTS._entries))  # ends with the test
 
     def open_loopback(u, robot, clock):
         return Link(SerialTransport("loop://"), clock or ManualClock())
@@ -153,6 +153,7 @@ def test_a_registered_transport_opens_by_its_scheme_and_lists_its_ports(monkeypa
         TransportScheme(
             "loopback", ("delay",), "", open_loopback,
             lambda: [Port("loopback://", "bytes come back")], "loopback://",
+            description="bytes sent come back",
         )
     )
     link = open_link("loopback://?delay=0")

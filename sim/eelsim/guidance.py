@@ -40,7 +40,7 @@ wall time.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -48,11 +48,36 @@ from numpy.typing import NDArray
 
 from eelsim.camera import MedianFilter
 from eelsim.control import heading_offset, wrap_angle
+from eelsim.registry import Registry
 
 FloatArray = NDArray[np.float64]
 
-GUIDANCE_LAWS = ("pursuit", "ilos")
-"""The guidance laws by name: the paper's pure pursuit, integral line-of-sight path following."""
+SteeringLaw = Callable[["Guidance", FloatArray], float]
+"""``steer(guidance, waypoint) -> gamma``: a law's offset from the latest filtered pose, rad."""
+
+GUIDANCE_LAWS: Registry[SteeringLaw] = Registry("guidance law", None)
+"""The guidance laws by name, each its steering function (:mod:`eelsim.registry`).
+
+Closed to plug-ins (no entry-point group): the batched kernel carries every law's code
+(``eelsim.batch.kernel_template._observe``, tested against these), so a law is added here and
+there together."""
+
+
+@GUIDANCE_LAWS.add("pursuit", "the paper's pure pursuit of each waypoint (default)")
+def _steer_pursuit(guidance: Guidance, waypoint: FloatArray) -> float:
+    pose = guidance.filtered_pose
+    assert pose is not None  # steered only after a pose
+    return heading_offset(pose[:2], float(pose[2]), waypoint, guidance.k_theta)
+
+
+@GUIDANCE_LAWS.add("ilos", "integral line-of-sight path following along each leg")
+def _steer_ilos(guidance: Guidance, waypoint: FloatArray) -> float:
+    pose, start = guidance.filtered_pose, guidance.leg_start_m
+    assert pose is not None and start is not None  # set by the first pose
+    theta_ref, di_x, di_y = ilos_reference(pose[:2], start, waypoint, guidance.integral_s,
+                                           guidance.law, guidance.control_period_s)
+    guidance.integral_s += (di_x, di_y)
+    return guidance.k_theta * float(wrap_angle(theta_ref - float(pose[2])))
 
 
 @dataclass(frozen=True)
@@ -90,7 +115,7 @@ class GuidanceLaw:
                                                   and self.heading_gain > 0):
             raise ValueError(f"heading gain must be positive, got {self.heading_gain}")
         if self.name not in GUIDANCE_LAWS:
-            raise ValueError(f"unknown guidance law {self.name!r}: one of {', '.join(GUIDANCE_LAWS)}")
+            raise ValueError(GUIDANCE_LAWS.unknown_message(self.name))
         if self.name == "ilos":
             if not (math.isfinite(self.lookahead_m) and self.lookahead_m > 0):
                 raise ValueError(f"ILOS look-ahead must be positive, got {self.lookahead_m}")
@@ -319,17 +344,7 @@ class Guidance:
         if self._filtered is None:
             return self._offset
         waypoint = self.waypoints_m[min(self._target, len(self.waypoints_m) - 1)]
-        if self.law.integral:
-            start = self.leg_start_m
-            assert start is not None  # set by the first pose
-            theta_ref, di_x, di_y = ilos_reference(self._filtered[:2], start, waypoint,
-                                                   self.integral_s, self.law,
-                                                   self.control_period_s)
-            self.integral_s += (di_x, di_y)
-            gamma = self.k_theta * float(wrap_angle(theta_ref - float(self._filtered[2])))
-        else:
-            gamma = heading_offset(self._filtered[:2], float(self._filtered[2]), waypoint,
-                                   self.k_theta)
+        gamma = GUIDANCE_LAWS[self.law.name](self, waypoint)
         if self.offset_limit_rad is not None:
             gamma = float(np.clip(gamma, -self.offset_limit_rad, self.offset_limit_rad))
         self._offset = gamma

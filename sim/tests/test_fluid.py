@@ -19,12 +19,7 @@ from eelsim.closed_loop import simulate_closed_loop
 from eelsim.dynamics import accelerations, fluid_link_forces
 from eelsim.fluid import (
     FLUID_LAWS,
-    GALILEAN,
-    LIGHTHILL,
-    LINEAR_QUADRATIC,
     MORISON,
-    RESISTIVE,
-    REYNOLDS,
     FluidCoefficients,
     FluidLaw,
     HydroCoefficients,
@@ -102,7 +97,7 @@ TOY = ToyLaw()
 def toy_law():
     register_fluid_law(TOY)
     yield TOY
-    FLUID_LAWS.pop(TOY.name, None)
+    FLUID_LAWS.remove(TOY.name)
 
 
 def _lane(fluid, r):
@@ -159,10 +154,7 @@ def _batched_forces(law, n, lanes, rng, still_water):
     return got, want
 
 
-@pytest.mark.parametrize("law", [MORISON, GALILEAN, LINEAR_QUADRATIC, LIGHTHILL, RESISTIVE,
-                                 REYNOLDS, FLUID_LAWS["morison_lift"],
-                                 FLUID_LAWS["lighthill_lift"], FLUID_LAWS["resistive_lift"], TOY],
-                         ids=lambda law: law.name)
+@pytest.mark.parametrize("law", [*FLUID_LAWS.values(), TOY], ids=lambda law: law.name)
 @pytest.mark.parametrize("n_links", [3, 6, 8])
 @pytest.mark.parametrize("still_water", [False, True])
 def test_each_laws_kernel_code_computes_its_numpy_forces(law, n_links, still_water):
@@ -247,3 +239,22 @@ def test_a_new_law_works_from_the_robot_description_to_the_batched_kernel(toy_la
     assert np.allclose(res.states[0], ref.states, rtol=0, atol=1e-9)
     with pytest.raises(ValueError, match=r"shape \(R, 3\) or \(3,\) \(k_t, k_n, k_a\)"):
         run_batch(robot, s, coefficients=[0.008, 0.776, 0.618, 0.007])
+
+
+def test_a_new_law_joins_the_comparison_only_when_it_declares_itself_a_candidate(toy_law):
+    from eelsim.fluid import candidate_laws
+
+    assert toy_law.name in FLUID_LAWS and toy_law.name not in candidate_laws()
+
+    class Candidate(ToyLaw):
+        name: ClassVar[str] = "toy_candidate"
+        candidate: ClassVar[bool] = True
+        coefficients = type("ToyCandidateCoefficients", (ToyCoefficients,),
+                            {"__annotations__": {"law_name": ClassVar[str]},
+                             "law_name": "toy_candidate"})
+
+    register_fluid_law(Candidate(), "a toy law that asks to be compared")
+    try:
+        assert candidate_laws()[-1] == "toy_candidate"
+    finally:
+        FLUID_LAWS.remove("toy_candidate")

@@ -231,11 +231,13 @@ def test_the_reynolds_law_drags_as_speed_to_the_power_one_and_a_half(robot):
     assert forces[0][0] < 0 and forces[0][1] < 0  # against the motion
 
 
-def test_only_the_plant_law_and_the_lift_variants_are_left_out_of_the_fitting_candidates():
-    assert candidate_laws() == ("morison", "galilean", "linear_quadratic", "lighthill",
-                                "resistive")
-    assert not get_fluid_law("reynolds").candidate
-    assert not any(FLUID_LAWS[f"{name}_lift"].candidate for name in (*candidate_laws(), "reynolds"))
+def test_the_candidates_are_the_laws_that_declare_themselves_so_and_their_lift_variants():
+    bases = ("morison", "galilean", "linear_quadratic", "lighthill", "resistive")
+    assert candidate_laws(lift_variants=False) == bases
+    assert candidate_laws() == (*bases, *(f"{name}_lift" for name in bases))
+    assert not get_fluid_law("reynolds").candidate and not FLUID_LAWS["reynolds_lift"].candidate
+    for name in candidate_laws():
+        assert "candidate" in vars(type(FLUID_LAWS[name]))  # declared by the law, not inherited
     for name in FLUID_LAWS:
         law = get_fluid_law(name)
         assert law.bounds.shape == (len(law.coefficient_names), 2)

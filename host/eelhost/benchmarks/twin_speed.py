@@ -377,7 +377,7 @@ def _law_rates(batch: ModuleType, robot: Robot, settings: TwinBenchSettings) -> 
     from eelhost.benchmarks.engine_rounds import generation_spec
     from eelsim.fluid import candidate_laws, get_fluid_law
 
-    laws = list(candidate_laws())
+    laws = list(candidate_laws(lift_variants=False))
     pd_robot = robot if pd_gains(robot.joints) is not None else robot.with_joints(
         load_robot().joints)
     specs = {}

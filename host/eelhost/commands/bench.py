@@ -10,6 +10,7 @@ import argparse
 import sys
 
 from eelhost.benchmarks.twin_speed import TwinBenchSettings, twin_speed_report
+from eelhost.commands import COMMANDS
 from eelhost.commands.common import (
     COUNT,
     add_robot_options,
@@ -19,11 +20,12 @@ from eelhost.commands.common import (
 )
 
 
+@COMMANDS.add("bench", "speed of the twin: single run, one GA generation, MuJoCo comparison")
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register the subcommand."""
     p = sub.add_parser(
         "bench",
-        help="speed of the twin: single run, one GA generation, MuJoCo comparison",
+        help=COMMANDS.description("bench"),
         description="Benchmark the batched closed-loop kernel (and MuJoCo on the same robot, each "
         "engine timed alone in its own process, in rounds) and print the report (--write: also "
         "docs/benchmarks.md). Ratios are measured within each round: on a loaded machine they "

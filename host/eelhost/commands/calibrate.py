@@ -18,6 +18,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from eelhost.commands import COMMANDS
 from eelhost.commands.common import OptionError, floats
 from eelhost.vision.calibration import (
     Calibration,
@@ -35,11 +36,15 @@ from eelhost.vision.sources import IMAGE_SUFFIXES, FrameSourceError, open_source
 SYNTHETIC_BOARD_ORIGIN = "0.2,0.6"  # the default board lies in the synthetic tank's view there
 
 
+@COMMANDS.add(
+    "calibrate",
+    "calibrate the camera (ChArUco board or tank corners; optional lens) or check it",
+)
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register the subcommand."""
     p = sub.add_parser(
         "calibrate",
-        help="calibrate the camera (ChArUco board or tank corners; optional lens) or check it",
+        help=COMMANDS.description("calibrate"),
         description="Find the ChArUco board in a frame (or take the four tank corners, clicked or "
         "given), fit the pixels <-> metres homography at the markers' height, print the "
         "reprojection error in pixels and metres, and write the calibration file. Example: "

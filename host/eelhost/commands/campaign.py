@@ -16,6 +16,7 @@ import time
 from pathlib import Path
 from urllib.parse import parse_qsl, urlencode
 
+from eelhost.commands import COMMANDS
 from eelhost.commands.common import NON_NEGATIVE, OptionError
 from eelhost.commands.link_options import add_link_options, resolve_link_options
 from eelhost.commands.run import add_take_options, current_option, view_opener
@@ -32,11 +33,15 @@ from eelsim.control import Gait
 from eelsim.robot import load_robot
 
 
+@COMMANDS.add(
+    "campaign",
+    "run a protocol of takes (the paper's gait grid by default) into a dataset",
+)
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register the subcommand."""
     p = sub.add_parser(
         "campaign",
-        help="run a protocol of takes (the paper's gait grid by default) into a dataset",
+        help=COMMANDS.description("campaign"),
         description="Run every take of the plan (default: the paper's 4 x 4 gait grid, straight "
         "and turning, the corner gaits for training) with eelbot run's loop and recording, into "
         "--out, a dataset folder eelbot estimate loads. Resumable: run it again to go on. "

@@ -192,19 +192,44 @@ def add_robot_options(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--coefficients",
-        metavar="Cf,Cd,Ca,Cm",
-        type=lambda s: floats(s, 4),
-        help="hydrodynamic coefficients (default: the robot file's)",
+        metavar="NAME=VALUE,...",
+        type=coefficient_text,
+        help="the robot file's fluid law's coefficients, by name (C_d=0.8,C_a=1.0: the others "
+        "keep the robot file's values) or all in the law's order (0.008,0.776,0.618,0.007 for "
+        "morison's C_f,C_d,C_a,C_m) (default: the robot file's)",
     )
 
 
+def coefficient_text(text: str) -> str:
+    """``--coefficients``'s argparse ``type``: the text, checked for form only.
+
+    The law, and so the names and the count, are the robot file's, known after parsing;
+    :func:`robot_and_coefficients` reads the values (:meth:`FluidCoefficients.from_text`).
+    """
+    items = [item.strip() for item in text.split(",") if item.strip()]
+    if not items:
+        raise argparse.ArgumentTypeError(f"expected NAME=VALUE,... or numbers, got {text!r}")
+    return text
+
+
 def robot_and_coefficients(args: argparse.Namespace) -> tuple[Robot, FluidCoefficients]:
-    """Load the robot and the coefficients chosen on the command line."""
+    """Load the robot and the coefficients chosen on the command line.
+
+    ``--coefficients`` names coefficients of the robot file's law, or gives them all in its
+    order (:meth:`eelsim.fluid.FluidCoefficients.from_text`); a wrong name or count is an
+    :class:`OptionError` naming the law's coefficients.
+    """
     robot = load_robot(args.robot)
     if not args.coefficients:
         return robot, robot.hydrodynamics
+    record = type(robot.hydrodynamics)
     with rejected_as("--coefficients"):
-        return robot, type(robot.hydrodynamics).from_array(args.coefficients)
+        try:
+            return robot, record.from_text(args.coefficients, robot.hydrodynamics)
+        except ValidationError:
+            raise
+        except ValueError as err:
+            raise OptionError(f"--coefficients: {err}") from None
 
 
 def add_loop_options(p: argparse.ArgumentParser) -> None:
@@ -240,13 +265,12 @@ def loop_options(args: argparse.Namespace, stop_at_goal: bool = True) -> LoopOpt
 
 def add_fit_options(p: argparse.ArgumentParser) -> None:
     """Options of a coefficient fit (method, budgets, backend, clock offsets, resume)."""
-    from eelhost.estimation.methods import method_descriptions
-    from eelhost.estimation.pipeline import METHODS
+    from eelhost.estimation.methods import method_descriptions, method_names
 
     g = p.add_argument_group("fitting")
     g.add_argument(
         "--method",
-        choices=METHODS,
+        choices=method_names(),  # read now, so a plug-in's method is offered
         default="cmaes",
         # the registry's own descriptions, so the help says what the code does
         help="; ".join(f"{name}: {text}" for name, text in method_descriptions().items()),

@@ -7,6 +7,7 @@ import dataclasses
 import tomllib
 from pathlib import Path
 
+from eelhost.commands import COMMANDS
 from eelhost.commands.common import (
     COUNT,
     NON_NEGATIVE,
@@ -28,11 +29,12 @@ from eelsim.fluid import FLUID_LAWS
 from eelsim.robot import load_robot
 
 
+@COMMANDS.add("dataset", "generate a virtual-tank dataset")
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register the subcommand."""
     p = sub.add_parser(
         "dataset",
-        help="generate a virtual-tank dataset",
+        help=COMMANDS.description("dataset"),
         description="Record the paper's 32 experiments and its two paths from the twin "
         "with true coefficients (default: table 3, straight and turning rows).",
     )

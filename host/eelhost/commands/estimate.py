@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from eelhost.commands import COMMANDS
 from eelhost.commands.common import add_fit_options, fit_settings
 from eelhost.data.experiments import load_dataset
 from eelhost.estimation.pipeline import fit_motion, write_coefficients
@@ -12,11 +13,12 @@ from eelhost.files import check_output_folder
 from eelhost.progress import Progress
 
 
+@COMMANDS.add("estimate", "fit C_f, C_d, C_a, C_m to a dataset")
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register the subcommand."""
     p = sub.add_parser(
         "estimate",
-        help="fit C_f, C_d, C_a, C_m to a dataset",
+        help=COMMANDS.description("estimate"),
         description="Fit the coefficients to the training experiments (minimax of "
         "position + 5 x velocity error at 7 samples, the paper's protocol).",
     )

@@ -10,6 +10,7 @@ import argparse
 from pathlib import Path
 
 from eelhost.benchmarks.estimator_accuracy import estimator_report
+from eelhost.commands import COMMANDS
 from eelhost.commands.common import (
     COUNT,
     SEED,
@@ -17,17 +18,19 @@ from eelhost.commands.common import (
     add_write_option,
     write_report,
 )
+from eelhost.commands.joint_models_option import add_joint_models_option
 from eelhost.data.virtual_tank import mismatched_plants
 from eelhost.errors import UserError
 
 WRITE_DEFAULT = "docs/estimation_benchmarks.md"
 
 
+@COMMANDS.add("estimate-bench", "measure the estimator against its targets")
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register the subcommand."""
     p = sub.add_parser(
         "estimate-bench",
-        help="measure the estimator against its targets",
+        help=COMMANDS.description("estimate-bench"),
         description="Measure the estimator against its targets and write the figures.",
     )
     p.add_argument("--work", default="out/estimate-bench", help="folder for generated datasets")
@@ -61,6 +64,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="bootstrap refits (--coverage, --bands)")
     p.add_argument("--seed", type=SEED, default=0, help="seed of the datasets and the fits")
     add_current_option(p)  # one setting for every tank
+    add_joint_models_option(p)
     p.set_defaults(run=run)
 
 
@@ -109,6 +113,7 @@ def run(args: argparse.Namespace) -> int:
         progress=lambda line: print(line, flush=True),
         only=tuple(args.tanks.split(",")) if args.tanks else None,
         fit_current=args.fit_current,
+        joint_models=args.joint_models,
     )
     if write_report(args.write, text):
         print(f"wrote {args.write}")  # the tables went to stdout as they were measured

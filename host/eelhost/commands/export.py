@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from eelhost.commands import COMMANDS
 from eelhost.commands.common import OptionError
 from eelhost.field.mcap_export import export_take_mcap, take_stem
 from eelhost.field.session import SYNTHETIC
@@ -16,11 +17,15 @@ from eelhost.files import check_output_stem
 from eelhost.progress import Progress
 
 
+@COMMANDS.add(
+    "export",
+    "write a take as MCAP (pose, joints, commands, telemetry, camera) for Foxglove",
+)
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register the subcommand."""
     p = sub.add_parser(
         "export",
-        help="write a take as MCAP (pose, joints, commands, telemetry, camera) for Foxglove",
+        help=COMMANDS.description("export"),
         description="Write a take of eelbot run (or campaign, or track) as an MCAP file whose "
         "topics use Foxglove's well-known schemas (foxglove.PoseInFrame, FrameTransform, "
         "CompressedImage) and eelbot's own JSON schemas (docs/data.md, 'Takes as MCAP'). "

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from eelhost.commands import COMMANDS
 from eelhost.commands.common import OptionError, floats
 from eelhost.commands.link_options import add_robot_file_option, resolve_robot_file_option
 from eelhost.files import check_output_folder
@@ -14,11 +15,15 @@ from eelhost.vision.printing import write_board_pdf, write_marker_sheet_pdf
 from eelsim.robot import load_robot
 
 
+@COMMANDS.add(
+    "markers",
+    "write the printable marker sheet, the ChArUco board (PDF, true size) and markers.json",
+)
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register the subcommand."""
     p = sub.add_parser(
         "markers",
-        help="write the printable marker sheet, the ChArUco board (PDF, true size) and markers.json",
+        help=COMMANDS.description("markers"),
         description="Write <out>/markers.pdf (one ArUco marker plate per link, A4), "
         "<out>/charuco.pdf (the calibration board on the smallest ISO A paper that holds it) and "
         "<out>/markers.json (what was printed: calibrate, run and campaign read it with "

@@ -19,6 +19,7 @@ import platform
 import re
 from pathlib import Path
 
+from eelhost.commands import COMMANDS
 from eelhost.commands.common import (
     COUNT,
     SEED,
@@ -57,11 +58,12 @@ BENCH_BEGIN = "<!-- bench: begin (written by eelbot plan --bench) -->"
 BENCH_END = "<!-- bench: end -->"
 
 
+@COMMANDS.add("plan", "plan a path the twin swims without collision, or benchmark the planner")
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register the subcommand."""
     p = sub.add_parser(
         "plan",
-        help="plan a path the twin swims without collision, or benchmark the planner",
+        help=COMMANDS.description("plan"),
         description="Plan with every manoeuvre swum in the calibrated twin (A*), check the plan "
         "in the twin over the coefficients' uncertainty, repair or refuse it. WORLD is a world "
         "TOML file, the bundled example 'tank_5_obstacles', or 'bench:SEED' (a generated "
@@ -117,11 +119,11 @@ def add_check_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--robust-search", action="store_true",
                    help="also swim every leg of the search in the unknown current (fewer plans "
                    "fail their check, about 4 times the search's time)")
-    p.add_argument("--guidance", choices=GUIDANCE_LAWS, default=PURSUIT.name,
-                   help="the robot's guidance law for the search and the check: 'pursuit', the "
-                   "paper's pure pursuit of each waypoint (default; the tank's run loop steers "
-                   "with it), or 'ilos', integral line-of-sight along each leg with a stiffer "
-                   "heading gain (docs/planning.md, \"The guidance\")")
+    p.add_argument("--guidance", choices=GUIDANCE_LAWS.names(), default=PURSUIT.name,
+                   help="the robot's guidance law for the search and the check: "
+                   + "; ".join(f"{name}: {text}" for name, text in GUIDANCE_LAWS.descriptions().items())
+                   + f" (the tank's run loop steers with {PURSUIT.name}; {PLANNING_GUIDANCE.name} "
+                   "has the planner's stiffer heading gain; docs/planning.md, \"The guidance\")")
 
 
 def _unknown_current(text: str) -> float:

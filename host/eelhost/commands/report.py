@@ -6,7 +6,9 @@ import argparse
 from dataclasses import replace
 from pathlib import Path
 
+from eelhost.commands import COMMANDS
 from eelhost.commands.common import add_fit_options, fit_settings, number
+from eelhost.commands.joint_models_option import add_joint_models_option
 from eelhost.data.experiments import BUNDLED_DATASET, load_dataset
 from eelhost.data.virtual_tank import generate_dataset
 from eelhost.errors import UserError
@@ -17,11 +19,12 @@ from eelhost.progress import Progress
 from eelsim.fluid import FLUID_LAWS
 
 
+@COMMANDS.add("report", "fit straight and turning, validate, write a report folder")
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register the subcommand."""
     p = sub.add_parser(
         "report",
-        help="fit straight and turning, validate, write a report folder",
+        help=COMMANDS.description("report"),
         description="The whole estimation chain. Without DATASET it uses the bundled "
         "virtual-tank dataset (truth = the paper's table 3).",
     )
@@ -39,6 +42,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--laws", type=law_names, metavar="LAW,...",
                    help="fluid laws the comparison tries (default: "
                    + ",".join(default_laws()) + ")")
+    add_joint_models_option(p)
     p.add_argument("--keep-model", action="store_true",
                    help="report the robot file's model even when the comparison recommends "
                    "another (default: fit the recommended model and report its fits)")
@@ -106,6 +110,7 @@ def run(args: argparse.Namespace) -> int:
         compare_models=not args.no_compare,
         adopt_recommended=not args.keep_model,
         laws=args.laws,
+        joint_models=args.joint_models,
         say=say,
         progress_factory=factory,
     )

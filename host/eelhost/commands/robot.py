@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import argparse
 
-from eelhost.commands import robot_trim
+from eelhost.commands import COMMANDS, robot_trim
 from eelhost.commands.link_options import add_link_options, resolve_link_options
 from eelhost.link.base import Link
 from eelhost.link.maintenance import Maintenance, parse_assignment, setting_info
@@ -23,11 +23,12 @@ LINK_NOTE = ("required; sim://?feedback=1&battery=7.4 gives the virtual robot an
              "servos and a battery (docs/host.md)")
 
 
+@COMMANDS.add("robot", "the robot's settings, servo trims and health, over its link")
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register the subcommand and its own subcommands."""
     p = sub.add_parser(
         "robot",
-        help="the robot's settings, servo trims and health, over its link",
+        help=COMMANDS.description("robot"),
         description="Talk to the robot (or the virtual robot) over its link: read and change its "
         "settings (docs/firmware.md, 'Settings'), calibrate the servo trims, print its health.",
     )

@@ -8,6 +8,7 @@ import os
 import time
 from pathlib import Path
 
+from eelhost.commands import COMMANDS
 from eelhost.commands.common import (
     COUNT,
     FINITE,
@@ -38,11 +39,12 @@ from eelsim.control import Gait
 from eelsim.robot import load_robot
 
 
+@COMMANDS.add("run", "steer the robot along waypoints from the camera, and record the run")
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register the subcommand."""
     p = sub.add_parser(
         "run",
-        help="steer the robot along waypoints from the camera, and record the run",
+        help=COMMANDS.description("run"),
         description="Localise the robot in the camera frames, send the heading offset every "
         "control period, record every pose, frame and command (<out>.csv, .json, .frames.csv, "
         ".commands.csv, .rx.bin, and copies of the robot file and calibration). Stops the robot "

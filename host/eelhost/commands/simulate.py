@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from eelhost.commands import COMMANDS
 from eelhost.commands.common import (
     FINITE,
     POSITIVE,
@@ -28,11 +29,12 @@ from eelsim.record import write_run
 from eelsim.scenario import load_scenario
 
 
+@COMMANDS.add("simulate", "run a scenario in the twin and write its trajectory")
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register the subcommand."""
     p = sub.add_parser(
         "simulate",
-        help="run a scenario in the twin and write its trajectory",
+        help=COMMANDS.description("simulate"),
         description="Run a named scenario (straight, turning, path1, path2, "
         "straight_A0.61_w2.7, ...) "
         "or a scenario TOML file in the closed-loop twin; write <out>.csv and <out>.json, and "

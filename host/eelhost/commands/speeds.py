@@ -7,17 +7,19 @@ from pathlib import Path
 
 import numpy as np
 
+from eelhost.commands import COMMANDS
 from eelhost.commands.common import POSITIVE, add_robot_options, robot_and_coefficients
 from eelhost.files import atomic_write
 from eelhost.progress import Progress
 from eelsim.speeds import grid_speeds, speed_table_markdown
 
 
+@COMMANDS.add("speeds", "steady speed of every gait of the 4 x 4 grid")
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register the subcommand."""
     p = sub.add_parser(
         "speeds",
-        help="steady speed of every gait of the 4 x 4 grid",
+        help=COMMANDS.description("speeds"),
         description="Simulate each gait of the paper's grid swimming straight and "
         "print the steady speeds (m/s and BL/s) as a markdown table.",
     )

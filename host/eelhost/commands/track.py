@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from eelhost.commands import COMMANDS
 from eelhost.commands.common import (
     FINITE,
     NON_NEGATIVE,
@@ -26,12 +27,16 @@ from eelsim.robot import load_robot
 DEFAULT_BETA_RAD = 1.04  # as eelbot run's --gait
 
 
+@COMMANDS.add(
+    "track",
+    "localise the robot in a video (or image folder) filmed without eelbot, into an "
+    "experiment",
+)
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register the subcommand."""
     p = sub.add_parser(
         "track",
-        help="localise the robot in a video (or image folder) filmed without eelbot, into an "
-        "experiment",
+        help=COMMANDS.description("track"),
         description="Run eelbot run's localisation and median filter over every frame of a video "
         "file or a folder of images and write an experiment (<out>.csv, .json, .frames.csv and "
         "copies of the robot file and calibration) that estimate and validate read as a take. "

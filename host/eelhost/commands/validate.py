@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from eelhost.commands import COMMANDS
 from eelhost.commands.common import NON_NEGATIVE, add_backend_option
 from eelhost.data.experiments import load_dataset
 from eelhost.estimation.evaluate import ALIGN_S
@@ -14,11 +15,12 @@ from eelhost.files import atomic_write, check_output_folder
 from eelhost.progress import phase
 
 
+@COMMANDS.add("validate", "validate coefficients on held-out experiments")
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register the subcommand."""
     p = sub.add_parser(
         "validate",
-        help="validate coefficients on held-out experiments",
+        help=COMMANDS.description("validate"),
         description="E_x and E_v (paper's mean of norms and true RMS, BL and BL/s) for "
         "every test experiment and path, as tables (markdown, CSV) and figures.",
     )

@@ -14,16 +14,18 @@ from eelhost.benchmarks.vision_accuracy import (
     run_benchmark,
     vision_doc,
 )
+from eelhost.commands import COMMANDS
 from eelhost.commands.common import COUNT, SEED, add_write_option, write_report
 from eelhost.progress import Progress
 from eelsim.robot import load_robot
 
 
+@COMMANDS.add("vision-bench", "accuracy and speed of the vision on synthetic frames")
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register the subcommand."""
     p = sub.add_parser(
         "vision-bench",
-        help="accuracy and speed of the vision on synthetic frames",
+        help=COMMANDS.description("vision-bench"),
         description="Render synthetic 1280 x 720 overhead frames of a twin run, localise the robot "
         "in them, and report position and heading errors against the truth and frames per "
         "second on one core; --write also writes docs/vision.md.",

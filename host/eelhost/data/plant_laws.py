@@ -43,7 +43,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from pydantic import Field
 
-from eelsim.fluid import FLUID_LAWS, register_fluid_law
+from eelsim.fluid import register_fluid_law
 from eelsim.fluid.base import (
     FloatArray,
     FluidCoefficients,
@@ -171,8 +171,5 @@ class FoilLaw(RelativeMotionLaw):
                 f"{w('flamq', link)} * abs(om) * om")
 
 
-FOIL = FoilLaw()
+FOIL = register_fluid_law(FoilLaw(), "a slender foil's drag and lift (test plants only)")
 """The foil law (a plant law: never a candidate)."""
-
-if FOIL.name not in FLUID_LAWS:
-    register_fluid_law(FOIL)

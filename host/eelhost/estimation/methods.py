@@ -18,9 +18,10 @@ The bundled methods (docs/estimation.md):
 :func:`run_fit` runs the settings' method; a space that fits the tank's ambient current is fitted in
 two stages (see there).
 
-To add one: write ``def fit_mine(problem: FitProblem) -> FitResult`` and call
-``register_method("mine", fit_mine, "what it does")`` below (or from your own module, imported
-before the fit).
+To add one: write ``def fit_mine(problem: FitProblem) -> FitResult`` decorated with
+``@ESTIMATORS.add("mine", "what it does")``, here or in your own package, which names it in the
+``eelbot.estimators`` entry-point group (docs/architecture.md, "Extension points"); the method is
+then offered by ``eelbot estimate --method`` and the report's.
 """
 
 from __future__ import annotations
@@ -34,12 +35,13 @@ import numpy as np
 from eelhost.estimation.evaluate import EstimationError, Evaluator
 from eelhost.estimation.local import polish_least_squares, polish_minimax
 from eelhost.estimation.optimise import Checkpoint, FitResult, Progress, fit_cmaes, fit_ga
+from eelsim.registry import Registry
 
 if TYPE_CHECKING:  # pipeline imports this module
     from eelhost.estimation.pipeline import FitSettings
 
-__all__ = ["FitMethod", "FitProblem", "get_method", "method_descriptions", "method_names",
-           "register_method", "run_fit"]
+__all__ = ["ESTIMATORS", "FitMethod", "FitProblem", "get_method", "method_descriptions",
+           "method_names", "register_method", "run_fit"]
 
 # Least iterations of the minimax polish that fits the ambient current (run_fit's second stage).
 CURRENT_POLISH_ITERATIONS = 10
@@ -81,17 +83,17 @@ class FitProblem:
 FitMethod = Callable[[FitProblem], FitResult]
 
 
-@dataclass(frozen=True)
-class _Entry:
-    fit: FitMethod
-    description: str
+ESTIMATORS: Registry[FitMethod] = Registry("estimation method", "eelbot.estimators")
+"""The registered methods, by name (:mod:`eelsim.registry`; plug-ins: group ``eelbot.estimators``).
 
-
-_METHODS: dict[str, _Entry] = {}
+Each bundled method registers itself below, beside its definition: ``@ESTIMATORS.add("name",
+"one line")``."""
 
 
 def register_method(name: str, fit: FitMethod, description: str) -> None:
     """Make an estimation method available as ``FitSettings(method=name)``.
+
+    The same as ``ESTIMATORS.add(name, fit, description)``.
 
     Parameters
     ----------
@@ -101,18 +103,23 @@ def register_method(name: str, fit: FitMethod, description: str) -> None:
         ``fit(problem) -> FitResult``.
     description : str
         One line for the help.
+
+    Raises
+    ------
+    eelsim.registry.DuplicateNameError
+        When another method has that name.
     """
-    _METHODS[name] = _Entry(fit, description)
+    ESTIMATORS.add(name, fit, description)
 
 
 def method_names() -> tuple[str, ...]:
-    """The registered methods' names, in registration order."""
-    return tuple(_METHODS)
+    """The registered methods' names, in registration order (plug-ins included)."""
+    return ESTIMATORS.names()
 
 
 def method_descriptions() -> dict[str, str]:
     """Each registered method's one-line description, by name (the ``--method`` help)."""
-    return {name: entry.description for name, entry in _METHODS.items()}
+    return ESTIMATORS.descriptions()
 
 
 def get_method(name: str) -> FitMethod:
@@ -121,12 +128,11 @@ def get_method(name: str) -> FitMethod:
     Raises
     ------
     EstimationError
-        When no method has that name.
+        When no method has that name (the message lists the known ones).
     """
-    entry = _METHODS.get(name)
-    if entry is None:
-        raise EstimationError(f"method must be one of {', '.join(_METHODS)}, got {name!r}")
-    return entry.fit
+    if name not in ESTIMATORS:
+        raise EstimationError(ESTIMATORS.unknown_message(name))
+    return ESTIMATORS[name]
 
 
 def _global_cmaes(problem: FitProblem, restarts: str) -> FitResult:
@@ -169,6 +175,7 @@ def _then(
     )
 
 
+@ESTIMATORS.add("cmaes", "CMA-ES with restarts + minimax polish (default)")
 def _fit_cmaes(problem: FitProblem) -> FitResult:
     ev, settings = problem.evaluator, problem.settings
     res = _global_cmaes(problem, settings.restarts)
@@ -180,6 +187,7 @@ def _fit_cmaes(problem: FitProblem) -> FitResult:
     return _then(problem, res, pol, f"{res.method}+minimax", ev.simulations - before)
 
 
+@ESTIMATORS.add("cmaes-lsq", "one CMA-ES run + least-squares polish")
 def _fit_cmaes_lsq(problem: FitProblem) -> FitResult:
     ev, settings = problem.evaluator, problem.settings
     res = _global_cmaes(problem, "none")
@@ -192,6 +200,7 @@ def _fit_cmaes_lsq(problem: FitProblem) -> FitResult:
     return _then(problem, res, pol, "cmaes+lsq", ev.simulations - before)
 
 
+@ESTIMATORS.add("ga", "the paper's genetic algorithm")
 def _fit_ga(problem: FitProblem) -> FitResult:
     settings = problem.settings
     return fit_ga(
@@ -207,6 +216,7 @@ def _fit_ga(problem: FitProblem) -> FitResult:
     )
 
 
+@ESTIMATORS.add("minimax", "minimax polish only, from the robot file's values")
 def _fit_minimax(problem: FitProblem) -> FitResult:
     ev = problem.evaluator
     return polish_minimax(ev.evaluate, ev.space, problem.start,
@@ -214,6 +224,7 @@ def _fit_minimax(problem: FitProblem) -> FitResult:
                           simulations=problem.simulations)
 
 
+@ESTIMATORS.add("lsq", "least-squares polish only, from the robot file's values")
 def _fit_lsq(problem: FitProblem) -> FitResult:
     ev, begin = problem.evaluator, problem.start
     f0 = float(ev.fitness(begin[None, :])[0])
@@ -261,10 +272,3 @@ def run_fit(problem: FitProblem) -> FitResult:
     iterations = max(problem.settings.polish_iterations, CURRENT_POLISH_ITERATIONS)
     pol = polish_minimax(ev.evaluate, space, begin, iterations, simulations=problem.simulations)
     return _then(problem, in_space, pol, f"{first.method}+current", ev.simulations - before)
-
-
-register_method("cmaes", _fit_cmaes, "CMA-ES with restarts + minimax polish (default)")
-register_method("cmaes-lsq", _fit_cmaes_lsq, "one CMA-ES run + least-squares polish")
-register_method("ga", _fit_ga, "the paper's genetic algorithm")
-register_method("minimax", _fit_minimax, "minimax polish only, from the robot file's values")
-register_method("lsq", _fit_lsq, "least-squares polish only, from the robot file's values")

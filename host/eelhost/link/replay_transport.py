@@ -173,5 +173,6 @@ register_transport(
         open=_open_replay,
         list_ports=_list_replay_ports,
         example="replay:///path/run.rx.bin",
+        description="a recorded run's received bytes played back",
     )
 )

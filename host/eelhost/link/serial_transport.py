@@ -119,5 +119,6 @@ register_transport(
         open=_open_serial,
         list_ports=_list_serial_ports,
         example="serial:///dev/ttyUSB0?baud=57600",
+        description="the XBee radio (or any serial link) on a serial port",
     )
 )

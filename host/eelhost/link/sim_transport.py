@@ -235,5 +235,6 @@ register_transport(
         list_ports=_list_sim_ports,
         example="sim://?speed=1&seed=0",
         check=_sim_settings,
+        description="the virtual robot: the native firmware driving the twin",
     )
 )

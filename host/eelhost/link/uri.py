@@ -1,9 +1,11 @@
 """Open a link from a URI: one host code for the robot, the virtual robot and a replay.
 
 Transports are chosen by a URI (docs/architecture.md, "transports chosen by a URI"). Each transport
-module registers its scheme here with :func:`register_transport` (its parameters, how to open it,
-how to list the ports it can see), as cflib's drivers do; :func:`open_link` and
-:func:`list_ports` consult that registry. The bundled ones:
+module registers its scheme in :data:`TRANSPORTS` with :func:`register_transport` (its
+parameters, how to open it, how to list the ports it can see, one line saying what it is), as
+cflib's drivers do; :func:`open_link`, :func:`list_ports` and the CLI's help consult that
+registry. Another package adds a transport through the ``eelbot.transports`` entry-point group
+(docs/architecture.md, "Extension points"). The bundled ones:
 
 - ``serial:///dev/ttyUSB0?baud=57600`` (``serial://COM3`` on Windows): the XBee on a serial port
   (:mod:`eelhost.link.serial_transport`);
@@ -18,16 +20,19 @@ Errors are :class:`LinkURIError` naming the part of the URI that is wrong.
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Callable
 from dataclasses import dataclass
 from urllib.parse import parse_qs, urlsplit
 
 from eelhost.errors import UserError
 from eelhost.link.base import Clock, Link
+from eelsim.registry import Registry
 from eelsim.robot import Robot
 
 __all__ = [
     "LinkURI",
+    "TRANSPORTS",
     "LinkURIError",
     "Port",
     "TransportScheme",
@@ -142,6 +147,8 @@ class TransportScheme:
         ``check(uri)``: refuses parameter values the transport cannot use (raising
         :class:`LinkURIError`), called by :func:`parse_link_uri`, so a bad value is said before
         anything is opened or recorded.
+    description : str
+        One line for help texts (``eelbot ports --help``); required by the registry.
     """
 
     name: str
@@ -151,25 +158,53 @@ class TransportScheme:
     list_ports: Callable[[], list[Port]]
     example: str
     check: Callable[[LinkURI], object] | None = None
+    description: str = ""
 
 
-_SCHEMES: dict[str, TransportScheme] = {}
+def _check_scheme(name: str, scheme: TransportScheme) -> None:
+    """Refuse an entry that cannot be registered under ``name`` (:data:`TRANSPORTS`)."""
+    if not isinstance(scheme, TransportScheme):
+        raise ValueError(f"expected a TransportScheme, got {type(scheme).__name__}")
+    if scheme.name.lower() != name:
+        raise ValueError(f"the entry says its scheme is {scheme.name!r}")
+    if not re.fullmatch(r"[a-z][a-z0-9+.-]*", name):
+        raise ValueError("a URI scheme is a letter, then letters, digits, '+', '-' or '.'")
+    if not scheme.description.strip():
+        raise ValueError("give the TransportScheme a one-line description")
 
 
-def register_transport(scheme: TransportScheme) -> None:
-    """Make a transport available under its URI scheme (a transport module calls this once).
+TRANSPORTS: Registry[TransportScheme] = Registry(
+    "transport", "eelbot.transports", check=_check_scheme, normalise=str.lower, plural="schemes"
+)
+"""The registered transports, by URI scheme (:mod:`eelsim.registry`; plug-ins: group
+``eelbot.transports``, each entry point a :class:`TransportScheme`)."""
+
+
+def register_transport(scheme: TransportScheme) -> TransportScheme:
+    """Make a transport available under its URI scheme (beside the transport's definition).
 
     Parameters
     ----------
     scheme : TransportScheme
-        The entry; a second registration of the same name replaces the first.
+        The entry, with its one-line ``description``.
+
+    Returns
+    -------
+    TransportScheme
+        The entry itself.
+
+    Raises
+    ------
+    eelsim.registry.RegistryError
+        When another transport has the scheme, or the entry has no description.
     """
-    _SCHEMES[scheme.name.lower()] = scheme
+    TRANSPORTS.add(scheme.name, scheme, scheme.description)
+    return scheme
 
 
 def transport_schemes() -> dict[str, TransportScheme]:
-    """The registered schemes, by name."""
-    return dict(_SCHEMES)
+    """The registered schemes, by name (plug-ins included)."""
+    return dict(TRANSPORTS.items())
 
 
 def list_ports() -> list[Port]:
@@ -179,7 +214,7 @@ def list_ports() -> list[Port]:
     -------
     list of Port
     """
-    return [port for scheme in _SCHEMES.values() for port in scheme.list_ports()]
+    return [port for scheme in TRANSPORTS.values() for port in scheme.list_ports()]
 
 
 def parse_link_uri(uri: str) -> LinkURI:
@@ -201,14 +236,14 @@ def parse_link_uri(uri: str) -> LinkURI:
         refuses (``sim://?seed=-3``).
     """
     text = str(uri).strip()
-    examples = ", ".join(s.example.split("?")[0] for s in _SCHEMES.values())
+    examples = ", ".join(s.example.split("?")[0] for s in TRANSPORTS.values())
     if "://" not in text:
         raise LinkURIError(f"{text!r}: not a link URI (expected {examples})")
     parts = urlsplit(text)
-    scheme = _SCHEMES.get(parts.scheme.lower())
+    scheme = TRANSPORTS.get(parts.scheme)
     if scheme is None:
         raise LinkURIError(
-            f"{text!r}: unknown scheme {parts.scheme!r} (expected {', '.join(_SCHEMES)})"
+            f"{text!r}: unknown scheme {parts.scheme!r} (expected {', '.join(TRANSPORTS)})"
         )
     target = parts.netloc + parts.path
     if scheme.target and not target:
@@ -263,6 +298,6 @@ def open_link(uri: str, robot: Robot | None = None, clock: Clock | None = None) 
         For a missing replay log.
     """
     u = parse_link_uri(uri)
-    link = _SCHEMES[u.scheme].open(u, robot, clock)
+    link = TRANSPORTS[u.scheme].open(u, robot, clock)
     link.open()
     return link

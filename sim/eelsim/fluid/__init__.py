@@ -2,8 +2,10 @@
 
 A fluid law owns its coefficients (names, record, default bounds for estimation), its per-link
 coefficients, its readable numpy forces and its batched form for the generated kernel
-(:class:`FluidLaw`; docs/model.md section 2 and "Fluid laws: how to add one"). One module per law;
-each registers itself here, at the bottom of this file.
+(:class:`FluidLaw`; docs/model.md section 2 and "Fluid laws: how to add one"). One module per law,
+which registers the law beside its definition with :func:`register_fluid_law` in
+:data:`FLUID_LAWS` (an :class:`eelsim.registry.Registry`); another package adds its own through
+the ``eelbot.fluid_laws`` entry-point group (docs/architecture.md, "Extension points").
 
 >>> from eelsim.fluid import get_fluid_law
 >>> law = get_fluid_law("morison")
@@ -15,10 +17,13 @@ Galilean-consistent), ``"lighthill"`` (Lighthill's elongated-body reactive law w
 drag) and ``"resistive"`` (resistive-force drag integrated along each link) are candidate models
 for fitting; ``"reynolds"`` (drag with Reynolds-number-dependent coefficients) is for test plants
 only (:func:`candidate_laws`). Each has a ``"<law>_lift"`` variant carrying a lift force
-(:mod:`eelsim.fluid.lift`), fitted only when named.
+(:mod:`eelsim.fluid.lift`). The five candidate laws and their lift variants declare themselves
+candidates (``FluidLaw.candidate``): they are the model comparison's default grid.
 """
 
 from __future__ import annotations
+
+from typing import TypeVar
 
 from eelsim.fluid.base import (
     FluidCoefficients,
@@ -28,20 +33,50 @@ from eelsim.fluid.base import (
     LinkForces,
     LinkMotion,
 )
+from eelsim.registry import Registry
 
 DEFAULT_FLUID_LAW = "morison"
 """The law of a robot file whose ``[hydrodynamics]`` table names none: the paper's."""
 
-FLUID_LAWS: dict[str, FluidLaw] = {}
-"""The registered laws, by name."""
+
+def _check_law(name: str, law: FluidLaw) -> None:
+    """Refuse a law that cannot be registered under ``name`` (:func:`register_fluid_law`)."""
+    if not isinstance(law, FluidLaw):
+        raise ValueError(f"expected a FluidLaw, got {type(law).__name__}")
+    if not name.isidentifier():
+        raise ValueError(f"a fluid law's name must be an identifier, got {name!r}")
+    if law.name != name:
+        raise ValueError(f"the law says its name is {law.name!r}")
+    if law.coefficients.law_name != law.name:
+        raise ValueError(
+            f"its coefficient record {law.coefficients.__name__} says "
+            f"law_name = {law.coefficients.law_name!r}"
+        )
+    if len(law.default_bounds) != len(law.coefficient_names):
+        raise ValueError(
+            f"{len(law.default_bounds)} bounds for {len(law.coefficient_names)} coefficients"
+        )
 
 
-def register_fluid_law(law: FluidLaw) -> FluidLaw:
+_Law = TypeVar("_Law", bound=FluidLaw)
+
+FLUID_LAWS: Registry[FluidLaw] = Registry(
+    "fluid law", "eelbot.fluid_laws", check=_check_law, plural="laws"
+)
+"""The registered laws, by name (:mod:`eelsim.registry`; plug-ins: group ``eelbot.fluid_laws``)."""
+
+
+def register_fluid_law(law: _Law, description: str | None = None) -> _Law:
     """Make ``law`` available by its name (robot files, batches, the estimator).
+
+    Called beside the law's definition: ``MORISON = register_fluid_law(MorisonLaw(), "...")``.
 
     Parameters
     ----------
     law : FluidLaw
+    description : str, optional
+        One line for help texts (default: the law's ``description`` or its class docstring's
+        first line).
 
     Returns
     -------
@@ -50,25 +85,11 @@ def register_fluid_law(law: FluidLaw) -> FluidLaw:
 
     Raises
     ------
-    ValueError
-        When the name is not an identifier (it names the law's kernel modules) or is taken by
-        another law, or the law's coefficient record or bounds do not fit it.
+    eelsim.registry.RegistryError
+        (a ValueError) When the name is not an identifier (it names the law's kernel modules) or
+        is taken by another law, or the law's coefficient record or bounds do not fit it.
     """
-    if not law.name.isidentifier():
-        raise ValueError(f"a fluid law's name must be an identifier, got {law.name!r}")
-    if law.name in FLUID_LAWS and FLUID_LAWS[law.name] is not law:
-        raise ValueError(f"a fluid law named {law.name!r} is already registered")
-    if law.coefficients.law_name != law.name:
-        raise ValueError(
-            f"fluid law {law.name!r}: its coefficient record {law.coefficients.__name__} says "
-            f"law_name = {law.coefficients.law_name!r}"
-        )
-    if len(law.default_bounds) != len(law.coefficient_names):
-        raise ValueError(
-            f"fluid law {law.name!r}: {len(law.default_bounds)} bounds for "
-            f"{len(law.coefficient_names)} coefficients"
-        )
-    FLUID_LAWS[law.name] = law
+    FLUID_LAWS.add(law.name, law, description)
     return law
 
 
@@ -85,14 +106,10 @@ def get_fluid_law(name: str) -> FluidLaw:
 
     Raises
     ------
-    ValueError
-        For an unknown name; the message lists the known ones.
+    eelsim.registry.UnknownNameError
+        (a ValueError) For an unknown name; the message lists the known ones.
     """
-    try:
-        return FLUID_LAWS[name]
-    except KeyError:
-        known = ", ".join(sorted(FLUID_LAWS))
-        raise ValueError(f"unknown fluid law {name!r}; known laws: {known}") from None
+    return FLUID_LAWS[name]
 
 
 def law_of(coefficients: FluidCoefficients) -> FluidLaw:
@@ -109,38 +126,50 @@ def law_of(coefficients: FluidCoefficients) -> FluidLaw:
     return get_fluid_law(type(coefficients).law_name)
 
 
-def candidate_laws() -> tuple[str, ...]:
-    """Names of the laws meant as candidate models for fitting (``FluidLaw.candidate``).
+def candidate_laws(lift_variants: bool = True) -> tuple[str, ...]:
+    """Names of the laws that declare themselves candidates (``FluidLaw.candidate``).
 
-    The others (e.g. ``"reynolds"``) are for test plants: virtual tanks whose water the fitted
-    model does not contain. The estimator fits any law asked for by name; this is its default
-    list of candidates.
+    They make the model comparison's default grid (``eelbot report``,
+    :func:`eelhost.estimation.selection.default_laws`). A law is not a candidate unless its own
+    class says so (``candidate = True``; a law derived from a candidate does not inherit it):
+    the others (``"reynolds"``, a plug-in's new law) are for test plants or are fitted when
+    asked for by name. The ``<law>_lift`` variant of a candidate is one too.
+
+    Parameters
+    ----------
+    lift_variants : bool
+        Include the candidates' ``<law>_lift`` variants (False: the base laws only).
 
     Returns
     -------
     tuple of str
-        In registration order (the default law first).
+        In registration order: the bundled base laws (the default law first), their lift
+        variants, then plug-ins.
     """
-    return tuple(name for name, law in FLUID_LAWS.items() if law.candidate)
+    return tuple(name for name, law in FLUID_LAWS.items()
+                 if vars(type(law)).get("candidate", False)  # its own class says so
+                 and (lift_variants or not isinstance(law, LiftLaw)))
 
 
-# ---- the laws (one module each)
+# ---- the laws: one module each, registering itself beside its definition; imported here in
+# the order of registration (the default law first)
+# isort: off
+from eelsim.fluid.morison import MORISON, HydroCoefficients  # noqa: E402
 from eelsim.fluid.galilean import GALILEAN, GalileanCoefficients  # noqa: E402
-from eelsim.fluid.lift import LiftLaw, with_lift  # noqa: E402
-from eelsim.fluid.lighthill import LIGHTHILL, LighthillCoefficients  # noqa: E402
 from eelsim.fluid.linear_quadratic import (  # noqa: E402
     LINEAR_QUADRATIC,
     LinearQuadraticCoefficients,
 )
-from eelsim.fluid.morison import MORISON, HydroCoefficients  # noqa: E402
+from eelsim.fluid.lighthill import LIGHTHILL, LighthillCoefficients  # noqa: E402
 from eelsim.fluid.resistive import RESISTIVE, ResistiveCoefficients  # noqa: E402
 from eelsim.fluid.reynolds import REYNOLDS, ReynoldsCoefficients  # noqa: E402
+from eelsim.fluid.lift import LiftLaw, with_lift  # noqa: E402
+# isort: on
 
-for _law in (MORISON, GALILEAN, LINEAR_QUADRATIC, LIGHTHILL, RESISTIVE, REYNOLDS):
-    register_fluid_law(_law)
-# every law above can carry a lift (docs/model.md section 2, "Lift"): the <law>_lift variants
-for _base in tuple(FLUID_LAWS.values()):
-    register_fluid_law(with_lift(_base))
+# every bundled law can carry a lift (docs/model.md section 2, "Lift"): the <law>_lift variants
+for _entry in FLUID_LAWS.registered():
+    register_fluid_law(with_lift(_entry.obj),
+                       f"{_entry.description}, plus a lift force (C_L)")
 
 __all__ = [
     "DEFAULT_FLUID_LAW",

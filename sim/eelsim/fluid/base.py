@@ -22,6 +22,7 @@ docs/model.md ("Fluid laws: how to add one") walks through adding a law.
 from __future__ import annotations
 
 import abc
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar, Protocol, Self
@@ -79,6 +80,76 @@ class FluidCoefficients(BaseModel):
                 f"expected {len(names)} coefficients ({', '.join(names)}), got {len(v)}"
             )
         return cls(**dict(zip(names, v, strict=True)))
+
+    @classmethod
+    def from_text(cls, text: str, base: FluidCoefficients | None = None) -> Self:
+        """Build from ``"C_d=0.8,C_a=1.0"`` (by name) or ``"0.008,0.8,1.0,0.01"`` (in order).
+
+        By name, the coefficients not named keep ``base``'s values (all must be named without a
+        base); in order, every coefficient is given, in :meth:`names` order.
+
+        Parameters
+        ----------
+        text : str
+            Comma-separated: every item ``NAME=VALUE``, or every item a number.
+        base : FluidCoefficients, optional
+            Coefficients of the same law whose values the unnamed coefficients keep.
+
+        Returns
+        -------
+        FluidCoefficients
+            An instance of the class it is called on.
+
+        Raises
+        ------
+        ValueError
+            A name the law does not have, a name given twice, a mixture of both forms, the wrong
+            count in order, a missing coefficient, a value that is not a finite number: the
+            message names the law's coefficients. A value out of range: pydantic's
+            ValidationError (a ValueError) naming the field.
+        """
+        names = cls.names()
+        law = f"the {cls.law_name} law's coefficients are {', '.join(names)}"
+        items = [item.strip() for item in str(text).split(",") if item.strip()]
+        if not items:
+            raise ValueError(f"no coefficients in {text!r} ({law})")
+        named = ["=" in item for item in items]
+        if any(named) and not all(named):
+            raise ValueError(f"give all as NAME=VALUE or all as numbers in order, got {text!r} "
+                             f"({law})")
+        if not all(named):
+            if len(items) != len(names):
+                raise ValueError(f"expected {len(names)} numbers in order, got {len(items)} in "
+                                 f"{text!r} ({law}; or give some as NAME=VALUE)")
+            return cls.from_array([_finite(name, item, law) for name, item in zip(names, items,
+                                                                                  strict=True)])
+        values: dict[str, float] = {}
+        for item in items:
+            key, _, raw = (part.strip() for part in item.partition("="))
+            if key not in names:
+                raise ValueError(f"{key!r} is not a coefficient of the {cls.law_name} law ({law})")
+            if key in values:
+                raise ValueError(f"{key} given twice in {text!r}")
+            values[key] = _finite(key, raw, law)
+        missing = [name for name in names if name not in values]
+        if missing and base is None:
+            raise ValueError(f"missing {', '.join(missing)} in {text!r} ({law})")
+        if missing and type(base) is not cls:
+            raise ValueError(f"missing {', '.join(missing)} in {text!r}, and the values to keep "
+                             f"are {type(base).__name__}'s, not {cls.__name__}'s")
+        kept = {} if base is None else {name: float(getattr(base, name)) for name in missing}
+        return cls(**{name: values.get(name, kept.get(name)) for name in names})
+
+
+def _finite(name: str, raw: str, law: str) -> float:
+    """``raw`` as a finite float, or a ValueError naming the coefficient."""
+    try:
+        value = float(raw)
+    except ValueError:
+        raise ValueError(f"{name}={raw!r} is not a number ({law})") from None
+    if not math.isfinite(value):
+        raise ValueError(f"{name}={raw} is not finite")
+    return value
 
 
 @dataclass(frozen=True)
@@ -186,15 +257,18 @@ class FluidLaw(abc.ABC):
         Names of the per-link rows the batched form reads (one row per link each), filled from
         :meth:`LinkFluid.kernel_values`.
     candidate : bool
-        A candidate model for fitting (the default), or a law meant for test plants only, which
-        the estimator does not fit unless asked by name (:func:`eelsim.fluid.candidate_laws`).
+        Declared by a law meant as a candidate model for fitting: it joins the model
+        comparison's default grid (``eelbot report``; :func:`eelsim.fluid.candidate_laws`).
+        False by default, and not inherited (only the class that sets it is a candidate), so that
+        a new law, even one derived from a candidate, or a law for test plants only, is fitted
+        only when asked for by name.
     """
 
     name: ClassVar[str]
     coefficients: ClassVar[type[FluidCoefficients]]
     default_bounds: ClassVar[Sequence[tuple[float, float]]]
     kernel_rows: ClassVar[tuple[str, ...]]
-    candidate: ClassVar[bool] = True
+    candidate: ClassVar[bool] = False
 
     @property
     def coefficient_names(self) -> tuple[str, ...]:

@@ -19,6 +19,7 @@ from typing import ClassVar
 
 from numpy.typing import ArrayLike
 
+from eelsim.fluid import register_fluid_law  # defined before this module is imported
 from eelsim.fluid.base import FloatArray, FluidCoefficients, KernelCode, LinkFluid
 from eelsim.fluid.morison import (
     MORISON,
@@ -41,6 +42,7 @@ class GalileanLaw(RelativeMotionLaw):
     """The paper's drag and added mass, Galilean-consistent (see the module docstring)."""
 
     name: ClassVar[str] = "galilean"
+    candidate: ClassVar[bool] = True  # in the model comparison's default grid
     coefficients: ClassVar[type[FluidCoefficients]] = GalileanCoefficients
     default_bounds = MORISON.default_bounds
     kernel_rows = MORISON.kernel_rows
@@ -69,5 +71,5 @@ class GalileanLaw(RelativeMotionLaw):
         return emit_paper_drag(code, link)
 
 
-GALILEAN = GalileanLaw()
+GALILEAN = register_fluid_law(GalileanLaw(), "the paper's coefficients, forces from the motion relative to the water (Galilean-consistent)")
 """The Galilean-consistent paper law, registered as ``"galilean"``."""

@@ -151,7 +151,9 @@ def with_lift(base: FluidLaw) -> LiftLaw:
     Returns
     -------
     LiftLaw
-        Not registered (:func:`eelsim.fluid.register_fluid_law` does that); not a candidate.
+        Not registered (:func:`eelsim.fluid.register_fluid_law` does that); a candidate for the
+        model comparison when its base law is one (the comparison tries every candidate with and
+        without lift, docs/estimation.md).
     """
     name = f"{base.name}_lift"
     record = f"{base.coefficients.__name__}Lift"
@@ -166,7 +168,7 @@ def with_lift(base: FluidLaw) -> LiftLaw:
     setattr(sys.modules[__name__], record, coefficients)  # importable by name: it pickles
     law_name = f"{type(base).__name__}Lift"
     law_class = type(law_name, (LiftLaw,), {
-        "name": name, "coefficients": coefficients, "base": base, "candidate": False,
+        "name": name, "coefficients": coefficients, "base": base, "candidate": base.candidate,
         "default_bounds": (*base.default_bounds, LIFT_BOUNDS),
         "kernel_rows": (*base.kernel_rows, "klift"),
         "__module__": __name__,

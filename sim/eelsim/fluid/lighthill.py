@@ -41,6 +41,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from pydantic import Field
 
+from eelsim.fluid import register_fluid_law  # defined before this module is imported
 from eelsim.fluid.base import (
     FloatArray,
     FluidCoefficients,
@@ -117,6 +118,7 @@ class LighthillLaw(RelativeMotionLaw):
     """Lighthill's elongated-body law with the paper's drag (see the module docstring)."""
 
     name: ClassVar[str] = "lighthill"
+    candidate: ClassVar[bool] = True  # in the model comparison's default grid
     coefficients: ClassVar[type[FluidCoefficients]] = LighthillCoefficients
     # the paper's drag bounds; C_a from none to three times the potential-flow value
     default_bounds: ClassVar[tuple[tuple[float, float], ...]] = (
@@ -192,5 +194,5 @@ def _lighthill(fluid: LinkFluid) -> LighthillLinkFluid:
     return fluid
 
 
-LIGHTHILL = LighthillLaw()
+LIGHTHILL = register_fluid_law(LighthillLaw(), "Lighthill's elongated-body reactive law with the paper's drag")
 """Registered as ``"lighthill"``."""

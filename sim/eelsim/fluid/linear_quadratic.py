@@ -25,6 +25,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from pydantic import Field
 
+from eelsim.fluid import register_fluid_law  # defined before this module is imported
 from eelsim.fluid.base import (
     FloatArray,
     FluidCoefficients,
@@ -97,6 +98,7 @@ class LinearQuadraticLaw(RelativeMotionLaw):
     """Separate linear and quadratic drag (see the module docstring)."""
 
     name: ClassVar[str] = "linear_quadratic"
+    candidate: ClassVar[bool] = True  # in the model comparison's default grid
     coefficients: ClassVar[type[FluidCoefficients]] = LinearQuadraticCoefficients
     # the paper's bounds for each drag term; the quadratic terms may vanish (at 0.1 m/s the
     # linear terms give about ten times the force, docs/model.md section 2)
@@ -143,5 +145,5 @@ class LinearQuadraticLaw(RelativeMotionLaw):
                 f"{w('lambda2', link)} * om + {w('lambda3', link)} * abs(om) * om")
 
 
-LINEAR_QUADRATIC = LinearQuadraticLaw()
+LINEAR_QUADRATIC = register_fluid_law(LinearQuadraticLaw(), "separate linear and quadratic drag, Galilean-consistent")
 """Registered as ``"linear_quadratic"``."""

@@ -27,6 +27,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from pydantic import Field
 
+from eelsim.fluid import register_fluid_law  # defined before this module is imported
 from eelsim.fluid.base import (
     FloatArray,
     FluidCoefficients,
@@ -98,6 +99,7 @@ class MorisonLaw(FluidLaw):
     """The paper's law (see the module docstring)."""
 
     name: ClassVar[str] = "morison"
+    candidate: ClassVar[bool] = True  # in the model comparison's default grid
     coefficients: ClassVar[type[FluidCoefficients]] = HydroCoefficients
     # Table 3 of the paper: C_f 0.008-0.009, C_d 0.78-0.98, C_a 0.62-1.17, C_m 0.001-0.007;
     # slender-body estimates (Kelasidi) put C_f near 0.03 and C_a, C_m near 1. Wide enough for
@@ -198,5 +200,5 @@ def _morison(fluid: LinkFluid) -> MorisonLinkFluid:
     return fluid
 
 
-MORISON = MorisonLaw()
+MORISON = register_fluid_law(MorisonLaw(), "the paper's: Morison drag (C_f, C_d) and added mass (C_a, C_m)")
 """The Morison law, registered as ``"morison"`` (the default)."""

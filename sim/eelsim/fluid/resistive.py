@@ -41,6 +41,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from pydantic import Field
 
+from eelsim.fluid import register_fluid_law  # defined before this module is imported
 from eelsim.fluid.base import (
     FloatArray,
     FluidCoefficients,
@@ -132,6 +133,7 @@ class ResistiveLaw(RelativeMotionLaw):
     """Resistive-force drag integrated along each link (see the module docstring)."""
 
     name: ClassVar[str] = "resistive"
+    candidate: ClassVar[bool] = True  # in the model comparison's default grid
     coefficients: ClassVar[type[FluidCoefficients]] = ResistiveCoefficients
     # as the linear_quadratic law's drag bounds; C_a may vanish (pure resistive force theory)
     default_bounds: ClassVar[tuple[tuple[float, float], ...]] = (
@@ -194,5 +196,5 @@ class ResistiveLaw(RelativeMotionLaw):
                 f"{w('rkn1', link)} * (2.0 * h * h * h / 3.0) * om + {w('rkn2', link)} * fl_i1")
 
 
-RESISTIVE = ResistiveLaw()
+RESISTIVE = register_fluid_law(ResistiveLaw(), "resistive-force drag integrated along each link")
 """Registered as ``"resistive"``."""

@@ -34,6 +34,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from pydantic import Field
 
+from eelsim.fluid import register_fluid_law  # defined before this module is imported
 from eelsim.fluid.base import (
     FloatArray,
     FluidCoefficients,
@@ -159,5 +160,5 @@ class ReynoldsLaw(RelativeMotionLaw):
                 f"({w('lamq', link)} * abs(om) + {w('lamv', link)} * _vsqrt(abs(om))) * om")
 
 
-REYNOLDS = ReynoldsLaw()
+REYNOLDS = register_fluid_law(ReynoldsLaw(), "drag with Reynolds-number-dependent coefficients (test plants only)")
 """Registered as ``"reynolds"`` (a plant law: not fitted by default)."""
