@@ -433,16 +433,16 @@ def cross_validate(
 
 
 def default_laws() -> list[str]:
-    """The comparison's fluid laws by default: the twin's candidate laws and their lift variants.
+    """The comparison's fluid laws by default: the laws that declare themselves candidates.
 
-    The ``<law>_lift`` variants (:mod:`eelsim.fluid.lift`) are tried beside every candidate law;
-    the screen (:func:`pass_screen`) keeps the grid's cost near that of the full search of four
-    candidates.
+    :func:`eelsim.fluid.candidate_laws`: the twin's five candidate laws and their ``<law>_lift``
+    variants (:mod:`eelsim.fluid.lift`), which are candidates because their base law is; the
+    screen (:func:`pass_screen`) keeps the grid's cost near that of the full search of four
+    candidates. A law registered without ``candidate = True`` is fitted only when named.
     """
-    from eelsim.fluid import FLUID_LAWS, candidate_laws
+    from eelsim.fluid import candidate_laws
 
-    laws = list(candidate_laws())
-    return laws + [f"{law}_lift" for law in laws if f"{law}_lift" in FLUID_LAWS]
+    return list(candidate_laws())
 
 
 def pass_screen(scores: Sequence[CandidateScore], survivors: int = SURVIVORS,
