@@ -544,3 +544,50 @@ def test_a_late_replan_with_contact_ahead_stops_the_robot_without_waiting_for_it
     assert d is not None and d.stop == "no_safe_continuation", d
     assert "has not come back" in d.detail and nav._job is not None
     assert t > nav._job.t_start_s  # only once the replan was late
+
+
+def test_the_lookahead_asks_for_a_replan_5_s_ahead_but_judges_stops_on_the_next_3_s():
+    # a disc some 4 s ahead of the swimming robot: within the replan horizon, beyond the stops'
+    world = parse_world({**OPEN, "obstacles": [
+        {"kind": "circle", "centre_m": [1.25, 1.03], "radius_m": 0.05}]}, "disc")
+    planner = Planner(world, ROBOT, MODEL, check=False)
+    outcome = Outcome(Plan(False, "none", "none"), "none", "none")
+    e = estimate_at(3.0)
+    verdicts = {}
+    for horizon in (3.0, 5.0):
+        nav = TankReplanner(lambda extra: planner, planner, outcome, PATH_GAIT,
+                            replan_horizon_s=horizon)
+        try:
+            verdicts[horizon] = nav._look_ahead(e, [(2.5, 1.3)], np.zeros(2))
+        finally:
+            nav.close()
+        margin = nav.lookahead_margin_m
+    outline_3, capsule_3 = verdicts[3.0]
+    outline_5, capsule_5 = verdicts[5.0]
+    assert capsule_3 > margin + 0.005  # 3 s ahead the capsule stays clear: no replan asked for
+    assert capsule_5 < margin  # 5 s ahead it meets the disc: a replan is asked for in time
+    assert outline_5 == outline_3 > margin  # the stop's verdict is still the next 3 s's
+
+
+def test_a_slow_replan_does_not_push_the_next_replans_start_beyond_the_lead_cap(open_plan):
+    planner, outcome = open_plan
+    nav = failing_replanner("exhausted")(lambda extra: planner, planner, outcome, PATH_GAIT,
+                                         lookahead_s=0.0)
+    e = estimate_at(3.0)
+    period_s = planner.twin.restart_steps * planner.twin.dt_s
+    try:
+        starts = []
+        for last_wall in (0.0, 0.3, 5.0):  # no replan yet, a quick one, one of 5 s of wall time
+            nav._last_wall_s = last_wall
+            nav._request(3.0, e, [(2.1, 1.0)], "left_corridor")
+            assert nav._job is not None
+            starts.append(nav._job.t_start_s - e.t_s)
+            nav._job.future.result()
+            nav._job = None
+    finally:
+        nav.close()
+    # the start is a restart point at least the lead ahead: at most the cap plus one period,
+    # so a plan ready by then steers within 1 s of the request (issue 28)
+    assert starts[0] >= nav.lead_s - 1e-9
+    assert max(starts) <= nav.max_lead_s + period_s + 1e-9 <= 1.0
+    assert starts[1] >= 1.5 * 0.3 - 1e-9  # 1.5 times the last wall time while under the cap

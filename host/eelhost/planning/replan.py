@@ -317,7 +317,12 @@ class TankReplanner:
     lead_s : float
         First guess of the planner's wall time: a replan starts from the state predicted for this
         long after the request (then 1.5 times the last replan's wall time, at least this and at
-        most 3 s), rounded up to the next control update and frame.
+        most ``max_lead_s``), rounded up to the next control update and frame.
+    max_lead_s : float
+        The longest lead: with the rounding up to a restart period (0.3 s), a replan's plan
+        steers at most ``max_lead_s`` plus a period after the estimate it starts from, when it
+        is ready by then (issue 28's target: within 1 s of the request). A plan that comes back
+        later is switched in when it comes, unless it is stale (:meth:`_stale`).
     contact_frames : int
         Consecutive frames whose estimated body touches something before the run is stopped.
     estimate_current : bool
@@ -338,6 +343,12 @@ class TankReplanner:
         A replan whose predicted start is refused as blocked (the body within its half width of
         an obstacle) is tried again from the states the twin predicts one, two, ... restart
         periods later along the present waypoints, this many times.
+    replan_horizon_s : float
+        The look-ahead swims this long (at least ``lookahead_s``): a capsule within
+        ``lookahead_margin_m`` of anything anywhere in it asks for a replan, while only the
+        first ``lookahead_s`` of it judge stops and keeping the present plan. A replan asked for
+        only when contact is under 3 s away started from a body that no manoeuvre could turn
+        away in time (docs/planning.md, "Replanning before contact").
     """
 
     def __init__(
@@ -349,7 +360,8 @@ class TankReplanner:
         corridor_m: float = 0.10,
         max_failures: int = 3,
         backoff_s: float = 1.0,
-        lead_s: float = 0.45,
+        lead_s: float = 0.3,
+        max_lead_s: float = 0.6,
         contact_frames: int = 2,
         estimate_current: bool = True,
         lookahead_s: float = 3.0,
@@ -358,6 +370,7 @@ class TankReplanner:
         goal_planner_for: Callable[[FloatArray], Planner] | None = None,
         goal_approach_m: float = 0.5,
         blocked_retries: int = 3,
+        replan_horizon_s: float = 5.0,
     ) -> None:
         self.planner_for = planner_for
         self.planner = planner
@@ -368,6 +381,7 @@ class TankReplanner:
         self.max_failures = max_failures
         self.backoff_s = backoff_s
         self.lead_s = lead_s
+        self.max_lead_s = max(max_lead_s, lead_s)
         self.contact_frames = contact_frames
         self.estimate_current = estimate_current
         self.lookahead_s = lookahead_s
@@ -376,6 +390,7 @@ class TankReplanner:
         self.goal_planner_for = goal_planner_for
         self.goal_approach_m = goal_approach_m
         self.blocked_retries = blocked_retries
+        self.replan_horizon_s = max(replan_horizon_s, lookahead_s)
         self._goal_planner: tuple[Planner, FloatArray] | None = None
         self.half_width_m = float(self.model.half_axis_horizontal_m.max())
         self.estimator = BodyStateEstimator(self.model, gait)
@@ -494,7 +509,7 @@ class TankReplanner:
         elif predicted:
             reason = "predicted_contact"
             log.info("the twin predicts the body's capsule within %.0f mm of an obstacle or wall "
-                     "within %.1f s", capsule * 1000, self.lookahead_s)  # type: ignore[operator]
+                     "within %.1f s", capsule * 1000, self.replan_horizon_s)  # type: ignore[operator]
         if reason is not None and not busy and t_s >= self._next_try_s:
             self._request(t_s, est, left, reason)
         elif (self._pending is None and self._lookahead is None and self.lookahead_s > 0
@@ -555,7 +570,7 @@ class TankReplanner:
     def _lead_steps(self) -> int:
         """Steps from a request to the predicted start: a whole number of restart periods."""
         period = self.planner.twin.restart_steps or 1
-        lead = min(max(self.lead_s, 1.5 * self._last_wall_s), 3.0)
+        lead = min(max(self.lead_s, 1.5 * self._last_wall_s), self.max_lead_s)
         steps = int(math.ceil(lead / self.planner.twin.dt_s / period)) * period
         return max(steps, period)
 
@@ -723,15 +738,17 @@ class TankReplanner:
 
     def _look_ahead(self, est: BodyEstimate, left: list[tuple[float, float]],
                     extra: FloatArray) -> tuple[float, float] | None:
-        """On the worker: the smallest clearances the twin predicts over the look-ahead.
+        """On the worker: the smallest clearances the twin predicts ahead of the estimate.
 
-        Returns (the body's own outline's, the planner's capsule's), or None without a run.
+        Returns (the body's own outline's over ``lookahead_s``, the planner's capsule's over
+        ``replan_horizon_s``), or None without a run.
         """
         twin = self._twin_in(extra)
         now = int(round(est.t_s / twin.dt_s))
-        steps = int(round(self.lookahead_s / twin.dt_s))
+        steps = int(round(self.replan_horizon_s / twin.dt_s))
+        stride = 3
         runs = twin.run([left], steps * twin.dt_s, states=est.state[None], start_steps=[now],
-                        stride=3)
+                        stride=stride)
         states = runs.states[0]
         states = states[np.isfinite(states[:, 0])]
         # the run ends where the goal test first holds (the loop stops the robot there): a goal
@@ -742,10 +759,12 @@ class TankReplanner:
             states = states[: int(inside[0]) + 1]
         if not len(states):
             return None
-        # the body's own outline, as the run's contact test, judges stops and keeping the plan;
-        # the planner's capsule (a half width beyond the tips) asks for replans: docs/planning.md
+        # the body's own outline, as the run's contact test, judges stops and keeping the plan
+        # over the near future; the planner's capsule (a half width beyond the tips) asks for
+        # replans over the longer horizon: docs/planning.md
+        near = states[: int(round(self.lookahead_s / twin.dt_s)) // stride + 1]
         planner = self._planned[0]
-        return (float(outline_clearance_m(self.world, self.model, states).min()),
+        return (float(outline_clearance_m(self.world, self.model, near).min()),
                 float(body_clearance_m(planner.world, planner.clearance, planner.model,
                                        states).min()))
 
