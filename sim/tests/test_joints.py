@@ -83,9 +83,9 @@ def servo_following(robot, n, gait=FAST):
 
 
 def test_the_models_are_registered_and_an_unknown_one_is_refused_naming_the_known_ones():
-    assert set(JOINT_MODELS) == {"pd", "servo"}
+    assert set(JOINT_MODELS) == {"pd", "pd_limited", "servo"}
     assert get_joint_model("pd") is PD and not PD.kinematic and SERVO.kinematic
-    with pytest.raises(ValueError, match="unknown joint model 'stepper'; known models: pd, servo"):
+    with pytest.raises(ValueError, match="unknown joint model 'stepper'; known models: pd, pd_limited, servo"):
         get_joint_model("stepper")
 
 
@@ -108,7 +108,7 @@ def test_the_robot_file_chooses_the_joint_model_and_validates_its_keys(servo_rob
     data = servo_robot.model_dump()
     for table, wrong in [
         ({"model": "stepper", "limit_rad": 1.4}, r"joints: .*model must name a joint model "
-                                                 r"\(pd, servo\), got 'stepper'"),
+                                                 r"\(pd, pd_limited, servo\), got 'stepper'"),
         ({"model": "servo", "limit_rad": 1.4, "kp_nm_per_rad": 1.0}, r"joints.kp_nm_per_rad: "
                                                                      r"unknown key"),
         ({"model": "servo", "limit_rad": 1.4, "motor_time_constant_s": 0.0},

@@ -57,7 +57,7 @@ def test_file_round_trip_loads_the_same_robot(tmp_path):
         (lambda d: d["hydrodynamics"].update(law="potential"), "hydrodynamics",
          "unknown fluid law 'potential'; known laws: "),
         (lambda d: d["joints"].update(model="stepper"), "joints",
-         "model must name a joint model (pd, servo), got 'stepper'"),
+         "model must name a joint model (pd, pd_limited, servo), got 'stepper'"),
         (lambda d: d["joints"].update(position_gain_1_s=30.0), "joints.position_gain_1_s",
          "unknown key"),
         (lambda d: d["hydrodynamics"].update(C_x=1.0), "hydrodynamics.C_x", "unknown key"),

@@ -3,9 +3,14 @@
 A joint model owns its parameters (the ``[joints]`` table's record, and the ones an estimator may
 fit, with bounds), its readable numpy law and its batched form for the generated kernel, and what
 explicit RK4 needs of the step (:class:`JointModel`; docs/model.md section 4, "Joint models").
-One module per model; each registers itself here, at the bottom of this file.
+One module per model, which registers the model beside its definition with
+:func:`register_joint_model` in :data:`JOINT_MODELS` (an :class:`eelsim.registry.Registry`);
+another package adds its own through the ``eelbot.joint_models`` entry-point group
+(docs/architecture.md, "Extension points").
 
 - ``"pd"`` (the default; the paper's): a PD loop drives free joints with torques;
+- ``"pd_limited"``: the PD loop clipped to the servo's torque-speed line, the stall torque and
+  no-load speed fitted (offered to the model comparison on request);
 - ``"servo"``: a hobby position servo (position-loop gain, rate limit, motor lag, optional dead
   zone) whose joint angles follow its law; the torque it must give is computed and saturation
   is counted.
@@ -17,7 +22,7 @@ One module per model; each registers itself here, at the bottom of this file.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, TypeVar
 
 from eelsim.joints.base import (
     JointModel,
@@ -25,20 +30,45 @@ from eelsim.joints.base import (
     largest_stable_step,
     parameters_of,
 )
+from eelsim.registry import Registry
 
 DEFAULT_JOINT_MODEL = "pd"
 """The model of a robot file whose ``[joints]`` table names none: the paper's PD loop."""
 
-JOINT_MODELS: dict[str, JointModel] = {}
-"""The registered joint models, by name."""
+def _check_model(name: str, model: JointModel) -> None:
+    """Refuse a model that cannot be registered under ``name`` (:func:`register_joint_model`)."""
+    if not isinstance(model, JointModel):
+        raise ValueError(f"expected a JointModel, got {type(model).__name__}")
+    if not name.isidentifier():
+        raise ValueError(f"a joint model's name must be an identifier, got {name!r}")
+    if model.name != name:
+        raise ValueError(f"the model says its name is {model.name!r}")
+    if model.parameters.model_name != model.name:
+        raise ValueError(
+            f"its parameter record {model.parameters.__name__} says "
+            f"model_name = {model.parameters.model_name!r}"
+        )
 
 
-def register_joint_model(model: JointModel) -> JointModel:
+_Model = TypeVar("_Model", bound=JointModel)
+
+JOINT_MODELS: Registry[JointModel] = Registry(
+    "joint model", "eelbot.joint_models", check=_check_model, plural="models"
+)
+"""The registered joint models, by name (:mod:`eelsim.registry`; plug-ins: group
+``eelbot.joint_models``)."""
+
+
+def register_joint_model(model: _Model, description: str | None = None) -> _Model:
     """Make ``model`` available by its name (robot files, batches, the estimator).
+
+    Called beside the model's definition: ``PD = register_joint_model(PDJoints(), "...")``.
 
     Parameters
     ----------
     model : JointModel
+    description : str, optional
+        One line for help texts (default: the model's class docstring's first line).
 
     Returns
     -------
@@ -47,20 +77,11 @@ def register_joint_model(model: JointModel) -> JointModel:
 
     Raises
     ------
-    ValueError
-        When the name is not an identifier (it names kernel modules) or is taken by another
-        model, or the model's parameter record does not name it.
+    eelsim.registry.RegistryError
+        (a ValueError) When the name is not an identifier (it names kernel modules) or is taken
+        by another model, or the model's parameter record does not name it.
     """
-    if not model.name.isidentifier():
-        raise ValueError(f"a joint model's name must be an identifier, got {model.name!r}")
-    if model.name in JOINT_MODELS and JOINT_MODELS[model.name] is not model:
-        raise ValueError(f"a joint model named {model.name!r} is already registered")
-    if model.parameters.model_name != model.name:
-        raise ValueError(
-            f"joint model {model.name!r}: its parameter record {model.parameters.__name__} says "
-            f"model_name = {model.parameters.model_name!r}"
-        )
-    JOINT_MODELS[model.name] = model
+    JOINT_MODELS.add(model.name, model, description)
     return model
 
 
@@ -77,14 +98,10 @@ def get_joint_model(name: str) -> JointModel:
 
     Raises
     ------
-    ValueError
-        For an unknown name; the message lists the known ones.
+    eelsim.registry.UnknownNameError
+        (a ValueError) For an unknown name; the message lists the known ones.
     """
-    try:
-        return JOINT_MODELS[name]
-    except KeyError:
-        known = ", ".join(sorted(JOINT_MODELS))
-        raise ValueError(f"unknown joint model {name!r}; known models: {known}") from None
+    return JOINT_MODELS[name]
 
 
 def joint_model_of(parameters: JointParameters) -> JointModel:
@@ -99,6 +116,27 @@ def joint_model_of(parameters: JointParameters) -> JointModel:
     JointModel
     """
     return get_joint_model(type(parameters).model_name)
+
+
+def default_grid_models(own: str | None = None) -> list[str]:
+    """The joint models an estimator's comparison tries unless told which, by name.
+
+    Every model that is ``offered_by_default``, and ``own`` (the robot file's model) whatever
+    it says.
+
+    Parameters
+    ----------
+    own : str, optional
+
+    Returns
+    -------
+    list of str
+        Sorted.
+    """
+    names = {n for n, m in JOINT_MODELS.items() if m.offered_by_default}
+    if own is not None:
+        names.add(own)
+    return sorted(names)
 
 
 def joint_parameters(table: Any) -> Any:
@@ -116,21 +154,22 @@ def joint_parameters(table: Any) -> Any:
     return parameters_of(table, JOINT_MODELS, DEFAULT_JOINT_MODEL)
 
 
-# ---- the models (one module each)
+# ---- the models: one module each, registering itself beside its definition (the default first)
 from eelsim.joints.pd import PD, PDJointParameters, pd_gains, stiffness_hint  # noqa: E402
+from eelsim.joints.pd_limited import PD_LIMITED, PDLimitedJointParameters  # noqa: E402
 from eelsim.joints.servo import SERVO, ServoJointParameters  # noqa: E402
-
-for _model in (PD, SERVO):
-    register_joint_model(_model)
 
 __all__ = [
     "DEFAULT_JOINT_MODEL",
     "JOINT_MODELS",
     "PD",
+    "PD_LIMITED",
     "SERVO",
     "JointModel",
     "JointParameters",
+    "default_grid_models",
     "PDJointParameters",
+    "PDLimitedJointParameters",
     "ServoJointParameters",
     "get_joint_model",
     "joint_model_of",

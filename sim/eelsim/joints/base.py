@@ -22,7 +22,7 @@ The robot's joints are hobby servos; the twin can model them in two ways (docs/m
 from __future__ import annotations
 
 import abc
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Annotated, Any, ClassVar, Protocol, Self
 
 import numpy as np
@@ -118,6 +118,10 @@ class JointModel(abc.ABC):
     kernel_rows : tuple of str
         Names of the per-run rows the batched form reads (one number each), filled from
         :meth:`kernel_values`.
+    offered_by_default : bool
+        Whether the estimator's model comparison tries it when neither the robot file nor the
+        user names it (default True; a model whose candidates would cost the comparison too much
+        for what most plants need says False).
     """
 
     name: ClassVar[str]
@@ -125,6 +129,7 @@ class JointModel(abc.ABC):
     kinematic: ClassVar[bool]
     fit_parameters: ClassVar[Sequence[tuple[str, float, float]]]
     kernel_rows: ClassVar[tuple[str, ...]]
+    offered_by_default: ClassVar[bool] = True
 
     @property
     def fit_names(self) -> tuple[str, ...]:
@@ -144,6 +149,15 @@ class JointModel(abc.ABC):
     @abc.abstractmethod
     def with_fit_values(self, spec: JointParameters, values: ArrayLike) -> JointParameters:
         """A copy of ``spec`` with the fittable parameters set to ``values`` (``fit_names`` order)."""
+
+    def table_from(self, spec: JointParameters) -> JointParameters | None:
+        """The ``[joints]`` table of this model made from another model's, or None if it cannot be.
+
+        For a model that extends another (the PD loop on the servo line extends the PD loop): a
+        comparison candidate of this model on a robot file of the other starts from that file's
+        table. None by default: the candidate brings the bundled robot file's table.
+        """
+        return None
 
     @abc.abstractmethod
     def drive(
@@ -264,7 +278,7 @@ def largest_stable_step(rates: Sequence[complex] | ArrayLike) -> float:
     return float(best)
 
 
-def parameters_of(table: Any, models: dict[str, JointModel], default: str) -> Any:
+def parameters_of(table: Any, models: Mapping[str, JointModel], default: str) -> Any:
     """Validate a ``[joints]`` table given as a dict against its ``model``'s record."""
     if not isinstance(table, dict):
         return table

@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, ClassVar
 import numpy as np
 from numpy.typing import ArrayLike
 
+from eelsim.joints import register_joint_model  # defined before this module is imported
 from eelsim.joints.base import (
     FloatArray,
     JointModel,
@@ -188,5 +189,5 @@ def _pd(spec: JointParameters) -> PDJointParameters:
     return spec
 
 
-PD = PDJoints()
+PD = register_joint_model(PDJoints(), "the paper's PD loop driving free joints with torques")
 """The PD model, registered as ``"pd"`` (the default)."""

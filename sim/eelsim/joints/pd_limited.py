@@ -113,6 +113,7 @@ def _limited(spec: JointParameters) -> PDLimitedJointParameters:
     return spec
 
 
-PD_LIMITED = register_joint_model(
-    PDLimitedJoints(), "the PD loop clipped to the servo's torque-speed line, the line fitted")
+PD_LIMITED = PDLimitedJoints()
 """The PD model on the fitted torque-speed line, registered as ``"pd_limited"``."""
+register_joint_model(PD_LIMITED, "the PD loop clipped to the servo's torque-speed line, the line "
+                     "fitted")

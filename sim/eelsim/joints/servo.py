@@ -34,6 +34,7 @@ from typing import TYPE_CHECKING, ClassVar
 import numpy as np
 from numpy.typing import ArrayLike
 
+from eelsim.joints import register_joint_model  # defined before this module is imported
 from eelsim.joints.base import (
     FloatArray,
     JointModel,
@@ -172,5 +173,5 @@ def _servo(spec: JointParameters) -> ServoJointParameters:
     return spec
 
 
-SERVO = ServoJoints()
+SERVO = register_joint_model(ServoJoints(), "a hobby position servo: position-loop gain, rate limit, motor lag, dead zone")
 """The hobby-servo model, registered as ``"servo"``."""
