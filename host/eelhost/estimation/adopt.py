@@ -110,7 +110,8 @@ def fit_and_choose(
         :func:`eelhost.estimation.selection.default_laws`, the twin's candidate laws and their lift
         variants).
     joint_models : sequence of str, optional
-        The joint models it tries (default: every one the twin has).
+        The joint models it tries (default: those offered by default and the robot file's,
+        ``eelsim.joints.default_grid_models``).
 
     Returns
     -------

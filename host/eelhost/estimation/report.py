@@ -63,6 +63,7 @@ def run_report(
     compare_models: bool = True,
     adopt_recommended: bool = True,
     laws: Sequence[str] | None = None,
+    joint_models: Sequence[str] | None = None,
     say: Say | None = None,
     progress_factory: Callable[[str], Callable[[int, float, int], None]] | None = None,
 ) -> Path:
@@ -91,6 +92,9 @@ def run_report(
         Fluid laws the comparison tries (default:
         :func:`eelhost.estimation.selection.default_laws`, the twin's candidate laws and their lift
         variants).
+    joint_models : sequence of str, optional
+        Joint models the comparison tries (default: those offered by default and the robot
+        file's, ``eelsim.joints.default_grid_models``).
     say : callable, optional
         Where progress messages go (default: this module's logger, at INFO).
     progress_factory : callable, optional
@@ -125,7 +129,7 @@ def run_report(
         return res, ev
 
     chosen = fit_and_choose(dataset, motions, settings, compare_models, adopt_recommended,
-                            fit=fit, say=say, laws=laws)
+                            fit=fit, say=say, laws=laws, joint_models=joint_models)
     # one current for the tank, from both motions' experiments (estimation/tank_current.py)
     with phase("the tank's current from every training experiment", simulations_counter()):
         chosen.fits, chosen.evaluators, tank = share_tank_current(chosen.fits,
