@@ -42,3 +42,35 @@ def test_the_plant_swum_on_its_servo_line_reproduces_its_recording_and_without_i
                                              axis=-1).max())
     assert gaps[True] < 1e-6  # the same loop, the same camera: the recording itself
     assert gaps[False] > 0.01  # the robot without its line swims centimetres further
+
+
+def test_the_comparison_offers_the_servo_line_model_only_when_asked_and_alike_from_either_file():
+    from eelhost.data.experiments import BUNDLED_DATASET, load_dataset
+    from eelhost.estimation.selection import candidate_spaces
+    from eelsim.robot import SERVO_ROBOT
+
+    ds = load_dataset(BUNDLED_DATASET)
+    default = [s.model_name for s in candidate_spaces(ds, ["morison"], False, None)]
+    assert default == ["pd x morison", "servo x morison"]
+    asked = ["pd", "pd_limited", "servo"]
+    tables = []
+    for robot in (ds.robot, load_robot(SERVO_ROBOT)):
+        spaces = candidate_spaces(replace(ds, robot=robot), ["morison"], False, asked)
+        limited = next(s for s in spaces if s.model_name == "pd_limited x morison")
+        assert limited.joints.names == ("servo_max_torque_nm", "servo_max_speed_rad_s")
+        tables.append(limited.joints.table)
+    # from either robot file the same table: the paper's PD gains, whose line the fit moves
+    assert tables[0] == tables[1]
+    assert tables[0].kp_nm_per_rad == ds.robot.joints.kp_nm_per_rad
+    # a robot file of this model has it in the default grid
+    own = replace(ds, robot=ds.robot.with_joints(tables[0]))
+    assert "pd_limited x morison" in [s.model_name
+                                      for s in candidate_spaces(own, ["morison"], False, None)]
+
+
+def test_an_unknown_joint_model_on_the_command_line_is_a_usage_error_naming_the_known_ones(capsys):
+    from eelhost.cli import main
+
+    assert main(["report", "--joint-models", "pd,stepper"]) == 2
+    assert "expected joint models from pd, pd_limited, servo, got 'pd,stepper'" in (
+        capsys.readouterr().err)
