@@ -3,7 +3,9 @@
 A method turns a prepared fit (:class:`FitProblem`: the evaluator of the training experiments,
 the settings, where to start, the checkpoint) into a :class:`~eelhost.estimation.optimise.
 FitResult`. :func:`eelhost.estimation.pipeline.fit_motion` looks the method up here by
-``FitSettings.method``, and ``eelbot estimate --method`` offers every registered name.
+``FitSettings.method``, and ``eelbot estimate --method`` offers every registered name. How a fit
+is run (:class:`FitSettings`: the method, seed, budgets, backend) is defined here, beside the
+methods that read it.
 
 The bundled methods (docs/estimation.md):
 
@@ -28,7 +30,6 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -37,14 +38,57 @@ from eelhost.estimation.local import polish_least_squares, polish_minimax
 from eelhost.estimation.optimise import Checkpoint, FitResult, Progress, fit_cmaes, fit_ga
 from eelsim.registry import Registry
 
-if TYPE_CHECKING:  # pipeline imports this module
-    from eelhost.estimation.pipeline import FitSettings
-
 __all__ = ["ESTIMATORS", "FitMethod", "FitProblem", "get_method", "method_descriptions",
            "method_names", "register_method", "run_fit"]
 
 # Least iterations of the minimax polish that fits the ambient current (run_fit's second stage).
 CURRENT_POLISH_ITERATIONS = 10
+
+
+@dataclass(frozen=True)
+class FitSettings:
+    """How a fit is run.
+
+    Attributes
+    ----------
+    method : str
+        A registered method (this module's registry): "cmaes", "ga", ...
+    seed : int
+    budget : int
+        Candidates for CMA-ES over all its runs (the GA's is population x generations).
+    pop_size, generations : int
+        GA settings (the paper's 150 and 130).
+    polish_iterations : int
+        Iterations of the local polish after CMA-ES (0: none).
+    restarts : str
+        CMA-ES restarts: "none", "ipop" or "bipop" (:func:`eelhost.estimation.optimise.fit_cmaes`).
+    backend : str
+        Evaluator backend ("auto", "batch", "reference").
+    align_s : float
+        Half-width of each experiment's clock-offset search during fitting (default 0: the
+        paper's protocol). With few training experiments the offsets trade off against the
+        coefficients (measured: C_a 48 % off on the bundled dataset), so it is off by default.
+    fit_current : bool
+        Fit the tank's unknown ambient current (v_x, v_y) with the coefficients, a nuisance
+        shared by the experiments (:class:`~eelhost.estimation.space.ParameterSpace`;
+        docs/estimation.md, "Nuisance parameters").
+    jobs : int or None
+        Worker processes of the model comparison's independent fits (docs/estimation.md,
+        "Choosing the model"); None: one per core, 1: in this process. The scores do not
+        depend on it.
+    """
+
+    method: str = "cmaes"
+    seed: int = 0
+    budget: int = 1500
+    pop_size: int = 150
+    generations: int = 130
+    polish_iterations: int = 30
+    backend: str = "auto"
+    align_s: float = 0.0
+    restarts: str = "bipop"
+    fit_current: bool = True
+    jobs: int | None = None
 
 
 @dataclass(frozen=True)

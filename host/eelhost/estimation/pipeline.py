@@ -10,7 +10,6 @@ for the robot, fitted on the training experiments of both motion types).
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -28,57 +27,16 @@ from eelhost.estimation.coefficients_file import (  # noqa: F401 (their old impo
     write_coefficients,
 )
 from eelhost.estimation.evaluate import EstimationError, Evaluator
-from eelhost.estimation.methods import FitProblem, method_names, run_fit
+from eelhost.estimation.methods import (  # noqa: F401 (FitSettings: its old import path)
+    FitProblem,
+    FitSettings,
+    method_names,
+    run_fit,
+)
 from eelhost.estimation.optimise import Checkpoint, FitResult
 from eelhost.estimation.space import ParameterSpace
 
 METHODS = method_names()  # as registered when this module is imported
-
-
-@dataclass(frozen=True)
-class FitSettings:
-    """How a fit is run.
-
-    Attributes
-    ----------
-    method : str
-        A registered method (:mod:`eelhost.estimation.methods`): "cmaes", "ga", ...
-    seed : int
-    budget : int
-        Candidates for CMA-ES over all its runs (the GA's is population x generations).
-    pop_size, generations : int
-        GA settings (the paper's 150 and 130).
-    polish_iterations : int
-        Iterations of the local polish after CMA-ES (0: none).
-    restarts : str
-        CMA-ES restarts: "none", "ipop" or "bipop" (:func:`eelhost.estimation.optimise.fit_cmaes`).
-    backend : str
-        Evaluator backend ("auto", "batch", "reference").
-    align_s : float
-        Half-width of each experiment's clock-offset search during fitting (default 0: the
-        paper's protocol). With few training experiments the offsets trade off against the
-        coefficients (measured: C_a 48 % off on the bundled dataset), so it is off by default.
-    fit_current : bool
-        Fit the tank's unknown ambient current (v_x, v_y) with the coefficients, a nuisance
-        shared by the experiments (:class:`~eelhost.estimation.parameters.ParameterSpace`;
-        docs/estimation.md, "Nuisance parameters").
-    jobs : int or None
-        Worker processes of the model comparison's independent fits (docs/estimation.md,
-        "Choosing the model"); None: one per core, 1: in this process. The scores do not
-        depend on it.
-    """
-
-    method: str = "cmaes"
-    seed: int = 0
-    budget: int = 1500
-    pop_size: int = 150
-    generations: int = 130
-    polish_iterations: int = 30
-    backend: str = "auto"
-    align_s: float = 0.0
-    restarts: str = "bipop"
-    fit_current: bool = True
-    jobs: int | None = None
 
 
 def training_experiments(dataset: Dataset, motion: str) -> list[Experiment]:
