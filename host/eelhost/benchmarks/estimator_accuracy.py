@@ -41,10 +41,12 @@ from eelhost.data.virtual_tank import (
 )
 from eelhost.errors import UserError
 from eelhost.estimation.adopt import fit_and_choose
+from eelhost.estimation.coefficients_file import FittedModel
 from eelhost.estimation.evaluate import Evaluator
+from eelhost.estimation.methods import FitSettings
 from eelhost.estimation.optimise import FitResult
-from eelhost.estimation.parameters import FittedModel, ParameterSpace
-from eelhost.estimation.pipeline import FitSettings, fit_motion
+from eelhost.estimation.pipeline import fit_motion
+from eelhost.estimation.space import ParameterSpace
 from eelhost.estimation.tank_current import share_tank_current
 from eelhost.estimation.validate import validate, worst_ex
 from eelhost.machine import cpu_model

@@ -38,8 +38,7 @@ from eelhost.data.virtual_tank import (
 from eelhost.estimation.coefficients_file import read_coefficients_file
 from eelhost.estimation.evaluate import Evaluator
 from eelhost.estimation.identify import identifiability
-from eelhost.estimation.methods import FitProblem, run_fit
-from eelhost.estimation.pipeline import FitSettings
+from eelhost.estimation.methods import FitProblem, FitSettings, run_fit
 from eelhost.estimation.space import ParameterSpace
 from eelhost.estimation.uncertainty import WIDEN, BootstrapResult, parametric_bootstrap
 from eelsim.robot import load_robot

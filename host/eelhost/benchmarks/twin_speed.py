@@ -488,7 +488,8 @@ def _mujoco_section(robot: Robot, servo_robot: Robot, coeffs: FluidCoefficients,
 def _whole_ga(threads: int) -> list[str]:
     """Run the paper's GA for the bundled dataset's straight runs; report it as markdown lines."""
     from eelhost.data.experiments import BUNDLED_DATASET, load_dataset
-    from eelhost.estimation.pipeline import FitSettings, fit_motion
+    from eelhost.estimation.methods import FitSettings
+    from eelhost.estimation.pipeline import fit_motion
 
     dataset = load_dataset(BUNDLED_DATASET)
     start = time.perf_counter()

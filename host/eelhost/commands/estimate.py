@@ -8,7 +8,8 @@ from pathlib import Path
 from eelhost.commands import COMMANDS
 from eelhost.commands.common import add_fit_options, fit_settings
 from eelhost.data.experiments import load_dataset
-from eelhost.estimation.pipeline import fit_motion, write_coefficients
+from eelhost.estimation.coefficients_file import write_coefficients
+from eelhost.estimation.pipeline import fit_motion
 from eelhost.files import check_output_folder
 from eelhost.progress import Progress
 

@@ -25,10 +25,11 @@ import numpy as np
 
 from eelhost.data.experiments import Dataset
 from eelhost.estimation.evaluate import Evaluator, simulations_counter
+from eelhost.estimation.methods import FitSettings
 from eelhost.estimation.optimise import FitResult
-from eelhost.estimation.parameters import ParameterSpace
-from eelhost.estimation.pipeline import FitSettings, fit_motion
+from eelhost.estimation.pipeline import fit_motion
 from eelhost.estimation.selection import ONE_SET, CandidateScore, cross_validate, recommend
+from eelhost.estimation.space import ParameterSpace
 from eelhost.progress import phase
 
 log = logging.getLogger(__name__)

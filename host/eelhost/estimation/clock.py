@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from eelhost.estimation.evaluate import ALIGN_S, ALIGN_STEP_S
+from eelhost.estimation.runs import ALIGN_S, ALIGN_STEP_S
 from eelhost.estimation.validate import ValidationRun
 
 WIDE_S = 1.0  # the revisited search's half-width, s

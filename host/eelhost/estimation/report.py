@@ -17,18 +17,17 @@ import numpy as np
 from eelhost.data.experiments import Dataset
 from eelhost.estimation.adopt import fit_and_choose
 from eelhost.estimation.clock import clock_check
+from eelhost.estimation.coefficients_file import write_coefficients
 from eelhost.estimation.diagnostics import fit_warnings
-from eelhost.estimation.evaluate import ALIGN_S, Evaluator, simulations_counter
+from eelhost.estimation.evaluate import Evaluator, simulations_counter
 from eelhost.estimation.identify import identifiability
+from eelhost.estimation.methods import FitSettings
 from eelhost.estimation.optimise import FitResult
-from eelhost.estimation.parameters import ParameterSpace
-from eelhost.estimation.pipeline import (
-    FitSettings,
-    fit_motion,
-    write_coefficients,
-)
+from eelhost.estimation.pipeline import fit_motion
+from eelhost.estimation.runs import ALIGN_S
 from eelhost.estimation.selection import recommend
 from eelhost.estimation.selection import table_markdown as comparison_markdown
+from eelhost.estimation.space import ParameterSpace
 from eelhost.estimation.speeds import speed_errors, speeds_markdown
 from eelhost.estimation.tank_current import share_tank_current
 from eelhost.estimation.uncertainty import BootstrapResult, parametric_bootstrap

@@ -55,11 +55,12 @@ import numpy as np
 
 from eelhost.data.experiments import Dataset, Experiment
 from eelhost.estimation.evaluate import EstimationError, Evaluator, count_runs
+from eelhost.estimation.joint_fit import joint_fit, joint_model_name
 from eelhost.estimation.local import FAILED, polish_minimax_many
-from eelhost.estimation.methods import CURRENT_POLISH_ITERATIONS
+from eelhost.estimation.methods import CURRENT_POLISH_ITERATIONS, FitSettings
 from eelhost.estimation.optimise import fit_cmaes
-from eelhost.estimation.parameters import ParameterSpace, joint_fit, joint_model_name
-from eelhost.estimation.pipeline import FitSettings, training_experiments
+from eelhost.estimation.pipeline import training_experiments
+from eelhost.estimation.space import ParameterSpace
 
 log = logging.getLogger(__name__)
 

@@ -39,7 +39,7 @@ from eelhost.estimation.evaluate import Evaluator
 from eelhost.estimation.identify import REL_STEP
 from eelhost.estimation.local import FAILED, polish_minimax, polish_minimax_many
 from eelhost.estimation.optimise import FitResult
-from eelhost.estimation.parameters import (
+from eelhost.estimation.space import (
     CURRENT_BOUND_M_S,
     ParameterSpace,
     box_from_unit,

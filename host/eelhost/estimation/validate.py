@@ -14,9 +14,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from eelhost.data.experiments import Experiment
-from eelhost.estimation.evaluate import ALIGN_S, Evaluator, Simulated
+from eelhost.estimation.coefficients_file import FittedModel
+from eelhost.estimation.evaluate import Evaluator
 from eelhost.estimation.fitness import N_SAMPLES_VALIDATE, validation_errors
-from eelhost.estimation.parameters import FittedModel
+from eelhost.estimation.runs import ALIGN_S, Simulated
 from eelsim.flags import Failure
 from eelsim.robot import Robot
 

@@ -40,7 +40,11 @@ from numpy.typing import NDArray
 from scipy.stats import chi2, norm
 
 from eelhost.errors import UserError
-from eelhost.estimation.pipeline import CoefficientsError, fitted_models, read_coefficients_file
+from eelhost.estimation.coefficients_file import (
+    CoefficientsError,
+    fitted_models,
+    read_coefficients_file,
+)
 from eelhost.planning.world import Current, World
 from eelsim.fluid import FluidCoefficients
 from eelsim.model import SwimmerModel
@@ -327,7 +331,7 @@ def read_coefficient_model(
     robot : Robot
         The robot file the fits are of (records that name no law are the Morison law's, as
         in the first format). A file recording another robot is refused unless
-        ``allow_other_robot`` (:func:`eelhost.estimation.pipeline.check_robot`).
+        ``allow_other_robot`` (:func:`eelhost.estimation.coefficients_file.check_robot`).
 
     Returns
     -------
