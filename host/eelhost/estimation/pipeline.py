@@ -30,13 +30,10 @@ from eelhost.estimation.evaluate import EstimationError, Evaluator
 from eelhost.estimation.methods import (  # noqa: F401 (FitSettings: its old import path)
     FitProblem,
     FitSettings,
-    method_names,
     run_fit,
 )
 from eelhost.estimation.optimise import Checkpoint, FitResult
 from eelhost.estimation.space import ParameterSpace
-
-METHODS = method_names()  # as registered when this module is imported
 
 
 def training_experiments(dataset: Dataset, motion: str) -> list[Experiment]:
