@@ -2,7 +2,8 @@
 
 Each variant (links x fluid law x joint model x stage) takes 20-60 s to compile on first use.
 The main job needs twenty (its fits, and the model comparison's candidates: five laws and
-their lift variants, with either joint model), the test suite sixteen; compiled one after
+their lift variants, with either joint model), the test suite sixteen, both read from the
+registries (:func:`variant_lists`); compiled one after
 another inside the command that needs them they were most of its
 time from a fresh clone. Compiled here in parallel into the cache
 (``eelsim.batch.kernel_cache_dir``), the command loads each in under a second. A variant missing
@@ -22,22 +23,40 @@ Variant = tuple[int, str | None, str, str]
 """(links, stage or None for the machine's default, fluid law, bundled robot file)."""
 
 PAPER, SERVO = "paper_robot.toml", "servo_robot.toml"
+ROBOTS = (PAPER, SERVO)
+"""The bundled robot files: the PD joints and the servo joints, the comparison's two joint models."""
 
-# eelbot report on the bundled dataset: the fits, then the candidates of the comparison
-CANDIDATES = ("morison", "galilean", "linear_quadratic", "lighthill", "resistive")
-"""eelsim.fluid.candidate_laws(), written out: this script compiles in processes of its own."""
-COMPARED = CANDIDATES + tuple(f"{law}_lift" for law in CANDIDATES)
-"""eelhost.estimation.selection.default_laws(): the comparison's grid, each with both joints."""
-MAIN: list[Variant] = [(6, None, law, robot) for robot in (PAPER, SERVO) for law in COMPARED]
 
-# sim/tests and host/tests: 3, 6 and 8 links, every candidate law with both joint models, the
-# test plants' law, and the numba stage the C stage is checked against
-TESTS: list[Variant] = [(n, "c", "morison", robot) for n in (3, 6, 8) for robot in (PAPER, SERVO)]
-TESTS += [(6, "c", law, robot) for law in ("galilean", "linear_quadratic") for robot in (PAPER, SERVO)]
-TESTS += [(6, "c", law, PAPER) for law in ("lighthill", "resistive", "lighthill_lift")]
-TESTS += [(6, "c", "reynolds", PAPER), (6, "numba", "morison", PAPER), (6, "numba", "morison", SERVO)]
-# the plant-only foil law's plants swim on the servo joints (host/tests/test_plants.py)
-TESTS += [(6, "c", "foil", SERVO)]
+def variant_lists() -> dict[str, list[Variant]]:
+    """The lists, with the laws read from the registries.
+
+    Nothing is named here by hand but the few variants particular tests swim.
+
+    - ``main``: ``eelbot report`` on the bundled dataset: the comparison's default grid
+      (:func:`eelhost.estimation.selection.default_laws`, the laws that declare themselves
+      candidates), each with both joint models.
+    - ``tests``: sim/tests and host/tests: the default law at 3, 6 and 8 links, every candidate
+      law, every plant-only law and the numba stage the C stage is checked against.
+    """
+    import eelhost.data  # noqa: F401  (registers the plant-only fluid laws, e.g. "foil")
+    from eelhost.estimation.selection import default_laws
+    from eelsim.fluid import DEFAULT_FLUID_LAW, FLUID_LAWS, LiftLaw, candidate_laws
+
+    main: list[Variant] = [(6, None, law, robot) for robot in ROBOTS for law in default_laws()]
+    bases = [law for law in candidate_laws(lift_variants=False) if law != DEFAULT_FLUID_LAW]
+    plant_laws = [name for name, law in FLUID_LAWS.items()
+                  if name not in candidate_laws() and not isinstance(law, LiftLaw)]
+    tests: list[Variant] = [(n, "c", DEFAULT_FLUID_LAW, robot) for n in (3, 6, 8)
+                            for robot in ROBOTS]
+    tests += [(6, "c", law, PAPER) for law in bases]
+    # the servo-joint tests of the Galilean-consistent laws, and the lift law's literature test
+    tests += [(6, "c", law, SERVO) for law in ("galilean", "linear_quadratic")]
+    tests += [(6, "c", "lighthill_lift", PAPER)]
+    # the plant-only laws' plants: reynolds on the paper robot, the foil plants on the servos
+    # (host/tests/test_plants.py)
+    tests += [(6, "c", law, SERVO if law == "foil" else PAPER) for law in plant_laws]
+    tests += [(6, "numba", DEFAULT_FLUID_LAW, robot) for robot in ROBOTS]
+    return {"main": main, "tests": tests}
 
 
 def _warm(variant: Variant) -> str:
@@ -54,11 +73,10 @@ def _warm(variant: Variant) -> str:
 
 def main() -> int:
     """Compile the named list's variants, JOBS processes at a time; a line per variant."""
-    lists = {"main": MAIN, "tests": TESTS}
-    if len(sys.argv) < 2 or sys.argv[1] not in lists:
-        print(f"usage: warm_kernels.py {'|'.join(lists)} [JOBS]", file=sys.stderr)
+    if len(sys.argv) < 2 or sys.argv[1] not in ("main", "tests"):
+        print("usage: warm_kernels.py main|tests [JOBS]", file=sys.stderr)
         return 2
-    variants = lists[sys.argv[1]]
+    variants = variant_lists()[sys.argv[1]]
     jobs = int(sys.argv[2]) if len(sys.argv) > 2 else 2
     start = time.perf_counter()
     with ProcessPoolExecutor(max_workers=jobs) as pool:
