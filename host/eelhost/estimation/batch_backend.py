@@ -102,12 +102,8 @@ def simulate_batch(
 
     Parameters
     ----------
-    robots : sequence of Robot
-        Each candidate's robot (its joint parameters; the same object when none are fitted).
-    prepared : sequence of PreparedExperiment
-    parameters : ndarray, shape (C, K)
-        Candidates, vectors of ``space``.
-    space : ParameterSpace
+    robots, prepared, parameters, space
+        As for :meth:`eelhost.estimation.runs.SimulationBackend.simulate`.
     lengths : RunLengths, optional
         Guesses the runs' lengths for the kernel's packing, and learns them from this call.
     expected : ndarray, shape (C, E), optional
