@@ -80,3 +80,16 @@ def test_every_registered_law_reads_its_coefficients_back_by_name_and_in_order(n
     text = ",".join(f"{key}={v!r}" for key, v in zip(record.names(), values, strict=True))
     assert record.from_text(text) == middle
     assert record.from_text(",".join(repr(v) for v in values)) == middle
+
+
+def test_the_virtual_robots_water_takes_coefficients_by_name_too(lq_robot):
+    from eelhost.link.sim_transport import _in_the_water
+    from eelhost.link.uri import LinkURIError, parse_link_uri
+    from eelsim.robot import load_robot
+
+    robot = load_robot(lq_robot)
+    water = _in_the_water(parse_link_uri("sim://?coefficients=C_a=0.9,C_m=0.01"), robot)
+    assert water.hydrodynamics == chosen(lq_robot, "C_a=0.9,C_m=0.01")
+    with pytest.raises(LinkURIError, match="coefficients='C_x=1'.*not a coefficient of the "
+                                           "linear_quadratic law"):
+        _in_the_water(parse_link_uri("sim://?coefficients=C_x=1"), robot)

@@ -222,14 +222,36 @@ def robot_and_coefficients(args: argparse.Namespace) -> tuple[Robot, FluidCoeffi
     robot = load_robot(args.robot)
     if not args.coefficients:
         return robot, robot.hydrodynamics
-    record = type(robot.hydrodynamics)
-    with rejected_as("--coefficients"):
+    return robot, coefficients_from_option(type(robot.hydrodynamics), args.coefficients,
+                                           "--coefficients", robot.hydrodynamics)
+
+
+def coefficients_from_option(record: type[FluidCoefficients], text: str, option: str,
+                             base: FluidCoefficients | None = None) -> FluidCoefficients:
+    """A law's coefficients from an option's text, by name or in order (``from_text``).
+
+    Parameters
+    ----------
+    record : type of FluidCoefficients
+        The law's record.
+    text : str
+    option : str
+        The option, which the error names.
+    base : FluidCoefficients, optional
+        The values of the coefficients not named (None: every one must be given).
+
+    Raises
+    ------
+    OptionError
+        A wrong name, count or value, naming the option and the law's coefficients.
+    """
+    with rejected_as(option):
         try:
-            return robot, record.from_text(args.coefficients, robot.hydrodynamics)
+            return record.from_text(text, base)
         except ValidationError:
             raise
         except ValueError as err:
-            raise OptionError(f"--coefficients: {err}") from None
+            raise OptionError(f"{option}: {err}") from None
 
 
 def add_loop_options(p: argparse.ArgumentParser) -> None:

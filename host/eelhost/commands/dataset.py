@@ -13,8 +13,7 @@ from eelhost.commands.common import (
     NON_NEGATIVE,
     SEED,
     add_robot_options,
-    floats,
-    rejected_as,
+    coefficients_from_option,
 )
 from eelhost.data.virtual_tank import (
     TankSettings,
@@ -42,9 +41,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_robot_options(p)
     p.add_argument(
         "--truth",
-        metavar="C1,C2,...",
-        help="one true coefficient set for every experiment, in the law's order "
-        "(default: table 3 per motion)",
+        metavar="NAME=VALUE,...",
+        help="one true coefficient set for every experiment: the law's coefficients all by name "
+        "or all in its order (default: table 3 per motion)",
     )
     p.add_argument(
         "--mismatch",
@@ -98,10 +97,7 @@ def run(args: argparse.Namespace) -> int:
         if not args.truth:
             raise UserError(f"--fluid-law: {err}") from None
     if args.truth:
-        names = FLUID_LAWS[law].coefficient_names
-        option = f"--truth ({','.join(names)})"
-        with rejected_as(option):
-            c = FLUID_LAWS[law].coefficients.from_array(floats(args.truth, len(names), option))
+        c = coefficients_from_option(FLUID_LAWS[law].coefficients, args.truth, "--truth")
         truth = {"straight": c, "turning": c}
     settings = dataclasses.replace(
         base,

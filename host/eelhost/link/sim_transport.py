@@ -14,7 +14,8 @@ commas), ``start=x,y,heading_deg`` (where the robot starts in the virtual tank),
 ``current=speed,direction_deg``, ``feedback`` (1: analog-feedback servos, the robot measures its
 joint angles and runs the PD itself; 0 by default), ``battery`` (volts of a battery behind the
 robot's divider, measured by the firmware; none by default), ``coefficients=C_f,C_d,C_a,C_m``
-(the water the virtual robot swims in, in the order of the robot file's fluid law; by default the
+(the water the virtual robot swims in: all in the order of the robot file's fluid law, or some
+by name, ``coefficients=C_d=0.8,C_a=1.0``, the others the file's; by default the
 robot file's ``[hydrodynamics]``: the host's model and the virtual tank's truth are then the same
 numbers, docs/host.md "The virtual robot and replays"), ``eeprom=FILE`` (the robot's EEPROM kept in
 FILE between invocations, so saved settings persist: ``eelbot robot config --link
@@ -131,14 +132,17 @@ def _in_the_water(u: LinkURI, robot: Robot) -> Robot:
     raw = u.one("coefficients")
     if raw is None:
         return robot
-    values = u.numbers("coefficients", raw, None)
+    by_name = "=" in raw  # C_d=0.8,C_a=1.0: the others the robot file's (from_text)
+    values = None if by_name else u.numbers("coefficients", raw, None)
     law = type(robot.hydrodynamics)
     try:
+        if values is None:
+            return robot.with_coefficients(law.from_text(raw, robot.hydrodynamics))
         return robot.with_coefficients(law.from_array(values))
     except ValidationError as err:  # a value out of the law's range
         where = f"{u.text!r}: coefficients={raw!r}"
         raise LinkURIError(validation_message(where, err, f"{law.law_name} coefficients")) from None
-    except ValueError as err:  # the wrong count; the message names the law's coefficients
+    except ValueError as err:  # a wrong name or count; the message names the law's coefficients
         raise LinkURIError(f"{u.text!r}: coefficients={raw!r}: {err}") from None
 
 
@@ -184,7 +188,7 @@ def _sim_settings(u: LinkURI) -> dict:
     if battery_v is not None and not 0.0 < battery_v <= 30.0:
         raise LinkURIError(f"{u.text!r}: battery={battery_v:g} V must be in (0, 30]")
     coefficients = u.one("coefficients")
-    if coefficients is not None:
+    if coefficients is not None and "=" not in coefficients:  # by name: checked by the law
         u.numbers("coefficients", coefficients, None)  # the law's own checks need the robot
     eeprom = u.one("eeprom")
     eeprom_path = Path(eeprom).expanduser() if eeprom else None
