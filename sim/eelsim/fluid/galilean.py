@@ -71,5 +71,8 @@ class GalileanLaw(RelativeMotionLaw):
         return emit_paper_drag(code, link)
 
 
-GALILEAN = register_fluid_law(GalileanLaw(), "the paper's coefficients, forces from the motion relative to the water (Galilean-consistent)")
+GALILEAN: GalileanLaw = register_fluid_law(
+    GalileanLaw(),
+    "the paper's coefficients, forces from the motion relative to the water (Galilean-consistent)",
+)
 """The Galilean-consistent paper law, registered as ``"galilean"``."""

@@ -194,5 +194,7 @@ def _lighthill(fluid: LinkFluid) -> LighthillLinkFluid:
     return fluid
 
 
-LIGHTHILL = register_fluid_law(LighthillLaw(), "Lighthill's elongated-body reactive law with the paper's drag")
+LIGHTHILL: LighthillLaw = register_fluid_law(
+    LighthillLaw(), "Lighthill's elongated-body reactive law with the paper's drag"
+)
 """Registered as ``"lighthill"``."""

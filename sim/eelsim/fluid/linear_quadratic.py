@@ -145,5 +145,7 @@ class LinearQuadraticLaw(RelativeMotionLaw):
                 f"{w('lambda2', link)} * om + {w('lambda3', link)} * abs(om) * om")
 
 
-LINEAR_QUADRATIC = register_fluid_law(LinearQuadraticLaw(), "separate linear and quadratic drag, Galilean-consistent")
+LINEAR_QUADRATIC: LinearQuadraticLaw = register_fluid_law(
+    LinearQuadraticLaw(), "separate linear and quadratic drag, Galilean-consistent"
+)
 """Registered as ``"linear_quadratic"``."""

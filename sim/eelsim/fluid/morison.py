@@ -200,5 +200,7 @@ def _morison(fluid: LinkFluid) -> MorisonLinkFluid:
     return fluid
 
 
-MORISON = register_fluid_law(MorisonLaw(), "the paper's: Morison drag (C_f, C_d) and added mass (C_a, C_m)")
+MORISON: MorisonLaw = register_fluid_law(
+    MorisonLaw(), "the paper's: Morison drag (C_f, C_d) and added mass (C_a, C_m)"
+)
 """The Morison law, registered as ``"morison"`` (the default)."""

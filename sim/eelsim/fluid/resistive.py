@@ -196,5 +196,7 @@ class ResistiveLaw(RelativeMotionLaw):
                 f"{w('rkn1', link)} * (2.0 * h * h * h / 3.0) * om + {w('rkn2', link)} * fl_i1")
 
 
-RESISTIVE = register_fluid_law(ResistiveLaw(), "resistive-force drag integrated along each link")
+RESISTIVE: ResistiveLaw = register_fluid_law(
+    ResistiveLaw(), "resistive-force drag integrated along each link"
+)
 """Registered as ``"resistive"``."""

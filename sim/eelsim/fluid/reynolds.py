@@ -160,5 +160,7 @@ class ReynoldsLaw(RelativeMotionLaw):
                 f"({w('lamq', link)} * abs(om) + {w('lamv', link)} * _vsqrt(abs(om))) * om")
 
 
-REYNOLDS = register_fluid_law(ReynoldsLaw(), "drag with Reynolds-number-dependent coefficients (test plants only)")
+REYNOLDS: ReynoldsLaw = register_fluid_law(
+    ReynoldsLaw(), "drag with Reynolds-number-dependent coefficients (test plants only)"
+)
 """Registered as ``"reynolds"`` (a plant law: not fitted by default)."""
