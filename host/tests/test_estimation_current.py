@@ -10,6 +10,7 @@ from eelhost.data.experiments import load_dataset, manifest_text, write_experime
 from eelhost.data.virtual_tank import TABLE3, TankSettings, record_experiment
 from eelhost.estimation.evaluate import Evaluator
 from eelhost.estimation.identify import identifiability
+from eelhost.estimation.methods import method_names
 from eelhost.estimation.optimise import FitResult
 from eelhost.estimation.parameters import CURRENT_BOUND_M_S, CURRENT_NAMES, ParameterSpace
 from eelhost.estimation.pipeline import (
@@ -231,7 +232,7 @@ def test_the_report_bounds_and_judges_the_current_like_the_coefficients(stray_ta
     assert "Ambient current of the tank" in report.read_text()
 
 
-@pytest.mark.parametrize("method", ["cmaes", "cmaes-lsq", "ga", "minimax", "lsq"])
+@pytest.mark.parametrize("method", method_names())
 def test_every_method_fits_the_current_after_the_coefficients(stray_tank, method):
     settings = FitSettings(method, seed=0, budget=24, pop_size=6, generations=2,
                            polish_iterations=2)
