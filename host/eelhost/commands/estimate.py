@@ -14,7 +14,7 @@ from eelhost.files import check_output_folder
 from eelhost.progress import Progress
 
 
-@COMMANDS.add("estimate", "fit C_f, C_d, C_a, C_m to a dataset")
+@COMMANDS.add("estimate", "fit the robot file's fluid-law coefficients to a dataset")
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register the subcommand."""
     p = sub.add_parser(
