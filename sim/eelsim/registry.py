@@ -35,8 +35,10 @@ rest of the registry works.
 
 from __future__ import annotations
 
+import functools
 import importlib.metadata
 import logging
+import sys
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, replace
 from types import ModuleType
@@ -115,6 +117,25 @@ class Entry(Generic[T]):
     obj: T
     description: str
     origin: str = "built-in"
+
+
+@functools.lru_cache(maxsize=4)
+def _entry_points(path: tuple[str, ...]) -> dict[str, list[importlib.metadata.EntryPoint]]:
+    """Every installed entry point, by group, for this ``sys.path``.
+
+    Read once for all the registries (a scan of the installed distributions takes tens of ms);
+    ``path`` is the key, so a distribution put on a new path is found.
+    """
+    groups: dict[str, list[importlib.metadata.EntryPoint]] = {}
+    seen: set[str] = set()
+    for dist in importlib.metadata.distributions():
+        name = (dist.metadata["Name"] or "").lower().replace("-", "_")
+        if name in seen:  # the same distribution further down the path: the first one counts
+            continue
+        seen.add(name)
+        for ep in dist.entry_points:
+            groups.setdefault(ep.group, []).append(ep)
+    return groups
 
 
 class Registry(Mapping[str, T]):
@@ -262,7 +283,7 @@ class Registry(Mapping[str, T]):
         if self.group is None:
             return failed
         before = set(self._entries)  # what a plug-in's import registers is not among these
-        for ep in importlib.metadata.entry_points(group=self.group):
+        for ep in _entry_points(tuple(sys.path)).get(self.group, ()):
             written = f"{ep.name} = {ep.value}"
             name = self._normalise(ep.name)
             if name in self._entries and self._entries[name].origin == written:
