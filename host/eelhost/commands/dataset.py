@@ -24,7 +24,7 @@ from eelhost.data.virtual_tank import (
 from eelhost.errors import UserError
 from eelhost.files import check_output_folder
 from eelhost.progress import Progress
-from eelsim.fluid import FLUID_LAWS
+from eelsim.fluid import DEFAULT_FLUID_LAW, FLUID_LAWS
 from eelsim.robot import load_robot
 
 
@@ -89,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
     check_output_folder(args.out, "OUT")  # before 34 experiments are simulated
     plant = mismatched_plants()[args.plant] if args.plant else None
     base = plant.settings if plant else TankSettings()
-    law = args.fluid_law or (plant.law if plant else "morison")
+    law = args.fluid_law or (plant.law if plant else DEFAULT_FLUID_LAW)
     try:
         # a named plant's own truth (it may set some of its law's coefficients otherwise)
         truth = plant.truths() if plant and not args.fluid_law else law_truths(law)
