@@ -1,5 +1,11 @@
 """Spreading evaluation over a Dask cluster, for users who outgrow one machine.
 
+A :class:`ClusterMap` is the cluster's ``map(function, jobs)``; an evaluator's backend spreads its
+work through it (``Evaluator(..., map_function=dask_map(address))``, or a backend object:
+``BatchBackend(map_function)`` sends each generation's candidates in blocks, one task each,
+``ReferenceBackend(map_function=...)`` one closed-loop run per task). This module imports no
+backend: the backends take any map.
+
 What a cluster is trusted with (docs/cli.md, "Security"): Dask sends functions and results between
 the client and the workers as pickles, so whoever runs the scheduler or a worker can run code on
 the user's machine, and sees the experiments. eelbot therefore connects only to
