@@ -329,9 +329,11 @@ class TankReplanner:
         Estimate the current from the camera track against the twin and replan in it.
     lookahead_s : float
         Every ``lookahead_every_s`` the twin swims the robot on from its estimated state along
-        its present waypoints, in the estimated current, for this long; a body that comes within
-        ``lookahead_margin_m`` of an obstacle or wall there is replanned (``predicted_contact``)
-        even inside the corridor.
+        its present waypoints, in the estimated current, for ``replan_horizon_s``; a body that
+        comes within ``lookahead_margin_m`` of an obstacle or wall there is replanned
+        (``predicted_contact``) even inside the corridor. The body's outline over the first
+        ``lookahead_s`` of that run judges the stops and whether the present plan may be kept.
+        0 turns the look-ahead off.
     lookahead_every_s, lookahead_margin_m : float
     goal_planner_for : callable, optional
         ``goal_planner_for(extra_current_m_s)``: a planner like ``planner_for``'s whose search
