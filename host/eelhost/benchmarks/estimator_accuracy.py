@@ -107,7 +107,8 @@ def _plant_itself(ds: Dataset, plant: Plant | None, tests: list,
 
 
 def _fit_and_validate(ds: Dataset, plant: Plant | None, settings: FitSettings,
-                      say: Progress, joint_models: Sequence[str] | None = None) -> dict[str, Any]:
+                      say: Progress, joint_models: Sequence[str] | None = None,
+                      laws: Sequence[str] | None = None) -> dict[str, Any]:
     """Fit both motions, choose the model by the comparison, validate; the figures of a tank.
 
     ``fits`` are the chosen model's; ``own`` the robot file's model's fits (the same when it was
@@ -126,7 +127,7 @@ def _fit_and_validate(ds: Dataset, plant: Plant | None, settings: FitSettings,
         return res, ev
 
     chosen = fit_and_choose(ds, ("straight", "turning"), settings, fit=fit, say=say,
-                            joint_models=joint_models)
+                            joint_models=joint_models, laws=laws)
     alone = chosen.fits  # each motion with its own current, kept to show what the tank's changes
     # one current for the tank from both motions, as the report does (estimation/tank_current.py)
     chosen.fits, chosen.evaluators, out["tank_current"] = share_tank_current(
@@ -243,6 +244,7 @@ def estimator_report(
     only: tuple[str, ...] | None = None,
     fit_current: bool = True,
     joint_models: Sequence[str] | None = None,
+    laws: Sequence[str] | None = None,
 ) -> str:
     """Measure the estimator on the virtual tanks and write the markdown report.
 
@@ -266,6 +268,8 @@ def estimator_report(
     joint_models : sequence of str, optional
         The joint models the comparison tries on every tank (default: those offered by default
         and the robot file's, ``eelsim.joints.default_grid_models``).
+    laws : sequence of str, optional
+        The fluid laws it tries (default: ``eelhost.estimation.selection.default_laws``).
 
     Returns
     -------
@@ -296,7 +300,9 @@ def estimator_report(
                        "validation simulates in it" if fit_current else
                        "not fitted (`--no-fit-current`): the declared currents only") + "."
         + ("" if joint_models is None else " Joint models the comparison tries: "
-           + ", ".join(sorted(set(joint_models))) + "."),
+           + ", ".join(sorted(set(joint_models))) + ".")
+        + ("" if laws is None else " Fluid laws it tries: " + ", ".join(sorted(set(laws)))
+           + " (not the default grid)."),
         "",
     ]
     cases: list[tuple[str, str, Plant | None]] = [
@@ -319,7 +325,7 @@ def estimator_report(
     for key, label, plant in cases:
         ds = load_dataset(BUNDLED_DATASET) if plant is None else _tank(work, plant, seed, say)
         say(f"fitting the {label} ...")
-        results[key] = r = _fit_and_validate(ds, plant, settings, say, joint_models)
+        results[key] = r = _fit_and_validate(ds, plant, settings, say, joint_models, laws)
         if ga:
             say(f"running the paper's GA on the {key} tank ...")
             r["ga"] = _ga(ds, seed, ga_generations)

@@ -19,6 +19,7 @@ from eelhost.commands.common import (
     write_report,
 )
 from eelhost.commands.joint_models_option import add_joint_models_option
+from eelhost.commands.report import law_names
 from eelhost.data.virtual_tank import mismatched_plants
 from eelhost.errors import UserError
 
@@ -65,6 +66,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=SEED, default=0, help="seed of the datasets and the fits")
     add_current_option(p)  # one setting for every tank
     add_joint_models_option(p)
+    p.add_argument("--laws", type=law_names, metavar="LAW,...",
+                   help="fluid laws the comparison tries on every tank (default: the report's)")
     p.set_defaults(run=run)
 
 
@@ -114,6 +117,7 @@ def run(args: argparse.Namespace) -> int:
         only=tuple(args.tanks.split(",")) if args.tanks else None,
         fit_current=args.fit_current,
         joint_models=args.joint_models,
+        laws=args.laws,
     )
     if write_report(args.write, text):
         print(f"wrote {args.write}")  # the tables went to stdout as they were measured
