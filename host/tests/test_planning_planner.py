@@ -202,3 +202,34 @@ def test_an_ilos_plan_is_checked_with_the_guidance_state_the_search_left_at_each
     planned = np.concatenate([leg.com_m for leg in outcome.plan.legs])
     nominal = outcome.checks[0]
     assert distance_to_path(planned, nominal.states[:, N : N + 2]).max() < 0.001
+
+
+def test_the_soft_margin_costs_time_only_under_the_preferred_clearance():
+    planner = Planner(open_tank(), ROBOT, MODEL)
+    s = planner.settings
+    # the default soft margin: the hard margin plus room for the check's unknown current
+    assert s.preferred_clearance_m > s.margin_m and s.clearance_cost > 0
+    search = planner.search
+    dt = 3 * planner.twin.dt_s
+    assert search.soft_cost_s(np.full(100, s.preferred_clearance_m + 0.01), 3) == 0.0
+    at_margin = search.soft_cost_s(np.full(100, s.margin_m), 3)
+    assert at_margin == pytest.approx(s.clearance_cost * 100 * dt)
+    halfway = search.soft_cost_s(np.full(100, 0.5 * (s.margin_m + s.preferred_clearance_m)), 3)
+    assert halfway == pytest.approx(at_margin / 4)  # quadratic in the shortfall
+    # NaN samples (after a run's end) cost nothing
+    assert search.soft_cost_s(np.full(10, np.nan), 3) == 0.0
+    assert Planner(open_tank(), ROBOT, MODEL, soft_margin=False).settings.clearance_cost == 0.0
+
+
+def test_the_soft_margin_keeps_the_plan_further_from_an_obstacle_beside_the_direct_line():
+    # a disc 0.1 m beside the start-goal line: the fastest plan passes close, the soft margin
+    # pays some time for room (both plans keep the hard margin)
+    world = open_tank(obstacles=[{"kind": "circle", "centre_m": [1.25, 1.2], "radius_m": 0.1}])
+    clear = {}
+    for soft in (False, True):
+        planner = Planner(world, ROBOT, MODEL, check=False, soft_margin=soft)
+        outcome = planner.plan()
+        assert outcome.found, outcome.message
+        clear[soft] = min(leg.min_clearance_m for leg in outcome.plan.legs)
+        assert clear[soft] >= planner.settings.margin_m
+    assert clear[True] > clear[False] + 0.02, clear

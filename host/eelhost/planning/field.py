@@ -121,6 +121,12 @@ class GoalDistance:
         Nodes with less clearance than this are blocked.
     cell_m : float
         Grid spacing of the map (a multiple of the clearance field's).
+    preferred_clearance_m, clearance_cost : float
+        The search's soft margin (:class:`eelhost.planning.search.SearchSettings`): a step
+        between nodes whose mean clearance c is under the preferred clearance p costs its
+        length times 1 + clearance_cost ((p - c) / (p - body_half_width_m))^2, so the map is
+        the soft margin's cost of the cheapest path, in metres at the swimming speed
+        (0: plain path length).
     """
 
     def __init__(
@@ -129,10 +135,13 @@ class GoalDistance:
         clearance: ClearanceField,
         body_half_width_m: float,
         cell_m: float = 0.05,
+        preferred_clearance_m: float = 0.0,
+        clearance_cost: float = 0.0,
     ) -> None:
         stride = max(1, int(round(cell_m / clearance.cell_m)))
         self.cell_m = clearance.cell_m * stride
         free = clearance.values[::stride, ::stride] >= body_half_width_m
+        near = clearance.values[::stride, ::stride].ravel()
         nx, ny = free.shape
         self.shape = (nx, ny)
         xs = np.arange(nx) * self.cell_m
@@ -149,7 +158,13 @@ class GoalDistance:
             ok = free.ravel()[a.ravel()] & free.ravel()[b.ravel()]
             rows.append(a.ravel()[ok])
             cols.append(b.ravel()[ok])
-            lens.append(np.full(int(ok.sum()), math.hypot(di, dj) * self.cell_m))
+            length = np.full(int(ok.sum()), math.hypot(di, dj) * self.cell_m)
+            if clearance_cost > 0 and preferred_clearance_m > body_half_width_m:
+                mid = 0.5 * (near[a.ravel()[ok]] + near[b.ravel()[ok]])
+                short = np.clip((preferred_clearance_m - mid)
+                                / (preferred_clearance_m - body_half_width_m), 0.0, 1.0)
+                length = length * (1.0 + clearance_cost * short ** 2)
+            lens.append(length)
         r, c, ln = np.concatenate(rows), np.concatenate(cols), np.concatenate(lens)
         graph = coo_matrix((np.r_[ln, ln], (np.r_[r, c], np.r_[c, r])), shape=(nx * ny,) * 2)
         sources = np.flatnonzero(in_goal)

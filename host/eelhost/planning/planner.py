@@ -86,6 +86,16 @@ PLANNING_GUIDANCE = GuidanceLaw("ilos", lookahead_m=0.2, integral_gain=0.02, hea
 the planner does not know, where the paper's pure pursuit drifts off it. Not the default: the
 tank's run loop steers with pure pursuit (docs/planning.md says what is missing)."""
 
+SOFT_MARGIN_BASE_M = 0.03
+"""The soft margin's room over the hard margin for the coefficients' uncertainty alone, m."""
+
+SOFT_MARGIN_DRIFT_S = 6.0
+"""The soft margin's room per unit of unknown current, s (m per m/s): how far the robot strays
+from the search's run in the check's currents (docs/planning.md, "The search")."""
+
+SOFT_MARGIN_COST = 3.0
+"""The soft margin's cost, s per s swum, of a body point at the hard margin."""
+
 LEG_TIME_FACTOR = 1.6
 """A leg's time limit per metre, as a multiple of the time the robot needs against the current."""
 
@@ -261,6 +271,10 @@ class Planner:
         The robot's guidance law, for the search and the check (default the paper's pure
         pursuit, which the tank's run loop steers with; :data:`PLANNING_GUIDANCE` is the
         integral line-of-sight law). It replaces the one of ``options``.
+    soft_margin : bool
+        Give the search a soft margin (``SearchSettings.preferred_clearance_m``), unless
+        ``settings`` sets its own: the hard margin plus :data:`SOFT_MARGIN_BASE_M` plus
+        :data:`SOFT_MARGIN_DRIFT_S` times the unknown current, at :data:`SOFT_MARGIN_COST`.
     swimmer : SwimmerModel, optional
         The model of the robot the planner swims, built once by the command
         (:meth:`eelhost.planning.uncertainty.CoefficientModel.swimmer_for`) and handed on to the
@@ -285,6 +299,7 @@ class Planner:
         threads: int | None = 1,
         guidance: GuidanceLaw = PURSUIT,
         swimmer: SwimmerModel | None = None,
+        soft_margin: bool = True,
     ) -> None:
         world = coefficients.in_tank(world)
         robot = coefficients.robot_for(robot)
@@ -317,6 +332,13 @@ class Planner:
         # robust_search: every leg is also swum in the unknown current (search module docstring),
         # its body kept off everything by its half width and some
         self.settings = dataclasses.replace(base, margin_m=margin, leg_time_s=leg_time)
+        if soft_margin and base.clearance_cost <= 0:
+            # the soft margin (docs/planning.md, "The search"): room for the robot to stray from
+            # the searched run in the water the check draws, where the world leaves it
+            self.settings = dataclasses.replace(
+                self.settings, clearance_cost=SOFT_MARGIN_COST,
+                preferred_clearance_m=margin + SOFT_MARGIN_BASE_M
+                + SOFT_MARGIN_DRIFT_S * self.unknown_current_m_s)
         if robust_search:
             self.settings = dataclasses.replace(
                 self.settings, robust_current_m_s=self.unknown_current_m_s,
@@ -325,9 +347,14 @@ class Planner:
                          threads=threads, swimmer=self.model)
         self.clearance = ClearanceField(world)
         self.goal_distance = GoalDistance(world, self.clearance, self.body_half_width_m)
+        # the search's heuristic: the soft margin's cost along the cheapest free-space path
+        route = (GoalDistance(world, self.clearance, self.body_half_width_m,
+                              preferred_clearance_m=self.settings.preferred_clearance_m,
+                              clearance_cost=self.settings.clearance_cost)
+                 if self.settings.clearance_cost > 0 else self.goal_distance)
         # 1.3: the body's sway and a turn's cut corner let the centre of mass gain on the
         # straight-line speed; a heuristic speed too low only makes the search greedier
-        self.search = Search(world, self.twin, self.settings, self.clearance, self.goal_distance,
+        self.search = Search(world, self.twin, self.settings, self.clearance, route,
                              1.3 * fastest + world.current.speed_m_s)
 
     # -- refusals --------------------------------------------------------------------------------

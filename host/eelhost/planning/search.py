@@ -142,6 +142,14 @@ class SearchSettings:
     robust_directions : int
     robust_margin_m : float
         Clearance of the body centre line the extra runs keep (the body's half width and some).
+    preferred_clearance_m : float
+        The soft margin: clearance of the body centre line the search prefers (0 or at most
+        ``margin_m``: none). A sample of a leg closer than this to anything adds to the leg's
+        cost (``clearance_cost``), so plans use the middle of the gaps where the time allows;
+        ``margin_m`` stays the hard limit.
+    clearance_cost : float
+        Cost of the soft margin, s per s swum, of a sample at the hard margin ``margin_m``; it
+        falls quadratically to 0 at ``preferred_clearance_m``.
     """
 
     actions: Actions = Actions()
@@ -158,6 +166,8 @@ class SearchSettings:
     robust_current_m_s: float = 0.0
     robust_directions: int = 4
     robust_margin_m: float = 0.03
+    preferred_clearance_m: float = 0.0
+    clearance_cost: float = 0.0
 
 
 @dataclass
@@ -323,6 +333,7 @@ class Search:
         self.body_half_width_m = float(self.model.half_axis_horizontal_m.max())
         self.reach_m = reach_m(self.model)
         self._start_margin_m = settings.margin_m
+        self._soft_max_m = settings.preferred_clearance_m if settings.clearance_cost > 0 else 0.0
         self._memo: dict[tuple, list] = {}
         self.simulations = 0
 
@@ -496,11 +507,36 @@ class Search:
         # far enough from everything, that bound is all the search needs (and is what it keeps)
         far = self.clearance(flat[live, n : n + 2]) - self.clearance.error_m - self.reach_m
         out[live] = far
-        near = live[far < self.settings.margin_m + self._slack_m]
+        near = live[far < max(self.settings.margin_m, self._soft_max_m) + self._slack_m]
         if near.size:
             pts = body_points(self.model, flat[near], self.settings.per_link)
             out[near] = self.clearance(pts).min(axis=1) - self._slack_m
         return out.reshape(r, k)
+
+    def soft_cost_s(self, clear: FloatArray, stride: int) -> float:
+        """The soft margin's cost of a run's samples (``SearchSettings.preferred_clearance_m``).
+
+        Parameters
+        ----------
+        clear : ndarray, shape (S,)
+            Clearance of the body centre line at each sample (NaN after the run's end).
+        stride : int
+            Physics steps between samples.
+
+        Returns
+        -------
+        float
+            Extra cost, s: the time integral of ``clearance_cost`` times the squared shortfall
+            of the clearance under the preferred one, over the preferred one less the hard
+            margin (1 at the hard margin).
+        """
+        s = self.settings
+        if s.clearance_cost <= 0 or s.preferred_clearance_m <= s.margin_m or not clear.size:
+            return 0.0
+        span = s.preferred_clearance_m - s.margin_m
+        short = np.clip((s.preferred_clearance_m - np.nan_to_num(clear, nan=np.inf)) / span,
+                        0.0, None)
+        return float(s.clearance_cost * stride * self.twin.dt_s * np.sum(short ** 2))
 
     def _child(self, parent: _Node, action: int, wp, psi, runs: Runs, j: int,
                clear: FloatArray) -> _Node | None:
@@ -525,8 +561,9 @@ class Search:
             step = parent.step + at * stride
             leg = Leg(wp, d, bearing, parent.step, step, com[: at + 1], c, True, parent.key,
                       action)
-            return _Node(wp, psi, samples[at], step, step * self.twin.dt_s, -1, leg,
-                         self._key(wp, psi), goal=True)
+            soft = self.soft_cost_s(clear[: at + 1], stride)
+            return _Node(wp, psi, samples[at], step, parent.g + (step - parent.step)
+                         * self.twin.dt_s + soft, -1, leg, self._key(wp, psi), goal=True)
         if runs.reasons[j] or runs.arrival_step[j] < 0:
             return None
         c = float(np.min(clear[: last + 1]))
@@ -548,8 +585,10 @@ class Search:
         leg = Leg(wp, d, bearing, parent.step, parent.step + arrival, com, c, False, parent.key,
                   action)
         guide = runs.guidance_state(j, restart // stride, _leg_origin(parent, parent.guide))
-        return _Node(wp, psi, samples[restart // stride], step, step * self.twin.dt_s, -1,
-                     leg, self._key(wp, psi), guide=guide)
+        soft = self.soft_cost_s(clear[: restart // stride + 1], stride)
+        return _Node(wp, psi, samples[restart // stride], step,
+                     parent.g + restart * self.twin.dt_s + soft, -1, leg, self._key(wp, psi),
+                     guide=guide)
 
     # -- the search ------------------------------------------------------------------------------
 
@@ -681,7 +720,8 @@ class Search:
             legs.append(leg)
             ni = nodes[ni].parent
         legs.reverse()
-        cost = nodes[found].g
+        # the time the goal is entered (a node's g also holds the soft margin's cost)
+        cost = nodes[found].step * self.twin.dt_s
         msg = (f"plan found: {len(legs)} legs, goal entered at {cost:.1f} s, "
                f"{expansions} expansions, {sims} manoeuvres swum")
         return Plan(True, "found", msg, legs, cost, expansions, sims, elapsed, tree_arr, guide)
