@@ -177,3 +177,24 @@ def test_an_unknown_choice_names_the_registered_ones(installed, capsys):
     assert cli.main(["ports"]) == 0 and "loopback" in capsys.readouterr().out
     with pytest.raises(ValueError, match="unknown scheme 'tcp' .expected .*loopback"):
         open_link("tcp://robot")
+
+
+def test_in_a_fresh_process_the_installed_package_reaches_the_cli(tmp_path):
+    """No registry reset: what a user gets after ``pip install`` of their package."""
+    import os
+    import subprocess
+
+    install(tmp_path, "mine", {"eelbot.commands": {"hello": "mine_plugin:add_parser"},
+                               "eelbot.estimators": {"start-only": "mine_plugin:start_only"}},
+            {"mine_plugin": PLUGIN})
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(
+        [str(tmp_path), *filter(None, [os.environ.get("PYTHONPATH")])])}
+
+    def eelbot(*argv):
+        return subprocess.run([sys.executable, "-m", "eelhost", *argv], env=env,
+                              capture_output=True, text=True, timeout=300)
+
+    hello = eelbot("hello", "--name", "moray")
+    assert hello.returncode == 0 and hello.stdout == "hello moray\n" and hello.stderr == ""
+    method = eelbot("estimate", "--help")
+    assert "start-only" in method.stdout.split("--method")[1]
