@@ -258,3 +258,17 @@ def test_a_new_law_joins_the_comparison_only_when_it_declares_itself_a_candidate
         assert candidate_laws()[-1] == "toy_candidate"
     finally:
         FLUID_LAWS.remove("toy_candidate")
+
+
+def test_a_law_derived_from_a_candidate_and_its_lift_variant_are_not_candidates():
+    from eelsim.fluid import with_lift
+    from eelsim.fluid.base import declared_candidate
+    from eelsim.fluid.morison import MorisonLaw
+
+    class Derived(MorisonLaw):
+        """A user's variant of the paper's law, which does not say it is a candidate."""
+
+        name: ClassVar[str] = "derived_morison"
+
+    assert declared_candidate(MORISON) and declared_candidate(FLUID_LAWS["morison_lift"])
+    assert not declared_candidate(Derived()) and not declared_candidate(with_lift(Derived()))

@@ -23,6 +23,8 @@ candidates (``FluidLaw.candidate``): they are the model comparison's default gri
 
 from __future__ import annotations
 
+import importlib
+import pkgutil
 from typing import TypeVar
 
 from eelsim.fluid.base import (
@@ -32,6 +34,7 @@ from eelsim.fluid.base import (
     LinkFluid,
     LinkForces,
     LinkMotion,
+    declared_candidate,
 )
 from eelsim.registry import Registry
 
@@ -147,12 +150,13 @@ def candidate_laws(lift_variants: bool = True) -> tuple[str, ...]:
         variants, then plug-ins.
     """
     return tuple(name for name, law in FLUID_LAWS.items()
-                 if vars(type(law)).get("candidate", False)  # its own class says so
+                 if declared_candidate(law)  # its own class says so, not a parent's
                  and (lift_variants or not isinstance(law, LiftLaw)))
 
 
-# ---- the laws: one module each, registering itself beside its definition; imported here in
-# the order of registration (the default law first)
+# ---- the laws: one module each, registering itself beside its definition. The bundled laws'
+# names are exported here, in the order of registration (the default law first); then every
+# other module of this package is imported, so a new law's module registers with no list edited.
 # isort: off
 from eelsim.fluid.morison import MORISON, HydroCoefficients  # noqa: E402
 from eelsim.fluid.galilean import GALILEAN, GalileanCoefficients  # noqa: E402
@@ -165,6 +169,9 @@ from eelsim.fluid.resistive import RESISTIVE, ResistiveCoefficients  # noqa: E40
 from eelsim.fluid.reynolds import REYNOLDS, ReynoldsCoefficients  # noqa: E402
 from eelsim.fluid.lift import LiftLaw, with_lift  # noqa: E402
 # isort: on
+
+for _module in pkgutil.iter_modules(__path__):
+    importlib.import_module(f"{__name__}.{_module.name}")
 
 # every bundled law can carry a lift (docs/model.md section 2, "Lift"): the <law>_lift variants
 for _entry in FLUID_LAWS.registered():

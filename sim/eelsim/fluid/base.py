@@ -241,6 +241,15 @@ KERNEL_OUTPUTS = ("fxn", "fyn", "fnn", "tqn")
 KERNEL_TEMPORARY_PREFIX = "fl_"
 
 
+def declared_candidate(law: FluidLaw) -> bool:
+    """Whether ``law``'s own class sets ``candidate = True`` (a subclass does not inherit it).
+
+    So a law derived from a candidate (a user's variant of Morison's) joins the model
+    comparison only when it says so itself.
+    """
+    return bool(vars(type(law)).get("candidate", False))
+
+
 class FluidLaw(abc.ABC):
     """A law of the water's forces on the links (see the module docstring).
 

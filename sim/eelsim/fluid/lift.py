@@ -34,6 +34,7 @@ from eelsim.fluid.base import (
     LinkFluid,
     LinkForces,
     LinkMotion,
+    declared_candidate,
 )
 
 _NonNegative = Annotated[float, Field(ge=0.0, allow_inf_nan=False)]
@@ -168,7 +169,7 @@ def with_lift(base: FluidLaw) -> LiftLaw:
     setattr(sys.modules[__name__], record, coefficients)  # importable by name: it pickles
     law_name = f"{type(base).__name__}Lift"
     law_class = type(law_name, (LiftLaw,), {
-        "name": name, "coefficients": coefficients, "base": base, "candidate": base.candidate,
+        "name": name, "coefficients": coefficients, "base": base, "candidate": declared_candidate(base),
         "default_bounds": (*base.default_bounds, LIFT_BOUNDS),
         "kernel_rows": (*base.kernel_rows, "klift"),
         "__module__": __name__,
