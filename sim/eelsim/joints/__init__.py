@@ -22,6 +22,8 @@ another package adds its own through the ``eelbot.joint_models`` entry-point gro
 
 from __future__ import annotations
 
+import importlib
+import pkgutil
 from typing import Any, TypeVar
 
 from eelsim.joints.base import (
@@ -154,10 +156,15 @@ def joint_parameters(table: Any) -> Any:
     return parameters_of(table, JOINT_MODELS, DEFAULT_JOINT_MODEL)
 
 
-# ---- the models: one module each, registering itself beside its definition (the default first)
+# ---- the models: one module each, registering itself beside its definition. The bundled models'
+# names are exported here (the default first); then every other module of this package is
+# imported, so a new model's module registers with no list edited.
 from eelsim.joints.pd import PD, PDJointParameters, pd_gains, stiffness_hint  # noqa: E402
 from eelsim.joints.pd_limited import PD_LIMITED, PDLimitedJointParameters  # noqa: E402
 from eelsim.joints.servo import SERVO, ServoJointParameters  # noqa: E402
+
+for _module in pkgutil.iter_modules(__path__):
+    importlib.import_module(f"{__name__}.{_module.name}")
 
 __all__ = [
     "DEFAULT_JOINT_MODEL",
