@@ -16,11 +16,16 @@ when only the speed changed). Only one worker runs at a time.
 Usage (from the repo root, after ``bash scripts/setup.sh``)::
 
     .venv/bin/python tools/kernel_ab.py [--base HEAD] [--rounds 15] [--threads 1]
-        [--stage c|numba] [--base-stage c|numba]
+        [--stage c|numba] [--base-stage c|numba] [--clock wall|cpu] [--robot servo_robot.toml]
 
 ``--stage`` compiles the generated stage of both versions that way (default: as
 ``eelsim.batch.stage_backend`` chooses); ``--base-stage`` another way for the base, e.g.
 ``--base HEAD --base-stage numba --stage c`` weighs the C stage against numba's on the same code.
+``--clock cpu`` times each generation by the worker's CPU time instead of the wall clock: on a
+machine loaded beyond its cores the wall clock mostly measures the wait for a core (the CPU time
+still moves with the contention for caches and execution units). ``--robot`` runs another robot
+file (``servo_robot.toml``: the bundled servo joints; default: the
+bundled paper robot, PD joints).
 
 The first call compiles the base's kernel (about a minute; cached afterwards in the export,
 which is kept in the temporary folder under the revision's commit hash).
@@ -54,7 +59,7 @@ from eelsim.robot import load_robot
 from eelsim.scenario import TRAINING_CORNERS, grid_scenario
 
 runs, steps, threads, out = int(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3]), sys.argv[4]
-robot = load_robot()
+robot = load_robot(sys.argv[5] or None)
 opts = LoopOptions(stop_at_goal=False)
 corners = [grid_scenario("straight", a, w).model_copy(
     update={"duration_s": steps * opts.timing.dt_s}) for a, w in TRAINING_CORNERS]
@@ -64,10 +69,11 @@ res = batch.run_spec(spec, threads=threads)
 np.save(out, res.final_state)
 print(json.dumps({"ready": True, "codes": res.reason_code.tolist()}), flush=True)
 for _ in sys.stdin:
-    start = time.perf_counter()
+    start, start_cpu = time.perf_counter(), time.process_time()
     res = batch.run_spec(spec, threads=threads)
-    wall = time.perf_counter() - start
-    print(json.dumps({"wall": wall, "steps": float(res.final_step.sum())}), flush=True)
+    wall, cpu = time.perf_counter() - start, time.process_time() - start_cpu
+    print(json.dumps({"wall": wall, "cpu": cpu, "steps": float(res.final_step.sum())}),
+          flush=True)
 """
 
 
@@ -110,14 +116,17 @@ class Worker:
         The generation: runs, steps per run, threads.
     states_file : Path
         Where the worker saves its first run's final states.
+    robot : str
+        Robot file for the generation (empty: the bundled paper robot).
     """
 
     def __init__(self, sim_folder: Path, stage: str, runs: int, steps: int, threads: int,
-                 states_file: Path) -> None:
+                 states_file: Path, robot: str = "") -> None:
         env = dict(os.environ, PYTHONPATH=str(sim_folder), EELSIM_STAGE=stage)
         env.pop("EELSIM_KERNEL_CACHE", None)  # each version keeps its kernels beside its code
         self.process = subprocess.Popen(
-            [sys.executable, "-c", _WORKER, str(runs), str(steps), str(threads), str(states_file)],
+            [sys.executable, "-c", _WORKER, str(runs), str(steps), str(threads), str(states_file),
+             robot],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env)
         self.ready = self._answer()
 
@@ -128,13 +137,13 @@ class Worker:
             raise SystemExit(f"a kernel worker ended early (exit code {self.process.wait()})")
         return json.loads(line)
 
-    def time_once(self) -> tuple[float, float]:
-        """Run the generation once; return (wall seconds, RK4 steps)."""
+    def time_once(self, clock: str = "wall") -> tuple[float, float]:
+        """Run the generation once; return (seconds on ``clock``, RK4 steps)."""
         assert self.process.stdin is not None
         self.process.stdin.write("go\n")
         self.process.stdin.flush()
         answer = self._answer()
-        return answer["wall"], answer["steps"]
+        return answer[clock], answer["steps"]
 
     def close(self) -> None:
         """End the worker."""
@@ -153,6 +162,10 @@ def main() -> int:
     parser.add_argument("--steps", type=int, default=3000)
     parser.add_argument("--stage", choices=("c", "numba"), default=None)
     parser.add_argument("--base-stage", choices=("c", "numba"), default=None)
+    parser.add_argument("--clock", choices=("wall", "cpu"), default="wall",
+                        help="time on the wall clock or the worker's CPU time (a loaded machine)")
+    parser.add_argument("--robot", default="",
+                        help="robot file (servo_robot.toml: the bundled servo joints)")
     args = parser.parse_args()
     stage = batch.stage_backend(args.stage)
     base_stage = args.base_stage or stage
@@ -161,7 +174,7 @@ def main() -> int:
     folders = [export_revision(args.base, where), _REPO / "sim"]
     scratch = Path(tempfile.mkdtemp(prefix="eelsim_kernel_ab_"))
     files = [scratch / f"final_{i}.npy" for i in range(2)]
-    workers = [Worker(folder, st, args.runs, args.steps, args.threads, file)
+    workers = [Worker(folder, st, args.runs, args.steps, args.threads, file, args.robot)
                for folder, st, file in zip(folders, (base_stage, stage), files, strict=True)]
     try:
         finals = [np.load(file) for file in files]
@@ -172,7 +185,7 @@ def main() -> int:
         steps = 0.0
         for i in range(args.rounds):
             for j in ((0, 1) if i % 2 == 0 else (1, 0)):
-                walls[i, j], steps = workers[j].time_once()
+                walls[i, j], steps = workers[j].time_once(args.clock)
     finally:
         for worker in workers:
             worker.close()

@@ -4,7 +4,8 @@ Why: the GA generation (``tools/kernel_ab.py``) mixes the stage with the driver,
 numba's threads; to ask what bounds the stage itself (a wrong-maths variant, another GCC option,
 another block size) this script compiles each variant's stage with a small C loop that runs whole
 RK4 steps on one block (four stages, then the commit of the new state) and times them in
-alternation in one process, on one buffer. The verdict is the median of the per-round time
+alternation in one process, on one buffer, by the thread's CPU time (on a machine loaded beyond
+its cores the wall clock mostly measures the wait for a core). The verdict is the median of the per-round time
 ratios to the first variant (two copies of the same code: 0.99-1.00). See docs/kernel_history.md,
 session 5, for what it decided.
 
@@ -168,9 +169,9 @@ def main() -> None:
             name, lib, layout, init, work, lanes = variants[j]
             work[:] = init
             block_steps = args.steps * 16 // lanes
-            t0 = time.perf_counter()
+            t0 = time.thread_time()  # CPU time: the machine may be loaded beyond its cores
             lib.bench(work.ctypes.data, block_steps, DT_S)
-            per_step[i, j] = (time.perf_counter() - t0) / (block_steps * lanes) * 1e9
+            per_step[i, j] = (time.thread_time() - t0) / (block_steps * lanes) * 1e9
     for j, (name, *_) in enumerate(variants):
         ratio = per_step[:, j] / per_step[:, 0]
         print(f"{name:>12}: best {per_step[:, j].min():6.1f} ns per run and step, median"

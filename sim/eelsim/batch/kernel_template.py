@@ -30,9 +30,19 @@ still computed but never committed):
 
 The order of these operations is that of ``eelsim.closed_loop.simulate_closed_loop``; the tests
 compare the two to 1e-9.
+
+``_run_block`` is that list, one step per pass of its loop; the per-lane work of each item is a
+function of its own: ``_start_lanes`` (a block's runs into its lanes), ``_update_controls`` (1),
+``_record_states`` (2), the generated ``_stage`` (3-4: angles, joint law, fluid forces, the
+dynamics' solve and the RK4 sums, see ``eelsim.batch.codegen``) with ``_stage_settings``, then
+``_check_state`` and ``_fail_new_state`` (the checks), ``_camera_frames`` (5), ``_commit_kept``
+(6) and ``_write_outputs`` (a block's answers). The loop itself keeps only what every step runs
+(counts over the lanes that vectorise, the stages and the plain commit); why the pieces are
+called rather than inlined is written above them.
 """
 
 import math
+from typing import Any
 
 import numba
 import numpy as np
@@ -40,7 +50,7 @@ from llvmlite import ir as llvm_ir
 from numba.core import types
 from numba.extending import intrinsic
 
-from eelsim.batch.records import CameraState, Targets
+from eelsim.batch.records import CameraState, CheckScratch, LaneControl, LaneFate, Targets
 
 # Floating-point contraction (FMA) only: no reassociation (it would undo the Cody-Waite range
 # reduction of the generated sin/cos) and no "no NaN / no inf" assumptions (the failure checks
@@ -48,6 +58,16 @@ from eelsim.batch.records import CameraState, Targets
 _FASTMATH = {"contract"}
 
 NEVER = 2**62  # a step no run reaches
+
+# The driver's helpers that allocate nothing are compiled without numba's reference counting.
+# numba counts a reference to every array argument on entry and drops it on return (NRT_incref
+# and NRT_decref, an atomic add each) and removes those pairs only in functions whose control
+# flow is simple: _observe, called for every camera frame with two dozen arrays, made about 50
+# such calls per frame, and a function of the driver cut into pieces made hundreds per step
+# (docs/kernel_history.md, session 10). The arrays all belong to _run_block, which outlives
+# every call, so there is nothing for the counts to protect.
+_NO_REFCOUNT = {"cache": True, "_nrt": False}
+_njit: Any = numba.njit  # (numba's type stubs do not list _nrt)
 
 
 @intrinsic
@@ -116,7 +136,7 @@ def _cond_bound(work):  # pragma: no cover - replaced
 # ---- scalar helpers (per lane, not in the hot loop) ----
 
 
-@numba.njit(cache=True)
+@_njit(**_NO_REFCOUNT)
 def _np_mod(a, b):
     """numpy.mod for floats (sign of the divisor), as control.wrap_angle uses it."""
     m = np.fmod(a, b)
@@ -128,7 +148,7 @@ def _np_mod(a, b):
     return m
 
 
-@numba.njit(cache=True)
+@_njit(**_NO_REFCOUNT)
 def _wrap_angle(a):
     """control.wrap_angle for one angle: a itself in (-pi, pi], else pi - mod(pi - a, 2 pi)."""
     if -math.pi < a <= math.pi:
@@ -137,13 +157,13 @@ def _wrap_angle(a):
     return math.pi if w <= -math.pi else w
 
 
-@numba.njit(cache=True)
+@_njit(**_NO_REFCOUNT)
 def _heading_offset(px, py, heading, wx, wy, k_theta):
     """guidance.Guidance.offset: k_theta * wrap(atan2(wy - py, wx - px) - heading)."""
     return k_theta * _wrap_angle(math.atan2(wy - py, wx - px) - heading)
 
 
-@numba.njit(cache=True)
+@_njit(**_NO_REFCOUNT)
 def _guidance_offset(px, py, heading, r, run, target, waypoints, n_waypoints, k_theta, guide,
                      lane_guide):
     """guidance.Guidance.offset for lane r at a control update, the ILOS integral advanced.
@@ -185,7 +205,7 @@ def _guidance_offset(px, py, heading, r, run, target, waypoints, n_waypoints, k_
     return k_theta * _wrap_angle(theta_ref - heading)
 
 
-@numba.njit(cache=True)
+@_njit(**_NO_REFCOUNT)
 def _start_guidance(alive, run_of, guidance_state, filtered, lane_guide):
     """Each lane's first-leg start and ILOS integral from its run (a NaN start: the first pose)."""
     for r in range(alive.shape[0]):
@@ -196,7 +216,7 @@ def _start_guidance(alive, run_of, guidance_state, filtered, lane_guide):
             lane_guide[1, r] = filtered[1, r]
 
 
-@numba.njit(cache=True)
+@_njit(**_NO_REFCOUNT)
 def _sample_guidance(step, sample, sample_steps, alive, run_of, lane_guide, integral_out):
     """The lanes' ILOS integrals at a sample step, before its control update; the next sample."""
     while sample < sample_steps.shape[0] and sample_steps[sample] < step:
@@ -327,17 +347,17 @@ def _mass_matrix_condition(x, par, n, m, lo, inv, s, c, jx, jy):
     return _jacobi_condition(m)
 
 
-@numba.njit(cache=True)
+@_njit(**_NO_REFCOUNT)
 def _cross(ax, ay, bx, by):
     return ax * by - ay * bx
 
 
-@numba.njit(cache=True)
+@_njit(**_NO_REFCOUNT)
 def _on_segment(ax, ay, bx, by, cx, cy, d):
     return (d == 0.0 and min(ax, bx) <= cx <= max(ax, bx) and min(ay, by) <= cy <= max(ay, by))
 
 
-@numba.njit(cache=True)
+@_njit(**_NO_REFCOUNT)
 def _segments_intersect(p1x, p1y, p2x, p2y, q1x, q1y, q2x, q2y):
     """flags.segments_intersect: closed segments p1-p2 and q1-q2 share a point."""
     d1 = _cross(q2x - q1x, q2y - q1y, p1x - q1x, p1y - q1y)
@@ -386,7 +406,7 @@ def _self_collision(x, par, n, limit, info):
     return REASON_NONE
 
 
-@numba.njit(cache=True)
+@_njit(**_NO_REFCOUNT)
 def _distance_left(px, py, waypoints, n_waypoints, target):
     """closed_loop._distance_left: to the current target, then along the remaining waypoints."""
     if target >= n_waypoints:
@@ -398,7 +418,7 @@ def _distance_left(px, py, waypoints, n_waypoints, target):
     return d
 
 
-@numba.njit(cache=True)
+@_njit(**_NO_REFCOUNT)
 def _median_of_five(a, b, c, d, e):
     """The middle one of five values (what np.median gives), by min and max without branches."""
     f = max(min(a, b), min(c, d))
@@ -406,7 +426,7 @@ def _median_of_five(a, b, c, d, e):
     return max(min(e, f), min(max(e, f), g))
 
 
-@numba.njit(cache=True)
+@_njit(**_NO_REFCOUNT)
 def _median_by_ranks(med, count, filtered, rank, total):
     """np.median of the first ``count`` slots of ``med[slot, channel, lane]`` for every lane.
 
@@ -437,7 +457,7 @@ def _median_by_ranks(med, count, filtered, rank, total):
             filtered[ch, r] = total[r] * 0.5
 
 
-@numba.njit(cache=True)
+@_njit(**_NO_REFCOUNT, error_model="numpy")  # no zero test in the loops: pixel > 0 there
 def _observe(frame, px, py, heading, alive, run_of, noise, pixel, window, camera, targets,
              waypoints, frame_time):
     """One camera frame for every lane of the block, as loops over the lanes that vectorise.
@@ -487,9 +507,10 @@ def _observe(frame, px, py, heading, alive, run_of, noise, pixel, window, camera
         count += 1
         med_state[0] = count
     if count == 5:
-        # the default window, once filled: the middle value by min and max, in one loop
-        for r in range(LANES):
-            for ch in range(3):
+        # the default window, once filled: the middle value by min and max, lanes innermost so
+        # that each channel is one loop over contiguous lanes (it vectorises)
+        for ch in range(3):
+            for r in range(LANES):
                 filtered[ch, r] = _median_of_five(med[0, ch, r], med[1, ch, r], med[2, ch, r],
                                                   med[3, ch, r], med[4, ch, r])
     else:
@@ -512,7 +533,7 @@ def _observe(frame, px, py, heading, alive, run_of, noise, pixel, window, camera
                     arrival[r] = frame_time
 
 
-@numba.njit(cache=True)
+@_njit(**_NO_REFCOUNT)
 def _aim(r, run, targets, waypoints):
     """Lane r's current waypoint into targets.x/y (NaN once the last one is reached)."""
     if targets.reached[r] < targets.n_waypoints[r]:
@@ -523,7 +544,7 @@ def _aim(r, run, targets, waypoints):
         targets.y[r] = np.nan
 
 
-@numba.njit(cache=True)
+@_njit(**_NO_REFCOUNT)
 def _frame_poses(work, s, h, seen_x, seen_y, seen_heading):
     """The pose every lane's camera sees at fraction ``s`` of the step (rows x to xn, length h).
 
@@ -556,7 +577,7 @@ def _frame_poses(work, s, h, seen_x, seen_y, seen_heading):
         seen_heading[r] = ((k0 * (h0 / n) + k1 * (hd0 / n)) + k2 * (h1 / n)) + k3 * (hd1 / n)
 
 
-@numba.njit(cache=True)
+@_njit(**_NO_REFCOUNT)
 def _rotates(out, alive):
     """Whether the next stage may rotate the last stage's sin and cos: every live lane moved little.
 
@@ -570,7 +591,7 @@ def _rotates(out, alive):
     return far == 0
 
 
-@numba.njit(cache=True)
+@_njit(**_NO_REFCOUNT)
 def _check_start(work, out):
     """Finiteness and fastest rate of the block's initial states (rows x_bad and fastest).
 
@@ -589,7 +610,7 @@ def _check_start(work, out):
         out[O_FASTEST * LANES + r] = fastest
 
 
-@numba.njit(cache=True)
+@_njit(**_NO_REFCOUNT)
 def _torque_use(out, alive, ratio, saturated):
     """Each live lane's torques at the step's start, put to use (rows of the stage's loop 6).
 
@@ -618,12 +639,274 @@ def _zeros_on_cache_lines(count):
     return raw[skip : skip + count]
 
 
-@numba.njit(cache=True)
+@_njit(**_NO_REFCOUNT)
 def _gather(work, base, r, ns, dest):
     """The state of lane r from work rows ``base`` on, as a vector (for the scalar checks)."""
     for row in range(ns):
         dest[row] = work[(base + row) * LANES + r]
     return dest
+
+
+# ---- the block's loop, in pieces (one job each; _run_block below reads as the list above) ----
+# Why the pieces are ordinary compiled functions, called only when they have work, and not
+# inlined by numba (inline="always"): numba inlines in its own IR, where every array handed to
+# an inlined function is a new reference, and in a function this size LLVM's reference-count
+# pruning gives up: the pieces inlined that way made about 600 calls to NRT_incref/NRT_decref in
+# the step loop and the GA generation 1.5 times slower (tools/kernel_ab.py, final states
+# identical; docs/kernel_history.md, session 10). numba does not inline separately compiled
+# functions either, so each call costs its arguments (seven words per array). Hence: the
+# per-lane work sits in pieces behind a test that is false on most steps (a control update every
+# 30 steps, a sample step, a camera frame every third step, a check that fires, a block's start
+# and end), and what every step runs - a few counts over the lanes that vectorise, the RK4 stages
+# and the commit - stays in _run_block's loop, with the same calls per step as before the split.
+
+
+@_njit(**_NO_REFCOUNT)
+def _start_lanes(first, runs, work, fate, control, targets):
+    """Load the block's runs into its lanes: parameters, initial state, schedules, first waypoint.
+
+    Lanes past the last run hold the block's first run again (never committed: not alive), so
+    that every lane computes finite numbers. Returns whether no lane has a servo line or a
+    current (``batch.plain_runs``): the stage then leaves those terms out of its sweep.
+    """
+    (order, params, x0, total_steps, goal_steps, waypoints, n_waypoints, radius, _k_theta,
+     _delay_steps, update_steps, update_count, _noise, plain_run, _guidance_state) = runs
+    n_runs = x0.shape[0]
+    plain = True
+    for r in range(LANES):
+        fate.alive[r] = first + r < n_runs
+        run = order[first + r] if first + r < n_runs else order[first]
+        fate.run[r] = run
+        for p in range(params.shape[1]):
+            work[(W_GEOMETRY + p) * LANES + r] = params[run, p]
+        for row in range(2 * N_LINKS + 4):
+            work[(W_X + row) * LANES + r] = x0[run, row]
+        targets.radius[r] = radius[run]
+        fate.total[r] = total_steps[run]
+        fate.goal[r] = goal_steps[run]
+        if update_count[run] > 0:
+            control.update_at[r] = update_steps[run, 0]
+        targets.n_waypoints[r] = n_waypoints[run]
+        _aim(r, run, targets, waypoints)
+        plain = plain and plain_run[run]
+    return plain
+
+
+@_njit(**_NO_REFCOUNT)
+def _update_controls(step, work, runs, pending_size, guide, fate, control, filtered, target,
+                     lane_guide):
+    """Control updates and delayed offsets of the lanes that have one at ``step``.
+
+    An update computes the guidance offset from the filtered pose and queues it to act after the
+    run's delay; every offset whose step has come acts, in order (closed_loop's pending queue).
+    The offset in force goes to the stage's gamma row. Returns whether some lane updated (the
+    condition-number bound is computed only then).
+    """
+    (gamma, next_update, update_at, pending_at, pend_step, pend_value, pend_head, pend_count,
+     is_update) = control
+    any_update = False
+    for r in range(LANES):
+        if not fate.alive[r]:
+            continue
+        run = fate.run[r]
+        if update_at[r] == step:
+            is_update[r] = True
+            any_update = True
+            k = next_update[r] + 1
+            next_update[r] = k
+            update_at[r] = runs.update_steps[run, k] if k < runs.update_count[run] else NEVER
+            offset = _guidance_offset(filtered[0, r], filtered[1, r], filtered[2, r], r, run,
+                                      target[r], runs.waypoints, runs.n_waypoints[run],
+                                      runs.k_theta[run], guide, lane_guide)
+            slot = (pend_head[r] + pend_count[r]) % pending_size
+            pend_step[r, slot] = step + runs.delay_steps[run]
+            pend_value[r, slot] = offset
+            pend_count[r] += 1
+        while pend_count[r] > 0 and pend_step[r, pend_head[r]] <= step:
+            gamma[r] = pend_value[r, pend_head[r]]
+            pend_head[r] = (pend_head[r] + 1) % pending_size
+            pend_count[r] -= 1
+        pending_at[r] = pend_step[r, pend_head[r]] if pend_count[r] > 0 else NEVER
+        work[W_GAMMA * LANES + r] = gamma[r]
+    return any_update
+
+
+@_njit(**_NO_REFCOUNT)
+def _record_states(step, sample, sampled, record_full, work, fate, states_out, full_out):
+    """The live lanes' states at ``step`` into the outputs.
+
+    At a sample step (``sampled``: ``sample`` is its index), and every step when the full
+    history is asked for. The reference records before its checks, so this comes before them.
+    """
+    ns = 2 * N_LINKS + 4
+    if sampled:
+        for r in range(LANES):
+            if fate.alive[r]:
+                for row in range(ns):
+                    states_out[fate.run[r], sample, row] = work[(W_X + row) * LANES + r]
+    if record_full:
+        for r in range(LANES):
+            if fate.alive[r]:
+                for row in range(ns):
+                    full_out[fate.run[r], step, row] = work[(W_X + row) * LANES + r]
+
+
+@numba.njit(cache=True)
+def _check_state(step, t, work, out, params, stop_at_goal, fate, is_update, arrival, scratch):
+    """closed_loop._check of x for the live lanes, in its order, and the stop rules.
+
+    Non-finite, diverging, the condition number at control updates, the joint limit and link
+    intersection: the first that fires stops the lane with its reason. The vectorised bound (row
+    cond_bound) settles every physical state; the exact condition number (the scalar path) is
+    computed only near the threshold, the exact self-collision test only for lanes the screen
+    flagged. A lane that passes stops when its time is up or it is at its goal.
+    """
+    n = N_LINKS
+    ns = 2 * n + 4
+    for r in range(LANES):
+        if not fate.alive[r]:
+            continue
+        run = fate.run[r]
+        code = REASON_NONE
+        if np.isnan(out[O_X_BAD * LANES + r]):
+            code = REASON_NOT_FINITE
+        elif out[O_FASTEST * LANES + r] > DIVERGENCE_RATE:
+            code = REASON_DIVERGED
+        elif is_update[r]:
+            cond = out[O_COND_BOUND * LANES + r]
+            if not cond < 0.5 * ILL_CONDITION_THRESHOLD:
+                cond = _mass_matrix_condition(_gather(work, W_X, r, ns, scratch.state),
+                                              params[run], n, scratch.m, scratch.lo,
+                                              scratch.inv, scratch.s, scratch.c, scratch.jx,
+                                              scratch.jy)
+            if not cond < ILL_CONDITION_THRESHOLD:
+                code = REASON_CONDITION_NUMBER
+                fate.reason_value[r] = cond
+        if code == REASON_NONE and out[O_NEAR * LANES + r] != 0.0:
+            code = _self_collision(_gather(work, W_X, r, ns, scratch.state), params[run], n,
+                                   work[W_LIMIT * LANES + r], scratch.info)
+            if code != REASON_NONE:
+                fate.reason_index[r, 0] = int(scratch.info[0])
+                fate.reason_index[r, 1] = int(scratch.info[1])
+                fate.reason_value[r] = scratch.info[2]
+        if code != REASON_NONE:
+            self_hit = code == REASON_JOINT_LIMIT or code == REASON_LINKS_INTERSECT
+            fate.failure[r] = FAIL_SELF_COLLISION if self_hit else FAIL_ILL_CONDITIONED
+            fate.reason[r] = code
+            fate.failure_time[r] = t
+            fate.alive[r] = False
+            fate.final_step[r] = step
+        elif ((stop_at_goal and not np.isnan(arrival[r]) and step >= fate.goal[r])
+              or step >= fate.total[r]):
+            fate.alive[r] = False
+            fate.final_step[r] = step
+
+
+@_njit(**_NO_REFCOUNT)
+def _stage_settings(st, step, t, dt):
+    """RK4 stage ``st``'s time, step fraction, weight in the sums and whether it may rotate.
+
+    Rotating: sin and cos by rotation of the previous stage's rather than in full; it also needs
+    every live lane to have moved little (_rotates). Stage 1 rotates stage 4's angles (which left
+    their offset), with the full sin and cos every RESYNC_STEPS steps (and at step 0), so that
+    the chain of rotations keeps its rounding small.
+    """
+    half = 0.5 * dt
+    if st == 0:
+        return t, half, 1.0, step % RESYNC_STEPS != 0
+    if st == 1:
+        return t + half, half, 2.0, True
+    if st == 2:
+        return t + half, dt, 2.0, True
+    return t + dt, 0.0, 1.0, True
+
+
+@_njit(**_NO_REFCOUNT)
+def _fail_new_state(step, t, dt, out, fate):
+    """Stop the live lanes whose new state xn failed (row keep is 0 for them).
+
+    A non-positive pivot of the stage's solve fails the lane at t, a new state that is not
+    finite at t + dt (the reference's order).
+    """
+    for r in range(LANES):
+        if not fate.alive[r] or out[O_KEEP * LANES + r] != 0.0:
+            continue
+        code = REASON_NONE
+        if out[O_BAD_PIVOT * LANES + r] > 0.0:
+            code = REASON_NOT_POSITIVE_DEFINITE
+            fate.failure_time[r] = t
+        elif np.isnan(out[O_XN_BAD * LANES + r]):
+            code = REASON_NOT_FINITE
+            fate.failure_time[r] = t + dt
+        fate.failure[r] = FAIL_ILL_CONDITIONED
+        fate.reason[r] = code
+        fate.alive[r] = False
+        fate.final_step[r] = step
+
+
+@_njit(**_NO_REFCOUNT)
+def _camera_frames(step, frame, dt, frames, work, runs, pixel, window, fate, camera, targets,
+                   seen_x, seen_y, seen_heading):
+    """Observe the camera frames in (t, t + dt]; return the next frame's index.
+
+    Each frame sees the Hermite-interpolated pose between x and xn (_frame_poses) through the
+    camera model and the guidance's filter (_observe); ``seen_*`` are scratch for the poses.
+    """
+    while frame < frames.step.shape[0] and frames.step[frame] == step:
+        _frame_poses(work, frames.fraction[frame], dt, seen_x, seen_y, seen_heading)
+        _observe(frame, seen_x, seen_y, seen_heading, fate.alive, fate.run, runs.noise, pixel,
+                 window, camera, targets, runs.waypoints, frames.time[frame])
+        frame += 1
+    return frame
+
+
+@_njit(**_NO_REFCOUNT)
+def _commit_kept(work):
+    """The kept lanes' new state xn becomes x, a select per lane (row keep of out, in work).
+
+    For the steps on which some lane stops; otherwise _run_block copies the rows whole.
+    """
+    for row in range(2 * N_LINKS + 4):
+        for r in range(LANES):
+            i = row * LANES + r
+            keep = work[(WORK_ROWS + O_KEEP) * LANES + r]
+            work[W_X * LANES + i] = work[W_XN * LANES + i] if keep != 0.0 else work[W_X * LANES + i]
+
+
+@_njit(**_NO_REFCOUNT)
+def _write_outputs(first, dt, work, runs, outputs, fate, targets):
+    """Copy each run's answers from its lane into the outputs.
+
+    A run that neither failed nor arrived is too slow (reason index: the waypoint it was heading
+    for); the final state and the distance left go out too.
+    """
+    n_runs = runs.x0.shape[0]
+    for r in range(LANES):
+        if first + r >= n_runs:
+            continue
+        run = fate.run[r]
+        if fate.failure[r] == FAIL_NONE and np.isnan(targets.arrival[r]):
+            fate.failure[r] = FAIL_TOO_SLOW
+            fate.reason[r] = REASON_TOO_SLOW
+            fate.failure_time[r] = fate.final_step[r] * dt
+            fate.reason_index[r, 0] = targets.reached[r]
+        outputs.arrival[run] = targets.arrival[r]
+        outputs.failure[run] = fate.failure[r]
+        outputs.failure_time[run] = fate.failure_time[r]
+        outputs.reason[run] = fate.reason[r]
+        outputs.reason_index[run, 0] = fate.reason_index[r, 0]
+        outputs.reason_index[run, 1] = fate.reason_index[r, 1]
+        outputs.reason_value[run] = fate.reason_value[r]
+        for row in range(2 * N_LINKS + 4):
+            outputs.final_state[run, row] = work[(W_X + row) * LANES + r]
+        outputs.final_step[run] = fate.final_step[r]
+        outputs.target[run] = targets.reached[r]
+        outputs.torque_ratio[run] = fate.torque_ratio[r]
+        outputs.saturated[run] = fate.saturated[r]
+        outputs.distance[run] = _distance_left(work[(W_X + N_LINKS) * LANES + r],
+                                               work[(W_X + N_LINKS + 1) * LANES + r],
+                                               runs.waypoints[run], runs.n_waypoints[run],
+                                               targets.reached[r])
 
 
 @numba.njit(cache=True)
@@ -634,104 +917,66 @@ def _run_block(block, runs, frames, loop, outputs):
     The lanes' states live in ``work`` (rows W_X: the step's start, W_XN: its end), so the
     generated code reads and writes them with constant offsets; everything per lane and per step
     that does not vectorise (control updates, checks, camera) reads single numbers from there.
+    Each step is the sequence of the module docstring; the per-lane work is in the pieces above.
     """
-    (order, params, x0, total_steps, goal_steps, waypoints, n_waypoints, radius, k_theta,
-     delay_steps, update_steps, update_count, noise, plain_run, guidance_state) = runs
-    frame_step, frame_fraction, frame_time = frames
     dt, pixel, window, stop_at_goal, pending_size, record_full, sample_steps, guide = loop
-    (states_out, full_out, arrival_out, failure_out, failure_time_out, reason_out,
-     reason_index_out, reason_value_out, final_state_out, final_step_out, target_out,
-     distance_out, torque_ratio_out, saturated_out, integral_out) = outputs
     n = N_LINKS
     ns = 2 * n + 4
-    n_runs = x0.shape[0]
-    n_par = params.shape[1]
     first = block * LANES
     # one buffer: the rows of work, then those of out (the generated code indexes it whole)
     work = _zeros_on_cache_lines((WORK_ROWS + OUT_ROWS) * LANES)
     out = work[WORK_ROWS * LANES :]
-    xs = np.empty(ns)  # one lane's state, for the scalar checks
-    run_of = np.empty(LANES, np.int64)
+    # the lanes' records; the arrays that every step's loops read are named once here (taking
+    # them out of a record inside the loop would count a reference each time)
     alive = np.zeros(LANES, np.bool_)
-    is_update = np.zeros(LANES, np.bool_)
-    failure = np.zeros(LANES, np.int64)
-    fail_t = np.full(LANES, np.nan)
-    reason = np.zeros(LANES, np.int64)
-    reason_index = np.zeros((LANES, 2), np.int64)
-    reason_value = np.zeros(LANES)
-    info = np.zeros(3)
-    final_step = np.zeros(LANES, np.int64)
-    torque_ratio = np.zeros(LANES)  # max |u| / stall torque over the recorded steps
-    saturated = np.zeros(LANES, np.int64)  # recorded steps outside the torque-speed line
-    target = np.zeros(LANES, np.int64)
-    arrival = np.full(LANES, np.nan)
-    gamma = np.zeros(LANES)
-    next_update = np.zeros(LANES, np.int64)
-    pend_step = np.zeros((LANES, pending_size), np.int64)
-    pend_value = np.zeros((LANES, pending_size))
-    pend_head = np.zeros(LANES, np.int64)
-    pend_count = np.zeros(LANES, np.int64)
-    # the next step at which each lane updates its control or applies a pending offset (NEVER:
-    # none), and its last step: a vectorised test per step finds the lanes with something to do
+    lane_total = np.zeros(LANES, np.int64)
+    lane_goal = np.zeros(LANES, np.int64)
+    torque_ratio = np.zeros(LANES)
+    saturated = np.zeros(LANES, np.int64)
+    fate = LaneFate(np.empty(LANES, np.int64), alive, lane_total, lane_goal,
+                    np.zeros(LANES, np.int64), np.zeros(LANES, np.int64), np.full(LANES, np.nan),
+                    np.zeros((LANES, 2), np.int64), np.zeros(LANES), np.zeros(LANES, np.int64),
+                    torque_ratio, saturated)
     update_at = np.full(LANES, NEVER, np.int64)
     pending_at = np.full(LANES, NEVER, np.int64)
-    lane_total = np.zeros(LANES, np.int64)
-    lane_goal = np.zeros(LANES, np.int64)  # with stop_at_goal: stop at the goal from this step on
+    is_update = np.zeros(LANES, np.bool_)
+    control = LaneControl(np.zeros(LANES), np.zeros(LANES, np.int64), update_at, pending_at,
+                          np.zeros((LANES, pending_size), np.int64),
+                          np.zeros((LANES, pending_size)), np.zeros(LANES, np.int64),
+                          np.zeros(LANES, np.int64), is_update)
     # the camera's state, lanes innermost (see _observe), and the lanes' waypoints
     filtered = np.zeros((3, LANES))
     camera = CameraState(np.zeros((window, 3, LANES)), np.zeros(2, np.int64), np.zeros(LANES),
                          filtered, np.zeros(LANES), np.zeros(LANES), np.zeros(LANES))
-    lane_radius = np.zeros(LANES)
-    lane_waypoints = np.zeros(LANES, np.int64)
-    targets = Targets(target, arrival, np.full(LANES, np.nan), np.full(LANES, np.nan),
-                      lane_radius, lane_waypoints)
+    arrival = np.full(LANES, np.nan)
+    targets = Targets(np.zeros(LANES, np.int64), arrival, np.full(LANES, np.nan),
+                      np.full(LANES, np.nan), np.zeros(LANES), np.zeros(LANES, np.int64))
     lane_guide = np.zeros((4, LANES))  # guidance: first-leg start, ILOS integral
-    seen_x = np.zeros(LANES)
+    seen_x = np.zeros(LANES)  # the pose each lane's camera sees
     seen_y = np.zeros(LANES)
     seen_heading = np.zeros(LANES)
-    cm = np.empty((n + 2, n + 2))
-    clo = np.empty((n + 2, n + 2))
-    cinv = np.empty((n + 2, n + 2))
-    cs = np.empty(n)
-    cc = np.empty(n)
-    cjx = np.empty(n + 2)
-    cjy = np.empty(n + 2)
-    for r in range(LANES):
-        alive[r] = first + r < n_runs
-        run_of[r] = order[first + r] if first + r < n_runs else order[first]
-        for p in range(n_par):
-            work[(W_GEOMETRY + p) * LANES + r] = params[run_of[r], p]
-        for row in range(ns):
-            work[(W_X + row) * LANES + r] = x0[run_of[r], row]
-        lane_radius[r] = radius[run_of[r]]
-        lane_total[r] = total_steps[run_of[r]]
-        lane_goal[r] = goal_steps[run_of[r]]
-        if update_count[run_of[r]] > 0:
-            update_at[r] = update_steps[run_of[r], 0]
-        lane_waypoints[r] = n_waypoints[run_of[r]]
-        _aim(r, run_of[r], targets, waypoints)
+    scratch = CheckScratch(np.empty(ns), np.zeros(3), np.empty((n + 2, n + 2)),
+                           np.empty((n + 2, n + 2)), np.empty((n + 2, n + 2)), np.empty(n),
+                           np.empty(n), np.empty(n + 2), np.empty(n + 2))
+    plain = _start_lanes(first, runs, work, fate, control, targets)
     # the frame at t = 0 sees the initial pose (fraction 0 of the first step; the xn rows are
     # still zero)
     _frame_poses(work, 0.0, dt, seen_x, seen_y, seen_heading)
-    _observe(0, seen_x, seen_y, seen_heading, alive, run_of, noise, pixel, window, camera,
-             targets, waypoints, frame_time[0])
-    _start_guidance(alive, run_of, guidance_state, filtered, lane_guide)
+    _observe(0, seen_x, seen_y, seen_heading, alive, fate.run, runs.noise, pixel, window, camera,
+             targets, runs.waypoints, frames.time[0])
+    _start_guidance(alive, fate.run, runs.guidance_state, filtered, lane_guide)
     _check_start(work, out)
-    # no lane with a servo line or a current (batch.plain_runs): the stage leaves those out
-    plain = True
-    for r in range(LANES):
-        plain = plain and plain_run[run_of[r]]
     frame = 1
+    frame_step = frames.step
+    n_frames = frame_step.shape[0]
+    n_samples = sample_steps.shape[0]
     sample = 0
     guide_sample = 0
-    n_samples = sample_steps.shape[0]
-    n_frames = frame_step.shape[0]
-    half = 0.5 * dt
-    sixth = dt / 6.0
     step = 0
     while True:
         t = step * dt
-        # 1. control updates; offsets act after the delay (pending queue, in order)
+        # 1. control updates; offsets act after the delay (pending queue, in order). A count
+        # without branches finds the live lanes and those with something due.
         live = 0
         due = 0
         for r in range(LANES):
@@ -742,74 +987,38 @@ def _run_block(block, runs, frames, loop, outputs):
             break
         # the call only on a sample step: made every step it cost a fifth of the driver's time
         if guide_sample < n_samples and sample_steps[guide_sample] <= step:
-            guide_sample = _sample_guidance(step, guide_sample, sample_steps, alive, run_of,
-                                            lane_guide, integral_out)
+            guide_sample = _sample_guidance(step, guide_sample, sample_steps, alive, fate.run,
+                                            lane_guide, outputs.integral)
         any_update = False
         if due > 0:
-            for r in range(LANES):
-                if not alive[r]:
-                    continue
-                run = run_of[r]
-                if update_at[r] == step:
-                    is_update[r] = True
-                    any_update = True
-                    k = next_update[r] + 1
-                    next_update[r] = k
-                    update_at[r] = update_steps[run, k] if k < update_count[run] else NEVER
-                    offset = _guidance_offset(filtered[0, r], filtered[1, r], filtered[2, r],
-                                              r, run, target[r], waypoints, n_waypoints[run],
-                                              k_theta[run], guide, lane_guide)
-                    slot = (pend_head[r] + pend_count[r]) % pending_size
-                    pend_step[r, slot] = step + delay_steps[run]
-                    pend_value[r, slot] = offset
-                    pend_count[r] += 1
-                while pend_count[r] > 0 and pend_step[r, pend_head[r]] <= step:
-                    gamma[r] = pend_value[r, pend_head[r]]
-                    pend_head[r] = (pend_head[r] + 1) % pending_size
-                    pend_count[r] -= 1
-                pending_at[r] = pend_step[r, pend_head[r]] if pend_count[r] > 0 else NEVER
-                work[W_GAMMA * LANES + r] = gamma[r]
+            any_update = _update_controls(step, work, runs, pending_size, guide, fate, control,
+                                          filtered, targets.reached, lane_guide)
         # 2. samples (the reference records every step before its checks)
         while sample < n_samples and sample_steps[sample] < step:
             sample += 1
-        if sample < n_samples and sample_steps[sample] == step:
-            for r in range(LANES):
-                if alive[r]:
-                    for row in range(ns):
-                        states_out[run_of[r], sample, row] = work[(W_X + row) * LANES + r]
-        if record_full:
-            for r in range(LANES):
-                if alive[r]:
-                    for row in range(ns):
-                        full_out[run_of[r], step, row] = work[(W_X + row) * LANES + r]
-        # 3.-4. the four RK4 stages (same sums as integrate.rk4_step, done inside the stages).
-        # One call site on purpose: LLVM inlines the generated stage into this function, and
-        # four call sites made four copies of it (a minute of cold compile instead of seconds).
-        # After stage 1 at x (its sin/cos feed the collision screen) come the checks of
-        # closed_loop._check.
+        sampled = sample < n_samples and sample_steps[sample] == step
+        if sampled or record_full:
+            _record_states(step, sample, sampled, record_full, work, fate, outputs.states,
+                           outputs.full)
+        # 3.-4. the four RK4 stages from y = x (same sums as integrate.rk4_step, done inside the
+        # stages). One call site on purpose: LLVM inlines the generated stage into this
+        # function, and four call sites made four copies of it (a minute of cold compile
+        # instead of seconds). After stage 1 at x (its sin/cos feed the collision screen) come
+        # the checks of closed_loop._check.
+        for i in range(ns * LANES):  # the rows x are contiguous: one flat copy
+            work[W_Y * LANES + i] = work[W_X * LANES + i]
         for st in range(4):
-            if st == 0:
-                # the rows x are contiguous: one flat copy
-                for i in range(ns * LANES):
-                    work[W_Y * LANES + i] = work[W_X * LANES + i]
-                # stage 1 rotates stage 4's angles (which left their offset), with the full
-                # sin and cos every RESYNC_STEPS steps (and at step 0)
-                t_s, a, wk = t, half, 1.0
-                rotate = step % RESYNC_STEPS != 0 and _rotates(out, alive)
-            elif st == 1:
-                t_s, a, wk, rotate = t + half, half, 2.0, _rotates(out, alive)
-            elif st == 2:
-                t_s, a, wk, rotate = t + half, dt, 2.0, _rotates(out, alive)
-            else:
-                t_s, a, wk, rotate = t + dt, 0.0, 1.0, _rotates(out, alive)
-            _stage(work, t_s, a, wk, st == 0, st == 3, sixth, rotate, st == 1 or st == 3, plain)
+            t_s, a, wk, may_rotate = _stage_settings(st, step, t, dt)
+            rotate = may_rotate and _rotates(out, alive)
+            _stage(work, t_s, a, wk, st == 0, st == 3, dt / 6.0, rotate, st == 1 or st == 3,
+                   plain)
             if st == 0:
                 _torque_use(out, alive, torque_ratio, saturated)
                 _screen(work)
                 if any_update:
                     _cond_bound(work)
-                # the lanes that fail a check or stop here (most steps: none), found by a loop
-                # that vectorises; the checks of closed_loop._check below run only for them
+                # the lanes that fail a check or stop here (most steps: none), counted by a
+                # loop that vectorises; the checks run only for them
                 flagged = 0
                 for r in range(LANES):
                     bound = out[O_COND_BOUND * LANES + r]
@@ -821,45 +1030,10 @@ def _run_block(block, runs, frames, loop, outputs):
                              | (is_update[r] & ((bound >= 0.5 * ILL_CONDITION_THRESHOLD)
                                                 | (bound != bound))))
                     flagged += alive[r] & stops
-                for r in range(LANES if flagged > 0 else 0):
-                    if not alive[r]:
-                        continue
-                    run = run_of[r]
-                    code = REASON_NONE
-                    if np.isnan(out[O_X_BAD * LANES + r]):
-                        code = REASON_NOT_FINITE
-                    elif out[O_FASTEST * LANES + r] > DIVERGENCE_RATE:
-                        code = REASON_DIVERGED
-                    elif is_update[r]:
-                        # the vectorised bound settles every physical state; the exact value
-                        # (and the scalar path's bound) only near the threshold or if not PD
-                        cond = out[O_COND_BOUND * LANES + r]
-                        if not cond < 0.5 * ILL_CONDITION_THRESHOLD:
-                            cond = _mass_matrix_condition(_gather(work, W_X, r, ns, xs),
-                                                          params[run], n, cm, clo, cinv, cs, cc,
-                                                          cjx, cjy)
-                        if not cond < ILL_CONDITION_THRESHOLD:
-                            code = REASON_CONDITION_NUMBER
-                            reason_value[r] = cond
-                    if code == REASON_NONE and out[O_NEAR * LANES + r] != 0.0:
-                        code = _self_collision(_gather(work, W_X, r, ns, xs), params[run], n,
-                                               work[W_LIMIT * LANES + r], info)
-                        if code != REASON_NONE:
-                            reason_index[r, 0] = int(info[0])
-                            reason_index[r, 1] = int(info[1])
-                            reason_value[r] = info[2]
-                    if code != REASON_NONE:
-                        self_hit = (code == REASON_JOINT_LIMIT
-                                    or code == REASON_LINKS_INTERSECT)
-                        failure[r] = FAIL_SELF_COLLISION if self_hit else FAIL_ILL_CONDITIONED
-                        reason[r] = code
-                        fail_t[r] = t
-                        alive[r] = False
-                        final_step[r] = step
-                    elif ((stop_at_goal and not np.isnan(arrival[r]) and step >= lane_goal[r])
-                          or step >= total_steps[run]):
-                        alive[r] = False
-                        final_step[r] = step
+                if flagged > 0:
+                    _check_state(step, t, work, out, runs.params, stop_at_goal, fate, is_update,
+                                 arrival, scratch)
+        # the pivot and finiteness of the new state: row keep, counted without branches
         failing = 0
         kept = 0
         for r in range(LANES):
@@ -868,65 +1042,21 @@ def _run_block(block, runs, frames, loop, outputs):
             out[O_KEEP * LANES + r] = 1.0 if ok else 0.0
             failing += alive[r] & (not ok)
             kept += ok
-        for r in range(LANES if failing > 0 else 0):
-            if not alive[r] or out[O_KEEP * LANES + r] != 0.0:
-                continue
-            code = REASON_NONE
-            if out[O_BAD_PIVOT * LANES + r] > 0.0:
-                code = REASON_NOT_POSITIVE_DEFINITE
-                fail_t[r] = t
-            elif np.isnan(out[O_XN_BAD * LANES + r]):
-                code = REASON_NOT_FINITE
-                fail_t[r] = t + dt
-            failure[r] = FAIL_ILL_CONDITIONED
-            reason[r] = code
-            alive[r] = False
-            final_step[r] = step
+        if failing > 0:
+            _fail_new_state(step, t, dt, out, fate)
         # 5. camera frames in (t, t + dt] see the Hermite-interpolated pose
-        while frame < n_frames and frame_step[frame] == step:
-            _frame_poses(work, frame_fraction[frame], dt, seen_x, seen_y, seen_heading)
-            _observe(frame, seen_x, seen_y, seen_heading, alive, run_of, noise, pixel, window,
-                     camera, targets, waypoints, frame_time[frame])
-            frame += 1
+        if frame < n_frames and frame_step[frame] == step:
+            frame = _camera_frames(step, frame, dt, frames, work, runs, pixel, window, fate,
+                                   camera, targets, seen_x, seen_y, seen_heading)
         # 6. lanes still running commit the step: a plain copy of the rows when every lane
-        # does (most steps; the select per lane cost about 11 ns per run and step), else a
-        # select per lane
+        # does (most steps; the select per lane cost about 11 ns per run and step)
         if kept == LANES:
             for i in range(ns * LANES):
                 work[W_X * LANES + i] = work[W_XN * LANES + i]
         else:
-            for row in range(ns):
-                for r in range(LANES):
-                    i = row * LANES + r
-                    keep = work[(WORK_ROWS + O_KEEP) * LANES + r]  # out's row, in work
-                    work[W_X * LANES + i] = (work[W_XN * LANES + i] if keep != 0.0
-                                             else work[W_X * LANES + i])
+            _commit_kept(work)
         step += 1
-    for r in range(LANES):
-        if first + r >= n_runs:
-            continue
-        run = run_of[r]
-        if failure[r] == FAIL_NONE and np.isnan(arrival[r]):
-            failure[r] = FAIL_TOO_SLOW
-            reason[r] = REASON_TOO_SLOW
-            fail_t[r] = final_step[r] * dt
-            reason_index[r, 0] = target[r]
-        arrival_out[run] = arrival[r]
-        failure_out[run] = failure[r]
-        failure_time_out[run] = fail_t[r]
-        reason_out[run] = reason[r]
-        reason_index_out[run, 0] = reason_index[r, 0]
-        reason_index_out[run, 1] = reason_index[r, 1]
-        reason_value_out[run] = reason_value[r]
-        for row in range(ns):
-            final_state_out[run, row] = work[(W_X + row) * LANES + r]
-        final_step_out[run] = final_step[r]
-        target_out[run] = target[r]
-        torque_ratio_out[run] = torque_ratio[r]
-        saturated_out[run] = saturated[r]
-        distance_out[run] = _distance_left(work[(W_X + n) * LANES + r],
-                                           work[(W_X + n + 1) * LANES + r], waypoints[run],
-                                           n_waypoints[run], target[r])
+    _write_outputs(first, dt, work, runs, outputs, fate, targets)
 
 
 @numba.njit(cache=True, parallel=True)

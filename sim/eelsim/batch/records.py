@@ -180,3 +180,103 @@ class Targets(NamedTuple):
     y: FloatArray
     radius: FloatArray
     n_waypoints: IntArray
+
+
+class LaneControl(NamedTuple):
+    """Each lane's control state in a block (the kernel's ``_update_controls``).
+
+    Attributes
+    ----------
+    gamma : ndarray
+        The heading offset in force (it also goes to the stage's ``gamma`` row).
+    next_update : ndarray of int
+        Index of the lane's next control update in ``RunInputs.update_steps``.
+    update_at, pending_at : ndarray of int
+        The step of the lane's next control update and of its next pending offset (``NEVER``:
+        none); a vectorised test per step finds the lanes with something to do.
+    pend_step, pend_value : ndarray, shape (lanes, pending_size)
+        The pending queue (a ring): the step each offset acts from and the offset.
+    pend_head, pend_count : ndarray of int
+        The ring's head and length.
+    is_update : ndarray of bool
+        The lane updates its control at this step (the condition check runs then).
+    """
+
+    gamma: FloatArray
+    next_update: IntArray
+    update_at: IntArray
+    pending_at: IntArray
+    pend_step: IntArray
+    pend_value: FloatArray
+    pend_head: IntArray
+    pend_count: IntArray
+    is_update: BoolArray
+
+
+class LaneFate(NamedTuple):
+    """How each lane of a block is doing and how it ended (copied to ``RunOutputs`` at the end).
+
+    Attributes
+    ----------
+    run : ndarray of int
+        The run each lane holds (an idle lane repeats the block's first run, never committed).
+    alive : ndarray of bool
+        The lane is still running.
+    total, goal : ndarray of int
+        The lane's last step, and the step from which it stops at its goal (``stop_at_goal``).
+    failure, reason : ndarray of int
+        Failure and reason codes (``eelsim.flags.Failure``, :class:`Reason`).
+    failure_time : ndarray
+        When it failed (NaN: it did not).
+    reason_index : ndarray of int, shape (lanes, 2)
+        The joint or the link pair a self-collision names.
+    reason_value : ndarray
+        The condition number or joint angle the reason names.
+    final_step : ndarray of int
+        The step at which the lane stopped.
+    torque_ratio : ndarray
+        Largest |u| over the stall torque so far.
+    saturated : ndarray of int
+        Steps outside the servo's torque-speed line.
+    """
+
+    run: IntArray
+    alive: BoolArray
+    total: IntArray
+    goal: IntArray
+    failure: IntArray
+    reason: IntArray
+    failure_time: FloatArray
+    reason_index: IntArray
+    reason_value: FloatArray
+    final_step: IntArray
+    torque_ratio: FloatArray
+    saturated: IntArray
+
+
+class CheckScratch(NamedTuple):
+    """Scratch space for the scalar checks of one lane (allocations per check cost more).
+
+    Attributes
+    ----------
+    state : ndarray, shape (2 N + 4,)
+        The lane's state, gathered from ``work``.
+    info : ndarray, shape (3,)
+        What a self-collision check found (i, k, value).
+    m, lo, inv : ndarray, shape (N + 2, N + 2)
+        Mass matrix, its Cholesky factor and the factor's inverse.
+    s, c : ndarray, shape (N,)
+        sin and cos of the link angles.
+    jx, jy : ndarray, shape (N + 2,)
+        One link's Jacobian rows.
+    """
+
+    state: FloatArray
+    info: FloatArray
+    m: FloatArray
+    lo: FloatArray
+    inv: FloatArray
+    s: FloatArray
+    c: FloatArray
+    jx: FloatArray
+    jy: FloatArray
