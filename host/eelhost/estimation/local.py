@@ -1,6 +1,6 @@
 """Local polishes of a fit: the minimax trust region (the paper's fitness) and least squares.
 
-Both work in the unit cube of a :class:`~eelhost.estimation.parameters.ParameterSpace` with
+Both work in the unit cube of a :class:`~eelhost.estimation.space.ParameterSpace` with
 forward-difference Jacobians, the point and its K perturbations simulated as one batch.
 
 - :func:`polish_minimax` minimises the paper's fitness, the largest per-experiment error, itself.

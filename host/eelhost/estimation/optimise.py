@@ -1,7 +1,7 @@
 """Global optimisers for a model's parameters: the paper's GA and CMA-ES with restarts.
 
 All search the unit cube mapped linearly onto the bounds of a
-:class:`~eelhost.estimation.parameters.ParameterSpace` (the fluid law's coefficients and any
+:class:`~eelhost.estimation.space.ParameterSpace` (the fluid law's coefficients and any
 fitted joint parameters, by name; docs/estimation.md). The objective is any function mapping
 candidates (C, K) to fitness values (C,), normally :meth:`Evaluator.fitness`, evaluated a whole
 generation at a time so that the batched kernel sees one big batch. The local polishes are in

@@ -192,7 +192,7 @@ def candidate_spaces(
     """The joint model x law grid, in a fixed order (joint models, then laws, by name).
 
     Every joint model other than the robot file's brings the ``[joints]`` table of the bundled
-    robot file that uses it (:func:`eelhost.estimation.parameters.joint_fit`), so the grid is the
+    robot file that uses it (:func:`eelhost.estimation.joint_fit.joint_fit`), so the grid is the
     same from either bundled robot file.
     """
     from eelsim.fluid import get_fluid_law
