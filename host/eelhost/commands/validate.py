@@ -8,8 +8,8 @@ from pathlib import Path
 from eelhost.commands import COMMANDS
 from eelhost.commands.common import NON_NEGATIVE, add_backend_option
 from eelhost.data.experiments import load_dataset
-from eelhost.estimation.evaluate import ALIGN_S
-from eelhost.estimation.pipeline import CoefficientsError, read_coefficients
+from eelhost.estimation.coefficients_file import CoefficientsError, read_coefficients
+from eelhost.estimation.runs import ALIGN_S
 from eelhost.estimation.validate import table_csv, table_markdown, validate
 from eelhost.files import atomic_write, check_output_folder
 from eelhost.progress import phase
