@@ -72,7 +72,7 @@ def test_the_cmaes_budget_is_at_most_what_was_asked(budget, popsize, restarts):
     import numpy as np
 
     from eelhost.estimation.optimise import fit_cmaes
-    from eelhost.estimation.parameters import ParameterSpace
+    from eelhost.estimation.space import ParameterSpace
     from eelsim.fluid import get_fluid_law
 
     space = ParameterSpace(get_fluid_law("morison"))

@@ -9,9 +9,11 @@ from eelhost import progress
 from eelhost.cli import main
 from eelhost.data.experiments import load_dataset, manifest_text, write_experiment, write_manifest
 from eelhost.data.virtual_tank import TABLE3, TankSettings, record_experiment
+from eelhost.estimation.coefficients_file import read_coefficients
 from eelhost.estimation.evaluate import Evaluator
+from eelhost.estimation.methods import FitSettings
 from eelhost.estimation.optimise import Checkpoint, fit_ga
-from eelhost.estimation.pipeline import FitSettings, fit_motion, read_coefficients
+from eelhost.estimation.pipeline import fit_motion
 from eelsim.robot import load_robot
 from eelsim.scenario import load_scenario
 

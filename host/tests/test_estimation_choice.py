@@ -11,8 +11,7 @@ import pytest
 
 from eelhost.data.experiments import load_dataset, manifest_text, write_experiment, write_manifest
 from eelhost.data.virtual_tank import mismatched_plants, record_experiment
-from eelhost.estimation.parameters import ParameterSpace
-from eelhost.estimation.pipeline import FitSettings
+from eelhost.estimation.methods import FitSettings
 from eelhost.estimation.selection import (
     CandidateScore,
     candidate_spaces,
@@ -25,6 +24,7 @@ from eelhost.estimation.selection import (
     screen_rank,
     table_markdown,
 )
+from eelhost.estimation.space import ParameterSpace
 from eelsim.fluid import get_fluid_law
 from eelsim.robot import SERVO_ROBOT, load_robot
 from eelsim.scenario import load_scenario

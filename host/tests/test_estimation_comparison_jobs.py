@@ -10,7 +10,7 @@ import pytest
 
 from eelhost.data.experiments import BUNDLED_DATASET, load_dataset
 from eelhost.estimation.evaluate import simulations_counter
-from eelhost.estimation.pipeline import FitSettings
+from eelhost.estimation.methods import FitSettings
 from eelhost.estimation.selection import cross_validate
 
 SMALL = FitSettings(method="minimax", polish_iterations=1)

@@ -8,18 +8,17 @@ import pytest
 from eelhost.cli import main
 from eelhost.data.experiments import load_dataset, manifest_text, write_experiment, write_manifest
 from eelhost.data.virtual_tank import TABLE3, TankSettings, record_experiment
-from eelhost.estimation.evaluate import Evaluator
-from eelhost.estimation.identify import identifiability
-from eelhost.estimation.methods import method_names
-from eelhost.estimation.optimise import FitResult
-from eelhost.estimation.parameters import CURRENT_BOUND_M_S, CURRENT_NAMES, ParameterSpace
-from eelhost.estimation.pipeline import (
+from eelhost.estimation.coefficients_file import (
     CoefficientsError,
-    FitSettings,
-    fit_motion,
     read_coefficients,
     write_coefficients,
 )
+from eelhost.estimation.evaluate import Evaluator
+from eelhost.estimation.identify import identifiability
+from eelhost.estimation.methods import FitSettings, method_names
+from eelhost.estimation.optimise import FitResult
+from eelhost.estimation.pipeline import fit_motion
+from eelhost.estimation.space import CURRENT_BOUND_M_S, CURRENT_NAMES, ParameterSpace
 from eelhost.estimation.validate import validate
 from eelsim.robot import load_robot
 from eelsim.scenario import load_scenario
@@ -274,7 +273,7 @@ def test_a_steady_current_is_recovered_within_a_mm_s_and_15_degrees_by_either_jo
     # the tank swims on the joints of the model fitted (the paper's PD joints, or the bundled
     # servo file's), in a steady 5 mm/s current towards 120 deg that its metadata does not declare
     from eelhost.data.virtual_tank import mismatched_plants
-    from eelhost.estimation.parameters import spaces_of
+    from eelhost.estimation.space import spaces_of
 
     joints = None if joint_model == "pd" else mismatched_plants()["stiff_servos"].settings.joints
     settings = TankSettings(timestamp_jitter_s=0.0, control_jitter_s=0.0, joints=joints,

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from eelhost.data.virtual_tank import TABLE3, TankSettings, record_experiment
+from eelhost.estimation.coefficients_file import FittedModel
 from eelhost.estimation.evaluate import Evaluator
 from eelhost.estimation.local import polish_minimax
-from eelhost.estimation.parameters import FittedModel
 from eelhost.estimation.uncertainty import (
     BootstrapResult,
     misfit_growth,
@@ -171,7 +171,7 @@ def test_the_ensemble_is_the_estimate_first_then_every_bootstrap_refit_cut_to_th
 
 def test_a_fit_far_above_its_noise_floor_says_its_intervals_are_dominated_by_misfit(robot):
     from eelhost.estimation.diagnostics import NOISE_RATIO, fit_warnings
-    from eelhost.estimation.parameters import ParameterSpace
+    from eelhost.estimation.space import ParameterSpace
 
     space = ParameterSpace.for_robot(robot)
     x = space.bounds.mean(axis=1)

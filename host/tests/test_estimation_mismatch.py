@@ -15,16 +15,17 @@ from eelhost.data.virtual_tank import (
     true_robot,
 )
 from eelhost.estimation.adopt import fit_and_choose
+from eelhost.estimation.coefficients_file import FittedModel
 from eelhost.estimation.diagnostics import NOISE_RATIO, at_bounds, fit_warnings
 from eelhost.estimation.evaluate import Evaluator
-from eelhost.estimation.parameters import FittedModel, ParameterSpace, spaces_of
-from eelhost.estimation.pipeline import FitSettings
+from eelhost.estimation.methods import FitSettings
 from eelhost.estimation.selection import (
     CandidateScore,
     carry_over,
     cross_validate,
     recommend,
 )
+from eelhost.estimation.space import ParameterSpace, spaces_of
 from eelhost.estimation.uncertainty import BootstrapResult, parametric_bootstrap, regenerate
 from eelhost.estimation.validate import validate, worst_ex
 from eelsim.flags import PENALTY_ILL_CONDITIONED

@@ -3,7 +3,7 @@
 import numpy as np
 
 from eelhost.estimation.local import polish_minimax
-from eelhost.estimation.parameters import ParameterSpace
+from eelhost.estimation.space import ParameterSpace
 from eelsim.robot import load_robot
 
 TARGET_U = np.array([0.3, 0.3, 0.4, 0.4])

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from eelhost.data.virtual_tank import TABLE3, mismatched_plants, record_experiment, true_robot
+from eelhost.estimation.coefficients_file import FittedModel
 from eelhost.estimation.evaluate import Evaluator
-from eelhost.estimation.parameters import FittedModel
 from eelsim.robot import load_robot
 from eelsim.scenario import load_scenario
 

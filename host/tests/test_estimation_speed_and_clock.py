@@ -7,8 +7,8 @@ import pytest
 
 from eelhost.data.virtual_tank import TABLE3, TankSettings, record_experiment
 from eelhost.estimation.clock import WIDE_S, clock_check
-from eelhost.estimation.evaluate import ALIGN_S
-from eelhost.estimation.parameters import FittedModel
+from eelhost.estimation.coefficients_file import FittedModel
+from eelhost.estimation.runs import ALIGN_S
 from eelhost.estimation.speeds import mean_speed, speed_errors, speeds_markdown
 from eelhost.estimation.validate import validate
 from eelsim.robot import load_robot

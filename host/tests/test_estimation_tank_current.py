@@ -7,7 +7,8 @@ import pytest
 
 from eelhost.data.experiments import load_dataset, manifest_text, write_experiment, write_manifest
 from eelhost.data.virtual_tank import TABLE3, TankSettings, record_experiment
-from eelhost.estimation.pipeline import FitSettings, fit_motion
+from eelhost.estimation.methods import FitSettings
+from eelhost.estimation.pipeline import fit_motion
 from eelhost.estimation.tank_current import share_tank_current
 from eelsim.robot import load_robot
 from eelsim.scenario import load_scenario
@@ -81,7 +82,7 @@ def test_one_motion_alone_keeps_its_own_current(tank):
 def test_the_report_writes_the_tank_current_and_validation_swims_each_fit_in_it(tank, tmp_path):
     import json
 
-    from eelhost.estimation.pipeline import read_coefficients
+    from eelhost.estimation.coefficients_file import read_coefficients
     from eelhost.estimation.report import run_report
 
     ds = tank[0]

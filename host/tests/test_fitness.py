@@ -62,7 +62,7 @@ def test_validation_errors_report_the_papers_mean_and_true_rms_in_body_lengths()
 def test_failures_after_arrival_and_after_the_recording_do_not_count():
     from types import SimpleNamespace
 
-    from eelhost.estimation.evaluate import Simulated
+    from eelhost.estimation.runs import Simulated
 
     prepared = [SimpleNamespace(times_s=np.array([0.0, 10.0]))]
     nan = np.nan

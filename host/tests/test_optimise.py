@@ -3,7 +3,7 @@ import pytest
 
 from eelhost.estimation.local import polish_least_squares
 from eelhost.estimation.optimise import Checkpoint, CheckpointError, fit_cmaes, fit_ga
-from eelhost.estimation.parameters import ParameterSpace
+from eelhost.estimation.space import ParameterSpace
 from eelsim.fluid import get_fluid_law
 
 TARGET = np.array([0.008, 0.776, 0.618, 0.007])

@@ -130,7 +130,9 @@ def test_bench_gives_the_same_outcomes_in_worker_processes():
 
 def test_a_coefficient_file_of_another_model_is_planned_in_as_fitted(tmp_path):
     # what `eelbot report` writes when it adopted another model than the robot file's
-    from eelhost.estimation.parameters import FittedModel, joint_model_name, spaces_of
+    from eelhost.estimation.coefficients_file import FittedModel
+    from eelhost.estimation.joint_fit import joint_model_name
+    from eelhost.estimation.space import spaces_of
     from eelhost.planning.planner import Planner
 
     space = next(s for s in spaces_of(ROBOT, ["linear_quadratic"], current=True)

@@ -16,8 +16,8 @@ from eelhost.data.virtual_tank import (
     record_experiment,
     true_robot,
 )
+from eelhost.estimation.coefficients_file import FittedModel
 from eelhost.estimation.evaluate import Evaluator
-from eelhost.estimation.parameters import FittedModel
 from eelsim.fluid import candidate_laws
 from eelsim.robot import SERVO_ROBOT, load_robot
 from eelsim.scenario import load_scenario

@@ -16,14 +16,14 @@ import pytest
 
 from eelhost.cli import main
 from eelhost.data.experiments import DataError, load_dataset
-from eelhost.estimation.optimise import FitResult
-from eelhost.estimation.parameters import ParameterSpace
-from eelhost.estimation.pipeline import (
+from eelhost.estimation.coefficients_file import (
     CoefficientsError,
     read_coefficients,
     robot_record,
     write_coefficients,
 )
+from eelhost.estimation.optimise import FitResult
+from eelhost.estimation.space import ParameterSpace
 from eelhost.planning.uncertainty import CoefficientsFileError, read_coefficient_model
 from eelsim.robot import load_robot, parse_robot
 from eelsim.tomlfile import parse_toml
