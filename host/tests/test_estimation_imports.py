@@ -84,3 +84,59 @@ def test_report_reaches_the_fit_the_evaluator_and_the_coefficients_file():
             reached.add(module)
             todo.extend(graph[module])
     assert {"methods", "evaluate", "batch_backend", "coefficients_file", "space"} <= reached
+
+
+REPO = ROOM.parents[2]
+IMPORTERS = ("host", "sim", "tools", "scripts", "hil_tests", "benchmarks")
+
+
+def defined_names(source: str) -> set[str]:
+    """The names a module defines at its top level (functions, classes, assignments), not imports."""
+    names: set[str] = set()
+    for node in ast.parse(source).body:
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef):
+            names.add(node.name)
+        elif isinstance(node, ast.Assign | ast.AnnAssign):
+            targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+            for target in targets:
+                names.update(n.id for n in ast.walk(target) if isinstance(n, ast.Name))
+    return names
+
+
+def borrowed_imports(source: str, where: str, owners: dict[str, set[str]]) -> list[str]:
+    """Each ``from eelhost.estimation.M import name`` of ``source`` where M does not define name."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            parts = node.module.split(".")
+            if parts[:2] != PACKAGE.split(".") or len(parts) != 3:
+                continue
+            for alias in node.names:
+                if parts[2] not in owners:
+                    found.append(f"{where}:{node.lineno}: {node.module} is not a module of the room")
+                elif alias.name not in owners[parts[2]]:
+                    found.append(f"{where}:{node.lineno}: {alias.name} from {node.module}, "
+                                 "which does not define it")
+    return found
+
+
+def test_every_estimation_name_is_imported_from_the_module_that_defines_it():
+    # one import path per name (docs/architecture.md, the estimation room): no re-export shims
+    owners = {p.stem: defined_names(p.read_text()) for p in ROOM.glob("*.py") if p.stem != "__init__"}
+    found = []
+    for top in IMPORTERS:
+        for path in sorted((REPO / top).rglob("*.py")) if (REPO / top).is_dir() else []:
+            text = path.read_text()
+            if ".venv" not in path.parts and f"{PACKAGE}." in text:  # parse only the importers
+                found += borrowed_imports(text, str(path.relative_to(REPO)), owners)
+    assert not found, "\n".join(found)
+
+
+def test_the_owner_check_sees_a_re_exported_name():
+    owners = {"space": defined_names("from x import y\nclass ParameterSpace: ...\nN: int = 2\n")}
+    assert owners["space"] == {"ParameterSpace", "N"}
+    assert borrowed_imports("from eelhost.estimation.space import ParameterSpace, N", "t", owners) == []
+    assert borrowed_imports("def f():\n    from eelhost.estimation.space import y\n", "t", owners) == [
+        "t:2: y from eelhost.estimation.space, which does not define it"]
+    assert borrowed_imports("from eelhost.estimation.parameters import z", "t", owners) == [
+        "t:1: eelhost.estimation.parameters is not a module of the room"]

@@ -372,7 +372,7 @@ def add_backend_option(p: argparse.ArgumentParser | argparse._ArgumentGroup) -> 
 
 
 def fit_settings(args: argparse.Namespace):
-    """The :class:`~eelhost.estimation.pipeline.FitSettings` chosen on the command line."""
+    """The :class:`~eelhost.estimation.methods.FitSettings` chosen on the command line."""
     from eelhost.estimation.methods import FitSettings
 
     return FitSettings(

@@ -37,10 +37,7 @@ from eelhost.estimation.fitness import (
     trajectory_error,
 )
 from eelhost.estimation.reference_backend import ReferenceBackend
-from eelhost.estimation.runs import (  # noqa: F401 (their old import path: evaluate)
-    ALIGN_S,
-    ALIGN_STEP_S,
-    TMAX_FACTOR,
+from eelhost.estimation.runs import (
     PreparedExperiment,
     Simulated,
     SimulationBackend,

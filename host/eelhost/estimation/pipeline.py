@@ -15,19 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from eelhost.data.experiments import Dataset, Experiment
-from eelhost.estimation.coefficients_file import (  # noqa: F401 (their old import path)
-    COEFFICIENTS_FORMAT,
-    READABLE_COEFFICIENTS_FORMATS,
-    CoefficientsError,
-    check_robot,
-    fitted_models,
-    read_coefficients,
-    read_coefficients_file,
-    robot_record,
-    write_coefficients,
-)
 from eelhost.estimation.evaluate import EstimationError, Evaluator
-from eelhost.estimation.methods import (  # noqa: F401 (FitSettings: its old import path)
+from eelhost.estimation.methods import (
     FitProblem,
     FitSettings,
     run_fit,

@@ -34,8 +34,8 @@ from eelsim.fluid import FluidCoefficients, FluidLaw, get_fluid_law
 from eelsim.joints import default_grid_models
 from eelsim.robot import Robot
 
-__all__ = ["CURRENT_BOUND_M_S", "CURRENT_NAMES", "ParameterError", "ParameterSpace",
-           "box_from_unit", "box_to_unit", "spaces_of"]
+__all__ = ["CURRENT_BOUND_M_S", "CURRENT_NAMES", "ParameterSpace", "box_from_unit", "box_to_unit",
+           "spaces_of"]
 
 # The ambient current's components in the tank frame, m/s (docs/model.md: v_c, the direction it
 # flows towards). Cartesian rather than speed and direction: the fitness is smooth in them, with
