@@ -35,7 +35,11 @@ from eelhost.data.virtual_tank import (
     paper_experiment_plan,
     record_experiment,
 )
-from eelhost.estimation.coefficients_file import read_coefficients_file
+from eelhost.estimation.coefficients_file import (
+    prediction_band_coverage,
+    read_coefficients_file,
+    reported_uncertainty,
+)
 from eelhost.estimation.evaluate import Evaluator
 from eelhost.estimation.identify import identifiability
 from eelhost.estimation.methods import FitProblem, FitSettings, run_fit
@@ -241,9 +245,11 @@ def measure_bands(
         run_report(load_dataset(folder), report_dir, settings=FitSettings(seed=seed),
                    bootstrap_replicates=replicates, compare_models=False)
         seconds = time.perf_counter() - t0
-        data = read_coefficients_file(report_dir / "coefficients.json")
-        band = BandCoverage(name, data["prediction_band"]["coverage"],
-                            {m: u["excess"] for m, u in data["uncertainty"].items()}, seconds)
+        path = report_dir / "coefficients.json"
+        data = read_coefficients_file(path)
+        excess = {m: u.excess if u.excess is not None else float("nan")
+                  for m, u in reported_uncertainty(data).items()}
+        band = BandCoverage(name, prediction_band_coverage(data, path), excess, seconds)
         out.append(band)
         line = (f"{name}: held-out positions inside their 95 % bands: "
                 + ", ".join(f"{m} {v * 100:.0f} %" for m, v in band.coverage.items())

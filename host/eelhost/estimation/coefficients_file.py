@@ -5,8 +5,10 @@ its geometry, so that coefficients are not used on another robot by mistake) and
 motion type: a :class:`FittedModel` (the fluid law, the joint model and every parameter by name,
 the ambient current when fitted) with how it was found (:func:`fit_entry`). ``eelbot report`` adds
 its sections (uncertainty, identifiability, ...) through ``extra``. Readers: ``eelbot validate``
-(:func:`read_coefficients`, which also takes the coefficients as numbers) and the planner's
-coefficient model (:func:`read_coefficients_file`, :func:`fitted_models`).
+(:func:`read_coefficients`, which also takes the coefficients as numbers), the planner's
+coefficient model (:func:`read_coefficients_file`, :func:`fitted_models` and the report's
+bootstrap, :func:`reported_uncertainty`) and the coverage benchmark
+(:func:`prediction_band_coverage`, :func:`reported_uncertainty`).
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -361,3 +364,96 @@ def read_coefficients(
     except ValueError as err:
         raise CoefficientsError(f"coefficients: {spec!r}: {str(err).splitlines()[0]}") from None
     return {"joint": FittedModel(space, values)}
+
+
+def _finite(value: Any) -> float | None:
+    """``value`` as a float when it is a finite number (not a bool), else None."""
+    if isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value):
+        return float(value)
+    return None
+
+
+def _finite_by_name(section: Any) -> dict[str, float]:
+    """The finite numbers of an object of parameters by name (others are left out)."""
+    if not isinstance(section, dict):
+        return {}
+    values = {str(name): _finite(v) for name, v in section.items()}
+    return {name: v for name, v in values.items() if v is not None}
+
+
+@dataclass(frozen=True)
+class ReportedUncertainty:
+    """One fit's entry of the ``uncertainty`` section, as ``eelbot report`` writes it.
+
+    docs/data.md, "coefficients.json"; written from
+    :meth:`eelhost.estimation.uncertainty.BootstrapResult.to_json`. Values that are not finite
+    numbers are left out, so a reader falls back as if they were not reported.
+
+    Attributes
+    ----------
+    level : float or None
+        The intervals' level, in (0, 1) (None: not given or not a level).
+    lower, upper : dict of str to float
+        The intervals' ends, by parameter name.
+    std : dict of str to float
+        The bootstrap replicates' standard deviation (of the declared noise), by name.
+    excess : float or None
+        The fit's fitness over its noise floor.
+    samples : object
+        The bootstrap replicates as stored (a list of them by name, or one list per name), not
+        checked here; None when not stored.
+    """
+
+    level: float | None
+    lower: dict[str, float]
+    upper: dict[str, float]
+    std: dict[str, float]
+    excess: float | None
+    samples: Any
+
+    @classmethod
+    def from_json(cls, entry: Any) -> ReportedUncertainty:
+        """The entry as found (anything not an object: nothing reported)."""
+        entry = entry if isinstance(entry, dict) else {}
+        level = _finite(entry.get("level"))
+        return cls(
+            level=level if level is not None and 0.0 < level < 1.0 else None,
+            lower=_finite_by_name(entry.get("lower")),
+            upper=_finite_by_name(entry.get("upper")),
+            std=_finite_by_name(entry.get("std")),
+            excess=_finite(entry.get("excess")),
+            samples=entry.get("samples"),
+        )
+
+
+def reported_uncertainty(data: Mapping[str, Any]) -> dict[str, ReportedUncertainty]:
+    """The ``uncertainty`` section of a ``coefficients.json`` object, per fit (motion type).
+
+    Empty when the file has none (``eelbot estimate``, or a report without bootstrap); entries
+    that are not objects are left out.
+    """
+    section = data.get("uncertainty")
+    if not isinstance(section, dict):
+        return {}
+    return {str(motion): ReportedUncertainty.from_json(entry) for motion, entry in section.items()
+            if isinstance(entry, dict)}
+
+
+def prediction_band_coverage(data: Mapping[str, Any], path: str | Path) -> dict[str, float]:
+    """The held-out positions' coverage by the report's prediction bands, per motion and "all".
+
+    Raises
+    ------
+    CoefficientsError
+        When the file has no ``prediction_band`` coverage (written by ``eelbot report`` with
+        bootstrap replicates only), naming ``path``.
+    """
+    band = data.get("prediction_band")
+    coverage = band.get("coverage") if isinstance(band, dict) else None
+    if not isinstance(coverage, dict) or not coverage:
+        raise CoefficientsError(f"{path}: prediction_band.coverage: none recorded (eelbot report "
+                                "writes it when it bootstraps the fits)")
+    found = _finite_by_name(coverage)
+    if len(found) != len(coverage):
+        raise CoefficientsError(f"{path}: prediction_band.coverage: expected a number per motion")
+    return found

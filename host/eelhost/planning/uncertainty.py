@@ -42,8 +42,10 @@ from scipy.stats import chi2, norm
 from eelhost.errors import UserError
 from eelhost.estimation.coefficients_file import (
     CoefficientsError,
+    ReportedUncertainty,
     fitted_models,
     read_coefficients_file,
+    reported_uncertainty,
 )
 from eelhost.planning.world import Current, World
 from eelsim.fluid import FluidCoefficients
@@ -360,16 +362,14 @@ def read_coefficient_model(
                 f"{path}: fits: no {m!r} (or 'joint') set; found {', '.join(sorted(fits))}"
             )
         chosen[m], from_key[m] = fits[key], key
-    reported = data.get("uncertainty")
-    uncertainty: dict = reported if isinstance(reported, dict) else {}
+    uncertainty = reported_uncertainty(data)
     std: dict[str, FloatArray] = {}
     cov: dict[str, FloatArray] = {}
     notes: list[str] = []
     correlated: list[str] = []
     for m in MOTIONS:
         names = type(chosen[m]).names()
-        found = uncertainty.get(from_key[m])
-        entry: dict = found if isinstance(found, dict) else {}
+        entry = uncertainty.get(from_key[m])
         values = _marginal_sigmas(entry, names, chosen[m].as_array(), f"{m}", notes)
         std[m] = values
         corr = _sample_correlation(entry, names, f"{path}: uncertainty.{from_key[m]}.samples")
@@ -390,13 +390,14 @@ def read_coefficient_model(
     found = uncertainty.get(from_key["straight"])
     current_sigma = (_marginal_sigmas(found, CURRENT_NAMES, np.asarray(straight.current_m_s), "",
                                       [], default=0.0)
-                     if isinstance(found, dict) and straight.space.current else np.zeros(2))
+                     if found is not None and straight.space.current else np.zeros(2))
     return CoefficientModel(chosen, std, source, straight.robot(robot), (current[0], current[1]),
                             cov, np.diag(current_sigma**2))
 
 
-def _marginal_sigmas(entry: dict | None, names: tuple[str, ...], estimate: FloatArray, label: str,
-                     notes: list[str], default: float | None = None) -> FloatArray:
+def _marginal_sigmas(entry: ReportedUncertainty | None, names: tuple[str, ...],
+                     estimate: FloatArray, label: str, notes: list[str],
+                     default: float | None = None) -> FloatArray:
     """Standard deviation of each named parameter, from a bootstrap entry of coefficients.json.
 
     From the reported interval when there is one (``lower``, ``upper`` at ``level``): its wider
@@ -404,32 +405,30 @@ def _marginal_sigmas(entry: dict | None, names: tuple[str, ...], estimate: Float
     else the replicates' ``std``; else ``default`` (None: :data:`DEFAULT_RELATIVE_STD` of the
     value), and ``label name`` is added to ``notes``.
     """
-    entry = entry if isinstance(entry, dict) else {}
-    level = entry.get("level", REGION_LEVEL)
-    level = float(level) if isinstance(level, int | float) and 0 < level < 1 else REGION_LEVEL
+    entry = entry if entry is not None else ReportedUncertainty.from_json(None)
+    level = entry.level if entry.level is not None else REGION_LEVEL
     z = float(norm.ppf(0.5 + level / 2))
     out = np.empty(len(names))
     for i, name in enumerate(names):
-        lo, hi, sd = (entry.get(k, {}).get(name) if isinstance(entry.get(k), dict) else None
-                      for k in ("lower", "upper", "std"))
-        if (isinstance(lo, int | float) and isinstance(hi, int | float)
-                and math.isfinite(lo) and math.isfinite(hi) and lo <= hi):
+        lo, hi, sd = entry.lower.get(name), entry.upper.get(name), entry.std.get(name)
+        if lo is not None and hi is not None and lo <= hi:
             out[i] = max(hi - estimate[i], estimate[i] - lo, 0.0) / z
-        elif isinstance(sd, int | float) and math.isfinite(sd) and sd >= 0:
-            out[i] = float(sd)
+        elif sd is not None and sd >= 0:
+            out[i] = sd
         else:
             out[i] = DEFAULT_RELATIVE_STD * abs(estimate[i]) if default is None else default
             notes.append(f"{label} {name}".strip())
     return out
 
 
-def _sample_correlation(entry: dict, names: tuple[str, ...], where: str) -> FloatArray | None:
+def _sample_correlation(entry: ReportedUncertainty | None, names: tuple[str, ...],
+                        where: str) -> FloatArray | None:
     """Correlation of the named parameters over the stored bootstrap replicates, if any.
 
     ``samples`` is a list of replicates, each the parameters by name (or one list of values per
     name). None without replicates, or with fewer than the parameters plus two.
     """
-    raw = entry.get("samples") if isinstance(entry, dict) else None
+    raw = entry.samples if entry is not None else None
     if raw is None:
         return None
     try:
