@@ -8,6 +8,7 @@ too: a deferred import that only hides a circle is a circle.
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import pytest
@@ -104,10 +105,18 @@ def defined_names(source: str) -> set[str]:
 
 
 def borrowed_imports(source: str, where: str, owners: dict[str, set[str]]) -> list[str]:
-    """Each ``from eelhost.estimation.M import name`` of ``source`` where M does not define name."""
+    """Each ``from eelhost.estimation.M import name`` of ``source`` where M does not define name.
+
+    Also each ``import eelhost.estimation.M`` of a module M the room does not have.
+    """
     found = []
     for node in ast.walk(ast.parse(source)):
-        if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                parts = alias.name.split(".")
+                if parts[:2] == PACKAGE.split(".") and len(parts) > 2 and parts[2] not in owners:
+                    found.append(f"{where}:{node.lineno}: {alias.name} is not a module of the room")
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
             parts = node.module.split(".")
             if parts[:2] != PACKAGE.split(".") or len(parts) != 3:
                 continue
@@ -124,6 +133,10 @@ def test_every_estimation_name_is_imported_from_the_module_that_defines_it():
     # one import path per name (docs/architecture.md, the estimation room): no re-export shims
     owners = {p.stem: defined_names(p.read_text()) for p in ROOM.glob("*.py") if p.stem != "__init__"}
     found = []
+    for doc in sorted((REPO / "docs").glob("*.md")) + [REPO / "README.md"]:
+        for block in re.findall(r"```python\n(.*?)```", doc.read_text(), re.DOTALL):
+            if f"{PACKAGE}." in block:  # the docs' examples import from the owners too
+                found += borrowed_imports(block, str(doc.relative_to(REPO)), owners)
     for top in IMPORTERS:
         for path in sorted((REPO / top).rglob("*.py")) if (REPO / top).is_dir() else []:
             text = path.read_text()
@@ -139,4 +152,6 @@ def test_the_owner_check_sees_a_re_exported_name():
     assert borrowed_imports("def f():\n    from eelhost.estimation.space import y\n", "t", owners) == [
         "t:2: y from eelhost.estimation.space, which does not define it"]
     assert borrowed_imports("from eelhost.estimation.parameters import z", "t", owners) == [
+        "t:1: eelhost.estimation.parameters is not a module of the room"]
+    assert borrowed_imports("import eelhost.estimation.parameters", "t", owners) == [
         "t:1: eelhost.estimation.parameters is not a module of the room"]
