@@ -8,6 +8,7 @@ planner slower than the robot's watchdog is a real stall here, as it would be at
 from __future__ import annotations
 
 import json
+import math
 import time
 
 import numpy as np
@@ -22,8 +23,8 @@ from eelhost.field.session import TakeNotes
 from eelhost.field.take import TakeRequest, run_take
 from eelhost.planning.execute import body_clearance_m
 from eelhost.planning.field import ClearanceField
-from eelhost.planning.planner import Outcome, Planner
-from eelhost.planning.replan import TankReplanner, outline_clearance_m, predict_state
+from eelhost.planning.planner import PLANNING_GUIDANCE, Outcome, Planner
+from eelhost.planning.replan import Decision, TankReplanner, outline_clearance_m, predict_state
 from eelhost.planning.search import Plan
 from eelhost.planning.state_estimate import BodyStateEstimator
 from eelhost.planning.tank import plan_for_run, with_extra_current
@@ -230,7 +231,7 @@ def failing_replanner(status: str):
     class Failing(TankReplanner):
         requests: list[float] = []
 
-        def _replan(self, est, left, start_step, extra):  # noqa: ANN001, ANN202
+        def _replan(self, est, left, start_step, extra, guide=None):  # noqa: ANN001, ANN202
             self.requests.append(est.t_s)
             plan = Plan(False, status, f"failed ({status})")
             return (Outcome(plan, status, plan.message), est.state, 0.0, 0.0, np.zeros(2),
@@ -243,7 +244,7 @@ def failing_with_clear_look_ahead(status: str):
     """A :func:`failing_replanner` whose look-ahead swims the present waypoints 200 mm clear."""
 
     class ClearAhead(failing_replanner(status)):  # type: ignore[misc]
-        def _look_ahead(self, est, left, extra):  # noqa: ANN001, ANN202
+        def _look_ahead(self, est, left, extra, guide=None):  # noqa: ANN001, ANN202
             return 0.2, 0.2
 
     return ClearAhead
@@ -352,7 +353,7 @@ def test_a_failed_replan_with_contact_ahead_stops_the_robot_at_once(open_plan):
     planner, outcome = open_plan
 
     class HitAhead(failing_replanner("exhausted")):  # type: ignore[misc]
-        def _look_ahead(self, est, left, extra):  # noqa: ANN001, ANN202
+        def _look_ahead(self, est, left, extra, guide=None):  # noqa: ANN001, ANN202
             return -0.01, -0.01  # the present waypoints are swum 10 mm into something
 
     nav = HitAhead(lambda extra: planner, planner, outcome, PATH_GAIT)
@@ -405,12 +406,12 @@ class _Scripted:
     def __getattr__(self, name: str):  # noqa: ANN204
         return getattr(self._planner, name)
 
-    def plan(self, state, start_step):  # noqa: ANN001, ANN201
+    def plan(self, state, start_step, guide=None):  # noqa: ANN001, ANN201
         self.starts.append(start_step)
         if start_step < self.found_from_step:
             plan = Plan(False, self.status, f"scripted {self.status}")
             return Outcome(plan, self.status, plan.message)
-        return self._planner.plan(state, start_step)
+        return self._planner.plan(state, start_step, guide=guide)
 
 
 def estimate_at(t_s: float, shift_m=(0.0, 0.0)):
@@ -526,7 +527,7 @@ def test_a_late_replan_with_contact_ahead_stops_the_robot_without_waiting_for_it
             release.wait(30.0)  # a planner starved of processor time
             return super()._replan(*args)
 
-        def _look_ahead(self, est, left, extra):  # noqa: ANN001, ANN202
+        def _look_ahead(self, est, left, extra, guide=None):  # noqa: ANN001, ANN202
             return -0.005, -0.025  # the present waypoints swum 5 mm into something
 
     nav = Stuck(lambda extra: planner, planner, outcome, PATH_GAIT)
@@ -591,3 +592,156 @@ def test_a_slow_replan_does_not_push_the_next_replans_start_beyond_the_lead_cap(
     assert starts[0] >= nav.lead_s - 1e-9
     assert max(starts) <= nav.max_lead_s + period_s + 1e-9 <= 1.0
     assert starts[1] >= 1.5 * 0.3 - 1e-9  # 1.5 times the last wall time while under the cap
+
+
+# -- the guidance law at the tank (issue 28: --guidance ilos) --------------------------------------
+
+ILOS_LAW = PLANNING_GUIDANCE
+
+
+def ilos_offsets_by_hand(frames, sends, waypoints, start, switches, law, k_theta, period_s,
+                         window=5, limit_rad=1.0):
+    """The offsets docs/model.md section 4's ILOS law gives for measured poses, written here.
+
+    ``frames``: (t, x, y, heading) of every pose the loop measured; ``sends``: the times offsets
+    were sent; ``switches``: {t: (waypoints, (x0, y0, I_x, I_y))} new waypoints handed over at a
+    frame's time with their guidance state; ``start`` the first leg's start. Independent of
+    eelsim.guidance (its own median, unwrapping, acceptance and law).
+    """
+    buf, last, target, integral = [], None, 0, np.zeros(2)
+    start = np.asarray(start, float)
+    filtered = None
+    out, f = [], 0
+    for t_send in sends:
+        while f < len(frames) and frames[f][0] <= t_send + 1e-4:
+            t, x, y, h = frames[f]
+            for ts, (new, guide) in switches.items():
+                if abs(ts - t) < 1e-4:  # the loop's new guidance sees this frame afresh
+                    waypoints, buf, last, target = new, [], None, 0
+                    start, integral = np.array(guide[:2]), np.array(guide[2:], dtype=float)
+            h = h if last is None else last + math.remainder(h - last, 2 * math.pi)
+            last = h
+            buf = (buf + [(x, y, h)])[-window:]
+            filtered = np.median(np.array(buf), axis=0)
+            if target < len(waypoints) and np.hypot(*(filtered[:2] - waypoints[target])) < 0.15:
+                target += 1
+            f += 1
+        if filtered is None:
+            out.append(0.0)
+            continue
+        k = min(target, len(waypoints) - 1)
+        w = np.asarray(waypoints[k], float)
+        a = np.asarray(waypoints[k - 1], float) if k > 0 else start
+        along = (w - a) / np.linalg.norm(w - a)
+        normal = np.array([-along[1], along[0]])
+        e = float((filtered[:2] - a) @ normal)
+        ahead = min(law.lookahead_m, float(np.linalg.norm(w - a) - (filtered[:2] - a) @ along))
+        lateral = e + law.integral_gain * float(integral @ normal)
+        theta_ref = math.atan2(along[1], along[0]) + math.atan2(-lateral, ahead)
+        integral = integral + period_s * law.lookahead_m * e / (
+            lateral ** 2 + law.lookahead_m ** 2) * normal
+        gamma = k_theta * math.remainder(theta_ref - filtered[2], 2 * math.pi)
+        out.append(float(np.clip(gamma, -limit_rad, limit_rad)))
+    return out
+
+
+class SwitchAt:
+    """A navigator that hands over new waypoints with a guidance state once, at ``t_s``."""
+
+    replans = 0
+
+    def __init__(self, t_s, waypoints, guide):  # noqa: ANN001
+        self.t_s, self.waypoints, self.guide = t_s, waypoints, guide
+        self.switched_at = None
+        self.guides = []  # the guidance state the loop handed over with each frame
+
+    def on_frame(self, t_s, loc, pose, target, offset_rad, guide=None):  # noqa: ANN001, ANN201
+        self.guides.append((t_s, guide))
+        if self.switched_at is None and t_s >= self.t_s:
+            self.switched_at = t_s
+            return Decision(waypoints=self.waypoints, guide=self.guide)
+        return Decision()
+
+    def pace(self, t_s):  # noqa: ANN001, ANN201
+        pass
+
+    def close(self):  # noqa: ANN201
+        pass
+
+    def record(self):  # noqa: ANN201
+        return {}
+
+
+def test_the_run_loops_ilos_offsets_are_the_law_for_its_measured_poses_across_a_handover(tmp_path):
+    # a cross current pushes the robot off its first leg; at 4 s new waypoints come with a
+    # guidance state (leg start, integral) that the loop must steer them with
+    first = [(0.9, 0.0), (1.6, 0.0)]
+    later = [(1.2, 0.3), (1.8, 0.3)]
+    guide = (0.4, 0.05, 2.5, -1.5)
+    nav = SwitchAt(4.0, later, guide)
+    config = RunConfig(PATH_GAIT, first, duration_s=7.0, guidance=ILOS_LAW,
+                       start_guide=(0.0, 0.0, 0.0, 0.0))
+    stem = tmp_path / "ilos"
+    request = TakeRequest(ROBOT, config, str(stem), TakeNotes("sim://?speed=0&current=0.04,90"),
+                          "synthetic:clean", navigator=nav)
+    run_take(request)
+    frames = [tuple(float(v) for v in row[:4])
+              for row in np.loadtxt(f"{stem}.csv", delimiter=",", skiprows=1, ndmin=2)]
+    sent = [r for r in read_commands_csv(f"{stem}.commands.csv")
+            if r["event"] == "sent" and r["message"] == "SetOffset"][1:]  # after Start's 0
+    assert nav.switched_at is not None and len(sent) >= 20
+    expected = ilos_offsets_by_hand(frames, [r["t_s"] for r in sent], first, (0.0, 0.0),
+                                    {nav.switched_at: (later, guide)}, ILOS_LAW,
+                                    ILOS_LAW.heading_gain, 0.3)
+    got = [r["fields"]["offset_rad"] for r in sent]
+    assert np.allclose(got, expected, atol=1e-5), np.abs(np.subtract(got, expected)).max()
+    assert max(abs(o) for o in got) > 0.1
+    # the state the loop hands the navigator after the switch carries the handed-over integral
+    after = [g for t, g in nav.guides if t > nav.switched_at]
+    assert after and after[0][:2] == guide[:2]
+    assert np.hypot(after[0][2] - guide[2], after[0][3] - guide[3]) < 0.5
+    # the take records the law it steered with
+    meta = json.loads(open(f"{stem}.json").read())
+    assert meta["source"]["guidance"]["law"] == "ilos"
+    assert meta["source"]["guidance"]["heading_gain"] == ILOS_LAW.heading_gain
+    assert meta["source"]["guidance"]["start_guide"] == [0.0, 0.0, 0.0, 0.0]
+
+
+@pytest.fixture(scope="module")
+def ilos_open_plan():
+    planner = Planner(parse_world(OPEN, "open"), ROBOT, MODEL, guidance=ILOS_LAW, draws=8)
+    outcome = planner.plan()
+    assert outcome.found, outcome.message
+    return planner, outcome
+
+
+def test_a_replan_carries_the_loops_ilos_integral_into_its_plan_and_hands_that_state_on(
+        ilos_open_plan):
+    # the robot is 0.4 m off the planned corridor with an integral the controller has learnt;
+    # the replan must start from it (not from zero) and the loop must get the plan's own state
+    planner, outcome = ilos_open_plan
+    nav = TankReplanner(lambda extra: planner, planner, outcome, PATH_GAIT, lookahead_s=0.0,
+                        estimate_current=False)
+    handed = (0.6, 1.0, 2.0, -1.0)
+    d = None
+    try:
+        for k in range(10 * 30):
+            t = k / 30
+            d = nav.on_frame(t, pose_at(t, (0.8, 1.4)), np.array([0.8, 1.4, 0.0]), 0, 0.0,
+                             guide=handed)
+            if d.waypoints is not None or d.stop is not None:
+                break
+            nav._worker.submit(lambda: None).result()
+    finally:
+        nav.close()
+    assert d is not None and d.waypoints is not None, (d, nav.events[-1])
+    replan = nav.events[-1]
+    assert replan["kind"] == "replan" and replan["status"] == "found"
+    guide = d.guide
+    assert guide is not None and tuple(guide) == nav.outcome.plan.start_guide
+    assert replan["start_guide"] == pytest.approx(list(guide), abs=1e-5)  # recorded in the take
+    # a new leg from the predicted start's centre of mass, with the integral carried on: a few
+    # control updates of the law (at most 0.15 s each) from the loop's, not reset to zero
+    assert guide[:2] == pytest.approx(replan["start_state"][N : N + 2], abs=1e-4)
+    assert math.hypot(guide[2] - handed[2], guide[3] - handed[3]) < 0.6
+    assert math.hypot(guide[2], guide[3]) > 1.5

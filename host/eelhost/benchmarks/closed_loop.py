@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 import shapely
 
+from eelhost.errors import UserError
 from eelhost.field.runloop import RunConfig
 from eelhost.field.session import TakeNotes
 from eelhost.field.take import TakeRequest, run_take
@@ -97,6 +98,8 @@ class WorldResult:
         When the plan expected the goal.
     water : dict
         The virtual robot's coefficients and unknown current.
+    guidance : str
+        The guidance law of the planner and the run loop (``pursuit`` or ``ilos``).
     """
 
     seed: int
@@ -118,6 +121,7 @@ class WorldResult:
     planned_goal_s: float | None = None
     water: dict = field(default_factory=dict)
     replan_cpu_s: list[float] = field(default_factory=list)
+    guidance: str = "pursuit"
 
 
 def true_clearance_m(world: World, model: SwimmerModel, states: FloatArray) -> FloatArray:
@@ -225,6 +229,7 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
     """
     world = generate_world(seed)
     water = water_for(seed, model, unknown_current_m_s)
+    law = _law_name(planner_options)
     vx, vy = np.add(model.in_tank(world).current_m_s, water["unknown_current_m_s"])
     speed, direction = math.hypot(vx, vy), math.degrees(math.atan2(vy, vx))
     s = world.start
@@ -239,11 +244,13 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
     except PlanRefused as err:
         return WorldResult(seed, False, err.status, detail=str(err), water=water,
                            plan_wall_s=time.perf_counter() - wall0,
-                           plan_cpu_s=time.process_time() - cpu0)
+                           plan_cpu_s=time.process_time() - cpu0, guidance=law)
     plan_wall, plan_cpu = time.perf_counter() - wall0, time.process_time() - cpu0
     nav = planned.navigator
     cost = planned.outcome.plan.cost_s
-    config = RunConfig(gait, planned.waypoints_m, duration_s=2.0 * cost + 30.0)
+    # the run loop steers with the law the plan was searched and checked with, from its start
+    config = RunConfig(gait, planned.waypoints_m, duration_s=2.0 * cost + 30.0,
+                       guidance=planned.guidance, start_guide=planned.start_guide)
     with tempfile.TemporaryDirectory() as tmp:
         request = TakeRequest(robot, config, str(Path(tmp) / "take"), TakeNotes(planned.uri),
                               "synthetic:clean", navigator=nav,
@@ -264,7 +271,13 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
         [e["wall_s"] for e in replans],
         [e["t_switch_s"] - e["t_request_s"] for e in replans if "t_switch_s" in e],
         plan_wall, plan_cpu, out.t_end_s, cost, water,
-        [e["cpu_s"] for e in replans if e["cpu_s"] is not None])
+        [e["cpu_s"] for e in replans if e["cpu_s"] is not None], law)
+
+
+def _law_name(planner_options: dict[str, Any] | None) -> str:
+    """The name of the guidance law the planner options give (pure pursuit by default)."""
+    law = (planner_options or {}).get("guidance")
+    return "pursuit" if law is None else str(law.name)
 
 
 def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, out: Path,
@@ -291,6 +304,11 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
     Returns
     -------
     list of WorldResult
+
+    Raises
+    ------
+    UserError
+        ``results.jsonl`` holds worlds run with another guidance law.
     """
     out.mkdir(parents=True, exist_ok=True)
     path = out / "results.jsonl"
@@ -300,6 +318,11 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
             if line.strip():
                 r = WorldResult(**json.loads(line))
                 done[r.seed] = r
+    law = _law_name(planner_options)
+    other = sorted({r.seed for r in done.values() if r.guidance != law})
+    if other:
+        raise UserError(f"{path}: worlds {other[0]}.. were run with another guidance law than "
+                         f"{law}; use another --out")
     results = []
     if swimmer is None:
         swimmer = model.swimmer_for(robot)

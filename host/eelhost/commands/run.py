@@ -24,7 +24,7 @@ from eelhost.commands.common import (
     waypoints,
 )
 from eelhost.commands.link_options import add_link_options, resolve_link_options
-from eelhost.commands.plan import add_coefficient_model_option
+from eelhost.commands.plan import add_coefficient_model_option, guidance_law
 from eelhost.errors import EXIT_CONTACT, EXIT_NOT_REACHED, EXIT_OK
 from eelhost.field.recorder import MOTIONS
 from eelhost.field.runloop import RunConfig
@@ -36,6 +36,7 @@ from eelhost.progress import phase
 from eelhost.vision.markerfile import load_marker_file
 from eelhost.web.liveview import LiveView
 from eelsim.control import Gait
+from eelsim.guidance import GUIDANCE_LAWS, PURSUIT
 from eelsim.robot import load_robot
 
 
@@ -84,6 +85,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--k-theta", type=FINITE, default=0.37, help="heading gain")
     p.add_argument("--radius", type=POSITIVE, default=0.15, help="acceptance radius, m")
     p.add_argument("--control-period", type=POSITIVE, default=0.3, help="offset period, s")
+    p.add_argument("--guidance", choices=GUIDANCE_LAWS.names(), default=PURSUIT.name,
+                   help="the line-of-sight law that steers the robot: pursuit (the paper's pure "
+                   "pursuit of each waypoint, default) or ilos (integral line-of-sight along each "
+                   "leg with the planner's gains); with --plan or --bench the planner searches "
+                   "and checks with the same law (docs/planning.md, \"The guidance\")")
     p.add_argument("--duration", type=POSITIVE, help="stop after this long, s (default: no limit)")
     p.add_argument("--motion", choices=MOTIONS, default="auto",
                    help="what the take is, for a dataset: straight, turning, path, or auto "
@@ -185,6 +191,8 @@ def run(args: argparse.Namespace) -> int:
     navigator = None
     view = None
     uri = args.link
+    law = guidance_law(args.guidance)
+    start_guide = None
     if args.plan is not None:
         from eelhost.commands.plan import world_from_name
         from eelhost.planning.tank import plan_for_run
@@ -202,10 +210,12 @@ def run(args: argparse.Namespace) -> int:
         swimmer = model.swimmer_for(robot)
         with phase(f"plan {world.name}: search and check in the twin"):
             planned = plan_for_run(world, robot, args.link, gait, coefficients=model,
-                                   acceptance_radius_m=args.radius, swimmer=swimmer)
+                                   acceptance_radius_m=args.radius, swimmer=swimmer,
+                                   planner_options={"guidance": law})
         print(planned.outcome.message)
         print(f"coefficients: {model.describe()}")
         waypoints, navigator, uri = planned.waypoints_m, planned.navigator, planned.uri
+        start_guide = planned.start_guide
         view = TankView.covering(world.tank.size_m)
     else:
         waypoints = args.waypoints
@@ -216,6 +226,8 @@ def run(args: argparse.Namespace) -> int:
         acceptance_radius_m=args.radius,
         control_period_s=args.control_period,
         duration_s=args.duration,
+        guidance=law,
+        start_guide=start_guide,
     )
     notes = TakeNotes(uri, args.robot_file, args.motion, current, args.note)
     request = TakeRequest(robot, config, args.out, notes, args.camera, args.calibration,
@@ -264,22 +276,26 @@ def _bench(args: argparse.Namespace) -> int:
                 flush=True)
             bar.update(1)
 
-        options = ({} if args.check_unknown_current is None
-                   else {"unknown_current_m_s": args.check_unknown_current})
+        options: dict = {"guidance": guidance_law(args.guidance)}
+        if args.check_unknown_current is not None:
+            options["unknown_current_m_s"] = args.check_unknown_current
         results = run_closed_loop_bench(robot, model, seeds, out, show, options,
                                         model.swimmer_for(robot))
     command = (f"nice eelbot run --bench --worlds {args.worlds} --seed {args.seed}"
                + ("" if args.check_unknown_current is None
                   else f" --check-unknown-current {args.check_unknown_current:g}")
                + (f" --coefficients-file {args.coefficients_file}" if args.coefficients_file
-                  else ""))
+                  else "")
+               + (f" --guidance {args.guidance}" if args.guidance != PURSUIT.name else ""))
     lines = summary_lines(results)
     block = [BENCH_BEGIN, f"Command: `{command}`", "",
              f"- machine: {cpu_model()}, {os.cpu_count()} cores visible (shared with other "
              f"work); this run took {time.monotonic() - wall0:.0f} s of wall time"
              + (f" after reading {resumed} worlds' results back from {done_file}" if resumed
                 else ""),
-             f"- coefficients of the planner: {model.describe()}", *lines, BENCH_END]
+             f"- coefficients of the planner: {model.describe()}",
+             f"- guidance (planner and run loop): {guidance_law(args.guidance).describe()}",
+             *lines, BENCH_END]
     print("\n".join(lines))
     if args.write:
         _write_section(Path(args.write), block)

@@ -21,7 +21,12 @@ with acknowledgement and resends. Then, per camera frame:
    filtered pose (the twin's law) and send SetOffset (which also feeds the robot's watchdog).
 
 Steps 2 and 4 (filter, waypoint switch, line of sight, clipping) are the twin's own guidance
-object, :class:`eelsim.guidance.Guidance`, so the tank steers exactly as the twin does.
+object, :class:`eelsim.guidance.Guidance`, built with the run's guidance law
+(``RunConfig.guidance``: the paper's pure pursuit by default, or integral line-of-sight with the
+planner's gains, ``eelbot run --guidance ilos``) and the control period as ILOS's integral step,
+so the tank steers exactly as the twin does. Only step 4 advances ILOS's integral, once per
+control period, as the twin's control update does. The law is written into the take's metadata
+(``source.guidance``).
 
 With a navigator (``eelbot run --plan``: :class:`eelhost.planning.replan.TankReplanner`) every
 frame also goes to it after step 2; it may hand over new waypoints (a replan that is ready), end
@@ -30,7 +35,12 @@ the run in the goal, or stop the robot (``contact``: its estimated body touches 
 rate while it thinks; after each frame the navigator may hold the loop back so that a virtual
 robot's clock does not run ahead of the planner's wall time (:meth:`Navigator.pace`). Every plan
 and replan is rewritten into the take's metadata (``source.planning``) as it happens. Telemetry
-reporting FAILSAFE is counted (``failsafe_reports``).
+reporting FAILSAFE is counted (``failsafe_reports``). The navigator is handed the guidance's own
+state with every frame (:meth:`eelsim.guidance.Guidance.state`: the present leg's start and the
+ILOS integral), and a replan comes with the state its plan was searched from
+(``Plan.start_guide``): the new waypoints are steered from that leg start with that integral, so
+the robot follows the plan with the controller the planner swam (docs/planning.md, "Execution
+and replanning").
 
 Whatever ends the loop, even an exception, Stop is sent and waited for (with resends) for up to
 ``stop_timeout_s``, and the recording is closed with the outcome.
@@ -52,7 +62,7 @@ from eelhost.link.base import Clock, Link, LinkEvent
 from eelhost.vision.localise import Localisation, Localiser
 from eelhost.wire import protocol
 from eelsim.control import Gait
-from eelsim.guidance import Guidance
+from eelsim.guidance import PURSUIT, Guidance, GuidanceLaw
 from eelsim.joints import pd_gains
 from eelsim.robot import Robot
 
@@ -63,11 +73,15 @@ __all__ = ["Decision", "FrameReport", "Navigator", "RunConfig", "RunLoop", "RunO
 OFFSET_LIMIT_RAD = 1.0  # SetOffset's range
 EPS_S = 1e-9
 
+GuideState = tuple[float, float, float, float]
+"""The guidance's own state: the present leg's start (x, y), m, and the ILOS integral, s."""
+
 
 class Decision(Protocol):
     """What a navigator makes of a frame (:class:`eelhost.planning.replan.Decision`)."""
 
     waypoints: list[tuple[float, float]] | None
+    guide: GuideState | None
     stop: str | None
     detail: str
     arrived: bool
@@ -80,8 +94,12 @@ class Navigator(Protocol):
     replans: int
 
     def on_frame(self, t_s: float, loc: Localisation, pose: NDArray[np.float64] | None,
-                 target: int, offset_rad: float) -> Decision:
-        """Take one frame; say whether to switch waypoints, stop, or that the goal holds."""
+                 target: int, offset_rad: float, guide: GuideState | None = None) -> Decision:
+        """Take one frame; say whether to switch waypoints, stop, or that the goal holds.
+
+        ``offset_rad`` is the offset last sent (the one the robot steers with), ``guide`` the
+        guidance's state (:meth:`eelsim.guidance.Guidance.state`).
+        """
         ...
 
     def pace(self, t_s: float) -> None:
@@ -123,6 +141,13 @@ class RunConfig:
         How long to keep trying to get the final Stop acknowledged.
     amplitude_rate_rad_s, beta_rate_rad_s, offset_rate_rad_s : float
         SetGait's slew limits (0 = no limit, as the twin).
+    guidance : GuidanceLaw
+        The line-of-sight law that turns the filtered pose into the offset (default the paper's
+        pure pursuit; a plan must be followed with the law it was searched and checked with).
+    start_guide : (x, y, I_x, I_y), optional
+        The guidance state to start the first leg with (a plan's ``start_guide``: its first leg's
+        start and the ILOS integral); default the first leg from the first filtered position,
+        with no integral.
     """
 
     gait: Gait
@@ -137,6 +162,8 @@ class RunConfig:
     amplitude_rate_rad_s: float = 0.0
     beta_rate_rad_s: float = 0.0
     offset_rate_rad_s: float = 0.0
+    guidance: GuidanceLaw = PURSUIT
+    start_guide: GuideState | None = None
 
 
 @dataclass
@@ -283,13 +310,8 @@ class RunLoop:
         self.clock = clock or link.clock
         self.observers = list(observers or [])
         self.outcome = RunOutcome()
-        self.guidance = Guidance(
-            config.waypoints_m,
-            config.acceptance_radius_m,
-            config.gait.k_theta,
-            config.median_window,
-            offset_limit_rad=OFFSET_LIMIT_RAD,
-        )
+        self.guidance = self._guidance_for(config.waypoints_m, config.start_guide)
+        self._offset_rad = 0.0  # the offset last sent: the one the robot steers with
         self._stop_request: str | None = None
         self._stop_detail = ""
         self._t_start = 0.0
@@ -297,6 +319,24 @@ class RunLoop:
         self.replans = 0
         self._goal_reached = False
         link.listeners.append(self._on_event)
+
+    def _guidance_for(self, waypoints: list[tuple[float, float]],
+                      guide: GuideState | None) -> Guidance:
+        """The guidance along ``waypoints`` with the run's law, from ``guide`` when given.
+
+        A leg start that is not finite (a state taken before any pose) is left to the first
+        filtered position, as without ``guide``.
+        """
+        c = self.config
+        start = None
+        integral = (0.0, 0.0)
+        if guide is not None:
+            if np.isfinite(guide[0]) and np.isfinite(guide[1]):
+                start = (float(guide[0]), float(guide[1]))
+            integral = (float(guide[2]), float(guide[3]))
+        return Guidance(waypoints, c.acceptance_radius_m, c.gait.k_theta, c.median_window,
+                        offset_limit_rad=OFFSET_LIMIT_RAD, law=c.guidance, leg_start_m=start,
+                        integral_s=integral, control_period_s=c.control_period_s)
 
     @property
     def target(self) -> int:
@@ -351,6 +391,8 @@ class RunLoop:
         out = self.outcome
         frames = open_frames(self.frames)  # the camera first: nothing is sent if it fails
         self._t_start = self.clock.now()
+        if self.recorder is not None:
+            self.recorder.update_metadata(source={"guidance": self._guidance_record()})
         try:
             self._start_robot()
             self._loop(frames)
@@ -370,6 +412,17 @@ class RunLoop:
             if self.recorder is not None:
                 self.recorder.close(out.as_dict())
         return out
+
+    def _guidance_record(self) -> dict[str, Any]:
+        """The guidance law the run steers with, for the take's metadata (``source.guidance``)."""
+        c = self.config
+        law = c.guidance
+        return {"law": law.name, "description": law.describe(),
+                "heading_gain": law.gain(c.gait.k_theta),
+                "lookahead_m": law.lookahead_m if law.integral else None,
+                "integral_gain_m_s": law.integral_gain if law.integral else None,
+                "control_period_s": c.control_period_s,
+                "start_guide": None if c.start_guide is None else list(c.start_guide)}
 
     def _loop(self, frames: Iterable[tuple[float, NDArray[np.uint8]]]) -> None:
         c, out = self.config, self.outcome
@@ -410,7 +463,9 @@ class RunLoop:
                 return
             if t >= next_control - EPS_S:
                 # Sent even before the first pose (0 then): it keeps the robot's watchdog fed.
-                self.link.send(protocol.SetOffset(self.guidance.offset()))
+                # The only call of offset(): each is a control update (ILOS's integral step).
+                self._offset_rad = self.guidance.offset()
+                self.link.send(protocol.SetOffset(self._offset_rad))
                 out.offsets_sent += 1
                 next_control += c.control_period_s
             if self.navigator is not None:
@@ -421,7 +476,7 @@ class RunLoop:
         """Hand the frame to the navigator: go on, steer to new waypoints, stop, or arrive."""
         assert self.navigator is not None
         decision = self.navigator.on_frame(t, loc, self.guidance.filtered_pose, self.target,
-                                           self.guidance.offset())
+                                           self._offset_rad, guide=self.guidance.state())
         if decision.recorded:
             self._record_planning()
         if decision.stop is not None:
@@ -431,10 +486,9 @@ class RunLoop:
         elif decision.waypoints:
             self.replans += 1
             log.info("new plan at t = %.2f s: %d waypoints", t, len(decision.waypoints))
-            c = self.config
             pose = self.guidance.filtered_pose
-            self.guidance = Guidance(decision.waypoints, c.acceptance_radius_m, c.gait.k_theta,
-                                     c.median_window, offset_limit_rad=OFFSET_LIMIT_RAD)
+            # the new plan is steered from the guidance state it was searched from
+            self.guidance = self._guidance_for(decision.waypoints, decision.guide)
             if loc.found and loc.com_m is not None and loc.heading_rad is not None:
                 self.guidance.observe(t, float(loc.com_m[0]), float(loc.com_m[1]),
                                       loc.heading_rad)

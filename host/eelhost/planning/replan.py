@@ -15,7 +15,9 @@ waypoints. The goal test is :func:`eelhost.planning.search.in_goal` throughout.
   starts from the whole body state (:mod:`eelhost.planning.state_estimate`) predicted by the twin
   for the moment the plan will be ready, in the current estimated from the camera track; failed
   replans back off, and the robot is stopped deliberately when no safe continuation exists or
-  its estimated body touches an obstacle.
+  its estimated body touches an obstacle. The run loop's guidance state (the present leg's
+  start, the ILOS integral) goes with the estimate into every twin run from it, and a replan is
+  searched from the guidance state predicted for its start, which the loop then steers with.
 """
 
 from __future__ import annotations
@@ -34,7 +36,7 @@ import numpy as np
 from eelhost.planning.execute import Swim, body_clearance_m, swim
 from eelhost.planning.geometry import FloatArray, point_segment_distance
 from eelhost.planning.planner import Outcome, Planner
-from eelhost.planning.search import Plan, goal_mask, in_goal
+from eelhost.planning.search import Guide, Plan, goal_mask, in_goal, leg_start_guide
 from eelhost.planning.state_estimate import BodyEstimate, BodyStateEstimator, CurrentEstimator
 from eelhost.planning.twin import Twin
 from eelhost.planning.world import World
@@ -246,6 +248,9 @@ class Decision:
     ----------
     waypoints : list of (x, y) or None
         Steer to these from now on (a replan that is ready and due).
+    guide : (x, y, I_x, I_y) or None
+        With ``waypoints``: the guidance state the new plan was searched from
+        (``Plan.start_guide``), to steer them with.
     stop : str or None
         End the run now: ``contact`` (the estimated body touches an obstacle or wall) or
         ``no_safe_continuation`` (replanning cannot give the robot a safe plan).
@@ -258,6 +263,7 @@ class Decision:
     """
 
     waypoints: list[tuple[float, float]] | None = None
+    guide: Guide | None = None
     stop: str | None = None
     detail: str = ""
     arrived: bool = False
@@ -281,6 +287,7 @@ class _Window:
 
     estimate: BodyEstimate
     waypoints: list[tuple[float, float]]
+    guide: Guide | None = None
 
 
 class TankReplanner:
@@ -405,7 +412,9 @@ class TankReplanner:
             "plan", "start", 0.0, 0.0, 0.0, None, outcome, outcome.planning_time_s, math.nan,
             np.zeros(2))]
         self._job: _Job | None = None
-        self._pending: tuple[float, list[tuple[float, float]]] | None = None  # (t_start, wps)
+        # (t_start, waypoints, the guidance state they were searched from)
+        self._pending: tuple[float, list[tuple[float, float]], Guide | None] | None = None
+        self._guide: Guide | None = None  # the run loop's guidance state at the latest frame
         self._next_try_s = -math.inf
         self._touching = 0
         self._window: _Window | None = None
@@ -425,7 +434,7 @@ class TankReplanner:
     # -- the loop's calls ----------------------------------------------------------------------
 
     def on_frame(self, t_s: float, loc: Localisation, pose: FloatArray | None, target: int,
-                 offset_rad: float) -> Decision:
+                 offset_rad: float, guide: Guide | None = None) -> Decision:
         """Take one frame: estimate, check contact and goal, start, collect or switch replans.
 
         Parameters
@@ -440,12 +449,17 @@ class TankReplanner:
             Index of the waypoint being steered to in the waypoints last handed over.
         offset_rad : float
             The offset the robot steers with.
+        guide : (x, y, I_x, I_y), optional
+            The run loop's guidance state (:meth:`eelsim.guidance.Guidance.state`): the twin's
+            runs from this frame's estimate start with it (none: a leg from the estimate's
+            centre of mass, no integral).
 
         Returns
         -------
         Decision
         """
         d = Decision()
+        self._guide = guide
         if loc.found and loc.com_m is not None:
             self.estimator.observe(t_s, loc.com_m, loc.link_angles_rad, offset_rad)
             stop = self._contact(t_s)
@@ -459,7 +473,7 @@ class TankReplanner:
         if d.stop is not None:
             return d
         if self._pending is not None and t_s >= self._pending[0] - 1e-9:
-            d.waypoints = self._pending[1]
+            d.waypoints, d.guide = self._pending[1], self._pending[2]
             self.waypoints = list(d.waypoints)
             self._pending = None
             self._window = None  # the prediction of a window spans no switch of waypoints
@@ -519,7 +533,7 @@ class TankReplanner:
             # also while a replan runs (on its own worker): a failure is then judged on it
             self._next_lookahead_s = t_s + self.lookahead_every_s
             self._lookahead = self._side.submit(self._look_ahead, est, list(left),
-                                                  self.current.value_m_s.copy())
+                                                  self.current.value_m_s.copy(), self._guide)
         return d
 
     def pace(self, t_s: float) -> None:
@@ -584,15 +598,21 @@ class TankReplanner:
         now_step = int(round(est.t_s / dt))
         start_step = int(math.ceil((now_step + self._lead_steps()) / period)) * period
         extra = self.current.value_m_s.copy() if self.estimate_current else np.zeros(2)
-        future = self._worker.submit(self._replan_and_judge, est, list(left), start_step, extra)
+        future = self._worker.submit(self._replan_and_judge, est, list(left), start_step, extra,
+                                     self._guide)
         self._job = _Job(future, t_s, time.monotonic(), start_step * dt, reason)
         log.info("left the corridor at t = %.2f s; replanning from the state predicted for "
                  "t = %.2f s", t_s, start_step * dt)
 
     def _replan(self, est: BodyEstimate, left: list[tuple[float, float]], start_step: int,
-                extra: FloatArray) -> tuple[Outcome, FloatArray, float, float, FloatArray, float,
-                                            int]:
+                extra: FloatArray, guide: Guide | None = None
+                ) -> tuple[Outcome, FloatArray, float, float, FloatArray, float, int]:
         """On the worker: predict the state at the start step with the twin, then plan from it.
+
+        The prediction starts with the loop's guidance state ``guide``; the plan is searched from
+        the guidance state predicted for its start: its first leg from the start's centre of mass
+        (a new leg), with the integral the controller will hold then (:func:`predict_start`), so
+        the integral is carried across the replan as across a waypoint (docs/model.md section 4).
 
         A start refused as blocked is tried again a restart period later along the present
         waypoints (``blocked_retries`` times): the moving body swims on, and its predicted
@@ -606,19 +626,23 @@ class TankReplanner:
             self._planned = (self.planner, extra)
         planner = self.planner
         period = planner.twin.restart_steps or 1
-        state = predict_state(planner.twin, est, left, start_step)
-        assert state is not None  # allow_end: the run's last state when it ends early
-        outcome = planner.plan(state, start_step)
+        predicted = predict_start(planner.twin, est, left, start_step, guide=guide)
+        assert predicted is not None  # allow_end: the run's last state when it ends early
+        state, integral = predicted
+        outcome = planner.plan(state, start_step, guide=leg_start_guide(state, self.model.n_links,
+                                                                       integral))
         for _ in range(self.blocked_retries):
             if outcome.status != "blocked_start":
                 break
-            later = predict_state(planner.twin, est, left, start_step + period, allow_end=False)
+            later = predict_start(planner.twin, est, left, start_step + period, allow_end=False,
+                                  guide=guide)
             if later is None:
                 break
             log.info("replan start blocked at t = %.2f s; trying %.2f s",
                      start_step * planner.twin.dt_s, (start_step + period) * planner.twin.dt_s)
-            start_step, state = start_step + period, later
-            outcome = planner.plan(state, start_step)
+            start_step, (state, integral) = start_step + period, later
+            outcome = planner.plan(state, start_step, guide=leg_start_guide(
+                state, self.model.n_links, integral))
         # the tighter margin: near the goal after any failure of the search or check; anywhere
         # when the search ran out of poses (a start so close to an obstacle that every manoeuvre
         # from it breaks the world's margin: the predicted start of a robot the water pushed on)
@@ -626,7 +650,8 @@ class TankReplanner:
                 outcome.status == "exhausted" or self._near_goal(state)):
             goal_planner = self._goal_planner_in(extra)
             if goal_planner is not None:
-                approach = goal_planner.plan(state, start_step)
+                approach = goal_planner.plan(state, start_step, guide=leg_start_guide(
+                    state, self.model.n_links, integral))
                 log.info("goal approach from t = %.2f s: %s", start_step * planner.twin.dt_s,
                          approach.message)
                 if approach.found:
@@ -638,16 +663,17 @@ class TankReplanner:
                 self._planner_current.copy(), time.monotonic(), start_step)
 
     def _replan_and_judge(self, est: BodyEstimate, left: list[tuple[float, float]],
-                          start_step: int, extra: FloatArray) -> tuple[tuple, float | None]:
+                          start_step: int, extra: FloatArray,
+                          guide: Guide | None = None) -> tuple[tuple, float | None]:
         """On the worker: the replan and, when it fails, a look-ahead of the present waypoints.
 
         The look-ahead from the same estimate decides whether the robot may keep its present
         plan (:meth:`_collect`), so a failure is never judged on a stale or missing one.
         """
-        result = self._replan(est, left, start_step, extra)
+        result = self._replan(est, left, start_step, extra, guide)
         if result[0].found or self.lookahead_s <= 0:
             return result, None
-        judged = self._look_ahead(est, left, self.current.value_m_s.copy())
+        judged = self._look_ahead(est, left, self.current.value_m_s.copy(), guide)
         return result, None if judged is None else judged[0]
 
     def _stale(self, t_s: float, t_start_s: float, path: FloatArray) -> bool:
@@ -707,7 +733,8 @@ class TankReplanner:
             self.failures = 0
             self.outcome = outcome
             self.path = corridor_path(outcome.plan)
-            self._pending = (job.t_start_s, list(outcome.plan.waypoints_m))
+            self._pending = (job.t_start_s, list(outcome.plan.waypoints_m),
+                             outcome.plan.start_guide)
             log.info("replanned at t = %.2f s (%.2f s wall): %s", t_s, wall, outcome.message)
             return True
         self.failures += 1
@@ -739,7 +766,7 @@ class TankReplanner:
         return True
 
     def _look_ahead(self, est: BodyEstimate, left: list[tuple[float, float]],
-                    extra: FloatArray) -> tuple[float, float] | None:
+                    extra: FloatArray, guide: Guide | None = None) -> tuple[float, float] | None:
         """On the worker: the smallest clearances the twin predicts ahead of the estimate.
 
         Returns (the body's own outline's over ``lookahead_s``, the planner's capsule's over
@@ -750,7 +777,7 @@ class TankReplanner:
         steps = int(round(self.replan_horizon_s / twin.dt_s))
         stride = 3
         runs = twin.run([left], steps * twin.dt_s, states=est.state[None], start_steps=[now],
-                        stride=stride)
+                        stride=stride, guidance=_guidance_arg(twin, guide))
         states = runs.states[0]
         states = states[np.isfinite(states[:, 0])]
         # the run ends where the goal test first holds (the loop stops the robot there): a goal
@@ -814,14 +841,14 @@ class TankReplanner:
                                     end.t_s - window.estimate.t_s)
                 changed = True
         if self._window is None:
-            self._window = _Window(est, list(left))
+            self._window = _Window(est, list(left), self._guide)
         elif (est.t_s - self._window.estimate.t_s >= self.current.window_s
               and self._window_job is None and self._job is None):
             window = self._window
             future = self._side.submit(self._window_prediction, window, est.t_s,
                                          self.current.value_m_s.copy())
             self._window_job = (future, window, est)
-            self._window = _Window(est, list(left))
+            self._window = _Window(est, list(left), self._guide)
         return changed
 
     def _window_prediction(self, window: _Window, t_end_s: float,
@@ -829,7 +856,8 @@ class TankReplanner:
         """On the worker: where the twin puts the centre of mass at ``t_end_s``."""
         twin = self._twin_in(extra)
         step = int(round(t_end_s / twin.dt_s))
-        state = predict_state(twin, window.estimate, window.waypoints, step, allow_end=False)
+        state = predict_state(twin, window.estimate, window.waypoints, step, allow_end=False,
+                              guide=window.guide)
         if state is None:
             return None
         n = self.model.n_links
@@ -855,13 +883,26 @@ class TankReplanner:
             "waypoints_m": [[round(x, 4), round(y, 4)] for x, y in outcome.plan.waypoints_m]
             if outcome.found else [],
             "planned_goal_s": round(outcome.plan.cost_s, 2) if outcome.found else None,
+            "start_guide": ([round(float(v), 5) for v in outcome.plan.start_guide]
+                            if outcome.found and outcome.plan.start_guide is not None else None),
             "current_m_s": [round(float(world_current[0] + extra[0]), 4),
                             round(float(world_current[1] + extra[1]), 4)],
         }
 
 
+def _guidance_arg(twin: Twin, guide: Guide | None) -> list[Guide] | None:
+    """``Twin.run``'s ``guidance`` for one run from ``guide``: only with an integral law.
+
+    Pure pursuit has no state beyond its waypoints, so its runs are left as they were.
+    """
+    if guide is None or not twin.options.guidance.integral:
+        return None
+    return [tuple(float(v) for v in guide)]  # type: ignore[list-item]
+
+
 def predict_state(twin: Twin, est: BodyEstimate, waypoints: list[tuple[float, float]],
-                  step: int, allow_end: bool = True) -> FloatArray | None:
+                  step: int, allow_end: bool = True,
+                  guide: Guide | None = None) -> FloatArray | None:
     """The twin's prediction of the robot's state at ``step``, from an estimate.
 
     The robot swims on after the estimate under its own control stack, steering to
@@ -877,21 +918,44 @@ def predict_state(twin: Twin, est: BodyEstimate, waypoints: list[tuple[float, fl
     allow_end : bool
         When the run ends before ``step`` (the last waypoint accepted), return its last state;
         else None.
+    guide : (x, y, I_x, I_y), optional
+        The guidance state at the estimate (where the leg to ``waypoints[0]`` starts, the ILOS
+        integral); default a leg from the estimate's centre of mass.
 
     Returns
     -------
     ndarray, shape (2 N + 4,) or None
     """
+    predicted = predict_start(twin, est, waypoints, step, allow_end, guide)
+    return None if predicted is None else predicted[0]
+
+
+def predict_start(twin: Twin, est: BodyEstimate, waypoints: list[tuple[float, float]],
+                  step: int, allow_end: bool = True, guide: Guide | None = None
+                  ) -> tuple[FloatArray, tuple[float, float]] | None:
+    """The twin's prediction of the state at ``step`` and of the ILOS integral then.
+
+    As :func:`predict_state`, with the guidance's integral vector at ``step`` (before that
+    step's control update, as :meth:`Twin.run` restarts take it; zero with pure pursuit): what
+    a replan starting there carries.
+
+    Returns
+    -------
+    (ndarray (2 N + 4,), (I_x, I_y)) or None
+    """
+    integral0 = (0.0, 0.0) if guide is None else (float(guide[2]), float(guide[3]))
     now = int(round(est.t_s / twin.dt_s))
     steps = max(step - now, 0)
     if steps == 0 or not waypoints:
-        return est.state.copy()
+        return est.state.copy(), integral0
     runs = twin.run([waypoints], steps * twin.dt_s + 2 * twin.dt_s, states=est.state[None],
-                    start_steps=[now], stride=1)
+                    start_steps=[now], stride=1, guidance=_guidance_arg(twin, guide))
     states = runs.states[0]
     if steps < len(states) and np.all(np.isfinite(states[steps])):
-        return np.asarray(states[steps], dtype=float)
+        g = runs.integral_s[0, steps]
+        return np.asarray(states[steps], dtype=float), (float(g[0]), float(g[1]))
     if not allow_end:
         return None
     finite = np.flatnonzero(np.isfinite(states[:, 0]))
-    return np.asarray(states[finite[-1]], dtype=float)
+    g = runs.integral_s[0, finite[-1]]
+    return np.asarray(states[finite[-1]], dtype=float), (float(g[0]), float(g[1]))

@@ -25,6 +25,7 @@ from eelhost.planning.search import SearchSettings
 from eelhost.planning.uncertainty import CoefficientModel, default_model
 from eelhost.planning.world import Current, World
 from eelsim.control import Gait
+from eelsim.guidance import PURSUIT, GuidanceLaw
 from eelsim.model import SwimmerModel
 from eelsim.robot import Robot
 from eelsim.scenario import PATH_GAIT
@@ -45,12 +46,20 @@ class RunPlan:
     uri : str
         The robot's URI (for ``sim://``: with the world's start and current).
     outcome : Outcome
+    guidance : GuidanceLaw
+        The law the plan was searched and checked with (the planner's ``options.guidance``):
+        the run loop must steer with it (``RunConfig.guidance``).
+    start_guide : (x, y, I_x, I_y) or None
+        The guidance state the plan was searched from (``Plan.start_guide``): the run loop's
+        first leg starts there (``RunConfig.start_guide``).
     """
 
     waypoints_m: list[tuple[float, float]]
     navigator: TankReplanner
     uri: str
     outcome: Outcome
+    guidance: GuidanceLaw = PURSUIT
+    start_guide: tuple[float, float, float, float] | None = None
 
 
 def sim_uri_for_world(uri: str, world: World) -> str:
@@ -106,8 +115,8 @@ def plan_for_run(
     acceptance_radius_m : float
         The run loop's acceptance radius (the planner's twin must use the same).
     planner_options : dict, optional
-        More keyword arguments of :class:`Planner` (the benchmark's ``unknown_current_m_s``),
-        for the first plan and every replan.
+        More keyword arguments of :class:`Planner` (the benchmark's ``unknown_current_m_s``,
+        ``guidance``: the law the robot steers with), for the first plan and every replan.
     swimmer : SwimmerModel, optional
         The model of the robot the planner swims, built once by the command
         (:meth:`CoefficientModel.swimmer_for`; built here when not given) and handed to the
@@ -151,7 +160,8 @@ def plan_for_run(
         raise NoPlanFound(outcome.status, f"{world.name}: {outcome.message}")
     navigator = TankReplanner(planner_for, planner, outcome, gait,
                               goal_planner_for=goal_planner_for)
-    return RunPlan(outcome.plan.waypoints_m, navigator, sim_uri_for_world(uri, world), outcome)
+    return RunPlan(outcome.plan.waypoints_m, navigator, sim_uri_for_world(uri, world), outcome,
+                   planner.options.guidance, outcome.plan.start_guide)
 
 
 def with_extra_current(world: World, extra_m_s: FloatArray) -> World:
