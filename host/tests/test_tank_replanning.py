@@ -745,3 +745,15 @@ def test_a_replan_carries_the_loops_ilos_integral_into_its_plan_and_hands_that_s
     assert guide[:2] == pytest.approx(replan["start_state"][N : N + 2], abs=1e-4)
     assert math.hypot(guide[2] - handed[2], guide[3] - handed[3]) < 0.6
     assert math.hypot(guide[2], guide[3]) > 1.5
+
+
+def test_the_benchmark_refuses_to_resume_worlds_run_with_another_guidance_law(tmp_path, capsys):
+    out = tmp_path / "bench"
+    out.mkdir()
+    (out / "results.jsonl").write_text(json.dumps(
+        {"seed": 5600, "planned": False, "status": "exhausted"}) + "\n")  # pursuit, by default
+    status = main(["run", "--bench", "--worlds", "1", "--seed", "5600", "--guidance", "ilos",
+                   "--out", str(out)])
+    err = capsys.readouterr().err
+    assert status == 2
+    assert "another guidance law than ilos" in err and "results.jsonl" in err
