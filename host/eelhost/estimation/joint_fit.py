@@ -1,12 +1,13 @@
 """The joint model of a fit: which ``[joints]`` table a candidate swims with, and what it varies.
 
-The paper's PD gains stay as the robot file has them (:data:`FIXED_JOINT_MODELS`); the twin's
-other joint models fit their ``fit_parameters`` (names and bounds from the joint model, e.g. the
-servo's lag and motor time constant; docs/model.md section 4). A candidate of the model
-comparison may impose another joint model than the robot file's: it carries that model's
-``[joints]`` table, from the bundled robot file that uses it (docs/estimation.md, "Choosing the
-model"). :class:`JointFit` is this part of a :class:`~eelhost.estimation.space.ParameterSpace`;
-this module is the lowest of the parameter modules, so :class:`ParameterError` lives here.
+The paper's PD gains stay as the robot file has them (the PD model declares
+``fitted_by_estimator = False``); the twin's other joint models fit their ``fit_parameters``
+(names and bounds from the joint model, e.g. the servo's lag and motor time constant;
+docs/model.md section 4). A candidate of the model comparison may impose another joint model
+than the robot file's: it carries that model's ``[joints]`` table, from the bundled robot file
+that uses it (docs/estimation.md, "Choosing the model"). :class:`JointFit` is this part of a
+:class:`~eelhost.estimation.space.ParameterSpace`; this module is the lowest of the parameter
+modules, so :class:`ParameterError` lives here.
 """
 
 from __future__ import annotations
@@ -22,12 +23,6 @@ from eelsim.robot import BUNDLED_ROBOTS, Robot, load_robot
 
 class ParameterError(ValueError):
     """Parameters that do not fit a model (unknown or missing names, wrong count)."""
-
-
-# Joint models whose parameters a fit keeps as the robot file has them: the paper's PD gains are
-# its own (docs/estimation.md, "Fitness"); the twin's other joint models fit their
-# ``fit_parameters`` (the servo's lag and motor time constant).
-FIXED_JOINT_MODELS = frozenset({"pd"})
 
 
 @dataclass(frozen=True, eq=False)
@@ -115,13 +110,14 @@ def joint_fit(robot: Robot, model: str | None = None) -> JointFit:
     where it extends the robot's model (``JointModel.table_from``: the PD loop on the servo line
     from a PD robot file, with that file's gains), else brings the table of the bundled robot
     file that uses it (:func:`bundled_joints`). The fitted parameters are the model's
-    ``fit_parameters``, none for :data:`FIXED_JOINT_MODELS`.
+    ``fit_parameters``, none for a model that declares ``fitted_by_estimator = False`` (the
+    paper's PD).
     """
     own = joint_model_name(robot)
     name = own if model is None else model
     table = (None if name == own
              else get_joint_model(name).table_from(robot.joints) or bundled_joints(name))
-    if name in FIXED_JOINT_MODELS:
-        return JointFit(name, table=table)
     joints = get_joint_model(name)
+    if not joints.fitted_by_estimator:
+        return JointFit(name, table=table)
     return JointFit(name, joints.fit_names, joints.fit_bounds, table)

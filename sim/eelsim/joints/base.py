@@ -122,6 +122,9 @@ class JointModel(abc.ABC):
         Whether the estimator's model comparison tries it when neither the robot file nor the
         user names it (default True; a model whose candidates would cost the comparison too much
         for what most plants need says False).
+    fitted_by_estimator : bool
+        Whether the estimator fits its ``fit_parameters`` (default True); False keeps them as the
+        robot file has them (the paper's PD gains are its own: docs/estimation.md, "The protocol").
     """
 
     name: ClassVar[str]
@@ -130,6 +133,7 @@ class JointModel(abc.ABC):
     fit_parameters: ClassVar[Sequence[tuple[str, float, float]]]
     kernel_rows: ClassVar[tuple[str, ...]]
     offered_by_default: ClassVar[bool] = True
+    fitted_by_estimator: ClassVar[bool] = True
 
     @property
     def fit_names(self) -> tuple[str, ...]:

@@ -61,6 +61,8 @@ class PDJoints(JointModel):
     fit_parameters: ClassVar[tuple[tuple[str, float, float], ...]] = (
         ("kp_nm_per_rad", 0.01, 1.0), ("kd_nms_per_rad", 0.0, 0.02))
     kernel_rows: ClassVar[tuple[str, ...]] = ("kp", "kd", "stall", "stall_slope")
+    # the paper's gains are the robot's own (docs/estimation.md, "The protocol"): a fit keeps them
+    fitted_by_estimator: ClassVar[bool] = False
 
     def fit_values(self, spec: JointParameters) -> FloatArray:
         """(k_p, k_d)."""

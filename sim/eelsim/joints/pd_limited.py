@@ -56,6 +56,8 @@ class PDLimitedJoints(PDJoints):
     # ten more candidates and kernels would cost the report's comparison about half again
     # (docs/estimation.md, "Model comparison"): offered when the robot file or the user asks
     offered_by_default: ClassVar[bool] = False
+    # the PD gains stay the robot file's; the fit varies the line (its fit_parameters)
+    fitted_by_estimator: ClassVar[bool] = True
 
     def fit_values(self, spec: JointParameters) -> FloatArray:
         """(stall torque, no-load speed)."""
