@@ -19,10 +19,12 @@ docs/planning.md ("The search") is the long form. In short:
 - **The goal test** (:func:`in_goal`, the one used by execution and at the tank too): the centre
   of mass is inside the goal disc. A child whose run enters the disc shrunk by ``goal_margin_m``
   is a goal node; its cost is the time it enters.
-- **Cost** is time. The heuristic is the free-space path length to the goal disc
-  (:class:`eelhost.planning.field.GoalDistance`) over the fastest ground speed (swimming speed plus
-  current), weighted by ``weight`` (weighted A*: the plan costs at most ``weight`` times the
-  optimum of this graph). Nodes are merged on a grid of waypoint cells x leg directions, so the
+- **Cost** is time, plus the soft margin's cost where the body comes closer to anything than
+  ``preferred_clearance_m`` (:meth:`Search.soft_cost_s`), so plans take the middle of the gaps
+  where that costs little time. The heuristic is the free-space path length to the goal disc
+  (:class:`eelhost.planning.field.GoalDistance`, priced with the same soft margin) over the
+  fastest ground speed (swimming speed plus current), weighted by ``weight`` (weighted A*: the
+  plan costs at most ``weight`` times the optimum of this graph). Nodes are merged on a grid of waypoint cells x leg directions, so the
   search is finite; the B best open nodes are expanded together, their children swum in one batch.
 """
 
