@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from eelhost.data.experiments import load_dataset, manifest_text, write_experiment, write_manifest
-from eelhost.data.virtual_tank import mismatched_plants, record_experiment
+from eelhost.data.plants import PLANTS
+from eelhost.data.virtual_tank import record_experiment
 from eelhost.estimation.methods import FitSettings
 from eelhost.estimation.selection import (
     CandidateScore,
@@ -105,7 +106,7 @@ def test_every_joint_model_is_tried_with_every_law_in_the_same_order_from_either
 
 def _small_tank(folder, plant, robot_file, turning=()):
     """Three short straight gaits (and ``turning`` ones) of a plant, under a bundled robot file."""
-    p = mismatched_plants()[plant]
+    p = PLANTS[plant]
     truths = p.truths()
     for i, n in enumerate(GAITS):
         write_experiment(record_experiment(load_robot(), _short(n, 0.3), "straight",
@@ -133,7 +134,7 @@ def _compare(ds, motions, **screen):
                                                            | screen))
 
 
-@pytest.mark.parametrize("plant", sorted(mismatched_plants()))
+@pytest.mark.parametrize("plant", sorted(PLANTS))
 @pytest.mark.slow
 def test_the_chosen_model_is_the_same_from_either_bundled_robot_file_on_every_test_plant(
     plant, tmp_path

@@ -250,7 +250,7 @@ def test_a_report_on_a_tank_whose_truth_is_in_another_law_says_so_instead_of_com
     """A virtual tank's truth may follow another law than the fitted model (a test plant)."""
     import shutil
 
-    from eelhost.data.virtual_tank import law_truths
+    from eelhost.data.plants import law_truths
     from eelhost.estimation.report import run_report
 
     folder = tmp_path / "tank"
@@ -272,10 +272,10 @@ def test_a_steady_current_is_recovered_within_a_mm_s_and_15_degrees_by_either_jo
 ):
     # the tank swims on the joints of the model fitted (the paper's PD joints, or the bundled
     # servo file's), in a steady 5 mm/s current towards 120 deg that its metadata does not declare
-    from eelhost.data.virtual_tank import mismatched_plants
+    from eelhost.data.plants import PLANTS
     from eelhost.estimation.space import spaces_of
 
-    joints = None if joint_model == "pd" else mismatched_plants()["stiff_servos"].settings.joints
+    joints = None if joint_model == "pd" else PLANTS["stiff_servos"].settings.joints
     settings = TankSettings(timestamp_jitter_s=0.0, control_jitter_s=0.0, joints=joints,
                             stray_current_m_s=STRAY_M_S, stray_current_direction_deg=STRAY_DEG)
     names = ["straight_A0.87_w3.9", "straight_A0.61_w2.7", "straight_A0.61_w3.9"]

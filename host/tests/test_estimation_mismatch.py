@@ -6,11 +6,10 @@ import numpy as np
 import pytest
 
 from eelhost.data.experiments import load_dataset, manifest_text, write_experiment, write_manifest
+from eelhost.data.plants import PLANTS, law_truths
 from eelhost.data.virtual_tank import (
     TABLE3,
     TankSettings,
-    law_truths,
-    mismatched_plants,
     record_experiment,
     true_robot,
 )
@@ -202,7 +201,7 @@ def test_another_joint_model_brings_its_bundled_table_onto_the_datasets_robot(ro
 
 def test_cross_validation_on_a_stiff_servo_tank_recommends_the_servo_model(robot, tmp_path):
     # the tank's joints are the bundled servo robot's; the dataset's robot file has PD joints
-    plant = mismatched_plants()["stiff_servos"]
+    plant = PLANTS["stiff_servos"]
     settings = TankSettings(joints=plant.settings.joints, timestamp_jitter_s=0.0,
                             control_jitter_s=0.0, pixel_m=0.0)
     for i, n in enumerate(GAITS):
@@ -234,7 +233,7 @@ def test_a_servo_candidate_rk4_cannot_integrate_fails_as_ill_conditioned_beside_
 
 
 def test_every_test_plant_differs_from_the_fitted_model_and_has_a_truth():
-    plants = mismatched_plants()
+    plants = PLANTS
     assert {"head_tail", "servo_limits", "stray_current", "reynolds", "centred_median",
             "all"} <= set(plants)
     default = TankSettings()
@@ -250,13 +249,13 @@ def test_every_test_plant_differs_from_the_fitted_model_and_has_a_truth():
             assert plant_robot.joints.model_name == p.settings.joints.get("model", "pd")
 
 
-@pytest.mark.parametrize("plant", sorted(mismatched_plants()))
+@pytest.mark.parametrize("plant", sorted(PLANTS))
 @pytest.mark.parametrize("gait", ["straight_A0.61_w2.7", "straight_A0.87_w3.9"])
 def test_every_test_plants_robot_swims_head_first_on_a_straight_task(robot, plant, gait):
     # a tank is only a test of the estimator if its robot swims as the paper's did (forward,
     # at the paper's few centimetres per second); the paper's soft PD joints in water without
     # the Morison law's linear drag swam backwards (docs/estimation.md, "Test plants")
-    p = mismatched_plants()[plant]
+    p = PLANTS[plant]
     task = load_scenario(gait).model_copy(update={"duration_s": 8.0, "waypoints_m": [(5.0, 0.0)]})
     e = record_experiment(robot, task, "straight", p.truths()["straight"], p.settings, seed=0)
     t = e.t_s - e.t_s[0]
@@ -276,7 +275,7 @@ def test_another_laws_truth_keeps_table_3s_added_mass():
 def stiff_servo_tank(robot, tmp_path_factory):
     """A small clean tank swum on stiff servo joints, its robot file the paper's (PD joints)."""
     folder = tmp_path_factory.mktemp("stiff_servo_tank")
-    plant = mismatched_plants()["stiff_servos"]
+    plant = PLANTS["stiff_servos"]
     settings = TankSettings(joints=plant.settings.joints, timestamp_jitter_s=0.0,
                             control_jitter_s=0.0, pixel_m=0.0)
     held_out = "straight_A0.69_w3.1"

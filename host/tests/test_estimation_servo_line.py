@@ -8,7 +8,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from eelhost.data.virtual_tank import TABLE3, mismatched_plants, record_experiment, true_robot
+from eelhost.data.plants import PLANTS
+from eelhost.data.virtual_tank import TABLE3, record_experiment, true_robot
 from eelhost.estimation.coefficients_file import FittedModel
 from eelhost.estimation.evaluate import Evaluator
 from eelsim.robot import load_robot
@@ -18,7 +19,7 @@ from eelsim.scenario import load_scenario
 @pytest.fixture(scope="module")
 def small_servo_tank():
     """The servo_limits plant's robot and a 4 s recording of its fastest straight gait, no noise."""
-    plant = mismatched_plants()["servo_limits"]
+    plant = PLANTS["servo_limits"]
     settings = replace(plant.settings, timestamp_jitter_s=0.0, control_jitter_s=0.0, pixel_m=0.0)
     task = load_scenario("straight_A0.87_w3.9").model_copy(
         update={"duration_s": 4.0, "waypoints_m": [(0.6, 0.0)]})

@@ -7,11 +7,10 @@ import pytest
 
 from eelhost.data.experiments import load_dataset
 from eelhost.data.plant_laws import FOIL, FoilCoefficients
+from eelhost.data.plants import PLANTS, SMALL_SERVO_STALL_NM
 from eelhost.data.virtual_tank import (
-    SMALL_SERVO_STALL_NM,
     TABLE3,
     TankSettings,
-    mismatched_plants,
     paper_experiment_plan,
     record_experiment,
     true_robot,
@@ -51,18 +50,18 @@ def test_the_bundled_tanks_settings_record_the_bundled_dataset_again(bundled_fas
     assert _prefix_gap(exp, recorded) == 0.0
 
 
-@pytest.mark.parametrize("plant", sorted(mismatched_plants()))
+@pytest.mark.parametrize("plant", sorted(PLANTS))
 def test_every_plant_records_something_else_than_the_bundled_dataset(bundled_fast, plant):
     # issue 32: servo_limits recorded exactly the bundled figures (the paper's soft PD joints
     # ask 2.6 % of the robot file's servo's stall torque, so its line never bound)
     robot, index, motion, task, recorded = bundled_fast
-    p = mismatched_plants()[plant]
+    p = PLANTS[plant]
     exp = record_experiment(robot, task, motion, p.truths()[motion], p.settings, seed=index)
     assert _prefix_gap(exp, recorded) > 1.5 * PIXEL_M, plant
 
 
 def test_the_servo_limits_plant_clips_its_joints_on_a_small_servos_line():
-    p = mismatched_plants()["servo_limits"]
+    p = PLANTS["servo_limits"]
     robot = load_robot()
     plant_robot = true_robot(robot, p.settings)
     assert p.settings.servo_limits
@@ -72,11 +71,11 @@ def test_the_servo_limits_plant_clips_its_joints_on_a_small_servos_line():
 
 def test_plant_only_laws_are_no_candidate_and_two_plants_swim_in_them():
     assert FOIL.name not in candidate_laws()
-    foil_plants = {n for n, p in mismatched_plants().items() if p.law == FOIL.name}
+    foil_plants = {n for n, p in PLANTS.items() if p.law == FOIL.name}
     assert {"foil_lift", "no_added_mass"} <= foil_plants
-    still = mismatched_plants()["no_added_mass"].truths()
+    still = PLANTS["no_added_mass"].truths()
     assert still["straight"].C_a == 0.0 and still["turning"].C_m == 0.0
-    lift = mismatched_plants()["foil_lift"].truths()["straight"]
+    lift = PLANTS["foil_lift"].truths()["straight"]
     assert lift.C_a == TABLE3["straight"].C_a and lift.C_L > 0
 
 
@@ -109,7 +108,7 @@ def test_foil_lift_does_no_work_and_its_drag_only_dissipates():
 def test_the_batched_kernel_swims_the_foil_plants_as_the_reference_twin_does(plant):
     # the virtual tank records with the readable closed loop; the evaluator swims the batched
     # kernel's generated foil law: the truth must score 0 on a recording without noise
-    p = mismatched_plants()[plant]
+    p = PLANTS[plant]
     servo = load_robot(SERVO_ROBOT)
     clean = TankSettings(timestamp_jitter_s=0.0, control_jitter_s=0.0, pixel_m=0.0,
                          joints=p.settings.joints)

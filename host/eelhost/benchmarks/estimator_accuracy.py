@@ -7,7 +7,7 @@
    and the worst held-out E_x with the default method;
 2. a clean tank (no clock offset, no control jitter, otherwise identical): the same, to separate the
    method's accuracy from the data's noise;
-3. every mismatched test plant of :func:`eelhost.data.virtual_tank.mismatched_plants`: the plant's
+3. every test plant of :data:`eelhost.data.plants.PLANTS` (plug-ins included): the plant's
    robot file's model is fitted, the candidate models compared, and the recommended one fitted
    as ``eelbot report`` does (:mod:`eelhost.estimation.adopt`; identical links and a causal
    median either way); worst held-out E_x on the tests and the paths against the targets
@@ -31,12 +31,11 @@ from typing import Any
 import numpy as np
 
 from eelhost.data.experiments import BUNDLED_DATASET, Dataset, load_dataset
+from eelhost.data.plants import PLANTS, Plant
 from eelhost.data.virtual_tank import (
     TABLE3,
-    Plant,
     TankSettings,
     generate_dataset,
-    mismatched_plants,
     true_robot,
 )
 from eelhost.errors import UserError
@@ -313,7 +312,7 @@ def estimator_report(
             Plant("clean", "", TankSettings(timestamp_jitter_s=0.0, control_jitter_s=0.0)),
         ),
     ]
-    plants = mismatched_plants()
+    plants = dict(PLANTS)
     cases += [(p.name, f"mismatched plant `{p.name}`: {p.description}", p)
               for p in plants.values()]
     unknown = set(only or ()) - {key for key, _, _ in cases}

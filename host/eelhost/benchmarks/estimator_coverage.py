@@ -26,12 +26,11 @@ from pathlib import Path
 
 import numpy as np
 
+from eelhost.data.plants import PLANTS, Plant
 from eelhost.data.virtual_tank import (
     TABLE3,
-    Plant,
     TankSettings,
     generate_dataset,
-    mismatched_plants,
     paper_experiment_plan,
     record_experiment,
 )
@@ -210,7 +209,7 @@ def measure_bands(
     Parameters
     ----------
     plants : sequence of str
-        Names of :func:`eelhost.data.virtual_tank.mismatched_plants`.
+        Names of test plants (:data:`eelhost.data.plants.PLANTS`).
     work : Path
         Folder of the generated datasets and reports (a dataset already there is reused).
     robot_file : str, optional
@@ -233,10 +232,9 @@ def measure_bands(
     from eelhost.estimation.report import run_report
 
     robot = load_robot(robot_file) if robot_file else load_robot()
-    named = mismatched_plants()
     out = []
     for name in plants:
-        plant = named[name]
+        plant = PLANTS[name]
         folder = work / f"{name}-seed{seed}"
         if not (folder / "manifest.toml").exists():
             generate_dataset(folder, robot, plant.truths(), plant.settings, seed)

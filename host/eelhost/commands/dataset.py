@@ -15,15 +15,12 @@ from eelhost.commands.common import (
     add_robot_options,
     coefficients_from_option,
 )
-from eelhost.data.virtual_tank import (
-    TankSettings,
-    generate_dataset,
-    law_truths,
-    mismatched_plants,
-)
+from eelhost.data.plants import PLANTS, law_truths
+from eelhost.data.virtual_tank import TankSettings, generate_dataset
 from eelhost.errors import UserError
 from eelhost.files import check_output_folder
 from eelhost.progress import Progress
+from eelsim.camera import MEDIAN_PLACEMENTS
 from eelsim.fluid import DEFAULT_FLUID_LAW, FLUID_LAWS
 from eelsim.robot import load_robot
 
@@ -52,8 +49,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--plant",
-        choices=sorted(mismatched_plants()),
-        help="a named test plant (docs/estimation.md, 'Test plants'); other options add to it",
+        choices=sorted(PLANTS),  # read now, so a lab's plug-in plant is offered
+        help="a named test plant (docs/estimation.md, 'Test plants'; a lab adds its own through "
+        "the eelbot.plants entry points); other options add to it: " + plant_help(),
     )
     p.add_argument(
         "--fluid-law",
@@ -61,7 +59,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="the water's fluid law (truth: table 3 carried into it)",
     )
     p.add_argument(
-        "--median", choices=("causal", "centred"), help="the recording's median filter"
+        "--median", choices=MEDIAN_PLACEMENTS, help="the recording's median filter"
     )
     p.add_argument(
         "--joints-from",
@@ -87,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
     robot = load_robot(args.robot)
     check_output_folder(args.out, "OUT")  # before 34 experiments are simulated
-    plant = mismatched_plants()[args.plant] if args.plant else None
+    plant = PLANTS[args.plant] if args.plant else None
     base = plant.settings if plant else TankSettings()
     law = args.fluid_law or (plant.law if plant else DEFAULT_FLUID_LAW)
     try:
@@ -121,6 +119,13 @@ def run(args: argparse.Namespace) -> int:
         )
     print(f"wrote {manifest}")
     return 0
+
+
+def plant_help() -> str:
+    """Every registered plant with its one-line description, for help texts."""
+    # argparse formats help with %: a plug-in's "5 % salt" must not break --help
+    return "; ".join(f"{name}: {text}".replace("%", "%%")
+                     for name, text in PLANTS.descriptions().items())
 
 
 def _joints_table(path: str) -> dict:

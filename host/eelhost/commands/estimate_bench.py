@@ -18,9 +18,10 @@ from eelhost.commands.common import (
     add_write_option,
     write_report,
 )
+from eelhost.commands.dataset import plant_help
 from eelhost.commands.joint_models_option import add_joint_models_option
 from eelhost.commands.report import law_names
-from eelhost.data.virtual_tank import mismatched_plants
+from eelhost.data.plants import PLANTS
 from eelhost.errors import UserError
 
 WRITE_DEFAULT = "docs/estimation_benchmarks.md"
@@ -43,8 +44,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--tanks",
         metavar="NAME,...",
-        help="measure only these tanks: bundled, clean, or mismatched plants (eelbot dataset "
-        "--plant; default: all)",
+        help="measure only these tanks (default: all): bundled, clean, or test plants (eelbot "
+        "dataset --plant): " + ", ".join(sorted(PLANTS)),
     )
     p.add_argument(
         "--coverage",
@@ -57,7 +58,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--bands",
         metavar="PLANT,...",
         help="instead: measure the report's 95 %% prediction bands' coverage of held-out "
-        "positions on these plants (docs/estimation_coverage.md)",
+        "positions on these test plants (docs/estimation_coverage.md): " + plant_help(),
     )
     p.add_argument("--robot", help="the robot file of the --bands datasets (default: the "
                    "paper's)")
@@ -77,11 +78,9 @@ def run(args: argparse.Namespace) -> int:
         from eelhost.benchmarks.estimator_coverage import bands_markdown, measure_bands
 
         names = args.bands.split(",")
-        known = mismatched_plants()
-        unknown = [n for n in names if n not in known]
+        unknown = [n for n in names if n not in PLANTS]
         if unknown:
-            raise UserError(f"--bands: unknown plant {unknown[0]!r}; known: "
-                            + ", ".join(sorted(known)))
+            raise UserError(f"--bands: {PLANTS.unknown_message(unknown[0])}")
         bands = measure_bands(names, Path(args.work), args.robot, args.seed, args.replicates,
                               say=lambda line: print(line, flush=True))
         print(bands_markdown(bands, f"eelbot estimate-bench --bands {args.bands}"
@@ -92,10 +91,10 @@ def run(args: argparse.Namespace) -> int:
         from eelhost.benchmarks.estimator_coverage import coverage_markdown, measure_coverage
 
         tank = args.tanks or "bundled"
-        plant = None if tank == "bundled" else mismatched_plants().get(tank)
+        plant = None if tank == "bundled" else PLANTS.get(tank)
         if tank != "bundled" and plant is None:
             raise UserError(f"--coverage takes one tank in --tanks: bundled or a plant, got "
-                            f"{tank!r}")
+                            f"{tank!r}; known plants: {', '.join(sorted(PLANTS))}")
         cov = measure_coverage(args.coverage, args.seed, args.replicates,
                                say=lambda line: print(line, flush=True), plant=plant)
         text = "# Estimation: interval coverage\n\n" + coverage_markdown(

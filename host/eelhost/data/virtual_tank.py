@@ -7,8 +7,9 @@ as a recording filtered afterwards), with the time stamps' uncertainty (about 0.
 modelled as a per-experiment clock offset drawn uniformly from [-jitter, +jitter], and a jittered
 control period. The experiment ends when the robot reaches its last waypoint, as in the tank.
 
-Test plants make the data harder than the model that will be fitted to it (the dataset's robot
-file keeps the paper's model; docs/estimation.md, "Test plants"):
+The tank's settings (:class:`TankSettings`) make the data harder than the model that will be
+fitted to it (the dataset's robot file keeps the paper's model); the named test plants that use
+them are :mod:`eelhost.data.plants` (docs/estimation.md, "Test plants"):
 
 - a truth of another fluid law (e.g. a law the estimator does not fit);
 - ``head_tail``: the true robot has a bulkier head (battery, electronics) and a slim pointed tail,
@@ -34,7 +35,6 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-import tomllib
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
@@ -49,11 +49,10 @@ from eelhost.data.experiments import (
     write_experiment,
     write_manifest,
 )
-from eelhost.data.plant_laws import FOIL_DRAG
 from eelhost.files import atomic_write
 from eelsim.camera import CameraModel, observation_steps, observed_positions
 from eelsim.closed_loop import LoopOptions, RunResult, simulate_closed_loop
-from eelsim.fluid import FluidCoefficients, get_fluid_law
+from eelsim.fluid import FluidCoefficients
 from eelsim.robot import HydroCoefficients, Robot, load_robot
 from eelsim.scenario import TRAINING_CORNERS, Scenario, named_scenarios, paper_grid
 from eelsim.timing import LoopTiming
@@ -64,11 +63,6 @@ TABLE3: dict[str, FluidCoefficients] = {
     "straight": HydroCoefficients(C_f=0.008, C_d=0.776, C_a=0.618, C_m=0.007),
     "turning": HydroCoefficients(C_f=0.009, C_d=0.978, C_a=1.169, C_m=0.001),
 }
-
-SMALL_SERVO_STALL_NM = 0.02
-"""The ``servo_limits`` plant's stall torque: a sub-micro servo (about 0.2 kg cm), whose line
-binds on the paper's PD joints at the fast gaits (they ask up to 0.037 N m: at A 0.87, omega 3.9
-the robot swims 0.29 m in 8 s instead of 0.48 m; at A 0.61, omega 2.7 it is unchanged)."""
 
 # The mismatched robot's head and tail (per-link overrides of the true robot only).
 
@@ -134,134 +128,6 @@ class TankSettings:
         if self.servo_stall_torque_nm is not None:
             out["servo_stall_torque_nm"] = self.servo_stall_torque_nm
         return out
-
-
-# Another law's truth: table 3's added mass and inertia, drag of the law's own form with typical
-# values (docs/estimation.md, "Test plants").
-_OTHER_LAW_DRAG: dict[str, dict[str, float]] = {
-    # Blasius skin friction; a circular cylinder's cross-flow drag
-    "reynolds": {"C_f_lam": 1.328, "C_d_inf": 1.0, "C_d_visc": 5.0},
-    # skin friction as table 3's C_f, a cylinder's cross-flow drag, a moderate lift
-    "foil": FOIL_DRAG,
-}
-
-
-def law_truths(law: str) -> dict[str, FluidCoefficients]:
-    """The true coefficients per motion type of a plant whose water follows ``law``.
-
-    Laws with the paper's four coefficients take table 3's rows; others take table 3's added
-    mass and inertia (C_a, C_m) and the drag values of ``_OTHER_LAW_DRAG``.
-
-    Raises
-    ------
-    ValueError
-        When the law is unknown or has no typical drag values here.
-    """
-    fluid = get_fluid_law(law)
-    out: dict[str, FluidCoefficients] = {}
-    for motion, row in TABLE3.items():
-        paper = row.model_dump()
-        # separate linear and quadratic drag equal to the paper's one coefficient: its law
-        split = {f"{n}_{part}": paper[n] for n in ("C_f", "C_d") for part in ("lin", "quad")}
-        known = {**paper, **split, **_OTHER_LAW_DRAG.get(law, {})}
-        missing = [n for n in fluid.coefficient_names if n not in known]
-        if missing:
-            raise ValueError(
-                f"plant law {law!r}: no true value for {', '.join(missing)} (give --truth)"
-            )
-        out[motion] = fluid.coefficients(**{n: known[n] for n in fluid.coefficient_names})
-    return out
-
-
-@dataclass(frozen=True)
-class Plant:
-    """A named test plant: how the tank records and which law its water follows.
-
-    Attributes
-    ----------
-    name : str
-    description : str
-    settings : TankSettings
-    law : str
-        The water's fluid law (its truth from :func:`law_truths`).
-    truth_overrides : tuple of (str, float)
-        Coefficients of the law set otherwise than :func:`law_truths` does (e.g. no added mass).
-    """
-
-    name: str
-    description: str
-    settings: TankSettings
-    law: str = "morison"
-    truth_overrides: tuple[tuple[str, float], ...] = ()
-
-    def truths(self) -> dict[str, FluidCoefficients]:
-        """The true coefficients per motion type."""
-        fluid = get_fluid_law(self.law)
-        return {m: fluid.coefficients.model_validate({**c.model_dump(),
-                                                      **dict(self.truth_overrides)})
-                for m, c in law_truths(self.law).items()}
-
-
-def _servo_joints() -> dict | None:
-    """The ``[joints]`` table of the bundled servo robot file, when the twin has one."""
-    try:
-        text = resources.files("eelsim.data").joinpath("servo_robot.toml").read_text()
-    except (FileNotFoundError, OSError):
-        return None
-    joints = tomllib.loads(text).get("joints")
-    return dict(joints) if isinstance(joints, dict) else None
-
-
-def mismatched_plants() -> dict[str, Plant]:
-    """The mismatched plants ``eelbot dataset --plant`` and ``estimate-bench`` know, by name.
-
-    Each differs from the fitted model (the paper's PD joints, Morison water, identical links,
-    causal median) in one way, except ``reynolds``: its water, on the servo joints, since the
-    paper's soft PD joints swim backwards in water without the Morison law's linear drag
-    (docs/estimation.md, "Test plants"); ``all`` differs in every way at once. ``stiff_servos``
-    and ``reynolds`` are there only when the twin bundles a servo robot file
-    (``eelsim/data/servo_robot.toml``).
-    """
-    stray = 0.005
-    plants = [
-        Plant("head_tail", "bulkier head and pointed tail", TankSettings(head_tail=True)),
-        # an undersized servo: the paper's soft PD joints ask at most 0.033 N m, 2.6 % of the
-        # robot file's 1.26 N m servo, whose line therefore never binds (docs/estimation.md)
-        Plant("servo_limits", "PD joints on the torque-speed line of a 0.02 N m servo",
-              TankSettings(servo_limits=True, servo_stall_torque_nm=SMALL_SERVO_STALL_NM)),
-        Plant("stray_current", f"{stray} m/s unmodelled current, a new direction in every experiment",
-              TankSettings(stray_current_m_s=stray)),
-        Plant("steady_current", f"{stray} m/s unmodelled current towards 120 deg in every "
-              "experiment (a tank's residual current)",
-              TankSettings(stray_current_m_s=stray, stray_current_direction_deg=120.0)),
-        Plant("centred_median", "recording filtered by a centred median",
-              TankSettings(median="centred")),
-    ]
-    servo = _servo_joints()
-    if servo is not None:
-        plants.append(Plant("stiff_servos", "stiff position servos with lag",
-                            TankSettings(joints=servo)))
-        # physical water needs joints that impose the gait: the paper's soft PD joints rely on
-        # the Morison law's linear drag to hold the wave and swim backwards in it
-        # (docs/estimation.md, "Test plants")
-        plants.append(Plant("reynolds", "Reynolds-number-dependent drag (a law the estimator "
-                            "does not fit), on the servo joints",
-                            TankSettings(joints=servo), "reynolds"))
-        # plant-only laws (eelhost.data.plant_laws), on the servo joints for the same reason
-        plants.append(Plant("foil_lift", "lift and angle-of-attack-dependent drag on each link "
-                            "(a plant-only law), on the servo joints",
-                            TankSettings(joints=servo), "foil"))
-        plants.append(Plant("no_added_mass", "the foil water without added mass or added "
-                            "inertia (C_a = C_m = 0, below every candidate's bound), on the servo "
-                            "joints", TankSettings(joints=servo), "foil",
-                            (("C_a", 0.0), ("C_m", 0.0))))
-    plants.append(Plant(
-        "all", "all of the above at once",
-        TankSettings(head_tail=True, servo_limits=True, stray_current_m_s=stray,
-                     median="centred", joints=servo),
-        "reynolds" if servo is not None else "morison",
-    ))
-    return {p.name: p for p in plants}
 
 
 def true_robot(robot: Robot, settings: TankSettings) -> Robot:
