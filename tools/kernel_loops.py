@@ -39,7 +39,7 @@ import numpy as np
 
 from eelsim import batch
 from eelsim.batch import c_stage, codegen, loading
-from eelsim.joints import get_joint_model
+from eelsim.joints import JOINT_MODELS, get_joint_model
 
 _LABEL = re.compile(r"^(\.?[\w.$]+):")
 _JUMP = re.compile(r"^\s+j\w+\s+(\.?[\w.$]+)")
@@ -163,7 +163,7 @@ def main() -> int:
     parser.add_argument("--stage", choices=("c", "numba"), default=None,
                         help="whose code: the C compiler's (loops named) or numba's (numbered; "
                         "default: as the kernel)")
-    parser.add_argument("--joints", choices=("pd", "servo"), default="pd",
+    parser.add_argument("--joints", choices=sorted(JOINT_MODELS), default="pd",
                         help="the joint model whose stage is generated (pd)")
     args = parser.parse_args()
     cpu = args.cpu or _default_cpu()

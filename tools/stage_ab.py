@@ -11,7 +11,7 @@ session 5, for what it decided.
 
 Usage (from the repo root, after ``bash scripts/setup.sh``)::
 
-    .venv/bin/python tools/stage_ab.py [--rounds 41] [--steps 1500] [--joints pd|servo] NAME=SPEC ...
+    .venv/bin/python tools/stage_ab.py [--rounds 41] [--steps 1500] [--joints MODEL] NAME=SPEC ...
 
 SPEC is ``[FLAGS][@GENERATOR][%LANES]``: compiler options (default ``-O3 -march=native``), a copy
 of ``eelsim/batch/codegen.py`` to generate the stage with (default: the working tree's) and the
@@ -39,11 +39,12 @@ from types import ModuleType
 
 import numpy as np
 
+from eelhost.estimation.joint_fit import joint_fit, joint_model_name
 from eelsim import batch
 from eelsim.batch import c_stage, codegen
 from eelsim.closed_loop import LoopOptions
-from eelsim.joints import get_joint_model
-from eelsim.robot import SERVO_ROBOT, load_robot
+from eelsim.joints import JOINT_MODELS, get_joint_model
+from eelsim.robot import BUNDLED_ROBOTS, load_robot
 from eelsim.scenario import TRAINING_CORNERS, grid_scenario
 
 N_LINKS = 6
@@ -105,8 +106,14 @@ def _build(name: str, flags: str, generator: ModuleType, lanes: int, folder: Pat
 
 
 def _initial(layout, lanes: int, seed: int, joints: str = "pd") -> np.ndarray:
-    """A block's buffer: the bundled robot's (or servo robot's) per-run rows, random states."""
-    robot = load_robot(SERVO_ROBOT if joints == "servo" else None)
+    """A block's buffer: the per-run rows of the bundled robot with these joints, random states.
+
+    The first bundled robot file whose joint model it is, else the paper's with the model's
+    table (as the estimator's model comparison makes it: ``joint_fit(...).impose``).
+    """
+    robots = [load_robot(name) for name in BUNDLED_ROBOTS]
+    robot = next((r for r in robots if joint_model_name(r) == joints), None)
+    robot = robot or joint_fit(robots[0], joints).impose(robots[0])
     coeffs = robot.hydrodynamics
     corners = [grid_scenario("straight", a, w) for a, w in TRAINING_CORNERS]
     rng = np.random.default_rng(seed)
@@ -131,7 +138,7 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=41)
     parser.add_argument("--steps", type=int, default=1500, help="RK4 steps per timing (16 lanes)")
     parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--joints", choices=("pd", "servo"), default="pd",
+    parser.add_argument("--joints", choices=sorted(JOINT_MODELS), default="pd",
                         help="the joint model of every variant's stage and robot (pd: the "
                         "bundled robot; servo: servo_robot.toml)")
     args = parser.parse_args()
