@@ -14,6 +14,7 @@ from eelhost.estimation.evaluate import Evaluator
 from eelhost.estimation.methods import FitSettings
 from eelhost.estimation.optimise import Checkpoint, fit_ga
 from eelhost.estimation.pipeline import fit_motion
+from eelsim.camera import MEDIAN_PLACEMENTS
 from eelsim.robot import load_robot
 from eelsim.scenario import load_scenario
 
@@ -211,7 +212,7 @@ def test_validate_refuses_a_malformed_coefficients_argument(tiny_dataset, capsys
     assert "expected 4 numbers (C_f,C_d,C_a,C_m)" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("median", ["causal", "centred"])
+@pytest.mark.parametrize("median", MEDIAN_PLACEMENTS)
 def test_truth_scores_zero_when_the_twin_is_seen_through_the_recordings_camera(median):
     robot = load_robot()
     s = load_scenario("turning_A0.61_w2.7").model_copy(update={"waypoints_m": [(0.4, 0.2)]})

@@ -27,6 +27,7 @@ from eelhost.estimation.selection import (
 from eelhost.estimation.space import ParameterSpace, spaces_of
 from eelhost.estimation.uncertainty import BootstrapResult, parametric_bootstrap, regenerate
 from eelhost.estimation.validate import validate, worst_ex
+from eelsim.camera import MEDIAN_PLACEMENTS
 from eelsim.flags import PENALTY_ILL_CONDITIONED
 from eelsim.robot import SERVO_ROBOT, load_robot
 from eelsim.scenario import load_scenario
@@ -52,7 +53,7 @@ def noisy_experiments(robot):
             for i, n in enumerate(GAITS[:2])]
 
 
-@pytest.mark.parametrize("median", ["causal", "centred"])
+@pytest.mark.parametrize("median", MEDIAN_PLACEMENTS)
 def test_regenerated_recording_is_the_tanks_when_no_noise_is_declared(robot, median):
     # the bootstrap's recorder (batched kernel, camera applied afterwards) and the virtual
     # tank's (reference closed loop) are independent implementations of the same recording

@@ -104,7 +104,7 @@ def test_foil_lift_does_no_work_and_its_drag_only_dissipates():
     assert FOIL.drag(fluid, np.zeros(1), np.zeros(1), np.zeros(1))[0][0] == 0.0
 
 
-@pytest.mark.parametrize("plant", ["foil_lift", "no_added_mass"])
+@pytest.mark.parametrize("plant", sorted(n for n, p in PLANTS.items() if p.law == FOIL.name))
 def test_the_batched_kernel_swims_the_foil_plants_as_the_reference_twin_does(plant):
     # the virtual tank records with the readable closed loop; the evaluator swims the batched
     # kernel's generated foil law: the truth must score 0 on a recording without noise

@@ -22,7 +22,7 @@ from eelhost.wire import protocol
 from eelhost.xil.virtual_robot import VirtualCamera
 from eelsim.closed_loop import LoopOptions, simulate_closed_loop
 from eelsim.control import Gait
-from eelsim.robot import load_robot
+from eelsim.robot import BUNDLED_ROBOTS, load_robot
 from eelsim.scenario import load_scenario
 
 ROBOT = load_robot()
@@ -44,7 +44,7 @@ def virtual_run(uri: str, waypoints, stem, duration_s: float | None = None, robo
     return out, link
 
 
-@pytest.mark.parametrize("robot_file", ["paper_robot.toml", "servo_robot.toml"])
+@pytest.mark.parametrize("robot_file", BUNDLED_ROBOTS)
 @pytest.mark.slow
 def test_virtual_path1_reaches_every_waypoint_and_matches_the_twin(tmp_path, robot_file) -> None:
     # the paper's PD joints, and hobby servos whose references are the firmware's commanded angles
