@@ -659,6 +659,7 @@ def _gather(work, base, r, ns, dest):
 # 30 steps, a sample step, a camera frame every third step, a check that fires, a block's start
 # and end), and what every step runs - a few counts over the lanes that vectorise, the RK4 stages
 # and the commit - stays in _run_block's loop, with the same calls per step as before the split.
+# The one piece that runs every step, _stage_settings, takes scalars only and is inlined.
 
 
 @_njit(**_NO_REFCOUNT)
@@ -802,7 +803,7 @@ def _check_state(step, t, work, out, params, stop_at_goal, fate, is_update, arri
             fate.final_step[r] = step
 
 
-@_njit(**_NO_REFCOUNT)
+@numba.njit(cache=True, inline="always")  # scalars only: inlined with no reference to count
 def _stage_settings(st, step, t, dt):
     """RK4 stage ``st``'s time, step fraction, weight in the sums and whether it may rotate.
 
