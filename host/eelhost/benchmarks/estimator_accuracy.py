@@ -350,6 +350,11 @@ def estimator_report(
             ]
             lines += _recovery_rows(r)
             lines.append("")
+        joint_names = {m: res.model.space.joints.names for m, res in r["fits"].items()}
+        if any(joint_names.values()):  # a fitted joint model (servo lag, pd_limited's line)
+            lines += ["Fitted joint parameters: " + "; ".join(
+                f"{m} " + ", ".join(f"{n} {res.model.parameters()[n]:.4g}" for n in joint_names[m])
+                for m, res in r["fits"].items() if joint_names[m]) + ".", ""]
         if fit_current:
             true = _true_current(ds)
             lines += ["Fitted ambient current: " + "; ".join(
