@@ -151,7 +151,7 @@ binds on the paper's PD joints at the fast gaits (they ask up to 0.037 N m: at A
 the robot swims 0.29 m in 8 s instead of 0.48 m; at A 0.61, omega 2.7 it is unchanged)."""
 
 STRAY_CURRENT_M_S = 0.005
-"""The current plants' speed: about 4 % of the robot's slowest gait's."""
+"""The speed of the current plants' unmodelled current, m/s (docs/estimation.md, "Test plants")."""
 
 _SERVO_JOINTS = _joints_of(SERVO_ROBOT)
 """The bundled servo robot file's joints: stiff position servos with lag."""
@@ -199,6 +199,7 @@ NO_ADDED_MASS = register_plant(Plant(
     (("C_a", 0.0), ("C_m", 0.0))))
 
 ALL = register_plant(Plant(
-    "all", "every built-in plant's difference at once (Reynolds water, servo joints)",
+    "all", "head and tail, servo joints on their torque-speed line, the stray current, a "
+    "centred median and Reynolds water at once",
     TankSettings(head_tail=True, servo_limits=True, stray_current_m_s=STRAY_CURRENT_M_S,
                  median="centred", joints=_SERVO_JOINTS), "reynolds"))
