@@ -71,6 +71,7 @@ def test_its_law_is_the_pd_law_on_the_servo_line_and_its_kernel_code_computes_it
     assert clipped > 100  # the line binds on most of these draws
 
 
+@pytest.mark.slow
 def test_it_swims_as_the_pd_robot_with_the_loops_servo_line_and_the_batch_agrees(robot):
     s = load_scenario("straight_A0.87_w3.9").model_copy(update={"duration_s": 3.0})
     small = robot.with_joints(robot.joints.model_copy(
