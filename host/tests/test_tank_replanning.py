@@ -7,6 +7,7 @@ planner slower than the robot's watchdog is a real stall here, as it would be at
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import time
@@ -707,21 +708,33 @@ def test_the_run_loops_ilos_offsets_are_the_law_for_its_measured_poses_across_a_
     assert meta["source"]["guidance"]["start_guide"] == [0.0, 0.0, 0.0, 0.0]
 
 
-@pytest.fixture(scope="module")
-def ilos_open_plan():
-    planner = Planner(parse_world(OPEN, "open"), ROBOT, MODEL, guidance=ILOS_LAW, draws=8)
-    outcome = planner.plan()
-    assert outcome.found, outcome.message
-    return planner, outcome
+class GuideRecorder:
+    """An ILOS planner whose ``plan`` records the guidance state it is given and answers with
+    ``template``'s legs as a plan searched from that state (no search: the twin's runs of the
+    prediction are the ILOS law's own)."""
+
+    def __init__(self, planner: Planner, template: Outcome) -> None:
+        self._planner, self.template = planner, template
+        self.guides: list = []
+
+    def __getattr__(self, name: str):  # noqa: ANN204
+        return getattr(self._planner, name)
+
+    def plan(self, state, start_step, guide=None):  # noqa: ANN001, ANN201
+        self.guides.append(guide)
+        return dataclasses.replace(self.template,
+                                   plan=dataclasses.replace(self.template.plan, start_guide=guide))
 
 
 def test_a_replan_carries_the_loops_ilos_integral_into_its_plan_and_hands_that_state_on(
-        ilos_open_plan):
+        open_plan):
     # the robot is 0.4 m off the planned corridor with an integral the controller has learnt;
     # the replan must start from it (not from zero) and the loop must get the plan's own state
-    planner, outcome = ilos_open_plan
-    nav = TankReplanner(lambda extra: planner, planner, outcome, PATH_GAIT, lookahead_s=0.0,
-                        estimate_current=False)
+    pursuit_planner, outcome = open_plan
+    planner = GuideRecorder(Planner(parse_world(OPEN, "open"), ROBOT, MODEL, guidance=ILOS_LAW),
+                            outcome)
+    nav = TankReplanner(lambda extra: planner, planner, outcome, PATH_GAIT,  # type: ignore[arg-type]
+                        lookahead_s=0.0, estimate_current=False)
     handed = (0.6, 1.0, 2.0, -1.0)
     d = None
     try:
@@ -737,14 +750,16 @@ def test_a_replan_carries_the_loops_ilos_integral_into_its_plan_and_hands_that_s
     assert d is not None and d.waypoints is not None, (d, nav.events[-1])
     replan = nav.events[-1]
     assert replan["kind"] == "replan" and replan["status"] == "found"
+    assert len(planner.guides) == 1
     guide = d.guide
-    assert guide is not None and tuple(guide) == nav.outcome.plan.start_guide
+    assert guide is not None and tuple(guide) == planner.guides[0]
     assert replan["start_guide"] == pytest.approx(list(guide), abs=1e-5)  # recorded in the take
     # a new leg from the predicted start's centre of mass, with the integral carried on: a few
     # control updates of the law (at most 0.15 s each) from the loop's, not reset to zero
     assert guide[:2] == pytest.approx(replan["start_state"][N : N + 2], abs=1e-4)
     assert math.hypot(guide[2] - handed[2], guide[3] - handed[3]) < 0.6
     assert math.hypot(guide[2], guide[3]) > 1.5
+    assert guide[2:] != handed[2:]  # the twin's law moved it over the lead to the start
 
 
 def test_the_benchmark_refuses_to_resume_worlds_run_with_another_guidance_law(tmp_path, capsys):
