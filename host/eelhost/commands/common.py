@@ -362,12 +362,15 @@ def write_report(path: str | None, text: str) -> str | None:
 
 def add_backend_option(p: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
     """--backend: which implementation of the twin evaluates the candidates."""
+    from eelhost.estimation.evaluate import AUTO_BACKEND, BACKENDS  # read when the parser is built
+
     p.add_argument(
         "--backend",
-        choices=["auto", "batch", "reference"],
-        default="auto",
-        help="batch: the compiled batched kernel; reference: the readable closed-loop twin, one "
-        "run per candidate and experiment (slow, for cross-checks); auto: batch when it loads",
+        choices=[AUTO_BACKEND, *BACKENDS],
+        default=AUTO_BACKEND,
+        help="; ".join(f"{name}: {text}".replace("%", "%%")
+                       for name, text in BACKENDS.descriptions().items())
+        + f"; {AUTO_BACKEND}: batch when it loads, else reference",
     )
 
 

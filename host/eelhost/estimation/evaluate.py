@@ -16,7 +16,11 @@ each run's scenario gets the candidate's current added to the one its experiment
 
 Both return the centre of mass at the sample times, the failure flag and the path left; the
 evaluator turns them into errors, fitness and residuals. The backends import nothing of this
-module.
+module. The names are a registry, :data:`BACKENDS` (docs/architecture.md, "Extension points"):
+``--backend`` offers what it holds, and a package adds its own backend through the
+``eelbot.backends`` entry points (a factory ``make(workers, map_function) -> SimulationBackend``);
+``"auto"`` is not a backend but the choice of ``"batch"`` when its kernel loads, else
+``"reference"``.
 """
 
 from __future__ import annotations
@@ -45,6 +49,7 @@ from eelhost.estimation.runs import (
 )
 from eelhost.estimation.space import ParameterSpace
 from eelsim.flags import Failure, penalty
+from eelsim.registry import Registry
 from eelsim.robot import Robot
 
 _ALL_RUNS = [0]  # closed-loop runs of every evaluator in this process, for progress
@@ -99,10 +104,11 @@ class Evaluator:
     observe : bool
         Compare the simulation through the experiment's camera model (default) or by its true
         centre of mass.
-    backend : {"auto", "batch", "reference"} or SimulationBackend
-        What runs the simulations: a backend by name ("auto": the batched kernel when it can be
-        loaded), or a backend object (:class:`~eelhost.estimation.runs.SimulationBackend`), which
-        ``workers`` and ``map_function`` then do not change.
+    backend : str or SimulationBackend
+        What runs the simulations: a backend by name (of :data:`BACKENDS`; "auto": the batched
+        kernel when it can be loaded), or a backend object
+        (:class:`~eelhost.estimation.runs.SimulationBackend`), which ``workers`` and
+        ``map_function`` then do not change.
     workers : int
         Processes for the reference backend named.
     map_function : callable, optional
@@ -312,14 +318,42 @@ class Evaluator:
         return np.nan_to_num(vectors.reshape(len(vectors), -1), nan=10.0)  # 10 m: far worse
 
 
+BackendFactory = Callable[[int, Callable | None], SimulationBackend]
+"""``make(workers, map_function)``: a backend that uses ``workers`` local processes or spreads its
+work through ``map_function`` (a Dask cluster's), whichever it can."""
+
+BACKENDS: Registry[BackendFactory] = Registry("simulation backend", "eelbot.backends",
+                                              plural="backends")
+"""The simulation backends by name (:mod:`eelsim.registry`; plug-ins: group ``eelbot.backends``)."""
+
+AUTO_BACKEND = "auto"
+"""Not a backend: ``"batch"`` when its kernel loads, else ``"reference"``."""
+
+
+@BACKENDS.add("batch", "the compiled batched kernel (with a cluster: the candidates in blocks, "
+              "one task each)")
+def _batch_backend(workers: int, map_function: Callable | None) -> SimulationBackend:
+    # imported when chosen, not with the registry: it loads the batched kernel
+    from eelhost.estimation.batch_backend import BatchBackend
+
+    return BatchBackend(map_function)
+
+
+@BACKENDS.add("reference", "the readable closed-loop twin, one run per candidate and experiment "
+              "(slow, for cross-checks)")
+def _reference_backend(workers: int, map_function: Callable | None) -> SimulationBackend:
+    return ReferenceBackend(workers, map_function)
+
+
 def backend_named(
     backend: str, workers: int = 2, map_function: Callable | None = None
 ) -> SimulationBackend:
-    """The backend called ``backend``: "batch", "reference", or "auto" (batch when it loads).
+    """The backend called ``backend`` in :data:`BACKENDS`, or "auto" (batch when it loads).
 
     Parameters
     ----------
-    backend : {"auto", "batch", "reference"}
+    backend : str
+        A registered name ("batch", "reference", a plug-in's) or "auto".
     workers : int
         Local processes of the reference backend.
     map_function : callable, optional
@@ -329,16 +363,13 @@ def backend_named(
     Raises
     ------
     EstimationError
-        Another name.
+        Another name (the message lists the known ones).
     """
-    if backend not in ("auto", "batch", "reference"):
-        raise EstimationError(f"backend must be auto, batch or reference, got {backend!r}")
-    if backend == "reference":
-        return ReferenceBackend(workers, map_function)
-    try:  # imported when chosen: it loads the batched kernel
-        from eelhost.estimation.batch_backend import BatchBackend
-    except ImportError:
-        if backend == "batch":
-            raise
-        return ReferenceBackend(workers, map_function)
-    return BatchBackend(map_function)
+    if backend == AUTO_BACKEND:
+        try:
+            return BACKENDS["batch"](workers, map_function)
+        except ImportError:
+            return BACKENDS["reference"](workers, map_function)
+    if backend not in BACKENDS:
+        raise EstimationError(f"{BACKENDS.unknown_message(backend)}, or {AUTO_BACKEND}")
+    return BACKENDS[backend](workers, map_function)
