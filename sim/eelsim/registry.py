@@ -1,7 +1,8 @@
 """One registry style for every extension point (docs/architecture.md, "Extension points").
 
 A :class:`Registry` holds named objects of one kind (fluid laws, joint models, guidance laws,
-link transports, estimators, ``eelbot`` subcommands), each with a one-line description. An object
+link transports, estimators, simulation backends, test plants, ``eelbot`` subcommands), each with
+a one-line description. An object
 is registered beside its definition, by a call or as a decorator (as dm_control's
 ``@SUITE.add``)::
 
@@ -18,8 +19,8 @@ under a taken name is refused (:class:`DuplicateNameError`); looking up an unkno
 known ones (:class:`UnknownNameError`).
 
 Plug-ins. Another package adds its own objects through entry points, one group per registry
-(``eelbot.fluid_laws``, ``eelbot.joint_models``, ``eelbot.guidance_laws``, ``eelbot.transports``,
-``eelbot.estimators``, ``eelbot.commands``)::
+(``eelbot.fluid_laws``, ``eelbot.joint_models``, ``eelbot.transports``, ``eelbot.estimators``,
+``eelbot.backends``, ``eelbot.plants``, ``eelbot.commands``; docs/architecture.md lists them)::
 
     [project.entry-points."eelbot.fluid_laws"]
     toy = "mypackage.toy:TOY_LAW"
