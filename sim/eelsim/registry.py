@@ -37,10 +37,12 @@ rest of the registry works.
 from __future__ import annotations
 
 import functools
+import importlib
 import importlib.metadata
 import logging
+import pkgutil
 import sys
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass, replace
 from types import ModuleType
 from typing import Any, Generic, TypeVar
@@ -52,6 +54,8 @@ __all__ = [
     "Registry",
     "RegistryError",
     "UnknownNameError",
+    "check_kernel_named",
+    "import_package_modules",
 ]
 
 log = logging.getLogger(__name__)
@@ -118,6 +122,47 @@ class Entry(Generic[T]):
     obj: T
     description: str
     origin: str = "built-in"
+
+
+def import_package_modules(package: str, path: Iterable[str], suffix: str = "") -> None:
+    """Import every module of a package, so that its definitions register themselves.
+
+    How a package finds its bundled objects with no list edited (the fluid laws, the joint
+    models, the transports, the subcommands): called from the package's ``__init__`` with its
+    ``__name__`` and ``__path__``.
+
+    Parameters
+    ----------
+    package : str
+        The package's dotted name.
+    path : iterable of str
+        Its ``__path__``.
+    suffix : str, optional
+        Import only the modules whose names end with it (``"_transport"``); default all.
+    """
+    for module in pkgutil.iter_modules(list(path)):
+        if module.name.endswith(suffix):
+            importlib.import_module(f"{package}.{module.name}")
+
+
+def check_kernel_named(name: str, obj: object, cls: type, kind: str) -> None:
+    """Refuse ``obj`` as the ``kind`` called ``name`` unless it is a ``cls`` that says that name.
+
+    The shared part of the checks of registries whose names name generated kernel modules (fluid
+    laws, joint models): the name must be an identifier and the object's ``name`` must be it.
+
+    Raises
+    ------
+    ValueError
+        Saying which of the three is wrong (a registry's check prefixes the kind and name).
+    """
+    if not isinstance(obj, cls):
+        raise ValueError(f"expected a {cls.__name__}, got {type(obj).__name__}")
+    if not name.isidentifier():
+        raise ValueError(f"a {kind}'s name must be an identifier, got {name!r}")
+    own = getattr(obj, "name", None)
+    if own != name:
+        raise ValueError(f"the {kind} says its name is {own!r}")
 
 
 @functools.lru_cache(maxsize=4)

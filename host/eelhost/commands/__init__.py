@@ -16,11 +16,9 @@ entry-point group, naming such an ``add_parser`` (docs/architecture.md, "Extensi
 from __future__ import annotations
 
 import argparse
-import importlib
-import pkgutil
 from collections.abc import Callable
 
-from eelsim.registry import Registry
+from eelsim.registry import Registry, import_package_modules
 
 AddParser = Callable[[argparse._SubParsersAction], None]
 """``add_parser(subparsers)``: adds the subcommand's parser, whose ``run`` default runs it."""
@@ -28,8 +26,7 @@ AddParser = Callable[[argparse._SubParsersAction], None]
 
 def _import_commands() -> None:
     """Import every module of this package: their definitions register the subcommands."""
-    for module in pkgutil.iter_modules(__path__):
-        importlib.import_module(f"{__name__}.{module.name}")
+    import_package_modules(__name__, __path__)
 
 
 COMMANDS: Registry[AddParser] = Registry(

@@ -5,9 +5,6 @@ scheme with :func:`eelhost.link.uri.register_transport` when it is: adding a tra
 such a module (see docs/architecture.md).
 """
 
-import importlib
-import pkgutil
-
 from eelhost.link.base import (
     Clock,
     Link,
@@ -25,10 +22,9 @@ from eelhost.link.uri import (
     parse_link_uri,
     register_transport,
 )
+from eelsim.registry import import_package_modules
 
-for _module in pkgutil.iter_modules(__path__):
-    if _module.name.endswith("_transport"):
-        importlib.import_module(f"{__name__}.{_module.name}")
+import_package_modules(__name__, __path__, suffix="_transport")
 
 __all__ = [
     "Clock",

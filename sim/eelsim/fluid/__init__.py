@@ -23,8 +23,6 @@ candidates (``FluidLaw.candidate``): they are the model comparison's default gri
 
 from __future__ import annotations
 
-import importlib
-import pkgutil
 from typing import TypeVar
 
 from eelsim.fluid.base import (
@@ -36,7 +34,7 @@ from eelsim.fluid.base import (
     LinkMotion,
     declared_candidate,
 )
-from eelsim.registry import Registry
+from eelsim.registry import Registry, check_kernel_named, import_package_modules
 
 DEFAULT_FLUID_LAW = "morison"
 """The law of a robot file whose ``[hydrodynamics]`` table names none: the paper's."""
@@ -44,12 +42,7 @@ DEFAULT_FLUID_LAW = "morison"
 
 def _check_law(name: str, law: FluidLaw) -> None:
     """Refuse a law that cannot be registered under ``name`` (:func:`register_fluid_law`)."""
-    if not isinstance(law, FluidLaw):
-        raise ValueError(f"expected a FluidLaw, got {type(law).__name__}")
-    if not name.isidentifier():
-        raise ValueError(f"a fluid law's name must be an identifier, got {name!r}")
-    if law.name != name:
-        raise ValueError(f"the law says its name is {law.name!r}")
+    check_kernel_named(name, law, FluidLaw, "fluid law")
     if law.coefficients.law_name != law.name:
         raise ValueError(
             f"its coefficient record {law.coefficients.__name__} says "
@@ -170,8 +163,7 @@ from eelsim.fluid.reynolds import REYNOLDS, ReynoldsCoefficients  # noqa: E402
 from eelsim.fluid.lift import LiftLaw, with_lift  # noqa: E402
 # isort: on
 
-for _module in pkgutil.iter_modules(__path__):
-    importlib.import_module(f"{__name__}.{_module.name}")
+import_package_modules(__name__, __path__)
 
 # every bundled law can carry a lift (docs/model.md section 2, "Lift"): the <law>_lift variants
 for _entry in FLUID_LAWS.registered():

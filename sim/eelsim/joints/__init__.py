@@ -22,8 +22,6 @@ another package adds its own through the ``eelbot.joint_models`` entry-point gro
 
 from __future__ import annotations
 
-import importlib
-import pkgutil
 from typing import Any, TypeVar
 
 from eelsim.joints.base import (
@@ -32,19 +30,14 @@ from eelsim.joints.base import (
     largest_stable_step,
     parameters_of,
 )
-from eelsim.registry import Registry
+from eelsim.registry import Registry, check_kernel_named, import_package_modules
 
 DEFAULT_JOINT_MODEL = "pd"
 """The model of a robot file whose ``[joints]`` table names none: the paper's PD loop."""
 
 def _check_model(name: str, model: JointModel) -> None:
     """Refuse a model that cannot be registered under ``name`` (:func:`register_joint_model`)."""
-    if not isinstance(model, JointModel):
-        raise ValueError(f"expected a JointModel, got {type(model).__name__}")
-    if not name.isidentifier():
-        raise ValueError(f"a joint model's name must be an identifier, got {name!r}")
-    if model.name != name:
-        raise ValueError(f"the model says its name is {model.name!r}")
+    check_kernel_named(name, model, JointModel, "joint model")
     if model.parameters.model_name != model.name:
         raise ValueError(
             f"its parameter record {model.parameters.__name__} says "
@@ -163,8 +156,7 @@ from eelsim.joints.pd import PD, PDJointParameters, pd_gains, stiffness_hint  # 
 from eelsim.joints.pd_limited import PD_LIMITED, PDLimitedJointParameters  # noqa: E402
 from eelsim.joints.servo import SERVO, ServoJointParameters  # noqa: E402
 
-for _module in pkgutil.iter_modules(__path__):
-    importlib.import_module(f"{__name__}.{_module.name}")
+import_package_modules(__name__, __path__)
 
 __all__ = [
     "DEFAULT_JOINT_MODEL",
