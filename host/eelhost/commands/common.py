@@ -13,6 +13,7 @@ import argparse
 import math
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
+from typing import Any
 
 from pydantic import ValidationError
 
@@ -21,6 +22,7 @@ from eelhost.wire.limits import MAX_CURRENT_M_S, gait_problem
 from eelsim.camera import CameraModel
 from eelsim.closed_loop import LoopOptions
 from eelsim.fluid import FluidCoefficients
+from eelsim.registry import Registry
 from eelsim.robot import Robot, load_robot
 from eelsim.timing import LoopTiming
 
@@ -109,6 +111,28 @@ def number(
         return value
 
     parse.__name__ = kind.__name__
+    return parse
+
+
+def registered_names(registry: Registry[Any], plural: str) -> Callable[[str], tuple[str, ...]]:
+    """An argparse ``type``: comma-separated names registered in ``registry`` (``--laws``).
+
+    Parameters
+    ----------
+    registry : eelsim.registry.Registry
+        Read when a value is parsed (plug-ins included).
+    plural : str
+        What the names are, for the message: ``expected fluid laws from a, b, got 'x'``.
+    """
+
+    def parse(text: str) -> tuple[str, ...]:
+        names = tuple(n.strip() for n in text.split(",") if n.strip())
+        unknown = [n for n in names if n not in registry]
+        if not names or unknown:
+            raise argparse.ArgumentTypeError(
+                f"expected {plural} from {', '.join(sorted(registry))}, got {text!r}")
+        return names
+
     return parse
 
 

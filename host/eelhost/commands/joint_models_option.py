@@ -10,23 +10,12 @@ from __future__ import annotations
 
 import argparse
 
+from eelhost.commands.common import registered_names
 from eelsim.joints import JOINT_MODELS, default_grid_models
 
-
-def joint_model_names(text: str) -> tuple[str, ...]:
-    """Comma-separated names of registered joint models.
-
-    Raises
-    ------
-    argparse.ArgumentTypeError
-        For an empty list or an unknown name (the message lists the known ones).
-    """
-    names = tuple(n.strip() for n in text.split(",") if n.strip())
-    unknown = [n for n in names if n not in JOINT_MODELS]
-    if not names or unknown:
-        raise argparse.ArgumentTypeError(
-            f"expected joint models from {', '.join(sorted(JOINT_MODELS))}, got {text!r}")
-    return names
+joint_model_names = registered_names(JOINT_MODELS, "joint models")
+"""``--joint-models``: comma-separated names of registered joint models (argparse refuses an
+empty list or an unknown name, listing the known ones)."""
 
 
 def add_joint_models_option(p: argparse.ArgumentParser) -> None:

@@ -7,7 +7,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from eelhost.commands import COMMANDS
-from eelhost.commands.common import add_fit_options, fit_settings, number
+from eelhost.commands.common import add_fit_options, fit_settings, number, registered_names
 from eelhost.commands.joint_models_option import add_joint_models_option
 from eelhost.data.experiments import BUNDLED_DATASET, load_dataset
 from eelhost.data.virtual_tank import generate_dataset
@@ -53,14 +53,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(run=run)
 
 
-def law_names(text: str) -> tuple[str, ...]:
-    """``--laws``: comma-separated names of registered fluid laws."""
-    names = tuple(n.strip() for n in text.split(",") if n.strip())
-    unknown = [n for n in names if n not in FLUID_LAWS]
-    if not names or unknown:
-        raise argparse.ArgumentTypeError(
-            f"expected fluid laws from {', '.join(FLUID_LAWS)}, got {text!r}")
-    return names
+law_names = registered_names(FLUID_LAWS, "fluid laws")
+"""``--laws``: comma-separated names of registered fluid laws."""
 
 
 def run(args: argparse.Namespace) -> int:
