@@ -5,10 +5,14 @@ A test writes its outputs under its own ``tmp_path``; a command run without ``--
 lists those two folders before the run and fails the run if anything new is in them afterwards,
 naming the files, so a test that forgets its ``--out`` is found at once (it had left
 ``out/validate`` in every clone).
+
+It also offers the plug-in tests (of sim/ and host/) one way to install a toy package as pip
+would: :func:`install_distribution`.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
 from pathlib import Path
 
 import pytest
@@ -38,3 +42,31 @@ def the_run_leaves_the_clone_clean():
         pytest.fail(f"the tests left {len(left)} paths in the clone: {', '.join(left[:6])}"
                     f"{' ...' if len(left) > 6 else ''} (write to tmp_path, give --out)",
                     pytrace=False)
+
+
+InstallDistribution = Callable[..., Path]
+
+
+@pytest.fixture
+def install_distribution(tmp_path: Path) -> InstallDistribution:
+    """``install(name, entry_points, modules=None)``: a toy distribution in ``tmp_path``, as pip.
+
+    Writes ``<name>-0.1.dist-info`` with its ``METADATA`` and ``entry_points.txt``
+    (``{group: {entry point name: "module:object"}}``) and each module ``{module name: source}``
+    beside it; returns ``tmp_path``, which the test puts on ``sys.path`` (or ``PYTHONPATH``)
+    for :mod:`importlib.metadata` to find it.
+    """
+
+    def install(name: str, entry_points: Mapping[str, Mapping[str, str]],
+                modules: Mapping[str, str] | None = None) -> Path:
+        info = tmp_path / f"{name}-0.1.dist-info"
+        info.mkdir()
+        (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {name}\nVersion: 0.1\n")
+        (info / "entry_points.txt").write_text("".join(
+            f"[{group}]\n" + "".join(f"{k} = {v}\n" for k, v in points.items()) + "\n"
+            for group, points in entry_points.items()))
+        for module, text in (modules or {}).items():
+            (tmp_path / f"{module}.py").write_text(text)
+        return tmp_path
+
+    return install

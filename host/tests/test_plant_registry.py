@@ -2,7 +2,7 @@
 ``eelbot.plants`` entry points, is offered by ``eelbot dataset`` and ``estimate-bench`` and
 records a dataset; an unknown plant is refused naming the known ones (issue 30).
 
-The package is installed as pip would (``host/tests/test_plugins.py``'s pattern): a
+The package is installed as pip would (conftest.py's ``install_distribution`` fixture): a
 ``*.dist-info`` folder with ``entry_points.txt`` and the module beside it, on ``sys.path``.
 """
 
@@ -10,7 +10,7 @@ import sys
 
 import numpy as np
 import pytest
-from test_plugins import help_of, install
+from test_plugins import help_of
 
 from eelhost import cli
 from eelhost.data import virtual_tank
@@ -34,11 +34,11 @@ MISNAMED = Plant("clear", "says another name than its entry point's", TankSettin
 
 
 @pytest.fixture
-def lab(tmp_path, monkeypatch):
+def lab(tmp_path, monkeypatch, install_distribution):
     """The lab's package installed; the plant registry loads plug-ins afresh."""
-    install(tmp_path, "lab", {"eelbot.plants": {"murky": "lab_plants:MURKY",
-                                                "cloudy": "lab_plants:MISNAMED"}},
-            {"lab_plants": LAB})
+    install_distribution("lab", {"eelbot.plants": {"murky": "lab_plants:MURKY",
+                                                   "cloudy": "lab_plants:MISNAMED"}},
+                         {"lab_plants": LAB})
     PLANTS.names()  # the built-ins first, as in a fresh process
     monkeypatch.setattr(PLANTS, "_entries", dict(PLANTS._entries))
     monkeypatch.setattr(PLANTS, "_loaded", False)

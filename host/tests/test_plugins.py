@@ -2,7 +2,8 @@
 estimator and a subcommand, each one file outside eelbot, with no list edited (issue 30).
 
 The package is "installed" as pip would: a ``*.dist-info`` folder with ``entry_points.txt`` and
-the module beside it, in a temporary folder on ``sys.path``. The registries are emptied of
+the module beside it, in a temporary folder on ``sys.path`` (the ``install_distribution`` fixture
+of conftest.py). The registries are emptied of
 plug-ins for the test and restored after it.
 """
 
@@ -79,27 +80,16 @@ BROKEN = "def add_parser(sub):\n    raise RuntimeError('this plug-in has a bug')
 REGISTRIES = (FLUID_LAWS, JOINT_MODELS, GUIDANCE_LAWS, TRANSPORTS, ESTIMATORS, COMMANDS)
 
 
-def install(folder, name, entry_points, modules):
-    info = folder / f"{name}-0.1.dist-info"
-    info.mkdir()
-    (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {name}\nVersion: 0.1\n")
-    (info / "entry_points.txt").write_text("".join(
-        f"[{group}]\n" + "".join(f"{k} = {v}\n" for k, v in points.items()) + "\n"
-        for group, points in entry_points.items()))
-    for module, text in modules.items():
-        (folder / f"{module}.py").write_text(text)
-
-
 @pytest.fixture
-def installed(tmp_path, monkeypatch):
+def installed(tmp_path, monkeypatch, install_distribution):
     """The user's package and a broken one installed; every registry loads plug-ins afresh."""
-    install(tmp_path, "mine", {
+    install_distribution("mine", {
         "eelbot.fluid_laws": {"sticky": "mine_plugin:STICKY"},
         "eelbot.transports": {"loopback": "mine_plugin:LOOPBACK"},
         "eelbot.estimators": {"start-only": "mine_plugin:start_only"},
         "eelbot.commands": {"hello": "mine_plugin:add_parser"},
     }, {"mine_plugin": PLUGIN})
-    install(tmp_path, "broken", {
+    install_distribution("broken", {
         "eelbot.commands": {"oops": "broken_plugin:add_parser", "gone": "nowhere_at_all:x"},
     }, {"broken_plugin": "from eelhost.commands import COMMANDS\n\n"
         "@COMMANDS.add('oops', 'a command whose parser fails')\n" + BROKEN})
@@ -179,14 +169,14 @@ def test_an_unknown_choice_names_the_registered_ones(installed, capsys):
         open_link("tcp://robot")
 
 
-def test_in_a_fresh_process_the_installed_package_reaches_the_cli(tmp_path):
+def test_in_a_fresh_process_the_installed_package_reaches_the_cli(tmp_path, install_distribution):
     """No registry reset: what a user gets after ``pip install`` of their package."""
     import os
     import subprocess
 
-    install(tmp_path, "mine", {"eelbot.commands": {"hello": "mine_plugin:add_parser"},
-                               "eelbot.estimators": {"start-only": "mine_plugin:start_only"}},
-            {"mine_plugin": PLUGIN})
+    install_distribution("mine", {"eelbot.commands": {"hello": "mine_plugin:add_parser"},
+                                  "eelbot.estimators": {"start-only": "mine_plugin:start_only"}},
+                         {"mine_plugin": PLUGIN})
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(
         [str(tmp_path), *filter(None, [os.environ.get("PYTHONPATH")])])}
 

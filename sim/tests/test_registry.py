@@ -2,7 +2,7 @@
 
 Plug-ins are found through importlib.metadata entry points; here a tiny installed distribution
 (a ``*.dist-info`` folder with ``entry_points.txt``) is written into a temporary folder put on
-``sys.path``, as pip would install it.
+``sys.path``, as pip would install it (the ``install_distribution`` fixture of conftest.py).
 """
 
 import logging
@@ -12,18 +12,6 @@ import types
 import pytest
 
 from eelsim.registry import DuplicateNameError, Registry, RegistryError, UnknownNameError
-
-
-def install(folder, name, entry_points, modules=None):
-    """A distribution ``name`` in ``folder``: its entry points {group: {name: value}}, modules."""
-    info = folder / f"{name}-0.1.dist-info"
-    info.mkdir()
-    (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {name}\nVersion: 0.1\n")
-    (info / "entry_points.txt").write_text("".join(
-        f"[{group}]\n" + "".join(f"{k} = {v}\n" for k, v in points.items()) + "\n"
-        for group, points in entry_points.items()))
-    for module, text in (modules or {}).items():
-        (folder / f"{module}.py").write_text(text)
 
 
 def test_names_descriptions_and_order_are_the_registrations():
@@ -93,8 +81,9 @@ def test_a_normalised_registry_finds_any_spelling():
     assert reg["SERIAL"] == 1 and reg.names() == ("serial",)
 
 
-def test_plug_ins_register_under_their_entry_point_names_once(tmp_path, monkeypatch):
-    install(tmp_path, "widget_maker", {"eelbot.test_widgets": {
+def test_plug_ins_register_under_their_entry_point_names_once(tmp_path, monkeypatch,
+                                                             install_distribution):
+    install_distribution("widget_maker", {"eelbot.test_widgets": {
         "spanner": "widget_maker_mod:SPANNER", "decorated": "widget_maker_mod"}},
         {"widget_maker_mod": (
             "import eelbot_test_registry as r\n"
@@ -117,8 +106,8 @@ def test_plug_ins_register_under_their_entry_point_names_once(tmp_path, monkeypa
 
 
 def test_a_broken_plug_in_is_reported_naming_its_entry_point_and_the_rest_works(
-        tmp_path, monkeypatch, caplog):
-    install(tmp_path, "broken_widgets", {"eelbot.test_broken": {
+        tmp_path, monkeypatch, caplog, install_distribution):
+    install_distribution("broken_widgets", {"eelbot.test_broken": {
         "missing": "no_such_module_anywhere:THING",
         "empty": "broken_widgets_mod",
         "clash": "broken_widgets_mod:OTHER",
