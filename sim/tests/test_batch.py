@@ -450,3 +450,37 @@ def test_the_kernels_segment_test_is_flags_segments_intersect():
         assert k._segments_intersect(*p1, *p2, *q1, *q2) == expect, (p1, p2, q1, q2)
         answers.add(expect)
     assert answers == {True, False}
+
+
+def test_driver_helpers_without_reference_counts_never_hand_back_an_array():
+    # kernel_template compiles the driver's helpers that allocate nothing without numba's
+    # reference counting (_NO_REFCOUNT). Such a function must not return an array: its caller
+    # drops a reference to what it gets back, which without the count taken in the callee frees
+    # the array under its owner (heap corruption, seen once with _gather returning its argument).
+    # The rule is checked on the template's text: no return of a parameter the function indexes.
+    import ast
+    import inspect
+
+    from eelsim.batch import kernel_template
+
+    tree = ast.parse(inspect.getsource(kernel_template))
+    checked = []
+    for node in tree.body:
+        if not isinstance(node, ast.FunctionDef):
+            continue
+        no_counts = any(isinstance(d, ast.Call) and any(
+            isinstance(k.value, ast.Name) and k.value.id == "_NO_REFCOUNT" for k in d.keywords)
+            for d in node.decorator_list)
+        if not no_counts:
+            continue
+        params = {a.arg for a in node.args.args}
+        indexed = {n.value.id for n in ast.walk(node)
+                   if isinstance(n, ast.Subscript) and isinstance(n.value, ast.Name)}
+        for ret in (n for n in ast.walk(node) if isinstance(n, ast.Return) and n.value):
+            assert not (isinstance(ret.value, ast.Name) and ret.value.id in params & indexed), (
+                f"{node.name} returns its array argument {ret.value.id} without counting it")
+            assert not isinstance(ret.value, (ast.Subscript, ast.Attribute)) or not (
+                params & {n.id for n in ast.walk(ret.value) if isinstance(n, ast.Name)}), (
+                f"{node.name} returns a view of an argument without counting it")
+        checked.append(node.name)
+    assert "_observe" in checked and "_gather" not in checked

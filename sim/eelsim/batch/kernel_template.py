@@ -65,7 +65,9 @@ NEVER = 2**62  # a step no run reaches
 # flow is simple: _observe, called for every camera frame with two dozen arrays, made about 50
 # such calls per frame, and a function of the driver cut into pieces made hundreds per step
 # (docs/kernel_history.md, session 10). The arrays all belong to _run_block, which outlives
-# every call, so there is nothing for the counts to protect.
+# every call, so there is nothing for the counts to protect. Never for a function that returns
+# an array: its caller drops a reference to what it gets back, and without the count taken here
+# that frees the array under its owner (heap corruption; _gather had it for one commit).
 _NO_REFCOUNT = {"cache": True, "_nrt": False}
 _njit: Any = numba.njit  # (numba's type stubs do not list _nrt)
 
@@ -639,7 +641,7 @@ def _zeros_on_cache_lines(count):
     return raw[skip : skip + count]
 
 
-@_njit(**_NO_REFCOUNT)
+@numba.njit(cache=True)  # returns an array: it must count the reference it hands back
 def _gather(work, base, r, ns, dest):
     """The state of lane r from work rows ``base`` on, as a vector (for the scalar checks)."""
     for row in range(ns):
