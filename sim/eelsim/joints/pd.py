@@ -64,16 +64,26 @@ class PDJoints(JointModel):
     # the paper's gains are the robot's own (docs/estimation.md, "The protocol"): a fit keeps them
     fitted_by_estimator: ClassVar[bool] = False
 
+    # fit_values and with_fit_values read and replace the record's fields named in
+    # fit_parameters, so a model extending this one (pd_limited) fits other fields by naming them
     def fit_values(self, spec: JointParameters) -> FloatArray:
-        """(k_p, k_d)."""
-        p = _pd(spec)
-        return np.array([p.kp_nm_per_rad, p.kd_nms_per_rad])
+        """The fitted fields' values in ``fit_names`` order: (k_p, k_d) for this model."""
+        p = self._own(spec)
+        return np.array([getattr(p, name) for name in self.fit_names], dtype=float)
 
     def with_fit_values(self, spec: JointParameters, values: ArrayLike) -> JointParameters:
-        """``spec`` with (k_p, k_d) replaced (validated)."""
-        kp, kd = (float(v) for v in np.asarray(values, dtype=float).reshape(2))
-        return PDJointParameters.model_validate(
-            {**_pd(spec).model_dump(), "kp_nm_per_rad": kp, "kd_nms_per_rad": kd})
+        """``spec`` as this model's record with the fitted fields replaced (validated)."""
+        p = self._own(spec)
+        numbers = (float(v) for v in np.asarray(values, dtype=float).reshape(len(self.fit_names)))
+        return self.parameters.model_validate(
+            {**p.model_dump(), **dict(zip(self.fit_names, numbers, strict=True))})
+
+    def _own(self, spec: JointParameters) -> JointParameters:
+        """``spec``, refused with a TypeError unless it is this model's record (or a subclass's)."""
+        if not isinstance(spec, self.parameters):
+            raise TypeError(f"the {self.name} joint model needs its own parameters, got "
+                            f"{type(spec).__name__}")
+        return spec
 
     def drive(
         self,

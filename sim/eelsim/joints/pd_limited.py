@@ -29,7 +29,6 @@ from __future__ import annotations
 from typing import ClassVar
 
 import numpy as np
-from numpy.typing import ArrayLike
 
 from eelsim.joints import register_joint_model  # defined before this module is imported
 from eelsim.joints.base import FloatArray, JointParameters, KernelCode
@@ -59,18 +58,7 @@ class PDLimitedJoints(PDJoints):
     # the PD gains stay the robot file's; the fit varies the line (its fit_parameters)
     fitted_by_estimator: ClassVar[bool] = True
 
-    def fit_values(self, spec: JointParameters) -> FloatArray:
-        """(stall torque, no-load speed)."""
-        p = _limited(spec)
-        return np.array([p.servo_max_torque_nm, p.servo_max_speed_rad_s])
-
-    def with_fit_values(self, spec: JointParameters, values: ArrayLike) -> JointParameters:
-        """``spec`` with the stall torque and no-load speed replaced (validated: positive)."""
-        stall, speed = (float(v) for v in np.asarray(values, dtype=float).reshape(2))
-        return PDLimitedJointParameters.model_validate(
-            {**_limited(spec).model_dump(), "servo_max_torque_nm": stall,
-             "servo_max_speed_rad_s": speed})
-
+    # fit_values and with_fit_values: the PD model's, over this model's fit_parameters
     def table_from(self, spec: JointParameters) -> JointParameters | None:
         """A PD table (its gains, limits and servo) as this model's; None for another model's."""
         if isinstance(spec, PDLimitedJointParameters):
@@ -90,7 +78,7 @@ class PDLimitedJoints(PDJoints):
         """The PD torques clipped to the torque-speed line, N m."""
         from eelsim.closed_loop import servo_limited
 
-        p = _limited(spec)
+        p = self._own(spec)
         u = super().drive(spec, alpha_rad, alpha_dot_rad_s, phi_rad, phi_dot_rad_s)
         return servo_limited(u, np.asarray(phi_dot_rad_s, dtype=float), p.servo_max_torque_nm,
                              p.servo_max_speed_rad_s)
@@ -106,13 +94,6 @@ class PDLimitedJoints(PDJoints):
         plain; the clip is written either way.
         """
         super().emit_joint(code, plain=False)
-
-
-def _limited(spec: JointParameters) -> PDLimitedJointParameters:
-    if not isinstance(spec, PDLimitedJointParameters):
-        raise TypeError(f"the pd_limited joint model needs its own parameters, got "
-                        f"{type(spec).__name__}")
-    return spec
 
 
 PD_LIMITED = PDLimitedJoints()
