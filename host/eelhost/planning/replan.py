@@ -843,7 +843,9 @@ class TankReplanner:
         if self._window is None:
             self._window = _Window(est, list(left), self._guide)
         elif (est.t_s - self._window.estimate.t_s >= self.current.window_s
-              and self._window_job is None and self._job is None):
+              and self._window_job is None):
+            # also while a replan runs (on the other worker): with replans every few seconds a
+            # window waiting for none to run was never swum, and the current never estimated
             window = self._window
             future = self._side.submit(self._window_prediction, window, est.t_s,
                                          self.current.value_m_s.copy())
