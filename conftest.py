@@ -7,13 +7,15 @@ naming the files, so a test that forgets its ``--out`` is found at once (it had 
 ``out/validate`` in every clone).
 
 It also offers the plug-in tests (of sim/ and host/) one way to install a toy package as pip
-would: :func:`install_distribution`.
+would (:func:`install_distribution`) and to have registries load their plug-ins again
+(:func:`registries_afresh`).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -70,3 +72,22 @@ def install_distribution(tmp_path: Path) -> InstallDistribution:
         return tmp_path
 
     return install
+
+
+@pytest.fixture
+def registries_afresh(monkeypatch: pytest.MonkeyPatch) -> Callable[..., None]:
+    """``afresh(*registries)``: each registry loads its plug-ins again on its next lookup.
+
+    Its built-ins are loaded first, as in a fresh process; its entries, loaded flag and plug-in
+    errors are then the test's own copies (``monkeypatch``), so what the test's plug-ins register
+    is gone after it.
+    """
+
+    def afresh(*registries: Any) -> None:
+        for registry in registries:
+            registry.names()  # the built-ins first, as in a fresh process
+            monkeypatch.setattr(registry, "_entries", dict(registry._entries))
+            monkeypatch.setattr(registry, "_loaded", False)
+            monkeypatch.setattr(registry, "_plugin_errors", [])
+
+    return afresh

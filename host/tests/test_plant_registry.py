@@ -34,15 +34,12 @@ MISNAMED = Plant("clear", "says another name than its entry point's", TankSettin
 
 
 @pytest.fixture
-def lab(tmp_path, monkeypatch, install_distribution):
+def lab(tmp_path, monkeypatch, install_distribution, registries_afresh):
     """The lab's package installed; the plant registry loads plug-ins afresh."""
     install_distribution("lab", {"eelbot.plants": {"murky": "lab_plants:MURKY",
                                                    "cloudy": "lab_plants:MISNAMED"}},
                          {"lab_plants": LAB})
-    PLANTS.names()  # the built-ins first, as in a fresh process
-    monkeypatch.setattr(PLANTS, "_entries", dict(PLANTS._entries))
-    monkeypatch.setattr(PLANTS, "_loaded", False)
-    monkeypatch.setattr(PLANTS, "_plugin_errors", [])
+    registries_afresh(PLANTS)
     monkeypatch.syspath_prepend(str(tmp_path))
     yield tmp_path
     sys.modules.pop("lab_plants", None)

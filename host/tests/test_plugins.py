@@ -81,7 +81,7 @@ REGISTRIES = (FLUID_LAWS, JOINT_MODELS, GUIDANCE_LAWS, TRANSPORTS, ESTIMATORS, C
 
 
 @pytest.fixture
-def installed(tmp_path, monkeypatch, install_distribution):
+def installed(tmp_path, monkeypatch, install_distribution, registries_afresh):
     """The user's package and a broken one installed; every registry loads plug-ins afresh."""
     install_distribution("mine", {
         "eelbot.fluid_laws": {"sticky": "mine_plugin:STICKY"},
@@ -93,11 +93,7 @@ def installed(tmp_path, monkeypatch, install_distribution):
         "eelbot.commands": {"oops": "broken_plugin:add_parser", "gone": "nowhere_at_all:x"},
     }, {"broken_plugin": "from eelhost.commands import COMMANDS\n\n"
         "@COMMANDS.add('oops', 'a command whose parser fails')\n" + BROKEN})
-    for registry in REGISTRIES:
-        registry.names()  # the built-ins first, as in a fresh process
-        monkeypatch.setattr(registry, "_entries", dict(registry._entries))
-        monkeypatch.setattr(registry, "_loaded", False)
-        monkeypatch.setattr(registry, "_plugin_errors", [])
+    registries_afresh(*REGISTRIES)
     monkeypatch.syspath_prepend(str(tmp_path))
     yield tmp_path
     for name in ("mine_plugin", "broken_plugin"):
