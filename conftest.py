@@ -84,8 +84,13 @@ def registries_afresh(monkeypatch: pytest.MonkeyPatch) -> Callable[..., None]:
     """
 
     def afresh(*registries: Any) -> None:
+        # every registry's built-ins first, as in a fresh process, before any is reset: loading
+        # one's built-ins can look another up (the subcommands import the test plants, which
+        # check their fluid law), which would load that one's plug-ins before the test's
+        # package is on sys.path
         for registry in registries:
-            registry.names()  # the built-ins first, as in a fresh process
+            registry.names()
+        for registry in registries:
             monkeypatch.setattr(registry, "_entries", dict(registry._entries))
             monkeypatch.setattr(registry, "_loaded", False)
             monkeypatch.setattr(registry, "_plugin_errors", [])
