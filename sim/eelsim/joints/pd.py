@@ -15,7 +15,7 @@ modelled.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, ClassVar
+from typing import TYPE_CHECKING, ClassVar, cast
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -78,12 +78,13 @@ class PDJoints(JointModel):
         return self.parameters.model_validate(
             {**p.model_dump(), **dict(zip(self.fit_names, numbers, strict=True))})
 
-    def _own(self, spec: JointParameters) -> JointParameters:
+    def _own(self, spec: JointParameters) -> PDJointParameters:
         """``spec``, refused with a TypeError unless it is this model's record (or a subclass's)."""
         if not isinstance(spec, self.parameters):
             raise TypeError(f"the {self.name} joint model needs its own parameters, got "
                             f"{type(spec).__name__}")
-        return spec
+        # every PD-family record derives from PDJointParameters (PDJoints.parameters and below)
+        return cast(PDJointParameters, spec)
 
     def drive(
         self,
@@ -96,13 +97,13 @@ class PDJoints(JointModel):
         """Joint torques u = k_p (alpha - phi) + k_d (alpha_dot - phi_dot), N m."""
         from eelsim.control import joint_pd_torque
 
-        p = _pd(spec)
+        p = self._own(spec)
         return joint_pd_torque(alpha_rad, alpha_dot_rad_s, phi_rad, phi_dot_rad_s,
                                p.kp_nm_per_rad, p.kd_nms_per_rad)
 
     def kernel_values(self, spec: JointParameters, servo_limits: bool) -> dict[str, float]:
         """Gains, and the torque-speed clip (stall = inf and slope 0 when it is off)."""
-        p = _pd(spec)
+        p = self._own(spec)
         stall = p.servo_max_torque_nm if servo_limits else np.inf
         # stall * (1 / no_load): the expression the kernel's rows had (the same rounding)
         slope = p.servo_max_torque_nm * (1.0 / p.servo_max_speed_rad_s) if servo_limits else 0.0
@@ -130,7 +131,7 @@ class PDJoints(JointModel):
         # (eelsim.dynamics imports eelsim.robot, which imports this module: not at the top)
         from eelsim.dynamics import mass_matrix, straight_state
 
-        p = _pd(spec)
+        p = self._own(spec)
         n = model.n_links
         big_m = mass_matrix(model, straight_state(model))
         d = np.diff(np.eye(n), axis=0)  # phi = d theta
@@ -167,7 +168,7 @@ def stiffness_hint(spec: JointParameters, stable_step_s: float, dt_s: float) -> 
     """
     if not dt_s > stable_step_s:
         return ""
-    p = _pd(spec)
+    p = PD._own(spec)
     return (
         f"; the PD joints (k_p {p.kp_nm_per_rad:g} N m/rad, k_d {p.kd_nms_per_rad:g} N m s/rad) "
         f"are too stiff for explicit RK4 at dt = {dt_s:g} s (stable below about "
@@ -193,12 +194,6 @@ def pd_gains(spec: JointParameters) -> tuple[float, float] | None:
     if not isinstance(spec, PDJointParameters):
         return None
     return spec.kp_nm_per_rad, spec.kd_nms_per_rad
-
-
-def _pd(spec: JointParameters) -> PDJointParameters:
-    if not isinstance(spec, PDJointParameters):
-        raise TypeError(f"the PD joint model needs its own parameters, got {type(spec).__name__}")
-    return spec
 
 
 PD = register_joint_model(PDJoints(), "the paper's PD loop driving free joints with torques")
