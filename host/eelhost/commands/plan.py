@@ -208,6 +208,9 @@ def _check_json(outcome: Outcome) -> dict:
     return {"draws": outcome.draws,
             "failures": sum(not r.ok for r in outcome.drawn_checks),
             "collision_probability": num(p), "interval_95": [num(low), num(high)],
+            # the interval is 95 % over every plan the repairs may check (Bonferroni): each
+            # plan's own is taken at this level (docs/planning.md, "The planner", step 4)
+            "interval_level": outcome.level, "plans_checked_at_most": outcome.family,
             "arrival_s": {"median": num(median), "p5": num(t5), "p95": num(t95)},
             "summary": outcome.confidence()}
 

@@ -25,6 +25,12 @@ docs/planning.md ("The planner") is the long form. :meth:`Planner.plan`:
 4. **Repair**: the leg most check runs failed on (the leg being swum at the first contact, or
    the last leg when the goal was missed) is banned and the search runs again (it keeps what it
    swam); after ``repairs`` attempts the plan is refused with the reason of the last failure.
+   Each searched plan is checked over its own draws, fresh and independent of the draws that
+   failed the plans before it (:meth:`Planner.waters`), so a repaired plan is not one chosen to
+   pass the very draws its predecessors failed; and a plan's interval is a simultaneous one over
+   every plan a planning call may check (:data:`CHECK_LEVEL` split evenly over ``repairs + 1``
+   plans, Bonferroni), so the stated bound holds for whichever plan the repairs return
+   (docs/planning.md, "The planner", step 4).
 """
 
 from __future__ import annotations
@@ -70,6 +76,13 @@ SPEED_RUN_S = 20.0
 CHECK_DRAWS = 60
 """Draws of the water a plan is checked over by default (0 failures in 60: collision probability
 at most 6.0 %, the upper end of its two-sided 95 % Clopper-Pearson interval)."""
+
+CHECK_LEVEL = 0.95
+"""Confidence of the stated collision-probability interval over all the plans one planning call may
+check (the first and its repairs): each plan's Clopper-Pearson interval is taken at
+``1 - (1 - CHECK_LEVEL) / (repairs + 1)`` (Bonferroni), so that the chance that the planner
+returns a plan whose failure probability lies above its stated interval is at most 5 % however
+many repairs it took (docs/planning.md, "The planner", step 4)."""
 
 SCREEN_DRAWS = 12
 """Draws swum first; a plan that fails one is repaired without swimming the others."""
@@ -174,6 +187,10 @@ class Outcome:
     draws : int
         Draws of the water the returned plan was checked over (the first check run, the fits
         as fitted, comes on top).
+    family : int
+        The plans the planning call may check (the first and ``repairs`` repairs): the
+        returned plan's interval is taken at :attr:`level`, :data:`CHECK_LEVEL` split over them
+        (Bonferroni), so it holds at :data:`CHECK_LEVEL` whichever plan the repairs return.
     """
 
     plan: Plan
@@ -184,6 +201,7 @@ class Outcome:
     planning_time_s: float = 0.0
     search_time_s: float = 0.0
     draws: int = 0
+    family: int = 1
 
     @property
     def drawn_checks(self) -> list[Swim]:
@@ -197,14 +215,15 @@ class Outcome:
         Returns
         -------
         (float, float, float)
-            Failures over draws, and the two-sided 95 % Clopper-Pearson interval
-            (NaNs when the plan was not checked over draws).
+            Failures over draws, and the two-sided Clopper-Pearson interval at ``level`` (95 %
+            over every plan the planning call may check; NaNs when the plan was not checked
+            over draws).
         """
         runs = self.drawn_checks
         if not runs:
             return (math.nan, math.nan, math.nan)
         bad = sum(not r.ok for r in runs)
-        low, high = clopper_pearson(bad, len(runs))
+        low, high = clopper_pearson(bad, len(runs), self.level)
         return (bad / len(runs), low, high)
 
     @property
@@ -226,8 +245,14 @@ class Outcome:
             return "not checked over draws of the water"
         median, t5, t95 = self.arrival_s
         return (f"collision probability {p:.1%} ({sum(not r.ok for r in self.drawn_checks)} of "
-                f"{self.draws} draws of the water; 95 % interval {low:.1%}-{high:.1%}); arrival "
+                f"{self.draws} draws of the water; 95 % interval {low:.1%}-{high:.1%}, "
+                f"simultaneous over the {self.family} plan(s) the repairs may check); arrival "
                 f"{median:.1f} s (90 % of the check runs {t5:.1f}-{t95:.1f} s)")
+
+    @property
+    def level(self) -> float:
+        """Two-sided level of the returned plan's own interval (:data:`CHECK_LEVEL`, Bonferroni)."""
+        return 1.0 - (1.0 - CHECK_LEVEL) / max(self.family, 1)
 
     @property
     def found(self) -> bool:
@@ -256,7 +281,9 @@ class Planner:
         Bound of the current the planner is not told of, checked in every draw at that speed in
         directions round the circle.
     seed : int
-        Seed of the draws (the same draws for every repair and replan of this planner).
+        Seed of the draws. Each plan a planning call checks (the first, then each repair) has
+        its own draws (:meth:`waters`); every call (a replan) checks its first plan over the
+        same draws, its first repair over the same second draws, and so on.
     robust_search : bool
         Also swim every leg of the search in the unknown current towards 4 directions
         (:class:`eelhost.planning.search.SearchSettings`, ``robust_current_m_s``): fewer plans
@@ -309,8 +336,11 @@ class Planner:
         self.gait = gait
         self.options = dataclasses.replace(options or LoopOptions(), guidance=guidance)
         self.unknown_current_m_s = float(unknown_current_m_s)
+        self.seed = int(seed)
+        self.draws = int(draws)
         self.water = coefficients.water_draws(np.random.default_rng(seed), draws,
                                               self.unknown_current_m_s)
+        self._waters: dict[int, list[WaterDraw]] = {0: self.water}
         self.repairs = repairs
         self.check = check
         if swimmer is not None and swimmer.n_links != robot.n_links:
@@ -456,17 +486,20 @@ class Planner:
                 return Outcome(plan, plan.status, plan.message, checks, attempt, total, searching)
             if not self.check:
                 return Outcome(plan, "found", plan.message, [], attempt, total, searching)
-            checks, elapsed = self.check_plan(plan, state, step)
+            # each plan its own draws: a repaired plan is not chosen to pass the very draws its
+            # predecessors failed (docs/planning.md, "The planner", step 4)
+            waters = self.waters(attempt)
+            checks, elapsed = self.check_plan(plan, state, step, waters)
             total += elapsed
             bad = [c for c in checks if not c.ok]
             if not bad:
                 outcome = Outcome(plan, "found", "", checks, attempt, total, searching,
-                                  len(self.water))
+                                  len(waters), self.repairs + 1)
                 repaired = (f" (searched again after {attempt} failed check(s), swimming only "
                             "manoeuvres not swum before)" if attempt else "")
                 outcome.message = (
                     f"{plan.message}{repaired}; checked in the twin with the fits and over "
-                    f"{len(self.water)} "
+                    f"{len(waters)} "
                     f"draws of the water (min clearance "
                     f"{min(c.min_clearance_m for c in checks) * 1000:.0f} mm): "
                     f"{outcome.confidence()}")
@@ -484,6 +517,27 @@ class Planner:
         return Outcome(Plan(False, "check_failed", msg, plan.legs, plan.cost_s, plan.expansions,
                             plan.simulations, plan.planning_time_s, plan.tree),
                        "check_failed", msg, checks, self.repairs, total, searching)
+
+    def waters(self, attempt: int) -> list[WaterDraw]:
+        """The draws of the water the ``attempt``-th plan of a planning call is checked over.
+
+        Attempt 0 (the first plan) has the draws seeded with ``seed``; each repair its own,
+        seeded with ``(seed, attempt)``: independent of one another and of every other seed's.
+
+        Parameters
+        ----------
+        attempt : int
+            0 for the first plan, k for the k-th repair.
+
+        Returns
+        -------
+        list of WaterDraw
+        """
+        if attempt not in self._waters:
+            rng = np.random.default_rng([self.seed, attempt])
+            self._waters[attempt] = self.coefficients.water_draws(rng, self.draws,
+                                                                  self.unknown_current_m_s)
+        return self._waters[attempt]
 
     def swim_waters(self, plan: Plan, waters: list[WaterDraw], state: FloatArray | None = None,
                     step: int = 0) -> list[Swim]:
@@ -505,8 +559,8 @@ class Planner:
         return swim_legs(self.world, plan, self.twin, self.model, waters, legs, self.clearance,
                          state, step)
 
-    def check_plan(self, plan: Plan, state: FloatArray | None = None,
-                   step: int = 0) -> tuple[list[Swim], float]:
+    def check_plan(self, plan: Plan, state: FloatArray | None = None, step: int = 0,
+                   waters: list[WaterDraw] | None = None) -> tuple[list[Swim], float]:
         """Swim a plan with the fits and over the draws of the water (module docstring).
 
         Leg by leg, as the search swam it (:func:`eelhost.planning.check.swim_legs`). The fits
@@ -519,6 +573,8 @@ class Planner:
         state : ndarray, optional
             Start state (default: the world's start).
         step : int
+        waters : list of WaterDraw, optional
+            The draws (default the first plan's, :meth:`waters` (0)).
 
         Returns
         -------
@@ -529,7 +585,7 @@ class Planner:
         t0 = time.perf_counter()
         nominal = WaterDraw("the fits as fitted", self.coefficients.fits["straight"],
                             self.coefficients.fits["turning"], (0.0, 0.0))
-        todo = [nominal, *self.water]
+        todo = [nominal, *(self.water if waters is None else waters)]
         screen = 1 + SCREEN_DRAWS
         runs: list[Swim] = []
         for lo in [0, *range(screen, len(todo), BATCH_RUNS)]:
