@@ -35,8 +35,9 @@ the run in the goal, or stop the robot (``contact``: its estimated body touches 
 rate while it thinks; after each frame the navigator may hold the loop back so that a virtual
 robot's clock does not run ahead of the planner's wall time (:meth:`Navigator.pace`). Every plan
 and replan is rewritten into the take's metadata (``source.planning``) as it happens. Telemetry
-reporting FAILSAFE is counted (``failsafe_reports``). The navigator is handed the guidance's own
-state with every frame (:meth:`eelsim.guidance.Guidance.state`: the present leg's start and the
+reporting FAILSAFE is counted (``failsafe_reports``); every Telemetry also goes to the navigator
+(``on_telemetry``: the measured joint angles and the gait's phase for its state estimate). The
+navigator is handed the guidance's own state with every frame (:meth:`eelsim.guidance.Guidance.state`: the present leg's start and the
 ILOS integral), and a replan comes with the state its plan was searched from
 (``Plan.start_guide``): the new waypoints are steered from that leg start with that integral, so
 the robot follows the plan with the controller the planner swam (docs/planning.md, "Execution
@@ -105,6 +106,11 @@ class Navigator(Protocol):
     def pace(self, t_s: float) -> None:
         """Hold the loop while a virtual robot's clock is ahead of the planner's wall time."""
         ...
+
+    # A navigator may also have ``on_telemetry(t_received_s, msg, t_polled_before_s)``: the loop
+    # hands it every Telemetry with the time of the poll that read it and of the poll before
+    # (it arrived in between), since the gait started: the robot's joint angles and gait phase
+    # for the state estimate (docs/planning.md, "The robot's state at the tank").
 
     def close(self) -> None:
         """Stop planning."""
@@ -315,6 +321,7 @@ class RunLoop:
         self._stop_request: str | None = None
         self._stop_detail = ""
         self._t_start = 0.0
+        self._last_poll_s: float | None = None  # the loop's last link poll, since the gait started
         self.navigator = navigator
         self.replans = 0
         self._goal_reached = False
@@ -437,10 +444,17 @@ class RunLoop:
                 next_control = now - self._t_start
                 last_pose_t = now - self._t_start
             t = t_src + offset_to_clock - self._t_start  # since the gait started
+            polled_before, polled = self._last_poll_s, self.clock.now() - self._t_start
+            self._last_poll_s = polled
             for msg in self.link.poll():
                 if (isinstance(msg, protocol.Telemetry)
                         and msg.state == protocol.State.FAILSAFE):
                     out.failsafe_reports += 1
+                if isinstance(msg, protocol.Telemetry) and self.navigator is not None:
+                    # the joint angles and gait phase for the state estimate (optional method)
+                    on_telemetry = getattr(self.navigator, "on_telemetry", None)
+                    if on_telemetry is not None:
+                        on_telemetry(polled, msg, polled_before)
             out.frames += 1
             out.t_end_s = t
             loc = self.localiser.localise(t, frame)

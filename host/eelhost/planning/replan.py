@@ -41,6 +41,7 @@ from eelhost.planning.state_estimate import BodyEstimate, BodyStateEstimator, Cu
 from eelhost.planning.twin import Twin
 from eelhost.planning.world import World
 from eelhost.vision.localise import Localisation
+from eelhost.wire import protocol
 from eelsim.control import Gait
 from eelsim.fluid import FluidCoefficients
 from eelsim.model import SwimmerModel
@@ -432,6 +433,20 @@ class TankReplanner:
         self._side = ThreadPoolExecutor(max_workers=1, thread_name_prefix="eelbot-lookahead")
 
     # -- the loop's calls ----------------------------------------------------------------------
+
+    def on_telemetry(self, t_received_s: float, msg: protocol.Telemetry,
+                     t_polled_before_s: float | None = None) -> None:
+        """Take one Telemetry: the robot's joint angles and gait phase for the state estimate.
+
+        Parameters
+        ----------
+        t_received_s : float
+            The poll that read it, since the gait started.
+        msg : protocol.Telemetry
+        t_polled_before_s : float, optional
+            The poll before (it arrived after that).
+        """
+        self.estimator.add_telemetry(t_received_s, msg, t_polled_before_s)
 
     def on_frame(self, t_s: float, loc: Localisation, pose: FloatArray | None, target: int,
                  offset_rad: float, guide: Guide | None = None) -> Decision:

@@ -1,14 +1,19 @@
-"""The robot's whole body state at the tank, from the camera, for replanning and contact checks.
+"""The robot's whole body state at the tank, from the camera and the telemetry, for replanning.
 
-docs/planning.md ("The robot's state at the tank") is the long form. The planner swims every leg
-from a full twin state (docs/model.md section 1: link angles theta, centre of mass p, and their
-rates), so a replan needs all of it, not only the filtered pose:
+docs/planning.md ("The robot's state at the tank") is the long form, with the equations. The
+planner swims every leg from a full twin state (docs/model.md section 1: link angles theta, centre
+of mass p, and their rates), so a replan needs all of it, not only the filtered pose:
 
-- **pose and shape** from the camera: the localiser measures every link's angle and the centre of
-  mass in each frame (:class:`eelhost.vision.localise.Localisation`); a link whose marker was not
-  read gets the gait's reference at the frame's phase (joint j's reference is
-  A sin(omega t + (j - 1) beta) + gamma, docs/model.md section 4), placed around the measured mean
-  heading;
+- **pose** from the camera: the localiser measures every link's angle and the centre of mass in
+  each frame (:class:`eelhost.vision.localise.Localisation`);
+- **joint angles** from three sources, fused per joint by inverse variance
+  (:class:`JointSources`): the telemetry's measured angles (feedback servos, ``phi_mrad`` with the
+  flag JOINT_FEEDBACK, docs/firmware.md "Joint loop"), predicted from their sample time to the
+  frame's with the gait's reference and the phase read from the same telemetry
+  (:class:`TelemetryJoints`); without them the gait's reference at the frame's phase (the
+  telemetry's phase when it comes, the host's gait clock otherwise); and the camera's joint angles
+  (differences of its link angles). A link the camera did not read takes the fused shape placed
+  around the links it did read;
 - **rates** from a filter: a quadratic least-squares fit over the last ``window`` frames of each
   link angle (unwrapped in time) and of the centre of mass, differentiated at the newest frame. A
   quadratic follows the gait's oscillation (period 1.6 s at 3.9 rad/s) over the 0.2 s window,
@@ -20,6 +25,7 @@ rates), so a replan needs all of it, not only the filtered pose:
 
 from __future__ import annotations
 
+import logging
 import math
 from collections import deque
 from dataclasses import dataclass
@@ -27,19 +33,48 @@ from dataclasses import dataclass
 import numpy as np
 
 from eelhost.planning.geometry import FloatArray
-from eelsim.control import Gait
+from eelhost.wire import protocol
+from eelsim.control import Gait, gait_reference, joint_amplitudes
 from eelsim.model import SwimmerModel
 
-__all__ = ["BodyEstimate", "BodyStateEstimator", "CurrentEstimator", "gait_link_angles"]
+log = logging.getLogger(__name__)
+
+__all__ = ["BodyEstimate", "BodyStateEstimator", "CurrentEstimator", "JointSources",
+           "JointsAtFrame", "TelemetryJoints", "gait_link_angles"]
+
+#: Telemetry's ``phi_mrad`` of a joint without a measured angle (docs/firmware.md, "Joint loop").
+NO_ANGLE_MRAD = -32768
+#: The Telemetry's shortest trip to the host: its 58 bytes at 10 bits a byte on the line, and the
+#: XBee's 5 ms (docs/firmware.md, "Messages" and "Link").
+TELEMETRY_TRANSIT_S = 58 * 10 / protocol.BAUD + 0.005
+
+
+def links_from_joints(joint_angles_rad: FloatArray, heading_rad: float) -> FloatArray:
+    """Link angles of a body with these joint angles, whose mean link angle is ``heading_rad``.
+
+    The links' angles are the running sums of the joint angles (joint j between links j and
+    j + 1, tail first: phi_j = theta_{j+1} - theta_j, docs/model.md section 1).
+
+    Parameters
+    ----------
+    joint_angles_rad : ndarray, shape (N - 1,)
+    heading_rad : float
+
+    Returns
+    -------
+    ndarray, shape (N,)
+    """
+    theta = np.concatenate([[0.0], np.cumsum(np.asarray(joint_angles_rad, dtype=float))])
+    return theta - theta.mean() + heading_rad
 
 
 def gait_link_angles(model: SwimmerModel, gait: Gait, t_s: float, heading_rad: float,
                      offset_rad: float = 0.0) -> FloatArray:
     """Link angles of a body following the gait's joint references exactly, at a mean heading.
 
-    Joint j (between links j and j + 1, tail first) is at A sin(omega t + (j - 1) beta) + gamma
-    (docs/model.md section 4); the links' angles are the running sums of the joint angles,
-    shifted so that their mean is ``heading_rad``.
+    Joint j (between links j and j + 1, tail first) is at A_j sin(omega t + (j - 1) beta) + gamma
+    with the tapered amplitude A_j = A (N - j) / (N + 1) (docs/model.md section 4,
+    :func:`eelsim.control.gait_reference`).
 
     Parameters
     ----------
@@ -56,11 +91,314 @@ def gait_link_angles(model: SwimmerModel, gait: Gait, t_s: float, heading_rad: f
     -------
     ndarray, shape (N,)
     """
-    n = model.n_links
-    j = np.arange(n - 1)
-    phi = gait.amplitude_rad * np.sin(gait.omega_rad_s * t_s + j * gait.beta_rad) + offset_rad
-    theta = np.concatenate([[0.0], np.cumsum(phi)])
-    return theta - theta.mean() + heading_rad
+    alpha, _ = gait_reference(t_s, gait, offset_rad, model.n_links)
+    return links_from_joints(alpha, heading_rad)
+
+
+@dataclass(frozen=True)
+class JointSample:
+    """One accepted Telemetry, on the host's clock.
+
+    Attributes
+    ----------
+    t_s : float
+        When the robot sampled it, on the host's clock (since the gait started).
+    phase_rad : float or None
+        The gait's phase psi at ``t_s`` read from the references (None at zero amplitude).
+    amplitude_rad, offset_rad : float
+        The gait's (slewed) amplitude A and offset gamma at ``t_s``.
+    phi_rad : ndarray (N - 1,) or None
+        The measured joint angles (None: no feedback servos).
+    """
+
+    t_s: float
+    phase_rad: float | None
+    amplitude_rad: float
+    offset_rad: float
+    phi_rad: FloatArray | None
+
+
+@dataclass(frozen=True)
+class JointsAtFrame:
+    """The telemetry's joint angles predicted to a frame's time.
+
+    Attributes
+    ----------
+    phi_rad : ndarray, shape (N - 1,)
+    measured : bool
+        True: the robot's measured angles moved on with the reference; False: the reference.
+    age_s : float
+        Frame time minus the sample's time.
+    """
+
+    phi_rad: FloatArray
+    measured: bool
+    age_s: float
+
+
+class TelemetryJoints:
+    """The robot's joint angles and gait phase from its Telemetry (docs/planning.md).
+
+    Each Telemetry carries the robot's clock ``time_us``, the references alpha_j it commands, the
+    slewed amplitude A and offset gamma, and, with feedback servos (flag JOINT_FEEDBACK), the
+    measured angles ``phi_mrad``. The robot's clock is put on the host's by the delays' bounds: a
+    sample read at a poll at t_r arrived after the previous poll t_p, and was sent
+    ``transit_s`` before it arrived, so the offset c = t_host - t_robot lies between
+    max_k (t_p,k - t_robot,k) - transit_s and min_k (t_r,k - t_robot,k) - transit_s over the last
+    ``clock_window`` samples; c is the middle of that interval (its upper end when the bounds
+    cross). The phase
+    psi at the sample is the least-squares solution of alpha_j - gamma = A_j sin(psi + (j - 1)
+    beta). A sample is moved to the frame's time t by the gait: psi(t) = psi_s + omega (t -
+    t_s), and the measured angle by the change of its own oscillation: over the last ``history``
+    samples each joint is fitted, by least squares, as h_j(psi) = c_j + a_j sin(psi + (j - 1) beta)
+    + b_j cos(psi + (j - 1) beta) (the joint follows the gait's phase with its own gain and lag),
+    and phi_j(t) = phi_j(t_s) + h_j(psi(t)) - h_j(psi_s). Before 6 such samples the reference
+    stands for h_j (a_j = A_j, b_j = 0).
+
+    Samples are ignored, with the reason logged (the first of each reason as a warning, the
+    rest counted in :attr:`ignored`): the robot not RUNNING, a wrong joint count, angles
+    beyond ``limit_rad`` or not finite, a clock that went back or jumped ahead of the host's,
+    and, at a frame, a newest sample older than ``max_age_s`` (stale).
+
+    Parameters
+    ----------
+    model : SwimmerModel
+    gait : Gait
+        The gait sent to the robot (omega, beta).
+    max_age_s : float
+        Oldest sample used at a frame (the robot sends one every 0.1 s).
+    limit_rad : float
+        Largest joint angle taken as a measurement.
+    clock_window : int
+        Samples over which the delays' bounds are taken.
+    transit_s : float
+        The Telemetry's trip from the robot's clock to the host's transport.
+    history : int
+        Samples of measured angles in each joint's fit of its oscillation.
+    """
+
+    def __init__(self, model: SwimmerModel, gait: Gait, max_age_s: float = 0.3,
+                 limit_rad: float = 1.6, clock_window: int = 50,
+                 transit_s: float = TELEMETRY_TRANSIT_S, history: int = 16) -> None:
+        self.n_joints = model.n_links - 1
+        self.gait = gait
+        self.max_age_s = max_age_s
+        self.limit_rad = limit_rad
+        self.transit_s = transit_s
+        self._history: deque[JointSample] = deque(maxlen=max(int(history), 6))
+        self._fit: FloatArray | None = None  # (N - 1, 2): a_j, b_j of the newest fit
+        self.ratio = joint_amplitudes(1.0, model.n_links)
+        self.lag = np.arange(self.n_joints) * gait.beta_rad
+        self.latest: JointSample | None = None
+        self.ignored: dict[str, int] = {}
+        # (latest, earliest) offset t_host - t_robot each sample allows
+        self._bounds: deque[tuple[float, float]] = deque(maxlen=max(int(clock_window), 1))
+        self._wraps = 0
+        self._last_raw_us: int | None = None
+        self._last_rx_s = -math.inf
+        self._last_robot_s = -math.inf
+        self._stale_logged = False
+
+    def _ignore(self, reason: str, detail: str) -> None:
+        first = reason not in self.ignored
+        self.ignored[reason] = self.ignored.get(reason, 0) + 1
+        (log.warning if first else log.debug)(
+            "telemetry ignored for the state estimate (%s): %s", reason, detail)
+
+    def _robot_time_s(self, time_us: int) -> float:
+        """The robot's clock unwrapped across its 32-bit wrap (not yet committed)."""
+        wraps = self._wraps
+        if self._last_raw_us is not None and time_us < self._last_raw_us - 2**31:
+            wraps += 1
+        return (wraps * 2**32 + time_us) * 1e-6
+
+    def add(self, t_received_s: float, msg: protocol.Telemetry,
+            t_polled_before_s: float | None = None) -> bool:
+        """Take one Telemetry read at ``t_received_s`` (host clock since the gait started).
+
+        Parameters
+        ----------
+        t_received_s : float
+            The poll that read it.
+        msg : protocol.Telemetry
+        t_polled_before_s : float, optional
+            The poll before it (the message arrived after it); none: no lower bound.
+
+        Returns
+        -------
+        bool
+            Whether it was accepted.
+        """
+        if msg.state != protocol.State.RUNNING:
+            self._ignore("not_running", f"robot state {msg.state} at time_us {msg.time_us}")
+            return False
+        alpha = np.asarray(msg.alpha_rad, dtype=float)
+        phi_mrad = np.asarray(msg.phi_mrad, dtype=float)
+        if len(alpha) != self.n_joints or len(phi_mrad) != self.n_joints:
+            self._ignore("joint_count", f"{len(alpha)} references and {len(phi_mrad)} angles "
+                                        f"for {self.n_joints} joints")
+            return False
+        t_robot = self._robot_time_s(int(msg.time_us))
+        if t_robot <= self._last_robot_s:
+            self._ignore("clock_back", f"time_us {msg.time_us} not after the previous sample")
+            return False
+        if (math.isfinite(self._last_robot_s)
+                and t_robot - self._last_robot_s > (t_received_s - self._last_rx_s) + 1.0):
+            self._ignore("clock_jump", f"the robot's clock moved {t_robot - self._last_robot_s:.3f}"
+                                       f" s while {t_received_s - self._last_rx_s:.3f} s passed")
+            return False
+        gamma, amp = float(msg.offset_rad), float(msg.amplitude_rad)
+        if not (np.all(np.isfinite(alpha)) and math.isfinite(gamma) and math.isfinite(amp)):
+            self._ignore("garbled", f"references not finite at time_us {msg.time_us}")
+            return False
+        feedback = bool(msg.flags & protocol.Flags.JOINT_FEEDBACK)
+        phi: FloatArray | None = None
+        if feedback:
+            phi = phi_mrad * 1e-3
+            if np.any(phi_mrad == NO_ANGLE_MRAD) or np.any(np.abs(phi) > self.limit_rad):
+                self._ignore("garbled", f"measured angles {msg.phi_mrad} mrad outside "
+                                        f"+-{self.limit_rad:g} rad")
+                return False
+        if self._last_raw_us is not None and int(msg.time_us) < self._last_raw_us - 2**31:
+            self._wraps += 1
+        self._last_raw_us = int(msg.time_us)
+        self._last_robot_s, self._last_rx_s = t_robot, t_received_s
+        earliest = -math.inf if t_polled_before_s is None else t_polled_before_s - t_robot
+        self._bounds.append((t_received_s - t_robot - self.transit_s,
+                             earliest - self.transit_s))
+        t_s = t_robot + self.clock_offset_s()
+        self.latest = JointSample(t_s, self._phase(alpha, gamma, amp), amp, gamma, phi)
+        if phi is None or self.latest.phase_rad is None:
+            self._history.clear()
+            self._fit = None
+        else:
+            self._history.append(self.latest)
+            self._fit = self._fit_oscillation()
+        self._stale_logged = False
+        return True
+
+    def _fit_oscillation(self) -> FloatArray | None:
+        """Each joint's a_j, b_j over the history (class docstring); None before 6 samples."""
+        if len(self._history) < 6:
+            return None
+        psi = np.array([h.phase_rad for h in self._history], dtype=float)
+        phi = np.array([h.phi_rad for h in self._history], dtype=float)  # (K, N - 1)
+        out = np.empty((self.n_joints, 2))
+        for j in range(self.n_joints):
+            arg = psi + self.lag[j]
+            basis = np.stack([np.ones_like(psi), np.sin(arg), np.cos(arg)], axis=1)
+            coef, _, rank, _ = np.linalg.lstsq(basis, phi[:, j], rcond=None)
+            if rank < 3:
+                return None
+            out[j] = coef[1:]
+        return out
+
+    def _oscillation(self, phase_rad: float) -> FloatArray | None:
+        """h_j(psi) - c_j of the newest fit (None without one)."""
+        if self._fit is None:
+            return None
+        arg = phase_rad + self.lag
+        return self._fit[:, 0] * np.sin(arg) + self._fit[:, 1] * np.cos(arg)
+
+    def clock_offset_s(self) -> float:
+        """The host's clock minus the robot's, from the delays' bounds (class docstring)."""
+        hi = min(b[0] for b in self._bounds)
+        lo = max(b[1] for b in self._bounds)
+        return hi if not lo <= hi else 0.5 * (lo + hi)
+
+    def _phase(self, alpha: FloatArray, gamma: float, amp: float) -> float | None:
+        """The phase psi from alpha_j - gamma = A_j (sin psi cos lag_j + cos psi sin lag_j), least squares."""
+        a = amp * self.ratio
+        if amp < 1e-3:
+            return None
+        basis = np.stack([a * np.cos(self.lag), a * np.sin(self.lag)], axis=1)
+        (s, c), *_ = np.linalg.lstsq(basis, alpha - gamma, rcond=None)
+        return math.atan2(s, c)
+
+    def reference(self, phase_rad: float, amplitude_rad: float, offset_rad: float) -> FloatArray:
+        """The gait's references alpha_j at phase psi (docs/model.md section 4)."""
+        return amplitude_rad * self.ratio * np.sin(phase_rad + self.lag) + offset_rad
+
+    def at(self, t_s: float) -> JointsAtFrame | None:
+        """The newest sample's joint angles moved to ``t_s`` (None: none, or stale).
+
+        Parameters
+        ----------
+        t_s : float
+            Frame time, host clock since the gait started.
+
+        Returns
+        -------
+        JointsAtFrame or None
+        """
+        sample = self.latest
+        if sample is None:
+            return None
+        age = t_s - sample.t_s
+        if age > self.max_age_s:
+            if not self._stale_logged:
+                self._ignore("stale", f"newest sample {age:.3f} s old at t = {t_s:.3f} s "
+                                      f"(limit {self.max_age_s:g} s)")
+                self._stale_logged = True
+            return None
+        if sample.phase_rad is None:
+            ref_now = ref_then = np.full(self.n_joints, sample.offset_rad)
+        else:
+            psi_now = sample.phase_rad + self.gait.omega_rad_s * age
+            ref_now = self.reference(psi_now, sample.amplitude_rad, sample.offset_rad)
+            ref_then = self.reference(sample.phase_rad, sample.amplitude_rad, sample.offset_rad)
+            own_now, own_then = self._oscillation(psi_now), self._oscillation(sample.phase_rad)
+            if own_now is not None and own_then is not None:
+                ref_now, ref_then = own_now, own_then
+        if sample.phi_rad is not None:
+            return JointsAtFrame(sample.phi_rad + (ref_now - ref_then), True, age)
+        return JointsAtFrame(ref_now, False, age)
+
+
+@dataclass(frozen=True)
+class JointSources:
+    """Standard deviations of the joint-angle sources, for their inverse-variance fusion.
+
+    Attributes
+    ----------
+    camera_rad : float
+        A joint angle from two of the camera's link angles.
+    measured_rad : float
+        A measured angle (ADC, calibration) at its sample time.
+    measured_growth_rad_s : float
+        Added per second of age: the reference's change stands for the joint's.
+    reference_rad : float
+        The gait's reference standing for the joint's angle (servo lag, load).
+    """
+
+    camera_rad: float = 0.025
+    measured_rad: float = 0.005
+    measured_growth_rad_s: float = 0.3
+    reference_rad: float = 0.15
+
+
+def fuse_joints(camera: FloatArray, camera_var: float, prior: FloatArray | None,
+                prior_var: float) -> FloatArray:
+    """Inverse-variance mean of two joint-angle estimates; NaN in one takes the other.
+
+    Parameters
+    ----------
+    camera : ndarray, shape (N - 1,)
+        NaN where the camera did not see both links of a joint.
+    camera_var : float
+    prior : ndarray (N - 1,) or None
+    prior_var : float
+
+    Returns
+    -------
+    ndarray, shape (N - 1,)
+        NaN where neither has a value.
+    """
+    if prior is None:
+        return camera.copy()
+    w_c, w_p = 1.0 / camera_var, 1.0 / prior_var
+    fused = (w_c * camera + w_p * prior) / (w_c + w_p)
+    return np.where(np.isfinite(camera), fused, prior)
 
 
 @dataclass(frozen=True)
@@ -74,16 +412,21 @@ class BodyEstimate:
     state : ndarray, shape (2 N + 4,)
         theta, p, theta_dot, p_dot (the twin's layout).
     measured_links : int
-        Links whose angle the camera measured (the rest from the gait's reference).
+        Links whose angle the camera measured.
+    joint_source : str
+        What the newest frame's joint angles came from besides the camera: ``telemetry`` (the
+        robot's measured angles), ``reference`` (the gait's reference at the telemetry's phase, or
+        at the host's gait clock without telemetry) or ``camera`` (the camera alone).
     """
 
     t_s: float
     state: FloatArray
     measured_links: int
+    joint_source: str = "camera"
 
 
 class BodyStateEstimator:
-    """The whole body state from the camera's link angles and centre of mass (module docstring).
+    """The whole body state from the camera, the telemetry and the gait (module docstring).
 
     Parameters
     ----------
@@ -91,15 +434,57 @@ class BodyStateEstimator:
     gait : Gait
     window : int
         Frames of the rate filter.
+    sources : JointSources
+        The joint-angle sources' standard deviations.
+    use_reference : bool
+        Fuse the gait's reference with the camera when no measured angles come (feedback-free
+        servos); False: the reference only fills links the camera did not read.
+    telemetry : TelemetryJoints, optional
+        Where the Telemetry goes (:meth:`add_telemetry`); by default one with its defaults.
     """
 
-    def __init__(self, model: SwimmerModel, gait: Gait, window: int = 7) -> None:
+    def __init__(self, model: SwimmerModel, gait: Gait, window: int = 7,
+                 sources: JointSources | None = None, use_reference: bool = True,
+                 telemetry: TelemetryJoints | None = None) -> None:
         self.model = model
         self.gait = gait
         self.window = max(int(window), 3)
+        self.sources = sources or JointSources()
+        self.use_reference = use_reference
+        self.telemetry = telemetry or TelemetryJoints(model, gait)
         self._t: deque[float] = deque(maxlen=self.window)
         self._x: deque[FloatArray] = deque(maxlen=self.window)
         self._measured = 0
+        self._source = "camera"
+
+    def add_telemetry(self, t_received_s: float, msg: protocol.Telemetry,
+                      t_polled_before_s: float | None = None) -> bool:
+        """Take one Telemetry (:meth:`TelemetryJoints.add`)."""
+        return self.telemetry.add(t_received_s, msg, t_polled_before_s)
+
+    def joint_prior(self, t_s: float, offset_rad: float) -> tuple[FloatArray, float, str]:
+        """The joint angles at ``t_s`` besides the camera's, with their variance and source.
+
+        The telemetry's measured angles when a fresh sample has them; else the gait's reference at
+        the telemetry's phase (fresh sample without feedback) or at the host's gait clock and the
+        offset last sent (no fresh telemetry).
+
+        Returns
+        -------
+        phi_rad : ndarray (N - 1,)
+        variance_rad2 : float
+        source : str
+            ``telemetry`` or ``reference``.
+        """
+        s = self.sources
+        tel = self.telemetry.at(t_s)
+        if tel is not None and tel.measured:
+            sd = s.measured_rad + s.measured_growth_rad_s * abs(tel.age_s)
+            return tel.phi_rad, sd**2, "telemetry"
+        if tel is not None:
+            return tel.phi_rad, s.reference_rad**2, "reference"
+        alpha, _ = gait_reference(t_s, self.gait, offset_rad, self.model.n_links)
+        return alpha, s.reference_rad**2, "reference"
 
     def observe(self, t_s: float, com_m: FloatArray, link_angles_rad: FloatArray,
                 offset_rad: float = 0.0) -> None:
@@ -112,15 +497,28 @@ class BodyStateEstimator:
         link_angles_rad : ndarray, shape (N,)
             NaN where the camera did not measure a link.
         offset_rad : float
-            The offset the robot is steering with (for the gait's reference of unseen links).
+            The offset the robot is steering with (the host's reference without telemetry).
         """
-        theta = np.asarray(link_angles_rad, dtype=float).copy()
-        known = np.isfinite(theta)
+        seen = np.asarray(link_angles_rad, dtype=float)
+        known = np.isfinite(seen)
         self._measured = int(known.sum())
-        if not known.all():
-            heading = float(np.mean(theta[known])) if known.any() else self._last_heading()
-            theta[~known] = gait_link_angles(self.model, self.gait, t_s, heading,
-                                             offset_rad)[~known]
+        camera = np.diff(seen)
+        # the camera's link angles unwrapped along the body, so a joint never sees a 2 pi jump
+        camera = np.angle(np.exp(1j * camera))
+        prior, var, source = self.joint_prior(t_s, offset_rad)
+        if source == "reference" and not self.use_reference:
+            var = 1e6  # only where the camera has no joint angle
+            source = "camera"
+        joints = fuse_joints(camera, self.sources.camera_rad**2, prior, var)
+        self._source = source
+        if known.any():
+            theta = links_from_joints(joints, 0.0)
+            # place the shape on the links the camera read (least squares: the mean difference)
+            ref = seen[known][0]
+            diff = np.angle(np.exp(1j * (seen[known] - ref))) + ref - theta[known]
+            theta = theta + float(np.mean(diff))
+        else:
+            theta = links_from_joints(joints, self._last_heading())
         if self._x:
             # unwrap against the previous frame, so rates never see a 2 pi jump
             prev = self._x[-1][: self.model.n_links]
@@ -153,10 +551,10 @@ class BodyStateEstimator:
         value, rate = coef[0], coef[1]  # at tau = 0: the fitted value and its derivative
         n = self.model.n_links
         state = np.concatenate([value[:n], value[n:], rate[:n], rate[n:]])
-        return BodyEstimate(float(t[-1]), state, self._measured)
+        return BodyEstimate(float(t[-1]), state, self._measured, self._source)
 
     def latest_pose(self) -> FloatArray | None:
-        """The newest frame's link angles and centre of mass as measured (no fit), (N + 2,)."""
+        """The newest frame's link angles and centre of mass (no rate fit), (N + 2,)."""
         return self._x[-1].copy() if self._x else None
 
 
