@@ -1,0 +1,224 @@
+"""The body state estimate at the tank with the telemetry's joint angles (docs/planning.md, "The robot's
+state at the tank"): fused with the camera's over ``sim://`` (the native firmware's own Telemetry),
+the fallback to the gait's reference without feedback servos, and stale or garbled Telemetry
+ignored with a logged reason.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+import pytest
+
+from eelhost.field.runloop import RunConfig, RunLoop
+from eelhost.link import open_link
+from eelhost.planning.state_estimate import BodyStateEstimator, TelemetryJoints
+from eelhost.vision.localise import Localiser
+from eelhost.vision.synthetic import RenderOptions, SyntheticCamera
+from eelhost.wire import protocol
+from eelhost.xil.virtual_robot import VirtualCamera
+from eelsim.closed_loop import LoopOptions, simulate_closed_loop
+from eelsim.control import gait_reference
+from eelsim.model import SwimmerModel
+from eelsim.robot import load_robot
+from eelsim.scenario import PATH_GAIT, Scenario, load_scenario
+
+ROBOT = load_robot()
+MODEL = SwimmerModel.from_robot(ROBOT)
+N = ROBOT.n_links
+
+
+class _Go:
+    waypoints = None
+    guide = None
+    stop = None
+    detail = ""
+    arrived = False
+    recorded = False
+
+
+class Estimators:
+    """A navigator that only estimates: one estimator fed the Telemetry, one not."""
+
+    replans = 0
+
+    def __init__(self, gait):  # noqa: ANN001
+        self.with_telemetry = BodyStateEstimator(MODEL, gait)
+        self.camera_only = BodyStateEstimator(MODEL, gait, use_reference=False)
+        self.rows = []  # (t, with telemetry, camera only, joint source)
+        self.telemetry = 0
+
+    def on_telemetry(self, t_s, msg, t_before_s=None):  # noqa: ANN001, ANN201
+        self.telemetry += 1
+        self.with_telemetry.add_telemetry(t_s, msg, t_before_s)
+
+    def on_frame(self, t_s, loc, pose, target, offset_rad, guide=None):  # noqa: ANN001, ANN201
+        if loc.found and loc.com_m is not None:
+            for e in (self.with_telemetry, self.camera_only):
+                e.observe(t_s, loc.com_m, loc.link_angles_rad, offset_rad)
+            a, b = self.with_telemetry.estimate(), self.camera_only.estimate()
+            if a is not None and b is not None:
+                self.rows.append((t_s, a.state[:N], b.state[:N], a.joint_source))
+        return _Go()
+
+    def pace(self, t_s):  # noqa: ANN001, ANN201
+        pass
+
+    def close(self):  # noqa: ANN201
+        pass
+
+    def record(self):  # noqa: ANN201
+        return {}
+
+
+def run_over_sim(feedback: int, duration_s: float = 6.0):
+    """The run loop over ``sim://`` (native firmware + twin), path1's gait; the estimates and truth."""
+    sc = load_scenario("path1")
+    link = open_link(f"sim://?speed=0&seed=3&feedback={feedback}", robot=ROBOT)
+    cam = SyntheticCamera(ROBOT, options=RenderOptions(noise_sigma=0.0, jpeg_quality=0))
+    frames = VirtualCamera(link.transport.robot, cam, keep_truth=True)
+    nav = Estimators(sc.gait)
+    RunLoop(link, frames, Localiser(cam.calibration(), ROBOT), ROBOT,
+            RunConfig(sc.gait, list(sc.waypoints_m), duration_s=duration_s), None,
+            navigator=nav).run()
+    truth = {round(p.t_s, 6): np.diff(p.link_angles_rad) for p in frames.truth}
+    return nav, truth
+
+
+def joint_rms(nav: Estimators, truth, which: int, after_s: float = 1.5) -> float:
+    err = [np.diff(row[which]) - truth[round(row[0], 6)] for row in nav.rows if row[0] >= after_s]
+    return float(np.sqrt(np.mean(np.square(err))))
+
+
+def test_the_telemetrys_measured_angles_bring_the_estimate_closer_to_the_true_joints_over_sim():
+    # feedback servos: the native firmware measures the plant's joints and sends phi_mrad; the
+    # estimate with them is closer to the true joint angles of the moving, bent body than the
+    # camera's alone (docs/planning.md gives the figures: 0.015 against 0.022 rad on path1)
+    nav, truth = run_over_sim(feedback=1)
+    assert nav.telemetry >= 50
+    assert {row[3] for row in nav.rows if row[0] >= 1.0} == {"telemetry"}
+    bent = max(np.ptp(np.cumsum(j)) for j in truth.values())
+    assert bent > 0.5  # the body is bent
+    with_telemetry, camera = joint_rms(nav, truth, 1), joint_rms(nav, truth, 2)
+    assert with_telemetry < 0.8 * camera, (with_telemetry, camera)
+
+
+def test_without_feedback_servos_the_estimate_falls_back_to_the_reference_at_the_robots_phase():
+    # hobby servos: Telemetry has no measured angles (phi_mrad -32768, flag clear); the estimate
+    # takes the gait's reference at the phase read from the Telemetry, weighted as the poor
+    # stand-in it is, and stays as close to the truth as the camera alone
+    nav, truth = run_over_sim(feedback=0, duration_s=4.0)
+    assert nav.telemetry >= 30
+    assert {row[3] for row in nav.rows if row[0] >= 1.0} == {"reference"}
+    with_reference, camera = joint_rms(nav, truth, 1), joint_rms(nav, truth, 2)
+    assert with_reference < 1.1 * camera, (with_reference, camera)
+
+
+# -- a synthetic stream: a twin run of the path gait, its Telemetry made here ---------------------
+
+def twin_run(t_end_s: float = 5.0):
+    sc = Scenario(name="swim", amplitude_rad=PATH_GAIT.amplitude_rad,
+                  omega_rad_s=PATH_GAIT.omega_rad_s, beta_rad=PATH_GAIT.beta_rad,
+                  k_theta=PATH_GAIT.k_theta, waypoints_m=[(2.5, 1.3)], duration_s=t_end_s + 0.2,
+                  start_position_m=(0.6, 1.0), start_heading_deg=0.0)
+    return simulate_closed_loop(ROBOT, sc, LoopOptions(stop_at_goal=False))
+
+
+def state_at(run, t_s: float) -> np.ndarray:
+    return np.array([np.interp(t_s, run.t_s, run.states[:, i]) for i in range(run.states.shape[1])])
+
+
+def telemetry_at(run, t_s: float, feedback: bool = True, **change) -> protocol.Telemetry:  # noqa: ANN003
+    """The Telemetry a robot with this run would send at ``t_s`` (its clock = the gait's time)."""
+    alpha, _ = gait_reference(t_s, PATH_GAIT, 0.0, N)
+    phi = np.diff(state_at(run, t_s)[:N])
+    fields = dict(time_us=round(t_s * 1e6), state=protocol.State.RUNNING,
+                  flags=protocol.Flags.JOINT_FEEDBACK if feedback else 0,
+                  alpha_rad=tuple(float(a) for a in alpha), offset_rad=0.0,
+                  amplitude_rad=PATH_GAIT.amplitude_rad, frames_ok=0, frames_bad=0, frames_lost=0,
+                  phi_mrad=tuple(int(round(p * 1000)) if feedback else -32768 for p in phi))
+    fields.update(change)
+    return protocol.Telemetry(**fields)
+
+
+def feed(tel: TelemetryJoints, run, t0_s: float, t1_s: float, latency_s: float = 0.02) -> None:
+    """Telemetry every 0.1 s, read by 30 Hz polls ``latency_s`` or more after it was sent."""
+    polls = np.arange(0.0, t1_s + 0.2, 1 / 30)
+    for t in np.arange(t0_s, t1_s + 1e-9, 0.1):
+        k = int(np.searchsorted(polls, t + latency_s))
+        tel.add(float(polls[k]), telemetry_at(run, t), float(polls[k - 1]))
+
+
+def test_a_sample_is_placed_on_the_hosts_clock_and_moved_to_the_frame_along_its_joints_swing():
+    run = twin_run()
+    tel = TelemetryJoints(MODEL, PATH_GAIT)
+    feed(tel, run, 0.5, 4.0)
+    latest = tel.latest
+    assert latest is not None and latest.t_s == pytest.approx(4.0, abs=0.02)
+    for age in (0.03, 0.06, 0.09):
+        moved = tel.at(4.0 + age)
+        assert moved is not None and moved.measured
+        truth = np.diff(state_at(run, 4.0 + age)[:N])
+        held = np.abs(latest.phi_rad - truth).max()
+        assert np.abs(moved.phi_rad - truth).max() < 0.5 * held + 0.005  # better than holding
+
+
+def test_stale_and_garbled_telemetry_is_ignored_with_a_logged_reason(caplog):
+    run = twin_run()
+    tel = TelemetryJoints(MODEL, PATH_GAIT, max_age_s=0.3)
+    feed(tel, run, 0.5, 3.0)
+    good = tel.latest
+    caplog.set_level(logging.DEBUG, logger="eelhost.planning.state_estimate")
+    bad = {
+        "garbled": telemetry_at(run, 3.1, phi_mrad=(100, -32768, 0, 0, 0)),
+        "clock_back": telemetry_at(run, 2.5),
+        "clock_jump": telemetry_at(run, 3.1, time_us=round(400.0 * 1e6)),
+        "not_running": telemetry_at(run, 3.1, state=protocol.State.FAILSAFE),
+        "joint_count": telemetry_at(run, 3.1, phi_mrad=(0, 0, 0)),
+    }
+    beyond = telemetry_at(run, 3.1, phi_mrad=(2500, 0, 0, 0, 0))
+    for reason, msg in [*bad.items(), ("garbled", beyond)]:
+        assert not tel.add(3.14, msg, 3.11), reason
+        assert tel.latest is good  # nothing of it was taken
+        assert reason in tel.ignored
+        assert any(reason in r.getMessage() for r in caplog.records), reason
+    # stale: no sample for 0.3 s; the estimator falls back to the gait's reference, said so once
+    assert tel.at(3.0 + 0.25) is not None
+    assert tel.at(3.0 + 0.35) is None and tel.ignored["stale"] == 1
+    est = BodyStateEstimator(MODEL, PATH_GAIT, telemetry=tel)
+    for t in (3.35, 3.38, 3.41):
+        x = state_at(run, t)
+        est.observe(t, x[N : N + 2], x[:N])
+    e = est.estimate()
+    assert e is not None and e.joint_source == "reference"
+    assert tel.ignored["stale"] == 1
+    stale = [r for r in caplog.records if "stale" in r.getMessage()]
+    assert len(stale) == 1 and stale[0].levelno == logging.WARNING
+    # a good sample again is taken
+    assert tel.add(3.45, telemetry_at(run, 3.42), 3.42)
+
+
+def test_the_gaits_reference_fills_links_the_camera_did_not_read_with_the_tapered_amplitude():
+    run = twin_run()
+    est = BodyStateEstimator(MODEL, PATH_GAIT)
+    camera_only = BodyStateEstimator(MODEL, PATH_GAIT, use_reference=False)
+    for t in np.arange(3.0, 4.0 + 1e-9, 1 / 30):
+        x = state_at(run, t)
+        seen = x[:N].copy()
+        seen[-2:] = np.nan  # the two head links not read
+        est.observe(t, x[N : N + 2], seen)
+        camera_only.observe(t, x[N : N + 2], x[:N])
+    e, c = est.estimate(), camera_only.estimate()
+    assert e is not None and c is not None
+    assert e.joint_source == "reference" and e.measured_links == N - 2
+    assert c.joint_source == "camera"
+    truth = state_at(run, 4.0)[:N]
+    seen_c, seen_e = camera_only.latest_pose(), est.latest_pose()
+    assert seen_c is not None and seen_e is not None
+    assert np.abs(seen_c[:N] - truth).max() < 1e-9  # the camera alone, all links seen, as seen
+    # the unseen head's joints come from the reference (the taper A_j = A (N - j) / (N + 1))
+    alpha, _ = gait_reference(4.0, PATH_GAIT, 0.0, N)
+    assert np.abs(np.diff(seen_e[:N])[-2:] - alpha[-2:]).max() < 1e-9
+    # the body is placed on the links the camera read; off there by the head's lag only
+    assert np.abs(seen_e[:N] - truth).max() < 0.3
