@@ -104,6 +104,9 @@ def test_bench_summary_counts_plans_collisions_and_goals():
     assert "with a plan: 2 (67%)" in text and "1 of 2 (50.0%)" in text
     assert "processor time of the planning (the same span; " in text and "median 0.50 s" in text
     assert "collision probability at most 6.0%" in text
+    # b, repaired once, touched; a passed at once and did not
+    assert ("repaired after a failed check: 1 (worlds with contact in the fresh draws: 1 of the 1 "
+            "repaired plans, 0 of the 1 plans that passed at once)") in text
     assert "over the search's planned time, median 1.35 (max 1.50)" in text
 
 

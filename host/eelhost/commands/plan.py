@@ -122,8 +122,9 @@ def add_check_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--guidance", choices=GUIDANCE_LAWS.names(), default=PURSUIT.name,
                    help="the robot's guidance law for the search and the check: "
                    + "; ".join(f"{name}: {text}" for name, text in GUIDANCE_LAWS.descriptions().items())
-                   + f" (the tank's run loop steers with {PURSUIT.name}; {PLANNING_GUIDANCE.name} "
-                   "has the planner's stiffer heading gain; docs/planning.md, \"The guidance\")")
+                   + f" ({PLANNING_GUIDANCE.name} has the planner's stiffer heading gain; a plan "
+                   "is followed with the law it was checked with: eelbot run --plan WORLD "
+                   "--guidance ...; docs/planning.md, \"The guidance\")")
 
 
 def _unknown_current(text: str) -> float:

@@ -145,13 +145,17 @@ class BenchSummary:
         out.append(f"- processor time of the planning (the same span; what the wall-clock figures "
                    f"are when the machine is otherwise idle): median {statistics.median(cpu):.2f} s, "
                    f"90th percentile {np.percentile(cpu, 90):.2f} s")
-        out.append(f"- plans repaired after a failed check: {repaired}")
+        hit = sum(bool(r.collision) for r in self.planned if r.repairs > 0)
+        out.append(f"- plans repaired after a failed check: {repaired} (worlds with contact in "
+                   f"the fresh draws: {hit} of the {repaired} repaired plans, "
+                   f"{self.collisions - hit} of the {p - repaired} plans that passed at once)")
         if p:
             upper = sorted(r.collision_upper for r in self.planned)
             late = sorted(r.arrival_spread_s[2] / r.planned_arrival_s for r in self.planned)
             out.append(f"- each plan's check: 0 failures in its draws, collision probability at "
-                       f"most {statistics.median(upper):.1%} (upper end of the 95 % "
-                       f"Clopper-Pearson interval, median over the planned worlds)")
+                       f"most {statistics.median(upper):.1%} (upper end of its Clopper-Pearson "
+                       f"interval, 95 % over every plan the repairs may check; median over the "
+                       f"planned worlds)")
             out.append(f"- arrival: the 95th percentile of the check runs' arrival times over "
                        f"the search's planned time, median {statistics.median(late):.2f} (max "
                        f"{late[-1]:.2f})")

@@ -96,8 +96,9 @@ ROBUST_MARGIN_M = 0.002
 PLANNING_GUIDANCE = GuidanceLaw("ilos", lookahead_m=0.2, integral_gain=0.02, heading_gain=1.0)
 """The integral line-of-sight law a plan may be searched, checked and followed with
 (``eelbot plan --guidance ilos``; docs/planning.md, "The guidance"): it holds each leg in a current
-the planner does not know, where the paper's pure pursuit drifts off it. Not the default: the
-tank's run loop steers with pure pursuit (docs/planning.md says what is missing)."""
+the planner does not know, where the paper's pure pursuit drifts off it. Not the default (the
+tank's closed-loop A/B kept pure pursuit, docs/planning.md); the tank's run loop steers with either
+(``eelbot run --plan WORLD --guidance ilos``)."""
 
 SOFT_MARGIN_BASE_M = 0.03
 """The soft margin's room over the hard margin for the coefficients' uncertainty alone, m."""
@@ -277,6 +278,10 @@ class Planner:
     settings : SearchSettings, optional
     draws : int
         Draws of the water the check swims (:data:`CHECK_DRAWS`).
+    repair_draws : int, optional
+        Draws a repaired plan is checked over (default ``draws``): more draws for a plan that
+        comes after others failed, where plans that pass by chance are likelier
+        (docs/planning.md, "The planner", step 4).
     unknown_current_m_s : float
         Bound of the current the planner is not told of, checked in every draw at that speed in
         directions round the circle.
@@ -296,8 +301,8 @@ class Planner:
         Threads of the batched twin.
     guidance : GuidanceLaw
         The robot's guidance law, for the search and the check (default the paper's pure
-        pursuit, which the tank's run loop steers with; :data:`PLANNING_GUIDANCE` is the
-        integral line-of-sight law). It replaces the one of ``options``.
+        pursuit; :data:`PLANNING_GUIDANCE` is the integral line-of-sight law). It replaces the
+        one of ``options``.
     soft_margin : bool
         Give the search a soft margin (``SearchSettings.preferred_clearance_m``), unless
         ``settings`` sets its own: the hard margin plus :data:`SOFT_MARGIN_BASE_M` plus
@@ -318,6 +323,7 @@ class Planner:
         options: LoopOptions | None = None,
         settings: SearchSettings | None = None,
         draws: int = CHECK_DRAWS,
+        repair_draws: int | None = None,
         unknown_current_m_s: float = DEFAULT_UNKNOWN_CURRENT_M_S,
         seed: int = 0,
         robust_search: bool = False,
@@ -338,6 +344,7 @@ class Planner:
         self.unknown_current_m_s = float(unknown_current_m_s)
         self.seed = int(seed)
         self.draws = int(draws)
+        self.repair_draws = int(draws if repair_draws is None else repair_draws)
         self.water = coefficients.water_draws(np.random.default_rng(seed), draws,
                                               self.unknown_current_m_s)
         self._waters: dict[int, list[WaterDraw]] = {0: self.water}
@@ -521,8 +528,9 @@ class Planner:
     def waters(self, attempt: int) -> list[WaterDraw]:
         """The draws of the water the ``attempt``-th plan of a planning call is checked over.
 
-        Attempt 0 (the first plan) has the draws seeded with ``seed``; each repair its own,
-        seeded with ``(seed, attempt)``: independent of one another and of every other seed's.
+        Attempt 0 (the first plan) has ``draws`` draws seeded with ``seed``; each repair its own
+        ``repair_draws`` seeded with ``(seed, attempt)``: independent of one another and of
+        every other seed's.
 
         Parameters
         ----------
@@ -535,7 +543,7 @@ class Planner:
         """
         if attempt not in self._waters:
             rng = np.random.default_rng([self.seed, attempt])
-            self._waters[attempt] = self.coefficients.water_draws(rng, self.draws,
+            self._waters[attempt] = self.coefficients.water_draws(rng, self.repair_draws,
                                                                   self.unknown_current_m_s)
         return self._waters[attempt]
 
