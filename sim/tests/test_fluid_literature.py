@@ -223,13 +223,14 @@ def test_pure_resistive_force_theory_only_dissipates(robot):
                                   if isinstance(law, LiftLaw)])
 def test_lift_is_perpendicular_to_the_relative_flow_with_the_sin_two_alpha_magnitude(base):
     law = FLUID_LAWS[f"{base}_lift"]
-    assert law.coefficient_names == (*get_fluid_law(base).coefficient_names, "C_L")
+    assert law.coefficient_names == (*get_fluid_law(base).coefficient_names, "C_L", "C_D_alpha")
     rng = np.random.default_rng(1)
     n = 4
     coeffs = rng.uniform(law.bounds[:, 0], law.bounds[:, 1])
+    coeffs[-1] = 0.0  # the lift alone: no drag rise
     half, a, b = np.full(n, 0.05), np.full(n, 0.025), np.full(n, 0.02)
     lifted = law.link_coefficients(half, a, b, coeffs, 1000.0)
-    plain = get_fluid_law(base).link_coefficients(half, a, b, coeffs[:-1], 1000.0)
+    plain = get_fluid_law(base).link_coefficients(half, a, b, coeffs[:-2], 1000.0)
     theta, om, rel = rng.uniform(-3, 3, n), rng.normal(0, 2, n), rng.normal(0, 0.1, (n, 2))
     rel[0] = 0.0  # a link at rest in the water feels no lift
     motion = LinkMotion(np.sin(theta), np.cos(theta), om, rel[:, 0], rel[:, 1])
@@ -244,12 +245,51 @@ def test_lift_is_perpendicular_to_the_relative_flow_with_the_sin_two_alpha_magni
     alpha = np.arctan2(-np.sin(theta) * rel[:, 0] + np.cos(theta) * rel[:, 1],
                        np.cos(theta) * rel[:, 0] + np.sin(theta) * rel[:, 1])
     area = 2 * a * 2 * half
-    magnitude = 0.5 * 1000.0 * area * coeffs[-1] * np.abs(np.sin(2 * alpha)) * (rel**2).sum(1)
+    magnitude = 0.5 * 1000.0 * area * coeffs[-2] * np.abs(np.sin(2 * alpha)) * (rel**2).sum(1)
     assert np.allclose(np.hypot(lx, ly), magnitude, rtol=1e-12, atol=1e-18)
     assert lx[0] == 0.0 and ly[0] == 0.0
     normal = -np.sin(theta) * lx + np.cos(theta) * ly
     wn = -np.sin(theta) * rel[:, 0] + np.cos(theta) * rel[:, 1]
     assert np.all(normal * wn <= 0.0)  # its normal part opposes the sideways motion, as a plate's
+
+
+@pytest.mark.parametrize("base", ["galilean", "morison", "resistive"])
+def test_the_drag_rise_opposes_the_flow_with_the_sin_squared_magnitude_and_its_crossflow_moment(base):
+    law = FLUID_LAWS[f"{base}_lift"]
+    rng = np.random.default_rng(3)
+    n = 5
+    coeffs = rng.uniform(law.bounds[:, 0], law.bounds[:, 1])
+    coeffs[-2] = 0.0  # the drag rise alone: no lift
+    half, a, b = rng.uniform(0.03, 0.06, n), rng.uniform(0.02, 0.03, n), np.full(n, 0.02)
+    rho = 1000.0
+    risen = law.link_coefficients(half, a, b, coeffs, rho)
+    plain = get_fluid_law(base).link_coefficients(half, a, b, coeffs[:-2], rho)
+    theta, om, rel = rng.uniform(-3, 3, n), rng.normal(0, 2, n), rng.normal(0, 0.1, (n, 2))
+    rel[0] = 0.0
+    motion = LinkMotion(np.sin(theta), np.cos(theta), om, rel[:, 0], rel[:, 1])
+    with_rise = law.forces(risen, motion, CURRENT)
+    without = get_fluid_law(base).forces(plain, motion, CURRENT)
+    dx, dy = with_rise.fx - without.fx, with_rise.fy - without.fy
+    # the variant is its base law plus the drag rise (to rounding)
+    assert np.allclose((dx, dy), with_rise.parts["rise"], rtol=0, atol=1e-14)
+    dx, dy = with_rise.parts["rise"]
+    speed2 = (rel**2).sum(1)
+    # along -w: no component across the flow, and it takes energy
+    assert np.allclose(dx * rel[:, 1] - dy * rel[:, 0], 0.0, rtol=0, atol=1e-15)
+    assert np.all(dx * rel[:, 0] + dy * rel[:, 1] <= 0.0)
+    wn = -np.sin(theta) * rel[:, 0] + np.cos(theta) * rel[:, 1]
+    sin2 = np.divide(wn**2, speed2, out=np.zeros(n), where=speed2 > 0)
+    magnitude = 0.5 * rho * (2 * a) * (2 * half) * coeffs[-1] * sin2 * speed2
+    assert np.allclose(np.hypot(dx, dy), magnitude, rtol=1e-12, atol=1e-18)
+    assert dx[0] == 0.0 and dy[0] == 0.0
+    # the moment: the cross-flow drag 1/2 rho 2a C_D_alpha |s w| s w integrated along the link
+    # turning about its centre (quadrature, independent of the closed form)
+    dtau = with_rise.torque - without.torque
+    for i in range(n):
+        per_length = 0.5 * rho * 2 * a[i] * coeffs[-1]
+        moment = quad(lambda s, k=per_length, w=om[i]: -s * k * abs(s * w) * s * w,
+                      -half[i], half[i])[0]
+        assert np.isclose(dtau[i], moment, rtol=1e-10, atol=1e-18)
 
 
 def test_a_lift_variant_with_no_lift_is_its_base_law(robot):

@@ -27,7 +27,8 @@ tangential drag depends on the normal flow. Yaw damping: the cross-flow drag int
 link turning about its centre, tau = -lambda_q |theta_dot| theta_dot, lambda_q = rho a C_D2 l^4 / 2.
 Added mass mu_n and added inertia lambda_1 from C_a and C_m as the paper's, with the reactive
 terms of the relative motion (:mod:`eelsim.fluid.relative`). With C_a = C_m = 0 the links carry no
-water along: no added-mass inertia, which no candidate law's bounds allow (C_a >= 0.05).
+water along: no added-mass inertia (the candidate laws' C_a reaches 0 since issue 32; it
+stopped at 0.05 before).
 
 Typical values (:data:`FOIL_DRAG`): C_D0 = 0.008 (table 3's C_f), C_D2 = 1.0 (a circular
 cylinder's cross-flow drag), C_L = 1.0 (a flat plate's sin alpha cos alpha form with 2 pi alpha

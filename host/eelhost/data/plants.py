@@ -194,8 +194,8 @@ FOIL_LIFT = register_plant(Plant(
     "the servo joints", TankSettings(joints=_SERVO_JOINTS), "foil"))
 
 NO_ADDED_MASS = register_plant(Plant(
-    "no_added_mass", "the foil water without added mass or added inertia (C_a = C_m = 0, below "
-    "every candidate's bound), on the servo joints", TankSettings(joints=_SERVO_JOINTS), "foil",
+    "no_added_mass", "the foil water without added mass or added inertia (C_a = C_m = 0: the links "
+    "carry no water along), on the servo joints", TankSettings(joints=_SERVO_JOINTS), "foil",
     (("C_a", 0.0), ("C_m", 0.0))))
 
 ALL = register_plant(Plant(

@@ -74,7 +74,8 @@ SCREEN_FOLD_ITERATIONS = 2  # and of a screening fold's refit
 SURVIVORS = 4  # at most this many candidates pass the screen to the full search
 SURVIVOR_FACTOR = 2.0  # and only those within this factor of the screen's best mean held-out error
 FAMILY_FACTOR = 4.0  # a law family's best passes too when within this factor of the screen's best
-ABSENT = {"C_L": 0.0}  # a term the other model lacks starts switched off (a lift variant's C_L)
+# a term the other model lacks starts switched off (a lift variant's lift and drag rise)
+ABSENT = {"C_L": 0.0, "C_D_alpha": 0.0}
 ONE_SET_CANDIDATES = 1  # the best separate-set models also tried with one set for all motions
 ONE_SET = "one set"  # the suffix of a one-set candidate's name
 
@@ -86,7 +87,7 @@ def carry_over(values: Mapping[str, float], space: ParameterSpace, default: np.n
     ``C_f_quad``) takes its unsplit one (``C_f``), the ``galilean`` law being the split law with
     both equal (from the paper's law this is only a start: the split law adds the reactive
     terms); a term the other model lacks and that can be switched off (:data:`ABSENT`: a lift
-    variant's ``C_L``) starts off, so a ``<law>_lift`` candidate starts from its base law's fit
+    variant's ``C_L`` and ``C_D_alpha``) starts off, so a ``<law>_lift`` candidate starts from its base law's fit
     exactly; anything else keeps ``default``. The result is clipped to the bounds.
 
     Parameters

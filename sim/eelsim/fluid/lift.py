@@ -1,20 +1,28 @@
-"""A lift force on each link that any fluid law can carry: the ``<law>_lift`` variants.
+"""A foil's lift and drag rise on each link that any fluid law can carry: the ``<law>_lift`` variants.
 
-docs/model.md section 2, "Lift", has the equation and its source. A link moving through the water
-with velocity w = w_t t + w_n n relative to it, at the angle of attack alpha (tan alpha =
-w_n / w_t), feels besides its law's forces a quasi-steady lift perpendicular to w,
+docs/model.md section 2, "Lift", has the equations and their sources. A link moving through the
+water with velocity w = w_t t + w_n n relative to it, at the angle of attack alpha (tan alpha =
+w_n / w_t), feels besides its law's forces the quasi-steady forces of a flat plate (a blade
+element): a lift perpendicular to w and a drag rise along -w,
 
-    L = 1/2 rho S C_L sin(2 alpha) |w|^2 = rho S C_L w_t w_n,       S = 2a 2l (its side area)
-    f_lift = k_L w_t w_n (w_n t - w_t n) / |w|,                     k_L = rho S C_L
+    L = 1/2 rho S C_L sin(2 alpha) |w|^2 = rho S C_L w_t w_n,            S = 2a 2l (its side area)
+    D = 1/2 rho S C_D_alpha sin^2(alpha) |w|^2
+    f_lift = k_L w_t w_n (w_n t - w_t n) / |w|,                          k_L = rho S C_L
+    f_rise = -k_D w_n^2 (w_t t + w_n n) / |w|,                           k_D = 1/2 rho S C_D_alpha
+    tau_rise = -lambda_D |theta_dot| theta_dot,                          lambda_D = k_D l^3 / 4
 
-(the flat plate's sin 2 alpha lift, Dickinson, Lehmann and Sane, Science 284 (1999) 1954-1960;
-Wang, Birch and Dickinson, J. Exp. Biol. 207 (2004) 449-460: C_L = 1.2 sin 2 alpha). Its normal
-part opposes w_n, as a plate's pressure does; it acts at the link's centre (no torque) and is
-perpendicular to w, so it does no work. ``with_lift(law)`` makes the variant
-``<law>_lift``: the law's coefficients then ``C_L``, its forces plus f_lift in both forms. Every law
-registered before the variants has one (:mod:`eelsim.fluid`); they are not fitting candidates by
-default (docs/model.md: each would double the comparison's grid), but any is fitted when named
-(``eelbot report --laws galilean_lift``) and they make test plants whose water no candidate holds.
+(the flat plate's sin 2 alpha lift and its sin^2 alpha drag rise, measured together: Dickinson,
+Lehmann and Sane, Science 284 (1999) 1954-1960; Wang, Birch and Dickinson, J. Exp. Biol. 207
+(2004) 449-460: C_L = 1.2 sin 2 alpha, C_D = 1.4 - cos 2 alpha = 0.4 + 2 sin^2 alpha). The lift's
+normal part opposes w_n, as a plate's pressure does; it acts at the link's centre and is
+perpendicular to w, so it does no work. The drag rise is the same drag a link's own law may
+already hold at alpha = 0 grown with the angle; at alpha = 90 degrees (pure cross-flow) it is a
+cross-flow drag of coefficient C_D_alpha, and its moment on a link turning about its centre is
+that cross-flow drag integrated along the link (lambda_D = rho a C_D_alpha l^4 / 2); it only
+dissipates. ``with_lift(law)`` makes the variant ``<law>_lift``: the law's coefficients then
+``C_L`` and ``C_D_alpha`` (default 0: lift alone), its forces plus both terms in both forms. Every
+law registered before the variants has one (:mod:`eelsim.fluid`); a variant is a fitting
+candidate when its base law is one (docs/estimation.md, "Model comparison").
 """
 
 from __future__ import annotations
@@ -42,6 +50,9 @@ _NonNegative = Annotated[float, Field(ge=0.0, allow_inf_nan=False)]
 LIFT_BOUNDS = (0.0, 3.0)
 """Search bounds of C_L: none to about the thin-airfoil slope's pi (flat plate 1.2)."""
 
+DRAG_RISE_BOUNDS = (0.0, 3.0)
+"""Search bounds of C_D_alpha: none to a flat plate's 3.1 (Dickinson et al.; Wang et al.: 2)."""
+
 
 @dataclass(frozen=True)
 class LiftLinkFluid(LinkFluid):
@@ -53,14 +64,21 @@ class LiftLinkFluid(LinkFluid):
         The base law's per-link coefficients (mu_n and lambda_1 are the base's).
     k_lift : ndarray
         k_L = rho 2a 2l C_L, kg/m, shape (..., N).
+    k_rise : ndarray
+        k_D = 1/2 rho 2a 2l C_D_alpha, kg/m.
+    lambda_rise : ndarray
+        lambda_D = k_D l^3 / 4, kg m^2.
     """
 
     base: LinkFluid
     k_lift: FloatArray
+    k_rise: FloatArray
+    lambda_rise: FloatArray
 
     def kernel_values(self) -> dict[str, FloatArray]:
-        """The base law's rows and ``klift``."""
-        return {**self.base.kernel_values(), "klift": self.k_lift}
+        """The base law's rows, ``klift``, ``krise`` and ``lrise``."""
+        return {**self.base.kernel_values(), "klift": self.k_lift, "krise": self.k_rise,
+                "lrise": self.lambda_rise}
 
 
 def lift_force(k_lift: FloatArray, vt: FloatArray,
@@ -85,6 +103,28 @@ def lift_force(k_lift: FloatArray, vt: FloatArray,
     return q * vn, -q * vt
 
 
+def drag_rise_force(k_rise: FloatArray, vt: FloatArray,
+                    vn: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The angle-of-attack drag along t and n on each link (module docstring).
+
+    Parameters
+    ----------
+    k_rise : ndarray
+        k_D per link, kg/m.
+    vt, vn : ndarray
+        Tangential and normal velocity of the centre relative to the water, m/s.
+
+    Returns
+    -------
+    (f_t, f_n) : ndarrays
+        N, along -w; zero where the link is at rest in the water.
+    """
+    speed = np.sqrt(vt * vt + vn * vn)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        q = np.where(speed > 0.0, k_rise * vn * vn / speed, 0.0)
+    return -q * vt, -q * vn
+
+
 class LiftLaw(FluidLaw):
     """A base law's forces plus the lift (see the module docstring); built by :func:`with_lift`."""
 
@@ -98,23 +138,28 @@ class LiftLaw(FluidLaw):
         coefficients: ArrayLike,
         water_density_kg_m3: ArrayLike,
     ) -> LiftLinkFluid:
-        """The base law's values from all but the last coefficient; k_L from the last, C_L."""
+        """The base law's values from all but the last two coefficients; then C_L and C_D_alpha."""
         c = np.asarray(coefficients, dtype=float)
         k = len(self.coefficient_names)
         if c.shape[-1:] != (k,):
             raise ValueError(f"expected {k} coefficients on the last axis, got shape {c.shape}")
         base = self.base.link_coefficients(half_length_m, half_axis_vertical_m,
-                                           half_axis_horizontal_m, c[..., :-1],
+                                           half_axis_horizontal_m, c[..., :-2],
                                            water_density_kg_m3)
         l_ = np.asarray(half_length_m, dtype=float)
         a = np.asarray(half_axis_vertical_m, dtype=float)
         rho = np.asarray(water_density_kg_m3, dtype=float)
-        k_lift = rho * (2.0 * a) * (2.0 * l_) * c[..., -1]
+        side = rho * (2.0 * a) * (2.0 * l_)
+        k_lift = side * c[..., -2]
+        k_rise = 0.5 * side * c[..., -1]
+        shape = base.mu_n.shape
         return LiftLinkFluid(mu_n=base.mu_n, lambda_1=base.lambda_1, base=base,
-                             k_lift=np.broadcast_to(k_lift, base.mu_n.shape).copy())
+                             k_lift=np.broadcast_to(k_lift, shape).copy(),
+                             k_rise=np.broadcast_to(k_rise, shape).copy(),
+                             lambda_rise=np.broadcast_to(k_rise * l_**3 / 4.0, shape).copy())
 
     def forces(self, fluid: LinkFluid, motion: LinkMotion, current_m_s: FloatArray) -> LinkForces:
-        """The base law's forces plus the lift (part ``"lift"``)."""
+        """The base law's forces plus the lift (part ``"lift"``) and the drag rise (``"rise"``)."""
         if not isinstance(fluid, LiftLinkFluid):
             raise TypeError(f"the {self.name} law needs its own link coefficients, got "
                             f"{type(fluid).__name__}")
@@ -124,26 +169,34 @@ class LiftLaw(FluidLaw):
         vn = -s * motion.rel_vx + c * motion.rel_vy
         ft, fn = lift_force(fluid.k_lift, vt, vn)
         lift = (ft * c - fn * s, ft * s + fn * c)
-        return LinkForces(fx=body.fx + lift[0], fy=body.fy + lift[1], torque=body.torque,
-                          parts={**body.parts, "lift": lift})
+        dt, dn = drag_rise_force(fluid.k_rise, vt, vn)
+        rise = (dt * c - dn * s, dt * s + dn * c)
+        om = motion.omega
+        return LinkForces(fx=body.fx + lift[0] + rise[0], fy=body.fy + lift[1] + rise[1],
+                          torque=body.torque - fluid.lambda_rise * np.abs(om) * om,
+                          parts={**body.parts, "lift": lift, "rise": rise})
 
     def emit_link_forces(self, code: KernelCode, link: int, still_water: bool) -> None:
-        """The base law's code, then the lift added to its (negated) outputs."""
+        """The base law's code, then the lift and drag rise added to its (negated) outputs."""
         self.base.emit_link_forces(code, link, still_water)
-        line = code.line
+        line, w = code.line, code.w
         line("fl_lift_vt = c * lvx + s * lvy")
         line("fl_lift_vn = c * lvy - s * lvx")
         line("fl_lift_speed = _vsqrt(fl_lift_vt * fl_lift_vt + fl_lift_vn * fl_lift_vn)")
-        line(f"fl_lift_q = ({code.w('klift', link)} * fl_lift_vt * fl_lift_vn / fl_lift_speed)"
-             " if fl_lift_speed > 0.0 else 0.0")
-        line("fl_lift_t = fl_lift_q * fl_lift_vn")  # the lift along t; along n it is -q w_t
-        line("fnn = fnn + fl_lift_q * fl_lift_vt")
-        line("fxn = fxn - fl_lift_t * c - fl_lift_q * fl_lift_vt * s")
-        line("fyn = fyn - fl_lift_t * s + fl_lift_q * fl_lift_vt * c")
+        line("fl_lift_inv = (1.0 / fl_lift_speed) if fl_lift_speed > 0.0 else 0.0")
+        line(f"fl_lift_q = {w('klift', link)} * fl_lift_vt * fl_lift_vn * fl_lift_inv")
+        line(f"fl_rise_q = {w('krise', link)} * fl_lift_vn * fl_lift_vn * fl_lift_inv")
+        # the water's force on the link along t and n: lift (q_L w_n, -q_L w_t), rise -q_D w
+        line("fl_lift_t = fl_lift_q * fl_lift_vn - fl_rise_q * fl_lift_vt")
+        line("fl_lift_n = -fl_lift_q * fl_lift_vt - fl_rise_q * fl_lift_vn")
+        line("fnn = fnn - fl_lift_n")
+        line("fxn = fxn - fl_lift_t * c + fl_lift_n * s")
+        line("fyn = fyn - fl_lift_t * s - fl_lift_n * c")
+        line(f"tqn = tqn + {w('lrise', link)} * abs(om) * om")
 
 
 def with_lift(base: FluidLaw) -> LiftLaw:
-    """The variant ``<base>_lift`` of ``base``: its coefficients then ``C_L``, its forces plus lift.
+    """The variant ``<base>_lift`` of ``base``: its coefficients then ``C_L``, ``C_D_alpha``.
 
     Parameters
     ----------
@@ -159,19 +212,22 @@ def with_lift(base: FluidLaw) -> LiftLaw:
     name = f"{base.name}_lift"
     record = f"{base.coefficients.__name__}Lift"
     namespace: dict[str, Any] = {
-        "__annotations__": {"law_name": ClassVar[str], "C_L": _NonNegative},
+        "__annotations__": {"law_name": ClassVar[str], "C_L": _NonNegative,
+                            "C_D_alpha": _NonNegative},
         "law_name": name,
+        "C_D_alpha": 0.0,  # lift alone unless given (records written before the drag rise)
         "__module__": __name__,
         "__qualname__": record,
-        "__doc__": f"The coefficients of the ``{base.name}`` law and the lift's C_L.",
+        "__doc__": f"The coefficients of the ``{base.name}`` law, the lift's C_L and the drag "
+                   "rise's C_D_alpha.",
     }
     coefficients = type(record, (base.coefficients,), namespace)
     setattr(sys.modules[__name__], record, coefficients)  # importable by name: it pickles
     law_name = f"{type(base).__name__}Lift"
     law_class = type(law_name, (LiftLaw,), {
         "name": name, "coefficients": coefficients, "base": base, "candidate": declared_candidate(base),
-        "default_bounds": (*base.default_bounds, LIFT_BOUNDS),
-        "kernel_rows": (*base.kernel_rows, "klift"),
+        "default_bounds": (*base.default_bounds, LIFT_BOUNDS, DRAG_RISE_BOUNDS),
+        "kernel_rows": (*base.kernel_rows, "klift", "krise", "lrise"),
         "__module__": __name__,
         "__qualname__": law_name,
     })

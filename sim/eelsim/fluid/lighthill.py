@@ -122,7 +122,7 @@ class LighthillLaw(RelativeMotionLaw):
     coefficients: ClassVar[type[FluidCoefficients]] = LighthillCoefficients
     # the paper's drag bounds; C_a from none to three times the potential-flow value
     default_bounds: ClassVar[tuple[tuple[float, float], ...]] = (
-        (0.0005, 0.1), (0.05, 3.0), (0.05, 3.0))
+        (0.0005, 0.1), (0.05, 3.0), (0.0, 3.0))
     kernel_rows: ClassVar[tuple[str, ...]] = MORISON.kernel_rows
 
     def link_coefficients(

@@ -103,7 +103,7 @@ class LinearQuadraticLaw(RelativeMotionLaw):
     # the paper's bounds for each drag term; the quadratic terms may vanish (at 0.1 m/s the
     # linear terms give about ten times the force, docs/model.md section 2)
     default_bounds: ClassVar[tuple[tuple[float, float], ...]] = (
-        (0.0005, 0.1), (0.05, 3.0), (0.0, 0.1), (0.0, 3.0), (0.05, 3.0), (0.0, 1.0))
+        (0.0005, 0.1), (0.05, 3.0), (0.0, 0.1), (0.0, 3.0), (0.0, 3.0), (0.0, 1.0))
     kernel_rows: ClassVar[tuple[str, ...]] = ("ct1", "cn1", "ct2", "cn2", "lambda2", "lambda3")
 
     def link_coefficients(

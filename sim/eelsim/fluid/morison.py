@@ -103,9 +103,10 @@ class MorisonLaw(FluidLaw):
     coefficients: ClassVar[type[FluidCoefficients]] = HydroCoefficients
     # Table 3 of the paper: C_f 0.008-0.009, C_d 0.78-0.98, C_a 0.62-1.17, C_m 0.001-0.007;
     # slender-body estimates (Kelasidi) put C_f near 0.03 and C_a, C_m near 1. Wide enough for
-    # both (docs/model.md section 6).
+    # both; C_a and C_m from 0, a body that carries no water along being a model the data may
+    # choose (docs/model.md section 6).
     default_bounds: ClassVar[tuple[tuple[float, float], ...]] = (
-        (0.0005, 0.1), (0.05, 3.0), (0.05, 3.0), (0.0, 1.0))
+        (0.0005, 0.1), (0.05, 3.0), (0.0, 3.0), (0.0, 1.0))
     kernel_rows: ClassVar[tuple[str, ...]] = ("ct", "cn", "lambda2", "lambda3")
 
     def link_coefficients(
