@@ -11,108 +11,39 @@ import logging
 import numpy as np
 import pytest
 
-from eelhost.field.runloop import RunConfig, RunLoop
-from eelhost.link import open_link
+from eelhost.planning.state_bench import measure
 from eelhost.planning.state_estimate import BodyStateEstimator, TelemetryJoints
-from eelhost.vision.localise import Localiser
-from eelhost.vision.synthetic import RenderOptions, SyntheticCamera
 from eelhost.wire import protocol
-from eelhost.xil.virtual_robot import VirtualCamera
 from eelsim.closed_loop import LoopOptions, simulate_closed_loop
 from eelsim.control import gait_reference
 from eelsim.model import SwimmerModel
 from eelsim.robot import load_robot
-from eelsim.scenario import PATH_GAIT, Scenario, load_scenario
+from eelsim.scenario import PATH_GAIT, Scenario
 
 ROBOT = load_robot()
 MODEL = SwimmerModel.from_robot(ROBOT)
 N = ROBOT.n_links
 
 
-class _Go:
-    waypoints = None
-    guide = None
-    stop = None
-    detail = ""
-    arrived = False
-    recorded = False
-
-
-class Estimators:
-    """A navigator that only estimates: one estimator fed the Telemetry, one not."""
-
-    replans = 0
-
-    def __init__(self, gait):  # noqa: ANN001
-        self.with_telemetry = BodyStateEstimator(MODEL, gait)
-        self.camera_only = BodyStateEstimator(MODEL, gait, use_reference=False)
-        self.rows = []  # (t, with telemetry, camera only, joint source)
-        self.telemetry = 0
-
-    def on_telemetry(self, t_s, msg, t_before_s=None):  # noqa: ANN001, ANN201
-        self.telemetry += 1
-        self.with_telemetry.add_telemetry(t_s, msg, t_before_s)
-
-    def on_frame(self, t_s, loc, pose, target, offset_rad, guide=None):  # noqa: ANN001, ANN201
-        if loc.found and loc.com_m is not None:
-            for e in (self.with_telemetry, self.camera_only):
-                e.observe(t_s, loc.com_m, loc.link_angles_rad, offset_rad)
-            a, b = self.with_telemetry.estimate(), self.camera_only.estimate()
-            if a is not None and b is not None:
-                self.rows.append((t_s, a.state[:N], b.state[:N], a.joint_source))
-        return _Go()
-
-    def pace(self, t_s):  # noqa: ANN001, ANN201
-        pass
-
-    def close(self):  # noqa: ANN201
-        pass
-
-    def record(self):  # noqa: ANN201
-        return {}
-
-
-def run_over_sim(feedback: int, duration_s: float = 6.0):
-    """The run loop over ``sim://`` (native firmware + twin), path1's gait; the estimates and truth."""
-    sc = load_scenario("path1")
-    link = open_link(f"sim://?speed=0&seed=3&feedback={feedback}", robot=ROBOT)
-    cam = SyntheticCamera(ROBOT, options=RenderOptions(noise_sigma=0.0, jpeg_quality=0))
-    frames = VirtualCamera(link.transport.robot, cam, keep_truth=True)
-    nav = Estimators(sc.gait)
-    RunLoop(link, frames, Localiser(cam.calibration(), ROBOT), ROBOT,
-            RunConfig(sc.gait, list(sc.waypoints_m), duration_s=duration_s), None,
-            navigator=nav).run()
-    truth = {round(p.t_s, 6): np.diff(p.link_angles_rad) for p in frames.truth}
-    return nav, truth
-
-
-def joint_rms(nav: Estimators, truth, which: int, after_s: float = 1.5) -> float:
-    err = [np.diff(row[which]) - truth[round(row[0], 6)] for row in nav.rows if row[0] >= after_s]
-    return float(np.sqrt(np.mean(np.square(err))))
-
-
 def test_the_telemetrys_measured_angles_bring_the_estimate_closer_to_the_true_joints_over_sim():
     # feedback servos: the native firmware measures the plant's joints and sends phi_mrad; the
     # estimate with them is closer to the true joint angles of the moving, bent body than the
     # camera's alone (docs/planning.md gives the figures: 0.015 against 0.022 rad on path1)
-    nav, truth = run_over_sim(feedback=1)
-    assert nav.telemetry >= 50
-    assert {row[3] for row in nav.rows if row[0] >= 1.0} == {"telemetry"}
-    bent = max(np.ptp(np.cumsum(j)) for j in truth.values())
-    assert bent > 0.5  # the body is bent
-    with_telemetry, camera = joint_rms(nav, truth, 1), joint_rms(nav, truth, 2)
-    assert with_telemetry < 0.8 * camera, (with_telemetry, camera)
+    e = measure(ROBOT, "path1", feedback=True, duration_s=6.0, seed=3)
+    assert e.telemetry >= 50 and e.frames > 100
+    assert set(e.sources) == {"telemetry"} and not set(e.ignored) - {"not_running"}
+    assert e.bend_rad > 0.5  # the body is bent (and swims a path: moving)
+    assert e.joint_rad["with_telemetry"] < 0.8 * e.joint_rad["camera"], e.joint_rad
 
 
 def test_without_feedback_servos_the_estimate_falls_back_to_the_reference_at_the_robots_phase():
     # hobby servos: Telemetry has no measured angles (phi_mrad -32768, flag clear); the estimate
     # takes the gait's reference at the phase read from the Telemetry, weighted as the poor
     # stand-in it is, and stays as close to the truth as the camera alone
-    nav, truth = run_over_sim(feedback=0, duration_s=4.0)
-    assert nav.telemetry >= 30
-    assert {row[3] for row in nav.rows if row[0] >= 1.0} == {"reference"}
-    with_reference, camera = joint_rms(nav, truth, 1), joint_rms(nav, truth, 2)
-    assert with_reference < 1.1 * camera, (with_reference, camera)
+    e = measure(ROBOT, "path1", feedback=False, duration_s=4.0, seed=3)
+    assert e.telemetry >= 30 and e.frames > 50
+    assert set(e.sources) == {"reference"}  # the phase read from the Telemetry, no stale gap
+    assert e.joint_rad["with_telemetry"] < 1.1 * e.joint_rad["camera"], e.joint_rad
 
 
 # -- a synthetic stream: a twin run of the path gait, its Telemetry made here ---------------------
