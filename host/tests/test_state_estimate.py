@@ -124,6 +124,9 @@ def test_stale_and_garbled_telemetry_is_ignored_with_a_logged_reason(caplog):
     e = est.estimate()
     assert e is not None and e.joint_source == "reference"
     assert tel.ignored["stale"] == 1
+    summary = est.summary()  # what the take keeps (TankReplanner.record()["state_estimate"])
+    assert summary["frames_by_joint_source"] == {"reference": 3}
+    assert summary["telemetry_taken"] == 26 and summary["telemetry_ignored"]["garbled"] == 2
     stale = [r for r in caplog.records if "stale" in r.getMessage()]
     assert len(stale) == 1 and stale[0].levelno == logging.WARNING
     # a good sample again is taken

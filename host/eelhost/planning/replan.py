@@ -572,9 +572,14 @@ class TankReplanner:
         self._side.shutdown(wait=False, cancel_futures=True)
 
     def record(self) -> dict[str, Any]:
-        """What the take keeps of the planning: every plan and replan, and the current estimate."""
+        """What the take keeps of the planning: plans, replans, the current and state estimates.
+
+        ``state_estimate``: frames by the joint angles' source (telemetry, reference, camera) and
+        the Telemetry taken and ignored (docs/planning.md, "The robot's state at the tank").
+        """
         return {"plans": self.events, "replans": self.replans,
-                "current_estimate": self.current.history}
+                "current_estimate": self.current.history,
+                "state_estimate": self.estimator.summary()}
 
     # -- contact ---------------------------------------------------------------------------------
 

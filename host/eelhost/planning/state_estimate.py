@@ -191,6 +191,7 @@ class TelemetryJoints:
         self.lag = np.arange(self.n_joints) * gait.beta_rad
         self.latest: JointSample | None = None
         self.ignored: dict[str, int] = {}
+        self.taken = 0
         # (latest, earliest) offset t_host - t_robot each sample allows
         self._bounds: deque[tuple[float, float]] = deque(maxlen=max(int(clock_window), 1))
         self._wraps = 0
@@ -275,6 +276,7 @@ class TelemetryJoints:
             self._history.append(self.latest)
             self._fit = self._fit_oscillation()
         self._stale_logged = False
+        self.taken += 1
         return True
 
     def _fit_oscillation(self) -> FloatArray | None:
@@ -456,6 +458,7 @@ class BodyStateEstimator:
         self._x: deque[FloatArray] = deque(maxlen=self.window)
         self._measured = 0
         self._source = "camera"
+        self.frames_by_source: dict[str, int] = {}
 
     def add_telemetry(self, t_received_s: float, msg: protocol.Telemetry,
                       t_polled_before_s: float | None = None) -> bool:
@@ -511,6 +514,7 @@ class BodyStateEstimator:
             source = "camera"
         joints = fuse_joints(camera, self.sources.camera_rad**2, prior, var)
         self._source = source
+        self.frames_by_source[source] = self.frames_by_source.get(source, 0) + 1
         if known.any():
             theta = links_from_joints(joints, 0.0)
             # place the shape on the links the camera read (least squares: the mean difference)
@@ -552,6 +556,17 @@ class BodyStateEstimator:
         n = self.model.n_links
         state = np.concatenate([value[:n], value[n:], rate[:n], rate[n:]])
         return BodyEstimate(float(t[-1]), state, self._measured, self._source)
+
+    def summary(self) -> dict[str, object]:
+        """For the take: frames by joint-angle source, Telemetry taken and ignored (by reason).
+
+        Returns
+        -------
+        dict
+        """
+        return {"frames_by_joint_source": dict(self.frames_by_source),
+                "telemetry_taken": self.telemetry.taken,
+                "telemetry_ignored": dict(self.telemetry.ignored)}
 
     def latest_pose(self) -> FloatArray | None:
         """The newest frame's link angles and centre of mass (no rate fit), (N + 2,)."""
