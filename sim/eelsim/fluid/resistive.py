@@ -137,7 +137,7 @@ class ResistiveLaw(RelativeMotionLaw):
     coefficients: ClassVar[type[FluidCoefficients]] = ResistiveCoefficients
     # as the linear_quadratic law's drag bounds; C_a may vanish (pure resistive force theory)
     default_bounds: ClassVar[tuple[tuple[float, float], ...]] = (
-        (0.0005, 0.1), (0.05, 3.0), (0.0, 0.1), (0.0, 3.0), (0.0, 3.0))
+        (0.0, 0.1), (0.0, 3.0), (0.0, 0.1), (0.0, 3.0), (0.0, 3.0))
     kernel_rows: ClassVar[tuple[str, ...]] = ("rkt1", "rkn1", "rkt2", "rkn2")
 
     def link_coefficients(
