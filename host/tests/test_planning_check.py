@@ -76,8 +76,35 @@ def test_bootstrap_replicates_in_the_file_give_the_draws_their_correlation(tmp_p
     assert corr[1, 2] > 0.9 and corr[0, 1] < -0.9 and abs(corr[1, 3]) < 0.3
 
 
-def test_water_draws_put_the_unknown_current_at_its_bound_round_the_circle():
-    draws = MODEL.water_draws(np.random.default_rng(5), 2 * CURRENT_DIRECTIONS, 0.02)
+def directions_deg(draws):
+    offsets = np.array([d.current_offset_m_s for d in draws])
+    return np.degrees(np.arctan2(offsets[:, 1], offsets[:, 0])) % 360, np.hypot(*offsets.T)
+
+
+def test_check_draws_put_one_current_direction_in_every_sector_in_random_order():
+    draws = MODEL.water_draws(np.random.default_rng(5), 60, 0.02)
+    angles, speeds = directions_deg(draws)
+    assert np.allclose(speeds, 0.02)
+    # one draw in each 6-degree sector, so every band of directions 12 degrees wide holds one
+    assert sorted((angles // 6).astype(int)) == list(range(60))
+    # the screen's first 12 draws are spread round the circle, not the first 72 degrees
+    assert np.ptp(angles[:12]) > 180
+
+
+def test_a_band_of_failing_directions_between_the_lattices_is_found_only_by_the_check_draws():
+    # a plan failing for currents towards 10-30 degrees (5.6 % of directions): 60 lattice draws
+    # (8 directions) miss the band in most seeds, the check's stratified draws never do
+    missed = {"stratified": 0, "lattice": 0}
+    for seed in range(40):
+        for way in missed:
+            angles, _ = directions_deg(MODEL.water_draws(np.random.default_rng(seed), 60, 0.02,
+                                                          way))
+            missed[way] += not np.any((angles > 10) & (angles < 30))
+    assert missed["stratified"] == 0 and missed["lattice"] > 15
+
+
+def test_lattice_draws_put_the_unknown_current_at_its_bound_round_the_circle():
+    draws = MODEL.water_draws(np.random.default_rng(5), 2 * CURRENT_DIRECTIONS, 0.02, "lattice")
     offsets = np.array([d.current_offset_m_s for d in draws])
     assert np.allclose(np.hypot(*offsets.T), 0.02)
     angles = np.sort(np.degrees(np.arctan2(offsets[:CURRENT_DIRECTIONS, 1],

@@ -28,7 +28,11 @@ import numpy as np
 
 from eelhost.planning.audit import body_gaps_m
 from eelhost.planning.planner import Planner
-from eelhost.planning.uncertainty import DEFAULT_UNKNOWN_CURRENT_M_S, CoefficientModel
+from eelhost.planning.uncertainty import (
+    DEFAULT_UNKNOWN_CURRENT_M_S,
+    LATTICE,
+    CoefficientModel,
+)
 from eelhost.planning.world import World
 from eelhost.planning.worlds import generate_world
 from eelsim.guidance import PURSUIT, GuidanceLaw
@@ -200,8 +204,9 @@ def bench_world(world: World, robot: Robot, coefficients: CoefficientModel, seed
                          outcome.search_time_s, time.process_time() - c0, outcome.repairs)
     if not outcome.found:
         return result
+    # the fresh draws keep the lattice of directions the benchmark has always judged with
     draws = coefficients.water_draws(np.random.default_rng(seed + AUDIT_SEED_OFFSET),
-                                     BENCH_DRAWS, unknown_current_m_s)
+                                     BENCH_DRAWS, unknown_current_m_s, LATTICE)
     runs = planner.swim_waters(outcome.plan, draws)
     gaps = [float(body_gaps_m(planner.world, planner.model, r.states).min()) for r in runs]
     result.reached = all(r.reached for r in runs)
