@@ -156,3 +156,31 @@ def test_the_gaits_reference_fills_links_the_camera_did_not_read_with_the_tapere
     assert np.abs(np.diff(seen_e[:N])[-2:] - alpha[-2:]).max() < 1e-9
     # the body is placed on the links the camera read; off there by the head's lag only
     assert np.abs(seen_e[:N] - truth).max() < 0.3
+
+
+def test_telemetry_that_disagrees_with_the_camera_is_weighted_down_by_its_measured_error():
+    # the measured angles jitter by 0.08 rad (a joint the 10 Hz samples cannot follow): the
+    # camera-telemetry disagreement sets their variance, and the fused shape stays near the
+    # camera's instead of following the jitter
+    run = twin_run()
+    rng = np.random.default_rng(5)
+    tel = TelemetryJoints(MODEL, PATH_GAIT)
+    est = BodyStateEstimator(MODEL, PATH_GAIT, telemetry=tel)
+    polls = np.arange(0.0, 5.2, 1 / 30)
+    sent = np.arange(0.5, 4.0 + 1e-9, 0.1)
+    errors = []
+    for t in polls[(polls >= 0.55) & (polls <= 4.0)]:
+        for ts in sent[(sent > t - 1 / 30 - 0.02 + 1e-9) & (sent <= t - 0.02 + 1e-9)]:
+            phi = np.diff(state_at(run, ts)[:N]) + rng.normal(0.0, 0.08, N - 1)
+            tel.add(float(t), telemetry_at(run, ts, phi_mrad=tuple(int(v) for v in phi * 1000)),
+                    float(t - 1 / 30))
+        x = state_at(run, t)
+        camera = x[:N] + rng.normal(0.0, 0.01, N)
+        est.observe(float(t), x[N : N + 2], camera)
+        pose = est.latest_pose()
+        assert pose is not None
+        errors.append(np.diff(pose[:N]) - np.diff(x[:N]))
+    var = est.telemetry_variance(0.05)
+    assert np.all((var > 0.04**2) & (var < 0.16**2))  # about the jitter's 0.08^2
+    late = np.sqrt(np.mean(np.square(errors[-60:])))
+    assert late < 0.03  # the camera's joints (0.014 rad) dominate, not the 0.08 rad jitter

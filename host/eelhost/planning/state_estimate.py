@@ -368,19 +368,27 @@ class JointSources:
     measured_rad : float
         A measured angle (ADC, calibration) at its sample time.
     measured_growth_rad_s : float
-        Added per second of age: the reference's change stands for the joint's.
+        Added per second of age: the reference's change stands for the joint's. Used until
+        ``adapt_after`` frames have measured the telemetry's error against the camera.
     reference_rad : float
         The gait's reference standing for the joint's angle (servo lag, load).
+    adapt_weight : float
+        Weight of each frame in the running mean of the camera's and the telemetry's squared
+        disagreement (:class:`BodyStateEstimator`).
+    adapt_after : int
+        Frames of disagreement before it sets the telemetry's variance.
     """
 
     camera_rad: float = 0.025
     measured_rad: float = 0.005
     measured_growth_rad_s: float = 0.3
     reference_rad: float = 0.15
+    adapt_weight: float = 0.05
+    adapt_after: int = 10
 
 
 def fuse_joints(camera: FloatArray, camera_var: float, prior: FloatArray | None,
-                prior_var: float) -> FloatArray:
+                prior_var: FloatArray | float) -> FloatArray:
     """Inverse-variance mean of two joint-angle estimates; NaN in one takes the other.
 
     Parameters
@@ -389,7 +397,7 @@ def fuse_joints(camera: FloatArray, camera_var: float, prior: FloatArray | None,
         NaN where the camera did not see both links of a joint.
     camera_var : float
     prior : ndarray (N - 1,) or None
-    prior_var : float
+    prior_var : float or ndarray (N - 1,)
 
     Returns
     -------
@@ -459,13 +467,43 @@ class BodyStateEstimator:
         self._measured = 0
         self._source = "camera"
         self.frames_by_source: dict[str, int] = {}
+        # running mean of (camera - telemetry)^2 per joint, and the frames in it
+        self._disagreement = np.zeros(model.n_links - 1)
+        self._disagreement_frames = np.zeros(model.n_links - 1, dtype=int)
 
     def add_telemetry(self, t_received_s: float, msg: protocol.Telemetry,
                       t_polled_before_s: float | None = None) -> bool:
         """Take one Telemetry (:meth:`TelemetryJoints.add`)."""
         return self.telemetry.add(t_received_s, msg, t_polled_before_s)
 
-    def joint_prior(self, t_s: float, offset_rad: float) -> tuple[FloatArray, float, str]:
+    def telemetry_variance(self, age_s: float) -> FloatArray:
+        """Each joint's variance of the telemetry's angle moved to a frame.
+
+        The camera's and the telemetry's errors are independent, so their squared disagreement
+        averages s_cam^2 + s_tel^2: once ``adapt_after`` frames have measured it,
+        s_tel,j^2 = max(D_j - s_cam^2, s_m^2) with D_j its running mean (innovation-based, at the
+        frames' own ages: the prediction's error, a jitter the 10 Hz samples cannot follow, a
+        clock error, all in one); before, (s_m + g age)^2 with the defaults.
+
+        Parameters
+        ----------
+        age_s : float
+
+        Returns
+        -------
+        ndarray, shape (N - 1,)
+        """
+        s = self.sources
+        start = (s.measured_rad + s.measured_growth_rad_s * abs(age_s)) ** 2
+        adapted = np.maximum(self._disagreement - s.camera_rad**2, s.measured_rad**2)
+        return np.where(self._disagreement_frames >= s.adapt_after, adapted, start)
+
+    def disagreement_rad(self) -> FloatArray:
+        """RMS of the camera's and the telemetry's joint angles' disagreement, per joint."""
+        return np.sqrt(self._disagreement)
+
+    def joint_prior(self, t_s: float, offset_rad: float
+                    ) -> tuple[FloatArray, FloatArray | float, str]:
         """The joint angles at ``t_s`` besides the camera's, with their variance and source.
 
         The telemetry's measured angles when a fresh sample has them; else the gait's reference at
@@ -475,15 +513,14 @@ class BodyStateEstimator:
         Returns
         -------
         phi_rad : ndarray (N - 1,)
-        variance_rad2 : float
+        variance_rad2 : float or ndarray (N - 1,)
         source : str
             ``telemetry`` or ``reference``.
         """
         s = self.sources
         tel = self.telemetry.at(t_s)
         if tel is not None and tel.measured:
-            sd = s.measured_rad + s.measured_growth_rad_s * abs(tel.age_s)
-            return tel.phi_rad, sd**2, "telemetry"
+            return tel.phi_rad, self.telemetry_variance(tel.age_s), "telemetry"
         if tel is not None:
             return tel.phi_rad, s.reference_rad**2, "reference"
         alpha, _ = gait_reference(t_s, self.gait, offset_rad, self.model.n_links)
@@ -513,6 +550,8 @@ class BodyStateEstimator:
             var = 1e6  # only where the camera has no joint angle
             source = "camera"
         joints = fuse_joints(camera, self.sources.camera_rad**2, prior, var)
+        if source == "telemetry":
+            self._take_disagreement(camera - prior)
         self._source = source
         self.frames_by_source[source] = self.frames_by_source.get(source, 0) + 1
         if known.any():
@@ -529,6 +568,16 @@ class BodyStateEstimator:
             theta = prev + np.angle(np.exp(1j * (theta - prev)))
         self._t.append(float(t_s))
         self._x.append(np.concatenate([theta, np.asarray(com_m, dtype=float)]))
+
+    def _take_disagreement(self, diff: FloatArray) -> None:
+        """Add a frame's camera-minus-telemetry joint angles to the running mean (NaN: unseen)."""
+        seen = np.isfinite(diff)
+        first = seen & (self._disagreement_frames == 0)
+        w = self.sources.adapt_weight
+        d2 = np.where(seen, np.square(np.nan_to_num(diff)), 0.0)
+        self._disagreement = np.where(
+            first, d2, np.where(seen, (1 - w) * self._disagreement + w * d2, self._disagreement))
+        self._disagreement_frames = self._disagreement_frames + seen
 
     def _last_heading(self) -> float:
         return float(np.mean(self._x[-1][: self.model.n_links])) if self._x else 0.0
@@ -565,6 +614,8 @@ class BodyStateEstimator:
         dict
         """
         return {"frames_by_joint_source": dict(self.frames_by_source),
+                "camera_telemetry_disagreement_rad": [
+                    round(float(v), 4) for v in self.disagreement_rad()],
                 "telemetry_taken": self.telemetry.taken,
                 "telemetry_ignored": dict(self.telemetry.ignored)}
 
