@@ -772,3 +772,87 @@ def test_the_benchmark_refuses_to_resume_worlds_run_with_another_guidance_law(tm
     err = capsys.readouterr().err
     assert status == 2
     assert "another guidance law than ilos" in err and "results.jsonl" in err
+
+
+WALL_AHEAD = {
+    "name": "wall_ahead",
+    "tank": {"size_m": [3.0, 2.0]},
+    "start": {"position_m": [1.5, 1.0], "heading_deg": 180.0},
+    "goal": {"position_m": [1.0, 1.0], "radius_m": 0.2},
+    "current": {"speed_m_s": 0.0, "direction_deg": 0.0},
+    "obstacles": [],
+}
+
+
+def test_a_replan_that_finds_nothing_is_rescued_by_the_recoverys_sharper_turns():
+    # the robot swims at the tank's end wall, 0.6 m from it, and its goal is behind it
+    run = plan_for_run(parse_world(WALL_AHEAD, "wall_ahead"), ROBOT, "sim://")
+    nav = run.navigator
+    com = estimate_at(3.0).state[N]
+    est = estimate_at(3.0, (3.0 - 0.6 - com, 0.0))
+    step = int(round(3.0 / 0.01)) + 60
+    make_recovery, nav.recovery_planner_for = nav.recovery_planner_for, None
+    try:
+        without, *_ = nav._replan(est, [(2.9, 1.1)], step, np.zeros(2))
+        nav.recovery_planner_for = make_recovery
+        rescued, state, *_ = nav._replan(est, [(2.9, 1.1)], step, np.zeros(2))
+    finally:
+        nav.close()
+    # the planner's actions (turns up to 60 degrees) and margin give no plan that passes its check
+    assert not without.found and without.status == "check_failed", without.message
+    assert rescued.found and rescued.message.startswith("recovery:"), rescued.message
+    legs = rescued.plan.legs
+    assert any(abs(leg.bearing_deg) > 60.0 + 1e-6 for leg in legs)  # a turn only it has
+    # its plan passed the same check (every draw clear) and starts at the predicted body
+    assert rescued.checks and all(c.ok for c in rescued.checks)
+    assert np.hypot(*(legs[0].com_m[0] - state[N : N + 2])) < 0.02
+
+
+
+def test_a_moved_current_estimate_replans_the_robot_on_its_plan_and_a_failure_keeps_the_plan(
+        open_plan):
+    planner, outcome = open_plan
+
+    class InTheEstimate(TankReplanner):
+        """Replans fail; the estimate is set by the test; the look-ahead swims the plan clear."""
+
+        asked: list[tuple[float, tuple[float, float]]] = []
+
+        def _replan(self, est, left, start_step, extra, guide=None):  # noqa: ANN001, ANN202
+            self.asked.append((est.t_s, (float(extra[0]), float(extra[1]))))
+            plan = Plan(False, "exhausted", "failed (exhausted)")
+            return (Outcome(plan, "exhausted", plan.message), est.state, 0.0, 0.0, extra.copy(),
+                    time.monotonic(), start_step)
+
+        def _estimate_current(self, est, left):  # noqa: ANN001, ANN202
+            return False
+
+        def _look_ahead(self, est, left, extra, guide=None):  # noqa: ANN001, ANN202
+            return 0.2, 0.2
+
+    nav = InTheEstimate(lambda extra: planner, planner, outcome, PATH_GAIT)
+    nav.asked.clear()
+    start = np.asarray(outcome.plan.legs[0].com_m[0])
+    stops = []
+
+    def frames(t0: float, seconds: float) -> None:
+        for k in range(int(seconds * 30)):
+            t = t0 + k / 30
+            d = nav.on_frame(t, pose_at(t, start), np.array([*start, 0.0]), 0, 0.0)
+            stops.append(d.stop)
+            nav._worker.submit(lambda: None).result()
+            nav._side.submit(lambda: None).result()
+
+    try:
+        frames(0.0, 1.0)
+        assert nav.asked == []  # the plan's own water: nothing to replan
+        nav.current.value_m_s = np.array([0.0, 0.012])  # the camera's drift says 12 mm/s north
+        frames(1.0, 2.0)
+        assert len(nav.asked) == 1 and nav.asked[0][1] == (0.0, 0.012)  # in the estimate, once
+        assert nav.events[-1]["reason"] == "current_estimate"
+        assert nav.failures == 0 and set(stops) == {None}  # its failure keeps the plan
+        nav.current.value_m_s = np.array([0.0, 0.02])  # it moves on by 8 mm/s: asked again
+        frames(3.0, 1.0)
+        assert len(nav.asked) == 2 and set(stops) == {None}
+    finally:
+        nav.close()

@@ -359,6 +359,17 @@ class TankReplanner:
         first ``lookahead_s`` of it judge stops and keeping the present plan. A replan asked for
         only when contact is under 3 s away started from a body that no manoeuvre could turn
         away in time (docs/planning.md, "Replanning before contact").
+    recovery_planner_for : callable, optional
+        ``recovery_planner_for(extra_current_m_s)``: the recovery's planner (docs/planning.md,
+        "The recovery replan"): a richer action set (sharper turns) with the goal approach's
+        margin and a bounded number of expansions. A replan that found no plan with the
+        planner and the goal approach is tried once more with it, from the same start.
+    replan_current_change_m_s : float
+        When the current estimate has moved this far from the current the present plan was
+        searched in, the robot is replanned in the estimate (``current_estimate``), before the
+        water it did not know pushes it off its plan; a failure of such a replan keeps the
+        present plan and is not counted (0 turns it off; docs/planning.md, "Replanning in the
+        estimated current").
     """
 
     def __init__(
@@ -381,6 +392,8 @@ class TankReplanner:
         goal_approach_m: float = 0.5,
         blocked_retries: int = 3,
         replan_horizon_s: float = 5.0,
+        recovery_planner_for: Callable[[FloatArray], Planner] | None = None,
+        replan_current_change_m_s: float = 0.005,
     ) -> None:
         self.planner_for = planner_for
         self.planner = planner
@@ -401,7 +414,11 @@ class TankReplanner:
         self.goal_approach_m = goal_approach_m
         self.blocked_retries = blocked_retries
         self.replan_horizon_s = max(replan_horizon_s, lookahead_s)
-        self._goal_planner: tuple[Planner, FloatArray] | None = None
+        self.recovery_planner_for = recovery_planner_for
+        self.replan_current_change_m_s = replan_current_change_m_s
+        self._plan_current = np.zeros(2)  # the extra current the present plan was searched in
+        # the goal approach's and the recovery's planners, each with the extra current it has
+        self._extra_planners: dict[str, tuple[Planner, FloatArray]] = {}
         self.half_width_m = float(self.model.half_axis_horizontal_m.max())
         self.estimator = BodyStateEstimator(self.model, gait)
         self.current = CurrentEstimator()
@@ -541,6 +558,12 @@ class TankReplanner:
             reason = "predicted_contact"
             log.info("the twin predicts the body's capsule within %.0f mm of an obstacle or wall "
                      "within %.1f s", capsule * 1000, self.replan_horizon_s)  # type: ignore[operator]
+        elif (self.estimate_current and self.replan_current_change_m_s > 0
+              and float(np.hypot(*(self.current.value_m_s - self._plan_current)))
+              >= self.replan_current_change_m_s):
+            # the water the plan was searched in is not the one the camera sees: replan in the
+            # estimate while the robot is still on its plan (docs/planning.md)
+            reason = "current_estimate"
         if reason is not None and not busy and t_s >= self._next_try_s:
             self._request(t_s, est, left, reason)
         elif (self._pending is None and self._lookahead is None and self.lookahead_s > 0
@@ -679,6 +702,21 @@ class TankReplanner:
                 else:
                     outcome = dataclasses.replace(outcome, message=(
                         f"{outcome.message}; with the goal approach's margin: {approach.message}"))
+        # the recovery: sharper turns, the goal approach's margin, a bounded search; only when
+        # everything else found nothing (docs/planning.md, "The recovery replan")
+        if not outcome.found and outcome.status not in REFUSED_FROM_STATE:
+            recovery = self._planner_in("recovery", self.recovery_planner_for, extra)
+            if recovery is not None:
+                rescue = recovery.plan(state, start_step, guide=leg_start_guide(
+                    state, self.model.n_links, integral))
+                log.info("recovery replan from t = %.2f s: %s", start_step * planner.twin.dt_s,
+                         rescue.message)
+                if rescue.found:
+                    rescue.message = f"recovery: {rescue.message}"
+                    outcome = rescue
+                else:
+                    outcome = dataclasses.replace(outcome, message=(
+                        f"{outcome.message}; with the recovery's actions: {rescue.message}"))
         return (outcome, state, time.perf_counter() - wall0, time.thread_time() - cpu0,
                 self._planner_current.copy(), time.monotonic(), start_step)
 
@@ -714,12 +752,20 @@ class TankReplanner:
 
     def _goal_planner_in(self, extra: FloatArray) -> Planner | None:
         """The goal approach's planner in the world's current plus ``extra`` (cached)."""
-        if self.goal_planner_for is None:
+        return self._planner_in("goal approach", self.goal_planner_for, extra)
+
+    def _planner_in(self, name: str, make: Callable[[FloatArray], Planner] | None,
+                    extra: FloatArray) -> Planner | None:
+        """``make``'s planner in the world's current plus ``extra``, cached under ``name``.
+
+        A new one only when the estimate moved by 5 mm/s or more since the cached one's.
+        """
+        if make is None:
             return None
-        cached = self._goal_planner
+        cached = self._extra_planners.get(name)
         if cached is None or float(np.hypot(*(extra - cached[1]))) >= 0.005:
-            cached = (self.goal_planner_for(extra), extra)
-            self._goal_planner = cached
+            cached = (make(extra), extra)
+            self._extra_planners[name] = cached
         return cached[0]
 
     def _collect(self, t_s: float, d: Decision) -> bool:
@@ -751,11 +797,19 @@ class TankReplanner:
             return True
         if outcome.found:
             self.failures = 0
+            self._plan_current = extra
             self.outcome = outcome
             self.path = corridor_path(outcome.plan)
             self._pending = (job.t_start_s, list(outcome.plan.waypoints_m),
                              outcome.plan.start_guide)
             log.info("replanned at t = %.2f s (%.2f s wall): %s", t_s, wall, outcome.message)
+            return True
+        if job.reason == "current_estimate":
+            # asked for by the estimate alone, on a plan not known to go wrong: keep the plan,
+            # and ask again only when the estimate moves on (the look-ahead still guards it)
+            self._plan_current = extra
+            log.info("replanning in the estimated current failed (%s); the robot keeps its plan",
+                     outcome.status)
             return True
         self.failures += 1
         if judged_gap is not None:

@@ -21,7 +21,7 @@ from urllib.parse import parse_qsl, urlencode, urlsplit
 from eelhost.planning.geometry import FloatArray
 from eelhost.planning.planner import Outcome, Planner, PlanRefused
 from eelhost.planning.replan import GOAL_APPROACH_CLEARANCE_M, TankReplanner
-from eelhost.planning.search import SearchSettings
+from eelhost.planning.search import Actions, SearchSettings
 from eelhost.planning.uncertainty import CoefficientModel, default_model
 from eelhost.planning.world import Current, World
 from eelsim.control import Gait
@@ -29,6 +29,18 @@ from eelsim.guidance import PURSUIT, GuidanceLaw
 from eelsim.model import SwimmerModel
 from eelsim.robot import Robot
 from eelsim.scenario import PATH_GAIT
+
+RECOVERY_ACTIONS = Actions(distances_m=(0.3, 0.5),
+                           bearings_deg=(-120.0, -90.0, -60.0, -30.0, 0.0, 30.0, 60.0, 90.0, 120.0))
+"""The recovery replan's action set: the planner's legs plus turns of 90 and 120 degrees
+(docs/planning.md, "The recovery replan"). Shorter legs than 0.3 m are no use: the waypoint is
+accepted 0.15 m before it, too soon for the next control update."""
+
+RECOVERY_EXPANSIONS = 48
+"""The recovery search's expansions (six batches of 8): bounds its processor time."""
+
+RECOVERY_REPAIRS = 1
+"""The recovery's re-searches after a failed check (the planner's default is 4)."""
 
 
 class NoPlanFound(PlanRefused):
@@ -151,6 +163,19 @@ def plan_for_run(
         return Planner(approach, robot, model, gait, **{
             **options, "settings": dataclasses.replace(base, margin_m=margin)})
 
+    def recovery_planner_for(extra_m_s: FloatArray) -> Planner:
+        """The recovery's planner (docs/planning.md): sharper turns, the goal approach's margin.
+
+        A bounded search (RECOVERY_EXPANSIONS, RECOVERY_REPAIRS); its check is unchanged.
+        """
+        base = options.get("settings") or SearchSettings()
+        margin = planner.body_half_width_m + GOAL_APPROACH_CLEARANCE_M
+        approach = with_extra_current(world, extra_m_s).model_copy(update={"clearance_m": 0.0})
+        settings = dataclasses.replace(base, margin_m=margin, actions=RECOVERY_ACTIONS,
+                                       max_expansions=RECOVERY_EXPANSIONS)
+        return Planner(approach, robot, model, gait, **{
+            **options, "settings": settings, "repairs": RECOVERY_REPAIRS})
+
     if abs(planner.twin.acceptance_radius_m - acceptance_radius_m) > 1e-9:
         raise PlanRefused("acceptance_radius",
                           f"--radius {acceptance_radius_m:g}: the planner swims with "
@@ -159,7 +184,8 @@ def plan_for_run(
     if not outcome.found:
         raise NoPlanFound(outcome.status, f"{world.name}: {outcome.message}")
     navigator = TankReplanner(planner_for, planner, outcome, gait,
-                              goal_planner_for=goal_planner_for)
+                              goal_planner_for=goal_planner_for,
+                              recovery_planner_for=recovery_planner_for)
     return RunPlan(outcome.plan.waypoints_m, navigator, sim_uri_for_world(uri, world), outcome,
                    planner.options.guidance, outcome.plan.start_guide)
 
