@@ -7,7 +7,8 @@ of mass p, and their rates), so a replan needs all of it, not only the filtered 
 - **pose** from the camera: the localiser measures every link's angle and the centre of mass in
   each frame (:class:`eelhost.vision.localise.Localisation`);
 - **joint angles** from three sources, fused per joint by inverse variance
-  (:class:`JointSources`): the telemetry's measured angles (feedback servos, ``phi_mrad`` with the
+  (:class:`JointSources`; the telemetry's variance measured from its disagreement with the
+  camera, :meth:`BodyStateEstimator.telemetry_variance`): the telemetry's measured angles (feedback servos, ``phi_mrad`` with the
   flag JOINT_FEEDBACK, docs/firmware.md "Joint loop"), predicted from their sample time to the
   frame's with the gait's reference and the phase read from the same telemetry
   (:class:`TelemetryJoints`); without them the gait's reference at the frame's phase (the
