@@ -161,7 +161,7 @@ def test_the_take_records_every_plan_and_replan(slow_take):
     assert all(p["status"] == "found" for p in plans if "t_switch_s" in p)
     assert len(plans) == len(navigator.events) >= 2
     for p in plans[1:]:
-        assert p["reason"] in ("left_corridor", "predicted_contact")
+        assert p["reason"] in ("left_corridor", "predicted_contact", "current_estimate")
         assert len(p["start_state"]) == 2 * N + 4
         assert p["t_request_s"] < p["t_start_s"]
         assert p["waypoints_m"] and p["wall_s"] > 0
@@ -809,14 +809,17 @@ def test_a_replan_that_finds_nothing_is_rescued_by_the_recoverys_sharper_turns()
 
 
 
-def test_a_moved_current_estimate_replans_the_robot_on_its_plan_and_a_failure_keeps_the_plan(
+def test_a_moved_current_estimate_replans_only_a_plan_it_breaks_and_a_failure_keeps_the_plan(
         open_plan):
     planner, outcome = open_plan
 
     class InTheEstimate(TankReplanner):
-        """Replans fail; the estimate is set by the test; the look-ahead swims the plan clear."""
+        """Replans fail; the estimate is set by the test; the next 5 s are clear, and the whole
+        rest of the plan, swum in a moved estimate, comes ``rest_gap_m`` from something."""
 
         asked: list[tuple[float, tuple[float, float]]] = []
+        rest_gap_m = 0.2
+        horizons: list[float] = []
 
         def _replan(self, est, left, start_step, extra, guide=None):  # noqa: ANN001, ANN202
             self.asked.append((est.t_s, (float(extra[0]), float(extra[1]))))
@@ -827,8 +830,11 @@ def test_a_moved_current_estimate_replans_the_robot_on_its_plan_and_a_failure_ke
         def _estimate_current(self, est, left):  # noqa: ANN001, ANN202
             return False
 
-        def _look_ahead(self, est, left, extra, guide=None):  # noqa: ANN001, ANN202
-            return 0.2, 0.2
+        def _look_ahead(self, est, left, extra, guide=None, horizon_s=None):  # noqa: ANN001, ANN202
+            if horizon_s is None:
+                return 0.2, 0.2
+            self.horizons.append(horizon_s)
+            return 0.2, self.rest_gap_m
 
     nav = InTheEstimate(lambda extra: planner, planner, outcome, PATH_GAIT)
     nav.asked.clear()
@@ -845,14 +851,18 @@ def test_a_moved_current_estimate_replans_the_robot_on_its_plan_and_a_failure_ke
 
     try:
         frames(0.0, 1.0)
-        assert nav.asked == []  # the plan's own water: nothing to replan
+        assert nav.asked == [] and nav.horizons == []  # the plan's own water: nothing to check
         nav.current.value_m_s = np.array([0.0, 0.012])  # the camera's drift says 12 mm/s north
-        frames(1.0, 2.0)
-        assert len(nav.asked) == 1 and nav.asked[0][1] == (0.0, 0.012)  # in the estimate, once
+        frames(1.0, 1.0)
+        # the rest of the plan (to its goal, beyond the 5 s look-ahead) swum in it: still clear
+        assert len(nav.horizons) == 1 and nav.horizons[0] > nav.replan_horizon_s
+        assert nav.asked == []  # a plan the new water does not break is kept
+        nav.current.value_m_s = np.array([0.0, 0.02])  # it moves on by 8 mm/s, and now the
+        nav.rest_gap_m = 0.0  # rest of the plan swims into something: replanned in it, once
+        frames(2.0, 2.0)
+        assert len(nav.horizons) == 2
+        assert len(nav.asked) == 1 and nav.asked[0][1] == (0.0, 0.02)
         assert nav.events[-1]["reason"] == "current_estimate"
         assert nav.failures == 0 and set(stops) == {None}  # its failure keeps the plan
-        nav.current.value_m_s = np.array([0.0, 0.02])  # it moves on by 8 mm/s: asked again
-        frames(3.0, 1.0)
-        assert len(nav.asked) == 2 and set(stops) == {None}
     finally:
         nav.close()

@@ -366,10 +366,11 @@ class TankReplanner:
         planner and the goal approach is tried once more with it, from the same start.
     replan_current_change_m_s : float
         When the current estimate has moved this far from the current the present plan was
-        searched in, the robot is replanned in the estimate (``current_estimate``), before the
-        water it did not know pushes it off its plan; a failure of such a replan keeps the
-        present plan and is not counted (0 turns it off; docs/planning.md, "Replanning in the
-        estimated current").
+        searched in, the twin swims the rest of the present plan in the estimate; when it comes
+        out of the look-ahead's margin anywhere, the robot is replanned in the estimate
+        (``current_estimate``) before the water it did not know pushes it off its plan. A
+        failure of such a replan keeps the present plan and is not counted (0 turns it off;
+        docs/planning.md, "Replanning in the estimated current").
     """
 
     def __init__(
@@ -417,6 +418,8 @@ class TankReplanner:
         self.recovery_planner_for = recovery_planner_for
         self.replan_current_change_m_s = replan_current_change_m_s
         self._plan_current = np.zeros(2)  # the extra current the present plan was searched in
+        # the rest of the present plan swum in a moved estimate: (future, that estimate)
+        self._whole_job: tuple[Future, FloatArray] | None = None
         # the goal approach's and the recovery's planners, each with the extra current it has
         self._extra_planners: dict[str, tuple[Planner, FloatArray]] = {}
         self.half_width_m = float(self.model.half_axis_horizontal_m.max())
@@ -510,6 +513,7 @@ class TankReplanner:
             self._pending = None
             self._window = None  # the prediction of a window spans no switch of waypoints
             self._lookahead = None  # it followed the old waypoints
+            self._whole_job = None
             self.events[-1]["t_switch_s"] = round(t_s, 3)
             self.replans += 1
             d.recorded = True
@@ -558,11 +562,10 @@ class TankReplanner:
             reason = "predicted_contact"
             log.info("the twin predicts the body's capsule within %.0f mm of an obstacle or wall "
                      "within %.1f s", capsule * 1000, self.replan_horizon_s)  # type: ignore[operator]
-        elif (self.estimate_current and self.replan_current_change_m_s > 0
-              and float(np.hypot(*(self.current.value_m_s - self._plan_current)))
-              >= self.replan_current_change_m_s):
-            # the water the plan was searched in is not the one the camera sees: replan in the
-            # estimate while the robot is still on its plan (docs/planning.md)
+        elif self._whole_plan_fails(est, left, busy):
+            # the water the plan was searched in is not the one the camera sees, and the twin
+            # swims the rest of the plan out of its margin in the estimate: replan in it while
+            # the robot is still on its plan (docs/planning.md)
             reason = "current_estimate"
         if reason is not None and not busy and t_s >= self._next_try_s:
             self._request(t_s, est, left, reason)
@@ -839,16 +842,47 @@ class TankReplanner:
                     outcome.message, wait)
         return True
 
+    def _whole_plan_fails(self, est: BodyEstimate, left: list[tuple[float, float]],
+                          busy: bool) -> bool:
+        """Whether the rest of the present plan, swum in the moved current estimate, fails.
+
+        When the estimate has moved ``replan_current_change_m_s`` from the current the present
+        plan was searched in, the twin swims the rest of the plan in the estimate (on the side
+        worker) to its goal; a capsule within ``lookahead_margin_m`` of anything on the way
+        asks for a replan. A plan that the new water does not break is kept: a replan in the
+        estimate would often pick another route, and with it new risks.
+        """
+        job = self._whole_job
+        if job is not None:
+            if not job[0].done():
+                return False
+            self._whole_job = None
+            judged = job[0].result()
+            self._plan_current = job[1]
+            return judged is not None and judged[1] < self.lookahead_margin_m
+        if (busy or not self.estimate_current or self.replan_current_change_m_s <= 0
+                or float(np.hypot(*(self.current.value_m_s - self._plan_current)))
+                < self.replan_current_change_m_s):
+            return False
+        extra = self.current.value_m_s.copy()
+        remaining = self.outcome.plan.cost_s - est.t_s if self.outcome.found else math.nan
+        horizon = min(1.5 * remaining + 5.0, 90.0) if math.isfinite(remaining) else 60.0
+        self._whole_job = (self._side.submit(self._look_ahead, est, list(left), extra,
+                                             self._guide, max(horizon, self.replan_horizon_s)),
+                           extra)
+        return False
+
     def _look_ahead(self, est: BodyEstimate, left: list[tuple[float, float]],
-                    extra: FloatArray, guide: Guide | None = None) -> tuple[float, float] | None:
+                    extra: FloatArray, guide: Guide | None = None,
+                    horizon_s: float | None = None) -> tuple[float, float] | None:
         """On the worker: the smallest clearances the twin predicts ahead of the estimate.
 
         Returns (the body's own outline's over ``lookahead_s``, the planner's capsule's over
-        ``replan_horizon_s``), or None without a run.
+        ``horizon_s``, default ``replan_horizon_s``), or None without a run.
         """
         twin = self._twin_in(extra)
         now = int(round(est.t_s / twin.dt_s))
-        steps = int(round(self.replan_horizon_s / twin.dt_s))
+        steps = int(round((horizon_s or self.replan_horizon_s) / twin.dt_s))
         stride = 3
         runs = twin.run([left], steps * twin.dt_s, states=est.state[None], start_steps=[now],
                         stride=stride, guidance=_guidance_arg(twin, guide))
