@@ -31,7 +31,8 @@ def test_the_telemetrys_measured_angles_bring_the_estimate_closer_to_the_true_jo
     # camera's alone (docs/planning.md gives the figures: 0.015 against 0.022 rad on path1)
     e = measure(ROBOT, "path1", feedback=True, duration_s=6.0, seed=3)
     assert e.telemetry >= 50 and e.frames > 100
-    assert set(e.sources) == {"telemetry"} and not set(e.ignored) - {"not_running"}
+    # the telemetry on most frames; the reference where the offset was changing (steering)
+    assert e.sources.get("telemetry", 0) > 0.7 * e.frames and not set(e.ignored) - {"not_running"}
     assert e.bend_rad > 0.5  # the body is bent (and swims a path: moving)
     assert e.joint_rad["with_telemetry"] < 0.8 * e.joint_rad["camera"], e.joint_rad
 
@@ -93,6 +94,9 @@ def test_a_sample_is_placed_on_the_hosts_clock_and_moved_to_the_frame_along_its_
         truth = np.diff(state_at(run, 4.0 + age)[:N])
         held = np.abs(latest.phi_rad - truth).max()
         assert np.abs(moved.phi_rad - truth).max() < 0.5 * held + 0.005  # better than holding
+    # the host sent a new offset the sample does not have yet: it is not moved across the step
+    assert tel.at(4.05, offset_rad=0.0) is not None
+    assert tel.at(4.05, offset_rad=0.3) is None and tel.unused == {"offset_changing": 1}
 
 
 def test_stale_and_garbled_telemetry_is_ignored_with_a_logged_reason(caplog):

@@ -29,7 +29,7 @@ from eelhost.link import open_link
 from eelhost.planning.geometry import FloatArray
 from eelhost.planning.state_estimate import BodyStateEstimator
 from eelhost.vision.localise import Localisation, Localiser
-from eelhost.vision.synthetic import RenderOptions, SyntheticCamera
+from eelhost.vision.synthetic import RenderOptions, SyntheticCamera, TankView
 from eelhost.wire import protocol
 from eelhost.xil.virtual_robot import VirtualCamera, VirtualRobot
 from eelsim.control import Gait
@@ -146,7 +146,8 @@ class EstimateErrors:
 
 
 def measure(robot: Robot, scenario: str, feedback: bool, duration_s: float = 15.0,
-            noisy: bool = False, seed: int = 0, after_s: float = 1.5) -> EstimateErrors:
+            noisy: bool = False, seed: int = 0, after_s: float = 1.5,
+            tank_m: tuple[float, float] | None = None) -> EstimateErrors:
     """Run the loop over ``sim://`` with the estimating navigator; compare with the plant.
 
     Parameters
@@ -163,6 +164,9 @@ def measure(robot: Robot, scenario: str, feedback: bool, duration_s: float = 15.
         The radio's and the camera's seed.
     after_s : float
         Frames before this are left out (the gait starting).
+    tank_m : (float, float), optional
+        The camera films a tank this size whole (:meth:`TankView.covering`, as ``eelbot run
+        --plan`` films a world's tank over ``sim://``); default: the paper's tank view.
 
     Returns
     -------
@@ -176,7 +180,8 @@ def measure(robot: Robot, scenario: str, feedback: bool, duration_s: float = 15.
     if not isinstance(virtual, VirtualRobot):
         raise TypeError("sim:// gave no virtual robot")
     options = RenderOptions() if noisy else RenderOptions(noise_sigma=0.0, jpeg_quality=0)
-    cam = SyntheticCamera(robot, options=options, seed=seed)
+    view = TankView.covering(tank_m) if tank_m is not None else None
+    cam = SyntheticCamera(robot, options=options, seed=seed, view=view)
     frames = _TruthKeepingFrames(virtual, VirtualCamera(virtual, cam, keep_truth=False))
     nav = EstimatingNavigator(model, sc.gait)
     out = RunLoop(link, frames, Localiser(cam.calibration(), robot), robot,
@@ -223,7 +228,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--duration", type=float, default=15.0, help="seconds of each run")
     parser.add_argument("--noisy", action="store_true", help="the camera's noise and JPEG on")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--tank", help="W,H: the camera films a tank this size whole, m")
     args = parser.parse_args(argv)
+    tank: tuple[float, float] | None = None
+    if args.tank:
+        try:
+            w, h = (float(v) for v in args.tank.split(","))
+        except ValueError:
+            parser.error(f"--tank {args.tank!r}: expected W,H in metres")
+        tank = (w, h)
     print("| scenario | robot | camera | feedback servos | frames | joint angles RMS, with the "
           "telemetry / camera alone (rad) | link rates RMS, with / alone (rad/s) | sources | "
           "ignored | run |")
@@ -232,9 +245,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         for robot_file in args.robot or [None]:
             robot = load_robot(robot_file) if robot_file else load_robot()
             for feedback in args.feedback or [1, 0]:
-                e = measure(robot, scenario, bool(feedback), args.duration, args.noisy, args.seed)
-                print(f"| {scenario} | {robot_file or 'bundled'} | "
-                      f"{'noisy' if args.noisy else 'clean'} | {feedback} | {e.frames} | "
+                e = measure(robot, scenario, bool(feedback), args.duration, args.noisy, args.seed,
+                            tank_m=tank)
+                camera = ("noisy" if args.noisy else "clean") + (f", {args.tank} m tank"
+                                                                   if args.tank else "")
+                print(f"| {scenario} | {robot_file or 'bundled'} | {camera} | {feedback} | "
+                      f"{e.frames} | "
                       f"{e.joint_rad['with_telemetry']:.4f} / {e.joint_rad['camera']:.4f} | "
                       f"{e.link_rate_rad_s['with_telemetry']:.3f} / "
                       f"{e.link_rate_rad_s['camera']:.3f} | {e.sources} | {e.ignored} | "

@@ -176,16 +176,26 @@ class TelemetryJoints:
         The Telemetry's trip from the robot's clock to the host's transport.
     history : int
         Samples of measured angles in each joint's fit of its oscillation.
+    offset_tolerance_rad : float
+        A sample is not moved to a frame when the host's offset differs from the sample's by
+        more (:meth:`at`); the fit takes the offset as a regressor when it moved by more over
+        the history.
     """
 
     def __init__(self, model: SwimmerModel, gait: Gait, max_age_s: float = 0.3,
                  limit_rad: float = 1.6, clock_window: int = 50,
-                 transit_s: float = TELEMETRY_TRANSIT_S, history: int = 16) -> None:
+                 transit_s: float = TELEMETRY_TRANSIT_S, history: int = 16,
+                 offset_tolerance_rad: float = 0.05) -> None:
         self.n_joints = model.n_links - 1
         self.gait = gait
         self.max_age_s = max_age_s
         self.limit_rad = limit_rad
         self.transit_s = transit_s
+        self.offset_tolerance_rad = offset_tolerance_rad
+        #: frames at which the newest sample was not used although fresh, by reason
+        self.unused: dict[str, int] = {}
+        self.phase_fit_rad = 0.005
+        self._phase_at: tuple[float, float] | None = None  # (robot time, phase) of the last
         self._history: deque[JointSample] = deque(maxlen=max(int(history), 6))
         self._fit: FloatArray | None = None  # (N - 1, 2): a_j, b_j of the newest fit
         self.ratio = joint_amplitudes(1.0, model.n_links)
@@ -269,7 +279,7 @@ class TelemetryJoints:
         self._bounds.append((t_received_s - t_robot - self.transit_s,
                              earliest - self.transit_s))
         t_s = t_robot + self.clock_offset_s()
-        self.latest = JointSample(t_s, self._phase(alpha, gamma, amp), amp, gamma, phi)
+        self.latest = JointSample(t_s, self._phase(alpha, gamma, amp, t_robot), amp, gamma, phi)
         if phi is None or self.latest.phase_rad is None:
             self._history.clear()
             self._fit = None
@@ -286,14 +296,21 @@ class TelemetryJoints:
             return None
         psi = np.array([h.phase_rad for h in self._history], dtype=float)
         phi = np.array([h.phi_rad for h in self._history], dtype=float)  # (K, N - 1)
+        gamma = np.array([h.offset_rad for h in self._history], dtype=float)
+        # the offset as a regressor when it moved over the history (steering), so its steps
+        # do not leak into the swing's a_j, b_j
+        steering = float(np.ptp(gamma)) > self.offset_tolerance_rad
         out = np.empty((self.n_joints, 2))
         for j in range(self.n_joints):
             arg = psi + self.lag[j]
-            basis = np.stack([np.ones_like(psi), np.sin(arg), np.cos(arg)], axis=1)
+            columns = [np.sin(arg), np.cos(arg), np.ones_like(psi)]
+            if steering:
+                columns.append(gamma)
+            basis = np.stack(columns, axis=1)
             coef, _, rank, _ = np.linalg.lstsq(basis, phi[:, j], rcond=None)
-            if rank < 3:
+            if rank < len(columns):
                 return None
-            out[j] = coef[1:]
+            out[j] = coef[:2]
         return out
 
     def _oscillation(self, phase_rad: float) -> FloatArray | None:
@@ -309,26 +326,47 @@ class TelemetryJoints:
         lo = max(b[1] for b in self._bounds)
         return hi if not lo <= hi else 0.5 * (lo + hi)
 
-    def _phase(self, alpha: FloatArray, gamma: float, amp: float) -> float | None:
-        """The phase psi from alpha_j - gamma = A_j (sin psi cos lag_j + cos psi sin lag_j), least squares."""
-        a = amp * self.ratio
+    def _phase(self, alpha: FloatArray, gamma: float, amp: float, t_robot_s: float
+               ) -> float | None:
+        """The gait's phase psi at the sample (class docstring).
+
+        Least squares on alpha_j - gamma = A_j (sin psi cos lag_j + cos psi sin lag_j) when the
+        references fit the gait within ``phase_fit_rad`` RMS; otherwise (references clamped at
+        the joint limits in a hard turn) the previous sample's phase moved on by omega times the
+        robot's clock, which is exact while omega stays.
+        """
         if amp < 1e-3:
+            self._phase_at = None
             return None
+        a = amp * self.ratio
         basis = np.stack([a * np.cos(self.lag), a * np.sin(self.lag)], axis=1)
-        (s, c), *_ = np.linalg.lstsq(basis, alpha - gamma, rcond=None)
-        return math.atan2(s, c)
+        coef, *_ = np.linalg.lstsq(basis, alpha - gamma, rcond=None)
+        misfit = float(np.sqrt(np.mean(np.square(basis @ coef - (alpha - gamma)))))
+        psi: float | None = math.atan2(coef[0], coef[1])
+        if misfit > self.phase_fit_rad or abs(math.hypot(*coef) - 1.0) > 0.05:
+            prev = self._phase_at
+            psi = (None if prev is None
+                   else prev[1] + self.gait.omega_rad_s * (t_robot_s - prev[0]))
+        self._phase_at = None if psi is None else (t_robot_s, psi)
+        return psi
 
     def reference(self, phase_rad: float, amplitude_rad: float, offset_rad: float) -> FloatArray:
         """The gait's references alpha_j at phase psi (docs/model.md section 4)."""
         return amplitude_rad * self.ratio * np.sin(phase_rad + self.lag) + offset_rad
 
-    def at(self, t_s: float) -> JointsAtFrame | None:
-        """The newest sample's joint angles moved to ``t_s`` (None: none, or stale).
+    def at(self, t_s: float, offset_rad: float | None = None) -> JointsAtFrame | None:
+        """The newest sample's joint angles moved to ``t_s`` (None: none, stale, or steering).
 
         Parameters
         ----------
         t_s : float
             Frame time, host clock since the gait started.
+        offset_rad : float, optional
+            The offset the host last sent. When it differs from the sample's by more than
+            ``offset_tolerance_rad`` the robot is changing its offset, which moves every joint
+            by up to that much within the sample's age (the joints follow the step with their
+            own lag): the sample is not moved across it, and None is returned (counted as
+            ``offset_changing``).
 
         Returns
         -------
@@ -336,6 +374,10 @@ class TelemetryJoints:
         """
         sample = self.latest
         if sample is None:
+            return None
+        if offset_rad is not None and abs(offset_rad - sample.offset_rad) > \
+                self.offset_tolerance_rad:
+            self.unused["offset_changing"] = self.unused.get("offset_changing", 0) + 1
             return None
         age = t_s - sample.t_s
         if age > self.max_age_s:
@@ -519,7 +561,7 @@ class BodyStateEstimator:
             ``telemetry`` or ``reference``.
         """
         s = self.sources
-        tel = self.telemetry.at(t_s)
+        tel = self.telemetry.at(t_s, offset_rad)
         if tel is not None and tel.measured:
             return tel.phi_rad, self.telemetry_variance(tel.age_s), "telemetry"
         if tel is not None:
@@ -618,7 +660,8 @@ class BodyStateEstimator:
                 "camera_telemetry_disagreement_rad": [
                     round(float(v), 4) for v in self.disagreement_rad()],
                 "telemetry_taken": self.telemetry.taken,
-                "telemetry_ignored": dict(self.telemetry.ignored)}
+                "telemetry_ignored": dict(self.telemetry.ignored),
+                "telemetry_unused_frames": dict(self.telemetry.unused)}
 
     def latest_pose(self) -> FloatArray | None:
         """The newest frame's link angles and centre of mass (no rate fit), (N + 2,)."""
