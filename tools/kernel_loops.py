@@ -66,12 +66,13 @@ def named_loops(n_links: int, lanes: int, joints: str) -> list[tuple[str, list[s
             marked.append(f'__asm__ volatile("#LOOP{count}");')
             count += 1
         marked.append(text)
-    flags = [f for f in c_stage.C_FLAGS if f not in ("-shared", "-fPIC")]
+    compiler = c_stage.find_compiler() or "cc"
+    flags = [f for f in c_stage.compile_flags(compiler) if f not in ("-shared", "-fPIC")]
     with tempfile.TemporaryDirectory() as folder:
         c_file = Path(folder) / "stage.c"
         c_file.write_text("\n".join(marked) + "\n")
-        asm = subprocess.run([c_stage.find_compiler() or "cc", *flags, "-S", "-o", "-",
-                              str(c_file)], capture_output=True, text=True, check=True).stdout
+        asm = subprocess.run([compiler, *flags, "-S", "-o", "-", str(c_file)],
+                             capture_output=True, text=True, check=True).stdout
     lines = asm.splitlines()
     at = {int(m.group(1)): i for i, text in enumerate(lines)
           if (m := re.search(r"#LOOP(\d+)", text))}
@@ -94,8 +95,9 @@ def stage_assembly(n_links: int, lanes: int, stage: str) -> str:
     if stage == "c":
         source = codegen.generate_stage_source(codegen.make_layout(n_links, lanes))
         library, _ = c_stage.build(source, loading.C_FUNCTIONS, batch.kernel_cache_dir())
-        flags = [f for f in c_stage.C_FLAGS if f not in ("-shared", "-fPIC")]
-        return subprocess.run([c_stage.find_compiler() or "cc", *flags, "-S", "-o", "-",
+        compiler = c_stage.find_compiler() or "cc"
+        flags = [f for f in c_stage.compile_flags(compiler) if f not in ("-shared", "-fPIC")]
+        return subprocess.run([compiler, *flags, "-S", "-o", "-",
                                str(library.with_suffix(".c"))],
                               capture_output=True, text=True, check=True).stdout
     k = batch.kernel_module(n_links, lanes, "numba")

@@ -13,7 +13,8 @@ Usage (from the repo root, after ``bash scripts/setup.sh``)::
 
     .venv/bin/python tools/stage_ab.py [--rounds 41] [--steps 1500] [--joints MODEL] NAME=SPEC ...
 
-SPEC is ``[FLAGS][@GENERATOR][%LANES]``: compiler options (default ``-O3 -march=native``), a copy
+SPEC is ``[FLAGS][@GENERATOR][%LANES]``: compiler options (default: the kernel's own,
+``-O3 -march=native`` and, on an AVX-512 CPU GCC does not know, ``c_stage.AVX512_TUNING``), a copy
 of ``eelsim/batch/codegen.py`` to generate the stage with (default: the working tree's) and the
 runs per block (default 16). For example::
 
@@ -49,7 +50,9 @@ from eelsim.scenario import TRAINING_CORNERS, grid_scenario
 
 N_LINKS = 6
 DT_S = 0.01
-_TUNING = ("-O3", "-march=native")  # the variant's FLAGS replace these of the kernel's C_FLAGS
+# the variant's FLAGS replace these of the kernel's flags (by default, the kernel's own)
+_TUNING = ("-O3", "-march=native", *(f for f in c_stage.compile_flags("gcc")
+                                     if f in c_stage.AVX512_TUNING))
 _BASE_FLAGS = [f for f in c_stage.C_FLAGS if f not in _TUNING]
 
 # whole RK4 steps as the kernel's driver calls the stage (eelsim/batch/kernel_template.py), without the

@@ -405,6 +405,42 @@ def test_stages_that_rotate_the_previous_angles_equal_full_sine_and_cosine(robot
     assert np.allclose(results[0], results[1], rtol=1e-12, atol=1e-12)
 
 
+@pytest.mark.parametrize("stage", STAGES)
+def test_a_stage_rotates_only_while_every_running_lane_moved_little(robot, stage):
+    # the stage asked to rotate tests rows offset and live itself: one running lane whose
+    # angles moved ROTATE_LIMIT or more since the last stage makes it compute sin and cos in
+    # full, bit for bit as if asked to; the same lane no longer running changes nothing
+    spec = BatchSpec.build(robot, load_scenario("path2"))
+    k, work, out, lanes = _lane_block(spec, stage)
+    rng = np.random.default_rng(12)
+    xs = _random_states(rng, robot.n_links, lanes)
+    _set_rows(k, work, k.W_X, lanes, xs)
+    _set_rows(k, work, k.W_Y, lanes, xs)
+    dt, t = 0.01, 5.0
+    k._stage(work, t, 0.5 * dt, 1.0, True, False, dt / 6.0, False, False, False)  # stage 1, full
+    ys = xs.copy()
+    ys[:, : robot.n_links] += rng.uniform(-0.05, 0.05, (lanes, robot.n_links))
+    previous = out.copy()
+
+    def stage_with(rotate, far_lane_live):
+        out[:] = previous
+        out[k.O_LIVE * lanes : (k.O_LIVE + 1) * lanes] = 1.0
+        out[k.O_LIVE * lanes + 3] = 1.0 if far_lane_live else 0.0
+        out[k.O_OFFSET * lanes : (k.O_OFFSET + 1) * lanes] = 0.05
+        out[k.O_OFFSET * lanes + 3] = k.ROTATE_LIMIT  # lane 3 moved the limit: too far
+        _set_rows(k, work, k.W_Y, lanes, ys)
+        work[k.W_ACC * lanes : (k.W_ACC + xs.shape[1]) * lanes] = 0.0
+        k._stage(work, t, 0.0, 1.0, False, False, dt / 6.0, rotate, False, False)
+        return np.concatenate([work[k.W_ACC * lanes : (k.W_ACC + xs.shape[1]) * lanes],
+                               out[k.O_SIN * lanes : (k.O_COS + robot.n_links) * lanes]])
+
+    full = stage_with(False, True)
+    assert np.array_equal(stage_with(True, True), full)  # a running lane too far: in full
+    rotated = stage_with(True, False)  # that lane stopped: the others rotate
+    assert not np.array_equal(rotated, full)
+    assert np.allclose(rotated, full, rtol=1e-12, atol=1e-12)
+
+
 def test_a_block_size_that_is_not_whole_vectors_is_refused(robot):
     with pytest.raises(ValueError, match="multiple of 4"):
         run_batch(robot, load_scenario("straight"), lanes=10)

@@ -169,3 +169,28 @@ def test_a_failing_c_compiler_is_an_error_when_asked_for_and_a_fallback_on_auto(
     assert module.__name__.endswith("_l16_numba_morison")  # the numba-compiled kernel
     assert "_C_STAGE" not in vars(module)  # no binding to a C library in it
     assert batch.stage_backend("auto") == "numba"  # said once, then numba for this process
+
+
+@pytest.mark.parametrize(("features", "march", "tuned"), [
+    ("+avx2,+avx512f,+fma", "znver3", True),  # GCC 12 on a Zen 4: an AVX-512 CPU it does not know
+    ("+avx2,+avx512f,+fma", "sapphirerapids", False),  # a CPU it knows keeps its own tuning
+    ("+avx2,-avx512f,+fma", "znver3", False),  # no AVX-512
+    ("+avx2,+avx512f,+fma", None, False),  # a compiler that cannot say (clang): plain flags
+])
+def test_the_avx512_tuning_is_added_only_on_an_avx512_cpu_the_compiler_does_not_know(
+        tmp_path, monkeypatch, features, march, tuned):
+    compiler = tmp_path / "cc"
+    answer = f"printf '  -march=  \\t\\t{march}\\n'" if march else "exit 1"
+    compiler.write_text(f"#!/bin/sh\n{answer}\n")
+    compiler.chmod(0o755)
+    monkeypatch.setattr(c_stage, "_host_cpu", lambda: f"some-cpu {features}")
+    c_stage.compile_flags.cache_clear()
+    try:
+        flags = c_stage.compile_flags(str(compiler))
+    finally:
+        c_stage.compile_flags.cache_clear()  # the real host's answer again for later tests
+    assert (flags != c_stage.C_FLAGS) == tuned
+    assert set(flags) - set(c_stage.AVX512_TUNING) == set(c_stage.C_FLAGS)
+    if tuned:  # the tuning right after -march=native, which it refines
+        at = flags.index("-march=native")
+        assert flags[at + 1 : at + 3] == c_stage.AVX512_TUNING

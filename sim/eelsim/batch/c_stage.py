@@ -21,6 +21,7 @@ cache valid: the compiled driver refers to the symbol, not to an address.
 from __future__ import annotations
 
 import ast
+import functools
 import hashlib
 import logging
 import os
@@ -34,6 +35,19 @@ logger = logging.getLogger(__name__)
 # floor inlines (and the lane loops vectorise) only without trapping-math and errno
 C_FLAGS = ("-O3", "-march=native", "-ffp-contract=fast", "-fno-trapping-math", "-fno-math-errno",
            "-fPIC", "-shared")
+
+# Added to C_FLAGS on a CPU with AVX-512 that the compiler has no model of: GCC 12 takes this
+# VM's AMD Zen 4 for a Zen 3 (-march=native: the instructions of the CPU, the tuning of znver3).
+# GCC's tuning for Intel's AVX-512 servers, with 512-bit vectors kept, measured 0.96-0.98 of the
+# stage's time and 0.97 of a GA generation's, results bit-identical (docs/kernel_history.md,
+# session 11); the other Intel AVX-512 tunings did about as well, 256-bit vectors 1.65 times
+# worse. A CPU the compiler knows keeps its own tuning.
+AVX512_TUNING = ("-mtune=icelake-server", "-mprefer-vector-width=512")
+
+# the -march values GCC resolves -march=native to for the AVX-512 CPUs it knows
+_KNOWN_AVX512 = ("skylake-avx512", "cannonlake", "icelake", "cascadelake", "tigerlake",
+                 "cooperlake", "sapphirerapids", "rocketlake", "knl", "knm", "znver4", "znver5",
+                 "graniterapids", "emeraldrapids", "diamondrapids")
 
 # the generated functions' flag arguments (bool in Python, int64 in C); every other scalar
 # argument is a float64, ``work`` the buffer
@@ -220,6 +234,36 @@ def find_compiler() -> str | None:
     return None
 
 
+@functools.cache
+def compile_flags(compiler: str) -> tuple[str, ...]:
+    """The flags the C stage is compiled with: C_FLAGS, tuned for an AVX-512 CPU GCC does not know.
+
+    Parameters
+    ----------
+    compiler : str
+        The C compiler.
+
+    Returns
+    -------
+    tuple of str
+        C_FLAGS, with AVX512_TUNING after ``-march=native`` when the host CPU has AVX-512 and
+        the compiler (GCC) resolves ``-march=native`` to a CPU without it.
+    """
+    if "+avx512f" not in _host_cpu():
+        return C_FLAGS
+    try:
+        done = subprocess.run([compiler, "-march=native", "-Q", "--help=target"],
+                              capture_output=True, text=True, check=False, timeout=60)
+    except (OSError, subprocess.SubprocessError):
+        return C_FLAGS
+    march = next((line.split()[1] for line in done.stdout.splitlines()
+                  if line.split()[:1] == ["-march="] and len(line.split()) > 1), None)
+    if done.returncode != 0 or march is None or march.startswith(_KNOWN_AVX512):
+        return C_FLAGS  # not GCC (clang has no -Q --help=target), or a CPU it knows
+    at = C_FLAGS.index("-march=native") + 1
+    return C_FLAGS[:at] + AVX512_TUNING + C_FLAGS[at:]
+
+
 def _host_cpu() -> str:
     # part of the library's key: -march=native code must not run on another CPU from a shared
     # cache folder
@@ -261,7 +305,10 @@ def build(source: str, functions: tuple[str, ...], folder: Path,
         raise CStageError("no C compiler found (set CC, or install gcc)")
     marker = "STAGE_SYMBOL_"
     text = c_source(source, functions, marker)
-    key = hashlib.sha256("\n".join([text, compiler, *C_FLAGS, _host_cpu()]).encode())
+    # compile_flags follows from the compiler and the CPU, both in the key, and asks the
+    # compiler (a process start) only when it compiles: the rule itself is in the key instead
+    key = hashlib.sha256("\n".join([text, compiler, *C_FLAGS, *AVX512_TUNING, _host_cpu()])
+                         .encode())
     stem = f"eelsim_c_{key.hexdigest()[:16]}"
     symbols = {f: f"{stem}{f}" for f in functions}
     text = text.replace(marker, stem)
@@ -277,7 +324,8 @@ def build(source: str, functions: tuple[str, ...], folder: Path,
     own_c.write_text(text)
     partial = folder / f"{stem}.so.tmp{os.getpid()}"
     try:
-        done = subprocess.run([compiler, *C_FLAGS, "-o", str(partial), str(own_c)],
+        done = subprocess.run([compiler, *compile_flags(compiler), "-o", str(partial),
+                               str(own_c)],
                               capture_output=True, text=True, check=False)
     except OSError as exc:
         own_c.unlink(missing_ok=True)
@@ -318,7 +366,7 @@ def binding_source(library: Path, symbols: dict[str, str], source: str) -> str:
         names = args[name]
         types = ["numba.types.intp"] + [
             "numba.types.int64" if a in _FLAG_ARGS else "numba.types.float64" for a in names[1:]]
-        call = ", ".join(["work.ctypes.data", *names[1:]])
+        call = ", ".join(["_data_address(work)", *names[1:]])  # (kernel_template's)
         lines += [
             f"_C{name.upper()} = numba.types.ExternalFunction(",
             f"    {symbol!r}, numba.types.void({', '.join(types)}))",

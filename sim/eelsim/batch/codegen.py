@@ -234,8 +234,10 @@ def make_layout(n_links: int, lanes: int, law: FluidLaw | None = None,
         ("head_vy", 1),
         ("kc", n),
         ("torque", n - 1),  # joint j's torque u_j (on link j + 1, minus it on link j), loop 1c
-        ("torque_peak", 1),  # max_j |u_j| / stall torque at the step's start (loop 6)
-        ("torque_outside", 1),  # 1.0: some u_j outside the torque-speed line (loop 6)
+        # the lane's largest max_j |u_j| / stall torque over its steps so far, and its steps
+        # with some u_j outside the torque-speed line (loop 6, live lanes only)
+        ("torque_ratio", 1),
+        ("saturated", 1),
         # (kinematic joints: what the joints must give, from stage 1's solve)
         ("jacc", n - 1),  # kinematic joints: joint j's acceleration phi_ddot_j, loop 1c
         ("tqf", n),  # kinematic joints: the fluid torque on link j, loop 2a
@@ -252,6 +254,7 @@ def make_layout(n_links: int, lanes: int, law: FluidLaw | None = None,
         ("tail_ey", 1),
         ("cond_bound", 1),  # trace(M) trace(M^-1) >= cond(M); inf when a pivot is <= 0
         ("keep", 1),  # 1.0 for lanes that commit the step (set by the driver)
+        ("live", 1),  # 1.0 for the lanes still running (set by the driver when that changes)
     ]
 
     def assign(sizes: list[tuple[str, int]]) -> tuple[dict[str, int], int]:
@@ -600,8 +603,9 @@ def _stage_body(layout: Layout) -> list[str]:
 
     line("# ---- 1. angles. sin and cos of the link angles and of the gait phase, either by")
     line("# rotating the previous stage's (rows ang, sin, cos: angle addition with a short series,")
-    line(f"# when the driver has checked that every live lane moved less than {_ROTATE_LIMIT} rad")
-    line("# since) or in full; both leave the new ones in those rows. The gait phase advances by")
+    line(f"# when every live lane (row live) moved less than {_ROTATE_LIMIT} rad since: the")
+    line("# first loop below turns ``rotate`` off otherwise) or in full; both leave the new ones in")
+    line("# those rows. The gait phase advances by")
     line("# half a step in stages 2 and 4 (``advance``) and stays in stages 1 and 3.")
     line("# The flags choose between whole loops, never inside one: a select per lane on a flag")
     line("# had cost about 10 ns per run and stage.")
@@ -613,6 +617,15 @@ def _stage_body(layout: Layout) -> list[str]:
     e.lines.append(
         f"            work[{(layout.work_rows + layout.out['bad_pivot']) * lanes} + i] = 0.0"
     )
+    # the driver's own loop for this test, a numba function called before each stage, did not
+    # vectorise and cost about 4 % of a step (docs/kernel_history.md, session 11); here it does.
+    # A NaN offset is not small: that lane's blow-up then goes through the full sin and cos.
+    e.lines.append("    if rotate:")
+    e.lines.append("        far = 0.0")
+    e.loop("1. may the angles rotate? (no live lane moved ROTATE_LIMIT or more)", indent=4)
+    line(f"far = far if {o('offset')} < {_ROTATE_LIMIT!r} else "
+         f"(1.0 if {o('live')} != 0.0 else far)")
+    e.lines.append("        rotate = far == 0.0")
     e.lines.append("    if rotate:")
     e.lines.append("        if advance:")
     e.loop("1a. the gait phase advanced by half a step", indent=8)
@@ -668,11 +681,14 @@ def _torque_use(e: _Emitter) -> None:
     """Emit loop 6 (stage 1 only): the step's torques against the servo's torque-speed line.
 
     Per lane, from stage 1's rows torque (the torques at the step's start x): the largest |u_j|
-    as a fraction of the stall torque (row torque_peak) and 1.0 when some joint is outside the
-    line (row torque_outside; closed_loop.outside_torque_speed_line's expression, a tolerance of
-    1e-9 of the stall torque). A torque that is not finite counts for neither, as in the
-    reference. The driver folds them into each live lane's record (kernel_template's
-    _torque_use); done here, the lane loop vectorises (it had cost about half of the driver).
+    as a fraction of the stall torque, and whether some joint is outside the line
+    (closed_loop.outside_torque_speed_line's expression, a tolerance of 1e-9 of the stall
+    torque). A live lane (row live) folds them into its running figures: row torque_ratio, the
+    largest fraction so far, and row saturated, its steps outside the line (a count held as a
+    float, exact far beyond any run's steps); the driver copies both out at the block's end. A
+    torque that is not finite counts for neither, as in the reference. Done here, the lane loop
+    vectorises: as a loop of the driver it had cost about half of the driver (session 9), and
+    its fold into the lanes' records, left in the driver then, about 1 % of a step (session 11).
     """
     n = e.layout.n_links
     line, w, o = e.line, e.w, e.o
@@ -690,8 +706,11 @@ def _torque_use(e: _Emitter) -> None:
         line("big = abs(u) if abs(u) > big else big")
         line("outside = 1.0 if u > upper + tol else outside")
         line("outside = 1.0 if u < lower - tol else outside")
-    line(f"{o('torque_peak')} = big / stall")
-    line(f"{o('torque_outside')} = outside")
+    line("frac = big / stall")
+    line(f"peak = {o('torque_ratio')}")
+    line(f"live = {o('live')}")
+    line(f"{o('torque_ratio')} = (frac if frac > peak else peak) if live != 0.0 else peak")
+    line(f"{o('saturated')} = {o('saturated')} + (outside if live != 0.0 else 0.0)")
 
 
 def _forward_sweep(e: _Emitter) -> None:

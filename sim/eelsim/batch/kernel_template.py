@@ -85,6 +85,24 @@ def _vsqrt(typingctx, x):
 
 
 @intrinsic
+def _data_address(typingctx, array):
+    """The address of ``array``'s data, for the C stage's ``work`` argument.
+
+    ``array.ctypes.data`` makes a ctypes view that holds a reference to the array: a reference
+    count taken and dropped (an atomic add each) around every call of the stage, four per step,
+    which numba's pruning left in the step loop. The array here is the block's buffer, alive
+    for the whole block.
+    """
+    sig = types.intp(array)
+
+    def codegen(context, builder, signature, args):
+        data = context.make_array(signature.args[0])(context, builder, args[0]).data
+        return builder.ptrtoint(data, context.get_value_type(types.intp))
+
+    return sig, codegen
+
+
+@intrinsic
 def _next_block(typingctx, counter):
     """Atomically add one to ``counter[0]`` and return its value before: the next block to run.
 
@@ -117,8 +135,8 @@ WORK_ROWS = OUT_ROWS = 1
 W_Y = W_X = W_ACC = W_XN = W_GAMMA = W_GEOMETRY = W_HALF_LENGTH = W_LIMIT = 0
 W_MASS = W_MU = W_INERTIA = W_TORQUE_LIMIT = W_TORQUE_SLOPE = 0
 O_BAD_PIVOT = O_SIN = O_COS = O_NEAR = O_X_BAD = O_FASTEST = O_XN_BAD = O_COND_BOUND = 0
-O_TORQUE = O_TORQUE_PEAK = O_TORQUE_OUTSIDE = 0
-O_OFFSET = O_KEEP = 0
+O_TORQUE = O_TORQUE_RATIO = O_SATURATED = 0
+O_OFFSET = O_KEEP = O_LIVE = 0
 ROTATE_LIMIT = 0.1
 RESYNC_STEPS = 16
 
@@ -580,20 +598,6 @@ def _frame_poses(work, s, h, seen_x, seen_y, seen_heading):
 
 
 @_njit(**_NO_REFCOUNT)
-def _rotates(out, alive):
-    """Whether the next stage may rotate the last stage's sin and cos: every live lane moved little.
-
-    (A NaN offset is not small: that lane's blow-up then goes through the full sin/cos, exactly
-    as before.) One count over the lanes, without branches, so that it vectorises: it runs four
-    times per step, and the loop with an early exit had cost about 6 ns per run and step.
-    """
-    far = 0
-    for r in range(LANES):
-        far += alive[r] & ((out[O_OFFSET * LANES + r] < ROTATE_LIMIT) ^ True)
-    return far == 0
-
-
-@_njit(**_NO_REFCOUNT)
 def _check_start(work, out):
     """Finiteness and fastest rate of the block's initial states (rows x_bad and fastest).
 
@@ -610,22 +614,6 @@ def _check_start(work, out):
                 fastest = max(fastest, abs(v))
         out[O_X_BAD * LANES + r] = bad
         out[O_FASTEST * LANES + r] = fastest
-
-
-@_njit(**_NO_REFCOUNT)
-def _torque_use(out, alive, ratio, saturated):
-    """Each live lane's torques at the step's start, put to use (rows of the stage's loop 6).
-
-    The largest |u| as a fraction of the stall torque so far, and the steps outside the
-    torque-speed line (closed_loop.outside_torque_speed_line's expression, computed by the
-    generated stage 1: eelsim.batch.codegen._torque_use); a torque that is not finite counts
-    for neither (as in the reference).
-    """
-    for r in range(LANES):
-        if alive[r]:
-            frac = out[O_TORQUE_PEAK * LANES + r]
-            ratio[r] = frac if frac > ratio[r] else ratio[r]
-            saturated[r] += out[O_TORQUE_OUTSIDE * LANES + r] > 0.0
 
 
 @numba.njit(cache=True)
@@ -678,6 +666,7 @@ def _start_lanes(first, runs, work, fate, control, targets):
     plain = True
     for r in range(LANES):
         fate.alive[r] = first + r < n_runs
+        work[(WORK_ROWS + O_LIVE) * LANES + r] = 1.0 if fate.alive[r] else 0.0
         run = order[first + r] if first + r < n_runs else order[first]
         fate.run[r] = run
         for p in range(params.shape[1]):
@@ -798,10 +787,12 @@ def _check_state(step, t, work, out, params, stop_at_goal, fate, is_update, arri
             fate.reason[r] = code
             fate.failure_time[r] = t
             fate.alive[r] = False
+            out[O_LIVE * LANES + r] = 0.0
             fate.final_step[r] = step
         elif ((stop_at_goal and not np.isnan(arrival[r]) and step >= fate.goal[r])
               or step >= fate.total[r]):
             fate.alive[r] = False
+            out[O_LIVE * LANES + r] = 0.0
             fate.final_step[r] = step
 
 
@@ -810,9 +801,10 @@ def _stage_settings(st, step, t, dt):
     """RK4 stage ``st``'s time, step fraction, weight in the sums and whether it may rotate.
 
     Rotating: sin and cos by rotation of the previous stage's rather than in full; it also needs
-    every live lane to have moved little (_rotates). Stage 1 rotates stage 4's angles (which left
-    their offset), with the full sin and cos every RESYNC_STEPS steps (and at step 0), so that
-    the chain of rotations keeps its rounding small.
+    every live lane to have moved little, which the generated stage tests itself (rows offset
+    and live; the driver keeps row live equal to ``alive``). Stage 1 rotates stage 4's angles
+    (which left their offset), with the full sin and cos every RESYNC_STEPS steps (and at step
+    0), so that the chain of rotations keeps its rounding small.
     """
     half = 0.5 * dt
     if st == 0:
@@ -844,6 +836,7 @@ def _fail_new_state(step, t, dt, out, fate):
         fate.failure[r] = FAIL_ILL_CONDITIONED
         fate.reason[r] = code
         fate.alive[r] = False
+        out[O_LIVE * LANES + r] = 0.0
         fate.final_step[r] = step
 
 
@@ -904,8 +897,8 @@ def _write_outputs(first, dt, work, runs, outputs, fate, targets):
             outputs.final_state[run, row] = work[(W_X + row) * LANES + r]
         outputs.final_step[run] = fate.final_step[r]
         outputs.target[run] = targets.reached[r]
-        outputs.torque_ratio[run] = fate.torque_ratio[r]
-        outputs.saturated[run] = fate.saturated[r]
+        outputs.torque_ratio[run] = work[(WORK_ROWS + O_TORQUE_RATIO) * LANES + r]
+        outputs.saturated[run] = int(work[(WORK_ROWS + O_SATURATED) * LANES + r])
         outputs.distance[run] = _distance_left(work[(W_X + N_LINKS) * LANES + r],
                                                work[(W_X + N_LINKS + 1) * LANES + r],
                                                runs.waypoints[run], runs.n_waypoints[run],
@@ -934,12 +927,9 @@ def _run_block(block, runs, frames, loop, outputs):
     alive = np.zeros(LANES, np.bool_)
     lane_total = np.zeros(LANES, np.int64)
     lane_goal = np.zeros(LANES, np.int64)
-    torque_ratio = np.zeros(LANES)
-    saturated = np.zeros(LANES, np.int64)
     fate = LaneFate(np.empty(LANES, np.int64), alive, lane_total, lane_goal,
                     np.zeros(LANES, np.int64), np.zeros(LANES, np.int64), np.full(LANES, np.nan),
-                    np.zeros((LANES, 2), np.int64), np.zeros(LANES), np.zeros(LANES, np.int64),
-                    torque_ratio, saturated)
+                    np.zeros((LANES, 2), np.int64), np.zeros(LANES), np.zeros(LANES, np.int64))
     update_at = np.full(LANES, NEVER, np.int64)
     pending_at = np.full(LANES, NEVER, np.int64)
     is_update = np.zeros(LANES, np.bool_)
@@ -1011,12 +1001,11 @@ def _run_block(block, runs, frames, loop, outputs):
         for i in range(ns * LANES):  # the rows x are contiguous: one flat copy
             work[W_Y * LANES + i] = work[W_X * LANES + i]
         for st in range(4):
+            # (the stage itself turns rotate off unless every live lane moved little)
             t_s, a, wk, may_rotate = _stage_settings(st, step, t, dt)
-            rotate = may_rotate and _rotates(out, alive)
-            _stage(work, t_s, a, wk, st == 0, st == 3, dt / 6.0, rotate, st == 1 or st == 3,
-                   plain)
+            _stage(work, t_s, a, wk, st == 0, st == 3, dt / 6.0, may_rotate,
+                   st == 1 or st == 3, plain)
             if st == 0:
-                _torque_use(out, alive, torque_ratio, saturated)
                 _screen(work)
                 if any_update:
                     _cond_bound(work)

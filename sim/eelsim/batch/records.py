@@ -234,10 +234,10 @@ class LaneFate(NamedTuple):
         The condition number or joint angle the reason names.
     final_step : ndarray of int
         The step at which the lane stopped.
-    torque_ratio : ndarray
-        Largest |u| over the stall torque so far.
-    saturated : ndarray of int
-        Steps outside the servo's torque-speed line.
+
+    (The lanes' torque figures, the largest |u| over the stall torque and the steps outside the
+    servo's torque-speed line, are the generated stage's rows ``torque_ratio`` and ``saturated``,
+    and ``alive`` has a copy there too, row ``live``, for the stage's own tests.)
     """
 
     run: IntArray
@@ -250,8 +250,6 @@ class LaneFate(NamedTuple):
     reason_index: IntArray
     reason_value: FloatArray
     final_step: IntArray
-    torque_ratio: FloatArray
-    saturated: IntArray
 
 
 class CheckScratch(NamedTuple):
