@@ -534,9 +534,11 @@ def _screen(
         own[k], evs[k] = fitted, ev
 
     def others(i: int, m: str) -> list[np.ndarray]:
-        return [carry_over(replace(spaces[o], current=False).as_dict(own[(o, m)].values[0]),
+        # every other candidate's fit of every motion, and this one's of the other motions: the
+        # water is the same in every motion, so another motion's fit is a start too
+        return [carry_over(replace(spaces[o], current=False).as_dict(own[(o, n)].values[0]),
                            spaces[i], spaces[i].bounds.mean(axis=1))
-                for o in range(len(spaces)) if o != i]
+                for n in motions for o in range(len(spaces)) if (o, n) != (i, m)]
 
     scored = workers.map(_screen_stage, [(evs[(i, m)], own[(i, m)], others(i, m), seed)
                                          for i, m in keys])
@@ -577,13 +579,15 @@ def _full(
     keys = [(i, m) for i in alive for m in motions]
 
     def screened_starts(i: int, m: str) -> tuple[list[np.ndarray], list[np.ndarray]]:
-        # the candidate's own screening fit (a warm start), and every other candidate's
-        # screening fit carried over, the screened-out ones' too (the best of them is polished)
+        # the candidate's own screening fit (a warm start), and every other screening fit
+        # carried over, of every motion (this candidate's of the other motions too) and the
+        # screened-out ones' too (the best of them is polished)
         if (i, m) not in screened:
             return [], []
-        others = [carry_over(replace(spaces[o], current=False).as_dict(screened[(o, m)].values[0]),
+        others = [carry_over(replace(spaces[o], current=False).as_dict(screened[(o, n)].values[0]),
                              spaces[i], spaces[i].bounds.mean(axis=1))
-                  for o in range(len(spaces)) if o != i and (o, m) in screened]
+                  for n in motions for o in range(len(spaces))
+                  if (o, n) != (i, m) and (o, n) in screened]
         return others, [screened[(i, m)].values[0]]
 
     done = workers.map(_still_stage, [
@@ -592,10 +596,17 @@ def _full(
     for k, (own, ev) in zip(keys, done, strict=True):
         still[k], evs[k] = own, ev
     # the carried-over starts of a motion's candidate read the fits of the same motion's
-    # candidates before it in this stage, so each motion is one task
+    # candidates before it in this stage, so each motion is one task; the other motions' fits
+    # of this stage's first step (every candidate's, this one's too) are starts as well
+    def elsewhere(i: int, m: str) -> list[np.ndarray]:
+        return [carry_over(replace(spaces[o], current=False).as_dict(still[(o, n)].values[0]),
+                           spaces[i], spaces[i].bounds.mean(axis=1))
+                for n in motions if n != m for o in alive]
+
     chains = workers.map(_cross_seed_chain, [
         ([spaces[i] for i in alive], [evs[(i, m)] for i in alive],
-         [still[(i, m)] for i in alive], seed, iterations) for m in motions])
+         [still[(i, m)] for i in alive], seed, iterations, [elsewhere(i, m) for i in alive])
+        for m in motions])
     for m, (fits_m, evs_m) in zip(motions, chains, strict=True):
         for j, i in enumerate(alive):
             still[(i, m)], evs[(i, m)] = fits_m[j], evs_m[j]
@@ -625,12 +636,13 @@ def _still_stage(ev: Evaluator, seed: int, iterations: int, budget: int,
 
 def _cross_seed_chain(
     spaces: Sequence[ParameterSpace], evs: list[Evaluator], still: list[_Fitted], seed: int,
-    iterations: int,
+    iterations: int, elsewhere: Sequence[Sequence[np.ndarray]] = (),
 ) -> tuple[list[_Fitted], list[Evaluator]]:
     """One motion's candidates refitted from each other's best fits, in the grid's order.
 
     Candidate i starts from every other's best fit so far (those before it already refitted
-    in this pass), then once more for any candidate whose fit still fails.
+    in this pass) and from ``elsewhere[i]`` (the other motions' fits, carried into its space),
+    then once more for any candidate whose fit still fails.
     """
     still = list(still)
 
@@ -638,6 +650,7 @@ def _cross_seed_chain(
         others = [carry_over(replace(spaces[o], current=False).as_dict(still[o].values[0]),
                              spaces[i], spaces[i].bounds.mean(axis=1))
                   for o in range(len(spaces)) if o != i]
+        others += list(elsewhere[i]) if i < len(elsewhere) else []
         if others:
             again = multi_start_fit(evs[i], seed, others, iterations, 0)
             still[i] = _merge(still[i], again)
