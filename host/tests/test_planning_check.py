@@ -87,7 +87,7 @@ def test_check_draws_put_one_current_direction_in_every_sector_in_random_order()
     assert np.allclose(speeds, 0.02)
     # one draw in each 6-degree sector, so every band of directions 12 degrees wide holds one
     assert sorted((angles // 6).astype(int)) == list(range(60))
-    # the screen's first 12 draws are spread round the circle, not the first 72 degrees
+    # the first draws (the screen among them) are spread round the circle, not in 72 degrees
     assert np.ptp(angles[:12]) > 180
 
 

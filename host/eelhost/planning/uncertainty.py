@@ -213,21 +213,26 @@ class CoefficientModel:
             raise ValueError(f"directions: expected {STRATIFIED!r} or {LATTICE!r}, "
                              f"got {directions!r}")
         first = rng.uniform(0.0, 2.0 * math.pi)
-        # the lattice's draws consume the generator as they always have (the bench's are the same)
-        order = rng.permutation(count) if directions == STRATIFIED else np.arange(count)
         cov = self.current_cov if self.current_cov is not None else np.zeros((2, 2))
-        out = []
-        for k in range(count):
+        # the coefficients and the fitted current consume the generator as they always have, so
+        # a seed's coefficients are the lattice's (and the bench's lattice draws are unchanged);
+        # the stratified directions come from it afterwards
+        drawn = []
+        for _ in range(count):
             straight, turning = self.draw(rng, "straight"), self.draw(rng, "turning")
-            if directions == STRATIFIED:
-                angle = 2.0 * math.pi * (order[k] + rng.uniform()) / count
-            else:
-                angle = first + 2.0 * math.pi * (k % CURRENT_DIRECTIONS) / CURRENT_DIRECTIONS
             fitted = region_draw(rng, cov) if np.any(cov) else np.zeros(2)
+            drawn.append((straight, turning, fitted))
+        k = np.arange(count)
+        if directions == STRATIFIED:
+            angles = 2.0 * np.pi * (rng.permutation(count) + rng.uniform(size=count)) / count
+        else:
+            angles = first + 2.0 * np.pi * (k % CURRENT_DIRECTIONS) / CURRENT_DIRECTIONS
+        out = []
+        for i, ((straight, turning, fitted), angle) in enumerate(zip(drawn, angles, strict=True)):
             offset = (float(fitted[0] + unknown_current_m_s * math.cos(angle)),
                       float(fitted[1] + unknown_current_m_s * math.sin(angle)))
             out.append(WaterDraw(
-                f"draw {k + 1} (unknown current {unknown_current_m_s:g} m/s towards "
+                f"draw {i + 1} (unknown current {unknown_current_m_s:g} m/s towards "
                 f"{math.degrees(angle) % 360:.0f} deg)", straight, turning, offset))
         return out
 
