@@ -28,7 +28,7 @@ N = ROBOT.n_links
 def test_the_telemetrys_measured_angles_bring_the_estimate_closer_to_the_true_joints_over_sim():
     # feedback servos: the native firmware measures the plant's joints and sends phi_mrad; the
     # estimate with them is closer to the true joint angles of the moving, bent body than the
-    # camera's alone (docs/planning.md gives the figures: 0.015 against 0.022 rad on path1)
+    # camera's alone (docs/planning.md gives the figures: 0.016 against 0.022 rad on path1)
     e = measure(ROBOT, "path1", feedback=True, duration_s=6.0, seed=3)
     assert e.telemetry >= 50 and e.frames > 100
     # the telemetry on most frames; the reference where the offset was changing (steering)
