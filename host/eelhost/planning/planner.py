@@ -89,7 +89,8 @@ SCREEN_DRAWS = 4
 does not depend on it (every draw must pass), only what a failing plan costs: the plans that fail
 their check fail about 40 % of the draws at the default bound (docs/planning.md, "Targets of
 issue 28 (the planner's)"), so 4 draws catch most of them; 4 instead of 12 cut the median
-processor time on development worlds by about a fifth with the same outcomes."""
+processor time on development worlds by a tenth to a fifth with the same statuses (the leg a
+repair bans is chosen among the failing runs swum, so it can differ)."""
 
 BATCH_RUNS = 16
 """Check runs swum in one batch (each holds every physics step of its run)."""
