@@ -296,8 +296,9 @@ def _bench(args: argparse.Namespace, robot: Robot, model: CoefficientModel,
         f"Python {platform.python_version()}",
         f"- coefficients: {model.describe()}",
         f"- the check: the fits as fitted and {CHECK_DRAWS} draws of the water per plan (coefficients "
-        f"jointly within the fit's 95 % region; unknown current {args.unknown_current:g} m/s "
-        "towards 8 directions)",
+        f"jointly within the fit's 95 % region; unknown current {args.unknown_current:g} m/s, "
+        "its directions stratified round the circle; each repair its own draws); the fresh "
+        "draws below keep 8 directions 45 degrees apart",
         f"- guidance: {guidance.describe()}",
         *lines,
         BENCH_END,
