@@ -152,29 +152,31 @@ def plan_for_run(
         """The planner in the world with the estimated extra current added to its own."""
         return Planner(with_extra_current(world, extra_m_s), robot, model, gait, **options)
 
-    def goal_planner_for(extra_m_s: FloatArray) -> Planner:
-        """The goal approach's planner (docs/planning.md), its check unchanged.
+    def approach_planner(extra_m_s: FloatArray, repairs: int | None = None,
+                         **search: Any) -> Planner:
+        """A planner whose search keeps the goal approach's margin, its check unchanged.
 
-        Its search keeps the body's half width and GOAL_APPROACH_CLEARANCE_M from everything.
+        The body's half width and GOAL_APPROACH_CLEARANCE_M from everything; ``search``:
+        further SearchSettings fields (the recovery's actions and expansions).
         """
         base = options.get("settings") or SearchSettings()
         margin = planner.body_half_width_m + GOAL_APPROACH_CLEARANCE_M
         approach = with_extra_current(world, extra_m_s).model_copy(update={"clearance_m": 0.0})
+        more = {} if repairs is None else {"repairs": repairs}
         return Planner(approach, robot, model, gait, **{
-            **options, "settings": dataclasses.replace(base, margin_m=margin)})
+            **options, **more, "settings": dataclasses.replace(base, margin_m=margin, **search)})
+
+    def goal_planner_for(extra_m_s: FloatArray) -> Planner:
+        """The goal approach's planner (docs/planning.md)."""
+        return approach_planner(extra_m_s)
 
     def recovery_planner_for(extra_m_s: FloatArray) -> Planner:
         """The recovery's planner (docs/planning.md): sharper turns, the goal approach's margin.
 
         A bounded search (RECOVERY_EXPANSIONS, RECOVERY_REPAIRS); its check is unchanged.
         """
-        base = options.get("settings") or SearchSettings()
-        margin = planner.body_half_width_m + GOAL_APPROACH_CLEARANCE_M
-        approach = with_extra_current(world, extra_m_s).model_copy(update={"clearance_m": 0.0})
-        settings = dataclasses.replace(base, margin_m=margin, actions=RECOVERY_ACTIONS,
-                                       max_expansions=RECOVERY_EXPANSIONS)
-        return Planner(approach, robot, model, gait, **{
-            **options, "settings": settings, "repairs": RECOVERY_REPAIRS})
+        return approach_planner(extra_m_s, RECOVERY_REPAIRS, actions=RECOVERY_ACTIONS,
+                                max_expansions=RECOVERY_EXPANSIONS)
 
     if abs(planner.twin.acceptance_radius_m - acceptance_radius_m) > 1e-9:
         raise PlanRefused("acceptance_radius",
