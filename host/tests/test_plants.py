@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from eelhost.data.experiments import load_dataset
-from eelhost.data.plant_laws import FOIL, FoilCoefficients
+from eelhost.data.plant_laws import FOIL, STALL, FoilCoefficients, StallCoefficients
 from eelhost.data.plants import PLANTS, SMALL_SERVO_STALL_NM
 from eelhost.data.virtual_tank import (
     TABLE3,
@@ -70,9 +70,13 @@ def test_the_servo_limits_plant_clips_its_joints_on_a_small_servos_line():
 
 
 def test_plant_only_laws_are_no_candidate_and_two_plants_swim_in_them():
-    assert FOIL.name not in candidate_laws()
+    assert FOIL.name not in candidate_laws() and STALL.name not in candidate_laws()
     foil_plants = {n for n, p in PLANTS.items() if p.law == FOIL.name}
     assert {"foil_lift", "no_added_mass"} <= foil_plants
+    stalling = PLANTS["stalling_foil"]
+    assert stalling.law == STALL.name and stalling.settings == PLANTS["foil_lift"].settings
+    stall = stalling.truths()["straight"]
+    assert stall.C_L > stall.C_D2  # the lift drops at the stall angle
     still = PLANTS["no_added_mass"].truths()
     assert still["straight"].C_a == 0.0 and still["turning"].C_m == 0.0
     lift = PLANTS["foil_lift"].truths()["straight"]
@@ -104,7 +108,65 @@ def test_foil_lift_does_no_work_and_its_drag_only_dissipates():
     assert FOIL.drag(fluid, np.zeros(1), np.zeros(1), np.zeros(1))[0][0] == 0.0
 
 
-@pytest.mark.parametrize("plant", sorted(n for n, p in PLANTS.items() if p.law == FOIL.name))
+def _stalled_plate_forces(c, half_length, half_vertical, half_horizontal, rho, vt, vn):
+    """The stall law in angle form, written from docs/estimation.md: drag along -w, lift across.
+
+    D = q |w|^2 (S_t C_D0 + S_n C_D2 sin^2 a), L = q |w|^2 S_n C sin a cos a with C = C_L up to
+    the stall angle and C_D2 beyond, turned against the normal flow.
+    """
+    q = rho / 2.0
+    wetted = np.pi * (half_vertical + half_horizontal) * half_length
+    lateral = 4.0 * half_vertical * half_length
+    speed = np.hypot(vt, vn)
+    ut, un = vt / speed, vn / speed  # the flow's direction in the link's frame
+    sin_a, cos_a = np.abs(un), np.abs(ut)
+    stalled = np.arcsin(sin_a) > c.alpha_stall
+    lift_coefficient = np.where(stalled, c.C_D2, c.C_L)
+    drag = q * speed**2 * (wetted * c.C_D0 + lateral * c.C_D2 * sin_a**2)
+    lift = q * speed**2 * lateral * lift_coefficient * sin_a * cos_a
+    # across the flow, the side whose normal component opposes w_n
+    across_t, across_n = np.sign(ut * un) * un, -np.sign(ut * un) * ut
+    return -drag * ut + lift * across_t, -drag * un + lift * across_n, stalled
+
+
+def test_the_stall_law_is_the_foil_law_below_the_stall_angle_and_a_stalled_plate_above():
+    robot = load_robot()
+    geometry = (robot.link.half_length_m, robot.link.half_axis_vertical_m,
+                robot.link.half_axis_horizontal_m)
+    stall = StallCoefficients(C_D0=0.008, C_D2=1.0, C_L=2.0, C_a=0.6, C_m=0.01,
+                              alpha_stall=np.radians(16.0))
+    foil = FoilCoefficients(**{k: v for k, v in stall.model_dump().items() if k != "alpha_stall"})
+    s_fluid = STALL.link_coefficients(*geometry, stall.as_array(), 1000.0)
+    f_fluid = FOIL.link_coefficients(*geometry, foil.as_array(), 1000.0)
+    rng = np.random.default_rng(3)
+    vt, vn, om = rng.normal(0, 0.1, (3, 2000))
+    st_t, st_n, st_q = STALL.drag(s_fluid, vt, vn, om)
+    fo_t, fo_n, fo_q = FOIL.drag(f_fluid, vt, vn, om)
+    want_t, want_n, stalled = _stalled_plate_forces(stall, *geometry, 1000.0, vt, vn)
+    assert 200 < stalled.sum() < 1800  # both sides of the stall angle are tried
+    attached = ~stalled
+    # below the stall angle: the foil law, force for force; the same added mass and damping
+    np.testing.assert_allclose(st_t[attached], fo_t[attached], rtol=1e-12, atol=1e-18)
+    np.testing.assert_allclose(st_n[attached], fo_n[attached], rtol=1e-12, atol=1e-18)
+    np.testing.assert_array_equal(st_q, fo_q)
+    np.testing.assert_array_equal(s_fluid.mu_n, f_fluid.mu_n)
+    # everywhere: the angle form; above the stall angle the lift is smaller than the foil's
+    np.testing.assert_allclose(st_t, want_t, rtol=1e-9, atol=1e-15)
+    np.testing.assert_allclose(st_n, want_n, rtol=1e-9, atol=1e-15)
+    # (the two lifts vanish together only where the flow is across the link, alpha = 90 deg)
+    beyond = stalled & (np.abs(vt) > 0.1 * np.hypot(vt, vn))
+    gap = np.hypot(fo_t - st_t, fo_n - st_n)[beyond]
+    assert np.all(gap > 0.05 * np.hypot(fo_t, fo_n)[beyond])
+    # the stalled plate's force is normal to it, besides the skin friction along it
+    k_0 = s_fluid.k_0
+    np.testing.assert_allclose(st_t[stalled], -(k_0 * np.hypot(vt, vn) * vt)[stalled],
+                               rtol=1e-9, atol=1e-18)
+    # at rest relative to the water: no force, no division by zero
+    assert STALL.drag(s_fluid, np.zeros(1), np.zeros(1), np.zeros(1))[0][0] == 0.0
+
+
+@pytest.mark.parametrize("plant", sorted(n for n, p in PLANTS.items()
+                                         if p.law in (FOIL.name, STALL.name)))
 def test_the_batched_kernel_swims_the_foil_plants_as_the_reference_twin_does(plant):
     # the virtual tank records with the readable closed loop; the evaluator swims the batched
     # kernel's generated foil law: the truth must score 0 on a recording without noise

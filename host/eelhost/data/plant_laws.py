@@ -174,3 +174,116 @@ class FoilLaw(RelativeMotionLaw):
 
 FOIL = register_fluid_law(FoilLaw(), "a slender foil's drag and lift (test plants only)")
 """The foil law (a plant law: never a candidate)."""
+
+
+# The ``stall`` law (docs/estimation.md, "Test plants"): the foil water whose lift stalls. Below
+# the stall angle alpha_s it is the foil law, force for force; above it the link is a stalled
+# flat plate, whose force is normal to the plate (Hoerner & Borst 1985, ch. 4; Sheldahl & Klimas
+# 1981's post-stall data): its lift is then q |w|^2 S_n C_D2 sin alpha cos alpha, the normal drag's
+# own, and
+#
+#     f_t = -k_0 |w| w_t
+#     f_n = -(k_0 |w| + k_2 |w|) w_n
+#
+# The angle is the acute one between the flow and the link's axis, sin alpha = |w_n| / |w|, so
+# the link stalls alike heading or tailing into the flow (a slender link is fore-aft symmetric).
+# Where C_L > C_D2 the lift drops at the stall angle, as an aerofoil's does.
+
+STALL_WATER = {**FOIL_DRAG, "C_L": float(2.0 * np.pi), "alpha_stall": float(np.radians(16.0))}
+"""The stall plant's drag, lift and stall angle (rad): thin-aerofoil lift (2 pi alpha at a small
+angle) up to 16 degrees, about a NACA 0012's stall angle, then the stalled plate's C_D2 = 1.0
+(docs/estimation.md, "Plant-only water: the stall law")."""
+
+
+class StallCoefficients(FluidCoefficients):
+    """Coefficients of the stall law: the foil law's and the stall angle (dimensionless).
+
+    Attributes
+    ----------
+    C_D0, C_D2, C_L, C_a, C_m : float
+        As the foil law's (:class:`FoilCoefficients`).
+    alpha_stall : float
+        The stall angle of attack, rad: beyond it the lift is the flat plate's, C_D2 sin alpha
+        cos alpha.
+    """
+
+    law_name: ClassVar[str] = "stall"
+
+    C_D0: _NonNegative
+    C_D2: _NonNegative
+    C_L: _NonNegative
+    C_a: _NonNegative
+    C_m: _NonNegative
+    alpha_stall: Annotated[float, Field(ge=0.0, le=float(np.pi / 2), allow_inf_nan=False)]
+
+
+@dataclass(frozen=True)
+class StallLinkFluid(FoilLinkFluid):
+    """Per-link coefficients of the stall law: the foil law's and sin alpha_s (shape (..., N))."""
+
+    sin_stall: FloatArray
+
+    def kernel_values(self) -> dict[str, FloatArray]:
+        """The foil law's rows and ``fssin``."""
+        return {**super().kernel_values(), "fssin": self.sin_stall}
+
+
+class StallLaw(RelativeMotionLaw):
+    """The foil law whose lift stalls beyond an angle of attack, for test plants (see above)."""
+
+    name: ClassVar[str] = "stall"
+    coefficients: ClassVar[type[FluidCoefficients]] = StallCoefficients
+    candidate: ClassVar[bool] = False
+    default_bounds: ClassVar[tuple[tuple[float, float], ...]] = (
+        *FoilLaw.default_bounds, (0.0, float(np.pi / 2)))
+    kernel_rows: ClassVar[tuple[str, ...]] = (*FoilLaw.kernel_rows, "fssin")
+
+    def link_coefficients(
+        self,
+        half_length_m: ArrayLike,
+        half_axis_vertical_m: ArrayLike,
+        half_axis_horizontal_m: ArrayLike,
+        coefficients: ArrayLike,
+        water_density_kg_m3: ArrayLike,
+    ) -> StallLinkFluid:
+        """The foil law's coefficients (the first five) and the sine of the stall angle."""
+        columns = law_coefficient_columns(coefficients, 6)
+        foil = FOIL.link_coefficients(half_length_m, half_axis_vertical_m, half_axis_horizontal_m,
+                                      np.stack(columns[:5], axis=-1), water_density_kg_m3)
+        if not isinstance(foil, FoilLinkFluid):  # pragma: no cover - FOIL's own type
+            raise TypeError(type(foil).__name__)
+        return StallLinkFluid(
+            mu_n=foil.mu_n, lambda_1=foil.lambda_1, k_0=foil.k_0, k_2=foil.k_2,
+            k_lift=foil.k_lift, lambda_q=foil.lambda_q,
+            sin_stall=np.sin(columns[5]) + np.zeros_like(foil.k_0))
+
+    def drag(
+        self, fluid: LinkFluid, vt: FloatArray, vn: FloatArray, omega: FloatArray
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Drag, lift (the foil's below the stall angle, the flat plate's above) and yaw damping."""
+        if not isinstance(fluid, StallLinkFluid):
+            raise TypeError(f"the stall law needs its own link coefficients, got "
+                            f"{type(fluid).__name__}")
+        f = fluid
+        speed = np.sqrt(vt * vt + vn * vn)
+        inv = 1.0 / np.maximum(speed, SPEED_FLOOR_M_S)
+        # attached flow up to the stall angle; then the stalled plate's lift, C_L -> C_D2
+        k_lift = np.where(np.abs(vn) <= f.sin_stall * speed, f.k_lift, f.k_2)
+        return (-(f.k_0 * speed + (f.k_2 - k_lift) * vn * vn * inv) * vt,
+                -(f.k_0 * speed + (f.k_2 * vn * vn + k_lift * vt * vt) * inv) * vn,
+                -f.lambda_q * np.abs(omega) * omega)
+
+    def emit_drag(self, code: KernelCode, link: int) -> tuple[str, str, str]:
+        """The same, negated, for the batched kernel."""
+        w, line = code.w, code.line
+        line("fl_sp = _vsqrt(fl_vt * fl_vt + fl_vn * fl_vn)")
+        line(f"fl_inv = 1.0 / max(fl_sp, {SPEED_FLOOR_M_S!r})")
+        k0, k2 = w("fk0", link), w("fk2", link)
+        line(f"fl_kl = {w('fkl', link)} if abs(fl_vn) <= {w('fssin', link)} * fl_sp else {k2}")
+        return (f"({k0} * fl_sp + ({k2} - fl_kl) * fl_vn * fl_vn * fl_inv) * fl_vt",
+                f"({k0} * fl_sp + ({k2} * fl_vn * fl_vn + fl_kl * fl_vt * fl_vt) * fl_inv) * fl_vn",
+                f"{w('flamq', link)} * abs(om) * om")
+
+
+STALL = register_fluid_law(StallLaw(), "the foil water whose lift stalls (test plants only)")
+"""The stall law (a plant law: never a candidate)."""

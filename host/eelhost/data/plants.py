@@ -20,7 +20,7 @@ from __future__ import annotations
 import tomllib
 from dataclasses import dataclass
 
-from eelhost.data.plant_laws import FOIL_DRAG
+from eelhost.data.plant_laws import FOIL_DRAG, STALL_WATER
 from eelhost.data.virtual_tank import TABLE3, TankSettings
 from eelsim.fluid import DEFAULT_FLUID_LAW, FLUID_LAWS, FluidCoefficients, get_fluid_law
 from eelsim.registry import Registry
@@ -41,6 +41,8 @@ _OTHER_LAW_DRAG: dict[str, dict[str, float]] = {
     "reynolds": {"C_f_lam": 1.328, "C_d_inf": 1.0, "C_d_visc": 5.0},
     # skin friction as table 3's C_f, a cylinder's cross-flow drag, a moderate lift
     "foil": FOIL_DRAG,
+    # the foil's drag; thin-aerofoil lift up to a 16 deg stall, then the stalled plate's
+    "stall": STALL_WATER,
 }
 
 
@@ -197,6 +199,11 @@ NO_ADDED_MASS = register_plant(Plant(
     "no_added_mass", "the foil water without added mass or added inertia (C_a = C_m = 0: the links "
     "carry no water along), on the servo joints", TankSettings(joints=_SERVO_JOINTS), "foil",
     (("C_a", 0.0), ("C_m", 0.0))))
+
+STALLING_FOIL = register_plant(Plant(
+    "stalling_foil", "the foil water whose lift stalls at 16 deg angle of attack, dropping to a "
+    "flat plate's (a plant-only law), on the servo joints", TankSettings(joints=_SERVO_JOINTS),
+    "stall"))
 
 ALL = register_plant(Plant(
     "all", "head and tail, servo joints on their torque-speed line, the stray current, a "
