@@ -11,7 +11,7 @@ import logging
 import numpy as np
 import pytest
 
-from eelhost.planning.state_bench import measure
+from eelhost.benchmarks.state_estimate import measure
 from eelhost.planning.state_estimate import BodyStateEstimator, TelemetryJoints
 from eelhost.wire import protocol
 from eelsim.closed_loop import LoopOptions, simulate_closed_loop

@@ -10,7 +10,7 @@ joint angles' error (the body's shape) and of the link rates' error.
 
 Command (docs/planning.md, "The robot's state at the tank", has its figures)::
 
-    .venv/bin/python -m eelhost.planning.state_bench --scenario path1 --duration 15
+    .venv/bin/python -m eelhost.benchmarks.state_estimate --scenario path1 --duration 15
 """
 
 from __future__ import annotations
@@ -219,7 +219,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     int
         Exit status.
     """
-    parser = argparse.ArgumentParser(prog="python -m eelhost.planning.state_bench",
+    parser = argparse.ArgumentParser(prog="python -m eelhost.benchmarks.state_estimate",
                                      description=__doc__.splitlines()[0])
     parser.add_argument("--scenario", action="append", help="named scenario (repeat); path1")
     parser.add_argument("--robot", action="append", help="robot file (repeat); the bundled one")
