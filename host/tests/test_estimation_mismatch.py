@@ -141,6 +141,24 @@ def test_recommendation_is_the_lowest_held_out_error_and_ties_go_to_the_simpler_
     assert recommend([simple, much_better, bad]) is much_better
 
 
+def test_a_richer_model_whose_lead_is_inside_one_standard_error_of_the_folds_is_not_recommended():
+    def score(model, k, err):
+        return CandidateScore(model, k, {"straight": 0.1}, {"straight": np.array(err)})
+
+    # 7 % lower mean, but the best's folds spread by far more than that: the simpler law stays
+    base = score("pd x morison", 12, [0.060, 0.055, 0.028, 0.078, 0.036, 0.039, 0.033, 0.055])
+    nested = score("pd x morison_lift", 16,
+                   [0.053, 0.051, 0.027, 0.061, 0.040, 0.039, 0.031, 0.055])
+    assert nested.mean_held_out < base.mean_held_out / 1.02
+    assert base.mean_held_out - nested.mean_held_out < nested.standard_error
+    assert recommend([nested, base]) is base
+    # the same lead with folds that agree is evidence: the richer model is recommended
+    tight = score("pd x morison_lift", 16, [nested.mean_held_out] * 8)
+    assert recommend([tight, base]) is tight
+    # a failed candidate has no standard error to lend
+    assert not np.isfinite(score("x", 3, [np.nan, 0.1]).standard_error)
+
+
 @pytest.mark.slow
 def test_cross_validation_holds_out_each_gait_and_keeps_the_law_that_made_the_tank(
     robot, tmp_path

@@ -12,7 +12,7 @@ robot file.
 
 A model is adopted only on the held-out evidence, never on the training fitness: a richer model
 always fits its training gaits at least as well, and the comparison prefers the simpler one within
-``selection.TIE``.
+``selection.TIE`` or one standard error of the folds (``selection.recommend``).
 """
 
 from __future__ import annotations

@@ -219,7 +219,7 @@ def run_report(
             "Recommended: none: every candidate failed, so the robot file's model was fitted."
             if choice is None else
             f"Recommended: **{choice.model}** (lowest mean held-out error; within "
-            "2 % the model with fewer parameters)"
+            "2 % or one standard error of the folds the model with fewer parameters)"
             + ("; adopted: the fits above are its own." if chosen.adopted else
                "." if choice.model == chosen.model else
                f"; not adopted (`--keep-model`): the fits above are {chosen.model}'s."))

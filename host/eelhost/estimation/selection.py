@@ -38,7 +38,13 @@ held-out one) is refitted from the candidate's next start; a candidate whose fol
 marked failed, shown as such, and never ranked by a penalty-inflated mean.
 
 The recommendation is the candidate with the lowest mean held-out error over every held-out gait;
-one within ``TIE`` of it with fewer parameters is preferred (the simpler model predicts as well).
+one with fewer parameters is preferred when its mean is within the larger of ``TIE`` of the best's
+and one standard error of the best's mean over its folds (the one-standard-error rule of
+cross-validation: Breiman, Friedman, Olshen and Stone, *Classification and Regression Trees*,
+1984, section 3.4.3; Hastie, Tibshirani and Friedman, *The Elements of Statistical Learning*, 2009,
+section 7.10). A richer model's lower error within the folds' own spread is not evidence that it
+predicts better: a lift variant nests its base law, and on water without lift its extra
+coefficients fit noise (docs/estimation.md, "Model choice").
 """
 
 from __future__ import annotations
@@ -165,6 +171,16 @@ class CandidateScore:
         return float(np.mean(errors))
 
     @property
+    def standard_error(self) -> float:
+        """Standard error of :attr:`mean_held_out` over the folds (0 for one fold; inf if failed)."""
+        errors = np.concatenate(list(self.held_out.values()))
+        if self.failed or not np.all(np.isfinite(errors)):
+            return float("inf")
+        if errors.size < 2:
+            return 0.0
+        return float(np.std(errors, ddof=1) / np.sqrt(errors.size))
+
+    @property
     def worst_held_out(self) -> float:
         """Largest held-out error (inf for a failed candidate)."""
         errors = np.concatenate(list(self.held_out.values()))
@@ -176,6 +192,8 @@ class CandidateScore:
 def recommend(scores: Sequence[CandidateScore]) -> CandidateScore | None:
     """The candidate to trust (module docstring): lowest mean held-out error, ties to the simpler.
 
+    A tie is a mean within the larger of ``TIE`` of the best's and the best's standard error.
+
     Failed candidates and those the screen dropped are never recommended; None when every
     candidate failed.
     """
@@ -183,7 +201,8 @@ def recommend(scores: Sequence[CandidateScore]) -> CandidateScore | None:
     if not ran:
         return None
     best = min(ran, key=lambda c: c.mean_held_out)
-    close = [c for c in ran if c.mean_held_out <= best.mean_held_out * (1 + TIE)]
+    margin = max(best.mean_held_out * TIE, best.standard_error)
+    close = [c for c in ran if c.mean_held_out <= best.mean_held_out + margin]
     return min(close, key=lambda c: (c.parameters, c.mean_held_out))
 
 
