@@ -110,6 +110,20 @@ class FoilLinkFluid(LinkFluid):
         return {"fk0": self.k_0, "fk2": self.k_2, "fkl": self.k_lift, "flamq": self.lambda_q}
 
 
+def _foil_forces(f: FoilLinkFluid, k_lift: FloatArray, vt: FloatArray, vn: FloatArray,
+                 omega: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The foil water's drag, lift and yaw damping with the lift's coefficient ``k_lift``.
+
+    The foil law passes its own; the stall law its own below the stall angle and the stalled
+    plate's above it (module docstring), so both laws are one formula.
+    """
+    speed = np.sqrt(vt * vt + vn * vn)
+    inv = 1.0 / np.maximum(speed, SPEED_FLOOR_M_S)
+    return (-(f.k_0 * speed + (f.k_2 - k_lift) * vn * vn * inv) * vt,
+            -(f.k_0 * speed + (f.k_2 * vn * vn + k_lift * vt * vt) * inv) * vn,
+            -f.lambda_q * np.abs(omega) * omega)
+
+
 class FoilLaw(RelativeMotionLaw):
     """Lift and angle-of-attack-dependent drag on each link, for test plants (module docstring)."""
 
@@ -154,12 +168,7 @@ class FoilLaw(RelativeMotionLaw):
         if not isinstance(fluid, FoilLinkFluid):
             raise TypeError(f"the foil law needs its own link coefficients, got "
                             f"{type(fluid).__name__}")
-        f = fluid
-        speed = np.sqrt(vt * vt + vn * vn)
-        inv = 1.0 / np.maximum(speed, SPEED_FLOOR_M_S)
-        return (-(f.k_0 * speed + (f.k_2 - f.k_lift) * vn * vn * inv) * vt,
-                -(f.k_0 * speed + (f.k_2 * vn * vn + f.k_lift * vt * vt) * inv) * vn,
-                -f.lambda_q * np.abs(omega) * omega)
+        return _foil_forces(fluid, fluid.k_lift, vt, vn, omega)
 
     def emit_drag(self, code: KernelCode, link: int) -> tuple[str, str, str]:
         """The same, negated, for the batched kernel."""
@@ -264,14 +273,10 @@ class StallLaw(RelativeMotionLaw):
         if not isinstance(fluid, StallLinkFluid):
             raise TypeError(f"the stall law needs its own link coefficients, got "
                             f"{type(fluid).__name__}")
-        f = fluid
         speed = np.sqrt(vt * vt + vn * vn)
-        inv = 1.0 / np.maximum(speed, SPEED_FLOOR_M_S)
         # attached flow up to the stall angle; then the stalled plate's lift, C_L -> C_D2
-        k_lift = np.where(np.abs(vn) <= f.sin_stall * speed, f.k_lift, f.k_2)
-        return (-(f.k_0 * speed + (f.k_2 - k_lift) * vn * vn * inv) * vt,
-                -(f.k_0 * speed + (f.k_2 * vn * vn + k_lift * vt * vt) * inv) * vn,
-                -f.lambda_q * np.abs(omega) * omega)
+        k_lift = np.where(np.abs(vn) <= fluid.sin_stall * speed, fluid.k_lift, fluid.k_2)
+        return _foil_forces(fluid, k_lift, vt, vn, omega)
 
     def emit_drag(self, code: KernelCode, link: int) -> tuple[str, str, str]:
         """The same, negated, for the batched kernel."""
