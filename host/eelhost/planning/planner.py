@@ -283,10 +283,6 @@ class Planner:
     settings : SearchSettings, optional
     draws : int
         Draws of the water the check swims (:data:`CHECK_DRAWS`).
-    repair_draws : int, optional
-        Draws a repaired plan is checked over (default ``draws``): more draws for a plan that
-        comes after others failed, where plans that pass by chance are likelier
-        (docs/planning.md, "The planner", step 4).
     unknown_current_m_s : float
         Bound of the current the planner is not told of, checked in every draw at that speed in
         directions round the circle.
@@ -328,7 +324,6 @@ class Planner:
         options: LoopOptions | None = None,
         settings: SearchSettings | None = None,
         draws: int = CHECK_DRAWS,
-        repair_draws: int | None = None,
         unknown_current_m_s: float = DEFAULT_UNKNOWN_CURRENT_M_S,
         seed: int = 0,
         robust_search: bool = False,
@@ -349,7 +344,6 @@ class Planner:
         self.unknown_current_m_s = float(unknown_current_m_s)
         self.seed = int(seed)
         self.draws = int(draws)
-        self.repair_draws = int(draws if repair_draws is None else repair_draws)
         self.water = coefficients.water_draws(np.random.default_rng(seed), draws,
                                               self.unknown_current_m_s)
         self._waters: dict[int, list[WaterDraw]] = {0: self.water}
@@ -534,7 +528,7 @@ class Planner:
         """The draws of the water the ``attempt``-th plan of a planning call is checked over.
 
         Attempt 0 (the first plan) has ``draws`` draws seeded with ``seed``; each repair its own
-        ``repair_draws`` seeded with ``(seed, attempt)``: independent of one another and of
+        ``draws`` seeded with ``(seed, attempt)``: independent of one another and of
         every other seed's.
 
         Parameters
@@ -548,7 +542,7 @@ class Planner:
         """
         if attempt not in self._waters:
             rng = np.random.default_rng([self.seed, attempt])
-            self._waters[attempt] = self.coefficients.water_draws(rng, self.repair_draws,
+            self._waters[attempt] = self.coefficients.water_draws(rng, self.draws,
                                                                   self.unknown_current_m_s)
         return self._waters[attempt]
 
