@@ -22,6 +22,8 @@ callback (the command prints it).
 from __future__ import annotations
 
 import os
+import re
+import shutil
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import replace
@@ -40,6 +42,7 @@ from eelhost.data.virtual_tank import (
 )
 from eelhost.errors import UserError
 from eelhost.estimation.adopt import fit_and_choose
+from eelhost.estimation.clock import WIDE_S, clock_check
 from eelhost.estimation.coefficients_file import FittedModel
 from eelhost.estimation.evaluate import Evaluator
 from eelhost.estimation.methods import FitSettings
@@ -48,7 +51,9 @@ from eelhost.estimation.pipeline import fit_motion
 from eelhost.estimation.space import ParameterSpace
 from eelhost.estimation.tank_current import share_tank_current
 from eelhost.estimation.validate import validate, worst_ex
+from eelhost.files import atomic_write
 from eelhost.machine import cpu_model
+from eelsim.robot import DEFAULT_ROBOT, bundled_robot, load_robot, robot_file_text
 
 PAPER_WORST_EX = {"straight": 0.082, "turning": 0.183, "path": 0.01}
 # Issue 32's target for the worst held-out E_x (recorded clock, BL) on a mismatched tank, from
@@ -62,12 +67,30 @@ MOTIONS = ("straight", "turning", "path")
 Progress = Callable[[str], None]
 
 
-def _tank(work: Path, plant: Plant, seed: int, say: Progress) -> Dataset:
+def _tank(work: Path, plant: Plant, seed: int, say: Progress,
+          robot_file: str | None = None) -> Dataset:
+    """The plant's virtual tank (recorded once per ``work`` folder), declaring ``robot_file``.
+
+    The plant is always recorded from the bundled paper robot (plus the plant's own differences,
+    ``virtual_tank.true_robot``); ``robot_file`` is only what the dataset declares, as a lab's
+    robot file: the same recordings under either bundled file (issue 32: the chosen model must
+    not depend on it).
+    """
     folder = work / plant.name
     if not (folder / "manifest.toml").exists():
         say(f"generating the {plant.name} virtual tank in {folder} ...")
         generate_dataset(folder, truth=plant.truths(), settings=plant.settings, seed=seed)
-    return load_dataset(folder)
+    if robot_file is None or bundled_robot(robot_file) == DEFAULT_ROBOT:
+        return load_dataset(folder)
+    declared = work / f"{plant.name}@{Path(robot_file).name}"
+    if not (declared / "manifest.toml").exists():
+        shutil.copytree(folder, declared, dirs_exist_ok=True, ignore=shutil.ignore_patterns(
+            "manifest.toml"))  # the manifest last: a copy cut short is made again
+        atomic_write(declared / "robot.toml", robot_file_text(robot_file))
+        manifest = (folder / "manifest.toml").read_text()
+        atomic_write(declared / "manifest.toml", re.sub(
+            r'(?m)^robot = ".*"$', 'robot = "robot.toml"', manifest, count=1))
+    return load_dataset(declared)
 
 
 def _true_current(ds: Dataset) -> np.ndarray:
@@ -95,7 +118,8 @@ def _plant_itself(ds: Dataset, plant: Plant | None, tests: list,
     ``LoopOptions.servo_limits``; it clips PD joints only, as in the tank).
     """
     settings = plant.settings if plant is not None else TankSettings()
-    robot = true_robot(ds.robot, settings)
+    # a plant's tank is recorded from the bundled paper robot whatever file it declares (_tank)
+    robot = true_robot(ds.robot if plant is None else load_robot(), settings)
     models = {}
     for motion, truth in ds.truth.items():
         base = FittedModel.of_coefficients(truth, robot)
@@ -146,13 +170,15 @@ def _fit_and_validate(ds: Dataset, plant: Plant | None, settings: FitSettings,
             out["truth_fitness"][motion] = float(ev.fitness(x[None])[0])
     tests = ds.held_out
 
-    def worst(fits: dict[str, FitResult]) -> dict[str, tuple[float, float]]:
+    def worst(fits: dict[str, FitResult], clock: bool = False) -> dict[str, tuple[float, float]]:
         runs = validate(ds.robot, {m: r.model for m, r in fits.items()}, tests,
                         backend=settings.backend)
+        if clock:  # the chosen model's best clock offsets at their bound (as the report)
+            out["clock"] = clock_check(runs)
         recorded, aligned = worst_ex(runs), worst_ex(runs, aligned=True)
         return {m: (recorded[m], aligned[m]) for m in MOTIONS if m in recorded}
 
-    out["worst_ex"] = worst(chosen.fits)
+    out["worst_ex"] = worst(chosen.fits, clock=True)
     out["alone_worst_ex"] = worst(alone) if out["tank_current"] is not None else None
     out["plant_worst_ex"] = _plant_itself(ds, plant, tests, settings.backend) if ds.truth else {}
     own = chosen.robot_file_fits
@@ -244,6 +270,7 @@ def estimator_report(
     fit_current: bool = True,
     joint_models: Sequence[str] | None = None,
     laws: Sequence[str] | None = None,
+    robot_file: str | None = None,
 ) -> str:
     """Measure the estimator on the virtual tanks and write the markdown report.
 
@@ -269,6 +296,9 @@ def estimator_report(
         and the robot file's, ``eelsim.joints.default_grid_models``).
     laws : sequence of str, optional
         The fluid laws it tries (default: ``eelhost.estimation.selection.default_laws``).
+    robot_file : str, optional
+        The robot file the plants' datasets declare (default: the paper's); the recordings are
+        the same whichever (``_tank``). The bundled dataset keeps its own.
 
     Returns
     -------
@@ -301,7 +331,9 @@ def estimator_report(
         + ("" if joint_models is None else " Joint models the comparison tries: "
            + ", ".join(sorted(set(joint_models))) + ".")
         + ("" if laws is None else " Fluid laws it tries: " + ", ".join(sorted(set(laws)))
-           + " (not the default grid)."),
+           + " (not the default grid).")
+        + ("" if robot_file is None else f" The plants' datasets declare the robot file "
+           f"`{robot_file}` (recorded from the paper robot and the plant's differences)."),
         "",
     ]
     cases: list[tuple[str, str, Plant | None]] = [
@@ -322,7 +354,8 @@ def estimator_report(
     cases = [c for c in cases if only is None or c[0] in only]
     results = {}
     for key, label, plant in cases:
-        ds = load_dataset(BUNDLED_DATASET) if plant is None else _tank(work, plant, seed, say)
+        ds = (load_dataset(BUNDLED_DATASET) if plant is None
+              else _tank(work, plant, seed, say, robot_file))
         say(f"fitting the {label} ...")
         results[key] = r = _fit_and_validate(ds, plant, settings, say, joint_models, laws)
         if ga:
@@ -372,6 +405,14 @@ def estimator_report(
                           "with those, worst held-out E_x, recorded clock: " + ", ".join(
                               f"{m} {a:.4f} BL" for m, (a, _b) in r["alone_worst_ex"].items())
                           + ".", ""]
+        clock = r["clock"]
+        wide = np.abs(list(clock.wide_offsets_s.values()))
+        lines += [f"Best clock offsets at the +-{clock.bound_s:g} s bound: {len(clock.at_bound)} "
+                  f"of {clock.total} held-out experiments"
+                  + (f"; searched within +-{WIDE_S:g} s they lie at {np.median(wide):.2f} s "
+                     f"(median; up to {wide.max():.2f} s)" if wide.size else "")
+                  + (" (the report warns: misfit, not a clock error)." if clock.most_at_bound
+                     else "."), ""]
         lines += [
             "| motion | fitness | worst held-out E_x, recorded clock (BL) | worst held-out E_x, "
             "best clock offset (BL) | the plant itself, recorded clock (BL) | target "

@@ -60,8 +60,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="instead: measure the report's 95 %% prediction bands' coverage of held-out "
         "positions on these test plants (docs/estimation_coverage.md): " + plant_help(),
     )
-    p.add_argument("--robot", help="the robot file of the --bands datasets (default: the "
-                   "paper's)")
+    p.add_argument("--robot", help="the robot file the datasets declare (default: the paper's; "
+                   "--tanks: the same recordings under either bundled file; --bands: the "
+                   "robot the plants are recorded from)")
     p.add_argument("--replicates", type=COUNT, default=8,
                    help="bootstrap refits (--coverage, --bands)")
     p.add_argument("--seed", type=SEED, default=0, help="seed of the datasets and the fits")
@@ -117,6 +118,7 @@ def run(args: argparse.Namespace) -> int:
         fit_current=args.fit_current,
         joint_models=args.joint_models,
         laws=args.laws,
+        robot_file=args.robot,
     )
     if write_report(args.write, text):
         print(f"wrote {args.write}")  # the tables went to stdout as they were measured
