@@ -48,3 +48,23 @@ def test_a_plants_tank_declared_under_the_servo_file_holds_the_same_recordings(t
     floors = [_plant_itself(ds, plant, ds.held_out, "reference") for ds in (pd, servo)]
     assert floors[0] == floors[1]
     assert 0 < floors[0]["straight"] < 0.05
+
+
+def test_interval_coverage_on_stiff_servos_under_the_servo_file_judges_the_plants_own_joints():
+    # the servo model fitted to stiff_servos contains the tank: its truth is the law's straight
+    # row, the servo file's lag (1/K) and motor time constant, and still water
+    from eelhost.benchmarks.estimator_coverage import coverage_truth
+    from eelhost.estimation.space import ParameterSpace
+
+    plant = PLANTS["stiff_servos"]
+    space = ParameterSpace.for_robot(load_robot(SERVO_ROBOT), current=True)
+    truth = space.as_dict(coverage_truth(space, plant, load_robot()))
+    joints = load_robot(SERVO_ROBOT).joints
+    assert truth["lag_s"] == 1.0 / joints.position_gain_1_s
+    assert truth["motor_time_constant_s"] == joints.motor_time_constant_s
+    assert truth["C_d"] == plant.truths()["straight"].C_d
+    assert truth["current_x_m_s"] == truth["current_y_m_s"] == 0.0
+    # a steady current is the nuisance's truth: 5 mm/s towards 120 deg
+    steady = coverage_truth(ParameterSpace.for_robot(load_robot(), current=True),
+                            PLANTS["steady_current"], load_robot())
+    np.testing.assert_allclose(steady[-2:], 0.005 * np.array([-0.5, np.sqrt(3) / 2]))

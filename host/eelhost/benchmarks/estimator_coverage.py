@@ -33,6 +33,7 @@ from eelhost.data.virtual_tank import (
     generate_dataset,
     paper_experiment_plan,
     record_experiment,
+    true_robot,
 )
 from eelhost.estimation.coefficients_file import (
     prediction_band_coverage,
@@ -44,7 +45,7 @@ from eelhost.estimation.identify import identifiability
 from eelhost.estimation.methods import FitProblem, FitSettings, run_fit
 from eelhost.estimation.space import ParameterSpace
 from eelhost.estimation.uncertainty import WIDEN, BootstrapResult, parametric_bootstrap
-from eelsim.robot import load_robot
+from eelsim.robot import Robot, load_robot
 
 log = logging.getLogger(__name__)
 
@@ -96,6 +97,7 @@ def measure_coverage(
     settings: FitSettings | None = None,
     say: Callable[[str], None] | None = None,
     plant: Plant | None = None,
+    robot_file: str | None = None,
 ) -> Coverage:
     """The intervals' coverage over ``seeds`` synthetic tanks (module docstring).
 
@@ -112,29 +114,29 @@ def measure_coverage(
         Gets a line per seed.
     plant : Plant, optional
         A named plant whose model the fitted one contains (default: the bundled tank's noise).
+    robot_file : str, optional
+        The robot file whose model is fitted (default: the paper's); the tank is recorded from
+        the paper robot with the plant's differences either way (``stiff_servos`` with the
+        servo file: its joints are that file's, so the servo model contains the truth, its
+        fitted joint parameters included).
 
     Returns
     -------
     Coverage
     """
-    robot = load_robot()
+    recorder = load_robot()
+    robot = load_robot(robot_file) if robot_file else recorder
     tank = plant.settings if plant is not None else TankSettings()
     true = plant.truths()[MOTION] if plant is not None else TABLE3[MOTION]
     # the fit's parameters (with the ambient current when the settings fit it: still water here)
     space = ParameterSpace.for_robot(robot, current=(settings or FitSettings()).fit_current)
-    current = np.zeros(len(space.current_names))
-    if (plant is not None and space.current_names
-            and tank.stray_current_direction_deg is not None):
-        # a steady current of the tank is the nuisance's truth
-        a = np.radians(tank.stray_current_direction_deg)
-        current = tank.stray_current_m_s * np.array([np.cos(a), np.sin(a)])
-    truth = np.concatenate([true.as_array(), current])
+    truth = coverage_truth(space, plant, recorder)
     gaits = [s for motion, split, s in paper_experiment_plan()
              if motion == MOTION and split == "train"]
     results = []
     for k in range(seeds):
         seed = first_seed + k
-        exps = [record_experiment(robot, s, MOTION, true, tank, seed=1000 * seed + i)
+        exps = [record_experiment(recorder, s, MOTION, true, tank, seed=1000 * seed + i)
                 for i, s in enumerate(gaits)]
         fit_settings = settings or FitSettings(seed=seed)
         ev = Evaluator(robot, exps, backend=fit_settings.backend, align_s=fit_settings.align_s,
@@ -153,6 +155,24 @@ def measure_coverage(
         if say:
             say(line)
     return Coverage(space.names, truth, results)
+
+
+def coverage_truth(space: ParameterSpace, plant: Plant | None, recorder: Robot) -> np.ndarray:
+    """The true point of ``space`` for a straight tank of ``plant`` recorded from ``recorder``.
+
+    The law's straight truth, the plant's own joint parameters where the space fits them (the
+    servo model's lag and motor time constant on ``stiff_servos``), and the tank's steady
+    current where the space has one (still water when the plant's current is drawn anew per
+    experiment, which has no one true value).
+    """
+    tank = plant.settings if plant is not None else TankSettings()
+    true = plant.truths()[MOTION] if plant is not None else TABLE3[MOTION]
+    current = np.zeros(len(space.current_names))
+    if space.current_names and tank.stray_current_direction_deg is not None:
+        a = np.radians(tank.stray_current_direction_deg)
+        current = tank.stray_current_m_s * np.array([np.cos(a), np.sin(a)])
+    body = space.vector(true.as_array(), true_robot(recorder, tank))
+    return np.concatenate([body[: space.size - len(current)], current])
 
 
 def coverage_markdown(cov: Coverage, seeds_command: str, tank: str = "bundled noise") -> str:

@@ -61,8 +61,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "positions on these test plants (docs/estimation_coverage.md): " + plant_help(),
     )
     p.add_argument("--robot", help="the robot file the datasets declare (default: the paper's; "
-                   "--tanks: the same recordings under either bundled file; --bands: the "
-                   "robot the plants are recorded from)")
+                   "--tanks: the same recordings under either bundled file; --coverage: the "
+                   "model fitted to the same recordings; --bands: the robot the plants are "
+                   "recorded from)")
     p.add_argument("--replicates", type=COUNT, default=8,
                    help="bootstrap refits (--coverage, --bands)")
     p.add_argument("--seed", type=SEED, default=0, help="seed of the datasets and the fits")
@@ -97,10 +98,12 @@ def run(args: argparse.Namespace) -> int:
             raise UserError(f"--coverage takes one tank in --tanks: bundled or a plant, got "
                             f"{tank!r}; known plants: {', '.join(sorted(PLANTS))}")
         cov = measure_coverage(args.coverage, args.seed, args.replicates,
-                               say=lambda line: print(line, flush=True), plant=plant)
+                               say=lambda line: print(line, flush=True), plant=plant,
+                               robot_file=args.robot)
         text = "# Estimation: interval coverage\n\n" + coverage_markdown(
             cov, f"eelbot estimate-bench --coverage {args.coverage} --seed {args.seed} "
-            f"--replicates {args.replicates}" + (f" --tanks {tank}" if plant else ""),
+            f"--replicates {args.replicates}" + (f" --tanks {tank}" if plant else "")
+            + (f" --robot {args.robot}" if args.robot else ""),
             "bundled noise" if plant is None else f"plant {tank}")
         print(text)
         if args.write:
