@@ -6,16 +6,29 @@ ignored with a logged reason.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 
 import numpy as np
 import pytest
 
 from eelhost.benchmarks.state_estimate import measure
-from eelhost.planning.state_estimate import BodyStateEstimator, TelemetryJoints
+from eelhost.planning.planner import Planner
+from eelhost.planning.replan import predict_state
+from eelhost.planning.state_estimate import (
+    BodyEstimate,
+    BodyStateEstimator,
+    CurrentEstimator,
+    TelemetryJoints,
+    steady_towards,
+)
+from eelhost.planning.twin import Twin
+from eelhost.planning.uncertainty import default_model
+from eelhost.planning.world import parse_world
 from eelhost.wire import protocol
 from eelsim.closed_loop import LoopOptions, simulate_closed_loop
 from eelsim.control import gait_reference
+from eelsim.dynamics import heading
 from eelsim.model import SwimmerModel
 from eelsim.robot import load_robot
 from eelsim.scenario import PATH_GAIT, Scenario
@@ -23,6 +36,15 @@ from eelsim.scenario import PATH_GAIT, Scenario
 ROBOT = load_robot()
 MODEL = SwimmerModel.from_robot(ROBOT)
 N = ROBOT.n_links
+FITTED = default_model(ROBOT)
+WORLD = {
+    "name": "current",
+    "tank": {"size_m": [3.0, 2.0]},
+    "start": {"position_m": [0.5, 0.9], "heading_deg": 0.0},
+    "goal": {"position_m": [2.6, 1.0], "radius_m": 0.2},
+    "current": {"speed_m_s": 0.0, "direction_deg": 0.0},
+    "obstacles": [],
+}
 
 
 def test_the_telemetrys_measured_angles_bring_the_estimate_closer_to_the_true_joints_over_sim():
@@ -188,3 +210,84 @@ def test_telemetry_that_disagrees_with_the_camera_is_weighted_down_by_its_measur
     assert np.all((var > 0.04**2) & (var < 0.16**2))  # about the jitter's 0.08^2
     late = np.sqrt(np.mean(np.square(errors[-60:])))
     assert late < 0.03  # the camera's joints (0.014 rad) dominate, not the 0.08 rad jitter
+
+
+def _current_run(current_speed_m_s: float):
+    """The reference loop swimming past a waypoint and back to one behind it, in a current.
+
+    The planner's twin (its coefficients, no current) is the estimator's process model; the
+    plant is the reference closed loop (``eelsim.closed_loop``, written apart from the batched
+    kernel the twin runs) with the same coefficients in a current towards +y.
+    """
+    world = parse_world(WORLD, "current")
+    twin = Planner(world, ROBOT, FITTED).twin
+    sc = Scenario(name="current", amplitude_rad=PATH_GAIT.amplitude_rad,
+                  omega_rad_s=PATH_GAIT.omega_rad_s, beta_rad=PATH_GAIT.beta_rad,
+                  k_theta=PATH_GAIT.k_theta, waypoints_m=[(1.7, 1.0), (0.9, 1.1)],
+                  acceptance_radius_m=twin.acceptance_radius_m,
+                  current_speed_m_s=current_speed_m_s, current_direction_deg=90.0,
+                  duration_s=24.0, start_position_m=(0.5, 0.9), start_heading_deg=0.0)
+    run = simulate_closed_loop(ROBOT, sc, dataclasses.replace(twin.options, stop_at_goal=False),
+                               coefficients=twin.coefficients[0])
+    return twin, sc, run
+
+
+def test_the_current_estimate_converges_on_the_plants_current_in_windows_the_twin_can_swim():
+    # drift of the track from the twin's prediction, window by window, with no threads: the
+    # estimate comes within 6 mm/s of the plant's 0.05 m/s; the robot's turn back to the
+    # waypoint behind it and its reaching a waypoint end windows instead of being compared
+    # (docs/planning.md, "The current's windows": across them the twin swims another manoeuvre)
+    twin, sc, run = _current_run(0.05)
+    est = BodyStateEstimator(twin.model, PATH_GAIT)
+    current = CurrentEstimator()
+    compared, ends = [], []
+    for t in np.arange(0.0, sc.duration_s - 0.5, 1 / 30):
+        k = int(np.argmin(np.abs(run.t_s - t)))
+        x = run.states[k]
+        est.observe(float(run.t_s[k]), x[N : N + 2], x[:N])
+        e = est.estimate()
+        target = int(run.target_index[k])
+        if e is None or target >= len(sc.waypoints_m):
+            continue
+        pose = np.array([x[N], x[N + 1], heading(x[:N])])
+        window = current.track(e, pose, sc.waypoints_m[target])
+        ends.append((e.t_s, target))
+        if window is None:
+            continue
+        extra = window.assumed_m_s
+        model = Twin(twin.robot, twin.coefficients, twin.gait, twin.options,
+                     (float(extra[0]), float(extra[1])), twin.acceptance_radius_m,
+                     twin.threads, twin.model)
+        predicted = predict_state(model, window.start, [window.waypoint_m],
+                                  int(round(window.end.t_s / model.dt_s)), allow_end=False)
+        if predicted is not None:
+            current.update(window.end.t_s, predicted[N : N + 2], window.end.state[N : N + 2],
+                           window.span_s, window.assumed_m_s)
+            compared.append(window)
+    assert len(compared) >= 5
+    assert np.hypot(*(current.value_m_s - (0.0, 0.05))) < 0.006, current.history
+    # every compared window steered to one waypoint, the one the plant steered to throughout
+    for w in compared:
+        assert {tgt for t, tgt in ends if w.start.t_s <= t <= w.end.t_s} == {
+            sc.waypoints_m.index(w.waypoint_m)}
+    # the turn back was left out: some frames of the run lie in no compared window
+    assert any(not any(w.start.t_s <= t <= w.end.t_s for w in compared) for t, _ in ends[200:])
+
+
+def test_a_window_ends_where_the_robot_turns_towards_a_waypoint_behind_it():
+    current = CurrentEstimator(min_window_s=0.5)
+    state = np.zeros(2 * N + 4)
+    est = [BodyEstimate(float(t), state, N) for t in np.arange(0.0, 2.0, 0.1)]
+    ahead, behind = (1.0, 0.0), (-1.0, 0.0)
+    pose = np.zeros(3)  # at the origin, facing +x
+    assert steady_towards(pose, ahead, current.max_bearing_rad)
+    assert not steady_towards(pose, behind, current.max_bearing_rad)
+    closed = [current.track(e, pose, ahead) for e in est[:10]]
+    assert closed == [None] * 10  # one window open, shorter than window_s
+    window = current.track(est[10], pose, behind)  # the robot now steers to a point behind
+    assert window is not None and window.end is est[9] and window.start is est[0]
+    assert window.waypoint_m == ahead and np.array_equal(window.assumed_m_s, np.zeros(2))
+    # no window while it turns; one that is too short is dropped
+    assert [current.track(e, pose, behind) for e in est[11:15]] == [None] * 4
+    assert current.track(est[15], pose, ahead) is None
+    assert current.track(est[16], pose, (2.0, 0.0)) is None  # 0.1 s: not compared

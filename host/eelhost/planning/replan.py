@@ -29,7 +29,7 @@ import time
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor, wait
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -37,7 +37,12 @@ from eelhost.planning.execute import Swim, body_clearance_m, swim
 from eelhost.planning.geometry import FloatArray, point_segment_distance
 from eelhost.planning.planner import Outcome, Planner
 from eelhost.planning.search import Guide, Plan, goal_mask, in_goal, leg_start_guide
-from eelhost.planning.state_estimate import BodyEstimate, BodyStateEstimator, CurrentEstimator
+from eelhost.planning.state_estimate import (
+    BodyEstimate,
+    BodyStateEstimator,
+    CurrentEstimator,
+    CurrentWindow,
+)
 from eelhost.planning.twin import Twin
 from eelhost.planning.world import World
 from eelhost.vision.localise import Localisation
@@ -282,15 +287,6 @@ class _Job:
     reason: str
 
 
-@dataclass
-class _Window:
-    """A current-estimation window: the estimate at its start and the waypoints then followed."""
-
-    estimate: BodyEstimate
-    waypoints: list[tuple[float, float]]
-    guide: Guide | None = None
-
-
 class TankReplanner:
     """The tank's replanning beside the control loop (docs/planning.md, "Execution and replanning").
 
@@ -438,8 +434,8 @@ class TankReplanner:
         self._guide: Guide | None = None  # the run loop's guidance state at the latest frame
         self._next_try_s = -math.inf
         self._touching = 0
-        self._window: _Window | None = None
-        self._window_job: tuple[Future, _Window, BodyEstimate] | None = None
+        # the current's windows being swum by the twin on the side worker, oldest first
+        self._window_jobs: list[tuple[Future, CurrentWindow]] = []
         self._planner_current = np.zeros(2)
         # (planner, its extra current) swapped as one, read by the side worker
         self._planned: tuple[Planner, FloatArray] = (planner, np.zeros(2))
@@ -511,7 +507,7 @@ class TankReplanner:
             d.waypoints, d.guide = self._pending[1], self._pending[2]
             self.waypoints = list(d.waypoints)
             self._pending = None
-            self._window = None  # the prediction of a window spans no switch of waypoints
+            self.current.drop()  # the prediction of a window spans no switch of waypoints
             self._lookahead = None  # it followed the old waypoints
             self._whole_job = None
             self.events[-1]["t_switch_s"] = round(t_s, 3)
@@ -522,7 +518,7 @@ class TankReplanner:
         if est is None or pose is None:
             return d
         left = self.waypoints[min(target, len(self.waypoints) - 1):]
-        d.recorded |= self._estimate_current(est, left)
+        d.recorded |= self._estimate_current(est, left, pose)
         busy = self._job is not None or self._pending is not None
         predicted = False
         capsule = None
@@ -934,40 +930,43 @@ class TankReplanner:
 
     # -- the current -----------------------------------------------------------------------------
 
-    def _estimate_current(self, est: BodyEstimate, left: list[tuple[float, float]]) -> bool:
-        """Start a window, or compare the camera with the twin over the last one."""
+    def _estimate_current(self, est: BodyEstimate, left: list[tuple[float, float]],
+                          pose: FloatArray) -> bool:
+        """Take the windows the twin has swum into the estimate; hand it a window that closed.
+
+        Windows (:meth:`CurrentEstimator.track`) cover frames steering to one waypoint the
+        robot faces; each closed one is swum on the side worker, also while a replan runs (on
+        the other worker): with replans every few seconds a window waiting for none to run was
+        never swum, and the current never estimated.
+        """
         if not self.estimate_current:
             return False
         changed = False
-        if self._window_job is not None and self._window_job[0].done():
-            future, window, end = self._window_job
-            self._window_job = None
+        while self._window_jobs and self._window_jobs[0][0].done():
+            future, window = self._window_jobs.pop(0)
             predicted = future.result()
             if predicted is not None:
                 n = self.model.n_links
-                self.current.update(end.t_s, predicted, end.state[n : n + 2],
-                                    end.t_s - window.estimate.t_s)
+                self.current.update(window.end.t_s, predicted, window.end.state[n : n + 2],
+                                    window.span_s, window.assumed_m_s)
                 changed = True
-        if self._window is None:
-            self._window = _Window(est, list(left), self._guide)
-        elif (est.t_s - self._window.estimate.t_s >= self.current.window_s
-              and self._window_job is None):
-            # also while a replan runs (on the other worker): with replans every few seconds a
-            # window waiting for none to run was never swum, and the current never estimated
-            window = self._window
-            future = self._side.submit(self._window_prediction, window, est.t_s,
-                                         self.current.value_m_s.copy())
-            self._window_job = (future, window, est)
-            self._window = _Window(est, list(left), self._guide)
+        closed = self.current.track(est, pose, left[0] if left else None, self._guide)
+        if closed is not None:
+            self._window_jobs.append((self._side.submit(self._window_prediction, closed),
+                                      closed))
         return changed
 
-    def _window_prediction(self, window: _Window, t_end_s: float,
-                           extra: FloatArray) -> FloatArray | None:
-        """On the worker: where the twin puts the centre of mass at ``t_end_s``."""
-        twin = self._twin_in(extra)
-        step = int(round(t_end_s / twin.dt_s))
-        state = predict_state(twin, window.estimate, window.waypoints, step, allow_end=False,
-                              guide=window.guide)
+    def _window_prediction(self, window: CurrentWindow) -> FloatArray | None:
+        """On the worker: where the twin puts the centre of mass at the window's end.
+
+        The twin steers to the window's one waypoint; when it reaches it before the window's
+        end, it swam another manoeuvre than the robot, and the window is not compared (None).
+        """
+        twin = self._twin_in(window.assumed_m_s)
+        step = int(round(window.end.t_s / twin.dt_s))
+        guide = None if window.guide is None else cast(Guide, tuple(window.guide))
+        state = predict_state(twin, window.start, [window.waypoint_m], step, allow_end=False,
+                              guide=guide)
         if state is None:
             return None
         n = self.model.n_links

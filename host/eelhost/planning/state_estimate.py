@@ -40,8 +40,9 @@ from eelsim.model import SwimmerModel
 
 log = logging.getLogger(__name__)
 
-__all__ = ["BodyEstimate", "BodyStateEstimator", "CurrentEstimator", "JointSources",
-           "JointsAtFrame", "TelemetryJoints", "gait_link_angles"]
+__all__ = ["BodyEstimate", "BodyStateEstimator", "CurrentEstimator", "CurrentWindow",
+           "JointSources", "JointsAtFrame", "TelemetryJoints", "gait_link_angles",
+           "steady_towards"]
 
 #: Telemetry's ``phi_mrad`` of a joint without a measured angle (docs/firmware.md, "Joint loop").
 NO_ANGLE_MRAD = -32768
@@ -669,35 +670,91 @@ class BodyStateEstimator:
 
 
 @dataclass
+class CurrentWindow:
+    """A stretch of the camera track the twin is compared over (:class:`CurrentEstimator`).
+
+    Attributes
+    ----------
+    start, end : BodyEstimate
+        The estimates at its first and last frame.
+    waypoint_m : (float, float)
+        The one waypoint the robot steered to throughout.
+    guide : tuple of float or None
+        The run loop's guidance state at ``start`` (leg start, ILOS integral).
+    assumed_m_s : ndarray, shape (2,)
+        The estimate when the window closed: the twin predicts in it.
+    """
+
+    start: BodyEstimate
+    end: BodyEstimate
+    waypoint_m: tuple[float, float]
+    guide: tuple[float, ...] | None = None
+    assumed_m_s: FloatArray = None  # type: ignore[assignment]
+
+    @property
+    def span_s(self) -> float:
+        """Length of the window."""
+        return self.end.t_s - self.start.t_s
+
+
+def steady_towards(pose: FloatArray, waypoint_m: tuple[float, float], limit_rad: float) -> bool:
+    """Whether the robot at ``pose`` (x, y, heading) faces its waypoint within ``limit_rad``.
+
+    Pure pursuit steers by the bearing error, wrapped to (-pi, pi]: with the waypoint near
+    behind, the side it turns to flips with a tiny change of pose, so the twin and the robot
+    may turn opposite ways (docs/planning.md, "The current's windows").
+    """
+    bearing = math.atan2(waypoint_m[1] - pose[1], waypoint_m[0] - pose[0])
+    error = (bearing - float(pose[2]) + math.pi) % (2.0 * math.pi) - math.pi
+    return abs(error) <= limit_rad
+
+
+@dataclass
 class CurrentEstimator:
     """The water's unknown current, from the camera track against the twin's prediction.
 
     Over each window the twin predicts where the centre of mass goes from the window's first
-    estimated state, in the current the planner assumes plus the present estimate; the camera
-    says where it went. In a uniform current the twin's body drifts with the water (drag and added
-    mass act on the velocity relative to it), so a current the twin lacks shows as a drift of the
-    track from the prediction at that current's velocity: the estimate moves by ``gain`` times
-    the drift over the window, and is kept within ``max_m_s``. A robot that swims slower or faster
-    than its coefficients say shows up the same way, along its heading (docs/planning.md says what
-    that costs).
+    estimated state, in the current the planner assumes plus the estimate ``a`` of the moment;
+    the camera says where it went. In a uniform current the twin's body drifts with the water
+    (drag and added mass act on the velocity relative to it), so the track drifts from the
+    prediction at the velocity of the current the twin lacks: ``c = a + drift`` is the window's
+    sample of the current, and the estimate moves by ``gain`` times ``c`` less the estimate
+    (kept within ``max_m_s``), so windows compared in any order each count once. A robot that
+    swims slower or faster than its coefficients say shows up the same way, along its heading
+    (docs/planning.md says what that costs).
+
+    The comparison holds only while the twin swims the manoeuvre the robot swam, so a window
+    (:meth:`track`) covers frames on which the robot steers to one waypoint that it faces within
+    ``max_bearing_rad``: it ends at the last such frame before the robot reaches the waypoint,
+    turns towards one beside or behind it, or gets new waypoints (:meth:`drop`), or after
+    ``window_s``; shorter than ``min_window_s``, it is not compared. Across a waypoint the twin
+    and the robot accept it at different moments, and in a turn towards a waypoint behind the
+    body they may turn opposite ways: on the development runs such windows drifted by up to
+    0.14 m/s in still water the twin knew (docs/planning.md, "The current's windows").
 
     Attributes
     ----------
     window_s : float
-        Length of a comparison window.
+        Longest comparison window.
     gain : float
-        Fraction of a window's drift taken into the estimate.
+        Fraction of a window's sample taken into the estimate.
     max_m_s : float
         Largest speed the estimate may reach.
+    min_window_s : float
+        Shortest window compared.
+    max_bearing_rad : float
+        Largest bearing error of the waypoint within a window.
     value_m_s : ndarray, shape (2,)
         The estimate, added to the planner's current.
     history : list of dict
-        Every update: time, drift velocity, estimate.
+        Every update: time, window start, drift velocity, estimate.
     """
 
     window_s: float = 3.0
     gain: float = 0.6
     max_m_s: float = 0.08
+    min_window_s: float = 1.5
+    max_bearing_rad: float = math.radians(60.0)
     value_m_s: FloatArray = None  # type: ignore[assignment]
     history: list[dict] = None  # type: ignore[assignment]
 
@@ -706,9 +763,53 @@ class CurrentEstimator:
             self.value_m_s = np.zeros(2)
         if self.history is None:
             self.history = []
+        self._open: CurrentWindow | None = None
+
+    def track(self, est: BodyEstimate, pose: FloatArray, waypoint_m: tuple[float, float] | None,
+              guide: tuple[float, ...] | None = None) -> CurrentWindow | None:
+        """Take one frame into the windows; return a window that closed and is to be compared.
+
+        Parameters
+        ----------
+        est : BodyEstimate
+            The frame's body estimate.
+        pose : ndarray (3,)
+            The guidance's filtered (x, y, heading): what the robot steers by.
+        waypoint_m : (float, float) or None
+            The waypoint the robot steers to (None: none left).
+        guide : tuple, optional
+            The run loop's guidance state at this frame (kept with a window that starts here).
+
+        Returns
+        -------
+        CurrentWindow or None
+            A window of at least ``min_window_s`` that ended, with ``assumed_m_s`` set.
+        """
+        steady = waypoint_m is not None and steady_towards(pose, waypoint_m,
+                                                           self.max_bearing_rad)
+        window, closed = self._open, None
+        if window is not None:
+            same = steady and tuple(waypoint_m) == window.waypoint_m  # type: ignore[arg-type]
+            if not same or est.t_s - window.start.t_s >= self.window_s:
+                if same:
+                    window.end = est
+                closed = window if window.span_s >= self.min_window_s - 1e-9 else None
+                self._open = window = None
+            else:
+                window.end = est
+        if window is None and steady:
+            wp = (float(waypoint_m[0]), float(waypoint_m[1]))  # type: ignore[index]
+            self._open = CurrentWindow(est, est, wp, guide)
+        if closed is not None:
+            closed.assumed_m_s = self.value_m_s.copy()
+        return closed
+
+    def drop(self) -> None:
+        """Forget the open window (the robot was given new waypoints)."""
+        self._open = None
 
     def update(self, t_s: float, predicted_m: FloatArray, measured_m: FloatArray,
-               span_s: float) -> FloatArray:
+               span_s: float, assumed_m_s: FloatArray | None = None) -> FloatArray:
         """Take one window's comparison into the estimate.
 
         Parameters
@@ -719,6 +820,8 @@ class CurrentEstimator:
             Where the twin put the centre of mass and where the camera saw it.
         span_s : float
             Length of the window.
+        assumed_m_s : ndarray (2,), optional
+            The estimate the twin predicted in (default: the present one).
 
         Returns
         -------
@@ -726,12 +829,14 @@ class CurrentEstimator:
             The new estimate.
         """
         drift = (np.asarray(measured_m, float) - np.asarray(predicted_m, float)) / span_s
-        value = self.value_m_s + self.gain * drift
+        assumed = self.value_m_s if assumed_m_s is None else np.asarray(assumed_m_s, float)
+        value = self.value_m_s + self.gain * (assumed + drift - self.value_m_s)
         speed = float(math.hypot(*value))
         if speed > self.max_m_s:
             value = value * (self.max_m_s / speed)
         self.value_m_s = value
         self.history.append({"t_s": round(float(t_s), 3),
+                             "t_start_s": round(float(t_s - span_s), 3),
                              "drift_m_s": [round(float(v), 4) for v in drift],
                              "current_m_s": [round(float(v), 4) for v in value]})
         return value
