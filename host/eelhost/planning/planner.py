@@ -450,7 +450,7 @@ class Planner:
     # -- planning --------------------------------------------------------------------------------
 
     def plan(self, state: FloatArray | None = None, step: int = 0,
-             guide: Guide | None = None) -> Outcome:
+             guide: Guide | None = None, deadline_s: float | None = None) -> Outcome:
         """Plan from the start (or from ``state`` at ``step``), check the plan, repair it.
 
         Parameters
@@ -463,6 +463,10 @@ class Planner:
             The guidance's state at ``state``: where the first leg starts and the controller's
             ILOS integral (default: from the state's centre of mass, the integral zero). A
             replan at the tank passes the controller's integral.
+        deadline_s : float, optional
+            A ``time.monotonic()`` time for every search of the call (the first and the
+            repairs'): past it a search stops ``out_of_time`` (:meth:`Search.plan`); a check
+            already started runs to its end. Default: none.
 
         Returns
         -------
@@ -477,7 +481,8 @@ class Planner:
         bad: list[Swim] = []
         plan = Plan(False, "gave_up", "")
         for attempt in range(self.repairs + 1):
-            plan = self.search.plan(banned, start_state=state, start_step=step, guide=guide)
+            plan = self.search.plan(banned, start_state=state, start_step=step, guide=guide,
+                                    deadline_s=deadline_s)
             total += plan.planning_time_s
             searching += plan.planning_time_s
             if not plan.found and attempt > 0:

@@ -220,7 +220,8 @@ class Plan:
     status : str
         ``found``, ``exhausted`` (every node the actions reach, as merged on the closed-set
         grid, was expanded: no plan with these actions and this margin, which is not a proof
-        that none exists) or ``gave_up`` (expansion limit); the planner adds its own.
+        that none exists), ``gave_up`` (expansion limit) or ``out_of_time`` (the caller's
+        wall-clock deadline passed first); the planner adds its own.
     message : str
         One line: the outcome, and why when no plan was found.
     legs : list of Leg
@@ -601,6 +602,7 @@ class Search:
         start_step: int = 0,
         heading_rad: float | None = None,
         guide: Guide | None = None,
+        deadline_s: float | None = None,
     ) -> Plan:
         """Search from the world's start, or from any state (see the module docstring).
 
@@ -620,6 +622,10 @@ class Search:
             The guidance's state at the start: where the first leg starts and the ILOS integral
             (default :func:`leg_start_guide` of the start state: from its centre of mass, the
             integral zero). A replan passes the controller's own.
+        deadline_s : float, optional
+            A ``time.monotonic()`` time: no batch is expanded after it, and the search ends
+            ``out_of_time`` unless it has found the goal (a replan's budget at the tank,
+            docs/planning.md "The replan's deadline"). Default: none.
 
         Returns
         -------
@@ -659,7 +665,11 @@ class Search:
         tree: list[tuple[float, float, float, float]] = []
         expansions = 0
         found = -1
+        late = False
         while heap and found < 0 and expansions < s.max_expansions:
+            if deadline_s is not None and time.monotonic() >= deadline_s:
+                late = True
+                break
             batch: list[int] = []
             while heap and len(batch) < s.batch:
                 _, _, ni = heapq.heappop(heap)
@@ -701,7 +711,12 @@ class Search:
         tree_arr = np.asarray(tree, dtype=float).reshape(-1, 4)
         sims = self.simulations - sims0
         if found < 0:
-            if expansions >= s.max_expansions:
+            if late:
+                status = "out_of_time"
+                msg = (f"no plan: the search ran out of time after {expansions} expansions "
+                       f"({sims} manoeuvres swum in the twin, {elapsed:.2f} s) without reaching "
+                       "the goal")
+            elif expansions >= s.max_expansions:
                 status = "gave_up"
                 msg = (f"no plan: the search gave up after {expansions} expansions "
                        f"({sims} manoeuvres swum in the twin) without reaching the goal")
