@@ -68,3 +68,10 @@ def test_interval_coverage_on_stiff_servos_under_the_servo_file_judges_the_plant
     steady = coverage_truth(ParameterSpace.for_robot(load_robot(), current=True),
                             PLANTS["steady_current"], load_robot())
     np.testing.assert_allclose(steady[-2:], 0.005 * np.array([-0.5, np.sqrt(3) / 2]))
+
+
+def test_choose_without_bands_is_a_usage_error(capsys):
+    from eelhost import cli
+
+    assert cli.main(["estimate-bench", "--choose", "--tanks", "steady_current"]) == 2
+    assert "--choose: goes with --bands" in capsys.readouterr().err

@@ -60,6 +60,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="instead: measure the report's 95 %% prediction bands' coverage of held-out "
         "positions on these test plants (docs/estimation_coverage.md): " + plant_help(),
     )
+    p.add_argument("--choose", action="store_true",
+                   help="with --bands: the report's model comparison on (as by default), the "
+                   "bands of the model it chooses (without it: the robot file's model)")
     p.add_argument("--robot", help="the robot file the datasets declare (default: the paper's; "
                    "--tanks: the same recordings under either bundled file; --coverage: the "
                    "model fitted to the same recordings; --bands: the robot the plants are "
@@ -76,6 +79,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
+    if args.choose and not args.bands:
+        raise UserError("--choose: goes with --bands PLANT,... (the bands of the chosen model)")
     if args.bands:
         from eelhost.benchmarks.estimator_coverage import bands_markdown, measure_bands
 
@@ -84,9 +89,10 @@ def run(args: argparse.Namespace) -> int:
         if unknown:
             raise UserError(f"--bands: {PLANTS.unknown_message(unknown[0])}")
         bands = measure_bands(names, Path(args.work), args.robot, args.seed, args.replicates,
-                              say=lambda line: print(line, flush=True))
+                              say=lambda line: print(line, flush=True), compare=args.choose)
         print(bands_markdown(bands, f"eelbot estimate-bench --bands {args.bands}"
                              + (f" --robot {args.robot}" if args.robot else "")
+                             + (" --choose" if args.choose else "")
                              + f" --seed {args.seed}"))
         return 0
     if args.coverage:
