@@ -45,6 +45,7 @@ from eelhost.estimation.adopt import fit_and_choose
 from eelhost.estimation.clock import WIDE_S, clock_check
 from eelhost.estimation.coefficients_file import FittedModel
 from eelhost.estimation.evaluate import Evaluator
+from eelhost.estimation.joint_fit import joint_model_name
 from eelhost.estimation.methods import FitSettings
 from eelhost.estimation.optimise import FitResult
 from eelhost.estimation.pipeline import fit_motion
@@ -160,11 +161,16 @@ def _fit_and_validate(ds: Dataset, plant: Plant | None, settings: FitSettings,
     out["model"] = chosen.model
     out["adopted"] = chosen.adopted
     out["comparison"] = chosen.comparison
+    # the truth's fitness where the fit's model holds it: the plant's law and joint model (a
+    # PD truth scored in a servo space is no truth); the plant's joint values, declared shapes
+    recorded = true_robot(ds.robot if plant is None else load_robot(),
+                          plant.settings if plant is not None else TankSettings())
     for motion, res in chosen.fits.items():
         ev = chosen.evaluators[motion]
         truth = ds.truth.get(motion)
-        if truth is not None and type(truth) is type(res.coefficients):
-            x = ev.space.vector(truth.as_array(), ds.robot)  # in the declared water
+        if (truth is not None and type(truth) is type(res.coefficients)
+                and joint_model_name(recorded) == ev.space.joints.model):
+            x = ev.space.vector(truth.as_array(), recorded)  # in the declared water
             if ev.space.current:
                 x[-2:] = _true_current(ds)
             out["truth_fitness"][motion] = float(ev.fitness(x[None])[0])
