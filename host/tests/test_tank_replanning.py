@@ -120,7 +120,10 @@ def slow_take(tmp_path_factory):
     world = parse_world(OPEN, "open")
     planned = plan_for_run(world, ROBOT, "sim://?speed=0&current=0.05,90", PATH_GAIT, MODEL)
     base = planned.navigator
-    navigator = slow_replanner(1.5)(base.planner_for, base.planner, base.outcome, PATH_GAIT)
+    # a budget the 1.5 s stall never reaches: the replans still find their plans, and the take
+    # records the budget they had
+    navigator = slow_replanner(1.5)(base.planner_for, base.planner, base.outcome, PATH_GAIT,
+                                    replan_budget_s=10.0)
     stem = tmp_path_factory.mktemp("slow") / "take"
     config = RunConfig(PATH_GAIT, planned.waypoints_m, duration_s=40.0)
     request = TakeRequest(ROBOT, config, str(stem), TakeNotes(planned.uri), "synthetic:clean",
@@ -166,6 +169,8 @@ def test_the_take_records_every_plan_and_replan(slow_take):
         assert p["t_request_s"] < p["t_start_s"]
         assert p["waypoints_m"] and p["wall_s"] > 0
         assert len(p["current_m_s"]) == 2
+        assert p["budget_s"] == 10.0
+    assert planning["replan_budget_s"] == 10.0 and plans[0]["budget_s"] is None
     # the current estimate (0.05 m/s towards +y, unknown to the planner) is recorded; its
     # accuracy is tested without threads in test_state_estimate.py
     windows = planning["current_estimate"]
@@ -239,7 +244,8 @@ def failing_replanner(status: str):
     class Failing(TankReplanner):
         requests: list[float] = []
 
-        def _replan(self, est, left, start_step, extra, guide=None):  # noqa: ANN001, ANN202
+        def _replan(self, est, left, start_step, extra, guide=None,  # noqa: ANN001, ANN202
+                    deadline_s=None):  # noqa: ANN001
             self.requests.append(est.t_s)
             plan = Plan(False, status, f"failed ({status})")
             return (Outcome(plan, status, plan.message), est.state, 0.0, 0.0, np.zeros(2),
@@ -414,7 +420,7 @@ class _Scripted:
     def __getattr__(self, name: str):  # noqa: ANN204
         return getattr(self._planner, name)
 
-    def plan(self, state, start_step, guide=None):  # noqa: ANN001, ANN201
+    def plan(self, state, start_step, guide=None, deadline_s=None):  # noqa: ANN001, ANN201
         self.starts.append(start_step)
         if start_step < self.found_from_step:
             plan = Plan(False, self.status, f"scripted {self.status}")
@@ -727,7 +733,7 @@ class GuideRecorder:
     def __getattr__(self, name: str):  # noqa: ANN204
         return getattr(self._planner, name)
 
-    def plan(self, state, start_step, guide=None):  # noqa: ANN001, ANN201
+    def plan(self, state, start_step, guide=None, deadline_s=None):  # noqa: ANN001, ANN201
         self.guides.append(guide)
         return dataclasses.replace(self.template,
                                    plan=dataclasses.replace(self.template.plan, start_guide=guide))
@@ -828,7 +834,8 @@ def test_a_moved_current_estimate_replans_only_a_plan_it_breaks_and_a_failure_ke
         rest_gap_m = 0.2
         horizons: list[float] = []
 
-        def _replan(self, est, left, start_step, extra, guide=None):  # noqa: ANN001, ANN202
+        def _replan(self, est, left, start_step, extra, guide=None,  # noqa: ANN001, ANN202
+                    deadline_s=None):  # noqa: ANN001
             self.asked.append((est.t_s, (float(extra[0]), float(extra[1]))))
             plan = Plan(False, "exhausted", "failed (exhausted)")
             return (Outcome(plan, "exhausted", plan.message), est.state, 0.0, 0.0, extra.copy(),
@@ -873,3 +880,49 @@ def test_a_moved_current_estimate_replans_only_a_plan_it_breaks_and_a_failure_ke
         assert nav.failures == 0 and set(stops) == {None}  # its failure keeps the plan
     finally:
         nav.close()
+
+
+def test_a_replan_whose_search_is_slow_stops_at_its_budget_without_the_fallback_searches(
+        open_plan):
+    # every batch of the search takes 0.4 s more: with a 0.6 s budget the replan comes back
+    # out of time after a batch or two, and neither the goal approach nor the recovery
+    # (each only within what is left of the budget) runs after it
+    planner, outcome = open_plan
+    tried: list[str] = []
+
+    def other(name):  # noqa: ANN001, ANN202
+        def make(extra):  # noqa: ANN001, ANN202
+            tried.append(name)
+            return planner
+        return make
+
+    nav = TankReplanner(lambda extra: planner, planner, outcome, PATH_GAIT,
+                        goal_planner_for=other("goal approach"),
+                        recovery_planner_for=other("recovery"), replan_budget_s=0.6)
+    expand = planner.search._expand
+
+    def slow_expand(*args):  # noqa: ANN002, ANN202
+        time.sleep(0.4)
+        return expand(*args)
+
+    planner.search._expand = slow_expand  # type: ignore[method-assign]
+    try:
+        run = swimming_state(2.0)
+        est = BodyStateEstimator(planner.model, PATH_GAIT)
+        for t in np.arange(0.0, 2.0 + 1e-9, 1 / 30):
+            x = np.array([np.interp(t, run.t_s, run.states[:, i])
+                          for i in range(run.states.shape[1])])
+            est.observe(t, x[N : N + 2], x[:N])
+        e = est.estimate()
+        assert e is not None
+        wall0 = time.monotonic()
+        result = nav._replan(e, [(2.5, 1.3)], 240, np.zeros(2), None, wall0 + 0.6)
+        wall = time.monotonic() - wall0
+    finally:
+        del planner.search._expand
+        nav.close()
+    got = result[0]
+    assert got.status == "out_of_time" and not got.found, got.message
+    assert got.plan.expansions <= 2 * planner.search.settings.batch
+    assert tried == []
+    assert wall < 5.0  # generous: the budget, a batch in progress and the prediction

@@ -44,6 +44,7 @@ from eelhost.field.session import TakeNotes
 from eelhost.field.take import TakeRequest, run_take
 from eelhost.planning.geometry import FloatArray
 from eelhost.planning.planner import PlanRefused
+from eelhost.planning.replan import REPLAN_BUDGET_S
 from eelhost.planning.tank import plan_for_run
 from eelhost.planning.uncertainty import CoefficientModel
 from eelhost.planning.world import CircleObstacle, World
@@ -100,6 +101,10 @@ class WorldResult:
         The virtual robot's coefficients and unknown current.
     guidance : str
         The guidance law of the planner and the run loop (``pursuit`` or ``ilos``).
+    failed_replan_statuses : list of str
+        The status of each failed replan (``out_of_time``: its budget ran out first).
+    replan_budget_s : float or None
+        Each replan's wall-clock budget (None: none).
     """
 
     seed: int
@@ -122,6 +127,8 @@ class WorldResult:
     water: dict = field(default_factory=dict)
     replan_cpu_s: list[float] = field(default_factory=list)
     guidance: str = "pursuit"
+    failed_replan_statuses: list[str] = field(default_factory=list)
+    replan_budget_s: float | None = None
 
 
 def true_clearance_m(world: World, model: SwimmerModel, states: FloatArray) -> FloatArray:
@@ -206,7 +213,8 @@ def water_for(seed: int, model: CoefficientModel,
 def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PATH_GAIT,
               unknown_current_m_s: float = UNKNOWN_CURRENT_M_S,
               planner_options: dict[str, Any] | None = None,
-              swimmer: SwimmerModel | None = None) -> WorldResult:
+              swimmer: SwimmerModel | None = None,
+              replan_budget_s: float | None = REPLAN_BUDGET_S) -> WorldResult:
     """Plan one generated world and swim the plan over ``sim://`` (module docstring).
 
     Parameters
@@ -222,6 +230,8 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
         The model of the robot the planner swims, built once by the command
         (:meth:`CoefficientModel.swimmer_for`; built per world when not given). The virtual
         robot builds its own: it is the water, not the planner.
+    replan_budget_s : float or None
+        Each replan's wall-clock budget (:func:`eelhost.planning.tank.plan_for_run`).
 
     Returns
     -------
@@ -240,7 +250,7 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
     wall0, cpu0 = time.perf_counter(), time.process_time()
     try:
         planned = plan_for_run(world, robot, uri, gait, model, planner_options=planner_options,
-                               swimmer=swimmer)
+                               swimmer=swimmer, replan_budget_s=replan_budget_s)
     except PlanRefused as err:
         return WorldResult(seed, False, err.status, detail=str(err), water=water,
                            plan_wall_s=time.perf_counter() - wall0,
@@ -271,7 +281,8 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
         [e["wall_s"] for e in replans],
         [e["t_switch_s"] - e["t_request_s"] for e in replans if "t_switch_s" in e],
         plan_wall, plan_cpu, out.t_end_s, cost, water,
-        [e["cpu_s"] for e in replans if e["cpu_s"] is not None], law)
+        [e["cpu_s"] for e in replans if e["cpu_s"] is not None], law,
+        [e["status"] for e in replans if e["status"] != "found"], replan_budget_s)
 
 
 def _law_name(planner_options: dict[str, Any] | None) -> str:
@@ -283,7 +294,8 @@ def _law_name(planner_options: dict[str, Any] | None) -> str:
 def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, out: Path,
                           progress: Callable[[WorldResult], None] | None = None,
                           planner_options: dict[str, Any] | None = None,
-                          swimmer: SwimmerModel | None = None) -> list[WorldResult]:
+                          swimmer: SwimmerModel | None = None,
+                          replan_budget_s: float | None = REPLAN_BUDGET_S) -> list[WorldResult]:
     """Run the benchmark over ``seeds``, resuming from ``<out>/results.jsonl``.
 
     Parameters
@@ -331,7 +343,7 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
             r = done[seed]
         else:
             r = run_world(seed, robot, model, planner_options=planner_options,
-                          swimmer=swimmer)
+                          swimmer=swimmer, replan_budget_s=replan_budget_s)
             with path.open("a") as f:
                 f.write(json.dumps(asdict(r)) + "\n")
         results.append(r)
@@ -372,6 +384,13 @@ def summary_lines(results: list[WorldResult]) -> list[str]:
                  f"{sum(1 for r in planned if r.replans or r.failed_replans)} runs"
                  + (f"; wall time from request to plan: median {statistics.median(walls):.2f} s,"
                     f" largest {max(walls):.2f} s" if walls else ""))
+    budgets = sorted({r.replan_budget_s for r in planned if r.replan_budget_s is not None})
+    failed = Counter(s for r in planned for s in r.failed_replan_statuses)
+    if budgets or failed:
+        lines.append("- each replan's wall-clock budget: "
+                     + (", ".join(f"{b:g} s" for b in budgets) if budgets else "none")
+                     + "; failed replans by status: "
+                     + (", ".join(f"{k} {v}" for k, v in sorted(failed.items())) or "none"))
     cpus = [c for r in planned for c in r.replan_cpu_s]
     if cpus:
         lines.append(f"- replans' processor time: median {statistics.median(cpus):.2f} s, "

@@ -85,6 +85,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--k-theta", type=FINITE, default=0.37, help="heading gain")
     p.add_argument("--radius", type=POSITIVE, default=0.15, help="acceptance radius, m")
     p.add_argument("--control-period", type=POSITIVE, default=0.3, help="offset period, s")
+    p.add_argument("--replan-budget", type=NON_NEGATIVE, default=1.0, metavar="S",
+                   help="with --plan or --bench: each replan's wall-clock budget from its "
+                   "request; its searches stop there and it returns what it has (1.0 s; 0: no "
+                   "deadline; docs/planning.md, \"The replan's deadline\")")
     p.add_argument("--guidance", choices=GUIDANCE_LAWS.names(), default=PURSUIT.name,
                    help="the line-of-sight law that steers the robot: pursuit (the paper's pure "
                    "pursuit of each waypoint, default) or ilos (integral line-of-sight along each "
@@ -211,7 +215,8 @@ def run(args: argparse.Namespace) -> int:
         with phase(f"plan {world.name}: search and check in the twin"):
             planned = plan_for_run(world, robot, args.link, gait, coefficients=model,
                                    acceptance_radius_m=args.radius, swimmer=swimmer,
-                                   planner_options={"guidance": law})
+                                   planner_options={"guidance": law},
+                                   replan_budget_s=args.replan_budget or None)
         print(planned.outcome.message)
         print(f"coefficients: {model.describe()}")
         waypoints, navigator, uri = planned.waypoints_m, planned.navigator, planned.uri
@@ -280,13 +285,15 @@ def _bench(args: argparse.Namespace) -> int:
         if args.check_unknown_current is not None:
             options["unknown_current_m_s"] = args.check_unknown_current
         results = run_closed_loop_bench(robot, model, seeds, out, show, options,
-                                        model.swimmer_for(robot))
+                                        model.swimmer_for(robot), args.replan_budget or None)
     command = (f"nice eelbot run --bench --worlds {args.worlds} --seed {args.seed}"
                + ("" if args.check_unknown_current is None
                   else f" --check-unknown-current {args.check_unknown_current:g}")
                + (f" --coefficients-file {args.coefficients_file}" if args.coefficients_file
                   else "")
-               + (f" --guidance {args.guidance}" if args.guidance != PURSUIT.name else ""))
+               + (f" --guidance {args.guidance}" if args.guidance != PURSUIT.name else "")
+               + (f" --replan-budget {args.replan_budget:g}" if args.replan_budget != 1.0
+                  else ""))
     lines = summary_lines(results)
     block = [BENCH_BEGIN, f"Command: `{command}`", "",
              f"- machine: {cpu_model()}, {os.cpu_count()} cores visible (shared with other "

@@ -241,6 +241,16 @@ GOAL_APPROACH_CLEARANCE_M = 0.01
 """The goal approach's search margin beyond the body's half width (docs/planning.md): its centre
 line this far plus the half width from everything, so the true outline at least this far."""
 
+REPLAN_BUDGET_S = 1.0
+"""A replan's wall-clock budget from its request (docs/planning.md, "The replan's deadline"):
+issue 28 asks for a new plan ready within 1 s of the robot leaving its corridor."""
+
+
+def _time_left(deadline_s: float | None) -> bool:
+    """Whether a ``time.monotonic()`` deadline (None: none) is still ahead."""
+    return deadline_s is None or time.monotonic() < deadline_s
+
+
 REFUSED_FROM_STATE = ("blocked_start", "current_too_strong", "unreachable")
 """Planner statuses that refuse the start state itself: no safe continuation from it, so the
 robot is stopped unless the look-ahead swims its present plan clear (then it keeps that plan)."""
@@ -367,6 +377,15 @@ class TankReplanner:
         (``current_estimate``) before the water it did not know pushes it off its plan. A
         failure of such a replan keeps the present plan and is not counted (0 turns it off;
         docs/planning.md, "Replanning in the estimated current").
+    replan_budget_s : float or None
+        Wall-clock budget of a replan from its request: the prediction of its start, the
+        searches (the planner's and its repairs', then the goal approach's and the recovery's,
+        each only within what is left) stop at it and the replan returns what it has (a plan,
+        or none: ``out_of_time``), so that the robot steers a new plan within about this long
+        of leaving its corridor (issue 28's 1 s; docs/planning.md, "The replan's deadline").
+        A check that has started runs to its end. None (the default here): no deadline;
+        ``eelbot run --plan`` and the closed-loop benchmark give :data:`REPLAN_BUDGET_S`
+        (:func:`eelhost.planning.tank.plan_for_run`).
     """
 
     def __init__(
@@ -391,6 +410,7 @@ class TankReplanner:
         replan_horizon_s: float = 5.0,
         recovery_planner_for: Callable[[FloatArray], Planner] | None = None,
         replan_current_change_m_s: float = 0.005,
+        replan_budget_s: float | None = None,
     ) -> None:
         self.planner_for = planner_for
         self.planner = planner
@@ -413,6 +433,7 @@ class TankReplanner:
         self.replan_horizon_s = max(replan_horizon_s, lookahead_s)
         self.recovery_planner_for = recovery_planner_for
         self.replan_current_change_m_s = replan_current_change_m_s
+        self.replan_budget_s = replan_budget_s
         self._plan_current = np.zeros(2)  # the extra current the present plan was searched in
         # the rest of the present plan swum in a moved estimate: (future, that estimate)
         self._whole_job: tuple[Future, FloatArray] | None = None
@@ -600,6 +621,7 @@ class TankReplanner:
         the Telemetry taken and ignored (docs/planning.md, "The robot's state at the tank").
         """
         return {"plans": self.events, "replans": self.replans,
+                "replan_budget_s": self.replan_budget_s,
                 "current_estimate": self.current.history,
                 "state_estimate": self.estimator.summary()}
 
@@ -640,14 +662,16 @@ class TankReplanner:
         now_step = int(round(est.t_s / dt))
         start_step = int(math.ceil((now_step + self._lead_steps()) / period)) * period
         extra = self.current.value_m_s.copy() if self.estimate_current else np.zeros(2)
+        wall = time.monotonic()
+        deadline = None if self.replan_budget_s is None else wall + self.replan_budget_s
         future = self._worker.submit(self._replan_and_judge, est, list(left), start_step, extra,
-                                     self._guide)
-        self._job = _Job(future, t_s, time.monotonic(), start_step * dt, reason)
+                                     self._guide, deadline)
+        self._job = _Job(future, t_s, wall, start_step * dt, reason)
         log.info("left the corridor at t = %.2f s; replanning from the state predicted for "
                  "t = %.2f s", t_s, start_step * dt)
 
     def _replan(self, est: BodyEstimate, left: list[tuple[float, float]], start_step: int,
-                extra: FloatArray, guide: Guide | None = None
+                extra: FloatArray, guide: Guide | None = None, deadline_s: float | None = None
                 ) -> tuple[Outcome, FloatArray, float, float, FloatArray, float, int]:
         """On the worker: predict the state at the start step with the twin, then plan from it.
 
@@ -660,6 +684,10 @@ class TankReplanner:
         waypoints (``blocked_retries`` times): the moving body swims on, and its predicted
         state a moment later may be clear. A start near the goal that gives no plan is tried
         again with the goal approach's planner. Returns the start step actually used.
+
+        ``deadline_s`` (a ``time.monotonic()`` time, :attr:`replan_budget_s` after the request)
+        bounds every search; the retries, the goal approach and the recovery are tried only
+        while time is left before it.
         """
         wall0, cpu0 = time.perf_counter(), time.thread_time()
         if float(np.hypot(*(extra - self._planner_current))) >= 0.005:
@@ -672,9 +700,10 @@ class TankReplanner:
         assert predicted is not None  # allow_end: the run's last state when it ends early
         state, integral = predicted
         outcome = planner.plan(state, start_step, guide=leg_start_guide(state, self.model.n_links,
-                                                                       integral))
+                                                                       integral),
+                               deadline_s=deadline_s)
         for _ in range(self.blocked_retries):
-            if outcome.status != "blocked_start":
+            if outcome.status != "blocked_start" or not _time_left(deadline_s):
                 break
             later = predict_start(planner.twin, est, left, start_step + period, allow_end=False,
                                   guide=guide)
@@ -684,16 +713,16 @@ class TankReplanner:
                      start_step * planner.twin.dt_s, (start_step + period) * planner.twin.dt_s)
             start_step, (state, integral) = start_step + period, later
             outcome = planner.plan(state, start_step, guide=leg_start_guide(
-                state, self.model.n_links, integral))
+                state, self.model.n_links, integral), deadline_s=deadline_s)
         # the tighter margin: near the goal after any failure of the search or check; anywhere
         # when the search ran out of poses (a start so close to an obstacle that every manoeuvre
         # from it breaks the world's margin: the predicted start of a robot the water pushed on)
-        if not outcome.found and outcome.status not in REFUSED_FROM_STATE and (
-                outcome.status == "exhausted" or self._near_goal(state)):
+        if not outcome.found and outcome.status not in REFUSED_FROM_STATE and _time_left(
+                deadline_s) and (outcome.status == "exhausted" or self._near_goal(state)):
             goal_planner = self._goal_planner_in(extra)
             if goal_planner is not None:
                 approach = goal_planner.plan(state, start_step, guide=leg_start_guide(
-                    state, self.model.n_links, integral))
+                    state, self.model.n_links, integral), deadline_s=deadline_s)
                 log.info("goal approach from t = %.2f s: %s", start_step * planner.twin.dt_s,
                          approach.message)
                 if approach.found:
@@ -703,11 +732,12 @@ class TankReplanner:
                         f"{outcome.message}; with the goal approach's margin: {approach.message}"))
         # the recovery: sharper turns, the goal approach's margin, a bounded search; only when
         # everything else found nothing (docs/planning.md, "The recovery replan")
-        if not outcome.found and outcome.status not in REFUSED_FROM_STATE:
+        if (not outcome.found and outcome.status not in REFUSED_FROM_STATE
+                and _time_left(deadline_s)):
             recovery = self._planner_in("recovery", self.recovery_planner_for, extra)
             if recovery is not None:
                 rescue = recovery.plan(state, start_step, guide=leg_start_guide(
-                    state, self.model.n_links, integral))
+                    state, self.model.n_links, integral), deadline_s=deadline_s)
                 log.info("recovery replan from t = %.2f s: %s", start_step * planner.twin.dt_s,
                          rescue.message)
                 if rescue.found:
@@ -720,14 +750,14 @@ class TankReplanner:
                 self._planner_current.copy(), time.monotonic(), start_step)
 
     def _replan_and_judge(self, est: BodyEstimate, left: list[tuple[float, float]],
-                          start_step: int, extra: FloatArray,
-                          guide: Guide | None = None) -> tuple[tuple, float | None]:
+                          start_step: int, extra: FloatArray, guide: Guide | None = None,
+                          deadline_s: float | None = None) -> tuple[tuple, float | None]:
         """On the worker: the replan and, when it fails, a look-ahead of the present waypoints.
 
         The look-ahead from the same estimate decides whether the robot may keep its present
         plan (:meth:`_collect`), so a failure is never judged on a stale or missing one.
         """
-        result = self._replan(est, left, start_step, extra, guide)
+        result = self._replan(est, left, start_step, extra, guide, deadline_s)
         if result[0].found or self.lookahead_s <= 0:
             return result, None
         judged = self._look_ahead(est, left, self.current.value_m_s.copy(), guide)
@@ -988,6 +1018,8 @@ class TankReplanner:
             "message": outcome.message,
             "wall_s": round(wall, 3),
             "cpu_s": None if math.isnan(cpu) else round(cpu, 3),
+            "budget_s": (None if kind == "plan" or self.replan_budget_s is None
+                         else self.replan_budget_s),
             "start_state": None if state is None else [round(float(v), 5) for v in state],
             "waypoints_m": [[round(x, 4), round(y, 4)] for x, y in outcome.plan.waypoints_m]
             if outcome.found else [],

@@ -20,7 +20,7 @@ from urllib.parse import parse_qsl, urlencode, urlsplit
 
 from eelhost.planning.geometry import FloatArray
 from eelhost.planning.planner import Outcome, Planner, PlanRefused
-from eelhost.planning.replan import GOAL_APPROACH_CLEARANCE_M, TankReplanner
+from eelhost.planning.replan import GOAL_APPROACH_CLEARANCE_M, REPLAN_BUDGET_S, TankReplanner
 from eelhost.planning.search import Actions, SearchSettings
 from eelhost.planning.uncertainty import CoefficientModel, default_model
 from eelhost.planning.world import Current, World
@@ -111,6 +111,7 @@ def plan_for_run(
     acceptance_radius_m: float = 0.15,
     planner_options: dict[str, Any] | None = None,
     swimmer: SwimmerModel | None = None,
+    replan_budget_s: float | None = REPLAN_BUDGET_S,
 ) -> RunPlan:
     """Plan in a world for ``eelbot run --plan`` (module docstring).
 
@@ -133,6 +134,9 @@ def plan_for_run(
         The model of the robot the planner swims, built once by the command
         (:meth:`CoefficientModel.swimmer_for`; built here when not given) and handed to the
         first plan's planner and every replan's.
+    replan_budget_s : float or None
+        Each replan's wall-clock budget from its request (``TankReplanner``; docs/planning.md,
+        "The replan's deadline"); None: no deadline.
 
     Returns
     -------
@@ -187,7 +191,8 @@ def plan_for_run(
         raise NoPlanFound(outcome.status, f"{world.name}: {outcome.message}")
     navigator = TankReplanner(planner_for, planner, outcome, gait,
                               goal_planner_for=goal_planner_for,
-                              recovery_planner_for=recovery_planner_for)
+                              recovery_planner_for=recovery_planner_for,
+                              replan_budget_s=replan_budget_s)
     return RunPlan(outcome.plan.waypoints_m, navigator, sim_uri_for_world(uri, world), outcome,
                    planner.options.guidance, outcome.plan.start_guide)
 
