@@ -67,3 +67,19 @@ def test_offsets_at_their_bound_are_reported_with_where_a_wider_search_puts_them
     assert check.wide_offsets_s[recording.name] == pytest.approx(0.4, abs=0.02)
     assert 0.4 < WIDE_S and check.most_at_bound
     assert f"+-{ALIGN_S:g} s bound" in check.warning()
+
+
+def test_offsets_at_the_revisited_bound_too_are_named_as_further_still(robot, recording):
+    # a clock 1.5 s late: the revisited +-1 s search ends on its own bound as well, and the
+    # warning says so instead of giving 1 s as where the offset lies
+    truth = FittedModel.of_coefficients(TRUTH, robot)
+    late = replace(recording, t_s=recording.t_s + 1.5)
+    check = clock_check(validate(robot, {"straight": truth}, [late]))
+    assert check.at_bound == (recording.name,)
+    assert check.wide_offsets_s[recording.name] == pytest.approx(WIDE_S)
+    assert check.beyond_wide == (recording.name,)
+    assert f"1 of them at +-{WIDE_S:g} s again (further still)" in check.warning()
+    # within the revisited bound nothing is further
+    inside = clock_check(validate(robot, {"straight": truth},
+                                  [replace(recording, t_s=recording.t_s + 0.4)]))
+    assert inside.beyond_wide == () and "further still" not in inside.warning()

@@ -416,7 +416,8 @@ def estimator_report(
         lines += [f"Best clock offsets at the +-{clock.bound_s:g} s bound: {len(clock.at_bound)} "
                   f"of {clock.total} held-out experiments"
                   + (f"; searched within +-{WIDE_S:g} s they lie at {np.median(wide):.2f} s "
-                     f"(median; up to {wide.max():.2f} s)" if wide.size else "")
+                     f"(median; up to {wide.max():.2f} s; {len(clock.beyond_wide)} at "
+                     f"+-{WIDE_S:g} s again)" if wide.size else "")
                   + (" (the report warns: misfit, not a clock error)." if clock.most_at_bound
                      else "."), ""]
         lines += [
