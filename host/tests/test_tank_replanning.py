@@ -11,6 +11,7 @@ import dataclasses
 import json
 import math
 import time
+from concurrent.futures import Future
 
 import numpy as np
 import pytest
@@ -27,7 +28,7 @@ from eelhost.planning.field import ClearanceField
 from eelhost.planning.planner import PLANNING_GUIDANCE, Outcome, Planner
 from eelhost.planning.replan import Decision, TankReplanner, outline_clearance_m, predict_state
 from eelhost.planning.search import Plan
-from eelhost.planning.state_estimate import BodyStateEstimator
+from eelhost.planning.state_estimate import BodyStateEstimator, CurrentWindow
 from eelhost.planning.tank import plan_for_run, with_extra_current
 from eelhost.planning.uncertainty import default_model, read_coefficient_model
 from eelhost.planning.world import parse_world
@@ -926,3 +927,32 @@ def test_a_replan_whose_search_is_slow_stops_at_its_budget_without_the_fallback_
     assert got.plan.expansions <= 2 * planner.search.settings.batch
     assert tried == []
     assert wall < 5.0  # generous: the budget, a batch in progress and the prediction
+
+
+def test_a_moved_current_estimate_has_its_planner_built_before_the_next_replan(open_plan):
+    # a window says the water moves 0.05 m/s towards +y: the estimate moves by 0.6 of it, and the
+    # planner in that estimate is built on the replan worker at once; a replan asked for in the
+    # same estimate then builds none (the build took 0.4-0.9 s of a 1 s budget under load)
+    planner, outcome = open_plan
+    built: list[tuple[float, float]] = []
+
+    def planner_for(extra):  # noqa: ANN001, ANN202
+        built.append((float(extra[0]), float(extra[1])))
+        return planner
+
+    nav = TankReplanner(planner_for, planner, outcome, PATH_GAIT)
+    try:
+        start, end = estimate_at(1.0), estimate_at(3.0)
+        window = CurrentWindow(start, end, (2.5, 1.3), None, np.zeros(2))
+        swum: Future = Future()
+        swum.set_result(end.state[N : N + 2] - np.array([0.0, 0.05]) * window.span_s)
+        nav._window_jobs.append((swum, window))
+        pose = np.array([end.state[N], end.state[N + 1], float(np.mean(end.state[:N]))])
+        assert nav._estimate_current(end, [(2.5, 1.3)], pose)
+        assert nav._prebuild is not None
+        nav._prebuild.result(timeout=60)
+        assert len(built) == 1 and built[0] == pytest.approx((0.0, 0.03), abs=1e-9)
+        nav._prepare_planner(nav.current.value_m_s.copy())
+        assert len(built) == 1
+    finally:
+        nav.close()

@@ -458,6 +458,7 @@ class TankReplanner:
         # the current's windows being swum by the twin on the side worker, oldest first
         self._window_jobs: list[tuple[Future, CurrentWindow]] = []
         self._planner_current = np.zeros(2)
+        self._prebuild: Future | None = None  # the planner in a moved estimate, being built
         # (planner, its extra current) swapped as one, read by the side worker
         self._planned: tuple[Planner, FloatArray] = (planner, np.zeros(2))
         self._last_wall_s = 0.0
@@ -690,10 +691,7 @@ class TankReplanner:
         while time is left before it.
         """
         wall0, cpu0 = time.perf_counter(), time.thread_time()
-        if float(np.hypot(*(extra - self._planner_current))) >= 0.005:
-            self.planner = self.planner_for(extra)
-            self._planner_current = extra
-            self._planned = (self.planner, extra)
+        self._prepare_planner(extra)
         planner = self.planner
         period = planner.twin.restart_steps or 1
         predicted = predict_start(planner.twin, est, left, start_step, guide=guide)
@@ -748,6 +746,19 @@ class TankReplanner:
                         f"{outcome.message}; with the recovery's actions: {rescue.message}"))
         return (outcome, state, time.perf_counter() - wall0, time.thread_time() - cpu0,
                 self._planner_current.copy(), time.monotonic(), start_step)
+
+    def _prepare_planner(self, extra: FloatArray) -> None:
+        """On the replan worker: the planner in the world's current plus ``extra``.
+
+        A new one only when ``extra`` moved by 5 mm/s or more from the present planner's. Also
+        run as soon as the current estimate moves that far (:meth:`_estimate_current`), so a
+        replan that comes later finds it built: building one took 0.4-0.9 s of a replan's 1 s
+        on the loaded machine (docs/planning.md, "The replan's deadline").
+        """
+        if float(np.hypot(*(extra - self._planner_current))) >= 0.005:
+            self.planner = self.planner_for(extra)
+            self._planner_current = extra
+            self._planned = (self.planner, extra)
 
     def _replan_and_judge(self, est: BodyEstimate, left: list[tuple[float, float]],
                           start_step: int, extra: FloatArray, guide: Guide | None = None,
@@ -980,6 +991,13 @@ class TankReplanner:
                 self.current.update(window.end.t_s, predicted, window.end.state[n : n + 2],
                                     window.span_s, window.assumed_m_s)
                 changed = True
+        if changed and self._job is None and (
+                self._prebuild is None or self._prebuild.done()) and float(np.hypot(
+                    *(self.current.value_m_s - self._planner_current))) >= 0.005:
+            # build the planner in the moved estimate now, on the replan worker (a replan asked
+            # for meanwhile queues behind it and finds it built), not inside the next replan
+            self._prebuild = self._worker.submit(self._prepare_planner,
+                                                 self.current.value_m_s.copy())
         closed = self.current.track(est, pose, left[0] if left else None, self._guide)
         if closed is not None:
             self._window_jobs.append((self._side.submit(self._window_prediction, closed),
