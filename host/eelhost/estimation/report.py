@@ -22,6 +22,7 @@ from eelhost.estimation.diagnostics import fit_warnings
 from eelhost.estimation.evaluate import Evaluator, simulations_counter
 from eelhost.estimation.identify import identifiability
 from eelhost.estimation.methods import FitSettings
+from eelhost.estimation.neighbours import SANE_FACTOR
 from eelhost.estimation.optimise import FitResult
 from eelhost.estimation.pipeline import fit_motion
 from eelhost.estimation.runs import ALIGN_S
@@ -167,7 +168,10 @@ def run_report(
             "adopted": chosen.adopted,
             "candidates": {c.model: {"parameters": c.parameters, "fitness": c.fitness,
                                      "held_out": {m: v.tolist() for m, v in c.held_out.items()},
-                                     "failed": c.failed, "screened_out": c.screened_out}
+                                     "failed": c.failed, "screened_out": c.screened_out,
+                                     "between_training_gaits": {
+                                         m: v if np.isfinite(v) else None
+                                         for m, v in c.between.items()}}
                            for c in comparison},
         }
     tests = dataset.held_out
@@ -218,8 +222,9 @@ def run_report(
         verdict = (
             "Recommended: none: every candidate failed, so the robot file's model was fitted."
             if choice is None else
-            f"Recommended: **{choice.model}** (lowest mean held-out error; within "
-            "2 % or one standard error of the folds the model with fewer parameters)"
+            f"Recommended: **{choice.model}** (lowest mean held-out error of the candidates "
+            "that stay sane between their training gaits; within 2 % or one standard error of "
+            "the folds the model with fewer parameters)"
             + ("; adopted: the fits above are its own." if chosen.adopted else
                "." if choice.model == chosen.model else
                f"; not adopted (`--keep-model`): the fits above are {chosen.model}'s."))
@@ -229,6 +234,9 @@ def run_report(
             "",
             "Each training gait held out in turn: the model refitted on the others, scored on it "
             "(the fitness's per-experiment error, m; docs/estimation.md, \"Model comparison\")."
+            " Between training gaits: how far the candidate's mean speed at the gaits between its"
+            " training gaits leaves the recorded speeds around them (x1.00: inside; more than"
+            f" x{SANE_FACTOR:g}: not sane, not recommended while a sane candidate ran)."
             + (" Every candidate was first screened with a short search; those marked screened "
                "out were dropped there, and their figures are the screen's."
                if any(c.screened_out for c in comparison) else ""),

@@ -37,7 +37,13 @@ screen's figures, marked, and never recommended.
 held-out one) is refitted from the candidate's next start; a candidate whose fold still fails is
 marked failed, shown as such, and never ranked by a penalty-inflated mean.
 
-The recommendation is the candidate with the lowest mean held-out error over every held-out gait;
+**Between the training gaits.** The folds of a corner design only extrapolate, so every fitted
+candidate also swims the gaits between its training gaits, and one whose mean speed there leaves
+the recorded speeds around them by more than
+:data:`~eelhost.estimation.neighbours.SANE_FACTOR` is not recommended while a sane one ran
+(:mod:`eelhost.estimation.neighbours`).
+
+The recommendation is the sane candidate with the lowest mean held-out error over every held-out gait;
 one with fewer parameters is preferred when its mean is within the larger of ``TIE`` of the best's
 and one standard error of the best's mean over its folds (the one-standard-error rule of
 cross-validation: Breiman, Friedman, Olshen and Stone, *Classification and Regression Trees*,
@@ -64,6 +70,7 @@ from eelhost.estimation.evaluate import EstimationError, Evaluator, count_runs
 from eelhost.estimation.joint_fit import joint_fit, joint_model_name
 from eelhost.estimation.local import FAILED, polish_minimax_many
 from eelhost.estimation.methods import CURRENT_POLISH_ITERATIONS, FitSettings
+from eelhost.estimation.neighbours import SANE_FACTOR, neighbour_excursion
 from eelhost.estimation.optimise import fit_cmaes
 from eelhost.estimation.pipeline import training_experiments
 from eelhost.estimation.space import ParameterSpace
@@ -81,7 +88,7 @@ SURVIVORS = 4  # at most this many candidates pass the screen to the full search
 SURVIVOR_FACTOR = 2.0  # and only those within this factor of the screen's best mean held-out error
 FAMILY_FACTOR = 4.0  # a law family's best passes too when within this factor of the screen's best
 # a term the other model lacks starts switched off (a lift variant's lift and drag rise)
-ABSENT = {"C_L": 0.0, "C_D_alpha": 0.0}
+ABSENT = {"C_L": 0.0, "C_D_alpha": 0.0, "alpha_stall": float(np.pi / 2)}  # pi/2: no stall
 ONE_SET_CANDIDATES = 1  # the best separate-set models also tried with one set for all motions
 ONE_SET = "one set"  # the suffix of a one-set candidate's name
 
@@ -93,7 +100,7 @@ def carry_over(values: Mapping[str, float], space: ParameterSpace, default: np.n
     ``C_f_quad``) takes its unsplit one (``C_f``), the ``galilean`` law being the split law with
     both equal (from the paper's law this is only a start: the split law adds the reactive
     terms); a term the other model lacks and that can be switched off (:data:`ABSENT`: a lift
-    variant's ``C_L`` and ``C_D_alpha``) starts off, so a ``<law>_lift`` candidate starts from its base law's fit
+    variant's ``C_L`` and ``C_D_alpha``, its ``alpha_stall`` at pi/2) starts off, so a ``<law>_lift`` candidate starts from its base law's fit
     exactly; anything else keeps ``default``. The result is clipped to the bounds.
 
     Parameters
@@ -145,6 +152,10 @@ class CandidateScore:
     screened_out : bool
         Whether the candidate was dropped by the screen: its figures are then the screen's
         (short search, short polish), and it is never recommended.
+    between : dict of str to float
+        Per fit, how far its predictions of the gaits between its training gaits leave the
+        speeds the recordings bracket (:func:`eelhost.estimation.neighbours.neighbour_excursion`:
+        1 inside; absent for a screened-out candidate).
     """
 
     model: str
@@ -156,6 +167,17 @@ class CandidateScore:
     values: dict[str, np.ndarray] = field(default_factory=dict)
     failed: str | None = None
     screened_out: bool = False
+    between: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def excursion(self) -> float:
+        """The worst excursion between training gaits over its fits (1 when none was checked)."""
+        return max(self.between.values(), default=1.0)
+
+    @property
+    def sane(self) -> bool:
+        """Whether its predictions between its training gaits stay within ``SANE_FACTOR``."""
+        return self.excursion <= SANE_FACTOR
 
     @property
     def one_set(self) -> bool:
@@ -193,6 +215,9 @@ def recommend(scores: Sequence[CandidateScore]) -> CandidateScore | None:
     """The candidate to trust (module docstring): lowest mean held-out error, ties to the simpler.
 
     A tie is a mean within the larger of ``TIE`` of the best's and the best's standard error.
+    Only candidates that stay sane between their training gaits (:attr:`CandidateScore.sane`)
+    are ranked; when none does, those within ``SANE_FACTOR`` of the smallest excursion are (the
+    least implausible).
 
     Failed candidates and those the screen dropped are never recommended; None when every
     candidate failed.
@@ -200,6 +225,8 @@ def recommend(scores: Sequence[CandidateScore]) -> CandidateScore | None:
     ran = [c for c in scores if np.isfinite(c.mean_held_out) and not c.screened_out]
     if not ran:
         return None
+    least = min(c.excursion for c in ran)
+    ran = [c for c in ran if c.sane or c.excursion <= SANE_FACTOR * least]
     best = min(ran, key=lambda c: c.mean_held_out)
     margin = max(best.mean_held_out * TIE, best.standard_error)
     close = [c for c in ran if c.mean_held_out <= best.mean_held_out + margin]
@@ -522,6 +549,7 @@ def screen_rank(score: CandidateScore) -> tuple[int, float, float]:
 def _add_to_score(
     scores: dict[int, CandidateScore], spaces: Sequence[ParameterSpace], motions: Sequence[str],
     i: int, m: str, fitted: _Fitted, held: Any, why: str | None, ev: Evaluator,
+    between: float | None = None,
 ) -> None:
     """Fold candidate ``i``'s fit of motion ``m`` into its score, made on first use.
 
@@ -534,6 +562,8 @@ def _add_to_score(
                                                             fitted.values[0], held)
     score.failed = score.failed or (f"{m}: {why}" if why else None)
     score.simulations += ev.simulations
+    if between is not None:
+        score.between[m] = between
 
 
 def _screen(
@@ -632,9 +662,9 @@ def _full(
     scored = workers.map(_score_stage, [(evs[k], still[k], iterations, fold_iterations)
                                         for k in keys])
     scores: dict[int, CandidateScore] = {}
-    for (i, m), (fitted, (held, why), ev) in zip(keys, scored, strict=True):
+    for (i, m), (fitted, (held, why), between, ev) in zip(keys, scored, strict=True):
         evs[(i, m)] = ev
-        _add_to_score(scores, spaces, motions, i, m, fitted, held, why, ev)
+        _add_to_score(scores, spaces, motions, i, m, fitted, held, why, ev, between)
     return scores
 
 
@@ -684,10 +714,14 @@ def _cross_seed_chain(
 
 def _score_stage(
     ev: Evaluator, still: _Fitted, iterations: int, fold_iterations: int
-) -> tuple[_Fitted, tuple[np.ndarray, str | None], Evaluator]:
-    """A candidate's fits with the current, its folds' held-out errors, and its evaluator."""
+) -> tuple[_Fitted, tuple[np.ndarray, str | None], float, Evaluator]:
+    """A candidate's fits with the current, folds, excursion between gaits, and evaluator.
+
+    The excursion: :func:`~eelhost.estimation.neighbours.neighbour_excursion` of its best fit.
+    """
     fitted = _with_current(ev, still, iterations)
-    return fitted, _folds(ev, fitted, fold_iterations), ev
+    folds = _folds(ev, fitted, fold_iterations)
+    return fitted, folds, neighbour_excursion(ev, fitted.values[0]), ev
 
 
 def _in_worker(job: tuple[Callable[..., Any], tuple[Any, ...]]) -> tuple[Any, int]:
@@ -781,6 +815,7 @@ def _one_set(
     score.values["joint"] = own.values[0]
     score.held_out["joint"], why = _folds(ev, own, fold_iterations)
     score.failed = f"joint: {why}" if why else None
+    score.between["joint"] = neighbour_excursion(ev, own.values[0])
     score.simulations = ev.simulations
     return score
 
@@ -788,6 +823,9 @@ def _one_set(
 def _said(score: CandidateScore, say: Callable[[str], None] | None) -> None:
     text = ("failed: " + score.failed) if score.failed else (
         f"mean held-out error {score.mean_held_out:.4f}")
+    if score.between and not score.failed:
+        text += f", between training gaits x{score.excursion:.2f}" + (
+            "" if score.sane else " (not sane)")
     if score.screened_out:
         text = f"screened out ({text})"
     log.info("%s: %s", score.model, text)
@@ -800,14 +838,17 @@ def table_markdown(scores: Sequence[CandidateScore]) -> str:
     choice = recommend(scores)
     motions = list(dict.fromkeys(m for c in scores for m in c.fitness))
     head = ("| model | parameters | " + " | ".join(f"fitness {m}" for m in motions)
-            + " | mean held-out error | worst held-out error | simulations |")
-    lines = [head, "|---|---|" + "---|" * len(motions) + "---|---|---|"]
+            + " | mean held-out error | worst held-out error | between training gaits"
+            " | simulations |")
+    lines = [head, "|---|---|" + "---|" * len(motions) + "---|---|---|---|"]
     for c in scores:
         mark = " (recommended)" if c is choice else " (screened out)" if c.screened_out else ""
         fitness = " | ".join(f"{c.fitness[m]:.4f}" if m in c.fitness else "-" for m in motions)
         screen = " (screen)" if c.screened_out else ""
         held = (f"failed ({c.failed}) | failed" if c.failed
                 else f"{c.mean_held_out:.4f}{screen} | {c.worst_held_out:.4f}{screen}")
-        lines.append(f"| {c.model}{mark} | {c.parameters} | {fitness} | {held} | "
+        between = ("-" if not c.between else f"x{c.excursion:.2f}"
+                   + ("" if c.sane else " (not sane)"))
+        lines.append(f"| {c.model}{mark} | {c.parameters} | {fitness} | {held} | {between} | "
                      f"{c.simulations} |")
     return "\n".join(lines)
