@@ -84,9 +84,10 @@ def test_a_lift_variant_starts_from_its_base_laws_fit_with_the_lift_switched_off
     lift = ParameterSpace(get_fluid_law("morison_lift"))
     fitted = base.bounds[:, 0] + 0.3 * (base.bounds[:, 1] - base.bounds[:, 0])
     start = carry_over(base.as_dict(fitted), lift, lift.bounds.mean(axis=1))
-    # both of the variant's terms (lift and drag rise) start switched off
-    assert lift.names[-2:] == ("C_L", "C_D_alpha") and np.all(start[-2:] == 0.0)
-    np.testing.assert_array_equal(start[:-2], fitted)
+    # the variant's terms (lift, drag rise and stall) start switched off
+    assert lift.names[-3:] == ("C_L", "C_D_alpha", "alpha_stall")
+    np.testing.assert_array_equal(start[-3:], [0.0, 0.0, np.pi / 2])
+    np.testing.assert_array_equal(start[:-3], fitted)
     # the default grid tries every candidate law with and without its lift
     assert {"morison_lift", "morison", "resistive_lift"} <= set(default_laws())
 

@@ -38,7 +38,7 @@ def test_the_foil_water_without_zero_angle_drag_is_linear_quadratic_lift_with_no
     foil = FoilCoefficients(C_D0=0.0, C_D2=1.3, C_L=0.9, C_a=0.7, C_m=0.02)
     law = get_fluid_law("linear_quadratic_lift")
     named = {"C_f_lin": 0.0, "C_d_lin": 0.0, "C_f_quad": 0.0, "C_d_quad": 0.0, "C_a": 0.7,
-             "C_m": 0.02, "C_L": 0.45, "C_D_alpha": 1.3}
+             "C_m": 0.02, "C_L": 0.45, "C_D_alpha": 1.3, "alpha_stall": np.pi / 2}
     plant_fluid, plant = _link_forces(FOIL, foil.as_array(), motion)
     fluid, candidate = _link_forces(law, [named[k] for k in law.coefficient_names], motion)
     np.testing.assert_allclose(fluid.mu_n, plant_fluid.mu_n, rtol=1e-14)

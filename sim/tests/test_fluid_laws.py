@@ -76,7 +76,7 @@ GALILEAN_LAWS = [
     ReynoldsCoefficients(C_f_lam=1.328, C_d_inf=1.0, C_d_visc=5.0, C_a=0.618, C_m=0.007),
     LighthillCoefficients(C_f=0.008, C_d=0.776, C_a=0.618),
     ResistiveCoefficients(C_t_lin=0.008, C_n_lin=0.776, C_t_quad=0.02, C_n_quad=1.2, C_a=0.618),
-    FLUID_LAWS["galilean_lift"].coefficients(**PAPER, C_L=1.2, C_D_alpha=2.0),
+    FLUID_LAWS["galilean_lift"].coefficients(**PAPER, C_L=1.2, C_D_alpha=2.0, alpha_stall=0.3),
 ]
 
 
@@ -251,7 +251,7 @@ def test_the_candidates_are_the_laws_that_declare_themselves_so_and_their_lift_v
     LighthillCoefficients(C_f=0.008, C_d=0.776, C_a=0.618),
     ResistiveCoefficients(C_t_lin=0.008, C_n_lin=0.776, C_t_quad=0.02, C_n_quad=1.2, C_a=0.618),
     FLUID_LAWS["lighthill_lift"].coefficients(C_f=0.008, C_d=0.776, C_a=0.618, C_L=1.2,
-                                              C_D_alpha=2.0),
+                                              C_D_alpha=2.0, alpha_stall=0.35),
 ], ids=lambda c: c.law_name)
 def test_each_new_law_runs_in_the_batched_kernel_as_in_the_reference(robot, coefficients):
     # from the robot file's [hydrodynamics] table: law name and its coefficients

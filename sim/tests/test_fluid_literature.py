@@ -223,14 +223,15 @@ def test_pure_resistive_force_theory_only_dissipates(robot):
                                   if isinstance(law, LiftLaw)])
 def test_lift_is_perpendicular_to_the_relative_flow_with_the_sin_two_alpha_magnitude(base):
     law = FLUID_LAWS[f"{base}_lift"]
-    assert law.coefficient_names == (*get_fluid_law(base).coefficient_names, "C_L", "C_D_alpha")
+    assert law.coefficient_names == (*get_fluid_law(base).coefficient_names, "C_L", "C_D_alpha",
+                                     "alpha_stall")
     rng = np.random.default_rng(1)
     n = 4
     coeffs = rng.uniform(law.bounds[:, 0], law.bounds[:, 1])
-    coeffs[-1] = 0.0  # the lift alone: no drag rise
+    coeffs[-2:] = 0.0, np.pi / 2  # the lift alone: no drag rise, no stall
     half, a, b = np.full(n, 0.05), np.full(n, 0.025), np.full(n, 0.02)
     lifted = law.link_coefficients(half, a, b, coeffs, 1000.0)
-    plain = get_fluid_law(base).link_coefficients(half, a, b, coeffs[:-2], 1000.0)
+    plain = get_fluid_law(base).link_coefficients(half, a, b, coeffs[:-3], 1000.0)
     theta, om, rel = rng.uniform(-3, 3, n), rng.normal(0, 2, n), rng.normal(0, 0.1, (n, 2))
     rel[0] = 0.0  # a link at rest in the water feels no lift
     motion = LinkMotion(np.sin(theta), np.cos(theta), om, rel[:, 0], rel[:, 1])
@@ -241,11 +242,12 @@ def test_lift_is_perpendicular_to_the_relative_flow_with_the_sin_two_alpha_magni
     assert np.allclose(with_lift.fx - without.fx, lx, rtol=0, atol=1e-15)
     assert np.allclose(with_lift.fy - without.fy, ly, rtol=0, atol=1e-15)
     assert np.allclose(with_lift.torque, without.torque, rtol=0, atol=0)
-    assert np.allclose(lx * rel[:, 0] + ly * rel[:, 1], 0.0, atol=1e-18)  # does no work
+    # does no work (to rounding of the products, ~0.02 W)
+    assert np.allclose(lx * rel[:, 0] + ly * rel[:, 1], 0.0, atol=1e-16)
     alpha = np.arctan2(-np.sin(theta) * rel[:, 0] + np.cos(theta) * rel[:, 1],
                        np.cos(theta) * rel[:, 0] + np.sin(theta) * rel[:, 1])
     area = 2 * a * 2 * half
-    magnitude = 0.5 * 1000.0 * area * coeffs[-2] * np.abs(np.sin(2 * alpha)) * (rel**2).sum(1)
+    magnitude = 0.5 * 1000.0 * area * coeffs[-3] * np.abs(np.sin(2 * alpha)) * (rel**2).sum(1)
     assert np.allclose(np.hypot(lx, ly), magnitude, rtol=1e-12, atol=1e-18)
     assert lx[0] == 0.0 and ly[0] == 0.0
     normal = -np.sin(theta) * lx + np.cos(theta) * ly
@@ -259,11 +261,12 @@ def test_the_drag_rise_opposes_the_flow_with_the_sin_squared_magnitude_and_its_c
     rng = np.random.default_rng(3)
     n = 5
     coeffs = rng.uniform(law.bounds[:, 0], law.bounds[:, 1])
-    coeffs[-2] = 0.0  # the drag rise alone: no lift
+    coeffs[-3] = 0.0  # the drag rise alone: no lift
+    coeffs[-1] = np.pi / 2  # and no stall (a stalled plate's lift is the drag rise's k_D)
     half, a, b = rng.uniform(0.03, 0.06, n), rng.uniform(0.02, 0.03, n), np.full(n, 0.02)
     rho = 1000.0
     risen = law.link_coefficients(half, a, b, coeffs, rho)
-    plain = get_fluid_law(base).link_coefficients(half, a, b, coeffs[:-2], rho)
+    plain = get_fluid_law(base).link_coefficients(half, a, b, coeffs[:-3], rho)
     theta, om, rel = rng.uniform(-3, 3, n), rng.normal(0, 2, n), rng.normal(0, 0.1, (n, 2))
     rel[0] = 0.0
     motion = LinkMotion(np.sin(theta), np.cos(theta), om, rel[:, 0], rel[:, 1])
@@ -279,17 +282,64 @@ def test_the_drag_rise_opposes_the_flow_with_the_sin_squared_magnitude_and_its_c
     assert np.all(dx * rel[:, 0] + dy * rel[:, 1] <= 0.0)
     wn = -np.sin(theta) * rel[:, 0] + np.cos(theta) * rel[:, 1]
     sin2 = np.divide(wn**2, speed2, out=np.zeros(n), where=speed2 > 0)
-    magnitude = 0.5 * rho * (2 * a) * (2 * half) * coeffs[-1] * sin2 * speed2
+    magnitude = 0.5 * rho * (2 * a) * (2 * half) * coeffs[-2] * sin2 * speed2
     assert np.allclose(np.hypot(dx, dy), magnitude, rtol=1e-12, atol=1e-18)
     assert dx[0] == 0.0 and dy[0] == 0.0
     # the moment: the cross-flow drag 1/2 rho 2a C_D_alpha |s w| s w integrated along the link
     # turning about its centre (quadrature, independent of the closed form)
     dtau = with_rise.torque - without.torque
     for i in range(n):
-        per_length = 0.5 * rho * 2 * a[i] * coeffs[-1]
+        per_length = 0.5 * rho * 2 * a[i] * coeffs[-2]
         moment = quad(lambda s, k=per_length, w=om[i]: -s * k * abs(s * w) * s * w,
                       -half[i], half[i])[0]
         assert np.isclose(dtau[i], moment, rtol=1e-10, atol=1e-18)
+
+
+@pytest.mark.parametrize("base", ["linear_quadratic", "morison"])
+def test_a_stalled_link_feels_a_flat_plates_normal_force_and_an_attached_one_the_full_lift(base):
+    # flat plate past the stall (Hoerner; Dickinson et al.): lift and drag rise add up to a force
+    # normal to the link of 1/2 rho S C_D_alpha sin(alpha) |w|^2; below the stall angle the
+    # variant is the one that never stalls
+    law = FLUID_LAWS[f"{base}_lift"]
+    rng = np.random.default_rng(8)
+    n = 400
+    coeffs = rng.uniform(law.bounds[:, 0], law.bounds[:, 1])
+    coeffs[-3:] = 2.5, 1.1, np.radians(20.0)
+    never = coeffs.copy()
+    never[-1] = np.pi / 2
+    half, a, b = np.full(n, 0.05), np.full(n, 0.025), np.full(n, 0.02)
+    stalls = law.link_coefficients(half, a, b, coeffs, 1000.0)
+    attached = law.link_coefficients(half, a, b, never, 1000.0)
+    theta = rng.uniform(-3, 3, n)
+    alpha = rng.uniform(0.0, np.pi / 2, n) * rng.choice([-1, 1], n)  # either side, head or tail
+    alpha[rng.random(n) < 0.5] += np.pi
+    speed = rng.uniform(0.01, 0.2, n)
+    wt, wn = speed * np.cos(alpha), speed * np.sin(alpha)
+    vx, vy = np.cos(theta) * wt - np.sin(theta) * wn, np.sin(theta) * wt + np.cos(theta) * wn
+    motion = LinkMotion(np.sin(theta), np.cos(theta), np.zeros(n), vx, vy)
+    f_stall = law.forces(stalls, motion, np.zeros(2))
+    f_never = law.forces(attached, motion, np.zeros(2))
+    acute = np.arcsin(np.abs(np.sin(alpha)))
+    below, past = acute < np.radians(20.0), acute > np.radians(24.0)
+    assert below.sum() > 20 and past.sum() > 20
+    np.testing.assert_array_equal(f_stall.fx[below], f_never.fx[below])
+    lx, ly = f_stall.parts["lift"]
+    rx, ry = f_stall.parts["rise"]
+    fx, fy = lx + rx, ly + ry
+    along = np.cos(theta) * fx + np.sin(theta) * fy
+    across = -np.sin(theta) * fx + np.cos(theta) * fy
+    plate = 0.5 * 1000.0 * (2 * a) * (2 * half) * 1.1 * np.abs(np.sin(alpha)) * speed**2
+    scale = plate.max()
+    np.testing.assert_allclose(along[past], 0.0, atol=1e-12 * scale)
+    np.testing.assert_allclose(np.abs(across[past]), plate[past], rtol=1e-12)
+    assert np.all(across[past] * wn[past] < 0.0)  # against the sideways flow
+    # in the band between, the lift's coefficient lies between the attached and the plate's
+    band = ~below & ~past
+    k_never = np.hypot(*f_never.parts["lift"])
+    k_stall = np.hypot(lx, ly)
+    plate_lift = 0.5 * 1000.0 * (2 * a) * (2 * half) * 1.1 * np.abs(np.sin(2 * alpha)) / 2 * speed**2
+    lo, hi = np.minimum(k_never, plate_lift), np.maximum(k_never, plate_lift)
+    assert np.all((k_stall[band] >= lo[band] - 1e-15) & (k_stall[band] <= hi[band] + 1e-15))
 
 
 def test_a_lift_variant_with_no_lift_is_its_base_law(robot):
