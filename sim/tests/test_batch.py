@@ -441,6 +441,51 @@ def test_a_stage_rotates_only_while_every_running_lane_moved_little(robot, stage
     assert np.allclose(rotated, full, rtol=1e-12, atol=1e-12)
 
 
+@pytest.mark.parametrize("stage", STAGES)
+def test_the_last_stage_keeps_only_running_lanes_with_a_finite_new_state_and_positive_pivots(
+        robot, stage):
+    # the last stage writes row keep (1.0: the lane commits its new state) and the block's
+    # verdict (cell 0: a running lane failed; cell 1: some lane does not commit), which the
+    # driver reads instead of counting over its lanes: written out here independently
+    spec = BatchSpec.build(robot, load_scenario("path2"))
+    k, work, out, lanes = _lane_block(spec, stage)
+    xs = _random_states(np.random.default_rng(5), robot.n_links, lanes)
+    _set_rows(k, work, k.W_X, lanes, xs)
+    dt = 0.01
+
+    def last_stage(live, bad_pivot_lane=None, nan_lane=None):
+        ys = xs.copy()
+        if nan_lane is not None:
+            ys[nan_lane, robot.n_links + 2] = np.nan
+        _set_rows(k, work, k.W_Y, lanes, ys)
+        out[k.O_LIVE * lanes : (k.O_LIVE + 1) * lanes] = live
+        out[k.O_BAD_PIVOT * lanes : (k.O_BAD_PIVOT + 1) * lanes] = 0.0
+        if bad_pivot_lane is not None:
+            out[k.O_BAD_PIVOT * lanes + bad_pivot_lane] = 1.0
+        k._stage(work, 1.0, 0.0, 1.0, False, True, dt / 6.0, False, False, False)
+        xn = np.array([work[(k.W_XN + row) * lanes : (k.W_XN + row + 1) * lanes]
+                       for row in range(xs.shape[1])]).T
+        finite = np.isfinite(xn).all(axis=1)
+        pivots = out[k.O_BAD_PIVOT * lanes : (k.O_BAD_PIVOT + 1) * lanes] == 0.0
+        expected = (live != 0.0) & finite & pivots
+        keep = out[k.O_KEEP * lanes : (k.O_KEEP + 1) * lanes]
+        verdict = out[k.O_STEP_VERDICT * lanes : k.O_STEP_VERDICT * lanes + 2]
+        assert np.array_equal(keep, expected.astype(float))
+        assert verdict[0] == float(((live != 0.0) & ~expected).any())
+        assert verdict[1] == float(not expected.all())
+        return keep, verdict
+
+    live = np.ones(lanes)
+    keep, verdict = last_stage(live)
+    assert keep.all() and verdict.tolist() == [0.0, 0.0]
+    keep, verdict = last_stage(live, bad_pivot_lane=2, nan_lane=5)
+    assert np.flatnonzero(keep == 0.0).tolist() == [2, 5] and verdict.tolist() == [1.0, 1.0]
+    stopped = live.copy()
+    stopped[[2, 5, 9]] = 0.0  # lanes that stopped earlier fail nothing, but do not commit
+    keep, verdict = last_stage(stopped, bad_pivot_lane=2, nan_lane=5)
+    assert np.flatnonzero(keep == 0.0).tolist() == [2, 5, 9] and verdict.tolist() == [0.0, 1.0]
+
+
 def test_a_block_size_that_is_not_whole_vectors_is_refused(robot):
     with pytest.raises(ValueError, match="multiple of 4"):
         run_batch(robot, load_scenario("straight"), lanes=10)

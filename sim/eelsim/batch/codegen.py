@@ -253,7 +253,10 @@ def make_layout(n_links: int, lanes: int, law: FluidLaw | None = None,
         ("tail_ex", 1),
         ("tail_ey", 1),
         ("cond_bound", 1),  # trace(M) trace(M^-1) >= cond(M); inf when a pivot is <= 0
-        ("keep", 1),  # 1.0 for lanes that commit the step (set by the driver)
+        ("keep", 1),  # 1.0 for the lanes that commit the step (the last stage's loop 4b)
+        # the block's step (the last stage): [0] 1.0 when a live lane's new state failed,
+        # [1] 1.0 when some lane does not commit (loop 4b; the driver reads lane 0 and 1)
+        ("step_verdict", 1),
         ("live", 1),  # 1.0 for the lanes still running (set by the driver when that changes)
     ]
 
@@ -917,7 +920,9 @@ def _rk4_sums(e: _Emitter) -> None:
     line("# stage 4: the new state xn = x + dt/6 (acc + k4) only")
     deriv = [w("y", n + 2 + i) for i in range(n + 2)] + [o("qdd", i) for i in range(n + 2)]
     e.lines.append("    if last:")
-    e.loop("4b. the new state and its finiteness", indent=4)
+    e.lines.append("        failing = 0.0")
+    e.lines.append("        unkept = 0.0")
+    e.loop("4b. the new state, its finiteness and which lanes commit it", indent=4)
     line("# v - v is 0 for finite v and NaN for NaN or +-inf: one NaN test per lane for all rows;")
     line("# fastest: the divergence test of the next step's x (the new state, if the lane goes on).")
     line("# Reduced row by row, so that no row's value waits in a register (or on the stack)")
@@ -933,6 +938,17 @@ def _rk4_sums(e: _Emitter) -> None:
     line(f"{o('offset')} = offset")
     line(f"{o('xn_bad')} = nan")
     line(f"{o('fastest')} = fastest")
+    line("# row keep: a live lane commits a finite new state whose solve had positive pivots")
+    line("# (the driver's loop for this, over its bool array, had compiled to scalar code)")
+    line(f"lv = {o('live')}")
+    line(f"kp = (1.0 if nan == nan else 0.0) if {o('bad_pivot')} == 0.0 else 0.0")
+    line("kp = kp if lv != 0.0 else 0.0")
+    line(f"{o('keep')} = kp")
+    line("failing = failing if kp != 0.0 else (1.0 if lv != 0.0 else failing)")
+    line("unkept = unkept if kp != 0.0 else 1.0")
+    verdict = (e.layout.work_rows + e.layout.out["step_verdict"]) * e.layout.lanes
+    e.lines.append(f"        work[{verdict}] = failing")
+    e.lines.append(f"        work[{verdict + 1}] = unkept")
     e.lines.append("    else:")
     e.loop("4a. RK4 accumulator and the next stage's input", indent=4)
     for i, d in enumerate(deriv):

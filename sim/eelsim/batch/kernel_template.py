@@ -11,8 +11,8 @@ What runs here, for a block of ``LANES`` runs advancing in lock step (one physic
 so the time, the camera frame schedule and the sample steps are shared; runs that stopped are
 still computed but never committed):
 
-1. control updates (offset gamma from the filtered pose, pending queue for the delay) - a
-   vectorised test finds the lanes that have one, the update itself is per lane;
+1. control updates (offset gamma from the filtered pose, pending queue for the delay) - the
+   driver keeps the next step at which some lane has one, the update itself is per lane;
 2. sampling of the state;
 3. RK4 stage 1 (vectorised), the self-collision screen (vectorised), the condition-number bound
    when some lane updates its control (vectorised), then the checks of ``closed_loop._check`` in
@@ -21,8 +21,8 @@ still computed but never committed):
    where the bound is near the threshold. x's finiteness and fastest rate come from the last
    stage of the step before (x0's from a check at the block's start);
 4. the stop rules, RK4 stages 2-4 (vectorised; each stage also does its part of the RK4 sums,
-   the last one the finiteness and fastest rate of the new state), the pivot and finiteness
-   checks of the new state;
+   the last one the finiteness and fastest rate of the new state and which lanes commit it:
+   row keep), the pivot and finiteness checks of the new state;
 5. camera frames in (t, t + dt]: Hermite pose, pixel quantisation, heading noise, median filter,
    waypoint switching and arrival - for all lanes at once;
 6. the lanes still running commit the new state (a copy of the rows when all do, else a select
@@ -37,7 +37,7 @@ function of its own: ``_start_lanes`` (a block's runs into its lanes), ``_update
 dynamics' solve and the RK4 sums, see ``eelsim.batch.codegen``) with ``_stage_settings``, then
 ``_check_state`` and ``_fail_new_state`` (the checks), ``_camera_frames`` (5), ``_commit_kept``
 (6) and ``_write_outputs`` (a block's answers). The loop itself keeps only what every step runs
-(counts over the lanes that vectorise, the stages and the plain commit); why the pieces are
+(one count over the lanes that vectorises, the stages and the plain commit); why the pieces are
 called rather than inlined is written above them.
 """
 
@@ -136,7 +136,7 @@ W_Y = W_X = W_ACC = W_XN = W_GAMMA = W_GEOMETRY = W_HALF_LENGTH = W_LIMIT = 0
 W_MASS = W_MU = W_INERTIA = W_TORQUE_LIMIT = W_TORQUE_SLOPE = 0
 O_BAD_PIVOT = O_SIN = O_COS = O_NEAR = O_X_BAD = O_FASTEST = O_XN_BAD = O_COND_BOUND = 0
 O_TORQUE = O_TORQUE_RATIO = O_SATURATED = 0
-O_OFFSET = O_KEEP = O_LIVE = 0
+O_OFFSET = O_KEEP = O_LIVE = O_STEP_VERDICT = 0
 ROTATE_LIMIT = 0.1
 RESYNC_STEPS = 16
 
@@ -647,9 +647,9 @@ def _gather(work, base, r, ns, dest):
 # functions either, so each call costs its arguments (seven words per array). Hence: the
 # per-lane work sits in pieces behind a test that is false on most steps (a control update every
 # 30 steps, a sample step, a camera frame every third step, a check that fires, a block's start
-# and end), and what every step runs - a few counts over the lanes that vectorise, the RK4 stages
-# and the commit - stays in _run_block's loop, with the same calls per step as before the split.
-# The one piece that runs every step, _stage_settings, takes scalars only and is inlined.
+# and end), and what every step runs - one count over the lanes that vectorises, the RK4 stages
+# and the commit - stays in _run_block's loop. The stages are called through _rk4_stage (no
+# reference counts; _stage_settings in it takes scalars only and is inlined).
 
 
 @_njit(**_NO_REFCOUNT)
@@ -817,6 +817,37 @@ def _stage_settings(st, step, t, dt):
 
 
 @_njit(**_NO_REFCOUNT)
+def _count_live(alive):
+    """How many lanes are still running."""
+    live = 0
+    for r in range(LANES):
+        live += alive[r]
+    return live
+
+
+@_njit(**_NO_REFCOUNT)
+def _next_due(alive, update_at, pending_at):
+    """The first step at which a live lane has a control update or a delayed offset due."""
+    due = NEVER
+    for r in range(LANES):
+        if alive[r]:
+            due = min(due, update_at[r], pending_at[r])
+    return due
+
+
+@_njit(**_NO_REFCOUNT)
+def _rk4_stage(work, st, step, t, dt, plain):
+    """RK4 stage ``st`` of the step at ``t`` for every lane (the generated ``_stage``).
+
+    Its own function, without reference counts: called from _run_block's stage loop directly,
+    the stage made numba take and drop a reference to the block's buffer around three of the
+    four calls of every step (an atomic add each).
+    """
+    t_s, a, wk, may_rotate = _stage_settings(st, step, t, dt)
+    _stage(work, t_s, a, wk, st == 0, st == 3, dt / 6.0, may_rotate, st == 1 or st == 3, plain)
+
+
+@_njit(**_NO_REFCOUNT)
 def _fail_new_state(step, t, dt, out, fate):
     """Stop the live lanes whose new state xn failed (row keep is 0 for them).
 
@@ -966,26 +997,27 @@ def _run_block(block, runs, frames, loop, outputs):
     sample = 0
     guide_sample = 0
     step = 0
+    # the live lanes and the next step at which one has a control update or a delayed offset
+    # due, kept up to date where they change (a count over the lanes at every step had
+    # compiled to scalar code over the bool arrays)
+    live = _count_live(alive)
+    next_due = _next_due(alive, update_at, pending_at)
     while True:
-        t = step * dt
-        # 1. control updates; offsets act after the delay (pending queue, in order). A count
-        # without branches finds the live lanes and those with something due.
-        live = 0
-        due = 0
-        for r in range(LANES):
-            is_update[r] = False
-            live += alive[r]
-            due += alive[r] & ((update_at[r] == step) | (pending_at[r] <= step))
         if live == 0:
             break
+        t = step * dt
         # the call only on a sample step: made every step it cost a fifth of the driver's time
         if guide_sample < n_samples and sample_steps[guide_sample] <= step:
             guide_sample = _sample_guidance(step, guide_sample, sample_steps, alive, fate.run,
                                             lane_guide, outputs.integral)
+        # 1. control updates; offsets act after the delay (pending queue, in order). A lane
+        # that stopped since next_due was found may leave it early: the call then finds
+        # nothing to do.
         any_update = False
-        if due > 0:
+        if step >= next_due:
             any_update = _update_controls(step, work, runs, pending_size, guide, fate, control,
                                           filtered, targets.reached, lane_guide)
+            next_due = _next_due(alive, update_at, pending_at)
         # 2. samples (the reference records every step before its checks)
         while sample < n_samples and sample_steps[sample] < step:
             sample += 1
@@ -1002,9 +1034,7 @@ def _run_block(block, runs, frames, loop, outputs):
             work[W_Y * LANES + i] = work[W_X * LANES + i]
         for st in range(4):
             # (the stage itself turns rotate off unless every live lane moved little)
-            t_s, a, wk, may_rotate = _stage_settings(st, step, t, dt)
-            _stage(work, t_s, a, wk, st == 0, st == 3, dt / 6.0, may_rotate,
-                   st == 1 or st == 3, plain)
+            _rk4_stage(work, st, step, t, dt, plain)
             if st == 0:
                 _screen(work)
                 if any_update:
@@ -1025,28 +1055,26 @@ def _run_block(block, runs, frames, loop, outputs):
                 if flagged > 0:
                     _check_state(step, t, work, out, runs.params, stop_at_goal, fate, is_update,
                                  arrival, scratch)
-        # the pivot and finiteness of the new state: row keep, counted without branches
-        failing = 0
-        kept = 0
-        for r in range(LANES):
-            xn_bad = out[O_XN_BAD * LANES + r]
-            ok = alive[r] & (out[O_BAD_PIVOT * LANES + r] == 0.0) & (xn_bad == xn_bad)
-            out[O_KEEP * LANES + r] = 1.0 if ok else 0.0
-            failing += alive[r] & (not ok)
-            kept += ok
-        if failing > 0:
+                    live = _count_live(alive)
+        # the pivot and finiteness of the new state: the last stage wrote row keep and the
+        # block's verdict (some live lane failed; some lane does not commit)
+        if out[O_STEP_VERDICT * LANES] != 0.0:
             _fail_new_state(step, t, dt, out, fate)
+            live = _count_live(alive)
         # 5. camera frames in (t, t + dt] see the Hermite-interpolated pose
         if frame < n_frames and frame_step[frame] == step:
             frame = _camera_frames(step, frame, dt, frames, work, runs, pixel, window, fate,
                                    camera, targets, seen_x, seen_y, seen_heading)
         # 6. lanes still running commit the step: a plain copy of the rows when every lane
         # does (most steps; the select per lane cost about 11 ns per run and step)
-        if kept == LANES:
+        if out[O_STEP_VERDICT * LANES + 1] == 0.0:
             for i in range(ns * LANES):
                 work[W_X * LANES + i] = work[W_XN * LANES + i]
         else:
             _commit_kept(work)
+        if any_update:  # the flags of this step's updates, for the checks above
+            for r in range(LANES):
+                is_update[r] = False
         step += 1
     _write_outputs(first, dt, work, runs, outputs, fate, targets)
 
