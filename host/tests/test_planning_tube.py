@@ -27,6 +27,7 @@ def tank_with_a_disc():
     })
 
 
+@pytest.mark.slow
 def test_a_tube_plan_stays_clear_in_every_current_of_its_tube_when_the_check_swims_it():
     # the search's extra waters are swum leg by leg from their own states; the check's swim of
     # the plan in the same waters (written apart: check.swim_legs) must agree that the body
