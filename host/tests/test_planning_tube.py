@@ -106,3 +106,14 @@ def test_a_tube_plan_that_fails_its_check_is_repaired_by_the_nominal_search(monk
     assert outcome.found and not outcome.tube and outcome.repairs == 1, outcome.message
     # the family of checked plans is the same as without the tube search
     assert outcome.family == planner.repairs + 1
+
+
+def test_plan_json_records_what_the_tube_search_did():
+    from eelhost.commands.plan import plan_json
+    from eelhost.planning.planner import Outcome
+    from eelhost.planning.search import Plan
+
+    outcome = Outcome(Plan(False, "exhausted", "no plan"), "exhausted", "no plan",
+                      tube_status="exhausted")
+    record = plan_json(tank_with_a_disc(), outcome)
+    assert record["tube_search"] == "exhausted" and record["from_tube"] is False

@@ -188,6 +188,9 @@ def plan_json(world: World, outcome: Outcome) -> dict:
         "simulations": plan.simulations,
         "planning_time_s": outcome.planning_time_s,
         "repairs": outcome.repairs,
+        # the tube search (--tube-first): what it did ("" when off) and whether the plan is its
+        "tube_search": outcome.tube_status,
+        "from_tube": outcome.tube,
         "check": _check_json(outcome),
         "waypoints_m": plan.waypoints_m if outcome.found else [],
         "legs": [
