@@ -97,3 +97,62 @@ def test_the_report_writes_the_tank_current_and_validation_swims_each_fit_in_it(
         got = np.array(models[motion].current_m_s)  # what validate swims in
         assert np.all(np.abs(got - held) <= half + 1e-12)
     assert "One current for the tank" in report.read_text()
+
+
+class _LinearResiduals:
+    """An evaluator whose residuals are linear in one parameter and the current, plus ``noise``.
+
+    ``experiments`` recordings of ``samples`` residuals each (the layout of
+    ``Evaluator.residuals``: each experiment's residuals one block).
+    """
+
+    def __init__(self, rng, experiments, samples, noise):
+        from types import SimpleNamespace
+
+        camera = SimpleNamespace(pixel_m=0.0)
+        self.prepared = [SimpleNamespace(experiment=SimpleNamespace(
+            recording_camera=lambda: camera))] * experiments
+        self.columns = rng.normal(size=(experiments * samples, 3))  # (own, v_x, v_y)
+        self.noise = noise(rng, self.columns, experiments, samples)
+
+    def residuals(self, x):
+        return x @ self.columns.T + self.noise
+
+
+def _interval(noise_of):
+    from eelhost.estimation.tank_current import _half_width, _JointCube
+
+    rng = np.random.default_rng(5)
+    e, n = 4, 12
+    evs = [_LinearResiduals(rng, e, n, noise_of) for _ in range(2)]
+    cube = _JointCube(np.array([[-1.0, 1.0], [-1.0, 1.0], [-0.03, 0.03], [-0.03, 0.03]]))
+
+    def split(x):
+        return [x[:, [0, 2, 3]], x[:, [1, 2, 3]]]
+
+    half = _half_width(evs, cube, split, np.zeros(4))
+    # the independent-residual interval, written apart: the full Jacobian in the unit cube and
+    # the inverse of J^T J, the residual variance RSS / (M - K)
+    ranges = cube.bounds[:, 1] - cube.bounds[:, 0]
+    jac = np.zeros((2 * e * n, 4))
+    jac[: e * n, [0, 2, 3]] = evs[0].columns * ranges[[0, 2, 3]]
+    jac[e * n:, [1, 2, 3]] = evs[1].columns * ranges[[1, 2, 3]]
+    r = np.concatenate([ev.noise for ev in evs])
+    sigma2 = r @ r / (len(r) - 4)
+    independent = 1.959964 * np.sqrt(sigma2 * np.diag(np.linalg.inv(jac.T @ jac)))[2:] * ranges[2:]
+    return half, independent
+
+
+def test_the_current_interval_is_the_independent_one_unless_each_experiments_residuals_move_together():
+    # residuals independent from sample to sample: the linearised interval
+    half, independent = _interval(lambda rng, columns, e, n: 1e-3 * rng.normal(size=e * n))
+    np.testing.assert_allclose(half, np.maximum(independent, half), rtol=1e-6)
+    assert np.all(half < 2 * independent)
+    # each experiment's residuals one shift along the current's own columns (a clock offset, a
+    # misfit): the same size of residuals, but only as many pieces of evidence as experiments,
+    # and the cluster-robust interval is wider than the independent one
+    def shifted(rng, columns, e, n):
+        return np.repeat(1e-3 * rng.choice([-1.0, 1.0], size=e), n) * columns[:, 1]
+
+    half, independent = _interval(shifted)
+    assert np.all(half >= independent) and half.max() > 1.5 * independent.max()
