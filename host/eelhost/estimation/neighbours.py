@@ -185,12 +185,14 @@ def neighbour_excursion(ev: Evaluator, values: np.ndarray) -> float:
     sim = near.simulate(np.asarray(values, float)[None, :])
     ev.simulations += near.simulations
     ev.steps += near.steps
+    # a failure after the run's arrival and its last sample does not count (it circles its goal
+    # where nothing is compared); too slow to reach the goal in time is a speed, which is what is
+    # compared; a run that blew up or collided with itself before its last sample has none
+    counted = sim.counted_failure(near.prepared)
     worst = 1.0
     for j, (n, p) in enumerate(zip(neighbours, near.prepared, strict=True)):
         pos = sim.positions_m[0, j]
-        # too slow to reach the goal in time is a speed, which is what is compared; a run that
-        # blew up or collided with itself has none
-        broken = int(sim.failure[0, j]) not in (int(Failure.NONE), int(Failure.TOO_SLOW))
+        broken = int(counted[0, j]) not in (int(Failure.NONE), int(Failure.TOO_SLOW))
         failed = broken or bool(np.isnan(pos).any())
         v = float("nan") if failed else mean_speed(p.times_s, pos)
         worst = max(worst, bracket_excursion(v, [recorded[i] for i in n.bracket]))
