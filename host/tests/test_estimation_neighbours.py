@@ -27,7 +27,7 @@ def _exp(motion, amplitude, omega, span_s=10.0):
 
 
 def test_the_neighbours_of_a_corner_design_are_its_edge_midpoints_and_its_centre():
-    corners = [_exp("straight", 0.61, 2.7), _exp("straight", 0.61, 3.9, span_s=20.0),
+    corners = [_exp("straight", 0.61, 2.7), _exp("straight", 0.61, 3.9, span_s=5.0),
                _exp("straight", 0.87, 2.7), _exp("straight", 0.87, 3.9),
                _exp("turning", 0.61, 2.7), _exp("turning", 0.87, 2.7)]
     near = neighbour_gaits(corners)
@@ -37,7 +37,7 @@ def test_the_neighbours_of_a_corner_design_are_its_edge_midpoints_and_its_centre
                      ("straight", 0.74, 3.9, (1, 3)), ("straight", 0.87, 3.3, (2, 3)),
                      ("straight", 0.74, 3.3, (0, 1, 2, 3)),
                      ("turning", 0.74, 2.7, (4, 5))]  # a line: its centre is its edge's midpoint
-    # the longest recording of the bracket is swum, with its span
+    # the shortest recording of the bracket is swum, with its span (compared before the goal)
     assert near[0].experiment.span_s == corners[1].span_s
     assert near[0].experiment.scenario.waypoints_m == corners[0].scenario.waypoints_m
 

@@ -52,7 +52,7 @@ class Neighbour:
     Attributes
     ----------
     experiment : Experiment
-        The task of the longest-recorded bracketing experiment with the neighbour's gait (its
+        The task of the shortest-recorded bracketing experiment with the neighbour's gait (its
         recording is that experiment's and is not compared; its span is the neighbour's).
     bracket : tuple of int
         Positions, in the experiments handed to :func:`neighbour_gaits`, of the training gaits it
@@ -120,9 +120,11 @@ def neighbour_gaits(experiments: Sequence[Experiment]) -> list[Neighbour]:
 
 def _neighbour(experiments: Sequence[Experiment], gait: tuple[float, float],
                bracket: tuple[int, ...]) -> Neighbour:
-    # the longest recording of the bracket (the slowest swimmer's, on a task that ends at its
-    # goal) is the template, so the neighbour is swum at least as long as a bracketing gait
-    template = max(bracket, key=lambda i: experiments[i].span_s[1] - experiments[i].span_s[0])
+    # the shortest recording of the bracket (the fastest swimmer's, on a task that ends at its
+    # goal) is the template: a neighbour that swims no faster than its bracket is compared
+    # before it reaches the goal, not while it circles there (where a fast model's joints may
+    # collide, and nothing was ever recorded)
+    template = min(bracket, key=lambda i: experiments[i].span_s[1] - experiments[i].span_s[0])
     return Neighbour(_with_gait(experiments[template], *gait), bracket)
 
 
