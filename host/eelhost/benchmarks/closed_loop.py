@@ -379,8 +379,8 @@ def summary_lines(results: list[WorldResult]) -> list[str]:
     ends = Counter(r.reason for r in planned)
     lines.append("- how the runs ended: " + ", ".join(f"{k} {v}" for k, v in sorted(ends.items())))
     walls = [w for r in planned for w in r.replan_wall_s]
-    lines.append(f"- replans: {sum(r.replans for r in planned)} ({sum(r.failed_replans for r in planned)}"
-                 " failed) in "
+    lines.append(f"- replans switched in: {sum(r.replans for r in planned)}, besides"
+                 f" {sum(r.failed_replans for r in planned)} that failed, in "
                  f"{sum(1 for r in planned if r.replans or r.failed_replans)} runs"
                  + (f"; wall time from request to plan: median {statistics.median(walls):.2f} s,"
                     f" largest {max(walls):.2f} s" if walls else ""))
