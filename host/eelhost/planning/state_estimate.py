@@ -35,7 +35,7 @@ import numpy as np
 
 from eelhost.planning.geometry import FloatArray
 from eelhost.wire import protocol
-from eelsim.control import Gait, gait_reference, joint_amplitudes
+from eelsim.control import Gait, gait_reference, joint_amplitudes, wrap_angle
 from eelsim.model import SwimmerModel
 
 log = logging.getLogger(__name__)
@@ -705,8 +705,7 @@ def steady_towards(pose: FloatArray, waypoint_m: tuple[float, float], limit_rad:
     may turn opposite ways (docs/planning.md, "The current's windows").
     """
     bearing = math.atan2(waypoint_m[1] - pose[1], waypoint_m[0] - pose[0])
-    error = (bearing - float(pose[2]) + math.pi) % (2.0 * math.pi) - math.pi
-    return abs(error) <= limit_rad
+    return abs(float(wrap_angle(bearing - float(pose[2])))) <= limit_rad
 
 
 @dataclass
