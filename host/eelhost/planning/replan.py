@@ -246,6 +246,11 @@ REPLAN_BUDGET_S = 1.0
 issue 28 asks for a new plan ready within 1 s of the robot leaving its corridor."""
 
 
+PLANNER_REBUILD_M_S = 0.005
+"""A planner in the current estimate is built anew only when the estimate has moved this far from
+the one it was built in (building one takes 0.4-0.9 s on a loaded machine; docs/planning.md)."""
+
+
 def _time_left(deadline_s: float | None) -> bool:
     """Whether a ``time.monotonic()`` deadline (None: none) is still ahead."""
     return deadline_s is None or time.monotonic() < deadline_s
@@ -755,7 +760,7 @@ class TankReplanner:
         replan that comes later finds it built: building one took 0.4-0.9 s of a replan's 1 s
         on the loaded machine (docs/planning.md, "The replan's deadline").
         """
-        if float(np.hypot(*(extra - self._planner_current))) >= 0.005:
+        if float(np.hypot(*(extra - self._planner_current))) >= PLANNER_REBUILD_M_S:
             self.planner = self.planner_for(extra)
             self._planner_current = extra
             self._planned = (self.planner, extra)
@@ -803,7 +808,7 @@ class TankReplanner:
         if make is None:
             return None
         cached = self._extra_planners.get(name)
-        if cached is None or float(np.hypot(*(extra - cached[1]))) >= 0.005:
+        if cached is None or float(np.hypot(*(extra - cached[1]))) >= PLANNER_REBUILD_M_S:
             cached = (make(extra), extra)
             self._extra_planners[name] = cached
         return cached[0]
@@ -993,7 +998,7 @@ class TankReplanner:
                 changed = True
         if changed and self._job is None and (
                 self._prebuild is None or self._prebuild.done()) and float(np.hypot(
-                    *(self.current.value_m_s - self._planner_current))) >= 0.005:
+                    *(self.current.value_m_s - self._planner_current))) >= PLANNER_REBUILD_M_S:
             # build the planner in the moved estimate now, on the replan worker (a replan asked
             # for meanwhile queues behind it and finds it built), not inside the next replan
             self._prebuild = self._worker.submit(self._prepare_planner,
