@@ -177,6 +177,14 @@ STEADY_CURRENT = register_plant(Plant(
     "experiment (a tank's residual current)",
     TankSettings(stray_current_m_s=STRAY_CURRENT_M_S, stray_current_direction_deg=120.0)))
 
+# the same current in a tank of stiff servo joints: the joint model whose lag and motor time
+# constant trade against an along-track current (docs/estimation.md, "One current for the tank")
+SERVO_CURRENT = register_plant(Plant(
+    "servo_current", f"{STRAY_CURRENT_M_S} m/s unmodelled current towards 120 deg in every "
+    "experiment, on the servo joints",
+    TankSettings(joints=_SERVO_JOINTS, stray_current_m_s=STRAY_CURRENT_M_S,
+                 stray_current_direction_deg=120.0)))
+
 CENTRED_MEDIAN = register_plant(Plant(
     "centred_median", "recording filtered by a centred median", TankSettings(median="centred")))
 
