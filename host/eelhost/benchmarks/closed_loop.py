@@ -214,7 +214,8 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
               unknown_current_m_s: float = UNKNOWN_CURRENT_M_S,
               planner_options: dict[str, Any] | None = None,
               swimmer: SwimmerModel | None = None,
-              replan_budget_s: float | None = REPLAN_BUDGET_S) -> WorldResult:
+              replan_budget_s: float | None = REPLAN_BUDGET_S,
+              record_to: Path | None = None) -> WorldResult:
     """Plan one generated world and swim the plan over ``sim://`` (module docstring).
 
     Parameters
@@ -232,6 +233,9 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
         robot builds its own: it is the water, not the planner.
     replan_budget_s : float or None
         Each replan's wall-clock budget (:func:`eelhost.planning.tank.plan_for_run`).
+    record_to : Path, optional
+        Write the run's planning record there (the take's ``source.planning``: every plan and
+        replan with its start state, status and message), to replay failing replans offline.
 
     Returns
     -------
@@ -272,6 +276,10 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
     vr = result.virtual_robot
     assert vr is not None and vr.trace is not None
     clear = true_clearance_m(world, vr.model, np.asarray(vr.trace))
+    if record_to is not None:
+        record_to.parent.mkdir(parents=True, exist_ok=True)
+        record_to.write_text(json.dumps({"seed": seed, "outcome": out.reason,
+                                         "detail": out.detail, **nav.record()}))
     replans = [e for e in nav.events if e["kind"] == "replan"]
     return WorldResult(
         seed, True, "found", out.reason, out.detail, out.reason == "arrived",
@@ -304,7 +312,7 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
     model : CoefficientModel
     seeds : range
     out : Path
-        Folder of ``results.jsonl``.
+        Folder of ``results.jsonl`` (and ``planning/<seed>.json``, each run's planning record).
     progress : callable, optional
         Called with each world's result as it is finished (or read back).
     planner_options : dict, optional
@@ -343,7 +351,8 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
             r = done[seed]
         else:
             r = run_world(seed, robot, model, planner_options=planner_options,
-                          swimmer=swimmer, replan_budget_s=replan_budget_s)
+                          swimmer=swimmer, replan_budget_s=replan_budget_s,
+                          record_to=out / "planning" / f"{seed}.json")
             with path.open("a") as f:
                 f.write(json.dumps(asdict(r)) + "\n")
         results.append(r)
