@@ -6,7 +6,14 @@ import numpy as np
 import pytest
 
 from eelhost.data.experiments import load_dataset
-from eelhost.data.plant_laws import FOIL, STALL, FoilCoefficients, StallCoefficients
+from eelhost.data.plant_laws import (
+    FOIL,
+    QUARTER_CHORD,
+    STALL,
+    FoilCoefficients,
+    QuarterChordCoefficients,
+    StallCoefficients,
+)
 from eelhost.data.plants import PLANTS, SMALL_SERVO_STALL_NM
 from eelhost.data.virtual_tank import (
     TABLE3,
@@ -166,7 +173,7 @@ def test_the_stall_law_is_the_foil_law_below_the_stall_angle_and_a_stalled_plate
 
 
 @pytest.mark.parametrize("plant", sorted(n for n, p in PLANTS.items()
-                                         if p.law in (FOIL.name, STALL.name)))
+                                         if p.law in (FOIL.name, STALL.name, QUARTER_CHORD.name)))
 def test_the_batched_kernel_swims_the_foil_plants_as_the_reference_twin_does(plant):
     # the virtual tank records with the readable closed loop; the evaluator swims the batched
     # kernel's generated foil law: the truth must score 0 on a recording without noise
@@ -180,3 +187,86 @@ def test_the_batched_kernel_swims_the_foil_plants_as_the_reference_twin_does(pla
     model = FittedModel.of_coefficients(truth, servo)
     ev = Evaluator(servo, [exp], backend="batch", space=model.space)
     assert ev.errors(model.values[None])[0, 0] < 1e-9
+
+
+def test_the_pitching_foil_swims_in_a_plant_only_law_on_the_foil_plants_joints():
+    assert QUARTER_CHORD.name not in candidate_laws()
+    pitching = PLANTS["pitching_foil"]
+    assert pitching.law == QUARTER_CHORD.name
+    assert pitching.settings == PLANTS["foil_lift"].settings
+    truth = pitching.truths()["turning"]
+    assert truth.C_a == TABLE3["turning"].C_a and truth.C_L > 0
+
+
+def _quarter_chord_by_hand(c, half_length, half_vertical, half_horizontal, rho, vt, vn, om):
+    """The quarter_chord law written from docs/estimation.md, in angle form, as a force on a point.
+
+    The drag along -w at the centre; the lift of a flat plate in the flow seen at the
+    three-quarter-chord point, across that flow, applied at the quarter-chord point.
+    Returns the force (t, n), the torque about the centre and the lift's force and point.
+    """
+    q = rho / 2.0
+    wetted = np.pi * (half_vertical + half_horizontal) * half_length
+    lateral = 4.0 * half_vertical * half_length
+    speed = np.hypot(vt, vn)
+    drag = q * speed**2 * (wetted * c.C_D0 + lateral * c.C_D2 * (vn / speed) ** 2)
+    lead = np.where(vt >= 0, 1.0, -1.0)  # +1: the link's head end leads
+    quarter = lead * half_length / 2.0  # the quarter chord's place along t from the centre
+    vn3 = vn - quarter * om  # the point a quarter chord behind the centre
+    speed3 = np.hypot(vt, vn3)
+    ut, un = vt / speed3, vn3 / speed3
+    lift = q * speed3**2 * lateral * c.C_L * np.abs(un) * np.abs(ut)
+    across_t, across_n = np.sign(ut * un) * un, -np.sign(ut * un) * ut
+    lift_t, lift_n = lift * across_t, lift * across_n
+    force_t = -drag * vt / speed + lift_t
+    force_n = -drag * vn / speed + lift_n
+    torque = -rho * half_vertical * c.C_D2 * half_length**4 / 2.0 * np.abs(om) * om \
+        + quarter * lift_n
+    return force_t, force_n, torque, (lift_t, lift_n), quarter
+
+
+def test_the_quarter_chord_law_lifts_from_the_three_quarter_chord_flow_at_the_quarter_chord():
+    robot = load_robot()
+    geometry = (robot.link.half_length_m, robot.link.half_axis_vertical_m,
+                robot.link.half_axis_horizontal_m)
+    c = QuarterChordCoefficients(C_D0=0.008, C_D2=1.0, C_L=0.73, C_a=0.6, C_m=0.01)
+    fluid = QUARTER_CHORD.link_coefficients(*geometry, c.as_array(), 1000.0)
+    rng = np.random.default_rng(4)
+    vt, vn = rng.normal(0, 0.1, (2, 2000))
+    om = rng.normal(0, 2.0, 2000)
+    ft, fn, tq = QUARTER_CHORD.drag(fluid, vt, vn, om)
+    want_t, want_n, want_q, (lift_t, lift_n), quarter = _quarter_chord_by_hand(
+        c, *geometry, 1000.0, vt, vn, om)
+    np.testing.assert_allclose(ft, want_t, rtol=1e-9, atol=1e-15)
+    np.testing.assert_allclose(fn, want_n, rtol=1e-9, atol=1e-15)
+    np.testing.assert_allclose(tq, want_q, rtol=1e-9, atol=1e-15)
+    # the drag only dissipates: on the link, its power and its yaw damping's are never positive
+    drag_power = (ft - lift_t) * vt + (fn - lift_n) * vn + (tq - quarter * lift_n) * om
+    assert np.all(drag_power <= 1e-15)
+    # the lift is across the flow at the three-quarter chord; on the link it works only through
+    # the pitch rate: its power is l theta_dot f_n^L (the sign of w_t's), zero without turning
+    lift_power = lift_t * vt + lift_n * vn + quarter * lift_n * om
+    np.testing.assert_allclose(lift_power, 2.0 * quarter * om * lift_n, rtol=1e-9, atol=1e-18)
+    assert np.any(lift_power > 1e-6)  # a pitching foil can feed its wake's thrust
+    # a link that does not turn feels the foil law's forces, with the lift's moment about the
+    # centre besides the yaw damping's
+    foil = FoilCoefficients(**c.model_dump())
+    f_fluid = FOIL.link_coefficients(*geometry, foil.as_array(), 1000.0)
+    still = np.zeros_like(om)
+    qt, qn, qq = QUARTER_CHORD.drag(fluid, vt, vn, still)
+    fo_t, fo_n, fo_q = FOIL.drag(f_fluid, vt, vn, still)
+    np.testing.assert_allclose(qt, fo_t, rtol=1e-12, atol=1e-18)
+    np.testing.assert_allclose(qn, fo_n, rtol=1e-12, atol=1e-18)
+    _, _, _, (_, still_lift_n), _ = _quarter_chord_by_hand(c, *geometry, 1000.0, vt, vn, still)
+    np.testing.assert_allclose(qq, fo_q + quarter * still_lift_n, rtol=1e-9, atol=1e-18)
+    assert np.all(np.abs(qq - fo_q) > 0)  # the foil law has no such moment
+    # at a small angle the pitch rate adds Sane and Dickinson's rotational lift,
+    # C_rot rho U c^2 theta_dot on the span 2a, C_rot = C_L / 8, against the three-quarter flow
+    u, rate = 0.1, 0.2
+    _, fn_rate, _ = QUARTER_CHORD.drag(fluid, np.full(1, u), np.zeros(1), np.full(1, rate))
+    chord, span = 2.0 * robot.link.half_length_m, 2.0 * robot.link.half_axis_vertical_m
+    rotational = c.C_L / 8.0 * 1000.0 * u * chord**2 * rate * span
+    np.testing.assert_allclose(fn_rate[0], rotational, rtol=0.01)
+    # at rest relative to the water: no force, no division by zero
+    rest = QUARTER_CHORD.drag(fluid, np.zeros(1), np.zeros(1), np.zeros(1))
+    assert rest[0][0] == 0.0 and rest[1][0] == 0.0 and rest[2][0] == 0.0

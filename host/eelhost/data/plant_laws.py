@@ -292,3 +292,121 @@ class StallLaw(RelativeMotionLaw):
 
 STALL = register_fluid_law(StallLaw(), "the foil water whose lift stalls (test plants only)")
 """The stall law (a plant law: never a candidate)."""
+
+
+# The ``quarter_chord`` law (docs/estimation.md, "Plant-only water: the quarter_chord law"): the
+# foil water whose lift is the quasi-steady thin aerofoil's. A pitching aerofoil's circulation is
+# set by the flow at its three-quarter-chord point and its lift acts at the quarter-chord point
+# (Pistolesi's theorem; T. Theodorsen, NACA Report 496, 1935, with C(k) = 1; Y. C. Fung, *An
+# Introduction to the Theory of Aeroelasticity*, 1955, ch. 6). On a link of chord 2l moving
+# with w_t (sign s = +1 head-first along t, -1 tail-first), the quarter-chord point lies
+# d = s l / 2 ahead of the centre and the three-quarter-chord point d behind it, where the normal
+# flow is w_n3 = w_n - d theta_dot. The foil law's lift taken in the flow w3 = (w_t, w_n3),
+# perpendicular to it, and applied at the quarter chord, with k_L = q S_n C_L:
+#
+#     f_t^L = k_L w_n3^2 w_t / |w3|,   f_n^L = -k_L w_t^2 w_n3 / |w3|,   tau^L = d f_n^L
+#
+# besides the foil law's drag along -w and yaw damping. Its power is s l theta_dot f_n^L: zero
+# on a link that does not turn (the lift is then across w, as the foil law's); a pitching foil
+# exchanges energy with its wake (flutter, thrust of a pitching plate). At a small angle the
+# pitch-rate part of the normal force is k_L |w_t| (l / 2) theta_dot, the rotational lift
+# C_rot rho U c^2 theta_dot of S. P. Sane and M. H. Dickinson (J. Exp. Biol. 205, 2002,
+# 1087-1096) with C_rot = C_L / 8 (pi / 4, theirs for a mid-chord axis, at the thin aerofoil's
+# C_L = 2 pi). The one-panel lattice (bound vortex at the quarter chord, the flow taken at the
+# three-quarter chord) is J. Weissinger's for finite wings (NACA TM 1120, 1947), so the slope
+# C_L may be a finite wing's (the plant's: QUARTER_CHORD_WATER).
+
+QUARTER_CHORD_WATER = {**FOIL_DRAG, "C_L": 0.73}
+"""The pitching foil plant's drag and lift: the foil's drag; the lift slope of a wing of the
+bundled links' aspect ratio A = 2a / 2l = 0.47, Helmbold's 2 pi A / (2 + sqrt(A^2 + 4)) = 0.73
+per radian (docs/estimation.md, "Plant-only water: the quarter_chord law")."""
+
+
+class QuarterChordCoefficients(FoilCoefficients):
+    """Coefficients of the quarter_chord law: the foil law's (:class:`FoilCoefficients`)."""
+
+    law_name: ClassVar[str] = "quarter_chord"
+
+
+@dataclass(frozen=True)
+class QuarterChordLinkFluid(FoilLinkFluid):
+    """Per-link coefficients of the quarter_chord law: the foil law's and the half-length l, m.
+
+    The batched form reads l from the kernel's own ``half_length`` row.
+    """
+
+    half_length: FloatArray
+
+
+def _leading_sign(vt: FloatArray) -> FloatArray:
+    """+1 where the link moves head-first along t (w_t >= 0), -1 tail-first.
+
+    At w_t = 0 the choice does not matter: the lift and its moment carry w_t.
+    """
+    return np.where(vt >= 0.0, 1.0, -1.0)
+
+
+class QuarterChordLaw(RelativeMotionLaw):
+    """The foil water with the thin aerofoil's pitching lift at the quarter chord (see above)."""
+
+    name: ClassVar[str] = "quarter_chord"
+    coefficients: ClassVar[type[FluidCoefficients]] = QuarterChordCoefficients
+    candidate: ClassVar[bool] = False
+    default_bounds: ClassVar[tuple[tuple[float, float], ...]] = FoilLaw.default_bounds
+    kernel_rows: ClassVar[tuple[str, ...]] = FoilLaw.kernel_rows
+
+    def link_coefficients(
+        self,
+        half_length_m: ArrayLike,
+        half_axis_vertical_m: ArrayLike,
+        half_axis_horizontal_m: ArrayLike,
+        coefficients: ArrayLike,
+        water_density_kg_m3: ArrayLike,
+    ) -> QuarterChordLinkFluid:
+        """The foil law's coefficients and the links' half-lengths."""
+        foil = FOIL.link_coefficients(half_length_m, half_axis_vertical_m, half_axis_horizontal_m,
+                                      coefficients, water_density_kg_m3)
+        if not isinstance(foil, FoilLinkFluid):  # pragma: no cover - FOIL's own type
+            raise TypeError(type(foil).__name__)
+        return QuarterChordLinkFluid(
+            mu_n=foil.mu_n, lambda_1=foil.lambda_1, k_0=foil.k_0, k_2=foil.k_2,
+            k_lift=foil.k_lift, lambda_q=foil.lambda_q,
+            half_length=np.asarray(half_length_m, dtype=float) + np.zeros_like(foil.k_0))
+
+    def drag(
+        self, fluid: LinkFluid, vt: FloatArray, vn: FloatArray, omega: FloatArray
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Drag, yaw damping and the three-quarter-chord flow's lift at the quarter chord."""
+        if not isinstance(fluid, QuarterChordLinkFluid):
+            raise TypeError(f"the quarter_chord law needs its own link coefficients, got "
+                            f"{type(fluid).__name__}")
+        speed = np.sqrt(vt * vt + vn * vn)
+        drag = fluid.k_0 * speed + fluid.k_2 * vn * vn / np.maximum(speed, SPEED_FLOOR_M_S)
+        ahead = 0.5 * fluid.half_length * _leading_sign(vt)  # the quarter chord, from the centre
+        vn3 = vn - ahead * omega  # the normal flow at the three-quarter chord
+        inv3 = 1.0 / np.maximum(np.sqrt(vt * vt + vn3 * vn3), SPEED_FLOOR_M_S)
+        lift_n = -fluid.k_lift * vt * vt * vn3 * inv3
+        return (-drag * vt + fluid.k_lift * vn3 * vn3 * vt * inv3,
+                -drag * vn + lift_n,
+                -fluid.lambda_q * np.abs(omega) * omega + ahead * lift_n)
+
+    def emit_drag(self, code: KernelCode, link: int) -> tuple[str, str, str]:
+        """The same, negated, for the batched kernel."""
+        w, line = code.w, code.line
+        floor = repr(SPEED_FLOOR_M_S)
+        k0, k2, kl = w("fk0", link), w("fk2", link), w("fkl", link)
+        line("fl_sp = _vsqrt(fl_vt * fl_vt + fl_vn * fl_vn)")
+        line(f"fl_dr = {k0} * fl_sp + {k2} * fl_vn * fl_vn / max(fl_sp, {floor})")
+        line(f"fl_d = 0.5 * {w('half_length', link)} * (1.0 if fl_vt >= 0.0 else -1.0)")
+        line("fl_w3 = fl_vn - fl_d * om")
+        line(f"fl_i3 = 1.0 / max(_vsqrt(fl_vt * fl_vt + fl_w3 * fl_w3), {floor})")
+        line(f"fl_ln = {kl} * fl_vt * fl_vt * fl_w3 * fl_i3")
+        return (f"fl_dr * fl_vt - {kl} * fl_w3 * fl_w3 * fl_vt * fl_i3",
+                "fl_dr * fl_vn + fl_ln",
+                f"{w('flamq', link)} * abs(om) * om + fl_d * fl_ln")
+
+
+QUARTER_CHORD = register_fluid_law(
+    QuarterChordLaw(), "the foil water with a pitching thin aerofoil's lift at the quarter chord "
+    "(test plants only)")
+"""The quarter_chord law (a plant law: never a candidate)."""

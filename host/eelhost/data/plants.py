@@ -20,7 +20,7 @@ from __future__ import annotations
 import tomllib
 from dataclasses import dataclass
 
-from eelhost.data.plant_laws import FOIL_DRAG, STALL_WATER
+from eelhost.data.plant_laws import FOIL_DRAG, QUARTER_CHORD_WATER, STALL_WATER
 from eelhost.data.virtual_tank import TABLE3, TankSettings
 from eelsim.fluid import DEFAULT_FLUID_LAW, FLUID_LAWS, FluidCoefficients, get_fluid_law
 from eelsim.registry import Registry
@@ -43,6 +43,8 @@ _OTHER_LAW_DRAG: dict[str, dict[str, float]] = {
     "foil": FOIL_DRAG,
     # the foil's drag; thin-aerofoil lift up to a 16 deg stall, then the stalled plate's
     "stall": STALL_WATER,
+    # the foil's drag; the thin aerofoil's pitching lift at the quarter chord
+    "quarter_chord": QUARTER_CHORD_WATER,
 }
 
 
@@ -212,6 +214,14 @@ STALLING_FOIL = register_plant(Plant(
     "stalling_foil", "the foil water whose lift stalls at 16 deg angle of attack, dropping to a "
     "flat plate's (a plant-only law), on the servo joints", TankSettings(joints=_SERVO_JOINTS),
     "stall"))
+
+# the thin aerofoil's lift slope 2 pi, its circulation from the three-quarter-chord flow and its
+# lift at the quarter chord: a lift that depends on the links' pitch rate and turns them
+# (docs/estimation.md, "Plant-only water: the quarter_chord law")
+PITCHING_FOIL = register_plant(Plant(
+    "pitching_foil", "the foil water with a pitching thin aerofoil's lift (circulation from the "
+    "three-quarter-chord flow, acting at the quarter chord: a plant-only law), on the servo "
+    "joints", TankSettings(joints=_SERVO_JOINTS), "quarter_chord"))
 
 ALL = register_plant(Plant(
     "all", "head and tail, servo joints on their torque-speed line, the stray current, a "
