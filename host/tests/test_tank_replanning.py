@@ -16,6 +16,7 @@ from concurrent.futures import Future
 import numpy as np
 import pytest
 
+from eelhost.benchmarks.closed_loop import true_clearance_m
 from eelhost.cli import main
 from eelhost.commands.run import exit_status
 from eelhost.errors import EXIT_CONTACT
@@ -26,8 +27,17 @@ from eelhost.field.take import TakeRequest, run_take
 from eelhost.planning.execute import body_clearance_m
 from eelhost.planning.field import ClearanceField
 from eelhost.planning.planner import PLANNING_GUIDANCE, Outcome, Planner
-from eelhost.planning.replan import Decision, TankReplanner, outline_clearance_m, predict_state
-from eelhost.planning.search import Plan
+from eelhost.planning.replan import (
+    ESCAPE_CHECK_MARGIN_M,
+    ESCAPE_MARGIN_M,
+    Decision,
+    TankReplanner,
+    check_escape_leg,
+    escape_plan,
+    outline_clearance_m,
+    predict_state,
+)
+from eelhost.planning.search import Leg, Plan, leg_start_guide
 from eelhost.planning.state_estimate import BodyStateEstimator, CurrentWindow
 from eelhost.planning.tank import plan_for_run, with_extra_current
 from eelhost.planning.uncertainty import default_model, read_coefficient_model
@@ -489,7 +499,8 @@ def test_the_goal_approachs_smaller_margin_is_tried_near_the_goal_or_when_no_pos
     def replan(status, est):  # noqa: ANN001, ANN202
         failing = _Scripted(planner, status, np.inf)
         nav = TankReplanner(lambda extra: failing, failing, outcome,  # type: ignore[arg-type]
-                            PATH_GAIT, goal_planner_for=lambda extra: tight, goal_approach_m=0.5)
+                            PATH_GAIT, goal_planner_for=lambda extra: tight, goal_approach_m=0.5,
+                            escape=False)
         try:
             return nav._replan(est, [(2.1, 1.0)], step, np.zeros(2))
         finally:
@@ -807,6 +818,7 @@ def test_a_replan_that_finds_nothing_is_rescued_by_the_recoverys_sharper_turns()
     est = estimate_at(3.0, (3.0 - 0.6 - com, 0.0))
     step = int(round(3.0 / 0.01)) + 60
     make_recovery, nav.recovery_planner_for = nav.recovery_planner_for, None
+    nav.escape = False  # the escape is tested on its own below
     try:
         without, *_ = nav._replan(est, [(2.9, 1.1)], step, np.zeros(2))
         nav.recovery_planner_for = make_recovery
@@ -957,3 +969,113 @@ def test_a_moved_current_estimate_has_its_planner_built_before_the_next_replan(o
         assert len(built) == 1
     finally:
         nav.close()
+
+
+def test_an_escape_turns_the_body_away_with_one_leg_its_check_and_the_true_body_keep_clear():
+    # the robot swims at the tank's end wall, 0.6 m from it, its goal behind it: the escape is one
+    # leg that turns it away, judged by the body's own outline, and ends clearer than it started
+    planner = Planner(parse_world(WALL_AHEAD, "wall_ahead"), ROBOT, MODEL)
+    com = estimate_at(3.0).state[N]
+    est = estimate_at(3.0, (3.0 - 0.6 - com, 0.0))
+    step = int(round(3.0 / 0.01)) + 60
+    state = predict_state(planner.twin, est, [(2.9, 1.1)], step)
+    assert state is not None
+    guide = leg_start_guide(state, N)
+    outcome, end_step = escape_plan(planner, state, step, guide)
+    assert outcome.found and outcome.message.startswith("escape:"), outcome.message
+    (leg,) = outcome.plan.legs
+    assert not leg.goal and end_step is not None and step < end_step <= leg.end_step
+    assert abs(leg.bearing_deg) >= 90.0  # away from the wall ahead, not along it
+    wall_gap = 3.0 - np.asarray(leg.waypoint_m)[0]
+    assert wall_gap > 3.0 - state[N]  # its waypoint further from the wall than the start
+    # swum again in the twin and judged by the benchmark's own shapely body: clear all the way
+    runs = planner.twin.run([[leg.waypoint_m]], 40.0, states=state[None], start_steps=[step],
+                            coefficient_index=[planner.search.leg_coefficients(False,
+                                                                                leg.bearing_deg)],
+                            stride=1, guidance=[guide])
+    arrival = int(runs.arrival_step[0])
+    assert arrival > 0
+    path = runs.states[0, : arrival + 1]
+    true = true_clearance_m(planner.world, planner.model, path)
+    assert true.min() >= ESCAPE_MARGIN_M - 1e-3
+    assert np.allclose(outline_clearance_m(planner.world, planner.model, path), true, atol=1e-3)
+    # its check swam the fits and every draw of the water, each run's outline clear
+    swum, bad = check_escape_leg(planner, leg, state, step, guide)
+    assert bad is None and swum == 1 + len(planner.waters(0))
+
+
+def test_an_escape_leg_that_swims_into_the_wall_fails_its_check():
+    planner = Planner(parse_world(WALL_AHEAD, "wall_ahead"), ROBOT, MODEL)
+    com = estimate_at(3.0).state[N]
+    est = estimate_at(3.0, (3.0 - 0.6 - com, 0.0))
+    step = int(round(3.0 / 0.01)) + 60
+    state = predict_state(planner.twin, est, [(2.9, 1.1)], step)
+    assert state is not None
+    heading = float(np.angle(np.exp(1j * state[:N]).mean()))
+    into = (float(state[N] + 0.5 * math.cos(heading)), 1.0)  # straight on, at the wall
+    leg = Leg(into, 0.5, 0.0, step, step + 600, np.asarray([state[N : N + 2]]), 0.1)
+    swum, bad = check_escape_leg(planner, leg, state, step, leg_start_guide(state, N))
+    assert bad is not None and swum <= 1 + 4  # the screen's runs already fail it
+    assert ESCAPE_CHECK_MARGIN_M > 0
+
+
+class EscapingReplanner(TankReplanner):
+    """The first replan gives an escape leg from (0.8, 1.4) to (1.1, 1.4); later ones fail.
+
+    The look-ahead swims the present waypoints 200 mm clear (the robot keeps its escape).
+    """
+
+    asked: list[int] = []
+
+    def _look_ahead(self, est, left, extra, guide=None, horizon_s=None):  # noqa: ANN001, ANN202
+        return 0.2, 0.2
+
+    def _replan(self, est, left, start_step, extra, guide=None,  # noqa: ANN001, ANN202
+                deadline_s=None):  # noqa: ANN001
+        self.asked.append(start_step)
+        if len(self.asked) == 1:
+            com = np.asarray([[0.8 + 0.01 * k, 1.4] for k in range(31)])
+            leg = Leg((1.1, 1.4), 0.3, 0.0, start_step, start_step + 400, com, 0.1)
+            plan = Plan(True, "found", "", [leg], math.nan, start_guide=(0.8, 1.4, 0.0, 0.0))
+            return (Outcome(plan, "found", "escape: scripted"), est.state, 0.0, 0.0, np.zeros(2),
+                    time.monotonic(), start_step)
+        plan = Plan(False, "exhausted", "failed (exhausted)")
+        return (Outcome(plan, "exhausted", plan.message), est.state, 0.0, 0.0, np.zeros(2),
+                time.monotonic(), start_step)
+
+
+def test_an_escape_is_followed_by_a_replan_from_its_end_and_its_waypoint_is_no_arrival(
+        open_plan):
+    planner, outcome = open_plan
+    nav = EscapingReplanner(lambda extra: planner, planner, outcome, PATH_GAIT,
+                            estimate_current=False)
+    nav.asked = []
+    switched = None
+    stop = None
+    try:
+        for k in range(30 * 30):
+            t = k / 30
+            # off the first plan's corridor at (0.8, 1.4); the escape's waypoint is reached at 9 s
+            target = 1 if switched is not None and t >= 9.0 else 0
+            d = nav.on_frame(t, pose_at(t, (0.8, 1.4)), np.array([0.8, 1.4, 0.0]), target, 0.0)
+            if d.waypoints is not None:
+                switched = t
+            if d.stop is not None:
+                stop = (t, d)
+                break
+            nav._worker.submit(lambda: None).result()  # the worker's jobs done: deterministic
+            nav._side.submit(lambda: None).result()
+    finally:
+        nav.close()
+    assert switched is not None and nav.waypoints == [(1.1, 1.4)]
+    escape = nav.events[1]
+    end_s = escape["escape_end_s"]
+    assert escape["status"] == "found" and end_s > escape["t_start_s"]
+    # the next replan was asked for from the escape leg's end, not 0.3-0.9 s ahead
+    after = [e for e in nav.events[2:] if e["reason"] == "after_escape"]
+    assert after and after[0]["t_start_s"] == pytest.approx(end_s)
+    assert nav.asked[1] == int(round(end_s / planner.twin.dt_s))
+    # its waypoint reached with no plan from it: a deliberate stop, never "arrived"
+    assert stop is not None and stop[0] == pytest.approx(9.0, abs=0.05)
+    assert stop[1].stop == "no_safe_continuation" and not stop[1].arrived
+    assert "escape leg's waypoint" in stop[1].detail

@@ -35,8 +35,15 @@ import numpy as np
 
 from eelhost.planning.execute import Swim, body_clearance_m, swim
 from eelhost.planning.geometry import FloatArray, point_segment_distance
-from eelhost.planning.planner import Outcome, Planner
-from eelhost.planning.search import Guide, Plan, goal_mask, in_goal, leg_start_guide
+from eelhost.planning.planner import LEG_TIME_FACTOR, SCREEN_DRAWS, Outcome, Planner
+from eelhost.planning.search import (
+    Guide,
+    Leg,
+    Plan,
+    goal_mask,
+    in_goal,
+    leg_start_guide,
+)
 from eelhost.planning.state_estimate import (
     BodyEstimate,
     BodyStateEstimator,
@@ -44,6 +51,7 @@ from eelhost.planning.state_estimate import (
     CurrentWindow,
 )
 from eelhost.planning.twin import Twin
+from eelhost.planning.uncertainty import WaterDraw
 from eelhost.planning.world import World
 from eelhost.vision.localise import Localisation
 from eelhost.wire import protocol
@@ -256,6 +264,227 @@ def _time_left(deadline_s: float | None) -> bool:
     return deadline_s is None or time.monotonic() < deadline_s
 
 
+ESCAPE_BEARINGS_DEG = (0.0, -30.0, 30.0, -60.0, 60.0, -90.0, 90.0, -120.0, 120.0, -150.0, 150.0)
+"""The escape's first legs (docs/planning.md, "The escape"): bearings from the body's heading."""
+
+ESCAPE_DISTANCES_M = (0.3, 0.5)
+"""The escape's first legs' lengths (the search's; shorter ones are accepted too soon)."""
+
+ESCAPE_MARGIN_M = 0.01
+"""The escape leg's margin in the twin: the body's own outline (each link's stadium,
+:func:`outline_clearance_m`, the run's contact test's geometry) this far from everything. The
+searches judge every leg with the planner's capsule (the centre line widened by the largest half
+width, reaching 20 mm beyond both tips) plus 10-50 mm, which a body sweeping its tail past an
+obstacle cannot keep while its outline is 20 mm or more clear (docs/planning.md, "The escape")."""
+
+ESCAPE_CHECK_MARGIN_M = 0.005
+"""The escape leg's check: the body's own outline this far from everything in every run (the
+fits as fitted and every draw of the water), up to its waypoint's acceptance."""
+
+ESCAPE_TRIES = 3
+"""The escape legs (the clearest at their end first) the searches are run from."""
+
+
+@dataclass
+class EscapeLeg:
+    """A first leg the escape may take, swum by the twin from the replan's predicted start.
+
+    Attributes
+    ----------
+    leg : Leg
+        The leg (its ``com_m`` from the start to the waypoint's acceptance).
+    end_state : ndarray, shape (2 N + 4,)
+        The state at the last restart point before the acceptance (where the next leg starts,
+        as the search and the check cut their legs).
+    end_step : int
+    end_guide : (x, y, I_x, I_y)
+        The guidance state a next leg starts with there (from the escape's waypoint).
+    min_outline_m : float
+        The body's own outline's smallest gap over the leg (:func:`outline_clearance_m`).
+    end_clearance_m : float
+        The capsule's gap at ``end_state``.
+    """
+
+    leg: Leg
+    end_state: FloatArray
+    end_step: int
+    end_guide: Guide
+    min_outline_m: float
+    end_clearance_m: float
+
+
+def escape_legs(planner: Planner, state: FloatArray, step: int, guide: Guide,
+                margin_m: float = ESCAPE_MARGIN_M) -> list[EscapeLeg]:
+    """The first legs that turn the body away with a smaller margin than the searches keep.
+
+    Every leg of :data:`ESCAPE_DISTANCES_M` at :data:`ESCAPE_BEARINGS_DEG` from the body's mean
+    heading is swum in one batch of the planner's twin (in its current) from ``state``; a leg
+    counts when its waypoint is accepted and the body's own outline stays ``margin_m`` clear of
+    everything on the way. Best first: the clearest at the leg's end (at most 0.12 m counts),
+    then the nearest to the goal (docs/planning.md, "The escape").
+
+    Parameters
+    ----------
+    planner : Planner
+    state : ndarray, shape (2 N + 4,)
+        The replan's start state.
+    step : int
+        Its step of the task (a restart point).
+    guide : (x, y, I_x, I_y)
+        The guidance state there.
+    margin_m : float
+
+    Returns
+    -------
+    list of EscapeLeg
+    """
+    twin, world, model = planner.twin, planner.world, planner.model
+    n = model.n_links
+    state = np.asarray(state, dtype=float)
+    w, h = world.tank.size_m
+    com = state[n : n + 2]
+    heading = float(np.angle(np.exp(1j * state[:n]).mean()))
+    jobs = []
+    for d in ESCAPE_DISTANCES_M:
+        for b in ESCAPE_BEARINGS_DEG:
+            psi = heading + math.radians(b)
+            wp = (float(com[0] + d * math.cos(psi)), float(com[1] + d * math.sin(psi)))
+            if 0 < wp[0] < w and 0 < wp[1] < h:
+                jobs.append((d, b, wp))
+    if not jobs:
+        return []
+    leg_time = planner.search.settings.leg_time_s
+    runs = twin.run([[wp] for _, _, wp in jobs],
+                    [leg_time * (d + 0.3) for d, _, _ in jobs],
+                    states=np.repeat(state[None], len(jobs), axis=0),
+                    start_steps=[step] * len(jobs),
+                    coefficient_index=[planner.search.leg_coefficients(False, b)
+                                       for _, b, _ in jobs],
+                    stride=1, guidance=[guide] * len(jobs))
+    period = twin.restart_steps or 1
+    warm = planner.search.warm_steps
+    goal = np.asarray(world.goal.position_m, dtype=float)
+    out = []
+    for j, (d, b, wp) in enumerate(jobs):
+        arrival = int(runs.arrival_step[j])
+        if runs.reasons[j] or arrival < 0:
+            continue
+        restart = ((arrival - warm) // period) * period
+        if restart <= 0:
+            continue
+        path = runs.states[j, : arrival + 1]
+        outline = outline_clearance_m(world, model, path)
+        if float(outline.min()) < margin_m:
+            continue
+        capsule = body_clearance_m(world, planner.clearance, model, path)
+        leg = Leg(wp, d, b, step, step + arrival, path[:, n : n + 2].copy(),
+                  float(capsule.min()) + float(model.half_axis_horizontal_m.max()))
+        out.append(EscapeLeg(leg, np.asarray(path[restart], dtype=float), step + restart,
+                             runs.guidance_state(j, restart, wp), float(outline.min()),
+                             float(capsule[restart])))
+    out.sort(key=lambda e: (-min(e.end_clearance_m, 0.12),
+                            float(np.hypot(*(e.end_state[n : n + 2] - goal)))))
+    return out
+
+
+def escape_plan(planner: Planner, state: FloatArray, step: int, guide: Guide,
+                tries: int = ESCAPE_TRIES) -> tuple[Outcome, int | None]:
+    """The escape: one leg away from what the searches could not leave, checked over the water.
+
+    The best ``tries`` :func:`escape_legs` are checked in turn (:func:`check_escape_leg`); the
+    first that passes is the plan, a single leg whose waypoint is not the goal: the replanner
+    plans again from the leg's end while the robot swims it (docs/planning.md, "The escape").
+
+    Parameters
+    ----------
+    planner : Planner
+        Its twin swims the legs, its draws of the water check them.
+    state : ndarray, shape (2 N + 4,)
+    step : int
+    guide : (x, y, I_x, I_y)
+    tries : int
+
+    Returns
+    -------
+    Outcome, int or None
+        ``found`` with the one-leg plan (message starting ``escape:``) and the step of the leg's
+        end (the restart point before its waypoint is accepted, where the next plan starts), or
+        ``exhausted`` with why and None.
+    """
+    t0 = time.perf_counter()
+    legs = escape_legs(planner, state, step, guide)
+    why = ""
+    for esc in legs[:tries]:
+        draws, bad = check_escape_leg(planner, esc.leg, state, step, guide)
+        if bad is None:
+            plan = Plan(True, "found", "", [esc.leg], math.nan, 0, len(legs), 0.0,
+                        start_guide=guide)
+            msg = (f"escape: a {esc.leg.distance_m:g} m leg at {esc.leg.bearing_deg:+.0f} deg "
+                   f"from the heading (the body's outline {esc.min_outline_m * 1000:.0f} mm clear "
+                   f"in the twin, at least {ESCAPE_CHECK_MARGIN_M * 1000:g} mm with the fits and "
+                   f"over {draws - 1} draws of the water); planning again from its end at "
+                   f"t = {esc.end_step * planner.twin.dt_s:.2f} s")
+            return (Outcome(plan, "found", msg, [], 0, time.perf_counter() - t0, 0.0, draws - 1,
+                            1), esc.end_step)
+        why = bad
+    msg = (f"no escape: {len(legs)} legs keep the body's outline {ESCAPE_MARGIN_M * 1000:.0f} mm "
+           "clear in the twin" + (f", the best {min(tries, len(legs))} failed their check "
+                                  f"(last: {why})" if why else ""))
+    return Outcome(Plan(False, "exhausted", msg), "exhausted", msg,
+                   planning_time_s=time.perf_counter() - t0), None
+
+
+def check_escape_leg(planner: Planner, leg: Leg, state: FloatArray, step: int, guide: Guide
+                     ) -> tuple[int, str | None]:
+    """Swim an escape leg with the fits as fitted and over the planner's first draws of the water.
+
+    As the planner's check (:meth:`Planner.check_plan`: the same draws, the fits and
+    :data:`eelhost.planning.planner.SCREEN_DRAWS` draws first, the rest only when they pass),
+    but a run passes when its waypoint is accepted with the body's own outline
+    :data:`ESCAPE_CHECK_MARGIN_M` clear of everything on the way (the leg ends there: the next
+    plan is checked from its own start).
+
+    Returns
+    -------
+    int, str or None
+        The runs swum, and why the first failing one failed (None: every run passed).
+    """
+    twin = planner.twin
+    nominal = WaterDraw("the fits as fitted", planner.coefficients.fits["straight"],
+                        planner.coefficients.fits["turning"], (0.0, 0.0))
+    todo = [nominal, *planner.waters(0)]
+    runner = Twin(twin.robot, [c for w in todo for c in (w.straight, w.turning)], twin.gait,
+                  twin.options, twin.current_m_s, twin.acceptance_radius_m, twin.threads,
+                  twin.model)
+    index = planner.search.leg_coefficients(False, leg.bearing_deg)
+    took = max(leg.end_step - leg.start_step, 1) * twin.dt_s
+    vx, vy = twin.current_m_s
+    swum = 0
+    screen = 1 + SCREEN_DRAWS
+    for lo, hi in ((0, screen), (screen, len(todo))):
+        part = list(range(lo, min(hi, len(todo))))
+        if not part:
+            continue
+        runs = runner.run([[leg.waypoint_m]] * len(part), LEG_TIME_FACTOR * took + 10.0,
+                          states=np.repeat(np.asarray(state, dtype=float)[None], len(part), 0),
+                          start_steps=[step] * len(part),
+                          coefficient_index=[2 * i + index for i in part], stride=1,
+                          currents=[(vx + todo[i].current_offset_m_s[0],
+                                     vy + todo[i].current_offset_m_s[1]) for i in part],
+                          guidance=[guide] * len(part))
+        swum += len(part)
+        for j, i in enumerate(part):
+            arrival = int(runs.arrival_step[j])
+            if runs.reasons[j] or arrival < 0:
+                return swum, (f"{todo[i].label}: waypoint never accepted"
+                              + (f" ({runs.reasons[j]})" if runs.reasons[j] else ""))
+            gap = float(outline_clearance_m(planner.world, planner.model,
+                                            runs.states[j, : arrival + 1]).min())
+            if gap < ESCAPE_CHECK_MARGIN_M:
+                return swum, f"{todo[i].label}: the outline {gap * 1000:.0f} mm from something"
+    return swum, None
+
+
 REFUSED_FROM_STATE = ("blocked_start", "current_too_strong", "unreachable")
 """Planner statuses that refuse the start state itself: no safe continuation from it, so the
 robot is stopped unless the look-ahead swims its present plan clear (then it keeps that plan)."""
@@ -391,6 +620,11 @@ class TankReplanner:
         A check that has started runs to its end. None (the default here): no deadline;
         ``eelbot run --plan`` and the closed-loop benchmark give :data:`REPLAN_BUDGET_S`
         (:func:`eelhost.planning.tank.plan_for_run`).
+    escape : bool
+        When every search of a replan found nothing from its start (not refused), try the
+        escape (:func:`escape_plan`): a first leg that keeps the body's own outline
+        :data:`ESCAPE_MARGIN_M` clear in the twin, then the planner's and the goal approach's
+        searches from its end, checked as one plan (docs/planning.md, "The escape").
     """
 
     def __init__(
@@ -416,6 +650,7 @@ class TankReplanner:
         recovery_planner_for: Callable[[FloatArray], Planner] | None = None,
         replan_current_change_m_s: float = 0.005,
         replan_budget_s: float | None = None,
+        escape: bool = True,
     ) -> None:
         self.planner_for = planner_for
         self.planner = planner
@@ -439,6 +674,7 @@ class TankReplanner:
         self.recovery_planner_for = recovery_planner_for
         self.replan_current_change_m_s = replan_current_change_m_s
         self.replan_budget_s = replan_budget_s
+        self.escape = escape
         self._plan_current = np.zeros(2)  # the extra current the present plan was searched in
         # the rest of the present plan swum in a moved estimate: (future, that estimate)
         self._whole_job: tuple[Future, FloatArray] | None = None
@@ -457,6 +693,10 @@ class TankReplanner:
         self._job: _Job | None = None
         # (t_start, waypoints, the guidance state they were searched from)
         self._pending: tuple[float, list[tuple[float, float]], Guide | None] | None = None
+        # the step where the pending plan's escape leg ends (None: a plan to the goal), and the
+        # present plan's: the robot is planned again from it while it swims the escape
+        self._pending_escape: int | None = None
+        self._escape_end_step: int | None = None
         self._guide: Guide | None = None  # the run loop's guidance state at the latest frame
         self._next_try_s = -math.inf
         self._touching = 0
@@ -534,12 +774,22 @@ class TankReplanner:
             d.waypoints, d.guide = self._pending[1], self._pending[2]
             self.waypoints = list(d.waypoints)
             self._pending = None
+            self._escape_end_step, self._pending_escape = self._pending_escape, None
             self.current.drop()  # the prediction of a window spans no switch of waypoints
             self._lookahead = None  # it followed the old waypoints
             self._whole_job = None
             self.events[-1]["t_switch_s"] = round(t_s, 3)
             self.replans += 1
             d.recorded = True
+            return d
+        if (self._escape_end_step is not None and target >= len(self.waypoints)
+                and self._pending is None):
+            # the escape's waypoint is reached and no plan from it has come: stop here rather
+            # than let the loop read the last waypoint as the end of the run
+            d.stop = "no_safe_continuation"
+            d.detail = (f"at t = {t_s:.2f} s the robot reached its escape leg's waypoint "
+                        + ("while the replan from it has not come back" if self._job is not None
+                           else f"with no plan from it: {self.events[-1]['message']}"))
             return d
         est = self.estimator.estimate()
         if est is None or pose is None:
@@ -590,8 +840,12 @@ class TankReplanner:
             # swims the rest of the plan out of its margin in the estimate: replan in it while
             # the robot is still on its plan (docs/planning.md)
             reason = "current_estimate"
+        elif self._escape_end_step is not None:
+            # on an escape leg: the search again, from the leg's end (docs/planning.md)
+            reason = "after_escape"
         if reason is not None and not busy and t_s >= self._next_try_s:
-            self._request(t_s, est, left, reason)
+            self._request(t_s, est, left, reason,
+                          self._escape_end_step if reason == "after_escape" else None)
         elif (self._pending is None and self._lookahead is None and self.lookahead_s > 0
               and t_s >= self._next_lookahead_s):
             # also while a replan runs (on its own worker): a failure is then judged on it
@@ -661,12 +915,18 @@ class TankReplanner:
         return max(steps, period)
 
     def _request(self, t_s: float, est: BodyEstimate, left: list[tuple[float, float]],
-                 reason: str) -> None:
+                 reason: str, not_before_step: int | None = None) -> None:
+        """Submit a replan from the state predicted a lead ahead.
+
+        At ``not_before_step`` or later when given (an escape leg's end).
+        """
         dt = self.planner.twin.dt_s
         period = self.planner.twin.restart_steps or 1
         # the predicted start: the first restart point (control update and frame) after the lead
         now_step = int(round(est.t_s / dt))
         start_step = int(math.ceil((now_step + self._lead_steps()) / period)) * period
+        if not_before_step is not None:
+            start_step = max(start_step, not_before_step)
         extra = self.current.value_m_s.copy() if self.estimate_current else np.zeros(2)
         wall = time.monotonic()
         deadline = None if self.replan_budget_s is None else wall + self.replan_budget_s
@@ -749,6 +1009,20 @@ class TankReplanner:
                 else:
                     outcome = dataclasses.replace(outcome, message=(
                         f"{outcome.message}; with the recovery's actions: {rescue.message}"))
+        # the escape: one leg judged by the body's own outline, the search again from its end
+        # while the robot swims it; only when every search from the start found nothing
+        # (docs/planning.md, "The escape")
+        if (self.escape and not outcome.found and outcome.status not in REFUSED_FROM_STATE
+                and _time_left(deadline_s)):
+            escaped, _ = escape_plan(planner, state, start_step, leg_start_guide(
+                state, self.model.n_links, integral))
+            log.info("escape from t = %.2f s: %s", start_step * planner.twin.dt_s,
+                     escaped.message)
+            if escaped.found:
+                outcome = escaped
+            else:
+                outcome = dataclasses.replace(outcome, message=(
+                    f"{outcome.message}; {escaped.message}"))
         return (outcome, state, time.perf_counter() - wall0, time.thread_time() - cpu0,
                 self._planner_current.copy(), time.monotonic(), start_step)
 
@@ -778,6 +1052,20 @@ class TankReplanner:
             return result, None
         judged = self._look_ahead(est, left, self.current.value_m_s.copy(), guide)
         return result, None if judged is None else judged[0]
+
+    def _escape_end(self, outcome: Outcome) -> int | None:
+        """The step where an escape's leg ends (:func:`escape_plan`), None for a plan to the goal.
+
+        An escape's one leg does not end in the goal disc; its end is the last restart point
+        before its waypoint is accepted, where the search and the check cut every leg.
+        """
+        legs = outcome.plan.legs
+        if not legs or legs[-1].goal:
+            return None
+        leg = legs[-1]
+        period = self.planner.twin.restart_steps or 1
+        warm = self.planner.search.warm_steps
+        return leg.start_step + ((leg.end_step - leg.start_step - warm) // period) * period
 
     def _stale(self, t_s: float, t_start_s: float, path: FloatArray) -> bool:
         """A plan ready more than a restart period after its start, the robot off its corridor."""
@@ -847,6 +1135,10 @@ class TankReplanner:
             self.path = corridor_path(outcome.plan)
             self._pending = (job.t_start_s, list(outcome.plan.waypoints_m),
                              outcome.plan.start_guide)
+            self._pending_escape = self._escape_end(outcome)
+            if self._pending_escape is not None:
+                self.events[-1]["escape_end_s"] = round(self._pending_escape * self.planner.twin.dt_s,
+                                                        3)
             log.info("replanned at t = %.2f s (%.2f s wall): %s", t_s, wall, outcome.message)
             return True
         if job.reason == "current_estimate":
