@@ -215,9 +215,9 @@ STALLING_FOIL = register_plant(Plant(
     "flat plate's (a plant-only law), on the servo joints", TankSettings(joints=_SERVO_JOINTS),
     "stall"))
 
-# the thin aerofoil's lift slope 2 pi, its circulation from the three-quarter-chord flow and its
-# lift at the quarter chord: a lift that depends on the links' pitch rate and turns them
-# (docs/estimation.md, "Plant-only water: the quarter_chord law")
+# a thin aerofoil's circulation from the three-quarter-chord flow and its lift at the quarter
+# chord, with the lift slope of a wing of the links' aspect ratio: a lift that depends on the
+# links' turning rate and turns them (docs/estimation.md, "Plant-only water: the quarter_chord law")
 PITCHING_FOIL = register_plant(Plant(
     "pitching_foil", "the foil water with a pitching thin aerofoil's lift (circulation from the "
     "three-quarter-chord flow, acting at the quarter chord: a plant-only law), on the servo "
