@@ -23,10 +23,16 @@ def robot():
     return load_robot()
 
 
+def declaring(exp, jitter_s):
+    """The same recording, its camera declaring time stamps good to +-``jitter_s``."""
+    return replace(exp, camera={**exp.camera, "timestamp_jitter_s": jitter_s})
+
+
 @pytest.fixture(scope="module")
 def recording(robot):
+    # recorded on time, but declaring the paper's +-0.1 s time-stamp uncertainty
     task = load_scenario("straight_A0.87_w3.9").model_copy(update={"waypoints_m": [(0.5, 0.0)]})
-    return record_experiment(robot, task, "straight", TRUTH, CLEAN, seed=0)
+    return declaring(record_experiment(robot, task, "straight", TRUTH, CLEAN, seed=0), ALIGN_S)
 
 
 def test_mean_speed_is_the_distance_along_the_samples_over_their_span():
@@ -77,9 +83,44 @@ def test_offsets_at_the_revisited_bound_too_are_named_as_further_still(robot, re
     check = clock_check(validate(robot, {"straight": truth}, [late]))
     assert check.at_bound == (recording.name,)
     assert check.wide_offsets_s[recording.name] == pytest.approx(WIDE_S)
+    assert check.wide_s == WIDE_S  # ten times the declared 0.1 s is no wider
     assert check.beyond_wide == (recording.name,)
     assert f"1 of them at +-{WIDE_S:g} s again (further still)" in check.warning()
     # within the revisited bound nothing is further
     inside = clock_check(validate(robot, {"straight": truth},
                                   [replace(recording, t_s=recording.t_s + 0.4)]))
     assert inside.beyond_wide == () and "further still" not in inside.warning()
+
+
+@pytest.mark.parametrize(("declared_s", "found_s", "at_bound"),
+                         [(0.0, 0.0, False), (0.1, 0.1, True), (0.5, 0.4, False)])
+def test_the_clock_search_is_as_wide_as_the_time_stamp_uncertainty_the_recording_declares(
+    robot, recording, declared_s, found_s, at_bound
+):
+    # a bound is a statement about the recording's clock (docs/estimation.md, "Validation"): a
+    # hardware-triggered camera (0 declared) is compared on its own clock only, a looser one is
+    # searched as far as it declares. The same recording 0.4 s late under each declaration:
+    late = declaring(replace(recording, t_s=recording.t_s + 0.4), declared_s)
+    truth = FittedModel.of_coefficients(TRUTH, robot)
+    runs = validate(robot, {"straight": truth}, [late])
+    row = runs[0].row
+    assert row.clock_bound_s == declared_s
+    assert row.clock_offset_s == pytest.approx(found_s, abs=0.015)
+    check = clock_check(runs)
+    assert (check.at_bound == (late.name,)) is at_bound
+    assert check.total == (0 if declared_s == 0 else 1)
+    assert (check.warning() is not None) is at_bound
+    if declared_s == 0:  # nothing searched: the aligned E_x is the recorded clock's
+        assert row.Ex_mean_BL == row.Ex_mean_unaligned_BL
+    # a bound given explicitly overrides what the recordings declare
+    forced = validate(robot, {"straight": truth}, [late], align_s=0.2)[0].row
+    assert forced.clock_bound_s == 0.2 and forced.clock_offset_s == pytest.approx(0.2)
+
+
+def test_a_wider_declared_bound_is_revisited_ten_times_wider(robot, recording):
+    truth = FittedModel.of_coefficients(TRUTH, robot)
+    late = declaring(replace(recording, t_s=recording.t_s + 1.5), 0.3)
+    check = clock_check(validate(robot, {"straight": truth}, [late]))
+    assert check.at_bound == (late.name,) and check.wide_s == pytest.approx(3.0)
+    assert check.wide_offsets_s[late.name] == pytest.approx(1.5, abs=0.02)
+    assert check.beyond_wide == () and "+-0.3 s bound" in check.warning()

@@ -42,7 +42,7 @@ from eelhost.data.virtual_tank import (
 )
 from eelhost.errors import UserError
 from eelhost.estimation.adopt import fit_and_choose
-from eelhost.estimation.clock import WIDE_S, clock_check
+from eelhost.estimation.clock import clock_check
 from eelhost.estimation.coefficients_file import FittedModel
 from eelhost.estimation.evaluate import Evaluator
 from eelhost.estimation.joint_fit import joint_model_name
@@ -329,7 +329,8 @@ def estimator_report(
         "(minimax, n = 7, w = 5), the fitted model first the tank's robot file's, then the one "
         "the leave-one-gait-out comparison recommends (each tank's section says which). E_x is "
         "the paper's mean of norms over n = 35 samples, on the recording's own clock and at the "
-        "best clock offset within +-0.1 s; paths are predicted with the turning fit. The "
+        "best clock offset within the time-stamp uncertainty each recording declares (+-0.1 s "
+        "here); paths are predicted with the turning fit. The "
         "truth's fitness is in the tank's steady stray current where it had one. Ambient "
         "current: " + ("fitted as a nuisance (v_x, v_y within +-0.03 m/s, every tank), and the "
                        "validation simulates in it" if fit_current else
@@ -413,11 +414,11 @@ def estimator_report(
                           + ".", ""]
         clock = r["clock"]
         wide = np.abs(list(clock.wide_offsets_s.values()))
-        lines += [f"Best clock offsets at the +-{clock.bound_s:g} s bound: {len(clock.at_bound)} "
-                  f"of {clock.total} held-out experiments"
-                  + (f"; searched within +-{WIDE_S:g} s they lie at {np.median(wide):.2f} s "
+        lines += [f"Best clock offsets at the {clock.bound_text()} bound (declared): "
+                  f"{len(clock.at_bound)} of {clock.total} held-out experiments"
+                  + (f"; searched within +-{clock.wide_s:g} s they lie at {np.median(wide):.2f} s "
                      f"(median; up to {wide.max():.2f} s; {len(clock.beyond_wide)} at "
-                     f"+-{WIDE_S:g} s again)" if wide.size else "")
+                     f"+-{clock.wide_s:g} s again)" if wide.size else "")
                   + (" (the report warns: misfit, not a clock error)." if clock.most_at_bound
                      else "."), ""]
         lines += [

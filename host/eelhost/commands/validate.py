@@ -31,10 +31,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--align",
         type=NON_NEGATIVE,
-        default=ALIGN_S,
+        default=None,
         metavar="SECONDS",
         help="also report each experiment at the clock offset of its recording that fits best, "
-        "searched within +-SECONDS (default 0.1, the paper's time-stamp uncertainty)",
+        "searched within +-SECONDS (default: the time-stamp uncertainty each recording declares, "
+        f"camera.timestamp_jitter_s; {ALIGN_S:g} s where it declares none)",
     )
     p.add_argument(
         "--allow-other-robot",

@@ -415,11 +415,15 @@ def _report_text(
         "",
     ]
     lines += [f"- worst E_x ({m}): {v:.4f} BL" for m, v in worst_ex(runs, aligned=True).items()]
+    clock = clock_check(runs)
     if runs:  # validation reports the best clock offset besides the recorded clock
         lines.append(
             f"\nEach experiment is compared at the clock offset of its recording that fits best "
-            f"(searched within +-{ALIGN_S:g} s; the paper's time stamps are good to +-0.1 s). "
-            "On the recordings' own clocks:"
+            f"(searched within {clock.bound_text()}, the time-stamp uncertainty the recordings "
+            f"declare; {ALIGN_S:g} s where they declare none). "
+            "On the recordings' own clocks:" if clock.total else
+            "\nThe recordings declare exact time stamps (camera.timestamp_jitter_s 0): each "
+            "experiment is compared on its own clock only:"
         )
         lines += [f"- worst E_x ({m}), recorded clock: {v:.4f} BL"
                   for m, v in worst_ex(runs).items()]

@@ -32,9 +32,26 @@ from eelsim.scenario import Scenario
 from eelsim.timing import LoopTiming
 
 TMAX_FACTOR = 1.5
-# Default half-width of the clock-offset search: the paper's stated time-stamp uncertainty.
+# The paper's stated time-stamp uncertainty, s: what a recording that declares none is read to
+# have (``Experiment.timestamp_jitter_s``), and so the validation's clock search there.
 ALIGN_S = 0.1
 ALIGN_STEP_S = 0.01
+
+
+def declared_clock_bound_s(exp: Experiment) -> float:
+    """Half-width of the validation's clock-offset search for a recording: what it declares.
+
+    The camera's ``timestamp_jitter_s`` (docs/data.md; ``ALIGN_S`` where it declares none): the
+    bound is a statement about the recording's clock, so a hardware-triggered camera that
+    declares 0 is compared on its own clock only (docs/estimation.md, "Validation").
+    """
+    return exp.timestamp_jitter_s
+
+
+def clock_shifts(align_s: float) -> np.ndarray:
+    """The candidate clock offsets within +-``align_s``, ``ALIGN_STEP_S`` apart (just 0 for 0)."""
+    half = int(round(align_s / ALIGN_STEP_S))
+    return np.arange(-half, half + 1) * ALIGN_STEP_S
 
 
 @dataclass(frozen=True)
@@ -146,8 +163,7 @@ def prepare(
     t0, t1 = exp.span_s
     times = sample_times(t0, t1, n_samples, dt_s)
     tmax = float(np.ceil(tmax_factor * t1 / dt_s)) * dt_s
-    half = int(round(align_s / ALIGN_STEP_S))
-    shifts = np.arange(-half, half + 1) * ALIGN_STEP_S
+    shifts = clock_shifts(align_s)
     camera = exp.recording_camera()
     timing = LoopTiming(
         dt_s=dt_s,

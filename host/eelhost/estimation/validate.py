@@ -17,7 +17,7 @@ from eelhost.data.experiments import Experiment
 from eelhost.estimation.coefficients_file import FittedModel
 from eelhost.estimation.evaluate import Evaluator
 from eelhost.estimation.fitness import N_SAMPLES_VALIDATE, validation_errors
-from eelhost.estimation.runs import ALIGN_S, Simulated
+from eelhost.estimation.runs import Simulated, clock_shifts, declared_clock_bound_s
 from eelsim.flags import Failure
 from eelsim.robot import Robot
 
@@ -36,6 +36,7 @@ class ValidationRow:
     failure: str
     Ex_mean_unaligned_BL: float = float("nan")  # noqa: N815 (on the recording's own clock)
     clock_offset_s: float = 0.0
+    clock_bound_s: float = 0.0  # the half-width the clock offset was searched within
 
 
 @dataclass
@@ -65,7 +66,7 @@ def validate(
     experiments: Sequence[Experiment],
     n_samples: int = N_SAMPLES_VALIDATE,
     backend: str = "auto",
-    align_s: float = ALIGN_S,
+    align_s: float | None = None,
     servo_limits: bool = False,
 ) -> list[ValidationRun]:
     """Predict each experiment with the fitted coefficients and measure the errors.
@@ -80,9 +81,12 @@ def validate(
         Samples per experiment (35 in the paper).
     backend : str
         Evaluator backend.
-    align_s : float
+    align_s : float or None
         Half-width of the clock-offset search: each experiment is compared at the offset of its
         recording's clock that fits best (reported), besides its own clock (the paper's E_x).
+        None (the default): what each recording declares, its camera's ``timestamp_jitter_s``
+        (:func:`~eelhost.estimation.runs.declared_clock_bound_s`; docs/estimation.md,
+        "Validation"); 0: its own clock only.
     servo_limits : bool
         Swim the robot with its PD joints on the servos' torque-speed line (the loop's option;
         :class:`~eelhost.estimation.evaluate.Evaluator`).
@@ -98,7 +102,9 @@ def validate(
         groups.setdefault(coefficient_set_for(exp.motion, fitted), []).append(exp)
     for key, exps in groups.items():
         model = fitted[key]
-        ev = Evaluator(robot, exps, n_samples=n_samples, backend=backend, align_s=align_s,
+        # the clock search is done below, per recording (its own declared bound): the evaluator
+        # compares on the recorded clock
+        ev = Evaluator(robot, exps, n_samples=n_samples, backend=backend, align_s=0.0,
                        space=model.space, servo_limits=servo_limits)
         sim: Simulated = ev.simulate(model.values[None, :])
         counted = sim.counted_failure(ev.prepared)
@@ -106,6 +112,7 @@ def validate(
             failure = Failure(int(counted[0, j]))
             simp = sim.positions_m[0, j]
             offset, unaligned, exp_pos = 0.0, float("nan"), p.exp_positions_m
+            bound = declared_clock_bound_s(p.experiment) if align_s is None else align_s
             if np.isnan(simp).any():
                 err = dict.fromkeys(
                     ("Ex_mean_BL", "Ev_mean_BL_s", "Ex_rms_BL", "Ev_rms_BL_s"), float("nan")
@@ -113,9 +120,11 @@ def validate(
             else:
                 unaligned = validation_errors(p.times_s, exp_pos, simp, bl)["Ex_mean_BL"]
                 # the recording's clock offset that fits best (just 0 without alignment)
-                gaps = np.linalg.norm(p.shifted_positions_m - simp, axis=-1).mean(axis=-1)
+                shifts = clock_shifts(bound)
+                shifted = np.stack([p.experiment.position_at(p.times_s + d) for d in shifts])
+                gaps = np.linalg.norm(shifted - simp, axis=-1).mean(axis=-1)
                 k = int(np.argmin(gaps))
-                offset, exp_pos = float(p.shifts_s[k]), p.shifted_positions_m[k]
+                offset, exp_pos = float(shifts[k]), shifted[k]
                 err = validation_errors(p.times_s, exp_pos, simp, bl)
             row = ValidationRow(
                 p.experiment.name,
@@ -124,6 +133,7 @@ def validate(
                 failure=failure.name,
                 Ex_mean_unaligned_BL=unaligned,
                 clock_offset_s=offset,
+                clock_bound_s=bound,
                 **err,
             )
             runs.append(
