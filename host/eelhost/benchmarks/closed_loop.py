@@ -88,7 +88,8 @@ class WorldResult:
     replan_wall_s : list of float
         Wall time of each replan, from its request to its plan.
     replan_delay_s : list of float
-        Robot's time from each replan's request to its plan being switched in.
+        Robot's time from each replan's request to its plan being switched in (not the replans
+        from an escape's end, asked for when the escape starts).
     replan_cpu_s : list of float
         Processor time of each replan (its thread's), failed ones included.
     plan_wall_s, plan_cpu_s : float
@@ -105,6 +106,8 @@ class WorldResult:
         The status of each failed replan (``out_of_time``: its budget ran out first).
     replan_budget_s : float or None
         Each replan's wall-clock budget (None: none).
+    escapes : int
+        Escape legs switched in (docs/planning.md, "The escape"; counted in ``replans`` too).
     """
 
     seed: int
@@ -129,6 +132,7 @@ class WorldResult:
     guidance: str = "pursuit"
     failed_replan_statuses: list[str] = field(default_factory=list)
     replan_budget_s: float | None = None
+    escapes: int = 0
 
 
 def true_clearance_m(world: World, model: SwimmerModel, states: FloatArray) -> FloatArray:
@@ -287,10 +291,14 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
         sum(e["status"] == "found" for e in replans),
         sum(e["status"] != "found" for e in replans),
         [e["wall_s"] for e in replans],
-        [e["t_switch_s"] - e["t_request_s"] for e in replans if "t_switch_s" in e],
+        # a replan from an escape's end is asked for at the escape's start, to steer at its end:
+        # not a robot that left its corridor
+        [e["t_switch_s"] - e["t_request_s"] for e in replans
+         if "t_switch_s" in e and e["reason"] != "after_escape"],
         plan_wall, plan_cpu, out.t_end_s, cost, water,
         [e["cpu_s"] for e in replans if e["cpu_s"] is not None], law,
-        [e["status"] for e in replans if e["status"] != "found"], replan_budget_s)
+        [e["status"] for e in replans if e["status"] != "found"], replan_budget_s,
+        sum("escape_end_s" in e and "t_switch_s" in e for e in replans))
 
 
 def _law_name(planner_options: dict[str, Any] | None) -> str:
@@ -393,6 +401,11 @@ def summary_lines(results: list[WorldResult]) -> list[str]:
                  f"{sum(1 for r in planned if r.replans or r.failed_replans)} runs"
                  + (f"; wall time from request to plan: median {statistics.median(walls):.2f} s,"
                     f" largest {max(walls):.2f} s" if walls else ""))
+    escapes = [r for r in planned if r.escapes]
+    if escapes:
+        lines.append(f"- escape legs switched in: {sum(r.escapes for r in escapes)}, in "
+                     f"{len(escapes)} runs ({sum(r.reached for r in escapes)} of them reached "
+                     "the goal)")
     budgets = sorted({r.replan_budget_s for r in planned if r.replan_budget_s is not None})
     failed = Counter(s for r in planned for s in r.failed_replan_statuses)
     if budgets or failed:

@@ -675,6 +675,7 @@ class TankReplanner:
         self.replan_current_change_m_s = replan_current_change_m_s
         self.replan_budget_s = replan_budget_s
         self.escape = escape
+        self._last_tiers: dict[str, float] = {}  # the last replan's parts' wall times
         self._plan_current = np.zeros(2)  # the extra current the present plan was searched in
         # the rest of the present plan swum in a moved estimate: (future, that estimate)
         self._whole_job: tuple[Future, FloatArray] | None = None
@@ -956,12 +957,22 @@ class TankReplanner:
         while time is left before it.
         """
         wall0, cpu0 = time.perf_counter(), time.thread_time()
+        tiers: dict[str, float] = {}  # wall time of each part, recorded with the replan
+        mark = [wall0]
+
+        def took(name: str) -> None:
+            now = time.perf_counter()
+            tiers[name] = round(tiers.get(name, 0.0) + now - mark[0], 3)
+            mark[0] = now
+
         self._prepare_planner(extra)
+        took("planner_built")
         planner = self.planner
         period = planner.twin.restart_steps or 1
         predicted = predict_start(planner.twin, est, left, start_step, guide=guide)
         assert predicted is not None  # allow_end: the run's last state when it ends early
         state, integral = predicted
+        took("prediction")
         outcome = planner.plan(state, start_step, guide=leg_start_guide(state, self.model.n_links,
                                                                        integral),
                                deadline_s=deadline_s)
@@ -977,6 +988,7 @@ class TankReplanner:
             start_step, (state, integral) = start_step + period, later
             outcome = planner.plan(state, start_step, guide=leg_start_guide(
                 state, self.model.n_links, integral), deadline_s=deadline_s)
+        took("planner")
         # the tighter margin: near the goal after any failure of the search or check; anywhere
         # when the search ran out of poses (a start so close to an obstacle that every manoeuvre
         # from it breaks the world's margin: the predicted start of a robot the water pushed on)
@@ -988,6 +1000,7 @@ class TankReplanner:
                     state, self.model.n_links, integral), deadline_s=deadline_s)
                 log.info("goal approach from t = %.2f s: %s", start_step * planner.twin.dt_s,
                          approach.message)
+                took("goal_approach")
                 if approach.found:
                     outcome = approach
                 else:
@@ -1003,6 +1016,7 @@ class TankReplanner:
                     state, self.model.n_links, integral), deadline_s=deadline_s)
                 log.info("recovery replan from t = %.2f s: %s", start_step * planner.twin.dt_s,
                          rescue.message)
+                took("recovery")
                 if rescue.found:
                     rescue.message = f"recovery: {rescue.message}"
                     outcome = rescue
@@ -1016,6 +1030,7 @@ class TankReplanner:
                 and _time_left(deadline_s)):
             escaped, _ = escape_plan(planner, state, start_step, leg_start_guide(
                 state, self.model.n_links, integral))
+            took("escape")
             log.info("escape from t = %.2f s: %s", start_step * planner.twin.dt_s,
                      escaped.message)
             if escaped.found:
@@ -1023,6 +1038,7 @@ class TankReplanner:
             else:
                 outcome = dataclasses.replace(outcome, message=(
                     f"{outcome.message}; {escaped.message}"))
+        self._last_tiers = tiers
         return (outcome, state, time.perf_counter() - wall0, time.thread_time() - cpu0,
                 self._planner_current.copy(), time.monotonic(), start_step)
 
@@ -1116,6 +1132,9 @@ class TankReplanner:
         self._last_wall_s = wall
         self.events.append(self._event("replan", job.reason, job.t_request_s, job.t_start_s,
                                        job.t_request_s + wall, state, outcome, wall, cpu, extra))
+        tiers, self._last_tiers = self._last_tiers, {}
+        if tiers:
+            self.events[-1]["parts_wall_s"] = tiers
         if outcome.found and self._stale(t_s, job.t_start_s, corridor_path(outcome.plan)):
             # ready long after the state it was planned from, and the robot is no longer in its
             # corridor: it would be left at once; the robot keeps its plan, and replans now
