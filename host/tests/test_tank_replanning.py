@@ -1075,6 +1075,8 @@ def test_an_escape_is_followed_by_a_replan_from_its_end_and_its_waypoint_is_no_a
     after = [e for e in nav.events[2:] if e["reason"] == "after_escape"]
     assert after and after[0]["t_start_s"] == pytest.approx(end_s)
     assert nav.asked[1] == int(round(end_s / planner.twin.dt_s))
+    # and tried again at once when it fails, not after the 1, 2, 4 s back-off: the end comes
+    assert len(after) >= 4 and max(np.diff([e["t_request_s"] for e in after])) < 0.5
     # its waypoint reached with no plan from it: a deliberate stop, never "arrived"
     assert stop is not None and stop[0] == pytest.approx(9.0, abs=0.05)
     assert stop[1].stop == "no_safe_continuation" and not stop[1].arrived

@@ -930,7 +930,12 @@ class TankReplanner:
             start_step = max(start_step, not_before_step)
         extra = self.current.value_m_s.copy() if self.estimate_current else np.zeros(2)
         wall = time.monotonic()
-        deadline = None if self.replan_budget_s is None else wall + self.replan_budget_s
+        budget = self.replan_budget_s
+        if budget is not None and not_before_step is not None:
+            # the plan from an escape's end is needed by then, not within the budget: the
+            # searches may use the escape's time less a budget for the check
+            budget = max(budget, start_step * dt - t_s - budget)
+        deadline = None if budget is None else wall + budget
         future = self._worker.submit(self._replan_and_judge, est, list(left), start_step, extra,
                                      self._guide, deadline)
         self._job = _Job(future, t_s, wall, start_step * dt, reason)
@@ -1183,13 +1188,17 @@ class TankReplanner:
                         "so the robot keeps it", self.failures, outcome.status)
             self._next_try_s = t_s + self.backoff_s * 2 ** (min(self.failures, self.max_failures)
                                                             - 1)
+            if job.reason == "after_escape":
+                self._next_try_s = t_s  # the escape's end comes: no back-off (docs/planning.md)
             return True
         if outcome.status in REFUSED_FROM_STATE or self.failures >= self.max_failures:
             d.stop = "no_safe_continuation"
             d.detail = (f"replanning at t = {job.t_request_s:.2f} s found no safe continuation "
                         f"({self.failures} failed in a row): {outcome.message}")
             return True
-        wait = self.backoff_s * 2 ** (self.failures - 1)
+        # after an escape the next plan is needed by the escape's end, which comes whatever the
+        # planner does: try again at once
+        wait = 0.0 if job.reason == "after_escape" else self.backoff_s * 2 ** (self.failures - 1)
         self._next_try_s = t_s + wait
         log.warning("replanning failed at t = %.2f s (%s); next try in %.1f s", t_s,
                     outcome.message, wait)
