@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from eelhost.benchmarks.closed_loop import true_clearance_m, water_for
+from eelhost.benchmarks.closed_loop import WorldResult, summary_lines, true_clearance_m, water_for
 from eelhost.planning.body import link_endpoints
 from eelhost.planning.uncertainty import default_model
 from eelhost.planning.world import parse_world
@@ -62,3 +62,15 @@ def test_the_virtual_robots_water_is_seeded_and_within_its_bounds():
     assert a == b and water_for(8, model) != a
     speeds = [np.hypot(*water_for(s, model)["unknown_current_m_s"]) for s in range(50)]
     assert max(speeds) <= 0.02 and min(speeds) >= 0.0
+
+
+def test_the_summary_counts_escape_legs_and_reads_results_written_before_them():
+    old = WorldResult(5000, True, "found", "arrived", reached=True, min_clearance_m=0.05)
+    assert old.escapes == 0  # results.jsonl lines written before the escape still read
+    escaped = WorldResult(5001, True, "found", "arrived", reached=True, min_clearance_m=0.04,
+                          replans=3, escapes=2)
+    stopped = WorldResult(5002, True, "found", "no_safe_continuation", min_clearance_m=0.03,
+                          replans=1, escapes=1)
+    lines = summary_lines([old, escaped, stopped])
+    assert "- escape legs switched in: 3, in 2 runs (1 of them reached the goal)" in lines
+    assert not any("escape" in line for line in summary_lines([old]))
