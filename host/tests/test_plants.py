@@ -267,6 +267,9 @@ def test_the_quarter_chord_law_lifts_from_the_three_quarter_chord_flow_at_the_qu
     chord, span = 2.0 * robot.link.half_length_m, 2.0 * robot.link.half_axis_vertical_m
     rotational = c.C_L / 8.0 * 1000.0 * u * chord**2 * rate * span
     np.testing.assert_allclose(fn_rate[0], rotational, rtol=0.01)
+    # another law's link coefficients are refused by name
+    with pytest.raises(TypeError, match="the quarter_chord law needs its own"):
+        QUARTER_CHORD.drag(f_fluid, vt, vn, om)
     # at rest relative to the water: no force, no division by zero
     rest = QUARTER_CHORD.drag(fluid, np.zeros(1), np.zeros(1), np.zeros(1))
     assert rest[0][0] == 0.0 and rest[1][0] == 0.0 and rest[2][0] == 0.0

@@ -37,8 +37,8 @@ at small alpha on the lateral area would give 2 pi; a slender body's is far smal
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Annotated, ClassVar
+from dataclasses import dataclass, fields
+from typing import Annotated, ClassVar, TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -110,6 +110,29 @@ class FoilLinkFluid(LinkFluid):
         return {"fk0": self.k_0, "fk2": self.k_2, "fkl": self.k_lift, "flamq": self.lambda_q}
 
 
+_Fluid = TypeVar("_Fluid", bound=LinkFluid)
+
+
+def _own_fluid(fluid: LinkFluid, kind: type[_Fluid], law: str) -> _Fluid:
+    """``fluid`` as the link coefficients of the law ``law`` (of type ``kind``).
+
+    Raises
+    ------
+    TypeError
+        When another law's coefficients are handed to this law.
+    """
+    if not isinstance(fluid, kind):
+        raise TypeError(f"the {law} law needs its own link coefficients, got "
+                        f"{type(fluid).__name__}")
+    return fluid
+
+
+def _foil_fields(foil: LinkFluid) -> dict[str, FloatArray]:
+    """The foil law's link coefficients by field name, for a law built on them."""
+    own = _own_fluid(foil, FoilLinkFluid, "foil")
+    return {f.name: getattr(own, f.name) for f in fields(FoilLinkFluid)}
+
+
 def _foil_forces(f: FoilLinkFluid, k_lift: FloatArray, vt: FloatArray, vn: FloatArray,
                  omega: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
     """The foil water's drag, lift and yaw damping with the lift's coefficient ``k_lift``.
@@ -165,10 +188,8 @@ class FoilLaw(RelativeMotionLaw):
         self, fluid: LinkFluid, vt: FloatArray, vn: FloatArray, omega: FloatArray
     ) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Drag, lift and yaw damping (module docstring)."""
-        if not isinstance(fluid, FoilLinkFluid):
-            raise TypeError(f"the foil law needs its own link coefficients, got "
-                            f"{type(fluid).__name__}")
-        return _foil_forces(fluid, fluid.k_lift, vt, vn, omega)
+        foil = _own_fluid(fluid, FoilLinkFluid, self.name)
+        return _foil_forces(foil, foil.k_lift, vt, vn, omega)
 
     def emit_drag(self, code: KernelCode, link: int) -> tuple[str, str, str]:
         """The same, negated, for the batched kernel."""
@@ -257,26 +278,20 @@ class StallLaw(RelativeMotionLaw):
     ) -> StallLinkFluid:
         """The foil law's coefficients (the first five) and the sine of the stall angle."""
         columns = law_coefficient_columns(coefficients, 6)
-        foil = FOIL.link_coefficients(half_length_m, half_axis_vertical_m, half_axis_horizontal_m,
-                                      np.stack(columns[:5], axis=-1), water_density_kg_m3)
-        if not isinstance(foil, FoilLinkFluid):  # pragma: no cover - FOIL's own type
-            raise TypeError(type(foil).__name__)
-        return StallLinkFluid(
-            mu_n=foil.mu_n, lambda_1=foil.lambda_1, k_0=foil.k_0, k_2=foil.k_2,
-            k_lift=foil.k_lift, lambda_q=foil.lambda_q,
-            sin_stall=np.sin(columns[5]) + np.zeros_like(foil.k_0))
+        foil = _foil_fields(FOIL.link_coefficients(
+            half_length_m, half_axis_vertical_m, half_axis_horizontal_m,
+            np.stack(columns[:5], axis=-1), water_density_kg_m3))
+        return StallLinkFluid(**foil, sin_stall=np.sin(columns[5]) + np.zeros_like(foil["k_0"]))
 
     def drag(
         self, fluid: LinkFluid, vt: FloatArray, vn: FloatArray, omega: FloatArray
     ) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Drag, lift (the foil's below the stall angle, the flat plate's above) and yaw damping."""
-        if not isinstance(fluid, StallLinkFluid):
-            raise TypeError(f"the stall law needs its own link coefficients, got "
-                            f"{type(fluid).__name__}")
+        stall = _own_fluid(fluid, StallLinkFluid, self.name)
         speed = np.sqrt(vt * vt + vn * vn)
         # attached flow up to the stall angle; then the stalled plate's lift, C_L -> C_D2
-        k_lift = np.where(np.abs(vn) <= fluid.sin_stall * speed, fluid.k_lift, fluid.k_2)
-        return _foil_forces(fluid, k_lift, vt, vn, omega)
+        k_lift = np.where(np.abs(vn) <= stall.sin_stall * speed, stall.k_lift, stall.k_2)
+        return _foil_forces(stall, k_lift, vt, vn, omega)
 
     def emit_drag(self, code: KernelCode, link: int) -> tuple[str, str, str]:
         """The same, negated, for the batched kernel."""
@@ -364,31 +379,26 @@ class QuarterChordLaw(RelativeMotionLaw):
         water_density_kg_m3: ArrayLike,
     ) -> QuarterChordLinkFluid:
         """The foil law's coefficients and the links' half-lengths."""
-        foil = FOIL.link_coefficients(half_length_m, half_axis_vertical_m, half_axis_horizontal_m,
-                                      coefficients, water_density_kg_m3)
-        if not isinstance(foil, FoilLinkFluid):  # pragma: no cover - FOIL's own type
-            raise TypeError(type(foil).__name__)
+        foil = _foil_fields(FOIL.link_coefficients(
+            half_length_m, half_axis_vertical_m, half_axis_horizontal_m, coefficients,
+            water_density_kg_m3))
         return QuarterChordLinkFluid(
-            mu_n=foil.mu_n, lambda_1=foil.lambda_1, k_0=foil.k_0, k_2=foil.k_2,
-            k_lift=foil.k_lift, lambda_q=foil.lambda_q,
-            half_length=np.asarray(half_length_m, dtype=float) + np.zeros_like(foil.k_0))
+            **foil, half_length=np.asarray(half_length_m, dtype=float) + np.zeros_like(foil["k_0"]))
 
     def drag(
         self, fluid: LinkFluid, vt: FloatArray, vn: FloatArray, omega: FloatArray
     ) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Drag, yaw damping and the three-quarter-chord flow's lift at the quarter chord."""
-        if not isinstance(fluid, QuarterChordLinkFluid):
-            raise TypeError(f"the quarter_chord law needs its own link coefficients, got "
-                            f"{type(fluid).__name__}")
+        f = _own_fluid(fluid, QuarterChordLinkFluid, self.name)
         speed = np.sqrt(vt * vt + vn * vn)
-        drag = fluid.k_0 * speed + fluid.k_2 * vn * vn / np.maximum(speed, SPEED_FLOOR_M_S)
-        ahead = 0.5 * fluid.half_length * _leading_sign(vt)  # the quarter chord, from the centre
+        drag = f.k_0 * speed + f.k_2 * vn * vn / np.maximum(speed, SPEED_FLOOR_M_S)
+        ahead = 0.5 * f.half_length * _leading_sign(vt)  # the quarter chord, from the centre
         vn3 = vn - ahead * omega  # the normal flow at the three-quarter chord
         inv3 = 1.0 / np.maximum(np.sqrt(vt * vt + vn3 * vn3), SPEED_FLOOR_M_S)
-        lift_n = -fluid.k_lift * vt * vt * vn3 * inv3
-        return (-drag * vt + fluid.k_lift * vn3 * vn3 * vt * inv3,
+        lift_n = -f.k_lift * vt * vt * vn3 * inv3
+        return (-drag * vt + f.k_lift * vn3 * vn3 * vt * inv3,
                 -drag * vn + lift_n,
-                -fluid.lambda_q * np.abs(omega) * omega + ahead * lift_n)
+                -f.lambda_q * np.abs(omega) * omega + ahead * lift_n)
 
     def emit_drag(self, code: KernelCode, link: int) -> tuple[str, str, str]:
         """The same, negated, for the batched kernel."""
