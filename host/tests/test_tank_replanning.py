@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import threading
 import time
 from concurrent.futures import Future
 
@@ -1081,3 +1082,48 @@ def test_an_escape_is_followed_by_a_replan_from_its_end_and_its_waypoint_is_no_a
     assert stop is not None and stop[0] == pytest.approx(9.0, abs=0.05)
     assert stop[1].stop == "no_safe_continuation" and not stop[1].arrived
     assert "escape leg's waypoint" in stop[1].detail
+
+
+class EscapeIntoContact(EscapingReplanner):
+    """An escape, then a replan from its end that does not come back while the twin, in the
+    water now estimated, swims the escape 5 mm into an obstacle."""
+
+    release = threading.Event()
+
+    def _replan(self, est, left, start_step, extra, guide=None,  # noqa: ANN001, ANN202
+                deadline_s=None):  # noqa: ANN001
+        if self.asked:
+            self.asked.append(start_step)
+            self.release.wait(30.0)
+        return super()._replan(est, left, start_step, extra, guide, deadline_s)
+
+    def _look_ahead(self, est, left, extra, guide=None, horizon_s=None):  # noqa: ANN001, ANN202
+        return (-0.005, 0.0) if self._escape_end_step is not None else (0.2, 0.2)
+
+
+def test_an_escape_the_twin_swims_into_contact_stops_the_robot_while_its_next_replan_runs(
+        open_plan):
+    planner, outcome = open_plan
+    nav = EscapeIntoContact(lambda extra: planner, planner, outcome, PATH_GAIT,
+                            estimate_current=False)
+    nav.asked = []
+    switched = stop = None
+    try:
+        for k in range(10 * 30):
+            t = k / 30
+            d = nav.on_frame(t, pose_at(t, (0.8, 1.4)), np.array([0.8, 1.4, 0.0]), 0, 0.0)
+            if d.waypoints is not None:
+                switched = t
+            if d.stop is not None:
+                stop = (t, d)
+                break
+            if switched is None:
+                nav._worker.submit(lambda: None).result()  # the escape's replan: done
+            nav._side.submit(lambda: None).result()  # every look-ahead: done
+    finally:
+        EscapeIntoContact.release.set()
+        nav.close()
+    assert switched is not None and len(nav.asked) == 2  # the replan from its end is running
+    assert stop is not None and stop[1].stop == "no_safe_continuation"
+    assert "has not come back" in stop[1].detail
+    assert stop[0] - switched <= 2 * nav.lookahead_every_s + 0.1  # at the next look-ahead

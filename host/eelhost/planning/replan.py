@@ -819,10 +819,12 @@ class TankReplanner:
             return d
         job = self._job
         if (predicted and gap is not None and gap <= 0.0 and job is not None
-                and t_s > job.t_start_s + 1e-9):
+                and (t_s > job.t_start_s + 1e-9 or self._escape_end_step is not None)):
             # the replan is late (past its start) and the twin swims the present plan into
             # contact meanwhile: on a loaded machine replans took minutes of wall time, and the
-            # robot swam on into an obstacle before they came back
+            # robot swam on into an obstacle before they came back. On an escape leg the replan
+            # from its end runs for most of the leg: the water that makes the twin swim the
+            # checked escape into contact stops the robot without waiting for it
             d.stop = "no_safe_continuation"
             d.detail = (f"at t = {t_s:.2f} s the twin swims the present plan into an obstacle "
                         f"or wall within {self.lookahead_s:g} s ({-gap * 1000:.0f} mm deep) and "
