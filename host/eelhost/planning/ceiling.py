@@ -42,7 +42,7 @@ START_RADIUS_M = 0.2
 body starts is given, not chosen, so its own neighbourhood is not the route's bottleneck (the
 start's clearance is reported apart, :attr:`Ceiling.start_clearance_m`)."""
 
-MARGINS_M = (0.050, 0.075, 0.100, 0.125, 0.150, 0.200)
+MARGINS_M = (0.050, 0.075, 0.100, 0.125, 0.150, 0.175, 0.200, 0.250, 0.300)
 """Room beyond the body's half width the ceiling table is given for (m)."""
 
 
