@@ -217,6 +217,21 @@ def test_kernel_code_that_writes_the_sweeps_own_locals_is_refused():
         codegen.emit_law_forces(codegen._Emitter(layout), 0, False)
 
 
+def test_kernel_code_that_carries_a_temporary_from_link_to_link_is_refused():
+    # each link's force code runs in a lane loop of its own (loop 2ab), so a temporary kept
+    # from the link before would read whatever the last lane of another loop left there
+    class Carrying(ToyLaw):
+        def emit_link_forces(self, code, link, still_water):
+            super().emit_link_forces(code, link, still_water)
+            code.line("fxn = fxn + fl_sum")
+            code.line("fl_sum = fxn")
+
+    layout = codegen.make_layout(3, 4, Carrying())
+    with pytest.raises(ValueError, match=r"fluid law 'toy_linear'.*link 1 reads \['fl_sum'\] "
+                       "before assigning"):
+        codegen.emit_law_forces(codegen._Emitter(layout), 1, False)
+
+
 @pytest.mark.slow
 def test_a_new_law_works_from_the_robot_description_to_the_batched_kernel(toy_law):
     # the robot's [hydrodynamics] names the law and its own coefficients; the model, the

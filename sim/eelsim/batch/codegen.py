@@ -88,9 +88,10 @@ _ROTATE_LIMIT = 0.1
 # stage); every this many steps stage 1 computes them in full again, so that the chain's rounding
 # stays below 1e-14.
 _RESYNC_STEPS = 16
-# what the backward recursion hands from one link's lane loop to the next (rows ``carry``): the
-# articulated inertia P and bias z at the joint point, and the pivot flag
-_CARRY = ("pxx", "pxy", "pyy", "zx", "zy", "bad")
+# what the backward sweep hands from one link's lane loop to the next (rows ``carry``): the
+# articulated inertia P and bias z at the joint point, the pivot flag and the velocity (relative
+# to the water) of the joint point the walk down the chain has reached
+_CARRY = ("pxx", "pxy", "pyy", "zx", "zy", "bad", "lvx", "lvy")
 
 
 def screen_pairs(n_links: int) -> list[tuple[int, int]]:
@@ -363,17 +364,20 @@ def _head_velocity(e: _Emitter) -> None:
 
 
 def _joint_law(e: _Emitter, plain: bool) -> None:
-    """Emit loop 1c: every joint's law (control.gait_reference, the joint model's drive).
+    """Emit 1c: every joint's law (control.gait_reference, the joint model's drive).
 
     The torques u of a torque-driven model (the PD law, clipped to the servo line unless
-    ``plain``) or the accelerations phi_ddot of a kinematic one (the servo law).
+    ``plain``) or the accelerations phi_ddot of a kinematic one (the servo law). At the start of
+    the backward sweep's first loop (_backward_sweep): the joints' chains of clamps run beside
+    the head's fluid force (as a loop of its own before it, the stage took 1.01-1.02 times as
+    long; docs/kernel_history.md, session 13).
     """
     n = e.layout.n_links
     line, w, o = e.line, e.w, e.o
     model = e.layout.joints
     target = "jacc" if model.kinematic else "torque"
-    title = "1c. joint accelerations" if model.kinematic else "1c. joint torques"
-    e.loop(title + (" (no servo line)" if plain and not model.kinematic else ""), indent=4)
+    title = "joint accelerations" if model.kinematic else "joint torques"
+    line(f"# 1c. {title}" + (" (no servo line)" if plain and not model.kinematic else ""))
     line("# the gait phase's sin and cos give each joint's by angle addition; joint jt lies")
     line("# between links jt and jt + 1 and acts +u on link jt + 1, -u on link jt")
     line(f"sp = {o('gait_sin')}")
@@ -429,12 +433,28 @@ def _assigned(lines: list[str]) -> set[str]:
     return names
 
 
+def _read_before_assigned(lines: list[str], prefix: str) -> list[str]:
+    """The names starting with ``prefix`` that the statements ``lines`` read before assigning."""
+    assigned: set[str] = set()
+    early: set[str] = set()
+    for text in lines:
+        tree = ast.parse(text.strip())
+        for node in ast.walk(tree):  # a statement's reads come before its own assignment
+            if (isinstance(node, ast.Name) and isinstance(node.ctx, ast.Load)
+                    and node.id.startswith(prefix) and node.id not in assigned):
+                early.add(node.id)
+        assigned |= _assigned([text])
+    return sorted(early)
+
+
 def emit_law_forces(e: _Emitter, link: int, still_water: bool) -> None:
     """Emit the fluid law's code for one link (its batched form), after checking what it assigns.
 
     The law may assign only its outputs and ``fl_`` temporaries
     (:meth:`eelsim.fluid.FluidLaw.emit_link_forces`), and must assign every output: a law that
-    clobbered the sweep's locals would give wrong numbers silently.
+    clobbered the sweep's locals would give wrong numbers silently. Nor may it read a
+    temporary before assigning it for this link: each link's code runs in a lane loop of its
+    own (torque-driven joints, loop 2ab), where another link's value is not there.
 
     Parameters
     ----------
@@ -453,6 +473,13 @@ def emit_law_forces(e: _Emitter, link: int, still_water: bool) -> None:
     law = e.layout.law
     start = len(e.lines)
     law.emit_link_forces(e, link, still_water)
+    carried = _read_before_assigned(e.lines[start:], KERNEL_TEMPORARY_PREFIX)
+    if carried:
+        raise ValueError(
+            f"fluid law {law.name!r}: its kernel code for link {link} reads {carried} before "
+            "assigning them; each link's code runs in a lane loop of its own, so a temporary "
+            "cannot carry from one link to another"
+        )
     assigned = _assigned(e.lines[start:])
     wrong = sorted(name for name in assigned if name not in KERNEL_OUTPUTS
                    and not name.startswith(KERNEL_TEMPORARY_PREFIX))
@@ -466,106 +493,51 @@ def emit_law_forces(e: _Emitter, link: int, still_water: bool) -> None:
 
 
 def _backward_sweep(e: _Emitter, plain: bool) -> None:
-    """Emit loops 2a and 2b, the backward sweep (see _stage_body).
+    """Emit loop 2, the backward sweep (see _stage_body): head to tail, one lane loop per link.
+
+    The first loop starts with the joints' law (1c, _joint_law).
+    Torque-driven joints: link j's loop (2ab) walks the velocity down to link j, gives its
+    fluid force and torque and then its step of the articulated-body recursion; P, z, the pivot
+    flag and the walk's velocity go on to link j - 1's loop through rows ``carry``. The force
+    work does not wait on the recursion's chain (P, the pivot, its division, P again), so the
+    processor runs it beside the chain of the loop before: as a loop of its own before the
+    recursion (session 5's shape) the stage took 1.06 times as long on the AVX-512 VM, whose
+    16-lane block is only two vectors, two chains in flight (docs/kernel_history.md, session 13).
+    Kinematic joints: one loop (2a) of every link's force and torque, for loop 2s.
 
     ``plain``: for blocks whose lanes all have no servo line and no current, without those terms
     (the numbers are the same: the general code adds exact zeros and clamps at infinity there).
     """
     n = e.layout.n_links
-    line, w, o = e.line, e.w, e.o
+    line, o = e.line, e.o
     suffix = " (no servo line, no current)" if plain else ""
-    e.loop("2a. link velocities, fluid forces and torques" + suffix, indent=4)
-    line("# Each link's velocity relative to the water walks down the chain from the head's:")
-    line("# (lvx, lvy) is that of the joint point in front of link j, the link's centre is")
-    line("# h om n_j = h om (-s, c) behind it and the next joint point as much again. The fluid")
-    line(f"# law ({e.layout.law.name}) gives minus its force (fxn, fyn), minus the normal part fnn")
-    line("# and minus its torque tqn; k = h om^2: centripetal acceleration -k t.")
-    line(f"lvx = {o('head_vx')}")
-    line(f"lvy = {o('head_vy')}")
-    for j in reversed(range(n)):
-        line(f"s = {o('sin', j)}")
-        line(f"c = {o('cos', j)}")
-        line(f"om = {w('y', n + 2 + j)}")
-        line(f"h = {w('half_length', j)}")
-        line("hw = h * om")
-        line("hws = hw * s")
-        line("hwc = hw * c")
-        if j < n - 1:  # the head's row holds its centre's velocity already
-            line("lvx = lvx + hws")
-            line("lvy = lvy - hwc")
-        emit_law_forces(e, j, still_water=plain)
-        line(f"{o('fxn', j)} = fxn")
-        line(f"{o('fyn', j)} = fyn")
-        if e.layout.joints.kinematic:
-            line(f"{o('tqf', j)} = -tqn")
-        else:
-            if 0 < j < n - 1:
-                joint = f"({o('torque', j - 1)} - {o('torque', j)})"
-            elif j > 0:
-                joint = o("torque", j - 1)
-            else:
-                joint = f"-{o('torque', j)}"
-            line(f"tq = {joint} - tqn")
-            line("# n . F_j is -fnn")
-            line(f"{o('rho0', j)} = tq - h * fnn")
-        line(f"{o('kc', j)} = h * (om * om)")
-        if j > 0:
-            line("lvx = lvx + hws")
-            line("lvy = lvy - hwc")
     if e.layout.joints.kinematic:
+        e.loop("2a. the joints' law, link velocities, fluid forces and torques" + suffix, indent=4)
+        _joint_law(e, plain)
+        _link_forces_comment(e)
+        line(f"lvx = {o('head_vx')}")
+        line(f"lvy = {o('head_vy')}")
+        for j in reversed(range(n)):
+            _link_forces(e, j, plain)
         return
     for j in reversed(range(n)):
-        e.loop(f"2b. articulated-body recursion, link {j}", indent=4)
+        law = "the joints' law (1c); " if j == n - 1 else ""
+        e.loop(f"2ab. link {j}: {law}its velocity, fluid force and torque, its step of the"
+               f" articulated-body recursion{suffix}", indent=4)
         if j == n - 1:
+            _joint_law(e, plain)
+            _link_forces_comment(e)
             line("# Articulated-body recursion (module docstring): the links beyond joint j push on")
             line("# link j with f = z - P e_j, e_j the acceleration of the joint point (P: 2x2")
-            line("# articulated inertia through a free pin, z: bias force). One lane loop per link:")
-            line("# P, z and the pivot flag go from one to the next through rows ``carry``.")
+            line("# articulated inertia through a free pin, z: bias force).")
+            line(f"lvx = {o('head_vx')}")
+            line(f"lvy = {o('head_vy')}")
             line("bad = 0.0")
         else:
             for index, name in enumerate(_CARRY):
                 line(f"{name} = {o('carry', index)}")
-        line(f"s = {o('sin', j)}")
-        line(f"c = {o('cos', j)}")
-        line(f"m = {w('mass', j)}")
-        line(f"mu = {w('mu', j)}")
-        line(f"hm = {w('hm', j)}")
-        line(f"k = {o('kc', j)}")
-        if j == n - 1:  # the head: nothing beyond it
-            line("wx = -hm * s")
-            line("wy = hm * c")
-            line(f"dd = {w('dd0', j)}")
-            line(f"rho = {o('rho0', j)}")
-        else:
-            line("anx = c * pxy - s * pxx")  # P n
-            line("any = c * pyy - s * pxy")
-            line("atx = c * pxx + s * pxy")  # P t
-            line("aty = c * pxy + s * pyy")
-            line(f"hh = {w('half_length', j)} + {w('half_length', j)}")
-            line("wx = hh * anx - hm * s")
-            line("wy = hh * any + hm * c")
-            line(f"dd = {w('dd0', j)} + {w('four_h2', j)} * (c * any - s * anx)")
-            line(f"rho = {o('rho0', j)} + hh * ((c * zy - s * zx) + (k + k) * (c * anx + s * any))")
-        line("bad = 1.0 if dd <= 0.0 else bad")
-        line("inv = 1.0 / dd")
-        line("rd = rho * inv")
-        line("gx = wx * inv")
-        line("gy = wy * inv")
-        line(f"{o('gx', j)} = gx")
-        line(f"{o('gy', j)} = gy")
-        line(f"{o('rd', j)} = rd")
-        if j == n - 1:
-            line("pxx = (m + mu * (s * s)) - gx * wx")
-            line("pxy = -mu * (s * c) - gx * wy")
-            line("pyy = (m + mu * (c * c)) - gy * wy")
-            line(f"zx = (m * k * c - {o('fxn', j)}) - wx * rd")
-            line(f"zy = (m * k * s - {o('fyn', j)}) - wy * rd")
-        else:
-            line("pxx = (pxx + (m + mu * (s * s))) - gx * wx")
-            line("pxy = (pxy - mu * (s * c)) - gx * wy")
-            line("pyy = (pyy + (m + mu * (c * c))) - gy * wy")
-            line(f"zx = ((zx - {o('fxn', j)}) + k * (m * c + (atx + atx))) - wx * rd")
-            line(f"zy = ((zy - {o('fyn', j)}) + k * (m * s + (aty + aty))) - wy * rd")
+        _link_forces(e, j, plain)
+        _recursion_link(e, j)
         if j > 0:
             for index, name in enumerate(_CARRY):
                 line(f"{o('carry', index)} = {name}")
@@ -581,6 +553,97 @@ def _backward_sweep(e: _Emitter, plain: bool) -> None:
     line(f"{o('bad_pivot')} = max({o('bad_pivot')}, bad)")
 
 
+def _link_forces_comment(e: _Emitter) -> None:
+    line = e.line
+    line("# Each link's velocity relative to the water walks down the chain from the head's:")
+    line("# (lvx, lvy) is that of the joint point in front of link j, the link's centre is")
+    line("# h om n_j = h om (-s, c) behind it and the next joint point as much again. The fluid")
+    line(f"# law ({e.layout.law.name}) gives minus its force (fxn, fyn), minus the normal part fnn")
+    line("# and minus its torque tqn; k = h om^2: centripetal acceleration -k t.")
+
+
+def _link_forces(e: _Emitter, j: int, plain: bool) -> None:
+    """Emit link j's velocity (walking (lvx, lvy) on), fluid force and torque (rows fxn, ...)."""
+    n = e.layout.n_links
+    line, w, o = e.line, e.w, e.o
+    line(f"s = {o('sin', j)}")
+    line(f"c = {o('cos', j)}")
+    line(f"om = {w('y', n + 2 + j)}")
+    line(f"h = {w('half_length', j)}")
+    line("hw = h * om")
+    line("hws = hw * s")
+    line("hwc = hw * c")
+    if j < n - 1:  # the head's row holds its centre's velocity already
+        line("lvx = lvx + hws")
+        line("lvy = lvy - hwc")
+    emit_law_forces(e, j, still_water=plain)
+    line(f"{o('fxn', j)} = fxn")
+    line(f"{o('fyn', j)} = fyn")
+    if e.layout.joints.kinematic:
+        line(f"{o('tqf', j)} = -tqn")
+    else:
+        if 0 < j < n - 1:
+            joint = f"({o('torque', j - 1)} - {o('torque', j)})"
+        elif j > 0:
+            joint = o("torque", j - 1)
+        else:
+            joint = f"-{o('torque', j)}"
+        line(f"tq = {joint} - tqn")
+        line("# n . F_j is -fnn")
+        line(f"{o('rho0', j)} = tq - h * fnn")
+    line(f"{o('kc', j)} = h * (om * om)")
+    if j > 0:
+        line("lvx = lvx + hws")
+        line("lvy = lvy - hwc")
+
+
+def _recursion_link(e: _Emitter, j: int) -> None:
+    """Emit link j's step of the articulated-body recursion (P, z, the pivot flag; rows gx...)."""
+    n = e.layout.n_links
+    line, w, o = e.line, e.w, e.o
+    line(f"s = {o('sin', j)}")
+    line(f"c = {o('cos', j)}")
+    line(f"m = {w('mass', j)}")
+    line(f"mu = {w('mu', j)}")
+    line(f"hm = {w('hm', j)}")
+    line(f"k = {o('kc', j)}")
+    if j == n - 1:  # the head: nothing beyond it
+        line("wx = -hm * s")
+        line("wy = hm * c")
+        line(f"dd = {w('dd0', j)}")
+        line(f"rho = {o('rho0', j)}")
+    else:
+        line("anx = c * pxy - s * pxx")  # P n
+        line("any = c * pyy - s * pxy")
+        line("atx = c * pxx + s * pxy")  # P t
+        line("aty = c * pxy + s * pyy")
+        line(f"hh = {w('half_length', j)} + {w('half_length', j)}")
+        line("wx = hh * anx - hm * s")
+        line("wy = hh * any + hm * c")
+        line(f"dd = {w('dd0', j)} + {w('four_h2', j)} * (c * any - s * anx)")
+        line(f"rho = {o('rho0', j)} + hh * ((c * zy - s * zx) + (k + k) * (c * anx + s * any))")
+    line("bad = 1.0 if dd <= 0.0 else bad")
+    line("inv = 1.0 / dd")
+    line("rd = rho * inv")
+    line("gx = wx * inv")
+    line("gy = wy * inv")
+    line(f"{o('gx', j)} = gx")
+    line(f"{o('gy', j)} = gy")
+    line(f"{o('rd', j)} = rd")
+    if j == n - 1:
+        line("pxx = (m + mu * (s * s)) - gx * wx")
+        line("pxy = -mu * (s * c) - gx * wy")
+        line("pyy = (m + mu * (c * c)) - gy * wy")
+        line(f"zx = (m * k * c - {o('fxn', j)}) - wx * rd")
+        line(f"zy = (m * k * s - {o('fyn', j)}) - wy * rd")
+    else:
+        line("pxx = (pxx + (m + mu * (s * s))) - gx * wx")
+        line("pxy = (pxy - mu * (s * c)) - gx * wy")
+        line("pyy = (pyy + (m + mu * (c * c))) - gy * wy")
+        line(f"zx = ((zx - {o('fxn', j)}) + k * (m * c + (atx + atx))) - wx * rd")
+        line(f"zy = ((zy - {o('fyn', j)}) + k * (m * s + (aty + aty))) - wy * rd")
+
+
 def _stage_body(layout: Layout) -> list[str]:
     """One RK4 stage for every lane, as a series of short loops over the lanes (see below).
 
@@ -591,13 +654,18 @@ def _stage_body(layout: Layout) -> list[str]:
     through rows of ``out`` once instead of through many spills. The recursion, whose chain
     (P, the pivot, its division, P again) is long, runs one short loop per link, so that the
     processor overlaps the lane vectors' chains; loops without such a chain gain nothing from
-    being cut (docs/kernel_history.md, session 5).
+    being cut (docs/kernel_history.md, session 5). Where a loop's chain leaves the processor
+    idle, independent work shares the loop: each link's fluid force rides in its recursion
+    loop, and the RK4 sums of the rows that do not wait for the accelerations in the forward
+    sweep's (session 13).
 
     1. sin and cos of the link angles (a/b) and of the gait phase, the head's velocity;
-       1c. every joint's torque;
-    2. the backward sweep (head to tail): 2a. each link's velocity, fluid force and torque;
-       2b. the articulated-body recursion, one loop per link; the tail's 2 x 2 solve;
-    3. the forward sweep (tail to head); 4. the RK4 sums.
+    2. the backward sweep (head to tail), one loop per link: its velocity, fluid force and
+       torque, its step of the articulated-body recursion; the tail's 2 x 2 solve (kinematic
+       joints: one loop of the forces); 1c, every joint's torque or acceleration, at the start
+       of its first loop;
+    3. the forward sweep (tail to head; kinematic joints: 2s, the 3 x 3 balance), inside
+       4. the RK4 sums' loop.
     """
     n = layout.n_links
     e = _Emitter(layout)
@@ -661,17 +729,11 @@ def _stage_body(layout: Layout) -> list[str]:
     e.indent = 0
 
     e.lines.append("    if plain:")
-    _joint_law(e, True)
     _backward_sweep(e, True)
     e.lines.append("    else:")
-    _joint_law(e, False)
     _backward_sweep(e, False)
     e.indent = 0
 
-    if layout.joints.kinematic:
-        _prescribed_shape(e)
-    else:
-        _forward_sweep(e)
     _rk4_sums(e)
     e.lines.append("    if first:")
     if layout.joints.kinematic:
@@ -717,10 +779,10 @@ def _torque_use(e: _Emitter) -> None:
 
 
 def _forward_sweep(e: _Emitter) -> None:
-    """Emit loop 3, the articulated-body recursion's forward sweep (see _stage_body)."""
+    """Emit the articulated-body recursion's forward sweep (3, in the RK4 sums' loop)."""
     n = e.layout.n_links
     line, w, o = e.line, e.w, e.o
-    e.loop("3. forward sweep")
+    line("# 3. the forward sweep (in the RK4 sums' loop)")
     line("# tail to head: theta_ddot_j = rd_j - g_j . e_j, link centre acceleration a_j = e + d")
     line("# and the next joint point's e + 2 d, d = h theta_ddot n - k t; p_ddot = sum_j w_j a_j.")
     line("# Written so that the chain from one joint point to the next is two multiply-adds for")
@@ -752,8 +814,11 @@ def _forward_sweep(e: _Emitter) -> None:
     line(f"{o('qdd', n + 1)} = pdy")
 
 
-def _prescribed_shape(e: _Emitter) -> None:
-    """Emit loop 2s: kinematic joints, the 3 x 3 system of the body's force and moment balance.
+def _prescribed_shape(e: _Emitter, part: str) -> None:
+    """Emit 2s: kinematic joints, the 3 x 3 system of the body's force and moment balance.
+
+    In two parts, both in the RK4 sums' loop (``_rk4_sums``): ``"sums"``, the chain over the
+    links and the balance's sums, and ``"solve"``, the 3 x 3 solve and the accelerations.
 
     docs/model.md section 4 ("Joint models") and ``eelsim.dynamics.prescribed_shape_accelerations``
     solve (T^T M T) s_ddot = T^T (Q0 - M c) with the dense M; here the same balance is summed
@@ -770,7 +835,10 @@ def _prescribed_shape(e: _Emitter) -> None:
     """
     n = e.layout.n_links
     line, w, o = e.line, e.w, e.o
-    e.loop("2s. prescribed shape: the body's force and moment balance (3 x 3)")
+    if part == "solve":
+        _shape_solve(e)
+        return
+    line("# 2s. prescribed shape: the body's force and moment balance (3 x 3), in the RK4 sums' loop")
     for name in ("px", "py", "ex", "ey", "beta", "axx", "axy", "ayy", "agx", "agy", "gag",
                  "itot", "rsx", "rsy", "ge", "tb", "pmx", "pmy", "cmx", "cmy"):
         line(f"{name} = 0.0")
@@ -805,6 +873,12 @@ def _prescribed_shape(e: _Emitter) -> None:
         line("pmy = pmy + wj * py")
         line("cmx = cmx + wj * cx")
         line("cmy = cmy + wj * cy")
+
+
+def _shape_solve(e: _Emitter) -> None:
+    """Emit the second part of 2s (see _prescribed_shape): the solve and the accelerations."""
+    n = e.layout.n_links
+    line, o = e.line, e.o
     line("# to the centre of mass: Gm = R Pm, and A Gm, A Cm with A = sum A_j")
     line("gmx = -pmy")
     line("gmy = pmx")
@@ -912,9 +986,23 @@ def _prescribed_shape_torques(e: _Emitter) -> None:
 
 
 def _rk4_sums(e: _Emitter) -> None:
-    """Emit loops 4a/4b: the RK4 sums of the accelerations in rows qdd (see _stage_body)."""
+    """Emit loops 4a/4b: the accelerations (3 or 2s) and the RK4 sums (see _stage_body).
+
+    The accelerations are computed in the sums' loop, the forward sweep after the sums of the
+    rows whose derivative is a velocity (the angles, the position), the 3 x 3 balance's sums
+    before them and its solve after them: the sweep and the solve are chains that leave the
+    processor idle, and those sums fill the wait (as loops of their own the stage took 1.02-1.06
+    times as long; docs/kernel_history.md, session 13). The sums' order per row is unchanged:
+    the numbers are the same.
+    """
     n = e.layout.n_links
     line, w, o = e.line, e.w, e.o
+
+    def accelerations(i: int) -> None:
+        if e.layout.joints.kinematic and i in (0, n + 2):
+            _prescribed_shape(e, "sums" if i == 0 else "solve")
+        elif i == n + 2:  # the first row whose derivative is an acceleration
+            _forward_sweep(e)
     line("# RK4 bookkeeping of integrate.rk4_step, fused so that the state rows are touched once:")
     line("# stages 1-3: acc = k1, acc + 2 k2, acc + 2 k3 and the next stage's input y = x + a k;")
     line("# stage 4: the new state xn = x + dt/6 (acc + k4) only")
@@ -927,6 +1015,7 @@ def _rk4_sums(e: _Emitter) -> None:
     line("# fastest: the divergence test of the next step's x (the new state, if the lane goes on).")
     line("# Reduced row by row, so that no row's value waits in a register (or on the stack)")
     for i, d in enumerate(deriv):
+        accelerations(i)
         line(f"v = {w('x', i)} + sixth * ({w('acc', i)} + wk * {d})")
         line(f"{w('xn', i)} = v")
         if i < n:
@@ -952,6 +1041,7 @@ def _rk4_sums(e: _Emitter) -> None:
     e.lines.append("    else:")
     e.loop("4a. RK4 accumulator and the next stage's input", indent=4)
     for i, d in enumerate(deriv):
+        accelerations(i)
         line(f"d = {d}")
         line(f"{w('acc', i)} = {w('acc', i)} + wk * d")
         line(f"{w('y', i)} = {w('x', i)} + a * d")
