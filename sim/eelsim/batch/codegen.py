@@ -243,10 +243,10 @@ def make_layout(n_links: int, lanes: int, law: FluidLaw | None = None,
         ("jacc", n - 1),  # kinematic joints: joint j's acceleration phi_ddot_j, loop 1c
         ("tqf", n),  # kinematic joints: the fluid torque on link j, loop 2a
         ("centre", 4),  # kinematic joints: the chain's mean position and acceleration (2s)
-        ("fxn", n),  # minus the fluid force on link j, x and y (loop 2a, for 2b)
+        ("fxn", n),  # minus the fluid force on link j, x and y (loop 2ab for its recursion step; 2a for 2s)
         ("fyn", n),
         ("rho0", n),  # tau_j + h n.F_j: the part of rho_j that the recursion does not change
-        ("carry", len(_CARRY)),  # the recursion's running values from one link's loop to the next
+        ("carry", len(_CARRY)),  # the backward sweep's running values from one link's loop to the next
         ("gx", n),  # w / D: theta_ddot_j = rd_j - g_j . e_j in the forward sweep
         ("gy", n),
         ("rd", n),  # rho / D
