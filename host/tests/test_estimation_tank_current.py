@@ -1,6 +1,7 @@
 """One ambient current for the tank, from the straight and turning experiments together."""
 
 from dataclasses import replace
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -9,7 +10,7 @@ from eelhost.data.experiments import load_dataset, manifest_text, write_experime
 from eelhost.data.virtual_tank import TABLE3, TankSettings, record_experiment
 from eelhost.estimation.methods import FitSettings
 from eelhost.estimation.pipeline import fit_motion
-from eelhost.estimation.tank_current import share_tank_current
+from eelhost.estimation.tank_current import cross_track_axes, share_tank_current, swim_axis
 from eelsim.robot import load_robot
 from eelsim.scenario import load_scenario
 
@@ -156,3 +157,24 @@ def test_the_current_interval_is_the_independent_one_unless_each_experiments_res
 
     half, independent = _interval(shifted)
     assert np.all(half >= independent) and half.max() > 1.5 * independent.max()
+
+
+def test_a_motion_swimming_one_axis_is_told_apart_from_motions_that_do_not():
+    along_x = [np.array([1.0, 0.02]), np.array([1.0, -0.01])]
+    axis = swim_axis(SimpleNamespace(prepared=[_swum(d) for d in along_x]))
+    assert axis is not None and abs(axis[1]) < 0.02 and axis[0] > 0.99
+    # circles and paths: displacements to every side
+    assert swim_axis(SimpleNamespace(prepared=[_swum(d) for d in ([1, 0], [0, 1])])) is None
+    x, at_30 = np.array([1.0, 0.0]), np.array([np.cos(np.pi / 6), np.sin(np.pi / 6)])
+    # across their axes the two motions see the whole plane: each keeps its axis
+    assert [a is b for a, b in zip(cross_track_axes([x, at_30]), [x, at_30], strict=True)] == [
+        True, True]
+    assert cross_track_axes([x, None])[0] is x
+    # every motion along one axis: nothing would see the current along it, so none is decoupled
+    assert cross_track_axes([x, np.array([0.995, 0.0998])]) == [None, None]
+
+
+def _swum(displacement):
+    """A prepared experiment stand-in whose recording moves by ``displacement``."""
+    end = np.asarray(displacement, dtype=float)
+    return SimpleNamespace(experiment=SimpleNamespace(position_m=np.array([[0.0, 0.0], end])))

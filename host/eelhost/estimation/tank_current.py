@@ -7,11 +7,18 @@ against the coefficients that set the swimming speed, so a straight fit alone pu
 misfit into an along-track current; the turning experiments swim every direction, where a current
 and a speed error differ. So, once both fits are made:
 
-1. **Joint fit.** The vector [straight's parameters, turning's parameters, one current] is
-   polished by the minimax trust region (:func:`eelhost.estimation.local.polish_minimax_many`) on
-   every training experiment of both motions, each motion's errors divided by its own fit's
-   fitness (so that both motions weigh alike whatever their misfit), from three starts in lock
-   step: the straight fit's current, the turning fit's and still water.
+1. **Joint fit.** The vector [straight's parameters, turning's parameters, each one-axis
+   motion's current along its axis, one current] is polished by the minimax trust region
+   (:func:`eelhost.estimation.local.polish_minimax_many`) on every training experiment of both
+   motions, each motion's errors divided by its own fit's fitness (so that both motions weigh
+   alike whatever their misfit), from three starts in lock step: the straight fit's current, the
+   turning fit's and still water. A motion whose experiments all swim to one side
+   (:func:`swim_axis`: the paper's straight gaits along x, its turning gaits towards their
+   waypoint at 30 deg) swims in the tank's current plus a current of its own along that axis:
+   along its axis a current is a speed error its coefficients can make as well, and the bundled
+   noise decided which; across it, it is a drift nothing else makes. So the tank's current is
+   what the motions see across their axes (:func:`cross_track_axes`: only when those views span
+   the plane; otherwise nothing is decoupled).
 2. **Its interval.** The current's linearised standard error s on the joint problem (the
    residuals of both motions stacked, the Jacobian in the unit cube, the residual variance from
    the residuals, never below the pixel rounding's, the other parameters profiled out), and the
@@ -59,6 +66,8 @@ Z_95 = 1.959964  # the normal's 97.5 % quantile: the interval c +- z s
 # Least half-width of the held interval, m/s: a tenth of a mm/s, so that a polish's unit cube
 # keeps a range its finite differences can step in.
 MIN_HALF_WIDTH_M_S = 1e-4
+# Experiments whose net displacements all lie within this of their mean direction swim one axis.
+AXIS_SPREAD_DEG = 20.0
 
 
 @dataclass(frozen=True)
@@ -156,15 +165,25 @@ def share_tank_current(
     own = [np.asarray(fits[m].values, dtype=float) for m in motions]
     ks = [ev.space.size - 2 for ev in evs]  # each motion's parameters before the current
     scale = [1.0 / max(float(fits[m].fitness), 1e-9) for m in motions]
+    # a motion whose experiments all swim along one axis gets a current of its own along it
+    # (module doc, step 1): there it is a speed error, so the tank's current is what the other
+    # motions see along that axis and what every motion sees across it
+    axes = cross_track_axes([swim_axis(ev) for ev in evs])
+    axial = [i for i, d in enumerate(axes) if d is not None]
     cube = _JointCube(np.vstack(
         [ev.space.bounds[:k] for ev, k in zip(evs, ks, strict=True)]
-        + [np.tile([-CURRENT_BOUND_M_S, CURRENT_BOUND_M_S], (2, 1))]))
+        + [np.tile([-2 * CURRENT_BOUND_M_S, 2 * CURRENT_BOUND_M_S], (len(axial), 1))]
+        + [np.tile([-CURRENT_BOUND_M_S, CURRENT_BOUND_M_S], (2, 1))]).reshape(-1, 2))
+    first_extra = sum(ks)
 
     def split(x: np.ndarray) -> list[np.ndarray]:
         """The joint vectors (C, K) as each motion's vectors (C, k_m + 2)."""
         out, at = [], 0
-        for k in ks:
-            out.append(np.hstack([x[:, at:at + k], x[:, -2:]]))
+        for i, k in enumerate(ks):
+            current = x[:, -2:]
+            if axes[i] is not None:
+                current = current + x[:, first_extra + axial.index(i), None] * axes[i]
+            out.append(np.hstack([x[:, at:at + k], current]))
             at += k
         return out
 
@@ -182,8 +201,13 @@ def share_tank_current(
         return [(e_all[a:b], v_all[a:b]) for a, b in zip(edges[:-1], edges[1:], strict=True)]
 
     body = np.concatenate([x[:k] for x, k in zip(own, ks, strict=True)])
-    starts = np.array([np.concatenate([body, x[-2:]]) for x in own]
-                      + [np.concatenate([body, np.zeros(2)])])
+
+    def start(current: np.ndarray) -> np.ndarray:
+        # each axial motion's own current along its axis: what its fit found beyond ``current``
+        extra = [float((own[i][-2:] - current) @ axes[i]) for i in axial]  # type: ignore[operator]
+        return np.concatenate([body, extra, current])
+
+    starts = np.array([start(x[-2:]) for x in own] + [start(np.zeros(2))])
     results = polish_minimax_many(evaluate, cast(ParameterSpace, cube), starts, JOINT_ITERATIONS)
     best = min(results, key=lambda r: r.fitness)
     joint = np.asarray(best.values, dtype=float)
@@ -195,7 +219,9 @@ def share_tank_current(
             [np.maximum(current - half, -CURRENT_BOUND_M_S),
              np.minimum(current + half, CURRENT_BOUND_M_S)]))
         held_ev = ev.with_space(held)
-        pol = polish_minimax(held_ev.evaluate, held, part[0], HOLD_ITERATIONS)
+        # from its joint-fit parameters in the tank's current (not its own along its axis)
+        begin = np.concatenate([part[0][:-2], current])
+        pol = polish_minimax(held_ev.evaluate, held, begin, HOLD_ITERATIONS)
         runs = held_ev.simulations
         ev.simulations += runs  # the motion's count of simulations includes these
         held_ev.simulations = ev.simulations
@@ -213,6 +239,45 @@ def share_tank_current(
             f"{m} {1e3 * np.hypot(*c):.1f} mm/s towards {np.degrees(np.arctan2(c[1], c[0])):.0f} deg"
             for m, c in tank.per_motion_m_s.items()))
     return new_fits, new_evs, tank
+
+
+def swim_axis(ev: Evaluator) -> np.ndarray | None:
+    """The unit axis every experiment of ``ev`` swims along, or None.
+
+    From the recordings: each one's net displacement, first frame to last. One axis when every
+    displacement lies within ``AXIS_SPREAD_DEG`` of their mean direction (the straight gaits);
+    circles and paths swim every direction.
+    """
+    moves = np.array([p.experiment.position_m[-1] - p.experiment.position_m[0]
+                      for p in ev.prepared])
+    lengths = np.linalg.norm(moves, axis=1)
+    if np.any(lengths <= 0):
+        return None
+    units = moves / lengths[:, None]
+    mean = units.mean(axis=0)
+    if np.linalg.norm(mean) == 0:
+        return None
+    axis = mean / np.linalg.norm(mean)
+    if np.any(units @ axis < np.cos(np.radians(AXIS_SPREAD_DEG))):
+        return None
+    return axis
+
+
+def cross_track_axes(axes: list[np.ndarray | None]) -> list[np.ndarray | None]:
+    """The motions' swim axes, or all None where their cross-track drifts cannot fix a current.
+
+    Across its axis each one-axis motion sees the current; along it, only the motions that are
+    not one-axis do. The current is found when those views span the plane: a motion without an
+    axis, or two axes more than ``AXIS_SPREAD_DEG`` apart. Otherwise (every motion along one
+    axis) nothing is decoupled and each motion's along-track current is the tank's, as before.
+    """
+    given = [d for d in axes if d is not None]
+    if len(given) < len(axes):
+        return axes
+    spread = np.cos(np.radians(AXIS_SPREAD_DEG))
+    if any(abs(float(a @ b)) < spread for a in given for b in given):
+        return axes
+    return [None] * len(axes)
 
 
 def _half_width(evs: list[Evaluator], cube: _JointCube,
