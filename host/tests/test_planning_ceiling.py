@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
-from eelhost.planning.ceiling import CELL_M, share_at_least, world_ceiling
+from eelhost.planning.ceiling import CELL_M, distance_field, share_at_least, world_ceiling
+from eelhost.planning.field import signed_clearance
 from eelhost.planning.world import parse_world
+from eelhost.planning.worlds import generate_world
 
 LENGTH_M = 0.64
 
@@ -66,3 +69,16 @@ def test_the_start_clearance_is_the_straight_body_from_the_nearest_wall():
 
 def test_shares_count_values_at_or_above_each_threshold():
     assert share_at_least([0.1, 0.2, 0.3, 0.4], [0.1, 0.25, 0.5]) == [1.0, 0.5, 0.0]
+
+
+def test_the_ceiling_distance_field_agrees_with_the_planners_exact_clearance():
+    # two implementations written apart: shapely's distance (the ceiling) and the planner's
+    # signed clearance (eelhost.planning.field), on a generated world, outside the obstacles
+    world = generate_world(8000)
+    xs, ys, clearance = distance_field(world, 0.05)
+    gx, gy = np.meshgrid(xs, ys)
+    planner = signed_clearance(world, np.c_[gx.ravel(), gy.ravel()]).reshape(gx.shape)
+    outside = planner > 0
+    assert outside.mean() > 0.5
+    assert np.allclose(clearance[outside], planner[outside], atol=1e-4)
+    assert np.all(clearance[~outside] <= 1e-9)
