@@ -1127,3 +1127,52 @@ def test_an_escape_the_twin_swims_into_contact_stops_the_robot_while_its_next_re
     assert stop is not None and stop[1].stop == "no_safe_continuation"
     assert "has not come back" in stop[1].detail
     assert stop[0] - switched <= 2 * nav.lookahead_every_s + 0.1  # at the next look-ahead
+
+
+class EscapeThenPlan(EscapingReplanner):
+    """An escape, then a plan to the goal from its end."""
+
+    def _replan(self, est, left, start_step, extra, guide=None,  # noqa: ANN001, ANN202
+                deadline_s=None):  # noqa: ANN001
+        if not self.asked:
+            return super()._replan(est, left, start_step, extra, guide, deadline_s)
+        self.asked.append(start_step)
+        com = np.asarray([[1.1 + 0.01 * k, 1.4 - 0.004 * k] for k in range(101)])
+        leg = Leg((2.1, 1.0), 1.08, -20.0, start_step, start_step + 1200, com, 0.1, goal=True)
+        plan = Plan(True, "found", "", [leg], start_step * 0.01 + 12.0,
+                    start_guide=(1.1, 1.4, 0.0, 0.0))
+        return (Outcome(plan, "found", "plan found"), est.state, 0.0, 0.0, np.zeros(2),
+                time.monotonic(), start_step)
+
+
+def test_a_plan_from_an_escapes_end_is_switched_in_when_the_robot_reaches_the_escape_early(
+        open_plan):
+    # the robot accepts the escape's waypoint before the twin put it at the leg's end: the plan
+    # from that end is switched in at once (the loop would otherwise end the run at its last
+    # waypoint, as if arrived)
+    planner, outcome = open_plan
+    nav = EscapeThenPlan(lambda extra: planner, planner, outcome, PATH_GAIT,
+                         estimate_current=False)
+    nav.asked = []
+    escape_at = None
+    got = None
+    try:
+        for k in range(10 * 30):
+            t = k / 30
+            target = 1 if escape_at is not None and t >= escape_at + 0.5 else 0
+            d = nav.on_frame(t, pose_at(t, (0.8, 1.4)), np.array([0.8, 1.4, 0.0]), target, 0.0)
+            assert d.stop is None and not d.arrived
+            if d.waypoints is not None and escape_at is None:
+                escape_at = t
+            elif d.waypoints is not None:
+                got = (t, d.waypoints)
+                break
+            nav._worker.submit(lambda: None).result()
+            nav._side.submit(lambda: None).result()
+    finally:
+        nav.close()
+    assert escape_at is not None and got is not None
+    end_s = nav.events[1]["escape_end_s"]
+    assert got[1] == [(2.1, 1.0)]
+    assert got[0] == pytest.approx(escape_at + 0.5, abs=0.04) and got[0] < end_s - 1.0
+    assert nav._escape_end_step is None  # the robot is on a plan to the goal again

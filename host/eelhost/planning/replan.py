@@ -281,6 +281,10 @@ ESCAPE_CHECK_MARGIN_M = 0.005
 """The escape leg's check: the body's own outline this far from everything in every run (the
 fits as fitted and every draw of the water), up to its waypoint's acceptance."""
 
+ESCAPE_END_CLEARANCE_M = 0.05
+"""Escape legs whose end keeps the capsule this far from everything (the planner's search margin
+beyond the half width) rank alike on their end; among them the longer leg comes first."""
+
 ESCAPE_TRIES = 3
 """The escape legs (the clearest at their end first) the searches are run from."""
 
@@ -320,8 +324,9 @@ def escape_legs(planner: Planner, state: FloatArray, step: int, guide: Guide,
     Every leg of :data:`ESCAPE_DISTANCES_M` at :data:`ESCAPE_BEARINGS_DEG` from the body's mean
     heading is swum in one batch of the planner's twin (in its current) from ``state``; a leg
     counts when its waypoint is accepted and the body's own outline stays ``margin_m`` clear of
-    everything on the way. Best first: the clearest at the leg's end (at most 0.12 m counts),
-    then the nearest to the goal (docs/planning.md, "The escape").
+    everything on the way. Best first: the clearest at the leg's end (up to
+    :data:`ESCAPE_END_CLEARANCE_M`), then the longest, then the nearest to the goal
+    (docs/planning.md, "The escape").
 
     Parameters
     ----------
@@ -382,7 +387,9 @@ def escape_legs(planner: Planner, state: FloatArray, step: int, guide: Guide,
         out.append(EscapeLeg(leg, np.asarray(path[restart], dtype=float), step + restart,
                              runs.guidance_state(j, restart, wp), float(outline.min()),
                              float(capsule[restart])))
-    out.sort(key=lambda e: (-min(e.end_clearance_m, 0.12),
+    # room for the search at the end (its margin: the capsule 50 mm clear), then the longer leg
+    # (the replan from its end has the time the leg takes), then the nearer the goal
+    out.sort(key=lambda e: (-min(e.end_clearance_m, ESCAPE_END_CLEARANCE_M), -e.leg.distance_m,
                             float(np.hypot(*(e.end_state[n : n + 2] - goal)))))
     return out
 
@@ -771,7 +778,12 @@ class TankReplanner:
         d.recorded |= self._collect(t_s, d)
         if d.stop is not None:
             return d
-        if self._pending is not None and t_s >= self._pending[0] - 1e-9:
+        at_escape_end = (self._escape_end_step is not None
+                         and target >= len(self.waypoints))
+        if self._pending is not None and (t_s >= self._pending[0] - 1e-9 or at_escape_end):
+            # due; or the robot reached its escape's waypoint before the twin put it at the
+            # leg's end: the plan from that end now, or the loop reads the last waypoint as the
+            # end of the run
             d.waypoints, d.guide = self._pending[1], self._pending[2]
             self.waypoints = list(d.waypoints)
             self._pending = None
@@ -783,8 +795,7 @@ class TankReplanner:
             self.replans += 1
             d.recorded = True
             return d
-        if (self._escape_end_step is not None and target >= len(self.waypoints)
-                and self._pending is None):
+        if at_escape_end and self._pending is None:
             # the escape's waypoint is reached and no plan from it has come: stop here rather
             # than let the loop read the last waypoint as the end of the run
             d.stop = "no_safe_continuation"
