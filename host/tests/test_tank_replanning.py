@@ -1125,7 +1125,7 @@ def test_an_escape_the_twin_swims_into_contact_stops_the_robot_while_its_next_re
         nav.close()
     assert switched is not None and len(nav.asked) == 2  # the replan from its end is running
     assert stop is not None and stop[1].stop == "no_safe_continuation"
-    assert "has not come back" in stop[1].detail
+    assert "escape leg into an obstacle" in stop[1].detail
     assert stop[0] - switched <= 2 * nav.lookahead_every_s + 0.1  # at the next look-ahead
 
 
@@ -1176,3 +1176,65 @@ def test_a_plan_from_an_escapes_end_is_switched_in_when_the_robot_reaches_the_es
     assert got[1] == [(2.1, 1.0)]
     assert got[0] == pytest.approx(escape_at + 0.5, abs=0.04) and got[0] < end_s - 1.0
     assert nav._escape_end_step is None  # the robot is on a plan to the goal again
+
+
+class EscapeWaitingIntoContact(EscapeThenPlan):
+    """An escape and a plan from its end, waiting for it while the twin, in the water now
+    estimated, swims the escape 5 mm into an obstacle."""
+
+    def _look_ahead(self, est, left, extra, guide=None, horizon_s=None):  # noqa: ANN001, ANN202
+        waiting = self._escape_end_step is not None and self._pending is not None
+        return (-0.005, 0.0) if waiting else (0.2, 0.2)
+
+
+def test_an_escape_swum_into_contact_stops_the_robot_while_the_plan_from_its_end_waits(
+        open_plan):
+    planner, outcome = open_plan
+    nav = EscapeWaitingIntoContact(lambda extra: planner, planner, outcome, PATH_GAIT,
+                                   estimate_current=False)
+    nav.asked = []
+    stop = None
+    try:
+        for k in range(10 * 30):
+            t = k / 30
+            d = nav.on_frame(t, pose_at(t, (0.8, 1.4)), np.array([0.8, 1.4, 0.0]), 0, 0.0)
+            if d.stop is not None:
+                stop = (t, d)
+                break
+            nav._worker.submit(lambda: None).result()
+            nav._side.submit(lambda: None).result()
+    finally:
+        nav.close()
+    assert len(nav.asked) == 2 and nav._pending is not None  # the plan from the end waited
+    assert stop is not None and stop[1].stop == "no_safe_continuation"
+    assert "escape leg into an obstacle" in stop[1].detail
+    assert stop[0] < nav.events[1]["escape_end_s"] - 1.0  # well before the leg's end
+
+
+class LateEscape(EscapingReplanner):
+    """The escape comes back 0.6 s after the start it was checked from."""
+
+    def _replan(self, est, left, start_step, extra, guide=None,  # noqa: ANN001, ANN202
+                deadline_s=None):  # noqa: ANN001
+        result = super()._replan(est, left, start_step, extra, guide, deadline_s)
+        if len(self.asked) == 1:
+            now = int(round(est.t_s / 0.01))
+            result = (*result[:-1], now - 60)
+        return result
+
+
+def test_an_escape_ready_later_than_a_restart_period_after_its_start_is_not_used(open_plan):
+    planner, outcome = open_plan
+    nav = LateEscape(lambda extra: planner, planner, outcome, PATH_GAIT, estimate_current=False)
+    nav.asked = []
+    try:
+        for k in range(30):
+            t = k / 30
+            d = nav.on_frame(t, pose_at(t, (0.8, 1.4)), np.array([0.8, 1.4, 0.0]), 0, 0.0)
+            assert d.waypoints is None
+            nav._worker.submit(lambda: None).result()
+            nav._side.submit(lambda: None).result()
+    finally:
+        nav.close()
+    assert nav.events[1]["status"] == "stale" and "escape:" in nav.events[1]["message"]
+    assert nav._escape_end_step is None and nav._pending is None

@@ -270,14 +270,14 @@ ESCAPE_BEARINGS_DEG = (0.0, -30.0, 30.0, -60.0, 60.0, -90.0, 90.0, -120.0, 120.0
 ESCAPE_DISTANCES_M = (0.3, 0.5)
 """The escape's first legs' lengths (the search's; shorter ones are accepted too soon)."""
 
-ESCAPE_MARGIN_M = 0.01
+ESCAPE_MARGIN_M = 0.02
 """The escape leg's margin in the twin: the body's own outline (each link's stadium,
 :func:`outline_clearance_m`, the run's contact test's geometry) this far from everything. The
 searches judge every leg with the planner's capsule (the centre line widened by the largest half
 width, reaching 20 mm beyond both tips) plus 10-50 mm, which a body sweeping its tail past an
 obstacle cannot keep while its outline is 20 mm or more clear (docs/planning.md, "The escape")."""
 
-ESCAPE_CHECK_MARGIN_M = 0.005
+ESCAPE_CHECK_MARGIN_M = 0.01
 """The escape leg's check: the body's own outline this far from everything in every run (the
 fits as fitted and every draw of the water), up to its waypoint's acceptance."""
 
@@ -828,14 +828,21 @@ class TankReplanner:
                         f"or wall within {self.lookahead_s:g} s ({-gap * 1000:.0f} mm deep) and "
                         f"the last replan failed: {self.events[-1]['message']}")
             return d
+        if predicted and gap is not None and gap <= 0.0 and self._escape_end_step is not None:
+            # on an escape leg the replan from its end runs, or its plan waits for the end, for
+            # most of the leg: the water that makes the twin swim the checked escape into
+            # contact stops the robot without waiting for either (docs/planning.md)
+            d.stop = "no_safe_continuation"
+            d.detail = (f"at t = {t_s:.2f} s the twin swims the escape leg into an obstacle or "
+                        f"wall within {self.lookahead_s:g} s ({-gap * 1000:.0f} mm deep) in the "
+                        "water now estimated")
+            return d
         job = self._job
         if (predicted and gap is not None and gap <= 0.0 and job is not None
-                and (t_s > job.t_start_s + 1e-9 or self._escape_end_step is not None)):
+                and t_s > job.t_start_s + 1e-9):
             # the replan is late (past its start) and the twin swims the present plan into
             # contact meanwhile: on a loaded machine replans took minutes of wall time, and the
-            # robot swam on into an obstacle before they came back. On an escape leg the replan
-            # from its end runs for most of the leg: the water that makes the twin swim the
-            # checked escape into contact stops the robot without waiting for it
+            # robot swam on into an obstacle before they came back
             d.stop = "no_safe_continuation"
             d.detail = (f"at t = {t_s:.2f} s the twin swims the present plan into an obstacle "
                         f"or wall within {self.lookahead_s:g} s ({-gap * 1000:.0f} mm deep) and "
@@ -860,9 +867,11 @@ class TankReplanner:
         if reason is not None and not busy and t_s >= self._next_try_s:
             self._request(t_s, est, left, reason,
                           self._escape_end_step if reason == "after_escape" else None)
-        elif (self._pending is None and self._lookahead is None and self.lookahead_s > 0
+        elif ((self._pending is None or self._escape_end_step is not None)
+              and self._lookahead is None and self.lookahead_s > 0
               and t_s >= self._next_lookahead_s):
-            # also while a replan runs (on its own worker): a failure is then judged on it
+            # also while a replan runs (on its own worker): a failure is then judged on it; and on
+            # an escape leg while the plan from its end waits for it (seconds, not a frame or two)
             self._next_lookahead_s = t_s + self.lookahead_every_s
             self._lookahead = self._side.submit(self._look_ahead, est, list(left),
                                                   self.current.value_m_s.copy(), self._guide)
@@ -1153,7 +1162,13 @@ class TankReplanner:
         tiers, self._last_tiers = self._last_tiers, {}
         if tiers:
             self.events[-1]["parts_wall_s"] = tiers
-        if outcome.found and self._stale(t_s, job.t_start_s, corridor_path(outcome.plan)):
+        period_s = (self.planner.twin.restart_steps or 1) * self.planner.twin.dt_s
+        late_escape = (outcome.found and self._escape_end(outcome) is not None
+                       and t_s - job.t_start_s > period_s)
+        if outcome.found and (late_escape or self._stale(t_s, job.t_start_s,
+                                                         corridor_path(outcome.plan))):
+            # an escape is checked with little margin from its predicted start: one that comes
+            # later than a restart period after it is not used, in its corridor or not
             # ready long after the state it was planned from, and the robot is no longer in its
             # corridor: it would be left at once; the robot keeps its plan, and replans now
             self.events[-1]["status"] = "stale"
