@@ -1238,3 +1238,25 @@ def test_an_escape_ready_later_than_a_restart_period_after_its_start_is_not_used
         nav.close()
     assert nav.events[1]["status"] == "stale" and "escape:" in nav.events[1]["message"]
     assert nav._escape_end_step is None and nav._pending is None
+
+
+def test_a_replan_whose_searches_all_find_nothing_escapes_only_when_asked_to(open_plan):
+    _, outcome = open_plan
+    wall = Planner(parse_world(WALL_AHEAD, "wall_ahead"), ROBOT, MODEL)
+    nothing = _Scripted(wall, "exhausted", np.inf)  # every search of the replan: no manoeuvre
+    com = estimate_at(3.0).state[N]
+    est = estimate_at(3.0, (3.0 - 0.6 - com, 0.0))
+    step = int(round(3.0 / 0.01)) + 60
+    got = {}
+    for escape in (False, True):
+        nav = TankReplanner(lambda extra: nothing, nothing, outcome,  # type: ignore[arg-type]
+                            PATH_GAIT, goal_planner_for=lambda extra: nothing,
+                            recovery_planner_for=lambda extra: nothing, escape=escape)
+        try:
+            got[escape], *_ = nav._replan(est, [(2.9, 1.1)], step, np.zeros(2))
+            got[escape, "end"] = nav._escape_end(got[escape])
+        finally:
+            nav.close()
+    assert not got[False].found and got[False].status == "exhausted"  # the default: no escape
+    assert got[True].found and got[True].message.startswith("escape:"), got[True].message
+    assert len(got[True].plan.legs) == 1 and got[True, "end"] is not None

@@ -629,9 +629,11 @@ class TankReplanner:
         (:func:`eelhost.planning.tank.plan_for_run`).
     escape : bool
         When every search of a replan found nothing from its start (not refused), try the
-        escape (:func:`escape_plan`): a first leg that keeps the body's own outline
-        :data:`ESCAPE_MARGIN_M` clear in the twin, then the planner's and the goal approach's
-        searches from its end, checked as one plan (docs/planning.md, "The escape").
+        escape (:func:`escape_plan`): one leg that keeps the body's own outline
+        :data:`ESCAPE_MARGIN_M` clear in the twin and :data:`ESCAPE_CHECK_MARGIN_M` in every
+        check run, and plan again from its end while the robot swims it (docs/planning.md, "The
+        escape"). Off by default: on the development seeds it did not raise the share of goals
+        reached.
     """
 
     def __init__(
@@ -657,7 +659,7 @@ class TankReplanner:
         recovery_planner_for: Callable[[FloatArray], Planner] | None = None,
         replan_current_change_m_s: float = 0.005,
         replan_budget_s: float | None = None,
-        escape: bool = True,
+        escape: bool = False,
     ) -> None:
         self.planner_for = planner_for
         self.planner = planner
