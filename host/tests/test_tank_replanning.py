@@ -1260,3 +1260,17 @@ def test_a_replan_whose_searches_all_find_nothing_escapes_only_when_asked_to(ope
     assert not got[False].found and got[False].status == "exhausted"  # the default: no escape
     assert got[True].found and got[True].message.startswith("escape:"), got[True].message
     assert len(got[True].plan.legs) == 1 and got[True, "end"] is not None
+
+
+def test_the_escape_reaches_the_tank_replanner_only_when_eelbot_run_asks_for_it():
+    from eelhost import cli
+    parse = cli.build_parser().parse_args
+    assert parse(["run", "--plan", "tank_5_obstacles"]).escape is False
+    assert parse(["run", "--plan", "tank_5_obstacles", "--escape"]).escape is True
+    world = parse_world(OPEN, "open")
+    for escape in (False, True):
+        run = plan_for_run(world, ROBOT, "sim://", escape=escape)
+        try:
+            assert run.navigator.escape is escape
+        finally:
+            run.navigator.close()

@@ -219,7 +219,7 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
               planner_options: dict[str, Any] | None = None,
               swimmer: SwimmerModel | None = None,
               replan_budget_s: float | None = REPLAN_BUDGET_S,
-              record_to: Path | None = None) -> WorldResult:
+              record_to: Path | None = None, escape: bool = False) -> WorldResult:
     """Plan one generated world and swim the plan over ``sim://`` (module docstring).
 
     Parameters
@@ -240,6 +240,8 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
     record_to : Path, optional
         Write the run's planning record there (the take's ``source.planning``: every plan and
         replan with its start state, status and message), to replay failing replans offline.
+    escape : bool
+        The replanner's escape leg (:func:`eelhost.planning.tank.plan_for_run`; off by default).
 
     Returns
     -------
@@ -258,7 +260,7 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
     wall0, cpu0 = time.perf_counter(), time.process_time()
     try:
         planned = plan_for_run(world, robot, uri, gait, model, planner_options=planner_options,
-                               swimmer=swimmer, replan_budget_s=replan_budget_s)
+                               swimmer=swimmer, replan_budget_s=replan_budget_s, escape=escape)
     except PlanRefused as err:
         return WorldResult(seed, False, err.status, detail=str(err), water=water,
                            plan_wall_s=time.perf_counter() - wall0,
@@ -311,7 +313,8 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
                           progress: Callable[[WorldResult], None] | None = None,
                           planner_options: dict[str, Any] | None = None,
                           swimmer: SwimmerModel | None = None,
-                          replan_budget_s: float | None = REPLAN_BUDGET_S) -> list[WorldResult]:
+                          replan_budget_s: float | None = REPLAN_BUDGET_S,
+                          escape: bool = False) -> list[WorldResult]:
     """Run the benchmark over ``seeds``, resuming from ``<out>/results.jsonl``.
 
     Parameters
@@ -328,6 +331,10 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
     swimmer : SwimmerModel, optional
         The model of the robot the planner swims, handed to every world's planner (built once
         here when not given).
+    replan_budget_s : float or None
+        Each replan's wall-clock budget (:func:`run_world`).
+    escape : bool
+        The replanner's escape leg (:func:`run_world`; off by default).
 
     Returns
     -------
@@ -360,7 +367,7 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
         else:
             r = run_world(seed, robot, model, planner_options=planner_options,
                           swimmer=swimmer, replan_budget_s=replan_budget_s,
-                          record_to=out / "planning" / f"{seed}.json")
+                          record_to=out / "planning" / f"{seed}.json", escape=escape)
             with path.open("a") as f:
                 f.write(json.dumps(asdict(r)) + "\n")
         results.append(r)
