@@ -37,6 +37,31 @@ LEG_TIME_FACTOR = 3.0
 """A check run's time limit for a leg, as a multiple of the time the search's run took."""
 
 
+def water_twin(twin: Twin, waters: Sequence[WaterDraw]
+               ) -> tuple[Twin, list[tuple[float, float]]]:
+    """A twin carrying every water's coefficient sets, and each water's current.
+
+    Water i swims with coefficient index ``2 i`` (its straight set) or ``2 i + 1`` (its turning
+    set), in the planner's current plus its own offset.
+
+    Parameters
+    ----------
+    twin : Twin
+        Robot, gait, loop options and the planner's current.
+    waters : sequence of WaterDraw
+
+    Returns
+    -------
+    Twin, list of (vx, vy)
+    """
+    sets = [c for w in waters for c in (w.straight, w.turning)]
+    runner = Twin(twin.robot, sets, twin.gait, twin.options, twin.current_m_s,
+                  twin.acceptance_radius_m, twin.threads, twin.model)
+    vx, vy = twin.current_m_s
+    return runner, [(vx + w.current_offset_m_s[0], vy + w.current_offset_m_s[1])
+                    for w in waters]
+
+
 def swim_legs(
     world: World,
     plan: Plan,
@@ -82,11 +107,7 @@ def swim_legs(
     if state is None:
         state = straight_state(model, math.radians(world.start.heading_deg),
                                world.start.position_m)
-    sets = [c for w in waters for c in (w.straight, w.turning)]
-    runner = Twin(twin.robot, sets, twin.gait, twin.options, twin.current_m_s,
-                  twin.acceptance_radius_m, twin.threads, twin.model)
-    vx, vy = twin.current_m_s
-    currents = [(vx + w.current_offset_m_s[0], vy + w.current_offset_m_s[1]) for w in waters]
+    runner, currents = water_twin(twin, waters)
     period = runner.restart_steps or 1
     warm = int(math.ceil(twin.options.camera.median_window / twin.options.camera.fps
                          / twin.dt_s - 1e-9))

@@ -596,6 +596,23 @@ class Planner:
                        "check_failed", msg, checks, self.repairs, total, searching,
                        tube_status=tube_status)
 
+    def check_waters(self, waters: list[WaterDraw] | None = None) -> list[WaterDraw]:
+        """The waters a check swims: the fits as fitted, then ``waters``.
+
+        ``waters`` defaults to the first plan's draws.
+
+        Parameters
+        ----------
+        waters : list of WaterDraw, optional
+
+        Returns
+        -------
+        list of WaterDraw
+        """
+        nominal = WaterDraw("the fits as fitted", self.coefficients.fits["straight"],
+                            self.coefficients.fits["turning"], (0.0, 0.0))
+        return [nominal, *(self.water if waters is None else waters)]
+
     def waters(self, attempt: int) -> list[WaterDraw]:
         """The draws of the water the ``attempt``-th plan of a planning call is checked over.
 
@@ -662,9 +679,7 @@ class Planner:
             s.
         """
         t0 = time.perf_counter()
-        nominal = WaterDraw("the fits as fitted", self.coefficients.fits["straight"],
-                            self.coefficients.fits["turning"], (0.0, 0.0))
-        todo = [nominal, *(self.water if waters is None else waters)]
+        todo = self.check_waters(waters)
         screen = 1 + SCREEN_DRAWS
         runs: list[Swim] = []
         for lo in [0, *range(screen, len(todo), BATCH_RUNS)]:

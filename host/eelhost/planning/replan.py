@@ -33,6 +33,7 @@ from typing import Any, cast
 
 import numpy as np
 
+from eelhost.planning.check import water_twin
 from eelhost.planning.execute import Swim, body_clearance_m, swim
 from eelhost.planning.geometry import FloatArray, point_segment_distance
 from eelhost.planning.planner import LEG_TIME_FACTOR, SCREEN_DRAWS, Outcome, Planner
@@ -51,7 +52,6 @@ from eelhost.planning.state_estimate import (
     CurrentWindow,
 )
 from eelhost.planning.twin import Twin
-from eelhost.planning.uncertainty import WaterDraw
 from eelhost.planning.world import World
 from eelhost.vision.localise import Localisation
 from eelhost.wire import protocol
@@ -457,15 +457,10 @@ def check_escape_leg(planner: Planner, leg: Leg, state: FloatArray, step: int, g
         The runs swum, and why the first failing one failed (None: every run passed).
     """
     twin = planner.twin
-    nominal = WaterDraw("the fits as fitted", planner.coefficients.fits["straight"],
-                        planner.coefficients.fits["turning"], (0.0, 0.0))
-    todo = [nominal, *planner.waters(0)]
-    runner = Twin(twin.robot, [c for w in todo for c in (w.straight, w.turning)], twin.gait,
-                  twin.options, twin.current_m_s, twin.acceptance_radius_m, twin.threads,
-                  twin.model)
+    todo = planner.check_waters(planner.waters(0))
+    runner, currents = water_twin(twin, todo)
     index = planner.search.leg_coefficients(False, leg.bearing_deg)
     took = max(leg.end_step - leg.start_step, 1) * twin.dt_s
-    vx, vy = twin.current_m_s
     swum = 0
     screen = 1 + SCREEN_DRAWS
     for lo, hi in ((0, screen), (screen, len(todo))):
@@ -476,8 +471,7 @@ def check_escape_leg(planner: Planner, leg: Leg, state: FloatArray, step: int, g
                           states=np.repeat(np.asarray(state, dtype=float)[None], len(part), 0),
                           start_steps=[step] * len(part),
                           coefficient_index=[2 * i + index for i in part], stride=1,
-                          currents=[(vx + todo[i].current_offset_m_s[0],
-                                     vy + todo[i].current_offset_m_s[1]) for i in part],
+                          currents=[currents[i] for i in part],
                           guidance=[guide] * len(part))
         swum += len(part)
         for j, i in enumerate(part):
