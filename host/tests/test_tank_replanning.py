@@ -285,6 +285,17 @@ def open_plan():
     return planner, outcome
 
 
+def off_corridor_frame(nav: TankReplanner, t: float, target: int = 0):
+    """One frame of a robot at (0.8, 1.4), 0.4 m off the planned corridor."""
+    return nav.on_frame(t, pose_at(t, (0.8, 1.4)), np.array([0.8, 1.4, 0.0]), target, 0.0)
+
+
+def settle(nav: TankReplanner) -> None:
+    """Wait for the replan worker's and the look-ahead's jobs: the frames stay deterministic."""
+    nav._worker.submit(lambda: None).result()
+    nav._side.submit(lambda: None).result()
+
+
 def drive_off_corridor(nav: TankReplanner, seconds: float):
     """Frames of a robot 0.4 m off the planned corridor until the replanner stops it."""
     for k in range(int(seconds * 30)):
@@ -1020,6 +1031,11 @@ def test_an_escape_leg_that_swims_into_the_wall_fails_its_check():
     assert ESCAPE_CHECK_MARGIN_M > 0
 
 
+def scripted(outcome: Outcome, est, start_step: int):  # noqa: ANN001, ANN201
+    """A scripted replan's result, as ``TankReplanner._replan`` returns it, from ``est``."""
+    return outcome, est.state, 0.0, 0.0, np.zeros(2), time.monotonic(), start_step
+
+
 class EscapingReplanner(TankReplanner):
     """The first replan gives an escape leg from (0.8, 1.4) to (1.1, 1.4); later ones fail.
 
@@ -1038,11 +1054,9 @@ class EscapingReplanner(TankReplanner):
             com = np.asarray([[0.8 + 0.01 * k, 1.4] for k in range(31)])
             leg = Leg((1.1, 1.4), 0.3, 0.0, start_step, start_step + 400, com, 0.1)
             plan = Plan(True, "found", "", [leg], math.nan, start_guide=(0.8, 1.4, 0.0, 0.0))
-            return (Outcome(plan, "found", "escape: scripted"), est.state, 0.0, 0.0, np.zeros(2),
-                    time.monotonic(), start_step)
+            return scripted(Outcome(plan, "found", "escape: scripted"), est, start_step)
         plan = Plan(False, "exhausted", "failed (exhausted)")
-        return (Outcome(plan, "exhausted", plan.message), est.state, 0.0, 0.0, np.zeros(2),
-                time.monotonic(), start_step)
+        return scripted(Outcome(plan, "exhausted", plan.message), est, start_step)
 
 
 def test_an_escape_is_followed_by_a_replan_from_its_end_and_its_waypoint_is_no_arrival(
@@ -1058,14 +1072,13 @@ def test_an_escape_is_followed_by_a_replan_from_its_end_and_its_waypoint_is_no_a
             t = k / 30
             # off the first plan's corridor at (0.8, 1.4); the escape's waypoint is reached at 9 s
             target = 1 if switched is not None and t >= 9.0 else 0
-            d = nav.on_frame(t, pose_at(t, (0.8, 1.4)), np.array([0.8, 1.4, 0.0]), target, 0.0)
+            d = off_corridor_frame(nav, t, target)
             if d.waypoints is not None:
                 switched = t
             if d.stop is not None:
                 stop = (t, d)
                 break
-            nav._worker.submit(lambda: None).result()  # the worker's jobs done: deterministic
-            nav._side.submit(lambda: None).result()
+            settle(nav)
     finally:
         nav.close()
     assert switched is not None and nav.waypoints == [(1.1, 1.4)]
@@ -1111,7 +1124,7 @@ def test_an_escape_the_twin_swims_into_contact_stops_the_robot_while_its_next_re
     try:
         for k in range(10 * 30):
             t = k / 30
-            d = nav.on_frame(t, pose_at(t, (0.8, 1.4)), np.array([0.8, 1.4, 0.0]), 0, 0.0)
+            d = off_corridor_frame(nav, t)
             if d.waypoints is not None:
                 switched = t
             if d.stop is not None:
@@ -1141,8 +1154,7 @@ class EscapeThenPlan(EscapingReplanner):
         leg = Leg((2.1, 1.0), 1.08, -20.0, start_step, start_step + 1200, com, 0.1, goal=True)
         plan = Plan(True, "found", "", [leg], start_step * 0.01 + 12.0,
                     start_guide=(1.1, 1.4, 0.0, 0.0))
-        return (Outcome(plan, "found", "plan found"), est.state, 0.0, 0.0, np.zeros(2),
-                time.monotonic(), start_step)
+        return scripted(Outcome(plan, "found", "plan found"), est, start_step)
 
 
 def test_a_plan_from_an_escapes_end_is_switched_in_when_the_robot_reaches_the_escape_early(
@@ -1160,15 +1172,14 @@ def test_a_plan_from_an_escapes_end_is_switched_in_when_the_robot_reaches_the_es
         for k in range(10 * 30):
             t = k / 30
             target = 1 if escape_at is not None and t >= escape_at + 0.5 else 0
-            d = nav.on_frame(t, pose_at(t, (0.8, 1.4)), np.array([0.8, 1.4, 0.0]), target, 0.0)
+            d = off_corridor_frame(nav, t, target)
             assert d.stop is None and not d.arrived
             if d.waypoints is not None and escape_at is None:
                 escape_at = t
             elif d.waypoints is not None:
                 got = (t, d.waypoints)
                 break
-            nav._worker.submit(lambda: None).result()
-            nav._side.submit(lambda: None).result()
+            settle(nav)
     finally:
         nav.close()
     assert escape_at is not None and got is not None
@@ -1197,12 +1208,11 @@ def test_an_escape_swum_into_contact_stops_the_robot_while_the_plan_from_its_end
     try:
         for k in range(10 * 30):
             t = k / 30
-            d = nav.on_frame(t, pose_at(t, (0.8, 1.4)), np.array([0.8, 1.4, 0.0]), 0, 0.0)
+            d = off_corridor_frame(nav, t)
             if d.stop is not None:
                 stop = (t, d)
                 break
-            nav._worker.submit(lambda: None).result()
-            nav._side.submit(lambda: None).result()
+            settle(nav)
     finally:
         nav.close()
     assert len(nav.asked) == 2 and nav._pending is not None  # the plan from the end waited
@@ -1230,10 +1240,9 @@ def test_an_escape_ready_later_than_a_restart_period_after_its_start_is_not_used
     try:
         for k in range(30):
             t = k / 30
-            d = nav.on_frame(t, pose_at(t, (0.8, 1.4)), np.array([0.8, 1.4, 0.0]), 0, 0.0)
+            d = off_corridor_frame(nav, t)
             assert d.waypoints is None
-            nav._worker.submit(lambda: None).result()
-            nav._side.submit(lambda: None).result()
+            settle(nav)
     finally:
         nav.close()
     assert nav.events[1]["status"] == "stale" and "escape:" in nav.events[1]["message"]
