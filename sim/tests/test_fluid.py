@@ -287,3 +287,24 @@ def test_a_law_derived_from_a_candidate_and_its_lift_variant_are_not_candidates(
 
     assert declared_candidate(MORISON) and declared_candidate(FLUID_LAWS["morison_lift"])
     assert not declared_candidate(Derived()) and not declared_candidate(with_lift(Derived()))
+
+
+def test_a_lift_variant_of_a_users_law_leaves_the_bundled_variants_picklable():
+    # the comparison's worker processes get coefficient records by pickle, which finds a class
+    # by its module and name: a user's law derived from Morison's (the same coefficients class)
+    # must not take morison_lift's names
+    import pickle
+
+    from eelsim.fluid import with_lift
+    from eelsim.fluid.morison import MorisonLaw
+
+    class Derived(MorisonLaw):
+        """A user's variant of the paper's law."""
+
+        name: ClassVar[str] = "derived_morison_pickles"
+
+    bundled = FLUID_LAWS["morison_lift"]
+    variant = with_lift(Derived())
+    assert variant.coefficients is not bundled.coefficients
+    for cls in (bundled.coefficients, type(bundled), variant.coefficients, type(variant)):
+        assert pickle.loads(pickle.dumps(cls)) is cls

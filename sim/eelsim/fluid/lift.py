@@ -275,6 +275,20 @@ class LiftLaw(FluidLaw):
         line(f"tqn = tqn + {w('lrise', link)} * abs(om) * om")
 
 
+def _free_name(preferred: str, law: str) -> str:
+    """A module-level name for a lift variant's class that no other law's class holds.
+
+    The classes are set on this module so that they pickle by name (the comparison's worker
+    processes); a user's law derived from a bundled one shares its coefficients class, and
+    its variant under the same name would replace the bundled variant's class, which then no
+    longer pickles. Such a variant gets its law's name appended instead.
+    """
+    taken = getattr(sys.modules[__name__], preferred, None)
+    if taken is None or getattr(taken, "law_name", getattr(taken, "name", None)) == f"{law}_lift":
+        return preferred
+    return f"{preferred}_{law}"
+
+
 def with_lift(base: FluidLaw) -> LiftLaw:
     """The variant ``<base>_lift`` of ``base``: its coefficients, ``C_L``, ``C_D_alpha``, ``alpha_stall``.
 
@@ -290,7 +304,7 @@ def with_lift(base: FluidLaw) -> LiftLaw:
         without lift, docs/estimation.md).
     """
     name = f"{base.name}_lift"
-    record = f"{base.coefficients.__name__}Lift"
+    record = _free_name(f"{base.coefficients.__name__}Lift", base.name)
     namespace: dict[str, Any] = {
         "__annotations__": {"law_name": ClassVar[str], "C_L": _NonNegative,
                             "C_D_alpha": _NonNegative, "alpha_stall": _Angle},
@@ -304,7 +318,7 @@ def with_lift(base: FluidLaw) -> LiftLaw:
     }
     coefficients = type(record, (base.coefficients,), namespace)
     setattr(sys.modules[__name__], record, coefficients)  # importable by name: it pickles
-    law_name = f"{type(base).__name__}Lift"
+    law_name = _free_name(f"{type(base).__name__}Lift", base.name)
     law_class = type(law_name, (LiftLaw,), {
         "name": name, "coefficients": coefficients, "base": base, "candidate": declared_candidate(base),
         "default_bounds": (*base.default_bounds, LIFT_BOUNDS, DRAG_RISE_BOUNDS, STALL_BOUNDS),
