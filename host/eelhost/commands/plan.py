@@ -33,7 +33,6 @@ from eelhost.planning.coverage import action_coverage
 from eelhost.planning.planner import (
     CHECK_DRAWS,
     PLANNING_GUIDANCE,
-    TUBE_FIRST,
     Outcome,
     Planner,
     PlanRefused,
@@ -120,11 +119,6 @@ def add_check_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--robust-search", action="store_true",
                    help="also swim every leg of the search in the unknown current (fewer plans "
                    "fail their check, about 4 times the search's time)")
-    p.add_argument("--tube-first", action=argparse.BooleanOptionalAction, default=TUBE_FIRST,
-                   help="search first for a plan whose every leg also stays clear in the "
-                   "unknown current's bound towards 8 directions (the tube), the nominal "
-                   "search when there is none or its plan fails the check (default: "
-                   f"{'on' if TUBE_FIRST else 'off'}; docs/planning.md, \"The search\")")
     p.add_argument("--guidance", choices=GUIDANCE_LAWS.names(), default=PURSUIT.name,
                    help="the robot's guidance law for the search and the check: "
                    + "; ".join(f"{name}: {text}" for name, text in GUIDANCE_LAWS.descriptions().items())
@@ -149,7 +143,6 @@ def planner_options(args: argparse.Namespace) -> dict:
             "unknown_current_m_s": getattr(args, "unknown_current", DEFAULT_UNKNOWN_CURRENT_M_S),
             "seed": getattr(args, "check_seed", 0),
             "robust_search": getattr(args, "robust_search", False),
-            "robust_first": getattr(args, "tube_first", TUBE_FIRST),
             "guidance": guidance_law(getattr(args, "guidance", PURSUIT.name))}
 
 
@@ -188,9 +181,6 @@ def plan_json(world: World, outcome: Outcome) -> dict:
         "simulations": plan.simulations,
         "planning_time_s": outcome.planning_time_s,
         "repairs": outcome.repairs,
-        # the tube search (--tube-first): what it did ("" when off) and whether the plan is its
-        "tube_search": outcome.tube_status,
-        "from_tube": outcome.tube,
         "check": _check_json(outcome),
         "waypoints_m": plan.waypoints_m if outcome.found else [],
         "legs": [
@@ -284,8 +274,7 @@ def _bench(args: argparse.Namespace, robot: Robot, model: CoefficientModel,
     guidance = guidance_law(args.guidance)
     options = LoopOptions(guidance=guidance)  # the coverage's runs steer with the same law
     summary = run_bench(robot, model, args.worlds, args.seed, args.threads, progress,
-                        max(args.jobs, 1), args.unknown_current, guidance, swimmer,
-                        args.tube_first)
+                        max(args.jobs, 1), args.unknown_current, guidance, swimmer)
     lines = summary.lines()
     lines += ["- action coverage (successful actions per current direction relative to the "
               "heading):"]
@@ -297,9 +286,7 @@ def _bench(args: argparse.Namespace, robot: Robot, model: CoefficientModel,
                + (f" --jobs {args.jobs}" if args.jobs > 1 else "")
                + (f" --unknown-current {args.unknown_current:g}"
                   if args.unknown_current != DEFAULT_UNKNOWN_CURRENT_M_S else "")
-               + (f" --guidance {args.guidance}" if args.guidance != PURSUIT.name else "")
-               + ("" if args.tube_first == TUBE_FIRST
-                  else " --tube-first" if args.tube_first else " --no-tube-first"))
+               + (f" --guidance {args.guidance}" if args.guidance != PURSUIT.name else ""))
     block = [
         BENCH_BEGIN,
         f"Command: `{command}`",

@@ -73,10 +73,6 @@ class WorldResult:
         Smallest body gap over the drawn-water runs, by the audit (NaN without a plan).
     goal_distance_m : float
         Closest approach of the worse run to the goal centre (NaN without a plan).
-    tube : bool
-        The plan came from the planner's tube search.
-    tube_status : str
-        What the tube search did ("" when it did not run).
     """
 
     name: str
@@ -93,8 +89,6 @@ class WorldResult:
     collision_upper: float = float("nan")
     arrival_spread_s: tuple[float, float, float] = (float("nan"),) * 3
     planned_arrival_s: float = float("nan")
-    tube: bool = False
-    tube_status: str = ""
 
 
 @dataclass
@@ -150,12 +144,6 @@ class BenchSummary:
             f"max {times[-1]:.2f} s; worlds with a plan: median {statistics.median(found_t):.2f} s",
             f"- search alone: median {statistics.median(search):.2f} s",
         ]
-        tubes = Counter(r.tube_status for r in self.results if r.tube_status)
-        if tubes:
-            tube = sum(r.tube for r in self.planned)
-            out.append("- the tube search first: " + ", ".join(
-                f"{k} {v}" for k, v in sorted(tubes.items()))
-                + f" (worlds it ran in); plans from it that passed the check: {tube} of {p}")
         repaired = sum(r.repairs > 0 for r in self.planned)
         cpu = sorted(r.cpu_time_s for r in self.results)
         out.append(f"- processor time of the planning (the same span; what the wall-clock figures "
@@ -182,8 +170,7 @@ def bench_world(world: World, robot: Robot, coefficients: CoefficientModel, seed
                 threads: int | None = 1,
                 unknown_current_m_s: float = DEFAULT_UNKNOWN_CURRENT_M_S,
                 guidance: GuidanceLaw = PURSUIT,
-                swimmer: SwimmerModel | None = None,
-                robust_first: bool = False) -> WorldResult:
+                swimmer: SwimmerModel | None = None) -> WorldResult:
     """Plan in one world and swim the plan in fresh draws of the water (module docstring).
 
     Parameters
@@ -202,8 +189,6 @@ def bench_world(world: World, robot: Robot, coefficients: CoefficientModel, seed
     swimmer : SwimmerModel, optional
         The model of the robot the planner swims, built once by the command
         (:meth:`CoefficientModel.swimmer_for`; built here when not given).
-    robust_first : bool
-        The planner's tube search first (:class:`eelhost.planning.planner.Planner`).
 
     Returns
     -------
@@ -212,12 +197,11 @@ def bench_world(world: World, robot: Robot, coefficients: CoefficientModel, seed
     t0, c0 = time.perf_counter(), time.process_time()
     planner = Planner(world, robot, coefficients, threads=threads, seed=seed,
                       unknown_current_m_s=unknown_current_m_s, guidance=guidance,
-                      swimmer=swimmer, robust_first=robust_first)
+                      swimmer=swimmer)
     outcome = planner.plan()
     elapsed = time.perf_counter() - t0  # the planner's set-up (clearance and goal maps) too
     result = WorldResult(world.name, outcome.status, outcome.message, elapsed,
-                         outcome.search_time_s, time.process_time() - c0, outcome.repairs,
-                        tube=outcome.tube, tube_status=outcome.tube_status)
+                         outcome.search_time_s, time.process_time() - c0, outcome.repairs)
     if not outcome.found:
         return result
     # the fresh draws keep the lattice of directions the benchmark has always judged with
@@ -237,17 +221,17 @@ def bench_world(world: World, robot: Robot, coefficients: CoefficientModel, seed
 
 def _warm_up(robot: Robot, coefficients: CoefficientModel, seed: int,
              threads: int | None, unknown_current_m_s: float, guidance: GuidanceLaw,
-             swimmer: SwimmerModel | None = None, robust_first: bool = False) -> None:
+             swimmer: SwimmerModel | None = None) -> None:
     """Load the batched kernel and measure the swimming speed once (not timed)."""
     bench_world(generate_world(seed), robot, coefficients, seed, threads, unknown_current_m_s,
-                guidance, swimmer, robust_first)
+                guidance, swimmer)
 
 
 def _one(robot: Robot, coefficients: CoefficientModel, seed: int,
          threads: int | None, unknown_current_m_s: float, guidance: GuidanceLaw,
-         swimmer: SwimmerModel | None = None, robust_first: bool = False) -> WorldResult:
+         swimmer: SwimmerModel | None = None) -> WorldResult:
     return bench_world(generate_world(seed), robot, coefficients, seed, threads,
-                       unknown_current_m_s, guidance, swimmer, robust_first)
+                       unknown_current_m_s, guidance, swimmer)
 
 
 def run_bench(
@@ -261,7 +245,6 @@ def run_bench(
     unknown_current_m_s: float = DEFAULT_UNKNOWN_CURRENT_M_S,
     guidance: GuidanceLaw = PURSUIT,
     swimmer: SwimmerModel | None = None,
-    robust_first: bool = False,
 ) -> BenchSummary:
     """Run the benchmark over ``count`` generated worlds (seeds ``seed`` .. ``seed + count - 1``).
 
@@ -284,8 +267,6 @@ def run_bench(
     swimmer : SwimmerModel, optional
         The model of the robot the planner swims, built once by the command and handed to
         every world's planner (built here once when not given; each process has its copy).
-    robust_first : bool
-        The planner's tube search first.
 
     Returns
     -------
@@ -297,10 +278,9 @@ def run_bench(
         swimmer = coefficients.swimmer_for(robot)
     if jobs <= 1:
         _warm_up(robot, coefficients, seed + count, threads, unknown_current_m_s, guidance,
-                 swimmer, robust_first)
+                 swimmer)
         results: Iterable[WorldResult] = (_one(robot, coefficients, s, threads,
-                                               unknown_current_m_s, guidance, swimmer,
-                                               robust_first)
+                                               unknown_current_m_s, guidance, swimmer)
                                           for s in seeds)
         _collect(summary, results, progress)
         return summary
@@ -308,10 +288,9 @@ def run_bench(
     with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn"),
                              initializer=_warm_up,
                              initargs=(robot, coefficients, seed + count, threads,
-                                       unknown_current_m_s, guidance, swimmer,
-                                       robust_first)) as pool:
+                                       unknown_current_m_s, guidance, swimmer)) as pool:
         results = pool.map(_one, *zip(*[(robot, coefficients, s, threads, unknown_current_m_s,
-                                         guidance, swimmer, robust_first) for s in seeds],
+                                         guidance, swimmer) for s in seeds],
                                       strict=True))
         _collect(summary, results, progress)
     return summary

@@ -98,23 +98,6 @@ BATCH_RUNS = 16
 ROBUST_MARGIN_M = 0.002
 """With ``robust_search``, the body's gap every extra water's run keeps (over its half width)."""
 
-TUBE_DIRECTIONS = 8
-"""With ``robust_first``, the tube search's extra waters: the unknown current's bound towards this
-many directions, evenly round the circle (docs/planning.md, "The search", "Tube search first")."""
-
-TUBE_MARGIN_M = 0.010
-"""With ``robust_first``, the body's gap every extra water's run keeps (over its half width): room
-for the coefficients the check also draws, and for currents between the extra waters' directions."""
-
-TUBE_FIRST = False
-"""``eelbot plan``'s default for the tube search first (``--tube-first``): off, since on the
-development seeds it planned the same worlds as the nominal search alone for twice the processor
-time (docs/planning.md, "The search")."""
-
-TUBE_EXPANSIONS = 100
-"""With ``robust_first``, the tube search gives up after this many expansions (then the nominal
-search runs): a tube search that finds a plan mostly does so within a few dozen expansions."""
-
 PLANNING_GUIDANCE = GuidanceLaw("ilos", lookahead_m=0.2, integral_gain=0.02, heading_gain=1.0)
 """The integral line-of-sight law a plan may be searched, checked and followed with
 (``eelbot plan --guidance ilos``; docs/planning.md, "The guidance"): it holds each leg in a current
@@ -214,11 +197,6 @@ class Outcome:
         The plans the planning call may check (the first and ``repairs`` repairs): the
         returned plan's interval is taken at :attr:`level`, :data:`CHECK_LEVEL` split over them
         (Bonferroni), so it holds at :data:`CHECK_LEVEL` whichever plan the repairs return.
-    tube : bool
-        The returned plan came from the tube search (``Planner(robust_first=True)``).
-    tube_status : str
-        What the tube search did (``found``, ``exhausted``: no plan keeps the tube with these
-        actions, ``gave_up``), "" when it did not run.
     """
 
     plan: Plan
@@ -230,8 +208,6 @@ class Outcome:
     search_time_s: float = 0.0
     draws: int = 0
     family: int = 1
-    tube: bool = False
-    tube_status: str = ""
 
     @property
     def drawn_checks(self) -> list[Swim]:
@@ -337,14 +313,6 @@ class Planner:
         (:meth:`eelhost.planning.uncertainty.CoefficientModel.swimmer_for`) and handed on to the
         twin, the search, the check and the executed swims, and to every replan's planner
         (docs/architecture.md, "The planning room"); built here when not given.
-    robust_first : bool
-        Search a tube first (:attr:`tube_search`): every leg also swum in the unknown current's
-        bound towards :data:`TUBE_DIRECTIONS` directions, each extra water's body kept
-        :data:`TUBE_MARGIN_M` clear of everything, at most :data:`TUBE_EXPANSIONS` expansions;
-        the nominal search runs when the tube search finds no plan or its plan fails the check
-        (the repairs are the nominal search's). Every plan goes through the same check, counted
-        in the same family of ``repairs + 1`` checked plans (docs/planning.md, "The search").
-        Off for a bound of 0 and with ``robust_search``.
     """
 
     def __init__(
@@ -365,7 +333,6 @@ class Planner:
         guidance: GuidanceLaw = PURSUIT,
         swimmer: SwimmerModel | None = None,
         soft_margin: bool = True,
-        robust_first: bool = False,
     ) -> None:
         world = coefficients.in_tank(world)
         robot = coefficients.robot_for(robot)
@@ -425,18 +392,6 @@ class Planner:
         # straight-line speed; a heuristic speed too low only makes the search greedier
         self.search = Search(world, self.twin, self.settings, self.clearance, route,
                              1.3 * fastest + world.current.speed_m_s)
-        self.tube_search: Search | None = None
-        if robust_first and not robust_search and self.unknown_current_m_s > 0:
-            # the tube: the same search, every kept leg also swum in the bound's directions
-            # (docs/planning.md, "Tube search first"); its own memo, the same twin and maps
-            tube = dataclasses.replace(
-                self.settings, robust_current_m_s=self.unknown_current_m_s,
-                robust_directions=TUBE_DIRECTIONS,
-                robust_margin_m=self.body_half_width_m + TUBE_MARGIN_M,
-                max_expansions=min(self.settings.max_expansions, TUBE_EXPANSIONS))
-            self.tube_search = Search(world, self.twin, tube, self.clearance, route,
-                                      1.3 * fastest + world.current.speed_m_s)
-
     # -- refusals --------------------------------------------------------------------------------
 
     def refusal(self, state: FloatArray | None = None) -> PlanRefused | None:
@@ -524,23 +479,11 @@ class Planner:
         checks: list[Swim] = []
         bad: list[Swim] = []
         plan = Plan(False, "gave_up", "")
-        # the tube search first; the nominal one once the tube finds no (more) plan. Only a
-        # checked plan counts as an attempt, so the family of checked plans stays repairs + 1
-        search = self.tube_search or self.search
-        tube_status = ""
-        attempt = 0
-        while attempt <= self.repairs:
-            plan = search.plan(banned, start_state=state, start_step=step, guide=guide,
-                               deadline_s=deadline_s)
+        for attempt in range(self.repairs + 1):
+            plan = self.search.plan(banned, start_state=state, start_step=step, guide=guide,
+                                    deadline_s=deadline_s)
             total += plan.planning_time_s
             searching += plan.planning_time_s
-            if search is not self.search:
-                tube_status = plan.status
-            if not plan.found and search is not self.search:
-                log.info("the tube search found no plan (%s); the nominal search runs",
-                         plan.status)
-                search = self.search
-                continue
             if not plan.found and attempt > 0:
                 msg = (f"check failed: {attempt} plans failed their check in the twin (last: "
                        f"{bad[0].label}: {bad[0].message}) and the search found no other "
@@ -548,14 +491,11 @@ class Planner:
                 return Outcome(Plan(False, "check_failed", msg, expansions=plan.expansions,
                                     simulations=plan.simulations,
                                     planning_time_s=plan.planning_time_s, tree=plan.tree),
-                               "check_failed", msg, checks, attempt, total, searching,
-                               tube_status=tube_status)
+                               "check_failed", msg, checks, attempt, total, searching)
             if not plan.found:
-                return Outcome(plan, plan.status, plan.message, checks, attempt, total, searching,
-                               tube_status=tube_status)
+                return Outcome(plan, plan.status, plan.message, checks, attempt, total, searching)
             if not self.check:
-                return Outcome(plan, "found", plan.message, [], attempt, total, searching,
-                               tube=search is not self.search, tube_status=tube_status)
+                return Outcome(plan, "found", plan.message, [], attempt, total, searching)
             # each plan its own draws: a repaired plan is not chosen to pass the very draws its
             # predecessors failed (docs/planning.md, "The planner", step 4)
             waters = self.waters(attempt)
@@ -564,14 +504,11 @@ class Planner:
             bad = [c for c in checks if not c.ok]
             if not bad:
                 outcome = Outcome(plan, "found", "", checks, attempt, total, searching,
-                                  len(waters), self.repairs + 1,
-                                  tube=search is not self.search, tube_status=tube_status)
+                                  len(waters), self.repairs + 1)
                 repaired = (f" (searched again after {attempt} failed check(s), swimming only "
                             "manoeuvres not swum before)" if attempt else "")
-                tube = (f" in the tube of {TUBE_DIRECTIONS} currents of "
-                        f"{self.unknown_current_m_s:g} m/s" if outcome.tube else "")
                 outcome.message = (
-                    f"{plan.message}{tube}{repaired}; checked in the twin with the fits and over "
+                    f"{plan.message}{repaired}; checked in the twin with the fits and over "
                     f"{len(waters)} "
                     f"draws of the water (min clearance "
                     f"{min(c.min_clearance_m for c in checks) * 1000:.0f} mm): "
@@ -584,17 +521,12 @@ class Planner:
             banned.add((leg.parent_key, leg.action))
             log.info("plan failed its check in %d runs (e.g. %s: %s); banning leg to (%.2f, %.2f)",
                      len(bad), bad[0].label, bad[0].message, *leg.waypoint_m)
-            attempt += 1
-            # a tube plan that fails its check: the repairs are the nominal search's (a tube
-            # repaired in the tube mostly failed again, for a tube search's time each)
-            search = self.search
         msg = (f"check failed: after {self.repairs} repairs the plan still fails in the twin with "
                f"{len(bad)} of the {len(checks)} check runs swum (e.g. {bad[0].label}: "
                f"{bad[0].message})")
         return Outcome(Plan(False, "check_failed", msg, plan.legs, plan.cost_s, plan.expansions,
                             plan.simulations, plan.planning_time_s, plan.tree),
-                       "check_failed", msg, checks, self.repairs, total, searching,
-                       tube_status=tube_status)
+                       "check_failed", msg, checks, self.repairs, total, searching)
 
     def check_waters(self, waters: list[WaterDraw] | None = None) -> list[WaterDraw]:
         """The waters a check swims: the fits as fitted, then ``waters``.
