@@ -10,14 +10,12 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-import threading
 import time
 from concurrent.futures import Future
 
 import numpy as np
 import pytest
 
-from eelhost.benchmarks.closed_loop import true_clearance_m
 from eelhost.cli import main
 from eelhost.commands.run import exit_status
 from eelhost.errors import EXIT_CONTACT
@@ -29,16 +27,12 @@ from eelhost.planning.execute import body_clearance_m
 from eelhost.planning.field import ClearanceField
 from eelhost.planning.planner import PLANNING_GUIDANCE, Outcome, Planner
 from eelhost.planning.replan import (
-    ESCAPE_CHECK_MARGIN_M,
-    ESCAPE_MARGIN_M,
     Decision,
     TankReplanner,
-    check_escape_leg,
-    escape_plan,
     outline_clearance_m,
     predict_state,
 )
-from eelhost.planning.search import Leg, Plan, leg_start_guide
+from eelhost.planning.search import Plan
 from eelhost.planning.state_estimate import BodyStateEstimator, CurrentWindow
 from eelhost.planning.tank import plan_for_run, with_extra_current
 from eelhost.planning.uncertainty import default_model, read_coefficient_model
@@ -285,17 +279,6 @@ def open_plan():
     return planner, outcome
 
 
-def off_corridor_frame(nav: TankReplanner, t: float, target: int = 0):
-    """One frame of a robot at (0.8, 1.4), 0.4 m off the planned corridor."""
-    return nav.on_frame(t, pose_at(t, (0.8, 1.4)), np.array([0.8, 1.4, 0.0]), target, 0.0)
-
-
-def settle(nav: TankReplanner) -> None:
-    """Wait for the replan worker's and the look-ahead's jobs: the frames stay deterministic."""
-    nav._worker.submit(lambda: None).result()
-    nav._side.submit(lambda: None).result()
-
-
 def drive_off_corridor(nav: TankReplanner, seconds: float):
     """Frames of a robot 0.4 m off the planned corridor until the replanner stops it."""
     for k in range(int(seconds * 30)):
@@ -511,8 +494,7 @@ def test_the_goal_approachs_smaller_margin_is_tried_near_the_goal_or_when_no_pos
     def replan(status, est):  # noqa: ANN001, ANN202
         failing = _Scripted(planner, status, np.inf)
         nav = TankReplanner(lambda extra: failing, failing, outcome,  # type: ignore[arg-type]
-                            PATH_GAIT, goal_planner_for=lambda extra: tight, goal_approach_m=0.5,
-                            escape=False)
+                            PATH_GAIT, goal_planner_for=lambda extra: tight, goal_approach_m=0.5)
         try:
             return nav._replan(est, [(2.1, 1.0)], step, np.zeros(2))
         finally:
@@ -830,7 +812,6 @@ def test_a_replan_that_finds_nothing_is_rescued_by_the_recoverys_sharper_turns()
     est = estimate_at(3.0, (3.0 - 0.6 - com, 0.0))
     step = int(round(3.0 / 0.01)) + 60
     make_recovery, nav.recovery_planner_for = nav.recovery_planner_for, None
-    nav.escape = False  # the escape is tested on its own below
     try:
         without, *_ = nav._replan(est, [(2.9, 1.1)], step, np.zeros(2))
         nav.recovery_planner_for = make_recovery
@@ -981,305 +962,3 @@ def test_a_moved_current_estimate_has_its_planner_built_before_the_next_replan(o
         assert len(built) == 1
     finally:
         nav.close()
-
-
-def test_an_escape_turns_the_body_away_with_one_leg_its_check_and_the_true_body_keep_clear():
-    # the robot swims at the tank's end wall, 0.6 m from it, its goal behind it: the escape is one
-    # leg that turns it away, judged by the body's own outline, and ends clearer than it started
-    planner = Planner(parse_world(WALL_AHEAD, "wall_ahead"), ROBOT, MODEL)
-    com = estimate_at(3.0).state[N]
-    est = estimate_at(3.0, (3.0 - 0.6 - com, 0.0))
-    step = int(round(3.0 / 0.01)) + 60
-    state = predict_state(planner.twin, est, [(2.9, 1.1)], step)
-    assert state is not None
-    guide = leg_start_guide(state, N)
-    outcome, end_step = escape_plan(planner, state, step, guide)
-    assert outcome.found and outcome.message.startswith("escape:"), outcome.message
-    (leg,) = outcome.plan.legs
-    assert not leg.goal and end_step is not None and step < end_step <= leg.end_step
-    assert abs(leg.bearing_deg) >= 90.0  # away from the wall ahead, not along it
-    wall_gap = 3.0 - np.asarray(leg.waypoint_m)[0]
-    assert wall_gap > 3.0 - state[N]  # its waypoint further from the wall than the start
-    # swum again in the twin and judged by the benchmark's own shapely body: clear all the way
-    runs = planner.twin.run([[leg.waypoint_m]], 40.0, states=state[None], start_steps=[step],
-                            coefficient_index=[planner.search.leg_coefficients(False,
-                                                                                leg.bearing_deg)],
-                            stride=1, guidance=[guide])
-    arrival = int(runs.arrival_step[0])
-    assert arrival > 0
-    path = runs.states[0, : arrival + 1]
-    true = true_clearance_m(planner.world, planner.model, path)
-    assert true.min() >= ESCAPE_MARGIN_M - 1e-3
-    assert np.allclose(outline_clearance_m(planner.world, planner.model, path), true, atol=1e-3)
-    # its check swam the fits and every draw of the water, each run's outline clear
-    swum, bad = check_escape_leg(planner, leg, state, step, guide)
-    assert bad is None and swum == 1 + len(planner.waters(0))
-
-
-def test_an_escape_leg_that_swims_into_the_wall_fails_its_check():
-    planner = Planner(parse_world(WALL_AHEAD, "wall_ahead"), ROBOT, MODEL)
-    com = estimate_at(3.0).state[N]
-    est = estimate_at(3.0, (3.0 - 0.6 - com, 0.0))
-    step = int(round(3.0 / 0.01)) + 60
-    state = predict_state(planner.twin, est, [(2.9, 1.1)], step)
-    assert state is not None
-    heading = float(np.angle(np.exp(1j * state[:N]).mean()))
-    into = (float(state[N] + 0.5 * math.cos(heading)), 1.0)  # straight on, at the wall
-    leg = Leg(into, 0.5, 0.0, step, step + 600, np.asarray([state[N : N + 2]]), 0.1)
-    swum, bad = check_escape_leg(planner, leg, state, step, leg_start_guide(state, N))
-    assert bad is not None and swum <= 1 + 4  # the screen's runs already fail it
-    assert ESCAPE_CHECK_MARGIN_M > 0
-
-
-def scripted(outcome: Outcome, est, start_step: int):  # noqa: ANN001, ANN201
-    """A scripted replan's result, as ``TankReplanner._replan`` returns it, from ``est``."""
-    return outcome, est.state, 0.0, 0.0, np.zeros(2), time.monotonic(), start_step
-
-
-class EscapingReplanner(TankReplanner):
-    """The first replan gives an escape leg from (0.8, 1.4) to (1.1, 1.4); later ones fail.
-
-    The look-ahead swims the present waypoints 200 mm clear (the robot keeps its escape).
-    """
-
-    asked: list[int] = []
-
-    def _look_ahead(self, est, left, extra, guide=None, horizon_s=None):  # noqa: ANN001, ANN202
-        return 0.2, 0.2
-
-    def _replan(self, est, left, start_step, extra, guide=None,  # noqa: ANN001, ANN202
-                deadline_s=None):  # noqa: ANN001
-        self.asked.append(start_step)
-        if len(self.asked) == 1:
-            com = np.asarray([[0.8 + 0.01 * k, 1.4] for k in range(31)])
-            leg = Leg((1.1, 1.4), 0.3, 0.0, start_step, start_step + 400, com, 0.1)
-            plan = Plan(True, "found", "", [leg], math.nan, start_guide=(0.8, 1.4, 0.0, 0.0))
-            return scripted(Outcome(plan, "found", "escape: scripted"), est, start_step)
-        plan = Plan(False, "exhausted", "failed (exhausted)")
-        return scripted(Outcome(plan, "exhausted", plan.message), est, start_step)
-
-
-def test_an_escape_is_followed_by_a_replan_from_its_end_and_its_waypoint_is_no_arrival(
-        open_plan):
-    planner, outcome = open_plan
-    nav = EscapingReplanner(lambda extra: planner, planner, outcome, PATH_GAIT,
-                            estimate_current=False)
-    nav.asked = []
-    switched = None
-    stop = None
-    try:
-        for k in range(30 * 30):
-            t = k / 30
-            # off the first plan's corridor at (0.8, 1.4); the escape's waypoint is reached at 9 s
-            target = 1 if switched is not None and t >= 9.0 else 0
-            d = off_corridor_frame(nav, t, target)
-            if d.waypoints is not None:
-                switched = t
-            if d.stop is not None:
-                stop = (t, d)
-                break
-            settle(nav)
-    finally:
-        nav.close()
-    assert switched is not None and nav.waypoints == [(1.1, 1.4)]
-    escape = nav.events[1]
-    end_s = escape["escape_end_s"]
-    assert escape["status"] == "found" and end_s > escape["t_start_s"]
-    # the next replan was asked for from the escape leg's end, not 0.3-0.9 s ahead
-    after = [e for e in nav.events[2:] if e["reason"] == "after_escape"]
-    assert after and after[0]["t_start_s"] == pytest.approx(end_s)
-    assert nav.asked[1] == int(round(end_s / planner.twin.dt_s))
-    # and tried again at once when it fails, not after the 1, 2, 4 s back-off: the end comes
-    assert len(after) >= 4 and max(np.diff([e["t_request_s"] for e in after])) < 0.5
-    # its waypoint reached with no plan from it: a deliberate stop, never "arrived"
-    assert stop is not None and stop[0] == pytest.approx(9.0, abs=0.05)
-    assert stop[1].stop == "no_safe_continuation" and not stop[1].arrived
-    assert "escape leg's waypoint" in stop[1].detail
-
-
-class EscapeIntoContact(EscapingReplanner):
-    """An escape, then a replan from its end that does not come back while the twin, in the
-    water now estimated, swims the escape 5 mm into an obstacle."""
-
-    release = threading.Event()
-
-    def _replan(self, est, left, start_step, extra, guide=None,  # noqa: ANN001, ANN202
-                deadline_s=None):  # noqa: ANN001
-        if self.asked:
-            self.asked.append(start_step)
-            self.release.wait(30.0)
-        return super()._replan(est, left, start_step, extra, guide, deadline_s)
-
-    def _look_ahead(self, est, left, extra, guide=None, horizon_s=None):  # noqa: ANN001, ANN202
-        return (-0.005, 0.0) if self._escape_end_step is not None else (0.2, 0.2)
-
-
-def test_an_escape_the_twin_swims_into_contact_stops_the_robot_while_its_next_replan_runs(
-        open_plan):
-    planner, outcome = open_plan
-    nav = EscapeIntoContact(lambda extra: planner, planner, outcome, PATH_GAIT,
-                            estimate_current=False)
-    nav.asked = []
-    switched = stop = None
-    try:
-        for k in range(10 * 30):
-            t = k / 30
-            d = off_corridor_frame(nav, t)
-            if d.waypoints is not None:
-                switched = t
-            if d.stop is not None:
-                stop = (t, d)
-                break
-            if switched is None:
-                nav._worker.submit(lambda: None).result()  # the escape's replan: done
-            nav._side.submit(lambda: None).result()  # every look-ahead: done
-    finally:
-        EscapeIntoContact.release.set()
-        nav.close()
-    assert switched is not None and len(nav.asked) == 2  # the replan from its end is running
-    assert stop is not None and stop[1].stop == "no_safe_continuation"
-    assert "escape leg into an obstacle" in stop[1].detail
-    assert stop[0] - switched <= 2 * nav.lookahead_every_s + 0.1  # at the next look-ahead
-
-
-class EscapeThenPlan(EscapingReplanner):
-    """An escape, then a plan to the goal from its end."""
-
-    def _replan(self, est, left, start_step, extra, guide=None,  # noqa: ANN001, ANN202
-                deadline_s=None):  # noqa: ANN001
-        if not self.asked:
-            return super()._replan(est, left, start_step, extra, guide, deadline_s)
-        self.asked.append(start_step)
-        com = np.asarray([[1.1 + 0.01 * k, 1.4 - 0.004 * k] for k in range(101)])
-        leg = Leg((2.1, 1.0), 1.08, -20.0, start_step, start_step + 1200, com, 0.1, goal=True)
-        plan = Plan(True, "found", "", [leg], start_step * 0.01 + 12.0,
-                    start_guide=(1.1, 1.4, 0.0, 0.0))
-        return scripted(Outcome(plan, "found", "plan found"), est, start_step)
-
-
-def test_a_plan_from_an_escapes_end_is_switched_in_when_the_robot_reaches_the_escape_early(
-        open_plan):
-    # the robot accepts the escape's waypoint before the twin put it at the leg's end: the plan
-    # from that end is switched in at once (the loop would otherwise end the run at its last
-    # waypoint, as if arrived)
-    planner, outcome = open_plan
-    nav = EscapeThenPlan(lambda extra: planner, planner, outcome, PATH_GAIT,
-                         estimate_current=False)
-    nav.asked = []
-    escape_at = None
-    got = None
-    try:
-        for k in range(10 * 30):
-            t = k / 30
-            target = 1 if escape_at is not None and t >= escape_at + 0.5 else 0
-            d = off_corridor_frame(nav, t, target)
-            assert d.stop is None and not d.arrived
-            if d.waypoints is not None and escape_at is None:
-                escape_at = t
-            elif d.waypoints is not None:
-                got = (t, d.waypoints)
-                break
-            settle(nav)
-    finally:
-        nav.close()
-    assert escape_at is not None and got is not None
-    end_s = nav.events[1]["escape_end_s"]
-    assert got[1] == [(2.1, 1.0)]
-    assert got[0] == pytest.approx(escape_at + 0.5, abs=0.04) and got[0] < end_s - 1.0
-    assert nav._escape_end_step is None  # the robot is on a plan to the goal again
-
-
-class EscapeWaitingIntoContact(EscapeThenPlan):
-    """An escape and a plan from its end, waiting for it while the twin, in the water now
-    estimated, swims the escape 5 mm into an obstacle."""
-
-    def _look_ahead(self, est, left, extra, guide=None, horizon_s=None):  # noqa: ANN001, ANN202
-        waiting = self._escape_end_step is not None and self._pending is not None
-        return (-0.005, 0.0) if waiting else (0.2, 0.2)
-
-
-def test_an_escape_swum_into_contact_stops_the_robot_while_the_plan_from_its_end_waits(
-        open_plan):
-    planner, outcome = open_plan
-    nav = EscapeWaitingIntoContact(lambda extra: planner, planner, outcome, PATH_GAIT,
-                                   estimate_current=False)
-    nav.asked = []
-    stop = None
-    try:
-        for k in range(10 * 30):
-            t = k / 30
-            d = off_corridor_frame(nav, t)
-            if d.stop is not None:
-                stop = (t, d)
-                break
-            settle(nav)
-    finally:
-        nav.close()
-    assert len(nav.asked) == 2 and nav._pending is not None  # the plan from the end waited
-    assert stop is not None and stop[1].stop == "no_safe_continuation"
-    assert "escape leg into an obstacle" in stop[1].detail
-    assert stop[0] < nav.events[1]["escape_end_s"] - 1.0  # well before the leg's end
-
-
-class LateEscape(EscapingReplanner):
-    """The escape comes back 0.6 s after the start it was checked from."""
-
-    def _replan(self, est, left, start_step, extra, guide=None,  # noqa: ANN001, ANN202
-                deadline_s=None):  # noqa: ANN001
-        result = super()._replan(est, left, start_step, extra, guide, deadline_s)
-        if len(self.asked) == 1:
-            now = int(round(est.t_s / 0.01))
-            result = (*result[:-1], now - 60)
-        return result
-
-
-def test_an_escape_ready_later_than_a_restart_period_after_its_start_is_not_used(open_plan):
-    planner, outcome = open_plan
-    nav = LateEscape(lambda extra: planner, planner, outcome, PATH_GAIT, estimate_current=False)
-    nav.asked = []
-    try:
-        for k in range(30):
-            t = k / 30
-            d = off_corridor_frame(nav, t)
-            assert d.waypoints is None
-            settle(nav)
-    finally:
-        nav.close()
-    assert nav.events[1]["status"] == "stale" and "escape:" in nav.events[1]["message"]
-    assert nav._escape_end_step is None and nav._pending is None
-
-
-def test_a_replan_whose_searches_all_find_nothing_escapes_only_when_asked_to(open_plan):
-    _, outcome = open_plan
-    wall = Planner(parse_world(WALL_AHEAD, "wall_ahead"), ROBOT, MODEL)
-    nothing = _Scripted(wall, "exhausted", np.inf)  # every search of the replan: no manoeuvre
-    com = estimate_at(3.0).state[N]
-    est = estimate_at(3.0, (3.0 - 0.6 - com, 0.0))
-    step = int(round(3.0 / 0.01)) + 60
-    got = {}
-    for escape in (False, True):
-        nav = TankReplanner(lambda extra: nothing, nothing, outcome,  # type: ignore[arg-type]
-                            PATH_GAIT, goal_planner_for=lambda extra: nothing,
-                            recovery_planner_for=lambda extra: nothing, escape=escape)
-        try:
-            got[escape], *_ = nav._replan(est, [(2.9, 1.1)], step, np.zeros(2))
-            got[escape, "end"] = nav._escape_end(got[escape])
-        finally:
-            nav.close()
-    assert not got[False].found and got[False].status == "exhausted"  # the default: no escape
-    assert got[True].found and got[True].message.startswith("escape:"), got[True].message
-    assert len(got[True].plan.legs) == 1 and got[True, "end"] is not None
-
-
-def test_the_escape_reaches_the_tank_replanner_only_when_eelbot_run_asks_for_it():
-    from eelhost import cli
-    parse = cli.build_parser().parse_args
-    assert parse(["run", "--plan", "tank_5_obstacles"]).escape is False
-    assert parse(["run", "--plan", "tank_5_obstacles", "--escape"]).escape is True
-    world = parse_world(OPEN, "open")
-    for escape in (False, True):
-        run = plan_for_run(world, ROBOT, "sim://", escape=escape)
-        try:
-            assert run.navigator.escape is escape
-        finally:
-            run.navigator.close()

@@ -31,7 +31,7 @@ import tempfile
 import time
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -88,8 +88,7 @@ class WorldResult:
     replan_wall_s : list of float
         Wall time of each replan, from its request to its plan.
     replan_delay_s : list of float
-        Robot's time from each replan's request to its plan being switched in (not the replans
-        from an escape's end, asked for when the escape starts).
+        Robot's time from each replan's request to its plan being switched in.
     replan_cpu_s : list of float
         Processor time of each replan (its thread's), failed ones included.
     plan_wall_s, plan_cpu_s : float
@@ -106,8 +105,6 @@ class WorldResult:
         The status of each failed replan (``out_of_time``: its budget ran out first).
     replan_budget_s : float or None
         Each replan's wall-clock budget (None: none).
-    escapes : int
-        Escape legs switched in (docs/planning.md, "The escape"; counted in ``replans`` too).
     """
 
     seed: int
@@ -132,7 +129,6 @@ class WorldResult:
     guidance: str = "pursuit"
     failed_replan_statuses: list[str] = field(default_factory=list)
     replan_budget_s: float | None = None
-    escapes: int = 0
 
 
 def true_clearance_m(world: World, model: SwimmerModel, states: FloatArray) -> FloatArray:
@@ -219,7 +215,7 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
               planner_options: dict[str, Any] | None = None,
               swimmer: SwimmerModel | None = None,
               replan_budget_s: float | None = REPLAN_BUDGET_S,
-              record_to: Path | None = None, escape: bool = False) -> WorldResult:
+              record_to: Path | None = None) -> WorldResult:
     """Plan one generated world and swim the plan over ``sim://`` (module docstring).
 
     Parameters
@@ -240,8 +236,6 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
     record_to : Path, optional
         Write the run's planning record there (the take's ``source.planning``: every plan and
         replan with its start state, status and message), to replay failing replans offline.
-    escape : bool
-        The replanner's escape leg (:func:`eelhost.planning.tank.plan_for_run`; off by default).
 
     Returns
     -------
@@ -260,7 +254,7 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
     wall0, cpu0 = time.perf_counter(), time.process_time()
     try:
         planned = plan_for_run(world, robot, uri, gait, model, planner_options=planner_options,
-                               swimmer=swimmer, replan_budget_s=replan_budget_s, escape=escape)
+                               swimmer=swimmer, replan_budget_s=replan_budget_s)
     except PlanRefused as err:
         return WorldResult(seed, False, err.status, detail=str(err), water=water,
                            plan_wall_s=time.perf_counter() - wall0,
@@ -293,14 +287,10 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
         sum(e["status"] == "found" for e in replans),
         sum(e["status"] != "found" for e in replans),
         [e["wall_s"] for e in replans],
-        # a replan from an escape's end is asked for at the escape's start, to steer at its end:
-        # not a robot that left its corridor
-        [e["t_switch_s"] - e["t_request_s"] for e in replans
-         if "t_switch_s" in e and e["reason"] != "after_escape"],
+        [e["t_switch_s"] - e["t_request_s"] for e in replans if "t_switch_s" in e],
         plan_wall, plan_cpu, out.t_end_s, cost, water,
         [e["cpu_s"] for e in replans if e["cpu_s"] is not None], law,
-        [e["status"] for e in replans if e["status"] != "found"], replan_budget_s,
-        sum("escape_end_s" in e and "t_switch_s" in e for e in replans))
+        [e["status"] for e in replans if e["status"] != "found"], replan_budget_s)
 
 
 def _law_name(planner_options: dict[str, Any] | None) -> str:
@@ -314,7 +304,7 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
                           planner_options: dict[str, Any] | None = None,
                           swimmer: SwimmerModel | None = None,
                           replan_budget_s: float | None = REPLAN_BUDGET_S,
-                          escape: bool = False) -> list[WorldResult]:
+                          ) -> list[WorldResult]:
     """Run the benchmark over ``seeds``, resuming from ``<out>/results.jsonl``.
 
     Parameters
@@ -333,8 +323,6 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
         here when not given).
     replan_budget_s : float or None
         Each replan's wall-clock budget (:func:`run_world`).
-    escape : bool
-        The replanner's escape leg (:func:`run_world`; off by default).
 
     Returns
     -------
@@ -348,10 +336,12 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
     out.mkdir(parents=True, exist_ok=True)
     path = out / "results.jsonl"
     done: dict[int, WorldResult] = {}
+    known = {f.name for f in fields(WorldResult)}
     if path.exists():
         for line in path.read_text().splitlines():
             if line.strip():
-                r = WorldResult(**json.loads(line))
+                # keys of fields since removed (``escapes``, session 6's escape leg) are dropped
+                r = WorldResult(**{k: v for k, v in json.loads(line).items() if k in known})
                 done[r.seed] = r
     law = _law_name(planner_options)
     other = sorted({r.seed for r in done.values() if r.guidance != law})
@@ -367,7 +357,7 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
         else:
             r = run_world(seed, robot, model, planner_options=planner_options,
                           swimmer=swimmer, replan_budget_s=replan_budget_s,
-                          record_to=out / "planning" / f"{seed}.json", escape=escape)
+                          record_to=out / "planning" / f"{seed}.json")
             with path.open("a") as f:
                 f.write(json.dumps(asdict(r)) + "\n")
         results.append(r)
@@ -408,11 +398,6 @@ def summary_lines(results: list[WorldResult]) -> list[str]:
                  f"{sum(1 for r in planned if r.replans or r.failed_replans)} runs"
                  + (f"; wall time from request to plan: median {statistics.median(walls):.2f} s,"
                     f" largest {max(walls):.2f} s" if walls else ""))
-    escapes = [r for r in planned if r.escapes]
-    if escapes:
-        lines.append(f"- escape legs switched in: {sum(r.escapes for r in escapes)}, in "
-                     f"{len(escapes)} runs ({sum(r.reached for r in escapes)} of them reached "
-                     "the goal)")
     budgets = sorted({r.replan_budget_s for r in planned if r.replan_budget_s is not None})
     failed = Counter(s for r in planned for s in r.failed_replan_statuses)
     if budgets or failed:

@@ -89,11 +89,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="with --plan or --bench: each replan's wall-clock budget from its "
                    "request; its searches stop there and it returns what it has (1.0 s; 0: no "
                    "deadline; docs/planning.md, \"The replan's deadline\")")
-    p.add_argument("--escape", action="store_true",
-                   help="with --plan or --bench: when every search of a replan finds nothing, "
-                   "switch in one escape leg that keeps the body's outline clear and plan again "
-                   "from its end (off by default: measured to reach no more goals; "
-                   "docs/planning.md, \"The escape\")")
     p.add_argument("--guidance", choices=GUIDANCE_LAWS.names(), default=PURSUIT.name,
                    help="the line-of-sight law that steers the robot: pursuit (the paper's pure "
                    "pursuit of each waypoint, default) or ilos (integral line-of-sight along each "
@@ -221,8 +216,7 @@ def run(args: argparse.Namespace) -> int:
             planned = plan_for_run(world, robot, args.link, gait, coefficients=model,
                                    acceptance_radius_m=args.radius, swimmer=swimmer,
                                    planner_options={"guidance": law},
-                                   replan_budget_s=args.replan_budget or None,
-                                   escape=args.escape)
+                                   replan_budget_s=args.replan_budget or None)
         print(planned.outcome.message)
         print(f"coefficients: {model.describe()}")
         waypoints, navigator, uri = planned.waypoints_m, planned.navigator, planned.uri
@@ -291,8 +285,7 @@ def _bench(args: argparse.Namespace) -> int:
         if args.check_unknown_current is not None:
             options["unknown_current_m_s"] = args.check_unknown_current
         results = run_closed_loop_bench(robot, model, seeds, out, show, options,
-                                        model.swimmer_for(robot), args.replan_budget or None,
-                                        escape=args.escape)
+                                        model.swimmer_for(robot), args.replan_budget or None)
     command = (f"nice eelbot run --bench --worlds {args.worlds} --seed {args.seed}"
                + ("" if args.check_unknown_current is None
                   else f" --check-unknown-current {args.check_unknown_current:g}")
@@ -300,8 +293,7 @@ def _bench(args: argparse.Namespace) -> int:
                   else "")
                + (f" --guidance {args.guidance}" if args.guidance != PURSUIT.name else "")
                + (f" --replan-budget {args.replan_budget:g}" if args.replan_budget != 1.0
-                  else "")
-               + (" --escape" if args.escape else ""))
+                  else ""))
     lines = summary_lines(results)
     block = [BENCH_BEGIN, f"Command: `{command}`", "",
              f"- machine: {cpu_model()}, {os.cpu_count()} cores visible (shared with other "

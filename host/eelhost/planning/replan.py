@@ -33,13 +33,11 @@ from typing import Any, cast
 
 import numpy as np
 
-from eelhost.planning.check import water_twin
 from eelhost.planning.execute import Swim, body_clearance_m, swim
 from eelhost.planning.geometry import FloatArray, point_segment_distance
-from eelhost.planning.planner import LEG_TIME_FACTOR, SCREEN_DRAWS, Outcome, Planner
+from eelhost.planning.planner import Outcome, Planner
 from eelhost.planning.search import (
     Guide,
-    Leg,
     Plan,
     goal_mask,
     in_goal,
@@ -264,228 +262,6 @@ def _time_left(deadline_s: float | None) -> bool:
     return deadline_s is None or time.monotonic() < deadline_s
 
 
-ESCAPE_BEARINGS_DEG = (0.0, -30.0, 30.0, -60.0, 60.0, -90.0, 90.0, -120.0, 120.0, -150.0, 150.0)
-"""The escape's first legs (docs/planning.md, "The escape"): bearings from the body's heading."""
-
-ESCAPE_DISTANCES_M = (0.3, 0.5)
-"""The escape's first legs' lengths (the search's; shorter ones are accepted too soon)."""
-
-ESCAPE_MARGIN_M = 0.02
-"""The escape leg's margin in the twin: the body's own outline (each link's stadium,
-:func:`outline_clearance_m`, the run's contact test's geometry) this far from everything. The
-searches judge every leg with the planner's capsule (the centre line widened by the largest half
-width, reaching 20 mm beyond both tips) plus 10-50 mm, which a body sweeping its tail past an
-obstacle cannot keep while its outline is 20 mm or more clear (docs/planning.md, "The escape")."""
-
-ESCAPE_CHECK_MARGIN_M = 0.01
-"""The escape leg's check: the body's own outline this far from everything in every run (the
-fits as fitted and every draw of the water), up to its waypoint's acceptance."""
-
-ESCAPE_END_CLEARANCE_M = 0.05
-"""Escape legs whose end keeps the capsule this far from everything (the planner's search margin
-beyond the half width) rank alike on their end; among them the longer leg comes first."""
-
-ESCAPE_TRIES = 3
-"""The escape legs (the clearest at their end first) the searches are run from."""
-
-
-@dataclass
-class EscapeLeg:
-    """A first leg the escape may take, swum by the twin from the replan's predicted start.
-
-    Attributes
-    ----------
-    leg : Leg
-        The leg (its ``com_m`` from the start to the waypoint's acceptance).
-    end_state : ndarray, shape (2 N + 4,)
-        The state at the last restart point before the acceptance (where the next leg starts,
-        as the search and the check cut their legs).
-    end_step : int
-    end_guide : (x, y, I_x, I_y)
-        The guidance state a next leg starts with there (from the escape's waypoint).
-    min_outline_m : float
-        The body's own outline's smallest gap over the leg (:func:`outline_clearance_m`).
-    end_clearance_m : float
-        The capsule's gap at ``end_state``.
-    """
-
-    leg: Leg
-    end_state: FloatArray
-    end_step: int
-    end_guide: Guide
-    min_outline_m: float
-    end_clearance_m: float
-
-
-def escape_legs(planner: Planner, state: FloatArray, step: int, guide: Guide,
-                margin_m: float = ESCAPE_MARGIN_M) -> list[EscapeLeg]:
-    """The first legs that turn the body away with a smaller margin than the searches keep.
-
-    Every leg of :data:`ESCAPE_DISTANCES_M` at :data:`ESCAPE_BEARINGS_DEG` from the body's mean
-    heading is swum in one batch of the planner's twin (in its current) from ``state``; a leg
-    counts when its waypoint is accepted and the body's own outline stays ``margin_m`` clear of
-    everything on the way. Best first: the clearest at the leg's end (up to
-    :data:`ESCAPE_END_CLEARANCE_M`), then the longest, then the nearest to the goal
-    (docs/planning.md, "The escape").
-
-    Parameters
-    ----------
-    planner : Planner
-    state : ndarray, shape (2 N + 4,)
-        The replan's start state.
-    step : int
-        Its step of the task (a restart point).
-    guide : (x, y, I_x, I_y)
-        The guidance state there.
-    margin_m : float
-
-    Returns
-    -------
-    list of EscapeLeg
-    """
-    twin, world, model = planner.twin, planner.world, planner.model
-    n = model.n_links
-    state = np.asarray(state, dtype=float)
-    w, h = world.tank.size_m
-    com = state[n : n + 2]
-    heading = float(np.angle(np.exp(1j * state[:n]).mean()))
-    jobs = []
-    for d in ESCAPE_DISTANCES_M:
-        for b in ESCAPE_BEARINGS_DEG:
-            psi = heading + math.radians(b)
-            wp = (float(com[0] + d * math.cos(psi)), float(com[1] + d * math.sin(psi)))
-            if 0 < wp[0] < w and 0 < wp[1] < h:
-                jobs.append((d, b, wp))
-    if not jobs:
-        return []
-    leg_time = planner.search.settings.leg_time_s
-    runs = twin.run([[wp] for _, _, wp in jobs],
-                    [leg_time * (d + 0.3) for d, _, _ in jobs],
-                    states=np.repeat(state[None], len(jobs), axis=0),
-                    start_steps=[step] * len(jobs),
-                    coefficient_index=[planner.search.leg_coefficients(False, b)
-                                       for _, b, _ in jobs],
-                    stride=1, guidance=[guide] * len(jobs))
-    period = twin.restart_steps or 1
-    warm = planner.search.warm_steps
-    goal = np.asarray(world.goal.position_m, dtype=float)
-    out = []
-    for j, (d, b, wp) in enumerate(jobs):
-        arrival = int(runs.arrival_step[j])
-        if runs.reasons[j] or arrival < 0:
-            continue
-        restart = ((arrival - warm) // period) * period
-        if restart <= 0:
-            continue
-        path = runs.states[j, : arrival + 1]
-        outline = outline_clearance_m(world, model, path)
-        if float(outline.min()) < margin_m:
-            continue
-        capsule = body_clearance_m(world, planner.clearance, model, path)
-        leg = Leg(wp, d, b, step, step + arrival, path[:, n : n + 2].copy(),
-                  float(capsule.min()) + float(model.half_axis_horizontal_m.max()))
-        out.append(EscapeLeg(leg, np.asarray(path[restart], dtype=float), step + restart,
-                             runs.guidance_state(j, restart, wp), float(outline.min()),
-                             float(capsule[restart])))
-    # room for the search at the end (its margin: the capsule 50 mm clear), then the longer leg
-    # (the replan from its end has the time the leg takes), then the nearer the goal
-    out.sort(key=lambda e: (-min(e.end_clearance_m, ESCAPE_END_CLEARANCE_M), -e.leg.distance_m,
-                            float(np.hypot(*(e.end_state[n : n + 2] - goal)))))
-    return out
-
-
-def escape_plan(planner: Planner, state: FloatArray, step: int, guide: Guide,
-                tries: int = ESCAPE_TRIES) -> tuple[Outcome, int | None]:
-    """The escape: one leg away from what the searches could not leave, checked over the water.
-
-    The best ``tries`` :func:`escape_legs` are checked in turn (:func:`check_escape_leg`); the
-    first that passes is the plan, a single leg whose waypoint is not the goal: the replanner
-    plans again from the leg's end while the robot swims it (docs/planning.md, "The escape").
-
-    Parameters
-    ----------
-    planner : Planner
-        Its twin swims the legs, its draws of the water check them.
-    state : ndarray, shape (2 N + 4,)
-    step : int
-    guide : (x, y, I_x, I_y)
-    tries : int
-
-    Returns
-    -------
-    Outcome, int or None
-        ``found`` with the one-leg plan (message starting ``escape:``) and the step of the leg's
-        end (the restart point before its waypoint is accepted, where the next plan starts), or
-        ``exhausted`` with why and None.
-    """
-    t0 = time.perf_counter()
-    legs = escape_legs(planner, state, step, guide)
-    why = ""
-    for esc in legs[:tries]:
-        draws, bad = check_escape_leg(planner, esc.leg, state, step, guide)
-        if bad is None:
-            plan = Plan(True, "found", "", [esc.leg], math.nan, 0, len(legs), 0.0,
-                        start_guide=guide)
-            msg = (f"escape: a {esc.leg.distance_m:g} m leg at {esc.leg.bearing_deg:+.0f} deg "
-                   f"from the heading (the body's outline {esc.min_outline_m * 1000:.0f} mm clear "
-                   f"in the twin, at least {ESCAPE_CHECK_MARGIN_M * 1000:g} mm with the fits and "
-                   f"over {draws - 1} draws of the water); planning again from its end at "
-                   f"t = {esc.end_step * planner.twin.dt_s:.2f} s")
-            return (Outcome(plan, "found", msg, [], 0, time.perf_counter() - t0, 0.0, draws - 1,
-                            1), esc.end_step)
-        why = bad
-    msg = (f"no escape: {len(legs)} legs keep the body's outline {ESCAPE_MARGIN_M * 1000:.0f} mm "
-           "clear in the twin" + (f", the best {min(tries, len(legs))} failed their check "
-                                  f"(last: {why})" if why else ""))
-    return Outcome(Plan(False, "exhausted", msg), "exhausted", msg,
-                   planning_time_s=time.perf_counter() - t0), None
-
-
-def check_escape_leg(planner: Planner, leg: Leg, state: FloatArray, step: int, guide: Guide
-                     ) -> tuple[int, str | None]:
-    """Swim an escape leg with the fits as fitted and over the planner's first draws of the water.
-
-    As the planner's check (:meth:`Planner.check_plan`: the same draws, the fits and
-    :data:`eelhost.planning.planner.SCREEN_DRAWS` draws first, the rest only when they pass),
-    but a run passes when its waypoint is accepted with the body's own outline
-    :data:`ESCAPE_CHECK_MARGIN_M` clear of everything on the way (the leg ends there: the next
-    plan is checked from its own start).
-
-    Returns
-    -------
-    int, str or None
-        The runs swum, and why the first failing one failed (None: every run passed).
-    """
-    twin = planner.twin
-    todo = planner.check_waters(planner.waters(0))
-    runner, currents = water_twin(twin, todo)
-    index = planner.search.leg_coefficients(False, leg.bearing_deg)
-    took = max(leg.end_step - leg.start_step, 1) * twin.dt_s
-    swum = 0
-    screen = 1 + SCREEN_DRAWS
-    for lo, hi in ((0, screen), (screen, len(todo))):
-        part = list(range(lo, min(hi, len(todo))))
-        if not part:
-            continue
-        runs = runner.run([[leg.waypoint_m]] * len(part), LEG_TIME_FACTOR * took + 10.0,
-                          states=np.repeat(np.asarray(state, dtype=float)[None], len(part), 0),
-                          start_steps=[step] * len(part),
-                          coefficient_index=[2 * i + index for i in part], stride=1,
-                          currents=[currents[i] for i in part],
-                          guidance=[guide] * len(part))
-        swum += len(part)
-        for j, i in enumerate(part):
-            arrival = int(runs.arrival_step[j])
-            if runs.reasons[j] or arrival < 0:
-                return swum, (f"{todo[i].label}: waypoint never accepted"
-                              + (f" ({runs.reasons[j]})" if runs.reasons[j] else ""))
-            gap = float(outline_clearance_m(planner.world, planner.model,
-                                            runs.states[j, : arrival + 1]).min())
-            if gap < ESCAPE_CHECK_MARGIN_M:
-                return swum, f"{todo[i].label}: the outline {gap * 1000:.0f} mm from something"
-    return swum, None
-
-
 REFUSED_FROM_STATE = ("blocked_start", "current_too_strong", "unreachable")
 """Planner statuses that refuse the start state itself: no safe continuation from it, so the
 robot is stopped unless the look-ahead swims its present plan clear (then it keeps that plan)."""
@@ -621,13 +397,6 @@ class TankReplanner:
         A check that has started runs to its end. None (the default here): no deadline;
         ``eelbot run --plan`` and the closed-loop benchmark give :data:`REPLAN_BUDGET_S`
         (:func:`eelhost.planning.tank.plan_for_run`).
-    escape : bool
-        When every search of a replan found nothing from its start (not refused), try the
-        escape (:func:`escape_plan`): one leg that keeps the body's own outline
-        :data:`ESCAPE_MARGIN_M` clear in the twin and :data:`ESCAPE_CHECK_MARGIN_M` in every
-        check run, and plan again from its end while the robot swims it (docs/planning.md, "The
-        escape"). Off by default: on the development seeds it did not raise the share of goals
-        reached.
     """
 
     def __init__(
@@ -653,7 +422,6 @@ class TankReplanner:
         recovery_planner_for: Callable[[FloatArray], Planner] | None = None,
         replan_current_change_m_s: float = 0.005,
         replan_budget_s: float | None = None,
-        escape: bool = False,
     ) -> None:
         self.planner_for = planner_for
         self.planner = planner
@@ -677,7 +445,6 @@ class TankReplanner:
         self.recovery_planner_for = recovery_planner_for
         self.replan_current_change_m_s = replan_current_change_m_s
         self.replan_budget_s = replan_budget_s
-        self.escape = escape
         self._last_tiers: dict[str, float] = {}  # the last replan's parts' wall times
         self._plan_current = np.zeros(2)  # the extra current the present plan was searched in
         # the rest of the present plan swum in a moved estimate: (future, that estimate)
@@ -697,10 +464,6 @@ class TankReplanner:
         self._job: _Job | None = None
         # (t_start, waypoints, the guidance state they were searched from)
         self._pending: tuple[float, list[tuple[float, float]], Guide | None] | None = None
-        # the step where the pending plan's escape leg ends (None: a plan to the goal), and the
-        # present plan's: the robot is planned again from it while it swims the escape
-        self._pending_escape: int | None = None
-        self._escape_end_step: int | None = None
         self._guide: Guide | None = None  # the run loop's guidance state at the latest frame
         self._next_try_s = -math.inf
         self._touching = 0
@@ -774,30 +537,16 @@ class TankReplanner:
         d.recorded |= self._collect(t_s, d)
         if d.stop is not None:
             return d
-        at_escape_end = (self._escape_end_step is not None
-                         and target >= len(self.waypoints))
-        if self._pending is not None and (t_s >= self._pending[0] - 1e-9 or at_escape_end):
-            # due; or the robot reached its escape's waypoint before the twin put it at the
-            # leg's end: the plan from that end now, or the loop reads the last waypoint as the
-            # end of the run
+        if self._pending is not None and t_s >= self._pending[0] - 1e-9:
             d.waypoints, d.guide = self._pending[1], self._pending[2]
             self.waypoints = list(d.waypoints)
             self._pending = None
-            self._escape_end_step, self._pending_escape = self._pending_escape, None
             self.current.drop()  # the prediction of a window spans no switch of waypoints
             self._lookahead = None  # it followed the old waypoints
             self._whole_job = None
             self.events[-1]["t_switch_s"] = round(t_s, 3)
             self.replans += 1
             d.recorded = True
-            return d
-        if at_escape_end and self._pending is None:
-            # the escape's waypoint is reached and no plan from it has come: stop here rather
-            # than let the loop read the last waypoint as the end of the run
-            d.stop = "no_safe_continuation"
-            d.detail = (f"at t = {t_s:.2f} s the robot reached its escape leg's waypoint "
-                        + ("while the replan from it has not come back" if self._job is not None
-                           else f"with no plan from it: {self.events[-1]['message']}"))
             return d
         est = self.estimator.estimate()
         if est is None or pose is None:
@@ -824,15 +573,6 @@ class TankReplanner:
                         f"or wall within {self.lookahead_s:g} s ({-gap * 1000:.0f} mm deep) and "
                         f"the last replan failed: {self.events[-1]['message']}")
             return d
-        if predicted and gap is not None and gap <= 0.0 and self._escape_end_step is not None:
-            # on an escape leg the replan from its end runs, or its plan waits for the end, for
-            # most of the leg: the water that makes the twin swim the checked escape into
-            # contact stops the robot without waiting for either (docs/planning.md)
-            d.stop = "no_safe_continuation"
-            d.detail = (f"at t = {t_s:.2f} s the twin swims the escape leg into an obstacle or "
-                        f"wall within {self.lookahead_s:g} s ({-gap * 1000:.0f} mm deep) in the "
-                        "water now estimated")
-            return d
         job = self._job
         if (predicted and gap is not None and gap <= 0.0 and job is not None
                 and t_s > job.t_start_s + 1e-9):
@@ -857,17 +597,11 @@ class TankReplanner:
             # swims the rest of the plan out of its margin in the estimate: replan in it while
             # the robot is still on its plan (docs/planning.md)
             reason = "current_estimate"
-        elif self._escape_end_step is not None:
-            # on an escape leg: the search again, from the leg's end (docs/planning.md)
-            reason = "after_escape"
         if reason is not None and not busy and t_s >= self._next_try_s:
-            self._request(t_s, est, left, reason,
-                          self._escape_end_step if reason == "after_escape" else None)
-        elif ((self._pending is None or self._escape_end_step is not None)
-              and self._lookahead is None and self.lookahead_s > 0
+            self._request(t_s, est, left, reason)
+        elif (self._pending is None and self._lookahead is None and self.lookahead_s > 0
               and t_s >= self._next_lookahead_s):
-            # also while a replan runs (on its own worker): a failure is then judged on it; and on
-            # an escape leg while the plan from its end waits for it (seconds, not a frame or two)
+            # also while a replan runs (on its own worker): a failure is then judged on it
             self._next_lookahead_s = t_s + self.lookahead_every_s
             self._lookahead = self._side.submit(self._look_ahead, est, list(left),
                                                   self.current.value_m_s.copy(), self._guide)
@@ -934,25 +668,16 @@ class TankReplanner:
         return max(steps, period)
 
     def _request(self, t_s: float, est: BodyEstimate, left: list[tuple[float, float]],
-                 reason: str, not_before_step: int | None = None) -> None:
-        """Submit a replan from the state predicted a lead ahead.
-
-        At ``not_before_step`` or later when given (an escape leg's end).
-        """
+                 reason: str) -> None:
+        """Submit a replan from the state predicted a lead ahead."""
         dt = self.planner.twin.dt_s
         period = self.planner.twin.restart_steps or 1
         # the predicted start: the first restart point (control update and frame) after the lead
         now_step = int(round(est.t_s / dt))
         start_step = int(math.ceil((now_step + self._lead_steps()) / period)) * period
-        if not_before_step is not None:
-            start_step = max(start_step, not_before_step)
         extra = self.current.value_m_s.copy() if self.estimate_current else np.zeros(2)
         wall = time.monotonic()
         budget = self.replan_budget_s
-        if budget is not None and not_before_step is not None:
-            # the plan from an escape's end is needed by then, not within the budget: the
-            # searches may use the escape's time less a budget for the check
-            budget = max(budget, start_step * dt - t_s - budget)
         deadline = None if budget is None else wall + budget
         future = self._worker.submit(self._replan_and_judge, est, list(left), start_step, extra,
                                      self._guide, deadline)
@@ -1046,21 +771,6 @@ class TankReplanner:
                 else:
                     outcome = dataclasses.replace(outcome, message=(
                         f"{outcome.message}; with the recovery's actions: {rescue.message}"))
-        # the escape: one leg judged by the body's own outline, the search again from its end
-        # while the robot swims it; only when every search from the start found nothing
-        # (docs/planning.md, "The escape")
-        if (self.escape and not outcome.found and outcome.status not in REFUSED_FROM_STATE
-                and _time_left(deadline_s)):
-            escaped, _ = escape_plan(planner, state, start_step, leg_start_guide(
-                state, self.model.n_links, integral))
-            took("escape")
-            log.info("escape from t = %.2f s: %s", start_step * planner.twin.dt_s,
-                     escaped.message)
-            if escaped.found:
-                outcome = escaped
-            else:
-                outcome = dataclasses.replace(outcome, message=(
-                    f"{outcome.message}; {escaped.message}"))
         self._last_tiers = tiers
         return (outcome, state, time.perf_counter() - wall0, time.thread_time() - cpu0,
                 self._planner_current.copy(), time.monotonic(), start_step)
@@ -1091,20 +801,6 @@ class TankReplanner:
             return result, None
         judged = self._look_ahead(est, left, self.current.value_m_s.copy(), guide)
         return result, None if judged is None else judged[0]
-
-    def _escape_end(self, outcome: Outcome) -> int | None:
-        """The step where an escape's leg ends (:func:`escape_plan`), None for a plan to the goal.
-
-        An escape's one leg does not end in the goal disc; its end is the last restart point
-        before its waypoint is accepted, where the search and the check cut every leg.
-        """
-        legs = outcome.plan.legs
-        if not legs or legs[-1].goal:
-            return None
-        leg = legs[-1]
-        period = self.planner.twin.restart_steps or 1
-        warm = self.planner.search.warm_steps
-        return leg.start_step + ((leg.end_step - leg.start_step - warm) // period) * period
 
     def _stale(self, t_s: float, t_start_s: float, path: FloatArray) -> bool:
         """A plan ready more than a restart period after its start, the robot off its corridor."""
@@ -1158,13 +854,7 @@ class TankReplanner:
         tiers, self._last_tiers = self._last_tiers, {}
         if tiers:
             self.events[-1]["parts_wall_s"] = tiers
-        period_s = (self.planner.twin.restart_steps or 1) * self.planner.twin.dt_s
-        late_escape = (outcome.found and self._escape_end(outcome) is not None
-                       and t_s - job.t_start_s > period_s)
-        if outcome.found and (late_escape or self._stale(t_s, job.t_start_s,
-                                                         corridor_path(outcome.plan))):
-            # an escape is checked with little margin from its predicted start: one that comes
-            # later than a restart period after it is not used, in its corridor or not
+        if outcome.found and self._stale(t_s, job.t_start_s, corridor_path(outcome.plan)):
             # ready long after the state it was planned from, and the robot is no longer in its
             # corridor: it would be left at once; the robot keeps its plan, and replans now
             self.events[-1]["status"] = "stale"
@@ -1183,10 +873,6 @@ class TankReplanner:
             self.path = corridor_path(outcome.plan)
             self._pending = (job.t_start_s, list(outcome.plan.waypoints_m),
                              outcome.plan.start_guide)
-            self._pending_escape = self._escape_end(outcome)
-            if self._pending_escape is not None:
-                self.events[-1]["escape_end_s"] = round(self._pending_escape * self.planner.twin.dt_s,
-                                                        3)
             log.info("replanned at t = %.2f s (%.2f s wall): %s", t_s, wall, outcome.message)
             return True
         if job.reason == "current_estimate":
@@ -1212,17 +898,13 @@ class TankReplanner:
                         "so the robot keeps it", self.failures, outcome.status)
             self._next_try_s = t_s + self.backoff_s * 2 ** (min(self.failures, self.max_failures)
                                                             - 1)
-            if job.reason == "after_escape":
-                self._next_try_s = t_s  # the escape's end comes: no back-off (docs/planning.md)
             return True
         if outcome.status in REFUSED_FROM_STATE or self.failures >= self.max_failures:
             d.stop = "no_safe_continuation"
             d.detail = (f"replanning at t = {job.t_request_s:.2f} s found no safe continuation "
                         f"({self.failures} failed in a row): {outcome.message}")
             return True
-        # after an escape the next plan is needed by the escape's end, which comes whatever the
-        # planner does: try again at once
-        wait = 0.0 if job.reason == "after_escape" else self.backoff_s * 2 ** (self.failures - 1)
+        wait = self.backoff_s * 2 ** (self.failures - 1)
         self._next_try_s = t_s + wait
         log.warning("replanning failed at t = %.2f s (%s); next try in %.1f s", t_s,
                     outcome.message, wait)

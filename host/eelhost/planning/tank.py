@@ -112,7 +112,6 @@ def plan_for_run(
     planner_options: dict[str, Any] | None = None,
     swimmer: SwimmerModel | None = None,
     replan_budget_s: float | None = REPLAN_BUDGET_S,
-    escape: bool = False,
 ) -> RunPlan:
     """Plan in a world for ``eelbot run --plan`` (module docstring).
 
@@ -138,10 +137,6 @@ def plan_for_run(
     replan_budget_s : float or None
         Each replan's wall-clock budget from its request (``TankReplanner``; docs/planning.md,
         "The replan's deadline"); None: no deadline.
-    escape : bool
-        Let a replan whose every search finds nothing switch in one escape leg and plan again
-        from its end (``TankReplanner(escape=True)``; docs/planning.md, "The escape"). Off by
-        default: measured not to reach more goals (docs/planning.md, history entry 13).
 
     Returns
     -------
@@ -197,7 +192,7 @@ def plan_for_run(
     navigator = TankReplanner(planner_for, planner, outcome, gait,
                               goal_planner_for=goal_planner_for,
                               recovery_planner_for=recovery_planner_for,
-                              replan_budget_s=replan_budget_s, escape=escape)
+                              replan_budget_s=replan_budget_s)
     return RunPlan(outcome.plan.waypoints_m, navigator, sim_uri_for_world(uri, world), outcome,
                    planner.options.guidance, outcome.plan.start_guide)
 
