@@ -33,11 +33,13 @@ from typing import Any, cast
 
 import numpy as np
 
+from eelhost.planning.check import water_twin
 from eelhost.planning.execute import Swim, body_clearance_m, swim
 from eelhost.planning.geometry import FloatArray, point_segment_distance
 from eelhost.planning.planner import Outcome, Planner
 from eelhost.planning.search import (
     Guide,
+    Leg,
     Plan,
     goal_mask,
     in_goal,
@@ -262,6 +264,148 @@ def _time_left(deadline_s: float | None) -> bool:
     return deadline_s is None or time.monotonic() < deadline_s
 
 
+SHIFT_RADII_M = (0.05, 0.10, 0.15)
+"""How far the shift repair moves the present plan's waypoints (docs/planning.md, "The shift
+repair")."""
+
+SHIFT_DIRECTIONS = 8
+"""The directions (evenly spread) each radius of :data:`SHIFT_RADII_M` is tried in."""
+
+SHIFT_CHECKED = 3
+"""The shifted plans (the clearest in the estimated water first) checked over the water."""
+
+
+def shifted_waypoints(waypoints: list[tuple[float, float]], size_m: tuple[float, float]
+                      ) -> list[list[tuple[float, float]]]:
+    """The present plan's remaining waypoints moved a little, the goal's last one kept.
+
+    Every shift of :data:`SHIFT_RADII_M` in :data:`SHIFT_DIRECTIONS` directions, applied to all
+    the waypoints before the last and, separately, to the first one only (the next leg alone),
+    each clipped 0.05 m inside the tank. The unshifted list is not among them.
+
+    Parameters
+    ----------
+    waypoints : list of (x, y)
+        The waypoints the robot has left, the last one the goal's.
+    size_m : (width, height)
+        The tank.
+
+    Returns
+    -------
+    list of list of (x, y)
+    """
+    if len(waypoints) < 2:
+        return []
+    w, h = size_m
+    out = []
+    for r in SHIFT_RADII_M:
+        for k in range(SHIFT_DIRECTIONS):
+            a = 2.0 * math.pi * k / SHIFT_DIRECTIONS
+            dx, dy = r * math.cos(a), r * math.sin(a)
+            moved = [(min(max(x + dx, 0.05), w - 0.05), min(max(y + dy, 0.05), h - 0.05))
+                     for x, y in waypoints[:-1]]
+            out.append(moved + [waypoints[-1]])
+            if len(waypoints) > 2:
+                out.append([moved[0], *waypoints[1:]])
+    return out
+
+
+def shift_repair(planner: Planner, state: FloatArray, step: int, guide: Guide,
+                 waypoints: list[tuple[float, float]], horizon_s: float,
+                 deadline_s: float | None = None) -> Outcome | None:
+    """The present plan's route with its waypoints shifted, when that swims it clear again.
+
+    The twin swims the remaining ``waypoints`` and every :func:`shifted_waypoints` of them from
+    ``state`` to the goal test, in the planner's water (the world's current plus the estimate)
+    with the straight fit, in one batch. The variants are ranked by the planner's capsule's
+    smallest gap on the way (then by the time to the goal); the best :data:`SHIFT_CHECKED` that
+    keep at least the unshifted route's gap plus 10 mm are checked in turn over the planner's
+    own waters (the fits as fitted and the draws of its check, the straight sets, one batch): a
+    variant passes when every run enters the goal disc with the capsule clear of everything.
+    The first that passes is the plan (docs/planning.md, "The shift repair").
+
+    Parameters
+    ----------
+    planner : Planner
+        In the water of the replan (its twin's current holds the estimate).
+    state : ndarray, shape (2 N + 4,)
+        The replan's predicted start.
+    step : int
+        Its step of the task.
+    guide : (x, y, I_x, I_y)
+        The guidance state a new leg from ``state`` starts with.
+    waypoints : list of (x, y)
+        The present plan's waypoints the robot has left.
+    horizon_s : float
+        The longest swim to the goal.
+    deadline_s : float, optional
+        A ``time.monotonic()`` time: no batch is started after it.
+
+    Returns
+    -------
+    Outcome or None
+        ``found``, message starting ``shift repair:``, or None (no variant passed).
+    """
+    t0 = time.perf_counter()
+    variants = shifted_waypoints(list(waypoints), planner.world.tank.size_m)
+    if not variants:
+        return None
+    variants.insert(0, list(waypoints))
+    twin, world, model = planner.twin, planner.world, planner.model
+    n = model.n_links
+    state = np.asarray(state, dtype=float)
+    stride = 3
+
+    def judged(runs: Any, j: int) -> tuple[float, int] | None:
+        """(capsule's smallest gap, samples to the goal) of run j, None if it never gets there."""
+        states = runs.states[j]
+        states = states[np.isfinite(states[:, 0])]
+        inside = np.flatnonzero(goal_mask(world, states[:, n : n + 2]))
+        if not inside.size:
+            return None
+        states = states[: int(inside[0]) + 1]
+        return float(body_clearance_m(world, planner.clearance, model, states).min()), len(states)
+
+    runs = twin.run(variants, horizon_s, states=np.repeat(state[None], len(variants), axis=0),
+                    start_steps=[step] * len(variants), stride=stride,
+                    guidance=[guide] * len(variants))
+    scored = [(judged(runs, j), j) for j in range(len(variants))]
+    base = scored[0][0]
+    floor = (base[0] if base is not None else 0.0) + 0.01
+    ranked = sorted(((g, j) for g, j in scored[1:] if g is not None and g[0] >= max(floor, 0.0)),
+                    key=lambda e: (-e[0][0], e[0][1]))
+    if not ranked:
+        return None
+    waters = planner.check_waters(planner.waters(0))
+    runner, currents = water_twin(twin, waters)
+    for (gap, samples), j in ranked[:SHIFT_CHECKED]:
+        if not _time_left(deadline_s):
+            return None
+        checks = runner.run([variants[j]] * len(waters), horizon_s,
+                            states=np.repeat(state[None], len(waters), axis=0),
+                            start_steps=[step] * len(waters),
+                            coefficient_index=[2 * i for i in range(len(waters))],
+                            stride=stride, currents=currents, guidance=[guide] * len(waters))
+        worst = [judged(checks, i) for i in range(len(waters))]
+        if any(g is None or g[0] <= 0.0 for g in worst):
+            continue
+        path = runs.states[j][: samples][:, n : n + 2].copy()
+        end_step = step + (samples - 1) * stride
+        legs = [Leg(wp, 0.0, 0.0, step, end_step, path if i == 0 else np.zeros((0, 2)), gap,
+                    goal=i == len(variants[j]) - 1) for i, wp in enumerate(variants[j])]
+        least = min(g[0] for g in worst if g is not None)
+        msg = (f"shift repair: the present plan's {len(variants[j])} waypoints shifted, "
+               f"the capsule {gap * 1000:.0f} mm clear in the estimated water (unshifted "
+               + ("never reaches the goal" if base is None else f"{base[0] * 1000:.0f} mm")
+               + f"), at least {least * 1000:.0f} mm over the {len(waters)} waters of the check;"
+               f" goal at {end_step * twin.dt_s:.1f} s")
+        plan = Plan(True, "found", msg, legs, end_step * twin.dt_s, 0, len(variants),
+                    time.perf_counter() - t0, start_guide=guide)
+        return Outcome(plan, "found", msg, [], 0, time.perf_counter() - t0, 0.0,
+                       len(waters) - 1, 1)
+    return None
+
+
 REFUSED_FROM_STATE = ("blocked_start", "current_too_strong", "unreachable")
 """Planner statuses that refuse the start state itself: no safe continuation from it, so the
 robot is stopped unless the look-ahead swims its present plan clear (then it keeps that plan)."""
@@ -397,6 +541,11 @@ class TankReplanner:
         A check that has started runs to its end. None (the default here): no deadline;
         ``eelbot run --plan`` and the closed-loop benchmark give :data:`REPLAN_BUDGET_S`
         (:func:`eelhost.planning.tank.plan_for_run`).
+    shift_repair : bool
+        When every search of a replan found nothing from its start (not refused), try the
+        present plan's remaining waypoints shifted by 5-15 cm (:func:`shift_repair`): the
+        variant the twin swims clearest in the estimated water, when it passes a check over the
+        planner's waters, is the plan (docs/planning.md, "The shift repair").
     """
 
     def __init__(
@@ -422,6 +571,7 @@ class TankReplanner:
         recovery_planner_for: Callable[[FloatArray], Planner] | None = None,
         replan_current_change_m_s: float = 0.005,
         replan_budget_s: float | None = None,
+        shift_repair: bool = True,
     ) -> None:
         self.planner_for = planner_for
         self.planner = planner
@@ -445,6 +595,7 @@ class TankReplanner:
         self.recovery_planner_for = recovery_planner_for
         self.replan_current_change_m_s = replan_current_change_m_s
         self.replan_budget_s = replan_budget_s
+        self.shift_repair = shift_repair
         self._last_tiers: dict[str, float] = {}  # the last replan's parts' wall times
         self._plan_current = np.zeros(2)  # the extra current the present plan was searched in
         # the rest of the present plan swum in a moved estimate: (future, that estimate)
@@ -771,6 +922,24 @@ class TankReplanner:
                 else:
                     outcome = dataclasses.replace(outcome, message=(
                         f"{outcome.message}; with the recovery's actions: {rescue.message}"))
+        # the shift repair: the present route, its waypoints moved against the water that pushes
+        # it into something (docs/planning.md, "The shift repair")
+        if (self.shift_repair and not outcome.found and outcome.status not in REFUSED_FROM_STATE
+                and _time_left(deadline_s)):
+            remaining = (self.outcome.plan.cost_s - start_step * planner.twin.dt_s
+                         if self.outcome.found else math.nan)
+            horizon = (min(1.5 * remaining + 5.0, 90.0) if math.isfinite(remaining) else 60.0)
+            repaired = shift_repair(planner, state, start_step, leg_start_guide(
+                state, self.model.n_links, integral), left, max(horizon, self.replan_horizon_s),
+                deadline_s)
+            took("shift_repair")
+            log.info("shift repair from t = %.2f s: %s", start_step * planner.twin.dt_s,
+                     "none passed" if repaired is None else repaired.message)
+            if repaired is not None:
+                outcome = repaired
+            else:
+                outcome = dataclasses.replace(outcome, message=(
+                    f"{outcome.message}; no shift of the present waypoints passed"))
         self._last_tiers = tiers
         return (outcome, state, time.perf_counter() - wall0, time.thread_time() - cpu0,
                 self._planner_current.copy(), time.monotonic(), start_step)
