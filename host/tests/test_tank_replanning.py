@@ -32,7 +32,7 @@ from eelhost.planning.replan import (
     outline_clearance_m,
     predict_state,
 )
-from eelhost.planning.search import Plan
+from eelhost.planning.search import Leg, Plan
 from eelhost.planning.state_estimate import BodyStateEstimator, CurrentWindow
 from eelhost.planning.tank import plan_for_run, with_extra_current
 from eelhost.planning.uncertainty import default_model, read_coefficient_model
@@ -962,3 +962,82 @@ def test_a_moved_current_estimate_has_its_planner_built_before_the_next_replan(o
         assert len(built) == 1
     finally:
         nav.close()
+
+
+BESIDE = {
+    "name": "beside",
+    "tank": {"size_m": [3.0, 2.0]},
+    "start": {"position_m": [0.6, 1.0], "heading_deg": 0.0},
+    "goal": {"position_m": [2.3, 1.1], "radius_m": 0.2},
+    "current": {"speed_m_s": 0.0, "direction_deg": 0.0},
+    # a disc the present waypoints' route grazes (the capsule about 1 mm clear in the twin)
+    "obstacles": [{"kind": "circle", "centre_m": [1.55, 0.88], "radius_m": 0.1}],
+}
+BESIDE_LEFT = [(1.9, 1.1), (2.3, 1.1)]
+
+
+@pytest.fixture(scope="module")
+def grazing():
+    """The planner of BESIDE (checked as the benchmark's, no unknown current), the swimming
+    robot's predicted start 0.6 s after its estimate at 3 s, and that start's step."""
+    planner = Planner(parse_world(BESIDE, "beside"), ROBOT, MODEL, unknown_current_m_s=0.0)
+    step = int(round(3.0 / 0.01)) + 60
+    state = predict_state(planner.twin, estimate_at(3.0), BESIDE_LEFT, step)
+    assert state is not None
+    return planner, state, step
+
+
+def _true_gap(planner: Planner, state, step: int, waypoints) -> float:  # noqa: ANN001
+    """The benchmark's shapely body's smallest gap over the twin's swim of ``waypoints`` to the
+    goal disc (geometry written apart from the replanner's)."""
+    from eelhost.benchmarks.closed_loop import true_clearance_m
+    from eelhost.planning.search import goal_mask, leg_start_guide
+
+    runs = planner.twin.run([waypoints], 30.0, states=state[None], start_steps=[step], stride=1,
+                            guidance=[leg_start_guide(state, N)])
+    states = runs.states[0][np.isfinite(runs.states[0][:, 0])]
+    inside = np.flatnonzero(goal_mask(planner.world, states[:, N : N + 2]))
+    assert inside.size, "never reaches the goal"
+    return float(true_clearance_m(planner.world, planner.model, states[: inside[0] + 1]).min())
+
+
+def test_the_shift_repair_moves_a_grazing_route_off_the_obstacle_and_keeps_the_goal(grazing):
+    from eelhost.planning.replan import shift_repair
+    from eelhost.planning.search import leg_start_guide
+
+    planner, state, step = grazing
+    outcome = shift_repair(planner, state, step, leg_start_guide(state, N), BESIDE_LEFT, 30.0)
+    assert outcome is not None and outcome.found, "no shift passed"
+    assert outcome.message.startswith("shift repair:"), outcome.message
+    moved = outcome.plan.waypoints_m
+    assert len(moved) == 2 and moved[-1] == BESIDE_LEFT[-1] and moved[0] != BESIDE_LEFT[0]
+    assert outcome.plan.start_guide == leg_start_guide(state, N)
+    # the corridor is the twin's swim from the start
+    assert np.hypot(*(outcome.plan.legs[0].com_m[0] - state[N : N + 2])) < 0.02
+    # the benchmark's own body: the repaired route clear, and clearer than the grazing one
+    before = _true_gap(planner, state, step, BESIDE_LEFT)
+    after = _true_gap(planner, state, step, moved)
+    assert after > 0.03 and after > before + 0.02
+
+
+def test_a_replan_whose_searches_all_find_nothing_is_shift_repaired_only_when_asked_to(grazing):
+    planner, state, step = grazing
+    nothing = _Scripted(planner, "exhausted", np.inf)  # every search of the replan: no manoeuvre
+    com = np.column_stack([np.linspace(0.6, 2.3, 50), np.linspace(1.0, 1.1, 50)])
+    first = Plan(True, "found", "", [Leg(BESIDE_LEFT[0], 1.3, 0.0, 0, 1500, com, 0.05),
+                                     Leg(BESIDE_LEFT[1], 0.4, 0.0, 1500, 2500, com[-1:], 0.05,
+                                         goal=True)], 30.0)
+    got = {}
+    for on in (False, True):
+        nav = TankReplanner(lambda extra: nothing, nothing,  # type: ignore[arg-type]
+                            Outcome(first, "found", ""), PATH_GAIT,
+                            goal_planner_for=lambda extra: nothing,
+                            recovery_planner_for=lambda extra: nothing, shift_repair=on)
+        try:
+            # a start 0.6 s ahead of the estimate at 3 s: the fixture's predicted state
+            got[on], start, *_ = nav._replan(estimate_at(3.0), BESIDE_LEFT, step, np.zeros(2))
+        finally:
+            nav.close()
+        assert np.allclose(start, state)
+    assert not got[False].found and got[False].status == "exhausted"
+    assert got[True].found and got[True].message.startswith("shift repair:"), got[True].message
