@@ -195,3 +195,97 @@ def _swum(displacement):
     """A prepared experiment stand-in whose recording moves by ``displacement``."""
     end = np.asarray(displacement, dtype=float)
     return SimpleNamespace(experiment=SimpleNamespace(position_m=np.array([[0.0, 0.0], end])))
+
+
+class _LinearMotion:
+    """A motion whose residuals are linear in its own parameter and the current.
+
+    ``residuals(x) = x @ columns.T - columns @ truth + misfit + noise`` for x = (own, v_x, v_y):
+    ``truth`` the water's (own, current), ``misfit`` what the model cannot hold, laid along the
+    current's columns (``misfit_m_s``: the current that would absorb it), the worst case for a
+    nuisance.
+    """
+
+    def __init__(self, rng, truth, misfit_m_s, experiments=5, samples=12, noise_m=2e-4):
+        camera = SimpleNamespace(pixel_m=0.0)
+        self.prepared = [SimpleNamespace(experiment=SimpleNamespace(
+            recording_camera=lambda: camera))] * experiments
+        self.columns = rng.normal(size=(experiments * samples, 3))
+        self.offset = (-self.columns @ np.asarray(truth)
+                       - self.columns[:, 1:] @ np.asarray(misfit_m_s)
+                       + noise_m * rng.normal(size=experiments * samples))
+        self.space = SimpleNamespace(bounds=np.array([[-1.0, 1.0], [-0.03, 0.03], [-0.03, 0.03]]))
+
+    def residuals(self, x):
+        return np.atleast_2d(x) @ self.columns.T + self.offset
+
+    def own_fit(self):
+        return np.linalg.lstsq(self.columns, -self.offset, rcond=None)[0]
+
+
+def _tank_interval(current_m_s, misfits_m_s, seed=3):
+    """The tank's current, half-width and widening from two linear motions (their LS fits)."""
+    from eelhost.estimation.tank_current import _interval, _JointCube
+
+    rng = np.random.default_rng(seed)
+    evs = [_LinearMotion(rng, [0.3, *current_m_s], m) for m in misfits_m_s]
+    cube = _JointCube(np.array([[-1.0, 1.0], [-1.0, 1.0], [-0.03, 0.03], [-0.03, 0.03]]))
+
+    def split(x):
+        return [x[:, [0, 2, 3]], x[:, [1, 2, 3]]]
+
+    stacked = np.zeros((sum(len(ev.offset) for ev in evs), 4))
+    n = len(evs[0].offset)
+    stacked[:n, [0, 2, 3]] = evs[0].columns
+    stacked[n:, [1, 2, 3]] = evs[1].columns
+    joint = np.linalg.lstsq(stacked, -np.concatenate([ev.offset for ev in evs]), rcond=None)[0]
+    half, scale = _interval(evs, cube, split, joint, [ev.own_fit() for ev in evs])
+    return joint[-2:], half, scale
+
+
+def test_a_still_water_tank_whose_model_misfits_reports_an_interval_that_includes_still_water():
+    from eelhost.estimation.tank_current import TankCurrent
+
+    # each motion's misfit looks like its own current (4 and 2 mm/s, different ways): the
+    # joint fit's current is their mean, 1.1 mm/s, and the residuals alone give it +-0.1 mm/s
+    misfits = [(-0.004, 0.001), (0.002, -0.002)]
+    current, half, scale = _tank_interval((0.0, 0.0), misfits)
+    assert np.hypot(*current) > 0.001
+    assert scale > 5  # the motions disagree far beyond their intervals
+    assert np.all(np.abs(current) <= half)
+    tank = TankCurrent(current, half, {}, 10, 1.0, scale)
+    assert not tank.resolved and tank.to_json()["resolved"] is False
+    assert tank.text().startswith("no current resolved")
+
+
+def test_a_real_current_with_a_model_that_holds_the_water_is_resolved_and_not_widened_much():
+    from eelhost.estimation.tank_current import TankCurrent
+
+    truth = np.array([-0.0025, 0.00433])
+    current, half, scale = _tank_interval(truth, [(0.0, 0.0), (0.0, 0.0)])
+    assert scale < 2
+    assert np.all(np.abs(current - truth) <= half) and np.all(half < 0.001)
+    tank = TankCurrent(current, half, {}, 10, 1.0, scale)
+    assert tank.resolved and not tank.text().startswith("no current")
+
+
+def test_the_current_interval_widens_with_the_motions_misfit():
+    misfit = np.array([(-0.0004, 0.0001), (0.0002, -0.0002)])
+    halves = [_tank_interval((-0.0025, 0.00433), k * misfit)[1] for k in (0.0, 1.0, 2.0)]
+    assert np.all(halves[1] > 2 * halves[0]) and np.all(halves[2] > 1.5 * halves[1])
+    # the real current stays inside (the misfits' mean moves the fit, the interval holds it)
+    current, half, _ = _tank_interval((-0.0025, 0.00433), misfit)
+    assert np.all(np.abs(current - (-0.0025, 0.00433)) <= half)
+
+
+def test_the_birge_ratio_is_the_motions_chi_square_over_its_degrees_of_freedom():
+    from eelhost.estimation.tank_current import misfit_scale
+
+    tank = np.array([0.001, 0.002])
+    cov = np.diag([1e-6, 4e-6])
+    # written apart: two motions, 2 * 2 - 2 = 2 degrees of freedom
+    a, b = np.array([0.004, 0.002]), np.array([0.001, -0.004])
+    q = ((a - tank) ** 2 / np.diag(cov)).sum() + ((b - tank) ** 2 / np.diag(cov)).sum()
+    assert misfit_scale(tank, [(a, cov), (b, cov)]) == pytest.approx(np.sqrt(q / 2))
+    assert misfit_scale(tank, [(tank, cov), (tank + 1e-4, cov)]) == 1.0
+    assert misfit_scale(tank, [(a, cov)]) == 1.0  # one motion: nothing to compare

@@ -340,10 +340,17 @@ def _report_text(
         lines += [
             "",
             f"One current for the tank, estimated from all {tank['experiments']} training "
-            f"experiments together: {tank['speed_m_s']:.4f} m/s towards "
+            f"experiments together: "
+            + ("" if tank.get("resolved", True) else
+               "no current resolved (still water lies inside its interval): ")
+            + f"{tank['speed_m_s']:.4f} m/s towards "
             f"{tank['direction_deg']:.0f} deg (95 % interval +-"
             f"{1e3 * tank['half_width_m_s'][0]:.1f} mm/s in v_x, "
-            f"+-{1e3 * tank['half_width_m_s'][1]:.1f} mm/s in v_y); each fit holds it within "
+            f"+-{1e3 * tank['half_width_m_s'][1]:.1f} mm/s in v_y"
+            + (f", widened {tank['misfit_scale']:.1f} times because the motions' own currents "
+               "disagree beyond their intervals: the model's misfit"
+               if tank.get("misfit_scale", 1.0) > 1.0 else "")
+            + "); each fit holds it within "
             f"that interval. Each motion's fit alone had found: {alone}.",
         ]
     if "truth" in extra:

@@ -25,7 +25,12 @@ and a speed error differ. So, once both fits are made:
    interval c +- z s (z = 1.96) per component; or, where wider, the cluster-robust (sandwich)
    standard error with each experiment a cluster, times Student's t with G - 1 degrees of
    freedom for G experiments: a recording's residuals move together (its clock offset, its
-   jitter, the misfit), so they are not independent evidence.
+   jitter, the misfit), so they are not independent evidence. Neither sees a misfit the
+   current absorbed (the residuals no longer hold it), so the interval is widened by the Birge
+   ratio of the motions' own currents against the tank's (:func:`misfit_scale`): in one tank,
+   with a model that holds the water, they differ by their noise only; beyond it, the misfit
+   moved them, and the tank's current as much. When still water lies inside the interval, no
+   current is resolved (``TankCurrent.resolved``), and the report says so.
 3. **Each motion's fit holds it.** Each motion's parameters are polished again from the joint
    fit with the current bounded to that interval (``ParameterSpace.current_bounds``), so the
    bootstrap, the identifiability analysis and the validation see the tank's current, and a fit
@@ -86,6 +91,9 @@ class TankCurrent:
         Training experiments it was estimated from.
     fitness : float
         The joint fit's largest error relative to each motion's own fitness.
+    misfit_scale : float
+        How much the interval was widened because the motions' own currents disagree beyond
+        their intervals (:func:`misfit_scale`; 1: they agree).
     """
 
     current_m_s: np.ndarray
@@ -93,13 +101,27 @@ class TankCurrent:
     per_motion_m_s: dict[str, np.ndarray]
     experiments: int
     fitness: float
+    misfit_scale: float = 1.0
+
+    @property
+    def resolved(self) -> bool:
+        """Whether the data hold a current: still water (0, 0) lies outside its interval."""
+        return bool(np.any(np.abs(self.current_m_s) > self.half_width_m_s))
 
     def text(self) -> str:
-        """"0.0050 m/s towards 120 deg (+-0.4, +-0.5 mm/s)"."""
+        """"0.0050 m/s towards 120 deg (v_x -2.5 +- 0.4 mm/s, v_y +4.3 +- 0.5 mm/s)".
+
+        Prefixed "no current resolved:" when still water lies inside the interval, and followed
+        by the widening for the motions' disagreement when there was one.
+        """
         vx, vy = self.current_m_s
         hx, hy = 1e3 * self.half_width_m_s
-        return (f"{np.hypot(vx, vy):.4f} m/s towards {np.degrees(np.arctan2(vy, vx)):.0f} deg "
-                f"(v_x {1e3 * vx:+.1f} +- {hx:.1f} mm/s, v_y {1e3 * vy:+.1f} +- {hy:.1f} mm/s)")
+        widened = (f"; widened x{self.misfit_scale:.1f}: the motions' own currents disagree"
+                   if self.misfit_scale > 1.0 else "")
+        return (("" if self.resolved else "no current resolved: ")
+                + f"{np.hypot(vx, vy):.4f} m/s towards {np.degrees(np.arctan2(vy, vx)):.0f} deg "
+                f"(v_x {1e3 * vx:+.1f} +- {hx:.1f} mm/s, v_y {1e3 * vy:+.1f} +- {hy:.1f} mm/s"
+                f"{widened})")
 
     def to_json(self) -> dict[str, Any]:
         """JSON-ready (``coefficients.json``'s ``tank_current``; docs/data.md)."""
@@ -111,6 +133,8 @@ class TankCurrent:
             "half_width_m_s": [float(h) for h in self.half_width_m_s],
             "per_motion_alone": {m: [float(v) for v in c] for m, c in self.per_motion_m_s.items()},
             "experiments": self.experiments,
+            "resolved": self.resolved,
+            "misfit_scale": float(self.misfit_scale),
         }
 
 
@@ -211,8 +235,8 @@ def share_tank_current(
     results = polish_minimax_many(evaluate, cast(ParameterSpace, cube), starts, JOINT_ITERATIONS)
     best = min(results, key=lambda r: r.fitness)
     joint = np.asarray(best.values, dtype=float)
-    half = _half_width(evs, cube, split, joint)
     current = joint[-2:]
+    half, scale_by = _interval(evs, cube, split, joint, own)
     new_fits, new_evs = dict(fits), dict(evaluators)
     for m, ev, part in zip(motions, evs, split(joint[None]), strict=True):
         held = replace(ev.space, current_bounds=np.column_stack(
@@ -233,12 +257,43 @@ def share_tank_current(
                                 search_evaluations=fits[m].search_evaluations)
         new_evs[m] = held_ev
     tank = TankCurrent(current, half, {m: x[-2:] for m, x in zip(motions, own, strict=True)},
-                       sum(len(ev.prepared) for ev in evs), best.fitness)
+                       sum(len(ev.prepared) for ev in evs), best.fitness, scale_by)
     say(f"tank current from {tank.experiments} training experiments ({', '.join(motions)}): "
         f"{tank.text()}; alone: " + "; ".join(
             f"{m} {1e3 * np.hypot(*c):.1f} mm/s towards {np.degrees(np.arctan2(c[1], c[0])):.0f} deg"
             for m, c in tank.per_motion_m_s.items()))
     return new_fits, new_evs, tank
+
+
+def misfit_scale(current: np.ndarray, views: list[tuple[np.ndarray, np.ndarray]]) -> float:
+    """The factor that widens the tank current's interval when the motions disagree (step 2).
+
+    Each motion's own fit found a current c_m with covariance S_m (its own residuals, the other
+    parameters profiled out; along a motion's swimming axis S_m is wide where its coefficients
+    trade against it). In one tank and a model that holds the water they differ from the tank's
+    current c by their noise only, and Q = sum (c_m - c)^T S_m^-1 (c_m - c) is about chi^2 with
+    2 M - 2 degrees of freedom for M motions. A model's misfit moves each motion's current its
+    own way; the tank's current, fitted on the same misfit, moves as much, which its interval
+    from the residuals cannot see. So the interval is widened by sqrt(Q / (2 M - 2)) when that
+    exceeds 1: the Birge ratio (the Particle Data Group's scale factor for measurements that
+    disagree beyond their errors).
+
+    Parameters
+    ----------
+    current : ndarray, shape (2,)
+        The tank's current, m/s.
+    views : list of (ndarray (2,), ndarray (2, 2))
+        Each motion's own current and its covariance, (m/s)^2.
+
+    Returns
+    -------
+    float
+        At least 1.
+    """
+    if len(views) < 2:
+        return 1.0
+    q = sum(float((c - current) @ np.linalg.pinv(cov) @ (c - current)) for c, cov in views)
+    return float(np.sqrt(max(1.0, q / (2 * len(views) - 2))))
 
 
 def swim_axis(ev: Evaluator) -> np.ndarray | None:
@@ -280,15 +335,74 @@ def cross_track_axes(axes: list[np.ndarray | None]) -> list[np.ndarray | None]:
     return [None] * len(axes)
 
 
+@dataclass(frozen=True)
+class _Spread:
+    """The current's covariance on a fit (module doc, step 2), (m/s)^2.
+
+    ``independent``: from independent residuals, its 95 % half-width z sqrt(diag); ``robust``:
+    cluster-robust (experiments the clusters), its half-width t(G - 1) sqrt(diag), or None with
+    one experiment; ``quantile``: t(G - 1) / z, the robust one's widening of z.
+    """
+
+    independent: np.ndarray
+    robust: np.ndarray | None
+    quantile: float
+
+    def half_width(self) -> np.ndarray:
+        """The 95 % half-width per component: the wider of the two intervals."""
+        half = Z_95 * np.sqrt(np.clip(np.diag(self.independent), 0.0, None))
+        if self.robust is not None:
+            half = np.maximum(half, Z_95 * self.quantile
+                              * np.sqrt(np.clip(np.diag(self.robust), 0.0, None)))
+        return half
+
+    def covariance(self) -> np.ndarray:
+        """The covariance of the wider interval, as a normal's (the robust one times its t)."""
+        if self.robust is None:
+            return self.independent
+        robust = self.robust * self.quantile**2
+        return robust if np.trace(robust) > np.trace(self.independent) else self.independent
+
+
+def _interval(evs: list[Evaluator], cube: _JointCube,
+              split: Callable[[np.ndarray], list[np.ndarray]], joint: np.ndarray,
+              own: list[np.ndarray]) -> tuple[np.ndarray, float]:
+    """The tank current's 95 % half-width per component and its widening for misfit (step 2).
+
+    ``own`` holds each motion's own fit (its vector, current last) in its own space. The
+    half-width on the joint problem (:func:`_half_width`) times :func:`misfit_scale` of the
+    motions' own currents, each with its covariance on its own residuals.
+    """
+    views = [_spread([ev], _JointCube(ev.space.bounds), lambda x: [x], x)
+             for ev, x in zip(evs, own, strict=True)]
+    scale_by = misfit_scale(joint[-2:], [(x[-2:], v.covariance())
+                                         for x, v in zip(own, views, strict=True)
+                                         if v is not None])
+    half = np.clip(scale_by * _half_width(evs, cube, split, joint), MIN_HALF_WIDTH_M_S,
+                   CURRENT_BOUND_M_S)
+    return half, scale_by
+
+
 def _half_width(evs: list[Evaluator], cube: _JointCube,
                 split: Callable[[np.ndarray], list[np.ndarray]], joint: np.ndarray) -> np.ndarray:
     """Half-width of the current's 95 % interval, per component (module doc, step 2).
 
+    :func:`_spread`'s wider interval; a current the other parameters can explain gets the whole
+    search bound.
+    """
+    spread = _spread(evs, cube, split, joint)
+    if spread is None:
+        return np.full(2, CURRENT_BOUND_M_S)
+    return np.clip(spread.half_width(), MIN_HALF_WIDTH_M_S, CURRENT_BOUND_M_S)
+
+
+def _spread(evs: list[Evaluator], cube: _JointCube,
+            split: Callable[[np.ndarray], list[np.ndarray]], joint: np.ndarray) -> _Spread | None:
+    """The current's covariance at ``joint``, or None where the other parameters explain it.
+
     As :func:`eelhost.estimation.identify.identifiability` (Jacobian in the unit cube, residual
-    variance never below the pixel rounding's), on the residuals of both motions stacked, with
-    the other parameters profiled out: z times that standard error, or t(G - 1) times the
-    cluster-robust one (experiments the clusters) where wider; a current the other parameters
-    can explain gets the whole search bound.
+    variance never below the pixel rounding's), on the residuals of ``evs`` stacked, with the
+    other parameters profiled out; and the cluster-robust one with each experiment a cluster.
     """
     k = cube.size
     u0 = cube.to_unit(joint)
@@ -316,9 +430,9 @@ def _half_width(evs: list[Evaluator], cube: _JointCube,
     scale = float(np.sum(current**2)) or 1.0
     ranges = cube.bounds[-2:, 1] - cube.bounds[-2:, 0]
     if np.linalg.eigvalsh(info).min() <= 1e-12 * scale:  # the others explain the current
-        return np.full(2, CURRENT_BOUND_M_S)
+        return None
     bread = np.linalg.inv(info)
-    half = Z_95 * np.sqrt(sigma2 * np.diag(bread)) * ranges
+    to_m_s = np.outer(ranges, ranges)  # unit-cube covariance to (m/s)^2
     # the same with the residuals correlated within each experiment (a clock offset or a misfit
     # shifts a whole recording): the cluster-robust sandwich, experiments the clusters, with the
     # small-sample factor G / (G - 1) and Student's t with G - 1 degrees of freedom (Cameron &
@@ -328,8 +442,8 @@ def _half_width(evs: list[Evaluator], cube: _JointCube,
     scores = np.array([alone[cluster == g].T @ r[0][cluster == g]
                        for g in np.unique(cluster)])  # (G, 2)
     groups = len(scores)
-    if groups > 1:
-        robust = bread @ (scores.T @ scores) @ bread * groups / (groups - 1)
-        half = np.maximum(half, float(student_t.ppf(0.975, groups - 1)) * ranges
-                          * np.sqrt(np.clip(np.diag(robust), 0.0, None)))
-    return np.clip(half, MIN_HALF_WIDTH_M_S, CURRENT_BOUND_M_S)
+    if groups < 2:
+        return _Spread(sigma2 * bread * to_m_s, None, 1.0)
+    robust = bread @ (scores.T @ scores) @ bread * groups / (groups - 1)
+    return _Spread(sigma2 * bread * to_m_s, robust * to_m_s,
+                   float(student_t.ppf(0.975, groups - 1)) / Z_95)
