@@ -19,14 +19,15 @@ run never accepts ends that run there (the goal missed, blamed on that leg).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+import time
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
 from eelhost.planning.execute import Swim, body_clearance_m
 from eelhost.planning.field import ClearanceField
 from eelhost.planning.geometry import FloatArray
-from eelhost.planning.search import Guide, Plan, goal_mask, leg_start_guide
+from eelhost.planning.search import Guide, Plan, SwimCost, goal_mask, leg_start_guide
 from eelhost.planning.twin import Twin
 from eelhost.planning.uncertainty import WaterDraw
 from eelhost.planning.world import World
@@ -35,6 +36,13 @@ from eelsim.model import SwimmerModel
 
 LEG_TIME_FACTOR = 3.0
 """A check run's time limit for a leg, as a multiple of the time the search's run took."""
+
+class CheckOutOfTime(Exception):
+    """The check stopped at its deadline before swimming every run (the plan is not checked)."""
+
+
+CHECK_COST = SwimCost()
+"""The process's measurement of the check's cost, shared by every planner (replans' too)."""
 
 
 def water_twin(twin: Twin, waters: Sequence[WaterDraw]
@@ -73,6 +81,9 @@ def swim_legs(
     state: FloatArray | None = None,
     start_step: int = 0,
     guide: Guide | None = None,
+    deadline_s: float | None = None,
+    clock: Callable[[], float] = time.monotonic,
+    cost: SwimCost | None = None,
 ) -> list[Swim]:
     """Swim a plan leg by leg in each water and judge each run (module docstring).
 
@@ -96,12 +107,29 @@ def swim_legs(
         The guidance's state at the start (default the plan's ``start_guide``, else the first
         leg from the start state's centre of mass with the integral zero, as the search).
         Each run's next leg starts with the state its previous leg left at the restart.
+    deadline_s : float, optional
+        A time on ``clock``: no leg's batch is started that ``cost`` predicts would end after
+        it (or at all once it has passed); the swim then raises :class:`CheckOutOfTime`.
+        Default: none.
+    clock : callable
+        The clock of ``deadline_s`` and of the cost's measurement (``time.monotonic``).
+    cost : SwimCost, optional
+        Where the swim's measured cost is recorded and the leg batches' time predicted from
+        (default :data:`CHECK_COST`, the process's).
 
     Returns
     -------
     list of Swim
         One per water, in order.
+
+    Raises
+    ------
+    CheckOutOfTime
+        ``deadline_s`` came before every leg was swum (no run is judged then).
     """
+    cost = CHECK_COST if cost is None else cost
+    started = clock()
+    run_steps = 0
     r = len(waters)
     n = model.n_links
     if state is None:
@@ -128,6 +156,13 @@ def swim_legs(
             break
         wps = [leg.waypoint_m] if k == 0 else [plan.legs[k - 1].waypoint_m, leg.waypoint_m]
         took = max(leg.end_step - leg.start_step, period) * twin.dt_s
+        if deadline_s is not None:
+            # the leg's batch as the search swam it, in every live water
+            need = cost.predict_s(len(live) * took / twin.dt_s) or 0.0
+            if clock() + need > deadline_s:
+                raise CheckOutOfTime(
+                    f"the check stopped at its deadline before leg {k + 1} of "
+                    f"{len(plan.legs)} ({len(live)} of {r} runs still swimming)")
         runs = runner.run(
             [wps] * len(live), LEG_TIME_FACTOR * took + 10.0,
             states=states[live], start_steps=steps[live],
@@ -135,6 +170,7 @@ def swim_legs(
             currents=[currents[i] for i in live],
             guidance=[guides[i] for i in live],
         )
+        run_steps += int(np.sum(runs.final_step + 1))
         # at a restart the guidance steers to this leg's waypoint along the leg from the one
         # before (for the first leg, from the start's leg start)
         origin = plan.legs[k - 1].waypoint_m if k > 0 else (guide[0], guide[1])
@@ -188,4 +224,5 @@ def swim_legs(
             t_s=np.asarray(t0 + np.arange(len(run_states)) * twin.dt_s, dtype=np.float64),
             states=run_states,
         ))
+    cost.record(run_steps, clock() - started)
     return out

@@ -40,17 +40,18 @@ import logging
 import math
 import time
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from eelhost.errors import UserError
 from eelhost.planning.body import body_points
-from eelhost.planning.check import swim_legs
+from eelhost.planning.check import CHECK_COST, CheckOutOfTime, swim_legs
 from eelhost.planning.execute import Swim
 from eelhost.planning.field import ClearanceField, GoalDistance, signed_clearance
 from eelhost.planning.geometry import FloatArray
-from eelhost.planning.search import Guide, Plan, Search, SearchSettings
+from eelhost.planning.search import Guide, Plan, Search, SearchSettings, SwimCost
 from eelhost.planning.twin import Twin
 from eelhost.planning.uncertainty import (
     DEFAULT_UNKNOWN_CURRENT_M_S,
@@ -114,6 +115,12 @@ from the search's run in the check's currents (docs/planning.md, "The search")."
 
 SOFT_MARGIN_COST = 3.0
 """The soft margin's cost, s per s swum, of a body point at the hard margin."""
+
+CHECK_OVER_SEARCH = 4.0
+"""Before the check's cost has been measured in this process, a run-step of the check is taken to
+cost this many times a run-step of the search's swims, measured in the same call (the check
+samples every physics step and measures the exact clearance of every state; docs/planning.md,
+"The planning call's deadline")."""
 
 LEG_TIME_FACTOR = 1.6
 """A leg's time limit per metre, as a multiple of the time the robot needs against the current."""
@@ -179,7 +186,9 @@ class Outcome:
         The last search's plan (``found`` False when refused).
     status : str
         ``found``, or why not: ``blocked_start``, ``current_too_strong``, ``unreachable``
-        (refusals), ``exhausted``, ``gave_up`` (the search's), ``check_failed``.
+        (refusals), ``exhausted``, ``gave_up`` (the search's), ``check_failed``,
+        ``out_of_time`` (the deadline stopped a search or the check; a plan whose check it
+        stopped is returned with ``found`` False and no check runs).
     message : str
         One line.
     checks : list of Swim
@@ -349,6 +358,9 @@ class Planner:
         self._waters: dict[int, list[WaterDraw]] = {0: self.water}
         self.repairs = repairs
         self.check = check
+        self.check_cost: SwimCost = CHECK_COST
+        """The check's measured cost the deadline keeps free (:data:`check.CHECK_COST`, the
+        process's, by default)."""
         if swimmer is not None and swimmer.n_links != robot.n_links:
             raise ValueError(f"the robot's model has {swimmer.n_links} links, the robot "
                              f"{robot.n_links}")
@@ -392,6 +404,65 @@ class Planner:
         # straight-line speed; a heuristic speed too low only makes the search greedier
         self.search = Search(world, self.twin, self.settings, self.clearance, route,
                              1.3 * fastest + world.current.speed_m_s)
+    @property
+    def clock(self) -> Callable[[], float]:
+        """The clock a deadline is read on (``time.monotonic``; a test's fake one)."""
+        return self.search.clock
+
+    @clock.setter
+    def clock(self, clock: Callable[[], float]) -> None:
+        self.search.clock = clock
+
+    def check_time_s(self, plan_steps: float) -> float:
+        """The predicted wall time of a whole check of a plan ``plan_steps`` physics steps long.
+
+        The fits as fitted and ``draws`` draws, each swum the plan's length, at the check's
+        cost per run-step measured in this process (:attr:`check_cost`); before any check has
+        been measured, :data:`CHECK_OVER_SEARCH` times the search's own (0 before either).
+
+        Parameters
+        ----------
+        plan_steps : float
+
+        Returns
+        -------
+        float
+            Seconds.
+        """
+        run_steps = (1 + self.draws) * max(plan_steps, 0.0)
+        need = self.check_cost.predict_s(run_steps)
+        if need is None:
+            search = self.search.swim_cost.predict_s(run_steps)
+            need = 0.0 if search is None else CHECK_OVER_SEARCH * search
+        return need
+
+    def expected_steps(self, state: FloatArray | None = None) -> float:
+        """A plan's expected length from ``state`` (default the start), physics steps.
+
+        The free-space path of the body's centre to the goal disc
+        (:class:`eelhost.planning.field.GoalDistance`) at the slowest ground speed (the
+        swimming speed against the world's whole current): what the deadline keeps the check's
+        time for before a plan is found.
+
+        Parameters
+        ----------
+        state : ndarray, optional
+
+        Returns
+        -------
+        float
+        """
+        n = self.model.n_links
+        if state is None:
+            xy = np.asarray(self.world.start.position_m, dtype=float)
+        else:
+            xy = np.asarray(state, dtype=float)[n : n + 2]
+        path = self.goal_distance(xy)
+        if not math.isfinite(path):
+            return 0.0
+        slowest = max(self.swimming_speed_m_s - self.world.current.speed_m_s, 1e-3)
+        return path / slowest / self.twin.dt_s
+
     # -- refusals --------------------------------------------------------------------------------
 
     def refusal(self, state: FloatArray | None = None) -> PlanRefused | None:
@@ -463,9 +534,13 @@ class Planner:
             ILOS integral (default: from the state's centre of mass, the integral zero). A
             replan at the tank passes the controller's integral.
         deadline_s : float, optional
-            A ``time.monotonic()`` time for every search of the call (the first and the
-            repairs'): past it a search stops ``out_of_time`` (:meth:`Search.plan`); a check
-            already started runs to its end. Default: none.
+            A time on :attr:`clock` (``time.monotonic()``) by which the whole call returns, its
+            checks included, up to a small overshoot (docs/planning.md, "The planning call's
+            deadline"): every search keeps the predicted time of a whole check free before it
+            (:meth:`check_time_s` of :meth:`expected_steps`) and starts no batch that would
+            still be in flight (:meth:`Search.plan`), ending ``out_of_time``; a check starts no
+            leg it predicts would end after the deadline, and the call then ends ``out_of_time``
+            with the plan not checked (``found`` False). Default: none (nothing changes).
 
         Returns
         -------
@@ -479,9 +554,13 @@ class Planner:
         checks: list[Swim] = []
         bad: list[Swim] = []
         plan = Plan(False, "gave_up", "")
+        # with a deadline, every search keeps the predicted time of a whole check of a plan of
+        # the expected length free before it (docs/planning.md, "The planning call's deadline")
+        expected = self.expected_steps(state)
+        reserve = (lambda: self.check_time_s(expected)) if self.check else None
         for attempt in range(self.repairs + 1):
             plan = self.search.plan(banned, start_state=state, start_step=step, guide=guide,
-                                    deadline_s=deadline_s)
+                                    deadline_s=deadline_s, reserve_s=reserve)
             total += plan.planning_time_s
             searching += plan.planning_time_s
             if not plan.found and attempt > 0:
@@ -499,7 +578,22 @@ class Planner:
             # each plan its own draws: a repaired plan is not chosen to pass the very draws its
             # predecessors failed (docs/planning.md, "The planner", step 4)
             waters = self.waters(attempt)
-            checks, elapsed = self.check_plan(plan, state, step, waters)
+            t_check = time.perf_counter()
+            try:
+                # (the keyword only with a deadline: a replaced check_plan may not take it)
+                checks, elapsed = (self.check_plan(plan, state, step, waters)
+                                   if deadline_s is None else
+                                   self.check_plan(plan, state, step, waters, deadline_s))
+            except CheckOutOfTime as stop:
+                total += time.perf_counter() - t_check
+                # never returned as checked: the plan's status says it was not
+                msg = (f"out of time: {plan.message}, but {stop} (predicted "
+                       f"{self.check_time_s(plan.legs[-1].end_step - step):.2f} s for the whole "
+                       "check); the plan is not checked")
+                return Outcome(Plan(False, "out_of_time", msg, plan.legs, plan.cost_s,
+                                    plan.expansions, plan.simulations, plan.planning_time_s,
+                                    plan.tree, plan.start_guide),
+                               "out_of_time", msg, [], attempt, total, searching)
             total += elapsed
             bad = [c for c in checks if not c.ok]
             if not bad:
@@ -568,7 +662,7 @@ class Planner:
         return self._waters[attempt]
 
     def swim_waters(self, plan: Plan, waters: list[WaterDraw], state: FloatArray | None = None,
-                    step: int = 0) -> list[Swim]:
+                    step: int = 0, deadline_s: float | None = None) -> list[Swim]:
         """Swim a plan leg by leg in each water, as the search swam it, and judge each run.
 
         Parameters
@@ -578,6 +672,9 @@ class Planner:
         state : ndarray, optional
             Start state (default: the world's start).
         step : int
+        deadline_s : float, optional
+            A time on :attr:`clock` (:func:`eelhost.planning.check.swim_legs`; it raises
+            :class:`eelhost.planning.check.CheckOutOfTime` when it stops there).
 
         Returns
         -------
@@ -585,10 +682,12 @@ class Planner:
         """
         legs = [self.search.leg_coefficients(leg.goal, leg.bearing_deg) for leg in plan.legs]
         return swim_legs(self.world, plan, self.twin, self.model, waters, legs, self.clearance,
-                         state, step)
+                         state, step, deadline_s=deadline_s, clock=self.clock,
+                         cost=self.check_cost)
 
     def check_plan(self, plan: Plan, state: FloatArray | None = None, step: int = 0,
-                   waters: list[WaterDraw] | None = None) -> tuple[list[Swim], float]:
+                   waters: list[WaterDraw] | None = None, deadline_s: float | None = None
+                   ) -> tuple[list[Swim], float]:
         """Swim a plan with the fits and over the draws of the water (module docstring).
 
         Leg by leg, as the search swam it (:func:`eelhost.planning.check.swim_legs`). The fits
@@ -603,12 +702,21 @@ class Planner:
         step : int
         waters : list of WaterDraw, optional
             The draws (default the first plan's, :meth:`waters` (0)).
+        deadline_s : float, optional
+            A time on :attr:`clock`: no leg's batch is started that would end after it
+            (:func:`eelhost.planning.check.swim_legs`). Default: none.
 
         Returns
         -------
         list of Swim, float
             The runs (the fits as fitted first, then the draws in order) and the time they took,
             s.
+
+        Raises
+        ------
+        CheckOutOfTime
+            The deadline stopped the check before its verdict (a failing run found before it
+            ends the check with its runs, as without a deadline).
         """
         t0 = time.perf_counter()
         todo = self.check_waters(waters)
@@ -618,7 +726,7 @@ class Planner:
             part = todo[lo : screen if lo == 0 else lo + BATCH_RUNS]
             if not part:
                 break
-            runs += self.swim_waters(plan, part, state, step)
+            runs += self.swim_waters(plan, part, state, step, deadline_s)
             if not all(r.ok for r in runs):
                 break
         return runs, time.perf_counter() - t0

@@ -33,7 +33,8 @@ from __future__ import annotations
 import heapq
 import math
 import time
-from collections.abc import Sequence
+from collections import deque
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -45,6 +46,13 @@ from eelhost.planning.geometry import FloatArray
 from eelhost.planning.twin import Runs, Twin
 from eelhost.planning.world import World
 from eelsim.control import wrap_angle
+
+BATCHES_SEEN = 3
+"""With a deadline, a batch's nodes are predicted to take the largest wall time per node of the
+search's last this many batches (those that swam anything)."""
+
+COST_WINDOW = 32
+"""A swim cost's rate is taken over its last this many measured swims (:class:`SwimCost`)."""
 
 REST_KEY = -1
 GOAL = -1
@@ -84,6 +92,40 @@ def goal_mask(world: World, xy: FloatArray, shrink_m: float = 0.0) -> NDArray[np
     """
     gx, gy = world.goal.position_m
     return np.hypot(xy[..., 0] - gx, xy[..., 1] - gy) <= world.goal.radius_m - shrink_m
+
+
+class SwimCost:
+    """Wall-clock cost per run-step of some swims in the twin, measured in this process.
+
+    A run-step is one physics step of one run. Each measured swim records its wall time and the
+    run-steps it swam; the rate is their sums' ratio over the last :data:`COST_WINDOW` swims, so
+    it follows the machine's load and the robot's model. The check's
+    (:data:`eelhost.planning.check.CHECK_COST`: its kernel, the restarts and the exact clearance
+    of every state) is what the planner keeps free before a deadline; the search's own
+    (:attr:`Search.swim_cost`) stands in for it, scaled, before the check has been measured
+    (docs/planning.md, "The planning call's deadline").
+    """
+
+    def __init__(self, window: int = COST_WINDOW) -> None:
+        self._walls: deque[float] = deque(maxlen=window)
+        self._steps: deque[int] = deque(maxlen=window)
+
+    def record(self, run_steps: int, wall_s: float) -> None:
+        """Add one measured swim: ``run_steps`` run-steps in ``wall_s`` seconds."""
+        if run_steps > 0 and wall_s >= 0:
+            self._walls.append(float(wall_s))
+            self._steps.append(int(run_steps))
+
+    @property
+    def rate_s(self) -> float | None:
+        """Seconds per run-step over the recorded swims (None before any)."""
+        steps = sum(self._steps)
+        return sum(self._walls) / steps if steps else None
+
+    def predict_s(self, run_steps: float) -> float | None:
+        """Predicted wall time of ``run_steps`` run-steps, s (None before any measurement)."""
+        rate = self.rate_s
+        return None if rate is None else rate * run_steps
 
 
 @dataclass(frozen=True)
@@ -339,6 +381,10 @@ class Search:
         self._soft_max_m = settings.preferred_clearance_m if settings.clearance_cost > 0 else 0.0
         self._memo: dict[tuple, list] = {}
         self.simulations = 0
+        self.swim_cost = SwimCost()
+        """Wall time per run-step of this search's batches (measured even without a deadline)."""
+        self.clock: Callable[[], float] = time.monotonic
+        """The clock ``deadline_s`` is read on (a test's fake one in place of the default)."""
 
     # -- pieces ----------------------------------------------------------------------------------
 
@@ -406,6 +452,7 @@ class Search:
             origin = node.state[self.n : self.n + 2]
             durations.append(s.leg_time_s * (math.hypot(wp[0] - origin[0], wp[1] - origin[1])
                                              + 0.3))
+        t0 = self.clock()
         runs = self.twin.run(
             waypoints,
             durations,
@@ -419,6 +466,7 @@ class Search:
         clear = self._clearances(runs)
         kids = [self._child(nodes[pos], a, wp, psi, runs, j, clear[j])
                 for j, (pos, a, wp, psi) in enumerate(jobs)]
+        self.swim_cost.record(int(np.sum(runs.final_step + 1)), self.clock() - t0)
         if s.robust_current_m_s > 0:
             self._swim_particles(jobs, kids, waypoints, durations, index, nodes)
         for j, (pos, a, _, _) in enumerate(jobs):
@@ -603,6 +651,7 @@ class Search:
         heading_rad: float | None = None,
         guide: Guide | None = None,
         deadline_s: float | None = None,
+        reserve_s: Callable[[], float] | None = None,
     ) -> Plan:
         """Search from the world's start, or from any state (see the module docstring).
 
@@ -623,9 +672,14 @@ class Search:
             (default :func:`leg_start_guide` of the start state: from its centre of mass, the
             integral zero). A replan passes the controller's own.
         deadline_s : float, optional
-            A ``time.monotonic()`` time: no batch is expanded after it, and the search ends
-            ``out_of_time`` unless it has found the goal (a replan's budget at the tank,
-            docs/planning.md "The replan's deadline"). Default: none.
+            A time on :attr:`clock` (``time.monotonic()`` by default): no batch is started that
+            would still be in flight then (near it, the batch shrinks to the nodes predicted to
+            fit, each at the largest wall time per node of the last :data:`BATCHES_SEEN`
+            batches), and the search ends ``out_of_time`` unless it has found the goal (docs/planning.md, "The planning call's deadline"). Default: none.
+        reserve_s : callable, optional
+            With ``deadline_s``: the time to keep free before it, s, asked before every batch
+            (the planner's prediction of its check, which improves as the search measures its
+            own swims). Default: none kept.
 
         Returns
         -------
@@ -666,12 +720,26 @@ class Search:
         expansions = 0
         found = -1
         late = False
+        node_walls: list[float] = []  # wall time per node of this call's batches that swam
         while heap and found < 0 and expansions < s.max_expansions:
-            if deadline_s is not None and time.monotonic() >= deadline_s:
-                late = True
-                break
+            size = s.batch
+            if deadline_s is not None:
+                # no batch is started that would still be in flight at the deadline (less the
+                # time kept for the check): near it, the batch shrinks to the nodes that fit,
+                # each predicted to take the largest wall time per node of the last few batches
+                # (docs/planning.md, "The planning call's deadline")
+                left = deadline_s - self.clock() - (reserve_s() if reserve_s else 0.0)
+                per_node = max(node_walls[-BATCHES_SEEN:], default=0.0)
+                if left <= 0:
+                    late = True
+                    break
+                if per_node > 0:
+                    size = min(size, int(left / per_node))
+                    if size < 1:
+                        late = True
+                        break
             batch: list[int] = []
-            while heap and len(batch) < s.batch:
+            while heap and len(batch) < size:
                 _, _, ni = heapq.heappop(heap)
                 node = nodes[ni]
                 if node.goal:
@@ -687,8 +755,11 @@ class Search:
             if found >= 0 or not batch:
                 continue
             expansions += len(batch)
-            for ni, kids in zip(batch, self._expand([nodes[i] for i in batch], batch, banned),
-                                strict=True):
+            t_batch, sims_before = self.clock(), self.simulations
+            expanded = self._expand([nodes[i] for i in batch], batch, banned)
+            if self.simulations > sims_before:
+                node_walls.append((self.clock() - t_batch) / len(batch))
+            for ni, kids in zip(batch, expanded, strict=True):
                 parent = nodes[ni]
                 for child in kids:
                     if child is None:

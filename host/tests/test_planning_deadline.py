@@ -1,0 +1,144 @@
+"""One deadline for the whole planning call: the search leaves the check its time, the check stops.
+
+Every test runs on a fake clock that advances only when the twin swims (a fixed cost per
+run-step), so what the deadline decides does not depend on the machine's load.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from eelhost.planning.planner import Planner
+from eelhost.planning.search import SwimCost
+from eelhost.planning.twin import Twin
+from eelhost.planning.uncertainty import default_model
+from eelhost.planning.world import parse_world
+from eelsim.robot import load_robot
+
+ROBOT = load_robot()
+MODEL = default_model(ROBOT)
+STEP_COST_S = 1e-6
+"""The fake clock's seconds per run-step the twin swims."""
+
+
+def open_tank():
+    return parse_world({
+        "name": "open",
+        "tank": {"size_m": [3.0, 2.0]},
+        "start": {"position_m": [0.5, 1.0], "heading_deg": 0.0},
+        "goal": {"position_m": [1.6, 1.0], "radius_m": 0.2},
+        "current": {"speed_m_s": 0.0, "direction_deg": 0.0},
+        "obstacles": [],
+    })
+
+
+class WorkClock:
+    """A clock that moves only when the twin swims: STEP_COST_S per run-step."""
+
+    def __init__(self) -> None:
+        self.now_s = 0.0
+
+    def __call__(self) -> float:
+        return self.now_s
+
+
+@pytest.fixture
+def clock(monkeypatch):
+    fake = WorkClock()
+    real = Twin.run
+
+    def run(self, *args, **kwargs):
+        runs = real(self, *args, **kwargs)
+        fake.now_s += STEP_COST_S * float(np.sum(runs.final_step + 1))
+        return runs
+
+    monkeypatch.setattr(Twin, "run", run)
+    return fake
+
+
+def planner(clock, check_rate_s=None):
+    p = Planner(open_tank(), ROBOT, MODEL, draws=6, unknown_current_m_s=0.0, seed=3)
+    p.clock = clock
+    p.check_cost = SwimCost()  # this test's own measurement, not the process's
+    if check_rate_s is not None:
+        p.check_cost.record(1_000_000, check_rate_s * 1_000_000)
+    return p
+
+
+def test_the_swim_cost_is_the_ratio_of_its_recent_sums_and_unknown_before_any():
+    cost = SwimCost(window=2)
+    assert cost.rate_s is None and cost.predict_s(100) is None
+    cost.record(100, 1.0)
+    cost.record(300, 1.0)
+    assert cost.rate_s == pytest.approx(2.0 / 400)
+    cost.record(100, 3.0)  # the first one leaves the window
+    assert cost.predict_s(10) == pytest.approx(10 * 4.0 / 400)
+
+
+def test_without_a_deadline_the_plan_and_its_check_do_not_depend_on_the_clock(clock):
+    plain = Planner(open_tank(), ROBOT, MODEL, draws=6, unknown_current_m_s=0.0, seed=3).plan()
+    jumpy = planner(clock)
+    readings = iter(np.random.default_rng(0).uniform(0, 1e6, 100_000))
+    jumpy.clock = lambda: float(next(readings))  # a clock that makes no sense at all
+    outcome = jumpy.plan()
+    assert plain.found and outcome.found, (plain.message, outcome.message)
+    assert outcome.plan.waypoints_m == plain.plan.waypoints_m
+    assert [(c.ok, c.min_clearance_m) for c in outcome.checks] == [
+        (c.ok, c.min_clearance_m) for c in plain.checks]
+    # and a deadline far beyond the work changes nothing either
+    far = planner(clock).plan(deadline_s=clock() + 1e9)
+    assert far.found and far.plan.waypoints_m == plain.plan.waypoints_m
+
+
+def test_the_search_stops_early_enough_to_leave_the_check_its_predicted_time(clock):
+    # how long the search and the check take on the fake clock, without a deadline
+    free = planner(clock, check_rate_s=STEP_COST_S)
+    t0 = clock()
+    alone = free.search.plan()
+    search_s = clock() - t0
+    assert alone.found
+    p = planner(clock, check_rate_s=STEP_COST_S)
+    reserve = p.check_time_s(p.expected_steps())
+    assert reserve > 0
+    # a deadline with room for half the search after the check's predicted time
+    start = clock()
+    deadline = start + reserve + search_s / 2
+    outcome = p.plan(deadline_s=deadline)
+    assert outcome.status == "out_of_time" and not outcome.found and not outcome.plan.found
+    assert outcome.checks == []  # no check was started
+    assert p.search.swim_cost.rate_s == pytest.approx(STEP_COST_S)
+    # it stopped before the room for the check: no batch was in flight past it
+    assert clock() <= deadline - reserve
+    assert clock() > start  # and it did search while there was time
+
+
+def test_a_check_that_cannot_finish_by_the_deadline_stops_and_the_plan_is_not_checked(clock):
+    # a search that keeps no room for the check (it expects a plan of no length)
+    p = planner(clock, check_rate_s=STEP_COST_S)
+    p.expected_steps = lambda state=None: 0.0
+    searched = p.search.plan()  # swum once: the planner's search replays it from its memo
+    t0 = clock()
+    runs, _ = planner(clock).check_plan(searched)
+    check_s = clock() - t0
+    assert all(r.ok for r in runs) and check_s > 0
+    start = clock()
+    deadline = start + check_s / 2  # the search takes no time now; half the check's does
+    outcome = p.plan(deadline_s=deadline)
+    assert outcome.status == "out_of_time", outcome.message
+    assert not outcome.found and not outcome.plan.found
+    assert outcome.checks == [] and outcome.draws == 0
+    assert "not checked" in outcome.message and "the check stopped at its deadline" in (
+        outcome.message)
+    assert outcome.plan.waypoints_m == searched.waypoints_m  # the same plan, unchecked
+    # it started no leg it predicted would end after the deadline
+    assert start < clock() <= deadline
+
+
+def test_a_check_that_fits_before_the_deadline_passes_as_without_one(clock):
+    p = planner(clock, check_rate_s=STEP_COST_S)
+    plain = planner(clock).plan()
+    outcome = p.plan(deadline_s=clock() + 1.0)  # the work takes well under 1 s of fake time
+    assert outcome.found, outcome.message
+    assert outcome.plan.waypoints_m == plain.plan.waypoints_m
+    assert len(outcome.checks) == 1 + 6
