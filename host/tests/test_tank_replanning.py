@@ -1001,6 +1001,14 @@ def _true_gap(planner: Planner, state, step: int, waypoints) -> float:  # noqa: 
     return float(true_clearance_m(planner.world, planner.model, states[: inside[0] + 1]).min())
 
 
+def _present_plan_of_beside() -> Plan:
+    """A present plan along BESIDE_LEFT, its goal expected at 30 s (the repair's horizon)."""
+    com = np.column_stack([np.linspace(0.6, 2.3, 50), np.linspace(1.0, 1.1, 50)])
+    return Plan(True, "found", "", [Leg(BESIDE_LEFT[0], 1.3, 0.0, 0, 1500, com, 0.05),
+                                    Leg(BESIDE_LEFT[1], 0.4, 0.0, 1500, 2500, com[-1:], 0.05,
+                                        goal=True)], 30.0)
+
+
 def test_the_shift_repair_moves_a_grazing_route_off_the_obstacle_and_keeps_the_goal(grazing):
     from eelhost.planning.replan import shift_repair
     from eelhost.planning.search import leg_start_guide
@@ -1023,10 +1031,7 @@ def test_the_shift_repair_moves_a_grazing_route_off_the_obstacle_and_keeps_the_g
 def test_a_replan_whose_searches_all_find_nothing_is_shift_repaired_only_when_asked_to(grazing):
     planner, state, step = grazing
     nothing = _Scripted(planner, "exhausted", np.inf)  # every search of the replan: no manoeuvre
-    com = np.column_stack([np.linspace(0.6, 2.3, 50), np.linspace(1.0, 1.1, 50)])
-    first = Plan(True, "found", "", [Leg(BESIDE_LEFT[0], 1.3, 0.0, 0, 1500, com, 0.05),
-                                     Leg(BESIDE_LEFT[1], 0.4, 0.0, 1500, 2500, com[-1:], 0.05,
-                                         goal=True)], 30.0)
+    first = _present_plan_of_beside()
     got = {}
     for on in (False, True):
         nav = TankReplanner(lambda extra: nothing, nothing,  # type: ignore[arg-type]
@@ -1041,3 +1046,22 @@ def test_a_replan_whose_searches_all_find_nothing_is_shift_repaired_only_when_as
         assert np.allclose(start, state)
     assert not got[False].found and got[False].status == "exhausted"
     assert got[True].found and got[True].message.startswith("shift repair:"), got[True].message
+
+
+def test_a_replan_whose_searches_used_up_the_budget_is_still_shift_repaired(grazing, monkeypatch):
+    # the searches stop at the budget with nothing (out_of_time): the repair still runs, within
+    # its grace past the budget (made long here so the machine's load cannot decide the test)
+    import eelhost.planning.replan as replan
+
+    monkeypatch.setattr(replan, "SHIFT_GRACE_S", 600.0)
+    planner, state, step = grazing
+    late = _Scripted(planner, "out_of_time", np.inf)
+    first = _present_plan_of_beside()
+    nav = TankReplanner(lambda extra: late, late,  # type: ignore[arg-type]
+                        Outcome(first, "found", ""), PATH_GAIT, replan_budget_s=1e-6)
+    try:
+        got, *_ = nav._replan(estimate_at(3.0), BESIDE_LEFT, step, np.zeros(2),
+                              deadline_s=time.monotonic() - 1.0)
+    finally:
+        nav.close()
+    assert got.found and got.message.startswith("shift repair:"), got.message

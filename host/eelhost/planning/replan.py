@@ -274,6 +274,9 @@ SHIFT_DIRECTIONS = 8
 SHIFT_CHECKED = 3
 """The shifted plans (the clearest in the estimated water first) checked over the water."""
 
+SHIFT_GRACE_S = 0.5
+"""How far past the replan's budget the shift repair may start a check (docs/planning.md)."""
+
 
 def shifted_waypoints(waypoints: list[tuple[float, float]], size_m: tuple[float, float]
                       ) -> list[list[tuple[float, float]]]:
@@ -924,14 +927,17 @@ class TankReplanner:
                         f"{outcome.message}; with the recovery's actions: {rescue.message}"))
         # the shift repair: the present route, its waypoints moved against the water that pushes
         # it into something (docs/planning.md, "The shift repair")
-        if (self.shift_repair and not outcome.found and outcome.status not in REFUSED_FROM_STATE
-                and _time_left(deadline_s)):
+        if self.shift_repair and not outcome.found and outcome.status not in REFUSED_FROM_STATE:
+            # also when the searches used up the budget (a failing search often does): the
+            # repair's swims may overrun it by SHIFT_GRACE_S, a plan a little late rather than none
+            repair_deadline = (None if deadline_s is None
+                               else max(deadline_s, time.monotonic()) + SHIFT_GRACE_S)
             remaining = (self.outcome.plan.cost_s - start_step * planner.twin.dt_s
                          if self.outcome.found else math.nan)
             horizon = (min(1.5 * remaining + 5.0, 90.0) if math.isfinite(remaining) else 60.0)
             repaired = shift_repair(planner, state, start_step, leg_start_guide(
                 state, self.model.n_links, integral), left, max(horizon, self.replan_horizon_s),
-                deadline_s)
+                repair_deadline)
             took("shift_repair")
             log.info("shift repair from t = %.2f s: %s", start_step * planner.twin.dt_s,
                      "none passed" if repaired is None else repaired.message)
