@@ -11,6 +11,7 @@ import pytest
 from eelhost.benchmarks.closed_loop import (
     WorldResult,
     run_closed_loop_bench,
+    summary_lines,
     true_clearance_m,
     water_for,
 )
@@ -79,3 +80,14 @@ def test_results_written_with_a_field_since_removed_still_read_back(tmp_path):
     (tmp_path / "results.jsonl").write_text(json.dumps({**line, "escapes": 0}) + "\n")
     got = run_closed_loop_bench(ROBOT, default_model(ROBOT), range(5000, 5001), tmp_path)
     assert got == [WorldResult(5000, False, "exhausted", detail="no plan")]
+
+
+def test_the_summary_counts_shift_repairs_and_reads_results_written_before_them():
+    old = WorldResult(5000, True, "found", "arrived", reached=True, min_clearance_m=0.05)
+    repaired = WorldResult(5001, True, "found", "arrived", reached=True, min_clearance_m=0.04,
+                           replans=3, shift_repairs=2)
+    stopped = WorldResult(5002, True, "found", "no_safe_continuation", min_clearance_m=0.03,
+                          replans=1, shift_repairs=1)
+    lines = summary_lines([old, repaired, stopped])
+    assert "- shift repairs switched in: 3, in 2 runs (1 of them reached the goal)" in lines
+    assert not any("shift repair" in line for line in summary_lines([old]))

@@ -105,6 +105,9 @@ class WorldResult:
         The status of each failed replan (``out_of_time``: its budget ran out first).
     replan_budget_s : float or None
         Each replan's wall-clock budget (None: none).
+    shift_repairs : int
+        Replans switched in that were shift repairs of the present plan (docs/planning.md, "The
+        shift repair"; counted in ``replans`` too).
     """
 
     seed: int
@@ -129,6 +132,7 @@ class WorldResult:
     guidance: str = "pursuit"
     failed_replan_statuses: list[str] = field(default_factory=list)
     replan_budget_s: float | None = None
+    shift_repairs: int = 0
 
 
 def true_clearance_m(world: World, model: SwimmerModel, states: FloatArray) -> FloatArray:
@@ -290,7 +294,8 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
         [e["t_switch_s"] - e["t_request_s"] for e in replans if "t_switch_s" in e],
         plan_wall, plan_cpu, out.t_end_s, cost, water,
         [e["cpu_s"] for e in replans if e["cpu_s"] is not None], law,
-        [e["status"] for e in replans if e["status"] != "found"], replan_budget_s)
+        [e["status"] for e in replans if e["status"] != "found"], replan_budget_s,
+        sum(e["message"].startswith("shift repair:") and "t_switch_s" in e for e in replans))
 
 
 def _law_name(planner_options: dict[str, Any] | None) -> str:
@@ -398,6 +403,11 @@ def summary_lines(results: list[WorldResult]) -> list[str]:
                  f"{sum(1 for r in planned if r.replans or r.failed_replans)} runs"
                  + (f"; wall time from request to plan: median {statistics.median(walls):.2f} s,"
                     f" largest {max(walls):.2f} s" if walls else ""))
+    repaired = [r for r in planned if r.shift_repairs]
+    if repaired:
+        lines.append(f"- shift repairs switched in: {sum(r.shift_repairs for r in repaired)}, in "
+                     f"{len(repaired)} runs ({sum(r.reached for r in repaired)} of them reached "
+                     "the goal)")
     budgets = sorted({r.replan_budget_s for r in planned if r.replan_budget_s is not None})
     failed = Counter(s for r in planned for s in r.failed_replan_statuses)
     if budgets or failed:
