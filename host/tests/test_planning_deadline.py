@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from eelhost.cli import main
 from eelhost.planning.planner import Planner
 from eelhost.planning.search import SwimCost
 from eelhost.planning.twin import Twin
@@ -142,3 +143,10 @@ def test_a_check_that_fits_before_the_deadline_passes_as_without_one(clock):
     assert outcome.found, outcome.message
     assert outcome.plan.waypoints_m == plain.plan.waypoints_m
     assert len(outcome.checks) == 1 + 6
+
+
+def test_the_bench_budget_is_refused_without_the_bench_or_when_not_positive(tmp_path, capsys):
+    assert main(["plan", "tank_5_obstacles", "--budget", "1", "--out", str(tmp_path)]) == 2
+    assert "--budget" in capsys.readouterr().err
+    assert main(["plan", "--bench", "--budget", "0"]) == 2
+    assert "expected a budget above 0 s" in capsys.readouterr().err

@@ -82,6 +82,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--bench", action="store_true",
                    help="run the benchmark over --worlds generated worlds and print its figures")
     p.add_argument("--worlds", type=COUNT, default=100, help="benchmark worlds")
+    p.add_argument("--budget", type=_budget, default=None, metavar="S",
+                   help="with --bench: give each world's planning call a deadline S seconds "
+                   "after it starts, its check included, as a replan at the tank has (default: "
+                   "none); the figures count the calls that returned after it")
     p.add_argument("--seed", type=SEED, default=0, help="first benchmark world's seed")
     p.add_argument("--jobs", type=COUNT, default=1,
                    help="benchmark worlds planned at once, one process each")
@@ -134,6 +138,16 @@ def _unknown_current(text: str) -> float:
         raise argparse.ArgumentTypeError(f"expected a speed in m/s, got {text!r}") from None
     if not 0.0 <= value <= 1.0:
         raise argparse.ArgumentTypeError(f"expected a speed from 0 to 1 m/s, got {text}")
+    return value
+
+
+def _budget(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected seconds, got {text!r}") from None
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"expected a budget above 0 s, got {text}")
     return value
 
 
@@ -224,6 +238,8 @@ def run(args: argparse.Namespace) -> int:
     swimmer = model.swimmer_for(robot)
     if args.bench:
         return _bench(args, robot, model, swimmer)
+    if getattr(args, "budget", None) is not None:
+        raise OptionError("--budget is for the benchmark: give it with --bench")
     if not args.world:
         raise OptionError("give a WORLD (or --bench)")
     world = world_from_name(args.world)
@@ -274,7 +290,8 @@ def _bench(args: argparse.Namespace, robot: Robot, model: CoefficientModel,
     guidance = guidance_law(args.guidance)
     options = LoopOptions(guidance=guidance)  # the coverage's runs steer with the same law
     summary = run_bench(robot, model, args.worlds, args.seed, args.threads, progress,
-                        max(args.jobs, 1), args.unknown_current, guidance, swimmer)
+                        max(args.jobs, 1), args.unknown_current, guidance, swimmer,
+                        args.budget)
     lines = summary.lines()
     lines += ["- action coverage (successful actions per current direction relative to the "
               "heading):"]
@@ -286,7 +303,8 @@ def _bench(args: argparse.Namespace, robot: Robot, model: CoefficientModel,
                + (f" --jobs {args.jobs}" if args.jobs > 1 else "")
                + (f" --unknown-current {args.unknown_current:g}"
                   if args.unknown_current != DEFAULT_UNKNOWN_CURRENT_M_S else "")
-               + (f" --guidance {args.guidance}" if args.guidance != PURSUIT.name else ""))
+               + (f" --guidance {args.guidance}" if args.guidance != PURSUIT.name else "")
+               + (f" --budget {args.budget:g}" if args.budget is not None else ""))
     block = [
         BENCH_BEGIN,
         f"Command: `{command}`",

@@ -73,6 +73,9 @@ class WorldResult:
         Smallest body gap over the drawn-water runs, by the audit (NaN without a plan).
     goal_distance_m : float
         Closest approach of the worse run to the goal centre (NaN without a plan).
+    overshoot_s : float
+        With a budget: the wall time from the planning call's deadline to its return, s
+        (negative: returned before it; NaN without a budget).
     """
 
     name: str
@@ -89,6 +92,7 @@ class WorldResult:
     collision_upper: float = float("nan")
     arrival_spread_s: tuple[float, float, float] = (float("nan"),) * 3
     planned_arrival_s: float = float("nan")
+    overshoot_s: float = float("nan")
 
 
 @dataclass
@@ -144,6 +148,14 @@ class BenchSummary:
             f"max {times[-1]:.2f} s; worlds with a plan: median {statistics.median(found_t):.2f} s",
             f"- search alone: median {statistics.median(search):.2f} s",
         ]
+        budgeted = [r.overshoot_s for r in self.results if r.overshoot_s == r.overshoot_s]
+        if budgeted:
+            late = sorted(budgeted)
+            out.append(f"- with the budget (a deadline on each planning call, its check "
+                       f"included): returned after its deadline in "
+                       f"{sum(o > 0 for o in late)} of {len(late)} worlds, by at most "
+                       f"{max(late[-1], 0.0) * 1000:.0f} ms; median return "
+                       f"{-statistics.median(late) * 1000:.0f} ms before the deadline")
         repaired = sum(r.repairs > 0 for r in self.planned)
         cpu = sorted(r.cpu_time_s for r in self.results)
         out.append(f"- processor time of the planning (the same span; what the wall-clock figures "
@@ -170,7 +182,8 @@ def bench_world(world: World, robot: Robot, coefficients: CoefficientModel, seed
                 threads: int | None = 1,
                 unknown_current_m_s: float = DEFAULT_UNKNOWN_CURRENT_M_S,
                 guidance: GuidanceLaw = PURSUIT,
-                swimmer: SwimmerModel | None = None) -> WorldResult:
+                swimmer: SwimmerModel | None = None,
+                budget_s: float | None = None) -> WorldResult:
     """Plan in one world and swim the plan in fresh draws of the water (module docstring).
 
     Parameters
@@ -189,6 +202,9 @@ def bench_world(world: World, robot: Robot, coefficients: CoefficientModel, seed
     swimmer : SwimmerModel, optional
         The model of the robot the planner swims, built once by the command
         (:meth:`CoefficientModel.swimmer_for`; built here when not given).
+    budget_s : float, optional
+        A deadline this long after the planning call starts (the planner built already, as a
+        replan's is): ``Planner.plan(deadline_s=)``, its check included. Default: none.
 
     Returns
     -------
@@ -198,10 +214,14 @@ def bench_world(world: World, robot: Robot, coefficients: CoefficientModel, seed
     planner = Planner(world, robot, coefficients, threads=threads, seed=seed,
                       unknown_current_m_s=unknown_current_m_s, guidance=guidance,
                       swimmer=swimmer)
-    outcome = planner.plan()
+    deadline = None if budget_s is None else time.monotonic() + budget_s
+    outcome = planner.plan(deadline_s=deadline)
+    done = time.monotonic()
     elapsed = time.perf_counter() - t0  # the planner's set-up (clearance and goal maps) too
     result = WorldResult(world.name, outcome.status, outcome.message, elapsed,
                          outcome.search_time_s, time.process_time() - c0, outcome.repairs)
+    if deadline is not None:
+        result.overshoot_s = done - deadline
     if not outcome.found:
         return result
     # the fresh draws keep the lattice of directions the benchmark has always judged with
@@ -222,16 +242,16 @@ def bench_world(world: World, robot: Robot, coefficients: CoefficientModel, seed
 def _warm_up(robot: Robot, coefficients: CoefficientModel, seed: int,
              threads: int | None, unknown_current_m_s: float, guidance: GuidanceLaw,
              swimmer: SwimmerModel | None = None) -> None:
-    """Load the batched kernel and measure the swimming speed once (not timed)."""
+    """Load the batched kernel, measure the swimming speed and the check's cost (not timed)."""
     bench_world(generate_world(seed), robot, coefficients, seed, threads, unknown_current_m_s,
                 guidance, swimmer)
 
 
 def _one(robot: Robot, coefficients: CoefficientModel, seed: int,
          threads: int | None, unknown_current_m_s: float, guidance: GuidanceLaw,
-         swimmer: SwimmerModel | None = None) -> WorldResult:
+         swimmer: SwimmerModel | None = None, budget_s: float | None = None) -> WorldResult:
     return bench_world(generate_world(seed), robot, coefficients, seed, threads,
-                       unknown_current_m_s, guidance, swimmer)
+                       unknown_current_m_s, guidance, swimmer, budget_s)
 
 
 def run_bench(
@@ -245,6 +265,7 @@ def run_bench(
     unknown_current_m_s: float = DEFAULT_UNKNOWN_CURRENT_M_S,
     guidance: GuidanceLaw = PURSUIT,
     swimmer: SwimmerModel | None = None,
+    budget_s: float | None = None,
 ) -> BenchSummary:
     """Run the benchmark over ``count`` generated worlds (seeds ``seed`` .. ``seed + count - 1``).
 
@@ -267,6 +288,9 @@ def run_bench(
     swimmer : SwimmerModel, optional
         The model of the robot the planner swims, built once by the command and handed to
         every world's planner (built here once when not given; each process has its copy).
+    budget_s : float, optional
+        Each world's planning call gets a deadline this long after it starts
+        (:func:`bench_world`). Default: none.
 
     Returns
     -------
@@ -280,7 +304,8 @@ def run_bench(
         _warm_up(robot, coefficients, seed + count, threads, unknown_current_m_s, guidance,
                  swimmer)
         results: Iterable[WorldResult] = (_one(robot, coefficients, s, threads,
-                                               unknown_current_m_s, guidance, swimmer)
+                                               unknown_current_m_s, guidance, swimmer,
+                                               budget_s)
                                           for s in seeds)
         _collect(summary, results, progress)
         return summary
@@ -290,7 +315,7 @@ def run_bench(
                              initargs=(robot, coefficients, seed + count, threads,
                                        unknown_current_m_s, guidance, swimmer)) as pool:
         results = pool.map(_one, *zip(*[(robot, coefficients, s, threads, unknown_current_m_s,
-                                         guidance, swimmer) for s in seeds],
+                                         guidance, swimmer, budget_s) for s in seeds],
                                       strict=True))
         _collect(summary, results, progress)
     return summary
