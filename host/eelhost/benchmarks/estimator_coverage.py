@@ -10,6 +10,12 @@ the fraction of seeds whose interval holds the truth, per coefficient; the targe
 90 % for 95 % intervals. :func:`needed_widening` is the smallest extra factor on the half-widths
 that would have reached the target on these seeds: the value ``uncertainty.WIDEN`` is set to.
 
+With ``motions=("straight", "turning")`` each seed records both motions' training gaits and is
+treated as the report treats a dataset: each motion fitted, the tank's one current estimated from
+both (:func:`eelhost.estimation.tank_current.share_tank_current`) and held by each motion's fit,
+and the held fits bootstrapped. Those are the intervals ``eelbot report`` gives; the straight
+tank alone fits its own current.
+
 **Prediction bands** (:func:`measure_bands`): for each named plant (typically one whose law is
 no candidate), the virtual tank records the paper's 34 experiments, ``eelbot report`` runs on
 them (straight and turning fits, bootstrap, validation), and the fraction of held-out positions
@@ -53,6 +59,31 @@ TARGET = 0.90
 MOTION = "straight"
 
 
+@dataclass(frozen=True)
+class Intervals:
+    """One seed's estimates and intervals (of one fit, or of several side by side).
+
+    Attributes
+    ----------
+    estimate, lower, upper : ndarray, shape (K,)
+    """
+
+    estimate: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+
+    @classmethod
+    def of(cls, boots: Sequence[BootstrapResult]) -> Intervals:
+        """The fits' intervals one after the other, in the order given."""
+        return cls(*(np.concatenate([getattr(b, f) for b in boots])
+                     for f in ("estimate", "lower", "upper")))
+
+    def covers(self, truth: np.ndarray) -> np.ndarray:
+        """Whether each interval holds the true value."""
+        t = np.asarray(truth, dtype=float)
+        return (self.lower <= t) & (t <= self.upper)
+
+
 @dataclass
 class Coverage:
     """Coverage of the intervals over seeds.
@@ -60,14 +91,18 @@ class Coverage:
     Attributes
     ----------
     names : tuple of str
+        The parameters ("<motion> <name>" when several motions are fitted).
     truth : ndarray, shape (K,)
-    results : list of BootstrapResult
+    results : list of Intervals
         One per seed.
+    motions : tuple of str
+        The motions fitted.
     """
 
     names: tuple[str, ...]
     truth: np.ndarray
-    results: list[BootstrapResult]
+    results: list[Intervals]
+    motions: tuple[str, ...] = (MOTION,)
 
     def covered(self) -> np.ndarray:
         """Whether each seed's interval holds the truth, shape (seeds, K)."""
@@ -98,6 +133,7 @@ def measure_coverage(
     say: Callable[[str], None] | None = None,
     plant: Plant | None = None,
     robot_file: str | None = None,
+    motions: Sequence[str] = (MOTION,),
 ) -> Coverage:
     """The intervals' coverage over ``seeds`` synthetic tanks (module docstring).
 
@@ -119,54 +155,72 @@ def measure_coverage(
         the paper robot with the plant's differences either way (``stiff_servos`` with the
         servo file: its joints are that file's, so the servo model contains the truth, its
         fitted joint parameters included).
+    motions : sequence of str
+        The motions recorded and fitted ("straight", "turning"); with both, the tank's one
+        current is shared and held by each fit, as in ``eelbot report``.
 
     Returns
     -------
     Coverage
     """
+    from eelhost.estimation.tank_current import share_tank_current
+
     recorder = load_robot()
     robot = load_robot(robot_file) if robot_file else recorder
     tank = plant.settings if plant is not None else TankSettings()
-    true = plant.truths()[MOTION] if plant is not None else TABLE3[MOTION]
+    truths = plant.truths() if plant is not None else TABLE3
     # the fit's parameters (with the ambient current when the settings fit it: still water here)
     space = ParameterSpace.for_robot(robot, current=(settings or FitSettings()).fit_current)
-    truth = coverage_truth(space, plant, recorder)
-    gaits = [s for motion, split, s in paper_experiment_plan()
-             if motion == MOTION and split == "train"]
+    several = len(motions) > 1
+    names = tuple(f"{m} {n}" if several else n for m in motions for n in space.names)
+    truth = np.concatenate([coverage_truth(space, plant, recorder, m) for m in motions])
+    gaits = {m: [s for motion, split, s in paper_experiment_plan()
+                 if motion == m and split == "train"] for m in motions}
     results = []
     for k in range(seeds):
         seed = first_seed + k
-        exps = [record_experiment(recorder, s, MOTION, true, tank, seed=1000 * seed + i)
-                for i, s in enumerate(gaits)]
         fit_settings = settings or FitSettings(seed=seed)
-        ev = Evaluator(robot, exps, backend=fit_settings.backend, align_s=fit_settings.align_s,
-                       space=space)
-        res = run_fit(FitProblem(ev, fit_settings, space.start(robot)))
-        ident = identifiability(ev, res.values)
-        boot = parametric_bootstrap(ev, res.values, res.fitness, replicates, seed=seed,
-                                    unidentified=ident.unidentified(),
-                                    linear_std=ident.std_error)
-        results.append(boot)
+        fits, evs = {}, {}
+        for j, m in enumerate(motions):
+            # the straight gaits keep the seeds they had when only they were measured
+            exps = [record_experiment(recorder, s, m, truths[m], tank,
+                                      seed=1000 * seed + 100 * j + i)
+                    for i, s in enumerate(gaits[m])]
+            evs[m] = Evaluator(robot, exps, backend=fit_settings.backend,
+                               align_s=fit_settings.align_s, space=space)
+            fits[m] = run_fit(FitProblem(evs[m], fit_settings, space.start(robot)))
+        if several:
+            fits, evs, _ = share_tank_current(fits, evs)
+        boots = []
+        for m in motions:
+            ident = identifiability(evs[m], fits[m].values)
+            boots.append(parametric_bootstrap(evs[m], fits[m].values, fits[m].fitness,
+                                              replicates, seed=seed,
+                                              unidentified=ident.unidentified(),
+                                              linear_std=ident.std_error))
+        got = Intervals.of(boots)
+        results.append(got)
         line = (f"seed {seed}: " + ", ".join(
             f"{n} {v:.4g} [{lo:.4g}, {hi:.4g}]{'' if c else ' MISSED'}"
-            for n, v, lo, hi, c in zip(space.names, boot.estimate, boot.lower, boot.upper,
-                                       boot.covers(truth), strict=True)))
+            for n, v, lo, hi, c in zip(names, got.estimate, got.lower, got.upper,
+                                       got.covers(truth), strict=True)))
         log.info("%s", line)
         if say:
             say(line)
-    return Coverage(space.names, truth, results)
+    return Coverage(names, truth, results, tuple(motions))
 
 
-def coverage_truth(space: ParameterSpace, plant: Plant | None, recorder: Robot) -> np.ndarray:
-    """The true point of ``space`` for a straight tank of ``plant`` recorded from ``recorder``.
+def coverage_truth(space: ParameterSpace, plant: Plant | None, recorder: Robot,
+                   motion: str = MOTION) -> np.ndarray:
+    """The true point of ``space`` for a ``motion`` tank of ``plant`` recorded from ``recorder``.
 
-    The law's straight truth, the plant's own joint parameters where the space fits them (the
-    servo model's lag and motor time constant on ``stiff_servos``), and the tank's steady
+    The law's truth for that motion, the plant's own joint parameters where the space fits them
+    (the servo model's lag and motor time constant on ``stiff_servos``), and the tank's steady
     current where the space has one (still water when the plant's current is drawn anew per
     experiment, which has no one true value).
     """
     tank = plant.settings if plant is not None else TankSettings()
-    true = plant.truths()[MOTION] if plant is not None else TABLE3[MOTION]
+    true = plant.truths()[motion] if plant is not None else TABLE3[motion]
     current = np.zeros(len(space.current_names))
     if space.current_names and tank.stray_current_direction_deg is not None:
         a = np.radians(tank.stray_current_direction_deg)
@@ -179,10 +233,13 @@ def coverage_markdown(cov: Coverage, seeds_command: str, tank: str = "bundled no
     """The coverage as a markdown section."""
     rate = cov.rate()
     need = cov.needed_widening()
+    what = (f"{' and '.join(cov.motions)} tank" if len(cov.motions) > 1
+            else f"{cov.motions[0]} tank") + (
+        " (the tank's one current, held by each fit)" if len(cov.motions) > 1 else "")
     lines = [
         f"## Coverage of the report's 95 % intervals: {tank}",
         "",
-        f"`{seeds_command}`: {len(cov.results)} seeds of a straight tank whose model contains the "
+        f"`{seeds_command}`: {len(cov.results)} seeds of a {what} whose model contains the "
         f"truth ({tank}), intervals with the widening factor {WIDEN:g} in use. Target: "
         f"the truth inside in at least {TARGET * 100:.0f} % of the seeds.",
         "",

@@ -60,6 +60,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="instead: measure the report's 95 %% prediction bands' coverage of held-out "
         "positions on these test plants (docs/estimation_coverage.md): " + plant_help(),
     )
+    p.add_argument("--motions", default="straight", metavar="MOTION,...",
+                   help="with --coverage: the motions each tank records and fits (default: "
+                   "straight; straight,turning: both, the tank's one current held by each fit, "
+                   "as eelbot report gives the intervals)")
     p.add_argument("--choose", action="store_true",
                    help="with --bands: the report's model comparison on (as by default), the "
                    "bands of the model it chooses (without it: the robot file's model)")
@@ -79,6 +83,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
+    if args.motions != "straight" and not args.coverage:
+        raise UserError("--motions: goes with --coverage SEEDS (the motions each tank fits)")
     if args.choose and not args.bands:
         raise UserError("--choose: goes with --bands PLANT,... (the bands of the chosen model)")
     if args.bands:
@@ -103,13 +109,19 @@ def run(args: argparse.Namespace) -> int:
         if tank != "bundled" and plant is None:
             raise UserError(f"--coverage takes one tank in --tanks: bundled or a plant, got "
                             f"{tank!r}; known plants: {', '.join(sorted(PLANTS))}")
+        motions = tuple(args.motions.split(","))
+        if not motions or any(m not in ("straight", "turning") for m in motions) or len(
+                set(motions)) < len(motions):
+            raise UserError(f"--motions: straight, turning or straight,turning, got "
+                            f"{args.motions!r}")
         cov = measure_coverage(args.coverage, args.seed, args.replicates,
                                say=lambda line: print(line, flush=True), plant=plant,
-                               robot_file=args.robot)
+                               robot_file=args.robot, motions=motions)
         text = "# Estimation: interval coverage\n\n" + coverage_markdown(
             cov, f"eelbot estimate-bench --coverage {args.coverage} --seed {args.seed} "
             f"--replicates {args.replicates}" + (f" --tanks {tank}" if plant else "")
-            + (f" --robot {args.robot}" if args.robot else ""),
+            + (f" --robot {args.robot}" if args.robot else "")
+            + (f" --motions {args.motions}" if motions != ("straight",) else ""),
             "bundled noise" if plant is None else f"plant {tank}")
         print(text)
         if args.write:
