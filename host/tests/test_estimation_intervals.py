@@ -9,8 +9,10 @@ from eelhost.data.virtual_tank import TABLE3, TankSettings, record_experiment
 from eelhost.estimation.coefficients_file import FittedModel
 from eelhost.estimation.evaluate import Evaluator
 from eelhost.estimation.local import polish_minimax
+from eelhost.estimation.space import ParameterSpace
 from eelhost.estimation.uncertainty import (
     BootstrapResult,
+    held_current_shift,
     misfit_growth,
     misfit_replicates,
     model_views,
@@ -182,3 +184,77 @@ def test_a_fit_far_above_its_noise_floor_says_its_intervals_are_dominated_by_mis
     assert any("dominated by misfit" in w for w in fit_warnings("straight", space, x, far))
     assert not any("misfit" in w for w in fit_warnings("straight", space, x, near))
     assert k == 4
+
+
+def test_a_held_currents_ends_shift_the_coefficients_in_quadrature():
+    # held_current_shift pins each current component at each end of its held interval (the
+    # other free within its own), refits, and adds the components' largest shifts in quadrature
+    ev, _ = _held_evaluator()
+    space = ev.space
+    estimate = np.array([0.008, 0.8, 0.6, 0.5, 0.001, -0.002])
+    calls = []
+
+    def refit(in_space, start):
+        b = in_space.bounds
+        calls.append(b[-2:].copy())
+        moved = start.copy()
+        # C_d follows the x component, C_a the y component, linearly
+        moved[1] += 10.0 * (start[4] - estimate[4])
+        moved[2] += 20.0 * (start[5] - estimate[5])
+        return moved
+
+    shift = held_current_shift(ev, estimate, refit, max_iterations=1)
+    assert len(calls) == 4
+    held = space.bounds[-2:]
+    for call in calls:
+        pinned = np.flatnonzero(call[:, 1] - call[:, 0] < 1e-5)
+        assert len(pinned) == 1  # one component fixed at an end, the other free in its interval
+        other = 1 - pinned[0]
+        np.testing.assert_allclose(call[other], held[other])
+    # x ends are 0.001 -> [-0.003, 0.003]: largest move 0.004 * 10; y: -0.002 -> [-0.004, 0.001]
+    np.testing.assert_allclose(shift[:4], [0.0, 0.04, 0.06, 0.0], atol=1e-12)
+    np.testing.assert_allclose(shift[4:], [0.003, 0.0025])
+
+
+def _held_evaluator():
+    robot = load_robot()
+    exps = [record_experiment(robot, _short(n), "straight", TRUTH, TankSettings(), seed=20 + i)
+            for i, n in enumerate(GAITS)]
+    free = Evaluator(robot, exps, backend="batch",
+                     space=ParameterSpace.for_robot(robot, current=True))
+    held = dataclasses.replace(free.space,
+                               current_bounds=np.array([[-0.003, 0.003], [-0.004, 0.001]]))
+    return free.with_space(held), free
+
+
+def test_a_fit_holding_the_tanks_current_gets_its_interval_and_carries_it_into_the_drag():
+    # the tank's current is estimated from every motion and held within its interval by each
+    # motion's fit; the refits around the held value do not see that interval, so the current's
+    # interval is the held one and the drag, which trades against a current along the swimming
+    # axis (x), is moved by it
+    ev, _ = _held_evaluator()
+    estimate = np.concatenate([TRUTH.as_array(), [0.0, 0.0]])
+    fitness = float(np.max(ev.evaluate(estimate[None])[0]))
+    boot = parametric_bootstrap(ev, estimate, fitness, replicates=2, seed=3, max_iterations=3)
+    np.testing.assert_allclose(boot.lower[-2:], [-0.003, -0.004])
+    np.testing.assert_allclose(boot.upper[-2:], [0.003, 0.001])
+    c_d = 1
+    assert boot.held_shift[c_d] > 0.01  # 3 mm/s along the axis moves C_d visibly
+    half = (boot.upper[c_d] - boot.lower[c_d]) / 2
+    assert half >= boot.held_shift[c_d] * 0.999
+    assert "held_current_shift" in boot.to_json()
+
+
+def test_two_motion_coverage_judges_each_motions_row_and_rejects_other_motions(capsys):
+    # --coverage --motions straight,turning: each motion's truth is its own row of the law
+    from eelhost import cli
+    from eelhost.benchmarks.estimator_coverage import coverage_truth
+
+    space = ParameterSpace.for_robot(load_robot(), current=True)
+    for motion in ("straight", "turning"):
+        truth = space.as_dict(coverage_truth(space, None, load_robot(), motion))
+        assert truth["C_d"] == TABLE3[motion].C_d and truth["C_a"] == TABLE3[motion].C_a
+    assert cli.main(["estimate-bench", "--coverage", "1", "--motions", "straight,sideways"]) == 2
+    assert "--motions: straight, turning or straight,turning" in capsys.readouterr().err
+    assert cli.main(["estimate-bench", "--motions", "straight,turning"]) == 2
+    assert "--motions: goes with --coverage" in capsys.readouterr().err

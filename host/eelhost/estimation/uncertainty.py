@@ -55,6 +55,7 @@ from eelhost.data.experiments import Experiment
 from eelhost.estimation.coefficients_file import FittedModel
 from eelhost.estimation.evaluate import Evaluator
 from eelhost.estimation.local import polish_minimax_many
+from eelhost.estimation.space import ParameterSpace
 from eelsim.camera import CameraModel, observation_steps, observed_positions
 from eelsim.closed_loop import LoopOptions
 from eelsim.robot import Robot
@@ -67,6 +68,8 @@ LEVEL = 0.95
 # seeds with the ambient current fitted, C_f, C_d and C_a were covered in 95 % of the seeds at
 # 1.0, the current's x component in 85 %; 1.05 is the factor that component needed for 90 %.
 WIDEN = 1.05
+# Half-range of a held current component pinned at its interval's end (held_current_shift), m/s.
+PINNED_M_S = 1e-6
 
 
 def _record(
@@ -293,6 +296,11 @@ class BootstrapResult:
         The leave-one-experiment-out refits on the recordings (empty with fewer than three):
         their predictions of the experiment left out give the residual curves; their own spread
         is reported (:meth:`jackknife_std`), not used.
+    held_shift : ndarray, shape (K,)
+        When the fit holds the tank's current within its interval (estimated from every
+        motion's experiments, :mod:`eelhost.estimation.tank_current`): how far each parameter
+        moves when the current is put at that interval's ends (:func:`held_current_shift`),
+        added to the bootstrap's half-width in quadrature. Empty otherwise.
     """
 
     names: tuple[str, ...]
@@ -311,6 +319,7 @@ class BootstrapResult:
     jackknife: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     growth_source: str = "in-sample"
     experiments: int = 0
+    held_shift: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def growth_dof(self) -> int:
@@ -398,6 +407,7 @@ class BootstrapResult:
             "jackknife_std": by_name(self.jackknife_std()),
             "misfit_dominated": [n for n, d in zip(self.names, self.misfit_dominated(),
                                                     strict=True) if d],
+            **({"held_current_shift": by_name(self.held_shift)} if self.held_shift.size else {}),
             "misfit_growth": {"c0_m2": float(self.growth[0]), "c1_m2_s2": float(self.growth[1]),
                               "from": self.growth_source, "dof": self.growth_dof},
             "lower": by_name(self.lower),
@@ -488,8 +498,9 @@ def parametric_bootstrap(
                     failed, replicates)
     n_exp = len(experiments)
 
-    def refit(problems: list[tuple[list, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
-        """Minimax polish of each (prepared data, experiments kept) from the estimate.
+    def refit(problems: list[tuple[list, np.ndarray]], in_space: ParameterSpace = space,
+              start: np.ndarray = estimate) -> tuple[np.ndarray, np.ndarray]:
+        """Minimax polish of each (prepared data, experiments kept) from ``start``.
 
         Returns the refits (P, K) and their fitness on their own data (P,).
         """
@@ -507,8 +518,8 @@ def parametric_bootstrap(
                 at += size
             return out
 
-        fits = polish_minimax_many(evaluate, space,
-                                   np.repeat(estimate[None], len(problems), axis=0),
+        fits = polish_minimax_many(evaluate, in_space,
+                                   np.repeat(start[None], len(problems), axis=0),
                                    max_iterations)
         return (np.array([r.values for r in fits]).reshape(-1, space.size),
                 np.array([r.fitness for r in fits]))
@@ -559,6 +570,9 @@ def parametric_bootstrap(
     # each source's spread times its Student quantile; the widest sets the half-width (the
     # jackknife's own spread is reported, not used: a minimax fit is not smooth in its data, and
     # its leave-one-out refits jumped between the experiments that set the maximum)
+    def refit_with_space(in_space: ParameterSpace, start: np.ndarray) -> np.ndarray:
+        return refit([(evaluator.prepared, everything)], in_space, start)[0][0]
+
     def quantile(n: int) -> float:
         return float(student_t.ppf(0.5 + level / 2, n - 1)) if n >= 2 else 0.0
 
@@ -569,8 +583,75 @@ def parametric_bootstrap(
                                             else np.nan_to_num(boot.linear_std, posinf=0.0)),
     ]) * widen
     bounds = space.bounds
+    held = held_current(space)
+    if held.any():
+        # the current was estimated from every motion's experiments and is held within its
+        # interval: each refit sees the spread of this motion's data around the held value, not
+        # the current's own uncertainty, which the coefficients trade against along the swimming
+        # axis. That uncertainty is propagated by moving the current to its interval's ends (a
+        # 95 % statement, like the half-width) and added in quadrature, as independent sources
+        boot.held_shift = held_current_shift(evaluator, estimate, refit_with_space,
+                                             max_iterations)
+        half = np.hypot(half, boot.held_shift)
     boot.lower = np.maximum(estimate - half, bounds[:, 0])
     boot.upper = np.minimum(estimate + half, bounds[:, 1])
+    # the held current's own interval is the tank's (its bounds here): this motion alone says
+    # no more about it than every experiment together did
+    boot.lower[held], boot.upper[held] = bounds[held, 0], bounds[held, 1]
     whole = np.isin(np.array(space.names), list(unidentified))
     boot.lower[whole], boot.upper[whole] = space.bounds[whole, 0], space.bounds[whole, 1]
     return boot
+
+
+def held_current(space: ParameterSpace) -> np.ndarray:
+    """Per parameter of ``space``, whether it is the current held within the tank's interval."""
+    mask = np.zeros(space.size, dtype=bool)
+    if space.current and space.current_bounds is not None:
+        mask[-len(space.current_names):] = True
+    return mask
+
+
+def held_current_shift(
+    evaluator: Evaluator,
+    estimate: np.ndarray,
+    refit: Callable[[ParameterSpace, np.ndarray], np.ndarray],
+    max_iterations: int,
+) -> np.ndarray:
+    """How far each parameter moves when the held current is put at its interval's ends.
+
+    For each component of the current and each end of its held interval, the other parameters
+    are refitted (the minimax polish from the estimate, ``max_iterations``) with the current
+    fixed there; a component's shift is the larger of its two ends', and the components' shifts
+    add in quadrature. The current's own entries are its interval's half-widths.
+
+    Parameters
+    ----------
+    evaluator : Evaluator
+        The fit's evaluator, in the held space.
+    estimate : ndarray, shape (K,)
+    refit : callable
+        (space, start) -> the polished vector in that space (the bootstrap's refit).
+    max_iterations : int
+
+    Returns
+    -------
+    ndarray, shape (K,)
+    """
+    space = evaluator.space
+    held = np.flatnonzero(held_current(space))
+    bounds = space.bounds
+    shifts = np.zeros((len(held), space.size))
+    for row, i in enumerate(held):
+        for end in bounds[i]:
+            start = estimate.copy()
+            start[i] = end
+            # this component within a micrometre per second of the end (fixed, for a polish
+            # whose unit cube needs a range to divide by), the other free within its interval
+            pinned = np.array(bounds[held], dtype=float)
+            pinned[row] = [end - PINNED_M_S, end + PINNED_M_S]
+            fixed = dataclasses.replace(space, current_bounds=pinned)
+            moved = refit(fixed, start)
+            shifts[row] = np.maximum(shifts[row], np.abs(moved - estimate))
+    shift = np.sqrt(np.sum(shifts**2, axis=0))
+    shift[held] = (bounds[held, 1] - bounds[held, 0]) / 2
+    return shift
