@@ -49,7 +49,8 @@ from eelsim.control import wrap_angle
 
 BATCHES_SEEN = 3
 """With a deadline, a batch's nodes are predicted to take the largest wall time per node of the
-search's last this many batches (those that swam anything)."""
+search's last this many batches (those that swam anything, in this call or the search's calls
+before: a repair's first batch too)."""
 
 COST_WINDOW = 32
 """A swim cost's rate is taken over its last this many measured swims (:class:`SwimCost`)."""
@@ -382,6 +383,9 @@ class Search:
         self._memo: dict[tuple, list] = {}
         self.simulations = 0
         self.swim_cost = SwimCost()
+        # wall time per node of the last few batches that swam anything, over this search's
+        # calls (a repair's or a replan's first batch is predicted from the ones before)
+        self._node_walls: deque[float] = deque(maxlen=BATCHES_SEEN)
         """Wall time per run-step of this search's batches (measured even without a deadline)."""
         self.clock: Callable[[], float] = time.monotonic
         """The clock ``deadline_s`` is read on (a test's fake one in place of the default)."""
@@ -720,7 +724,7 @@ class Search:
         expansions = 0
         found = -1
         late = False
-        node_walls: list[float] = []  # wall time per node of this call's batches that swam
+        node_walls = self._node_walls
         while heap and found < 0 and expansions < s.max_expansions:
             size = s.batch
             if deadline_s is not None:
@@ -729,7 +733,7 @@ class Search:
                 # each predicted to take the largest wall time per node of the last few batches
                 # (docs/planning.md, "The planning call's deadline")
                 left = deadline_s - self.clock() - (reserve_s() if reserve_s else 0.0)
-                per_node = max(node_walls[-BATCHES_SEEN:], default=0.0)
+                per_node = max(node_walls, default=0.0)
                 if left <= 0:
                     late = True
                     break
