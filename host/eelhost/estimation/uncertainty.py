@@ -36,6 +36,10 @@ data and intervals of zero width), so the fit's own residuals are resampled too.
   it. ``widen`` is the factor the coverage benchmark (``eelbot estimate-bench --coverage``)
   measured to be needed for the 95 % intervals to cover the truth in at least 90 % of synthetic
   tanks whose model contains it.
+- **A held current** (:func:`held_current_shift`): a fit that holds the tank's current within
+  its interval (:mod:`eelhost.estimation.tank_current`) gets that interval as the current's,
+  and each other parameter's half-width grows in quadrature by how far it moves when the current
+  is put at the interval's ends (docs/estimation.md, "Uncertainty").
 - **Prediction bands** (:func:`eelhost.estimation.validate.prediction_bands`) swim the estimate
   and every refit (:meth:`BootstrapResult.ensemble`) and add the misfit's growth along a
   recording (:func:`misfit_growth` of each training experiment predicted by the fit without it).
