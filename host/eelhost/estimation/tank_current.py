@@ -67,6 +67,8 @@ log = logging.getLogger(__name__)
 # Iterations of the joint polish and of each motion's polish holding the tank's current.
 JOINT_ITERATIONS = 12
 HOLD_ITERATIONS = 8
+# Gauss-Newton iterations from the minimax fits to the least-squares estimate of the current.
+LEAST_SQUARES_ITERATIONS = 3
 Z_95 = 1.959964  # the normal's 97.5 % quantile: the interval c +- z s
 # Least half-width of the held interval, m/s: a tenth of a mm/s, so that a polish's unit cube
 # keeps a range its finite differences can step in.
@@ -234,7 +236,7 @@ def share_tank_current(
     starts = np.array([start(x[-2:]) for x in own] + [start(np.zeros(2))])
     results = polish_minimax_many(evaluate, cast(ParameterSpace, cube), starts, JOINT_ITERATIONS)
     best = min(results, key=lambda r: r.fitness)
-    joint = np.asarray(best.values, dtype=float)
+    joint = _least_squares(evs, cube, split, np.asarray(best.values, dtype=float))
     current = joint[-2:]
     half, scale_by = _interval(evs, cube, split, joint, own)
     new_fits, new_evs = dict(fits), dict(evaluators)
@@ -341,12 +343,15 @@ class _Spread:
 
     ``independent``: from independent residuals, its 95 % half-width z sqrt(diag); ``robust``:
     cluster-robust (experiments the clusters), its half-width t(G - 1) sqrt(diag), or None with
-    one experiment; ``quantile``: t(G - 1) / z, the robust one's widening of z.
+    one experiment; ``quantile``: t(G - 1) / z, the robust one's widening of z;
+    ``least_squares_step_m_s``: the Gauss-Newton step from the fit's current to the residuals'
+    least-squares one, the other parameters profiled out (the estimate these covariances are of).
     """
 
     independent: np.ndarray
     robust: np.ndarray | None
     quantile: float
+    least_squares_step_m_s: np.ndarray
 
     def half_width(self) -> np.ndarray:
         """The 95 % half-width per component: the wider of the two intervals."""
@@ -369,11 +374,17 @@ def _interval(evs: list[Evaluator], cube: _JointCube,
               own: list[np.ndarray]) -> tuple[np.ndarray, float]:
     """The tank current's 95 % half-width per component and its widening for misfit (step 2).
 
-    ``own`` holds each motion's own fit (its vector, current last) in its own space. The
-    half-width on the joint problem (:func:`_half_width`) times :func:`misfit_scale` of the
-    motions' own currents, each with its covariance on its own residuals.
+    ``own`` holds each motion's own fit (its vector, current last) in its own space, taken to
+    its least-squares point (:func:`_least_squares`) as ``joint`` was. The half-width on the
+    joint problem (:func:`_half_width`) times :func:`misfit_scale` of the motions' own
+    currents, each with its covariance on its own residuals.
     """
-    views = [_spread([ev], _JointCube(ev.space.bounds), lambda x: [x], x)
+    def alone(x: np.ndarray) -> list[np.ndarray]:
+        return [x]
+
+    own = [_least_squares([ev], _JointCube(ev.space.bounds), alone, x)
+           for ev, x in zip(evs, own, strict=True)]
+    views = [_spread([ev], _JointCube(ev.space.bounds), alone, x)
              for ev, x in zip(evs, own, strict=True)]
     scale_by = misfit_scale(joint[-2:], [(x[-2:], v.covariance())
                                          for x, v in zip(own, views, strict=True)
@@ -396,6 +407,53 @@ def _half_width(evs: list[Evaluator], cube: _JointCube,
     return np.clip(spread.half_width(), MIN_HALF_WIDTH_M_S, CURRENT_BOUND_M_S)
 
 
+def _jacobian(evs: list[Evaluator], cube: _JointCube,
+              split: Callable[[np.ndarray], list[np.ndarray]],
+              x: np.ndarray) -> tuple[np.ndarray, list[np.ndarray], np.ndarray]:
+    """Residuals at ``x`` and its forward-difference neighbours, each motion's, and the Jacobian.
+
+    Returns (r, parts, jac): r (K + 1, M) the stacked residuals at x and at each step, parts the
+    same per motion, jac (M, K) in unit-cube coordinates (steps of ``REL_STEP``, backwards at
+    the upper bound).
+    """
+    k = cube.size
+    u0 = cube.to_unit(x)
+    steps = np.where(u0 + REL_STEP <= 1.0, REL_STEP, -REL_STEP)
+    pts = np.vstack([x] + [cube.from_unit(u0 + np.eye(k)[i] * steps[i]) for i in range(k)])
+    parts = [ev.residuals(part) for ev, part in zip(evs, split(pts), strict=True)]
+    r = np.hstack(parts)
+    return r, parts, ((r[1:] - r[0]) / steps[:, None]).T
+
+
+def _least_squares(evs: list[Evaluator], cube: _JointCube,
+                   split: Callable[[np.ndarray], list[np.ndarray]],
+                   x: np.ndarray) -> np.ndarray:
+    """Gauss-Newton from ``x`` to the residuals' least-squares point (module doc, step 2).
+
+    The interval is that of the least-squares estimate, so the current reported is that
+    estimate, not the minimax fit's (which balances the worst experiments, and with them the
+    misfit). Each step the minimum-norm solution of J d = -r in the unit cube, clipped to the
+    bounds and halved until the sum of squares falls (at most four times); it stops when none does.
+    """
+    x = np.asarray(x, dtype=float)
+    for _ in range(LEAST_SQUARES_ITERATIONS):
+        r, _, jac = _jacobian(evs, cube, split, x)
+        cost = float(r[0] @ r[0])
+        d = np.linalg.lstsq(jac, -r[0], rcond=1e-9)[0]
+        u0 = cube.to_unit(x)
+        for _ in range(4):
+            trial = cube.from_unit(np.clip(u0 + d, 0.0, 1.0))
+            rt = np.hstack([ev.residuals(part) for ev, part in zip(evs, split(trial[None]),
+                                                                 strict=True)])[0]
+            if float(rt @ rt) < cost:
+                x = trial
+                break
+            d = d / 2
+        else:
+            break
+    return x
+
+
 def _spread(evs: list[Evaluator], cube: _JointCube,
             split: Callable[[np.ndarray], list[np.ndarray]], joint: np.ndarray) -> _Spread | None:
     """The current's covariance at ``joint``, or None where the other parameters explain it.
@@ -405,17 +463,12 @@ def _spread(evs: list[Evaluator], cube: _JointCube,
     other parameters profiled out; and the cluster-robust one with each experiment a cluster.
     """
     k = cube.size
-    u0 = cube.to_unit(joint)
-    steps = np.where(u0 + REL_STEP <= 1.0, REL_STEP, -REL_STEP)
-    pts = np.vstack([joint] + [cube.from_unit(u0 + np.eye(k)[i] * steps[i]) for i in range(k)])
-    parts = [ev.residuals(part) for ev, part in zip(evs, split(pts), strict=True)]
-    r = np.hstack(parts)
+    r, parts, jac = _jacobian(evs, cube, split, joint)
     # each residual's experiment (a cluster): an evaluator's columns are its experiments' blocks
     cluster = np.concatenate([
         first + np.repeat(np.arange(len(ev.prepared)), p.shape[1] // len(ev.prepared))
         for first, ev, p in zip(np.cumsum([0] + [len(ev.prepared) for ev in evs[:-1]]), evs,
                                 parts, strict=True)])
-    jac = ((r[1:] - r[0]) / steps[:, None]).T  # (M, K), unit-cube coordinates
     pixel = max(float(p.experiment.recording_camera().pixel_m) for ev in evs for p in ev.prepared)
     sigma2 = max(float(r[0] @ r[0]) / max(1, jac.shape[0] - k), pixel**2 / 12.0)
     # the current's covariance with the other parameters profiled out: its columns' part that
@@ -433,6 +486,7 @@ def _spread(evs: list[Evaluator], cube: _JointCube,
         return None
     bread = np.linalg.inv(info)
     to_m_s = np.outer(ranges, ranges)  # unit-cube covariance to (m/s)^2
+    step = -ranges * (bread @ (alone.T @ r[0]))
     # the same with the residuals correlated within each experiment (a clock offset or a misfit
     # shifts a whole recording): the cluster-robust sandwich, experiments the clusters, with the
     # small-sample factor G / (G - 1) and Student's t with G - 1 degrees of freedom (Cameron &
@@ -443,7 +497,7 @@ def _spread(evs: list[Evaluator], cube: _JointCube,
                        for g in np.unique(cluster)])  # (G, 2)
     groups = len(scores)
     if groups < 2:
-        return _Spread(sigma2 * bread * to_m_s, None, 1.0)
+        return _Spread(sigma2 * bread * to_m_s, None, 1.0, step)
     robust = bread @ (scores.T @ scores) @ bread * groups / (groups - 1)
     return _Spread(sigma2 * bread * to_m_s, robust * to_m_s,
-                   float(student_t.ppf(0.975, groups - 1)) / Z_95)
+                   float(student_t.ppf(0.975, groups - 1)) / Z_95, step)
