@@ -289,3 +289,17 @@ def test_the_birge_ratio_is_the_motions_chi_square_over_its_degrees_of_freedom()
     assert misfit_scale(tank, [(a, cov), (b, cov)]) == pytest.approx(np.sqrt(q / 2))
     assert misfit_scale(tank, [(tank, cov), (tank + 1e-4, cov)]) == 1.0
     assert misfit_scale(tank, [(a, cov)]) == 1.0  # one motion: nothing to compare
+
+
+def test_the_tank_current_is_taken_to_the_residuals_least_squares_estimate():
+    from eelhost.estimation.tank_current import _JointCube, _least_squares
+
+    rng = np.random.default_rng(8)
+    ev = _LinearMotion(rng, [0.3, -0.0025, 0.00433], (0.001, 0.0))
+    cube = _JointCube(ev.space.bounds)
+    # from a point another criterion chose (the minimax fit's), off the least-squares one
+    got = _least_squares([ev], cube, lambda x: [x], np.array([0.1, 0.004, 0.0]))
+    np.testing.assert_allclose(got, ev.own_fit(), atol=1e-7)
+    # the least-squares point itself stays
+    np.testing.assert_allclose(_least_squares([ev], cube, lambda x: [x], ev.own_fit()),
+                               ev.own_fit(), atol=1e-9)
