@@ -18,7 +18,10 @@ and a speed error differ. So, once both fits are made:
    along its axis a current is a speed error its coefficients can make as well, and the bundled
    noise decided which; across it, it is a drift nothing else makes. So the tank's current is
    what the motions see across their axes (:func:`cross_track_axes`: only when those views span
-   the plane; otherwise nothing is decoupled).
+   the plane; otherwise nothing is decoupled). From the best start, Gauss-Newton steps
+   (:func:`_least_squares`) take the joint vector to the residuals' least-squares point: the
+   interval below is that estimate's, and the minimax point balances the worst experiments, and
+   with them the misfit.
 2. **Its interval.** The current's linearised standard error s on the joint problem (the
    residuals of both motions stacked, the Jacobian in the unit cube, the residual variance from
    the residuals, never below the pixel rounding's, the other parameters profiled out), and the
@@ -27,7 +30,8 @@ and a speed error differ. So, once both fits are made:
    freedom for G experiments: a recording's residuals move together (its clock offset, its
    jitter, the misfit), so they are not independent evidence. Neither sees a misfit the
    current absorbed (the residuals no longer hold it), so the interval is widened by the Birge
-   ratio of the motions' own currents against the tank's (:func:`misfit_scale`): in one tank,
+   ratio of the motions' own currents (each motion's own fit taken to its least-squares point
+   the same way) against the tank's (:func:`misfit_scale`): in one tank,
    with a model that holds the water, they differ by their noise only; beyond it, the misfit
    moved them, and the tank's current as much. When still water lies inside the interval, no
    current is resolved (``TankCurrent.resolved``), and the report says so.
