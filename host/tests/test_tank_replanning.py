@@ -1065,3 +1065,20 @@ def test_a_replan_whose_searches_used_up_the_budget_is_still_shift_repaired(graz
     finally:
         nav.close()
     assert got.found and got.message.startswith("shift repair:"), got.message
+
+
+def test_the_shift_repair_keeps_the_present_waypoints_when_they_hold_from_where_the_robot_is():
+    # nothing near the route: no shift is 10 mm clearer, so the route is kept as it is, re-swum
+    # from the robot's start (a robot that left its corridor on a route that still holds)
+    from eelhost.planning.replan import shift_repair
+    from eelhost.planning.search import leg_start_guide
+
+    planner = Planner(parse_world({**BESIDE, "obstacles": []}, "clear"), ROBOT, MODEL,
+                      unknown_current_m_s=0.0)
+    step = int(round(3.0 / 0.01)) + 60
+    left = [(1.6, 1.0), (2.3, 1.0)]
+    state = predict_state(planner.twin, estimate_at(3.0), left, step)
+    assert state is not None
+    outcome = shift_repair(planner, state, step, leg_start_guide(state, N), left, 30.0)
+    assert outcome is not None and "kept as they are" in outcome.message, outcome
+    assert outcome.plan.waypoints_m == left

@@ -36,7 +36,7 @@ import numpy as np
 from eelhost.planning.check import water_twin
 from eelhost.planning.execute import Swim, body_clearance_m, swim
 from eelhost.planning.geometry import FloatArray, point_segment_distance
-from eelhost.planning.planner import Outcome, Planner
+from eelhost.planning.planner import SCREEN_DRAWS, Outcome, Planner
 from eelhost.planning.search import (
     Guide,
     Leg,
@@ -274,6 +274,9 @@ SHIFT_DIRECTIONS = 8
 SHIFT_CHECKED = 3
 """The shifted plans (the clearest in the estimated water first) checked over the water."""
 
+SHIFT_PREFERENCE_M = 0.01
+"""A shift must swim the capsule this much clearer than the unshifted waypoints to rank first."""
+
 SHIFT_GRACE_S = 0.5
 """How far past the replan's budget the shift repair may start a check (docs/planning.md)."""
 
@@ -316,14 +319,16 @@ def shifted_waypoints(waypoints: list[tuple[float, float]], size_m: tuple[float,
 def shift_repair(planner: Planner, state: FloatArray, step: int, guide: Guide,
                  waypoints: list[tuple[float, float]], horizon_s: float,
                  deadline_s: float | None = None) -> Outcome | None:
-    """The present plan's route with its waypoints shifted, when that swims it clear again.
+    """The present plan's route from where the robot is, its waypoints shifted if that is clearer.
 
     The twin swims the remaining ``waypoints`` and every :func:`shifted_waypoints` of them from
     ``state`` to the goal test, in the planner's water (the world's current plus the estimate)
-    with the straight fit, in one batch. The variants are ranked by the planner's capsule's
-    smallest gap on the way (then by the time to the goal); the best :data:`SHIFT_CHECKED` that
-    keep at least the unshifted route's gap plus 10 mm are checked in turn over the planner's
-    own waters (the fits as fitted and the draws of its check, the straight sets, one batch): a
+    with the straight fit, in one batch. The variants whose planner's capsule stays clear are
+    ranked by its smallest gap on the way (the unshifted waypoints with
+    :data:`SHIFT_PREFERENCE_M` added; then by the time to the goal); the best
+    :data:`SHIFT_CHECKED` are checked in turn over the planner's own waters (the fits as fitted
+    and the draws of its check, the straight sets; the fits and the first
+    :data:`eelhost.planning.planner.SCREEN_DRAWS` draws first, as the planner's check): a
     variant passes when every run enters the goal disc with the capsule clear of everything.
     The first that passes is the plan (docs/planning.md, "The shift repair").
 
@@ -350,10 +355,9 @@ def shift_repair(planner: Planner, state: FloatArray, step: int, guide: Guide,
         ``found``, message starting ``shift repair:``, or None (no variant passed).
     """
     t0 = time.perf_counter()
-    variants = shifted_waypoints(list(waypoints), planner.world.tank.size_m)
-    if not variants:
+    if not waypoints:
         return None
-    variants.insert(0, list(waypoints))
+    variants = [list(waypoints), *shifted_waypoints(list(waypoints), planner.world.tank.size_m)]
     twin, world, model = planner.twin, planner.world, planner.model
     n = model.n_links
     state = np.asarray(state, dtype=float)
@@ -374,30 +378,41 @@ def shift_repair(planner: Planner, state: FloatArray, step: int, guide: Guide,
                     guidance=[guide] * len(variants))
     scored = [(judged(runs, j), j) for j in range(len(variants))]
     base = scored[0][0]
-    floor = (base[0] if base is not None else 0.0) + 0.01
-    ranked = sorted(((g, j) for g, j in scored[1:] if g is not None and g[0] >= max(floor, 0.0)),
-                    key=lambda e: (-e[0][0], e[0][1]))
+    # the present waypoints as they are come first unless a shift is 10 mm clearer: a robot
+    # that left its corridor may still be on a route that holds from where it is
+    ranked = sorted(((g, j) for g, j in scored if g is not None and g[0] > 0.0),
+                    key=lambda e: (-(e[0][0] + (SHIFT_PREFERENCE_M if e[1] == 0 else 0.0)),
+                                   e[0][1]))
     if not ranked:
         return None
     waters = planner.check_waters(planner.waters(0))
     runner, currents = water_twin(twin, waters)
+    screen = 1 + SCREEN_DRAWS
     for (gap, samples), j in ranked[:SHIFT_CHECKED]:
-        if not _time_left(deadline_s):
-            return None
-        checks = runner.run([variants[j]] * len(waters), horizon_s,
-                            states=np.repeat(state[None], len(waters), axis=0),
-                            start_steps=[step] * len(waters),
-                            coefficient_index=[2 * i for i in range(len(waters))],
-                            stride=stride, currents=currents, guidance=[guide] * len(waters))
-        worst = [judged(checks, i) for i in range(len(waters))]
-        if any(g is None or g[0] <= 0.0 for g in worst):
+        worst: list[tuple[float, int] | None] = []
+        for part in (range(0, min(screen, len(waters))), range(screen, len(waters))):
+            if not part or not _time_left(deadline_s):
+                break
+            checks = runner.run([variants[j]] * len(part), horizon_s,
+                                states=np.repeat(state[None], len(part), axis=0),
+                                start_steps=[step] * len(part),
+                                coefficient_index=[2 * i for i in part], stride=stride,
+                                currents=[currents[i] for i in part],
+                                guidance=[guide] * len(part))
+            worst += [judged(checks, k) for k in range(len(part))]
+            if any(g is None or g[0] <= 0.0 for g in worst):
+                break
+        if len(worst) < len(waters) or any(g is None or g[0] <= 0.0 for g in worst):
+            if not _time_left(deadline_s):
+                return None
             continue
         path = runs.states[j][: samples][:, n : n + 2].copy()
         end_step = step + (samples - 1) * stride
         legs = [Leg(wp, 0.0, 0.0, step, end_step, path if i == 0 else np.zeros((0, 2)), gap,
                     goal=i == len(variants[j]) - 1) for i, wp in enumerate(variants[j])]
         least = min(g[0] for g in worst if g is not None)
-        msg = (f"shift repair: the present plan's {len(variants[j])} waypoints shifted, "
+        msg = (f"shift repair: the present plan's {len(variants[j])} waypoints "
+               + ("kept as they are" if j == 0 else "shifted") + ", "
                f"the capsule {gap * 1000:.0f} mm clear in the estimated water (unshifted "
                + ("never reaches the goal" if base is None else f"{base[0] * 1000:.0f} mm")
                + f"), at least {least * 1000:.0f} mm over the {len(waters)} waters of the check;"
