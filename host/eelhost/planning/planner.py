@@ -31,6 +31,11 @@ docs/planning.md ("The planner") is the long form. :meth:`Planner.plan`:
    every plan a planning call may check (:data:`CHECK_LEVEL` split evenly over ``repairs + 1``
    plans, Bonferroni), so the stated bound holds for whichever plan the repairs return
    (docs/planning.md, "The planner", step 4).
+5. **Deadline** (``deadline_s``, a replan's at the tank): the whole call, checks included,
+   returns by it up to a small overshoot; every search keeps the check's predicted time free
+   (its cost per run-step measured in this process) and the check starts no leg it predicts
+   would end late, so a plan whose check did not finish comes back ``out_of_time``, never as
+   checked (docs/planning.md, "The planning call's deadline").
 """
 
 from __future__ import annotations
