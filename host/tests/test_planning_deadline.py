@@ -151,3 +151,17 @@ def test_the_bench_budget_is_refused_without_the_bench_or_when_not_positive(tmp_
     assert "--budget" in capsys.readouterr().err
     assert main(["plan", "--bench", "--budget", "0"]) == 2
     assert "expected a budget above 0 s" in capsys.readouterr().err
+
+
+def test_the_bench_records_how_late_a_budgeted_call_came_back():
+    from eelhost.planning.bench import BenchSummary, bench_world
+
+    result = bench_world(open_tank(), ROBOT, MODEL, seed=3, unknown_current_m_s=0.0,
+                         budget_s=1e-9)  # gone before the search can start
+    assert result.status == "out_of_time" and result.reached is None
+    assert 0.0 < result.overshoot_s < 60.0  # returned after a deadline it could not meet
+    free = bench_world(open_tank(), ROBOT, MODEL, seed=3, unknown_current_m_s=0.0)
+    assert free.overshoot_s != free.overshoot_s  # NaN: no budget, nothing to record
+    summary = BenchSummary(results=[result, free])
+    assert any("returned after its deadline in 1 of 1 worlds" in line
+               for line in summary.lines())
