@@ -14,6 +14,10 @@ Each run is then judged as :func:`eelhost.planning.execute.swim` judges one: the
 and the body clear of everything at every physics step (the exact link distances against the
 body's half width, :func:`eelhost.planning.execute.body_clearance_m`). A leg whose waypoint a
 run never accepts ends that run there (the goal missed, blamed on that leg).
+
+Each swim records its wall time per run-step (:data:`CHECK_COST`); with a deadline, a leg's
+batch predicted by it to end late is not started and the swim raises :class:`CheckOutOfTime`
+(docs/planning.md, "The planning call's deadline").
 """
 
 from __future__ import annotations
@@ -36,6 +40,7 @@ from eelsim.model import SwimmerModel
 
 LEG_TIME_FACTOR = 3.0
 """A check run's time limit for a leg, as a multiple of the time the search's run took."""
+
 
 class CheckOutOfTime(Exception):
     """The check stopped at its deadline before swimming every run (the plan is not checked)."""
