@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from eelhost.cli import main
-from eelhost.planning.planner import Planner
+from eelhost.planning.planner import PlanLengths, Planner
 from eelhost.planning.search import SwimCost
 from eelhost.planning.twin import Twin
 from eelhost.planning.uncertainty import default_model
@@ -61,7 +61,8 @@ def clock(monkeypatch):
 def planner(clock, check_rate_s=None):
     p = Planner(open_tank(), ROBOT, MODEL, draws=6, unknown_current_m_s=0.0, seed=3)
     p.clock = clock
-    p.check_cost = SwimCost()  # this test's own measurement, not the process's
+    p.check_cost = SwimCost()  # this test's own measurements, not the process's
+    p.plan_lengths = PlanLengths()
     if check_rate_s is not None:
         p.check_cost.record(1_000_000, check_rate_s * 1_000_000)
     return p
@@ -75,6 +76,22 @@ def test_the_swim_cost_is_the_ratio_of_its_recent_sums_and_unknown_before_any():
     assert cost.rate_s == pytest.approx(2.0 / 400)
     cost.record(100, 3.0)  # the first one leaves the window
     assert cost.predict_s(10) == pytest.approx(10 * 4.0 / 400)
+
+
+def test_the_expected_plan_length_is_the_measured_ratio_to_the_free_path(clock):
+    p = planner(clock)
+    current = open_tank().current.speed_m_s  # still water: the slowest speed is the swimming one
+    assert current == 0.0
+    free = p.expected_steps()
+    # 0.9 m from the start to the goal disc's edge, at the swimming speed
+    assert free == pytest.approx(0.9 / p.swimming_speed_m_s / p.twin.dt_s, rel=0.1)
+    outcome = p.plan()  # a found plan records its length over the free path
+    assert outcome.found
+    ratio = (outcome.plan.legs[-1].end_step - 0) / free
+    assert p.expected_steps() == pytest.approx(free * ratio)
+    for r in (0.5, 4.0):  # the median of the recorded ratios
+        p.plan_lengths.record(r)
+    assert p.expected_steps() == pytest.approx(free * sorted([0.5, ratio, 4.0])[1])
 
 
 def test_without_a_deadline_the_plan_and_its_check_do_not_depend_on_the_clock(clock):

@@ -44,7 +44,7 @@ import dataclasses
 import logging
 import math
 import time
-from collections import Counter
+from collections import Counter, deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -129,6 +129,36 @@ samples every physics step and measures the exact clearance of every state; docs
 
 LEG_TIME_FACTOR = 1.6
 """A leg's time limit per metre, as a multiple of the time the robot needs against the current."""
+
+
+PLAN_LENGTH_WINDOW = 16
+"""The expected plan length's ratio is the median over the process's last this many plans."""
+
+
+class PlanLengths:
+    """How long the plans found in this process were, over their free-space paths.
+
+    Each ratio is a found plan's length (steps from its start to the goal's entry) over the
+    free-space path of the body's centre from its start to the goal disc at the swimming speed
+    (:meth:`Planner.expected_steps`): what a deadline expects of the next plan, measured, not
+    assumed (docs/planning.md, "The planning call's deadline").
+    """
+
+    def __init__(self, window: int = PLAN_LENGTH_WINDOW) -> None:
+        self._ratios: deque[float] = deque(maxlen=window)
+
+    def record(self, ratio: float) -> None:
+        """Add one found plan's ratio (ignored unless finite and above 0)."""
+        if math.isfinite(ratio) and ratio > 0:
+            self._ratios.append(float(ratio))
+
+    def ratio(self, default: float) -> float:
+        """The median of the recorded ratios, ``default`` before any."""
+        return float(np.median(self._ratios)) if self._ratios else float(default)
+
+
+PLAN_LENGTHS = PlanLengths()
+"""The process's record of found plans' lengths, shared by every planner (replans' too)."""
 
 
 class PlanRefused(UserError, ValueError):
@@ -366,6 +396,9 @@ class Planner:
         self.check_cost: SwimCost = CHECK_COST
         """The check's measured cost the deadline keeps free (:data:`check.CHECK_COST`, the
         process's, by default)."""
+        self.plan_lengths: PlanLengths = PLAN_LENGTHS
+        """The found plans' lengths over their free-space paths (:data:`PLAN_LENGTHS`, the
+        process's, by default): :meth:`expected_steps`."""
         if swimmer is not None and swimmer.n_links != robot.n_links:
             raise ValueError(f"the robot's model has {swimmer.n_links} links, the robot "
                              f"{robot.n_links}")
@@ -441,21 +474,10 @@ class Planner:
             need = 0.0 if search is None else CHECK_OVER_SEARCH * search
         return need
 
-    def expected_steps(self, state: FloatArray | None = None) -> float:
-        """A plan's expected length from ``state`` (default the start), physics steps.
+    def _free_path_steps(self, state: FloatArray | None) -> float:
+        """The free-space path of the body's centre to the goal disc at the swimming speed, steps.
 
-        The free-space path of the body's centre to the goal disc
-        (:class:`eelhost.planning.field.GoalDistance`) at the slowest ground speed (the
-        swimming speed against the world's whole current): what the deadline keeps the check's
-        time for before a plan is found.
-
-        Parameters
-        ----------
-        state : ndarray, optional
-
-        Returns
-        -------
-        float
+        0 when no path is open (:class:`eelhost.planning.field.GoalDistance`).
         """
         n = self.model.n_links
         if state is None:
@@ -465,8 +487,28 @@ class Planner:
         path = self.goal_distance(xy)
         if not math.isfinite(path):
             return 0.0
+        return path / self.swimming_speed_m_s / self.twin.dt_s
+
+    def expected_steps(self, state: FloatArray | None = None) -> float:
+        """A plan's expected length from ``state`` (default the start), physics steps.
+
+        The free-space path of the body's centre to the goal disc
+        (:class:`eelhost.planning.field.GoalDistance`) at the swimming speed, times the median
+        ratio of the plans found in this process to that path (:attr:`plan_lengths`); before
+        any, the path at the slowest ground speed (the swimming speed against the world's whole
+        current). What the deadline keeps the check's time for before a plan is found.
+
+        Parameters
+        ----------
+        state : ndarray, optional
+
+        Returns
+        -------
+        float
+        """
         slowest = max(self.swimming_speed_m_s - self.world.current.speed_m_s, 1e-3)
-        return path / slowest / self.twin.dt_s
+        return self._free_path_steps(state) * self.plan_lengths.ratio(
+            self.swimming_speed_m_s / slowest)
 
     # -- refusals --------------------------------------------------------------------------------
 
@@ -563,11 +605,14 @@ class Planner:
         # the expected length free before it (docs/planning.md, "The planning call's deadline")
         expected = self.expected_steps(state)
         reserve = (lambda: self.check_time_s(expected)) if self.check else None
+        free_path = self._free_path_steps(state)
         for attempt in range(self.repairs + 1):
             plan = self.search.plan(banned, start_state=state, start_step=step, guide=guide,
                                     deadline_s=deadline_s, reserve_s=reserve)
             total += plan.planning_time_s
             searching += plan.planning_time_s
+            if plan.found and free_path > 0:
+                self.plan_lengths.record((plan.legs[-1].end_step - step) / free_path)
             if not plan.found and attempt > 0:
                 msg = (f"check failed: {attempt} plans failed their check in the twin (last: "
                        f"{bad[0].label}: {bad[0].message}) and the search found no other "
