@@ -13,6 +13,7 @@ from eelhost.estimation.space import ParameterSpace
 from eelhost.estimation.uncertainty import (
     BootstrapResult,
     held_current_shift,
+    jitter_variance,
     misfit_growth,
     misfit_replicates,
     model_views,
@@ -258,3 +259,26 @@ def test_two_motion_coverage_judges_each_motions_row_and_rejects_other_motions(c
     assert "--motions: straight, turning or straight,turning" in capsys.readouterr().err
     assert cli.main(["estimate-bench", "--motions", "straight,turning"]) == 2
     assert "--motions: goes with --coverage" in capsys.readouterr().err
+
+
+def test_a_band_holds_the_declared_control_jitters_spread_of_the_held_out_run(robot):
+    # the estimate itself, no parameter spread and no misfit: what is left of the band is what
+    # the declared control jitter alone does to the run, and it is not there when none is declared
+    exp = record_experiment(robot, _short(GAITS[0], 0.5), "straight", TRUTH, TankSettings(),
+                            seed=31)
+    assert exp.timing["jitter_s"] > 0
+    model = FittedModel.of_coefficients(TRUTH, robot)
+    times = exp.t_s[::10]
+    var = jitter_variance(robot, model, exp, times, draws=4, seed=1)
+    assert var.shape == times.shape and np.all(var >= 0) and var[-1] > 0
+    assert var[-1] > var[0]  # the jitter's effect adds up along the run
+    quiet = dataclasses.replace(exp, timing={**exp.timing, "jitter_s": 0.0})
+    np.testing.assert_array_equal(jitter_variance(robot, model, quiet, times), 0.0)
+    ensemble = model.values[None]
+    args = (robot, {"straight": model}, {"straight": ensemble}, {"straight": np.zeros(2)},
+            [exp])
+    with_jitter, = prediction_bands(*args, n_samples=15, backend="batch", jitter_draws=4)
+    without, = prediction_bands(*args, n_samples=15, backend="batch", jitter_draws=0)
+    np.testing.assert_array_equal(without.radius_m, 0.0)
+    assert with_jitter.radius_m[-1] > 0
+    np.testing.assert_array_equal(with_jitter.centre_m, without.centre_m)

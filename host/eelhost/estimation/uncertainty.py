@@ -193,6 +193,59 @@ def model_views(
             for exp in experiments]
 
 
+def jitter_variance(
+    robot: Robot,
+    model: FittedModel,
+    exp: Experiment,
+    times_s: np.ndarray,
+    draws: int = 8,
+    seed: int = 0,
+) -> np.ndarray:
+    """Per-axis variance the declared control jitter alone gives a run of ``exp``'s task.
+
+    The fitted model swims the task ``draws`` times, each with its own draw of the control
+    period's jitter the experiment declares (``timing.jitter_s``), seen through the recording's
+    camera without pixel rounding and without a clock offset; the variance is half the mean
+    squared distance of the runs from the run without jitter, at ``times_s`` (on the recording's
+    clock). A long run can part ways with the jitter (a waypoint circled or not): no parameter
+    set predicts which, so a prediction band must hold it (docs/estimation.md, "Prediction
+    bands").
+
+    Parameters
+    ----------
+    robot : Robot
+    model : FittedModel
+    exp : Experiment
+    times_s : ndarray, shape (n,)
+        Where the variance is wanted (the recording's clock).
+    draws : int
+    seed : int
+        Seeds the jitter draws.
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        m^2; zeros when the experiment declares no jitter or the model fails without it.
+    """
+    times_s = np.asarray(times_s, dtype=float)
+    jitter_s = float(exp.timing.get("jitter_s", 0.0))
+    if jitter_s <= 0 or draws < 1:
+        return np.zeros(len(times_s))
+    plant = model.robot(robot)
+    camera = dataclasses.replace(exp.recording_camera(), pixel_m=0.0)
+    centre = _record(plant, model, exp, np.zeros(1), np.zeros(1, dtype=np.int64), 0.0, camera)[0]
+    runs = _record(plant, model, exp, np.zeros(draws),
+                   np.random.default_rng([seed, 17]).integers(0, 2**31, draws), jitter_s, camera)
+    if centre is None:
+        return np.zeros(len(times_s))
+    # a run that fails is as far as the run goes: left out
+    kept = [r for r in runs if r is not None]
+    if not kept:
+        return np.zeros(len(times_s))
+    half_sq = 0.5 * np.mean([np.sum((r - centre) ** 2, axis=1) for r in kept], axis=0)
+    return np.interp(times_s, exp.t_s, half_sq)
+
+
 def webb_weights(rng: np.random.Generator, shape: tuple[int, ...]) -> np.ndarray:
     """Webb's six-point weights of the wild cluster bootstrap.
 

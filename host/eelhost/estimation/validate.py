@@ -209,6 +209,9 @@ BAND_LEVEL = 0.95
 # Extra widening of the bands, as measured by the band coverage benchmark
 # (docs/estimation_coverage.md): 1, none.
 BAND_WIDEN = 1.0
+# Runs of each held-out task with their own draw of the declared control jitter (the band's
+# jitter share, uncertainty.jitter_variance).
+JITTER_DRAWS = 8
 
 
 @dataclass
@@ -291,13 +294,17 @@ def prediction_bands(
     level: float = BAND_LEVEL,
     widen: float = BAND_WIDEN,
     dof: dict[str, int] | None = None,
+    jitter_draws: int = JITTER_DRAWS,
+    seed: int = 0,
 ) -> list[PredictionBand]:
     """95 % prediction bands of held-out experiments, and their coverage of the recordings.
 
     Each experiment is swum by its fitted set's ensemble (the estimate and its bootstrap refits,
     :meth:`eelhost.estimation.uncertainty.BootstrapResult.ensemble`): the spread of their
-    predictions is the parameters' share; the training residuals' growth is the misfit's
-    (:func:`band_radius`). The recording is compared on its own clock.
+    predictions is the parameters' share; the estimate swum again with ``jitter_draws`` draws of
+    the control jitter the experiment declares gives the jitter's share
+    (:func:`eelhost.estimation.uncertainty.jitter_variance`); the training residuals' growth is
+    the misfit's (:func:`band_radius`). The recording is compared on its own clock.
 
     Parameters
     ----------
@@ -315,12 +322,18 @@ def prediction_bands(
     dof : dict, optional
         Per fitted set, the degrees of freedom of its misfit's estimate (:func:`band_radius`;
         default: the variance taken as known).
+    jitter_draws : int
+        Runs per experiment for the declared control jitter's share (0: none).
+    seed : int
+        Seeds those runs' jitter.
 
     Returns
     -------
     list of PredictionBand
         In the experiments' order; sets without an ensemble are left out.
     """
+    from eelhost.estimation.uncertainty import jitter_variance
+
     bands: list[PredictionBand] = []
     groups: dict[str, list[Experiment]] = {}
     for exp in experiments:
@@ -336,6 +349,10 @@ def prediction_bands(
             members = pos[1:][~np.isnan(pos[1:]).any(axis=(1, 2))]
             spread = (0.5 * np.mean(np.sum((members - centre) ** 2, axis=-1), axis=0)
                       if len(members) else np.zeros(len(p.times_s)))
+            # what the declared control jitter alone does to this run: no parameter set
+            # predicts it (a long path circles a waypoint or not with it)
+            spread = spread + jitter_variance(robot, fitted[key], p.experiment, p.times_s,
+                                              jitter_draws, seed)
             radius = band_radius(spread, p.times_s - p.experiment.t_s[0], growth[key], level,
                                  widen, None if dof is None else dof.get(key))
             gap = np.linalg.norm(p.exp_positions_m - centre, axis=-1)
