@@ -41,8 +41,9 @@ data and intervals of zero width), so the fit's own residuals are resampled too.
   and each other parameter's half-width grows in quadrature by how far it moves when the current
   is put at the interval's ends (docs/estimation.md, "Uncertainty").
 - **Prediction bands** (:func:`eelhost.estimation.validate.prediction_bands`) swim the estimate
-  and every refit (:meth:`BootstrapResult.ensemble`) and add the misfit's growth along a
-  recording (:func:`misfit_growth` of each training experiment predicted by the fit without it).
+  and every refit (:meth:`BootstrapResult.ensemble`), add the declared control jitter's spread
+  of the held-out run (:func:`jitter_variance`) and the misfit's growth along a recording
+  (:func:`misfit_growth` of each training experiment predicted by the fit without it).
 """
 
 from __future__ import annotations
