@@ -494,7 +494,8 @@ def test_the_goal_approachs_smaller_margin_is_tried_near_the_goal_or_when_no_pos
     def replan(status, est):  # noqa: ANN001, ANN202
         failing = _Scripted(planner, status, np.inf)
         nav = TankReplanner(lambda extra: failing, failing, outcome,  # type: ignore[arg-type]
-                            PATH_GAIT, goal_planner_for=lambda extra: tight, goal_approach_m=0.5)
+                            PATH_GAIT, goal_planner_for=lambda extra: tight, goal_approach_m=0.5,
+                            shift_repair=False)  # the goal approach alone
         try:
             return nav._replan(est, [(2.1, 1.0)], step, np.zeros(2))
         finally:
@@ -812,6 +813,7 @@ def test_a_replan_that_finds_nothing_is_rescued_by_the_recoverys_sharper_turns()
     est = estimate_at(3.0, (3.0 - 0.6 - com, 0.0))
     step = int(round(3.0 / 0.01)) + 60
     make_recovery, nav.recovery_planner_for = nav.recovery_planner_for, None
+    nav.shift_repair = False  # the recovery alone (the shift repair has its own tests)
     try:
         without, *_ = nav._replan(est, [(2.9, 1.1)], step, np.zeros(2))
         nav.recovery_planner_for = make_recovery
@@ -897,11 +899,21 @@ def test_a_replan_whose_search_is_slow_stops_at_its_budget_without_the_fallback_
     planner, outcome = open_plan
     tried: list[str] = []
 
+    class Counted:
+        """The planner, counting the searches asked of it under ``name``."""
+
+        def __init__(self, name: str) -> None:
+            self.name = name
+
+        def __getattr__(self, attr: str):  # noqa: ANN204
+            return getattr(planner, attr)
+
+        def plan(self, *args, **kwargs):  # noqa: ANN002, ANN003, ANN202
+            tried.append(self.name)
+            return planner.plan(*args, **kwargs)
+
     def other(name):  # noqa: ANN001, ANN202
-        def make(extra):  # noqa: ANN001, ANN202
-            tried.append(name)
-            return planner
-        return make
+        return lambda extra: Counted(name)
 
     nav = TankReplanner(lambda extra: planner, planner, outcome, PATH_GAIT,
                         goal_planner_for=other("goal approach"),

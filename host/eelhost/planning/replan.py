@@ -650,6 +650,9 @@ class TankReplanner:
         # look-aheads and the current's windows on their own thread, so a replan never queues
         # behind them (the twin's kernel releases the interpreter: both run at once)
         self._side = ThreadPoolExecutor(max_workers=1, thread_name_prefix="eelbot-lookahead")
+        if goal_planner_for is not None or recovery_planner_for is not None:
+            # the fallback tiers' planners built while the robot starts swimming
+            self._prebuild = self._worker.submit(self._prepare_planner, np.zeros(2))
 
     # -- the loop's calls ----------------------------------------------------------------------
 
@@ -909,10 +912,13 @@ class TankReplanner:
         # the tighter margin: near the goal after any failure of the search or check; anywhere
         # when the search ran out of poses (a start so close to an obstacle that every manoeuvre
         # from it breaks the world's margin: the predicted start of a robot the water pushed on)
-        if not outcome.found and outcome.status not in REFUSED_FROM_STATE and _time_left(
-                deadline_s) and (outcome.status == "exhausted" or self._near_goal(state)):
+        # (not after a search stopped by the budget: the planner keeps only its check's time
+        # free before the deadline, no room for another search and check)
+        if not outcome.found and outcome.status not in (*REFUSED_FROM_STATE, "out_of_time") and (
+                _time_left(deadline_s)) and (outcome.status == "exhausted"
+                                             or self._near_goal(state)):
             goal_planner = self._goal_planner_in(extra)
-            if goal_planner is not None:
+            if goal_planner is not None and _time_left(deadline_s):
                 approach = goal_planner.plan(state, start_step, guide=leg_start_guide(
                     state, self.model.n_links, integral), deadline_s=deadline_s)
                 log.info("goal approach from t = %.2f s: %s", start_step * planner.twin.dt_s,
@@ -925,10 +931,10 @@ class TankReplanner:
                         f"{outcome.message}; with the goal approach's margin: {approach.message}"))
         # the recovery: sharper turns, the goal approach's margin, a bounded search; only when
         # everything else found nothing (docs/planning.md, "The recovery replan")
-        if (not outcome.found and outcome.status not in REFUSED_FROM_STATE
+        if (not outcome.found and outcome.status not in (*REFUSED_FROM_STATE, "out_of_time")
                 and _time_left(deadline_s)):
             recovery = self._planner_in("recovery", self.recovery_planner_for, extra)
-            if recovery is not None:
+            if recovery is not None and _time_left(deadline_s):
                 rescue = recovery.plan(state, start_step, guide=leg_start_guide(
                     state, self.model.n_links, integral), deadline_s=deadline_s)
                 log.info("recovery replan from t = %.2f s: %s", start_step * planner.twin.dt_s,
@@ -977,6 +983,11 @@ class TankReplanner:
             self.planner = self.planner_for(extra)
             self._planner_current = extra
             self._planned = (self.planner, extra)
+        # the goal approach's and the recovery's planners in the same water, built here too
+        # (ahead of the replans when called from the estimate's prebuild or at the start), not
+        # inside a replan after its main search has used the budget
+        self._goal_planner_in(self._planner_current)
+        self._planner_in("recovery", self.recovery_planner_for, self._planner_current)
 
     def _replan_and_judge(self, est: BodyEstimate, left: list[tuple[float, float]],
                           start_step: int, extra: FloatArray, guide: Guide | None = None,
