@@ -347,15 +347,12 @@ class _Spread:
 
     ``independent``: from independent residuals, its 95 % half-width z sqrt(diag); ``robust``:
     cluster-robust (experiments the clusters), its half-width t(G - 1) sqrt(diag), or None with
-    one experiment; ``quantile``: t(G - 1) / z, the robust one's widening of z;
-    ``least_squares_step_m_s``: the Gauss-Newton step from the fit's current to the residuals'
-    least-squares one, the other parameters profiled out (the estimate these covariances are of).
+    one experiment; ``quantile``: t(G - 1) / z, the robust one's widening of z.
     """
 
     independent: np.ndarray
     robust: np.ndarray | None
     quantile: float
-    least_squares_step_m_s: np.ndarray
 
     def half_width(self) -> np.ndarray:
         """The 95 % half-width per component: the wider of the two intervals."""
@@ -490,7 +487,6 @@ def _spread(evs: list[Evaluator], cube: _JointCube,
         return None
     bread = np.linalg.inv(info)
     to_m_s = np.outer(ranges, ranges)  # unit-cube covariance to (m/s)^2
-    step = -ranges * (bread @ (alone.T @ r[0]))
     # the same with the residuals correlated within each experiment (a clock offset or a misfit
     # shifts a whole recording): the cluster-robust sandwich, experiments the clusters, with the
     # small-sample factor G / (G - 1) and Student's t with G - 1 degrees of freedom (Cameron &
@@ -501,7 +497,7 @@ def _spread(evs: list[Evaluator], cube: _JointCube,
                        for g in np.unique(cluster)])  # (G, 2)
     groups = len(scores)
     if groups < 2:
-        return _Spread(sigma2 * bread * to_m_s, None, 1.0, step)
+        return _Spread(sigma2 * bread * to_m_s, None, 1.0)
     robust = bread @ (scores.T @ scores) @ bread * groups / (groups - 1)
     return _Spread(sigma2 * bread * to_m_s, robust * to_m_s,
-                   float(student_t.ppf(0.975, groups - 1)) / Z_95, step)
+                   float(student_t.ppf(0.975, groups - 1)) / Z_95)
