@@ -52,8 +52,8 @@ def test_a_repaired_plan_is_judged_on_its_own_draws_with_a_simultaneous_bound():
     checked = []
     real = planner.check_plan
 
-    def first_two_fail(plan, state=None, step=0, waters=None):
-        runs, took = real(plan, state, step, waters)
+    def first_two_fail(plan, state=None, step=0, waters=None, deadline_s=None):
+        runs, took = real(plan, state, step, waters, deadline_s)
         checked.append(waters)
         if len(checked) < 3:  # a drawn run made to touch on the first leg: repair
             runs[1] = dataclasses.replace(runs[1], collision_free=False, failed_leg=0,

@@ -630,10 +630,7 @@ class Planner:
             waters = self.waters(attempt)
             t_check = time.perf_counter()
             try:
-                # (the keyword only with a deadline: a replaced check_plan may not take it)
-                checks, elapsed = (self.check_plan(plan, state, step, waters)
-                                   if deadline_s is None else
-                                   self.check_plan(plan, state, step, waters, deadline_s))
+                checks, elapsed = self.check_plan(plan, state, step, waters, deadline_s)
             except CheckOutOfTime as stop:
                 total += time.perf_counter() - t_check
                 # never returned as checked: the plan's status says it was not

@@ -387,10 +387,10 @@ class Search:
         self._memo: dict[tuple, list] = {}
         self.simulations = 0
         self.swim_cost = SwimCost()
+        """Wall time per run-step of this search's batches (measured even without a deadline)."""
         # wall time per node of the last few batches that swam anything, over this search's
         # calls (a repair's or a replan's first batch is predicted from the ones before)
         self._node_walls: deque[float] = deque(maxlen=BATCHES_SEEN)
-        """Wall time per run-step of this search's batches (measured even without a deadline)."""
         self.clock: Callable[[], float] = time.monotonic
         """The clock ``deadline_s`` is read on (a test's fake one in place of the default)."""
 
