@@ -235,10 +235,10 @@ def jitter_variance(
     plant = model.robot(robot)
     camera = dataclasses.replace(exp.recording_camera(), pixel_m=0.0)
     centre = _record(plant, model, exp, np.zeros(1), np.zeros(1, dtype=np.int64), 0.0, camera)[0]
-    runs = _record(plant, model, exp, np.zeros(draws),
-                   np.random.default_rng([seed, 17]).integers(0, 2**31, draws), jitter_s, camera)
     if centre is None:
         return np.zeros(len(times_s))
+    runs = _record(plant, model, exp, np.zeros(draws),
+                   np.random.default_rng([seed, 17]).integers(0, 2**31, draws), jitter_s, camera)
     # a run that fails is as far as the run goes: left out
     kept = [r for r in runs if r is not None]
     if not kept:
