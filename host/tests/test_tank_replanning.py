@@ -1040,6 +1040,45 @@ def test_the_shift_repair_moves_a_grazing_route_off_the_obstacle_and_keeps_the_g
     assert after > 0.03 and after > before + 0.02
 
 
+def test_the_shift_repair_refuses_a_route_within_its_margin_even_when_every_check_run_is_clear(
+        grazing, monkeypatch):
+    # shifts of 2 mm only, and a check over the fits alone (the estimated water's own run): the
+    # grazing route's variants swim the capsule a few mm clear, so every check run passes; only
+    # the repair's own margin in the estimated water refuses them
+    import eelhost.planning.replan as replan
+    from eelhost.planning.search import leg_start_guide
+
+    planner, state, step = grazing
+    monkeypatch.setattr(replan, "SHIFT_RADII_M", (0.002,))
+    monkeypatch.setattr(planner, "waters", lambda attempt: [])
+    guide = leg_start_guide(state, N)
+    monkeypatch.setattr(replan, "SHIFT_MARGIN_M", 0.0)
+    grazed = replan.shift_repair(planner, state, step, guide, BESIDE_LEFT, 30.0)
+    assert grazed is not None and grazed.found, "nothing clear even without a margin"
+    nominal_mm = float(grazed.message.split("the capsule ")[1].split(" mm")[0])
+    assert 0.0 <= nominal_mm < 10.0, grazed.message
+    monkeypatch.setattr(replan, "SHIFT_MARGIN_M", 0.01)
+    assert replan.shift_repair(planner, state, step, guide, BESIDE_LEFT, 30.0) is None
+
+
+def test_a_shift_repaired_route_keeps_the_margin_in_the_estimated_water(grazing):
+    from eelhost.planning.replan import SHIFT_MARGIN_M, shift_repair
+    from eelhost.planning.search import goal_mask, leg_start_guide
+
+    planner, state, step = grazing
+    outcome = shift_repair(planner, state, step, leg_start_guide(state, N), BESIDE_LEFT, 30.0)
+    assert outcome is not None and outcome.found
+    # the repaired route re-swum from the start in the estimated water, judged on its own
+    runs = planner.twin.run([outcome.plan.waypoints_m], 30.0, states=state[None],
+                            start_steps=[step], stride=3, guidance=[leg_start_guide(state, N)])
+    states = runs.states[0][np.isfinite(runs.states[0][:, 0])]
+    inside = np.flatnonzero(goal_mask(planner.world, states[:, N : N + 2]))
+    assert inside.size
+    gaps = body_clearance_m(planner.world, planner.clearance, planner.model,
+                            states[: inside[0] + 1])
+    assert float(gaps.min()) >= SHIFT_MARGIN_M
+
+
 def test_a_replan_whose_searches_all_find_nothing_is_shift_repaired_only_when_asked_to(grazing):
     planner, state, step = grazing
     nothing = _Scripted(planner, "exhausted", np.inf)  # every search of the replan: no manoeuvre
