@@ -66,17 +66,33 @@ class Intervals:
     Attributes
     ----------
     estimate, lower, upper : ndarray, shape (K,)
+    split : ndarray of bool, shape (K,), optional
+        Where the report says the parameter is not identified: another valley fits within the
+        noise (:meth:`BootstrapResult.not_identified`).
+    local_lower, local_upper : ndarray, shape (K,), optional
+        The intervals of the bootstrap around the estimate alone, before other valleys widened
+        them.
     """
 
     estimate: np.ndarray
     lower: np.ndarray
     upper: np.ndarray
+    split: np.ndarray | None = None
+    local_lower: np.ndarray | None = None
+    local_upper: np.ndarray | None = None
 
     @classmethod
     def of(cls, boots: Sequence[BootstrapResult]) -> Intervals:
         """The fits' intervals one after the other, in the order given."""
-        return cls(*(np.concatenate([getattr(b, f) for b in boots])
-                     for f in ("estimate", "lower", "upper")))
+        def joined(f: str) -> np.ndarray:
+            return np.concatenate([getattr(b, f) for b in boots])
+
+        return cls(joined("estimate"), joined("lower"), joined("upper"),
+                   np.concatenate([b.split.astype(bool) if len(b.split) == len(b.estimate)
+                                   else np.zeros(len(b.estimate), bool) for b in boots]),
+                   *(np.concatenate([getattr(b, f) if len(getattr(b, f)) == len(b.estimate)
+                                     else getattr(b, f.split("_")[1]) for b in boots])
+                     for f in ("local_lower", "local_upper")))
 
     def covers(self, truth: np.ndarray) -> np.ndarray:
         """Whether each interval holds the true value."""
@@ -111,6 +127,17 @@ class Coverage:
     def rate(self) -> np.ndarray:
         """Fraction of seeds covered, per parameter."""
         return self.covered().mean(axis=0)
+
+    def local_rate(self) -> np.ndarray:
+        """Fraction of seeds the bootstrap around the estimate alone covered, per parameter."""
+        return np.array([(r.local_lower <= self.truth) & (self.truth <= r.local_upper)
+                         if r.local_lower is not None and r.local_upper is not None
+                         else r.covers(self.truth) for r in self.results]).mean(axis=0)
+
+    def flagged(self) -> np.ndarray:
+        """Seeds whose report says the parameter is not identified (other valleys), per parameter."""
+        return np.sum([r.split if r.split is not None else np.zeros(len(self.names), bool)
+                       for r in self.results], axis=0)
 
     def needed_widening(self, target: float = TARGET) -> np.ndarray:
         """Per parameter, the factor on the half-widths that covers ``target`` of the seeds.
@@ -194,16 +221,25 @@ def measure_coverage(
         boots = []
         for m in motions:
             ident = identifiability(evs[m], fits[m].values)
+            # the other motions' fits are starts for the search of other valleys, as in the
+            # report
+            others = [fits[o].values for o in motions
+                      if o != m and len(fits[o].values) == len(fits[m].values)]
             boots.append(parametric_bootstrap(evs[m], fits[m].values, fits[m].fitness,
                                               replicates, seed=seed,
                                               unidentified=ident.unidentified(),
-                                              linear_std=ident.std_error))
+                                              linear_std=ident.std_error, starts=others))
         got = Intervals.of(boots)
         results.append(got)
         line = (f"seed {seed}: " + ", ".join(
-            f"{n} {v:.4g} [{lo:.4g}, {hi:.4g}]{'' if c else ' MISSED'}"
-            for n, v, lo, hi, c in zip(names, got.estimate, got.lower, got.upper,
-                                       got.covers(truth), strict=True)))
+            f"{n} {v:.4g} [{lo:.4g}, {hi:.4g}] (local [{llo:.4g}, {lhi:.4g}])"
+            f"{' (valleys)' if sp else ''}{'' if c else ' MISSED'}"
+            for n, v, lo, hi, llo, lhi, sp, c in zip(
+                names, got.estimate, got.lower, got.upper,
+                got.local_lower if got.local_lower is not None else got.lower,
+                got.local_upper if got.local_upper is not None else got.upper,
+                got.split if got.split is not None else np.zeros(len(names), bool),
+                got.covers(truth), strict=True)))
         log.info("%s", line)
         if say:
             say(line)
@@ -243,11 +279,14 @@ def coverage_markdown(cov: Coverage, seeds_command: str, tank: str = "bundled no
         f"truth ({tank}), intervals with the widening factor {WIDEN:g} in use. Target: "
         f"the truth inside in at least {TARGET * 100:.0f} % of the seeds.",
         "",
-        "| parameter | coverage | factor needed for 90 % |",
-        "|---|---|---|",
+        "| parameter | coverage | factor needed for 90 % | coverage around the estimate alone "
+        "(before other valleys) | seeds said not identified (other valleys fit alike) |",
+        "|---|---|---|---|---|",
     ]
-    lines += [f"| {n} | {r * 100:.0f} % | {f:.2f} |"
-              for n, r, f in zip(cov.names, rate, need, strict=True)]
+    lines += [f"| {n} | {r * 100:.0f} % | {f:.2f} | {lr * 100:.0f} % | {g} of "
+              f"{len(cov.results)} |"
+              for n, r, f, lr, g in zip(cov.names, rate, need, cov.local_rate(), cov.flagged(),
+                                        strict=True)]
     lines.append("")
     return "\n".join(lines)
 

@@ -75,6 +75,15 @@ LEVEL = 0.95
 WIDEN = 1.05
 # Half-range of a held current component pinned at its interval's end (held_current_shift), m/s.
 PINNED_M_S = 1e-6
+# Starts spread over the search bounds (scrambled Sobol points) from which the fit's own data are
+# refitted to look for other valleys, besides the starts the caller gives (the other motions'
+# fits): docs/estimation.md, "Uncertainty", "Valleys that fit alike".
+SPREAD_STARTS = 4
+# Points tried on each line from the estimate (to each start and each valley found), as
+# fractions of the way.
+LINE_FRACTIONS = (1 / 6, 1 / 3, 1 / 2, 2 / 3, 5 / 6, 1.0)
+# Points tried along the bootstrap refits' principal axis, in its standard deviations.
+AXIS_STEPS = (-16.0, -8.0, -4.0, -2.0, 2.0, 4.0, 8.0, 16.0)
 
 
 def _record(
@@ -316,6 +325,186 @@ def misfit_growth(experiments: Sequence[Experiment], views: Sequence[np.ndarray]
     return np.asarray(coef, dtype=float)
 
 
+def fitness_threshold(
+    noise_drop: np.ndarray, misfit_drop: np.ndarray, excess: float = 1.0,
+    level: float = LEVEL,
+) -> float:
+    """How much worse than the estimate a point may fit and still be one the data allow.
+
+    On each bootstrap replicate the point it was generated from (the estimate) fits worse than
+    the replicate's own refit by a drop: what the noise lets a refit gain on data from a known
+    point. A point whose fitness on the recordings is within the ``level`` quantile of those
+    drops of the estimate's is not rejected by the data (a test inversion: docs/estimation.md,
+    "Uncertainty", "Valleys that fit alike"). The declared-noise drops are widened by the fit's
+    excess over its noise floor, as their spread is; the residual replicates' drops carry the
+    misfit as they are; the larger quantile is the threshold.
+
+    Parameters
+    ----------
+    noise_drop, misfit_drop : ndarray
+        Per replicate, the estimate's fitness on it minus its refit's (non-finite ones, from a
+        failed simulation, are left out).
+    excess : float
+        The fit's fitness over its noise floor (at least 1).
+    level : float
+
+    Returns
+    -------
+    float
+        0 when there are no drops.
+    """
+    parts = []
+    for drops, scale in ((noise_drop, excess), (misfit_drop, 1.0)):
+        d = np.asarray(drops, dtype=float)
+        d = d[np.isfinite(d)]
+        if d.size:
+            parts.append(scale * float(np.quantile(np.maximum(d, 0.0), level)))
+    return max(parts, default=0.0)
+
+
+@dataclass
+class Valleys:
+    """What a fit's own data allow beyond the estimate's valley (:func:`search_valleys`).
+
+    Attributes
+    ----------
+    threshold : float
+        The fitness above the estimate's that the data still allow (:func:`fitness_threshold`).
+    minima : ndarray, shape (V, K)
+        Refits of the recordings from other starts that fit within the threshold and lie
+        outside the estimate's own interval in some parameter: other valleys that fit alike.
+    minima_fitness : ndarray, shape (V,)
+    points : ndarray, shape (P, K)
+        Every point tried (the refits, the lines to them and to the starts, the refits'
+        principal axis) that fits within the threshold.
+    """
+
+    threshold: float
+    minima: np.ndarray
+    minima_fitness: np.ndarray
+    points: np.ndarray
+
+    def widened(
+        self, estimate: np.ndarray, half: np.ndarray, bounds: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The interval estimate +- ``half`` grown to hold every allowed point and valley.
+
+        Each other valley gets the estimate's half-width around it (its refits would scatter as
+        the estimate's do); the points on the lines are held as they are. Cut to ``bounds``.
+
+        Returns
+        -------
+        (lower, upper, split) : ndarray, shape (K,) each
+            ``split`` says per parameter whether another valley lies outside estimate +- half:
+            the data do not tell the valleys apart (the parameter is not identified by them).
+        """
+        lower, upper = estimate - half, estimate + half
+        split = np.zeros(len(estimate), dtype=bool)
+        if len(self.minima):
+            lower = np.minimum(lower, (self.minima - half).min(axis=0))
+            upper = np.maximum(upper, (self.minima + half).max(axis=0))
+            split = np.any(np.abs(self.minima - estimate) > half, axis=0)
+        if len(self.points):
+            lower = np.minimum(lower, self.points.min(axis=0))
+            upper = np.maximum(upper, self.points.max(axis=0))
+        return np.maximum(lower, bounds[:, 0]), np.minimum(upper, bounds[:, 1]), split
+
+
+def search_valleys(
+    fitness_of: Callable[[np.ndarray], np.ndarray],
+    polish: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
+    estimate: np.ndarray,
+    fitness: float,
+    threshold: float,
+    starts: np.ndarray,
+    half: np.ndarray,
+    bounds: np.ndarray,
+    axis: np.ndarray | None = None,
+) -> Valleys:
+    """Other valleys of the fit's data, and points between, that fit within ``threshold``.
+
+    A bootstrap whose refits start from the estimate stays in its valley: where the data let
+    parameters trade (the servo model's motor lag against the drags on turning gaits), another
+    valley can fit the recordings as well and the refits never see it. So the recordings are
+    refitted from ``starts`` (:func:`polish`), and the refits, points on the straight lines from
+    the estimate to each start and each refit, and points along ``axis`` are judged by their
+    fitness on the recordings: those within ``threshold`` of the estimate's are points the data
+    do not reject (an inner approximation of the test-inversion region; docs/estimation.md,
+    "Uncertainty", "Valleys that fit alike").
+
+    Parameters
+    ----------
+    fitness_of : callable
+        Points (P, K) -> their fitness on the recordings (P,).
+    polish : callable
+        Starts (S, K) -> (the refits (S, K), their fitness (S,)).
+    estimate : ndarray, shape (K,)
+    fitness : float
+        The estimate's fitness.
+    threshold : float
+        :func:`fitness_threshold`.
+    starts : ndarray, shape (S, K)
+    half : ndarray, shape (K,)
+        The estimate's half-widths: a refit farther than this in some parameter is another
+        valley.
+    bounds : ndarray, shape (K, 2)
+    axis : ndarray, shape (K,), optional
+        One standard deviation along the bootstrap refits' principal axis; points at
+        :data:`AXIS_STEPS` of it are tried.
+
+    Returns
+    -------
+    Valleys
+    """
+    k = len(estimate)
+    starts = np.clip(np.atleast_2d(np.asarray(starts, dtype=float)).reshape(-1, k),
+                     bounds[:, 0], bounds[:, 1])
+    if len(starts):
+        minima, minima_fitness = polish(starts)
+    else:
+        minima, minima_fitness = np.zeros((0, k)), np.zeros(0)
+    ends = np.concatenate([starts, minima])
+    fractions = np.array(LINE_FRACTIONS)
+    lines = (estimate + fractions[None, :, None] * (ends - estimate)[:, None, :]).reshape(-1, k)
+    along = (np.zeros((0, k)) if axis is None
+             else estimate + np.array(AXIS_STEPS)[:, None] * np.asarray(axis)[None])
+    tried = np.clip(np.concatenate([lines, along]), bounds[:, 0], bounds[:, 1])
+    tried_fitness = fitness_of(tried) if len(tried) else np.zeros(0)
+    limit = fitness + threshold
+    allowed = np.isfinite(tried_fitness) & (tried_fitness <= limit)
+    kept = np.isfinite(minima_fitness) & (minima_fitness <= limit)
+    far = np.any(np.abs(minima - estimate) > half, axis=1) if len(minima) else kept
+    other = kept & far
+    return Valleys(float(threshold), minima[other], minima_fitness[other],
+                   np.concatenate([tried[allowed], minima[kept]]))
+
+
+def spread_starts(bounds: np.ndarray, n: int, seed: int) -> np.ndarray:
+    """``n`` starts spread over ``bounds`` (scrambled Sobol points), shape (n, K)."""
+    if n < 1:
+        return np.zeros((0, len(bounds)))
+    from scipy.stats import qmc
+
+    unit = qmc.Sobol(len(bounds), scramble=True, seed=seed).random(n)
+    return bounds[:, 0] + unit * (bounds[:, 1] - bounds[:, 0])
+
+
+def principal_axis(samples: np.ndarray, estimate: np.ndarray, bounds: np.ndarray) -> np.ndarray | None:
+    """One standard deviation of ``samples`` about ``estimate`` along their widest direction.
+
+    Measured in the search range's unit cube (so that no parameter's unit dominates), returned
+    in the parameters' units; None with fewer than two samples or no spread.
+    """
+    if len(samples) < 2:
+        return None
+    span = np.where(bounds[:, 1] > bounds[:, 0], bounds[:, 1] - bounds[:, 0], 1.0)
+    centred = (samples - estimate) / span
+    _, sv, vt = np.linalg.svd(centred, full_matrices=False)
+    if sv[0] <= 0:
+        return None
+    return vt[0] * sv[0] / np.sqrt(len(samples) - 1) * span
+
+
 @dataclass
 class BootstrapResult:
     """The bootstrap of one fit: declared noise and the fit's own residuals.
@@ -359,6 +548,15 @@ class BootstrapResult:
         motion's experiments, :mod:`eelhost.estimation.tank_current`): how far each parameter
         moves when the current is put at that interval's ends (:func:`held_current_shift`),
         added to the bootstrap's half-width in quadrature. Empty otherwise.
+    valleys : Valleys, optional
+        The search for other valleys of the recordings (:func:`search_valleys`): the interval
+        holds every point it found within the fitness threshold. None when not searched.
+    split : ndarray of bool, shape (K,)
+        Per parameter, whether another valley that fits within the threshold lies outside the
+        local interval: the data do not identify it (:meth:`not_identified`).
+    local_lower, local_upper : ndarray, shape (K,)
+        The interval before the other valleys widened it (the bootstrap around the estimate
+        alone), for comparison.
     """
 
     names: tuple[str, ...]
@@ -378,6 +576,14 @@ class BootstrapResult:
     growth_source: str = "in-sample"
     experiments: int = 0
     held_shift: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    valleys: Valleys | None = None
+    split: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    local_lower: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    local_upper: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+    def not_identified(self) -> list[str]:
+        """Parameters another valley fitting within the noise puts outside the local interval."""
+        return [n for n, s in zip(self.names, self.split, strict=False) if s]
 
     @property
     def growth_dof(self) -> int:
@@ -466,6 +672,14 @@ class BootstrapResult:
             "misfit_dominated": [n for n, d in zip(self.names, self.misfit_dominated(),
                                                     strict=True) if d],
             **({"held_current_shift": by_name(self.held_shift)} if self.held_shift.size else {}),
+            **({"valleys": {
+                "fitness_threshold": self.valleys.threshold,
+                "other_valleys": [{"fitness": float(f), "parameters": by_name(v)}
+                                  for v, f in zip(self.valleys.minima,
+                                                  self.valleys.minima_fitness, strict=True)],
+                "allowed_points": int(len(self.valleys.points)),
+                "not_identified": self.not_identified(),
+            }} if self.valleys is not None else {}),
             "misfit_growth": {"c0_m2": float(self.growth[0]), "c1_m2_s2": float(self.growth[1]),
                               "from": self.growth_source, "dof": self.growth_dof},
             "lower": by_name(self.lower),
@@ -490,6 +704,9 @@ def parametric_bootstrap(
     unidentified: Sequence[str] = (),
     linear_std: np.ndarray | None = None,
     misfit: bool = True,
+    starts: Sequence[np.ndarray] = (),
+    spread: int = SPREAD_STARTS,
+    valleys: bool = True,
 ) -> BootstrapResult:
     """Intervals for a fit from refits: the declared noise, and the misfit the noise misses.
 
@@ -535,6 +752,15 @@ def parametric_bootstrap(
         half-widths, so that an interval is never of zero width where the refits all agree.
     misfit : bool
         Include the residual bootstrap (False: the declared noise alone, as before issue 32).
+    starts : sequence of ndarray, shape (K,)
+        Points of this space to refit the recordings from when looking for other valleys (the
+        report gives the other motions' fits).
+    spread : int
+        Further starts spread over the search bounds (:func:`spread_starts`).
+    valleys : bool
+        Look for other valleys that fit within the noise and widen the intervals to hold them
+        (:func:`search_valleys`; one more round of ``len(starts) + spread`` refits of
+        ``2 max_iterations``).
 
     Returns
     -------
@@ -557,10 +783,12 @@ def parametric_bootstrap(
     n_exp = len(experiments)
 
     def refit(problems: list[tuple[list, np.ndarray]], in_space: ParameterSpace = space,
-              start: np.ndarray = estimate) -> tuple[np.ndarray, np.ndarray]:
+              start: np.ndarray = estimate,
+              iterations: int = max_iterations) -> tuple[np.ndarray, np.ndarray]:
         """Minimax polish of each (prepared data, experiments kept) from ``start``.
 
-        Returns the refits (P, K) and their fitness on their own data (P,).
+        ``start`` is one point for all, or one per problem. Returns the refits (P, K) and
+        their fitness on their own data (P,).
         """
         if not problems:
             return np.zeros((0, space.size)), np.zeros(0)
@@ -577,8 +805,8 @@ def parametric_bootstrap(
             return out
 
         fits = polish_minimax_many(evaluate, in_space,
-                                   np.repeat(start[None], len(problems), axis=0),
-                                   max_iterations)
+                                   np.broadcast_to(start, (len(problems), space.size)).copy(),
+                                   iterations)
         return (np.array([r.values for r in fits]).reshape(-1, space.size),
                 np.array([r.fitness for r in fits]))
 
@@ -589,7 +817,8 @@ def parametric_bootstrap(
     if progress:
         progress(f"bootstrap: {len(kept)} replicates recorded, refitting them and "
                  f"{len(drops)} leave-one-out fits")
-    first, first_fitness = refit([(evaluator.prepare_like(r), everything) for r in kept]
+    noise_data = [evaluator.prepare_like(r) for r in kept]
+    first, first_fitness = refit([(d, everything) for d in noise_data]
                                  + [(evaluator.prepared, np.arange(n_exp) != i) for i in drops])
     # the refits' fitness on their own replicates: the noise floor
     boot = BootstrapResult(space.names, estimate, first[: len(kept)], first_fitness[: len(kept)],
@@ -597,6 +826,8 @@ def parametric_bootstrap(
                            failed, linear_std=None if linear_std is None
                            else np.asarray(linear_std),
                            jackknife=first[len(kept):], experiments=n_exp)
+    wild_data: list[list] = []
+    wild_fitness = np.zeros(0)
     if misfit:
         # round 2: the wild cluster bootstrap of the residual curves. Each experiment's curve is
         # its recording minus the prediction of the fit without it (leave-one-out), when there
@@ -623,8 +854,8 @@ def parametric_bootstrap(
             # recording - loo view + fit view = fit view + residual: reweighted around the view
             wild = misfit_replicates(shifted, [v for v in views if v is not None], replicates,
                                      np.random.default_rng([seed, 32]))
-            boot.misfit_samples = refit([(evaluator.prepare_like(r), everything)
-                                         for r in wild])[0]
+            wild_data = [evaluator.prepare_like(r) for r in wild]
+            boot.misfit_samples, wild_fitness = refit([(d, everything) for d in wild_data])
     # each source's spread times its Student quantile; the widest sets the half-width (the
     # jackknife's own spread is reported, not used: a minimax fit is not smooth in its data, and
     # its leave-one-out refits jumped between the experiments that set the maximum)
@@ -651,13 +882,46 @@ def parametric_bootstrap(
         boot.held_shift = held_current_shift(evaluator, estimate, refit_with_space,
                                              max_iterations)
         half = np.hypot(half, boot.held_shift)
-    boot.lower = np.maximum(estimate - half, bounds[:, 0])
-    boot.upper = np.minimum(estimate + half, bounds[:, 1])
+    boot.local_lower = np.maximum(estimate - half, bounds[:, 0])
+    boot.local_upper = np.minimum(estimate + half, bounds[:, 1])
+    if valleys:
+        # round 3: the recordings refitted from other starts; the interval holds every valley
+        # and every point between that fits within what the noise lets a refit gain
+        # (docs/estimation.md, "Uncertainty", "Valleys that fit alike")
+        sim0 = evaluator.simulate(estimate[None])
+        own = float(evaluator.errors_of(sim0)[0].max())
+
+        def estimate_on(data: list[list]) -> np.ndarray:
+            return np.array([evaluator.errors_of(sim0, d)[0].max() for d in data])
+
+        threshold = widen * fitness_threshold(
+            estimate_on(noise_data) - first_fitness[: len(kept)],
+            estimate_on(wild_data) - wild_fitness, boot.excess, level)
+        given = (np.asarray(starts, dtype=float).reshape(-1, space.size) if len(starts)
+                 else np.zeros((0, space.size)))
+        tried = np.concatenate([given, spread_starts(bounds, spread, seed)])
+        if progress:
+            progress(f"bootstrap: refitting the recordings from {len(tried)} other starts")
+
+        def polish_from(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            return refit([(evaluator.prepared, everything)] * len(points), space, points,
+                         2 * max_iterations)
+
+        refits = np.concatenate([boot.samples.reshape(-1, space.size),
+                                 boot.misfit_samples.reshape(-1, space.size)])
+        boot.valleys = search_valleys(
+            evaluator.fitness, polish_from, estimate, min(own, float(fitness)), threshold, tried,
+            half, bounds, principal_axis(refits, estimate, bounds))
+        boot.lower, boot.upper, boot.split = boot.valleys.widened(estimate, half, bounds)
+    else:
+        boot.lower, boot.upper = boot.local_lower.copy(), boot.local_upper.copy()
+        boot.split = np.zeros(space.size, dtype=bool)
     # the held current's own interval is the tank's (its bounds here): this motion alone says
     # no more about it than every experiment together did
-    boot.lower[held], boot.upper[held] = bounds[held, 0], bounds[held, 1]
     whole = np.isin(np.array(space.names), list(unidentified))
-    boot.lower[whole], boot.upper[whole] = space.bounds[whole, 0], space.bounds[whole, 1]
+    for lo, hi in ((boot.lower, boot.upper), (boot.local_lower, boot.local_upper)):
+        lo[held | whole], hi[held | whole] = bounds[held | whole, 0], bounds[held | whole, 1]
+    boot.split[held | whole] = False
     return boot
 
 
