@@ -80,10 +80,38 @@ def test_an_interval_is_never_narrower_than_the_linearised_error(undeclared_nois
     ev, fit = undeclared_noise_fit
     floor = np.array([1e-3, 0.2, 0.3, 0.1])
     boot = parametric_bootstrap(ev, fit.values, fit.fitness, replicates=2, seed=2,
-                                max_iterations=1, misfit=False, linear_std=floor)
+                                max_iterations=1, misfit=False, linear_std=floor,
+                                valleys=False)
     half = np.minimum(boot.upper - fit.values, fit.values - boot.lower)
     inside = (boot.lower > ev.space.bounds[:, 0]) & (boot.upper < ev.space.bounds[:, 1])
     np.testing.assert_allclose(half[inside], (1.959964 * floor * boot.widen)[inside], rtol=1e-5)
+
+
+def test_the_search_for_other_valleys_only_widens_the_local_interval_and_is_reported(
+    undeclared_noise_fit
+):
+    ev, fit = undeclared_noise_fit
+    far = fit.values * np.array([1.5, 0.5, 1.5, 1.0])
+    boot = parametric_bootstrap(ev, fit.values, fit.fitness, replicates=4, seed=2,
+                                max_iterations=6, starts=[far], spread=1)
+    assert boot.valleys is not None
+    # the refits of the residual replicates gain something on their data: a threshold
+    assert boot.valleys.threshold > 0
+    assert np.all(boot.lower <= boot.local_lower) and np.all(boot.upper >= boot.local_upper)
+    assert np.all(boot.local_upper >= boot.local_lower)
+    # every allowed point fits within the threshold of the estimate's fitness on the recordings
+    if len(boot.valleys.points):
+        allowed = ev.fitness(boot.valleys.points)
+        assert np.all(allowed <= fit.fitness + boot.valleys.threshold + 1e-12)
+    reported = boot.to_json()["valleys"]
+    assert reported["fitness_threshold"] == boot.valleys.threshold
+    assert reported["not_identified"] == boot.not_identified()
+    local = parametric_bootstrap(ev, fit.values, fit.fitness, replicates=4, seed=2,
+                                 max_iterations=6, valleys=False)
+    assert local.valleys is None and "valleys" not in local.to_json()
+    np.testing.assert_array_equal(local.lower, local.local_lower)
+    # the same bootstrap around the estimate either way: the local intervals agree
+    np.testing.assert_allclose(local.local_lower, boot.local_lower)
 
 
 def test_residual_replicates_keep_each_experiments_curve_up_to_one_weight(robot):

@@ -83,6 +83,19 @@ def fit_warnings(
             f"{boot.excess:.1f}x, or the residual bootstrap's, whichever is wider), as are "
             "predictions of other gaits"
         )
+    if boot is not None and boot.not_identified() and boot.valleys is not None:
+        # per parameter, the other valley farthest from the estimate
+        others = []
+        for name in boot.not_identified():
+            j = list(space.names).index(name)
+            far = boot.valleys.minima[np.argmax(np.abs(boot.valleys.minima[:, j] - values[j])), j]
+            others.append(f"{name} {values[j]:.4g} or {far:.4g}")
+        out.append(
+            f"{motion}: {', '.join(boot.not_identified())} not identified by the data: another "
+            f"valley fits within the noise ({'; '.join(others)}; fitness threshold "
+            f"{boot.valleys.threshold:.4g}), so their intervals span both (docs/estimation.md, "
+            "\"Uncertainty\")"
+        )
     for line in out:
         log.warning("%s", line)
     return out

@@ -154,7 +154,10 @@ def run_report(
                 boot = parametric_bootstrap(ev, res.values, res.fitness, bootstrap_replicates,
                                             seed=settings.seed,
                                             unidentified=ident.unidentified(),
-                                            linear_std=ident.std_error)
+                                            linear_std=ident.std_error,
+                                            starts=[r.values for m, r in fits.items()
+                                                    if m != motion
+                                                    and r.space.names == res.space.names])
             extra["uncertainty"][motion] = boot.to_json()
             boots[motion] = boot
             say(f"{motion}: noise floor {boot.noise_floor:.4f}, fitness / noise floor {boot.excess:.1f}")
@@ -388,13 +391,18 @@ def _report_text(
             "training experiment's residual curve against the fit without it, reweighted per "
             "experiment (a wild cluster bootstrap: what the model misses, whatever its cause); "
             "the wider sets the interval, never narrower than the linearised standard error, "
-            f"times the measured factor {u['widen']:g} (docs/estimation.md, \"Uncertainty\").",
+            f"times the measured factor {u['widen']:g}; then grown to hold every other valley "
+            "and point that fits the recordings within what the noise lets a refit gain (the "
+            "recordings refitted from the other motions' fits and from starts spread over the "
+            "bounds; docs/estimation.md, \"Uncertainty\").",
             "",
-            "| fit | noise floor | fitness / noise floor | intervals set by the misfit |",
-            "|---|---|---|---|",
+            "| fit | noise floor | fitness / noise floor | intervals set by the misfit | "
+            "not identified (another valley fits within the noise; intervals span both) |",
+            "|---|---|---|---|---|",
         ]
         lines += [f"| {m} | {u['noise_floor']:.4f} | {u['excess']:.1f} | "
-                  + (", ".join(u.get("misfit_dominated", [])) or "none") + " |"
+                  + (", ".join(u.get("misfit_dominated", [])) or "none") + " | "
+                  + (", ".join(u.get("valleys", {}).get("not_identified", [])) or "none") + " |"
                   for m, u in extra["uncertainty"].items()]
     lines += ["", "## Warnings", ""]
     lines += [f"- {w}" for w in extra["warnings"]] or ["None."]

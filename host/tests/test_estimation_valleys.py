@@ -1,0 +1,134 @@
+"""Intervals that span the valleys the data cannot tell apart (docs/estimation.md, "Uncertainty").
+
+The search itself (:func:`search_valleys`) is judged on a function with two valleys whose depths
+are known, polished by scipy: no simulation, so the tests are fast and exact.
+"""
+
+import numpy as np
+from scipy.optimize import minimize
+
+from eelhost.estimation.uncertainty import (
+    Valleys,
+    fitness_threshold,
+    principal_axis,
+    search_valleys,
+    spread_starts,
+)
+
+BOUNDS = np.array([[-2.0, 2.0], [-1.0, 1.0]])
+ESTIMATE = np.array([1.0, 0.0])
+HALF = np.array([0.2, 0.2])
+
+
+def _two_valleys(depth_gap):
+    """Fitness with minima at x = +1 (0) and x = -1 (``depth_gap``), y = 0 in both."""
+    def fitness(p):
+        p = np.atleast_2d(p)
+        x, y = p[:, 0], p[:, 1]
+        return np.minimum((x - 1) ** 2, (x + 1) ** 2 + depth_gap) + y**2
+
+    def polish(starts):
+        fits = [minimize(lambda q: float(fitness(q)[0]), s, bounds=BOUNDS, method="L-BFGS-B")
+                for s in starts]
+        return np.array([f.x for f in fits]), np.array([f.fun for f in fits])
+
+    return fitness, polish
+
+
+def test_a_second_valley_fitting_within_the_threshold_widens_the_interval_over_both():
+    fitness, polish = _two_valleys(depth_gap=0.01)
+    starts = np.array([[-1.5, 0.5], [1.5, -0.5]])
+    found = search_valleys(fitness, polish, ESTIMATE, 0.0, 0.05, starts, HALF, BOUNDS)
+    assert len(found.minima) == 1
+    assert abs(found.minima[0, 0] + 1) < 1e-3
+    lower, upper, split = found.widened(ESTIMATE, HALF, BOUNDS)
+    # the other valley with the estimate's half-width around it, and the estimate's own
+    assert lower[0] <= -1.2 + 1e-3 and upper[0] >= 1.2 - 1e-9
+    # only the parameter the valleys differ in is said to be not identified
+    assert split.tolist() == [True, False]
+    assert lower[1] >= -0.2 - 1e-6 and upper[1] <= 0.2 + 1e-6
+
+
+def test_a_second_valley_the_data_reject_leaves_the_interval_local():
+    fitness, polish = _two_valleys(depth_gap=1.0)
+    starts = np.array([[-1.5, 0.5]])
+    found = search_valleys(fitness, polish, ESTIMATE, 0.0, 0.05, starts, HALF, BOUNDS)
+    assert len(found.minima) == 0
+    lower, upper, split = found.widened(ESTIMATE, HALF, BOUNDS)
+    assert not split.any()
+    np.testing.assert_allclose(lower, ESTIMATE - HALF)
+    np.testing.assert_allclose(upper, ESTIMATE + HALF)
+
+
+def test_points_between_that_fit_within_the_threshold_stretch_the_interval_along_a_ridge():
+    # a flat ridge in x between 0 and 1: the local half-width (0.2) says less than the data
+    def fitness(p):
+        p = np.atleast_2d(p)
+        return np.maximum(0.0, -p[:, 0]) ** 2 + np.maximum(0.0, p[:, 0] - 1) ** 2 + p[:, 1] ** 2
+
+    def polish(starts):  # a polish that does not move: only the line's points can help
+        return starts, fitness(starts)
+
+    found = search_valleys(fitness, polish, ESTIMATE, 0.0, 0.01, np.array([[0.0, 0.0]]),
+                           HALF, BOUNDS)
+    lower, upper, split = found.widened(ESTIMATE, HALF, BOUNDS)
+    assert lower[0] <= 0.0 + 1e-9  # the whole ridge down to x = 0 fits as well
+    # the start (x = 0) is a point of the ridge, not a polished valley beyond the threshold
+    assert upper[0] == ESTIMATE[0] + HALF[0]
+
+
+def test_the_interval_is_cut_to_the_search_bounds():
+    found = Valleys(0.1, np.array([[-1.95, 0.0]]), np.array([0.0]), np.zeros((0, 2)))
+    lower, upper, split = found.widened(ESTIMATE, HALF, BOUNDS)
+    assert lower[0] == BOUNDS[0, 0]
+    assert split[0]
+
+
+def test_the_threshold_is_the_quantile_of_what_refits_gain_with_the_noise_widened_by_the_excess():
+    noise = np.array([0.01, 0.02, 0.03, 0.04, np.nan])
+    misfit = np.array([-0.5, 0.01])  # a refit worse than its start gains nothing
+    got = fitness_threshold(noise, misfit, excess=2.0, level=0.5)
+    assert np.isclose(got, 2.0 * 0.025)
+    assert np.isclose(fitness_threshold(noise, np.array([0.3]), excess=1.0, level=0.5), 0.3)
+    assert fitness_threshold(np.zeros(0), np.zeros(0)) == 0.0
+
+
+def test_spread_starts_lie_within_the_bounds_and_are_reproducible():
+    a = spread_starts(BOUNDS, 4, seed=3)
+    assert a.shape == (4, 2)
+    assert np.all((a >= BOUNDS[:, 0]) & (a <= BOUNDS[:, 1]))
+    np.testing.assert_array_equal(a, spread_starts(BOUNDS, 4, seed=3))
+    assert spread_starts(BOUNDS, 0, seed=3).shape == (0, 2)
+
+
+def test_the_principal_axis_follows_the_refits_widest_spread():
+    rng = np.random.default_rng(0)
+    t = rng.normal(size=200)
+    samples = ESTIMATE + np.column_stack([0.4 * t, -0.2 * t]) + 1e-4 * rng.normal(size=(200, 2))
+    axis = principal_axis(samples, ESTIMATE, BOUNDS)
+    assert axis is not None
+    # the trade is x against -y; one standard deviation along it
+    assert axis[0] * axis[1] < 0
+    assert np.isclose(abs(axis[0]), 0.4, rtol=0.15) and np.isclose(abs(axis[1]), 0.2, rtol=0.15)
+    assert principal_axis(samples[:1], ESTIMATE, BOUNDS) is None
+
+
+def test_the_report_warns_about_parameters_another_valley_fits_alike():
+    from eelhost.estimation.diagnostics import fit_warnings
+    from eelhost.estimation.space import ParameterSpace
+    from eelhost.estimation.uncertainty import BootstrapResult
+    from eelsim.robot import load_robot
+
+    space = ParameterSpace.for_robot(load_robot())
+    x = space.bounds.mean(axis=1)
+    k = space.size
+    other = x.copy()
+    other[1] *= 1.5  # C_d in another valley
+    boot = BootstrapResult(space.names, x, np.tile(x, (3, 1)), np.full(3, 0.1), 0.1,
+                           x - 0.01, x + 0.01)
+    assert fit_warnings("turning", space, x, boot) == []
+    boot.valleys = Valleys(0.02, other[None], np.array([0.105]), other[None])
+    boot.split = np.arange(k) == 1
+    (warning,) = fit_warnings("turning", space, x, boot)
+    assert "C_d not identified" in warning and f"{other[1]:.4g}" in warning
+    assert boot.to_json()["valleys"]["not_identified"] == ["C_d"]
