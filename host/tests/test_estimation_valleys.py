@@ -132,3 +132,23 @@ def test_the_report_warns_about_parameters_another_valley_fits_alike():
     (warning,) = fit_warnings("turning", space, x, boot)
     assert "C_d not identified" in warning and f"{other[1]:.4g}" in warning
     assert boot.to_json()["valleys"]["not_identified"] == ["C_d"]
+
+
+def test_a_parameter_the_data_hardly_hold_reaches_its_bounds_when_moved_alone():
+    # y hardly matters: moved alone, it fits within the threshold right to its bounds
+    def fitness(p):
+        p = np.atleast_2d(p)
+        return (p[:, 0] - 1) ** 2 + 1e-4 * p[:, 1] ** 2
+
+    def polish(starts):
+        return starts, fitness(starts)
+
+    none = search_valleys(fitness, polish, ESTIMATE, 0.0, 0.01, np.zeros((0, 2)), HALF, BOUNDS)
+    assert none.widened(ESTIMATE, HALF, BOUNDS)[0][1] == -HALF[1]
+    found = search_valleys(fitness, polish, ESTIMATE, 0.0, 0.01, np.zeros((0, 2)), HALF, BOUNDS,
+                           coordinates=np.array([True, True]))
+    lower, upper, split = found.widened(ESTIMATE, HALF, BOUNDS)
+    np.testing.assert_allclose([lower[1], upper[1]], BOUNDS[1])
+    # x is held by the data: moved alone it leaves the threshold within 0.1 of the estimate
+    assert 0.8 <= lower[0] and upper[0] <= 1.2
+    assert not split.any()  # points along a line are not other valleys

@@ -420,6 +420,7 @@ def search_valleys(
     half: np.ndarray,
     bounds: np.ndarray,
     axis: np.ndarray | None = None,
+    coordinates: np.ndarray | None = None,
 ) -> Valleys:
     """Other valleys of the fit's data, and points between, that fit within ``threshold``.
 
@@ -427,8 +428,10 @@ def search_valleys(
     parameters trade (the servo model's motor lag against the drags on turning gaits), another
     valley can fit the recordings as well and the refits never see it. So the recordings are
     refitted from ``starts`` (:func:`polish`), and the refits, points on the straight lines from
-    the estimate to each start and each refit, and points along ``axis`` are judged by their
-    fitness on the recordings: those within ``threshold`` of the estimate's are points the data
+    the estimate to each start and each refit, points along ``axis``, and points on the lines
+    from the estimate towards both bounds of each parameter in ``coordinates`` (the others kept:
+    a parameter the data hardly hold, such as the servo model's motor time constant, moves far
+    along them) are judged by their fitness on the recordings: those within ``threshold`` of the estimate's are points the data
     do not reject (an inner approximation of the test-inversion region; docs/estimation.md,
     "Uncertainty", "Valleys that fit alike").
 
@@ -451,6 +454,9 @@ def search_valleys(
     axis : ndarray, shape (K,), optional
         One standard deviation along the bootstrap refits' principal axis; points at
         :data:`AXIS_STEPS` of it are tried.
+    coordinates : ndarray of bool, shape (K,), optional
+        Parameters moved alone towards each of their bounds, at :data:`LINE_FRACTIONS` of the
+        way.
 
     Returns
     -------
@@ -468,7 +474,11 @@ def search_valleys(
     lines = (estimate + fractions[None, :, None] * (ends - estimate)[:, None, :]).reshape(-1, k)
     along = (np.zeros((0, k)) if axis is None
              else estimate + np.array(AXIS_STEPS)[:, None] * np.asarray(axis)[None])
-    tried = np.clip(np.concatenate([lines, along]), bounds[:, 0], bounds[:, 1])
+    alone = [estimate + f * np.where(np.arange(k) == j, end - estimate, 0.0)
+             for j in (np.flatnonzero(coordinates) if coordinates is not None else [])
+             for end in bounds[j] for f in fractions]
+    tried = np.clip(np.concatenate([lines, along, np.reshape(alone, (-1, k))]),
+                    bounds[:, 0], bounds[:, 1])
     tried_fitness = fitness_of(tried) if len(tried) else np.zeros(0)
     limit = fitness + threshold
     allowed = np.isfinite(tried_fitness) & (tried_fitness <= limit)
@@ -911,7 +921,9 @@ def parametric_bootstrap(
                                  boot.misfit_samples.reshape(-1, space.size)])
         boot.valleys = search_valleys(
             evaluator.fitness, polish_from, estimate, min(own, float(fitness)), threshold, tried,
-            half, bounds, principal_axis(refits, estimate, bounds))
+            half, bounds, principal_axis(refits, estimate, bounds),
+            coordinates=~(held_current(space)
+                          | np.isin(np.array(space.names), list(unidentified))))
         boot.lower, boot.upper, boot.split = boot.valleys.widened(estimate, half, bounds)
     else:
         boot.lower, boot.upper = boot.local_lower.copy(), boot.local_upper.copy()
