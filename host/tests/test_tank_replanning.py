@@ -27,6 +27,7 @@ from eelhost.planning.execute import body_clearance_m
 from eelhost.planning.field import ClearanceField
 from eelhost.planning.planner import PLANNING_GUIDANCE, Outcome, Planner
 from eelhost.planning.replan import (
+    Ahead,
     Decision,
     TankReplanner,
     outline_clearance_m,
@@ -569,6 +570,85 @@ def test_a_late_replan_with_contact_ahead_stops_the_robot_without_waiting_for_it
     assert t > nav._job.t_start_s  # only once the replan was late
 
 
+def contact_ahead_replanner(status: str, contact_in_s: float):
+    """A :func:`failing_replanner` whose look-ahead swims the present waypoints into contact
+    ``contact_in_s`` after its estimate (10 mm deep)."""
+
+    class ContactAhead(failing_replanner(status)):  # type: ignore[misc]
+        def _look_ahead(self, est, left, extra, guide=None):  # noqa: ANN001, ANN202
+            return Ahead(-0.01, -0.01, est.t_s + contact_in_s)
+
+    return ContactAhead
+
+
+@pytest.mark.parametrize(("contact_in_s", "budget_s", "retried"), [
+    (10.0, 1.0, True),  # contact far ahead: time for another replan before it
+    (1.0, 1.0, False),  # contact nearer than a replan's budget, grace and lead: stop
+    (10.0, None, False),  # no budget, so no bound on when a retry would come back: stop
+])
+def test_a_failed_replan_is_retried_at_once_only_while_the_contact_ahead_leaves_time_for_it(
+        open_plan, contact_in_s, budget_s, retried):
+    planner, outcome = open_plan
+    nav = contact_ahead_replanner("exhausted", contact_in_s)(
+        lambda extra: planner, planner, outcome, PATH_GAIT, replan_budget_s=budget_s)
+    nav.requests.clear()
+    try:
+        t_stop, d = drive_off_corridor(nav, 8.0)
+    finally:
+        nav.close()
+    assert d is not None and d.stop == "no_safe_continuation"
+    assert "into an obstacle or wall" in d.detail
+    if retried:
+        # no back-off between the tries (1 s, then 2 s, without contact ahead), and still
+        # stopped after max_failures of them
+        assert len(nav.requests) == nav.max_failures == 3
+        assert np.diff(nav.requests).max() < 0.5
+        assert nav.retries_before_contact == 2 and nav.record()["retries_before_contact"] == 2
+    else:
+        assert len(nav.requests) == 1 and nav.retries_before_contact == 0
+        assert t_stop is not None and t_stop < 0.5
+
+
+@pytest.mark.parametrize("contact_in_s", [10.0, 0.5])
+def test_a_replan_past_its_start_is_waited_for_within_its_budget_only_with_time_before_contact(
+        open_plan, contact_in_s):
+    import threading
+
+    from eelhost.planning.replan import SHIFT_GRACE_S
+
+    planner, outcome = open_plan
+    release = threading.Event()
+
+    class Stuck(TankReplanner):
+        def _replan(self, *args):  # noqa: ANN002, ANN202
+            release.wait(30.0)  # a planner starved of processor time
+            return super()._replan(*args)
+
+        def _look_ahead(self, est, left, extra, guide=None):  # noqa: ANN001, ANN202
+            return Ahead(-0.005, -0.025, est.t_s + contact_in_s)
+
+    nav = Stuck(lambda extra: planner, planner, outcome, PATH_GAIT, replan_budget_s=1.0)
+    d = None
+    try:
+        for k in range(5 * 30):
+            t = k / 30
+            d = nav.on_frame(t, pose_at(t, (0.8, 1.4)), np.array([0.8, 1.4, 0.0]), 0, 0.0)
+            if d.stop is not None:
+                break
+            nav._side.submit(lambda: None).result()  # the look-ahead's thread is done
+    finally:
+        release.set()
+        nav.close()
+    assert d is not None and d.stop == "no_safe_continuation", d
+    job = nav._job
+    assert "has not come back" in d.detail and job is not None
+    assert job.due_s == pytest.approx(job.t_request_s + 1.0 + SHIFT_GRACE_S)
+    if contact_in_s > 5.0:  # waited for until its budget and grace were over
+        assert t > job.due_s
+    else:  # the contact too near to wait: stopped once the replan was past its start
+        assert job.t_start_s < t < job.due_s
+
+
 def test_the_lookahead_asks_for_a_replan_5_s_ahead_but_judges_stops_on_the_next_3_s():
     # a disc some 4 s ahead of the swimming robot: within the replan horizon, beyond the stops'
     world = parse_world({**OPEN, "obstacles": [
@@ -585,11 +665,12 @@ def test_the_lookahead_asks_for_a_replan_5_s_ahead_but_judges_stops_on_the_next_
         finally:
             nav.close()
         margin = nav.lookahead_margin_m
-    outline_3, capsule_3 = verdicts[3.0]
-    outline_5, capsule_5 = verdicts[5.0]
+    outline_3, capsule_3, contact_3 = verdicts[3.0]
+    outline_5, capsule_5, contact_5 = verdicts[5.0]
     assert capsule_3 > margin + 0.005  # 3 s ahead the capsule stays clear: no replan asked for
     assert capsule_5 < margin  # 5 s ahead it meets the disc: a replan is asked for in time
     assert outline_5 == outline_3 > margin  # the stop's verdict is still the next 3 s's
+    assert contact_3 == contact_5 == math.inf  # no contact of the outline within those 3 s
 
 
 def test_a_slow_replan_does_not_push_the_next_replans_start_beyond_the_lead_cap(open_plan):
@@ -1133,3 +1214,17 @@ def test_the_shift_repair_keeps_the_present_waypoints_when_they_hold_from_where_
     outcome = shift_repair(planner, state, step, leg_start_guide(state, N), left, 30.0)
     assert outcome is not None and "kept as they are" in outcome.message, outcome
     assert outcome.plan.waypoints_m == left
+
+
+def test_the_benchmarks_summary_counts_the_runs_retried_before_a_predicted_contact():
+    from eelhost.benchmarks.closed_loop import WorldResult, summary_lines
+
+    plain = WorldResult(5000, True, "found", "arrived", reached=True, min_clearance_m=0.05)
+    retried = WorldResult(5001, True, "found", "arrived", reached=True, min_clearance_m=0.04,
+                          retries_before_contact=2)
+    stopped = WorldResult(5002, True, "found", "no_safe_continuation", min_clearance_m=0.03,
+                          retries_before_contact=1)
+    lines = summary_lines([plain, retried, stopped])
+    assert ("- replans retried at once before a predicted contact instead of a stop: 3, in 2 "
+            "runs (1 of them reached the goal)") in lines
+    assert not any("retried" in line for line in summary_lines([plain]))

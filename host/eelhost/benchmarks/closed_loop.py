@@ -108,6 +108,9 @@ class WorldResult:
     shift_repairs : int
         Replans switched in that were shift repairs of the present plan (docs/planning.md, "The
         shift repair"; counted in ``replans`` too).
+    retries_before_contact : int
+        Replans asked for at once after a failed one, instead of a stop, because the predicted
+        contact was far enough ahead (docs/planning.md, "Retried before contact").
     """
 
     seed: int
@@ -133,6 +136,7 @@ class WorldResult:
     failed_replan_statuses: list[str] = field(default_factory=list)
     replan_budget_s: float | None = None
     shift_repairs: int = 0
+    retries_before_contact: int = 0
 
 
 def true_clearance_m(world: World, model: SwimmerModel, states: FloatArray) -> FloatArray:
@@ -295,7 +299,8 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
         plan_wall, plan_cpu, out.t_end_s, cost, water,
         [e["cpu_s"] for e in replans if e["cpu_s"] is not None], law,
         [e["status"] for e in replans if e["status"] != "found"], replan_budget_s,
-        sum(e["message"].startswith("shift repair:") and "t_switch_s" in e for e in replans))
+        sum(e["message"].startswith("shift repair:") and "t_switch_s" in e for e in replans),
+        nav.retries_before_contact)
 
 
 def _law_name(planner_options: dict[str, Any] | None) -> str:
@@ -408,6 +413,11 @@ def summary_lines(results: list[WorldResult]) -> list[str]:
         lines.append(f"- shift repairs switched in: {sum(r.shift_repairs for r in repaired)}, in "
                      f"{len(repaired)} runs ({sum(r.reached for r in repaired)} of them reached "
                      "the goal)")
+    retried = [r for r in planned if r.retries_before_contact]
+    if retried:
+        lines.append(f"- replans retried at once before a predicted contact instead of a stop: "
+                     f"{sum(r.retries_before_contact for r in retried)}, in {len(retried)} runs "
+                     f"({sum(r.reached for r in retried)} of them reached the goal)")
     budgets = sorted({r.replan_budget_s for r in planned if r.replan_budget_s is not None})
     failed = Counter(s for r in planned for s in r.failed_replan_statuses)
     if budgets or failed:

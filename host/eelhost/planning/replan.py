@@ -29,7 +29,7 @@ import time
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor, wait
 from dataclasses import dataclass, field
-from typing import Any, cast
+from typing import Any, NamedTuple, cast
 
 import numpy as np
 
@@ -432,6 +432,35 @@ def shift_repair(planner: Planner, state: FloatArray, step: int, guide: Guide,
     return None
 
 
+class Ahead(NamedTuple):
+    """What a look-ahead of the present waypoints predicts (:meth:`TankReplanner._look_ahead`).
+
+    Attributes
+    ----------
+    outline_m : float
+        The body's own outline's smallest gap over ``lookahead_s`` (<= 0: contact).
+    capsule_m : float
+        The planner's capsule's smallest gap over the replan horizon.
+    contact_s : float
+        The robot's time of the outline's first contact within ``lookahead_s`` (inf: none).
+    """
+
+    outline_m: float
+    capsule_m: float
+    contact_s: float = math.inf
+
+
+def contact_time_s(judged: tuple[float, ...], t_s: float) -> float:
+    """When a look-ahead's verdict puts the first contact; -inf when it says contact, not when.
+
+    A verdict without a time (a bare (outline, capsule) pair) that swims into contact is taken
+    as contact now, so the stops that rest on it stay as they were.
+    """
+    if len(judged) > 2:
+        return float(judged[2])
+    return -math.inf if judged[0] <= 0.0 else math.inf
+
+
 REFUSED_FROM_STATE = ("blocked_start", "current_too_strong", "unreachable")
 """Planner statuses that refuse the start state itself: no safe continuation from it, so the
 robot is stopped unless the look-ahead swims its present plan clear (then it keeps that plan)."""
@@ -476,6 +505,7 @@ class _Job:
     wall_request_s: float
     t_start_s: float
     reason: str
+    due_s: float = math.inf  # the robot's time by which its budget and the repair's grace end
 
 
 class TankReplanner:
@@ -572,6 +602,12 @@ class TankReplanner:
         present plan's remaining waypoints shifted by 5-15 cm (:func:`shift_repair`): the
         variant the twin swims clearest in the estimated water, when it passes a check over the
         planner's waters, is the plan (docs/planning.md, "The shift repair").
+    retry_before_contact : bool
+        With a ``replan_budget_s``: when a replan has failed and the look-ahead swims the present
+        waypoints into contact, replan again at once instead of stopping the robot while the
+        contact is far enough ahead for another replan to steer before it
+        (:meth:`_retry_need_s`); a replan in flight past its start is likewise waited for while
+        it can still come back in time (docs/planning.md, "Retried before contact").
     """
 
     def __init__(
@@ -598,6 +634,7 @@ class TankReplanner:
         replan_current_change_m_s: float = 0.005,
         replan_budget_s: float | None = None,
         shift_repair: bool = True,
+        retry_before_contact: bool = True,
     ) -> None:
         self.planner_for = planner_for
         self.planner = planner
@@ -622,6 +659,11 @@ class TankReplanner:
         self.replan_current_change_m_s = replan_current_change_m_s
         self.replan_budget_s = replan_budget_s
         self.shift_repair = shift_repair
+        self.retry_before_contact = retry_before_contact
+        self.retries_before_contact = 0  # replans asked for instead of a stop (the record's)
+        # the robot's time of the first contact the latest look-ahead predicts (inf: none)
+        self._contact_at_s = math.inf
+        self._retry_now = False  # a failed replan asked for another at the next frame
         self._last_tiers: dict[str, float] = {}  # the last replan's parts' wall times
         self._plan_current = np.zeros(2)  # the extra current the present plan was searched in
         # the rest of the present plan swum in a moved estimate: (future, that estimate)
@@ -740,12 +782,24 @@ class TankReplanner:
             judged = self._lookahead.result()
             self._lookahead = None
             self._last_gap = (t_s, None if judged is None else judged[0])
+            self._contact_at_s = math.inf if judged is None else contact_time_s(judged, t_s)
             capsule = None if judged is None else judged[1]
             # a new plan is asked for with the planner's capsule (the safer trigger); the robot is
             # stopped, or keeps its plan, on its own outline
             predicted = capsule is not None and capsule < self.lookahead_margin_m
         gap = self._last_gap[1]
+        retry = False
         if (predicted and self.failures > 0 and gap is not None and gap <= 0.0
+                and self._job is None and self._pending is None
+                and self.failures < self.max_failures
+                and self._contact_at_s - t_s >= self._retry_need_s()):
+            # the present plan swims into something and the last replan found nothing better,
+            # but the contact is far enough ahead for one more replan to steer before it: ask
+            # for it now, whatever the back-off (docs/planning.md, "Retried before contact")
+            retry = True
+            log.info("contact predicted at t = %.2f s after a failed replan: replanning again "
+                     "at t = %.2f s instead of stopping", self._contact_at_s, t_s)
+        elif (predicted and self.failures > 0 and gap is not None and gap <= 0.0
                 and self._job is None and self._pending is None):
             # the present plan swims into something and the last replan found nothing better
             d.stop = "no_safe_continuation"
@@ -755,10 +809,13 @@ class TankReplanner:
             return d
         job = self._job
         if (predicted and gap is not None and gap <= 0.0 and job is not None
-                and t_s > job.t_start_s + 1e-9):
+                and t_s > job.t_start_s + 1e-9
+                and not (t_s <= job.due_s
+                         and self._contact_at_s - max(job.due_s, t_s) >= self.lead_s)):
             # the replan is late (past its start) and the twin swims the present plan into
             # contact meanwhile: on a loaded machine replans took minutes of wall time, and the
-            # robot swam on into an obstacle before they came back
+            # robot swam on into an obstacle before they came back (it is waited for only while
+            # within its budget and its plan could still steer a lead before the contact)
             d.stop = "no_safe_continuation"
             d.detail = (f"at t = {t_s:.2f} s the twin swims the present plan into an obstacle "
                         f"or wall within {self.lookahead_s:g} s ({-gap * 1000:.0f} mm deep) and "
@@ -772,12 +829,17 @@ class TankReplanner:
             reason = "predicted_contact"
             log.info("the twin predicts the body's capsule within %.0f mm of an obstacle or wall "
                      "within %.1f s", capsule * 1000, self.replan_horizon_s)  # type: ignore[operator]
+        elif self._retry_now:
+            reason = "predicted_contact"  # a failed replan's look-ahead swam into contact
         elif self._whole_plan_fails(est, left, busy):
             # the water the plan was searched in is not the one the camera sees, and the twin
             # swims the rest of the plan out of its margin in the estimate: replan in it while
             # the robot is still on its plan (docs/planning.md)
             reason = "current_estimate"
-        if reason is not None and not busy and t_s >= self._next_try_s:
+        if reason is not None and not busy and (t_s >= self._next_try_s or retry):
+            if retry or self._retry_now:
+                self.retries_before_contact += 1
+            self._retry_now = False
             self._request(t_s, est, left, reason)
         elif (self._pending is None and self._lookahead is None and self.lookahead_s > 0
               and t_s >= self._next_lookahead_s):
@@ -814,6 +876,7 @@ class TankReplanner:
         the Telemetry taken and ignored (docs/planning.md, "The robot's state at the tank").
         """
         return {"plans": self.events, "replans": self.replans,
+                "retries_before_contact": self.retries_before_contact,
                 "replan_budget_s": self.replan_budget_s,
                 "current_estimate": self.current.history,
                 "state_estimate": self.estimator.summary()}
@@ -840,6 +903,18 @@ class TankReplanner:
 
     # -- replans -------------------------------------------------------------------------------
 
+    def _retry_need_s(self) -> float:
+        """The robot's time a replan asked for now may take before its plan steers, at most.
+
+        Its budget, the shift repair's grace past it and a lead for the new plan to turn the
+        robot (:attr:`lead_s`); inf without a budget or with ``retry_before_contact`` off (then
+        a failed replan with contact ahead always stops the robot, as before).
+        """
+        if self.replan_budget_s is None or not self.retry_before_contact:
+            return math.inf
+        return (self.replan_budget_s + (SHIFT_GRACE_S if self.shift_repair else 0.0)
+                + self.lead_s)
+
     def _lead_steps(self) -> int:
         """Steps from a request to the predicted start: a whole number of restart periods."""
         period = self.planner.twin.restart_steps or 1
@@ -861,7 +936,9 @@ class TankReplanner:
         deadline = None if budget is None else wall + budget
         future = self._worker.submit(self._replan_and_judge, est, list(left), start_step, extra,
                                      self._guide, deadline)
-        self._job = _Job(future, t_s, wall, start_step * dt, reason)
+        due = (math.inf if budget is None or not self.retry_before_contact
+               else t_s + budget + (SHIFT_GRACE_S if self.shift_repair else 0.0))
+        self._job = _Job(future, t_s, wall, start_step * dt, reason, due)
         log.info("left the corridor at t = %.2f s; replanning from the state predicted for "
                  "t = %.2f s", t_s, start_step * dt)
 
@@ -999,7 +1076,7 @@ class TankReplanner:
 
     def _replan_and_judge(self, est: BodyEstimate, left: list[tuple[float, float]],
                           start_step: int, extra: FloatArray, guide: Guide | None = None,
-                          deadline_s: float | None = None) -> tuple[tuple, float | None]:
+                          deadline_s: float | None = None) -> tuple[tuple, Ahead | None]:
         """On the worker: the replan and, when it fails, a look-ahead of the present waypoints.
 
         The look-ahead from the same estimate decides whether the robot may keep its present
@@ -1008,8 +1085,7 @@ class TankReplanner:
         result = self._replan(est, left, start_step, extra, guide, deadline_s)
         if result[0].found or self.lookahead_s <= 0:
             return result, None
-        judged = self._look_ahead(est, left, self.current.value_m_s.copy(), guide)
-        return result, None if judged is None else judged[0]
+        return result, self._look_ahead(est, left, self.current.value_m_s.copy(), guide)
 
     def _stale(self, t_s: float, t_start_s: float, path: FloatArray) -> bool:
         """A plan ready more than a restart period after its start, the robot off its corridor."""
@@ -1050,7 +1126,7 @@ class TankReplanner:
         job = self._job
         if job is None or not job.future.done():
             return False
-        result, judged_gap = job.future.result()
+        result, judged = job.future.result()
         outcome, state, _, cpu, extra, done, start_step = result
         job.t_start_s = start_step * self.planner.twin.dt_s
         wall = done - job.wall_request_s  # from the request: queueing and prediction included
@@ -1092,8 +1168,19 @@ class TankReplanner:
                      outcome.status)
             return True
         self.failures += 1
-        if judged_gap is not None:
-            self._last_gap = (t_s, judged_gap)
+        if judged is not None:
+            self._last_gap = (t_s, judged[0])
+            self._contact_at_s = contact_time_s(judged, t_s)
+        if (self._present_plan_hits(t_s) and self.failures < self.max_failures
+                and self._contact_at_s - t_s >= self._retry_need_s()):
+            # the present plan swims into contact, but far enough ahead for another replan to
+            # steer before it: replan again at once (docs/planning.md, "Retried before contact")
+            self._next_try_s = t_s
+            self._retry_now = True
+            log.warning("replanning failed at t = %.2f s (%s) with contact predicted at "
+                        "t = %.2f s: replanning again at once", t_s, outcome.status,
+                        self._contact_at_s)
+            return True
         if self._present_plan_hits(t_s):
             d.stop = "no_safe_continuation"
             d.detail = (f"replanning at t = {job.t_request_s:.2f} s failed and the twin swims the "
@@ -1151,11 +1238,12 @@ class TankReplanner:
 
     def _look_ahead(self, est: BodyEstimate, left: list[tuple[float, float]],
                     extra: FloatArray, guide: Guide | None = None,
-                    horizon_s: float | None = None) -> tuple[float, float] | None:
+                    horizon_s: float | None = None) -> Ahead | None:
         """On the worker: the smallest clearances the twin predicts ahead of the estimate.
 
-        Returns (the body's own outline's over ``lookahead_s``, the planner's capsule's over
-        ``horizon_s``, default ``replan_horizon_s``), or None without a run.
+        Returns the body's own outline's over ``lookahead_s`` with the time of its first
+        contact there, and the planner's capsule's over ``horizon_s`` (default
+        ``replan_horizon_s``), or None without a run.
         """
         twin = self._twin_in(extra)
         now = int(round(est.t_s / twin.dt_s))
@@ -1178,9 +1266,12 @@ class TankReplanner:
         # replans over the longer horizon: docs/planning.md
         near = states[: int(round(self.lookahead_s / twin.dt_s)) // stride + 1]
         planner = self._planned[0]
-        return (float(outline_clearance_m(self.world, self.model, near).min()),
-                float(body_clearance_m(planner.world, planner.clearance, planner.model,
-                                       states).min()))
+        outline = outline_clearance_m(self.world, self.model, near)
+        touching = np.flatnonzero(outline <= 0.0)
+        contact = (now + int(touching[0]) * stride) * twin.dt_s if touching.size else math.inf
+        return Ahead(float(outline.min()),
+                     float(body_clearance_m(planner.world, planner.clearance, planner.model,
+                                            states).min()), contact)
 
     def _twin_in(self, extra: FloatArray) -> Twin:
         """The planner's twin in the world's current plus the estimate ``extra``."""
