@@ -16,7 +16,7 @@ from scipy.stats import chi2
 from eelhost.planning.audit import body_gaps_m, centre_lines
 from eelhost.planning.body import link_endpoints
 from eelhost.planning.execute import swim
-from eelhost.planning.planner import Planner
+from eelhost.planning.planner import CHECK_MARGIN_M, Planner
 from eelhost.planning.uncertainty import (
     CURRENT_DIRECTIONS,
     clopper_pearson,
@@ -216,9 +216,13 @@ def test_plan_command_writes_the_checks_confidence_and_refuses_a_bad_bound(tmp_p
     assert main(["plan", "tank_5_obstacles", "--unknown-current", "0", "--draws", "8",
                  "--out", str(out)]) == 0
     printed = capsys.readouterr().out
-    assert "collision probability 0.0% (0 of 8 draws of the water; 95 % interval" in printed
+    assert ("collision probability 0.0% (0 of 8 draws of the water failed, every run 30 mm "
+            "clear; 95 % interval") in printed
     check = json.loads((out / "plan.json").read_text())["check"]
     assert check["draws"] == 8 and check["failures"] == 0
+    assert check["margin_m"] == pytest.approx(CHECK_MARGIN_M)
+    assert min(c["min_clearance_m"] for c in json.loads((out / "plan.json").read_text())
+               ["checks"]) > CHECK_MARGIN_M
     # 95 % over the first plan and its 4 repairs: each plan's interval at 99 % (Bonferroni)
     assert check["plans_checked_at_most"] == 5 and check["interval_level"] == pytest.approx(0.99)
     assert check["interval_95"][1] == pytest.approx(1 - 0.005 ** (1 / 8))
@@ -227,3 +231,6 @@ def test_plan_command_writes_the_checks_confidence_and_refuses_a_bad_bound(tmp_p
     assert main(["plan", "tank_5_obstacles", "--unknown-current", "-0.01", "--out",
                  str(out)]) == 2
     assert "--unknown-current: expected a speed from 0 to 1 m/s" in capsys.readouterr().err
+    assert main(["plan", "tank_5_obstacles", "--check-margin", "-0.01", "--out",
+                 str(out)]) == 2
+    assert "--check-margin: expected a margin from 0 to 0.5 m" in capsys.readouterr().err

@@ -32,6 +32,7 @@ from eelhost.machine import cpu_model
 from eelhost.planning.coverage import action_coverage
 from eelhost.planning.planner import (
     CHECK_DRAWS,
+    CHECK_MARGIN_M,
     PLANNING_GUIDANCE,
     Outcome,
     Planner,
@@ -120,6 +121,10 @@ def add_check_options(p: argparse.ArgumentParser) -> None:
                    f"towards directions round the circle (default {DEFAULT_UNKNOWN_CURRENT_M_S} "
                    "m/s, a lab tank's residual flow; 0 to leave it out)")
     p.add_argument("--check-seed", type=SEED, default=0, help="seed of the check's draws")
+    p.add_argument("--check-margin", type=_check_margin, default=CHECK_MARGIN_M, metavar="M",
+                   help="every check run must keep the body this far from everything (default "
+                   f"{CHECK_MARGIN_M} m: plans checked merely clear touched in fresh draws; 0 "
+                   "for clear alone; docs/planning.md, \"The planner\")")
     p.add_argument("--robust-search", action="store_true",
                    help="also swim every leg of the search in the unknown current (fewer plans "
                    "fail their check, about 4 times the search's time)")
@@ -141,6 +146,16 @@ def _unknown_current(text: str) -> float:
     return value
 
 
+def _check_margin(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a distance in m, got {text!r}") from None
+    if not 0.0 <= value <= 0.5:
+        raise argparse.ArgumentTypeError(f"expected a margin from 0 to 0.5 m, got {text}")
+    return value
+
+
 def _budget(text: str) -> float:
     try:
         value = float(text)
@@ -156,6 +171,7 @@ def planner_options(args: argparse.Namespace) -> dict:
     return {"draws": getattr(args, "draws", CHECK_DRAWS),
             "unknown_current_m_s": getattr(args, "unknown_current", DEFAULT_UNKNOWN_CURRENT_M_S),
             "seed": getattr(args, "check_seed", 0),
+            "check_margin_m": getattr(args, "check_margin", CHECK_MARGIN_M),
             "robust_search": getattr(args, "robust_search", False),
             "guidance": guidance_law(getattr(args, "guidance", PURSUIT.name))}
 
@@ -221,7 +237,9 @@ def _check_json(outcome: Outcome) -> dict:
         return None if v != v else v  # NaN: not checked
 
     return {"draws": outcome.draws,
-            "failures": sum(not r.ok for r in outcome.drawn_checks),
+            "failures": sum(outcome.failed(r) for r in outcome.drawn_checks),
+            # a run within the margin of anything failed the check (docs/planning.md)
+            "margin_m": outcome.margin_m,
             "collision_probability": num(p), "interval_95": [num(low), num(high)],
             # the interval is 95 % over every plan the repairs may check (Bonferroni): each
             # plan's own is taken at this level (docs/planning.md, "The planner", step 4)
@@ -291,7 +309,7 @@ def _bench(args: argparse.Namespace, robot: Robot, model: CoefficientModel,
     options = LoopOptions(guidance=guidance)  # the coverage's runs steer with the same law
     summary = run_bench(robot, model, args.worlds, args.seed, args.threads, progress,
                         max(args.jobs, 1), args.unknown_current, guidance, swimmer,
-                        args.budget)
+                        args.budget, args.check_margin)
     lines = summary.lines()
     lines += ["- action coverage (successful actions per current direction relative to the "
               "heading):"]
@@ -304,7 +322,9 @@ def _bench(args: argparse.Namespace, robot: Robot, model: CoefficientModel,
                + (f" --unknown-current {args.unknown_current:g}"
                   if args.unknown_current != DEFAULT_UNKNOWN_CURRENT_M_S else "")
                + (f" --guidance {args.guidance}" if args.guidance != PURSUIT.name else "")
-               + (f" --budget {args.budget:g}" if args.budget is not None else ""))
+               + (f" --budget {args.budget:g}" if args.budget is not None else "")
+               + (f" --check-margin {args.check_margin:g}"
+                  if args.check_margin != CHECK_MARGIN_M else ""))
     block = [
         BENCH_BEGIN,
         f"Command: `{command}`",
@@ -315,7 +335,8 @@ def _bench(args: argparse.Namespace, robot: Robot, model: CoefficientModel,
         f"- coefficients: {model.describe()}",
         f"- the check: the fits as fitted and {CHECK_DRAWS} draws of the water per plan (coefficients "
         f"jointly within the fit's 95 % region; unknown current {args.unknown_current:g} m/s, "
-        "its directions stratified round the circle; each repair its own draws); the fresh "
+        "its directions stratified round the circle; each repair its own draws; every run "
+        f"{args.check_margin * 1000:g} mm clear of everything); the fresh "
         "draws below keep 8 directions 45 degrees apart",
         f"- guidance: {guidance.describe()}",
         *lines,

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from eelhost.planning.audit import body_gaps_m
-from eelhost.planning.planner import Planner
+from eelhost.planning.planner import CHECK_MARGIN_M, Planner
 from eelhost.planning.uncertainty import (
     DEFAULT_UNKNOWN_CURRENT_M_S,
     LATTICE,
@@ -183,7 +183,8 @@ def bench_world(world: World, robot: Robot, coefficients: CoefficientModel, seed
                 unknown_current_m_s: float = DEFAULT_UNKNOWN_CURRENT_M_S,
                 guidance: GuidanceLaw = PURSUIT,
                 swimmer: SwimmerModel | None = None,
-                budget_s: float | None = None) -> WorldResult:
+                budget_s: float | None = None,
+                check_margin_m: float = CHECK_MARGIN_M) -> WorldResult:
     """Plan in one world and swim the plan in fresh draws of the water (module docstring).
 
     Parameters
@@ -205,6 +206,9 @@ def bench_world(world: World, robot: Robot, coefficients: CoefficientModel, seed
     budget_s : float, optional
         A deadline this long after the planning call starts (the planner built already, as a
         replan's is): ``Planner.plan(deadline_s=)``, its check included. Default: none.
+    check_margin_m : float
+        The check's margin (:data:`eelhost.planning.planner.CHECK_MARGIN_M`); the fresh draws
+        are judged by contact alone, whatever it is.
 
     Returns
     -------
@@ -213,7 +217,7 @@ def bench_world(world: World, robot: Robot, coefficients: CoefficientModel, seed
     t0, c0 = time.perf_counter(), time.process_time()
     planner = Planner(world, robot, coefficients, threads=threads, seed=seed,
                       unknown_current_m_s=unknown_current_m_s, guidance=guidance,
-                      swimmer=swimmer)
+                      swimmer=swimmer, check_margin_m=check_margin_m)
     deadline = None if budget_s is None else time.monotonic() + budget_s
     outcome = planner.plan(deadline_s=deadline)
     done = time.monotonic()
@@ -241,17 +245,19 @@ def bench_world(world: World, robot: Robot, coefficients: CoefficientModel, seed
 
 def _warm_up(robot: Robot, coefficients: CoefficientModel, seed: int,
              threads: int | None, unknown_current_m_s: float, guidance: GuidanceLaw,
-             swimmer: SwimmerModel | None = None) -> None:
+             swimmer: SwimmerModel | None = None,
+             check_margin_m: float = CHECK_MARGIN_M) -> None:
     """Load the batched kernel, measure the swimming speed and the check's cost (not timed)."""
     bench_world(generate_world(seed), robot, coefficients, seed, threads, unknown_current_m_s,
-                guidance, swimmer)
+                guidance, swimmer, check_margin_m=check_margin_m)
 
 
 def _one(robot: Robot, coefficients: CoefficientModel, seed: int,
          threads: int | None, unknown_current_m_s: float, guidance: GuidanceLaw,
-         swimmer: SwimmerModel | None = None, budget_s: float | None = None) -> WorldResult:
+         swimmer: SwimmerModel | None = None, budget_s: float | None = None,
+         check_margin_m: float = CHECK_MARGIN_M) -> WorldResult:
     return bench_world(generate_world(seed), robot, coefficients, seed, threads,
-                       unknown_current_m_s, guidance, swimmer, budget_s)
+                       unknown_current_m_s, guidance, swimmer, budget_s, check_margin_m)
 
 
 def run_bench(
@@ -266,6 +272,7 @@ def run_bench(
     guidance: GuidanceLaw = PURSUIT,
     swimmer: SwimmerModel | None = None,
     budget_s: float | None = None,
+    check_margin_m: float = CHECK_MARGIN_M,
 ) -> BenchSummary:
     """Run the benchmark over ``count`` generated worlds (seeds ``seed`` .. ``seed + count - 1``).
 
@@ -291,6 +298,8 @@ def run_bench(
     budget_s : float, optional
         Each world's planning call gets a deadline this long after it starts
         (:func:`bench_world`). Default: none.
+    check_margin_m : float
+        The check's margin (:func:`bench_world`).
 
     Returns
     -------
@@ -302,10 +311,10 @@ def run_bench(
         swimmer = coefficients.swimmer_for(robot)
     if jobs <= 1:
         _warm_up(robot, coefficients, seed + count, threads, unknown_current_m_s, guidance,
-                 swimmer)
+                 swimmer, check_margin_m)
         results: Iterable[WorldResult] = (_one(robot, coefficients, s, threads,
                                                unknown_current_m_s, guidance, swimmer,
-                                               budget_s)
+                                               budget_s, check_margin_m)
                                           for s in seeds)
         _collect(summary, results, progress)
         return summary
@@ -313,9 +322,11 @@ def run_bench(
     with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn"),
                              initializer=_warm_up,
                              initargs=(robot, coefficients, seed + count, threads,
-                                       unknown_current_m_s, guidance, swimmer)) as pool:
+                                       unknown_current_m_s, guidance, swimmer,
+                                       check_margin_m)) as pool:
         results = pool.map(_one, *zip(*[(robot, coefficients, s, threads, unknown_current_m_s,
-                                         guidance, swimmer, budget_s) for s in seeds],
+                                         guidance, swimmer, budget_s, check_margin_m)
+                                        for s in seeds],
                                       strict=True))
         _collect(summary, results, progress)
     return summary

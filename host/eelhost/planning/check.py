@@ -13,7 +13,10 @@ centre of mass enters the goal disc (:func:`eelhost.planning.search.in_goal`).
 Each run is then judged as :func:`eelhost.planning.execute.swim` judges one: the goal reached,
 and the body clear of everything at every physics step (the exact link distances against the
 body's half width, :func:`eelhost.planning.execute.body_clearance_m`). A leg whose waypoint a
-run never accepts ends that run there (the goal missed, blamed on that leg).
+run never accepts ends that run there (the goal missed, blamed on that leg). With a check margin
+(``margin_m``, the planner's :data:`eelhost.planning.planner.CHECK_MARGIN_M`) a run whose body
+comes within the margin of anything has its ``failed_leg`` set to the leg it came that close on,
+so that a repair can ban it; whether it touched stays its own (``collision_free``).
 
 Each swim records its wall time per run-step (:data:`CHECK_COST`); with a deadline, a leg's
 batch predicted by it to end late is not started and the swim raises :class:`CheckOutOfTime`
@@ -89,6 +92,7 @@ def swim_legs(
     deadline_s: float | None = None,
     clock: Callable[[], float] = time.monotonic,
     cost: SwimCost | None = None,
+    margin_m: float = 0.0,
 ) -> list[Swim]:
     """Swim a plan leg by leg in each water and judge each run (module docstring).
 
@@ -121,6 +125,10 @@ def swim_legs(
     cost : SwimCost, optional
         Where the swim's measured cost is recorded and the leg batches' time predicted from
         (default :data:`CHECK_COST`, the process's).
+    margin_m : float
+        The check's margin, m: a run that reaches the goal without contact but whose body comes
+        within this of anything gets ``failed_leg``, the leg of its first such step (default 0:
+        only contact and a missed goal).
 
     Returns
     -------
@@ -216,6 +224,9 @@ def swim_legs(
         touching = np.flatnonzero(clear <= 0.0)
         first = int(touching[0]) if touching.size else None
         failed = leg_of[i][first] if first is not None else missed_leg[i]
+        if failed is None and margin_m > 0.0:
+            near = np.flatnonzero(clear <= margin_m)
+            failed = leg_of[i][int(near[0])] if near.size else None
         out.append(Swim(
             label=w.label,
             reached=bool(reached[i]),
