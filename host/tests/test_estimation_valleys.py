@@ -13,6 +13,7 @@ from eelhost.estimation.uncertainty import (
     principal_axis,
     search_valleys,
     spread_starts,
+    trade_directions,
 )
 
 BOUNDS = np.array([[-2.0, 2.0], [-1.0, 1.0]])
@@ -152,3 +153,29 @@ def test_a_parameter_the_data_hardly_hold_reaches_its_bounds_when_moved_alone():
     # x is held by the data: moved alone it leaves the threshold within 0.1 of the estimate
     assert 0.8 <= lower[0] and upper[0] <= 1.2
     assert not split.any()  # points along a line are not other valleys
+
+
+def test_a_parameter_held_only_together_with_another_follows_their_trade_to_its_bounds():
+    # the data hold x + y (a total delay, say), hardly y itself: y moved alone leaves the
+    # threshold at once, y moved with x along their trade reaches its bounds
+    def fitness(p):
+        p = np.atleast_2d(p)
+        return 100 * (p[:, 0] + p[:, 1] - 1) ** 2 + 1e-4 * p[:, 1] ** 2
+
+    def polish(starts):
+        return starts, fitness(starts)
+
+    t = np.linspace(-0.1, 0.1, 9)
+    refits = ESTIMATE + np.column_stack([-t, t])  # the bootstrap's refits along the trade
+    trade = trade_directions(refits, ESTIMATE)
+    np.testing.assert_allclose(trade, [[1.0, -1.0], [-1.0, 1.0]])
+    mask = np.array([False, True])
+    alone = search_valleys(fitness, polish, ESTIMATE, 0.0, 0.01, np.zeros((0, 2)), HALF,
+                           BOUNDS, coordinates=mask)
+    assert alone.widened(ESTIMATE, HALF, BOUNDS)[1][1] == HALF[1]
+    traded = search_valleys(fitness, polish, ESTIMATE, 0.0, 0.01, np.zeros((0, 2)), HALF,
+                            BOUNDS, coordinates=mask, trade=trade)
+    lower, upper, _ = traded.widened(ESTIMATE, HALF, BOUNDS)
+    np.testing.assert_allclose([lower[1], upper[1]], BOUNDS[1])
+    assert lower[0] <= 0.0 + 1e-9  # x went with it
+    assert trade_directions(refits[:1], ESTIMATE) is None

@@ -421,6 +421,7 @@ def search_valleys(
     bounds: np.ndarray,
     axis: np.ndarray | None = None,
     coordinates: np.ndarray | None = None,
+    trade: np.ndarray | None = None,
 ) -> Valleys:
     """Other valleys of the fit's data, and points between, that fit within ``threshold``.
 
@@ -429,9 +430,11 @@ def search_valleys(
     valley can fit the recordings as well and the refits never see it. So the recordings are
     refitted from ``starts`` (:func:`polish`), and the refits, points on the straight lines from
     the estimate to each start and each refit, points along ``axis``, and points on the lines
-    from the estimate towards both bounds of each parameter in ``coordinates`` (the others kept:
-    a parameter the data hardly hold, such as the servo model's motor time constant, moves far
-    along them) are judged by their fitness on the recordings: those within ``threshold`` of the estimate's are points the data
+    from the estimate towards both bounds of each parameter in ``coordinates``, once with the
+    others kept and once with the others moving as they trade against it (``trade``: the
+    linearised profile's trace; a parameter the data hold only together with another, such as
+    the servo model's motor time constant with its lag, moves far along it only so) are judged
+    by their fitness on the recordings: those within ``threshold`` of the estimate's are points the data
     do not reject (an inner approximation of the test-inversion region; docs/estimation.md,
     "Uncertainty", "Valleys that fit alike").
 
@@ -455,8 +458,10 @@ def search_valleys(
         One standard deviation along the bootstrap refits' principal axis; points at
         :data:`AXIS_STEPS` of it are tried.
     coordinates : ndarray of bool, shape (K,), optional
-        Parameters moved alone towards each of their bounds, at :data:`LINE_FRACTIONS` of the
-        way.
+        Parameters moved towards each of their bounds, at :data:`LINE_FRACTIONS` of the way.
+    trade : ndarray, shape (K, K), optional
+        Row j: how every parameter moves per unit of parameter j along its profile
+        (:func:`trade_directions`; row j's own entry 1). Without it the parameters move alone.
 
     Returns
     -------
@@ -474,8 +479,10 @@ def search_valleys(
     lines = (estimate + fractions[None, :, None] * (ends - estimate)[:, None, :]).reshape(-1, k)
     along = (np.zeros((0, k)) if axis is None
              else estimate + np.array(AXIS_STEPS)[:, None] * np.asarray(axis)[None])
-    alone = [estimate + f * np.where(np.arange(k) == j, end - estimate, 0.0)
+    directions = [np.eye(k)] + ([] if trade is None else [np.asarray(trade, dtype=float)])
+    alone = [estimate + f * (end - estimate[j]) * d[j]
              for j in (np.flatnonzero(coordinates) if coordinates is not None else [])
+             for d in directions if np.isfinite(d[j]).all()
              for end in bounds[j] for f in fractions]
     tried = np.clip(np.concatenate([lines, along, np.reshape(alone, (-1, k))]),
                     bounds[:, 0], bounds[:, 1])
@@ -487,6 +494,25 @@ def search_valleys(
     other = kept & far
     return Valleys(float(threshold), minima[other], minima_fitness[other],
                    np.concatenate([tried[allowed], minima[kept]]))
+
+
+def trade_directions(samples: np.ndarray, estimate: np.ndarray) -> np.ndarray | None:
+    """How the parameters trade against each other, from the bootstrap refits.
+
+    Row j is the regression of every parameter on parameter j over the refits (their second
+    moments about the estimate): M[:, j] / M[j, j]. Moving parameter j by t and the others by
+    t times the row follows the linearised profile of j (the others at their best for that j,
+    if the fitness were quadratic with the refits' covariance). A parameter the refits do not
+    move gets a row of nan. None with fewer than two refits.
+    """
+    if len(samples) < 2:
+        return None
+    d = samples - estimate
+    m = d.T @ d / len(d)
+    diag = np.diag(m)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rows = np.where(diag[:, None] > 0, m / diag[:, None], np.nan)
+    return rows
 
 
 def spread_starts(bounds: np.ndarray, n: int, seed: int) -> np.ndarray:
@@ -923,7 +949,8 @@ def parametric_bootstrap(
             evaluator.fitness, polish_from, estimate, min(own, float(fitness)), threshold, tried,
             half, bounds, principal_axis(refits, estimate, bounds),
             coordinates=~(held_current(space)
-                          | np.isin(np.array(space.names), list(unidentified))))
+                          | np.isin(np.array(space.names), list(unidentified))),
+            trade=trade_directions(refits, estimate))
         boot.lower, boot.upper, boot.split = boot.valleys.widened(estimate, half, bounds)
     else:
         boot.lower, boot.upper = boot.local_lower.copy(), boot.local_upper.copy()
