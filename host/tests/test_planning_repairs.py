@@ -13,7 +13,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from eelhost.planning.planner import CHECK_LEVEL, Planner
+from eelhost.planning.planner import CHECK_LEVEL, REPAIR_DRAWS_FACTOR, Planner
 from eelhost.planning.uncertainty import default_model
 from eelhost.planning.world import parse_world
 from eelsim.robot import load_robot
@@ -40,10 +40,15 @@ def test_each_plan_has_its_own_reproducible_draws():
     planner = Planner(open_tank(), ROBOT, MODEL, draws=6, seed=11)
     first, second, third = (drawn(planner.waters(k)) for k in range(3))
     assert planner.waters(0) is planner.water  # the first plan's draws are the seed's
-    assert not np.allclose(first, second) and not np.allclose(second, third)
+    # a repaired plan is checked over REPAIR_DRAWS_FACTOR times as many draws, its own
+    assert len(first) == 6 and len(second) == len(third) == REPAIR_DRAWS_FACTOR * 6
+    assert not np.allclose(first, second[:6]) and not np.allclose(second, third)
     again = Planner(open_tank(), ROBOT, MODEL, draws=6, seed=11)
     assert np.array_equal(drawn(again.waters(2)), third)  # the same seed, the same draws
     assert planner.waters(2) is planner.waters(2)  # a replan checks over the same ones
+    assert len(Planner(open_tank(), ROBOT, MODEL, draws=6, repair_draws=7).waters(1)) == 7
+    with pytest.raises(ValueError, match="repair_draws"):
+        Planner(open_tank(), ROBOT, MODEL, draws=6, repair_draws=0)
 
 
 def test_a_repaired_plan_is_judged_on_its_own_draws_with_a_simultaneous_bound():
@@ -63,13 +68,14 @@ def test_a_repaired_plan_is_judged_on_its_own_draws_with_a_simultaneous_bound():
     planner.check_plan = first_two_fail
     outcome = planner.plan()
     assert outcome.found and outcome.repairs == 2, outcome.message
-    assert [len(w) for w in checked] == [4, 4, 4]
+    repaired = REPAIR_DRAWS_FACTOR * 4
+    assert [len(w) for w in checked] == [4, repaired, repaired]
     assert checked[0] is planner.waters(0) and checked[2] is planner.waters(2)
     assert not np.allclose(drawn(checked[1]), drawn(checked[2]))
     # the returned plan's runs are over the third plan's draws, not the first's
     assert [r.label for r in outcome.drawn_checks] == [w.label for w in checked[2]]
-    # 0 in 4 at 1 - 0.05 / 3 two-sided: the upper end 1 - (0.05 / 6)^(1/4)
-    assert outcome.family == 3
+    # 0 in 12 at 1 - 0.05 / 3 two-sided: the upper end 1 - (0.05 / 6)^(1/12)
+    assert outcome.family == 3 and outcome.draws == repaired
     assert outcome.level == pytest.approx(1 - (1 - CHECK_LEVEL) / 3)
-    assert outcome.collision_probability[2] == pytest.approx(1 - (0.05 / 6) ** 0.25)
+    assert outcome.collision_probability[2] == pytest.approx(1 - (0.05 / 6) ** (1 / repaired))
     assert "simultaneous over the 3 plan(s)" in outcome.message

@@ -34,6 +34,7 @@ from eelhost.planning.planner import (
     CHECK_DRAWS,
     CHECK_MARGIN_M,
     PLANNING_GUIDANCE,
+    REPAIR_DRAWS_FACTOR,
     Outcome,
     Planner,
     PlanRefused,
@@ -335,7 +336,8 @@ def _bench(args: argparse.Namespace, robot: Robot, model: CoefficientModel,
         f"- coefficients: {model.describe()}",
         f"- the check: the fits as fitted and {CHECK_DRAWS} draws of the water per plan (coefficients "
         f"jointly within the fit's 95 % region; unknown current {args.unknown_current:g} m/s, "
-        "its directions stratified round the circle; each repair its own draws; every run "
+        "its directions stratified round the circle; each repair its own draws, "
+        f"{REPAIR_DRAWS_FACTOR} times as many; every run "
         f"{args.check_margin * 1000:g} mm clear of everything); the fresh "
         "draws below keep 8 directions 45 degrees apart",
         f"- guidance: {guidance.describe()}",

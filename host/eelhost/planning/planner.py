@@ -100,6 +100,16 @@ two of them in the benchmark's 8 (docs/planning.md, "Targets of issue 28 (the pl
 bound the probability of coming within the margin, and with it the (smaller) probability of
 contact, by the same Clopper-Pearson interval."""
 
+REPAIR_DRAWS_FACTOR = 3
+"""A repaired plan is checked over this many times ``draws`` draws (180 by default). A repair is
+the search's next plan round the leg the last one failed on, and most of them fail much as their
+predecessor did: on development seeds 12000-12299 (ILOS) the repaired plans that passed their 60
+draws and the margin touched in 1-2 of 60 further fresh draws each in 2 of 9 (their failing runs
+took another way round an obstacle, -20 mm, not the tail of the passing runs' clearances), the
+first plans that passed in none of 14. A plan that fails one draw in 30 passes 60 draws with
+probability 13 %, 180 with 0.2 %; for each of the up to ``repairs`` plans the planner may try
+that is the chance it is returned (docs/planning.md, "The planner", step 5)."""
+
 SCREEN_DRAWS = 4
 """Draws swum first; a plan that fails one is repaired without swimming the others. The verdict
 does not depend on it (every draw must pass), only what a failing plan costs: the plans that fail
@@ -400,6 +410,9 @@ class Planner:
     check_margin_m : float
         Every check run must keep the body at least this far from everything
         (:data:`CHECK_MARGIN_M`; 0: merely clear).
+    repair_draws : int, optional
+        Draws a repaired plan is checked over (default :data:`REPAIR_DRAWS_FACTOR` times
+        ``draws``).
     """
 
     def __init__(
@@ -421,6 +434,7 @@ class Planner:
         swimmer: SwimmerModel | None = None,
         soft_margin: bool = True,
         check_margin_m: float = CHECK_MARGIN_M,
+        repair_draws: int | None = None,
     ) -> None:
         world = coefficients.in_tank(world)
         robot = coefficients.robot_for(robot)
@@ -432,6 +446,10 @@ class Planner:
         self.unknown_current_m_s = float(unknown_current_m_s)
         self.seed = int(seed)
         self.draws = int(draws)
+        self.repair_draws = int(REPAIR_DRAWS_FACTOR * self.draws if repair_draws is None
+                                else repair_draws)
+        if self.repair_draws < 1:
+            raise ValueError(f"repair_draws: expected at least 1, got {repair_draws!r}")
         self.water = coefficients.water_draws(np.random.default_rng(seed), draws,
                                               self.unknown_current_m_s)
         self._waters: dict[int, list[WaterDraw]] = {0: self.water}
@@ -745,8 +763,8 @@ class Planner:
         """The draws of the water the ``attempt``-th plan of a planning call is checked over.
 
         Attempt 0 (the first plan) has ``draws`` draws seeded with ``seed``; each repair its own
-        ``draws`` seeded with ``(seed, attempt)``: independent of one another and of
-        every other seed's.
+        ``repair_draws`` (:data:`REPAIR_DRAWS_FACTOR` times ``draws``) seeded with
+        ``(seed, attempt)``: independent of one another and of every other seed's.
 
         Parameters
         ----------
@@ -759,7 +777,8 @@ class Planner:
         """
         if attempt not in self._waters:
             rng = np.random.default_rng([self.seed, attempt])
-            self._waters[attempt] = self.coefficients.water_draws(rng, self.draws,
+            count = self.draws if attempt == 0 else self.repair_draws
+            self._waters[attempt] = self.coefficients.water_draws(rng, count,
                                                                   self.unknown_current_m_s)
         return self._waters[attempt]
 
