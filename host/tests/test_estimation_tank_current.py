@@ -138,7 +138,7 @@ class _LinearResiduals:
 
 
 def _interval(noise_of):
-    from eelhost.estimation.tank_current import _half_width, _JointCube
+    from eelhost.estimation.tank_current import _JointCube, _spread
 
     rng = np.random.default_rng(5)
     e, n = 4, 12
@@ -148,7 +148,7 @@ def _interval(noise_of):
     def split(x):
         return [x[:, [0, 2, 3]], x[:, [1, 2, 3]]]
 
-    half = _half_width(evs, cube, split, np.zeros(4))
+    half = _spread(evs, cube, split, np.zeros(4)).half_width()
     # the independent-residual interval, written apart: the full Jacobian in the unit cube and
     # the inverse of J^T J, the residual variance RSS / (M - K)
     ranges = cube.bounds[:, 1] - cube.bounds[:, 0]
@@ -223,24 +223,14 @@ class _LinearMotion:
         return np.linalg.lstsq(self.columns, -self.offset, rcond=None)[0]
 
 
-def _tank_interval(current_m_s, misfits_m_s, seed=3):
+def _tank_interval(current_m_s, misfits_m_s, seed=3, axes=(None, None)):
     """The tank's current, half-width and widening from two linear motions (their LS fits)."""
-    from eelhost.estimation.tank_current import _interval, _JointCube
+    from eelhost.estimation.tank_current import estimate
 
     rng = np.random.default_rng(seed)
     evs = [_LinearMotion(rng, [0.3, *current_m_s], m) for m in misfits_m_s]
-    cube = _JointCube(np.array([[-1.0, 1.0], [-1.0, 1.0], [-0.03, 0.03], [-0.03, 0.03]]))
-
-    def split(x):
-        return [x[:, [0, 2, 3]], x[:, [1, 2, 3]]]
-
-    stacked = np.zeros((sum(len(ev.offset) for ev in evs), 4))
-    n = len(evs[0].offset)
-    stacked[:n, [0, 2, 3]] = evs[0].columns
-    stacked[n:, [1, 2, 3]] = evs[1].columns
-    joint = np.linalg.lstsq(stacked, -np.concatenate([ev.offset for ev in evs]), rcond=None)[0]
-    half, scale = _interval(evs, cube, split, joint, [ev.own_fit() for ev in evs])
-    return joint[-2:], half, scale
+    _, current, covariance, scale = estimate(evs, [np.zeros(3), np.zeros(3)], list(axes))
+    return current, 1.959964 * np.sqrt(np.diag(covariance)), scale, covariance
 
 
 def test_a_still_water_tank_whose_model_misfits_reports_an_interval_that_includes_still_water():
@@ -249,11 +239,11 @@ def test_a_still_water_tank_whose_model_misfits_reports_an_interval_that_include
     # each motion's misfit looks like its own current (4 and 2 mm/s, different ways): the
     # joint fit's current is their mean, 1.1 mm/s, and the residuals alone give it +-0.1 mm/s
     misfits = [(-0.004, 0.001), (0.002, -0.002)]
-    current, half, scale = _tank_interval((0.0, 0.0), misfits)
+    current, half, scale, covariance = _tank_interval((0.0, 0.0), misfits)
     assert np.hypot(*current) > 0.001
     assert scale > 5  # the motions disagree far beyond their intervals
     assert np.all(np.abs(current) <= half)
-    tank = TankCurrent(current, half, {}, 10, 1.0, scale)
+    tank = TankCurrent(current, half, {}, 10, 1.0, scale, covariance)
     assert not tank.resolved and tank.to_json()["resolved"] is False
     assert tank.text().startswith("no current resolved")
 
@@ -262,10 +252,10 @@ def test_a_real_current_with_a_model_that_holds_the_water_is_resolved_and_not_wi
     from eelhost.estimation.tank_current import TankCurrent
 
     truth = np.array([-0.0025, 0.00433])
-    current, half, scale = _tank_interval(truth, [(0.0, 0.0), (0.0, 0.0)])
+    current, half, scale, covariance = _tank_interval(truth, [(0.0, 0.0), (0.0, 0.0)])
     assert scale < 2
     assert np.all(np.abs(current - truth) <= half) and np.all(half < 0.001)
-    tank = TankCurrent(current, half, {}, 10, 1.0, scale)
+    tank = TankCurrent(current, half, {}, 10, 1.0, scale, covariance)
     assert tank.resolved and not tank.text().startswith("no current")
 
 
@@ -274,7 +264,7 @@ def test_the_current_interval_widens_with_the_motions_misfit():
     halves = [_tank_interval((-0.0025, 0.00433), k * misfit)[1] for k in (0.0, 1.0, 2.0)]
     assert np.all(halves[1] > 2 * halves[0]) and np.all(halves[2] > 1.5 * halves[1])
     # the real current stays inside (the misfits' mean moves the fit, the interval holds it)
-    current, half, _ = _tank_interval((-0.0025, 0.00433), misfit)
+    current, half, _, _ = _tank_interval((-0.0025, 0.00433), misfit)
     assert np.all(np.abs(current - (-0.0025, 0.00433)) <= half)
 
 
@@ -300,6 +290,99 @@ def test_the_tank_current_is_taken_to_the_residuals_least_squares_estimate():
     # from a point another criterion chose (the minimax fit's), off the least-squares one
     got = _least_squares([ev], cube, lambda x: [x], np.array([0.1, 0.004, 0.0]))
     np.testing.assert_allclose(got, ev.own_fit(), atol=1e-7)
+    # a least-squares point beyond a bound: the best point within the bounds, the parameter at
+    # its bound and the current fitted with it (written apart: the bounded linear problem with
+    # that parameter fixed at the bound)
+    far = _LinearMotion(rng, [1.5, -0.0025, 0.00433], (0.0, 0.0))
+    got = _least_squares([far], cube, lambda x: [x], np.array([0.9, 0.0, 0.0]))
+    rest = np.linalg.lstsq(far.columns[:, 1:], -far.offset - far.columns[:, 0], rcond=None)[0]
+    np.testing.assert_allclose(got, [1.0, *rest], atol=1e-7)
     # the least-squares point itself stays
     np.testing.assert_allclose(_least_squares([ev], cube, lambda x: [x], ev.own_fit()),
                                ev.own_fit(), atol=1e-9)
+
+
+def test_the_views_are_combined_by_their_information_and_a_one_axis_view_only_across_its_axis():
+    from eelhost.estimation.tank_current import RESOLVED_CHI2, CurrentView, combine_views
+
+    a, b = np.array([0.001, 0.004]), np.array([-0.002, 0.005])
+    sa, sb = np.array([[4e-6, 1e-6], [1e-6, 1e-6]]), np.diag([1e-6, 9e-6])
+    current, cov = combine_views([CurrentView(a, sa), CurrentView(b, sb)])
+    # written apart: the inverse-covariance-weighted mean
+    wa, wb = np.linalg.inv(sa), np.linalg.inv(sb)
+    np.testing.assert_allclose(cov, np.linalg.inv(wa + wb), rtol=1e-9)
+    np.testing.assert_allclose(current, np.linalg.solve(wa + wb, wa @ a + wb @ b), rtol=1e-9)
+    # two one-axis motions (along x and along 30 deg): each tells only its cross-track
+    # component, n_m . c = n_m . c_m, two equations for two unknowns; whatever each says along
+    # its axis moves nothing
+    x_axis, at_30 = np.array([1.0, 0.0]), np.array([np.cos(np.pi / 6), np.sin(np.pi / 6)])
+    truth = np.array([-0.0025, 0.00433])
+    along_x, along_30 = truth + 0.006 * x_axis, truth - 0.004 * at_30  # far off along the axes
+    current, cov = combine_views([CurrentView(along_x, sa, x_axis),
+                                  CurrentView(along_30, sb, at_30)])
+    np.testing.assert_allclose(current, truth, atol=1e-12)
+    across = np.array([[0.0, 1.0], [-at_30[1], at_30[0]]])
+    variances = np.array([n @ s @ n for n, s in zip(across, (sa, sb), strict=True)])
+    written_apart = np.linalg.inv(across.T @ np.diag(1 / variances) @ across)
+    np.testing.assert_allclose(cov, written_apart, rtol=1e-9)
+    # a direction no view tells: the whole search bound wide, the views' mean there
+    from eelhost.estimation.space import CURRENT_BOUND_M_S
+
+    current, cov = combine_views([CurrentView(along_x, sa, x_axis)])
+    assert current[1] == pytest.approx(along_x[1])
+    assert current[0] == pytest.approx(along_x[0])
+    assert np.sqrt(RESOLVED_CHI2 * cov[0, 0]) == pytest.approx(CURRENT_BOUND_M_S)
+    # a view that tells nothing (its current unidentifiable) is left out
+    current, _ = combine_views([CurrentView(a, sa), CurrentView(b, None)])
+    np.testing.assert_allclose(current, a, atol=1e-15)
+
+
+def test_a_one_axis_motions_along_track_error_does_not_pull_the_tanks_current():
+    # two linear motions in a 5 mm/s current towards 120 deg; the first swims along x and its
+    # residuals hold an along-track error that looks like 4 mm/s of current along x (a clock
+    # offset, a speed its coefficients cannot make), the worst case: along its own columns
+    truth = (-0.0025, 0.00433)
+    misfits = [(0.004, 0.0), (0.0, 0.0)]
+    pulled, _, _, _ = _tank_interval(truth, misfits)
+    current, half, _, _ = _tank_interval(truth, misfits, axes=(np.array([1.0, 0.0]), None))
+    assert np.hypot(*(pulled - truth)) > 0.001  # every component counted: pulled along x
+    assert np.hypot(*(current - truth)) < 0.0003  # across x only: the truth
+    assert np.all(np.abs(current - truth) <= half)
+
+
+def test_still_water_is_told_by_the_confidence_ellipse_not_by_each_components_interval():
+    from eelhost.estimation.tank_current import RESOLVED_CHI2, TankCurrent
+
+    sd = 0.001
+    cov = np.diag([sd**2, sd**2])
+    half = np.full(2, 1.959964 * sd)
+    # 2.1 standard deviations along x: outside v_x's 95 % interval, inside the 95 % ellipse
+    # (chi-squared with 2 degrees of freedom, 5.99), as a still tank is one time in ten
+    edge = TankCurrent(np.array([2.1 * sd, 0.0]), half, {}, 8, 1.0, 1.0, cov)
+    assert RESOLVED_CHI2 == pytest.approx(5.991, abs=1e-3)
+    assert not edge.resolved and edge.text().startswith("no current resolved")
+    assert TankCurrent(np.array([2.1 * sd, 0.0]), half, {}, 8, 1.0).resolved  # intervals alone
+    # 2.5 standard deviations: outside the ellipse too
+    beyond = TankCurrent(np.array([2.5 * sd, 0.0]), half, {}, 8, 1.0, 1.0, cov)
+    assert beyond.resolved and beyond.to_json()["covariance_m2_s2"] == cov.tolist()
+    # both components at 1.9 standard deviations: each inside its interval, together beyond
+    assert TankCurrent(np.array([1.9 * sd, 1.9 * sd]), half, {}, 8, 1.0, 1.0, cov).resolved
+
+
+@pytest.mark.slow
+def test_one_set_for_every_motion_gets_the_tanks_interval_and_verdict(tank):
+    ds = tank[0]
+    fit, ev = fit_motion(ds, "joint", FitSettings(budget=150, polish_iterations=4))
+    held, held_evs, current = share_tank_current({"joint": fit}, {"joint": ev})
+    assert current is not None and current.experiments == 4
+    assert list(current.per_motion_m_s) == ["joint"] and current.misfit_scale == 1.0
+    # one set for two motions whose water differs (table 3's straight and turning sets)
+    # misfits, and its current with it (about 12 mm/s towards 164 deg): its interval says so
+    # and holds the truth; the verdict is the ellipse's
+    truth = STRAY_M_S * np.array([np.cos(np.radians(STRAY_DEG)), np.sin(np.radians(STRAY_DEG))])
+    assert np.all(np.abs(current.current_m_s - truth) <= current.half_width_m_s)
+    c, cov = current.current_m_s, current.covariance_m2_s2
+    assert current.resolved == bool(c @ np.linalg.inv(cov) @ c > 5.991)
+    got = np.array(held["joint"].model.current_m_s)
+    assert np.all(np.abs(got - current.current_m_s) <= current.half_width_m_s + 1e-12)
+    assert held_evs["joint"].space is held["joint"].space

@@ -345,9 +345,9 @@ def _report_text(
             f"One current for the tank, estimated from all {tank['experiments']} training "
             f"experiments together: "
             + ("" if tank.get("resolved", True) else
-               "no current resolved (still water lies inside its interval): ")
+               "no current resolved (still water lies inside its 95 % confidence ellipse): ")
             + f"{tank['speed_m_s']:.4f} m/s towards "
-            f"{tank['direction_deg']:.0f} deg (95 % interval +-"
+            f"{tank['direction_deg']:.0f} deg (the 95 % ellipse's interval +-"
             f"{1e3 * tank['half_width_m_s'][0]:.1f} mm/s in v_x, "
             f"+-{1e3 * tank['half_width_m_s'][1]:.1f} mm/s in v_y"
             + (f", widened {tank['misfit_scale']:.1f} times because the motions' own currents "

@@ -2,47 +2,44 @@
 
 docs/estimation.md, "Nuisance parameters: the tank's ambient current". The straight and turning
 fits each fit a current (:func:`eelhost.estimation.methods.run_fit`), but the experiments were
-recorded in one tank. The straight experiments all swim along one axis, where a current trades
-against the coefficients that set the swimming speed, so a straight fit alone puts noise and
-misfit into an along-track current; the turning experiments swim every direction, where a current
-and a speed error differ. So, once both fits are made:
+recorded in one tank. So, once both fits are made:
 
-1. **Joint fit.** The vector [straight's parameters, turning's parameters, each one-axis
-   motion's current along its axis, one current] is polished by the minimax trust region
-   (:func:`eelhost.estimation.local.polish_minimax_many`) on every training experiment of both
-   motions, each motion's errors divided by its own fit's fitness (so that both motions weigh
-   alike whatever their misfit), from three starts in lock step: the straight fit's current, the
-   turning fit's and still water. A motion whose experiments all swim to one side
-   (:func:`swim_axis`: the paper's straight gaits along x, its turning gaits towards their
-   waypoint at 30 deg) swims in the tank's current plus a current of its own along that axis:
-   along its axis a current is a speed error its coefficients can make as well, and the bundled
-   noise decided which; across it, it is a drift nothing else makes. So the tank's current is
-   what the motions see across their axes (:func:`cross_track_axes`: only when those views span
-   the plane; otherwise nothing is decoupled). From the best start, Gauss-Newton steps
-   (:func:`_least_squares`) take the joint vector to the residuals' least-squares point: the
-   interval below is that estimate's, and the minimax point balances the worst experiments, and
-   with them the misfit.
-2. **Its interval.** The current's linearised standard error s on the joint problem (the
-   residuals of both motions stacked, the Jacobian in the unit cube, the residual variance from
-   the residuals, never below the pixel rounding's, the other parameters profiled out), and the
-   interval c +- z s (z = 1.96) per component; or, where wider, the cluster-robust (sandwich)
-   standard error with each experiment a cluster, times Student's t with G - 1 degrees of
-   freedom for G experiments: a recording's residuals move together (its clock offset, its
-   jitter, the misfit), so they are not independent evidence. Neither sees a misfit the
-   current absorbed (the residuals no longer hold it), so the interval is widened by the Birge
-   ratio of the motions' own currents (each motion's own fit taken to its least-squares point
-   the same way) against the tank's (:func:`misfit_scale`): in one tank,
-   with a model that holds the water, they differ by their noise only; beyond it, the misfit
-   moved them, and the tank's current as much. When still water lies inside the interval, no
-   current is resolved (``TankCurrent.resolved``), and the report says so.
-3. **Each motion's fit holds it.** Each motion's parameters are polished again from the joint
-   fit with the current bounded to that interval (``ParameterSpace.current_bounds``), so the
-   bootstrap, the identifiability analysis and the validation see the tank's current, and a fit
-   can move it only within what all the experiments allow.
+1. **Each motion's view, weighed by what it tells.** Each motion's own fit is taken to its
+   residuals' least-squares point (:func:`_least_squares`, SciPy's bounded trust-region least
+   squares from the minimax fit, which balances the worst experiments and with them the misfit),
+   and its current there has a covariance (:func:`_spread`: linearised, the other parameters
+   profiled out, the wider of the independent-residual and the cluster-robust one). A motion
+   whose experiments all swim to one side (:func:`swim_axis`: the paper's straight gaits along
+   x, its turning gaits towards their waypoint at 30 deg) tells only its current across that
+   axis: along it a current is a speed error its coefficients can make as well, and the
+   recording's clock offset and the controller's timing jitter shift it along the track too (on
+   a servo tank the straight fit's along-track current came out 4 mm/s off, twice its own
+   cluster-robust standard error, its cross-track one within 0.1 mm/s), so its along-track
+   view is left out, not weighed (:func:`cross_track_axes`: only when the views left span the
+   plane; otherwise every view counts whole). The tank's current is the information-weighted
+   least squares of the views (:func:`combine_views`): each view weighs by the inverse of its
+   covariance, a one-axis view by the inverse variance of its cross-track current.
+2. **Its interval.** The covariance of that combination on every experiment of every motion
+   together: from independent residuals or, where wider, cluster-robust with each experiment a
+   cluster and Student's t with G - 1 degrees of freedom for all G experiments (a recording's
+   residuals move together: its clock offset, its jitter, the misfit). Neither sees a misfit the
+   currents absorbed, so it is widened by the Birge ratio of the motions' own currents against
+   the tank's (:func:`misfit_scale`): in one tank, with a model that holds the water, they
+   differ by their noise only; beyond it, the misfit moved them, and the tank's current as
+   much. The interval of each component is the shadow of the 95 % confidence ellipse on its
+   axis (simultaneous intervals), and a current is **resolved** when still water lies outside
+   that ellipse (``TankCurrent.resolved``: the Wald test of both components at once); otherwise
+   the report says "no current resolved".
+3. **Each motion's fit holds it.** Each motion's parameters are polished again from its
+   least-squares point with the current bounded to that interval
+   (``ParameterSpace.current_bounds``), so the bootstrap, the identifiability analysis and the
+   validation see the tank's current, and a fit can move it only within what all the
+   experiments allow.
 
 The currents each experiment declares still add to it as vectors (a stray current that changes
-per experiment is declared per experiment). With only one motion (or one set for every motion:
-its fit is already shared) nothing changes.
+per experiment is declared per experiment). With only one motion nothing changes; one set for
+every motion (``{"joint": fit}``, its current already shared) gets the same interval, verdict
+and holding from its own view.
 """
 
 from __future__ import annotations
@@ -53,32 +50,35 @@ from dataclasses import dataclass, replace
 from typing import Any, cast
 
 import numpy as np
+from scipy.optimize import least_squares as scipy_least_squares
+from scipy.stats import chi2
 from scipy.stats import t as student_t
 
 from eelhost.estimation.evaluate import Evaluator
 from eelhost.estimation.identify import REL_STEP
-from eelhost.estimation.local import FAILED, polish_minimax, polish_minimax_many
+from eelhost.estimation.local import FAILED, polish_minimax
 from eelhost.estimation.optimise import FitResult
 from eelhost.estimation.space import (
     CURRENT_BOUND_M_S,
-    ParameterSpace,
     box_from_unit,
     box_to_unit,
 )
 
 log = logging.getLogger(__name__)
 
-# Iterations of the joint polish and of each motion's polish holding the tank's current.
-JOINT_ITERATIONS = 12
+# Iterations of each motion's polish holding the tank's current.
 HOLD_ITERATIONS = 8
-# Gauss-Newton iterations from the minimax fits to the least-squares estimate of the current.
-LEAST_SQUARES_ITERATIONS = 3
+# Residual evaluations (each one run per experiment) of the trust-region least squares that
+# takes each motion's fit to its least-squares point; its Jacobians cost K + 1 runs each.
+LEAST_SQUARES_EVALUATIONS = 20
 Z_95 = 1.959964  # the normal's 97.5 % quantile: the interval c +- z s
 # Least half-width of the held interval, m/s: a tenth of a mm/s, so that a polish's unit cube
 # keeps a range its finite differences can step in.
 MIN_HALF_WIDTH_M_S = 1e-4
 # Experiments whose net displacements all lie within this of their mean direction swim one axis.
 AXIS_SPREAD_DEG = 20.0
+# chi-squared with 2 degrees of freedom at 95 %: still water outside the current's ellipse
+RESOLVED_CHI2 = float(chi2.ppf(0.95, 2))
 
 
 @dataclass(frozen=True)
@@ -90,16 +90,21 @@ class TankCurrent:
     current_m_s : ndarray, shape (2,)
         (v_x, v_y), m/s.
     half_width_m_s : ndarray, shape (2,)
-        Half-width of its 95 % interval per component (the bounds each motion's fit holds).
+        Half-width of its interval per component, the shadow of its 95 % confidence ellipse
+        (the bounds each motion's fit holds).
     per_motion_m_s : dict of str to ndarray
         The current each motion's own fit had found alone, for the record.
     experiments : int
         Training experiments it was estimated from.
     fitness : float
-        The joint fit's largest error relative to each motion's own fitness.
+        The largest held fit's fitness relative to its motion's own fit's (what holding the
+        tank's current costs).
     misfit_scale : float
         How much the interval was widened because the motions' own currents disagree beyond
         their intervals (:func:`misfit_scale`; 1: they agree).
+    covariance_m2_s2 : ndarray, shape (2, 2), or None
+        The current's covariance (widened as the interval), (m/s)^2; None: unknown (then
+        ``resolved`` asks each component's interval).
     """
 
     current_m_s: np.ndarray
@@ -108,11 +113,21 @@ class TankCurrent:
     experiments: int
     fitness: float
     misfit_scale: float = 1.0
+    covariance_m2_s2: np.ndarray | None = None
 
     @property
     def resolved(self) -> bool:
-        """Whether the data hold a current: still water (0, 0) lies outside its interval."""
-        return bool(np.any(np.abs(self.current_m_s) > self.half_width_m_s))
+        """Whether the data hold a current: still water lies outside its 95 % confidence ellipse.
+
+        The Wald test of (0, 0) on both components at once, c^T V^-1 c against chi-squared
+        with 2 degrees of freedom (5.99): asking each component's 95 % interval instead calls a
+        still tank's current resolved about one time in ten. Without a covariance, whether
+        (0, 0) lies outside the interval of either component.
+        """
+        if self.covariance_m2_s2 is None:
+            return bool(np.any(np.abs(self.current_m_s) > self.half_width_m_s))
+        c = self.current_m_s
+        return bool(float(c @ np.linalg.pinv(self.covariance_m2_s2) @ c) > RESOLVED_CHI2)
 
     def text(self) -> str:
         """"0.0050 m/s towards 120 deg (v_x -2.5 +- 0.4 mm/s, v_y +4.3 +- 0.5 mm/s)".
@@ -141,12 +156,14 @@ class TankCurrent:
             "experiments": self.experiments,
             "resolved": self.resolved,
             "misfit_scale": float(self.misfit_scale),
+            **({} if self.covariance_m2_s2 is None else
+               {"covariance_m2_s2": [[float(v) for v in row] for row in self.covariance_m2_s2]}),
         }
 
 
 @dataclass(frozen=True, eq=False)
 class _JointCube:
-    """The joint vector's bounds and unit-cube mapping (all :func:`polish_minimax_many` uses)."""
+    """A vector's bounds and unit-cube mapping (for :func:`_least_squares`, :func:`_spread`)."""
 
     bounds: np.ndarray
 
@@ -171,7 +188,8 @@ def share_tank_current(
     Parameters
     ----------
     fits : dict of str to FitResult
-        Per motion, its fit (each with its own current).
+        Per motion, its fit (each with its own current); or ``{"joint": fit}``, one set for
+        every motion (its current is already shared: it gets its interval and verdict).
     evaluators : dict of str to Evaluator
         Per motion, the evaluator of its training experiments.
     say : callable, optional
@@ -181,76 +199,35 @@ def share_tank_current(
     -------
     (fits, evaluators, TankCurrent or None)
         The fits holding the tank's current and their evaluators (in the held spaces); the
-        inputs unchanged and None when fewer than two motions fit a current without failing.
+        inputs unchanged and None when fewer than two motions (or no one set) fit a current
+        without failing.
     """
     say = say or log.info
     # a fit that scores a failure penalty (a run blew up or fell short) says nothing about the
     # water: its motion keeps its own current
-    motions = [m for m in ("straight", "turning")
-               if m in fits and fits[m].space.current and m in evaluators
-               and fits[m].fitness < FAILED]
+    usable = [m for m in fits if fits[m].space.current and m in evaluators
+              and fits[m].fitness < FAILED]
+    motions: list[str] = [m for m in ("straight", "turning") if m in usable]
     if len(motions) < 2:
+        motions = ["joint"] if usable == ["joint"] and list(fits) == ["joint"] else []
+    if not motions:
         return fits, evaluators, None
     evs = [evaluators[m] for m in motions]
-    own = [np.asarray(fits[m].values, dtype=float) for m in motions]
-    ks = [ev.space.size - 2 for ev in evs]  # each motion's parameters before the current
-    scale = [1.0 / max(float(fits[m].fitness), 1e-9) for m in motions]
-    # a motion whose experiments all swim along one axis gets a current of its own along it
-    # (module doc, step 1): there it is a speed error, so the tank's current is what the other
-    # motions see along that axis and what every motion sees across it
-    axes = cross_track_axes([swim_axis(ev) for ev in evs])
-    axial = [i for i, d in enumerate(axes) if d is not None]
-    cube = _JointCube(np.vstack(
-        [ev.space.bounds[:k] for ev, k in zip(evs, ks, strict=True)]
-        + [np.tile([-2 * CURRENT_BOUND_M_S, 2 * CURRENT_BOUND_M_S], (len(axial), 1))]
-        + [np.tile([-CURRENT_BOUND_M_S, CURRENT_BOUND_M_S], (2, 1))]).reshape(-1, 2))
-    first_extra = sum(ks)
-
-    def split(x: np.ndarray) -> list[np.ndarray]:
-        """The joint vectors (C, K) as each motion's vectors (C, k_m + 2)."""
-        out, at = [], 0
-        for i, k in enumerate(ks):
-            current = x[:, -2:]
-            if axes[i] is not None:
-                current = current + x[:, first_extra + axial.index(i), None] * axes[i]
-            out.append(np.hstack([x[:, at:at + k], current]))
-            at += k
-        return out
-
-    def evaluate(xs: list[np.ndarray]) -> list[tuple[np.ndarray, np.ndarray]]:
-        # every start's candidates in one batch per motion
-        sizes = [len(x) for x in xs]
-        both = np.vstack(xs)
-        errors, vectors = [], []
-        for ev, part, s in zip(evs, split(both), scale, strict=True):
-            e, v = ev.evaluate(part)
-            errors.append(s * e)
-            vectors.append(s * v)
-        e_all, v_all = np.concatenate(errors, axis=1), np.concatenate(vectors, axis=1)
-        edges = np.cumsum([0] + sizes)
-        return [(e_all[a:b], v_all[a:b]) for a, b in zip(edges[:-1], edges[1:], strict=True)]
-
-    body = np.concatenate([x[:k] for x, k in zip(own, ks, strict=True)])
-
-    def start(current: np.ndarray) -> np.ndarray:
-        # each axial motion's own current along its axis: what its fit found beyond ``current``
-        extra = [float((own[i][-2:] - current) @ axes[i]) for i in axial]  # type: ignore[operator]
-        return np.concatenate([body, extra, current])
-
-    starts = np.array([start(x[-2:]) for x in own] + [start(np.zeros(2))])
-    results = polish_minimax_many(evaluate, cast(ParameterSpace, cube), starts, JOINT_ITERATIONS)
-    best = min(results, key=lambda r: r.fitness)
-    joint = _least_squares(evs, cube, split, np.asarray(best.values, dtype=float))
-    current = joint[-2:]
-    half, scale_by = _interval(evs, cube, split, joint, own)
+    axes: list[np.ndarray | None] = (cross_track_axes([swim_axis(ev) for ev in evs])
+                                     if len(evs) > 1 else [None])
+    own, current, covariance, scale_by = estimate(
+        evs, [np.asarray(fits[m].values, dtype=float) for m in motions], axes)
+    half = np.clip(np.sqrt(RESOLVED_CHI2 * np.clip(np.diag(covariance), 0.0, None)),
+                   MIN_HALF_WIDTH_M_S, CURRENT_BOUND_M_S)
     new_fits, new_evs = dict(fits), dict(evaluators)
-    for m, ev, part in zip(motions, evs, split(joint[None]), strict=True):
+    worst = 0.0
+    for m, ev, x in zip(motions, evs, own, strict=True):
         held = replace(ev.space, current_bounds=np.column_stack(
             [np.maximum(current - half, -CURRENT_BOUND_M_S),
              np.minimum(current + half, CURRENT_BOUND_M_S)]))
         held_ev = ev.with_space(held)
-        # from its joint-fit parameters in the tank's current (not its own along its axis)
-        begin = np.concatenate([part[0][:-2], current])
+        # from its own least-squares parameters in the tank's current
+        begin = np.concatenate([x[:-2], current])
         pol = polish_minimax(held_ev.evaluate, held, begin, HOLD_ITERATIONS)
         runs = held_ev.simulations
         ev.simulations += runs  # the motion's count of simulations includes these
@@ -262,13 +239,145 @@ def share_tank_current(
                                 fits[m].evaluations + pol.evaluations,
                                 search_evaluations=fits[m].search_evaluations)
         new_evs[m] = held_ev
+        worst = max(worst, float(pol.fitness) / max(float(fits[m].fitness), 1e-9))
     tank = TankCurrent(current, half, {m: x[-2:] for m, x in zip(motions, own, strict=True)},
-                       sum(len(ev.prepared) for ev in evs), best.fitness, scale_by)
+                       sum(len(ev.prepared) for ev in evs), worst, scale_by, covariance)
     say(f"tank current from {tank.experiments} training experiments ({', '.join(motions)}): "
         f"{tank.text()}; alone: " + "; ".join(
             f"{m} {1e3 * np.hypot(*c):.1f} mm/s towards {np.degrees(np.arctan2(c[1], c[0])):.0f} deg"
             for m, c in tank.per_motion_m_s.items()))
     return new_fits, new_evs, tank
+
+
+def estimate(evs: list[Any], starts: list[np.ndarray], axes: list[np.ndarray | None]
+             ) -> tuple[list[np.ndarray], np.ndarray, np.ndarray, float]:
+    """The tank's current from the motions' own fits (module doc, steps 1 and 2).
+
+    Parameters
+    ----------
+    evs : list of Evaluator
+        Each motion's evaluator (``residuals``, ``space.bounds``, ``prepared``).
+    starts : list of ndarray
+        Each motion's fit, its current last.
+    axes : list of (ndarray (2,) or None)
+        Each motion's swimming axis where only its cross-track current counts
+        (:func:`cross_track_axes`).
+
+    Returns
+    -------
+    (own, current, covariance, scale)
+        Each motion's vector at its least-squares point; the tank's current, m/s; its
+        covariance, (m/s)^2, widened by ``scale`` squared; ``scale``, :func:`misfit_scale`.
+    """
+    own = [_least_squares([ev], _JointCube(ev.space.bounds), _alone, np.asarray(x, dtype=float))
+           for ev, x in zip(evs, starts, strict=True)]
+    spreads = [_spread([ev], _JointCube(ev.space.bounds), _alone, x)
+               for ev, x in zip(evs, own, strict=True)]
+    views = [CurrentView(x[-2:], None, a) if s is None else
+             CurrentView(x[-2:], s.covariance(), a, s.independent, s.influence)
+             for x, s, a in zip(own, spreads, axes, strict=True)]
+    current, covariance = combine_views(views)
+    scale_by = misfit_scale(current, [(v.current_m_s, v.covariance) for v in views
+                                      if v.covariance is not None])
+    return own, current, covariance * scale_by**2, scale_by
+
+
+def _alone(x: np.ndarray) -> list[np.ndarray]:
+    """One motion's vectors as they are (its own problem)."""
+    return [x]
+
+
+@dataclass(frozen=True)
+class CurrentView:
+    """What one motion's own fit says of the tank's current (module doc, step 1).
+
+    Attributes
+    ----------
+    current_m_s : ndarray, shape (2,)
+        The motion's own least-squares current, m/s.
+    covariance : ndarray, shape (2, 2), or None
+        Its covariance, (m/s)^2 (:func:`_spread`'s wider one), which weighs it; None where the
+        motion's other parameters explain its current (it tells nothing).
+    axis : ndarray, shape (2,), or None
+        The unit axis it swims along when only its cross-track component counts
+        (:func:`cross_track_axes`); None: both components count.
+    independent : ndarray, shape (2, 2), or None
+        Its covariance from independent residuals, (m/s)^2.
+    influence : ndarray, shape (G, 2), or None
+        Each of its experiments' pull on ``current_m_s`` (the cluster-robust scores through
+        the inverse information), m/s: with ``independent``, the tank's covariance is taken on
+        every experiment of every motion together.
+    """
+
+    current_m_s: np.ndarray
+    covariance: np.ndarray | None
+    axis: np.ndarray | None = None
+    independent: np.ndarray | None = None
+    influence: np.ndarray | None = None
+
+
+def combine_views(views: list[CurrentView]) -> tuple[np.ndarray, np.ndarray]:
+    """The tank's current from the motions' views: information-weighted least squares.
+
+    c = (sum H_m)^-1 sum H_m c_m, where H_m is a view's information: S_m^-1 for a view whose
+    both components count, and n n^T / (n^T S_m n) for a one-axis motion (n its cross-track
+    unit vector, n^T S_m n the variance of its cross-track current). Its covariance is
+    (sum H_m)^-1; or, when every view carries its ``independent`` covariance and its
+    experiments' ``influence``, that of c = sum A_m c_m (A_m = (sum H)^-1 H_m) on all the
+    experiments together, as :func:`_spread` does for one fit: sum A_m S_ind,m A_m^T from
+    independent residuals, or where wider the cluster-robust sum over every experiment g of
+    (A_m d_g)(A_m d_g)^T G / (G - 1), times (t(G - 1) / z)^2. A direction no view informs (the
+    information singular there) gets a variance as wide as the whole search bound, and the
+    current there is the views' mean.
+
+    Parameters
+    ----------
+    views : list of CurrentView
+
+    Returns
+    -------
+    (ndarray (2,), ndarray (2, 2))
+        The current, m/s, and its covariance, (m/s)^2.
+    """
+    told = [v for v in views if v.covariance is not None]
+    weights = []
+    for view in told:
+        assert view.covariance is not None
+        if view.axis is None:
+            weights.append(np.linalg.pinv(view.covariance))
+        else:
+            across = np.array([-view.axis[1], view.axis[0]])
+            weights.append(np.outer(across, across)
+                           / max(float(across @ view.covariance @ across), 1e-30))
+    info = sum(weights, np.zeros((2, 2)))
+    rhs = sum((w @ v.current_m_s for w, v in zip(weights, told, strict=True)), np.zeros(2))
+    mean = np.mean([v.current_m_s for v in told] or [np.zeros(2)], axis=0)
+    values, vectors = np.linalg.eigh(info)
+    blind = CURRENT_BOUND_M_S**2 / RESOLVED_CHI2  # a variance whose interval is the whole bound
+    inverse, unseen, current = np.zeros((2, 2)), np.zeros((2, 2)), np.zeros(2)
+    for value, vector in zip(values, vectors.T, strict=True):
+        if value > 1e-9 * max(float(values.max()), 1e-300):
+            inverse += np.outer(vector, vector) / value
+            current += vector * float(vector @ rhs) / value
+        else:
+            unseen += np.outer(vector, vector) * blind
+            current += vector * float(vector @ mean)
+    sandwiches = [(v.independent, v.influence) for v in told]
+    if not told or any(i is None or d is None for i, d in sandwiches):
+        return current, inverse + unseen
+    gains = [inverse @ w for w in weights]
+    independent = sum((g @ cast(np.ndarray, i) @ g.T
+                       for g, (i, _) in zip(gains, sandwiches, strict=True)), np.zeros((2, 2)))
+    pulls = np.vstack([cast(np.ndarray, d) @ g.T
+                       for g, (_, d) in zip(gains, sandwiches, strict=True)])
+    groups = len(pulls)
+    covariance = independent
+    if groups >= 2:
+        quantile = float(student_t.ppf(0.975, groups - 1)) / Z_95
+        robust = pulls.T @ pulls * groups / (groups - 1) * quantile**2
+        if np.trace(robust) > np.trace(independent):
+            covariance = robust
+    return current, covariance + unseen
 
 
 def misfit_scale(current: np.ndarray, views: list[tuple[np.ndarray, np.ndarray]]) -> float:
@@ -353,6 +462,7 @@ class _Spread:
     independent: np.ndarray
     robust: np.ndarray | None
     quantile: float
+    influence: np.ndarray | None = None  # (G, 2): each experiment's pull on the current, m/s
 
     def half_width(self) -> np.ndarray:
         """The 95 % half-width per component: the wider of the two intervals."""
@@ -368,44 +478,6 @@ class _Spread:
             return self.independent
         robust = self.robust * self.quantile**2
         return robust if np.trace(robust) > np.trace(self.independent) else self.independent
-
-
-def _interval(evs: list[Evaluator], cube: _JointCube,
-              split: Callable[[np.ndarray], list[np.ndarray]], joint: np.ndarray,
-              own: list[np.ndarray]) -> tuple[np.ndarray, float]:
-    """The tank current's 95 % half-width per component and its widening for misfit (step 2).
-
-    ``own`` holds each motion's own fit (its vector, current last) in its own space, taken to
-    its least-squares point (:func:`_least_squares`) as ``joint`` was. The half-width on the
-    joint problem (:func:`_half_width`) times :func:`misfit_scale` of the motions' own
-    currents, each with its covariance on its own residuals.
-    """
-    def alone(x: np.ndarray) -> list[np.ndarray]:
-        return [x]
-
-    own = [_least_squares([ev], _JointCube(ev.space.bounds), alone, x)
-           for ev, x in zip(evs, own, strict=True)]
-    views = [_spread([ev], _JointCube(ev.space.bounds), alone, x)
-             for ev, x in zip(evs, own, strict=True)]
-    scale_by = misfit_scale(joint[-2:], [(x[-2:], v.covariance())
-                                         for x, v in zip(own, views, strict=True)
-                                         if v is not None])
-    half = np.clip(scale_by * _half_width(evs, cube, split, joint), MIN_HALF_WIDTH_M_S,
-                   CURRENT_BOUND_M_S)
-    return half, scale_by
-
-
-def _half_width(evs: list[Evaluator], cube: _JointCube,
-                split: Callable[[np.ndarray], list[np.ndarray]], joint: np.ndarray) -> np.ndarray:
-    """Half-width of the current's 95 % interval, per component (module doc, step 2).
-
-    :func:`_spread`'s wider interval; a current the other parameters can explain gets the whole
-    search bound.
-    """
-    spread = _spread(evs, cube, split, joint)
-    if spread is None:
-        return np.full(2, CURRENT_BOUND_M_S)
-    return np.clip(spread.half_width(), MIN_HALF_WIDTH_M_S, CURRENT_BOUND_M_S)
 
 
 def _jacobian(evs: list[Evaluator], cube: _JointCube,
@@ -429,30 +501,34 @@ def _jacobian(evs: list[Evaluator], cube: _JointCube,
 def _least_squares(evs: list[Evaluator], cube: _JointCube,
                    split: Callable[[np.ndarray], list[np.ndarray]],
                    x: np.ndarray) -> np.ndarray:
-    """Gauss-Newton from ``x`` to the residuals' least-squares point (module doc, step 2).
+    """From ``x`` to the residuals' least-squares point within the bounds (module doc, step 1).
 
     The interval is that of the least-squares estimate, so the current reported is that
     estimate, not the minimax fit's (which balances the worst experiments, and with them the
-    misfit). Each step the minimum-norm solution of J d = -r in the unit cube, clipped to the
-    bounds and halved until the sum of squares falls (at most four times); it stops when none does.
+    misfit). SciPy's trust-region reflective least squares (``scipy.optimize.least_squares``,
+    ``method="trf"``: bounds kept, parameters at a bound handled) in the unit cube, with the
+    forward-difference Jacobian of :func:`_jacobian` (one batch of K + 1 runs), at most
+    ``LEAST_SQUARES_EVALUATIONS`` residual evaluations. A fixed number of Gauss-Newton steps
+    halved until the sum of squares fell stopped short where a parameter sat at its bound (the
+    servo model's motor time constant): the current it returned fitted worse than the truth's.
+    Returns ``x`` when nothing fits better.
     """
     x = np.asarray(x, dtype=float)
-    for _ in range(LEAST_SQUARES_ITERATIONS):
-        r, _, jac = _jacobian(evs, cube, split, x)
-        cost = float(r[0] @ r[0])
-        d = np.linalg.lstsq(jac, -r[0], rcond=1e-9)[0]
-        u0 = cube.to_unit(x)
-        for _ in range(4):
-            trial = cube.from_unit(np.clip(u0 + d, 0.0, 1.0))
-            rt = np.hstack([ev.residuals(part) for ev, part in zip(evs, split(trial[None]),
-                                                                 strict=True)])[0]
-            if float(rt @ rt) < cost:
-                x = trial
-                break
-            d = d / 2
-        else:
-            break
-    return x
+    u0 = np.clip(cube.to_unit(x), 0.0, 1.0)
+
+    def residuals(u: np.ndarray) -> np.ndarray:
+        part = split(cube.from_unit(np.clip(u, 0.0, 1.0))[None])
+        return np.hstack([ev.residuals(p) for ev, p in zip(evs, part, strict=True)])[0]
+
+    def jacobian(u: np.ndarray) -> np.ndarray:
+        return _jacobian(evs, cube, split, cube.from_unit(np.clip(u, 0.0, 1.0)))[2]
+
+    r0 = residuals(u0)
+    fit = scipy_least_squares(residuals, u0, jac=jacobian, bounds=(0.0, 1.0), method="trf",
+                              max_nfev=LEAST_SQUARES_EVALUATIONS, x_scale=1.0)
+    if not np.all(np.isfinite(fit.x)) or 2.0 * float(fit.cost) >= float(r0 @ r0):
+        return x
+    return cube.from_unit(np.clip(fit.x, 0.0, 1.0))
 
 
 def _spread(evs: list[Evaluator], cube: _JointCube,
@@ -500,4 +576,5 @@ def _spread(evs: list[Evaluator], cube: _JointCube,
         return _Spread(sigma2 * bread * to_m_s, None, 1.0)
     robust = bread @ (scores.T @ scores) @ bread * groups / (groups - 1)
     return _Spread(sigma2 * bread * to_m_s, robust * to_m_s,
-                   float(student_t.ppf(0.975, groups - 1)) / Z_95)
+                   influence=(scores @ bread) * ranges,
+                   quantile=float(student_t.ppf(0.975, groups - 1)) / Z_95)
