@@ -597,7 +597,7 @@ def test_a_failed_replan_is_retried_at_once_only_while_the_contact_ahead_leaves_
     finally:
         nav.close()
     assert d is not None and d.stop == "no_safe_continuation"
-    assert "into an obstacle or wall" in d.detail
+    assert "into an obstacle or wall, first in " in d.detail  # the stop says when it touches
     if retried:
         # no back-off between the tries (1 s, then 2 s, without contact ahead), and still
         # stopped after max_failures of them

@@ -804,7 +804,8 @@ class TankReplanner:
             # the present plan swims into something and the last replan found nothing better
             d.stop = "no_safe_continuation"
             d.detail = (f"at t = {t_s:.2f} s the twin swims the present plan into an obstacle "
-                        f"or wall within {self.lookahead_s:g} s ({-gap * 1000:.0f} mm deep) and "
+                        f"or wall within {self.lookahead_s:g} s ({-gap * 1000:.0f} mm deep"
+                        f"{self._contact_note(t_s)}) and "
                         f"the last replan failed: {self.events[-1]['message']}")
             return d
         job = self._job
@@ -818,7 +819,8 @@ class TankReplanner:
             # within its budget and its plan could still steer a lead before the contact)
             d.stop = "no_safe_continuation"
             d.detail = (f"at t = {t_s:.2f} s the twin swims the present plan into an obstacle "
-                        f"or wall within {self.lookahead_s:g} s ({-gap * 1000:.0f} mm deep) and "
+                        f"or wall within {self.lookahead_s:g} s ({-gap * 1000:.0f} mm deep"
+                        f"{self._contact_note(t_s)}) and "
                         f"the replan requested at t = {job.t_request_s:.2f} s has not come back "
                         f"({time.monotonic() - job.wall_request_s:.1f} s of wall time)")
             return d
@@ -1184,7 +1186,8 @@ class TankReplanner:
         if self._present_plan_hits(t_s):
             d.stop = "no_safe_continuation"
             d.detail = (f"replanning at t = {job.t_request_s:.2f} s failed and the twin swims the "
-                        f"present plan into an obstacle or wall: {outcome.message}")
+                        f"present plan into an obstacle or wall{self._contact_note(t_s)}: "
+                        f"{outcome.message}")
             return True
         final = self.failures >= self.max_failures or outcome.status in REFUSED_FROM_STATE
         if final and self._present_plan_safe(t_s):
@@ -1281,6 +1284,11 @@ class TankReplanner:
         return Twin(twin.robot, twin.coefficients, twin.gait, twin.options,
                     (float(current[0]), float(current[1])), twin.acceptance_radius_m, twin.threads,
                     twin.model)
+
+    def _contact_note(self, t_s: float) -> str:
+        """", first in X s" for a stop's message when the look-ahead said when it touches."""
+        ahead = self._contact_at_s - t_s
+        return f", first in {ahead:.1f} s" if math.isfinite(ahead) else ""
 
     def _present_plan_hits(self, t_s: float) -> bool:
         """The last look-ahead, at most 1.5 s old, swam the present waypoints into contact."""
