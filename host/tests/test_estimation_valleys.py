@@ -11,6 +11,7 @@ from eelhost.estimation.uncertainty import (
     Valleys,
     fitness_threshold,
     principal_axis,
+    profile_targets,
     search_valleys,
     spread_starts,
     trade_directions,
@@ -179,3 +180,16 @@ def test_a_parameter_held_only_together_with_another_follows_their_trade_to_its_
     np.testing.assert_allclose([lower[1], upper[1]], BOUNDS[1])
     assert lower[0] <= 0.0 + 1e-9  # x went with it
     assert trade_directions(refits[:1], ESTIMATE) is None
+
+
+def test_profile_targets_lie_past_each_interval_end_short_of_its_bound():
+    lower, upper = np.array([0.8, -1.0]), np.array([1.2, 0.2])  # y's lower end is its bound
+    trade = np.array([[1.0, -1.0], [-1.0, 1.0]])
+    pins, starts = profile_targets(ESTIMATE, lower, upper, BOUNDS, np.array([True, True]), trade)
+    assert [j for j, _ in pins] == [0, 0, 0, 0, 1, 1]
+    np.testing.assert_allclose([v for _, v in pins], [-0.6, -2.0, 1.6, 2.0, 0.6, 1.0])
+    # each start holds its parameter at the target, the other moved along their trade
+    np.testing.assert_allclose(starts[[p[0] for p in pins].index(1) + 1], [0.0, 1.0])
+    np.testing.assert_allclose(starts[2], [1.6, -0.6])
+    assert np.all((starts >= BOUNDS[:, 0]) & (starts <= BOUNDS[:, 1]))
+    assert profile_targets(ESTIMATE, lower, upper, BOUNDS, np.array([False, False]))[0] == []

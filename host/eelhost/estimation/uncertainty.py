@@ -496,6 +496,42 @@ def search_valleys(
                    np.concatenate([tried[allowed], minima[kept]]))
 
 
+def profile_targets(
+    estimate: np.ndarray,
+    lower: np.ndarray,
+    upper: np.ndarray,
+    bounds: np.ndarray,
+    free: np.ndarray,
+    trade: np.ndarray | None = None,
+) -> tuple[list[tuple[int, float]], np.ndarray]:
+    """Where to hold each free parameter for a profile polish past its interval's ends.
+
+    For each free parameter and each end of [lower, upper] short of its bound: halfway from
+    the end to the bound, and the bound itself; each start has the others moved along their
+    trade against it (``trade``, :func:`trade_directions`) where known, cut to the bounds.
+
+    Returns
+    -------
+    (pins, starts)
+        Per profile polish, (index, value), and its start, shape (P, K).
+    """
+    pins: list[tuple[int, float]] = []
+    starts = []
+    for j in np.flatnonzero(free):
+        span = bounds[j, 1] - bounds[j, 0]
+        for reach, end in ((lower[j], bounds[j, 0]), (upper[j], bounds[j, 1])):
+            if abs(end - reach) <= 1e-6 * span:
+                continue
+            for v in (reach + 0.5 * (end - reach), end):
+                row = (trade[j] if trade is not None and np.isfinite(trade[j]).all()
+                       else np.eye(len(estimate))[j])
+                start = np.clip(estimate + (v - estimate[j]) * row, bounds[:, 0], bounds[:, 1])
+                start[j] = v
+                pins.append((int(j), float(v)))
+                starts.append(start)
+    return pins, np.reshape(starts, (-1, len(estimate)))
+
+
 def trade_directions(samples: np.ndarray, estimate: np.ndarray) -> np.ndarray | None:
     """How the parameters trade against each other, from the bootstrap refits.
 
@@ -743,6 +779,7 @@ def parametric_bootstrap(
     starts: Sequence[np.ndarray] = (),
     spread: int = SPREAD_STARTS,
     valleys: bool = True,
+    profile: bool = True,
 ) -> BootstrapResult:
     """Intervals for a fit from refits: the declared noise, and the misfit the noise misses.
 
@@ -797,6 +834,11 @@ def parametric_bootstrap(
         Look for other valleys that fit within the noise and widen the intervals to hold them
         (:func:`search_valleys`; one more round of ``len(starts) + spread`` refits of
         ``2 max_iterations``).
+    profile : bool
+        With ``valleys``: past each end of each free parameter's interval, refit the others
+        with it held halfway to its bound and at its bound (:func:`profile_targets`), and hold
+        those that fit within the threshold (one more round of up to 4 polishes per free
+        parameter).
 
     Returns
     -------
@@ -819,17 +861,27 @@ def parametric_bootstrap(
     n_exp = len(experiments)
 
     def refit(problems: list[tuple[list, np.ndarray]], in_space: ParameterSpace = space,
-              start: np.ndarray = estimate,
-              iterations: int = max_iterations) -> tuple[np.ndarray, np.ndarray]:
+              start: np.ndarray = estimate, iterations: int = max_iterations,
+              pins: Sequence[tuple[int, float]] = ()) -> tuple[np.ndarray, np.ndarray]:
         """Minimax polish of each (prepared data, experiments kept) from ``start``.
 
-        ``start`` is one point for all, or one per problem. Returns the refits (P, K) and
-        their fitness on their own data (P,).
+        ``start`` is one point for all, or one per problem. ``pins`` (one (index, value) per
+        problem, or none) holds a parameter of each problem at a value: the polish of the
+        others is a profile's. Returns the refits (P, K) and their fitness on their own data
+        (P,).
         """
         if not problems:
             return np.zeros((0, space.size)), np.zeros(0)
 
+        def pinned(asked: list[np.ndarray]) -> list[np.ndarray]:
+            out = [a.copy() for a in asked]
+            for a, (j, v) in zip(out, pins, strict=True):
+                a[:, j] = v  # the polish sees no slope along it and cannot move it
+            return out
+
         def evaluate(asked: list[np.ndarray]) -> list[tuple[np.ndarray, np.ndarray]]:
+            if pins:
+                asked = pinned(asked)
             sizes = [len(a) for a in asked]
             sim = evaluator.simulate(np.concatenate(asked))
             out, at = [], 0
@@ -843,7 +895,10 @@ def parametric_bootstrap(
         fits = polish_minimax_many(evaluate, in_space,
                                    np.broadcast_to(start, (len(problems), space.size)).copy(),
                                    iterations)
-        return (np.array([r.values for r in fits]).reshape(-1, space.size),
+        values = [r.values[None] for r in fits]
+        if pins:
+            values = pinned(values)
+        return (np.concatenate(values).reshape(-1, space.size),
                 np.array([r.fitness for r in fits]))
 
     # round 1: the declared noise's replicates and, on the recordings themselves, each
@@ -945,13 +1000,26 @@ def parametric_bootstrap(
 
         refits = np.concatenate([boot.samples.reshape(-1, space.size),
                                  boot.misfit_samples.reshape(-1, space.size)])
+        free = ~(held_current(space) | np.isin(np.array(space.names), list(unidentified)))
+        trade = trade_directions(refits, estimate)
+        reference = min(own, float(fitness))
         boot.valleys = search_valleys(
-            evaluator.fitness, polish_from, estimate, min(own, float(fitness)), threshold, tried,
-            half, bounds, principal_axis(refits, estimate, bounds),
-            coordinates=~(held_current(space)
-                          | np.isin(np.array(space.names), list(unidentified))),
-            trade=trade_directions(refits, estimate))
+            evaluator.fitness, polish_from, estimate, reference, threshold, tried,
+            half, bounds, principal_axis(refits, estimate, bounds), coordinates=free,
+            trade=trade)
         boot.lower, boot.upper, boot.split = boot.valleys.widened(estimate, half, bounds)
+        if profile:
+            # round 4: past each end the search reached, the others polished with the parameter
+            # held (a profile), halfway to its bound and at it
+            pins, pin_starts = profile_targets(estimate, boot.lower, boot.upper, bounds, free,
+                                               trade)
+            if progress and pins:
+                progress(f"bootstrap: {len(pins)} profile polishes")
+            moved, moved_fitness = refit([(evaluator.prepared, everything)] * len(pins), space,
+                                         pin_starts, max_iterations, pins=pins)
+            allowed = np.isfinite(moved_fitness) & (moved_fitness <= reference + threshold)
+            boot.valleys.points = np.concatenate([boot.valleys.points, moved[allowed]])
+            boot.lower, boot.upper, boot.split = boot.valleys.widened(estimate, half, bounds)
     else:
         boot.lower, boot.upper = boot.local_lower.copy(), boot.local_upper.copy()
         boot.split = np.zeros(space.size, dtype=bool)
