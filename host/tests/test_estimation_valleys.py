@@ -9,8 +9,10 @@ from scipy.optimize import minimize
 
 from eelhost.estimation.uncertainty import (
     Valleys,
+    bisect_targets,
     fitness_threshold,
     principal_axis,
+    profile_start,
     profile_targets,
     search_valleys,
     spread_starts,
@@ -193,3 +195,15 @@ def test_profile_targets_lie_past_each_interval_end_short_of_its_bound():
     np.testing.assert_allclose(starts[2], [1.6, -0.6])
     assert np.all((starts >= BOUNDS[:, 0]) & (starts <= BOUNDS[:, 1]))
     assert profile_targets(ESTIMATE, lower, upper, BOUNDS, np.array([False, False]))[0] == []
+
+
+def test_the_second_profile_round_bisects_between_the_last_allowed_and_first_rejected():
+    pins = [(0, 1.5), (0, 2.0), (1, -0.5), (1, -1.0), (2, 3.0), (2, 4.0)]
+    allowed = np.array([True, False, False, False, True, True])
+    got = bisect_targets(pins, allowed)
+    # end 0: halfway fitted, the bound did not -> three quarters; end 1 (from 0): a quarter;
+    # end 2: its bound fitted -> done
+    assert [j for j, _ in got] == [0, 1]
+    np.testing.assert_allclose([v for _, v in got], [1.75, -0.25])
+    start = profile_start(ESTIMATE, 1, 0.6, BOUNDS, np.array([[1.0, -1.0], [-1.0, 1.0]]))
+    np.testing.assert_allclose(start, [0.4, 0.6])

@@ -523,13 +523,45 @@ def profile_targets(
             if abs(end - reach) <= 1e-6 * span:
                 continue
             for v in (reach + 0.5 * (end - reach), end):
-                row = (trade[j] if trade is not None and np.isfinite(trade[j]).all()
-                       else np.eye(len(estimate))[j])
-                start = np.clip(estimate + (v - estimate[j]) * row, bounds[:, 0], bounds[:, 1])
-                start[j] = v
                 pins.append((int(j), float(v)))
-                starts.append(start)
+                starts.append(profile_start(estimate, int(j), float(v), bounds, trade))
     return pins, np.reshape(starts, (-1, len(estimate)))
+
+
+def profile_start(
+    estimate: np.ndarray, j: int, value: float, bounds: np.ndarray,
+    trade: np.ndarray | None = None,
+) -> np.ndarray:
+    """The start of a profile polish holding parameter ``j`` at ``value``.
+
+    The others moved along their trade against it (:func:`trade_directions`) where known, cut
+    to the bounds.
+    """
+    row = (trade[j] if trade is not None and np.isfinite(trade[j]).all()
+           else np.eye(len(estimate))[j])
+    start = np.clip(estimate + (value - estimate[j]) * row, bounds[:, 0], bounds[:, 1])
+    start[j] = value
+    return start
+
+
+def bisect_targets(
+    pins: Sequence[tuple[int, float]], allowed: np.ndarray
+) -> list[tuple[int, float]]:
+    """The second profile round: for each end, between its last allowed and first rejected.
+
+    ``pins`` come in pairs per end, (halfway, bound) as :func:`profile_targets` gives them, and
+    ``allowed`` says which fitted within the threshold. An end whose bound fitted is done; one
+    whose halfway point fitted tries three quarters of the way, one whose halfway point did not
+    a quarter (from the end the interval had).
+    """
+    out = []
+    for k in range(0, len(pins) - 1, 2):
+        (j, half), (_, end) = pins[k], pins[k + 1]
+        if allowed[k + 1]:
+            continue
+        reach = 2 * half - end
+        out.append((j, (half + end) / 2 if allowed[k] else (reach + half) / 2))
+    return out
 
 
 def trade_directions(samples: np.ndarray, estimate: np.ndarray) -> np.ndarray | None:
@@ -836,9 +868,10 @@ def parametric_bootstrap(
         ``2 max_iterations``).
     profile : bool
         With ``valleys``: past each end of each free parameter's interval, refit the others
-        with it held halfway to its bound and at its bound (:func:`profile_targets`), and hold
-        those that fit within the threshold (one more round of up to 4 polishes per free
-        parameter).
+        with it held halfway to its bound and at its bound (:func:`profile_targets`), then a
+        quarter or three quarters of the way as those fitted (:func:`bisect_targets`), and
+        hold those that fit within the threshold (two more rounds of up to 4 and 2 polishes
+        per free parameter).
 
     Returns
     -------
@@ -1010,15 +1043,21 @@ def parametric_bootstrap(
         boot.lower, boot.upper, boot.split = boot.valleys.widened(estimate, half, bounds)
         if profile:
             # round 4: past each end the search reached, the others polished with the parameter
-            # held (a profile), halfway to its bound and at it
+            # held (a profile), halfway to its bound and at it; then a quarter or three quarters
+            # of the way, as those fitted
             pins, pin_starts = profile_targets(estimate, boot.lower, boot.upper, bounds, free,
                                                trade)
             if progress and pins:
                 progress(f"bootstrap: {len(pins)} profile polishes")
-            moved, moved_fitness = refit([(evaluator.prepared, everything)] * len(pins), space,
-                                         pin_starts, max_iterations, pins=pins)
-            allowed = np.isfinite(moved_fitness) & (moved_fitness <= reference + threshold)
-            boot.valleys.points = np.concatenate([boot.valleys.points, moved[allowed]])
+            for opening in (True, False):
+                moved, moved_fitness = refit([(evaluator.prepared, everything)] * len(pins),
+                                             space, pin_starts, max_iterations, pins=pins)
+                allowed = np.isfinite(moved_fitness) & (moved_fitness <= reference + threshold)
+                boot.valleys.points = np.concatenate([boot.valleys.points, moved[allowed]])
+                if opening:  # once more, between each end's last allowed and first rejected
+                    pins = bisect_targets(pins, allowed)
+                    pin_starts = np.reshape([profile_start(estimate, j, v, bounds, trade)
+                                             for j, v in pins], (-1, space.size))
             boot.lower, boot.upper, boot.split = boot.valleys.widened(estimate, half, bounds)
     else:
         boot.lower, boot.upper = boot.local_lower.copy(), boot.local_upper.copy()
