@@ -1123,15 +1123,16 @@ def test_the_shift_repair_moves_a_grazing_route_off_the_obstacle_and_keeps_the_g
 
 def test_the_shift_repair_refuses_a_route_within_its_margin_even_when_every_check_run_is_clear(
         grazing, monkeypatch):
-    # shifts of 2 mm only, and a check over the fits alone (the estimated water's own run): the
-    # grazing route's variants swim the capsule a few mm clear, so every check run passes; only
-    # the repair's own margin in the estimated water refuses them
+    # shifts of 2 mm only, and a check over the fits alone (the estimated water's own run) with
+    # no check margin: the grazing route's variants swim the capsule a few mm clear, so every
+    # check run passes; only the repair's own margin in the estimated water refuses them
     import eelhost.planning.replan as replan
     from eelhost.planning.search import leg_start_guide
 
     planner, state, step = grazing
     monkeypatch.setattr(replan, "SHIFT_RADII_M", (0.002,))
     monkeypatch.setattr(planner, "waters", lambda attempt: [])
+    monkeypatch.setattr(planner, "check_margin_m", 0.0)
     guide = leg_start_guide(state, N)
     monkeypatch.setattr(replan, "SHIFT_MARGIN_M", 0.0)
     grazed = replan.shift_repair(planner, state, step, guide, BESIDE_LEFT, 30.0)
@@ -1139,6 +1140,11 @@ def test_the_shift_repair_refuses_a_route_within_its_margin_even_when_every_chec
     nominal_mm = float(grazed.message.split("the capsule ")[1].split(" mm")[0])
     assert 0.0 <= nominal_mm < 10.0, grazed.message
     monkeypatch.setattr(replan, "SHIFT_MARGIN_M", 0.01)
+    assert replan.shift_repair(planner, state, step, guide, BESIDE_LEFT, 30.0) is None
+    # and without the repair's own margin, the planner's check margin refuses them as it refuses
+    # a searched plan's check runs that come that close
+    monkeypatch.setattr(replan, "SHIFT_MARGIN_M", 0.0)
+    monkeypatch.setattr(planner, "check_margin_m", 0.03)
     assert replan.shift_repair(planner, state, step, guide, BESIDE_LEFT, 30.0) is None
 
 

@@ -334,7 +334,9 @@ def shift_repair(planner: Planner, state: FloatArray, step: int, guide: Guide,
     the best :data:`SHIFT_CHECKED` are checked in turn over the planner's own waters (the fits
     as fitted and the draws of its check, the straight sets; the fits and the first
     :data:`eelhost.planning.planner.SCREEN_DRAWS` draws first, as the planner's check): a
-    variant passes when every run enters the goal disc with the capsule clear of everything.
+    variant passes when every run enters the goal disc with the capsule more than the planner's
+    ``check_margin_m`` (the check's rule, :func:`eelhost.planning.planner.run_failed`) clear of
+    everything.
     The first that passes is the plan (docs/planning.md, "The shift repair").
 
     Parameters
@@ -388,7 +390,12 @@ def shift_repair(planner: Planner, state: FloatArray, step: int, guide: Guide,
     # a margin of its own in the estimated water, as the searches keep theirs in the fits': the
     # check's runs need only be clear (> 0), and repairs checked 1-2 mm clear steered a run of
     # seeds 11000-11099 within 2 mm of an obstacle
-    ranked = sorted(((g, j) for g, j in scored if g is not None and g[0] >= SHIFT_MARGIN_M),
+    # and every check run must keep the planner's check margin, as a searched plan's check runs
+    # (planner.run_failed); the fits' own run is the first of them, so a variant is not checked
+    # unless it keeps it here already
+    check_margin = planner.check_margin_m
+    ranked = sorted(((g, j) for g, j in scored
+                     if g is not None and g[0] >= SHIFT_MARGIN_M and g[0] > check_margin),
                     key=lambda e: (-(e[0][0] + (SHIFT_PREFERENCE_M if e[1] == 0 else 0.0)),
                                    e[0][1]))
     if not ranked:
@@ -408,9 +415,9 @@ def shift_repair(planner: Planner, state: FloatArray, step: int, guide: Guide,
                                 currents=[currents[i] for i in part],
                                 guidance=[guide] * len(part))
             worst += [judged(checks, k) for k in range(len(part))]
-            if any(g is None or g[0] <= 0.0 for g in worst):
+            if any(g is None or g[0] <= check_margin for g in worst):
                 break
-        if len(worst) < len(waters) or any(g is None or g[0] <= 0.0 for g in worst):
+        if len(worst) < len(waters) or any(g is None or g[0] <= check_margin for g in worst):
             if not _time_left(deadline_s):
                 return None
             continue
