@@ -386,3 +386,36 @@ def test_one_set_for_every_motion_gets_the_tanks_interval_and_verdict(tank):
     got = np.array(held["joint"].model.current_m_s)
     assert np.all(np.abs(got - current.current_m_s) <= current.half_width_m_s + 1e-12)
     assert held_evs["joint"].space is held["joint"].space
+
+
+def test_the_combined_interval_pools_every_experiment_of_every_motion_as_clusters():
+    from scipy.stats import t as student_t
+
+    from eelhost.estimation.tank_current import CurrentView, combine_views
+
+    rng = np.random.default_rng(4)
+    x_axis = np.array([1.0, 0.0])
+    views, pulls = [], []
+    for axis in (x_axis, None):
+        pull = 1e-3 * rng.normal(size=(4, 2))  # each of 4 experiments' pull on the view
+        robust = pull.T @ pull * 4 / 3 * (student_t.ppf(0.975, 3) / 1.959964) ** 2
+        views.append(CurrentView(1e-3 * rng.normal(size=2), robust, axis,
+                                 independent=np.diag([1e-9, 1e-9]), influence=pull))
+        pulls.append(pull)
+    _, weights_only = combine_views([replace(v, independent=None) for v in views])
+    current, cov = combine_views(views)
+    # written apart: the gains A_m of the combination, every experiment's pull through them,
+    # summed over all 8 experiments with 8 / 7 and (t(7) / z)^2
+    h = [np.outer([0.0, 1.0], [0.0, 1.0]) / views[0].covariance[1, 1],
+         np.linalg.inv(views[1].covariance)]
+    inverse = np.linalg.inv(h[0] + h[1])
+    moved = np.vstack([p @ (inverse @ w).T for p, w in zip(pulls, h, strict=True)])
+    expected = moved.T @ moved * 8 / 7 * (student_t.ppf(0.975, 7) / 1.959964) ** 2
+    np.testing.assert_allclose(cov, expected, rtol=1e-9)
+    np.testing.assert_allclose(weights_only, inverse, rtol=1e-9)
+    np.testing.assert_allclose(current, inverse @ sum(w @ v.current_m_s
+                                                      for w, v in zip(h, views, strict=True)),
+                               rtol=1e-9)
+    # eight clusters need a smaller t than four: the pooled interval is narrower than the
+    # weights' own (each motion's with t(3))
+    assert np.trace(cov) < np.trace(weights_only)
