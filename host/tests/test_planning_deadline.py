@@ -6,6 +6,8 @@ run-step), so what the deadline decides does not depend on the machine's load.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -182,3 +184,33 @@ def test_the_bench_records_how_late_a_budgeted_call_came_back():
     summary = BenchSummary(results=[result, free])
     assert any("returned after its deadline in 1 of 1 worlds" in line
                for line in summary.lines())
+
+
+def test_a_repairs_search_keeps_free_the_time_of_its_own_larger_check(clock):
+    p = planner(clock, check_rate_s=STEP_COST_S)
+    assert p.repair_draws == 3 * p.draws
+    assert p.check_time_s(1000.0, p.repair_draws) == pytest.approx(
+        p.check_time_s(1000.0) * (1 + p.repair_draws) / (1 + p.draws))
+    reserves = []
+    search = p.search.plan
+
+    def recording(*args, reserve_s=None, **kwargs):
+        reserves.append(reserve_s())
+        return search(*args, reserve_s=reserve_s, **kwargs)
+
+    p.search.plan = recording
+    real = p.check_plan
+
+    def first_fails(plan, state=None, step=0, waters=None, deadline_s=None):
+        runs, took = real(plan, state, step, waters, deadline_s)
+        if len(reserves) == 1:  # the first plan's check: a run made to touch, so a repair
+            runs[1] = dataclasses.replace(runs[1], collision_free=False, failed_leg=0,
+                                          first_collision_s=1.0)
+        return runs, took
+
+    p.check_plan = first_fails
+    outcome = p.plan(deadline_s=clock() + 1e9)
+    assert outcome.found and outcome.repairs == 1, outcome.message
+    # the same plan length expected by both searches, the repair's check 19 runs against 7
+    assert len(reserves) == 2 and reserves[0] > 0
+    assert reserves[1] / reserves[0] == pytest.approx((1 + p.repair_draws) / (1 + p.draws))

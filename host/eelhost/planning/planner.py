@@ -94,19 +94,20 @@ CHECK_MARGIN_M = 0.03
 """The check's margin, m: every check run (the fits' and each draw's) must keep the body this far
 from everything, not merely clear of it. A plan whose worst draw came within a few millimetres of
 contact is one whose collision probability sits near its stated bound: on development seeds
-12000-12299 the plans checked 0-19 mm clear touched in 1-2 of 60 further fresh draws each, and
-two of them in the benchmark's 8 (docs/planning.md, "Targets of issue 28 (the planner's)",
-"Session 8"). Coming within the margin counts as the run failing; so 0 such runs in n draws
+12000-12299 (ILOS) 12 of the 28 plans that passed 0-30 mm clear touched in 60 further fresh
+draws (24 of 1680 runs), and 3 of them in the benchmark's 8; of the 29 clearer ones 2, both
+repaired plans (docs/planning.md, "Targets of issue 28 (the planner's)", "Session 8's
+development figures"). Coming within the margin counts as the run failing; so 0 such runs in n draws
 bound the probability of coming within the margin, and with it the (smaller) probability of
 contact, by the same Clopper-Pearson interval."""
 
 REPAIR_DRAWS_FACTOR = 3
 """A repaired plan is checked over this many times ``draws`` draws (180 by default). A repair is
 the search's next plan round the leg the last one failed on, and most of them fail much as their
-predecessor did: on development seeds 12000-12299 (ILOS) the repaired plans that passed their 60
-draws and the margin touched in 1-2 of 60 further fresh draws each in 2 of 9 (their failing runs
-took another way round an obstacle, -20 mm, not the tail of the passing runs' clearances), the
-first plans that passed in none of 14. A plan that fails one draw in 30 passes 60 draws with
+predecessor did: on development seeds 12000-12299 (ILOS) 2 of the 11 repaired plans that passed
+their 60 draws more than 30 mm clear touched in 60 further fresh draws (by 9-20 mm, where their
+other runs kept 27 mm or more: a few draws going wrong, not the tail the margin covers), none
+of the 18 such first plans; with pure pursuit (12000-12099) 1 of 2 repaired plans. A plan that fails one draw in 30 passes 60 draws with
 probability 13 %, 180 with 0.2 %; for each of the up to ``repairs`` plans the planner may try
 that is the chance it is returned (docs/planning.md, "The planner", step 5)."""
 
@@ -516,7 +517,7 @@ class Planner:
     def clock(self, clock: Callable[[], float]) -> None:
         self.search.clock = clock
 
-    def check_time_s(self, plan_steps: float) -> float:
+    def check_time_s(self, plan_steps: float, draws: int | None = None) -> float:
         """The predicted wall time of a whole check of a plan ``plan_steps`` physics steps long.
 
         The fits as fitted and ``draws`` draws, each swum the plan's length, at the check's
@@ -526,13 +527,16 @@ class Planner:
         Parameters
         ----------
         plan_steps : float
+        draws : int, optional
+            The draws the check swims (default the first plan's, :attr:`draws`; a repaired
+            plan's are :attr:`repair_draws`).
 
         Returns
         -------
         float
             Seconds.
         """
-        run_steps = (1 + self.draws) * max(plan_steps, 0.0)
+        run_steps = (1 + (self.draws if draws is None else draws)) * max(plan_steps, 0.0)
         need = self.check_cost.predict_s(run_steps)
         if need is None:
             search = self.search.swim_cost.predict_s(run_steps)
@@ -669,9 +673,11 @@ class Planner:
         # with a deadline, every search keeps the predicted time of a whole check of a plan of
         # the expected length free before it (docs/planning.md, "The planning call's deadline")
         expected = self.expected_steps(state)
-        reserve = (lambda: self.check_time_s(expected)) if self.check else None
         free_path = self._free_path_steps(state)
         for attempt in range(self.repairs + 1):
+            # a repaired plan's check swims its own, larger count of draws (REPAIR_DRAWS_FACTOR)
+            count = len(self.waters(attempt)) if self.check else 0
+            reserve = ((lambda c=count: self.check_time_s(expected, c)) if self.check else None)
             plan = self.search.plan(banned, start_state=state, start_step=step, guide=guide,
                                     deadline_s=deadline_s, reserve_s=reserve)
             total += plan.planning_time_s
@@ -700,8 +706,8 @@ class Planner:
                 total += time.perf_counter() - t_check
                 # never returned as checked: the plan's status says it was not
                 msg = (f"out of time: {plan.message}, but {stop} (predicted "
-                       f"{self.check_time_s(plan.legs[-1].end_step - step):.2f} s for the whole "
-                       "check); the plan is not checked")
+                       f"{self.check_time_s(plan.legs[-1].end_step - step, len(waters)):.2f} s "
+                       "for the whole check); the plan is not checked")
                 return Outcome(Plan(False, "out_of_time", msg, plan.legs, plan.cost_s,
                                     plan.expansions, plan.simulations, plan.planning_time_s,
                                     plan.tree, plan.start_guide),
