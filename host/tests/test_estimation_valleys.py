@@ -207,3 +207,22 @@ def test_the_second_profile_round_bisects_between_the_last_allowed_and_first_rej
     np.testing.assert_allclose([v for _, v in got], [1.75, -0.25])
     start = profile_start(ESTIMATE, 1, 0.6, BOUNDS, np.array([[1.0, -1.0], [-1.0, 1.0]]))
     np.testing.assert_allclose(start, [0.4, 0.6])
+
+
+def test_the_coverage_table_counts_the_local_intervals_and_the_not_identified_beside_the_final():
+    from eelhost.benchmarks.estimator_coverage import Coverage, Intervals, coverage_markdown
+
+    truth = np.array([1.0, 2.0])
+    seeds = [
+        # the local interval misses x, the valley search's holds it and says not identified
+        Intervals(np.array([1.5, 2.0]), np.array([0.5, 1.9]), np.array([2.0, 2.1]),
+                  np.array([True, False]), np.array([1.3, 1.9]), np.array([1.7, 2.1])),
+        Intervals(np.array([1.0, 2.0]), np.array([0.9, 1.9]), np.array([1.1, 2.1]),
+                  np.array([False, False]), np.array([0.9, 1.9]), np.array([1.1, 2.1])),
+    ]
+    cov = Coverage(("x", "y"), truth, seeds)
+    np.testing.assert_allclose(cov.rate(), [1.0, 1.0])
+    np.testing.assert_allclose(cov.local_rate(), [0.5, 1.0])
+    np.testing.assert_array_equal(cov.flagged(), [1, 0])
+    table = coverage_markdown(cov, "cmd")
+    assert "| x | 100 % | 1.00 | 50 % | 1 of 2 |" in table

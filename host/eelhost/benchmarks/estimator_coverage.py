@@ -14,7 +14,10 @@ With ``motions=("straight", "turning")`` each seed records both motions' trainin
 treated as the report treats a dataset: each motion fitted, the tank's one current estimated from
 both (:func:`eelhost.estimation.tank_current.share_tank_current`) and held by each motion's fit,
 and the held fits bootstrapped. Those are the intervals ``eelbot report`` gives; the straight
-tank alone fits its own current.
+tank alone fits its own current. Each fit is given the other motions' fits as starts for the search of
+other valleys, as in the report. Beside each coverage the table gives the local intervals'
+(the bootstrap around the estimate alone, before the search widened them: the same fits and
+refits) and how many seeds' reports said the parameter is not identified.
 
 **Prediction bands** (:func:`measure_bands`): for each named plant (typically one whose law is
 no candidate), the virtual tank records the paper's 34 experiments, ``eelbot report`` runs on

@@ -36,6 +36,14 @@ data and intervals of zero width), so the fit's own residuals are resampled too.
   it. ``widen`` is the factor the coverage benchmark (``eelbot estimate-bench --coverage``)
   measured to be needed for the 95 % intervals to cover the truth in at least 90 % of synthetic
   tanks whose model contains it.
+- **Valleys that fit alike** (:func:`search_valleys`, :func:`profile_targets`): refits from the
+  estimate stay in its valley, so the recordings are also refitted from other starts (the other
+  motions' fits, points spread over the bounds), and points on lines from the estimate, along
+  each parameter's trade with the others and on profiles (a parameter held, the others
+  polished) are judged against a fitness threshold set by the bootstrap (:func:`fitness_threshold`:
+  what a refit gains on data from the estimate, a test inversion). The interval holds every
+  point within it; a parameter another valley puts outside the local interval is reported as not
+  identified (docs/estimation.md, "Uncertainty", "Valleys that fit alike").
 - **A held current** (:func:`held_current_shift`): a fit that holds the tank's current within
   its interval (:mod:`eelhost.estimation.tank_current`) gets that interval as the current's,
   and each other parameter's half-width grows in quadrature by how far it moves when the current
