@@ -539,6 +539,23 @@ def test_a_plan_ready_long_after_its_start_with_the_robot_off_its_corridor_is_no
             assert nav.events[-1]["status"] == "stale" and "not used" in nav.events[-1]["message"]
 
 
+def swim_until_stopped(nav: TankReplanner, release) -> tuple:  # noqa: ANN001
+    """Frames at 30 Hz along the test path for up to 5 s, until ``nav`` stops the robot; then
+    ``release`` the held replan and close ``nav``. Returns (the last decision, its time)."""
+    d, t = None, 0.0
+    try:
+        for k in range(5 * 30):
+            t = k / 30
+            d = nav.on_frame(t, pose_at(t, (0.8, 1.4)), np.array([0.8, 1.4, 0.0]), 0, 0.0)
+            if d.stop is not None:
+                break
+            nav._side.submit(lambda: None).result()  # the look-ahead's thread is done
+    finally:
+        release.set()
+        nav.close()
+    return d, t
+
+
 def test_a_late_replan_with_contact_ahead_stops_the_robot_without_waiting_for_it(open_plan):
     import threading
 
@@ -554,17 +571,7 @@ def test_a_late_replan_with_contact_ahead_stops_the_robot_without_waiting_for_it
             return -0.005, -0.025  # the present waypoints swum 5 mm into something
 
     nav = Stuck(lambda extra: planner, planner, outcome, PATH_GAIT)
-    d = None
-    try:
-        for k in range(5 * 30):
-            t = k / 30
-            d = nav.on_frame(t, pose_at(t, (0.8, 1.4)), np.array([0.8, 1.4, 0.0]), 0, 0.0)
-            if d.stop is not None:
-                break
-            nav._side.submit(lambda: None).result()  # the look-ahead's thread is done
-    finally:
-        release.set()
-        nav.close()
+    d, t = swim_until_stopped(nav, release)
     assert d is not None and d.stop == "no_safe_continuation", d
     assert "has not come back" in d.detail and nav._job is not None
     assert t > nav._job.t_start_s  # only once the replan was late
@@ -628,17 +635,7 @@ def test_a_replan_past_its_start_is_waited_for_within_its_budget_only_with_time_
             return Ahead(-0.005, -0.025, est.t_s + contact_in_s)
 
     nav = Stuck(lambda extra: planner, planner, outcome, PATH_GAIT, replan_budget_s=1.0)
-    d = None
-    try:
-        for k in range(5 * 30):
-            t = k / 30
-            d = nav.on_frame(t, pose_at(t, (0.8, 1.4)), np.array([0.8, 1.4, 0.0]), 0, 0.0)
-            if d.stop is not None:
-                break
-            nav._side.submit(lambda: None).result()  # the look-ahead's thread is done
-    finally:
-        release.set()
-        nav.close()
+    d, t = swim_until_stopped(nav, release)
     assert d is not None and d.stop == "no_safe_continuation", d
     job = nav._job
     assert "has not come back" in d.detail and job is not None

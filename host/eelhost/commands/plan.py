@@ -137,24 +137,24 @@ def add_check_options(p: argparse.ArgumentParser) -> None:
                    "--guidance ...; docs/planning.md, \"The guidance\")")
 
 
-def _unknown_current(text: str) -> float:
+def _bounded(text: str, quantity: str, unit: str, high: float) -> float:
+    """An option's number from 0 to ``high``, or argparse's error naming the quantity."""
     try:
         value = float(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a speed in m/s, got {text!r}") from None
-    if not 0.0 <= value <= 1.0:
-        raise argparse.ArgumentTypeError(f"expected a speed from 0 to 1 m/s, got {text}")
+        raise argparse.ArgumentTypeError(f"expected a {quantity} in {unit}, got {text!r}") from None
+    if not 0.0 <= value <= high:
+        raise argparse.ArgumentTypeError(f"expected a {quantity} from 0 to {high:g} {unit}, "
+                                         f"got {text}")
     return value
+
+
+def _unknown_current(text: str) -> float:
+    return _bounded(text, "speed", "m/s", 1.0)
 
 
 def _check_margin(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a distance in m, got {text!r}") from None
-    if not 0.0 <= value <= 0.5:
-        raise argparse.ArgumentTypeError(f"expected a margin from 0 to 0.5 m, got {text}")
-    return value
+    return _bounded(text, "margin", "m", 0.5)
 
 
 def _budget(text: str) -> float:
