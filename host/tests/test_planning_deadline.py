@@ -11,29 +11,16 @@ import dataclasses
 import numpy as np
 import pytest
 
+# the still open tank and the default robot of the repairs' tests
+from test_planning_repairs import MODEL, ROBOT, open_tank
+
 from eelhost.cli import main
 from eelhost.planning.planner import PlanLengths, Planner
 from eelhost.planning.search import SwimCost
 from eelhost.planning.twin import Twin
-from eelhost.planning.uncertainty import default_model
-from eelhost.planning.world import parse_world
-from eelsim.robot import load_robot
 
-ROBOT = load_robot()
-MODEL = default_model(ROBOT)
 STEP_COST_S = 1e-6
 """The fake clock's seconds per run-step the twin swims."""
-
-
-def open_tank():
-    return parse_world({
-        "name": "open",
-        "tank": {"size_m": [3.0, 2.0]},
-        "start": {"position_m": [0.5, 1.0], "heading_deg": 0.0},
-        "goal": {"position_m": [1.6, 1.0], "radius_m": 0.2},
-        "current": {"speed_m_s": 0.0, "direction_deg": 0.0},
-        "obstacles": [],
-    })
 
 
 class WorkClock:

@@ -12,22 +12,10 @@ import dataclasses
 import numpy as np
 import pytest
 
+# the still open tank and the default robot of the repairs' tests
+from test_planning_repairs import MODEL, ROBOT, open_tank
+
 from eelhost.planning.planner import CHECK_MARGIN_M, Planner, run_failed
-from eelhost.planning.uncertainty import default_model
-from eelhost.planning.world import parse_world
-from eelsim.robot import load_robot
-
-ROBOT = load_robot()
-MODEL = default_model(ROBOT)
-
-
-def open_tank():
-    return parse_world({
-        "name": "open", "tank": {"size_m": [3.0, 2.0]},
-        "start": {"position_m": [0.5, 1.0], "heading_deg": 0.0},
-        "goal": {"position_m": [1.6, 1.0], "radius_m": 0.2},
-        "current": {"speed_m_s": 0.0, "direction_deg": 0.0}, "obstacles": [],
-    })
 
 
 @pytest.fixture(scope="module")
