@@ -539,6 +539,21 @@ def test_a_plan_ready_long_after_its_start_with_the_robot_off_its_corridor_is_no
             assert nav.events[-1]["status"] == "stale" and "not used" in nav.events[-1]["message"]
 
 
+def stuck_replanner(release, ahead) -> type[TankReplanner]:  # noqa: ANN001
+    """A :class:`TankReplanner` whose replans wait for ``release`` (a planner starved of
+    processor time) and whose look-ahead from an estimate is ``ahead(est)``."""
+
+    class Stuck(TankReplanner):
+        def _replan(self, *args):  # noqa: ANN002, ANN202
+            release.wait(30.0)
+            return super()._replan(*args)
+
+        def _look_ahead(self, est, left, extra, guide=None):  # noqa: ANN001, ANN202
+            return ahead(est)
+
+    return Stuck
+
+
 def swim_until_stopped(nav: TankReplanner, release) -> tuple:  # noqa: ANN001
     """Frames at 30 Hz along the test path for up to 5 s, until ``nav`` stops the robot; then
     ``release`` the held replan and close ``nav``. Returns (the last decision, its time)."""
@@ -561,16 +576,9 @@ def test_a_late_replan_with_contact_ahead_stops_the_robot_without_waiting_for_it
 
     planner, outcome = open_plan
     release = threading.Event()
-
-    class Stuck(TankReplanner):
-        def _replan(self, *args):  # noqa: ANN002, ANN202
-            release.wait(30.0)  # a planner starved of processor time
-            return super()._replan(*args)
-
-        def _look_ahead(self, est, left, extra, guide=None):  # noqa: ANN001, ANN202
-            return -0.005, -0.025  # the present waypoints swum 5 mm into something
-
-    nav = Stuck(lambda extra: planner, planner, outcome, PATH_GAIT)
+    # the present waypoints swum 5 mm into something (a bare verdict: contact now)
+    nav = stuck_replanner(release, lambda est: (-0.005, -0.025))(
+        lambda extra: planner, planner, outcome, PATH_GAIT)
     d, t = swim_until_stopped(nav, release)
     assert d is not None and d.stop == "no_safe_continuation", d
     assert "has not come back" in d.detail and nav._job is not None
@@ -625,16 +633,8 @@ def test_a_replan_past_its_start_is_waited_for_within_its_budget_only_with_time_
 
     planner, outcome = open_plan
     release = threading.Event()
-
-    class Stuck(TankReplanner):
-        def _replan(self, *args):  # noqa: ANN002, ANN202
-            release.wait(30.0)  # a planner starved of processor time
-            return super()._replan(*args)
-
-        def _look_ahead(self, est, left, extra, guide=None):  # noqa: ANN001, ANN202
-            return Ahead(-0.005, -0.025, est.t_s + contact_in_s)
-
-    nav = Stuck(lambda extra: planner, planner, outcome, PATH_GAIT, replan_budget_s=1.0)
+    nav = stuck_replanner(release, lambda est: Ahead(-0.005, -0.025, est.t_s + contact_in_s))(
+        lambda extra: planner, planner, outcome, PATH_GAIT, replan_budget_s=1.0)
     d, t = swim_until_stopped(nav, release)
     assert d is not None and d.stop == "no_safe_continuation", d
     job = nav._job
