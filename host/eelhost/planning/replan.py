@@ -798,8 +798,7 @@ class TankReplanner:
         retry = False
         if (predicted and self.failures > 0 and gap is not None and gap <= 0.0
                 and self._job is None and self._pending is None
-                and self.failures < self.max_failures
-                and self._contact_at_s - t_s >= self._retry_need_s()):
+                and self._may_retry(t_s)):
             # the present plan swims into something and the last replan found nothing better,
             # but the contact is far enough ahead for one more replan to steer before it: ask
             # for it now, whatever the back-off (docs/planning.md, "Retried before contact")
@@ -911,6 +910,15 @@ class TankReplanner:
         return None
 
     # -- replans -------------------------------------------------------------------------------
+
+    def _may_retry(self, t_s: float) -> bool:
+        """A failed replan may be followed at once by another instead of a stop.
+
+        It may while failures are left and the predicted contact is far enough ahead for
+        another replan to steer before it (:meth:`_retry_need_s`).
+        """
+        return (self.failures < self.max_failures
+                and self._contact_at_s - t_s >= self._retry_need_s())
 
     def _retry_need_s(self) -> float:
         """The robot's time a replan asked for now may take before its plan steers, at most.
@@ -1180,8 +1188,7 @@ class TankReplanner:
         if judged is not None:
             self._last_gap = (t_s, judged[0])
             self._contact_at_s = contact_time_s(judged, t_s)
-        if (self._present_plan_hits(t_s) and self.failures < self.max_failures
-                and self._contact_at_s - t_s >= self._retry_need_s()):
+        if self._present_plan_hits(t_s) and self._may_retry(t_s):
             # the present plan swims into contact, but far enough ahead for another replan to
             # steer before it: replan again at once (docs/planning.md, "Retried before contact")
             self._next_try_s = t_s
