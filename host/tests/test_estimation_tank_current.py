@@ -132,32 +132,26 @@ class _LinearResiduals:
             recording_camera=lambda: camera))] * experiments
         self.columns = rng.normal(size=(experiments * samples, 3))  # (own, v_x, v_y)
         self.noise = noise(rng, self.columns, experiments, samples)
+        self.space = SimpleNamespace(bounds=np.array([[-1.0, 1.0], [-0.03, 0.03], [-0.03, 0.03]]))
 
     def residuals(self, x):
-        return x @ self.columns.T + self.noise
+        return np.atleast_2d(x) @ self.columns.T + self.noise
 
 
 def _interval(noise_of):
-    from eelhost.estimation.tank_current import _JointCube, _spread
+    from eelhost.estimation.tank_current import _spread
 
     rng = np.random.default_rng(5)
-    e, n = 4, 12
-    evs = [_LinearResiduals(rng, e, n, noise_of) for _ in range(2)]
-    cube = _JointCube(np.array([[-1.0, 1.0], [-1.0, 1.0], [-0.03, 0.03], [-0.03, 0.03]]))
-
-    def split(x):
-        return [x[:, [0, 2, 3]], x[:, [1, 2, 3]]]
-
-    half = _spread(evs, cube, split, np.zeros(4)).half_width()
+    e, n = 8, 12
+    ev = _LinearResiduals(rng, e, n, noise_of)
+    half = _spread(ev, np.zeros(3)).half_width()
     # the independent-residual interval, written apart: the full Jacobian in the unit cube and
     # the inverse of J^T J, the residual variance RSS / (M - K)
-    ranges = cube.bounds[:, 1] - cube.bounds[:, 0]
-    jac = np.zeros((2 * e * n, 4))
-    jac[: e * n, [0, 2, 3]] = evs[0].columns * ranges[[0, 2, 3]]
-    jac[e * n:, [1, 2, 3]] = evs[1].columns * ranges[[1, 2, 3]]
-    r = np.concatenate([ev.noise for ev in evs])
-    sigma2 = r @ r / (len(r) - 4)
-    independent = 1.959964 * np.sqrt(sigma2 * np.diag(np.linalg.inv(jac.T @ jac)))[2:] * ranges[2:]
+    ranges = ev.space.bounds[:, 1] - ev.space.bounds[:, 0]
+    jac = ev.columns * ranges
+    r = ev.noise
+    sigma2 = r @ r / (len(r) - 3)
+    independent = 1.959964 * np.sqrt(sigma2 * np.diag(np.linalg.inv(jac.T @ jac)))[1:] * ranges[1:]
     return half, independent
 
 
@@ -282,23 +276,22 @@ def test_the_birge_ratio_is_the_motions_chi_square_over_its_degrees_of_freedom()
 
 
 def test_the_tank_current_is_taken_to_the_residuals_least_squares_estimate():
-    from eelhost.estimation.tank_current import _JointCube, _least_squares
+    from eelhost.estimation.tank_current import _least_squares
 
     rng = np.random.default_rng(8)
     ev = _LinearMotion(rng, [0.3, -0.0025, 0.00433], (0.001, 0.0))
-    cube = _JointCube(ev.space.bounds)
     # from a point another criterion chose (the minimax fit's), off the least-squares one
-    got = _least_squares([ev], cube, lambda x: [x], np.array([0.1, 0.004, 0.0]))
+    got = _least_squares(ev, np.array([0.1, 0.004, 0.0]))
     np.testing.assert_allclose(got, ev.own_fit(), atol=1e-7)
     # a least-squares point beyond a bound: the best point within the bounds, the parameter at
     # its bound and the current fitted with it (written apart: the bounded linear problem with
     # that parameter fixed at the bound)
     far = _LinearMotion(rng, [1.5, -0.0025, 0.00433], (0.0, 0.0))
-    got = _least_squares([far], cube, lambda x: [x], np.array([0.9, 0.0, 0.0]))
+    got = _least_squares(far, np.array([0.9, 0.0, 0.0]))
     rest = np.linalg.lstsq(far.columns[:, 1:], -far.offset - far.columns[:, 0], rcond=None)[0]
     np.testing.assert_allclose(got, [1.0, *rest], atol=1e-7)
     # the least-squares point itself stays
-    np.testing.assert_allclose(_least_squares([ev], cube, lambda x: [x], ev.own_fit()),
+    np.testing.assert_allclose(_least_squares(ev, ev.own_fit()),
                                ev.own_fit(), atol=1e-9)
 
 

@@ -161,23 +161,6 @@ class TankCurrent:
         }
 
 
-@dataclass(frozen=True, eq=False)
-class _JointCube:
-    """A vector's bounds and unit-cube mapping (for :func:`_least_squares`, :func:`_spread`)."""
-
-    bounds: np.ndarray
-
-    @property
-    def size(self) -> int:
-        return len(self.bounds)
-
-    def from_unit(self, u: np.ndarray) -> np.ndarray:
-        return box_from_unit(self.bounds, u)
-
-    def to_unit(self, x: np.ndarray) -> np.ndarray:
-        return box_to_unit(self.bounds, x)
-
-
 def share_tank_current(
     fits: dict[str, FitResult],
     evaluators: dict[str, Evaluator],
@@ -269,10 +252,8 @@ def estimate(evs: list[Any], starts: list[np.ndarray], axes: list[np.ndarray | N
         Each motion's vector at its least-squares point; the tank's current, m/s; its
         covariance, (m/s)^2, widened by ``scale`` squared; ``scale``, :func:`misfit_scale`.
     """
-    own = [_least_squares([ev], _JointCube(ev.space.bounds), _alone, np.asarray(x, dtype=float))
-           for ev, x in zip(evs, starts, strict=True)]
-    spreads = [_spread([ev], _JointCube(ev.space.bounds), _alone, x)
-               for ev, x in zip(evs, own, strict=True)]
+    own = [_least_squares(ev, np.asarray(x, dtype=float)) for ev, x in zip(evs, starts, strict=True)]
+    spreads = [_spread(ev, x) for ev, x in zip(evs, own, strict=True)]
     views = [CurrentView(x[-2:], None, a) if s is None else
              CurrentView(x[-2:], s.covariance(), a, s.independent, s.influence)
              for x, s, a in zip(own, spreads, axes, strict=True)]
@@ -280,11 +261,6 @@ def estimate(evs: list[Any], starts: list[np.ndarray], axes: list[np.ndarray | N
     scale_by = misfit_scale(current, [(v.current_m_s, v.covariance) for v in views
                                       if v.covariance is not None])
     return own, current, covariance * scale_by**2, scale_by
-
-
-def _alone(x: np.ndarray) -> list[np.ndarray]:
-    """One motion's vectors as they are (its own problem)."""
-    return [x]
 
 
 @dataclass(frozen=True)
@@ -480,27 +456,24 @@ class _Spread:
         return robust if np.trace(robust) > np.trace(self.independent) else self.independent
 
 
-def _jacobian(evs: list[Evaluator], cube: _JointCube,
-              split: Callable[[np.ndarray], list[np.ndarray]],
-              x: np.ndarray) -> tuple[np.ndarray, list[np.ndarray], np.ndarray]:
-    """Residuals at ``x`` and its forward-difference neighbours, each motion's, and the Jacobian.
+def _jacobian(ev: Evaluator, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Residuals at ``x`` and the Jacobian there, in unit-cube coordinates.
 
-    Returns (r, parts, jac): r (K + 1, M) the stacked residuals at x and at each step, parts the
-    same per motion, jac (M, K) in unit-cube coordinates (steps of ``REL_STEP``, backwards at
-    the upper bound).
+    Returns (r, jac): r (K + 1, M) the residuals at x and at each forward step (one batch of
+    K + 1 runs), jac (M, K) (steps of ``REL_STEP`` in the unit cube of ``ev.space.bounds``,
+    backwards at the upper bound).
     """
-    k = cube.size
-    u0 = cube.to_unit(x)
+    bounds = ev.space.bounds
+    k = len(bounds)
+    u0 = box_to_unit(bounds, x)
     steps = np.where(u0 + REL_STEP <= 1.0, REL_STEP, -REL_STEP)
-    pts = np.vstack([x] + [cube.from_unit(u0 + np.eye(k)[i] * steps[i]) for i in range(k)])
-    parts = [ev.residuals(part) for ev, part in zip(evs, split(pts), strict=True)]
-    r = np.hstack(parts)
-    return r, parts, ((r[1:] - r[0]) / steps[:, None]).T
+    pts = np.vstack([x] + [box_from_unit(bounds, u0 + np.eye(k)[i] * steps[i])
+                           for i in range(k)])
+    r = np.asarray(ev.residuals(pts))
+    return r, ((r[1:] - r[0]) / steps[:, None]).T
 
 
-def _least_squares(evs: list[Evaluator], cube: _JointCube,
-                   split: Callable[[np.ndarray], list[np.ndarray]],
-                   x: np.ndarray) -> np.ndarray:
+def _least_squares(ev: Evaluator, x: np.ndarray) -> np.ndarray:
     """From ``x`` to the residuals' least-squares point within the bounds (module doc, step 1).
 
     The interval is that of the least-squares estimate, so the current reported is that
@@ -513,40 +486,38 @@ def _least_squares(evs: list[Evaluator], cube: _JointCube,
     servo model's motor time constant): the current it returned fitted worse than the truth's.
     Returns ``x`` when nothing fits better.
     """
+    bounds = ev.space.bounds
     x = np.asarray(x, dtype=float)
-    u0 = np.clip(cube.to_unit(x), 0.0, 1.0)
+    u0 = np.clip(box_to_unit(bounds, x), 0.0, 1.0)
 
     def residuals(u: np.ndarray) -> np.ndarray:
-        part = split(cube.from_unit(np.clip(u, 0.0, 1.0))[None])
-        return np.hstack([ev.residuals(p) for ev, p in zip(evs, part, strict=True)])[0]
+        return np.asarray(ev.residuals(box_from_unit(bounds, np.clip(u, 0.0, 1.0))[None]))[0]
 
     def jacobian(u: np.ndarray) -> np.ndarray:
-        return _jacobian(evs, cube, split, cube.from_unit(np.clip(u, 0.0, 1.0)))[2]
+        return _jacobian(ev, box_from_unit(bounds, np.clip(u, 0.0, 1.0)))[1]
 
     r0 = residuals(u0)
     fit = scipy_least_squares(residuals, u0, jac=jacobian, bounds=(0.0, 1.0), method="trf",
                               max_nfev=LEAST_SQUARES_EVALUATIONS, x_scale=1.0)
     if not np.all(np.isfinite(fit.x)) or 2.0 * float(fit.cost) >= float(r0 @ r0):
         return x
-    return cube.from_unit(np.clip(fit.x, 0.0, 1.0))
+    return box_from_unit(bounds, np.clip(fit.x, 0.0, 1.0))
 
 
-def _spread(evs: list[Evaluator], cube: _JointCube,
-            split: Callable[[np.ndarray], list[np.ndarray]], joint: np.ndarray) -> _Spread | None:
-    """The current's covariance at ``joint``, or None where the other parameters explain it.
+def _spread(ev: Evaluator, x: np.ndarray) -> _Spread | None:
+    """The current's covariance at ``x``, or None where the other parameters explain it.
 
     As :func:`eelhost.estimation.identify.identifiability` (Jacobian in the unit cube, residual
-    variance never below the pixel rounding's), on the residuals of ``evs`` stacked, with the
-    other parameters profiled out; and the cluster-robust one with each experiment a cluster.
+    variance never below the pixel rounding's), with the other parameters profiled out; and the
+    cluster-robust one with each experiment a cluster.
     """
-    k = cube.size
-    r, parts, jac = _jacobian(evs, cube, split, joint)
-    # each residual's experiment (a cluster): an evaluator's columns are its experiments' blocks
-    cluster = np.concatenate([
-        first + np.repeat(np.arange(len(ev.prepared)), p.shape[1] // len(ev.prepared))
-        for first, ev, p in zip(np.cumsum([0] + [len(ev.prepared) for ev in evs[:-1]]), evs,
-                                parts, strict=True)])
-    pixel = max(float(p.experiment.recording_camera().pixel_m) for ev in evs for p in ev.prepared)
+    bounds = ev.space.bounds
+    k = len(bounds)
+    r, jac = _jacobian(ev, x)
+    # each residual's experiment (a cluster): the evaluator's columns are its experiments' blocks
+    groups = len(ev.prepared)
+    cluster = np.repeat(np.arange(groups), r.shape[1] // groups)
+    pixel = max(float(p.experiment.recording_camera().pixel_m) for p in ev.prepared)
     sigma2 = max(float(r[0] @ r[0]) / max(1, jac.shape[0] - k), pixel**2 / 12.0)
     # the current's covariance with the other parameters profiled out: its columns' part that
     # no combination of the others' columns explains. A parameter no residual sees (C_m) has no
@@ -558,7 +529,7 @@ def _spread(evs: list[Evaluator], cube: _JointCube,
     alone = current - u @ (u.T @ current)
     info = alone.T @ alone
     scale = float(np.sum(current**2)) or 1.0
-    ranges = cube.bounds[-2:, 1] - cube.bounds[-2:, 0]
+    ranges = bounds[-2:, 1] - bounds[-2:, 0]
     if np.linalg.eigvalsh(info).min() <= 1e-12 * scale:  # the others explain the current
         return None
     bread = np.linalg.inv(info)
@@ -570,8 +541,7 @@ def _spread(evs: list[Evaluator], cube: _JointCube,
     # independent-residual variance above counts every sample as evidence, and gave the servo
     # model's current on a servo tank +-1.1 mm/s, 3.2 mm/s off the truth
     scores = np.array([alone[cluster == g].T @ r[0][cluster == g]
-                       for g in np.unique(cluster)])  # (G, 2)
-    groups = len(scores)
+                       for g in range(groups)])  # (G, 2)
     if groups < 2:
         return _Spread(sigma2 * bread * to_m_s, None, 1.0)
     robust = bread @ (scores.T @ scores) @ bread * groups / (groups - 1)
