@@ -407,9 +407,14 @@ def estimator_report(
                     f"{m} {1e3 * np.hypot(*c):.1f} mm/s towards "
                     f"{np.degrees(np.arctan2(c[1], c[0])):.0f} deg"
                     for m, c in tank.per_motion_m_s.items())
+                # one set for every motion is one fit, whose current every motion shares
+                one_set = list(tank.per_motion_m_s) == ["joint"]
+                held = ("held by the one set's fit. Its own least-squares current was"
+                        if one_set else "held by each motion's fit. Each fit alone had found")
                 lines += [f"The tank's current from all {tank.experiments} training experiments: "
-                          f"{tank.text()}; held by both fits. Each fit alone had found: {alone}; "
-                          "with those, worst held-out E_x, recorded clock: " + ", ".join(
+                          f"{tank.text()}; {held}: {alone}; "
+                          f"with {'it' if one_set else 'those'}, worst held-out E_x, recorded "
+                          "clock: " + ", ".join(
                               f"{m} {a:.4f} BL" for m, (a, _b) in r["alone_worst_ex"].items())
                           + ".", ""]
         clock = r["clock"]
