@@ -20,6 +20,9 @@ from eelhost.planning.state_estimate import (
     BodyStateEstimator,
     CurrentEstimator,
     TelemetryJoints,
+    body_error_m,
+    error_summary_mm,
+    place_on_seen_links,
     steady_towards,
 )
 from eelhost.planning.twin import Twin
@@ -27,8 +30,8 @@ from eelhost.planning.uncertainty import default_model
 from eelhost.planning.world import parse_world
 from eelhost.wire import protocol
 from eelsim.closed_loop import LoopOptions, simulate_closed_loop
-from eelsim.control import gait_reference
-from eelsim.dynamics import heading
+from eelsim.control import gait_reference, wrap_angle
+from eelsim.dynamics import heading, link_positions
 from eelsim.model import SwimmerModel
 from eelsim.robot import load_robot
 from eelsim.scenario import PATH_GAIT, Scenario
@@ -210,6 +213,112 @@ def test_telemetry_that_disagrees_with_the_camera_is_weighted_down_by_its_measur
     assert np.all((var > 0.04**2) & (var < 0.16**2))  # about the jitter's 0.08^2
     late = np.sqrt(np.mean(np.square(errors[-60:])))
     assert late < 0.03  # the camera's joints (0.014 rad) dominate, not the 0.08 rad jitter
+
+
+# -- a body bent beyond pi: the robot turning towards a waypoint behind it ------------------------
+
+def turning_run():
+    """The reference loop turning from heading 0 towards a waypoint behind it (offset ~1 rad)."""
+    sc = Scenario(name="turn", amplitude_rad=PATH_GAIT.amplitude_rad,
+                  omega_rad_s=PATH_GAIT.omega_rad_s, beta_rad=PATH_GAIT.beta_rad,
+                  k_theta=PATH_GAIT.k_theta, waypoints_m=[(0.4, 1.3)], duration_s=5.5,
+                  start_position_m=(1.0, 1.0), start_heading_deg=0.0)
+    return simulate_closed_loop(ROBOT, sc, LoopOptions(stop_at_goal=False))
+
+
+def estimate_errors(run, unread_links: tuple[int, int] | None, seed: int = 1):
+    """Feed a 30 fps camera of ``run`` to an estimator; the body errors of pose and estimate.
+
+    Each link angle is read wrapped to (-pi, pi] on its own (as a localiser may give them), with
+    0.01 rad of noise, the centre of mass with 1 mm; on a fifth of the frames one link drawn from
+    ``unread_links`` (a range) is not read. The estimator gets the offset the joints steer with.
+    """
+    rng = np.random.default_rng(seed)
+    est = BodyStateEstimator(MODEL, PATH_GAIT)
+    poses, states, truths, spans = [], [], [], []
+    for t in np.arange(0.5, 5.3, 1 / 30):
+        k = int(np.searchsorted(run.t_s, t))
+        x = run.states[k]
+        seen = np.asarray(wrap_angle(x[:N] + rng.normal(0.0, 0.01, N)))
+        if unread_links is not None and rng.uniform() < 0.2:
+            seen[rng.integers(*unread_links)] = np.nan
+        est.observe(float(run.t_s[k]), x[N : N + 2] + rng.normal(0.0, 0.001, 2), seen,
+                    float(run.offset_rad[k]))
+        e = est.estimate()
+        if e is not None:
+            poses.append(est.latest_pose())
+            states.append(e.state)
+            truths.append(x)
+            spans.append(float(np.ptp(x[:N])))
+    truth = np.asarray(truths)
+    return (body_error_m(MODEL, np.asarray(poses), truth),
+            body_error_m(MODEL, np.asarray(states), truth), np.asarray(spans))
+
+
+def test_the_estimate_of_a_turning_body_bent_beyond_pi_stays_within_its_bound():
+    # issue 28: bench worlds 13032 and 13048 were stopped by the estimated body, 0.1-0.37 m from
+    # the true one in hard turns: the links were placed by their angles wrapped about the first
+    # link, and a body curled beyond pi from tail to head had its far links moved by 2 pi. The
+    # bound (docs/planning.md): every point of the body within 15 mm with every link read,
+    # 25 mm with a link between two read ones unread on some frames
+    run = turning_run()
+    pose, state, spans = estimate_errors(run, None)
+    assert np.mean(spans > np.pi) > 0.5  # bent beyond pi on most frames, moving and steering
+    path_m = np.sum(np.hypot(*np.diff(run.states[:, N : N + 2], axis=0).T))
+    turn_rad = np.ptp(run.states[:, :N].mean(axis=1))
+    assert path_m > 0.1 and turn_rad > 1.5 and run.offset_rad.max() > 0.8
+    assert pose.max() < 0.015 and state.max() < 0.015, (error_summary_mm(pose),
+                                                         error_summary_mm(state))
+    pose, state, _ = estimate_errors(run, (1, N - 1))
+    assert pose.max() < 0.025 and state.max() < 0.025, (error_summary_mm(pose),
+                                                         error_summary_mm(state))
+
+
+def test_an_unread_link_between_read_ones_takes_the_angle_the_camera_measured_across_it():
+    # the gait's reference is far from the lagging joints in a hard turn: an unread link between
+    # two read ones keeps the angle between them that the camera measured
+    run = turning_run()
+    x = state_at(run, 2.3)
+    est = BodyStateEstimator(MODEL, PATH_GAIT)
+    seen = x[:N].copy()
+    seen[2] = np.nan
+    k = int(np.searchsorted(run.t_s, 2.3))
+    est.observe(2.3, x[N : N + 2], seen, float(run.offset_rad[k]))
+    pose = est.latest_pose()
+    assert pose is not None
+    alpha, _ = gait_reference(2.3, PATH_GAIT, float(run.offset_rad[k]), N)
+    assert abs(alpha[1] + alpha[2] - (x[3] - x[1])) > 0.2  # the reference's two joints: far off
+    assert abs(pose[3] - pose[1] - (x[3] - x[1])) < 0.02  # the camera's angle across the gap
+    assert body_error_m(MODEL, pose[None], x[None])[0] < 0.02
+
+
+def test_the_body_is_placed_on_its_read_links_whatever_their_2pi_branch():
+    theta = np.linspace(-2.2, 2.2, N)  # a body curled by 4.4 rad
+    for branch in ([0] * N, [0, 0, 0, 1, -1, 1], [3, -2, 0, 0, 1, 0]):
+        seen = theta + 0.3 + 2 * np.pi * np.asarray(branch)
+        placed = place_on_seen_links(theta, seen)
+        assert np.allclose(np.angle(np.exp(1j * (placed - theta - 0.3))), 0.0, atol=1e-12)
+
+
+def test_the_body_error_is_the_largest_distance_of_its_points():
+    x = state_at(twin_run(), 2.0)
+    moved = x.copy()
+    moved[N] += 0.03  # a shift moves every point by it
+    assert body_error_m(MODEL, moved[None], x[None])[0] == pytest.approx(0.03)
+    # a bent error: every link turned differently, against the ends from eelsim's link centres
+    turned = x.copy()
+    turned[:N] += np.linspace(-0.2, 0.15, N)
+
+    def ends(state):
+        xc, yc = link_positions(MODEL, state)
+        c, s = np.cos(state[:N]), np.sin(state[:N])
+        lh = MODEL.half_length_m
+        return np.concatenate([np.stack([xc - lh * c, yc - lh * s], -1),
+                               np.stack([xc + lh * c, yc + lh * s], -1)])
+
+    expected = np.linalg.norm(ends(turned) - ends(x), axis=1).max()
+    assert expected > 0.01
+    assert body_error_m(MODEL, turned[None], x[None])[0] == pytest.approx(expected, rel=1e-9)
 
 
 def _current_run(current_speed_m_s: float):

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from eelhost.planning.body import link_endpoints
 from eelhost.planning.geometry import FloatArray
 from eelhost.wire import protocol
 from eelsim.control import Gait, gait_reference, joint_amplitudes, wrap_angle
@@ -40,9 +41,9 @@ from eelsim.model import SwimmerModel
 
 log = logging.getLogger(__name__)
 
-__all__ = ["BodyEstimate", "BodyStateEstimator", "CurrentEstimator", "CurrentWindow",
+__all__ = ["BodyEstimate", "body_error_m", "error_summary_mm", "fill_unread_links", "BodyStateEstimator", "CurrentEstimator", "CurrentWindow",
            "JointSources", "JointsAtFrame", "TelemetryJoints", "gait_link_angles",
-           "steady_towards"]
+           "place_on_seen_links", "steady_towards"]
 
 #: Telemetry's ``phi_mrad`` of a joint without a measured angle (docs/firmware.md, "Joint loop").
 NO_ANGLE_MRAD = -32768
@@ -68,6 +69,129 @@ def links_from_joints(joint_angles_rad: FloatArray, heading_rad: float) -> Float
     """
     theta = np.concatenate([[0.0], np.cumsum(np.asarray(joint_angles_rad, dtype=float))])
     return theta - theta.mean() + heading_rad
+
+
+def place_on_seen_links(theta_rad: FloatArray, seen_rad: FloatArray) -> FloatArray:
+    """Turn a body's shape onto the link angles the camera read (least squares).
+
+    The shape ``theta_rad`` (link angles from the fused joint angles, a chain unwrapped along
+    the body) is turned by the mean of its differences to the links read, each difference taken
+    modulo 2 pi about the first one's. The differences all lie near the one turn the shape
+    needs, whatever the body's bend; the link angles themselves do not: a body curled in a hard
+    turn spans more than pi from tail to head (4.3 rad seen in a bench world), and wrapping them
+    about the first link moved the far links by 2 pi, which turned the whole estimate by
+    2 pi k / N (docs/planning.md, "The robot's state at the tank").
+
+    Parameters
+    ----------
+    theta_rad : ndarray, shape (N,)
+        The shape's link angles, consistent along the body.
+    seen_rad : ndarray, shape (N,)
+        The camera's link angles, each in any 2 pi branch, NaN where a link was not read (at
+        least one read).
+
+    Returns
+    -------
+    ndarray, shape (N,)
+        ``theta_rad`` turned by one angle.
+    """
+    seen = np.asarray(seen_rad, dtype=float)
+    known = np.isfinite(seen)
+    diff = seen[known] - theta_rad[known]
+    diff = diff[0] + wrap_angle(diff - diff[0])
+    return theta_rad + float(np.mean(diff))
+
+
+def fill_unread_links(theta_rad: FloatArray, seen_rad: FloatArray, prior_rad: FloatArray,
+                      prior_var_rad2: FloatArray | float, link_var_rad2: float) -> FloatArray:
+    """Link angles by least squares from the links the camera read and the joints' prior.
+
+    Minimises sum over read links (theta_i - seen_i)^2 / s_link^2 + sum over joints
+    (theta_{j+1} - theta_j - prior_j)^2 / s_prior,j^2. A link not read between two read ones
+    then takes its two joints' prior moved so that they add up to the angle between the read
+    links (which the camera measured), instead of the prior's joints as they are: in a hard
+    turn the gait's reference is 0.2-0.4 rad RMS from the PD joints (they lag it under load),
+    and taking the reference's two joints as they are put the head 0.15 m off (docs/planning.md,
+    "The robot's state at the tank").
+
+    Parameters
+    ----------
+    theta_rad : ndarray, shape (N,)
+        The shape placed on the read links (:func:`place_on_seen_links`): the 2 pi branch the
+        read angles are taken in.
+    seen_rad : ndarray, shape (N,)
+        The camera's link angles, NaN where not read (at least one read).
+    prior_rad : ndarray, shape (N - 1,)
+        The joints' prior (telemetry or the gait's reference).
+    prior_var_rad2 : float or ndarray (N - 1,)
+    link_var_rad2 : float
+        A read link angle's variance.
+
+    Returns
+    -------
+    ndarray, shape (N,)
+    """
+    n = len(theta_rad)
+    seen = np.asarray(seen_rad, dtype=float)
+    known = np.isfinite(seen)
+    # the read angles on the shape's branch (each within pi of the placed shape)
+    target = np.where(known, theta_rad + wrap_angle(np.where(known, seen, 0.0) - theta_rad), 0.0)
+    diff = np.diff(np.eye(n), axis=0)  # (N - 1, N): joint j = theta_{j+1} - theta_j
+    w_joint = 1.0 / np.broadcast_to(np.asarray(prior_var_rad2, dtype=float), (n - 1,))
+    w_link = known / link_var_rad2
+    normal = np.diag(w_link) + diff.T @ (w_joint[:, None] * diff)
+    rhs = w_link * target + diff.T @ (w_joint * np.asarray(prior_rad, dtype=float))
+    return np.asarray(np.linalg.solve(normal, rhs), dtype=float)
+
+
+def body_error_m(model: SwimmerModel, estimated: FloatArray, true: FloatArray) -> FloatArray:
+    """How far an estimated body is from the true one: the largest distance of its points.
+
+    Every joint and tip of the estimate is compared with the same point of the true body
+    (:func:`eelhost.planning.body.link_endpoints`); each link is rigid, so a point's displacement
+    is affine along the link and the largest over the whole centre line is at one of its ends.
+    A point of the outline off the centre line (the link's half width b off it) moves by at most
+    b times the link's angle error more. This is what a contact test on the estimated body can
+    be wrong by (docs/planning.md, "The robot's state at the tank").
+
+    Parameters
+    ----------
+    model : SwimmerModel
+    estimated, true : ndarray, shape (K, 2 N + 4) or (K, N + 2)
+        Link angles and centre of mass first (rates, if any, are not used).
+
+    Returns
+    -------
+    ndarray, shape (K,)
+        Metres, per state.
+    """
+    n = model.n_links
+    est = np.atleast_2d(np.asarray(estimated, dtype=float))[:, : n + 2]
+    tru = np.atleast_2d(np.asarray(true, dtype=float))[:, : n + 2]
+    pad = np.zeros((len(est), n + 2))
+    a = link_endpoints(model, np.concatenate([est, pad], axis=1))
+    b = link_endpoints(model, np.concatenate([tru, pad], axis=1))
+    return np.asarray(np.linalg.norm(a - b, axis=-1).max(axis=1), dtype=float)
+
+
+def error_summary_mm(errors_m: FloatArray) -> dict[str, float]:
+    """Median, 95th percentile and largest of body errors (:func:`body_error_m`), in mm.
+
+    Parameters
+    ----------
+    errors_m : ndarray
+
+    Returns
+    -------
+    dict
+        ``frames``, ``p50_mm``, ``p95_mm``, ``max_mm`` (only ``frames`` = 0 when empty).
+    """
+    e = np.asarray(errors_m, dtype=float) * 1000.0
+    if e.size == 0:
+        return {"frames": 0}
+    p50, p95 = np.percentile(e, [50, 95])
+    return {"frames": int(e.size), "p50_mm": round(float(p50), 1),
+            "p95_mm": round(float(p95), 1), "max_mm": round(float(e.max()), 1)}
 
 
 def gait_link_angles(model: SwimmerModel, gait: Gait, t_s: float, heading_rad: float,
@@ -599,11 +723,12 @@ class BodyStateEstimator:
         self._source = source
         self.frames_by_source[source] = self.frames_by_source.get(source, 0) + 1
         if known.any():
-            theta = links_from_joints(joints, 0.0)
-            # place the shape on the links the camera read (least squares: the mean difference)
-            ref = seen[known][0]
-            diff = np.angle(np.exp(1j * (seen[known] - ref))) + ref - theta[known]
-            theta = theta + float(np.mean(diff))
+            theta = place_on_seen_links(links_from_joints(joints, 0.0), seen)
+            if not known.all():
+                # the links read on both sides of an unread one fix its joints' sum: solve for
+                # every link at once instead of taking the prior's two joints as they are
+                link_var = 0.5 * self.sources.camera_rad**2  # a joint is two links' difference
+                theta = fill_unread_links(theta, seen, prior, var, link_var)
         else:
             theta = links_from_joints(joints, self._last_heading())
         if self._x:
