@@ -30,6 +30,7 @@ from eelhost.planning.replan import (
     Ahead,
     Decision,
     TankReplanner,
+    current_spread_m_s,
     outline_clearance_m,
     predict_state,
 )
@@ -646,6 +647,63 @@ def test_a_replan_past_its_start_is_waited_for_within_its_budget_only_with_time_
         assert job.t_start_s < t < job.due_s
 
 
+def capsule_near_replanner(near_in_s: float):
+    """A :func:`failing_replanner` on its corridor whose look-ahead swims the present waypoints
+    with the outline 50 mm clear but the capsule within the margin ``near_in_s`` after its
+    estimate (no current windows)."""
+
+    class CapsuleNear(failing_replanner("exhausted")):  # type: ignore[misc]
+        def _estimate_current(self, est, left, pose):  # noqa: ANN001, ANN202
+            return False
+
+        def _look_ahead(self, est, left, extra, guide=None, horizon_s=None):  # noqa: ANN001, ANN202
+            if horizon_s is not None:
+                return 0.2, 0.2
+            return Ahead(0.05, 0.0, math.inf, est.t_s + near_in_s)
+
+    return CapsuleNear
+
+
+@pytest.mark.parametrize("near_in_s", [1.0, 4.5])
+def test_the_back_off_yields_to_a_lookahead_that_puts_the_capsule_near_before_a_later_replan(
+        open_plan, near_in_s):
+    # seed 12041 (docs/planning.md): after a failed replan the back-off asked for no replan
+    # whatever the look-ahead said, and the robot swam into an obstacle meanwhile
+    planner, outcome = open_plan
+    nav = capsule_near_replanner(near_in_s)(lambda extra: planner, planner, outcome, PATH_GAIT,
+                                            replan_budget_s=1.0)
+    nav.requests.clear()
+    start = np.asarray(outcome.plan.legs[0].com_m[0])
+    stop = None
+    try:
+        for k in range(int(9.0 * 30)):
+            t = k / 30
+            d = nav.on_frame(t, pose_at(t, start), np.array([*start, 0.0]), 0, 0.0)
+            if d.stop is not None:
+                stop = (t, d)
+                break
+            nav._worker.submit(lambda: None).result()
+            nav._side.submit(lambda: None).result()
+    finally:
+        nav.close()
+    need = nav._retry_need_s()
+    gaps = np.diff(nav.requests)
+    if near_in_s + nav.lookahead_every_s < nav.backoff_s + need:
+        # the capsule comes near before a replan after the 1 s back-off could steer: every
+        # failed replan is followed by the next look-ahead's replan, within the back-off
+        assert len(nav.requests) == nav.max_failures and gaps.max() < nav.backoff_s
+        assert nav.backoff_yields == nav.max_failures - 1 and nav.retries_before_contact == 0
+        assert nav.record()["backoff_yields"] == nav.max_failures - 1
+        # then no failure is left: the robot is stopped deliberately, with the reason
+        assert stop is not None and stop[1].stop == "no_safe_continuation"
+        assert "before a replan after the back-off could steer" in stop[1].detail
+        assert "3 replans failed in a row" in stop[1].detail
+    else:
+        # far enough ahead: the back-off holds (1 s, then 2 s between tries), as before
+        assert nav.backoff_yields == 0 and len(nav.requests) >= 2
+        assert gaps[0] >= nav.backoff_s - 0.05 and (len(gaps) < 2 or gaps[1] >= 2.0 - 0.05)
+
+
 def test_the_lookahead_asks_for_a_replan_5_s_ahead_but_judges_stops_on_the_next_3_s():
     # a disc some 4 s ahead of the swimming robot: within the replan horizon, beyond the stops'
     world = parse_world({**OPEN, "obstacles": [
@@ -662,12 +720,47 @@ def test_the_lookahead_asks_for_a_replan_5_s_ahead_but_judges_stops_on_the_next_
         finally:
             nav.close()
         margin = nav.lookahead_margin_m
-    outline_3, capsule_3, contact_3 = verdicts[3.0]
-    outline_5, capsule_5, contact_5 = verdicts[5.0]
+    outline_3, capsule_3, contact_3, near_3 = verdicts[3.0]
+    outline_5, capsule_5, contact_5, near_5 = verdicts[5.0]
     assert capsule_3 > margin + 0.005  # 3 s ahead the capsule stays clear: no replan asked for
     assert capsule_5 < margin  # 5 s ahead it meets the disc: a replan is asked for in time
     assert outline_5 == outline_3 > margin  # the stop's verdict is still the next 3 s's
     assert contact_3 == contact_5 == math.inf  # no contact of the outline within those 3 s
+    assert near_3 == math.inf and e.t_s + 3.0 < near_5 <= e.t_s + 5.0  # when it comes near
+
+
+def test_the_lookaheads_margin_grows_with_the_current_estimates_uncertainty():
+    # the disc of the test above, judged over 3 s only: clear by more than the 10 mm margin in the
+    # estimated water, but not by the drift that an uncertain current estimate allows over 3 s
+    world = parse_world({**OPEN, "obstacles": [
+        {"kind": "circle", "centre_m": [1.25, 1.03], "radius_m": 0.05}]}, "disc")
+    planner = Planner(world, ROBOT, MODEL, check=False)
+    outcome = Outcome(Plan(False, "none", "none"), "none", "none")
+    e = estimate_at(3.0)
+    # one window with a sample of 20 mm/s north moved the estimate (gain 0.6) to 12 mm/s:
+    # the estimate may still be 8 mm/s off
+    history = [{"current_m_s": [0.0, 0.012]}]
+    assert current_spread_m_s(history, 0.6) == pytest.approx(0.008)
+    assert current_spread_m_s([], 0.6) == 0.0  # nothing measured: no allowance
+    # two more windows that agree with the estimate shrink it
+    assert current_spread_m_s(history + [{"current_m_s": [0.0, 0.012]}] * 2, 0.6) < 0.005
+    verdicts = []
+    for h in ([], history):
+        nav = TankReplanner(lambda extra: planner, planner, outcome, PATH_GAIT,
+                            replan_horizon_s=3.0)
+        nav.current.history = h
+        try:
+            verdicts.append(nav._look_ahead(e, [(2.5, 1.3)], np.zeros(2)))
+        finally:
+            nav.close()
+        margin = nav.lookahead_margin_m
+    known, uncertain = verdicts
+    assert known.capsule_m > margin and known.near_s == math.inf  # no replan asked for
+    # the allowance (8 mm/s times the time ahead, at most 20 mm) takes it within the margin
+    assert known.capsule_m - 0.02 - 1e-9 <= uncertain.capsule_m < margin
+    assert e.t_s < uncertain.near_s <= e.t_s + 3.0
+    # the stops' verdict (the outline, its contact) does not move with the allowance
+    assert (uncertain.outline_m, uncertain.contact_s) == (known.outline_m, known.contact_s)
 
 
 def test_a_slow_replan_does_not_push_the_next_replans_start_beyond_the_lead_cap(open_plan):

@@ -33,8 +33,9 @@ from typing import Any, NamedTuple, cast
 
 import numpy as np
 
+from eelhost.planning.body import link_endpoints
 from eelhost.planning.check import water_twin
-from eelhost.planning.execute import Swim, body_clearance_m, swim
+from eelhost.planning.execute import Swim, _body_clearance, body_clearance_m, swim
 from eelhost.planning.geometry import FloatArray, point_segment_distance
 from eelhost.planning.planner import SCREEN_DRAWS, Outcome, Planner
 from eelhost.planning.search import (
@@ -447,14 +448,82 @@ class Ahead(NamedTuple):
     outline_m : float
         The body's own outline's smallest gap over ``lookahead_s`` (<= 0: contact).
     capsule_m : float
-        The planner's capsule's smallest gap over the replan horizon.
+        The planner's capsule's smallest gap over the replan horizon, less the drift allowance
+        of the current estimate's uncertainty at each moment (:func:`drift_allowance_m`; 0
+        without a measured uncertainty): below the look-ahead's margin, a replan is asked for.
     contact_s : float
         The robot's time of the outline's first contact within ``lookahead_s`` (inf: none).
+    near_s : float
+        The robot's time at which that capsule first comes within the look-ahead's margin plus
+        the allowance (inf: never within the horizon): the back-off yields to a replan when it
+        comes before a replan asked for after the back-off could steer (docs/planning.md,
+        "The back-off yields to a predicted contact").
     """
 
     outline_m: float
     capsule_m: float
     contact_s: float = math.inf
+    near_s: float = math.inf
+
+
+def near_time_s(judged: tuple[float, ...], t_s: float, margin_m: float) -> float:
+    """When a look-ahead's verdict puts the capsule first within ``margin_m`` (plus allowance).
+
+    A verdict without that time (a bare pair or triple, as the tests' fakes give) whose capsule
+    is within the margin is taken as within it now.
+    """
+    if len(judged) > 3:
+        return float(judged[3])
+    return -math.inf if judged[1] < margin_m else math.inf
+
+
+LOOKAHEAD_DRIFT_MAX_M = 0.02
+"""The largest drift allowance added to the look-ahead's margin (:func:`drift_allowance_m`): 10 mm
+plus this is 30 mm, what a searched plan's capsule keeps in its own water (the search's 50 mm
+centre line less the body's half width), so a plan that holds in the estimate is not replanned
+for the allowance alone."""
+
+
+def current_spread_m_s(history: list[dict], gain: float, windows: int = 3) -> float:
+    """How far the current estimate may be from the water, from its last windows (m/s).
+
+    Each window's sample of the current (:class:`CurrentEstimator`) moved the estimate by
+    ``gain`` times its distance from it, so the sample was ``a_prev + (a_new - a_prev) / gain``.
+    The spread is the root mean square distance of the last ``windows`` samples from the present
+    estimate: 0 before any window (nothing measured), the remaining innovation after one
+    (``(1 - gain) / gain`` times the move), and the scatter of the water's samples around the
+    estimate later (docs/planning.md, "The look-ahead's margin grows with the current's
+    uncertainty").
+
+    Parameters
+    ----------
+    history : list of dict
+        :attr:`CurrentEstimator.history` (``current_m_s`` after every window).
+    gain : float
+        The estimator's gain (0 < gain <= 1).
+    windows : int
+
+    Returns
+    -------
+    float
+    """
+    if not history or gain <= 0.0:
+        return 0.0
+    values = [np.zeros(2)] + [np.asarray(h["current_m_s"], dtype=float) for h in history]
+    now = values[-1]
+    samples = [values[k - 1] + (values[k] - values[k - 1]) / gain
+               for k in range(max(1, len(values) - windows), len(values))]
+    return float(np.sqrt(np.mean([float(np.sum((c - now) ** 2)) for c in samples])))
+
+
+def drift_allowance_m(spread_m_s: float, ahead_s: FloatArray) -> FloatArray:
+    """The drift a current error of ``spread_m_s`` gives over ``ahead_s`` (m), capped.
+
+    In a uniform current the body drifts with the water, so a current known to within ``e``
+    puts the swum body up to ``e`` t from the twin's after ``t``; capped at
+    :data:`LOOKAHEAD_DRIFT_MAX_M`.
+    """
+    return np.minimum(spread_m_s * np.asarray(ahead_s, dtype=float), LOOKAHEAD_DRIFT_MAX_M)
 
 
 def contact_time_s(judged: tuple[float, ...], t_s: float) -> float:
@@ -670,6 +739,9 @@ class TankReplanner:
         self.retries_before_contact = 0  # replans asked for instead of a stop (the record's)
         # the robot's time of the first contact the latest look-ahead predicts (inf: none)
         self._contact_at_s = math.inf
+        # the robot's time the latest look-ahead puts the capsule within the margin (inf: never)
+        self._near_at_s = math.inf
+        self.backoff_yields = 0  # replans asked for during a back-off (the record's)
         self._retry_now = False  # a failed replan asked for another at the next frame
         self._last_tiers: dict[str, float] = {}  # the last replan's parts' wall times
         self._plan_current = np.zeros(2)  # the extra current the present plan was searched in
@@ -790,12 +862,14 @@ class TankReplanner:
             self._lookahead = None
             self._last_gap = (t_s, None if judged is None else judged[0])
             self._contact_at_s = math.inf if judged is None else contact_time_s(judged, t_s)
+            self._near_at_s = (math.inf if judged is None
+                               else near_time_s(judged, t_s, self.lookahead_margin_m))
             capsule = None if judged is None else judged[1]
             # a new plan is asked for with the planner's capsule (the safer trigger); the robot is
             # stopped, or keeps its plan, on its own outline
             predicted = capsule is not None and capsule < self.lookahead_margin_m
         gap = self._last_gap[1]
-        retry = False
+        retry = yielded = False
         if (predicted and self.failures > 0 and gap is not None and gap <= 0.0
                 and self._job is None and self._pending is None
                 and self._may_retry(t_s)):
@@ -814,6 +888,25 @@ class TankReplanner:
                         f"{self._contact_note(t_s)}) and "
                         f"the last replan failed: {self.events[-1]['message']}")
             return d
+        elif predicted and self._backoff_yields(t_s, busy):
+            # the back-off would let the capsule come within the margin before a replan asked
+            # for after it could steer (docs/planning.md, "The back-off yields to a predicted
+            # contact"): replan now while failures are left, else stop deliberately
+            if self.failures < self.max_failures:
+                retry = yielded = True
+                self.backoff_yields += 1
+                log.info("the back-off yields at t = %.2f s: the capsule comes within the margin "
+                         "at t = %.2f s, before a replan after the back-off (%.2f s) could "
+                         "steer", t_s, self._near_at_s, self._next_try_s)
+            else:
+                d.stop = "no_safe_continuation"
+                d.detail = (
+                    f"at t = {t_s:.2f} s the twin swims the present plan's capsule within "
+                    f"{self.lookahead_margin_m * 1000:.0f} mm of an obstacle or wall (with the "
+                    f"current estimate's drift allowance) at t = {self._near_at_s:.2f} s, "
+                    f"before a replan after the back-off could steer, and {self.failures} "
+                    f"replans failed in a row: {self.events[-1]['message']}")
+                return d
         job = self._job
         if (predicted and gap is not None and gap <= 0.0 and job is not None
                 and t_s > job.t_start_s + 1e-9
@@ -835,8 +928,9 @@ class TankReplanner:
             reason = "left_corridor"
         elif predicted:
             reason = "predicted_contact"
-            log.info("the twin predicts the body's capsule within %.0f mm of an obstacle or wall "
-                     "within %.1f s", capsule * 1000, self.replan_horizon_s)  # type: ignore[operator]
+            log.info("the twin predicts the body's capsule within %.0f mm (less the drift "
+                     "allowance) of an obstacle or wall within %.1f s", capsule * 1000,  # type: ignore[operator]
+                     self.replan_horizon_s)
         elif self._retry_now:
             reason = "predicted_contact"  # a failed replan's look-ahead swam into contact
         elif self._whole_plan_fails(est, left, busy):
@@ -845,7 +939,7 @@ class TankReplanner:
             # the robot is still on its plan (docs/planning.md)
             reason = "current_estimate"
         if reason is not None and not busy and (t_s >= self._next_try_s or retry):
-            if retry or self._retry_now:
+            if (retry and not yielded) or self._retry_now:
                 self.retries_before_contact += 1
             self._retry_now = False
             self._request(t_s, est, left, reason)
@@ -885,6 +979,7 @@ class TankReplanner:
         """
         return {"plans": self.events, "replans": self.replans,
                 "retries_before_contact": self.retries_before_contact,
+                "backoff_yields": self.backoff_yields,
                 "replan_budget_s": self.replan_budget_s,
                 "current_estimate": self.current.history,
                 "state_estimate": self.estimator.summary()}
@@ -919,6 +1014,18 @@ class TankReplanner:
         """
         return (self.failures < self.max_failures
                 and self._contact_at_s - t_s >= self._retry_need_s())
+
+    def _backoff_yields(self, t_s: float, busy: bool) -> bool:
+        """A back-off after a failed replan gives way to a replan (or a stop) now.
+
+        It does when the latest look-ahead puts the capsule within the margin (with the current
+        estimate's drift allowance) before a replan asked for when the back-off ends could
+        steer: its end plus the replanner's own need (:meth:`_retry_need_s`; without a budget
+        nothing bounds that, so it always does). Until session 9 the back-off asked for no
+        replan whatever the look-ahead said (seed 12041's contact, docs/planning.md).
+        """
+        return (self.failures > 0 and not busy and t_s < self._next_try_s
+                and self._near_at_s < self._next_try_s + self._retry_need_s())
 
     def _retry_need_s(self) -> float:
         """The robot's time a replan asked for now may take before its plan steers, at most.
@@ -1188,6 +1295,7 @@ class TankReplanner:
         if judged is not None:
             self._last_gap = (t_s, judged[0])
             self._contact_at_s = contact_time_s(judged, t_s)
+            self._near_at_s = near_time_s(judged, t_s, self.lookahead_margin_m)
         if self._present_plan_hits(t_s) and self._may_retry(t_s):
             # the present plan swims into contact, but far enough ahead for another replan to
             # steer before it: replan again at once (docs/planning.md, "Retried before contact")
@@ -1260,7 +1368,10 @@ class TankReplanner:
 
         Returns the body's own outline's over ``lookahead_s`` with the time of its first
         contact there, and the planner's capsule's over ``horizon_s`` (default
-        ``replan_horizon_s``), or None without a run.
+        ``replan_horizon_s``) with the time it first comes within the look-ahead's margin, or
+        None without a run. Without ``horizon_s`` (the look-ahead that guards the robot) the
+        capsule's gap at each moment is less the drift the current estimate's uncertainty
+        allows by then (:func:`drift_allowance_m`).
         """
         twin = self._twin_in(extra)
         now = int(round(est.t_s / twin.dt_s))
@@ -1286,9 +1397,22 @@ class TankReplanner:
         outline = outline_clearance_m(self.world, self.model, near)
         touching = np.flatnonzero(outline <= 0.0)
         contact = (now + int(touching[0]) * stride) * twin.dt_s if touching.size else math.inf
-        return Ahead(float(outline.min()),
-                     float(body_clearance_m(planner.world, planner.clearance, planner.model,
-                                            states).min()), contact)
+        # exact wherever the gap may be within the margin and the largest allowance (the
+        # capsule's gap is otherwise a lower bound away from its smallest value)
+        half_width = float(planner.model.half_axis_horizontal_m.max())
+        capsule = _body_clearance(
+            planner.world, planner.clearance, link_endpoints(planner.model, states),
+            float(planner.model.half_length_m.max()),
+            half_width + self.lookahead_margin_m + LOOKAHEAD_DRIFT_MAX_M) - half_width
+        if horizon_s is None:
+            # the look-ahead that guards the robot: its margin grows along the horizon with the
+            # drift the current estimate's uncertainty allows (docs/planning.md)
+            ahead_s = np.arange(len(capsule), dtype=np.float64) * (stride * twin.dt_s)
+            capsule = np.subtract(capsule, drift_allowance_m(
+                current_spread_m_s(self.current.history, self.current.gain), ahead_s))
+        within = np.flatnonzero(capsule < self.lookahead_margin_m)
+        near_s = (now + int(within[0]) * stride) * twin.dt_s if within.size else math.inf
+        return Ahead(float(outline.min()), float(capsule.min()), contact, near_s)
 
     def _twin_in(self, extra: FloatArray) -> Twin:
         """The planner's twin in the world's current plus the estimate ``extra``."""
