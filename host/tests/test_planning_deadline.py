@@ -15,7 +15,7 @@ import pytest
 from test_planning_repairs import MODEL, ROBOT, open_tank
 
 from eelhost.cli import main
-from eelhost.planning.planner import PlanLengths, Planner
+from eelhost.planning.planner import DEADLINE_DRAWS_MIN, PlanLengths, Planner
 from eelhost.planning.search import SwimCost
 from eelhost.planning.twin import Twin
 
@@ -201,3 +201,37 @@ def test_a_repairs_search_keeps_free_the_time_of_its_own_larger_check(clock):
     # the same plan length expected by both searches, the repair's check 19 runs against 7
     assert len(reserves) == 2 and reserves[0] > 0
     assert reserves[1] / reserves[0] == pytest.approx((1 + p.repair_draws) / (1 + p.draws))
+
+
+def test_a_check_too_long_for_the_deadline_is_cut_to_fewer_draws_instead_of_no_search(clock):
+    # session 9: under load the kept-free check of 60 draws alone exceeded a replan's 1 s, so the
+    # search started no expansion; now the check swims as many draws as half the time allows
+    free = Planner(open_tank(), ROBOT, MODEL, draws=40, unknown_current_m_s=0.0, seed=3)
+    free.clock, free.check_cost, free.plan_lengths = clock, SwimCost(), PlanLengths()
+    t0 = clock()
+    assert free.search.plan().found
+    search_s = clock() - t0
+    p = Planner(open_tank(), ROBOT, MODEL, draws=40, unknown_current_m_s=0.0, seed=3)
+    p.clock, p.check_cost, p.plan_lengths = clock, SwimCost(), PlanLengths()
+    expected = p.expected_steps()
+    # the check's measured cost per run-step set so that one run is predicted to take as long
+    # as the whole search (the check itself then swims at the fake clock's own, lower cost)
+    rate = search_s / expected
+    p.check_cost.record(1_000_000, rate * 1_000_000)
+    one_run = p.check_time_s(expected, 0)
+    whole = p.check_time_s(expected)
+    assert whole == pytest.approx(41 * one_run)
+    start = clock()
+    deadline = start + 1.5 * whole  # the whole check is more than half the time left
+    kept = p.draws_within(expected, p.draws, deadline)
+    assert kept == int(np.floor(0.75 * 41)) - 1 == 29  # as many as half the time holds
+    outcome = p.plan(deadline_s=deadline)
+    assert outcome.found, outcome.message
+    assert outcome.draws == kept and len(outcome.checks) == 1 + kept
+    assert f"over {kept} draws" in outcome.message  # the stated interval is over those swum
+    assert clock() <= deadline
+    # never fewer than DEADLINE_DRAWS_MIN, however little time is left; all without a deadline
+    assert p.draws_within(expected, p.draws, clock() + 0.1 * one_run) == DEADLINE_DRAWS_MIN
+    assert p.draws_within(expected, p.draws, None) == p.draws
+    # a repaired plan's check keeps at least the first plan's draws
+    assert p.draws_within(expected, p.repair_draws, clock() + 0.1 * one_run, p.draws) == p.draws

@@ -111,6 +111,19 @@ of the 18 such first plans; with pure pursuit (12000-12099) 1 of 2 repaired plan
 probability 13 %, 180 with 0.2 %; for each of the up to ``repairs`` plans the planner may try
 that is the chance it is returned (docs/planning.md, "The planner", step 5)."""
 
+DEADLINE_DRAWS_MIN = 20
+"""Fewest draws a first plan's check is cut to when a planning call's deadline leaves no room for
+its whole check (:meth:`Planner.draws_within`): 0 failures in 20 still bound the probability of
+coming within the margin by about 17 % (95 %, two-sided Clopper-Pearson), stated as such in the
+plan's message. A repaired plan's check is never cut below ``draws`` (the first plan's)."""
+
+CHECK_SHARE_MAX = 0.5
+"""Largest share of the time left at a planning call's start that the kept-free check may take;
+beyond it the check's draws are cut (:meth:`Planner.draws_within`). Until session 9 the search
+kept the whole check's predicted time free, and under load (a load average of 15-29) that alone
+exceeded a replan's 1 s budget: the search started no expansion (docs/planning.md, "The planning
+call's deadline")."""
+
 SCREEN_DRAWS = 4
 """Draws swum first; a plan that fails one is repaired without swimming the others. The verdict
 does not depend on it (every draw must pass), only what a failing plan costs: the plans that fail
@@ -543,6 +556,38 @@ class Planner:
             need = 0.0 if search is None else CHECK_OVER_SEARCH * search
         return need
 
+    def draws_within(self, plan_steps: float, draws: int, deadline_s: float | None,
+                     fewest: int = DEADLINE_DRAWS_MIN) -> int:
+        """How many of ``draws`` draws a check may swim so the search keeps room before a deadline.
+
+        All of them unless their check's predicted time (:meth:`check_time_s`) exceeds
+        :data:`CHECK_SHARE_MAX` of the time left now; then as many as fit in that share, never
+        fewer than ``fewest`` (nor more than ``draws``). Without a deadline, or before any cost
+        is measured, all of them. The plan's stated interval is always over the draws swum.
+
+        Parameters
+        ----------
+        plan_steps : float
+            The plan's expected length, physics steps (:meth:`expected_steps`).
+        draws : int
+        deadline_s : float or None
+            On :attr:`clock`.
+        fewest : int
+
+        Returns
+        -------
+        int
+        """
+        if deadline_s is None or draws <= fewest:
+            return draws
+        room = CHECK_SHARE_MAX * (deadline_s - self.clock())
+        if self.check_time_s(plan_steps, draws) <= room:
+            return draws
+        per_run = self.check_time_s(plan_steps, 0)  # the fits' one run at the measured cost
+        if per_run <= 0.0:
+            return draws
+        return int(min(draws, max(fewest, math.floor(room / per_run) - 1)))
+
     def _free_path_steps(self, state: FloatArray | None) -> float:
         """The free-space path of the body's centre to the goal disc at the swimming speed, steps.
 
@@ -675,8 +720,11 @@ class Planner:
         expected = self.expected_steps(state)
         free_path = self._free_path_steps(state)
         for attempt in range(self.repairs + 1):
-            # a repaired plan's check swims its own, larger count of draws (REPAIR_DRAWS_FACTOR)
-            count = len(self.waters(attempt)) if self.check else 0
+            # a repaired plan's check swims its own, larger count of draws (REPAIR_DRAWS_FACTOR);
+            # with a deadline, as many as its predicted time leaves the search room for
+            count = (self.draws_within(expected, len(self.waters(attempt)), deadline_s,
+                                       DEADLINE_DRAWS_MIN if attempt == 0 else self.draws)
+                     if self.check else 0)
             reserve = ((lambda c=count: self.check_time_s(expected, c)) if self.check else None)
             plan = self.search.plan(banned, start_state=state, start_step=step, guide=guide,
                                     deadline_s=deadline_s, reserve_s=reserve)
@@ -698,7 +746,7 @@ class Planner:
                 return Outcome(plan, "found", plan.message, [], attempt, total, searching)
             # each plan its own draws: a repaired plan is not chosen to pass the very draws its
             # predecessors failed (docs/planning.md, "The planner", step 4)
-            waters = self.waters(attempt)
+            waters = self.waters(attempt)[:count]
             t_check = time.perf_counter()
             try:
                 checks, elapsed = self.check_plan(plan, state, step, waters, deadline_s)
