@@ -10,6 +10,7 @@ import pytest
 
 from eelhost.benchmarks.closed_loop import (
     WorldResult,
+    estimate_error_mm,
     run_closed_loop_bench,
     summary_lines,
     true_clearance_m,
@@ -18,6 +19,7 @@ from eelhost.benchmarks.closed_loop import (
 from eelhost.planning.body import link_endpoints
 from eelhost.planning.uncertainty import default_model
 from eelhost.planning.world import parse_world
+from eelhost.xil.virtual_robot import DT_US
 from eelsim.dynamics import straight_state
 from eelsim.model import SwimmerModel
 from eelsim.robot import load_robot
@@ -91,3 +93,24 @@ def test_the_summary_counts_shift_repairs_and_reads_results_written_before_them(
     lines = summary_lines([old, repaired, stopped])
     assert "- shift repairs switched in: 3, in 2 runs (1 of them reached the goal)" in lines
     assert not any("shift repair" in line for line in summary_lines([old]))
+
+
+def test_the_estimate_error_compares_each_frame_with_the_plants_step_at_its_time():
+    # the plant's trace holds a state every physics step from the gait's start (the frames'
+    # clock); a frame's estimate 5 mm off its own step's body is 5 mm off, not off by the motion
+    # between steps
+    dt = DT_US * 1e-6
+    steps = np.arange(400)
+    trace = np.array([straight_state(BODY, 0.0, (0.5 + 0.1 * k * dt, 1.0)) for k in steps])
+    trace[:, : BODY.n_links] += 0.3 * np.sin(steps * dt * 4.0)[:, None] * np.linspace(-1, 1, BODY.n_links)
+    shift = np.zeros(BODY.n_links + 2)
+    shift[BODY.n_links] = 0.005  # the centre of mass 5 mm off along x
+    history = [(k * dt, trace[k, : BODY.n_links + 2] + shift) for k in range(0, 400, 33)]
+    got = estimate_error_mm(BODY, history, trace)
+    assert got["frames"] == len(history)
+    assert got["p50_mm"] == got["max_mm"] == pytest.approx(5.0)
+    assert estimate_error_mm(BODY, [], trace) == {"frames": 0}
+    line = next(s for s in summary_lines([WorldResult(5000, True, "found", "arrived",
+                                                      reached=True, estimate_error_mm=got)])
+                if "body estimate" in s)
+    assert "largest in any frame 5 mm" in line

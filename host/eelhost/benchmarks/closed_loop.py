@@ -45,11 +45,13 @@ from eelhost.field.take import TakeRequest, run_take
 from eelhost.planning.geometry import FloatArray
 from eelhost.planning.planner import PlanRefused
 from eelhost.planning.replan import REPLAN_BUDGET_S
+from eelhost.planning.state_estimate import body_error_m, error_summary_mm
 from eelhost.planning.tank import plan_for_run
 from eelhost.planning.uncertainty import CoefficientModel
 from eelhost.planning.world import CircleObstacle, World
 from eelhost.planning.worlds import generate_world
 from eelhost.vision.synthetic import TankView
+from eelhost.xil.virtual_robot import DT_US
 from eelsim.control import Gait
 from eelsim.model import SwimmerModel
 from eelsim.robot import Robot
@@ -111,6 +113,11 @@ class WorldResult:
     retries_before_contact : int
         Replans asked for at once after a failed one, instead of a stop, because the predicted
         contact was far enough ahead (docs/planning.md, "Retried before contact").
+    estimate_error_mm : dict
+        The camera's body estimate (each frame's, what the contact test judges) against the true
+        body at the frame: the largest distance of its points
+        (:func:`eelhost.planning.state_estimate.body_error_m`), median, 95th percentile and
+        largest over the run's frames, mm (empty in results written before it).
     """
 
     seed: int
@@ -137,6 +144,7 @@ class WorldResult:
     replan_budget_s: float | None = None
     shift_repairs: int = 0
     retries_before_contact: int = 0
+    estimate_error_mm: dict = field(default_factory=dict)
 
 
 def true_clearance_m(world: World, model: SwimmerModel, states: FloatArray) -> FloatArray:
@@ -273,6 +281,7 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
     # the run loop steers with the law the plan was searched and checked with, from its start
     config = RunConfig(gait, planned.waypoints_m, duration_s=2.0 * cost + 30.0,
                        guidance=planned.guidance, start_guide=planned.start_guide)
+    nav.estimator.history = []  # every frame's estimated body, for its error against the truth
     with tempfile.TemporaryDirectory() as tmp:
         request = TakeRequest(robot, config, str(Path(tmp) / "take"), TakeNotes(planned.uri),
                               "synthetic:clean", navigator=nav,
@@ -283,7 +292,9 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
         raise KeyboardInterrupt(f"{', '.join(result.signals)} received")
     vr = result.virtual_robot
     assert vr is not None and vr.trace is not None
-    clear = true_clearance_m(world, vr.model, np.asarray(vr.trace))
+    trace = np.asarray(vr.trace)
+    clear = true_clearance_m(world, vr.model, trace)
+    estimate_error = estimate_error_mm(vr.model, nav.estimator.history, trace)
     if record_to is not None:
         record_to.parent.mkdir(parents=True, exist_ok=True)
         record_to.write_text(json.dumps({"seed": seed, "outcome": out.reason,
@@ -300,7 +311,36 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
         [e["cpu_s"] for e in replans if e["cpu_s"] is not None], law,
         [e["status"] for e in replans if e["status"] != "found"], replan_budget_s,
         sum(e["message"].startswith("shift repair:") and "t_switch_s" in e for e in replans),
-        nav.retries_before_contact)
+        nav.retries_before_contact, estimate_error)
+
+
+def estimate_error_mm(model: SwimmerModel, history: list[tuple[float, FloatArray]] | None,
+                      trace: FloatArray) -> dict[str, float]:
+    """The estimated bodies' error against the plant's trace at each frame's time.
+
+    The trace holds the plant's state at every physics step k dt from the gait's start, the
+    frames' clock (:class:`eelhost.xil.virtual_robot.VirtualRobot`); each frame is compared with
+    the step nearest its time.
+
+    Parameters
+    ----------
+    model : SwimmerModel
+        The virtual robot's model (the true body).
+    history : list of (t, pose) or None
+        :attr:`BodyStateEstimator.history`.
+    trace : ndarray, shape (K, 2 N + 4)
+
+    Returns
+    -------
+    dict
+        :func:`eelhost.planning.state_estimate.error_summary_mm`.
+    """
+    if not history:
+        return error_summary_mm(np.zeros(0))
+    dt = DT_US * 1e-6
+    steps = np.clip(np.rint(np.array([t for t, _ in history]) / dt).astype(int), 0, len(trace) - 1)
+    poses = np.array([pose for _, pose in history])
+    return error_summary_mm(body_error_m(model, poses, trace[steps]))
 
 
 def _law_name(planner_options: dict[str, Any] | None) -> str:
@@ -398,6 +438,14 @@ def summary_lines(results: list[WorldResult]) -> list[str]:
     if clear:
         lines.append(f"- smallest true clearance over a run: median {statistics.median(clear) * 1000:.0f}"
                      f" mm, smallest {min(clear) * 1000:.0f} mm")
+    errors = [r.estimate_error_mm for r in planned if r.estimate_error_mm.get("frames")]
+    if errors:
+        med = {k: statistics.median(e[k] for e in errors) for k in ("p50_mm", "p95_mm", "max_mm")}
+        lines.append(f"- the camera's body estimate against the true body (largest distance of "
+                     f"its points in a frame): each run's median, 95th percentile and largest, "
+                     f"median over {len(errors)} runs: {med['p50_mm']:.0f}, {med['p95_mm']:.0f} "
+                     f"and {med['max_mm']:.0f} mm; largest in any frame "
+                     f"{max(e['max_mm'] for e in errors):.0f} mm")
     failsafe = [r for r in planned if r.failsafe_reports]
     lines.append(f"- runs with the firmware in FAILSAFE: {len(failsafe)}")
     ends = Counter(r.reason for r in planned)

@@ -638,6 +638,9 @@ class BodyStateEstimator:
         # running mean of (camera - telemetry)^2 per joint, and the frames in it
         self._disagreement = np.zeros(model.n_links - 1)
         self._disagreement_frames = np.zeros(model.n_links - 1, dtype=int)
+        self.history: list[tuple[float, FloatArray]] | None = None
+        """Set to a list to keep every frame's (t, link angles and centre of mass): benchmarks
+        compare them with the true body (:func:`body_error_m`)."""
 
     def add_telemetry(self, t_received_s: float, msg: protocol.Telemetry,
                       t_polled_before_s: float | None = None) -> bool:
@@ -737,6 +740,8 @@ class BodyStateEstimator:
             theta = prev + np.angle(np.exp(1j * (theta - prev)))
         self._t.append(float(t_s))
         self._x.append(np.concatenate([theta, np.asarray(com_m, dtype=float)]))
+        if self.history is not None:
+            self.history.append((float(t_s), self._x[-1]))
 
     def _take_disagreement(self, diff: FloatArray) -> None:
         """Add a frame's camera-minus-telemetry joint angles to the running mean (NaN: unseen)."""
