@@ -27,6 +27,7 @@ from eelhost.planning.execute import body_clearance_m
 from eelhost.planning.field import ClearanceField
 from eelhost.planning.planner import PLANNING_GUIDANCE, Outcome, Planner
 from eelhost.planning.replan import (
+    CALM_REPLAN_BUDGET_S,
     Ahead,
     Decision,
     TankReplanner,
@@ -1058,6 +1059,61 @@ def test_a_moved_current_estimate_replans_only_a_plan_it_breaks_and_a_failure_ke
         assert len(nav.asked) == 1 and nav.asked[0][1] == (0.0, 0.02)
         assert nav.events[-1]["reason"] == "current_estimate"
         assert nav.failures == 0 and set(stops) == {None}  # its failure keeps the plan
+    finally:
+        nav.close()
+
+
+def test_a_replan_in_a_moved_estimate_gets_the_calm_budget_and_starts_when_it_ends(open_plan):
+    planner, outcome = open_plan
+
+    class Timed(TankReplanner):
+        """Replans fail and record their start and budget; the look-ahead is clear, the whole
+        rest of the plan in the moved estimate is not."""
+
+        asked: list[tuple[float, float, float]] = []
+
+        def _replan(self, est, left, start_step, extra, guide=None,  # noqa: ANN001, ANN202
+                    deadline_s=None):  # noqa: ANN001
+            self.asked.append((est.t_s, start_step * self.planner.twin.dt_s,
+                               deadline_s - time.monotonic()))
+            plan = Plan(False, "exhausted", "failed (exhausted)")
+            return (Outcome(plan, "exhausted", plan.message), est.state, 0.0, 0.0, extra.copy(),
+                    time.monotonic(), start_step)
+
+        def _estimate_current(self, est, left, pose):  # noqa: ANN001, ANN202
+            return False
+
+        def _look_ahead(self, est, left, extra, guide=None, horizon_s=None):  # noqa: ANN001, ANN202
+            return (0.2, 0.2) if horizon_s is None else (0.2, 0.0)
+
+    nav = Timed(lambda extra: planner, planner, outcome, PATH_GAIT, replan_budget_s=1.0)
+    nav.asked.clear()
+    start = np.asarray(outcome.plan.legs[0].com_m[0])
+    try:
+        nav.current.value_m_s = np.array([0.0, 0.02])
+        for k in range(60):
+            t = k / 30
+            nav.on_frame(t, pose_at(t, start), np.array([*start, 0.0]), 0, 0.0)
+            nav._worker.submit(lambda: None).result()
+            nav._side.submit(lambda: None).result()
+        assert len(nav.asked) == 1 and nav.events[-1]["reason"] == "current_estimate"
+        t_request, t_start, left_s = nav.asked[0]
+        assert nav.events[-1]["budget_s"] == nav.calm_budget_s == CALM_REPLAN_BUDGET_S > 1.0
+        assert nav.calm_budget_s - 0.5 < left_s <= nav.calm_budget_s
+        # its start is the state predicted for when the budget ends, not a lead of 0.3-0.9 s
+        assert nav.calm_budget_s <= t_start - t_request <= nav.calm_budget_s + 0.3 + 1e-9
+        # a replan on leaving the corridor keeps the 1 s and the short lead
+        nav.asked.clear()
+        off = np.array([0.8, 1.4])
+        for k in range(60, 90):
+            t = k / 30
+            nav.on_frame(t, pose_at(t, off), np.array([*off, 0.0]), 0, 0.0)
+            nav._worker.submit(lambda: None).result()
+            nav._side.submit(lambda: None).result()
+        assert nav.asked and nav.events[-1]["reason"] == "left_corridor"
+        t_request, t_start, left_s = nav.asked[0]
+        assert nav.events[-1]["budget_s"] == 1.0 and 0.5 < left_s <= 1.0
+        assert t_start - t_request <= nav.max_lead_s + 0.3 + 1e-9
     finally:
         nav.close()
 
