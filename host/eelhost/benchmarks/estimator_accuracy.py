@@ -51,7 +51,7 @@ from eelhost.estimation.optimise import FitResult
 from eelhost.estimation.pipeline import fit_motion
 from eelhost.estimation.space import ParameterSpace
 from eelhost.estimation.tank_current import share_tank_current
-from eelhost.estimation.validate import validate, worst_ex
+from eelhost.estimation.validate import ex_text, validate, worst_ex
 from eelhost.files import atomic_write
 from eelhost.machine import cpu_model
 from eelsim.robot import DEFAULT_ROBOT, bundled_robot, load_robot, robot_file_text
@@ -436,7 +436,7 @@ def estimator_report(
             fit = r["fits"].get(m)
             itself = r["plant_worst_ex"].get(m, float("nan"))
             lines.append(
-                f"| {m} | {fit.fitness if fit else float('nan'):.4f} | {a:.4f} | {b:.4f} | "
+                f"| {m} | {fit.fitness if fit else float('nan'):.4f} | {ex_text(a)} | {ex_text(b)} | "
                 + (f"{itself:.4f}" if np.isfinite(itself) else "not measured")
                 + f" | <= {_target(m, itself):.4f} ({_met(a, m, itself)}) | "
                 f"{PAPER_WORST_EX[m]} |"

@@ -39,6 +39,7 @@ from eelhost.estimation.validate import (
     ValidationRun,
     band_coverage,
     bands_markdown,
+    ex_text,
     prediction_bands,
     table_csv,
     table_markdown,
@@ -429,7 +430,7 @@ def _report_text(
         "calls RMS) and as true RMS, in body lengths (BL) and BL/s.",
         "",
     ]
-    lines += [f"- worst E_x ({m}): {v:.4f} BL" for m, v in worst_ex(runs, aligned=True).items()]
+    lines += [f"- worst E_x ({m}): {ex_text(v)} BL" for m, v in worst_ex(runs, aligned=True).items()]
     clock = clock_check(runs)
     if runs:  # validation reports the best clock offset besides the recorded clock
         lines.append(
@@ -440,7 +441,7 @@ def _report_text(
             "\nThe recordings declare exact time stamps (camera.timestamp_jitter_s 0): each "
             "experiment is compared on its own clock only:"
         )
-        lines += [f"- worst E_x ({m}), recorded clock: {v:.4f} BL"
+        lines += [f"- worst E_x ({m}), recorded clock: {ex_text(v)} BL"
                   for m, v in worst_ex(runs).items()]
     lines += [
         "",

@@ -156,14 +156,25 @@ def worst_ex(runs: Sequence[ValidationRun], aligned: bool = False) -> dict[str, 
     Returns
     -------
     dict of str to float
-        Motion ("straight", "turning", "path") -> worst E_x, in the runs' order of motions; runs
-        without an E_x (NaN) are passed over, as the table's failure column reports them.
+        Motion ("straight", "turning", "path") -> worst E_x, in the runs' order of motions. A run
+        without an E_x (its prediction failed before the last sample: a self-collision, an
+        ill-conditioned step) makes its motion's worst infinite: a prediction that did not swim
+        the experiment is the worst there is, not one to pass over (docs/estimation.md,
+        "Validation"; :func:`ex_text` prints it). A run flagged too slow keeps its E_x, which
+        measures its lag over the recorded span.
     """
     worst: dict[str, float] = {}
     for run in runs:
         ex = run.row.Ex_mean_BL if aligned else run.row.Ex_mean_unaligned_BL
-        worst[run.experiment.motion] = float(np.fmax(worst.get(run.experiment.motion, np.nan), ex))
+        if not np.isfinite(ex):
+            ex = float("inf")
+        worst[run.experiment.motion] = max(worst.get(run.experiment.motion, -np.inf), ex)
     return worst
+
+
+def ex_text(ex_bl: float) -> str:
+    """A worst E_x in words: "0.0312" BL, or "failed" where a prediction did not swim."""
+    return f"{ex_bl:.4f}" if np.isfinite(ex_bl) else "failed (a prediction did not swim)"
 
 
 def table_markdown(rows: Sequence[ValidationRow]) -> str:
