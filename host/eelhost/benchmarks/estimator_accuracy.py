@@ -50,6 +50,7 @@ from eelhost.estimation.methods import FitSettings
 from eelhost.estimation.optimise import FitResult
 from eelhost.estimation.pipeline import fit_motion
 from eelhost.estimation.space import ParameterSpace
+from eelhost.estimation.steering import steering_check
 from eelhost.estimation.tank_current import share_tank_current
 from eelhost.estimation.validate import ex_text, validate, worst_ex
 from eelhost.files import atomic_write
@@ -185,6 +186,7 @@ def _fit_and_validate(ds: Dataset, plant: Plant | None, settings: FitSettings,
         return {m: (recorded[m], aligned[m]) for m in MOTIONS if m in recorded}
 
     out["worst_ex"] = worst(chosen.fits, clock=True)
+    out["steering"] = steering_check(ds, tests)
     out["alone_worst_ex"] = worst(alone) if out["tank_current"] is not None else None
     out["plant_worst_ex"] = _plant_itself(ds, plant, tests, settings.backend) if ds.truth else {}
     own = chosen.robot_file_fits
@@ -426,6 +428,12 @@ def estimator_report(
                      f"+-{clock.wide_s:g} s again)" if wide.size else "")
                   + (" (the report warns: misfit, not a clock error)." if clock.most_at_bound
                      else "."), ""]
+        steering = r["steering"]
+        lines += ["Largest steering offset (reconstructed from the poses): "
+                  f"{steering.training_rad:.3f} rad in the training experiments; held out "
+                  + (", ".join(f"{n} {steering.held_out_rad[n]:.3f} rad ({x:.2f} x)"
+                               for n, x in steering.beyond.items()) + " beyond it"
+                     if steering.beyond else "none beyond 1.2 x it") + ".", ""]
         lines += [
             "| motion | fitness | worst held-out E_x, recorded clock (BL) | worst held-out E_x, "
             "best clock offset (BL) | the plant itself, recorded clock (BL) | target "

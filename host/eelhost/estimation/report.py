@@ -30,6 +30,7 @@ from eelhost.estimation.selection import recommend
 from eelhost.estimation.selection import table_markdown as comparison_markdown
 from eelhost.estimation.space import ParameterSpace
 from eelhost.estimation.speeds import speed_errors, speeds_markdown
+from eelhost.estimation.steering import steering_check
 from eelhost.estimation.tank_current import share_tank_current
 from eelhost.estimation.uncertainty import BootstrapResult, parametric_bootstrap
 from eelhost.estimation.validate import (
@@ -209,6 +210,12 @@ def run_report(
     clock = clock_check(runs)  # offsets at their bound absorb misfit (estimation/clock.py)
     extra["clock_offsets_at_bound"] = list(clock.at_bound)
     extra["warnings"] += [w for w in [clock.warning()] if w]
+    # a held-out run that steers harder than any training run extrapolates (estimation/steering.py)
+    steering = steering_check(dataset, tests)
+    extra["steering_beyond_training"] = {"training_rad": steering.training_rad
+                                         if np.isfinite(steering.training_rad) else None,
+                                         "held_out_rad": steering.beyond_rad}
+    extra["warnings"] += [w for w in [steering.warning()] if w]
     write_coefficients(out / "coefficients.json", fits, extra, robot=dataset.robot)
     atomic_write(out / "table4.md", table_markdown([r.row for r in runs]) + "\n")
     atomic_write(out / "table4.csv", table_csv([r.row for r in runs]))
