@@ -1118,6 +1118,36 @@ def test_a_replan_in_a_moved_estimate_gets_the_calm_budget_and_starts_when_it_en
         nav.close()
 
 
+@pytest.mark.parametrize("budget_s", [3.0, 1.0])
+def test_contact_ahead_before_a_calm_replan_can_steer_stops_the_robot_before_its_start(
+        open_plan, budget_s):
+    from eelhost.planning.replan import _Job
+
+    planner, outcome = open_plan
+    nav = TankReplanner(lambda extra: planner, planner, outcome, PATH_GAIT,
+                        replan_budget_s=1.0, lookahead_s=0.0)
+    start = np.asarray(outcome.plan.legs[0].com_m[0])
+    try:
+        for k in range(15):  # frames for an estimate, no look-ahead, no replan
+            t = k / 30
+            assert nav.on_frame(t, pose_at(t, start), np.array([*start, 0.0]), 0, 0.0).stop is None
+        # a replan in flight, its start 3 s after its request (a calm one's, or by a test's
+        # hand a 1 s one's), and a look-ahead that swims the present plan into contact in 1 s
+        nav._job = _Job(Future(), 0.5, time.monotonic(), 3.5, "current_estimate",
+                        0.5 + budget_s + 0.5, budget_s)
+        ahead: Future = Future()
+        ahead.set_result(Ahead(-0.005, -0.025, 1.5))
+        nav._lookahead = ahead
+        d = nav.on_frame(0.5, pose_at(0.5, start), np.array([*start, 0.0]), 0, 0.0)
+    finally:
+        nav._job = None
+        nav.close()
+    if budget_s > 1.0:  # not waited for until its start: its plan could not steer in time
+        assert d.stop == "no_safe_continuation" and "has not come back" in d.detail
+    else:  # a replan within its start is waited for, as before
+        assert d.stop is None
+
+
 def test_a_replan_whose_search_is_slow_stops_at_its_budget_without_the_fallback_searches(
         open_plan):
     # every batch of the search takes 0.4 s more: with a 0.6 s budget the replan comes back

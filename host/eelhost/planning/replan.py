@@ -679,8 +679,8 @@ class TankReplanner:
         searches (the planner's and its repairs', then the goal approach's and the recovery's,
         each only within what is left) stop at it and the replan returns what it has (a plan,
         or none: ``out_of_time``), so that the robot steers a new plan within about this long
-        of leaving its corridor (issue 28's 1 s; docs/planning.md, "The replan's deadline").
-        A check that has started runs to its end. None (the default here): no deadline;
+        of leaving its corridor (issue 28's 1 s; docs/planning.md, "The replan's deadline");
+        the check stops at it too ("The planning call's deadline"). None (the default here): no deadline;
         ``eelbot run --plan`` and the closed-loop benchmark give :data:`REPLAN_BUDGET_S`
         (:func:`eelhost.planning.tank.plan_for_run`).
     shift_repair : bool
@@ -926,7 +926,7 @@ class TankReplanner:
                 return d
         job = self._job
         if (predicted and gap is not None and gap <= 0.0 and job is not None
-                and t_s > job.t_start_s + 1e-9
+                and (t_s > job.t_start_s + 1e-9 or self._calm(job))
                 and not (t_s <= job.due_s
                          and self._contact_at_s - max(job.due_s, t_s) >= self.lead_s)):
             # the replan is late (past its start) and the twin swims the present plan into
@@ -1063,6 +1063,15 @@ class TankReplanner:
                 or self.failures > 0):
             return base
         return max(base, self.calm_budget_s)
+
+    def _calm(self, job: _Job) -> bool:
+        """Whether ``job`` was given the calm budget (:attr:`calm_budget_s`).
+
+        Its start is its budget away, so contact predicted before its plan could steer stops
+        the robot without waiting for that start.
+        """
+        return (job.budget_s is not None and self.replan_budget_s is not None
+                and job.budget_s > self.replan_budget_s)
 
     def _lead_steps(self) -> int:
         """Steps from a request to the predicted start: a whole number of restart periods."""
