@@ -13,8 +13,10 @@ of mass p, and their rates), so a replan needs all of it, not only the filtered 
   frame's with the gait's reference and the phase read from the same telemetry
   (:class:`TelemetryJoints`); without them the gait's reference at the frame's phase (the
   telemetry's phase when it comes, the host's gait clock otherwise); and the camera's joint angles
-  (differences of its link angles). A link the camera did not read takes the fused shape placed
-  around the links it did read;
+  (differences of its link angles). The fused shape is turned onto the links the camera read
+  (:func:`place_on_seen_links`, right for a body curled beyond pi); with a link unread, all link
+  angles are solved by least squares from the read links and the joints' prior
+  (:func:`fill_unread_links`). :func:`body_error_m` measures an estimate against the true body;
 - **rates** from a filter: a quadratic least-squares fit over the last ``window`` frames of each
   link angle (unwrapped in time) and of the centre of mass, differentiated at the newest frame. A
   quadratic follows the gait's oscillation (period 1.6 s at 3.9 rad/s) over the 0.2 s window,
