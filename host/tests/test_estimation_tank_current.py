@@ -412,3 +412,115 @@ def test_the_combined_interval_pools_every_experiment_of_every_motion_as_cluster
     # eight clusters need a smaller t than four: the pooled interval is narrower than the
     # weights' own (each motion's with t(3))
     assert np.trace(cov) < np.trace(weights_only)
+
+
+def _arc(turn_rad_s, speed_m_s=0.1, seconds=10.0, fps=30.0):
+    """A recording stand-in of a robot swimming at a steady speed and turning rate from (0, 0)."""
+    t = np.arange(0.0, seconds, 1.0 / fps)
+    heading = turn_rad_s * t
+    if turn_rad_s == 0.0:
+        position = np.column_stack([speed_m_s * t, np.zeros_like(t)])
+    else:
+        radius = speed_m_s / turn_rad_s
+        position = radius * np.column_stack([np.sin(heading), 1.0 - np.cos(heading)])
+    return t, position, heading
+
+
+def _recorded(*arcs, samples=7):
+    """An evaluator stand-in holding the recordings (``gait_misfit_columns`` reads them)."""
+    prepared = [SimpleNamespace(
+        experiment=SimpleNamespace(t_s=t, position_m=p, heading_rad=h),
+        times_s=np.linspace(1.0, t[-1] - 0.5, samples)) for t, p, h in arcs]
+    return SimpleNamespace(prepared=prepared, weight=2.0)
+
+
+def _as_residuals(ev, g, moved):
+    """``moved`` (the position change at each frame of experiment g) as a unit residual column."""
+    from eelhost.estimation.fitness import sampled_velocity
+
+    p, times = ev.prepared[g], ev.prepared[g].times_s
+    at = np.column_stack([np.interp(times, p.experiment.t_s, moved[:, i]) for i in range(2)])
+    block = np.concatenate([at, ev.weight * sampled_velocity(times, at)]).ravel()
+    column = np.zeros(len(ev.prepared) * block.size)
+    column[g * block.size:(g + 1) * block.size] = block
+    return column / np.linalg.norm(column)
+
+
+def test_the_turning_misfit_is_the_path_of_a_turning_rate_off_by_a_fraction():
+    from eelhost.estimation.tank_current import turning_misfit_columns
+
+    ev = _recorded(_arc(0.3), _arc(0.0))
+    columns = turning_misfit_columns(ev)
+    assert columns.shape == (2 * 7 * 4, 2)
+    # written apart: the same circle swum at (1 + k) times the turning rate and the same speed,
+    # minus the recorded path, over k
+    k = 1e-5
+    _, turning, _ = _arc(0.3 * (1 + k))
+    _, p, _ = _arc(0.3)
+    np.testing.assert_allclose(columns[:, 0], _as_residuals(ev, 0, (turning - p) / k), atol=2e-3)
+    # each experiment's mode lives on its own block; a straight gait's costs nothing
+    assert not np.any(columns[28:, 0]) and not np.any(columns[:, 1])
+    # without a recorded heading, the path's own direction
+    t, p, _ = _arc(0.3)
+    unrecorded = SimpleNamespace(prepared=[SimpleNamespace(
+        experiment=SimpleNamespace(t_s=t, position_m=p, heading_rad=None),
+        times_s=ev.prepared[0].times_s)], weight=2.0)
+    np.testing.assert_allclose(turning_misfit_columns(unrecorded)[:, 0], columns[:28, 0], atol=2e-2)
+
+
+class _ConfoundedMotion(_LinearMotion):
+    """A linear motion swimming along ``axis`` whose model gets its turning a little wrong.
+
+    Its own parameter (a speed) trades against the current along its axis, as a swimming speed
+    does; ``turning_misfit`` drifts every experiment the same way across its track along the
+    columns ``nuisance`` (per experiment: mostly the cross-track current's own columns, the
+    turning rate's, with a part of their own that the data can tell apart).
+    """
+
+    def __init__(self, rng, truth, axis, turning_misfit, experiments=5, samples=12):
+        super().__init__(rng, truth, (0.0, 0.0), experiments, samples)
+        axis = np.asarray(axis, dtype=float)
+        across = np.array([-axis[1], axis[0]])
+        along = self.columns[:, 1:] @ axis
+        self.columns[:, 0] = along + 0.05 * rng.normal(size=len(along))
+        cross = self.columns[:, 1:] @ across
+        rows = experiments * samples
+        self.nuisance = np.zeros((rows, experiments))
+        for g in range(experiments):
+            block = slice(g * samples, (g + 1) * samples)
+            self.nuisance[block, g] = cross[block] + 0.5 * rng.normal(size=samples)
+        self.offset = (-self.columns @ np.asarray(truth) - turning_misfit * self.nuisance.sum(axis=1)
+                       + 2e-4 * rng.normal(size=rows))
+
+
+def _two_axes(truth, turning_misfit, told):
+    """The tank's current from a straight motion along x and a turning one along 30 deg."""
+    from eelhost.estimation.tank_current import RESOLVED_CHI2, TankCurrent, estimate
+
+    rng = np.random.default_rng(11)
+    axes = [np.array([1.0, 0.0]), np.array([np.cos(np.pi / 6), np.sin(np.pi / 6)])]
+    evs = [_ConfoundedMotion(rng, [0.3, *truth], axes[0], 0.0),
+           _ConfoundedMotion(rng, [0.3, *truth], axes[1], turning_misfit)]
+    starts = [ev.own_fit() for ev in evs]
+    nuisances = [ev.nuisance for ev in evs] if told else None
+    _, current, covariance, scale = estimate(evs, starts, axes, nuisances)
+    half = np.sqrt(RESOLVED_CHI2 * np.diag(covariance))
+    return TankCurrent(current, half, {}, 10, 1.0, scale, covariance)
+
+
+def test_a_current_the_turning_gaits_misfit_makes_is_told_apart_from_one_that_is_there():
+    # still water, the turning gaits' model turning a little wrong, all the same way: across
+    # its track that looks like 2 mm/s of current, and the two motions' cross-track views
+    # cross at an invented current (what head_tail did)
+    invented = _two_axes((0.0, 0.0), 0.002, told=False)
+    assert invented.resolved and np.hypot(*invented.current_m_s) > 0.002
+    # with the turning misfit a nuisance the data tell apart from a current: none resolved
+    still = _two_axes((0.0, 0.0), 0.002, told=True)
+    assert not still.resolved and np.hypot(*still.current_m_s) < 0.0005
+    # a current that is there is still found, with the misfit or without it
+    truth = np.array([-0.0025, 0.00433])
+    for misfit in (0.0, 0.002):
+        there = _two_axes(truth, misfit, told=True)
+        assert there.resolved
+        assert np.hypot(*(there.current_m_s - truth)) < 0.001
+        assert np.all(np.abs(there.current_m_s - truth) <= there.half_width_m_s)
