@@ -255,7 +255,8 @@ REPLAN_BUDGET_S = 1.0
 issue 28 asks for a new plan ready within 1 s of the robot leaving its corridor."""
 
 CALM_REPLAN_BUDGET_S = 3.0
-"""The budget of a replan asked for in a moved current estimate (``current_estimate``): the
+"""The calm budget tried (``TankReplanner(calm_budget_s=)``, off by default): the budget of a
+replan asked for in a moved current estimate (``current_estimate``): the
 robot is on its plan and the look-ahead swims the next ``replan_horizon_s`` (5 s) clear, so the
 replan may take longer, starting from the state predicted this long ahead. On the idle machine
 (seeds 13000-13099 and 14000-14099, pure pursuit) 10 of the 18 runs that missed their goal
@@ -697,8 +698,10 @@ class TankReplanner:
     calm_budget_s : float or None
         With a ``replan_budget_s``: the budget of a replan asked for in a moved current estimate
         (``current_estimate``, the look-ahead clear), when longer; it starts from the state
-        predicted that long ahead (docs/planning.md, "Calm replans get more time"). None: every
-        replan gets ``replan_budget_s``.
+        predicted that long ahead (docs/planning.md, "Calm replans get more time";
+        :data:`CALM_REPLAN_BUDGET_S` is the value tried). None (the default: a calm replan in
+        flight holds back the urgent replans behind it on the one worker): every replan gets
+        ``replan_budget_s``.
     """
 
     def __init__(
@@ -726,7 +729,7 @@ class TankReplanner:
         replan_budget_s: float | None = None,
         shift_repair: bool = True,
         retry_before_contact: bool = True,
-        calm_budget_s: float | None = CALM_REPLAN_BUDGET_S,
+        calm_budget_s: float | None = None,
     ) -> None:
         self.planner_for = planner_for
         self.planner = planner
@@ -905,10 +908,12 @@ class TankReplanner:
                         f"{self._contact_note(t_s)}) and "
                         f"the last replan failed: {self.events[-1]['message']}")
             return d
-        elif predicted and self._backoff_yields(t_s, busy):
+        elif (predicted and self._backoff_yields(t_s, busy)
+              and (self.failures < self.max_failures or not self._present_plan_safe(t_s))):
             # the back-off would let the capsule come within the margin before a replan asked
             # for after it could steer (docs/planning.md, "The back-off yields to a predicted
-            # contact"): replan now while failures are left, else stop deliberately
+            # contact"): replan now while failures are left, else stop deliberately unless the
+            # outline swims the present plan clear by the margin (kept, as after a last failure)
             if self.failures < self.max_failures:
                 retry = yielded = True
                 self.backoff_yields += 1
