@@ -10,7 +10,7 @@ offset, where candidates that fit the training gaits alike part ways, so a path'
 about the model's extrapolation than about its fit.
 
 The offset is not recorded; it is reconstructed from the recorded poses with the paper's pursuit
-law (docs/model.md section 4; :func:`eelsim.control.heading_offset`): each pose passes a causal
+law (docs/model.md section 4; :func:`eelsim.control.heading_offset`, for every frame at once): each pose passes a causal
 moving median over the declared ``camera.median_window`` poses (the heading unwrapped first), the
 target moves to the next waypoint when the filtered position is inside the acceptance circle, and
 gamma = k_theta wrap(theta_ref - theta_bar). The robot is left-right symmetric, so a turn's
@@ -20,13 +20,15 @@ with the largest of every training experiment (straight and turning together).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
 
 from eelhost.data.experiments import Dataset, Experiment
-from eelsim.control import heading_offset
+from eelsim.control import wrap_angle
 
 BEYOND = 1.2
 """A held-out experiment steers beyond the training when its largest |offset| exceeds the
@@ -50,17 +52,26 @@ def commanded_offsets(exp: Experiment) -> np.ndarray | None:
         return None
     window = max(1, int(exp.camera.get("median_window", 5)))
     poses = np.column_stack([exp.position_m, np.unwrap(exp.heading_rad)])
-    waypoints = [np.asarray(w, dtype=float) for w in exp.scenario.waypoints_m]
+    # causal median: the frames before a full window take the median of those there are
+    filtered = np.empty_like(poses)
+    head = min(window - 1, len(poses))
+    for k in range(head):
+        filtered[k] = np.median(poses[: k + 1], axis=0)
+    if len(poses) > head:
+        filtered[head:] = np.median(sliding_window_view(poses, window, axis=0), axis=-1)
+    waypoints = np.asarray(exp.scenario.waypoints_m, dtype=float).reshape(-1, 2)
     radius = exp.scenario.acceptance_radius_m
-    target = 0
-    out = np.empty(len(poses))
-    for k in range(len(poses)):
-        x, y, heading = np.median(poses[max(0, k - window + 1): k + 1], axis=0)
-        while (target < len(waypoints) - 1
-               and np.hypot(x - waypoints[target][0], y - waypoints[target][1]) < radius):
-            target += 1
-        out[k] = heading_offset((x, y), heading, waypoints[target], exp.scenario.k_theta)
-    return out
+    target = np.empty(len(poses), dtype=int)
+    k_wp = 0
+    for k, (x, y) in enumerate(filtered[:, :2]):
+        while (k_wp < len(waypoints) - 1
+               and math.hypot(x - waypoints[k_wp, 0], y - waypoints[k_wp, 1]) < radius):
+            k_wp += 1
+        target[k] = k_wp
+    goal = waypoints[target]
+    bearing = np.arctan2(goal[:, 1] - filtered[:, 1], goal[:, 0] - filtered[:, 0])
+    # eelsim.control.heading_offset, for every frame at once
+    return exp.scenario.k_theta * np.asarray(wrap_angle(bearing - filtered[:, 2]), dtype=float)
 
 
 @dataclass
