@@ -211,6 +211,8 @@ def _current_error(res: FitResult, true: np.ndarray) -> str:
 
 def _met(worst: float, motion: str, floor: float = float("nan")) -> str:
     target = _target(motion, floor)
+    if np.isinf(worst):  # a prediction failed (validate.worst_ex)
+        return "missed: a prediction failed"
     return "met" if worst <= target else f"missed by {worst - target:.4f}"
 
 
