@@ -223,7 +223,7 @@ def _tank_interval(current_m_s, misfits_m_s, seed=3, axes=(None, None)):
 
     rng = np.random.default_rng(seed)
     evs = [_LinearMotion(rng, [0.3, *current_m_s], m) for m in misfits_m_s]
-    _, current, covariance, scale = estimate(evs, [np.zeros(3), np.zeros(3)], list(axes))
+    _, current, covariance, scale, _ = estimate(evs, [np.zeros(3), np.zeros(3)], list(axes))
     return current, 1.959964 * np.sqrt(np.diag(covariance)), scale, covariance
 
 
@@ -414,113 +414,65 @@ def test_the_combined_interval_pools_every_experiment_of_every_motion_as_cluster
     assert np.trace(cov) < np.trace(weights_only)
 
 
-def _arc(turn_rad_s, speed_m_s=0.1, seconds=10.0, fps=30.0):
-    """A recording stand-in of a robot swimming at a steady speed and turning rate from (0, 0)."""
-    t = np.arange(0.0, seconds, 1.0 / fps)
-    heading = turn_rad_s * t
-    if turn_rad_s == 0.0:
-        position = np.column_stack([speed_m_s * t, np.zeros_like(t)])
-    else:
-        radius = speed_m_s / turn_rad_s
-        position = radius * np.column_stack([np.sin(heading), 1.0 - np.cos(heading)])
-    return t, position, heading
+class _OneAxisMotion(_LinearMotion):
+    """A linear motion swimming along ``axis``, its speed trading against the current along it.
 
-
-def _recorded(*arcs, samples=7):
-    """An evaluator stand-in holding the recordings (``gait_misfit_columns`` reads them)."""
-    prepared = [SimpleNamespace(
-        experiment=SimpleNamespace(t_s=t, position_m=p, heading_rad=h),
-        times_s=np.linspace(1.0, t[-1] - 0.5, samples)) for t, p, h in arcs]
-    return SimpleNamespace(prepared=prepared, weight=2.0)
-
-
-def _as_residuals(ev, g, moved):
-    """``moved`` (the position change at each frame of experiment g) as a unit residual column."""
-    from eelhost.estimation.fitness import sampled_velocity
-
-    p, times = ev.prepared[g], ev.prepared[g].times_s
-    at = np.column_stack([np.interp(times, p.experiment.t_s, moved[:, i]) for i in range(2)])
-    block = np.concatenate([at, ev.weight * sampled_velocity(times, at)]).ravel()
-    column = np.zeros(len(ev.prepared) * block.size)
-    column[g * block.size:(g + 1) * block.size] = block
-    return column / np.linalg.norm(column)
-
-
-def test_the_turning_misfit_is_the_path_of_a_turning_rate_off_by_a_fraction():
-    from eelhost.estimation.tank_current import turning_misfit_columns
-
-    ev = _recorded(_arc(0.3), _arc(0.0))
-    columns = turning_misfit_columns(ev)
-    assert columns.shape == (2 * 7 * 4, 2)
-    # written apart: the same circle swum at (1 + k) times the turning rate and the same speed,
-    # minus the recorded path, over k
-    k = 1e-5
-    _, turning, _ = _arc(0.3 * (1 + k))
-    _, p, _ = _arc(0.3)
-    np.testing.assert_allclose(columns[:, 0], _as_residuals(ev, 0, (turning - p) / k), atol=2e-3)
-    # each experiment's mode lives on its own block; a straight gait's costs nothing
-    assert not np.any(columns[28:, 0]) and not np.any(columns[:, 1])
-    # without a recorded heading, the path's own direction
-    t, p, _ = _arc(0.3)
-    unrecorded = SimpleNamespace(prepared=[SimpleNamespace(
-        experiment=SimpleNamespace(t_s=t, position_m=p, heading_rad=None),
-        times_s=ev.prepared[0].times_s)], weight=2.0)
-    np.testing.assert_allclose(turning_misfit_columns(unrecorded)[:, 0], columns[:28, 0], atol=2e-2)
-
-
-class _ConfoundedMotion(_LinearMotion):
-    """A linear motion swimming along ``axis`` whose model gets its turning a little wrong.
-
-    Its own parameter (a speed) trades against the current along its axis, as a swimming speed
-    does; ``turning_misfit`` drifts every experiment the same way across its track along the
-    columns ``nuisance`` (per experiment: mostly the cross-track current's own columns, the
-    turning rate's, with a part of their own that the data can tell apart).
+    ``across_misfit_m_s``: what its model gets wrong drifts every experiment the same way across
+    its track, along the cross-track current's own columns (a turning rate the model gets
+    wrong when every gait turns the same way: nothing in its positions tells it from a current).
     """
 
-    def __init__(self, rng, truth, axis, turning_misfit, experiments=5, samples=12):
-        super().__init__(rng, truth, (0.0, 0.0), experiments, samples)
+    def __init__(self, rng, truth, axis, across_misfit_m_s, experiments=4, samples=12):
         axis = np.asarray(axis, dtype=float)
         across = np.array([-axis[1], axis[0]])
-        along = self.columns[:, 1:] @ axis
-        self.columns[:, 0] = along + 0.05 * rng.normal(size=len(along))
-        cross = self.columns[:, 1:] @ across
-        rows = experiments * samples
-        self.nuisance = np.zeros((rows, experiments))
-        for g in range(experiments):
-            block = slice(g * samples, (g + 1) * samples)
-            self.nuisance[block, g] = cross[block] + 0.5 * rng.normal(size=samples)
-        self.offset = (-self.columns @ np.asarray(truth) - turning_misfit * self.nuisance.sum(axis=1)
-                       + 2e-4 * rng.normal(size=rows))
+        super().__init__(rng, truth, tuple(across_misfit_m_s * across), experiments, samples)
+        rebuilt = self.columns[:, 1:] @ axis + 0.05 * rng.normal(size=len(self.columns))
+        self.offset -= (rebuilt - self.columns[:, 0]) * truth[0]  # the same truth, new column
+        self.columns[:, 0] = rebuilt
 
 
-def _two_axes(truth, turning_misfit, told):
+def _one_axis_tank(truth, across_misfit_m_s):
     """The tank's current from a straight motion along x and a turning one along 30 deg."""
-    from eelhost.estimation.tank_current import RESOLVED_CHI2, TankCurrent, estimate
+    from eelhost.estimation.tank_current import TankCurrent, estimate
 
     rng = np.random.default_rng(11)
     axes = [np.array([1.0, 0.0]), np.array([np.cos(np.pi / 6), np.sin(np.pi / 6)])]
-    evs = [_ConfoundedMotion(rng, [0.3, *truth], axes[0], 0.0),
-           _ConfoundedMotion(rng, [0.3, *truth], axes[1], turning_misfit)]
-    starts = [ev.own_fit() for ev in evs]
-    nuisances = [ev.nuisance for ev in evs] if told else None
-    _, current, covariance, scale = estimate(evs, starts, axes, nuisances)
-    half = np.sqrt(RESOLVED_CHI2 * np.diag(covariance))
-    return TankCurrent(current, half, {}, 10, 1.0, scale, covariance)
+    evs = [_OneAxisMotion(rng, [0.3, *truth], axes[0], 0.0),
+           _OneAxisMotion(rng, [0.3, *truth], axes[1], across_misfit_m_s)]
+    _, current, covariance, scale, seeing = estimate(evs, [ev.own_fit() for ev in evs], axes)
+    half = 2.4474 * np.sqrt(np.diag(covariance))
+    seen_by = tuple(m for m, sees in zip(("straight", "turning"), seeing, strict=True) if sees)
+    return TankCurrent(current, half, {}, 8, 1.0, scale, covariance, seen_by)
 
 
-def test_a_current_the_turning_gaits_misfit_makes_is_told_apart_from_one_that_is_there():
-    # still water, the turning gaits' model turning a little wrong, all the same way: across
-    # its track that looks like 2 mm/s of current, and the two motions' cross-track views
-    # cross at an invented current (what head_tail did)
-    invented = _two_axes((0.0, 0.0), 0.002, told=False)
-    assert invented.resolved and np.hypot(*invented.current_m_s) > 0.002
-    # with the turning misfit a nuisance the data tell apart from a current: none resolved
-    still = _two_axes((0.0, 0.0), 0.002, told=True)
-    assert not still.resolved and np.hypot(*still.current_m_s) < 0.0005
-    # a current that is there is still found, with the misfit or without it
+def test_a_current_only_one_motions_view_sees_is_not_resolved():
+    # still water; the turning gaits' model drifts them 1 mm/s across their track, all the same
+    # way. The straight motion says still water across x, the turning one 1 mm/s across 30 deg:
+    # their two lines cross at 2 mm/s along x, well outside the ellipse (what head_tail did),
+    # but only one view sees any current: not resolved, and the fits may hold still water
+    tank = _one_axis_tank((0.0, 0.0), 0.001)
+    assert tank.outside_ellipse and np.hypot(*tank.current_m_s) > 0.0015
+    assert tank.seen_by == ("turning",) and not tank.resolved
+    assert tank.text().startswith("no current resolved") and "seen by turning's view alone" in (
+        tank.text())
+    assert tank.to_json()["resolved"] is False and tank.to_json()["seen_by"] == ["turning"]
+    # a current both motions swim in is seen by both views and resolved, misfit or none
     truth = np.array([-0.0025, 0.00433])
-    for misfit in (0.0, 0.002):
-        there = _two_axes(truth, misfit, told=True)
-        assert there.resolved
-        assert np.hypot(*(there.current_m_s - truth)) < 0.001
-        assert np.all(np.abs(there.current_m_s - truth) <= there.half_width_m_s)
+    for misfit in (0.0, 0.001):
+        there = _one_axis_tank(truth, misfit)
+        assert there.seen_by == ("straight", "turning") and there.resolved
+    assert np.hypot(*(_one_axis_tank(truth, 0.0).current_m_s - truth)) < 0.0003
+
+
+def test_a_view_sees_a_current_where_still_water_is_outside_its_interval_in_what_it_tells():
+    from eelhost.estimation.tank_current import CurrentView, sees_a_current
+
+    x_axis = np.array([1.0, 0.0])
+    cov = np.diag([4e-6, 1e-6])  # sd 2 mm/s along x, 1 mm/s across
+    # one axis: only the cross-track component counts, against 1.96 of its sd
+    assert not sees_a_current(CurrentView(np.array([0.009, 0.0019]), cov, x_axis))
+    assert sees_a_current(CurrentView(np.array([0.0, 0.0021]), cov, x_axis))
+    # whole: both components, the ellipse's 5.99
+    assert sees_a_current(CurrentView(np.array([0.005, 0.0]), cov))
+    assert not sees_a_current(CurrentView(np.array([0.004, 0.001]), cov))
+    assert not sees_a_current(CurrentView(np.array([0.01, 0.01]), None))

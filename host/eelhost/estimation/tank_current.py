@@ -16,16 +16,9 @@ recorded in one tank. So, once both fits are made:
    a servo tank the straight fit's along-track current came out 4 mm/s off, twice its own
    cluster-robust standard error, its cross-track one within 0.1 mm/s), so its along-track
    view is left out, not weighed (:func:`cross_track_axes`: only when the views left span the
-   plane; otherwise every view counts whole). **Only what the positions tell apart from a
-   turning rate the model gets wrong**: a model that gets a gait's turning rate wrong by some
-   fraction drifts the robot across its track as a current would, and when every turning gait
-   turns the same way they all drift the same way. So each experiment's turning rate off by
-   a fraction (:func:`turning_misfit_columns`, from its recording) is an unknown beside the
-   parameters: the view's current is the linearised least squares with them, and its
-   covariance has them profiled out. The
-   tank's current is the information-weighted least squares of the views
-   (:func:`combine_views`): each view weighs by the inverse of its covariance, a one-axis view
-   by the inverse variance of its cross-track current.
+   plane; otherwise every view counts whole). The tank's current is the information-weighted
+   least squares of the views (:func:`combine_views`): each view weighs by the inverse of its
+   covariance, a one-axis view by the inverse variance of its cross-track current.
 2. **Its interval.** The covariance of that combination on every experiment of every motion
    together: from independent residuals or, where wider, cluster-robust with each experiment a
    cluster and Student's t with G - 1 degrees of freedom for all G experiments (a recording's
@@ -62,7 +55,6 @@ from scipy.stats import chi2
 from scipy.stats import t as student_t
 
 from eelhost.estimation.evaluate import Evaluator
-from eelhost.estimation.fitness import sampled_velocity
 from eelhost.estimation.identify import REL_STEP
 from eelhost.estimation.local import FAILED, polish_minimax
 from eelhost.estimation.optimise import FitResult
@@ -87,6 +79,8 @@ MIN_HALF_WIDTH_M_S = 1e-4
 AXIS_SPREAD_DEG = 20.0
 # chi-squared with 2 degrees of freedom at 95 %: still water outside the current's ellipse
 RESOLVED_CHI2 = float(chi2.ppf(0.95, 2))
+# with 1 degree of freedom: a one-axis view's cross-track current away from still water
+SEEN_ACROSS_CHI2 = float(chi2.ppf(0.95, 1))
 
 
 @dataclass(frozen=True)
@@ -113,6 +107,9 @@ class TankCurrent:
     covariance_m2_s2 : ndarray, shape (2, 2), or None
         The current's covariance (widened as the interval), (m/s)^2; None: unknown (then
         ``resolved`` asks each component's interval).
+    seen_by : tuple of str, or None
+        The motions whose own view, alone, puts still water outside its 95 % interval in what
+        it tells (:func:`sees_a_current`); None: not asked (one view).
     """
 
     current_m_s: np.ndarray
@@ -122,10 +119,11 @@ class TankCurrent:
     fitness: float
     misfit_scale: float = 1.0
     covariance_m2_s2: np.ndarray | None = None
+    seen_by: tuple[str, ...] | None = None
 
     @property
-    def resolved(self) -> bool:
-        """Whether the data hold a current: still water lies outside its 95 % confidence ellipse.
+    def outside_ellipse(self) -> bool:
+        """Whether still water lies outside the current's 95 % confidence ellipse.
 
         The Wald test of (0, 0) on both components at once, c^T V^-1 c against chi-squared
         with 2 degrees of freedom (5.99): asking each component's 95 % interval instead calls a
@@ -137,6 +135,21 @@ class TankCurrent:
         c = self.current_m_s
         return bool(float(c @ np.linalg.pinv(self.covariance_m2_s2) @ c) > RESOLVED_CHI2)
 
+    @property
+    def corroborated(self) -> bool:
+        """Whether at least two motions' views each see a current on their own (or one view)."""
+        return self.seen_by is None or len(self.seen_by) >= 2
+
+    @property
+    def resolved(self) -> bool:
+        """Whether the data hold a current: outside the ellipse, and seen by two motions' views.
+
+        A current is something every motion swims in: where only one motion's view sees it,
+        the others' saying still water across their own tracks, it is what that motion's
+        model misfit makes as well (module doc, step 2), and it is not called resolved.
+        """
+        return self.outside_ellipse and self.corroborated
+
     def text(self) -> str:
         """"0.0050 m/s towards 120 deg (v_x -2.5 +- 0.4 mm/s, v_y +4.3 +- 0.5 mm/s)".
 
@@ -147,10 +160,13 @@ class TankCurrent:
         hx, hy = 1e3 * self.half_width_m_s
         widened = (f"; widened x{self.misfit_scale:.1f}: the motions' own currents disagree"
                    if self.misfit_scale > 1.0 else "")
+        alone = (f"; seen by {', '.join(self.seen_by) or 'no motion'}'s view alone"
+                 if self.outside_ellipse and not self.corroborated and self.seen_by is not None
+                 else "")
         return (("" if self.resolved else "no current resolved: ")
                 + f"{np.hypot(vx, vy):.4f} m/s towards {np.degrees(np.arctan2(vy, vx)):.0f} deg "
                 f"(v_x {1e3 * vx:+.1f} +- {hx:.1f} mm/s, v_y {1e3 * vy:+.1f} +- {hy:.1f} mm/s"
-                f"{widened})")
+                f"{widened}{alone})")
 
     def to_json(self) -> dict[str, Any]:
         """JSON-ready (``coefficients.json``'s ``tank_current``; docs/data.md)."""
@@ -164,6 +180,7 @@ class TankCurrent:
             "experiments": self.experiments,
             "resolved": self.resolved,
             "misfit_scale": float(self.misfit_scale),
+            **({} if self.seen_by is None else {"seen_by": list(self.seen_by)}),
             **({} if self.covariance_m2_s2 is None else
                {"covariance_m2_s2": [[float(v) for v in row] for row in self.covariance_m2_s2]}),
         }
@@ -206,17 +223,24 @@ def share_tank_current(
     evs = [evaluators[m] for m in motions]
     axes: list[np.ndarray | None] = (cross_track_axes([swim_axis(ev) for ev in evs])
                                      if len(evs) > 1 else [None])
-    own, current, covariance, scale_by = estimate(
-        evs, [np.asarray(fits[m].values, dtype=float) for m in motions], axes,
-        [turning_misfit_columns(ev) for ev in evs])
+    own, current, covariance, scale_by, seeing = estimate(
+        evs, [np.asarray(fits[m].values, dtype=float) for m in motions], axes)
     half = np.clip(np.sqrt(RESOLVED_CHI2 * np.clip(np.diag(covariance), 0.0, None)),
                    MIN_HALF_WIDTH_M_S, CURRENT_BOUND_M_S)
+    seen_by = (tuple(m for m, sees in zip(motions, seeing, strict=True) if sees)
+               if len(motions) > 1 else None)
+    tank = TankCurrent(current, half, {m: x[-2:] for m, x in zip(motions, own, strict=True)},
+                       sum(len(ev.prepared) for ev in evs), 0.0, scale_by, covariance, seen_by)
+    # the bounds each fit holds: the interval, and still water with it where no current is
+    # resolved (the data do not rule it out)
+    lower, upper = current - half, current + half
+    if not tank.resolved:
+        lower, upper = np.minimum(lower, 0.0), np.maximum(upper, 0.0)
     new_fits, new_evs = dict(fits), dict(evaluators)
     worst = 0.0
     for m, ev, x in zip(motions, evs, own, strict=True):
         held = replace(ev.space, current_bounds=np.column_stack(
-            [np.maximum(current - half, -CURRENT_BOUND_M_S),
-             np.minimum(current + half, CURRENT_BOUND_M_S)]))
+            [np.maximum(lower, -CURRENT_BOUND_M_S), np.minimum(upper, CURRENT_BOUND_M_S)]))
         held_ev = ev.with_space(held)
         # from its own least-squares parameters in the tank's current
         begin = np.concatenate([x[:-2], current])
@@ -232,8 +256,7 @@ def share_tank_current(
                                 search_evaluations=fits[m].search_evaluations)
         new_evs[m] = held_ev
         worst = max(worst, float(pol.fitness) / max(float(fits[m].fitness), 1e-9))
-    tank = TankCurrent(current, half, {m: x[-2:] for m, x in zip(motions, own, strict=True)},
-                       sum(len(ev.prepared) for ev in evs), worst, scale_by, covariance)
+    tank = replace(tank, fitness=worst)
     say(f"tank current from {tank.experiments} training experiments ({', '.join(motions)}): "
         f"{tank.text()}; alone: " + "; ".join(
             f"{m} {1e3 * np.hypot(*c):.1f} mm/s towards {np.degrees(np.arctan2(c[1], c[0])):.0f} deg"
@@ -241,9 +264,8 @@ def share_tank_current(
     return new_fits, new_evs, tank
 
 
-def estimate(evs: list[Any], starts: list[np.ndarray], axes: list[np.ndarray | None],
-             nuisances: list[np.ndarray | None] | None = None
-             ) -> tuple[list[np.ndarray], np.ndarray, np.ndarray, float]:
+def estimate(evs: list[Any], starts: list[np.ndarray], axes: list[np.ndarray | None]
+             ) -> tuple[list[np.ndarray], np.ndarray, np.ndarray, float, list[bool]]:
     """The tank's current from the motions' own fits (module doc, steps 1 and 2).
 
     Parameters
@@ -255,30 +277,40 @@ def estimate(evs: list[Any], starts: list[np.ndarray], axes: list[np.ndarray | N
     axes : list of (ndarray (2,) or None)
         Each motion's swimming axis where only its cross-track current counts
         (:func:`cross_track_axes`).
-    nuisances : list of (ndarray (M, P) or None), optional
-        Each motion's misfit columns the current is told apart from
-        (:func:`turning_misfit_columns`); None: none.
 
     Returns
     -------
-    (own, current, covariance, scale)
-        Each motion's vector at its least-squares point, its current the view's (moved by what
-        its nuisances took); the tank's current, m/s; its covariance, (m/s)^2, widened by
-        ``scale`` squared; ``scale``, :func:`misfit_scale`.
+    (own, current, covariance, scale, seeing)
+        Each motion's vector at its least-squares point; the tank's current, m/s; its
+        covariance, (m/s)^2, widened by ``scale`` squared; ``scale``, :func:`misfit_scale`;
+        per motion, whether its view alone sees a current (:func:`sees_a_current`).
     """
     own = [_least_squares(ev, np.asarray(x, dtype=float)) for ev, x in zip(evs, starts, strict=True)]
-    spreads = [_spread(ev, x, n) for ev, x, n in
-               zip(evs, own, nuisances or [None] * len(evs), strict=True)]
-    own = [x if s is None or s.shift is None else
-           np.concatenate([x[:-2], np.clip(x[-2:] + s.shift, -CURRENT_BOUND_M_S, CURRENT_BOUND_M_S)])
-           for x, s in zip(own, spreads, strict=True)]
+    spreads = [_spread(ev, x) for ev, x in zip(evs, own, strict=True)]
     views = [CurrentView(x[-2:], None, a) if s is None else
              CurrentView(x[-2:], s.covariance(), a, s.independent, s.influence)
              for x, s, a in zip(own, spreads, axes, strict=True)]
     current, covariance = combine_views(views)
     scale_by = misfit_scale(current, [(v.current_m_s, v.covariance) for v in views
                                       if v.covariance is not None])
-    return own, current, covariance * scale_by**2, scale_by
+    return own, current, covariance * scale_by**2, scale_by, [sees_a_current(v) for v in views]
+
+
+def sees_a_current(view: CurrentView) -> bool:
+    """Whether one motion's view, alone, puts still water outside its 95 % interval.
+
+    In what it tells: a one-axis view its cross-track current, (n . c)^2 / (n^T S n) against
+    chi-squared with 1 degree of freedom (3.84); a whole view both components, c^T S^-1 c
+    against 5.99. A view that tells nothing (no covariance) sees nothing.
+    """
+    if view.covariance is None:
+        return False
+    if view.axis is None:
+        c = view.current_m_s
+        return bool(float(c @ np.linalg.pinv(view.covariance) @ c) > RESOLVED_CHI2)
+    across = np.array([-view.axis[1], view.axis[0]])
+    spread = float(across @ view.covariance @ across)
+    return bool(spread > 0 and float(across @ view.current_m_s) ** 2 / spread > SEEN_ACROSS_CHI2)
 
 
 @dataclass(frozen=True)
@@ -457,7 +489,6 @@ class _Spread:
     robust: np.ndarray | None
     quantile: float
     influence: np.ndarray | None = None  # (G, 2): each experiment's pull on the current, m/s
-    shift: np.ndarray | None = None  # (2,): the current's move once the nuisances are fitted, m/s
 
     def half_width(self) -> np.ndarray:
         """The 95 % half-width per component: the wider of the two intervals."""
@@ -473,63 +504,6 @@ class _Spread:
             return self.independent
         robust = self.robust * self.quantile**2
         return robust if np.trace(robust) > np.trace(self.independent) else self.independent
-
-
-def turning_misfit_columns(ev: Evaluator) -> np.ndarray:
-    """Each experiment's turning rate off by a fraction, as a residual column (module doc, step 1).
-
-    A model that gets a gait's turning rate wrong by some fraction kappa gets its heading wrong
-    by kappa (theta(t) - theta(t_0)), so each step of its path dp turns by that, and the robot
-    drifts by dp(t) = kappa int_t0^t (theta(s) - theta(t_0)) J dp(s) (J the quarter turn):
-    across its track, more the longer it swims, as a current across it would drift it. When
-    every gait of a motion turns the same way, a current across their track fits that misfit
-    too. A straight gait's heading stays put, and so does this mode: it costs a straight motion
-    nothing. (Its speed off by a fraction drifts it along its track, which a one-axis motion's
-    along-track current already leaves out: :func:`cross_track_axes`.) From each recording:
-    ``t_s``, ``position_m`` p and ``heading_rad`` theta when recorded, else the direction of its
-    path over about a second.
-
-    Each column holds the mode at the experiment's sample times and ``weight`` times its sampled
-    velocity (the layout of :meth:`Evaluator.residuals`: one block per experiment, positions then
-    velocities, x and y interleaved), zero on the other experiments' blocks; unit norm (zero for
-    a gait that does not turn).
-
-    Returns
-    -------
-    ndarray, shape (M, E)
-    """
-    blocks = len(ev.prepared)
-    size = 4 * len(ev.prepared[0].times_s) if blocks else 0
-    columns = np.zeros((blocks * size, blocks))
-    quarter = np.array([[0.0, -1.0], [1.0, 0.0]])
-    for g, prepared in enumerate(ev.prepared):
-        experiment = prepared.experiment
-        t = np.asarray(experiment.t_s, dtype=float)
-        p = np.asarray(experiment.position_m, dtype=float)
-        heading = _heading(experiment)
-        turned = heading - heading[0]
-        steps = np.diff(p, axis=0)
-        drift = np.vstack([np.zeros(2), np.cumsum(
-            0.5 * (turned[1:] + turned[:-1])[:, None] * (steps @ quarter.T), axis=0)])
-        times = np.asarray(prepared.times_s, dtype=float)
-        at = np.column_stack([np.interp(times, t, drift[:, 0]), np.interp(times, t, drift[:, 1])])
-        column = np.concatenate([at, ev.weight * sampled_velocity(times, at)]).ravel()
-        norm = float(np.linalg.norm(column))
-        columns[g * size:(g + 1) * size, g] = column / norm if norm > 0 else 0.0
-    return columns
-
-
-def _heading(experiment: Any) -> np.ndarray:
-    """The recorded heading, rad, unwrapped; else the direction of the path over about 1 s."""
-    if experiment.heading_rad is not None:
-        return np.unwrap(np.asarray(experiment.heading_rad, dtype=float))
-    t = np.asarray(experiment.t_s, dtype=float)
-    p = np.asarray(experiment.position_m, dtype=float)
-    half = max(1, int(round(0.5 / max(float(np.median(np.diff(t))), 1e-9)))) if len(t) > 1 else 1
-    ahead = p[np.minimum(np.arange(len(p)) + half, len(p) - 1)]
-    behind = p[np.maximum(np.arange(len(p)) - half, 0)]
-    chord = ahead - behind
-    return np.unwrap(np.arctan2(chord[:, 1], chord[:, 0]))
 
 
 def _jacobian(ev: Evaluator, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -580,31 +554,26 @@ def _least_squares(ev: Evaluator, x: np.ndarray) -> np.ndarray:
     return box_from_unit(bounds, np.clip(fit.x, 0.0, 1.0))
 
 
-def _spread(ev: Evaluator, x: np.ndarray, nuisance: np.ndarray | None = None) -> _Spread | None:
+def _spread(ev: Evaluator, x: np.ndarray) -> _Spread | None:
     """The current's covariance at ``x``, or None where the other parameters explain it.
 
     As :func:`eelhost.estimation.identify.identifiability` (Jacobian in the unit cube, residual
     variance never below the pixel rounding's), with the other parameters profiled out; and the
-    cluster-robust one with each experiment a cluster. ``nuisance`` (M, P): residual columns of
-    misfits the current must be told apart from (:func:`turning_misfit_columns`), profiled out
-    with the parameters; the current they leave (``_Spread.shift``) is the linearised least
-    squares with them as extra unknowns.
+    cluster-robust one with each experiment a cluster.
     """
     bounds = ev.space.bounds
+    k = len(bounds)
     r, jac = _jacobian(ev, x)
     # each residual's experiment (a cluster): the evaluator's columns are its experiments' blocks
     groups = len(ev.prepared)
     cluster = np.repeat(np.arange(groups), r.shape[1] // groups)
     pixel = max(float(p.experiment.recording_camera().pixel_m) for p in ev.prepared)
+    sigma2 = max(float(r[0] @ r[0]) / max(1, jac.shape[0] - k), pixel**2 / 12.0)
     # the current's covariance with the other parameters profiled out: its columns' part that
     # no combination of the others' columns explains. A parameter no residual sees (C_m) has no
     # column to trade against the current, so it widens nothing (a plain inverse of J^T J made
     # every share of such a direction infinite)
     others, current = jac[:, :-2], jac[:, -2:]
-    if nuisance is not None and nuisance.size:
-        # in the parameters' scale: each unit column as long as the longest Jacobian column
-        longest = float(np.max(np.linalg.norm(jac, axis=0))) or 1.0
-        others = np.hstack([others, nuisance * longest])
     u, sing, _ = np.linalg.svd(others, full_matrices=False)
     u = u[:, sing > 1e-9 * sing[0]] if sing.size and sing[0] > 0 else u[:, :0]
     alone = current - u @ (u.T @ current)
@@ -615,26 +584,17 @@ def _spread(ev: Evaluator, x: np.ndarray, nuisance: np.ndarray | None = None) ->
         return None
     bread = np.linalg.inv(info)
     to_m_s = np.outer(ranges, ranges)  # unit-cube covariance to (m/s)^2
-    # the linearised least squares with every column: the current moves by what the residuals
-    # hold along its own part (none at a least-squares point without nuisance columns), and
-    # what is left is the residual of all of them
-    # (without nuisances ``x`` is taken as the least-squares point: no move, its residuals)
-    told = nuisance is not None and nuisance.size > 0
-    step = -bread @ (alone.T @ r[0]) if told else np.zeros(2)
-    left = r[0] - u @ (u.T @ r[0]) - alone @ step if told else r[0]
-    sigma2 = max(float(left @ left) / max(1, jac.shape[0] - u.shape[1] - 2), pixel**2 / 12.0)
     # the same with the residuals correlated within each experiment (a clock offset or a misfit
     # shifts a whole recording): the cluster-robust sandwich, experiments the clusters, with the
     # small-sample factor G / (G - 1) and Student's t with G - 1 degrees of freedom (Cameron &
     # Miller 2015, "A practitioner's guide to cluster-robust inference"). The
     # independent-residual variance above counts every sample as evidence, and gave the servo
     # model's current on a servo tank +-1.1 mm/s, 3.2 mm/s off the truth
-    scores = np.array([alone[cluster == g].T @ left[cluster == g]
+    scores = np.array([alone[cluster == g].T @ r[0][cluster == g]
                        for g in range(groups)])  # (G, 2)
-    shift = step * ranges
     if groups < 2:
-        return _Spread(sigma2 * bread * to_m_s, None, 1.0, shift=shift)
+        return _Spread(sigma2 * bread * to_m_s, None, 1.0)
     robust = bread @ (scores.T @ scores) @ bread * groups / (groups - 1)
     return _Spread(sigma2 * bread * to_m_s, robust * to_m_s,
                    influence=(scores @ bread) * ranges,
-                   quantile=float(student_t.ppf(0.975, groups - 1)) / Z_95, shift=shift)
+                   quantile=float(student_t.ppf(0.975, groups - 1)) / Z_95)
