@@ -28,8 +28,12 @@ recorded in one tank. So, once both fits are made:
    differ by their noise only; beyond it, the misfit moved them, and the tank's current as
    much. The interval of each component is the shadow of the 95 % confidence ellipse on its
    axis (simultaneous intervals), and a current is **resolved** when still water lies outside
-   that ellipse (``TankCurrent.resolved``: the Wald test of both components at once); otherwise
-   the report says "no current resolved".
+   that ellipse (the Wald test of both components at once) and at least two motions' views
+   each see a current on their own (:func:`sees_a_current`; ``TankCurrent.resolved``): two
+   one-axis views fix the current exactly, nothing left to disagree, so a misfit that drifts
+   one motion's gaits across their track (a turning all one way that the model gets wrong)
+   would otherwise pass for a current. Otherwise the report says "no current resolved", and
+   the bounds the fits hold reach still water.
 3. **Each motion's fit holds it.** Each motion's parameters are polished again from its
    least-squares point with the current bounded to that interval
    (``ParameterSpace.current_bounds``), so the bootstrap, the identifiability analysis and the
