@@ -1081,11 +1081,11 @@ def test_a_replan_in_a_moved_estimate_gets_the_calm_budget_and_starts_when_it_en
         rest of the plan in the moved estimate is not."""
 
         asked: list[tuple[float, float, float]] = []
+        walls: list[float] = []
 
         def _replan(self, est, left, start_step, extra, guide=None,  # noqa: ANN001, ANN202
                     deadline_s=None):  # noqa: ANN001
-            self.asked.append((est.t_s, start_step * self.planner.twin.dt_s,
-                               deadline_s - time.monotonic()))
+            self.asked.append((est.t_s, start_step * self.planner.twin.dt_s, deadline_s))
             plan = Plan(False, "exhausted", "failed (exhausted)")
             return (Outcome(plan, "exhausted", plan.message), est.state, 0.0, 0.0, extra.copy(),
                     time.monotonic(), start_step)
@@ -1095,6 +1095,10 @@ def test_a_replan_in_a_moved_estimate_gets_the_calm_budget_and_starts_when_it_en
 
         def _look_ahead(self, est, left, extra, guide=None, horizon_s=None):  # noqa: ANN001, ANN202
             return (0.2, 0.2) if horizon_s is None else (0.2, 0.0)
+
+        def _request(self, *args):  # noqa: ANN002, ANN202
+            super()._request(*args)
+            self.walls.append(self._job.wall_request_s)  # when its deadline was counted from
 
     nav = Timed(lambda extra: planner, planner, outcome, PATH_GAIT, replan_budget_s=1.0,
                 calm_budget_s=CALM_REPLAN_BUDGET_S)
@@ -1108,13 +1112,14 @@ def test_a_replan_in_a_moved_estimate_gets_the_calm_budget_and_starts_when_it_en
             nav._worker.submit(lambda: None).result()
             nav._side.submit(lambda: None).result()
         assert len(nav.asked) == 1 and nav.events[-1]["reason"] == "current_estimate"
-        t_request, t_start, left_s = nav.asked[0]
+        t_request, t_start, deadline = nav.asked[0]
         assert nav.events[-1]["budget_s"] == nav.calm_budget_s == CALM_REPLAN_BUDGET_S > 1.0
-        assert nav.calm_budget_s - 0.5 < left_s <= nav.calm_budget_s
+        assert deadline - nav.walls[0] == pytest.approx(nav.calm_budget_s)
         # its start is the state predicted for when the budget ends, not a lead of 0.3-0.9 s
         assert nav.calm_budget_s <= t_start - t_request <= nav.calm_budget_s + 0.3 + 1e-9
         # a replan on leaving the corridor keeps the 1 s and the short lead
         nav.asked.clear()
+        nav.walls.clear()
         off = np.array([0.8, 1.4])
         for k in range(60, 90):
             t = k / 30
@@ -1122,8 +1127,9 @@ def test_a_replan_in_a_moved_estimate_gets_the_calm_budget_and_starts_when_it_en
             nav._worker.submit(lambda: None).result()
             nav._side.submit(lambda: None).result()
         assert nav.asked and nav.events[-1]["reason"] == "left_corridor"
-        t_request, t_start, left_s = nav.asked[0]
-        assert nav.events[-1]["budget_s"] == 1.0 and 0.5 < left_s <= 1.0
+        t_request, t_start, deadline = nav.asked[0]
+        assert nav.events[-1]["budget_s"] == 1.0
+        assert deadline - nav.walls[0] == pytest.approx(1.0)
         assert t_start - t_request <= nav.max_lead_s + 0.3 + 1e-9
     finally:
         nav.close()
