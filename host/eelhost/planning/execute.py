@@ -215,12 +215,14 @@ def swim(
 
 
 def body_clearance_m(
-    world: World, field: ClearanceField, model: SwimmerModel, states: FloatArray
+    world: World, field: ClearanceField, model: SwimmerModel, states: FloatArray,
+    exact_within_m: float = 0.0,
 ) -> FloatArray:
     """Gap between the body and the nearest obstacle or wall at each state (negative: overlap).
 
     The link centre lines' exact distance less the body's half width, wherever it can be the
-    smallest or near contact (see :func:`_body_clearance`).
+    smallest, near contact, or within ``exact_within_m`` of it (see :func:`_body_clearance`);
+    elsewhere a lower bound.
 
     Parameters
     ----------
@@ -228,6 +230,8 @@ def body_clearance_m(
     field : ClearanceField
     model : SwimmerModel
     states : ndarray, shape (K, 2 N + 4)
+    exact_within_m : float
+        Gaps up to this are exact (a caller that compares them with a margin gives it).
 
     Returns
     -------
@@ -236,7 +240,7 @@ def body_clearance_m(
     half_link = float(model.half_length_m.max())
     half_width = float(model.half_axis_horizontal_m.max())
     ends = link_endpoints(model, states)
-    return _body_clearance(world, field, ends, half_link, half_width) - half_width
+    return _body_clearance(world, field, ends, half_link, half_width + exact_within_m) - half_width
 
 
 def _body_clearance(

@@ -33,9 +33,8 @@ from typing import Any, NamedTuple, cast
 
 import numpy as np
 
-from eelhost.planning.body import link_endpoints
 from eelhost.planning.check import water_twin
-from eelhost.planning.execute import Swim, _body_clearance, body_clearance_m, swim
+from eelhost.planning.execute import Swim, body_clearance_m, swim
 from eelhost.planning.geometry import FloatArray, point_segment_distance
 from eelhost.planning.planner import SCREEN_DRAWS, Outcome, Planner
 from eelhost.planning.search import (
@@ -1445,11 +1444,8 @@ class TankReplanner:
         contact = (now + int(touching[0]) * stride) * twin.dt_s if touching.size else math.inf
         # exact wherever the gap may be within the margin and the largest allowance (the
         # capsule's gap is otherwise a lower bound away from its smallest value)
-        half_width = float(planner.model.half_axis_horizontal_m.max())
-        capsule = _body_clearance(
-            planner.world, planner.clearance, link_endpoints(planner.model, states),
-            float(planner.model.half_length_m.max()),
-            half_width + self.lookahead_margin_m + LOOKAHEAD_DRIFT_MAX_M) - half_width
+        capsule = body_clearance_m(planner.world, planner.clearance, planner.model, states,
+                                   self.lookahead_margin_m + LOOKAHEAD_DRIFT_MAX_M)
         if horizon_s is None:
             # the look-ahead that guards the robot: its margin grows along the horizon with the
             # drift the current estimate's uncertainty allows (docs/planning.md)
