@@ -43,9 +43,9 @@ from eelsim.model import SwimmerModel
 
 log = logging.getLogger(__name__)
 
-__all__ = ["BodyEstimate", "body_error_m", "error_summary_mm", "fill_unread_links", "BodyStateEstimator", "CurrentEstimator", "CurrentWindow",
-           "JointSources", "JointsAtFrame", "TelemetryJoints", "gait_link_angles",
-           "place_on_seen_links", "steady_towards"]
+__all__ = ["BodyEstimate", "BodyStateEstimator", "CurrentEstimator", "CurrentWindow",
+           "JointSources", "JointsAtFrame", "TelemetryJoints", "body_error_m", "error_summary_mm",
+           "fill_unread_links", "gait_link_angles", "place_on_seen_links", "steady_towards"]
 
 #: Telemetry's ``phi_mrad`` of a joint without a measured angle (docs/firmware.md, "Joint loop").
 NO_ANGLE_MRAD = -32768
