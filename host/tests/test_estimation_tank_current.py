@@ -83,6 +83,11 @@ def test_both_motions_hold_one_tank_current_recovered_within_a_mm_s_and_15_degre
         assert held[motion].fitness == pytest.approx(
             float(held_evs[motion].fitness(held[motion].values[None])[0]))
         assert held[motion].simulations > fits[motion].simulations
+        # never worse than the motion's own fit with its current brought into the held bounds
+        space = held_evs[motion].space
+        own = space.from_unit(np.clip(space.to_unit(np.asarray(fits[motion].values)[None]),
+                                      0.0, 1.0))
+        assert held[motion].fitness <= float(held_evs[motion].fitness(own)[0]) + 1e-12
 
 
 def test_one_motion_alone_keeps_its_own_current(tank):

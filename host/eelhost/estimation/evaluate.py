@@ -330,6 +330,33 @@ AUTO_BACKEND = "auto"
 """Not a backend: ``"batch"`` when its kernel loads, else ``"reference"``."""
 
 
+def many_problems(ev: Evaluator, drop: Sequence[int | None] = ()) -> Callable:
+    """A ManyEvaluate (:mod:`eelhost.estimation.local`) over one evaluator's experiments.
+
+    Problem b leaves out experiment ``drop[b]`` (none where ``drop`` is shorter or says None).
+    The candidates of every problem are simulated as one batch (all experiments: a left-out
+    one is simulated too and ignored, which costs less than a batch per problem).
+    """
+
+    def evaluate(xs: list[np.ndarray]) -> list[tuple[np.ndarray, np.ndarray]]:
+        sizes = [len(x) for x in xs]
+        if not sum(sizes):
+            return [(np.zeros((0, len(ev.prepared))), np.zeros((0,)))] * len(xs)
+        errors, vectors = ev.evaluate(np.concatenate([x for x in xs if len(x)]))
+        out, at = [], 0
+        for b, n in enumerate(sizes):
+            e, v = errors[at:at + n], vectors[at:at + n]
+            j = drop[b] if b < len(drop) else None
+            if j is not None:
+                keep = [i for i in range(e.shape[1]) if i != j]
+                e, v = e[:, keep], v[:, keep]
+            out.append((e, v))
+            at += n
+        return out
+
+    return evaluate
+
+
 @BACKENDS.add("batch", "the compiled batched kernel (with a cluster: the candidates in blocks, "
               "one task each)")
 def _batch_backend(workers: int, map_function: Callable | None) -> SimulationBackend:

@@ -66,7 +66,7 @@ from typing import Any
 import numpy as np
 
 from eelhost.data.experiments import Dataset, Experiment
-from eelhost.estimation.evaluate import EstimationError, Evaluator, count_runs
+from eelhost.estimation.evaluate import EstimationError, Evaluator, count_runs, many_problems
 from eelhost.estimation.joint_fit import joint_fit, joint_model_name
 from eelhost.estimation.local import FAILED, polish_minimax_many
 from eelhost.estimation.methods import CURRENT_POLISH_ITERATIONS, FitSettings
@@ -260,32 +260,6 @@ class _Fitted:
     fitness: list[float]
 
 
-def _many(ev: Evaluator, drop: Sequence[int | None] = ()) -> Callable:
-    """A ManyEvaluate over one evaluator, problem b leaving out experiment ``drop[b]``.
-
-    The candidates of every problem are simulated as one batch (all experiments: a left-out
-    one is simulated too and ignored, which costs less than a batch per problem).
-    """
-
-    def evaluate(xs: list[np.ndarray]) -> list[tuple[np.ndarray, np.ndarray]]:
-        sizes = [len(x) for x in xs]
-        if not sum(sizes):
-            return [(np.zeros((0, len(ev.prepared))), np.zeros((0,)))] * len(xs)
-        errors, vectors = ev.evaluate(np.concatenate([x for x in xs if len(x)]))
-        out, at = [], 0
-        for b, n in enumerate(sizes):
-            e, v = errors[at:at + n], vectors[at:at + n]
-            j = drop[b] if b < len(drop) else None
-            if j is not None:
-                keep = [i for i in range(e.shape[1]) if i != j]
-                e, v = e[:, keep], v[:, keep]
-            out.append((e, v))
-            at += n
-        return out
-
-    return evaluate
-
-
 def multi_start_fit(
     ev: Evaluator,
     seed: int,
@@ -317,7 +291,7 @@ def multi_start_fit(
     if len(extra_starts):
         pts = np.asarray(extra_starts, dtype=float)[:, :k]
         begins.append(pts[int(np.argmin(still_ev.fitness(pts)))])
-    results = polish_minimax_many(_many(still_ev, [None] * len(begins)), still,
+    results = polish_minimax_many(many_problems(still_ev, [None] * len(begins)), still,
                                   np.array(begins), iterations)
     if still_ev is not ev:
         ev.simulations += still_ev.simulations
@@ -338,7 +312,7 @@ def _with_current(ev: Evaluator, still: _Fitted, iterations: int,
         return still
     zeros = np.zeros(len(ev.space.current_names))
     begins = [np.concatenate([v, zeros]) for v in still.values]
-    best = polish_minimax_many(_many(ev, [None]), ev.space, np.array(begins[:1]),
+    best = polish_minimax_many(many_problems(ev, [None]), ev.space, np.array(begins[:1]),
                                max(iterations, current_iterations))[0]
     return _merge(_Fitted([np.asarray(best.values, float)], [best.fitness]),
                   _Fitted(begins[1:], still.fitness[1:]))
@@ -360,7 +334,7 @@ def _folds(
     for start in fitted.values:
         if not todo:
             break
-        refits = polish_minimax_many(_many(ev, todo), ev.space,
+        refits = polish_minimax_many(many_problems(ev, todo), ev.space,
                                      np.tile(start, (len(todo), 1)), iterations)
         held = ev.errors(np.array([r.values for r in refits]))
         still_failing = []

@@ -58,9 +58,9 @@ from scipy.optimize import least_squares as scipy_least_squares
 from scipy.stats import chi2
 from scipy.stats import t as student_t
 
-from eelhost.estimation.evaluate import Evaluator
+from eelhost.estimation.evaluate import Evaluator, many_problems
 from eelhost.estimation.identify import REL_STEP
-from eelhost.estimation.local import FAILED, polish_minimax
+from eelhost.estimation.local import FAILED, polish_minimax_many
 from eelhost.estimation.optimise import FitResult
 from eelhost.estimation.space import (
     CURRENT_BOUND_M_S,
@@ -246,9 +246,15 @@ def share_tank_current(
         held = replace(ev.space, current_bounds=np.column_stack(
             [np.maximum(lower, -CURRENT_BOUND_M_S), np.minimum(upper, CURRENT_BOUND_M_S)]))
         held_ev = ev.with_space(held)
-        # from its own least-squares parameters in the tank's current
-        begin = np.concatenate([x[:-2], current])
-        pol = polish_minimax(held_ev.evaluate, held, begin, HOLD_ITERATIONS)
+        # from its own least-squares parameters in the tank's current, and from the motion's
+        # own fit with its current brought into the held bounds (the polish clips its start):
+        # the lower is kept. From the first alone the held polish could end far above the fit
+        # it replaces, and on a failure penalty where the motion's own current had absorbed a
+        # misfit (docs/estimation.md, "One current for the tank")
+        begins = np.vstack([np.concatenate([x[:-2], current]),
+                            np.asarray(fits[m].values, dtype=float)])
+        pol = min(polish_minimax_many(many_problems(held_ev), held, begins, HOLD_ITERATIONS),
+                  key=lambda fit: float(fit.fitness))
         runs = held_ev.simulations
         ev.simulations += runs  # the motion's count of simulations includes these
         held_ev.simulations = ev.simulations
