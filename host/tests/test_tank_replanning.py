@@ -715,13 +715,18 @@ def test_the_back_off_yields_to_a_lookahead_that_puts_the_capsule_near_before_a_
         assert gaps[0] >= nav.backoff_s - 0.05 and (len(gaps) < 2 or gaps[1] >= 2.0 - 0.05)
 
 
-def test_the_lookahead_asks_for_a_replan_5_s_ahead_but_judges_stops_on_the_next_3_s():
-    # a disc some 4 s ahead of the swimming robot: within the replan horizon, beyond the stops'
+def _disc_some_4_s_ahead():
+    """A planner without check in the open world with a small disc some 4 s ahead of the robot
+    swimming at 3 s (:func:`estimate_at`), a no-plan outcome, and that estimate."""
     world = parse_world({**OPEN, "obstacles": [
         {"kind": "circle", "centre_m": [1.25, 1.03], "radius_m": 0.05}]}, "disc")
     planner = Planner(world, ROBOT, MODEL, check=False)
-    outcome = Outcome(Plan(False, "none", "none"), "none", "none")
-    e = estimate_at(3.0)
+    return planner, Outcome(Plan(False, "none", "none"), "none", "none"), estimate_at(3.0)
+
+
+def test_the_lookahead_asks_for_a_replan_5_s_ahead_but_judges_stops_on_the_next_3_s():
+    # a disc some 4 s ahead of the swimming robot: within the replan horizon, beyond the stops'
+    planner, outcome, e = _disc_some_4_s_ahead()
     verdicts = {}
     for horizon in (3.0, 5.0):
         nav = TankReplanner(lambda extra: planner, planner, outcome, PATH_GAIT,
@@ -743,11 +748,7 @@ def test_the_lookahead_asks_for_a_replan_5_s_ahead_but_judges_stops_on_the_next_
 def test_the_lookaheads_margin_grows_with_the_current_estimates_uncertainty():
     # the disc of the test above, judged over 3 s only: clear by more than the 10 mm margin in the
     # estimated water, but not by the drift that an uncertain current estimate allows over 3 s
-    world = parse_world({**OPEN, "obstacles": [
-        {"kind": "circle", "centre_m": [1.25, 1.03], "radius_m": 0.05}]}, "disc")
-    planner = Planner(world, ROBOT, MODEL, check=False)
-    outcome = Outcome(Plan(False, "none", "none"), "none", "none")
-    e = estimate_at(3.0)
+    planner, outcome, e = _disc_some_4_s_ahead()
     # one window with a sample of 20 mm/s north moved the estimate (gain 0.6) to 12 mm/s:
     # the estimate may still be 8 mm/s off
     history = [{"current_m_s": [0.0, 0.012]}]
