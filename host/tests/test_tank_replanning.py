@@ -1014,11 +1014,31 @@ def test_a_replan_that_finds_nothing_is_rescued_by_the_recoverys_sharper_turns()
 
 
 
+class FailingInTheTestsEstimate(TankReplanner):
+    """Replans fail at once (exhausted), each call recorded by :meth:`_asked` in ``asked``
+    (which a subclass declares); no current window moves the estimate, the test sets it."""
+
+    asked: list
+
+    def _asked(self, est, start_step, extra, deadline_s):  # noqa: ANN001, ANN202
+        raise NotImplementedError
+
+    def _replan(self, est, left, start_step, extra, guide=None,  # noqa: ANN001, ANN202
+                deadline_s=None):  # noqa: ANN001
+        self.asked.append(self._asked(est, start_step, extra, deadline_s))
+        plan = Plan(False, "exhausted", "failed (exhausted)")
+        return (Outcome(plan, "exhausted", plan.message), est.state, 0.0, 0.0, extra.copy(),
+                time.monotonic(), start_step)
+
+    def _estimate_current(self, est, left, pose):  # noqa: ANN001, ANN202
+        return False
+
+
 def test_a_moved_current_estimate_replans_only_a_plan_it_breaks_and_a_failure_keeps_the_plan(
         open_plan):
     planner, outcome = open_plan
 
-    class InTheEstimate(TankReplanner):
+    class InTheEstimate(FailingInTheTestsEstimate):
         """Replans fail; the estimate is set by the test; the next 5 s are clear, and the whole
         rest of the plan, swum in a moved estimate, comes ``rest_gap_m`` from something."""
 
@@ -1026,15 +1046,8 @@ def test_a_moved_current_estimate_replans_only_a_plan_it_breaks_and_a_failure_ke
         rest_gap_m = 0.2
         horizons: list[float] = []
 
-        def _replan(self, est, left, start_step, extra, guide=None,  # noqa: ANN001, ANN202
-                    deadline_s=None):  # noqa: ANN001
-            self.asked.append((est.t_s, (float(extra[0]), float(extra[1]))))
-            plan = Plan(False, "exhausted", "failed (exhausted)")
-            return (Outcome(plan, "exhausted", plan.message), est.state, 0.0, 0.0, extra.copy(),
-                    time.monotonic(), start_step)
-
-        def _estimate_current(self, est, left, pose):  # noqa: ANN001, ANN202
-            return False
+        def _asked(self, est, start_step, extra, deadline_s):  # noqa: ANN001, ANN202
+            return est.t_s, (float(extra[0]), float(extra[1]))
 
         def _look_ahead(self, est, left, extra, guide=None, horizon_s=None):  # noqa: ANN001, ANN202
             if horizon_s is None:
@@ -1077,22 +1090,15 @@ def test_a_moved_current_estimate_replans_only_a_plan_it_breaks_and_a_failure_ke
 def test_a_replan_in_a_moved_estimate_gets_the_calm_budget_and_starts_when_it_ends(open_plan):
     planner, outcome = open_plan
 
-    class Timed(TankReplanner):
+    class Timed(FailingInTheTestsEstimate):
         """Replans fail and record their start and budget; the look-ahead is clear, the whole
         rest of the plan in the moved estimate is not."""
 
         asked: list[tuple[float, float, float]] = []
         walls: list[float] = []
 
-        def _replan(self, est, left, start_step, extra, guide=None,  # noqa: ANN001, ANN202
-                    deadline_s=None):  # noqa: ANN001
-            self.asked.append((est.t_s, start_step * self.planner.twin.dt_s, deadline_s))
-            plan = Plan(False, "exhausted", "failed (exhausted)")
-            return (Outcome(plan, "exhausted", plan.message), est.state, 0.0, 0.0, extra.copy(),
-                    time.monotonic(), start_step)
-
-        def _estimate_current(self, est, left, pose):  # noqa: ANN001, ANN202
-            return False
+        def _asked(self, est, start_step, extra, deadline_s):  # noqa: ANN001, ANN202
+            return est.t_s, start_step * self.planner.twin.dt_s, deadline_s
 
         def _look_ahead(self, est, left, extra, guide=None, horizon_s=None):  # noqa: ANN001, ANN202
             return (0.2, 0.2) if horizon_s is None else (0.2, 0.0)
