@@ -746,7 +746,9 @@ class Planner:
                 return Outcome(plan, "found", plan.message, [], attempt, total, searching)
             # each plan its own draws: a repaired plan is not chosen to pass the very draws its
             # predecessors failed (docs/planning.md, "The planner", step 4)
-            waters = self.waters(attempt)[:count]
+            waters = self.waters(attempt)
+            if count < len(waters):  # cut to fit the deadline (draws_within)
+                waters = waters[:count]
             t_check = time.perf_counter()
             try:
                 checks, elapsed = self.check_plan(plan, state, step, waters, deadline_s)
