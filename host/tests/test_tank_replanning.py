@@ -1015,13 +1015,15 @@ def test_a_replan_that_finds_nothing_is_rescued_by_the_recoverys_sharper_turns()
 
 
 class FailingInTheTestsEstimate(TankReplanner):
-    """Replans fail at once (exhausted), each call recorded by :meth:`_asked` in ``asked``
-    (which a subclass declares); no current window moves the estimate, the test sets it."""
+    """Replans fail at once (exhausted), each call recorded in ``asked`` (a subclass declares its
+    own list, and may record less than :meth:`_asked`'s whole call); no current window moves the
+    estimate, the test sets it."""
 
     asked: list
 
     def _asked(self, est, start_step, extra, deadline_s):  # noqa: ANN001, ANN202
-        raise NotImplementedError
+        return (est.t_s, start_step * self.planner.twin.dt_s, (float(extra[0]), float(extra[1])),
+                deadline_s)
 
     def _replan(self, est, left, start_step, extra, guide=None,  # noqa: ANN001, ANN202
                 deadline_s=None):  # noqa: ANN001
