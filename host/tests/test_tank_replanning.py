@@ -751,11 +751,12 @@ def test_the_lookaheads_margin_grows_with_the_current_estimates_uncertainty():
     planner, outcome, e = _disc_some_4_s_ahead()
     # one window with a sample of 20 mm/s north moved the estimate (gain 0.6) to 12 mm/s:
     # the estimate may still be 8 mm/s off
-    history = [{"current_m_s": [0.0, 0.012]}]
-    assert current_spread_m_s(history, 0.6) == pytest.approx(0.008)
-    assert current_spread_m_s([], 0.6) == 0.0  # nothing measured: no allowance
+    history = [{"current_m_s": [0.0, 0.012], "sample_m_s": [0.0, 0.02]}]
+    assert current_spread_m_s(history) == pytest.approx(0.008)
+    assert current_spread_m_s([]) == 0.0  # nothing measured: no allowance
     # two more windows that agree with the estimate shrink it
-    assert current_spread_m_s(history + [{"current_m_s": [0.0, 0.012]}] * 2, 0.6) < 0.005
+    agree = {"current_m_s": [0.0, 0.012], "sample_m_s": [0.0, 0.012]}
+    assert current_spread_m_s(history + [agree] * 2) < 0.005
     verdicts = []
     for h in ([], history):
         nav = TankReplanner(lambda extra: planner, planner, outcome, PATH_GAIT,

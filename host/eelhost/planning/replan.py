@@ -493,36 +493,30 @@ centre line less the body's half width), so a plan that holds in the estimate is
 for the allowance alone."""
 
 
-def current_spread_m_s(history: list[dict], gain: float, windows: int = 3) -> float:
+def current_spread_m_s(history: list[dict], windows: int = 3) -> float:
     """How far the current estimate may be from the water, from its last windows (m/s).
 
-    Each window's sample of the current (:class:`CurrentEstimator`) moved the estimate by
-    ``gain`` times its distance from it, so the sample was ``a_prev + (a_new - a_prev) / gain``.
-    The spread is the root mean square distance of the last ``windows`` samples from the present
-    estimate: 0 before any window (nothing measured), the remaining innovation after one
-    (``(1 - gain) / gain`` times the move), and the scatter of the water's samples around the
-    estimate later (docs/planning.md, "The look-ahead's margin grows with the current's
-    uncertainty").
+    The root mean square distance of the last ``windows`` windows' own samples of the current
+    (``sample_m_s`` in :attr:`CurrentEstimator.history`) from the present estimate: 0 before any
+    window (nothing measured), the remaining innovation after one, and the scatter of the
+    water's samples around the estimate later (docs/planning.md, "The look-ahead's margin grows
+    with the current's uncertainty").
 
     Parameters
     ----------
     history : list of dict
-        :attr:`CurrentEstimator.history` (``current_m_s`` after every window).
-    gain : float
-        The estimator's gain (0 < gain <= 1).
+        :attr:`CurrentEstimator.history` (``current_m_s`` and ``sample_m_s`` of every window).
     windows : int
 
     Returns
     -------
     float
     """
-    if not history or gain <= 0.0:
+    if not history:
         return 0.0
-    values = [np.zeros(2)] + [np.asarray(h["current_m_s"], dtype=float) for h in history]
-    now = values[-1]
-    samples = [values[k - 1] + (values[k] - values[k - 1]) / gain
-               for k in range(max(1, len(values) - windows), len(values))]
-    return float(np.sqrt(np.mean([float(np.sum((c - now) ** 2)) for c in samples])))
+    now = np.asarray(history[-1]["current_m_s"], dtype=float)
+    samples = np.array([h["sample_m_s"] for h in history[-windows:]], dtype=float)
+    return float(np.sqrt(np.mean(np.sum((samples - now) ** 2, axis=1))))
 
 
 def drift_allowance_m(spread_m_s: float, ahead_s: FloatArray) -> FloatArray:
@@ -1451,7 +1445,7 @@ class TankReplanner:
             # drift the current estimate's uncertainty allows (docs/planning.md)
             ahead_s = np.arange(len(capsule), dtype=np.float64) * (stride * twin.dt_s)
             capsule = np.subtract(capsule, drift_allowance_m(
-                current_spread_m_s(self.current.history, self.current.gain), ahead_s))
+                current_spread_m_s(self.current.history), ahead_s))
         within = np.flatnonzero(capsule < self.lookahead_margin_m)
         near_s = (now + int(within[0]) * stride) * twin.dt_s if within.size else math.inf
         return Ahead(float(outline.min()), float(capsule.min()), contact, near_s)

@@ -961,7 +961,8 @@ class CurrentEstimator:
         """
         drift = (np.asarray(measured_m, float) - np.asarray(predicted_m, float)) / span_s
         assumed = self.value_m_s if assumed_m_s is None else np.asarray(assumed_m_s, float)
-        value = self.value_m_s + self.gain * (assumed + drift - self.value_m_s)
+        sample = assumed + drift  # this window's own measure of the current
+        value = self.value_m_s + self.gain * (sample - self.value_m_s)
         speed = float(math.hypot(*value))
         if speed > self.max_m_s:
             value = value * (self.max_m_s / speed)
@@ -969,5 +970,6 @@ class CurrentEstimator:
         self.history.append({"t_s": round(float(t_s), 3),
                              "t_start_s": round(float(t_s - span_s), 3),
                              "drift_m_s": [round(float(v), 4) for v in drift],
+                             "sample_m_s": [round(float(v), 4) for v in sample],
                              "current_m_s": [round(float(v), 4) for v in value]})
         return value
