@@ -1,8 +1,9 @@
 """Compile batched-kernel variants into the kernel disk cache, two at a time.
 
 Each variant (links x fluid law x joint model x stage) takes 20-60 s to compile on first use.
-The main job needs twenty (its fits, and the model comparison's candidates: five laws and
-their lift variants, with either joint model), the test suite sixteen, both read from the
+The main job needs thirty (its fits, and the model comparison's candidates: five laws and
+their lift variants, with either joint model, and with the PD loop on the servo line, which joins
+the comparison after its screen with the laws the screen ranks best), the test suite sixteen, both read from the
 registries (:func:`variant_lists`); compiled one after
 another inside the command that needs them they were most of its
 time from a fresh clone. Compiled here in parallel into the cache
@@ -20,7 +21,11 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 
 Variant = tuple[int, str | None, str, str]
-"""(links, stage or None for the machine's default, fluid law, bundled robot file)."""
+"""(links, stage or None for the machine's default, fluid law, bundled robot file or joint model).
+
+A joint model's name in place of a robot file (``pd_limited``): the paper robot with that
+model's joints (:func:`eelhost.estimation.joint_fit.joint_fit`), as the comparison swims it.
+"""
 
 PAPER, SERVO = "paper_robot.toml", "servo_robot.toml"
 ROBOTS = (PAPER, SERVO)
@@ -34,15 +39,19 @@ def variant_lists() -> dict[str, list[Variant]]:
 
     - ``main``: ``eelbot report`` on the bundled dataset: the comparison's default grid
       (:func:`eelhost.estimation.selection.default_laws`, the laws that declare themselves
-      candidates), each with both joint models.
+      candidates), each with both joint models, and with every joint model that joins after the
+      screen (``eelsim.joints.after_screen_models``: which laws it takes depends on the data).
     - ``tests``: sim/tests and host/tests: the default law at 3, 6 and 8 links, every candidate
       law, every plant-only law and the numba stage the C stage is checked against.
     """
     import eelhost.data  # noqa: F401  (registers the plant-only fluid laws, e.g. "foil")
     from eelhost.estimation.selection import default_laws
     from eelsim.fluid import DEFAULT_FLUID_LAW, FLUID_LAWS, LiftLaw, candidate_laws
+    from eelsim.joints import after_screen_models
 
     main: list[Variant] = [(6, None, law, robot) for robot in ROBOTS for law in default_laws()]
+    main += [(6, None, law, model) for model in after_screen_models(("pd", "servo"))
+             for law in default_laws()]
     bases = [law for law in candidate_laws(lift_variants=False) if law != DEFAULT_FLUID_LAW]
     plant_laws = [name for name, law in FLUID_LAWS.items()
                   if name not in candidate_laws() and not isinstance(law, LiftLaw)]
@@ -52,6 +61,9 @@ def variant_lists() -> dict[str, list[Variant]]:
     # the servo-joint tests of the Galilean-consistent laws, and the lift law's literature test
     tests += [(6, "c", law, SERVO) for law in ("galilean", "linear_quadratic")]
     tests += [(6, "c", "lighthill_lift", PAPER)]
+    # the choice from either robot file (host/tests/test_estimation_choice.py): two laws, so the
+    # PD loop on the servo line joins with both
+    tests += [(6, "c", law, "pd_limited") for law in ("linear_quadratic", "morison")]
     # the plant-only laws' plants: reynolds on the paper robot, the foil plants on the servos
     # (host/tests/test_plants.py)
     tests += [(6, "c", law, SERVO if law == "foil" else PAPER) for law in plant_laws]
@@ -67,8 +79,30 @@ def _warm(variant: Variant) -> str:
     stage = stage or stage_backend()
     if stage == "c" and stage_backend() != "c":
         stage = "numba"  # no C compiler here: the numba stage is what runs
-    seconds = warm_up(n_links=n, stage=stage, law=law, robot_file=robot)
+    if robot in ROBOTS:
+        seconds = warm_up(n_links=n, stage=stage, law=law, robot_file=robot)
+    else:
+        seconds = _warm_joint_model(n, stage, law, robot)
     return f"N = {n}, {stage} stage, {law}, {robot}: {seconds:.0f} s"
+
+
+def _warm_joint_model(n: int, stage: str, law: str, model: str) -> float:
+    """Compile a kernel of joint model ``model`` on the paper robot (``eelsim.batch.warm_up``'s way)."""
+    from eelhost.estimation.joint_fit import joint_fit
+    from eelsim.batch import run_batch
+    from eelsim.fluid import get_fluid_law
+    from eelsim.robot import load_robot
+    from eelsim.scenario import load_scenario
+
+    start = time.perf_counter()
+    robot = joint_fit(load_robot(PAPER), model).impose(load_robot(PAPER))
+    fluid = get_fluid_law(law)
+    robot = robot.with_coefficients(fluid.coefficients.from_array(fluid.bounds.mean(axis=1)))
+    if robot.n_links != n:
+        robot = robot.model_copy(update={"n_links": n})
+    scenario = load_scenario("straight").model_copy(update={"duration_s": 0.05})
+    run_batch(robot, scenario, sample_steps=[0], stage=stage)
+    return time.perf_counter() - start
 
 
 def main() -> int:

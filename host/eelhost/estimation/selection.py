@@ -33,6 +33,14 @@ CMA-ES search, from the candidate's screening fit, and from the best of every ca
 screening fit carried over (the screened-out ones' too). Those dropped are shown with the
 screen's figures, marked, and never recommended.
 
+**Joint models that join after the screen.** A joint model that is not offered by default but
+``offered_after_screen`` (the PD loop on the servo's torque-speed line, ``pd_limited``) joins the
+default grid after the screen with only the :data:`AFTER_SCREEN_LAWS` laws whose candidates the
+screen ranks best (:func:`after_screen_laws`), screened the same way (restarted from every
+screening fit, its line starting off: :data:`ABSENT`), and then competes with the others for the
+full search; its best is not passed as a joint model's best (it nests the PD model with the
+same law: the line off). Its candidates follow the grid's in the order of the table.
+
 **A failure is not a score.** A fold whose refit fails (a penalty on a training gait or on the
 held-out one) is refitted from the candidate's next start; a candidate whose fold still fails is
 marked failed, shown as such, and never ranked by a penalty-inflated mean.
@@ -88,7 +96,11 @@ SURVIVORS = 4  # at most this many candidates pass the screen to the full search
 SURVIVOR_FACTOR = 2.0  # and only those within this factor of the screen's best mean held-out error
 FAMILY_FACTOR = 4.0  # a law family's best passes too when within this factor of the screen's best
 # a term the other model lacks starts switched off (a lift variant's lift and drag rise)
-ABSENT = {"C_L": 0.0, "C_D_alpha": 0.0, "alpha_stall": float(np.pi / 2)}  # pi/2: no stall
+# and the torque-speed line of a joint model that has one (pd_limited) at its bounds' far end,
+# where the gaits never reach it: the plain PD loop
+ABSENT = {"C_L": 0.0, "C_D_alpha": 0.0, "alpha_stall": float(np.pi / 2),  # pi/2: no stall
+          "servo_max_torque_nm": np.inf, "servo_max_speed_rad_s": np.inf}  # clipped to the bounds
+AFTER_SCREEN_LAWS = 2  # laws a joint model that joins after the screen is tried with
 ONE_SET_CANDIDATES = 1  # the best separate-set models also tried with one set for all motions
 ONE_SET = "one set"  # the suffix of a one-set candidate's name
 
@@ -100,7 +112,8 @@ def carry_over(values: Mapping[str, float], space: ParameterSpace, default: np.n
     ``C_f_quad``) takes its unsplit one (``C_f``), the ``galilean`` law being the split law with
     both equal (from the paper's law this is only a start: the split law adds the reactive
     terms); a term the other model lacks and that can be switched off (:data:`ABSENT`: a lift
-    variant's ``C_L`` and ``C_D_alpha``, its ``alpha_stall`` at pi/2) starts off, so a ``<law>_lift`` candidate starts from its base law's fit
+    variant's ``C_L`` and ``C_D_alpha``, its ``alpha_stall`` at pi/2; a torque-speed line at its
+    upper bounds) starts off, so a ``<law>_lift`` candidate starts from its base law's fit
     exactly; anything else keeps ``default``. The result is clipped to the bounds.
 
     Parameters
@@ -250,6 +263,22 @@ def candidate_spaces(
               else sorted(set(joint_models)))
     return [ParameterSpace(get_fluid_law(law), joint_fit(dataset.robot, model), current=current)
             for model in models for law in sorted(set(laws))]
+
+
+def after_screen_laws(scores: Sequence[CandidateScore], count: int = AFTER_SCREEN_LAWS) -> list[str]:
+    """The laws a joint model that joins after the screen is tried with: the screen's best.
+
+    The ``count`` distinct laws (a lift variant is a law of its own here) of the screened
+    candidates best by :func:`screen_rank`, on any joint model, in that order.
+    """
+    laws: list[str] = []
+    for score in sorted(scores, key=screen_rank):
+        law = score.model.split(ONE_SET)[0].rstrip(", ").partition(" x ")[2]
+        if law not in laws:
+            laws.append(law)
+        if len(laws) == count:
+            break
+    return laws
 
 
 @dataclass
@@ -430,7 +459,32 @@ def cross_validate(
         if screen_budget > 0 and len(spaces) > survivors:
             screen_fits, screen_scores = _screen(workers, spaces, evs, motions, settings.seed,
                                                  screen_budget)
-            alive = pass_screen(list(screen_scores.values()), survivors)
+            joining: list[str] = []
+            if joint_models is None:
+                from eelsim.fluid import get_fluid_law
+                from eelsim.joints import after_screen_models
+
+                joining = after_screen_models(sorted({s.joints.model for s in spaces}))
+            if joining:
+                chosen = after_screen_laws(list(screen_scores.values()))
+                first = len(spaces)
+                spaces = spaces + [
+                    ParameterSpace(get_fluid_law(law), joint_fit(dataset.robot, model),
+                                   current=settings.fit_current)
+                    for model in joining for law in chosen]
+                for i in range(first, len(spaces)):
+                    for m in motions:
+                        evs[(i, m)] = evaluator(spaces[i], training_experiments(dataset, m))
+                log.info("model comparison: %s join after the screen with %s",
+                         ", ".join(joining), ", ".join(chosen))
+                more_fits, more_scores = _screen(
+                    workers, spaces, evs, motions, settings.seed, screen_budget,
+                    screened=screen_fits, keys=[(i, m) for i in range(first, len(spaces))
+                                                for m in motions])
+                screen_fits.update(more_fits)
+                screen_scores.update(more_scores)
+            alive = pass_screen([screen_scores[i] for i in range(len(spaces))], survivors,
+                                joined=set(joining))
             log.info("model comparison: %d of %d candidates pass the screen", len(alive),
                      len(spaces))
         full = _full(workers, spaces, evs, motions, alive, screen_fits, settings.seed,
@@ -469,7 +523,8 @@ def default_laws() -> list[str]:
 
 def pass_screen(scores: Sequence[CandidateScore], survivors: int = SURVIVORS,
                 factor: float = SURVIVOR_FACTOR,
-                family_factor: float = FAMILY_FACTOR) -> list[int]:
+                family_factor: float = FAMILY_FACTOR,
+                joined: set[str] | frozenset[str] = frozenset()) -> list[int]:
     """Which screened candidates get the full search: their positions in ``scores``, in order.
 
     The ``survivors`` lowest mean held-out errors of the screen, of those within ``factor`` of
@@ -478,7 +533,8 @@ def pass_screen(scores: Sequence[CandidateScore], survivors: int = SURVIVORS,
     one that failed the screen too, when all of that joint model's did), and every law family's
     best (a law and its ``<law>_lift`` variant, on either joint model) within ``family_factor``
     of the lowest. When every candidate failed the screen, all pass (a short search may fail
-    where the full one does not).
+    where the full one does not). A joint model in ``joined`` (one that joined after the screen
+    with a few laws) has no joint model's best passed: its candidates pass on their errors.
     """
     ran = sorted((i for i, c in enumerate(scores) if np.isfinite(c.mean_held_out)),
                  key=lambda i: scores[i].mean_held_out)
@@ -490,7 +546,8 @@ def pass_screen(scores: Sequence[CandidateScore], survivors: int = SURVIVORS,
     laws: dict[str, int] = {}
     for i in sorted(range(len(scores)), key=lambda i: screen_rank(scores[i])):
         joint, law = family(scores[i].model)
-        joints.setdefault(joint, i)
+        if joint not in joined:
+            joints.setdefault(joint, i)
         if np.isfinite(scores[i].mean_held_out):
             laws.setdefault(law, i)
     passed |= set(joints.values())
@@ -543,16 +600,21 @@ def _add_to_score(
 def _screen(
     workers: _Workers, spaces: Sequence[ParameterSpace],
     evs: dict[tuple[int, str], Evaluator], motions: Sequence[str], seed: int, budget: int,
+    screened: Mapping[tuple[int, str], _Fitted] | None = None,
+    keys: Sequence[tuple[int, str]] | None = None,
 ) -> tuple[dict[tuple[int, str], _Fitted], dict[int, CandidateScore]]:
     """Every candidate fitted and scored cheaply (module docstring, "The screen").
 
     Two stages: every (candidate, fit)'s own short search; then, every one at once, its
     restart from every other candidate's screening fit, its current and its folds. Updates
     ``evs`` with the workers' evaluators. Returns the still-water fits and the scores.
+    ``keys`` (default: every one of ``evs``) are the (candidate, fit)s screened; ``screened``,
+    the still-water fits of candidates screened before (those that join after the screen
+    restart from them too).
     """
-    keys = list(evs)
+    keys = list(evs) if keys is None else list(keys)
     done = workers.map(_still_stage, [(evs[k], seed, SCREEN_ITERATIONS, budget) for k in keys])
-    own: dict[tuple[int, str], _Fitted] = {}
+    own: dict[tuple[int, str], _Fitted] = dict(screened or {})
     for k, (fitted, ev) in zip(keys, done, strict=True):
         own[k], evs[k] = fitted, ev
 
@@ -561,7 +623,8 @@ def _screen(
         # water is the same in every motion, so another motion's fit is a start too
         return [carry_over(replace(spaces[o], current=False).as_dict(own[(o, n)].values[0]),
                            spaces[i], spaces[i].bounds.mean(axis=1))
-                for n in motions for o in range(len(spaces)) if (o, n) != (i, m)]
+                for n in motions for o in range(len(spaces))
+                if (o, n) != (i, m) and (o, n) in own]
 
     scored = workers.map(_screen_stage, [(evs[(i, m)], own[(i, m)], others(i, m), seed)
                                          for i, m in keys])

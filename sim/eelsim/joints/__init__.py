@@ -10,7 +10,8 @@ another package adds its own through the ``eelbot.joint_models`` entry-point gro
 
 - ``"pd"`` (the default; the paper's): a PD loop drives free joints with torques;
 - ``"pd_limited"``: the PD loop clipped to the servo's torque-speed line, the stall torque and
-  no-load speed fitted (offered to the model comparison on request);
+  no-load speed fitted (joins the default comparison after its screen, with the laws it ranks
+  best; every law on request);
 - ``"servo"``: a hobby position servo (position-loop gain, rate limit, motor lag, optional dead
   zone) whose joint angles follow its law; the torque it must give is computed and saturation
   is counted.
@@ -132,6 +133,24 @@ def default_grid_models(own: str | None = None) -> list[str]:
     if own is not None:
         names.add(own)
     return sorted(names)
+
+
+def after_screen_models(grid: list[str] | tuple[str, ...] = ()) -> list[str]:
+    """The joint models that join an estimator's default comparison after its screen, by name.
+
+    Every model that is ``offered_after_screen`` and not in ``grid`` (the joint models already
+    compared: a robot file's own ``pd_limited`` is in its grid with every law).
+
+    Parameters
+    ----------
+    grid : sequence of str
+
+    Returns
+    -------
+    list of str
+        Sorted.
+    """
+    return sorted(n for n, m in JOINT_MODELS.items() if m.offered_after_screen and n not in grid)
 
 
 def joint_parameters(table: Any) -> Any:

@@ -122,6 +122,10 @@ class JointModel(abc.ABC):
         Whether the estimator's model comparison tries it when neither the robot file nor the
         user names it (default True; a model whose candidates would cost the comparison too much
         for what most plants need says False).
+    offered_after_screen : bool
+        Whether a model not offered by default joins the comparison after its screen, with the
+        few laws the screen ranks best for the default grid's models (default False; the PD loop
+        on the servo line says True: docs/estimation.md, "Model comparison").
     fitted_by_estimator : bool
         Whether the estimator fits its ``fit_parameters`` (default True); False keeps them as the
         robot file has them (the paper's PD gains are its own: docs/estimation.md, "The protocol").
@@ -133,6 +137,7 @@ class JointModel(abc.ABC):
     fit_parameters: ClassVar[Sequence[tuple[str, float, float]]]
     kernel_rows: ClassVar[tuple[str, ...]]
     offered_by_default: ClassVar[bool] = True
+    offered_after_screen: ClassVar[bool] = False
     fitted_by_estimator: ClassVar[bool] = True
 
     @property

@@ -52,9 +52,11 @@ class PDLimitedJoints(PDJoints):
     parameters: ClassVar[type[JointParameters]] = PDLimitedJointParameters
     fit_parameters: ClassVar[tuple[tuple[str, float, float], ...]] = (
         ("servo_max_torque_nm", 0.005, 0.08), ("servo_max_speed_rad_s", 3.0, 20.0))
-    # ten more candidates and kernels would cost the report's comparison about half again
-    # (docs/estimation.md, "Model comparison"): offered when the robot file or the user asks
+    # ten more candidates would cost the report's comparison about half again
+    # (docs/estimation.md, "Model comparison"): every law when the robot file or the user asks;
+    # by default it joins after the screen with the few laws the screen ranks best
     offered_by_default: ClassVar[bool] = False
+    offered_after_screen: ClassVar[bool] = True
     # the PD gains stay the robot file's; the fit varies the line (its fit_parameters)
     fitted_by_estimator: ClassVar[bool] = True
 
