@@ -9,6 +9,8 @@ import numpy as np
 
 from eelhost.data.experiments import Dataset, Experiment
 from eelhost.estimation.steering import BEYOND, commanded_offsets, steering_check
+from eelsim.camera import MedianFilter, causal_median
+from eelsim.control import wrap_angle
 from eelsim.robot import load_robot
 from eelsim.scenario import load_scenario
 
@@ -67,3 +69,29 @@ def test_a_recording_without_headings_is_left_out_not_guessed():
     check = steering_check(_dataset([_still("train", _towards(20.0), heading=False)],
                                     [_still("test", _towards(60.0))], []))
     assert math.isnan(check.training_rad) and check.beyond == {}
+
+
+def test_the_recording_median_is_what_the_controllers_filter_gives_frame_by_frame():
+    """One median for both (eelsim.camera): the vectorised form equals MedianFilter.push."""
+    rng = np.random.default_rng(3)
+    n = 200
+    xy = np.cumsum(rng.normal(0.0, 0.01, (n, 2)), axis=0)
+    xy[50] += 0.5  # an outlier the median rejects
+    # a heading turning through +-pi several times, with noise
+    heading = np.asarray(wrap_angle(np.linspace(2.5, 2.5 + 4.0 * math.pi, n)
+                                    + rng.normal(0.0, 0.05, n)), dtype=float)
+    for window in (1, 3, 5, 8):
+        filt = MedianFilter(window)
+        streamed = np.array([filt.push(x, y, h) for (x, y), h in zip(xy, heading, strict=True)])
+        at_once = causal_median(np.column_stack([xy, heading]), window)
+        assert np.allclose(at_once, streamed, rtol=0.0, atol=1e-12)
+    # the heading median follows the turn, never the raw angles' jump across +-pi
+    assert np.all(np.abs(np.diff(at_once[:, 2])) < 0.5)
+
+
+def test_a_recording_shorter_than_the_window_takes_the_median_of_the_frames_it_has():
+    poses = np.array([[0.0, 0.0, 0.0], [1.0, 2.0, 0.1], [5.0, 1.0, 0.2]])
+    out = causal_median(poses, 5)
+    assert np.allclose(out[0], poses[0])
+    assert np.allclose(out[1], poses[:2].mean(axis=0))
+    assert np.allclose(out[2], np.median(poses, axis=0))

@@ -22,6 +22,7 @@ from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
 
 from eelsim.control import wrap_angle
 
@@ -99,6 +100,10 @@ def hermite(
 class MedianFilter:
     """Moving median of the last ``window`` pose samples (x, y, unwrapped heading).
 
+    The streaming form of :func:`causal_median` (the controller's, one frame at a time); both
+    unwrap the heading with :func:`unwrap_heading` and take the median of the same window, so
+    a recording filtered at once gives what the controller saw frame by frame (tested).
+
     Parameters
     ----------
     window : int
@@ -106,20 +111,73 @@ class MedianFilter:
     """
 
     def __init__(self, window: int) -> None:
-        self._buf: deque[np.ndarray] = deque(maxlen=window)
+        self._buf: deque[np.ndarray] = deque(maxlen=max(1, int(window)))
         self._last_heading: float | None = None
 
     def push(self, x_m: float, y_m: float, heading_rad: float) -> np.ndarray:
         """Add a sample and return the filtered (x, y, heading).
 
-        Headings are unwrapped against the previous sample (the change taken in (-pi, pi],
-        :func:`eelsim.control.wrap_angle`) so that the median does not jump across +-pi.
+        Headings are unwrapped against the previous sample (:func:`unwrap_heading`) so that the
+        median does not jump across +-pi.
         """
         if self._last_heading is not None:
-            heading_rad = self._last_heading + float(wrap_angle(heading_rad - self._last_heading))
+            heading_rad = unwrap_heading(self._last_heading, heading_rad)
         self._last_heading = heading_rad
         self._buf.append(np.array([x_m, y_m, heading_rad]))
         return np.median(np.array(self._buf), axis=0)
+
+
+def unwrap_heading(previous_rad: float, heading_rad: float) -> float:
+    """A heading moved by whole turns to within (-pi, pi] of the previous (unwrapped) one.
+
+    The change is taken in (-pi, pi] (:func:`eelsim.control.wrap_angle`), the twin's one
+    convention, so that a median over headings does not jump across +-pi.
+
+    Parameters
+    ----------
+    previous_rad : float
+        The previous sample's unwrapped heading.
+    heading_rad : float
+        The new sample's heading, any branch.
+
+    Returns
+    -------
+    float
+        ``previous_rad + wrap(heading_rad - previous_rad)``.
+    """
+    return previous_rad + float(wrap_angle(heading_rad - previous_rad))
+
+
+def causal_median(poses: np.ndarray, window: int) -> np.ndarray:
+    """:class:`MedianFilter` over a whole recording at once (vectorised).
+
+    Parameters
+    ----------
+    poses : ndarray, shape (K, 3)
+        x (m), y (m) and heading (rad, any branch) of each frame, in time order.
+    window : int
+        Number of samples in the median (at least 1).
+
+    Returns
+    -------
+    ndarray, shape (K, 3)
+        Row k is what :meth:`MedianFilter.push` returns for frame k: the median of frames
+        max(0, k - window + 1) .. k, the heading unwrapped against the previous frame first
+        (frames before a full window take the median of those there are).
+    """
+    poses = np.array(poses, dtype=float, copy=True).reshape(-1, 3)
+    window = max(1, int(window))
+    if len(poses) > 1:
+        # unwrap_heading, frame after frame: wrap_angle(h - u_prev) = wrap_angle(h - h_prev)
+        steps = np.asarray(wrap_angle(np.diff(poses[:, 2])), dtype=float)
+        poses[1:, 2] = poses[0, 2] + np.cumsum(steps)
+    filtered = np.empty_like(poses)
+    head = min(window - 1, len(poses))
+    for k in range(head):
+        filtered[k] = np.median(poses[: k + 1], axis=0)
+    if len(poses) > head:
+        filtered[head:] = np.median(sliding_window_view(poses, window, axis=0), axis=-1)
+    return filtered
 
 
 def _frame_steps(frame: int, fps: float, dt_s: float) -> tuple[int, float]:

@@ -10,8 +10,9 @@ offset, where candidates that fit the training gaits alike part ways, so a path'
 about the model's extrapolation than about its fit.
 
 The offset is not recorded; it is reconstructed from the recorded poses with the paper's pursuit
-law (docs/model.md section 4; :func:`eelsim.control.heading_offset`, for every frame at once): each pose passes a causal
-moving median over the declared ``camera.median_window`` poses (the heading unwrapped first), the
+law (docs/model.md section 4; :func:`eelsim.control.heading_offset`, for every frame at once): each pose passes the
+controller's causal moving median over the declared ``camera.median_window`` poses
+(:func:`eelsim.camera.causal_median`, the whole-recording form of the twin's ``MedianFilter``), the
 target moves to the next waypoint when the filtered position is inside the acceptance circle, and
 gamma = k_theta wrap(theta_ref - theta_bar). The robot is left-right symmetric, so a turn's
 direction does not matter: the check compares the largest |gamma| of each held-out experiment
@@ -25,9 +26,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.lib.stride_tricks import sliding_window_view
 
 from eelhost.data.experiments import Dataset, Experiment
+from eelsim.camera import causal_median
 from eelsim.control import wrap_angle
 
 BEYOND = 1.2
@@ -50,15 +51,10 @@ def commanded_offsets(exp: Experiment) -> np.ndarray | None:
     """
     if exp.heading_rad is None or len(exp.t_s) == 0:
         return None
-    window = max(1, int(exp.camera.get("median_window", 5)))
-    poses = np.column_stack([exp.position_m, np.unwrap(exp.heading_rad)])
-    # causal median: the frames before a full window take the median of those there are
-    filtered = np.empty_like(poses)
-    head = min(window - 1, len(poses))
-    for k in range(head):
-        filtered[k] = np.median(poses[: k + 1], axis=0)
-    if len(poses) > head:
-        filtered[head:] = np.median(sliding_window_view(poses, window, axis=0), axis=-1)
+    window = int(exp.camera.get("median_window", 5))
+    poses = np.column_stack([exp.position_m, exp.heading_rad])
+    # the controller's causal median (eelsim.camera.MedianFilter), the whole recording at once
+    filtered = causal_median(poses, window)
     waypoints = np.asarray(exp.scenario.waypoints_m, dtype=float).reshape(-1, 2)
     radius = exp.scenario.acceptance_radius_m
     target = np.empty(len(poses), dtype=int)
