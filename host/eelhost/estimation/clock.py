@@ -18,8 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from eelhost.estimation.runs import ALIGN_STEP_S, clock_shifts
-from eelhost.estimation.validate import ValidationRun
+from eelhost.estimation.runs import ALIGN_STEP_S
+from eelhost.estimation.validate import ValidationRun, best_clock_offset
 
 WIDE_S = 1.0  # the revisited search's least half-width, s
 # The revisited search is at least this many times the widest declared bound: a recording that
@@ -121,14 +121,8 @@ def clock_check(runs: Sequence[ValidationRun], bound_s: float | None = None) -> 
     least = min((bounds[r.experiment.name] for r in searched), default=0.0)
     wide_s = max(WIDE_S, WIDE_FACTOR * widest)
     wide = {}
-    for r in at:
-        exp = r.experiment
-        t0, t1 = exp.t_s[0], exp.t_s[-1]
-        gaps = []
-        shifts = clock_shifts(wide_s)
-        for d in shifts:
-            t = np.clip(r.times_s + d, t0, t1)  # the recording holds nothing beyond its ends
-            gaps.append(np.linalg.norm(exp.position_at(t) - r.sim_positions_m, axis=-1).mean())
-        wide[exp.name] = float(shifts[int(np.argmin(gaps))])
+    for r in at:  # validation's own search, within the revisited bound
+        wide[r.experiment.name] = best_clock_offset(r.experiment, r.times_s, r.sim_positions_m,
+                                                    wide_s)[0]
     return ClockCheck(widest, tuple(r.experiment.name for r in at), len(searched), wide, wide_s,
                       least if least < widest else None)

@@ -119,12 +119,7 @@ def validate(
                 )
             else:
                 unaligned = validation_errors(p.times_s, exp_pos, simp, bl)["Ex_mean_BL"]
-                # the recording's clock offset that fits best (just 0 without alignment)
-                shifts = clock_shifts(bound)
-                shifted = np.stack([p.experiment.position_at(p.times_s + d) for d in shifts])
-                gaps = np.linalg.norm(shifted - simp, axis=-1).mean(axis=-1)
-                k = int(np.argmin(gaps))
-                offset, exp_pos = float(shifts[k]), shifted[k]
+                offset, exp_pos = best_clock_offset(p.experiment, p.times_s, simp, bound)
                 err = validation_errors(p.times_s, exp_pos, simp, bl)
             row = ValidationRow(
                 p.experiment.name,
@@ -141,6 +136,42 @@ def validate(
             )
     order = {e.name: i for i, e in enumerate(experiments)}
     return sorted(runs, key=lambda r: order[r.experiment.name])
+
+
+def best_clock_offset(
+    experiment: Experiment, times_s: np.ndarray, sim_positions_m: np.ndarray, bound_s: float
+) -> tuple[float, np.ndarray]:
+    """The recording's clock offset within +-``bound_s`` that brings it nearest the prediction.
+
+    docs/estimation.md, "Validation": the offsets ``runs.clock_shifts(bound_s)`` apart by
+    ``ALIGN_STEP_S`` (just 0 for a bound of 0), the one whose mean distance between the shifted
+    recording and the prediction is least. A recording holds nothing beyond its ends, so a shift
+    past them reads its first or last position (``Experiment.position_at`` interpolates inside
+    the recorded span).
+
+    Parameters
+    ----------
+    experiment : Experiment
+        The recording.
+    times_s : ndarray, shape (n,)
+        The sample times of the prediction.
+    sim_positions_m : ndarray, shape (n, 2)
+        The predicted centre of mass at those times.
+    bound_s : float
+        The search half-width, s.
+
+    Returns
+    -------
+    offset_s : float
+        The best offset.
+    positions_m : ndarray, shape (n, 2)
+        The recording at ``times_s + offset_s``.
+    """
+    shifts = clock_shifts(bound_s)
+    shifted = np.stack([experiment.position_at(times_s + d) for d in shifts])
+    gaps = np.linalg.norm(shifted - sim_positions_m, axis=-1).mean(axis=-1)
+    k = int(np.argmin(gaps))
+    return float(shifts[k]), shifted[k]
 
 
 def worst_ex(runs: Sequence[ValidationRun], aligned: bool = False) -> dict[str, float]:
