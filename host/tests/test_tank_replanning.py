@@ -617,10 +617,11 @@ def test_a_failed_replan_is_retried_at_once_only_while_the_contact_ahead_leaves_
     assert "into an obstacle or wall, first in " in d.detail  # the stop says when it touches
     if retried:
         # no back-off between the tries (1 s, then 2 s, without contact ahead), and still
-        # stopped after max_failures of them
-        assert len(nav.requests) == nav.max_failures == 3
+        # stopped after max_failures of them and the extra replans the far contact allows
+        assert len(nav.requests) == nav.max_failures + nav.extra_replans == 5
         assert np.diff(nav.requests).max() < 0.5
-        assert nav.retries_before_contact == 2 and nav.record()["retries_before_contact"] == 2
+        assert nav.retries_before_contact == 4 and nav.record()["retries_before_contact"] == 4
+        assert nav.record()["extra_replans"] == 2
     else:
         assert len(nav.requests) == 1 and nav.retries_before_contact == 0
         assert t_stop is not None and t_stop < 0.5
@@ -696,23 +697,72 @@ def test_the_back_off_yields_to_a_lookahead_that_puts_the_capsule_near_before_a_
         # failed replan is followed by the next look-ahead's replan, within the back-off
         assert len(nav.requests) >= nav.max_failures
         assert gaps[: nav.max_failures - 1].max() < nav.backoff_s
-        assert nav.backoff_yields == nav.max_failures - 1 and nav.retries_before_contact == 0
-        assert nav.record()["backoff_yields"] == nav.max_failures - 1
+        assert nav.retries_before_contact == 0
         if outline_late_m < nav.lookahead_margin_m:
-            # then no failure is left and the present plan is no longer known clear: the robot
-            # is stopped deliberately, with the reason
+            # then the present plan is no longer known clear by the margin, but its outline
+            # swims clear of contact: the extra replans are asked for at once, and once they
+            # have failed too the robot is stopped deliberately, with the reason
+            last = nav.max_failures + nav.extra_replans
+            assert nav.backoff_yields == last - 1 and nav.record()["backoff_yields"] == last - 1
+            assert nav.record()["extra_replans"] == nav.extra_replans == 2
+            assert gaps.max() < nav.backoff_s
             assert stop is not None and stop[1].stop == "no_safe_continuation"
             assert "before a replan after the back-off could steer" in stop[1].detail
-            assert "3 replans failed in a row" in stop[1].detail
-            assert len(nav.requests) == nav.max_failures
+            assert f"{last} replans failed in a row" in stop[1].detail
+            assert len(nav.requests) == last
         else:  # its outline still swims clear by the margin: kept, as after a last failure,
-            # and the back-off (4 s) holds until the next try
+            # and the back-off (4 s) holds until the next try, with no extra replan
+            assert nav.backoff_yields == nav.max_failures - 1
+            assert nav.record()["backoff_yields"] == nav.max_failures - 1
+            assert nav.record()["extra_replans"] == 0
             assert stop is None and len(nav.requests) > nav.max_failures
             assert gaps[nav.max_failures - 1] >= 4.0 * nav.backoff_s - 0.05
     else:
         # far enough ahead: the back-off holds (1 s, then 2 s between tries), as before
         assert nav.backoff_yields == 0 and len(nav.requests) >= 2
         assert gaps[0] >= nav.backoff_s - 0.05 and (len(gaps) < 2 or gaps[1] >= 2.0 - 0.05)
+
+
+def outline_near_replanner(status: str):
+    """A :func:`failing_replanner` whose look-ahead swims the present waypoints with the outline
+    5 mm clear (within the margin, no contact) and the capsule within the margin at once."""
+
+    class OutlineNear(failing_replanner(status)):  # type: ignore[misc]
+        def _estimate_current(self, est, left, pose):  # noqa: ANN001, ANN202
+            return False
+
+        def _look_ahead(self, est, left, extra, guide=None, horizon_s=None):  # noqa: ANN001, ANN202
+            if horizon_s is not None:
+                return 0.2, 0.2
+            return Ahead(0.005, 0.0, math.inf, est.t_s)
+
+    return OutlineNear
+
+
+@pytest.mark.parametrize("budget_s", [1.0, None])
+def test_failed_replans_go_on_beyond_the_limit_only_while_the_outline_swims_clear_of_contact(
+        open_plan, budget_s):
+    # development seeds 17000-17149 (docs/planning.md, "More replans while the outline swims
+    # clear"): the stop after the last allowed replan came with the body still clear
+    planner, outcome = open_plan
+    nav = outline_near_replanner("exhausted")(
+        lambda extra: planner, planner, outcome, PATH_GAIT, replan_budget_s=budget_s)
+    nav.requests.clear()
+    try:
+        t_stop, d = drive_off_corridor(nav, 12.0)
+    finally:
+        nav.close()
+    assert d is not None and d.stop == "no_safe_continuation"
+    if budget_s is not None:
+        # the outline never touches: two more replans at once after the third failure, then
+        # the stop with all five failures named
+        assert len(nav.requests) == nav.max_failures + nav.extra_replans == 5
+        assert np.diff(nav.requests)[nav.max_failures - 1:].max() < 0.5
+        assert nav.record()["extra_replans"] == 2
+        assert "5 failed in a row" in d.detail or "5 replans failed in a row" in d.detail
+    else:  # no budget bounds when another replan would steer: stopped after the third, as before
+        assert len(nav.requests) == nav.max_failures
+        assert nav.record()["extra_replans"] == 0
 
 
 def _disc_some_4_s_ahead():
