@@ -695,7 +695,9 @@ class TankReplanner:
         it can still come back in time (docs/planning.md, "Retried before contact").
     extra_replans : int
         With a ``replan_budget_s`` and ``retry_before_contact``: after ``max_failures`` failed
-        replans in a row, up to this many more are asked for instead of a stop while the latest
+        replans in a row, up to this many more (since the last plan found; a present plan kept
+        because it swam clear may have counted more failures meanwhile) are asked for instead
+        of a stop while the latest
         look-ahead (at most 1.5 s old) swims the body's outline without contact, or with its
         first contact far enough ahead for another replan to steer before it
         (:meth:`_retry_need_s`); the robot is stopped as before once that no longer holds or
@@ -766,6 +768,7 @@ class TankReplanner:
         self.extra_replans = extra_replans
         self.extra_replans_used = 0  # replans beyond max_failures (the record's)
         self._extra_now = False  # the next replan is one of those
+        self._extras = 0  # extra replans asked for since the last plan found
         # the robot's time of the first contact the latest look-ahead predicts (inf: none)
         self._contact_at_s = math.inf
         # the robot's time the latest look-ahead puts the capsule within the margin (inf: never)
@@ -977,6 +980,7 @@ class TankReplanner:
                 self.retries_before_contact += 1
             if self._extra_now:
                 self.extra_replans_used += 1
+                self._extras += 1
             self._extra_now = False
             self._retry_now = False
             self._request(t_s, est, left, reason)
@@ -1050,14 +1054,14 @@ class TankReplanner:
         It may while failures are left and the predicted contact is far enough ahead for
         another replan to steer before it (:meth:`_retry_need_s`).
         """
-        return (self.failures < self.max_failures + self.extra_replans
+        return ((self.failures < self.max_failures or self._extras < self.extra_replans)
                 and self._contact_at_s - t_s >= self._retry_need_s())
 
     def _failures_left(self, t_s: float) -> bool:
         """Another replan may follow the failed ones instead of a stop.
 
         While fewer than ``max_failures`` failed in a row; beyond them, ``extra_replans`` more
-        while the latest look-ahead (at most 1.5 s old) swims the body's outline without a
+        (since the last plan found) while the latest look-ahead (at most 1.5 s old) swims the body's outline without a
         contact nearer than another replan's need (:meth:`_retry_need_s`; inf without a budget,
         so never then): docs/planning.md, "More replans while the outline swims clear".
         """
@@ -1065,7 +1069,7 @@ class TankReplanner:
             return True
         t_gap, gap = self._last_gap
         need = self._retry_need_s()
-        return (self.failures < self.max_failures + self.extra_replans
+        return (self._extras < self.extra_replans
                 and gap is not None and t_s - t_gap <= 1.5 and math.isfinite(need)
                 and self._contact_at_s - t_s >= need)
 
@@ -1354,7 +1358,7 @@ class TankReplanner:
             self._next_try_s = t_s
             return True
         if outcome.found:
-            self.failures = 0
+            self.failures = self._extras = 0
             self._plan_current = extra
             self.outcome = outcome
             self.path = corridor_path(outcome.plan)
