@@ -45,7 +45,9 @@ def test_the_plant_swum_on_its_servo_line_reproduces_its_recording_and_without_i
     assert gaps[False] > 0.01  # the robot without its line swims centimetres further
 
 
-def test_the_comparison_offers_the_servo_line_model_only_when_asked_and_alike_from_either_file():
+def test_the_grid_holds_the_servo_line_model_with_every_law_only_when_asked_alike_from_either_file(
+):
+    # by default it joins after the screen with a few laws (test_estimation_after_screen.py)
     from eelhost.data.experiments import BUNDLED_DATASET, load_dataset
     from eelhost.estimation.selection import candidate_spaces
     from eelsim.robot import SERVO_ROBOT
