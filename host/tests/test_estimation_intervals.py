@@ -310,3 +310,20 @@ def test_a_band_holds_the_declared_control_jitters_spread_of_the_held_out_run(ro
     np.testing.assert_array_equal(without.radius_m, 0.0)
     assert with_jitter.radius_m[-1] > 0
     np.testing.assert_array_equal(with_jitter.centre_m, without.centre_m)
+
+
+def test_a_current_held_at_the_edge_of_the_tanks_interval_is_not_called_a_search_bound(robot):
+    from dataclasses import replace
+
+    from eelhost.estimation.diagnostics import fit_warnings
+    from eelhost.estimation.space import ParameterSpace
+
+    free = ParameterSpace.for_robot(robot, current=True)
+    held = replace(free, current_bounds=np.array([[-0.002, 0.001], [0.003, 0.005]]))
+    x = held.bounds.mean(axis=1)
+    x[-2] = -0.002  # v_x on the held interval's lower edge
+    (warning,) = fit_warnings("straight", held, x, None)
+    assert "current_x_m_s" in warning and "tank's current interval" in warning
+    assert "search bound" not in warning
+    # the same value in a free space is in the water's range: no warning at all
+    assert fit_warnings("straight", free, x, None) == []

@@ -69,7 +69,14 @@ def fit_warnings(
     -------
     list of str
     """
+    # a current held within the tank's interval (docs/estimation.md, "One current for the
+    # tank") sits at that interval's edge, not at a search bound of the water
+    held = set(space.current_names) if space.current_bounds is not None else set()
     out = [
+        f"{motion}: {name} = {v:.4g} is held at the edge {b:g} of the tank's current interval "
+        "(one current for the tank, shared by the motions): this motion alone would put it "
+        "further out; the other parameters take up the difference"
+        if name in held else
         f"{motion}: {name} = {v:.4g} is at its search bound {b:g}: the optimum may lie beyond "
         "it, and the other parameters compensate"
         for name, v, b in at_bounds(space, values)
