@@ -78,3 +78,20 @@ def test_setup_compiles_the_joining_models_kernels_with_every_default_law():
     spec.loader.exec_module(warm)
     main = warm.variant_lists()["main"]
     assert {(law, "pd_limited") for law in default_laws()} <= {(v[2], v[3]) for v in main}
+
+
+def test_a_joined_candidate_passes_beside_the_grids_own_survivors_never_instead_of_one():
+    from eelhost.estimation.selection import screen_survivors
+
+    grid = [_cand("pd x morison", [0.10, 0.10]), _cand("pd x morison_lift", [0.08, 0.08]),
+            _cand("pd x galilean", [0.5, 0.5]), _cand("servo x morison", [0.3, 0.3])]
+    joined = [_cand("pd_limited x morison_lift", [0.09, 0.09]),
+              _cand("pd_limited x morison", [0.9, 0.9])]
+    own = pass_screen(grid, survivors=2, family_factor=0.0)
+    assert own == [0, 1, 3]
+    # among all, pd_limited x morison_lift would take pd x morison's place in the best two;
+    # here it passes beside it, and its far-off sibling does not pass
+    assert 0 not in pass_screen(grid + joined, survivors=2, family_factor=0.0,
+                                joined={"pd_limited"})
+    assert screen_survivors(grid + joined, len(grid), survivors=2,
+                            joined={"pd_limited"}) == [0, 1, 3, 4]

@@ -37,9 +37,11 @@ screen's figures, marked, and never recommended.
 ``offered_after_screen`` (the PD loop on the servo's torque-speed line, ``pd_limited``) joins the
 default grid after the screen with only the :data:`AFTER_SCREEN_LAWS` laws whose candidates the
 screen ranks best (:func:`after_screen_laws`), screened the same way (restarted from every
-screening fit, its line starting off: :data:`ABSENT`), and then competes with the others for the
-full search; its best is not passed as a joint model's best (it nests the PD model with the
-same law: the line off). Its candidates follow the grid's in the order of the table.
+screening fit, its line starting off: :data:`ABSENT`); a joined candidate gets the full search
+when it would pass the screen among all candidates (:func:`screen_survivors`), beside the grid's
+own survivors, which it never displaces; its best is not passed as a joint model's best (it
+nests the PD model with the same law: the line off). Its candidates follow the grid's in the
+order of the table.
 
 **A failure is not a score.** A fold whose refit fails (a penalty on a training gait or on the
 held-out one) is refitted from the candidate's next start; a candidate whose fold still fails is
@@ -460,6 +462,7 @@ def cross_validate(
             screen_fits, screen_scores = _screen(workers, spaces, evs, motions, settings.seed,
                                                  screen_budget)
             joining: list[str] = []
+            grid_size = len(spaces)
             if joint_models is None:
                 from eelsim.fluid import get_fluid_law
                 from eelsim.joints import after_screen_models
@@ -483,8 +486,8 @@ def cross_validate(
                                                 for m in motions])
                 screen_fits.update(more_fits)
                 screen_scores.update(more_scores)
-            alive = pass_screen([screen_scores[i] for i in range(len(spaces))], survivors,
-                                joined=set(joining))
+            alive = screen_survivors([screen_scores[i] for i in range(len(spaces))],
+                                     grid_size, survivors, set(joining))
             log.info("model comparison: %d of %d candidates pass the screen", len(alive),
                      len(spaces))
         full = _full(workers, spaces, evs, motions, alive, screen_fits, settings.seed,
@@ -553,6 +556,21 @@ def pass_screen(scores: Sequence[CandidateScore], survivors: int = SURVIVORS,
     passed |= set(joints.values())
     passed |= {i for i in laws.values() if scores[i].mean_held_out <= family_factor * best}
     return sorted(passed)
+
+
+def screen_survivors(scores: Sequence[CandidateScore], grid_size: int,
+                     survivors: int = SURVIVORS, joined: set[str] | frozenset[str] = frozenset(),
+                     ) -> list[int]:
+    """Who gets the full search when joint models joined after the screen (module docstring).
+
+    The grid's own survivors (the first ``grid_size`` scores) are those :func:`pass_screen`
+    passes among them alone, as if nothing had joined, so a joined candidate never displaces
+    one; a joined candidate (after them) passes too when :func:`pass_screen` passes it among
+    all the scores (``joined`` names its joint models).
+    """
+    own = pass_screen(list(scores[:grid_size]), survivors)
+    every = pass_screen(list(scores), survivors, joined=joined)
+    return sorted(set(own) | {i for i in every if i >= grid_size})
 
 
 def family(model: str) -> tuple[str, str]:
