@@ -617,11 +617,10 @@ def test_a_failed_replan_is_retried_at_once_only_while_the_contact_ahead_leaves_
     assert "into an obstacle or wall, first in " in d.detail  # the stop says when it touches
     if retried:
         # no back-off between the tries (1 s, then 2 s, without contact ahead), and still
-        # stopped after max_failures of them and the extra replans the far contact allows
-        assert len(nav.requests) == nav.max_failures + nav.extra_replans == 5
+        # stopped after max_failures of them
+        assert len(nav.requests) == nav.max_failures == 3
         assert np.diff(nav.requests).max() < 0.5
-        assert nav.retries_before_contact == 4 and nav.record()["retries_before_contact"] == 4
-        assert nav.record()["extra_replans"] == 2
+        assert nav.retries_before_contact == 2 and nav.record()["retries_before_contact"] == 2
     else:
         assert len(nav.requests) == 1 and nav.retries_before_contact == 0
         assert t_stop is not None and t_stop < 0.5
@@ -697,24 +696,17 @@ def test_the_back_off_yields_to_a_lookahead_that_puts_the_capsule_near_before_a_
         # failed replan is followed by the next look-ahead's replan, within the back-off
         assert len(nav.requests) >= nav.max_failures
         assert gaps[: nav.max_failures - 1].max() < nav.backoff_s
-        assert nav.retries_before_contact == 0
+        assert nav.backoff_yields == nav.max_failures - 1 and nav.retries_before_contact == 0
+        assert nav.record()["backoff_yields"] == nav.max_failures - 1
         if outline_late_m < nav.lookahead_margin_m:
-            # then the present plan is no longer known clear by the margin, but its outline
-            # swims clear of contact: the extra replans are asked for at once, and once they
-            # have failed too the robot is stopped deliberately, with the reason
-            last = nav.max_failures + nav.extra_replans
-            assert nav.backoff_yields == last - 1 and nav.record()["backoff_yields"] == last - 1
-            assert nav.record()["extra_replans"] == nav.extra_replans == 2
-            assert gaps.max() < nav.backoff_s
+            # then no failure is left and the present plan is no longer known clear: the robot
+            # is stopped deliberately, with the reason
             assert stop is not None and stop[1].stop == "no_safe_continuation"
             assert "before a replan after the back-off could steer" in stop[1].detail
-            assert f"{last} replans failed in a row" in stop[1].detail
-            assert len(nav.requests) == last
+            assert "3 replans failed in a row" in stop[1].detail
+            assert len(nav.requests) == nav.max_failures
         else:  # its outline still swims clear by the margin: kept, as after a last failure,
-            # and the back-off (4 s) holds until the next try, with no extra replan
-            assert nav.backoff_yields == nav.max_failures - 1
-            assert nav.record()["backoff_yields"] == nav.max_failures - 1
-            assert nav.record()["extra_replans"] == 0
+            # and the back-off (4 s) holds until the next try
             assert stop is None and len(nav.requests) > nav.max_failures
             assert gaps[nav.max_failures - 1] >= 4.0 * nav.backoff_s - 0.05
     else:
@@ -748,7 +740,8 @@ def test_failed_replans_go_on_beyond_the_limit_only_while_the_outline_swims_clea
     # clear"): the stop after the last allowed replan came with the body still clear
     planner, outcome = open_plan
     nav = outline_near_replanner("exhausted")(
-        lambda extra: planner, planner, outcome, PATH_GAIT, replan_budget_s=budget_s)
+        lambda extra: planner, planner, outcome, PATH_GAIT, replan_budget_s=budget_s,
+        extra_replans=2)
     nav.requests.clear()
     try:
         t_stop, d = drive_off_corridor(nav, 12.0)
@@ -774,7 +767,7 @@ def test_the_extra_replans_count_from_the_last_plan_found_not_from_the_failures_
     # extra replan was left under a limit on the failures themselves
     planner, outcome = open_plan
     nav = outline_near_replanner("exhausted", clear_for=4)(
-        lambda extra: planner, planner, outcome, PATH_GAIT, replan_budget_s=1.0)
+        lambda extra: planner, planner, outcome, PATH_GAIT, replan_budget_s=1.0, extra_replans=2)
     nav.requests.clear()
     try:
         _, d = drive_off_corridor(nav, 20.0)

@@ -167,11 +167,8 @@ def plan_for_run(
         margin = planner.body_half_width_m + GOAL_APPROACH_CLEARANCE_M
         approach = with_extra_current(world, extra_m_s).model_copy(update={"clearance_m": 0.0})
         more = {} if repairs is None else {"repairs": repairs}
-        # fine_fallback: finer legs where the default ones are exhausted from the replan's
-        # start (docs/planning.md, "Session 10's development figures: the replans' search")
         return Planner(approach, robot, model, gait, **{
-            **options, **more, "fine_fallback": True,
-            "settings": dataclasses.replace(base, margin_m=margin, **search)})
+            **options, **more, "settings": dataclasses.replace(base, margin_m=margin, **search)})
 
     def goal_planner_for(extra_m_s: FloatArray) -> Planner:
         """The goal approach's planner (docs/planning.md)."""
