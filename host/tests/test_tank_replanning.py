@@ -293,16 +293,21 @@ def drive_off_corridor(nav: TankReplanner, seconds: float):
     return None, None
 
 
+def drive_and_close(nav: TankReplanner, seconds: float):
+    """:func:`drive_off_corridor` from no recorded request, closing the replanner's workers."""
+    nav.requests.clear()  # type: ignore[attr-defined]
+    try:
+        return drive_off_corridor(nav, seconds)
+    finally:
+        nav.close()
+
+
 def drive_with_failing_replans(open_plan, status: str, seconds: float):
     """Drive off the corridor with every replan failing ``status``, without look-ahead."""
     planner, outcome = open_plan
     nav = failing_replanner(status)(lambda extra: planner, planner, outcome, PATH_GAIT,
                                     lookahead_s=0.0)
-    nav.requests.clear()
-    try:
-        t_stop, d = drive_off_corridor(nav, seconds)
-    finally:
-        nav.close()
+    t_stop, d = drive_and_close(nav, seconds)
     return nav, t_stop, d
 
 
@@ -364,11 +369,7 @@ def test_failed_replans_keep_a_present_plan_the_twin_swims_clear(open_plan):
 
     nav = failing_with_clear_look_ahead("exhausted")(lambda extra: planner, planner, outcome,
                                                      PATH_GAIT)
-    nav.requests.clear()
-    try:
-        t_stop, d = drive_off_corridor(nav, 14.0)
-    finally:
-        nav.close()
+    t_stop, d = drive_and_close(nav, 14.0)
     assert d is None  # never stopped: it keeps its plan
     assert len(nav.requests) >= 4 and np.diff(nav.requests)[2:].min() >= 4.0 - 0.05
 
@@ -381,11 +382,7 @@ def test_a_failed_replan_with_contact_ahead_stops_the_robot_at_once(open_plan):
             return -0.01, -0.01  # the present waypoints are swum 10 mm into something
 
     nav = HitAhead(lambda extra: planner, planner, outcome, PATH_GAIT)
-    nav.requests.clear()
-    try:
-        t_stop, d = drive_off_corridor(nav, 5.0)
-    finally:
-        nav.close()
+    t_stop, d = drive_and_close(nav, 5.0)
     assert d is not None and d.stop == "no_safe_continuation"
     assert "into an obstacle or wall" in d.detail and len(nav.requests) == 1
 
@@ -478,11 +475,7 @@ def test_a_refused_replan_keeps_a_present_plan_the_twin_swims_clear(open_plan):
 
     nav = failing_with_clear_look_ahead("blocked_start")(lambda extra: planner, planner, outcome,
                                                      PATH_GAIT)
-    nav.requests.clear()
-    try:
-        t_stop, d = drive_off_corridor(nav, 6.0)
-    finally:
-        nav.close()
+    t_stop, d = drive_and_close(nav, 6.0)
     assert d is None and len(nav.requests) >= 2  # kept its plan, and tried again later
 
 
@@ -608,11 +601,7 @@ def test_a_failed_replan_is_retried_at_once_only_while_the_contact_ahead_leaves_
     planner, outcome = open_plan
     nav = contact_ahead_replanner("exhausted", contact_in_s)(
         lambda extra: planner, planner, outcome, PATH_GAIT, replan_budget_s=budget_s)
-    nav.requests.clear()
-    try:
-        t_stop, d = drive_off_corridor(nav, 8.0)
-    finally:
-        nav.close()
+    t_stop, d = drive_and_close(nav, 8.0)
     assert d is not None and d.stop == "no_safe_continuation"
     assert "into an obstacle or wall, first in " in d.detail  # the stop says when it touches
     if retried:
@@ -742,11 +731,7 @@ def test_failed_replans_go_on_beyond_the_limit_only_while_the_outline_swims_clea
     nav = outline_near_replanner("exhausted")(
         lambda extra: planner, planner, outcome, PATH_GAIT, replan_budget_s=budget_s,
         extra_replans=2)
-    nav.requests.clear()
-    try:
-        t_stop, d = drive_off_corridor(nav, 12.0)
-    finally:
-        nav.close()
+    t_stop, d = drive_and_close(nav, 12.0)
     assert d is not None and d.stop == "no_safe_continuation"
     if budget_s is not None:
         # the outline never touches: two more replans at once after the third failure, then
@@ -768,11 +753,7 @@ def test_the_extra_replans_count_from_the_last_plan_found_not_from_the_failures_
     planner, outcome = open_plan
     nav = outline_near_replanner("exhausted", clear_for=4)(
         lambda extra: planner, planner, outcome, PATH_GAIT, replan_budget_s=1.0, extra_replans=2)
-    nav.requests.clear()
-    try:
-        _, d = drive_off_corridor(nav, 20.0)
-    finally:
-        nav.close()
+    _, d = drive_and_close(nav, 20.0)
     assert d is not None and d.stop == "no_safe_continuation"
     assert len(nav.requests) == 4 + nav.extra_replans  # kept for the fourth, then two extra
     assert np.diff(nav.requests)[2] >= 4.0 * nav.backoff_s - 0.05  # the kept plan's back-off
