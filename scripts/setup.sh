@@ -46,5 +46,5 @@ fi
 # candidates), compiled into the on-disk cache two at a time (20-30 s each the first time, under
 # a second once cached), so that the main job does not pay for them; the stage compiled by the C
 # compiler when there is one, else by numba. The test command warms the tests' own variants.
-.venv/bin/python scripts/warm_kernels.py main 2 | sed 's/^kernels:/setup: kernel/'
+.venv/bin/python scripts/warm_kernels.py main 2 | sed -u 's/^kernels:/setup: kernel/'
 echo "setup: ready ($root/.venv)"
