@@ -14,8 +14,8 @@ a deadline S seconds of *processor* time after it starts, the planners' clocks r
 ``time.process_time`` (each world's first plan is planned first, so the check's measured cost
 is known as at the tank): on the loaded machine a wall-clock budget measures the load as much as
 the planner. ``--fine-tiers planner,approach,recovery`` turns the finer-action fallback
-(``Planner(fine_fallback=True)``) on for those tiers (default: as ``eelbot run`` builds them,
-the approach and the recovery).
+(``Planner(fine_fallback=True)``) on for those tiers (default: none, as ``eelbot run`` builds
+them since the fallback was turned off; session 10's replays used ``approach,recovery``).
 
 Usage: ``nice .venv/bin/python scripts/replay_replans.py OUT [OUT ...] --chain --deadline 1``
 (development seeds only).
@@ -54,7 +54,7 @@ def main() -> None:
     ap.add_argument("outs", nargs="+", help="folders of eelbot run --bench --out")
     ap.add_argument("--deadline", type=float, default=None, help="processor seconds per replan")
     ap.add_argument("--chain", action="store_true", help="the goal approach and the recovery too")
-    ap.add_argument("--fine-tiers", default="approach,recovery",
+    ap.add_argument("--fine-tiers", default="",
                     help="tiers with the finer-action fallback (comma-separated; '' for none)")
     ap.add_argument("--all", action="store_true", help="every replan, not only the failed ones")
     ap.add_argument("--seeds", default="", help="only these seeds (comma-separated)")
