@@ -704,63 +704,6 @@ def test_the_back_off_yields_to_a_lookahead_that_puts_the_capsule_near_before_a_
         assert gaps[0] >= nav.backoff_s - 0.05 and (len(gaps) < 2 or gaps[1] >= 2.0 - 0.05)
 
 
-def outline_near_replanner(status: str, clear_for: int = 0):
-    """A :func:`failing_replanner` whose look-ahead swims the present waypoints with the outline
-    5 mm clear (within the margin, no contact) and the capsule within the margin at once; 50 mm
-    clear (the plan kept) until ``clear_for`` replans have been asked for."""
-
-    class OutlineNear(failing_replanner(status)):  # type: ignore[misc]
-        def _estimate_current(self, est, left, pose):  # noqa: ANN001, ANN202
-            return False
-
-        def _look_ahead(self, est, left, extra, guide=None, horizon_s=None):  # noqa: ANN001, ANN202
-            if horizon_s is not None:
-                return 0.2, 0.2
-            return Ahead(0.05 if len(self.requests) < clear_for else 0.005, 0.0, math.inf,
-                         est.t_s)
-
-    return OutlineNear
-
-
-@pytest.mark.parametrize("budget_s", [1.0, None])
-def test_failed_replans_go_on_beyond_the_limit_only_while_the_outline_swims_clear_of_contact(
-        open_plan, budget_s):
-    # development seeds 17000-17149 (docs/planning.md, "More replans while the outline swims
-    # clear"): the stop after the last allowed replan came with the body still clear
-    planner, outcome = open_plan
-    nav = outline_near_replanner("exhausted")(
-        lambda extra: planner, planner, outcome, PATH_GAIT, replan_budget_s=budget_s,
-        extra_replans=2)
-    t_stop, d = drive_and_close(nav, 12.0)
-    assert d is not None and d.stop == "no_safe_continuation"
-    if budget_s is not None:
-        # the outline never touches: two more replans at once after the third failure, then
-        # the stop with all five failures named
-        assert len(nav.requests) == nav.max_failures + nav.extra_replans == 5
-        assert np.diff(nav.requests)[nav.max_failures - 1:].max() < 0.5
-        assert nav.record()["extra_replans"] == 2
-        assert "5 failed in a row" in d.detail or "5 replans failed in a row" in d.detail
-    else:  # no budget bounds when another replan would steer: stopped after the third, as before
-        assert len(nav.requests) == nav.max_failures
-        assert nav.record()["extra_replans"] == 0
-
-
-def test_the_extra_replans_count_from_the_last_plan_found_not_from_the_failures_in_a_row(
-        open_plan):
-    # seed 17028 (development): a plan kept because it swam clear was replanned every 4 s,
-    # failure after failure, so when its look-ahead came near, 6 had failed in a row and no
-    # extra replan was left under a limit on the failures themselves
-    planner, outcome = open_plan
-    nav = outline_near_replanner("exhausted", clear_for=4)(
-        lambda extra: planner, planner, outcome, PATH_GAIT, replan_budget_s=1.0, extra_replans=2)
-    _, d = drive_and_close(nav, 20.0)
-    assert d is not None and d.stop == "no_safe_continuation"
-    assert len(nav.requests) == 4 + nav.extra_replans  # kept for the fourth, then two extra
-    assert np.diff(nav.requests)[2] >= 4.0 * nav.backoff_s - 0.05  # the kept plan's back-off
-    assert np.diff(nav.requests)[4:].max() < 0.5
-    assert nav.record()["extra_replans"] == 2 and "6 failed in a row" in d.detail
-
-
 def _disc_some_4_s_ahead():
     """A planner without check in the open world with a small disc some 4 s ahead of the robot
     swimming at 3 s (:func:`estimate_at`), a no-plan outcome, and that estimate."""

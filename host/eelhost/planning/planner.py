@@ -56,7 +56,7 @@ from eelhost.planning.check import CHECK_COST, CheckOutOfTime, swim_legs
 from eelhost.planning.execute import Swim
 from eelhost.planning.field import ClearanceField, GoalDistance, signed_clearance
 from eelhost.planning.geometry import FloatArray
-from eelhost.planning.search import Actions, Guide, Plan, Search, SearchSettings, SwimCost
+from eelhost.planning.search import Guide, Plan, Search, SearchSettings, SwimCost
 from eelhost.planning.twin import Twin
 from eelhost.planning.uncertainty import (
     DEFAULT_UNKNOWN_CURRENT_M_S,
@@ -164,19 +164,6 @@ samples every physics step and measures the exact clearance of every state; docs
 LEG_TIME_FACTOR = 1.6
 """A leg's time limit per metre, as a multiple of the time the robot needs against the current."""
 
-
-FINE_ACTIONS = Actions(distances_m=(0.2, 0.3, 0.5),
-                       bearings_deg=(-90.0, -60.0, -45.0, -30.0, -15.0, 0.0, 15.0, 30.0, 45.0,
-                                     60.0, 90.0))
-"""The finer action set a replan's search tries when the default one is exhausted from its start,
-with ``Planner(fine_fallback=True)`` (off by default; docs/planning.md, "Session 10's development
-figures: the replans' search"): shorter legs and bearings every 15 degrees out to 45, then 60
-and 90. From a replan's start near an obstacle the ten default legs often all break the margin
-within one or two expansions (the body's tail swings into the obstacle as the head turns 30 or
-60 degrees, or the current sets a straight leg onto it), where a leg of 0.2 m or a turn of 15 or
-45 degrees may keep it. Without a deadline it found more replans on development seeds
-17200-17218; within a replan's 1 s it found fewer, its 3.4 times costlier expansions taking the
-time the goal approach and the recovery would have used."""
 
 PLAN_LENGTH_WINDOW = 16
 """The expected plan length's ratio is the median over the process's last this many plans."""
@@ -440,11 +427,6 @@ class Planner:
     repair_draws : int, optional
         Draws a repaired plan is checked over (default :data:`REPAIR_DRAWS_FACTOR` times
         ``draws``).
-    fine_fallback : bool
-        A planning call from a given state (a replan) whose first search is ``exhausted``
-        searches again with :data:`FINE_ACTIONS` (the same margin, the same check), within the
-        same deadline (docs/planning.md, "The planner", step 2). The first plan from the
-        world's start is not affected.
     """
 
     def __init__(
@@ -467,7 +449,6 @@ class Planner:
         soft_margin: bool = True,
         check_margin_m: float = CHECK_MARGIN_M,
         repair_draws: int | None = None,
-        fine_fallback: bool = False,
     ) -> None:
         world = coefficients.in_tank(world)
         robot = coefficients.robot_for(robot)
@@ -540,33 +521,6 @@ class Planner:
         # straight-line speed; a heuristic speed too low only makes the search greedier
         self.search = Search(world, self.twin, self.settings, self.clearance, route,
                              1.3 * fastest + world.current.speed_m_s)
-        self.fine_fallback = bool(fine_fallback)
-        self._fine_search: Search | None = None
-
-    def fine_search(self) -> Search:
-        """The search with :data:`FINE_ACTIONS` (built at its first use, then kept).
-
-        Its settings are this planner's but for the actions; it shares the twin, the clearance
-        field, the heuristic and the clock. Its first batch is predicted (for a deadline) from
-        the default search's wall time per node, scaled by the ratio of their action counts.
-
-        Returns
-        -------
-        Search
-        """
-        if self._fine_search is None:
-            base = self.search
-            fine = Search(self.world, self.twin,
-                          dataclasses.replace(self.settings, actions=FINE_ACTIONS),
-                          self.clearance, base.goal_distance, base.ground_speed_m_s)
-            self._fine_search = fine
-        fine = self._fine_search
-        fine.clock = self.search.clock
-        if not fine._node_walls and self.search._node_walls:
-            scale = len(FINE_ACTIONS.legs) / len(self.settings.actions.legs)
-            fine._node_walls.extend(w * scale for w in self.search._node_walls)
-        return fine
-
     @property
     def clock(self) -> Callable[[], float]:
         """The clock a deadline is read on (``time.monotonic``; a test's fake one)."""
@@ -765,7 +719,6 @@ class Planner:
         # the expected length free before it (docs/planning.md, "The planning call's deadline")
         expected = self.expected_steps(state)
         free_path = self._free_path_steps(state)
-        search = self.search
         for attempt in range(self.repairs + 1):
             # a repaired plan's check swims its own, larger count of draws (REPAIR_DRAWS_FACTOR);
             # with a deadline, as many as its predicted time leaves the search room for
@@ -773,25 +726,10 @@ class Planner:
                                        DEADLINE_DRAWS_MIN if attempt == 0 else self.draws)
                      if self.check else 0)
             reserve = ((lambda c=count: self.check_time_s(expected, c)) if self.check else None)
-            plan = search.plan(banned, start_state=state, start_step=step, guide=guide,
-                               deadline_s=deadline_s, reserve_s=reserve)
+            plan = self.search.plan(banned, start_state=state, start_step=step, guide=guide,
+                                    deadline_s=deadline_s, reserve_s=reserve)
             total += plan.planning_time_s
             searching += plan.planning_time_s
-            if (attempt == 0 and plan.status == "exhausted" and state is not None
-                    and self.fine_fallback):
-                # a replan's start from which every default leg broke the margin: the finer
-                # legs, the same margin and check (docs/planning.md, "The planner", step 2)
-                coarse = plan
-                search = self.fine_search()
-                plan = search.plan(banned, start_state=state, start_step=step, guide=guide,
-                                   deadline_s=deadline_s, reserve_s=reserve)
-                total += plan.planning_time_s
-                searching += plan.planning_time_s
-                plan.message = (f"{plan.message} (with the finer actions; the default ones: "
-                                f"{coarse.message})" if not plan.found
-                                else f"{plan.message} (with the finer actions)")
-                log.info("replan search exhausted with the default actions; with the finer "
-                         "ones: %s", plan.status)
             if plan.found and free_path > 0:
                 self.plan_lengths.record((plan.legs[-1].end_step - step) / free_path)
             if not plan.found and attempt > 0:

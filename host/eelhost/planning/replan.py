@@ -540,13 +540,6 @@ def contact_time_s(judged: tuple[float, ...], t_s: float) -> float:
     return -math.inf if judged[0] <= 0.0 else math.inf
 
 
-EXTRA_REPLANS = 0
-"""Failed replans in a row allowed beyond ``max_failures`` while the look-ahead swims the body's
-outline clear of contact for long enough that another replan could steer first (docs/planning.md,
-"More replans while the outline swims clear"). Off by default: on unseen seeds 18000-18099 the
-two extra replans acted in 6 worlds and reached no goal, and let the robot stop nearer to the
-obstacle (9-51 mm clear)."""
-
 REFUSED_FROM_STATE = ("blocked_start", "current_too_strong", "unreachable")
 """Planner statuses that refuse the start state itself: no safe continuation from it, so the
 robot is stopped unless the look-ahead swims its present plan clear (then it keeps that plan)."""
@@ -695,15 +688,6 @@ class TankReplanner:
         contact is far enough ahead for another replan to steer before it
         (:meth:`_retry_need_s`); a replan in flight past its start is likewise waited for while
         it can still come back in time (docs/planning.md, "Retried before contact").
-    extra_replans : int
-        With a ``replan_budget_s`` and ``retry_before_contact``: after ``max_failures`` failed
-        replans in a row, up to this many more (since the last plan found; a present plan kept
-        because it swam clear may have counted more failures meanwhile) are asked for instead
-        of a stop while the latest
-        look-ahead (at most 1.5 s old) swims the body's outline without contact, or with its
-        first contact far enough ahead for another replan to steer before it
-        (:meth:`_retry_need_s`); the robot is stopped as before once that no longer holds or
-        they have failed too (docs/planning.md, "More replans while the outline swims clear").
     calm_budget_s : float or None
         With a ``replan_budget_s``: the budget of a replan asked for in a moved current estimate
         (``current_estimate``, the look-ahead clear), when longer; it starts from the state
@@ -739,7 +723,6 @@ class TankReplanner:
         shift_repair: bool = True,
         retry_before_contact: bool = True,
         calm_budget_s: float | None = None,
-        extra_replans: int = EXTRA_REPLANS,
     ) -> None:
         self.planner_for = planner_for
         self.planner = planner
@@ -767,10 +750,6 @@ class TankReplanner:
         self.shift_repair = shift_repair
         self.retry_before_contact = retry_before_contact
         self.retries_before_contact = 0  # replans asked for instead of a stop (the record's)
-        self.extra_replans = extra_replans
-        self.extra_replans_used = 0  # replans beyond max_failures (the record's)
-        self._extra_now = False  # the next replan is one of those
-        self._extras = 0  # extra replans asked for since the last plan found
         # the robot's time of the first contact the latest look-ahead predicts (inf: none)
         self._contact_at_s = math.inf
         # the robot's time the latest look-ahead puts the capsule within the margin (inf: never)
@@ -911,7 +890,6 @@ class TankReplanner:
             # but the contact is far enough ahead for one more replan to steer before it: ask
             # for it now, whatever the back-off (docs/planning.md, "Retried before contact")
             retry = True
-            self._extra_now = self.failures >= self.max_failures
             log.info("contact predicted at t = %.2f s after a failed replan: replanning again "
                      "at t = %.2f s instead of stopping", self._contact_at_s, t_s)
         elif (predicted and self.failures > 0 and gap is not None and gap <= 0.0
@@ -928,11 +906,9 @@ class TankReplanner:
             # the back-off would let the capsule come within the margin before a replan asked
             # for after it could steer (docs/planning.md, "The back-off yields to a predicted
             # contact"): replan now while failures are left, else stop deliberately unless the
-            # outline swims the present plan clear by the margin (kept, as after a last failure);
-            # beyond max_failures, extra replans while the outline swims clear of contact
-            if self._failures_left(t_s):
+            # outline swims the present plan clear by the margin (kept, as after a last failure)
+            if self.failures < self.max_failures:
                 retry = yielded = True
-                self._extra_now = self.failures >= self.max_failures
                 self.backoff_yields += 1
                 log.info("the back-off yields at t = %.2f s: the capsule comes within the margin "
                          "at t = %.2f s, before a replan after the back-off (%.2f s) could "
@@ -980,10 +956,6 @@ class TankReplanner:
         if reason is not None and not busy and (t_s >= self._next_try_s or retry):
             if (retry and not yielded) or self._retry_now:
                 self.retries_before_contact += 1
-            if self._extra_now:
-                self.extra_replans_used += 1
-                self._extras += 1
-            self._extra_now = False
             self._retry_now = False
             self._request(t_s, est, left, reason)
         elif (self._pending is None and self._lookahead is None and self.lookahead_s > 0
@@ -1023,7 +995,6 @@ class TankReplanner:
         return {"plans": self.events, "replans": self.replans,
                 "retries_before_contact": self.retries_before_contact,
                 "backoff_yields": self.backoff_yields,
-                "extra_replans": self.extra_replans_used,
                 "replan_budget_s": self.replan_budget_s,
                 "current_estimate": self.current.history,
                 "state_estimate": self.estimator.summary()}
@@ -1056,24 +1027,8 @@ class TankReplanner:
         It may while failures are left and the predicted contact is far enough ahead for
         another replan to steer before it (:meth:`_retry_need_s`).
         """
-        return ((self.failures < self.max_failures or self._extras < self.extra_replans)
+        return (self.failures < self.max_failures
                 and self._contact_at_s - t_s >= self._retry_need_s())
-
-    def _failures_left(self, t_s: float) -> bool:
-        """Another replan may follow the failed ones instead of a stop.
-
-        While fewer than ``max_failures`` failed in a row; beyond them, ``extra_replans`` more
-        (since the last plan found) while the latest look-ahead (at most 1.5 s old) swims the body's outline without a
-        contact nearer than another replan's need (:meth:`_retry_need_s`; inf without a budget,
-        so never then): docs/planning.md, "More replans while the outline swims clear".
-        """
-        if self.failures < self.max_failures:
-            return True
-        t_gap, gap = self._last_gap
-        need = self._retry_need_s()
-        return (self._extras < self.extra_replans
-                and gap is not None and t_s - t_gap <= 1.5 and math.isfinite(need)
-                and self._contact_at_s - t_s >= need)
 
     def _backoff_yields(self, t_s: float, busy: bool) -> bool:
         """A back-off after a failed replan gives way to a replan (or a stop) now.
@@ -1360,7 +1315,7 @@ class TankReplanner:
             self._next_try_s = t_s
             return True
         if outcome.found:
-            self.failures = self._extras = 0
+            self.failures = 0
             self._plan_current = extra
             self.outcome = outcome
             self.path = corridor_path(outcome.plan)
@@ -1385,7 +1340,6 @@ class TankReplanner:
             # steer before it: replan again at once (docs/planning.md, "Retried before contact")
             self._next_try_s = t_s
             self._retry_now = True
-            self._extra_now = self.failures >= self.max_failures
             log.warning("replanning failed at t = %.2f s (%s) with contact predicted at "
                         "t = %.2f s: replanning again at once", t_s, outcome.status,
                         self._contact_at_s)
@@ -1397,17 +1351,6 @@ class TankReplanner:
                         f"{outcome.message}")
             return True
         final = self.failures >= self.max_failures or outcome.status in REFUSED_FROM_STATE
-        if (self.failures >= self.max_failures and outcome.status not in REFUSED_FROM_STATE
-                and not self._present_plan_safe(t_s) and self._failures_left(t_s)):
-            # the last allowed replan failed and the present plan is not known clear by the
-            # margin, but its outline swims clear of contact long enough for another replan to
-            # steer first: ask for it now instead of the stop (docs/planning.md, "More replans
-            # while the outline swims clear")
-            self._next_try_s = t_s
-            self._retry_now = self._extra_now = True
-            log.warning("replanning failed %d times (%s); the outline swims clear for now, so "
-                        "replanning again at once", self.failures, outcome.status)
-            return True
         if final and self._present_plan_safe(t_s):
             # no new plan (or none from this state), but the twin swims the present one on
             # without contact: keep it, and try again later from a state further on
