@@ -13,9 +13,7 @@ planner ran out of time; the shift repair is not replayed. ``--deadline S`` give
 a deadline S seconds of *processor* time after it starts, the planners' clocks reading
 ``time.process_time`` (each world's first plan is planned first, so the check's measured cost
 is known as at the tank): on the loaded machine a wall-clock budget measures the load as much as
-the planner. ``--fine-tiers planner,approach,recovery`` turns the finer-action fallback
-(``Planner(fine_fallback=True)``) on for those tiers (default: none, as ``eelbot run`` builds
-them since the fallback was turned off; session 10's replays used ``approach,recovery``).
+the planner. The tiers are ``eelbot run``'s own (:func:`eelhost.planning.tank.replan_planners`).
 
 Usage: ``nice .venv/bin/python scripts/replay_replans.py OUT [OUT ...] --chain --deadline 1``
 (development seeds only).
@@ -24,7 +22,6 @@ Usage: ``nice .venv/bin/python scripts/replay_replans.py OUT [OUT ...] --chain -
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import logging
 import time
@@ -33,17 +30,11 @@ from pathlib import Path
 import numpy as np
 
 from eelhost.planning.planner import Outcome, Planner
-from eelhost.planning.replan import GOAL_APPROACH_CLEARANCE_M
-from eelhost.planning.search import SearchSettings
-from eelhost.planning.tank import (
-    RECOVERY_ACTIONS,
-    RECOVERY_EXPANSIONS,
-    RECOVERY_REPAIRS,
-    with_extra_current,
-)
+from eelhost.planning.tank import replan_planners
 from eelhost.planning.uncertainty import default_model
 from eelhost.planning.worlds import generate_world
 from eelsim.robot import load_robot
+from eelsim.scenario import PATH_GAIT
 
 log = logging.getLogger("replay_replans")
 
@@ -54,12 +45,9 @@ def main() -> None:
     ap.add_argument("outs", nargs="+", help="folders of eelbot run --bench --out")
     ap.add_argument("--deadline", type=float, default=None, help="processor seconds per replan")
     ap.add_argument("--chain", action="store_true", help="the goal approach and the recovery too")
-    ap.add_argument("--fine-tiers", default="",
-                    help="tiers with the finer-action fallback (comma-separated; '' for none)")
     ap.add_argument("--all", action="store_true", help="every replan, not only the failed ones")
     ap.add_argument("--seeds", default="", help="only these seeds (comma-separated)")
     a = ap.parse_args()
-    tiers = {t for t in a.fine_tiers.split(",") if t}
     robot = load_robot()
     model = default_model(robot)
     swimmer = model.swimmer_for(robot)
@@ -78,26 +66,20 @@ def main() -> None:
                 continue
             world = generate_world(seed)
             opts = {"unknown_current_m_s": 0.0, "swimmer": swimmer}
-            first = Planner(world, robot, model, **opts)  # type: ignore[arg-type]
+            first = Planner(world, robot, model, PATH_GAIT, **opts)  # type: ignore[arg-type]
             first.clock = time.process_time
             if a.deadline is not None:
                 first.plan()  # measures the check's cost, as the tank's first plan does
+            tiers = replan_planners(first, world, robot, model, PATH_GAIT, opts)
+
+            def timed(p: Planner) -> Planner:
+                p.clock = time.process_time
+                return p
+
             for e in replans:
                 extra = np.subtract(e["current_m_s"], first.world.current_m_s)
-                water = with_extra_current(world, extra)
-                near = water.model_copy(update={"clearance_m": 0.0})
-                margin = first.body_half_width_m + GOAL_APPROACH_CLEARANCE_M
-
-                def planner(name: str, w=water, opts=opts, **settings) -> Planner:  # noqa: ANN001, ANN003
-                    extra_opts = {"repairs": RECOVERY_REPAIRS} if name == "recovery" else {}
-                    p = Planner(w, robot, model, fine_fallback=name in tiers,  # type: ignore[arg-type]
-                                settings=dataclasses.replace(SearchSettings(), **settings)
-                                if settings else None, **opts, **extra_opts)
-                    p.clock = time.process_time
-                    return p
-
                 state = np.asarray(e["start_state"], dtype=float)
-                main_planner = planner("planner")
+                main_planner = timed(tiers.planner_for(extra))
                 step = int(round(e["t_start_s"] / main_planner.twin.dt_s))
                 c0 = time.process_time()
                 deadline = None if a.deadline is None else c0 + a.deadline
@@ -108,14 +90,13 @@ def main() -> None:
                 outcome: Outcome = main_planner.plan(state, step, deadline_s=deadline)
                 tier = "planner"
                 if a.chain and not outcome.found and outcome.status == "exhausted" and left():
-                    approach = planner("approach", near, margin_m=margin).plan(
+                    approach = timed(tiers.goal_planner_for(extra)).plan(
                         state, step, deadline_s=deadline)
                     if approach.found:
                         outcome, tier = approach, "approach"
                 if (a.chain and not outcome.found and outcome.status not in (
                         "blocked_start", "out_of_time") and left()):
-                    rescue = planner("recovery", near, margin_m=margin, actions=RECOVERY_ACTIONS,
-                                     max_expansions=RECOVERY_EXPANSIONS).plan(
+                    rescue = timed(tiers.recovery_planner_for(extra)).plan(
                         state, step, deadline_s=deadline)
                     if rescue.found:
                         outcome, tier = rescue, "recovery"

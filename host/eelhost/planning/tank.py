@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 from urllib.parse import parse_qsl, urlencode, urlsplit
@@ -152,36 +153,7 @@ def plan_for_run(
                "swimmer": swimmer if swimmer is not None else model.swimmer_for(robot)}
     planner = Planner(world, robot, model, gait, **options)
 
-    def planner_for(extra_m_s: FloatArray) -> Planner:
-        """The planner in the world with the estimated extra current added to its own."""
-        return Planner(with_extra_current(world, extra_m_s), robot, model, gait, **options)
-
-    def approach_planner(extra_m_s: FloatArray, repairs: int | None = None,
-                         **search: Any) -> Planner:
-        """A planner whose search keeps the goal approach's margin, its check unchanged.
-
-        The body's half width and GOAL_APPROACH_CLEARANCE_M from everything; ``search``:
-        further SearchSettings fields (the recovery's actions and expansions).
-        """
-        base = options.get("settings") or SearchSettings()
-        margin = planner.body_half_width_m + GOAL_APPROACH_CLEARANCE_M
-        approach = with_extra_current(world, extra_m_s).model_copy(update={"clearance_m": 0.0})
-        more = {} if repairs is None else {"repairs": repairs}
-        return Planner(approach, robot, model, gait, **{
-            **options, **more, "settings": dataclasses.replace(base, margin_m=margin, **search)})
-
-    def goal_planner_for(extra_m_s: FloatArray) -> Planner:
-        """The goal approach's planner (docs/planning.md)."""
-        return approach_planner(extra_m_s)
-
-    def recovery_planner_for(extra_m_s: FloatArray) -> Planner:
-        """The recovery's planner (docs/planning.md): sharper turns, the goal approach's margin.
-
-        A bounded search (RECOVERY_EXPANSIONS, RECOVERY_REPAIRS); its check is unchanged.
-        """
-        return approach_planner(extra_m_s, RECOVERY_REPAIRS, actions=RECOVERY_ACTIONS,
-                                max_expansions=RECOVERY_EXPANSIONS)
-
+    tiers = replan_planners(planner, world, robot, model, gait, options)
     if abs(planner.twin.acceptance_radius_m - acceptance_radius_m) > 1e-9:
         raise PlanRefused("acceptance_radius",
                           f"--radius {acceptance_radius_m:g}: the planner swims with "
@@ -189,12 +161,71 @@ def plan_for_run(
     outcome = planner.plan()
     if not outcome.found:
         raise NoPlanFound(outcome.status, f"{world.name}: {outcome.message}")
-    navigator = TankReplanner(planner_for, planner, outcome, gait,
-                              goal_planner_for=goal_planner_for,
-                              recovery_planner_for=recovery_planner_for,
+    navigator = TankReplanner(tiers.planner_for, planner, outcome, gait,
+                              goal_planner_for=tiers.goal_planner_for,
+                              recovery_planner_for=tiers.recovery_planner_for,
                               replan_budget_s=replan_budget_s)
     return RunPlan(outcome.plan.waypoints_m, navigator, sim_uri_for_world(uri, world), outcome,
                    planner.options.guidance, outcome.plan.start_guide)
+
+
+@dataclass(frozen=True)
+class ReplanPlanners:
+    """The replanner's three tiers, each built for a water with an estimated extra current.
+
+    Attributes
+    ----------
+    planner_for : callable
+        The planner in the world with the extra current added to its own.
+    goal_planner_for : callable
+        The goal approach's planner: its search keeps the body's half width and
+        ``GOAL_APPROACH_CLEARANCE_M`` from everything, its check unchanged (docs/planning.md).
+    recovery_planner_for : callable
+        The recovery's planner: sharper turns (``RECOVERY_ACTIONS``), the goal approach's margin,
+        a bounded search (``RECOVERY_EXPANSIONS``, ``RECOVERY_REPAIRS``); its check unchanged.
+    """
+
+    planner_for: Callable[[FloatArray], Planner]
+    goal_planner_for: Callable[[FloatArray], Planner]
+    recovery_planner_for: Callable[[FloatArray], Planner]
+
+
+def replan_planners(planner: Planner, world: World, robot: Robot, model: CoefficientModel,
+                    gait: Gait, options: dict[str, Any]) -> ReplanPlanners:
+    """The tiers a :class:`TankReplanner` replans with (docs/planning.md, "Execution and replanning").
+
+    Parameters
+    ----------
+    planner : Planner
+        The first plan's planner (its body's half width sets the goal approach's margin).
+    world, robot, model, gait
+        As the first plan's.
+    options : dict
+        The first plan's further :class:`Planner` keyword arguments (its ``settings`` are the
+        base of the goal approach's and the recovery's).
+
+    Returns
+    -------
+    ReplanPlanners
+    """
+
+    def planner_for(extra_m_s: FloatArray) -> Planner:
+        return Planner(with_extra_current(world, extra_m_s), robot, model, gait, **options)
+
+    def approach_planner(extra_m_s: FloatArray, repairs: int | None = None,
+                         **search: Any) -> Planner:
+        base = options.get("settings") or SearchSettings()
+        margin = planner.body_half_width_m + GOAL_APPROACH_CLEARANCE_M
+        approach = with_extra_current(world, extra_m_s).model_copy(update={"clearance_m": 0.0})
+        more = {} if repairs is None else {"repairs": repairs}
+        return Planner(approach, robot, model, gait, **{
+            **options, **more, "settings": dataclasses.replace(base, margin_m=margin, **search)})
+
+    def recovery_planner_for(extra_m_s: FloatArray) -> Planner:
+        return approach_planner(extra_m_s, RECOVERY_REPAIRS, actions=RECOVERY_ACTIONS,
+                                max_expansions=RECOVERY_EXPANSIONS)
+
+    return ReplanPlanners(planner_for, approach_planner, recovery_planner_for)
 
 
 def with_extra_current(world: World, extra_m_s: FloatArray) -> World:
