@@ -84,6 +84,8 @@ from eelhost.estimation.neighbours import SANE_FACTOR, neighbour_excursion
 from eelhost.estimation.optimise import fit_cmaes
 from eelhost.estimation.pipeline import training_experiments
 from eelhost.estimation.space import ParameterSpace
+from eelsim.fluid import get_fluid_law
+from eelsim.joints import after_screen_models
 
 log = logging.getLogger(__name__)
 
@@ -275,7 +277,7 @@ def after_screen_laws(scores: Sequence[CandidateScore], count: int = AFTER_SCREE
     """
     laws: list[str] = []
     for score in sorted(scores, key=screen_rank):
-        law = score.model.split(ONE_SET)[0].rstrip(", ").partition(" x ")[2]
+        law = model_parts(score.model)[1]
         if law not in laws:
             laws.append(law)
         if len(laws) == count:
@@ -464,9 +466,6 @@ def cross_validate(
             joining: list[str] = []
             grid_size = len(spaces)
             if joint_models is None:
-                from eelsim.fluid import get_fluid_law
-                from eelsim.joints import after_screen_models
-
                 joining = after_screen_models(sorted({s.joints.model for s in spaces}))
             if joining:
                 chosen = after_screen_laws(list(screen_scores.values()))
@@ -573,13 +572,19 @@ def screen_survivors(scores: Sequence[CandidateScore], grid_size: int,
     return sorted(set(own) | {i for i in every if i >= grid_size})
 
 
+def model_parts(model: str) -> tuple[str, str]:
+    """A candidate's joint model and law, from its name "<joint model> x <law>[, one set]"."""
+    joint, _, law = model.split(ONE_SET)[0].rstrip(", ").partition(" x ")
+    return joint, law
+
+
 def family(model: str) -> tuple[str, str]:
     """A candidate's joint model and law family, from its name.
 
-    The name is "<joint model> x <law>[, one set]"; the law family of ``morison`` and of its
-    ``morison_lift`` variant is "morison".
+    The law family of ``morison`` and of its ``morison_lift`` variant is "morison"
+    (:func:`model_parts`).
     """
-    joint, _, law = model.split(ONE_SET)[0].rstrip(", ").partition(" x ")
+    joint, law = model_parts(model)
     return joint, law.removesuffix("_lift")
 
 
