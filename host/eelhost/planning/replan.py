@@ -786,6 +786,8 @@ class TankReplanner:
         self._planned: tuple[Planner, FloatArray] = (planner, np.zeros(2))
         self._last_wall_s = 0.0
         self._lookahead: Future | None = None
+        self._lookahead_from_s = -math.inf  # the estimate's time the running look-ahead swims from
+        # (the time of the estimate it swam from, the outline's smallest gap) of the newest verdict
         self._last_gap: tuple[float, float | None] = (-math.inf, None)
         self._next_lookahead_s = 0.0
         self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="eelbot-planner")
@@ -873,17 +875,18 @@ class TankReplanner:
         if self._lookahead is not None and self._lookahead.done():
             judged = self._lookahead.result()
             self._lookahead = None
-            self._last_gap = (t_s, None if judged is None else judged[0])
-            self._contact_at_s = math.inf if judged is None else contact_time_s(judged, t_s)
-            self._near_at_s = (math.inf if judged is None
-                               else near_time_s(judged, t_s, self.lookahead_margin_m))
+            self._adopt(judged, self._lookahead_from_s, t_s)
             capsule = None if judged is None else judged[1]
             # a new plan is asked for with the planner's capsule (the safer trigger); the robot is
             # stopped, or keeps its plan, on its own outline
             predicted = capsule is not None and capsule < self.lookahead_margin_m
         gap = self._last_gap[1]
         retry = yielded = False
-        if (predicted and self.failures > 0 and gap is not None and gap <= 0.0
+        # the outline within the margin counts as contact for the stops: the twin's outline
+        # was 8 mm clear where the body touched 0.6 s later (seed 18036, docs/planning.md,
+        # "The outline's margin")
+        close = gap is not None and gap < self.lookahead_margin_m
+        if (predicted and self.failures > 0 and close
                 and self._job is None and self._pending is None
                 and self._may_retry(t_s)):
             # the present plan swims into something and the last replan found nothing better,
@@ -891,14 +894,13 @@ class TankReplanner:
             # for it now, whatever the back-off (docs/planning.md, "Retried before contact")
             retry = True
             log.info("contact predicted at t = %.2f s after a failed replan: replanning again "
-                     "at t = %.2f s instead of stopping", self._contact_at_s, t_s)
-        elif (predicted and self.failures > 0 and gap is not None and gap <= 0.0
+                     "at t = %.2f s instead of stopping", self._danger_at_s(), t_s)
+        elif (predicted and self.failures > 0 and close
                 and self._job is None and self._pending is None):
             # the present plan swims into something and the last replan found nothing better
             d.stop = "no_safe_continuation"
-            d.detail = (f"at t = {t_s:.2f} s the twin swims the present plan into an obstacle "
-                        f"or wall within {self.lookahead_s:g} s ({-gap * 1000:.0f} mm deep"
-                        f"{self._contact_note(t_s)}) and "
+            d.detail = (f"at t = {t_s:.2f} s the twin swims the present plan "
+                        f"{self._verdict_text(t_s)} and "
                         f"the last replan failed: {self.events[-1]['message']}")
             return d
         elif (predicted and self._backoff_yields(t_s, busy)
@@ -923,19 +925,17 @@ class TankReplanner:
                     f"replans failed in a row: {self.events[-1]['message']}")
                 return d
         job = self._job
-        if (predicted and gap is not None and gap <= 0.0 and job is not None
+        if (predicted and close and job is not None
                 and (t_s > job.t_start_s + 1e-9 or self._calm(job))
                 and not (t_s <= job.due_s
-                         and self._contact_at_s - max(job.due_s, t_s) >= self.lead_s)):
+                         and self._danger_at_s() - max(job.due_s, t_s) >= self.lead_s)):
             # the replan is late (past its start) and the twin swims the present plan into
             # contact meanwhile: on a loaded machine replans took minutes of wall time, and the
             # robot swam on into an obstacle before they came back (it is waited for only while
             # within its budget and its plan could still steer a lead before the contact)
             d.stop = "no_safe_continuation"
-            d.detail = (f"at t = {t_s:.2f} s the twin swims the present plan into an obstacle "
-                        f"or wall within {self.lookahead_s:g} s ({-gap * 1000:.0f} mm deep"
-                        f"{self._contact_note(t_s)}) and "
-                        f"the replan requested at t = {job.t_request_s:.2f} s has not come back "
+            d.detail = (f"at t = {t_s:.2f} s the twin swims the present plan "
+                        f"{self._verdict_text(t_s)} and the replan requested at t = {job.t_request_s:.2f} s has not come back "
                         f"({time.monotonic() - job.wall_request_s:.1f} s of wall time)")
             return d
         reason = None
@@ -962,6 +962,7 @@ class TankReplanner:
               and t_s >= self._next_lookahead_s):
             # also while a replan runs (on its own worker): a failure is then judged on it
             self._next_lookahead_s = t_s + self.lookahead_every_s
+            self._lookahead_from_s = est.t_s
             self._lookahead = self._side.submit(self._look_ahead, est, list(left),
                                                   self.current.value_m_s.copy(), self._guide)
         return d
@@ -1028,7 +1029,7 @@ class TankReplanner:
         another replan to steer before it (:meth:`_retry_need_s`).
         """
         return (self.failures < self.max_failures
-                and self._contact_at_s - t_s >= self._retry_need_s())
+                and self._danger_at_s() - t_s >= self._retry_need_s())
 
     def _backoff_yields(self, t_s: float, busy: bool) -> bool:
         """A back-off after a failed replan gives way to a replan (or a stop) now.
@@ -1332,23 +1333,21 @@ class TankReplanner:
             return True
         self.failures += 1
         if judged is not None:
-            self._last_gap = (t_s, judged[0])
-            self._contact_at_s = contact_time_s(judged, t_s)
-            self._near_at_s = near_time_s(judged, t_s, self.lookahead_margin_m)
+            self._adopt(judged, job.t_request_s, t_s)
         if self._present_plan_hits(t_s) and self._may_retry(t_s):
-            # the present plan swims into contact, but far enough ahead for another replan to
-            # steer before it: replan again at once (docs/planning.md, "Retried before contact")
+            # the present plan swims into contact (or within the margin), but far enough ahead
+            # for another replan to steer before it: replan again at once (docs/planning.md,
+            # "Retried before contact")
             self._next_try_s = t_s
             self._retry_now = True
-            log.warning("replanning failed at t = %.2f s (%s) with contact predicted at "
-                        "t = %.2f s: replanning again at once", t_s, outcome.status,
-                        self._contact_at_s)
+            log.warning("replanning failed at t = %.2f s (%s) with the twin swimming the "
+                        "present plan %s: replanning again at once", t_s, outcome.status,
+                        self._verdict_text(t_s))
             return True
         if self._present_plan_hits(t_s):
             d.stop = "no_safe_continuation"
             d.detail = (f"replanning at t = {job.t_request_s:.2f} s failed and the twin swims the "
-                        f"present plan into an obstacle or wall{self._contact_note(t_s)}: "
-                        f"{outcome.message}")
+                        f"present plan {self._verdict_text(t_s)}: {outcome.message}")
             return True
         final = self.failures >= self.max_failures or outcome.status in REFUSED_FROM_STATE
         if final and self._present_plan_safe(t_s):
@@ -1459,15 +1458,56 @@ class TankReplanner:
                     (float(current[0]), float(current[1])), twin.acceptance_radius_m, twin.threads,
                     twin.model)
 
-    def _contact_note(self, t_s: float) -> str:
-        """", first in X s" for a stop's message when the look-ahead said when it touches."""
-        ahead = self._contact_at_s - t_s
-        return f", first in {ahead:.1f} s" if math.isfinite(ahead) else ""
+    def _danger_at_s(self) -> float:
+        """When the latest look-ahead puts the body in danger on its present plan.
+
+        The outline's first contact; without one (an outline within the margin but clear), when
+        the capsule first comes within the margin (plus the drift allowance).
+        """
+        return self._contact_at_s if self._contact_at_s < math.inf else self._near_at_s
+
+    def _verdict_text(self, t_s: float) -> str:
+        """The latest look-ahead's verdict, for a stop's message."""
+        gap = self._last_gap[1]
+        if gap is None:
+            return "with no look-ahead run"
+        ahead = self._danger_at_s() - t_s
+        first = f", first in {ahead:.1f} s" if math.isfinite(ahead) else ""
+        if gap <= 0.0:
+            return (f"into an obstacle or wall within {self.lookahead_s:g} s "
+                    f"({-gap * 1000:.0f} mm deep{first})")
+        return (f"within {gap * 1000:.0f} mm of an obstacle or wall within {self.lookahead_s:g} s "
+                f"(under the look-ahead's {self.lookahead_margin_m * 1000:.0f} mm margin{first})")
+
+    def _adopt(self, judged: tuple[float, ...] | None, from_s: float, t_s: float) -> None:
+        """Take a look-ahead's verdict, swum from the estimate at ``from_s``, unless older.
+
+        A failed replan's own look-ahead swims from the estimate of its request, which may be
+        more than a second older than the look-aheads run on the side meanwhile: the newest
+        estimate's verdict judges the present plan (on seed 18036 the replan's older verdict
+        kept a plan the newer ones swam within millimetres of an obstacle, and the body touched).
+        """
+        if from_s < self._last_gap[0]:
+            log.debug("look-ahead from t = %.2f s not taken: the one from t = %.2f s is newer",
+                      from_s, self._last_gap[0])
+            return
+        self._last_gap = (from_s, None if judged is None else judged[0])
+        self._contact_at_s = math.inf if judged is None else contact_time_s(judged, t_s)
+        self._near_at_s = (math.inf if judged is None
+                           else near_time_s(judged, t_s, self.lookahead_margin_m))
+        if judged is not None:
+            log.debug("look-ahead from t = %.2f s (taken at %.2f s): outline %.1f mm, capsule "
+                      "%.1f mm, contact at %.2f s, near at %.2f s", from_s, t_s,
+                      judged[0] * 1000, judged[1] * 1000, self._contact_at_s, self._near_at_s)
 
     def _present_plan_hits(self, t_s: float) -> bool:
-        """The last look-ahead, at most 1.5 s old, swam the present waypoints into contact."""
+        """The last look-ahead, at most 1.5 s old, swam the present waypoints within the margin.
+
+        Within ``lookahead_margin_m`` of an obstacle or wall counts as contact: the twin's outline
+        is not exact in water it does not know (docs/planning.md, "The outline's margin").
+        """
         t_gap, gap = self._last_gap
-        return gap is not None and t_s - t_gap <= 1.5 and gap <= 0.0
+        return gap is not None and t_s - t_gap <= 1.5 and gap < self.lookahead_margin_m
 
     def _present_plan_safe(self, t_s: float) -> bool:
         """The last look-ahead, at most 1.5 s old, swam the present waypoints clear of contact.
