@@ -106,3 +106,35 @@ def test_a_batch_uses_a_handed_model_only_when_it_is_the_robots_own(builds):
     assert handed.blow_up_hints == built.blow_up_hints
     with pytest.raises(ValueError, match="2 models for 1 robots"):
         BatchSpec.build(robot, scenario, models=[own, own])
+
+
+def test_planners_of_one_world_in_other_currents_share_its_clearance_field_and_water_draws():
+    # the replanner builds a planner per current estimate: the clearance field (tank and
+    # obstacles only) and the seeded water draws are the same, built once (docs/planning.md,
+    # "The replan's deadline")
+    import tomllib
+
+    import numpy as np
+
+    from eelhost.planning.field import ClearanceField, clearance_field
+    from eelhost.planning.planner import Planner
+    from eelhost.planning.tank import with_extra_current
+    from eelhost.planning.uncertainty import default_model
+    from eelhost.planning.world import parse_world
+
+    robot = load_robot(None)
+    model = default_model(robot)
+    world = parse_world(tomllib.loads(OPEN_WORLD), "open")
+    first = Planner(world, robot, model)
+    moved = Planner(with_extra_current(world, np.array([0.01, -0.005])), robot, model)
+    assert moved.clearance is first.clearance
+    assert moved.water is first.water and moved.waters(1) is first.waters(1)
+    # the same field as one built afresh, and read only, so no planner can change another's
+    fresh = ClearanceField(world)
+    np.testing.assert_array_equal(first.clearance.values, fresh.values)
+    with pytest.raises(ValueError):
+        first.clearance.values[0, 0] = 1.0
+    # another geometry gets its own field; another model its own draws
+    other = world.model_copy(update={"obstacles": []})
+    assert clearance_field(other) is not first.clearance
+    assert Planner(world, robot, default_model(robot)).water is not first.water

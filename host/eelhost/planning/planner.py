@@ -43,8 +43,9 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
+import threading
 import time
-from collections import Counter, deque
+from collections import Counter, OrderedDict, deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -54,7 +55,7 @@ from eelhost.errors import UserError
 from eelhost.planning.body import body_points
 from eelhost.planning.check import CHECK_COST, CheckOutOfTime, swim_legs
 from eelhost.planning.execute import Swim
-from eelhost.planning.field import ClearanceField, GoalDistance, signed_clearance
+from eelhost.planning.field import GoalDistance, clearance_field, signed_clearance
 from eelhost.planning.geometry import FloatArray
 from eelhost.planning.search import Guide, Plan, Search, SearchSettings, SwimCost
 from eelhost.planning.twin import Twin
@@ -209,6 +210,33 @@ def run_failed(run: Swim, margin_m: float = 0.0) -> bool:
     bool
     """
     return not run.ok or run.min_clearance_m <= margin_m
+
+
+_WATERS: OrderedDict[tuple, tuple[CoefficientModel, list[WaterDraw]]] = OrderedDict()
+_WATERS_LOCK = threading.Lock()
+
+
+def _water_draws(coefficients: CoefficientModel, seed: int | tuple[int, int], count: int,
+                 unknown_current_m_s: float) -> list[WaterDraw]:
+    """``coefficients.water_draws`` from the generator seeded with ``seed``, drawn once.
+
+    The replanner builds a planner per current estimate with the same model, seed and draws:
+    the draws (0.26 s on the slower processor) are the same, so they are kept (the 32 most
+    recent; keyed by the model's identity, which the entry holds so it is never reused).
+    """
+    key = (id(coefficients), seed, int(count), float(unknown_current_m_s))
+    with _WATERS_LOCK:
+        hit = _WATERS.get(key)
+        if hit is not None and hit[0] is coefficients:
+            _WATERS.move_to_end(key)
+            return hit[1]
+    draws = coefficients.water_draws(np.random.default_rng(
+        list(seed) if isinstance(seed, tuple) else seed), count, unknown_current_m_s)
+    with _WATERS_LOCK:
+        _WATERS[key] = (coefficients, draws)
+        while len(_WATERS) > 32:
+            _WATERS.popitem(last=False)
+    return draws
 
 
 class PlanRefused(UserError, ValueError):
@@ -464,8 +492,7 @@ class Planner:
                                 else repair_draws)
         if self.repair_draws < 1:
             raise ValueError(f"repair_draws: expected at least 1, got {repair_draws!r}")
-        self.water = coefficients.water_draws(np.random.default_rng(seed), draws,
-                                              self.unknown_current_m_s)
+        self.water = _water_draws(coefficients, seed, draws, self.unknown_current_m_s)
         self._waters: dict[int, list[WaterDraw]] = {0: self.water}
         self.repairs = repairs
         self.check = check
@@ -510,7 +537,7 @@ class Planner:
                 robust_margin_m=self.body_half_width_m + ROBUST_MARGIN_M)
         self.twin = Twin(robot, coefficients.sets, gait, self.options, world.current_m_s,
                          threads=threads, swimmer=self.model)
-        self.clearance = ClearanceField(world)
+        self.clearance = clearance_field(world)  # shared by the planners of this geometry
         self.goal_distance = GoalDistance(world, self.clearance, self.body_half_width_m)
         # the search's heuristic: the soft margin's cost along the cheapest free-space path
         route = (GoalDistance(world, self.clearance, self.body_half_width_m,
@@ -832,10 +859,9 @@ class Planner:
         list of WaterDraw
         """
         if attempt not in self._waters:
-            rng = np.random.default_rng([self.seed, attempt])
             count = self.draws if attempt == 0 else self.repair_draws
-            self._waters[attempt] = self.coefficients.water_draws(rng, count,
-                                                                  self.unknown_current_m_s)
+            self._waters[attempt] = _water_draws(self.coefficients, (self.seed, attempt), count,
+                                                 self.unknown_current_m_s)
         return self._waters[attempt]
 
     def swim_waters(self, plan: Plan, waters: list[WaterDraw], state: FloatArray | None = None,
