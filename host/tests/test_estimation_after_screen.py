@@ -1,8 +1,8 @@
 """Joint models that join the comparison after its screen, with the laws it ranks best.
 
 docs/estimation.md, "Model comparison": the PD loop on the servo's torque-speed line
-(``pd_limited``) is not in the default grid with every law, but joins after the screen with the
-two laws the screen ranks best, its line starting off.
+(``pd_limited``) is not in the default grid with every law, but joins after the screen with every
+base law of the grid and the two laws the screen ranks best, its line starting off.
 """
 
 import importlib.util
@@ -44,6 +44,22 @@ def test_the_joining_model_takes_the_screens_best_distinct_laws_on_any_joint_mod
     # morison (servo 0.2, then pd 0.3, the same law) and lighthill_lift; a failed one ranks last
     assert after_screen_laws(grid) == ["morison", "lighthill_lift"]
     assert after_screen_laws(grid, count=3) == ["morison", "lighthill_lift", "galilean"]
+
+
+def test_the_joining_model_is_tried_with_every_base_law_however_low_the_screen_ranks_it():
+    # on joints that bind, the screen ranks laws by the misfit they absorb: the water's own law
+    # (here morison) may rank last on the wrong joints and must still be tried on the joined ones
+    grid = [_cand("pd x linear_quadratic", [0.2, 0.2]), _cand("pd x resistive_lift", [0.3, 0.3]),
+            _cand("pd x galilean", [0.4, 0.4]), _cand("pd x morison", [0.9, 0.9])]
+    laws = ["morison", "galilean", "linear_quadratic", "resistive", "morison_lift",
+            "resistive_lift"]
+    chosen = after_screen_laws(grid, grid_laws=laws)
+    # the screen's two best first (a lift variant among them), then the other base laws in the
+    # grid's order; no lift variant the screen did not rank best
+    assert chosen == ["linear_quadratic", "resistive_lift", "morison", "galilean", "resistive"]
+    # a grid named without a base law does not gain one
+    assert after_screen_laws(grid, grid_laws=["linear_quadratic", "resistive_lift"]) == [
+        "linear_quadratic", "resistive_lift"]
 
 
 def test_a_joined_model_passes_the_screen_on_its_errors_not_as_a_joint_models_best():

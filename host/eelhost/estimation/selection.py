@@ -35,8 +35,10 @@ screen's figures, marked, and never recommended.
 
 **Joint models that join after the screen.** A joint model that is not offered by default but
 ``offered_after_screen`` (the PD loop on the servo's torque-speed line, ``pd_limited``) joins the
-default grid after the screen with only the :data:`AFTER_SCREEN_LAWS` laws whose candidates the
-screen ranks best (:func:`after_screen_laws`), screened the same way (restarted from every
+default grid after the screen with every base law of the grid (a law without its lift) and the
+:data:`AFTER_SCREEN_LAWS` laws whose candidates the screen ranks best (:func:`after_screen_laws`:
+the screen ranks laws on the wrong joints by how well they absorb the joints' misfit, not by the
+water, so the water's own law may rank last), screened the same way (restarted from every
 screening fit, its line starting off: :data:`ABSENT`); a joined candidate gets the full search
 when it would pass the screen among all candidates (:func:`screen_survivors`), beside the grid's
 own survivors, which it never displaces; its best is not passed as a joint model's best (it
@@ -85,6 +87,7 @@ from eelhost.estimation.optimise import fit_cmaes
 from eelhost.estimation.pipeline import training_experiments
 from eelhost.estimation.space import ParameterSpace
 from eelsim.fluid import get_fluid_law
+from eelsim.fluid.lift import LiftLaw
 from eelsim.joints import after_screen_models
 
 log = logging.getLogger(__name__)
@@ -104,7 +107,8 @@ FAMILY_FACTOR = 4.0  # a law family's best passes too when within this factor of
 # where the gaits never reach it: the plain PD loop
 ABSENT = {"C_L": 0.0, "C_D_alpha": 0.0, "alpha_stall": float(np.pi / 2),  # pi/2: no stall
           "servo_max_torque_nm": np.inf, "servo_max_speed_rad_s": np.inf}  # clipped to the bounds
-AFTER_SCREEN_LAWS = 2  # laws a joint model that joins after the screen is tried with
+AFTER_SCREEN_LAWS = 2  # the screen's best laws a joint model that joins after it is tried with
+# (besides every base law of the grid: after_screen_laws)
 ONE_SET_CANDIDATES = 1  # the best separate-set models also tried with one set for all motions
 ONE_SET = "one set"  # the suffix of a one-set candidate's name
 
@@ -269,19 +273,30 @@ def candidate_spaces(
             for model in models for law in sorted(set(laws))]
 
 
-def after_screen_laws(scores: Sequence[CandidateScore], count: int = AFTER_SCREEN_LAWS) -> list[str]:
-    """The laws a joint model that joins after the screen is tried with: the screen's best.
+def after_screen_laws(scores: Sequence[CandidateScore], count: int = AFTER_SCREEN_LAWS,
+                      grid_laws: Sequence[str] = ()) -> list[str]:
+    """The laws a joint model that joins after the screen is tried with.
 
     The ``count`` distinct laws (a lift variant is a law of its own here) of the screened
-    candidates best by :func:`screen_rank`, on any joint model, in that order.
+    candidates best by :func:`screen_rank`, on any joint model, in that order; then every base
+    law of ``grid_laws`` (one that is not a ``<law>_lift`` variant) not yet among them, in the
+    grid's order. Why the base laws (docs/estimation.md, "Model comparison", "The servo line
+    joins after the screen"): where the joints bind, every candidate of the grid swims the wrong
+    joints, and the screen ranks the laws by how much of the joints' misfit they absorb, not by
+    the water; on ``servo_limits`` (Morison water) the screen ranked ``morison`` among the last
+    and the joined candidates' turning fits misfit 7 times the plant's own fitness. Each law
+    family's simplest member is therefore tried on the joined joints; a lift variant (which nests
+    its base law) joins where the screen ranks it best.
     """
     laws: list[str] = []
     for score in sorted(scores, key=screen_rank):
+        if len(laws) == count:
+            break
         law = model_parts(score.model)[1]
         if law not in laws:
             laws.append(law)
-        if len(laws) == count:
-            break
+    laws += [law for law in grid_laws
+             if law not in laws and not isinstance(get_fluid_law(law), LiftLaw)]
     return laws
 
 
@@ -468,7 +483,7 @@ def cross_validate(
             if joint_models is None:
                 joining = after_screen_models(sorted({s.joints.model for s in spaces}))
             if joining:
-                chosen = after_screen_laws(list(screen_scores.values()))
+                chosen = after_screen_laws(list(screen_scores.values()), grid_laws=laws)
                 first = len(spaces)
                 spaces = spaces + [
                     ParameterSpace(get_fluid_law(law), joint_fit(dataset.robot, model),
