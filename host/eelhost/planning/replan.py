@@ -935,7 +935,8 @@ class TankReplanner:
             # within its budget and its plan could still steer a lead before the contact)
             d.stop = "no_safe_continuation"
             d.detail = (f"at t = {t_s:.2f} s the twin swims the present plan "
-                        f"{self._verdict_text(t_s)} and the replan requested at t = {job.t_request_s:.2f} s has not come back "
+                        f"{self._verdict_text(t_s)} and the replan requested at "
+                        f"t = {job.t_request_s:.2f} s has not come back "
                         f"({time.monotonic() - job.wall_request_s:.1f} s of wall time)")
             return d
         reason = None
