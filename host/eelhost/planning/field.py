@@ -16,8 +16,6 @@
 from __future__ import annotations
 
 import math
-import threading
-from collections import OrderedDict
 
 import numpy as np
 from numpy.typing import NDArray
@@ -26,6 +24,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
 from eelhost.planning.geometry import FloatArray, point_segment_distance, points_in_polygon
+from eelhost.planning.memo import BoundedCache
 from eelhost.planning.world import CircleObstacle, World
 
 BoolArray = NDArray[np.bool_]
@@ -115,8 +114,7 @@ FIELD_CACHE_SIZE = 16
 """Clearance fields :func:`clearance_field` keeps (the most recently used; 0.5 MB each for a
 3 x 2 m tank at 10 mm)."""
 
-_FIELDS: OrderedDict[tuple[str, float], ClearanceField] = OrderedDict()
-_FIELDS_LOCK = threading.Lock()
+_FIELDS: BoundedCache[ClearanceField] = BoundedCache(FIELD_CACHE_SIZE)
 
 
 def clearance_field(world: World, cell_m: float = 0.01) -> ClearanceField:
@@ -138,19 +136,13 @@ def clearance_field(world: World, cell_m: float = 0.01) -> ClearanceField:
     -------
     ClearanceField
     """
-    key = (world.model_dump_json(include={"tank", "obstacles"}), float(cell_m))
-    with _FIELDS_LOCK:
-        field = _FIELDS.get(key)
-        if field is not None:
-            _FIELDS.move_to_end(key)
-            return field
-    field = ClearanceField(world, cell_m)  # outside the lock: two threads may both build it
-    field.values.setflags(write=False)
-    with _FIELDS_LOCK:
-        _FIELDS[key] = field
-        while len(_FIELDS) > FIELD_CACHE_SIZE:
-            _FIELDS.popitem(last=False)
-    return field
+    def build() -> ClearanceField:
+        field = ClearanceField(world, cell_m)
+        field.values.setflags(write=False)
+        return field
+
+    return _FIELDS.get((world.model_dump_json(include={"tank", "obstacles"}), float(cell_m)),
+                       build)
 
 
 class GoalDistance:

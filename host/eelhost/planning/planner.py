@@ -43,9 +43,8 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-import threading
 import time
-from collections import Counter, OrderedDict, deque
+from collections import Counter, deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -57,6 +56,7 @@ from eelhost.planning.check import CHECK_COST, CheckOutOfTime, swim_legs
 from eelhost.planning.execute import Swim
 from eelhost.planning.field import GoalDistance, clearance_field, signed_clearance
 from eelhost.planning.geometry import FloatArray
+from eelhost.planning.memo import BoundedCache
 from eelhost.planning.search import Guide, Plan, Search, SearchSettings, SwimCost
 from eelhost.planning.twin import Twin
 from eelhost.planning.uncertainty import (
@@ -212,8 +212,7 @@ def run_failed(run: Swim, margin_m: float = 0.0) -> bool:
     return not run.ok or run.min_clearance_m <= margin_m
 
 
-_WATERS: OrderedDict[tuple, tuple[CoefficientModel, list[WaterDraw]]] = OrderedDict()
-_WATERS_LOCK = threading.Lock()
+_WATERS: BoundedCache[tuple[CoefficientModel, list[WaterDraw]]] = BoundedCache(32)
 
 
 def _water_draws(coefficients: CoefficientModel, seed: int | tuple[int, int], count: int,
@@ -221,22 +220,14 @@ def _water_draws(coefficients: CoefficientModel, seed: int | tuple[int, int], co
     """``coefficients.water_draws`` from the generator seeded with ``seed``, drawn once.
 
     The replanner builds a planner per current estimate with the same model, seed and draws:
-    the draws (0.26 s on the slower processor) are the same, so they are kept (the 32 most
-    recent; keyed by the model's identity, which the entry holds so it is never reused).
+    the draws (0.26 s on the slower processor) are the same, so they are kept (keyed by the
+    model's identity; the entry holds the model, so its identity is never reused meanwhile).
     """
-    key = (id(coefficients), seed, int(count), float(unknown_current_m_s))
-    with _WATERS_LOCK:
-        hit = _WATERS.get(key)
-        if hit is not None and hit[0] is coefficients:
-            _WATERS.move_to_end(key)
-            return hit[1]
-    draws = coefficients.water_draws(np.random.default_rng(
-        list(seed) if isinstance(seed, tuple) else seed), count, unknown_current_m_s)
-    with _WATERS_LOCK:
-        _WATERS[key] = (coefficients, draws)
-        while len(_WATERS) > 32:
-            _WATERS.popitem(last=False)
-    return draws
+    def draw() -> tuple[CoefficientModel, list[WaterDraw]]:
+        rng = np.random.default_rng(list(seed) if isinstance(seed, tuple) else seed)
+        return coefficients, coefficients.water_draws(rng, count, unknown_current_m_s)
+
+    return _WATERS.get((id(coefficients), seed, int(count), float(unknown_current_m_s)), draw)[1]
 
 
 class PlanRefused(UserError, ValueError):
