@@ -23,6 +23,7 @@ from eelhost.field.recorder import read_commands_csv
 from eelhost.field.runloop import RunConfig
 from eelhost.field.session import TakeNotes
 from eelhost.field.take import TakeRequest, run_take
+from eelhost.planning.deadline import Deadline
 from eelhost.planning.execute import body_clearance_m
 from eelhost.planning.field import ClearanceField
 from eelhost.planning.planner import PLANNING_GUIDANCE, Outcome, Planner
@@ -1189,7 +1190,7 @@ def test_a_replan_in_a_moved_estimate_gets_the_calm_budget_and_starts_when_it_en
         assert len(nav.asked) == 1 and nav.events[-1]["reason"] == "current_estimate"
         t_request, t_start, deadline = nav.asked[0]
         assert nav.events[-1]["budget_s"] == nav.calm_budget_s == CALM_REPLAN_BUDGET_S > 1.0
-        assert deadline - nav.walls[0] == pytest.approx(nav.calm_budget_s)
+        assert float(deadline) - nav.walls[0] == pytest.approx(nav.calm_budget_s)
         # its start is the state predicted for when the budget ends, not a lead of 0.3-0.9 s
         assert nav.calm_budget_s <= t_start - t_request <= nav.calm_budget_s + 0.3 + 1e-9
         # a replan on leaving the corridor keeps the 1 s and the short lead
@@ -1204,10 +1205,119 @@ def test_a_replan_in_a_moved_estimate_gets_the_calm_budget_and_starts_when_it_en
         assert nav.asked and nav.events[-1]["reason"] == "left_corridor"
         t_request, t_start, deadline = nav.asked[0]
         assert nav.events[-1]["budget_s"] == 1.0
-        assert deadline - nav.walls[0] == pytest.approx(1.0)
+        assert float(deadline) - nav.walls[0] == pytest.approx(1.0)
         assert t_start - t_request <= nav.max_lead_s + 0.3 + 1e-9
     finally:
         nav.close()
+
+
+def test_leaving_the_corridor_cuts_a_calm_replan_short_and_replans_at_once_with_one_second(
+        open_plan):
+    planner, outcome = open_plan
+
+    class Patient(FailingInTheTestsEstimate):
+        """A calm replan searches until its deadline (which a cut brings forward), a 1 s one
+        fails at once; the look-ahead is clear, the rest of the plan in the estimate is not."""
+
+        asked: list[float] = []
+
+        def _asked(self, est, start_step, extra, deadline_s):  # noqa: ANN001, ANN202
+            return float(deadline_s) - time.monotonic()  # the budget left when it returns
+
+        def _replan(self, est, left, start_step, extra, guide=None,  # noqa: ANN001, ANN202
+                    deadline_s=None):  # noqa: ANN001
+            if float(deadline_s) - time.monotonic() > 1.5:  # the calm one: until its deadline
+                while time.monotonic() < float(deadline_s):
+                    time.sleep(0.005)
+            return super()._replan(est, left, start_step, extra, guide, deadline_s)
+
+        def _look_ahead(self, est, left, extra, guide=None, horizon_s=None):  # noqa: ANN001, ANN202
+            return (0.2, 0.2) if horizon_s is None else (0.2, 0.0)
+
+    nav = Patient(lambda extra: planner, planner, outcome, PATH_GAIT, replan_budget_s=1.0,
+                  calm_budget_s=CALM_REPLAN_BUDGET_S)
+    nav.asked.clear()
+    start = np.asarray(outcome.plan.legs[0].com_m[0])
+    off = np.array([0.8, 1.4])
+    try:
+        nav.current.value_m_s = np.array([0.0, 0.02])
+        t, k = 0.0, 0
+        while nav._job is None and k < 60:  # on the plan: the moved estimate asks a calm replan
+            t = k / 30
+            nav.on_frame(t, pose_at(t, start), np.array([*start, 0.0]), 0, 0.0)
+            nav._side.submit(lambda: None).result()
+            k += 1
+        calm = nav._job
+        assert calm is not None and calm.reason == "current_estimate" and calm.budget_s == 3.0
+        wall0 = time.monotonic()
+        stops = []
+        while not any(e["reason"] == "left_corridor" for e in nav.events) and k < 400:
+            t = k / 30  # the robot leaves its corridor while the calm replan searches
+            stops.append(nav.on_frame(t, pose_at(t, off), np.array([*off, 0.0]), 0, 0.0).stop)
+            time.sleep(0.01)
+            k += 1
+        cut = next(e for e in nav.events if e["reason"] == "current_estimate")
+        assert cut["cut_for"] == "left_corridor" and calm.deadline is not None
+        assert calm.deadline.cut and cut["wall_s"] < 1.5  # back long before its 3 s
+        assert time.monotonic() - wall0 < 2.5
+        urgent = next(e for e in nav.events if e["reason"] == "left_corridor")
+        assert urgent["budget_s"] == 1.0 and "cut_for" not in urgent
+        assert len(nav.asked) == 2 and nav.asked[0] <= 0.0 < nav.asked[1] <= 1.0  # cut; 1 s
+        assert set(stops) == {None}  # no stop while the calm replan was cut and the urgent ran
+    finally:
+        nav.close()
+
+
+def test_a_contact_far_ahead_cuts_a_calm_replan_short_instead_of_stopping_the_robot(open_plan):
+    from eelhost.planning.replan import _Job
+
+    planner, outcome = open_plan
+    nav = TankReplanner(lambda extra: planner, planner, outcome, PATH_GAIT,
+                        replan_budget_s=1.0, lookahead_s=0.0, calm_budget_s=3.0)
+    start = np.asarray(outcome.plan.legs[0].com_m[0])
+    try:
+        for k in range(15):
+            t = k / 30
+            assert nav.on_frame(t, pose_at(t, start), np.array([*start, 0.0]), 0, 0.0).stop is None
+        deadline = Deadline(time.monotonic() + 3.0)
+        nav._job = _Job(Future(), 0.5, time.monotonic(), 3.5, "current_estimate", 4.0, 3.0,
+                        deadline)
+        ahead: Future = Future()
+        ahead.set_result(Ahead(-0.005, -0.025, 9.0))  # contact 8.5 s ahead: time to replan
+        nav._lookahead = ahead
+        d = nav.on_frame(0.5, pose_at(0.5, start), np.array([*start, 0.0]), 0, 0.0)
+        assert d.stop is None
+        assert deadline.cut and float(deadline) <= time.monotonic()
+        assert nav._job.cut_for == "predicted_contact"
+        assert nav._urgent_after_cut == "predicted_contact"
+    finally:
+        nav._job = None
+        nav.close()
+
+
+def test_a_deadline_only_comes_earlier_and_reads_as_its_present_value():
+    d = Deadline(10.0)
+    assert float(d) == 10.0 and not d.cut
+    d.cut_to(12.0)  # a cut never moves it later
+    assert float(d) == 10.0 and d.cut
+    d.cut_to(4.0)
+    assert float(d) == 4.0 and d.cut_at_s == 4.0
+
+
+def test_a_search_stops_at_a_deadline_cut_while_it_runs(open_plan):
+    planner, _ = open_plan
+    deadline = Deadline(time.monotonic() + 600.0)
+    asked = []
+
+    def reserve() -> float:  # asked before every batch: the first one cuts the deadline
+        asked.append(1)
+        deadline.cut_to(time.monotonic())
+        return 0.0
+
+    plan = planner.search.plan(deadline_s=deadline, reserve_s=reserve)
+    assert plan.status == "out_of_time" and not plan.found
+    assert plan.expansions <= planner.search.settings.batch
+    assert len(asked) == 2  # the batch before the cut ran; the next one saw it
 
 
 @pytest.mark.parametrize("budget_s", [3.0, 1.0])

@@ -44,7 +44,7 @@ from eelhost.field.session import TakeNotes
 from eelhost.field.take import TakeRequest, run_take
 from eelhost.planning.geometry import FloatArray
 from eelhost.planning.planner import PlanRefused
-from eelhost.planning.replan import REPLAN_BUDGET_S
+from eelhost.planning.replan import CALM_REPLAN_BUDGET_S, REPLAN_BUDGET_S
 from eelhost.planning.state_estimate import body_error_m, error_summary_mm
 from eelhost.planning.tank import plan_for_run
 from eelhost.planning.uncertainty import CoefficientModel
@@ -231,7 +231,8 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
               planner_options: dict[str, Any] | None = None,
               swimmer: SwimmerModel | None = None,
               replan_budget_s: float | None = REPLAN_BUDGET_S,
-              record_to: Path | None = None) -> WorldResult:
+              record_to: Path | None = None,
+              calm_budget_s: float | None = CALM_REPLAN_BUDGET_S) -> WorldResult:
     """Plan one generated world and swim the plan over ``sim://`` (module docstring).
 
     Parameters
@@ -252,6 +253,8 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
     record_to : Path, optional
         Write the run's planning record there (the take's ``source.planning``: every plan and
         replan with its start state, status and message), to replay failing replans offline.
+    calm_budget_s : float or None
+        The calm replans' budget (:func:`eelhost.planning.tank.plan_for_run`).
 
     Returns
     -------
@@ -270,7 +273,8 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
     wall0, cpu0 = time.perf_counter(), time.process_time()
     try:
         planned = plan_for_run(world, robot, uri, gait, model, planner_options=planner_options,
-                               swimmer=swimmer, replan_budget_s=replan_budget_s)
+                               swimmer=swimmer, replan_budget_s=replan_budget_s,
+                               calm_budget_s=calm_budget_s)
     except PlanRefused as err:
         return WorldResult(seed, False, err.status, detail=str(err), water=water,
                            plan_wall_s=time.perf_counter() - wall0,
@@ -354,6 +358,7 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
                           planner_options: dict[str, Any] | None = None,
                           swimmer: SwimmerModel | None = None,
                           replan_budget_s: float | None = REPLAN_BUDGET_S,
+                          calm_budget_s: float | None = CALM_REPLAN_BUDGET_S,
                           ) -> list[WorldResult]:
     """Run the benchmark over ``seeds``, resuming from ``<out>/results.jsonl``.
 
@@ -373,6 +378,8 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
         here when not given).
     replan_budget_s : float or None
         Each replan's wall-clock budget (:func:`run_world`).
+    calm_budget_s : float or None
+        The calm replans' budget (:func:`run_world`).
 
     Returns
     -------
@@ -407,7 +414,8 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
         else:
             r = run_world(seed, robot, model, planner_options=planner_options,
                           swimmer=swimmer, replan_budget_s=replan_budget_s,
-                          record_to=out / "planning" / f"{seed}.json")
+                          record_to=out / "planning" / f"{seed}.json",
+                          calm_budget_s=calm_budget_s)
             with path.open("a") as f:
                 f.write(json.dumps(asdict(r)) + "\n")
         results.append(r)

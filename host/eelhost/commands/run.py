@@ -32,6 +32,7 @@ from eelhost.field.session import TakeNotes
 from eelhost.field.take import TakeRequest, ViewOpener, refuse_overwrite, run_take
 from eelhost.files import check_output_stem
 from eelhost.link.uri import parse_link_uri
+from eelhost.planning.replan import CALM_REPLAN_BUDGET_S
 from eelhost.progress import phase
 from eelhost.vision.markerfile import load_marker_file
 from eelhost.web.liveview import LiveView
@@ -89,6 +90,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="with --plan or --bench: each replan's wall-clock budget from its "
                    "request; its searches stop there and it returns what it has (1.0 s; 0: no "
                    "deadline; docs/planning.md, \"The replan's deadline\")")
+    p.add_argument("--calm-budget", type=NON_NEGATIVE, default=CALM_REPLAN_BUDGET_S, metavar="S",
+                   help="with --plan or --bench and a --replan-budget: the budget of a replan "
+                   "asked for in a moved current estimate while the robot is on its plan; a "
+                   "replan on leaving the corridor or a predicted contact cuts it short (3.0 s; "
+                   "0: the --replan-budget; docs/planning.md, \"Calm replans get more time\")")
     p.add_argument("--guidance", choices=GUIDANCE_LAWS.names(), default=PURSUIT.name,
                    help="the line-of-sight law that steers the robot: pursuit (the paper's pure "
                    "pursuit of each waypoint, default) or ilos (integral line-of-sight along each "
@@ -216,7 +222,8 @@ def run(args: argparse.Namespace) -> int:
             planned = plan_for_run(world, robot, args.link, gait, coefficients=model,
                                    acceptance_radius_m=args.radius, swimmer=swimmer,
                                    planner_options={"guidance": law},
-                                   replan_budget_s=args.replan_budget or None)
+                                   replan_budget_s=args.replan_budget or None,
+                                   calm_budget_s=args.calm_budget or None)
         print(planned.outcome.message)
         print(f"coefficients: {model.describe()}")
         waypoints, navigator, uri = planned.waypoints_m, planned.navigator, planned.uri
@@ -285,7 +292,8 @@ def _bench(args: argparse.Namespace) -> int:
         if args.check_unknown_current is not None:
             options["unknown_current_m_s"] = args.check_unknown_current
         results = run_closed_loop_bench(robot, model, seeds, out, show, options,
-                                        model.swimmer_for(robot), args.replan_budget or None)
+                                        model.swimmer_for(robot), args.replan_budget or None,
+                                        calm_budget_s=args.calm_budget or None)
     command = (f"nice eelbot run --bench --worlds {args.worlds} --seed {args.seed}"
                + ("" if args.check_unknown_current is None
                   else f" --check-unknown-current {args.check_unknown_current:g}")
@@ -293,7 +301,9 @@ def _bench(args: argparse.Namespace) -> int:
                   else "")
                + (f" --guidance {args.guidance}" if args.guidance != PURSUIT.name else "")
                + (f" --replan-budget {args.replan_budget:g}" if args.replan_budget != 1.0
-                  else ""))
+                  else "")
+               + (f" --calm-budget {args.calm_budget:g}"
+                  if args.calm_budget != CALM_REPLAN_BUDGET_S else ""))
     lines = summary_lines(results)
     block = [BENCH_BEGIN, f"Command: `{command}`", "",
              f"- machine: {cpu_model()}, {os.cpu_count()} cores visible (shared with other "

@@ -28,6 +28,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Sequence
+from typing import SupportsFloat
 
 import numpy as np
 
@@ -89,7 +90,7 @@ def swim_legs(
     state: FloatArray | None = None,
     start_step: int = 0,
     guide: Guide | None = None,
-    deadline_s: float | None = None,
+    deadline_s: SupportsFloat | None = None,
     clock: Callable[[], float] = time.monotonic,
     cost: SwimCost | None = None,
     margin_m: float = 0.0,
@@ -172,7 +173,7 @@ def swim_legs(
         if deadline_s is not None:
             # the leg's batch as the search swam it, in every live water
             need = cost.predict_s(len(live) * took / twin.dt_s) or 0.0
-            if clock() + need > deadline_s:
+            if clock() + need > float(deadline_s):
                 raise CheckOutOfTime(
                     f"the check stopped at its deadline before leg {k + 1} of "
                     f"{len(plan.legs)} ({len(live)} of {r} runs still swimming)")

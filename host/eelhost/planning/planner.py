@@ -47,6 +47,7 @@ import time
 from collections import Counter, deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import SupportsFloat
 
 import numpy as np
 
@@ -574,7 +575,7 @@ class Planner:
             need = 0.0 if search is None else CHECK_OVER_SEARCH * search
         return need
 
-    def draws_within(self, plan_steps: float, draws: int, deadline_s: float | None,
+    def draws_within(self, plan_steps: float, draws: int, deadline_s: SupportsFloat | None,
                      fewest: int = DEADLINE_DRAWS_MIN) -> int:
         """How many of ``draws`` draws a check may swim so the search keeps room before a deadline.
 
@@ -598,7 +599,7 @@ class Planner:
         """
         if deadline_s is None or draws <= fewest:
             return draws
-        room = CHECK_SHARE_MAX * (deadline_s - self.clock())
+        room = CHECK_SHARE_MAX * (float(deadline_s) - self.clock())
         if self.check_time_s(plan_steps, draws) <= room:
             return draws
         per_run = self.check_time_s(plan_steps, 0)  # the fits' one run at the measured cost
@@ -699,7 +700,7 @@ class Planner:
     # -- planning --------------------------------------------------------------------------------
 
     def plan(self, state: FloatArray | None = None, step: int = 0,
-             guide: Guide | None = None, deadline_s: float | None = None) -> Outcome:
+             guide: Guide | None = None, deadline_s: SupportsFloat | None = None) -> Outcome:
         """Plan from the start (or from ``state`` at ``step``), check the plan, repair it.
 
         Parameters
@@ -856,7 +857,7 @@ class Planner:
         return self._waters[attempt]
 
     def swim_waters(self, plan: Plan, waters: list[WaterDraw], state: FloatArray | None = None,
-                    step: int = 0, deadline_s: float | None = None) -> list[Swim]:
+                    step: int = 0, deadline_s: SupportsFloat | None = None) -> list[Swim]:
         """Swim a plan leg by leg in each water, as the search swam it, and judge each run.
 
         Parameters
@@ -880,7 +881,7 @@ class Planner:
                          cost=self.check_cost, margin_m=self.check_margin_m)
 
     def check_plan(self, plan: Plan, state: FloatArray | None = None, step: int = 0,
-                   waters: list[WaterDraw] | None = None, deadline_s: float | None = None
+                   waters: list[WaterDraw] | None = None, deadline_s: SupportsFloat | None = None
                    ) -> tuple[list[Swim], float]:
         """Swim a plan with the fits and over the draws of the water (module docstring).
 

@@ -29,11 +29,12 @@ import time
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor, wait
 from dataclasses import dataclass, field
-from typing import Any, NamedTuple, cast
+from typing import Any, NamedTuple, SupportsFloat, cast
 
 import numpy as np
 
 from eelhost.planning.check import water_twin
+from eelhost.planning.deadline import Deadline
 from eelhost.planning.execute import Swim, body_clearance_m, swim
 from eelhost.planning.geometry import FloatArray, point_segment_distance
 from eelhost.planning.planner import SCREEN_DRAWS, Outcome, Planner
@@ -254,8 +255,9 @@ REPLAN_BUDGET_S = 1.0
 issue 28 asks for a new plan ready within 1 s of the robot leaving its corridor."""
 
 CALM_REPLAN_BUDGET_S = 3.0
-"""The calm budget tried (``TankReplanner(calm_budget_s=)``, off by default): the budget of a
-replan asked for in a moved current estimate (``current_estimate``): the
+"""The calm budget (``TankReplanner(calm_budget_s=)``; ``eelbot run`` passes it by default since
+session 12, when a more urgent replan could first cut a calm one short): the budget of a replan
+asked for in a moved current estimate (``current_estimate``): the
 robot is on its plan and the look-ahead swims the next ``replan_horizon_s`` (5 s) clear, so the
 replan may take longer, starting from the state predicted this long ahead. On the idle machine
 (seeds 13000-13099 and 14000-14099, pure pursuit) 10 of the 18 runs that missed their goal
@@ -269,9 +271,20 @@ PLANNER_REBUILD_M_S = 0.005
 the one it was built in (building one takes 0.4-0.9 s on a loaded machine; docs/planning.md)."""
 
 
-def _time_left(deadline_s: float | None) -> bool:
+def _time_left(deadline_s: SupportsFloat | None) -> bool:
     """Whether a ``time.monotonic()`` deadline (None: none) is still ahead."""
-    return deadline_s is None or time.monotonic() < deadline_s
+    return deadline_s is None or time.monotonic() < float(deadline_s)
+
+
+CUT_RETURN_S = 0.5
+"""Wall time a calm replan cut short has to come back before a predicted contact stops the
+robot as for a late replan (the search stops at its next batch, 0.1-0.3 s on the loaded machine;
+docs/planning.md, "Calm replans get more time")."""
+
+
+def _was_cut(deadline_s: SupportsFloat | None) -> bool:
+    """Whether a more urgent replan cut this one's deadline short (:class:`Deadline`)."""
+    return isinstance(deadline_s, Deadline) and deadline_s.cut
 
 
 SHIFT_RADII_M = (0.05, 0.10, 0.15)
@@ -586,6 +599,8 @@ class _Job:
     reason: str
     due_s: float = math.inf  # the robot's time by which its budget and the repair's grace end
     budget_s: float | None = None  # its budget (a calm replan's is longer)
+    deadline: Deadline | None = None  # its deadline, which a more urgent replan may cut short
+    cut_for: str | None = None  # the urgent replan's reason, once cut short
 
 
 class TankReplanner:
@@ -692,9 +707,10 @@ class TankReplanner:
         With a ``replan_budget_s``: the budget of a replan asked for in a moved current estimate
         (``current_estimate``, the look-ahead clear), when longer; it starts from the state
         predicted that long ahead (docs/planning.md, "Calm replans get more time";
-        :data:`CALM_REPLAN_BUDGET_S` is the value tried). None (the default: a calm replan in
-        flight holds back the urgent replans behind it on the one worker): every replan gets
-        ``replan_budget_s``.
+        :data:`CALM_REPLAN_BUDGET_S`, which ``eelbot run`` passes). A replan on leaving the
+        corridor or a predicted contact cuts a calm one short (its :class:`Deadline` brought
+        forward: the worker stops at its next batch) and is asked for as soon as the worker is
+        back. None (the default here): every replan gets ``replan_budget_s``.
     """
 
     def __init__(
@@ -756,6 +772,7 @@ class TankReplanner:
         self._near_at_s = math.inf
         self.backoff_yields = 0  # replans asked for during a back-off (the record's)
         self._retry_now = False  # a failed replan asked for another at the next frame
+        self._urgent_after_cut: str | None = None  # asked for once the cut calm replan is back
         self._last_tiers: dict[str, float] = {}  # the last replan's parts' wall times
         self._plan_current = np.zeros(2)  # the extra current the present plan was searched in
         # the rest of the present plan swum in a moved estimate: (future, that estimate)
@@ -925,8 +942,14 @@ class TankReplanner:
                     f"replans failed in a row: {self.events[-1]['message']}")
                 return d
         job = self._job
+        if job is not None and self._calm(job) and job.cut_for is None and (
+                predicted or self._off_corridor(pose)):
+            # a calm replan runs, and now a more urgent one is needed: cut the calm one short (the
+            # worker stops at its next batch) and ask for the urgent one when it is back
+            # (docs/planning.md, "Calm replans get more time")
+            self._cut(job, "predicted_contact" if predicted else "left_corridor", t_s)
         if (predicted and close and job is not None
-                and (t_s > job.t_start_s + 1e-9 or self._calm(job))
+                and (t_s > job.t_start_s + 1e-9 or self._calm_holds_up(job, t_s))
                 and not (t_s <= job.due_s
                          and self._danger_at_s() - max(job.due_s, t_s) >= self.lead_s)):
             # the replan is late (past its start) and the twin swims the present plan into
@@ -940,7 +963,7 @@ class TankReplanner:
                         f"({time.monotonic() - job.wall_request_s:.1f} s of wall time)")
             return d
         reason = None
-        if float(distance_to_path(self.path, np.asarray([pose[:2]]))[0]) > self.corridor_m:
+        if self._off_corridor(pose):
             reason = "left_corridor"
         elif predicted:
             reason = "predicted_contact"
@@ -949,15 +972,19 @@ class TankReplanner:
                      self.replan_horizon_s)
         elif self._retry_now:
             reason = "predicted_contact"  # a failed replan's look-ahead swam into contact
+        elif self._urgent_after_cut is not None:
+            reason = self._urgent_after_cut  # what cut the calm replan short
         elif self._whole_plan_fails(est, left, busy):
             # the water the plan was searched in is not the one the camera sees, and the twin
             # swims the rest of the plan out of its margin in the estimate: replan in it while
             # the robot is still on its plan (docs/planning.md)
             reason = "current_estimate"
-        if reason is not None and not busy and (t_s >= self._next_try_s or retry):
+        if reason is not None and not busy and (t_s >= self._next_try_s or retry
+                                                 or self._urgent_after_cut is not None):
             if (retry and not yielded) or self._retry_now:
                 self.retries_before_contact += 1
             self._retry_now = False
+            self._urgent_after_cut = None
             self._request(t_s, est, left, reason)
         elif (self._pending is None and self._lookahead is None and self.lookahead_s > 0
               and t_s >= self._next_lookahead_s):
@@ -1073,6 +1100,35 @@ class TankReplanner:
         return (job.budget_s is not None and self.replan_budget_s is not None
                 and job.budget_s > self.replan_budget_s)
 
+    def _calm_holds_up(self, job: _Job, t_s: float) -> bool:
+        """Whether a calm ``job`` keeps the urgent replan a predicted contact needs waiting.
+
+        Not once cut short (:meth:`_cut`) while the contact is far enough ahead for the urgent
+        replan to steer before it, and the worker is back within :data:`CUT_RETURN_S`; else
+        (uncut, the contact too near, or the worker not back) the robot is stopped as for a late
+        replan.
+        """
+        if not self._calm(job):
+            return False
+        if job.cut_for is None or job.deadline is None or job.deadline.cut_at_s is None:
+            return True
+        back_by_s = job.deadline.cut_at_s + CUT_RETURN_S  # wall time, as the cut
+        return time.monotonic() > back_by_s or not self._may_retry(t_s)
+
+    def _cut(self, job: _Job, reason: str, t_s: float) -> None:
+        """Cut a calm replan short for a ``reason`` replan asked for as soon as it is back."""
+        if job.deadline is None:
+            return
+        job.deadline.cut_to(time.monotonic())
+        job.cut_for = reason
+        self._urgent_after_cut = reason
+        log.info("a %s replan is needed at t = %.2f s: the calm replan asked for at t = %.2f s "
+                 "is cut short", reason, t_s, job.t_request_s)
+
+    def _off_corridor(self, pose: FloatArray) -> bool:
+        """Whether the pose's centre of mass is outside the present plan's corridor."""
+        return float(distance_to_path(self.path, np.asarray([pose[:2]]))[0]) > self.corridor_m
+
     def _lead_steps(self) -> int:
         """Steps from a request to the predicted start: a whole number of restart periods."""
         period = self.planner.twin.restart_steps or 1
@@ -1096,17 +1152,18 @@ class TankReplanner:
         start_step = int(math.ceil((now_step + lead) / period)) * period
         extra = self.current.value_m_s.copy() if self.estimate_current else np.zeros(2)
         wall = time.monotonic()
-        deadline = None if budget is None else wall + budget
+        deadline = None if budget is None else Deadline(wall + budget)
         future = self._worker.submit(self._replan_and_judge, est, list(left), start_step, extra,
                                      self._guide, deadline)
         due = (math.inf if budget is None or not self.retry_before_contact
                else t_s + budget + (SHIFT_GRACE_S if self.shift_repair else 0.0))
-        self._job = _Job(future, t_s, wall, start_step * dt, reason, due, budget)
+        self._job = _Job(future, t_s, wall, start_step * dt, reason, due, budget, deadline)
         log.info("left the corridor at t = %.2f s; replanning from the state predicted for "
                  "t = %.2f s", t_s, start_step * dt)
 
     def _replan(self, est: BodyEstimate, left: list[tuple[float, float]], start_step: int,
-                extra: FloatArray, guide: Guide | None = None, deadline_s: float | None = None
+                extra: FloatArray, guide: Guide | None = None,
+                deadline_s: SupportsFloat | None = None
                 ) -> tuple[Outcome, FloatArray, float, float, FloatArray, float, int]:
         """On the worker: predict the state at the start step with the twin, then plan from it.
 
@@ -1196,11 +1253,12 @@ class TankReplanner:
                         f"{outcome.message}; with the recovery's actions: {rescue.message}"))
         # the shift repair: the present route, its waypoints moved against the water that pushes
         # it into something (docs/planning.md, "The shift repair")
-        if self.shift_repair and not outcome.found and outcome.status not in REFUSED_FROM_STATE:
+        if (self.shift_repair and not outcome.found and outcome.status not in REFUSED_FROM_STATE
+                and not _was_cut(deadline_s)):
             # also when the searches used up the budget (a failing search often does): the
             # repair's swims may overrun it by SHIFT_GRACE_S, a plan a little late rather than none
             repair_deadline = (None if deadline_s is None
-                               else max(deadline_s, time.monotonic()) + SHIFT_GRACE_S)
+                               else max(float(deadline_s), time.monotonic()) + SHIFT_GRACE_S)
             remaining = (self.outcome.plan.cost_s - start_step * planner.twin.dt_s
                          if self.outcome.found else math.nan)
             horizon = (min(1.5 * remaining + 5.0, 90.0) if math.isfinite(remaining) else 60.0)
@@ -1239,7 +1297,8 @@ class TankReplanner:
 
     def _replan_and_judge(self, est: BodyEstimate, left: list[tuple[float, float]],
                           start_step: int, extra: FloatArray, guide: Guide | None = None,
-                          deadline_s: float | None = None) -> tuple[tuple, Ahead | None]:
+                          deadline_s: SupportsFloat | None = None
+                          ) -> tuple[tuple, Ahead | None]:
         """On the worker: the replan and, when it fails, a look-ahead of the present waypoints.
 
         The look-ahead from the same estimate decides whether the robot may keep its present
@@ -1301,6 +1360,8 @@ class TankReplanner:
                                        job.t_request_s + wall, state, outcome, wall, cpu, extra))
         if job.budget_s is not None:
             self.events[-1]["budget_s"] = job.budget_s
+        if job.cut_for is not None:
+            self.events[-1]["cut_for"] = job.cut_for
         tiers, self._last_tiers = self._last_tiers, {}
         if tiers:
             self.events[-1]["parts_wall_s"] = tiers
@@ -1327,8 +1388,10 @@ class TankReplanner:
             return True
         if job.reason == "current_estimate":
             # asked for by the estimate alone, on a plan not known to go wrong: keep the plan,
-            # and ask again only when the estimate moves on (the look-ahead still guards it)
-            self._plan_current = extra
+            # and ask again only when the estimate moves on (the look-ahead still guards it);
+            # one cut short for an urgent replan did not fail, and may be asked for again
+            if job.cut_for is None:
+                self._plan_current = extra
             log.info("replanning in the estimated current failed (%s); the robot keeps its plan",
                      outcome.status)
             return True

@@ -36,6 +36,7 @@ import time
 from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import SupportsFloat
 
 import numpy as np
 from numpy.typing import NDArray
@@ -662,7 +663,7 @@ class Search:
         start_step: int = 0,
         heading_rad: float | None = None,
         guide: Guide | None = None,
-        deadline_s: float | None = None,
+        deadline_s: SupportsFloat | None = None,
         reserve_s: Callable[[], float] | None = None,
     ) -> Plan:
         """Search from the world's start, or from any state (see the module docstring).
@@ -683,8 +684,9 @@ class Search:
             The guidance's state at the start: where the first leg starts and the ILOS integral
             (default :func:`leg_start_guide` of the start state: from its centre of mass, the
             integral zero). A replan passes the controller's own.
-        deadline_s : float, optional
-            A time on :attr:`clock` (``time.monotonic()`` by default): no batch is started that
+        deadline_s : float or Deadline, optional
+            A time on :attr:`clock`, read before every batch (a
+            :class:`~eelhost.planning.deadline.Deadline` may come earlier meanwhile) (``time.monotonic()`` by default): no batch is started that
             would still be in flight then (near it, the batch shrinks to the nodes predicted to
             fit, each at the largest wall time per node of the last :data:`BATCHES_SEEN`
             batches), and the search ends ``out_of_time`` unless it has found the goal (docs/planning.md, "The planning call's deadline"). Default: none.
@@ -740,7 +742,7 @@ class Search:
                 # time kept for the check): near it, the batch shrinks to the nodes that fit,
                 # each predicted to take the largest wall time per node of the last few batches
                 # (docs/planning.md, "The planning call's deadline")
-                left = deadline_s - self.clock() - (reserve_s() if reserve_s else 0.0)
+                left = float(deadline_s) - self.clock() - (reserve_s() if reserve_s else 0.0)
                 per_node = max(node_walls, default=0.0)
                 if left <= 0:
                     late = True

@@ -21,7 +21,12 @@ from urllib.parse import parse_qsl, urlencode, urlsplit
 
 from eelhost.planning.geometry import FloatArray
 from eelhost.planning.planner import Outcome, Planner, PlanRefused
-from eelhost.planning.replan import GOAL_APPROACH_CLEARANCE_M, REPLAN_BUDGET_S, TankReplanner
+from eelhost.planning.replan import (
+    CALM_REPLAN_BUDGET_S,
+    GOAL_APPROACH_CLEARANCE_M,
+    REPLAN_BUDGET_S,
+    TankReplanner,
+)
 from eelhost.planning.search import Actions, SearchSettings
 from eelhost.planning.uncertainty import CoefficientModel, default_model
 from eelhost.planning.world import Current, World
@@ -113,6 +118,7 @@ def plan_for_run(
     planner_options: dict[str, Any] | None = None,
     swimmer: SwimmerModel | None = None,
     replan_budget_s: float | None = REPLAN_BUDGET_S,
+    calm_budget_s: float | None = CALM_REPLAN_BUDGET_S,
 ) -> RunPlan:
     """Plan in a world for ``eelbot run --plan`` (module docstring).
 
@@ -138,6 +144,10 @@ def plan_for_run(
     replan_budget_s : float or None
         Each replan's wall-clock budget from its request (``TankReplanner``; docs/planning.md,
         "The replan's deadline"); None: no deadline.
+    calm_budget_s : float or None
+        The budget of a replan asked for in a moved current estimate while the robot is on its
+        plan, which a more urgent replan cuts short (``TankReplanner``; docs/planning.md, "Calm
+        replans get more time"); None: the ``replan_budget_s`` as every other replan's.
 
     Returns
     -------
@@ -164,7 +174,8 @@ def plan_for_run(
     navigator = TankReplanner(tiers.planner_for, planner, outcome, gait,
                               goal_planner_for=tiers.goal_planner_for,
                               recovery_planner_for=tiers.recovery_planner_for,
-                              replan_budget_s=replan_budget_s)
+                              replan_budget_s=replan_budget_s,
+                              calm_budget_s=calm_budget_s)
     return RunPlan(outcome.plan.waypoints_m, navigator, sim_uri_for_world(uri, world), outcome,
                    planner.options.guidance, outcome.plan.start_guide)
 
