@@ -1262,6 +1262,7 @@ def test_leaving_the_corridor_cuts_a_calm_replan_short_and_replans_at_once_with_
         assert time.monotonic() - wall0 < 2.5
         urgent = next(e for e in nav.events if e["reason"] == "left_corridor")
         assert urgent["budget_s"] == 1.0 and "cut_for" not in urgent
+        assert cut["t_request_s"] < cut["t_cut_s"] <= urgent["t_request_s"]
         assert len(nav.asked) == 2 and nav.asked[0] <= 0.0 < nav.asked[1] <= 1.0  # cut; 1 s
         assert set(stops) == {None}  # no stop while the calm replan was cut and the urgent ran
     finally:

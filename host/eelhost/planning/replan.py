@@ -601,6 +601,7 @@ class _Job:
     budget_s: float | None = None  # its budget (a calm replan's is longer)
     deadline: Deadline | None = None  # its deadline, which a more urgent replan may cut short
     cut_for: str | None = None  # the urgent replan's reason, once cut short
+    t_cut_s: float | None = None  # the robot's time of the cut
 
 
 class TankReplanner:
@@ -1120,7 +1121,7 @@ class TankReplanner:
         if job.deadline is None:
             return
         job.deadline.cut_to(time.monotonic())
-        job.cut_for = reason
+        job.cut_for, job.t_cut_s = reason, t_s
         self._urgent_after_cut = reason
         log.info("a %s replan is needed at t = %.2f s: the calm replan asked for at t = %.2f s "
                  "is cut short", reason, t_s, job.t_request_s)
@@ -1362,6 +1363,7 @@ class TankReplanner:
             self.events[-1]["budget_s"] = job.budget_s
         if job.cut_for is not None:
             self.events[-1]["cut_for"] = job.cut_for
+            self.events[-1]["t_cut_s"] = job.t_cut_s
         tiers, self._last_tiers = self._last_tiers, {}
         if tiers:
             self.events[-1]["parts_wall_s"] = tiers
