@@ -45,6 +45,19 @@ own survivors, which it never displaces; its best is not passed as a joint model
 nests the PD model with the same law: the line off). Its candidates follow the grid's in the
 order of the table.
 
+**The finalists.** The full search's fits still depend on their starts: where the joints bind,
+a fit whose joint parameters took up the water's misfit (a stall torque three times the
+plant's) sits in a basin its own polish never leaves, and the held-out errors then rank laws
+by their fits' luck. So the :data:`FINALISTS` best by mean held-out error (:func:`finalists`)
+are refitted before the choice (:func:`_final`): polished from every fully searched
+candidate's fits carried over by name (their own of the other motions too: the full stage
+polishes only the carried start that scores best before its polish, and a start's score says
+little of where its polish ends), and from their joint parameters spread over their whole
+bounds (:func:`spread_starts`, from their own fit and the best carried one), of which the
+:data:`FINAL_POLISHED` best, :data:`FINAL_SEPARATION` apart (:func:`separated`), are polished. A refit at most :data:`IMPROVED` times the fit's
+fitness replaces it, and its current, folds and excursion are scored again. The table marks a
+full fit more than :data:`MISFIT_FACTOR` times its motion's best (:func:`misfit_ratios`).
+
 **A failure is not a score.** A fold whose refit fails (a penalty on a training gait or on the
 held-out one) is refitted from the candidate's next start; a candidate whose fold still fails is
 marked failed, shown as such, and never ranked by a penalty-inflated mean.
@@ -109,6 +122,16 @@ ABSENT = {"C_L": 0.0, "C_D_alpha": 0.0, "alpha_stall": float(np.pi / 2),  # pi/2
           "servo_max_torque_nm": np.inf, "servo_max_speed_rad_s": np.inf}  # clipped to the bounds
 AFTER_SCREEN_LAWS = 2  # the screen's best laws a joint model that joins after it is tried with
 # (besides every base law of the grid: after_screen_laws)
+FINALISTS = 3  # the comparison's best few, refitted from more starts before the choice
+# where the joint parameters' spread starts sit in their bounds (fractions; every combination)
+SPREAD_LEVELS = (0.1, 0.3, 0.5, 0.7, 0.9)
+# and each joint parameter alone at this many even steps over its bounds, the others kept: on
+# the servo line the fitness has a valley a fiftieth of the stall torque's range wide
+SPREAD_STEPS = 61
+FINAL_POLISHED = 4  # a finalist's best new starts polished, per fit, each this far apart:
+FINAL_SEPARATION = 0.25  # in the unit cube of its still-water parameters (Euclidean)
+IMPROVED = 0.9  # a finalist's refit replaces its fit (scored again) when this much lower or more
+MISFIT_FACTOR = 3.0  # a full fit this many times the best full fit of its motion is marked
 ONE_SET_CANDIDATES = 1  # the best separate-set models also tried with one set for all motions
 ONE_SET = "one set"  # the suffix of a one-set candidate's name
 
@@ -177,6 +200,9 @@ class CandidateScore:
         Per fit, how far its predictions of the gaits between its training gaits leave the
         speeds the recordings bracket (:func:`eelhost.estimation.neighbours.neighbour_excursion`:
         1 inside; absent for a screened-out candidate).
+    refitted : list of str
+        The fits a finalist's refit from more starts replaced (module docstring, "The
+        finalists").
     """
 
     model: str
@@ -189,6 +215,7 @@ class CandidateScore:
     failed: str | None = None
     screened_out: bool = False
     between: dict[str, float] = field(default_factory=dict)
+    refitted: list[str] = field(default_factory=list)
 
     @property
     def excursion(self) -> float:
@@ -411,6 +438,7 @@ def cross_validate(
     fold_iterations: int = FOLD_ITERATIONS,
     screen_budget: int = SCREEN_BUDGET,
     survivors: int = SURVIVORS,
+    final: int = FINALISTS,
 ) -> list[CandidateScore]:
     """Leave-one-gait-out cross-validation of the candidate models (module docstring).
 
@@ -444,6 +472,9 @@ def cross_validate(
         ``survivors`` candidates.
     survivors : int
         At most this many candidates pass the screen (:func:`pass_screen`).
+    final : int
+        How many of the best fully searched candidates are refitted from more starts before
+        the choice (:func:`finalists`; 0: none).
 
     Returns
     -------
@@ -506,6 +537,8 @@ def cross_validate(
                      len(spaces))
         full = _full(workers, spaces, evs, motions, alive, screen_fits, settings.seed,
                      iterations, fold_iterations, budget, seed_offset=1 if screen_fits else 0)
+        if final > 0:
+            _final(workers, spaces, evs, full, iterations, fold_iterations, final)
     scores = []
     for i in range(len(spaces)):
         if i in full:
@@ -799,6 +832,168 @@ def _score_stage(
     return fitted, folds, neighbour_excursion(ev, fitted.values[0]), ev
 
 
+def finalists(scores: Mapping[int, CandidateScore], count: int = FINALISTS) -> list[int]:
+    """The comparison's best few: the ``count`` lowest mean held-out errors that ran, by position.
+
+    Failed candidates are not among them (module docstring, "The finalists").
+    """
+    ran = sorted((i for i, c in scores.items() if np.isfinite(c.mean_held_out)),
+                 key=lambda i: scores[i].mean_held_out)
+    return sorted(ran[:count])
+
+
+def spread_starts(space: ParameterSpace, base: np.ndarray,
+                  levels: Sequence[float] = SPREAD_LEVELS,
+                  steps: int = SPREAD_STEPS) -> list[np.ndarray]:
+    """``base`` with its joint parameters spread over their whole bounds.
+
+    Every combination of ``levels`` (fractions of each joint parameter's range), then each joint
+    parameter alone at ``steps`` even steps from its lower to its upper bound, the others at
+    ``base``'s values. The fluid coefficients (and anything after the joint parameters) stay
+    ``base``'s; a space without fitted joint parameters (the paper's PD) has none. Why: where
+    the joints bind, a fit whose joint parameters took up the water's misfit (a stall torque
+    three times the plant's) sits in a basin that the polish from its own fit never leaves, and
+    the plant's valley is narrow: on ``servo_limits`` the fitness at the plant's own turning
+    coefficients is 0.11 at its stall torque 0.020 N m, 0.67 at 0.022 and 1.02 at 0.018
+    (docs/estimation.md, "The finalists").
+
+    Parameters
+    ----------
+    space : ParameterSpace
+    base : ndarray, shape (K,)
+    levels : sequence of float
+    steps : int
+        0: the combinations only.
+
+    Returns
+    -------
+    list of ndarray, shape (K,)
+        ``len(levels) ** j + j * steps`` starts for ``j`` fitted joint parameters.
+    """
+    k, j = len(space.coefficient_names), len(space.joints.names)
+    if j == 0:
+        return []
+    lo, hi = space.bounds[k:k + j, 0], space.bounds[k:k + j, 1]
+    grid = np.stack(np.meshgrid(*([np.asarray(levels, dtype=float)] * j), indexing="ij"), -1)
+    own = (np.asarray(base, dtype=float)[k:k + j] - lo) / (hi - lo)
+    lines = [np.where(np.arange(j) == p, f, own) for p in range(j)
+             for f in np.linspace(0.0, 1.0, steps)] if steps > 0 else []
+    out = []
+    for fractions in list(grid.reshape(-1, j)) + lines:
+        x = np.array(base, dtype=float)
+        x[k:k + j] = lo + np.asarray(fractions) * (hi - lo)
+        out.append(x)
+    return out
+
+
+def separated(points: np.ndarray, fitness: np.ndarray, space: ParameterSpace, count: int,
+              separation: float = FINAL_SEPARATION,
+              away_from: Sequence[np.ndarray] = ()) -> list[int]:
+    """The best ``count`` of ``points`` by ``fitness``, each at least ``separation`` apart.
+
+    Distances are Euclidean in the unit cube of ``space``; a point that near one already taken
+    or one of ``away_from`` (the fits already polished) is passed over, and so are failed ones
+    (a penalty). Indices into ``points``, best first.
+    """
+    u = np.clip(space.to_unit(np.atleast_2d(points)), 0.0, 1.0)
+    taken_u = [np.clip(space.to_unit(np.asarray(a, float)), 0.0, 1.0) for a in away_from]
+    out: list[int] = []
+    for i in np.argsort(fitness, kind="stable"):
+        if len(out) == count or fitness[i] >= FAILED:
+            break
+        if all(np.linalg.norm(u[i] - t) >= separation for t in taken_u):
+            out.append(int(i))
+            taken_u.append(u[i])
+    return out
+
+
+def _final_stage(
+    ev: Evaluator, own: np.ndarray, carried: list[np.ndarray], iterations: int,
+    fold_iterations: int,
+) -> tuple[tuple[_Fitted, tuple[np.ndarray, str | None], float] | None, float, float,
+           Evaluator]:
+    """A finalist's fit refitted from more starts (module docstring, "The finalists").
+
+    ``own``: its still-water fit; ``carried``: the other candidates' full fits (and its own of
+    the other motions) carried into its space, each polished (those that run). Then its joint
+    parameters spread over their bounds (:func:`spread_starts`) from its own fit and from the
+    best carried one: the :data:`FINAL_POLISHED` best of those, :data:`FINAL_SEPARATION` apart
+    and from the other starts, are polished too. When the best is at most :data:`IMPROVED` times its own fit's fitness,
+    it is scored again (current, folds, excursion: :func:`_score_stage`). Returns that score or
+    None, its own and its best refit's still-water fitness, and the evaluator.
+    """
+    still = replace(ev.space, current=False)
+    still_ev = ev.with_space(still) if ev.space.current else ev
+    first = np.array([own] + list(carried), dtype=float)[:, :still.size]
+    f_first = still_ev.fitness(first)
+    bases = [first[0]] + ([first[1 + int(np.argmin(f_first[1:]))]] if len(first) > 1 else [])
+    spread = np.array([x for b in bases for x in spread_starts(still, b)]).reshape(-1, still.size)
+    f_spread = still_ev.fitness(spread) if len(spread) else np.zeros(0)
+    # every carried start that runs is polished: its fitness before the polish says little (on
+    # servo_limits seed 24 the straight fit scored 1.88 on the turning gaits and polished to
+    # 0.118, while the turning fit's own basin ended at 0.95); of the spread, the best few
+    ran = [j for j in range(1, len(first)) if f_first[j] < FAILED]
+    chosen = separated(spread, f_spread, still, FINAL_POLISHED, away_from=list(first))
+    points = np.vstack([first[ran], spread[chosen]])
+    best_fitness = float(f_first[0])
+    out = None
+    if len(points):
+        results = polish_minimax_many(many_problems(still_ev, [None] * len(points)), still,
+                                      points, iterations)
+        ranked = sorted(results, key=lambda r: r.fitness)
+        best_fitness = min(best_fitness, float(ranked[0].fitness))
+        if ranked[0].fitness <= IMPROVED * f_first[0]:
+            fits = _merge(_Fitted([np.asarray(r.values, float) for r in ranked],
+                                  [r.fitness for r in ranked]),
+                          _Fitted([first[0]], [float(f_first[0])]))
+            fitted, folds, between, _ = _score_stage(ev, fits, iterations, fold_iterations)
+            out = (fitted, folds, between)
+    if still_ev is not ev:
+        ev.simulations += still_ev.simulations
+        ev.steps += still_ev.steps
+    return out, float(f_first[0]), best_fitness, ev
+
+
+def _final(
+    workers: _Workers, spaces: Sequence[ParameterSpace],
+    evs: dict[tuple[int, str], Evaluator], full: dict[int, CandidateScore],
+    iterations: int, fold_iterations: int, count: int = FINALISTS,
+) -> None:
+    """The finalists refitted from more starts, their scores replaced where that fit lower.
+
+    Every fit of the :func:`finalists` is refitted in :func:`_final_stage` from every full
+    candidate's fits carried over by name and from its joint parameters spread over their
+    bounds; a refit at most :data:`IMPROVED` times the fit's still-water fitness replaces the
+    fit and its held-out errors (unless its folds fail). ``full`` is updated in place.
+    """
+    keys = [(i, m) for i in finalists(full, count) for m in full[i].values]
+    pool = [(o, n, spaces[o].as_dict(full[o].values[n])) for o in sorted(full)
+            for n in full[o].values if not full[o].failed]
+    tasks, before = [], []
+    for i, m in keys:
+        still = replace(spaces[i], current=False)
+        own = np.asarray(full[i].values[m], dtype=float)[:still.size]
+        carried = [carry_over(v, still, still.bounds.mean(axis=1))
+                   for o, n, v in pool if (o, n) != (i, m)]
+        before.append(evs[(i, m)].simulations)
+        tasks.append((evs[(i, m)], own, carried, iterations, fold_iterations))
+    done = workers.map(_final_stage, tasks)
+    for (i, m), runs, (result, was, now, ev) in zip(keys, before, done, strict=True):
+        evs[(i, m)] = ev
+        score = full[i]
+        score.simulations += ev.simulations - runs
+        kept, mean = "kept", score.mean_held_out
+        if result is not None and result[1][1] is None:
+            fitted, (held, _), between = result
+            score.fitness[m], score.values[m], score.held_out[m] = (
+                fitted.fitness[0], fitted.values[0], held)
+            score.between[m] = between
+            score.refitted.append(m)
+            kept = f"replaced; mean held-out error {mean:.4f} -> {score.mean_held_out:.4f}"
+        log.info("model comparison: finalist %s, %s: still-water fitness %.4f, refit from more "
+                 "starts %.4f (%s)", score.model, m, was, now, kept)
+
+
 def _in_worker(job: tuple[Callable[..., Any], tuple[Any, ...]]) -> tuple[Any, int]:
     """Run one stage's task in a worker process; its result and the closed-loop runs it made."""
     task, args = job
@@ -908,17 +1103,43 @@ def _said(score: CandidateScore, say: Callable[[str], None] | None) -> None:
         say(f"cross-validation: {score.model}: {text}")
 
 
+def misfit_ratios(scores: Sequence[CandidateScore]) -> dict[int, dict[str, float]]:
+    """Each fully fitted candidate's fitness over the lowest of its motion's, by position.
+
+    Among the separate-set candidates that got the full search and did not fail (the screen's
+    short fits and one set for every motion, fitted to other experiments, are not compared).
+    A ratio above :data:`MISFIT_FACTOR` says the fit is stuck in a local minimum or its family
+    cannot represent the tank (docs/estimation.md, "The finalists"); the table says so.
+    """
+    full = {i: c for i, c in enumerate(scores)
+            if not (c.screened_out or c.failed or c.one_set)}
+    best: dict[str, float] = {}
+    for c in full.values():
+        for m, f in c.fitness.items():
+            best[m] = min(best.get(m, np.inf), f)
+    return {i: {m: f / best[m] for m, f in c.fitness.items() if best[m] > 0}
+            for i, c in full.items()}
+
+
 def table_markdown(scores: Sequence[CandidateScore]) -> str:
-    """The comparison as a markdown table, the recommended candidate marked, failures shown."""
+    """The comparison as a markdown table, the recommended candidate marked, failures shown.
+
+    A full fit more than :data:`MISFIT_FACTOR` times its motion's best full fit is marked with
+    the ratio (:func:`misfit_ratios`).
+    """
     choice = recommend(scores)
+    ratios = misfit_ratios(scores)
     motions = list(dict.fromkeys(m for c in scores for m in c.fitness))
     head = ("| model | parameters | " + " | ".join(f"fitness {m}" for m in motions)
             + " | mean held-out error | worst held-out error | between training gaits"
             " | simulations |")
     lines = [head, "|---|---|" + "---|" * len(motions) + "---|---|---|---|"]
-    for c in scores:
+    for i, c in enumerate(scores):
         mark = " (recommended)" if c is choice else " (screened out)" if c.screened_out else ""
-        fitness = " | ".join(f"{c.fitness[m]:.4f}" if m in c.fitness else "-" for m in motions)
+        fitness = " | ".join(
+            (f"{c.fitness[m]:.4f}" + (f" (x{r:.1f} the best fit)" if (r := ratios.get(
+                i, {}).get(m, 1.0)) > MISFIT_FACTOR else "")) if m in c.fitness else "-"
+            for m in motions)
         screen = " (screen)" if c.screened_out else ""
         held = (f"failed ({c.failed}) | failed" if c.failed
                 else f"{c.mean_held_out:.4f}{screen} | {c.worst_held_out:.4f}{screen}")
