@@ -1382,6 +1382,7 @@ class TankReplanner:
         if outcome.found:
             self.failures = 0
             self._plan_current = extra
+            self._urgent_after_cut = None  # it judged the old plan; the new one is judged anew
             self.outcome = outcome
             self.path = corridor_path(outcome.plan)
             self._pending = (job.t_start_s, list(outcome.plan.waypoints_m),
