@@ -95,6 +95,16 @@ def test_the_summary_counts_shift_repairs_and_reads_results_written_before_them(
     assert not any("shift repair" in line for line in summary_lines([old]))
 
 
+def test_the_summary_counts_calm_replans_and_their_cuts_only_where_the_budget_was_on():
+    old = WorldResult(5000, True, "found", "arrived", reached=True, min_clearance_m=0.05)
+    calm = WorldResult(5001, True, "found", "arrived", reached=True, min_clearance_m=0.04,
+                       calm_budget_s=3.0, calm_replans=4, calm_found=1, calm_cut=2)
+    lines = summary_lines([old, calm])
+    assert ("- calm replans (in a moved current estimate, budget 3 s): 4, of which 1 found a "
+            "plan and 2 were cut short for an urgent replan") in lines
+    assert not any("calm replans" in line for line in summary_lines([old]))
+
+
 def test_the_estimate_error_compares_each_frame_with_the_plants_step_at_its_time():
     # the plant's trace holds a state every physics step from the gait's start (the frames'
     # clock); a frame's estimate 5 mm off its own step's body is 5 mm off, not off by the motion

@@ -118,6 +118,12 @@ class WorldResult:
         body at the frame: the largest distance of its points
         (:func:`eelhost.planning.state_estimate.body_error_m`), median, 95th percentile and
         largest over the run's frames, mm (empty in results written before it).
+    calm_budget_s : float or None
+        The calm replans' budget (None: off, or results written before it).
+    calm_replans, calm_found, calm_cut : int
+        Replans given the calm budget, those that found a plan, and those cut short for an
+        urgent replan (docs/planning.md, "Calm replans get more time, and an urgent replan cuts
+        them short").
     """
 
     seed: int
@@ -145,6 +151,10 @@ class WorldResult:
     shift_repairs: int = 0
     retries_before_contact: int = 0
     estimate_error_mm: dict = field(default_factory=dict)
+    calm_budget_s: float | None = None
+    calm_replans: int = 0
+    calm_found: int = 0
+    calm_cut: int = 0
 
 
 def true_clearance_m(world: World, model: SwimmerModel, states: FloatArray) -> FloatArray:
@@ -304,6 +314,8 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
         record_to.write_text(json.dumps({"seed": seed, "outcome": out.reason,
                                          "detail": out.detail, **nav.record()}))
     replans = [e for e in nav.events if e["kind"] == "replan"]
+    calm = [e for e in replans if replan_budget_s is not None
+            and (e.get("budget_s") or 0.0) > replan_budget_s]
     return WorldResult(
         seed, True, "found", out.reason, out.detail, out.reason == "arrived",
         float(clear.min()), bool(clear.min() < 0.0), out.failsafe_reports,
@@ -315,7 +327,9 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
         [e["cpu_s"] for e in replans if e["cpu_s"] is not None], law,
         [e["status"] for e in replans if e["status"] != "found"], replan_budget_s,
         sum(e["message"].startswith("shift repair:") and "t_switch_s" in e for e in replans),
-        nav.retries_before_contact, estimate_error)
+        nav.retries_before_contact, estimate_error, calm_budget_s if replan_budget_s else None,
+        len(calm), sum(e["status"] == "found" for e in calm),
+        sum("cut_for" in e for e in calm))
 
 
 def estimate_error_mm(model: SwimmerModel, history: list[tuple[float, FloatArray]] | None,
@@ -481,6 +495,13 @@ def summary_lines(results: list[WorldResult]) -> list[str]:
                      + (", ".join(f"{b:g} s" for b in budgets) if budgets else "none")
                      + "; failed replans by status: "
                      + (", ".join(f"{k} {v}" for k, v in sorted(failed.items())) or "none"))
+    calm_budgets = sorted({r.calm_budget_s for r in planned if r.calm_budget_s is not None})
+    if calm_budgets:
+        lines.append(f"- calm replans (in a moved current estimate, budget "
+                     f"{', '.join(f'{b:g} s' for b in calm_budgets)}): "
+                     f"{sum(r.calm_replans for r in planned)}, of which "
+                     f"{sum(r.calm_found for r in planned)} found a plan and "
+                     f"{sum(r.calm_cut for r in planned)} were cut short for an urgent replan")
     cpus = [c for r in planned for c in r.replan_cpu_s]
     if cpus:
         lines.append(f"- replans' processor time: median {statistics.median(cpus):.2f} s, "
