@@ -162,6 +162,11 @@ class Evaluator:
         other.backend = self.backend.fresh()  # the run lengths it learned were of this space
         return other
 
+    def count_from(self, other: Evaluator) -> None:
+        """Add the simulations and steps of ``other`` (a :meth:`with_space` of this one) here."""
+        self.simulations += other.simulations
+        self.steps += other.steps
+
     def prepare_like(self, experiments: Sequence[Experiment]) -> list[PreparedExperiment]:
         """Experiments prepared as this evaluator prepares its own (samples, clock search)."""
         return [prepare(e, self.n_samples, align_s=self.align_s, observe=self.observe,

@@ -307,8 +307,7 @@ def run_fit(problem: FitProblem) -> FitResult:
     still_ev = ev.with_space(still)
     k = still.size
     first = fit(replace(problem, evaluator=still_ev, start=np.asarray(problem.start)[:k]))
-    ev.simulations += still_ev.simulations
-    ev.steps += still_ev.steps
+    ev.count_from(still_ev)
     begin = np.concatenate([first.values, np.zeros(len(space.current_names))])
     in_space = FitResult(first.method, space, begin, first.fitness, first.history,
                          first.evaluations, search_evaluations=first.search_evaluations)

@@ -185,8 +185,7 @@ def neighbour_excursion(ev: Evaluator, values: np.ndarray) -> float:
     near.backend = ev.backend.fresh()
     near.simulations, near.steps = 0, 0
     sim = near.simulate(np.asarray(values, float)[None, :])
-    ev.simulations += near.simulations
-    ev.steps += near.steps
+    ev.count_from(near)
     # a failure after the run's arrival and its last sample does not count (it circles its goal
     # where nothing is compared); too slow to reach the goal in time is a speed, which is what is
     # compared; a run that blew up or collided with itself before its last sample has none

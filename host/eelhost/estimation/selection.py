@@ -200,9 +200,6 @@ class CandidateScore:
         Per fit, how far its predictions of the gaits between its training gaits leave the
         speeds the recordings bracket (:func:`eelhost.estimation.neighbours.neighbour_excursion`:
         1 inside; absent for a screened-out candidate).
-    refitted : list of str
-        The fits a finalist's refit from more starts replaced (module docstring, "The
-        finalists").
     """
 
     model: str
@@ -215,7 +212,6 @@ class CandidateScore:
     failed: str | None = None
     screened_out: bool = False
     between: dict[str, float] = field(default_factory=dict)
-    refitted: list[str] = field(default_factory=list)
 
     @property
     def excursion(self) -> float:
@@ -369,8 +365,7 @@ def multi_start_fit(
     results = polish_minimax_many(many_problems(still_ev, [None] * len(begins)), still,
                                   np.array(begins), iterations)
     if still_ev is not ev:
-        ev.simulations += still_ev.simulations
-        ev.steps += still_ev.steps
+        ev.count_from(still_ev)
     ranked = sorted(results, key=lambda r: r.fitness)
     return _Fitted([np.asarray(r.values, float) for r in ranked], [r.fitness for r in ranked])
 
@@ -949,8 +944,7 @@ def _final_stage(
             fitted, folds, between, _ = _score_stage(ev, fits, iterations, fold_iterations)
             out = (fitted, folds, between)
     if still_ev is not ev:
-        ev.simulations += still_ev.simulations
-        ev.steps += still_ev.steps
+        ev.count_from(still_ev)
     return out, float(f_first[0]), best_fitness, ev
 
 
@@ -988,7 +982,6 @@ def _final(
             score.fitness[m], score.values[m], score.held_out[m] = (
                 fitted.fitness[0], fitted.values[0], held)
             score.between[m] = between
-            score.refitted.append(m)
             kept = f"replaced; mean held-out error {mean:.4f} -> {score.mean_held_out:.4f}"
         log.info("model comparison: finalist %s, %s: still-water fitness %.4f, refit from more "
                  "starts %.4f (%s)", score.model, m, was, now, kept)
@@ -1121,6 +1114,15 @@ def misfit_ratios(scores: Sequence[CandidateScore]) -> dict[int, dict[str, float
             for i, c in full.items()}
 
 
+def _fitness_cell(c: CandidateScore, motion: str, ratios: Mapping[str, float]) -> str:
+    """A fit's fitness for the table, marked when over :data:`MISFIT_FACTOR` times the best."""
+    if motion not in c.fitness:
+        return "-"
+    ratio = ratios.get(motion, 1.0)
+    mark = f" (x{ratio:.1f} the best fit)" if ratio > MISFIT_FACTOR else ""
+    return f"{c.fitness[motion]:.4f}{mark}"
+
+
 def table_markdown(scores: Sequence[CandidateScore]) -> str:
     """The comparison as a markdown table, the recommended candidate marked, failures shown.
 
@@ -1136,10 +1138,7 @@ def table_markdown(scores: Sequence[CandidateScore]) -> str:
     lines = [head, "|---|---|" + "---|" * len(motions) + "---|---|---|---|"]
     for i, c in enumerate(scores):
         mark = " (recommended)" if c is choice else " (screened out)" if c.screened_out else ""
-        fitness = " | ".join(
-            (f"{c.fitness[m]:.4f}" + (f" (x{r:.1f} the best fit)" if (r := ratios.get(
-                i, {}).get(m, 1.0)) > MISFIT_FACTOR else "")) if m in c.fitness else "-"
-            for m in motions)
+        fitness = " | ".join(_fitness_cell(c, m, ratios.get(i, {})) for m in motions)
         screen = " (screen)" if c.screened_out else ""
         held = (f"failed ({c.failed}) | failed" if c.failed
                 else f"{c.mean_held_out:.4f}{screen} | {c.worst_held_out:.4f}{screen}")
