@@ -1613,3 +1613,143 @@ def test_the_benchmarks_summary_counts_the_runs_retried_before_a_predicted_conta
     assert ("- replans retried at once before a predicted contact instead of a stop: 3, in 2 "
             "runs (1 of them reached the goal)") in lines
     assert not any("retried" in line for line in summary_lines([plain]))
+
+
+# -- an earlier replan (docs/planning.md, "An earlier replan") ----------------------------------
+
+
+class EarlyAhead(FailingInTheTestsEstimate):
+    """The look-ahead swims the capsule ``bare_m`` from something (``capsule_m`` the same), the
+    outline 100 mm clear, the rest of the plan in a moved estimate ``rest_m``; replans fail at
+    once (exhausted), or give ``found`` when set, or the first one ``hold`` (``current_estimate``
+    or ``early_margin``) waits until its deadline is cut or passes; each call records its
+    estimate's time and its budget left."""
+
+    asked: list
+    fallbacks: list
+    bare_m = 0.02
+    rest_m = 0.2
+    found: Outcome | None = None
+    hold = False
+
+    def _asked(self, est, start_step, extra, deadline_s):  # noqa: ANN001, ANN202
+        return est.t_s, float(deadline_s) - time.monotonic()
+
+    def _replan(self, est, left, start_step, extra, guide=None,  # noqa: ANN001, ANN202
+                deadline_s=None, fallbacks=True):  # noqa: ANN001
+        self.fallbacks.append(fallbacks)
+        if self.hold and not self.asked:
+            while not deadline_s.cut and time.monotonic() < float(deadline_s):
+                time.sleep(0.005)
+        result = super()._replan(est, left, start_step, extra, guide, deadline_s)
+        return result if self.found is None else (self.found, *result[1:])
+
+    def _look_ahead(self, est, left, extra, guide=None, horizon_s=None):  # noqa: ANN001, ANN202
+        if horizon_s is not None:
+            return Ahead(0.2, self.rest_m)
+        return Ahead(0.1, self.bare_m, math.inf, math.inf, self.bare_m)
+
+
+def early_nav(open_plan, early_margin_m=0.03, **kwargs):  # noqa: ANN001, ANN201
+    planner, outcome = open_plan
+    nav = EarlyAhead(lambda extra: planner, planner, outcome, PATH_GAIT, replan_budget_s=1.0,
+                     calm_budget_s=CALM_REPLAN_BUDGET_S, early_margin_m=early_margin_m, **kwargs)
+    nav.asked, nav.fallbacks = [], []
+    return nav, np.asarray(outcome.plan.legs[0].com_m[0])
+
+
+def frames_at(nav: TankReplanner, t0: float, seconds: float, com, until=None) -> list:  # noqa: ANN001
+    """Frames of the robot at ``com`` from ``t0``, its workers' jobs done after each (when
+    ``until`` is given: the frames go on, 10 ms of wall time each, until ``until()``)."""
+    decisions = []
+    for k in range(int(seconds * 30)):
+        t = t0 + k / 30
+        decisions.append(nav.on_frame(t, pose_at(t, com), np.array([*com, 0.0]), 0, 0.0))
+        if until is None:
+            nav._worker.submit(lambda: None).result()
+        elif until():
+            break
+        else:
+            time.sleep(0.01)
+        nav._side.submit(lambda: None).result()
+    return decisions
+
+
+@pytest.mark.parametrize(("early_margin_m", "bare_m", "asked"),
+                         [(0.03, 0.02, True), (0.03, 0.04, False), (None, 0.02, False)])
+def test_an_early_replan_that_finds_nothing_keeps_the_plan_counts_no_failure_and_backs_off(
+        open_plan, early_margin_m, bare_m, asked):
+    nav, start = early_nav(open_plan, early_margin_m)
+    nav.bare_m = bare_m
+    try:
+        decisions = frames_at(nav, 0.0, 5.0, start)
+    finally:
+        nav.close()
+    assert {d.stop for d in decisions} == {None} and not any(d.waypoints for d in decisions)
+    assert nav.failures == 0
+    if not asked:  # outside the early margin, or the margin off: the plan swims on unreplanned
+        assert nav.asked == [] and len(nav.events) == 1
+        return
+    replans = nav.events[1:]
+    assert len(replans) >= 2 and {e["reason"] for e in replans} == {"early_margin"}
+    assert {e["budget_s"] for e in replans} == {1.0}  # the replan budget, not the calm one's
+    assert set(nav.fallbacks) == {False}  # the planner alone: a plan at the world's margin
+    assert all(0.5 < left <= 1.0 for _, left in nav.asked)
+    gaps = np.diff([t for t, _ in nav.asked])
+    assert gaps[0] >= 1.0 - 0.05  # backs off 1 s, then 2 s, never one replan per look-ahead
+    assert len(gaps) < 2 or gaps[1] >= 2.0 - 0.05
+    assert nav.record()["early_margin_m"] == 0.03
+
+
+def test_an_early_replan_that_finds_a_plan_switches_it_in(open_plan):
+    nav, start = early_nav(open_plan)
+    nav.found = open_plan[1]
+    try:
+        decisions = frames_at(nav, 0.0, 2.0, start)
+    finally:
+        nav.close()
+    switched = [d for d in decisions if d.waypoints]
+    assert switched and switched[0].waypoints == list(open_plan[1].plan.waypoints_m)
+    first = nav.events[1]
+    assert first["reason"] == "early_margin" and first["status"] == "found"
+    assert "t_switch_s" in first and nav.failures == 0 and nav.replans >= 1
+    # the new plan swims within the early margin too (the look-ahead says so): the next early
+    # replan backs off as after one that found nothing, not one per look-ahead
+    asked = [t for t, _ in nav.asked]
+    assert len(asked) >= 2 and np.diff(asked)[0] >= 1.0 - 0.05
+
+
+@pytest.mark.parametrize(("held", "need"), [("early_margin", "left_corridor"),
+                                            ("early_margin", "predicted_contact"),
+                                            ("current_estimate", "early_margin")])
+def test_a_more_urgent_need_cuts_a_replan_in_flight_short_and_is_replanned_at_once(
+        open_plan, held, need):
+    nav, start = early_nav(open_plan)
+    nav.hold = True
+    if held == "current_estimate":  # a calm replan: the look-ahead clear, the rest of the plan
+        nav.bare_m, nav.rest_m = 0.2, 0.0  # in the moved estimate not
+        nav.current.value_m_s = np.array([0.0, 0.02])
+    try:
+        frames_at(nav, 0.0, 2.0, start, until=lambda: nav._job is not None)
+        job = nav._job
+        assert job is not None and job.reason == held and job.deadline is not None
+        t0, com = 2.0, start
+        if need == "left_corridor":
+            com = np.array([0.8, 1.4])
+        elif need == "predicted_contact":
+            nav.bare_m = 0.005  # within the look-ahead's 10 mm: the urgent replan
+        else:
+            nav.bare_m = 0.02  # within the early margin: a calm replan's 3 s start is too late
+        decisions = frames_at(nav, t0, 4.0, com,
+                              until=lambda: len(nav.events) >= 3 or nav.failures > 0)
+    finally:
+        nav.close()
+    assert {d.stop for d in decisions} == {None}
+    assert job.deadline.cut and len(nav.asked) == 2
+    cut, urgent = nav.events[1], nav.events[2]
+    assert cut["reason"] == held and cut["cut_for"] == need
+    assert urgent["reason"] == need and urgent["budget_s"] == 1.0 and "cut_for" not in urgent
+    assert nav.asked[0][1] <= 0.0 < nav.asked[1][1] <= 1.0  # the cut one's deadline had come
+    # the cut replan counted no failure; the urgent one's failure counts when it is urgent
+    assert nav.failures == (0 if need == "early_margin" else 1)
+    assert nav.fallbacks == [held != "early_margin", need != "early_margin"]

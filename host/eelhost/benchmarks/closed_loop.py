@@ -44,7 +44,7 @@ from eelhost.field.session import TakeNotes
 from eelhost.field.take import TakeRequest, run_take
 from eelhost.planning.geometry import FloatArray
 from eelhost.planning.planner import PlanRefused
-from eelhost.planning.replan import CALM_REPLAN_BUDGET_S, REPLAN_BUDGET_S
+from eelhost.planning.replan import CALM_REPLAN_BUDGET_S, EARLY_MARGIN_M, REPLAN_BUDGET_S
 from eelhost.planning.state_estimate import body_error_m, error_summary_mm
 from eelhost.planning.tank import plan_for_run
 from eelhost.planning.uncertainty import CoefficientModel
@@ -242,7 +242,8 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
               swimmer: SwimmerModel | None = None,
               replan_budget_s: float | None = REPLAN_BUDGET_S,
               record_to: Path | None = None,
-              calm_budget_s: float | None = CALM_REPLAN_BUDGET_S) -> WorldResult:
+              calm_budget_s: float | None = CALM_REPLAN_BUDGET_S,
+              early_margin_m: float | None = EARLY_MARGIN_M) -> WorldResult:
     """Plan one generated world and swim the plan over ``sim://`` (module docstring).
 
     Parameters
@@ -265,6 +266,8 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
         replan with its start state, status and message), to replay failing replans offline.
     calm_budget_s : float or None
         The calm replans' budget (:func:`eelhost.planning.tank.plan_for_run`).
+    early_margin_m : float or None
+        The early replans' margin (:func:`eelhost.planning.tank.plan_for_run`); None: off.
 
     Returns
     -------
@@ -284,7 +287,7 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
     try:
         planned = plan_for_run(world, robot, uri, gait, model, planner_options=planner_options,
                                swimmer=swimmer, replan_budget_s=replan_budget_s,
-                               calm_budget_s=calm_budget_s)
+                               calm_budget_s=calm_budget_s, early_margin_m=early_margin_m)
     except PlanRefused as err:
         return WorldResult(seed, False, err.status, detail=str(err), water=water,
                            plan_wall_s=time.perf_counter() - wall0,
@@ -373,6 +376,7 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
                           swimmer: SwimmerModel | None = None,
                           replan_budget_s: float | None = REPLAN_BUDGET_S,
                           calm_budget_s: float | None = CALM_REPLAN_BUDGET_S,
+                          early_margin_m: float | None = EARLY_MARGIN_M,
                           ) -> list[WorldResult]:
     """Run the benchmark over ``seeds``, resuming from ``<out>/results.jsonl``.
 
@@ -394,6 +398,8 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
         Each replan's wall-clock budget (:func:`run_world`).
     calm_budget_s : float or None
         The calm replans' budget (:func:`run_world`).
+    early_margin_m : float or None
+        The early replans' margin (:func:`run_world`).
 
     Returns
     -------
@@ -429,7 +435,7 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
             r = run_world(seed, robot, model, planner_options=planner_options,
                           swimmer=swimmer, replan_budget_s=replan_budget_s,
                           record_to=out / "planning" / f"{seed}.json",
-                          calm_budget_s=calm_budget_s)
+                          calm_budget_s=calm_budget_s, early_margin_m=early_margin_m)
             with path.open("a") as f:
                 f.write(json.dumps(asdict(r)) + "\n")
         results.append(r)

@@ -32,7 +32,7 @@ from eelhost.field.session import TakeNotes
 from eelhost.field.take import TakeRequest, ViewOpener, refuse_overwrite, run_take
 from eelhost.files import check_output_stem
 from eelhost.link.uri import parse_link_uri
-from eelhost.planning.replan import CALM_REPLAN_BUDGET_S
+from eelhost.planning.replan import CALM_REPLAN_BUDGET_S, EARLY_MARGIN_M
 from eelhost.progress import phase
 from eelhost.vision.markerfile import load_marker_file
 from eelhost.web.liveview import LiveView
@@ -95,6 +95,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    "asked for in a moved current estimate while the robot is on its plan; a "
                    "replan on leaving the corridor or a predicted contact cuts it short (3.0 s; "
                    "0: the --replan-budget; docs/planning.md, \"Calm replans get more time\")")
+    p.add_argument("--early-margin", type=NON_NEGATIVE, default=EARLY_MARGIN_M, metavar="M",
+                   help="with --plan or --bench: a look-ahead that swims the planner's capsule "
+                   "within this of an obstacle or wall (but not within its 10 mm) asks for an "
+                   "early replan, whose failure keeps the plan (%(default)g m; 0: off; "
+                   "docs/planning.md, \"An earlier replan\")")
     p.add_argument("--guidance", choices=GUIDANCE_LAWS.names(), default=PURSUIT.name,
                    help="the line-of-sight law that steers the robot: pursuit (the paper's pure "
                    "pursuit of each waypoint, default) or ilos (integral line-of-sight along each "
@@ -223,7 +228,8 @@ def run(args: argparse.Namespace) -> int:
                                    acceptance_radius_m=args.radius, swimmer=swimmer,
                                    planner_options={"guidance": law},
                                    replan_budget_s=args.replan_budget or None,
-                                   calm_budget_s=args.calm_budget or None)
+                                   calm_budget_s=args.calm_budget or None,
+                                   early_margin_m=args.early_margin or None)
         print(planned.outcome.message)
         print(f"coefficients: {model.describe()}")
         waypoints, navigator, uri = planned.waypoints_m, planned.navigator, planned.uri
@@ -293,7 +299,8 @@ def _bench(args: argparse.Namespace) -> int:
             options["unknown_current_m_s"] = args.check_unknown_current
         results = run_closed_loop_bench(robot, model, seeds, out, show, options,
                                         model.swimmer_for(robot), args.replan_budget or None,
-                                        calm_budget_s=args.calm_budget or None)
+                                        calm_budget_s=args.calm_budget or None,
+                                        early_margin_m=args.early_margin or None)
     command = (f"nice eelbot run --bench --worlds {args.worlds} --seed {args.seed}"
                + ("" if args.check_unknown_current is None
                   else f" --check-unknown-current {args.check_unknown_current:g}")
@@ -303,7 +310,9 @@ def _bench(args: argparse.Namespace) -> int:
                + (f" --replan-budget {args.replan_budget:g}" if args.replan_budget != 1.0
                   else "")
                + (f" --calm-budget {args.calm_budget:g}"
-                  if args.calm_budget != CALM_REPLAN_BUDGET_S else ""))
+                  if args.calm_budget != CALM_REPLAN_BUDGET_S else "")
+               + (f" --early-margin {args.early_margin:g}"
+                  if args.early_margin != EARLY_MARGIN_M else ""))
     lines = summary_lines(results)
     block = [BENCH_BEGIN, f"Command: `{command}`", "",
              f"- machine: {cpu_model()}, {os.cpu_count()} cores visible (shared with other "

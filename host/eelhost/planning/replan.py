@@ -266,6 +266,27 @@ its repair's search starting no expansion), later replans coming from starts whe
 manoeuvre swam into the obstacle (docs/planning.md, "Calm replans get more time")."""
 
 
+EARLY_MARGIN_M = 0.03
+"""The early margin (``TankReplanner(early_margin_m=)``; ``eelbot run`` passes it by default): a
+look-ahead that swims the planner's capsule within this much of an obstacle or wall (less the
+drift allowance, as the look-ahead's own 10 mm margin) within the replan horizon, but not within
+the look-ahead's margin, asks for an early replan (``early_margin``) while the body still has
+room to turn: a searched plan keeps its capsule 30 mm clear in its own water (the search's
+50 mm centre line less the body's half width), so under this the plan has lost the margin a new
+search from there would ask for. On development seeds 21000-21049 every run that missed its goal
+was stopped after replans asked at 10 mm, from starts where every manoeuvre swam into the
+obstacle (docs/planning.md, "An earlier replan")."""
+
+EARLY_BACKOFF_S = 1.0
+"""After an early replan (found or not; the present plan kept and no failure counted when not),
+the next early one waits this long, doubled after each further one (at most four times this)
+until a look-ahead swims the plan clear of the early margin."""
+
+EARLY_REASONS = ("current_estimate", "early_margin")
+"""Replans asked for while the look-ahead swims the present plan clear by its margin: a failure
+of one keeps the present plan and counts no failure (docs/planning.md)."""
+
+
 PLANNER_REBUILD_M_S = 0.005
 """A planner in the current estimate is built anew only when the estimate has moved this far from
 the one it was built in (building one takes 0.4-0.9 s on a loaded machine; docs/planning.md)."""
@@ -480,12 +501,27 @@ class Ahead(NamedTuple):
         the allowance (inf: never within the horizon): the back-off yields to a replan when it
         comes before a replan asked for after the back-off could steer (docs/planning.md,
         "The back-off yields to a predicted contact").
+    bare_m : float
+        The capsule's smallest gap over the replan horizon without the drift allowance (nan: not
+        swum; the early margin then reads ``capsule_m``): under the early margin, an early
+        replan is asked for (docs/planning.md, "An earlier replan").
     """
 
     outline_m: float
     capsule_m: float
     contact_s: float = math.inf
     near_s: float = math.inf
+    bare_m: float = math.nan
+
+
+def early_gap_m(judged: tuple[float, ...]) -> float:
+    """The capsule's gap a look-ahead's verdict gives the early margin (:attr:`Ahead.bare_m`).
+
+    A verdict without it (a bare pair, as the tests' fakes give) gives its capsule's gap.
+    """
+    if len(judged) > 4 and not math.isnan(judged[4]):
+        return float(judged[4])
+    return float(judged[1])
 
 
 def near_time_s(judged: tuple[float, ...], t_s: float, margin_m: float) -> float:
@@ -712,6 +748,18 @@ class TankReplanner:
         corridor or a predicted contact cuts a calm one short (its :class:`Deadline` brought
         forward: the worker stops at its next batch) and is asked for as soon as the worker is
         back. None (the default here): every replan gets ``replan_budget_s``.
+    early_margin_m : float or None
+        A look-ahead whose capsule comes within this margin (more than ``lookahead_margin_m``)
+        within ``replan_horizon_s``, but not within ``lookahead_margin_m``, asks for an early
+        replan (``early_margin``) with the replan budget and the short lead, while no replan
+        runs and none has failed since the last plan was found. It finds a plan: switched in as
+        any. It finds none: the robot keeps its present plan and no failure is counted. Either
+        way the next early replan waits :data:`EARLY_BACKOFF_S` (doubled after each further one
+        until a look-ahead swims the plan clear of the early margin). It tries the planner alone
+        (no goal approach, recovery or shift repair, whose margins are the look-ahead's). A
+        replan on leaving the corridor or a predicted contact cuts it short as a calm one, and
+        an early need cuts a calm replan short (docs/planning.md, "An earlier replan";
+        :data:`EARLY_MARGIN_M`, which ``eelbot run`` passes). None (the default here): off.
     """
 
     def __init__(
@@ -740,6 +788,7 @@ class TankReplanner:
         shift_repair: bool = True,
         retry_before_contact: bool = True,
         calm_budget_s: float | None = None,
+        early_margin_m: float | None = None,
     ) -> None:
         self.planner_for = planner_for
         self.planner = planner
@@ -764,6 +813,10 @@ class TankReplanner:
         self.replan_current_change_m_s = replan_current_change_m_s
         self.replan_budget_s = replan_budget_s
         self.calm_budget_s = calm_budget_s
+        self.early_margin_m = (early_margin_m if early_margin_m is not None
+                               and early_margin_m > lookahead_margin_m else None)
+        self._next_early_s = -math.inf  # the robot's time the next early replan may be asked
+        self._early_in_row = 0  # early replans since the plan was last swum clear of its margin
         self.shift_repair = shift_repair
         self.retry_before_contact = retry_before_contact
         self.retries_before_contact = 0  # replans asked for instead of a stop (the record's)
@@ -890,6 +943,7 @@ class TankReplanner:
         busy = self._job is not None or self._pending is not None
         predicted = False
         capsule = None
+        judged: tuple[float, ...] | None = None
         if self._lookahead is not None and self._lookahead.done():
             judged = self._lookahead.result()
             self._lookahead = None
@@ -898,6 +952,13 @@ class TankReplanner:
             # a new plan is asked for with the planner's capsule (the safer trigger); the robot is
             # stopped, or keeps its plan, on its own outline
             predicted = capsule is not None and capsule < self.lookahead_margin_m
+        # within the early margin, clear of the look-ahead's own: the plan has lost the margin a
+        # new search would keep, and the body still has room to turn (docs/planning.md, "An
+        # earlier replan")
+        early = (judged is not None and not predicted and self.early_margin_m is not None
+                 and early_gap_m(judged) < self.early_margin_m)
+        if judged is not None and not early and not predicted:
+            self._early_in_row = 0  # clear of the early margin: the next early need is new
         gap = self._last_gap[1]
         retry = yielded = False
         # the outline within the margin counts as contact for the stops: the twin's outline
@@ -943,12 +1004,17 @@ class TankReplanner:
                     f"replans failed in a row: {self.events[-1]['message']}")
                 return d
         job = self._job
-        if job is not None and self._calm(job) and job.cut_for is None and (
+        if job is not None and self._cuttable(job) and job.cut_for is None and (
                 predicted or self._off_corridor(pose)):
-            # a calm replan runs, and now a more urgent one is needed: cut the calm one short (the
-            # worker stops at its next batch) and ask for the urgent one when it is back
-            # (docs/planning.md, "Calm replans get more time")
+            # a calm (or early) replan runs, and now a more urgent one is needed: cut it short
+            # (the worker stops at its next batch) and ask for the urgent one when it is back
+            # (docs/planning.md, "Calm replans get more time", "An earlier replan")
             self._cut(job, "predicted_contact" if predicted else "left_corridor", t_s)
+        elif (job is not None and self._calm(job) and job.cut_for is None and early
+              and self._early_allowed(t_s)):
+            # a calm replan starts its budget (3 s) ahead: too late for a plan the look-ahead
+            # already swims within the early margin; the early replan starts a lead ahead
+            self._cut(job, "early_margin", t_s)
         if (predicted and close and job is not None
                 and (t_s > job.t_start_s + 1e-9 or self._calm_holds_up(job, t_s))
                 and not (t_s <= job.due_s
@@ -975,6 +1041,11 @@ class TankReplanner:
             reason = "predicted_contact"  # a failed replan's look-ahead swam into contact
         elif self._urgent_after_cut is not None:
             reason = self._urgent_after_cut  # what cut the calm replan short
+        elif early and self._early_allowed(t_s):
+            reason = "early_margin"
+            log.info("the twin predicts the body's capsule %.0f mm from an obstacle or wall "
+                     "within %.1f s (under the early margin): an early replan",
+                     early_gap_m(judged) * 1000, self.replan_horizon_s)  # type: ignore[arg-type]
         elif self._whole_plan_fails(est, left, busy):
             # the water the plan was searched in is not the one the camera sees, and the twin
             # swims the rest of the plan out of its margin in the estimate: replan in it while
@@ -1026,6 +1097,7 @@ class TankReplanner:
                 "retries_before_contact": self.retries_before_contact,
                 "backoff_yields": self.backoff_yields,
                 "replan_budget_s": self.replan_budget_s,
+                "early_margin_m": self.early_margin_m,
                 "current_estimate": self.current.history,
                 "state_estimate": self.estimator.summary()}
 
@@ -1101,6 +1173,19 @@ class TankReplanner:
         return (job.budget_s is not None and self.replan_budget_s is not None
                 and job.budget_s > self.replan_budget_s)
 
+    def _cuttable(self, job: _Job) -> bool:
+        """Whether an urgent replan cuts ``job`` short: a calm replan or an early one."""
+        return job.deadline is not None and (self._calm(job) or job.reason == "early_margin")
+
+    def _early_allowed(self, t_s: float) -> bool:
+        """Whether an early replan may be asked for now (:attr:`early_margin_m`).
+
+        Not after a failed replan (the urgent replans and their back-off are in charge until a
+        plan is found), nor within the back-off of an early replan that found nothing.
+        """
+        return (self.early_margin_m is not None and self.failures == 0
+                and t_s >= self._next_try_s and t_s >= self._next_early_s)
+
     def _calm_holds_up(self, job: _Job, t_s: float) -> bool:
         """Whether a calm ``job`` keeps the urgent replan a predicted contact needs waiting.
 
@@ -1117,14 +1202,14 @@ class TankReplanner:
         return time.monotonic() > back_by_s or not self._may_retry(t_s)
 
     def _cut(self, job: _Job, reason: str, t_s: float) -> None:
-        """Cut a calm replan short for a ``reason`` replan asked for as soon as it is back."""
+        """Cut a calm (or early) replan short for a ``reason`` replan asked for once it is back."""
         if job.deadline is None:
             return
         job.deadline.cut_to(time.monotonic())
         job.cut_for, job.t_cut_s = reason, t_s
         self._urgent_after_cut = reason
-        log.info("a %s replan is needed at t = %.2f s: the calm replan asked for at t = %.2f s "
-                 "is cut short", reason, t_s, job.t_request_s)
+        log.info("a %s replan is needed at t = %.2f s: the %s replan asked for at t = %.2f s "
+                 "is cut short", reason, t_s, job.reason, job.t_request_s)
 
     def _off_corridor(self, pose: FloatArray) -> bool:
         """Whether the pose's centre of mass is outside the present plan's corridor."""
@@ -1155,16 +1240,16 @@ class TankReplanner:
         wall = time.monotonic()
         deadline = None if budget is None else Deadline(wall + budget)
         future = self._worker.submit(self._replan_and_judge, est, list(left), start_step, extra,
-                                     self._guide, deadline)
+                                     self._guide, deadline, reason)
         due = (math.inf if budget is None or not self.retry_before_contact
                else t_s + budget + (SHIFT_GRACE_S if self.shift_repair else 0.0))
         self._job = _Job(future, t_s, wall, start_step * dt, reason, due, budget, deadline)
-        log.info("left the corridor at t = %.2f s; replanning from the state predicted for "
-                 "t = %.2f s", t_s, start_step * dt)
+        log.info("%s at t = %.2f s; replanning from the state predicted for t = %.2f s",
+                 reason, t_s, start_step * dt)
 
     def _replan(self, est: BodyEstimate, left: list[tuple[float, float]], start_step: int,
                 extra: FloatArray, guide: Guide | None = None,
-                deadline_s: SupportsFloat | None = None
+                deadline_s: SupportsFloat | None = None, fallbacks: bool = True
                 ) -> tuple[Outcome, FloatArray, float, float, FloatArray, float, int]:
         """On the worker: predict the state at the start step with the twin, then plan from it.
 
@@ -1180,7 +1265,11 @@ class TankReplanner:
 
         ``deadline_s`` (a ``time.monotonic()`` time, :attr:`replan_budget_s` after the request)
         bounds every search; the retries, the goal approach and the recovery are tried only
-        while time is left before it.
+        while time is left before it. With ``fallbacks`` False (an early replan) only the planner
+        is tried: a plan at the world's margin or none, never the goal approach's, the
+        recovery's or a shifted route, whose margins are the look-ahead's own 10 mm, to replace
+        a plan the look-ahead still swims clear by that margin (docs/planning.md, "An earlier
+        replan").
         """
         wall0, cpu0 = time.perf_counter(), time.thread_time()
         tiers: dict[str, float] = {}  # wall time of each part, recorded with the replan
@@ -1220,7 +1309,8 @@ class TankReplanner:
         # from it breaks the world's margin: the predicted start of a robot the water pushed on)
         # (not after a search stopped by the budget: the planner keeps only its check's time
         # free before the deadline, no room for another search and check)
-        if not outcome.found and outcome.status not in (*REFUSED_FROM_STATE, "out_of_time") and (
+        if fallbacks and not outcome.found and outcome.status not in (
+                *REFUSED_FROM_STATE, "out_of_time") and (
                 _time_left(deadline_s)) and (outcome.status == "exhausted"
                                              or self._near_goal(state)):
             goal_planner = self._goal_planner_in(extra)
@@ -1237,7 +1327,8 @@ class TankReplanner:
                         f"{outcome.message}; with the goal approach's margin: {approach.message}"))
         # the recovery: sharper turns, the goal approach's margin, a bounded search; only when
         # everything else found nothing (docs/planning.md, "The recovery replan")
-        if (not outcome.found and outcome.status not in (*REFUSED_FROM_STATE, "out_of_time")
+        if (fallbacks and not outcome.found
+                and outcome.status not in (*REFUSED_FROM_STATE, "out_of_time")
                 and _time_left(deadline_s)):
             recovery = self._planner_in("recovery", self.recovery_planner_for, extra)
             if recovery is not None and _time_left(deadline_s):
@@ -1254,8 +1345,8 @@ class TankReplanner:
                         f"{outcome.message}; with the recovery's actions: {rescue.message}"))
         # the shift repair: the present route, its waypoints moved against the water that pushes
         # it into something (docs/planning.md, "The shift repair")
-        if (self.shift_repair and not outcome.found and outcome.status not in REFUSED_FROM_STATE
-                and not _was_cut(deadline_s)):
+        if (fallbacks and self.shift_repair and not outcome.found
+                and outcome.status not in REFUSED_FROM_STATE and not _was_cut(deadline_s)):
             # also when the searches used up the budget (a failing search often does): the
             # repair's swims may overrun it by SHIFT_GRACE_S, a plan a little late rather than none
             repair_deadline = (None if deadline_s is None
@@ -1298,15 +1389,20 @@ class TankReplanner:
 
     def _replan_and_judge(self, est: BodyEstimate, left: list[tuple[float, float]],
                           start_step: int, extra: FloatArray, guide: Guide | None = None,
-                          deadline_s: SupportsFloat | None = None
+                          deadline_s: SupportsFloat | None = None, reason: str = ""
                           ) -> tuple[tuple, Ahead | None]:
         """On the worker: the replan and, when it fails, a look-ahead of the present waypoints.
 
         The look-ahead from the same estimate decides whether the robot may keep its present
-        plan (:meth:`_collect`), so a failure is never judged on a stale or missing one.
+        plan (:meth:`_collect`), so a failure is never judged on a stale or missing one. Not
+        swum for a replan of :data:`EARLY_REASONS` (its failure keeps the plan unjudged): the
+        worker is then free at once for an urgent replan. An early replan (``reason``
+        ``early_margin``) tries the planner alone (:meth:`_replan`'s ``fallbacks``).
         """
-        result = self._replan(est, left, start_step, extra, guide, deadline_s)
-        if result[0].found or self.lookahead_s <= 0:
+        result = (self._replan(est, left, start_step, extra, guide, deadline_s, fallbacks=False)
+                  if reason == "early_margin"
+                  else self._replan(est, left, start_step, extra, guide, deadline_s))
+        if result[0].found or self.lookahead_s <= 0 or reason in EARLY_REASONS:
             return result, None
         return result, self._look_ahead(est, left, self.current.value_m_s.copy(), guide)
 
@@ -1379,6 +1475,13 @@ class TankReplanner:
             self.failures += 1  # a failure for the stops on contact ahead, but no back-off
             self._next_try_s = t_s
             return True
+        if job.reason == "early_margin" and job.cut_for is None:
+            # found or not, the next early replan waits (1, 2, then 4 s) until a look-ahead swims
+            # the plan clear of the early margin: a plan found with a margin near the early one
+            # would otherwise be replanned at every look-ahead (docs/planning.md, "An earlier
+            # replan")
+            self._next_early_s = t_s + EARLY_BACKOFF_S * 2 ** min(self._early_in_row, 2)
+            self._early_in_row += 1
         if outcome.found:
             self.failures = 0
             self._plan_current = extra
@@ -1397,6 +1500,14 @@ class TankReplanner:
                 self._plan_current = extra
             log.info("replanning in the estimated current failed (%s); the robot keeps its plan",
                      outcome.status)
+            return True
+        if job.reason == "early_margin":
+            # asked for while the look-ahead swam the present plan clear by its margin: keep the
+            # plan, count no failure (the look-ahead still guards it: within its margin, the
+            # urgent replan), and wait before the next early one (docs/planning.md, "An earlier
+            # replan"); one cut short for an urgent replan leaves the back-off as it was
+            log.info("the early replan found nothing (%s); the robot keeps its plan, next early "
+                     "replan from t = %.2f s", outcome.status, self._next_early_s)
             return True
         self.failures += 1
         if judged is not None:
@@ -1505,7 +1616,9 @@ class TankReplanner:
         # exact wherever the gap may be within the margin and the largest allowance (the
         # capsule's gap is otherwise a lower bound away from its smallest value)
         capsule = body_clearance_m(planner.world, planner.clearance, planner.model, states,
-                                   self.lookahead_margin_m + LOOKAHEAD_DRIFT_MAX_M)
+                                   max(self.lookahead_margin_m + LOOKAHEAD_DRIFT_MAX_M,
+                                       self.early_margin_m or 0.0))
+        bare = float(capsule.min())
         if horizon_s is None:
             # the look-ahead that guards the robot: its margin grows along the horizon with the
             # drift the current estimate's uncertainty allows (docs/planning.md)
@@ -1514,7 +1627,7 @@ class TankReplanner:
                 current_spread_m_s(self.current.history), ahead_s))
         within = np.flatnonzero(capsule < self.lookahead_margin_m)
         near_s = (now + int(within[0]) * stride) * twin.dt_s if within.size else math.inf
-        return Ahead(float(outline.min()), float(capsule.min()), contact, near_s)
+        return Ahead(float(outline.min()), float(capsule.min()), contact, near_s, bare)
 
     def _twin_in(self, extra: FloatArray) -> Twin:
         """The planner's twin in the world's current plus the estimate ``extra``."""
@@ -1564,8 +1677,9 @@ class TankReplanner:
                            else near_time_s(judged, t_s, self.lookahead_margin_m))
         if judged is not None:
             log.debug("look-ahead from t = %.2f s (taken at %.2f s): outline %.1f mm, capsule "
-                      "%.1f mm, contact at %.2f s, near at %.2f s", from_s, t_s,
-                      judged[0] * 1000, judged[1] * 1000, self._contact_at_s, self._near_at_s)
+                      "%.1f mm (%.1f mm bare), contact at %.2f s, near at %.2f s", from_s, t_s,
+                      judged[0] * 1000, judged[1] * 1000, early_gap_m(judged) * 1000,
+                      self._contact_at_s, self._near_at_s)
 
     def _present_plan_hits(self, t_s: float) -> bool:
         """The last look-ahead, at most 1.5 s old, swam the present waypoints within the margin.

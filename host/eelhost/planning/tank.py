@@ -23,6 +23,7 @@ from eelhost.planning.geometry import FloatArray
 from eelhost.planning.planner import Outcome, Planner, PlanRefused
 from eelhost.planning.replan import (
     CALM_REPLAN_BUDGET_S,
+    EARLY_MARGIN_M,
     GOAL_APPROACH_CLEARANCE_M,
     REPLAN_BUDGET_S,
     TankReplanner,
@@ -119,6 +120,7 @@ def plan_for_run(
     swimmer: SwimmerModel | None = None,
     replan_budget_s: float | None = REPLAN_BUDGET_S,
     calm_budget_s: float | None = CALM_REPLAN_BUDGET_S,
+    early_margin_m: float | None = EARLY_MARGIN_M,
 ) -> RunPlan:
     """Plan in a world for ``eelbot run --plan`` (module docstring).
 
@@ -148,6 +150,10 @@ def plan_for_run(
         The budget of a replan asked for in a moved current estimate while the robot is on its
         plan, which a more urgent replan cuts short (``TankReplanner``; docs/planning.md, "Calm
         replans get more time"); None: the ``replan_budget_s`` as every other replan's.
+    early_margin_m : float or None
+        A look-ahead whose capsule comes this near (but not within its own margin) asks for an
+        early replan whose failure keeps the plan (``TankReplanner``; docs/planning.md, "An
+        earlier replan"); None: off.
 
     Returns
     -------
@@ -175,7 +181,8 @@ def plan_for_run(
                               goal_planner_for=tiers.goal_planner_for,
                               recovery_planner_for=tiers.recovery_planner_for,
                               replan_budget_s=replan_budget_s,
-                              calm_budget_s=calm_budget_s)
+                              calm_budget_s=calm_budget_s,
+                              early_margin_m=early_margin_m)
     return RunPlan(outcome.plan.waypoints_m, navigator, sim_uri_for_world(uri, world), outcome,
                    planner.options.guidance, outcome.plan.start_guide)
 
