@@ -1472,7 +1472,8 @@ class TankReplanner:
                 f"robot outside its corridor: not used ({outcome.message})")
             log.warning("replan ready %.2f s late, robot off its corridor: not used",
                         t_s - job.t_start_s)
-            self.failures += 1  # a failure for the stops on contact ahead, but no back-off
+            if job.reason not in EARLY_REASONS:  # asked while the plan swam clear: none
+                self.failures += 1  # a failure for the stops on contact ahead, but no back-off
             self._next_try_s = t_s
             return True
         if job.reason == "early_margin" and job.cut_for is None:
