@@ -802,8 +802,8 @@ def test_the_lookahead_asks_for_a_replan_5_s_ahead_but_judges_stops_on_the_next_
         finally:
             nav.close()
         margin = nav.lookahead_margin_m
-    outline_3, capsule_3, contact_3, near_3 = verdicts[3.0]
-    outline_5, capsule_5, contact_5, near_5 = verdicts[5.0]
+    outline_3, capsule_3, contact_3, near_3 = verdicts[3.0][:4]
+    outline_5, capsule_5, contact_5, near_5 = verdicts[5.0][:4]
     assert capsule_3 > margin + 0.005  # 3 s ahead the capsule stays clear: no replan asked for
     assert capsule_5 < margin  # 5 s ahead it meets the disc: a replan is asked for in time
     assert outline_5 == outline_3 > margin  # the stop's verdict is still the next 3 s's
@@ -1753,3 +1753,23 @@ def test_a_more_urgent_need_cuts_a_replan_in_flight_short_and_is_replanned_at_on
     # the cut replan counted no failure; the urgent one's failure counts when it is urgent
     assert nav.failures == (0 if need == "early_margin" else 1)
     assert nav.fallbacks == [held != "early_margin", need != "early_margin"]
+
+
+def test_the_early_margin_is_judged_over_a_longer_horizon_than_the_urgent_replan():
+    # the disc some 4 s ahead, the urgent replan's horizon 3 s: the capsule clear there (no
+    # urgent replan), the bare gap over the early horizon (5 s) within the early margin
+    planner, outcome, e = _disc_some_4_s_ahead()
+    verdicts = []
+    for early in (None, 0.03):
+        nav = TankReplanner(lambda extra: planner, planner, outcome, PATH_GAIT,
+                            replan_horizon_s=3.0, early_margin_m=early, early_horizon_s=5.0)
+        try:
+            verdicts.append(nav._look_ahead(e, [(2.5, 1.3)], np.zeros(2)))
+        finally:
+            nav.close()
+    plain, early = verdicts
+    assert plain.capsule_m == pytest.approx(early.capsule_m)
+    assert early.capsule_m > 0.01 + 0.005  # clear over 3 s: no urgent replan
+    assert early.near_s == plain.near_s == math.inf
+    assert plain.bare_m == pytest.approx(plain.capsule_m)  # 3 s only without the early margin
+    assert early.bare_m < 0.01 < 0.03  # the disc within the early horizon: an early replan

@@ -277,6 +277,12 @@ search from there would ask for. On development seeds 21000-21049 every run that
 was stopped after replans asked at 10 mm, from starts where every manoeuvre swam into the
 obstacle (docs/planning.md, "An earlier replan")."""
 
+EARLY_HORIZON_S = 8.0
+"""How far ahead the look-ahead swims for the early margin (:data:`EARLY_MARGIN_M`), beyond the
+replan horizon's 5 s: on development seeds 21010 and 21012 the capsule's gap fell from 78 to
+13 mm and from 77 to 2 mm between two look-aheads 0.6 s apart, an obstacle coming into the 5 s
+horizon at its far end (near at 4.9 s ahead), so no margin over 5 s could have asked earlier."""
+
 EARLY_BACKOFF_S = 1.0
 """After an early replan (found or not; the present plan kept and no failure counted when not),
 the next early one waits this long, doubled after each further one (at most four times this)
@@ -502,9 +508,10 @@ class Ahead(NamedTuple):
         comes before a replan asked for after the back-off could steer (docs/planning.md,
         "The back-off yields to a predicted contact").
     bare_m : float
-        The capsule's smallest gap over the replan horizon without the drift allowance (nan: not
-        swum; the early margin then reads ``capsule_m``): under the early margin, an early
-        replan is asked for (docs/planning.md, "An earlier replan").
+        The capsule's smallest gap without the drift allowance over the early horizon (the
+        replan horizon without an early margin; nan: not swum, the early margin then reads
+        ``capsule_m``): under the early margin, an early replan is asked for
+        (docs/planning.md, "An earlier replan").
     """
 
     outline_m: float
@@ -760,6 +767,10 @@ class TankReplanner:
         replan on leaving the corridor or a predicted contact cuts it short as a calm one, and
         an early need cuts a calm replan short (docs/planning.md, "An earlier replan";
         :data:`EARLY_MARGIN_M`, which ``eelbot run`` passes). None (the default here): off.
+    early_horizon_s : float
+        With an ``early_margin_m``: the look-ahead swims this long (at least
+        ``replan_horizon_s``), and the capsule's gap over the whole of it, without the drift
+        allowance, is judged against the early margin (:data:`EARLY_HORIZON_S`).
     """
 
     def __init__(
@@ -789,6 +800,7 @@ class TankReplanner:
         retry_before_contact: bool = True,
         calm_budget_s: float | None = None,
         early_margin_m: float | None = None,
+        early_horizon_s: float = EARLY_HORIZON_S,
     ) -> None:
         self.planner_for = planner_for
         self.planner = planner
@@ -815,6 +827,7 @@ class TankReplanner:
         self.calm_budget_s = calm_budget_s
         self.early_margin_m = (early_margin_m if early_margin_m is not None
                                and early_margin_m > lookahead_margin_m else None)
+        self.early_horizon_s = early_horizon_s
         self._next_early_s = -math.inf  # the robot's time the next early replan may be asked
         self._early_in_row = 0  # early replans since the plan was last swum clear of its margin
         self.shift_repair = shift_repair
@@ -941,6 +954,10 @@ class TankReplanner:
         left = self.waypoints[min(target, len(self.waypoints) - 1):]
         d.recorded |= self._estimate_current(est, left, pose)
         busy = self._job is not None or self._pending is not None
+        # an early replan in flight is cut short by any urgent need: the rules after a failure
+        # (retry or stop) then act as if it did not run (docs/planning.md, "An earlier replan")
+        early_job = self._job is not None and self._job.reason == "early_margin"
+        idle = self._job is None or early_job
         predicted = False
         capsule = None
         judged: tuple[float, ...] | None = None
@@ -966,7 +983,7 @@ class TankReplanner:
         # "The outline's margin")
         close = gap is not None and gap < self.lookahead_margin_m
         if (predicted and self.failures > 0 and close
-                and self._job is None and self._pending is None
+                and idle and self._pending is None
                 and self._may_retry(t_s)):
             # the present plan swims into something and the last replan found nothing better,
             # but the contact is far enough ahead for one more replan to steer before it: ask
@@ -975,7 +992,7 @@ class TankReplanner:
             log.info("contact predicted at t = %.2f s after a failed replan: replanning again "
                      "at t = %.2f s instead of stopping", self._danger_at_s(), t_s)
         elif (predicted and self.failures > 0 and close
-                and self._job is None and self._pending is None):
+                and idle and self._pending is None):
             # the present plan swims into something and the last replan found nothing better
             d.stop = "no_safe_continuation"
             d.detail = (f"at t = {t_s:.2f} s the twin swims the present plan "
@@ -1016,7 +1033,8 @@ class TankReplanner:
             # already swims within the early margin; the early replan starts a lead ahead
             self._cut(job, "early_margin", t_s)
         if (predicted and close and job is not None
-                and (t_s > job.t_start_s + 1e-9 or self._calm_holds_up(job, t_s))
+                and (self._early_held_up(job) if early_job
+                     else t_s > job.t_start_s + 1e-9 or self._calm_holds_up(job, t_s))
                 and not (t_s <= job.due_s
                          and self._danger_at_s() - max(job.due_s, t_s) >= self.lead_s)):
             # the replan is late (past its start) and the twin swims the present plan into
@@ -1180,11 +1198,22 @@ class TankReplanner:
     def _early_allowed(self, t_s: float) -> bool:
         """Whether an early replan may be asked for now (:attr:`early_margin_m`).
 
-        Not after a failed replan (the urgent replans and their back-off are in charge until a
-        plan is found), nor within the back-off of an early replan that found nothing.
+        Not within the back-off of a failed replan, nor within an early replan's own back-off.
+        After a failed replan that kept the plan (its back-off over), it may: on development
+        seed 21011 the robot swam 13 s on a plan kept after a failure, its capsule's gap
+        falling from 150 to 28 mm before the next urgent replan.
         """
-        return (self.early_margin_m is not None and self.failures == 0
-                and t_s >= self._next_try_s and t_s >= self._next_early_s)
+        return (self.early_margin_m is not None and t_s >= self._next_try_s
+                and t_s >= self._next_early_s)
+
+    def _early_held_up(self, job: _Job) -> bool:
+        """Whether an early ``job``, cut short, is not back within :data:`CUT_RETURN_S`.
+
+        Cut by any urgent need, it otherwise stops the robot only as the rules after a failure
+        would without it; not back in time, the robot is stopped as for a late replan.
+        """
+        cut_at = None if job.deadline is None else job.deadline.cut_at_s
+        return cut_at is not None and time.monotonic() > cut_at + CUT_RETURN_S
 
     def _calm_holds_up(self, job: _Job, t_s: float) -> bool:
         """Whether a calm ``job`` keeps the urgent replan a predicted contact needs waiting.
@@ -1588,11 +1617,16 @@ class TankReplanner:
         ``replan_horizon_s``) with the time it first comes within the look-ahead's margin, or
         None without a run. Without ``horizon_s`` (the look-ahead that guards the robot) the
         capsule's gap at each moment is less the drift the current estimate's uncertainty
-        allows by then (:func:`drift_allowance_m`).
+        allows by then (:func:`drift_allowance_m`), and with an early margin the twin swims on
+        to ``early_horizon_s`` for the capsule's bare gap (:attr:`Ahead.bare_m`).
         """
         twin = self._twin_in(extra)
         now = int(round(est.t_s / twin.dt_s))
-        steps = int(round((horizon_s or self.replan_horizon_s) / twin.dt_s))
+        guard = horizon_s is None  # the look-ahead that guards the robot
+        horizon = (horizon_s if horizon_s is not None else self.replan_horizon_s
+                   if self.early_margin_m is None
+                   else max(self.replan_horizon_s, self.early_horizon_s))
+        steps = int(round(horizon / twin.dt_s))
         stride = 3
         runs = twin.run([left], steps * twin.dt_s, states=est.state[None], start_steps=[now],
                         stride=stride, guidance=_guidance_arg(twin, guide))
@@ -1619,10 +1653,12 @@ class TankReplanner:
         capsule = body_clearance_m(planner.world, planner.clearance, planner.model, states,
                                    max(self.lookahead_margin_m + LOOKAHEAD_DRIFT_MAX_M,
                                        self.early_margin_m or 0.0))
-        bare = float(capsule.min())
-        if horizon_s is None:
+        bare = float(capsule.min())  # the early margin's, over the early horizon
+        if guard:
             # the look-ahead that guards the robot: its margin grows along the horizon with the
-            # drift the current estimate's uncertainty allows (docs/planning.md)
+            # drift the current estimate's uncertainty allows (docs/planning.md); the urgent
+            # replan is asked over the replan horizon only
+            capsule = capsule[: int(round(self.replan_horizon_s / twin.dt_s)) // stride + 1]
             ahead_s = np.arange(len(capsule), dtype=np.float64) * (stride * twin.dt_s)
             capsule = np.subtract(capsule, drift_allowance_m(
                 current_spread_m_s(self.current.history), ahead_s))
