@@ -1628,6 +1628,8 @@ class EarlyAhead(FailingInTheTestsEstimate):
     asked: list
     fallbacks: list
     bare_m = 0.02
+    outline_m = 0.1
+    near_in_s = math.inf
     rest_m = 0.2
     found: Outcome | None = None
     hold = False
@@ -1647,7 +1649,8 @@ class EarlyAhead(FailingInTheTestsEstimate):
     def _look_ahead(self, est, left, extra, guide=None, horizon_s=None):  # noqa: ANN001, ANN202
         if horizon_s is not None:
             return Ahead(0.2, self.rest_m)
-        return Ahead(0.1, self.bare_m, math.inf, math.inf, self.bare_m)
+        return Ahead(self.outline_m, self.bare_m, math.inf, est.t_s + self.near_in_s,
+                     self.bare_m)
 
 
 def early_nav(open_plan, early_margin_m=0.03, **kwargs):  # noqa: ANN001, ANN201
@@ -1773,3 +1776,42 @@ def test_the_early_margin_is_judged_over_a_longer_horizon_than_the_urgent_replan
     assert early.near_s == plain.near_s == math.inf
     assert plain.bare_m == pytest.approx(plain.capsule_m)  # 3 s only without the early margin
     assert early.bare_m < 0.01 < 0.03  # the disc within the early horizon: an early replan
+
+
+@pytest.mark.parametrize("failures", [0, 1])
+def test_an_early_replan_in_flight_leaves_the_stop_after_a_failure_as_without_it(
+        open_plan, failures):
+    # the outline comes within the margin 0.5 s ahead while an early replan runs: too near for
+    # another replan after a failure (stopped at once, as with no replan running), while before
+    # any failure the urgent replan is asked as soon as the cut early one is back
+    nav, start = early_nav(open_plan)
+    nav.hold = True
+    try:
+        frames_at(nav, 0.0, 2.0, start, until=lambda: nav._job is not None)
+        assert nav._job is not None and nav._job.reason == "early_margin"
+        nav.failures = failures  # a replan failed before, its back-off over
+        nav.bare_m, nav.outline_m, nav.near_in_s = -0.01, 0.005, 0.5
+        decisions = frames_at(nav, 2.0, 3.0, start,
+                              until=lambda: len(nav.events) >= 3 or nav.failures > failures)
+    finally:
+        nav.close()
+    stops = [d for d in decisions if d.stop]
+    if failures:
+        assert stops and stops[0].stop == "no_safe_continuation"
+        assert "the last replan failed" in stops[0].detail
+    else:  # the urgent replan is asked; a stop comes only on its own failure
+        assert nav.events[1]["cut_for"] == "predicted_contact"
+        assert nav.events[2]["reason"] == "predicted_contact"
+        assert all(d.detail.startswith(f"replanning at t = {nav.events[2]['t_request_s']:.2f} s")
+                   for d in stops)
+
+
+def test_early_replans_resume_after_a_failed_replans_back_off(open_plan):
+    nav, start = early_nav(open_plan)
+    nav.failures, nav._next_try_s = 1, 3.0  # a failed replan kept the plan, next try at 3 s
+    try:
+        frames_at(nav, 0.0, 4.0, start)
+    finally:
+        nav.close()
+    assert nav.asked and all(t >= 3.0 - 0.7 for t, _ in nav.asked)  # the estimate's time
+    assert {e["reason"] for e in nav.events[1:]} == {"early_margin"} and nav.failures == 1
