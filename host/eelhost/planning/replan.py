@@ -268,10 +268,10 @@ manoeuvre swam into the obstacle (docs/planning.md, "Calm replans get more time"
 
 EARLY_MARGIN_M = 0.03
 """The early margin (``TankReplanner(early_margin_m=)``; ``eelbot run`` passes it by default): a
-look-ahead that swims the planner's capsule within this much of an obstacle or wall (less the
-drift allowance, as the look-ahead's own 10 mm margin) within the replan horizon, but not within
-the look-ahead's margin, asks for an early replan (``early_margin``) while the body still has
-room to turn: a searched plan keeps its capsule 30 mm clear in its own water (the search's
+look-ahead that swims the planner's capsule within this much of an obstacle or wall (its bare
+gap, without the drift allowance) within the early horizon (:data:`EARLY_HORIZON_S`), but not
+within the look-ahead's own margin, asks for an early replan (``early_margin``) while the body
+still has room to turn: a searched plan keeps its capsule 30 mm clear in its own water (the search's
 50 mm centre line less the body's half width), so under this the plan has lost the margin a new
 search from there would ask for. On development seeds 21000-21049 every run that missed its goal
 was stopped after replans asked at 10 mm, from starts where every manoeuvre swam into the
@@ -756,10 +756,11 @@ class TankReplanner:
         forward: the worker stops at its next batch) and is asked for as soon as the worker is
         back. None (the default here): every replan gets ``replan_budget_s``.
     early_margin_m : float or None
-        A look-ahead whose capsule comes within this margin (more than ``lookahead_margin_m``)
-        within ``replan_horizon_s``, but not within ``lookahead_margin_m``, asks for an early
-        replan (``early_margin``) with the replan budget and the short lead, while no replan
-        runs and none has failed since the last plan was found. It finds a plan: switched in as
+        A look-ahead whose capsule's bare gap (no drift allowance) comes under this margin
+        (more than ``lookahead_margin_m``) within ``early_horizon_s``, the capsule not within
+        ``lookahead_margin_m`` over ``replan_horizon_s``, asks for an early replan
+        (``early_margin``) with the replan budget and the short lead, when no replan runs and
+        no failed replan's back-off is on. It finds a plan: switched in as
         any. It finds none: the robot keeps its present plan and no failure is counted. Either
         way the next early replan waits :data:`EARLY_BACKOFF_S` (doubled after each further one
         until a look-ahead swims the plan clear of the early margin). It tries the planner alone
