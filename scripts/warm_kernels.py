@@ -64,9 +64,10 @@ def variant_lists() -> dict[str, list[Variant]]:
     # the choice from either robot file (host/tests/test_estimation_choice.py): two laws, so the
     # PD loop on the servo line joins with both
     tests += [(6, "c", law, "pd_limited") for law in ("linear_quadratic", "morison")]
-    # the plant-only laws' plants: reynolds on the paper robot, the foil plants on the servos
+    # the plant-only laws: reynolds on the paper robot (sim/tests/test_fluid_laws.py), the foil
+    # family (foil, stall, quarter_chord) on the servos that their plants swim on
     # (host/tests/test_plants.py)
-    tests += [(6, "c", law, SERVO if law == "foil" else PAPER) for law in plant_laws]
+    tests += [(6, "c", law, PAPER if law == "reynolds" else SERVO) for law in plant_laws]
     tests += [(6, "numba", DEFAULT_FLUID_LAW, robot) for robot in ROBOTS]
     return {"main": main, "tests": tests}
 
