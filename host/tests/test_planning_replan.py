@@ -62,9 +62,10 @@ def test_run_plan_over_sim_replans_in_an_unknown_current_and_arrives(tmp_path, c
     # a replan budget of 5 s: with the default 1 s a loaded machine's replans ran out of time
     # and the robot arrived with none; with 30 s an idle search ran 26 s (at 0.05 m/s) while
     # the robot, its clock paced by the planner's wall time, swam to the goal on its first plan
-    # (the deadline's own tests are test_planning_deadline.py's)
+    # (the deadline's own tests are test_planning_deadline.py's); no live view: its frames
+    # tripled the run's time and its own tests are test_liveview*.py's
     code = main(["run", "--link", "sim://?speed=0&current=0.04,270", "--plan", str(toml),
-                 "--camera", "synthetic:clean", "--replan-budget", "5",
+                 "--camera", "synthetic:clean", "--replan-budget", "5", "--no-view",
                  "--out", str(tmp_path / "run")])
     out = capsys.readouterr().out
     assert code == 0, out
