@@ -1815,3 +1815,16 @@ def test_early_replans_resume_after_a_failed_replans_back_off(open_plan):
         nav.close()
     assert nav.asked and all(t >= 3.0 - 0.7 for t, _ in nav.asked)  # the estimate's time
     assert {e["reason"] for e in nav.events[1:]} == {"early_margin"} and nav.failures == 1
+
+
+def test_an_early_replan_with_a_longer_budget_starts_when_it_ends(open_plan):
+    nav, start = early_nav(open_plan, early_budget_s=2.0)
+    try:
+        frames_at(nav, 0.0, 2.0, start)
+    finally:
+        nav.close()
+    first = nav.events[1]
+    assert first["reason"] == "early_margin" and first["budget_s"] == 2.0
+    assert 1.0 < nav.asked[0][1] <= 2.0  # its deadline 2 s after the request
+    # the state predicted for when the budget ends, as a calm replan's, not a lead of 0.3-0.9 s
+    assert 2.0 <= first["t_start_s"] - first["t_request_s"] <= 2.0 + 0.3 + 1e-9

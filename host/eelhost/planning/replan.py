@@ -283,6 +283,13 @@ replan horizon's 5 s: on development seeds 21010 and 21012 the capsule's gap fel
 13 mm and from 77 to 2 mm between two look-aheads 0.6 s apart, an obstacle coming into the 5 s
 horizon at its far end (near at 4.9 s ahead), so no margin over 5 s could have asked earlier."""
 
+EARLY_BUDGET_S = 2.0
+"""An early replan's budget (``TankReplanner(early_budget_s=)``; ``eelbot run`` passes it): on
+development seeds 21000-21024 10 of the first 14 early replans at 1 s ran out of time, 4 of them
+with a plan found whose check the deadline stopped; asked 5-8 s before the capsule comes near,
+an early replan can take 2 s and start from the state predicted for when they end (as a calm
+replan) and still steer before the urgent replan would have been asked."""
+
 EARLY_BACKOFF_S = 1.0
 """After an early replan (found or not; the present plan kept and no failure counted when not),
 the next early one waits this long, doubled after each further one (at most four times this)
@@ -772,6 +779,10 @@ class TankReplanner:
         With an ``early_margin_m``: the look-ahead swims this long (at least
         ``replan_horizon_s``), and the capsule's gap over the whole of it, without the drift
         allowance, is judged against the early margin (:data:`EARLY_HORIZON_S`).
+    early_budget_s : float or None
+        With a ``replan_budget_s``: an early replan's budget, when longer; it then starts from
+        the state predicted that long ahead, as a calm replan (:data:`EARLY_BUDGET_S`, which
+        ``eelbot run`` passes). None (the default here): the replan budget and the short lead.
     """
 
     def __init__(
@@ -802,6 +813,7 @@ class TankReplanner:
         calm_budget_s: float | None = None,
         early_margin_m: float | None = None,
         early_horizon_s: float = EARLY_HORIZON_S,
+        early_budget_s: float | None = None,
     ) -> None:
         self.planner_for = planner_for
         self.planner = planner
@@ -829,6 +841,7 @@ class TankReplanner:
         self.early_margin_m = (early_margin_m if early_margin_m is not None
                                and early_margin_m > lookahead_margin_m else None)
         self.early_horizon_s = early_horizon_s
+        self.early_budget_s = early_budget_s
         self._next_early_s = -math.inf  # the robot's time the next early replan may be asked
         self._early_in_row = 0  # early replans since the plan was last swum clear of its margin
         self.shift_repair = shift_repair
@@ -1176,8 +1189,10 @@ class TankReplanner:
                 + self.lead_s)
 
     def _budget_for(self, reason: str) -> float | None:
-        """The budget of a replan asked for with ``reason`` (:attr:`calm_budget_s`)."""
+        """The budget of a replan asked for with ``reason`` (calm and early budgets)."""
         base = self.replan_budget_s
+        if reason == "early_margin" and base is not None and self.early_budget_s is not None:
+            return max(base, self.early_budget_s)
         if (base is None or self.calm_budget_s is None or reason != "current_estimate"
                 or self.failures > 0):
             return base
@@ -1190,7 +1205,7 @@ class TankReplanner:
         the robot without waiting for that start.
         """
         return (job.budget_s is not None and self.replan_budget_s is not None
-                and job.budget_s > self.replan_budget_s)
+                and job.budget_s > self.replan_budget_s and job.reason != "early_margin")
 
     def _cuttable(self, job: _Job) -> bool:
         """Whether an urgent replan cuts ``job`` short: a calm replan or an early one."""

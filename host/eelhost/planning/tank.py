@@ -23,6 +23,7 @@ from eelhost.planning.geometry import FloatArray
 from eelhost.planning.planner import Outcome, Planner, PlanRefused
 from eelhost.planning.replan import (
     CALM_REPLAN_BUDGET_S,
+    EARLY_BUDGET_S,
     EARLY_MARGIN_M,
     GOAL_APPROACH_CLEARANCE_M,
     REPLAN_BUDGET_S,
@@ -121,6 +122,7 @@ def plan_for_run(
     replan_budget_s: float | None = REPLAN_BUDGET_S,
     calm_budget_s: float | None = CALM_REPLAN_BUDGET_S,
     early_margin_m: float | None = EARLY_MARGIN_M,
+    early_budget_s: float | None = EARLY_BUDGET_S,
 ) -> RunPlan:
     """Plan in a world for ``eelbot run --plan`` (module docstring).
 
@@ -154,6 +156,8 @@ def plan_for_run(
         A look-ahead whose capsule comes this near (but not within its own margin) asks for an
         early replan whose failure keeps the plan (``TankReplanner``; docs/planning.md, "An
         earlier replan"); None: off.
+    early_budget_s : float or None
+        The early replans' budget (``TankReplanner``); None: the ``replan_budget_s``.
 
     Returns
     -------
@@ -182,7 +186,8 @@ def plan_for_run(
                               recovery_planner_for=tiers.recovery_planner_for,
                               replan_budget_s=replan_budget_s,
                               calm_budget_s=calm_budget_s,
-                              early_margin_m=early_margin_m)
+                              early_margin_m=early_margin_m,
+                              early_budget_s=early_budget_s)
     return RunPlan(outcome.plan.waypoints_m, navigator, sim_uri_for_world(uri, world), outcome,
                    planner.options.guidance, outcome.plan.start_guide)
 
