@@ -16,10 +16,14 @@ and serves at ``http://127.0.0.1:<port>/``:
   as on Ctrl-C: Stop sent, the record closed). Like every POST it needs the session's token
   (:mod:`eelhost.web.server`), which only the page's own script sends.
 
-The prediction is the twin's closed loop (:func:`eelsim.closed_loop.simulate_closed_loop`) over
-the next ``horizon_s`` from the latest filtered pose, straight and at rest there (the camera gives
-no joint rates), steering to the waypoints not yet reached; it runs in a background thread at most
-once per ``predict_every_s`` of wall time, so a slow prediction never holds up the run.
+The prediction is the twin's closed loop over the next ``horizon_s`` from the latest filtered pose,
+straight and at rest there (the camera gives no joint rates), steering to the waypoints not yet
+reached; it runs in a background thread at most once per ``predict_every_s`` of wall time. It is
+swum by the batched kernel (:func:`eelsim.batch.run_spec`, one run on one thread), which agrees
+with the reference closed loop to rounding and runs without Python's global lock: the reference
+loop took about 5 s of processor time per prediction, held the lock the run loop needs, and
+slowed a run with the view to a third of its speed (docs/host.md, "5. One take by hand"). The
+kernel is loaded (compiled on first use) when the view opens, before the robot is started.
 
 It is a :class:`eelhost.field.take.LiveDisplay`: ``eelbot run`` and ``eelbot campaign`` hand
 :func:`eelhost.field.take.run_take` the way to open it, so the dependency goes one way, this
@@ -42,7 +46,8 @@ from numpy.typing import NDArray
 from eelhost.field.runloop import FrameReport, RunConfig
 from eelhost.vision.calibration import Calibration
 from eelhost.web.server import LocalServer
-from eelsim.closed_loop import LoopOptions, simulate_closed_loop
+from eelsim.batch import BatchSpec, run_spec
+from eelsim.closed_loop import LoopOptions
 from eelsim.robot import Robot
 from eelsim.scenario import Scenario
 
@@ -52,6 +57,10 @@ __all__ = ["LiveView"]
 
 FloatArray = NDArray[np.float64]
 TRACK_POINTS = 3000  # the oldest positions are dropped beyond this
+
+
+PREDICTION_SAMPLE_S = 0.1
+"""Spacing of the predicted path's points, s."""
 
 
 class LiveView:
@@ -97,6 +106,9 @@ class LiveView:
         self._scale = self._scale_bar()
         self.on_stop: Callable[[str], None] | None = None
         self.stop_requests = 0
+        # load (or compile) the twin's kernel now, before the robot is started, not in the run
+        log.info("live view: loading the twin's kernel for the prediction")
+        self.predict(np.zeros(3), 0)
         self.server = LocalServer(
             {"/": self._page, "/state.json": self._state, "/frame.jpg": self._frame},
             post={"/stop": self._stop}, port=port,
@@ -238,7 +250,8 @@ class LiveView:
         Returns
         -------
         ndarray, shape (K, 2)
-            Positions every 0.1 s.
+            Positions every ``PREDICTION_SAMPLE_S`` (0.1 s), from the pose on, until the twin
+            reaches the last waypoint or the horizon ends.
         """
         remaining = self.config.waypoints_m[target_index:] or self.config.waypoints_m[-1:]
         g = self.config.gait
@@ -249,9 +262,14 @@ class LiveView:
             start_position_m=(float(pose[0]), float(pose[1])),
             start_heading_deg=math.degrees(float(pose[2])),
         )
-        run = simulate_closed_loop(self.robot, scenario, LoopOptions(stop_at_goal=True))
+        options = LoopOptions(stop_at_goal=True)
+        spec = BatchSpec.build(self.robot, [scenario], None, options)
+        every = max(1, round(PREDICTION_SAMPLE_S / options.timing.dt_s))
+        steps = np.arange(0, int(spec.total_steps.max()) + 1, every)
+        result = run_spec(spec, sample_steps=steps, threads=1)
         n = self.robot.n_links
-        return np.asarray(run.states[::10, n : n + 2], dtype=float)
+        path = result.states[0, :, n : n + 2]
+        return np.asarray(path[~np.isnan(path).any(axis=1)], dtype=float)  # NaN: after the end
 
 
 PAGE = """<!doctype html>
