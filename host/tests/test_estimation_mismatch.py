@@ -22,6 +22,7 @@ from eelhost.estimation.selection import (
     CandidateScore,
     carry_over,
     cross_validate,
+    nested_in,
     recommend,
 )
 from eelhost.estimation.space import ParameterSpace, spaces_of
@@ -136,11 +137,32 @@ def test_recommendation_is_the_lowest_held_out_error_and_ties_go_to_the_simpler_
     def score(model, k, err):
         return CandidateScore(model, k, {"straight": 0.1}, {"straight": np.array(err)})
 
-    simple, rich, bad = score("a", 4, [0.100, 0.102]), score("b", 6, [0.100, 0.100]), score(
-        "c", 3, [0.3, 0.3])
+    simple, rich = score("pd x morison", 4, [0.100, 0.102]), score(
+        "pd x morison_lift", 6, [0.100, 0.100])
+    bad = score("pd x galilean", 3, [0.3, 0.3])
     assert recommend([rich, simple, bad]) is simple  # within 2 %: fewer parameters
-    much_better = score("d", 6, [0.05, 0.05])
+    much_better = score("pd x morison_lift", 6, [0.05, 0.05])
     assert recommend([simple, much_better, bad]) is much_better
+
+
+def test_a_tie_between_laws_that_do_not_nest_goes_to_the_lower_held_out_error():
+    def score(model, k, err):
+        return CandidateScore(model, k, {"straight": 0.1}, {"straight": np.array(err)})
+
+    # servo_limits dev seed 27: Lighthill's law (3 coefficients) within one standard error of
+    # Morison's (4), but not Morison's with a term switched off: the lower error is chosen
+    morison = score("pd_limited x morison", 16, [0.02, 0.10, 0.16, 0.40])
+    lighthill = score("pd_limited x lighthill", 14, [0.05, 0.12, 0.20, 0.40])
+    assert lighthill.mean_held_out - morison.mean_held_out < morison.standard_error
+    assert recommend([lighthill, morison]) is morison
+    # the same tie with the simpler model nested in the better one: the simpler is chosen
+    base = score("pd x lighthill", 10, lighthill.held_out["straight"])
+    line = score("pd_limited x lighthill", 14, morison.held_out["straight"])
+    assert recommend([line, base]) is base
+    assert nested_in("pd x morison", "pd_limited x morison_lift")
+    assert nested_in("pd_limited x morison, one set", "pd_limited x morison")
+    assert not nested_in("pd_limited x morison", "pd_limited x morison, one set")
+    assert not nested_in("servo x morison", "pd x morison_lift")
 
 
 def test_a_richer_model_whose_lead_is_inside_one_standard_error_of_the_folds_is_not_recommended():

@@ -69,13 +69,16 @@ the recorded speeds around them by more than
 (:mod:`eelhost.estimation.neighbours`).
 
 The recommendation is the sane candidate with the lowest mean held-out error over every held-out gait;
-one with fewer parameters is preferred when its mean is within the larger of ``TIE`` of the best's
-and one standard error of the best's mean over its folds (the one-standard-error rule of
+one with fewer parameters that nests in it (:func:`nested_in`: the best with terms switched off)
+is preferred when its mean is within the larger of ``TIE`` of the best's and one standard error
+of the best's mean over its folds (the one-standard-error rule of
 cross-validation: Breiman, Friedman, Olshen and Stone, *Classification and Regression Trees*,
 1984, section 3.4.3; Hastie, Tibshirani and Friedman, *The Elements of Statistical Learning*, 2009,
 section 7.10). A richer model's lower error within the folds' own spread is not evidence that it
 predicts better: a lift variant nests its base law, and on water without lift its extra
-coefficients fit noise (docs/estimation.md, "Model choice").
+coefficients fit noise (docs/estimation.md, "Model choice"). The rule is one of nested models
+(a path of growing complexity); between families that do not nest (Lighthill's law and
+Morison's) fewer parameters say nothing about which predicts, and the lower error is chosen.
 """
 
 from __future__ import annotations
@@ -92,7 +95,12 @@ import numpy as np
 
 from eelhost.data.experiments import Dataset, Experiment
 from eelhost.estimation.evaluate import EstimationError, Evaluator, count_runs, many_problems
-from eelhost.estimation.joint_fit import joint_fit, joint_model_name
+from eelhost.estimation.joint_fit import (
+    ParameterError,
+    bundled_joints,
+    joint_fit,
+    joint_model_name,
+)
 from eelhost.estimation.local import FAILED, polish_minimax_many
 from eelhost.estimation.methods import CURRENT_POLISH_ITERATIONS, FitSettings
 from eelhost.estimation.neighbours import SANE_FACTOR, neighbour_excursion
@@ -101,7 +109,7 @@ from eelhost.estimation.pipeline import training_experiments
 from eelhost.estimation.space import ParameterSpace
 from eelsim.fluid import get_fluid_law
 from eelsim.fluid.lift import LiftLaw
-from eelsim.joints import after_screen_models
+from eelsim.joints import after_screen_models, get_joint_model
 
 log = logging.getLogger(__name__)
 
@@ -258,7 +266,8 @@ class CandidateScore:
 def recommend(scores: Sequence[CandidateScore]) -> CandidateScore | None:
     """The candidate to trust (module docstring): lowest mean held-out error, ties to the simpler.
 
-    A tie is a mean within the larger of ``TIE`` of the best's and the best's standard error.
+    A tie is a mean within the larger of ``TIE`` of the best's and the best's standard error;
+    the simpler candidate of a tie is chosen only where it nests in the best (:func:`nested_in`).
     Only candidates that stay sane between their training gaits (:attr:`CandidateScore.sane`)
     are ranked; when none does, those within ``SANE_FACTOR`` of the smallest excursion are (the
     least implausible).
@@ -273,8 +282,52 @@ def recommend(scores: Sequence[CandidateScore]) -> CandidateScore | None:
     ran = [c for c in ran if c.sane or c.excursion <= SANE_FACTOR * least]
     best = min(ran, key=lambda c: c.mean_held_out)
     margin = max(best.mean_held_out * TIE, best.standard_error)
-    close = [c for c in ran if c.mean_held_out <= best.mean_held_out + margin]
+    # the simpler model of a tie is preferred only where it is the best with terms switched off
+    # (nested_in): between families that do not nest, fewer parameters say nothing about which
+    # predicts (docs/estimation.md, "Held-out paths and the servo line: ties go to a nested
+    # model")
+    close = [c for c in ran if c.mean_held_out <= best.mean_held_out + margin
+             and (c is best or nested_in(c.model, best.model))]
     return min(close, key=lambda c: (c.parameters, c.mean_held_out))
+
+
+def _extends(rich: str, simple: str) -> bool:
+    """Whether joint model ``rich`` extends ``simple`` (the PD loop on the servo line, the PD loop).
+
+    ``JointModel.table_from``: a model that can make its table from the other's extends it.
+    """
+    if rich == simple:
+        return True
+    try:
+        return get_joint_model(rich).table_from(bundled_joints(simple)) is not None
+    except (KeyError, ValueError, ParameterError):  # a name the twin does not know
+        return False
+
+
+def nested_in(simple: str, rich: str) -> bool:
+    """Whether candidate ``simple`` is candidate ``rich`` with some of its terms switched off.
+
+    By the candidates' names (:func:`model_parts`): the same law or the law without its lift
+    (a lift variant with C_L = C_D_alpha = 0 is its base law), the same joint model or one the
+    richer one extends (the servo line at its bounds' far end is the plain PD loop), and one set
+    for every motion where the richer one has one, or separate sets (one set is both sets
+    equal). Lighthill's and Morison's laws, or PD and servo joints, do not nest.
+
+    Parameters
+    ----------
+    simple, rich : str
+        Candidate names, "<joint model> x <law>[, one set]".
+
+    Returns
+    -------
+    bool
+        True also when the two are the same candidate.
+    """
+    simple_joint, simple_law = model_parts(simple)
+    rich_joint, rich_law = model_parts(rich)
+    laws = simple_law in (rich_law, rich_law.removesuffix("_lift"))
+    sets = simple.endswith(ONE_SET) or not rich.endswith(ONE_SET)
+    return laws and sets and _extends(rich_joint, simple_joint)
 
 
 def candidate_spaces(
