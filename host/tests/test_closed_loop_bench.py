@@ -10,6 +10,7 @@ import pytest
 
 from eelhost.benchmarks.closed_loop import (
     WorldResult,
+    calm_and_early,
     estimate_error_mm,
     run_closed_loop_bench,
     summary_lines,
@@ -103,6 +104,25 @@ def test_the_summary_counts_calm_replans_and_their_cuts_only_where_the_budget_wa
     assert ("- calm replans (in a moved current estimate, budget 3 s): 4, of which 1 found a "
             "plan and 2 were cut short for an urgent replan") in lines
     assert not any("calm replans" in line for line in summary_lines([old]))
+
+
+def test_early_replans_are_counted_apart_from_the_calm_ones_though_both_have_a_longer_budget():
+    events = [{"reason": "current_estimate", "budget_s": 3.0, "status": "found"},
+              {"reason": "current_estimate", "budget_s": 1.0, "status": "exhausted"},
+              {"reason": "early_margin", "budget_s": 2.0, "status": "exhausted"},
+              {"reason": "early_margin", "budget_s": 2.0, "status": "found", "cut_for": "x"},
+              {"reason": "left_corridor", "budget_s": 1.0, "status": "found"}]
+    calm, early = calm_and_early(events, 1.0)
+    assert calm == events[:1] and early == events[2:4]
+    assert calm_and_early(events, None)[0] == []
+    world = WorldResult(5002, True, "found", "arrived", reached=True, min_clearance_m=0.04,
+                        calm_budget_s=3.0, calm_replans=1, calm_found=1, early_replans=2,
+                        early_found=1, early_cut=1)
+    lines = summary_lines([world])
+    assert ("- early replans (the look-ahead's capsule under the early margin): 2, of which 1 "
+            "found a plan and 1 were cut short for an urgent replan") in lines
+    assert any(line.startswith("- calm replans (in a moved current estimate, budget 3 s): 1,")
+               for line in lines)
 
 
 def test_the_estimate_error_compares_each_frame_with_the_plants_step_at_its_time():

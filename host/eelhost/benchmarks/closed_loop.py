@@ -121,9 +121,12 @@ class WorldResult:
     calm_budget_s : float or None
         The calm replans' budget (None: off, or results written before it).
     calm_replans, calm_found, calm_cut : int
-        Replans given the calm budget, those that found a plan, and those cut short for an
-        urgent replan (docs/planning.md, "Calm replans get more time, and an urgent replan cuts
-        them short").
+        Calm replans (asked for in a moved current estimate, given the calm budget), those that
+        found a plan, and those cut short for an urgent replan (docs/planning.md, "Calm replans
+        get more time, and an urgent replan cuts them short").
+    early_replans, early_found, early_cut : int
+        The same for the early replans (docs/planning.md, "An earlier replan"), which have a
+        longer budget too but are not calm ones.
     """
 
     seed: int
@@ -155,6 +158,34 @@ class WorldResult:
     calm_replans: int = 0
     calm_found: int = 0
     calm_cut: int = 0
+    early_replans: int = 0
+    early_found: int = 0
+    early_cut: int = 0
+
+
+def calm_and_early(replans: list[dict], replan_budget_s: float | None
+                   ) -> tuple[list[dict], list[dict]]:
+    """A run's calm replans and its early ones, from the replanner's events.
+
+    Parameters
+    ----------
+    replans : list of dict
+        The replanner's replan events (``reason``, ``budget_s``, ``status``, ``cut_for``).
+    replan_budget_s : float or None
+        The run's replan budget (None: no budget, so no replan was given a calm one).
+
+    Returns
+    -------
+    calm, early : list of dict
+        Replans asked for in a moved current estimate that were given a longer budget than
+        ``replan_budget_s`` (docs/planning.md, "Calm replans get more time"), and replans asked
+        for under the early margin (docs/planning.md, "An earlier replan"), which have a longer
+        budget too but are counted apart.
+    """
+    calm = [e for e in replans if replan_budget_s is not None and e["reason"] == "current_estimate"
+            and (e.get("budget_s") or 0.0) > replan_budget_s]
+    early = [e for e in replans if e["reason"] == "early_margin"]
+    return calm, early
 
 
 def true_clearance_m(world: World, model: SwimmerModel, states: FloatArray) -> FloatArray:
@@ -317,8 +348,7 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
         record_to.write_text(json.dumps({"seed": seed, "outcome": out.reason,
                                          "detail": out.detail, **nav.record()}))
     replans = [e for e in nav.events if e["kind"] == "replan"]
-    calm = [e for e in replans if replan_budget_s is not None
-            and (e.get("budget_s") or 0.0) > replan_budget_s]
+    calm, early = calm_and_early(replans, replan_budget_s)
     return WorldResult(
         seed, True, "found", out.reason, out.detail, out.reason == "arrived",
         float(clear.min()), bool(clear.min() < 0.0), out.failsafe_reports,
@@ -332,7 +362,8 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
         sum(e["message"].startswith("shift repair:") and "t_switch_s" in e for e in replans),
         nav.retries_before_contact, estimate_error, calm_budget_s if replan_budget_s else None,
         len(calm), sum(e["status"] == "found" for e in calm),
-        sum("cut_for" in e for e in calm))
+        sum("cut_for" in e for e in calm), len(early), sum(e["status"] == "found" for e in early),
+        sum("cut_for" in e for e in early))
 
 
 def estimate_error_mm(model: SwimmerModel, history: list[tuple[float, FloatArray]] | None,
@@ -508,6 +539,11 @@ def summary_lines(results: list[WorldResult]) -> list[str]:
                      f"{sum(r.calm_replans for r in planned)}, of which "
                      f"{sum(r.calm_found for r in planned)} found a plan and "
                      f"{sum(r.calm_cut for r in planned)} were cut short for an urgent replan")
+    if any(r.early_replans for r in planned):
+        lines.append(f"- early replans (the look-ahead's capsule under the early margin): "
+                     f"{sum(r.early_replans for r in planned)}, of which "
+                     f"{sum(r.early_found for r in planned)} found a plan and "
+                     f"{sum(r.early_cut for r in planned)} were cut short for an urgent replan")
     cpus = [c for r in planned for c in r.replan_cpu_s]
     if cpus:
         lines.append(f"- replans' processor time: median {statistics.median(cpus):.2f} s, "
