@@ -44,7 +44,7 @@ from eelhost.field.session import TakeNotes
 from eelhost.field.take import TakeRequest, run_take
 from eelhost.planning.geometry import FloatArray
 from eelhost.planning.planner import PlanRefused
-from eelhost.planning.replan import CALM_REPLAN_BUDGET_S, EARLY_MARGIN_M, REPLAN_BUDGET_S
+from eelhost.planning.replan import CALM_REPLAN_BUDGET_S, REPLAN_BUDGET_S
 from eelhost.planning.state_estimate import body_error_m, error_summary_mm
 from eelhost.planning.tank import plan_for_run
 from eelhost.planning.uncertainty import CoefficientModel
@@ -274,7 +274,7 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
               replan_budget_s: float | None = REPLAN_BUDGET_S,
               record_to: Path | None = None,
               calm_budget_s: float | None = CALM_REPLAN_BUDGET_S,
-              early_margin_m: float | None = EARLY_MARGIN_M) -> WorldResult:
+              early_margin_m: float | None = None) -> WorldResult:
     """Plan one generated world and swim the plan over ``sim://`` (module docstring).
 
     Parameters
@@ -407,7 +407,7 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
                           swimmer: SwimmerModel | None = None,
                           replan_budget_s: float | None = REPLAN_BUDGET_S,
                           calm_budget_s: float | None = CALM_REPLAN_BUDGET_S,
-                          early_margin_m: float | None = EARLY_MARGIN_M,
+                          early_margin_m: float | None = None,
                           ) -> list[WorldResult]:
     """Run the benchmark over ``seeds``, resuming from ``<out>/results.jsonl``.
 

@@ -95,11 +95,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    "asked for in a moved current estimate while the robot is on its plan; a "
                    "replan on leaving the corridor or a predicted contact cuts it short (3.0 s; "
                    "0: the --replan-budget; docs/planning.md, \"Calm replans get more time\")")
-    p.add_argument("--early-margin", type=NON_NEGATIVE, default=EARLY_MARGIN_M, metavar="M",
+    p.add_argument("--early-margin", type=NON_NEGATIVE, default=0.0, metavar="M",
                    help="with --plan or --bench: a look-ahead that swims the planner's capsule "
                    "within this of an obstacle or wall (but not within its 10 mm) asks for an "
-                   "early replan, whose failure keeps the plan (%(default)g m; 0: off; "
-                   "docs/planning.md, \"An earlier replan\")")
+                   f"early replan, whose failure keeps the plan (0: off, the default; "
+                   f"{EARLY_MARGIN_M:g} m is the value developed; it gained no goal on unseen "
+                   "seeds: docs/planning.md, \"An earlier replan\")")
     p.add_argument("--guidance", choices=GUIDANCE_LAWS.names(), default=PURSUIT.name,
                    help="the line-of-sight law that steers the robot: pursuit (the paper's pure "
                    "pursuit of each waypoint, default) or ilos (integral line-of-sight along each "
@@ -311,8 +312,7 @@ def _bench(args: argparse.Namespace) -> int:
                   else "")
                + (f" --calm-budget {args.calm_budget:g}"
                   if args.calm_budget != CALM_REPLAN_BUDGET_S else "")
-               + (f" --early-margin {args.early_margin:g}"
-                  if args.early_margin != EARLY_MARGIN_M else ""))
+               + (f" --early-margin {args.early_margin:g}" if args.early_margin else ""))
     lines = summary_lines(results)
     block = [BENCH_BEGIN, f"Command: `{command}`", "",
              f"- machine: {cpu_model()}, {os.cpu_count()} cores visible (shared with other "

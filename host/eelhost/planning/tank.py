@@ -24,7 +24,6 @@ from eelhost.planning.planner import Outcome, Planner, PlanRefused
 from eelhost.planning.replan import (
     CALM_REPLAN_BUDGET_S,
     EARLY_BUDGET_S,
-    EARLY_MARGIN_M,
     GOAL_APPROACH_CLEARANCE_M,
     REPLAN_BUDGET_S,
     TankReplanner,
@@ -121,7 +120,7 @@ def plan_for_run(
     swimmer: SwimmerModel | None = None,
     replan_budget_s: float | None = REPLAN_BUDGET_S,
     calm_budget_s: float | None = CALM_REPLAN_BUDGET_S,
-    early_margin_m: float | None = EARLY_MARGIN_M,
+    early_margin_m: float | None = None,
     early_budget_s: float | None = EARLY_BUDGET_S,
 ) -> RunPlan:
     """Plan in a world for ``eelbot run --plan`` (module docstring).
@@ -155,7 +154,8 @@ def plan_for_run(
     early_margin_m : float or None
         A look-ahead whose capsule comes this near (but not within its own margin) asks for an
         early replan whose failure keeps the plan (``TankReplanner``; docs/planning.md, "An
-        earlier replan"); None: off.
+        earlier replan"); None (the default): off; ``replan.EARLY_MARGIN_M`` is the value developed,
+        which gained no goal on unseen seeds.
     early_budget_s : float or None
         The early replans' budget (``TankReplanner``); None: the ``replan_budget_s``.
 
