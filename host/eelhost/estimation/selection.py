@@ -325,7 +325,7 @@ def nested_in(simple: str, rich: str) -> bool:
     """
     simple_joint, simple_law = model_parts(simple)
     rich_joint, rich_law = model_parts(rich)
-    laws = simple_law in (rich_law, rich_law.removesuffix("_lift"))
+    laws = simple_law in (rich_law, family(rich)[1])  # the same law, or it without its lift
     sets = simple.endswith(ONE_SET) or not rich.endswith(ONE_SET)
     return laws and sets and _extends(rich_joint, simple_joint)
 
