@@ -26,19 +26,23 @@ from eelhost.field.take import TakeRequest, run_take
 from eelhost.planning.deadline import Deadline
 from eelhost.planning.execute import body_clearance_m
 from eelhost.planning.field import ClearanceField
+from eelhost.planning.geometry import FloatArray
 from eelhost.planning.planner import PLANNING_GUIDANCE, Outcome, Planner
 from eelhost.planning.replan import (
     CALM_REPLAN_BUDGET_S,
+    ESCAPE_FLOOR_M,
+    ESCAPE_RAMP_S,
     Ahead,
     Decision,
     TankReplanner,
     current_spread_m_s,
+    escape_margin_m,
     outline_clearance_m,
     predict_state,
 )
 from eelhost.planning.search import Leg, Plan
 from eelhost.planning.state_estimate import BodyStateEstimator, CurrentWindow
-from eelhost.planning.tank import plan_for_run, with_extra_current
+from eelhost.planning.tank import plan_for_run, replan_planners, with_extra_current
 from eelhost.planning.uncertainty import default_model, read_coefficient_model
 from eelhost.planning.world import parse_world
 from eelhost.vision.localise import Localisation
@@ -1828,3 +1832,83 @@ def test_an_early_replan_with_a_longer_budget_starts_when_it_ends(open_plan):
     assert 1.0 < nav.asked[0][1] <= 2.0  # its deadline 2 s after the request
     # the state predicted for when the budget ends, as a calm replan's, not a lead of 0.3-0.9 s
     assert 2.0 <= first["t_start_s"] - first["t_request_s"] <= 2.0 + 0.3 + 1e-9
+
+
+def _away_run():
+    """The robot swimming at 70 degrees off the tank's bottom wall, from (1, 1) m, for 3.5 s."""
+    sc = Scenario(name="away", amplitude_rad=PATH_GAIT.amplitude_rad,
+                  omega_rad_s=PATH_GAIT.omega_rad_s, beta_rad=PATH_GAIT.beta_rad,
+                  k_theta=PATH_GAIT.k_theta, waypoints_m=[(2.0, 3.75)], duration_s=3.5,
+                  start_position_m=(1.0, 1.0), start_heading_deg=70.0)
+    return simulate_closed_loop(ROBOT, sc, LoopOptions(stop_at_goal=False))
+
+
+def _away_from_the_wall(nav: TankReplanner, run, gap_m: float):  # noqa: ANN001
+    """The estimate at 3 s of :func:`_away_run` moved down until its body is ``gap_m`` clear.
+
+    The gap is the check's (:func:`body_clearance_m`).
+    """
+
+    def at(t_s: float, dy: float) -> FloatArray:
+        x = np.array([np.interp(t_s, run.t_s, run.states[:, i])
+                      for i in range(run.states.shape[1])])
+        x[N + 1] -= dy
+        return x
+
+    lo, hi = 0.0, 2.0
+    for _ in range(40):  # the shift that leaves the body gap_m from the wall
+        mid = (lo + hi) / 2
+        gap = float(body_clearance_m(nav.world, nav.planner.clearance, nav.model,
+                                     at(3.0, mid)[None])[0])
+        lo, hi = (mid, hi) if gap > gap_m else (lo, mid)
+    est = BodyStateEstimator(BODY, PATH_GAIT)
+    for t in np.arange(2.5, 3.0 + 1e-9, 1 / 30):
+        x = at(t, lo)
+        est.observe(t, x[N : N + 2], x[:N])
+    e = est.estimate()
+    assert e is not None
+    return e
+
+
+def test_a_replan_from_inside_the_margin_escapes_keeping_its_ramp_and_only_above_the_floor(
+        open_plan):
+    # the water pushed the robot to 20 mm from the bottom wall (inside the check's 30 mm) while it
+    # swims away from it: every plan's check fails at its first sample, so no tier finds one;
+    # the escape finds a plan whose every check run keeps the margin ramped from the start's gap
+    # less 10 mm to 30 mm over 4 s (docs/planning.md, "An escape from inside the margin")
+    planner, outcome = open_plan
+    tiers = replan_planners(planner, planner.world, ROBOT, MODEL, PATH_GAIT, {})
+    nav = TankReplanner(tiers.planner_for, planner, outcome, PATH_GAIT,
+                        goal_planner_for=tiers.goal_planner_for,
+                        recovery_planner_for=tiers.recovery_planner_for,
+                        escape_planner_for=tiers.escape_planner_for)
+    nav.shift_repair = False
+    try:
+        run = _away_run()
+        est = _away_from_the_wall(nav, run, 0.02)
+        step = int(round(3.0 / planner.twin.dt_s))
+        make, nav.escape_planner_for = nav.escape_planner_for, None
+        without, *_ = nav._replan(est, [(2.1, 1.0)], step, np.zeros(2))
+        nav.escape_planner_for = make
+        got, state, *_ = nav._replan(est, [(2.1, 1.0)], step, np.zeros(2))
+        gap = float(body_clearance_m(nav.world, planner.clearance, nav.model, state[None])[0])
+        # the floor: a start 5 mm clear gets no escape; one outside the margin needs none
+        near = _away_from_the_wall(nav, run, 0.005).state
+        far = _away_from_the_wall(nav, run, 0.05).state
+        assert nav._escape_gap(near) is None and nav._escape_gap(far) is None
+        assert nav._escape_gap(state) == pytest.approx(gap)
+    finally:
+        nav.close()
+    assert not without.found, without.message
+    assert 0.01 < gap < planner.check_margin_m  # the predicted start is inside the margin
+    assert got.found and got.message.startswith(f"escape from {gap * 1000:.0f} mm"), got.message
+    assert len(got.checks) > 20  # the fits and the draws of the check
+    for swum in got.checks:
+        clear = body_clearance_m(nav.world, planner.clearance, nav.model, swum.states)
+        t = swum.t_s - swum.t_s[0]
+        assert swum.ok and clear.min() > ESCAPE_FLOOR_M  # never nearer than the floor
+        assert np.all(clear > escape_margin_m(t, gap, planner.check_margin_m))
+        assert clear[t >= ESCAPE_RAMP_S].min() > planner.check_margin_m  # the full margin again
+    np.testing.assert_allclose(escape_margin_m(np.array([0.0, 2.0, 4.0, 9.0]), 0.02, 0.03),
+                               [0.01, 0.02, 0.03, 0.03])
+    assert escape_margin_m(np.array([0.0]), 0.015, 0.03)[0] == ESCAPE_FLOOR_M

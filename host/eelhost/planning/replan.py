@@ -45,6 +45,7 @@ from eelhost.planning.search import (
     goal_mask,
     in_goal,
     leg_start_guide,
+    ramped_margin_m,
 )
 from eelhost.planning.state_estimate import (
     BodyEstimate,
@@ -343,6 +344,44 @@ SHIFT_MARGIN_M = 0.01
 """The capsule's smallest gap a shifted (or kept) route must swim in the estimated water before
 it is checked: the goal approach's and the look-ahead's 10 mm, so a repair never steers a route
 the look-ahead would at once replan (docs/planning.md, "The shift repair")."""
+
+ESCAPE_FLOOR_M = 0.01
+"""The escape's hard floor, m: every run of its check keeps the capsule more than this from
+everything, and a start whose capsule is not more than this clear gets no escape (the
+look-ahead's margin: the twin's outline was 8-12 mm optimistic over 0.5-1 s in water it did not
+know; docs/planning.md, "An escape from inside the margin")."""
+
+ESCAPE_TOLERANCE_M = 0.01
+"""How much closer than its start an escape's runs may come, m (the search's own rule for the
+first leg from a start inside its margin: the body sways and turns before it moves away)."""
+
+ESCAPE_RAMP_S = 4.0
+"""Seconds within which an escape's runs must regain the check's full margin: the margin grows
+linearly from the start's gap less the tolerance to the check's margin over this time."""
+
+
+def escape_margin_m(t_s: FloatArray, start_gap_m: float, full_m: float) -> FloatArray:
+    """The capsule's margin an escape's check runs keep at ``t_s`` after its start.
+
+    It grows from the start's gap less :data:`ESCAPE_TOLERANCE_M` (never under
+    :data:`ESCAPE_FLOOR_M`) to ``full_m`` (the check's margin) over :data:`ESCAPE_RAMP_S`
+    (docs/planning.md, "An escape from inside the margin").
+
+    Parameters
+    ----------
+    t_s : array_like
+        Times since the escape's start, s.
+    start_gap_m : float
+        The capsule's gap at the start, m.
+    full_m : float
+        The check's margin, m.
+
+    Returns
+    -------
+    ndarray
+    """
+    start = max(start_gap_m - ESCAPE_TOLERANCE_M, ESCAPE_FLOOR_M)
+    return ramped_margin_m(t_s, start, full_m, ESCAPE_RAMP_S)
 
 
 def shifted_waypoints(waypoints: list[tuple[float, float]], size_m: tuple[float, float]
@@ -817,6 +856,7 @@ class TankReplanner:
         early_margin_m: float | None = None,
         early_horizon_s: float = EARLY_HORIZON_S,
         early_budget_s: float | None = None,
+        escape_planner_for: Callable[[FloatArray], Planner] | None = None,
     ) -> None:
         self.planner_for = planner_for
         self.planner = planner
@@ -838,6 +878,7 @@ class TankReplanner:
         self.blocked_retries = blocked_retries
         self.replan_horizon_s = max(replan_horizon_s, lookahead_s)
         self.recovery_planner_for = recovery_planner_for
+        self.escape_planner_for = escape_planner_for
         self.replan_current_change_m_s = replan_current_change_m_s
         self.replan_budget_s = replan_budget_s
         self.calm_budget_s = calm_budget_s
@@ -895,7 +936,8 @@ class TankReplanner:
         # look-aheads and the current's windows on their own thread, so a replan never queues
         # behind them (the twin's kernel releases the interpreter: both run at once)
         self._side = ThreadPoolExecutor(max_workers=1, thread_name_prefix="eelbot-lookahead")
-        if goal_planner_for is not None or recovery_planner_for is not None:
+        if (goal_planner_for is not None or recovery_planner_for is not None
+                or escape_planner_for is not None):
             # the fallback tiers' planners built while the robot starts swimming
             self._prebuild = self._worker.submit(self._prepare_planner, np.zeros(2))
 
@@ -1336,10 +1378,19 @@ class TankReplanner:
         assert predicted is not None  # allow_end: the run's last state when it ends early
         state, integral = predicted
         took("prediction")
-        outcome = planner.plan(state, start_step, guide=leg_start_guide(state, self.model.n_links,
-                                                                       integral),
-                               deadline_s=deadline_s)
-        for _ in range(self.blocked_retries):
+        # a start inside the check's margin (every plan's check fails at its first sample) goes
+        # straight to the escape; one a little outside it gets the escape after the other tiers
+        # (docs/planning.md, "An escape from inside the margin")
+        gap = self._escape_gap(state) if fallbacks else None
+        trapped = gap is not None and gap <= planner.check_margin_m
+        if trapped:
+            assert gap is not None
+            outcome = self._escape(state, start_step, integral, extra, gap, deadline_s)
+            took("escape")
+        else:
+            outcome = planner.plan(state, start_step, guide=leg_start_guide(
+                state, self.model.n_links, integral), deadline_s=deadline_s)
+        for _ in range(0 if trapped else self.blocked_retries):
             if outcome.status != "blocked_start" or not _time_left(deadline_s):
                 break
             later = predict_start(planner.twin, est, left, start_step + period, allow_end=False,
@@ -1357,7 +1408,7 @@ class TankReplanner:
         # from it breaks the world's margin: the predicted start of a robot the water pushed on)
         # (not after a search stopped by the budget: the planner keeps only its check's time
         # free before the deadline, no room for another search and check)
-        if fallbacks and not outcome.found and outcome.status not in (
+        if fallbacks and not trapped and not outcome.found and outcome.status not in (
                 *REFUSED_FROM_STATE, "out_of_time") and (
                 _time_left(deadline_s)) and (outcome.status == "exhausted"
                                              or self._near_goal(state)):
@@ -1375,7 +1426,7 @@ class TankReplanner:
                         f"{outcome.message}; with the goal approach's margin: {approach.message}"))
         # the recovery: sharper turns, the goal approach's margin, a bounded search; only when
         # everything else found nothing (docs/planning.md, "The recovery replan")
-        if (fallbacks and not outcome.found
+        if (fallbacks and not trapped and not outcome.found
                 and outcome.status not in (*REFUSED_FROM_STATE, "out_of_time")
                 and _time_left(deadline_s)):
             recovery = self._planner_in("recovery", self.recovery_planner_for, extra)
@@ -1391,9 +1442,17 @@ class TankReplanner:
                 else:
                     outcome = dataclasses.replace(outcome, message=(
                         f"{outcome.message}; with the recovery's actions: {rescue.message}"))
+        if (gap is not None and not trapped and not outcome.found
+                and outcome.status not in (*REFUSED_FROM_STATE, "out_of_time")
+                and _time_left(deadline_s)):
+            escaped = self._escape(state, start_step, integral, extra, gap, deadline_s)
+            took("escape")
+            outcome = escaped if escaped.found else dataclasses.replace(
+                outcome, message=f"{outcome.message}; {escaped.message}")
         # the shift repair: the present route, its waypoints moved against the water that pushes
-        # it into something (docs/planning.md, "The shift repair")
-        if (fallbacks and self.shift_repair and not outcome.found
+        # it into something (docs/planning.md, "The shift repair"); not from inside the check's
+        # margin, where every route's check fails at its first sample
+        if (fallbacks and self.shift_repair and not trapped and not outcome.found
                 and outcome.status not in REFUSED_FROM_STATE and not _was_cut(deadline_s)):
             # also when the searches used up the budget (a failing search often does): the
             # repair's swims may overrun it by SHIFT_GRACE_S, a plan a little late rather than none
@@ -1417,6 +1476,63 @@ class TankReplanner:
         return (outcome, state, time.perf_counter() - wall0, time.thread_time() - cpu0,
                 self._planner_current.copy(), time.monotonic(), start_step)
 
+    def _escape_gap(self, state: FloatArray) -> float | None:
+        """The start's capsule gap when an escape may plan from it, else None.
+
+        An escape is for a start inside the check's margin or within
+        :data:`ESCAPE_TOLERANCE_M` of it, and more than :data:`ESCAPE_FLOOR_M` clear (docs/planning.md,
+        "An escape from inside the margin").
+        """
+        if self.escape_planner_for is None:
+            return None
+        gap = float(body_clearance_m(self.world, self.planner.clearance, self.model,
+                                     np.asarray(state, dtype=float)[None])[0])
+        if not ESCAPE_FLOOR_M < gap < self.planner.check_margin_m + ESCAPE_TOLERANCE_M:
+            return None
+        return gap
+
+    def _escape(self, state: FloatArray, start_step: int, integral: tuple[float, float],
+                extra: FloatArray, gap: float, deadline_s: SupportsFloat | None) -> Outcome:
+        """On the worker: the escape's plan from a start ``gap`` clear, judged with the ramp.
+
+        The escape's planner (``escape_planner_for``: the recovery's actions and bounded search,
+        the search's margin ramped from the start's to the world's over :data:`ESCAPE_RAMP_S`,
+        its check's margin :data:`ESCAPE_FLOOR_M`) plans from ``state``; a plan it finds is kept
+        only when every run of its check keeps the capsule more than
+        :func:`escape_margin_m` from everything at every step (docs/planning.md, "An escape from
+        inside the margin").
+        """
+        escape = self._planner_in("escape", self.escape_planner_for, extra)
+        if escape is None or not _time_left(deadline_s):
+            return Outcome(Plan(False, "out_of_time", "no escape: no time left"), "out_of_time",
+                           "no escape: no time left")
+        out = escape.plan(state, start_step, guide=leg_start_guide(
+            state, self.model.n_links, integral), deadline_s=deadline_s)
+        log.info("escape from t = %.2f s, the capsule %.0f mm clear: %s",
+                 start_step * escape.twin.dt_s, gap * 1000, out.message)
+        if not out.found:
+            return dataclasses.replace(out, message=(
+                f"escape from {gap * 1000:.0f} mm: {out.message}"))
+        full = self.planner.check_margin_m
+        least = math.inf
+        for run in out.checks:
+            clear = body_clearance_m(escape.world, escape.clearance, self.model, run.states)
+            margin = escape_margin_m(run.t_s - run.t_s[0], gap, full)
+            excess = clear - margin
+            if not np.all(excess > 0.0):
+                at = int(np.argmax(excess <= 0.0))
+                msg = (f"escape from {gap * 1000:.0f} mm: {out.message}; but run {run.label} "
+                       f"came within {max(clear[at], 0.0) * 1000:.0f} mm at "
+                       f"{run.t_s[at] - run.t_s[0]:.1f} s, inside the escape's "
+                       f"{margin[at] * 1000:.0f} mm")
+                return Outcome(dataclasses.replace(out.plan, found=False, status="check_failed",
+                                                   message=msg), "check_failed", msg, out.checks)
+            least = min(least, float(excess.min()))
+        out.message = (f"escape from {gap * 1000:.0f} mm (every check run above the margin "
+                       f"ramped to {full * 1000:.0f} mm over {ESCAPE_RAMP_S:.0f} s, by at least "
+                       f"{least * 1000:.0f} mm): {out.message}")
+        return out
+
     def _prepare_planner(self, extra: FloatArray) -> None:
         """On the replan worker: the planner in the world's current plus ``extra``.
 
@@ -1434,6 +1550,7 @@ class TankReplanner:
         # inside a replan after its main search has used the budget
         self._goal_planner_in(self._planner_current)
         self._planner_in("recovery", self.recovery_planner_for, self._planner_current)
+        self._planner_in("escape", self.escape_planner_for, self._planner_current)
 
     def _replan_and_judge(self, est: BodyEstimate, left: list[tuple[float, float]],
                           start_step: int, extra: FloatArray, guide: Guide | None = None,

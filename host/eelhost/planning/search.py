@@ -60,9 +60,42 @@ stays in the cache; any size gives the same values)."""
 COST_WINDOW = 32
 """A swim cost's rate is taken over its last this many measured swims (:class:`SwimCost`)."""
 
+RAISE_INNER_M = 0.1
+"""Within this distance of where a check run came too close, a raised margin counts whole
+(:meth:`Search.raise_margin`), m."""
+
+RAISE_OUTER_M = 0.25
+"""A raised margin falls linearly to nothing at this distance, m."""
+
 REST_KEY = -1
 GOAL = -1
 """The action index of the leg to the goal's centre."""
+
+
+def ramped_margin_m(t_s: NDArray[np.floating] | float, start_m: float, full_m: float, ramp_s: float) -> FloatArray:
+    """A margin that grows linearly from ``start_m`` at time 0 to ``full_m`` at ``ramp_s``.
+
+    The escape replan's rule (docs/planning.md, "An escape from inside the margin"): a plan from
+    a start already inside the margin keeps what the start has, less a tolerance, and regains
+    the full margin within ``ramp_s``.
+
+    Parameters
+    ----------
+    t_s : array_like
+        Times since the plan's start, s.
+    start_m, full_m : float
+        The margin at time 0 and from ``ramp_s`` on, m (``start_m`` above ``full_m`` is cut to it).
+    ramp_s : float
+        Seconds over which the margin grows (> 0).
+
+    Returns
+    -------
+    ndarray
+        The margin at each time, m.
+    """
+    start = min(start_m, full_m)
+    frac = np.clip(np.asarray(t_s, dtype=float) / ramp_s, 0.0, 1.0)
+    return np.asarray(start + (full_m - start) * frac, dtype=float)
 
 
 def in_goal(world: World, xy: Sequence[float] | FloatArray, shrink_m: float = 0.0) -> bool:
@@ -200,6 +233,13 @@ class SearchSettings:
     clearance_cost : float
         Cost of the soft margin, s per s swum, of a sample at the hard margin ``margin_m``; it
         falls quadratically to 0 at ``preferred_clearance_m``.
+    start_ramp_s : float
+        0: the first legs keep the start's own clearance less 10 mm (never less than the body's
+        half width) and every later leg ``margin_m``. Above 0 (the escape replan,
+        docs/planning.md "An escape from inside the margin"): every sample keeps a margin that
+        grows linearly from the start's clearance less 10 mm (also under the half width) to
+        ``margin_m`` over this many seconds of the plan from its start, on whatever leg it lies,
+        so the plan may stay inside the margin for a bounded time but must regain it by then.
     """
 
     actions: Actions = Actions()
@@ -218,6 +258,7 @@ class SearchSettings:
     robust_margin_m: float = 0.03
     preferred_clearance_m: float = 0.0
     clearance_cost: float = 0.0
+    start_ramp_s: float = 0.0
 
 
 @dataclass
@@ -384,6 +425,7 @@ class Search:
         self.body_half_width_m = float(self.model.half_axis_horizontal_m.max())
         self.reach_m = reach_m(self.model)
         self._start_margin_m = settings.margin_m
+        self._start_step = 0  # the search's start step: the margin ramp's origin
         self._soft_max_m = settings.preferred_clearance_m if settings.clearance_cost > 0 else 0.0
         self._memo: dict[tuple, list] = {}
         self.simulations = 0
@@ -394,6 +436,10 @@ class Search:
         self._node_walls: deque[float] = deque(maxlen=BATCHES_SEEN)
         self.clock: Callable[[], float] = time.monotonic
         """The clock ``deadline_s`` is read on (a test's fake one in place of the default)."""
+        # the margin raised where plans failed their check (raise_margin): rows of (x, y,
+        # extra m); the memo keys of the children swum while some were set (clear_raised)
+        self._raised = np.zeros((0, 3))
+        self._memo_raised: set[tuple] = set()
 
     # -- pieces ----------------------------------------------------------------------------------
 
@@ -567,15 +613,63 @@ class Search:
         # far enough from everything, that bound is all the search needs (and is what it keeps)
         far = self.clearance(flat[live, n : n + 2]) - self.clearance.error_m - self.reach_m
         out[live] = far
-        near = live[far < max(self.settings.margin_m, self._soft_max_m) + self._slack_m]
+        # a raised margin (raise_margin) lowers no point's clearance by more than its largest
+        raised = float(self._raised[:, 2].max()) if len(self._raised) else 0.0
+        near = live[far < max(self.settings.margin_m, self._soft_max_m) + self._slack_m + raised]
         # in pieces whose body points stay in the processor's cache: the same values, in a
         # quarter to a third of the processor time of one pass over a batch's tens of thousands
         # of samples (docs/planning.md, "The planner", "Processor time")
         for lo in range(0, near.size, CLEARANCE_CHUNK):
             part = near[lo : lo + CLEARANCE_CHUNK]
             pts = body_points(self.model, flat[part], self.settings.per_link)
-            out[part] = self.clearance(pts).min(axis=1) - self._slack_m
+            out[part] = (self.clearance(pts) - self.raised_m(pts)).min(axis=1) - self._slack_m
         return out.reshape(r, k)
+
+    def raised_m(self, points: FloatArray) -> FloatArray:
+        """How much the margin is raised at ``points`` (:meth:`raise_margin`), m; shape (...)."""
+        out = np.zeros(np.shape(points)[:-1])
+        for x, y, extra in self._raised:
+            d = np.hypot(points[..., 0] - x, points[..., 1] - y)
+            ramp = np.clip((RAISE_OUTER_M - d) / (RAISE_OUTER_M - RAISE_INNER_M), 0.0, 1.0)
+            np.maximum(out, extra * ramp, out=out)
+        return out
+
+    def raise_margin(self, xy: tuple[float, float], extra_m: float) -> None:
+        """Keep every body point near ``xy`` ``extra_m`` further from everything, from now on.
+
+        The planner's repair after a failed check (docs/planning.md, "Targets of issue 28 (the
+        planner's)", "A repair with the margin raised where the check failed"): within
+        :data:`RAISE_INNER_M` of ``xy`` the body's clearance counts ``extra_m`` less (the hard
+        margin and the soft margin's cost alike), falling linearly to nothing at
+        :data:`RAISE_OUTER_M`; where several raises overlap, the largest counts. Children
+        swum before whose legs came near are swum again when next reached; the rest of the
+        memo stands (a raised margin only refuses more). :meth:`clear_raised` undoes it.
+
+        Parameters
+        ----------
+        xy : (float, float)
+            Where a check run came too close, m.
+        extra_m : float
+            How much further, m (> 0).
+        """
+        if not extra_m > 0:
+            return
+        self._raised = np.vstack([self._raised, [float(xy[0]), float(xy[1]), float(extra_m)]])
+        near = RAISE_OUTER_M + self.reach_m
+        for key in [k for k, kids in self._memo.items()
+                    if any(c is not None and c.leg is not None and np.min(np.hypot(
+                        c.leg.com_m[:, 0] - xy[0], c.leg.com_m[:, 1] - xy[1])) < near
+                        for _, c in kids)]:
+            del self._memo[key]
+
+    def clear_raised(self) -> None:
+        """Undo every :meth:`raise_margin` (a new planning call starts without them)."""
+        if not len(self._raised):
+            return
+        self._raised = np.zeros((0, 3))
+        for key in self._memo_raised:
+            self._memo.pop(key, None)
+        self._memo_raised.clear()
 
     def soft_cost_s(self, clear: FloatArray, stride: int) -> float:
         """The soft margin's cost of a run's samples (``SearchSettings.preferred_clearance_m``).
@@ -610,7 +704,7 @@ class Search:
         last = end // stride
         samples = runs.states[j, : last + 1]
         com = samples[:, self.n : self.n + 2]
-        margin = s.margin_m if parent.waypoint is not None else self._start_margin_m
+        margin = self._margin(parent, len(clear), stride)
         bearing = self._bearing_deg(parent, psi)
         origin = parent.waypoint if parent.waypoint is not None else (com[0, 0], com[0, 1])
         d = math.hypot(wp[0] - origin[0], wp[1] - origin[1])
@@ -620,7 +714,7 @@ class Search:
                 return None
             at = int(inside[0])
             c = float(np.min(clear[: at + 1]))
-            if c < margin:
+            if np.any(clear[: at + 1] < margin[: at + 1]):
                 return None
             step = parent.step + at * stride
             leg = Leg(wp, d, bearing, parent.step, step, com[: at + 1], c, True, parent.key,
@@ -631,7 +725,7 @@ class Search:
         if runs.reasons[j] or runs.arrival_step[j] < 0:
             return None
         c = float(np.min(clear[: last + 1]))
-        if c < margin:
+        if np.any(clear[: last + 1] < margin[: last + 1]):
             return None
         arrival = int(runs.arrival_step[j])
         period = self.twin.restart_steps or stride
@@ -653,6 +747,15 @@ class Search:
         return _Node(wp, psi, samples[restart // stride], step,
                      parent.g + restart * self.twin.dt_s + soft, -1, leg, self._key(wp, psi),
                      guide=guide)
+
+    def _margin(self, parent: _Node, samples: int, stride: int) -> FloatArray:
+        """The margin each of a leg's ``samples`` keeps (:attr:`SearchSettings.start_ramp_s`)."""
+        s = self.settings
+        if s.start_ramp_s <= 0:
+            flat = s.margin_m if parent.waypoint is not None else self._start_margin_m
+            return np.full(samples, flat)
+        t = (parent.step - self._start_step + stride * np.arange(samples)) * self.twin.dt_s
+        return ramped_margin_m(t, self._start_margin_m, s.margin_m, s.start_ramp_s)
 
     # -- the search ------------------------------------------------------------------------------
 
@@ -719,6 +822,13 @@ class Search:
         start_clear = float(self.clearance(body_points(self.model, start_state[None],
                                                        s.per_link)).min()) - self._slack_m
         self._start_margin_m = min(s.margin_m, max(start_clear - 0.01, self.body_half_width_m))
+        if s.start_ramp_s > 0:
+            # the escape: the start's own clearance less 10 mm, also under the half width (the
+            # centre line of a thin tail may be nearer than the widest link's half width); the
+            # escape's check judges the body's own gap (docs/planning.md, "An escape from
+            # inside the margin")
+            self._start_margin_m = min(s.margin_m, start_clear - 0.01)
+        self._start_step = int(start_step)
         if guide is None:
             guide = leg_start_guide(start_state, self.n)
         root = _Node(None, heading_rad, start_state, start_step, start_step * self.twin.dt_s, -1,
@@ -842,6 +952,8 @@ class Search:
             fresh = self._children([batch_nodes[k] for k in todo])
             for k, kids in zip(todo, fresh, strict=True):
                 self._memo[self._path_key(ids[k], batch_nodes[k])] = kids
+                if len(self._raised):  # swum with a raised margin: not kept past clear_raised
+                    self._memo_raised.add(self._path_key(ids[k], batch_nodes[k]))
         out = []
         for k, ni in enumerate(ids):
             kids = self._memo[self._path_key(ni, batch_nodes[k])]

@@ -24,6 +24,8 @@ from eelhost.planning.planner import Outcome, Planner, PlanRefused
 from eelhost.planning.replan import (
     CALM_REPLAN_BUDGET_S,
     EARLY_BUDGET_S,
+    ESCAPE_FLOOR_M,
+    ESCAPE_RAMP_S,
     GOAL_APPROACH_CLEARANCE_M,
     REPLAN_BUDGET_S,
     TankReplanner,
@@ -122,6 +124,7 @@ def plan_for_run(
     calm_budget_s: float | None = CALM_REPLAN_BUDGET_S,
     early_margin_m: float | None = None,
     early_budget_s: float | None = EARLY_BUDGET_S,
+    escape: bool = True,
 ) -> RunPlan:
     """Plan in a world for ``eelbot run --plan`` (module docstring).
 
@@ -158,6 +161,9 @@ def plan_for_run(
         which gained no goal on unseen seeds.
     early_budget_s : float or None
         The early replans' budget (``TankReplanner``); None: the ``replan_budget_s``.
+    escape : bool
+        Replans from a start inside the check's margin use the escape (``TankReplanner``'s
+        ``escape_planner_for``; docs/planning.md, "An escape from inside the margin").
 
     Returns
     -------
@@ -187,7 +193,8 @@ def plan_for_run(
                               replan_budget_s=replan_budget_s,
                               calm_budget_s=calm_budget_s,
                               early_margin_m=early_margin_m,
-                              early_budget_s=early_budget_s)
+                              early_budget_s=early_budget_s,
+                              escape_planner_for=tiers.escape_planner_for if escape else None)
     return RunPlan(outcome.plan.waypoints_m, navigator, sim_uri_for_world(uri, world), outcome,
                    planner.options.guidance, outcome.plan.start_guide)
 
@@ -206,11 +213,16 @@ class ReplanPlanners:
     recovery_planner_for : callable
         The recovery's planner: sharper turns (``RECOVERY_ACTIONS``), the goal approach's margin,
         a bounded search (``RECOVERY_EXPANSIONS``, ``RECOVERY_REPAIRS``); its check unchanged.
+    escape_planner_for : callable
+        The escape's planner: the recovery's actions and bounds, the search's margin the world's
+        but ramped from the start's over ``ESCAPE_RAMP_S`` (``SearchSettings.start_ramp_s``), its
+        check's margin ``ESCAPE_FLOOR_M`` (the replanner judges the ramp over the check's runs).
     """
 
     planner_for: Callable[[FloatArray], Planner]
     goal_planner_for: Callable[[FloatArray], Planner]
     recovery_planner_for: Callable[[FloatArray], Planner]
+    escape_planner_for: Callable[[FloatArray], Planner]
 
 
 def replan_planners(planner: Planner, world: World, robot: Robot, model: CoefficientModel,
@@ -248,7 +260,17 @@ def replan_planners(planner: Planner, world: World, robot: Robot, model: Coeffic
         return approach_planner(extra_m_s, RECOVERY_REPAIRS, actions=RECOVERY_ACTIONS,
                                 max_expansions=RECOVERY_EXPANSIONS)
 
-    return ReplanPlanners(planner_for, approach_planner, recovery_planner_for)
+    def escape_planner_for(extra_m_s: FloatArray) -> Planner:
+        base = options.get("settings") or SearchSettings()
+        world_in = with_extra_current(world, extra_m_s).model_copy(update={"clearance_m": 0.0})
+        return Planner(world_in, robot, model, gait, **{
+            **options, "repairs": RECOVERY_REPAIRS, "check_margin_m": ESCAPE_FLOOR_M,
+            "settings": dataclasses.replace(
+                base, margin_m=planner.settings.margin_m, actions=RECOVERY_ACTIONS,
+                max_expansions=RECOVERY_EXPANSIONS, start_ramp_s=ESCAPE_RAMP_S)})
+
+    return ReplanPlanners(planner_for, approach_planner, recovery_planner_for,
+                          escape_planner_for)
 
 
 def with_extra_current(world: World, extra_m_s: FloatArray) -> World:
