@@ -274,7 +274,7 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
               replan_budget_s: float | None = REPLAN_BUDGET_S,
               record_to: Path | None = None,
               calm_budget_s: float | None = CALM_REPLAN_BUDGET_S,
-              early_margin_m: float | None = None) -> WorldResult:
+              early_margin_m: float | None = None, escape: bool = False) -> WorldResult:
     """Plan one generated world and swim the plan over ``sim://`` (module docstring).
 
     Parameters
@@ -299,6 +299,9 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
         The calm replans' budget (:func:`eelhost.planning.tank.plan_for_run`).
     early_margin_m : float or None
         The early replans' margin (:func:`eelhost.planning.tank.plan_for_run`); None: off.
+    escape : bool
+        Replans from inside the check's margin use the escape
+        (:func:`eelhost.planning.tank.plan_for_run`); off by default.
 
     Returns
     -------
@@ -318,7 +321,8 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
     try:
         planned = plan_for_run(world, robot, uri, gait, model, planner_options=planner_options,
                                swimmer=swimmer, replan_budget_s=replan_budget_s,
-                               calm_budget_s=calm_budget_s, early_margin_m=early_margin_m)
+                               calm_budget_s=calm_budget_s, early_margin_m=early_margin_m,
+                               escape=escape)
     except PlanRefused as err:
         return WorldResult(seed, False, err.status, detail=str(err), water=water,
                            plan_wall_s=time.perf_counter() - wall0,
@@ -408,6 +412,7 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
                           replan_budget_s: float | None = REPLAN_BUDGET_S,
                           calm_budget_s: float | None = CALM_REPLAN_BUDGET_S,
                           early_margin_m: float | None = None,
+                          escape: bool = False,
                           ) -> list[WorldResult]:
     """Run the benchmark over ``seeds``, resuming from ``<out>/results.jsonl``.
 
@@ -431,6 +436,8 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
         The calm replans' budget (:func:`run_world`).
     early_margin_m : float or None
         The early replans' margin (:func:`run_world`).
+    escape : bool
+        The escape (:func:`run_world`).
 
     Returns
     -------
@@ -466,7 +473,8 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
             r = run_world(seed, robot, model, planner_options=planner_options,
                           swimmer=swimmer, replan_budget_s=replan_budget_s,
                           record_to=out / "planning" / f"{seed}.json",
-                          calm_budget_s=calm_budget_s, early_margin_m=early_margin_m)
+                          calm_budget_s=calm_budget_s, early_margin_m=early_margin_m,
+                          escape=escape)
             with path.open("a") as f:
                 f.write(json.dumps(asdict(r)) + "\n")
         results.append(r)

@@ -101,6 +101,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    f"early replan, whose failure keeps the plan (0: off, the default; "
                    f"{EARLY_MARGIN_M:g} m is the value developed; it gained no goal on unseen "
                    "seeds: docs/planning.md, \"An earlier replan\")")
+    p.add_argument("--escape", action="store_true",
+                   help="with --plan or --bench: a replan from a start whose body is inside the "
+                   "check's margin (but more than 10 mm clear) plans an escape whose margin "
+                   "ramps from the start's gap to the full margin over 4 s (off by default: "
+                   "no such start on its development seeds; docs/planning.md, \"An escape from "
+                   "inside the margin\")")
     p.add_argument("--guidance", choices=GUIDANCE_LAWS.names(), default=PURSUIT.name,
                    help="the line-of-sight law that steers the robot: pursuit (the paper's pure "
                    "pursuit of each waypoint, default) or ilos (integral line-of-sight along each "
@@ -230,7 +236,8 @@ def run(args: argparse.Namespace) -> int:
                                    planner_options={"guidance": law},
                                    replan_budget_s=args.replan_budget or None,
                                    calm_budget_s=args.calm_budget or None,
-                                   early_margin_m=args.early_margin or None)
+                                   early_margin_m=args.early_margin or None,
+                                   escape=args.escape)
         print(planned.outcome.message)
         print(f"coefficients: {model.describe()}")
         waypoints, navigator, uri = planned.waypoints_m, planned.navigator, planned.uri
@@ -301,7 +308,8 @@ def _bench(args: argparse.Namespace) -> int:
         results = run_closed_loop_bench(robot, model, seeds, out, show, options,
                                         model.swimmer_for(robot), args.replan_budget or None,
                                         calm_budget_s=args.calm_budget or None,
-                                        early_margin_m=args.early_margin or None)
+                                        early_margin_m=args.early_margin or None,
+                                        escape=args.escape)
     command = (f"nice eelbot run --bench --worlds {args.worlds} --seed {args.seed}"
                + ("" if args.check_unknown_current is None
                   else f" --check-unknown-current {args.check_unknown_current:g}")
@@ -312,7 +320,8 @@ def _bench(args: argparse.Namespace) -> int:
                   else "")
                + (f" --calm-budget {args.calm_budget:g}"
                   if args.calm_budget != CALM_REPLAN_BUDGET_S else "")
-               + (f" --early-margin {args.early_margin:g}" if args.early_margin else ""))
+               + (f" --early-margin {args.early_margin:g}" if args.early_margin else "")
+               + (" --escape" if args.escape else ""))
     lines = summary_lines(results)
     block = [BENCH_BEGIN, f"Command: `{command}`", "",
              f"- machine: {cpu_model()}, {os.cpu_count()} cores visible (shared with other "

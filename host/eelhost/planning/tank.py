@@ -124,7 +124,7 @@ def plan_for_run(
     calm_budget_s: float | None = CALM_REPLAN_BUDGET_S,
     early_margin_m: float | None = None,
     early_budget_s: float | None = EARLY_BUDGET_S,
-    escape: bool = True,
+    escape: bool = False,
 ) -> RunPlan:
     """Plan in a world for ``eelbot run --plan`` (module docstring).
 
@@ -163,7 +163,8 @@ def plan_for_run(
         The early replans' budget (``TankReplanner``); None: the ``replan_budget_s``.
     escape : bool
         Replans from a start inside the check's margin use the escape (``TankReplanner``'s
-        ``escape_planner_for``; docs/planning.md, "An escape from inside the margin").
+        ``escape_planner_for``; docs/planning.md, "An escape from inside the margin"); off by
+        default (``eelbot run --escape``).
 
     Returns
     -------
