@@ -140,6 +140,16 @@ BATCH_RUNS = 16
 ROBUST_MARGIN_M = 0.002
 """With ``robust_search``, the body's gap every extra water's run keeps (over its half width)."""
 
+RAISE_SAFETY_M = 0.01
+"""A repair raises the search's margin where the check failed by what the failing run lacked
+plus this, m (:meth:`Planner.failure_sites`)."""
+
+RAISE_MAX_M = 0.15
+"""The most a repair raises the search's margin at one place, m."""
+
+RAISE_NEAR_M = 0.1
+"""The fits' run's room near a failure is its smallest over body points this near it, m."""
+
 PLANNING_GUIDANCE = GuidanceLaw("ilos", lookahead_m=0.2, integral_gain=0.02, heading_gain=1.0)
 """The integral line-of-sight law a plan may be searched, checked and followed with
 (``eelbot plan --guidance ilos``; docs/planning.md, "The guidance"): it holds each leg in a current
@@ -447,6 +457,10 @@ class Planner:
     repair_draws : int, optional
         Draws a repaired plan is checked over (default :data:`REPAIR_DRAWS_FACTOR` times
         ``draws``).
+    raise_on_repair : bool
+        A repair also raises the search's margin where the failing check runs came too close
+        (:meth:`failure_sites`, :meth:`Search.raise_margin`), besides banning the leg most of
+        them failed on; False: the ban alone, as until session 14.
     """
 
     def __init__(
@@ -469,6 +483,7 @@ class Planner:
         soft_margin: bool = True,
         check_margin_m: float = CHECK_MARGIN_M,
         repair_draws: int | None = None,
+        raise_on_repair: bool = True,
     ) -> None:
         world = coefficients.in_tank(world)
         robot = coefficients.robot_for(robot)
@@ -487,6 +502,7 @@ class Planner:
         self.water = _water_draws(coefficients, seed, draws, self.unknown_current_m_s)
         self._waters: dict[int, list[WaterDraw]] = {0: self.water}
         self.repairs = repairs
+        self.raise_on_repair = bool(raise_on_repair)
         self.check = check
         if not check_margin_m >= 0.0:
             raise ValueError(f"check_margin_m: expected at least 0 m, got {check_margin_m!r}")
@@ -738,6 +754,7 @@ class Planner:
         # the expected length free before it (docs/planning.md, "The planning call's deadline")
         expected = self.expected_steps(state)
         free_path = self._free_path_steps(state)
+        self.search.clear_raised()  # a margin raised by an earlier call's repairs is not this one's
         for attempt in range(self.repairs + 1):
             # a repaired plan's check swims its own, larger count of draws (REPAIR_DRAWS_FACTOR);
             # with a deadline, as many as its predicted time leaves the search room for
@@ -800,6 +817,9 @@ class Planner:
             index = blamed.most_common(1)[0][0]
             leg = plan.legs[index]
             banned.add((leg.parent_key, leg.action))
+            if self.raise_on_repair:
+                for xy, extra in self.failure_sites(checks, bad):
+                    self.search.raise_margin(xy, extra)
             log.info("plan failed its check in %d runs (e.g. %s: %s); banning leg to (%.2f, %.2f)",
                      len(bad), bad[0].label, self.verdict(bad[0]), *leg.waypoint_m)
         msg = (f"check failed: after {self.repairs} repairs the plan still fails in the twin with "
@@ -808,6 +828,55 @@ class Planner:
         return Outcome(Plan(False, "check_failed", msg, plan.legs, plan.cost_s, plan.expansions,
                             plan.simulations, plan.planning_time_s, plan.tree),
                        "check_failed", msg, checks, self.repairs, total, searching)
+
+    def failure_sites(self, runs: list[Swim], bad: list[Swim]) -> list[tuple[tuple[float, float], float]]:
+        """Where each failing check run came too close, and how much more room the search must keep.
+
+        For a run that touched or came within the check's margin (not one that only missed the
+        goal or raised a twin flag): the body point at its smallest gap g, and the extra the
+        search's margin is raised by there (:meth:`Search.raise_margin`): the room the fits'
+        own run (the first of ``runs``) kept near that point, plus what the failing run lacked
+        (the check's margin less g), plus :data:`RAISE_SAFETY_M`, less the search's hard margin;
+        so the next plan must keep, near that point, what this one kept and what the failing
+        draw lost there (docs/planning.md, "A repair with the margin raised where the check
+        failed"). At most :data:`RAISE_MAX_M`.
+
+        Parameters
+        ----------
+        runs : list of Swim
+            The check's runs, the fits as fitted first.
+        bad : list of Swim
+            The failing ones among them.
+
+        Returns
+        -------
+        list of ((x, y), extra m)
+        """
+        nominal = runs[0] if runs else None
+        sites = []
+        for run in bad:
+            if run.collision_free and run.min_clearance_m > self.check_margin_m:
+                continue  # the goal missed or a twin flag: nowhere to keep away from
+            states = np.asarray(run.states)
+            if not len(states):
+                continue
+            pts = body_points(self.model, states, self.settings.per_link)
+            clear = self.clearance(pts)
+            k, i = np.unravel_index(int(np.nanargmin(clear)), clear.shape)
+            xy = (float(pts[k, i, 0]), float(pts[k, i, 1]))
+            kept = math.nan
+            if nominal is not None and len(nominal.states):
+                npts = body_points(self.model, np.asarray(nominal.states),
+                                   self.settings.per_link)
+                close = np.hypot(npts[..., 0] - xy[0], npts[..., 1] - xy[1]) < RAISE_NEAR_M
+                if np.any(close):
+                    kept = float(np.min(self.clearance(npts[close])))
+            if not math.isfinite(kept):
+                kept = self.settings.margin_m
+            lacked = self.check_margin_m - run.min_clearance_m
+            extra = kept + lacked + RAISE_SAFETY_M - self.settings.margin_m
+            sites.append((xy, float(min(max(extra, RAISE_SAFETY_M), RAISE_MAX_M))))
+        return sites
 
     def verdict(self, run: Swim) -> str:
         """One line on a check run: its own message, or how close it came within the margin."""
