@@ -1877,7 +1877,8 @@ def test_a_replan_from_inside_the_margin_escapes_keeping_its_ramp_and_only_above
     # the escape finds a plan whose every check run keeps the margin ramped from the start's gap
     # less 10 mm to 30 mm over 4 s (docs/planning.md, "An escape from inside the margin")
     planner, outcome = open_plan
-    tiers = replan_planners(planner, planner.world, ROBOT, MODEL, PATH_GAIT, {})
+    # 20 draws (the planner's 60 triple the check's time; the ramp is judged the same way)
+    tiers = replan_planners(planner, planner.world, ROBOT, MODEL, PATH_GAIT, {"draws": 20})
     nav = TankReplanner(tiers.planner_for, planner, outcome, PATH_GAIT,
                         goal_planner_for=tiers.goal_planner_for,
                         recovery_planner_for=tiers.recovery_planner_for,
