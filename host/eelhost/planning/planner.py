@@ -24,7 +24,10 @@ docs/planning.md ("The planner") is the long form. :meth:`Planner.plan`:
    swimming the rest.
 4. **Repair**: the leg most check runs failed on (the leg being swum at the first contact, or
    the last leg when the goal was missed) is banned and the search runs again (it keeps what it
-   swam); after ``repairs`` attempts the plan is refused with the reason of the last failure.
+   swam), with its margin raised where the failing runs came too close (:meth:`Planner.failure_sites`,
+   :meth:`eelhost.planning.search.Search.raise_margin`; docs/planning.md, "A repair with the
+   margin raised where the check failed"); after ``repairs`` attempts the plan is refused with
+   the reason of the last failure.
    Each searched plan is checked over its own draws, fresh and independent of the draws that
    failed the plans before it (:meth:`Planner.waters`), so a repaired plan is not one chosen to
    pass the very draws its predecessors failed; and a plan's interval is a simultaneous one over
