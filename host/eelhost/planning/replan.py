@@ -1504,8 +1504,9 @@ class TankReplanner:
         """
         escape = self._planner_in("escape", self.escape_planner_for, extra)
         if escape is None or not _time_left(deadline_s):
-            return Outcome(Plan(False, "out_of_time", "no escape: no time left"), "out_of_time",
-                           "no escape: no time left")
+            why = "no escape planner" if escape is None else "no time left"
+            status = "exhausted" if escape is None else "out_of_time"
+            return Outcome(Plan(False, status, f"no escape: {why}"), status, f"no escape: {why}")
         out = escape.plan(state, start_step, guide=leg_start_guide(
             state, self.model.n_links, integral), deadline_s=deadline_s)
         log.info("escape from t = %.2f s, the capsule %.0f mm clear: %s",
