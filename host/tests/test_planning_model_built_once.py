@@ -88,9 +88,7 @@ def test_plan_builds_the_robots_model_once_for_the_plan_its_check_and_the_covera
 
 def test_a_batch_uses_a_handed_model_only_when_it_is_the_robots_own(builds):
     robot = load_robot()
-    scenario = Scenario(name="s", amplitude_rad=PATH_GAIT.amplitude_rad,
-                        omega_rad_s=PATH_GAIT.omega_rad_s, beta_rad=PATH_GAIT.beta_rad,
-                        k_theta=PATH_GAIT.k_theta, waypoints_m=[(1.0, 0.0)], duration_s=1.0)
+    scenario = Scenario.swimming(PATH_GAIT, name="s", waypoints_m=[(1.0, 0.0)], duration_s=1.0)
     own = SwimmerModel.from_robot(robot)
     other = SwimmerModel.from_robot(robot, type(robot.hydrodynamics).from_array(
         1.5 * robot.hydrodynamics.as_array()))

@@ -75,10 +75,9 @@ def test_without_feedback_servos_the_estimate_falls_back_to_the_reference_at_the
 # -- a synthetic stream: a twin run of the path gait, its Telemetry made here ---------------------
 
 def twin_run(t_end_s: float = 5.0):
-    sc = Scenario(name="swim", amplitude_rad=PATH_GAIT.amplitude_rad,
-                  omega_rad_s=PATH_GAIT.omega_rad_s, beta_rad=PATH_GAIT.beta_rad,
-                  k_theta=PATH_GAIT.k_theta, waypoints_m=[(2.5, 1.3)], duration_s=t_end_s + 0.2,
-                  start_position_m=(0.6, 1.0), start_heading_deg=0.0)
+    sc = Scenario.swimming(PATH_GAIT, name="swim", waypoints_m=[(2.5, 1.3)],
+                           duration_s=t_end_s + 0.2, start_position_m=(0.6, 1.0),
+                           start_heading_deg=0.0)
     return simulate_closed_loop(ROBOT, sc, LoopOptions(stop_at_goal=False))
 
 
@@ -219,10 +218,8 @@ def test_telemetry_that_disagrees_with_the_camera_is_weighted_down_by_its_measur
 
 def turning_run():
     """The reference loop turning from heading 0 towards a waypoint behind it (offset ~1 rad)."""
-    sc = Scenario(name="turn", amplitude_rad=PATH_GAIT.amplitude_rad,
-                  omega_rad_s=PATH_GAIT.omega_rad_s, beta_rad=PATH_GAIT.beta_rad,
-                  k_theta=PATH_GAIT.k_theta, waypoints_m=[(0.4, 1.3)], duration_s=5.5,
-                  start_position_m=(1.0, 1.0), start_heading_deg=0.0)
+    sc = Scenario.swimming(PATH_GAIT, name="turn", waypoints_m=[(0.4, 1.3)], duration_s=5.5,
+                           start_position_m=(1.0, 1.0), start_heading_deg=0.0)
     return simulate_closed_loop(ROBOT, sc, LoopOptions(stop_at_goal=False))
 
 
@@ -330,12 +327,10 @@ def _current_run(current_speed_m_s: float):
     """
     world = parse_world(WORLD, "current")
     twin = Planner(world, ROBOT, FITTED).twin
-    sc = Scenario(name="current", amplitude_rad=PATH_GAIT.amplitude_rad,
-                  omega_rad_s=PATH_GAIT.omega_rad_s, beta_rad=PATH_GAIT.beta_rad,
-                  k_theta=PATH_GAIT.k_theta, waypoints_m=[(1.7, 1.0), (0.9, 1.1)],
-                  acceptance_radius_m=twin.acceptance_radius_m,
-                  current_speed_m_s=current_speed_m_s, current_direction_deg=90.0,
-                  duration_s=24.0, start_position_m=(0.5, 0.9), start_heading_deg=0.0)
+    sc = Scenario.swimming(PATH_GAIT, name="current", waypoints_m=[(1.7, 1.0), (0.9, 1.1)],
+                           acceptance_radius_m=twin.acceptance_radius_m,
+                           current_speed_m_s=current_speed_m_s, current_direction_deg=90.0,
+                           duration_s=24.0, start_position_m=(0.5, 0.9), start_heading_deg=0.0)
     run = simulate_closed_loop(ROBOT, sc, dataclasses.replace(twin.options, stop_at_goal=False),
                                coefficients=twin.coefficients[0])
     return twin, sc, run

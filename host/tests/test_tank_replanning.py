@@ -70,10 +70,8 @@ OPEN = {
 
 def swimming_state(t_s: float = 6.0):
     """A state of the robot swimming a path: bent, moving, mid-stroke; and its run."""
-    sc = Scenario(name="swim", amplitude_rad=PATH_GAIT.amplitude_rad,
-                  omega_rad_s=PATH_GAIT.omega_rad_s, beta_rad=PATH_GAIT.beta_rad,
-                  k_theta=PATH_GAIT.k_theta, waypoints_m=[(2.5, 1.3)], duration_s=t_s + 0.5,
-                  start_position_m=(0.6, 1.0), start_heading_deg=0.0)
+    sc = Scenario.swimming(PATH_GAIT, name="swim", waypoints_m=[(2.5, 1.3)], duration_s=t_s + 0.5,
+                           start_position_m=(0.6, 1.0), start_heading_deg=0.0)
     run = simulate_closed_loop(ROBOT, sc, LoopOptions(stop_at_goal=False))
     return run
 
@@ -1836,10 +1834,8 @@ def test_an_early_replan_with_a_longer_budget_starts_when_it_ends(open_plan):
 
 def _away_run():
     """The robot swimming at 70 degrees off the tank's bottom wall, from (1, 1) m, for 3.5 s."""
-    sc = Scenario(name="away", amplitude_rad=PATH_GAIT.amplitude_rad,
-                  omega_rad_s=PATH_GAIT.omega_rad_s, beta_rad=PATH_GAIT.beta_rad,
-                  k_theta=PATH_GAIT.k_theta, waypoints_m=[(2.0, 3.75)], duration_s=3.5,
-                  start_position_m=(1.0, 1.0), start_heading_deg=70.0)
+    sc = Scenario.swimming(PATH_GAIT, name="away", waypoints_m=[(2.0, 3.75)], duration_s=3.5,
+                           start_position_m=(1.0, 1.0), start_heading_deg=70.0)
     return simulate_closed_loop(ROBOT, sc, LoopOptions(stop_at_goal=False))
 
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
@@ -82,6 +82,24 @@ class Scenario(BaseModel):
     min_duration_s: Annotated[float, Field(ge=0, allow_inf_nan=False, strict=True)] = 0.0
     start_position_m: tuple[Finite, Finite] = (0.0, 0.0)
     start_heading_deg: Finite = 0.0
+
+    @classmethod
+    def swimming(cls, gait: Gait, **task: Any) -> Scenario:
+        """The task ``task`` (the other fields, by name) swum with ``gait``'s parameters G_p.
+
+        Parameters
+        ----------
+        gait : Gait
+            A, omega, beta and k_theta.
+        **task
+            Any other field of the scenario (name, waypoints, current, start, durations).
+
+        Returns
+        -------
+        Scenario
+        """
+        return cls(amplitude_rad=gait.amplitude_rad, omega_rad_s=gait.omega_rad_s,
+                   beta_rad=gait.beta_rad, k_theta=gait.k_theta, **task)
 
     @property
     def gait(self) -> Gait:
@@ -152,13 +170,9 @@ def paper_grid(motion: str) -> list[Scenario]:
 
 
 def _path(name: str, waypoints: list[tuple[float, float]], speed: float, direction: float):
-    g = PATH_GAIT
-    return Scenario(
+    return Scenario.swimming(
+        PATH_GAIT,
         name=name,
-        amplitude_rad=g.amplitude_rad,
-        omega_rad_s=g.omega_rad_s,
-        beta_rad=g.beta_rad,
-        k_theta=g.k_theta,
         waypoints_m=waypoints,
         current_speed_m_s=speed,
         current_direction_deg=direction,

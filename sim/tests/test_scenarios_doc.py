@@ -32,3 +32,17 @@ def test_the_named_paths_are_those_the_docs_list():
         row = next(line for line in text.splitlines() if line.startswith(f"| `{name}` |"))
         for x, y in named_scenarios()[name].waypoints_m:
             assert f"({x:.2f}, {y:.2f})" in row
+
+
+def test_a_task_swum_with_a_gait_carries_the_gait_and_its_own_fields():
+    from eelsim.control import Gait
+
+    gait = Gait(0.7, 3.1, 0.9, 0.2)
+    task = Scenario.swimming(gait, name="t", waypoints_m=[(1.0, 0.5)], duration_s=7.0,
+                             current_speed_m_s=0.01, current_direction_deg=45.0)
+    assert task.gait == gait
+    assert (task.name, task.waypoints_m, task.duration_s) == ("t", [(1.0, 0.5)], 7.0)
+    assert (task.current_speed_m_s, task.current_direction_deg) == (0.01, 45.0)
+    path1 = named_scenarios()["path1"]
+    assert Scenario.swimming(path1.gait, **path1.model_dump(exclude={
+        "amplitude_rad", "omega_rad_s", "beta_rad", "k_theta"})) == path1

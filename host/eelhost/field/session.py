@@ -229,12 +229,9 @@ class TankSession:
         else:
             speed, direction = notes.current_m_s or (0.0, 0.0)
         gait = config.gait
-        scenario = Scenario(
+        scenario = Scenario.swimming(
+            gait,
             name=Path(out).name,
-            amplitude_rad=gait.amplitude_rad,
-            omega_rad_s=gait.omega_rad_s,
-            beta_rad=gait.beta_rad,
-            k_theta=gait.k_theta,
             waypoints_m=config.waypoints_m,
             acceptance_radius_m=config.acceptance_radius_m,
             current_speed_m_s=speed,

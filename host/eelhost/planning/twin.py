@@ -209,12 +209,9 @@ class Twin:
         if current_m_s is not None:
             speed = math.hypot(*current_m_s)
             direction = math.degrees(math.atan2(current_m_s[1], current_m_s[0])) if speed else 0.0
-        return Scenario(
+        return Scenario.swimming(
+            g,
             name="planning",
-            amplitude_rad=g.amplitude_rad,
-            omega_rad_s=g.omega_rad_s,
-            beta_rad=g.beta_rad,
-            k_theta=g.k_theta,
             waypoints_m=[(float(x), float(y)) for x, y in waypoints],
             acceptance_radius_m=self.acceptance_radius_m,
             current_speed_m_s=speed,

@@ -255,9 +255,8 @@ class LiveView:
         """
         remaining = self.config.waypoints_m[target_index:] or self.config.waypoints_m[-1:]
         g = self.config.gait
-        scenario = Scenario(
-            name="live-view prediction", amplitude_rad=g.amplitude_rad, omega_rad_s=g.omega_rad_s,
-            beta_rad=g.beta_rad, k_theta=g.k_theta, waypoints_m=list(remaining),
+        scenario = Scenario.swimming(
+            g, name="live-view prediction", waypoints_m=list(remaining),
             acceptance_radius_m=self.config.acceptance_radius_m, duration_s=self.horizon_s,
             start_position_m=(float(pose[0]), float(pose[1])),
             start_heading_deg=math.degrees(float(pose[2])),
