@@ -855,7 +855,12 @@ class Planner:
         -------
         list of ((x, y), extra m)
         """
-        nominal = runs[0] if runs else None
+        # the fits' own run's body points and their room, once for every failing run
+        nominal_pts = nominal_clear = None
+        if runs and len(runs[0].states):
+            nominal_pts = body_points(self.model, np.asarray(runs[0].states),
+                                      self.settings.per_link)
+            nominal_clear = self.clearance(nominal_pts)
         sites = []
         for run in bad:
             if run.collision_free and run.min_clearance_m > self.check_margin_m:
@@ -868,12 +873,11 @@ class Planner:
             k, i = np.unravel_index(int(np.nanargmin(clear)), clear.shape)
             xy = (float(pts[k, i, 0]), float(pts[k, i, 1]))
             kept = math.nan
-            if nominal is not None and len(nominal.states):
-                npts = body_points(self.model, np.asarray(nominal.states),
-                                   self.settings.per_link)
-                close = np.hypot(npts[..., 0] - xy[0], npts[..., 1] - xy[1]) < RAISE_NEAR_M
+            if nominal_pts is not None and nominal_clear is not None:
+                close = (np.hypot(nominal_pts[..., 0] - xy[0], nominal_pts[..., 1] - xy[1])
+                         < RAISE_NEAR_M)
                 if np.any(close):
-                    kept = float(np.min(self.clearance(npts[close])))
+                    kept = float(np.min(nominal_clear[close]))
             if not math.isfinite(kept):
                 kept = self.settings.margin_m
             lacked = self.check_margin_m - run.min_clearance_m
