@@ -127,6 +127,9 @@ class WorldResult:
     early_replans, early_found, early_cut : int
         The same for the early replans (docs/planning.md, "An earlier replan"), which have a
         longer budget too but are not calm ones.
+    restarts, pauses : int
+        Restarts from rest made, and pauses (stops of the gait for one) (docs/planning.md, "A
+        restart from rest"; 0 in results written before it).
     """
 
     seed: int
@@ -161,6 +164,8 @@ class WorldResult:
     early_replans: int = 0
     early_found: int = 0
     early_cut: int = 0
+    restarts: int = 0
+    pauses: int = 0
 
 
 def calm_and_early(replans: list[dict], replan_budget_s: float | None
@@ -274,7 +279,8 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
               replan_budget_s: float | None = REPLAN_BUDGET_S,
               record_to: Path | None = None,
               calm_budget_s: float | None = CALM_REPLAN_BUDGET_S,
-              early_margin_m: float | None = None, escape: bool = False) -> WorldResult:
+              early_margin_m: float | None = None, escape: bool = False,
+              restarts: int = 0) -> WorldResult:
     """Plan one generated world and swim the plan over ``sim://`` (module docstring).
 
     Parameters
@@ -302,6 +308,9 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
     escape : bool
         Replans from inside the check's margin use the escape
         (:func:`eelhost.planning.tank.plan_for_run`); off by default.
+    restarts : int
+        Restarts from rest a run may make (``TankReplanner``'s ``max_restarts``;
+        docs/planning.md, "A restart from rest").
 
     Returns
     -------
@@ -329,6 +338,7 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
                            plan_cpu_s=time.process_time() - cpu0, guidance=law)
     plan_wall, plan_cpu = time.perf_counter() - wall0, time.process_time() - cpu0
     nav = planned.navigator
+    nav.max_restarts = restarts
     cost = planned.outcome.plan.cost_s
     # the run loop steers with the law the plan was searched and checked with, from its start
     config = RunConfig(gait, planned.waypoints_m, duration_s=2.0 * cost + 30.0,
@@ -367,7 +377,8 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
         nav.retries_before_contact, estimate_error, calm_budget_s if replan_budget_s else None,
         len(calm), sum(e["status"] == "found" for e in calm),
         sum("cut_for" in e for e in calm), len(early), sum(e["status"] == "found" for e in early),
-        sum("cut_for" in e for e in early))
+        sum("cut_for" in e for e in early), nav.restarts,
+        sum(e["kind"] == "halt" for e in nav.events))
 
 
 def estimate_error_mm(model: SwimmerModel, history: list[tuple[float, FloatArray]] | None,
@@ -413,6 +424,7 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
                           calm_budget_s: float | None = CALM_REPLAN_BUDGET_S,
                           early_margin_m: float | None = None,
                           escape: bool = False,
+                          restarts: int = 0,
                           ) -> list[WorldResult]:
     """Run the benchmark over ``seeds``, resuming from ``<out>/results.jsonl``.
 
@@ -438,6 +450,8 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
         The early replans' margin (:func:`run_world`).
     escape : bool
         The escape (:func:`run_world`).
+    restarts : int
+        Restarts from rest per run (:func:`run_world`).
 
     Returns
     -------
@@ -474,7 +488,7 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
                           swimmer=swimmer, replan_budget_s=replan_budget_s,
                           record_to=out / "planning" / f"{seed}.json",
                           calm_budget_s=calm_budget_s, early_margin_m=early_margin_m,
-                          escape=escape)
+                          escape=escape, restarts=restarts)
             with path.open("a") as f:
                 f.write(json.dumps(asdict(r)) + "\n")
         results.append(r)
@@ -552,6 +566,11 @@ def summary_lines(results: list[WorldResult]) -> list[str]:
                      f"{sum(r.early_replans for r in planned)}, of which "
                      f"{sum(r.early_found for r in planned)} found a plan and "
                      f"{sum(r.early_cut for r in planned)} were cut short for an urgent replan")
+    if any(r.pauses for r in planned):
+        paused = [r for r in planned if r.pauses]
+        lines.append(f"- pauses for a restart from rest: {sum(r.pauses for r in paused)} in "
+                     f"{len(paused)} runs, restarts made {sum(r.restarts for r in paused)}; "
+                     f"{sum(r.reached for r in paused)} of these runs reached the goal")
     cpus = [c for r in planned for c in r.replan_cpu_s]
     if cpus:
         lines.append(f"- replans' processor time: median {statistics.median(cpus):.2f} s, "

@@ -107,6 +107,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    "ramps from the start's gap to the full margin over 4 s (off by default: "
                    "no such start on its development seeds; docs/planning.md, \"An escape from "
                    "inside the margin\")")
+    p.add_argument("--restarts", type=int, default=0, metavar="N",
+                   help="with --plan or --bench: where no safe swimming continuation is left, "
+                   "stop the gait, let the robot drift to rest and restart on a plan from rest, "
+                   "at most N times per run (0: off, the default; docs/planning.md, \"A restart "
+                   "from rest\")")
     p.add_argument("--guidance", choices=GUIDANCE_LAWS.names(), default=PURSUIT.name,
                    help="the line-of-sight law that steers the robot: pursuit (the paper's pure "
                    "pursuit of each waypoint, default) or ilos (integral line-of-sight along each "
@@ -238,6 +243,7 @@ def run(args: argparse.Namespace) -> int:
                                    calm_budget_s=args.calm_budget or None,
                                    early_margin_m=args.early_margin or None,
                                    escape=args.escape)
+        planned.navigator.max_restarts = max(args.restarts, 0)
         print(planned.outcome.message)
         print(f"coefficients: {model.describe()}")
         waypoints, navigator, uri = planned.waypoints_m, planned.navigator, planned.uri
@@ -309,7 +315,7 @@ def _bench(args: argparse.Namespace) -> int:
                                         model.swimmer_for(robot), args.replan_budget or None,
                                         calm_budget_s=args.calm_budget or None,
                                         early_margin_m=args.early_margin or None,
-                                        escape=args.escape)
+                                        escape=args.escape, restarts=max(args.restarts, 0))
     command = (f"nice eelbot run --bench --worlds {args.worlds} --seed {args.seed}"
                + ("" if args.check_unknown_current is None
                   else f" --check-unknown-current {args.check_unknown_current:g}")
@@ -321,7 +327,8 @@ def _bench(args: argparse.Namespace) -> int:
                + (f" --calm-budget {args.calm_budget:g}"
                   if args.calm_budget != CALM_REPLAN_BUDGET_S else "")
                + (f" --early-margin {args.early_margin:g}" if args.early_margin else "")
-               + (" --escape" if args.escape else ""))
+               + (" --escape" if args.escape else "")
+               + (f" --restarts {args.restarts}" if args.restarts else ""))
     lines = summary_lines(results)
     block = [BENCH_BEGIN, f"Command: `{command}`", "",
              f"- machine: {cpu_model()}, {os.cpu_count()} cores visible (shared with other "

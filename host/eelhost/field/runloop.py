@@ -87,6 +87,9 @@ class Decision(Protocol):
     detail: str
     arrived: bool
     recorded: bool
+    # optional (a navigator's Decision may lack them): ``pause`` stops the gait (SetGait with
+    # amplitude 0) and keeps the run; ``restart`` with waypoints sets the gait's amplitude back
+    # (docs/planning.md, "A restart from rest")
 
 
 class Navigator(Protocol):
@@ -243,6 +246,8 @@ class FrameReport:
         The guidance's filtered (x, y, heading).
     target_index : int
         The waypoint being steered to.
+    waypoints_m : list of (float, float) or None
+        The waypoints steered to now (a replan's once it is adopted); None: the run's own.
     """
 
     t_s: float
@@ -250,6 +255,7 @@ class FrameReport:
     localisation: Localisation
     filtered_pose: NDArray[np.float64] | None
     target_index: int
+    waypoints_m: list[tuple[float, float]] | None = None
 
 
 def open_frames(frames: Iterable[tuple[float, NDArray[np.uint8]]]
@@ -325,6 +331,9 @@ class RunLoop:
         self.navigator = navigator
         self.replans = 0
         self._goal_reached = False
+        # the navigator paused the gait (amplitude 0): offsets of 0 go on feeding the watchdog
+        self._paused = False
+        self.pauses = 0
         link.listeners.append(self._on_event)
 
     def _guidance_for(self, waypoints: list[tuple[float, float]],
@@ -365,18 +374,13 @@ class RunLoop:
         if self.recorder is not None:
             self.recorder.command(event.t_s - self._t_start, event)
 
-    def _start_robot(self) -> None:
+    def _set_gait(self, amplitude_rad: float) -> None:
+        """SetGait with the run's omega, beta and slew rates and this amplitude (acknowledged)."""
         c = self.config
         g = c.gait
-        # the robot file's PD gains; with the servo joint model the servos close their own loop
-        # and the firmware keeps its defaults
-        gains = pd_gains(self.robot.joints)
-        self.link.send(protocol.Hello())
-        self.link.send(protocol.SetGains(*gains) if gains is not None else protocol.SetGains(),
-                       want_ack=True)
         self.link.send(
             protocol.SetGait(
-                g.amplitude_rad,
+                amplitude_rad,
                 g.omega_rad_s,
                 g.beta_rad,
                 c.amplitude_rate_rad_s,
@@ -385,6 +389,15 @@ class RunLoop:
             ),
             want_ack=True,
         )
+
+    def _start_robot(self) -> None:
+        # the robot file's PD gains; with the servo joint model the servos close their own loop
+        # and the firmware keeps its defaults
+        gains = pd_gains(self.robot.joints)
+        self.link.send(protocol.Hello())
+        self.link.send(protocol.SetGains(*gains) if gains is not None else protocol.SetGains(),
+                       want_ack=True)
+        self._set_gait(self.config.gait.amplitude_rad)
         self.link.send(protocol.SetOffset(0.0))
         self.link.send(protocol.Start(), want_ack=True)
 
@@ -470,7 +483,8 @@ class RunLoop:
             if self.recorder is not None:
                 self.recorder.frame_seen(t, loc.status, sum(loc.seen))
             if self.observers:
-                report = FrameReport(t, frame, loc, self.filtered, self.target)
+                steered = [(float(x), float(y)) for x, y in self.guidance.waypoints_m]
+                report = FrameReport(t, frame, loc, self.filtered, self.target, steered)
                 for observer in self.observers:
                     observer(report)
             if self._should_stop(t, last_pose_t):
@@ -478,7 +492,9 @@ class RunLoop:
             if t >= next_control - EPS_S:
                 # Sent even before the first pose (0 then): it keeps the robot's watchdog fed.
                 # The only call of offset(): each is a control update (ILOS's integral step).
-                self._offset_rad = self.guidance.offset()
+                # Paused (amplitude 0), the offset is 0: the body drifts straight, as the twin
+                # swims it, and the robot stays running with its watchdog fed.
+                self._offset_rad = 0.0 if self._paused else self.guidance.offset()
                 self.link.send(protocol.SetOffset(self._offset_rad))
                 out.offsets_sent += 1
                 next_control += c.control_period_s
@@ -497,7 +513,21 @@ class RunLoop:
             self.request_stop(decision.stop, decision.detail)
         elif decision.arrived:
             self._goal_reached = True
+        elif getattr(decision, "pause", False):
+            # stop swimming but keep the run: the gait's amplitude to 0 (the phase runs on, the
+            # robot stays running), the offset to 0 now and at every control period after
+            self._paused = True
+            self.pauses += 1
+            log.info("gait paused at t = %.2f s: %s", t, decision.detail)
+            self._set_gait(0.0)
+            self._offset_rad = 0.0
+            self.link.send(protocol.SetOffset(0.0))
+            self.outcome.offsets_sent += 1
         elif decision.waypoints:
+            if getattr(decision, "restart", False) and self._paused:
+                self._paused = False
+                log.info("gait restarted at t = %.2f s", t)
+                self._set_gait(self.config.gait.amplitude_rad)
             self.replans += 1
             log.info("new plan at t = %.2f s: %d waypoints", t, len(decision.waypoints))
             pose = self.guidance.filtered_pose

@@ -38,6 +38,14 @@ from eelhost.planning.deadline import Deadline
 from eelhost.planning.execute import Swim, body_clearance_m, swim
 from eelhost.planning.geometry import FloatArray, point_segment_distance
 from eelhost.planning.planner import SCREEN_DRAWS, Outcome, Planner
+from eelhost.planning.restart import (
+    DRIFT_AFTER_S,
+    REST_BUDGET_S,
+    REST_SETTLE_S,
+    drift,
+    stopped_gait,
+    stopped_twin,
+)
 from eelhost.planning.search import (
     Guide,
     Leg,
@@ -669,6 +677,11 @@ class Decision:
         The goal test holds.
     recorded : bool
         The plan record changed (the loop rewrites it into the take).
+    pause : bool
+        Stop the gait (amplitude 0, offset 0) but keep the run: the robot drifts to rest while
+        a restart is planned (docs/planning.md, "A restart from rest").
+    restart : bool
+        With ``waypoints``: swim again (the gait's amplitude back) and steer to them.
     """
 
     waypoints: list[tuple[float, float]] | None = None
@@ -677,6 +690,23 @@ class Decision:
     detail: str = ""
     arrived: bool = False
     recorded: bool = False
+    pause: bool = False
+    restart: bool = False
+
+
+@dataclass
+class _Pause:
+    """A stopped robot drifting towards rest while its restart is planned."""
+
+    t_halt_s: float
+    detail: str  # the stop it stands for
+    drift: Future | None = None  # the twin's drift of the stopped body (the side worker)
+    drift_wall_s: float = 0.0
+    drift_gap_m: float | None = None  # the drift's smallest outline gap less the allowance
+    job: _Job | None = None  # the rest replan
+    outcome: Outcome | None = None  # its plan, once found
+    extra: FloatArray | None = None  # the extra current it was searched in
+    pending: tuple[float, list[tuple[float, float]], Guide | None] | None = None
 
 
 @dataclass
@@ -825,6 +855,19 @@ class TankReplanner:
         With a ``replan_budget_s``: an early replan's budget, when longer; it then starts from
         the state predicted that long ahead, as a calm replan (:data:`EARLY_BUDGET_S`, which
         ``eelbot run`` passes). None (the default here): the replan budget and the short lead.
+    escape_planner_for : callable, optional
+        The escape's planner (docs/planning.md, "An escape from inside the margin").
+    max_restarts : int
+        Where the robot would be stopped for ``no_safe_continuation``, it is instead paused (its
+        gait's amplitude 0: it drifts towards rest, its joints straight) this many times per
+        run: the twin swims the stopped body's drift, which must stay clear by
+        ``lookahead_margin_m`` (less the current's drift allowance), ``rest_settle_s`` later a
+        replan is searched from the stopped body predicted for the end of its budget
+        (``rest_budget_s``), and the robot swims that plan from then; when the drift or the
+        replan fails, the run ends with ``no_safe_continuation`` as without it. Each pause and
+        restart is an event of the record (``kind`` ``halt`` and ``restart``; docs/planning.md,
+        "A restart from rest"). 0 (the default here): off.
+    rest_settle_s, rest_budget_s : float
     """
 
     def __init__(
@@ -857,7 +900,16 @@ class TankReplanner:
         early_horizon_s: float = EARLY_HORIZON_S,
         early_budget_s: float | None = None,
         escape_planner_for: Callable[[FloatArray], Planner] | None = None,
+        max_restarts: int = 0,
+        rest_settle_s: float = REST_SETTLE_S,
+        rest_budget_s: float = REST_BUDGET_S,
     ) -> None:
+        self.gait = gait
+        self.max_restarts = max(int(max_restarts), 0)
+        self.rest_settle_s = rest_settle_s
+        self.rest_budget_s = rest_budget_s
+        self.restarts = 0  # restarts from rest made (docs/planning.md, "A restart from rest")
+        self._pause: _Pause | None = None
         self.planner_for = planner_for
         self.planner = planner
         self.outcome = outcome
@@ -960,6 +1012,39 @@ class TankReplanner:
     def on_frame(self, t_s: float, loc: Localisation, pose: FloatArray | None, target: int,
                  offset_rad: float, guide: Guide | None = None) -> Decision:
         """Take one frame: estimate, check contact and goal, start, collect or switch replans.
+
+        A stop for ``no_safe_continuation`` becomes a pause while restarts are left
+        (:attr:`max_restarts`): the robot stops swimming and drifts, and a restart is planned
+        from rest (:meth:`_paused_frame`; docs/planning.md, "A restart from rest").
+
+        Parameters
+        ----------
+        t_s : float
+            Frame time since the gait started.
+        loc : Localisation
+        pose : ndarray (3,) or None
+            The guidance's filtered pose.
+        target : int
+            Index of the waypoint being steered to in the waypoints last handed over.
+        offset_rad : float
+            The offset the robot steers with.
+        guide : (x, y, I_x, I_y), optional
+            The run loop's guidance state.
+
+        Returns
+        -------
+        Decision
+        """
+        if self._pause is not None:
+            return self._paused_frame(t_s, loc, pose, offset_rad)
+        d = self._swimming_frame(t_s, loc, pose, target, offset_rad, guide)
+        if d.stop == "no_safe_continuation" and self.restarts < self.max_restarts:
+            return self._halt(t_s, d)
+        return d
+
+    def _swimming_frame(self, t_s: float, loc: Localisation, pose: FloatArray | None,
+                        target: int, offset_rad: float, guide: Guide | None = None) -> Decision:
+        """Take one frame while the robot swims (:meth:`on_frame`).
 
         Parameters
         ----------
@@ -1152,12 +1237,18 @@ class TankReplanner:
         virtual robot then runs in real time while the planner thinks, so the planner's wall time
         passes on the robot's clock (docs/planning.md).
         """
-        job = self._job
-        if job is None:
-            return
-        lead = (t_s - job.t_request_s) - (time.monotonic() - job.wall_request_s)
-        if lead > 0.0 and not job.future.done():
-            wait([job.future], timeout=lead)  # wakes early when the plan is done
+        pause = self._pause
+        jobs = [self._job] if pause is None else [pause.job]
+        for job in jobs:
+            if job is None:
+                continue
+            lead = (t_s - job.t_request_s) - (time.monotonic() - job.wall_request_s)
+            if lead > 0.0 and not job.future.done():
+                wait([job.future], timeout=lead)  # wakes early when the plan is done
+        if pause is not None and pause.drift is not None and not pause.drift.done():
+            lead = (t_s - pause.t_halt_s) - (time.monotonic() - pause.drift_wall_s)
+            if lead > 0.0:
+                wait([pause.drift], timeout=lead)
 
     def close(self) -> None:
         """Stop the worker (a replan in progress is left to finish on its own thread)."""
@@ -1171,12 +1262,247 @@ class TankReplanner:
         the Telemetry taken and ignored (docs/planning.md, "The robot's state at the tank").
         """
         return {"plans": self.events, "replans": self.replans,
+                "restarts": self.restarts, "max_restarts": self.max_restarts,
                 "retries_before_contact": self.retries_before_contact,
                 "backoff_yields": self.backoff_yields,
                 "replan_budget_s": self.replan_budget_s,
                 "early_margin_m": self.early_margin_m,
                 "current_estimate": self.current.history,
                 "state_estimate": self.estimator.summary()}
+
+    # -- a restart from rest (docs/planning.md, "A restart from rest") -----------------------------
+
+    def _halt(self, t_s: float, d: Decision) -> Decision:
+        """Turn a ``no_safe_continuation`` stop into a pause: stop swimming, drift, plan a restart.
+
+        Any replan in flight is cut short; the twin swims the stopped body's drift on the side
+        worker (:meth:`_drift_gap`), and the rest replan is asked for :attr:`rest_settle_s`
+        later (:meth:`_paused_frame`). Without an estimate the stop stands.
+        """
+        est = self.estimator.estimate()
+        if est is None:
+            return d
+        job = self._job
+        if job is not None and job.deadline is not None:
+            job.deadline.cut_to(time.monotonic())  # the worker comes back at its next batch
+        self._job = None
+        self._pending = None
+        self._lookahead = None
+        self._whole_job = None
+        self._retry_now = False
+        self._urgent_after_cut = None
+        self.current.drop()
+        # frames without fresh telemetry take the stopped gait's reference (straight joints)
+        self.estimator.gait = stopped_gait(self.gait)
+        extra = self.current.value_m_s.copy() if self.estimate_current else np.zeros(2)
+        pause = _Pause(t_s, d.detail)
+        pause.drift_wall_s = time.monotonic()
+        pause.drift = self._side.submit(self._drift_gap, est, extra)
+        self._pause = pause
+        self.events.append({
+            "kind": "halt", "reason": "no_safe_continuation", "t_s": round(t_s, 3),
+            "restart": self.restarts + 1, "detail": d.detail,
+            "start_state": [round(float(v), 5) for v in est.state]})
+        log.warning("no safe continuation at t = %.2f s: the robot stops swimming and drifts; "
+                    "restart %d of %d from rest (%s)", t_s, self.restarts + 1,
+                    self.max_restarts, d.detail)
+        return Decision(pause=True, recorded=True, detail=(
+            f"stopped swimming at t = {t_s:.2f} s for restart {self.restarts + 1} from rest"))
+
+    def _drift_gap(self, est: BodyEstimate, extra: FloatArray) -> float:
+        """On the side worker: the stopped body's drift's smallest outline gap, less the allowance.
+
+        The twin swims the stopped body (:func:`eelhost.planning.restart.stopped_twin`) from the
+        estimate until :data:`DRIFT_AFTER_S` after the planned restart, in the estimated current;
+        its outline's gap at each
+        moment is less the drift the current estimate's uncertainty allows by then, as the
+        look-ahead's.
+        """
+        twin = stopped_twin(self._twin_in(extra))
+        stride = 3
+        horizon = self.rest_settle_s + self.rest_budget_s + DRIFT_AFTER_S
+        states = drift(twin, est.state, est.t_s, horizon, stride)
+        if not len(states):
+            return -math.inf
+        outline = outline_clearance_m(self.world, self.model, states)
+        ahead = np.arange(len(outline), dtype=np.float64) * (stride * twin.dt_s)
+        allowance = drift_allowance_m(current_spread_m_s(self.current.history), ahead)
+        return float(np.min(np.subtract(outline, allowance)))
+
+    def _paused_frame(self, t_s: float, loc: Localisation, pose: FloatArray | None,
+                      offset_rad: float) -> Decision:
+        """Take one frame while the stopped robot drifts (:meth:`on_frame`).
+
+        Contact and goal as while swimming; then the drift's verdict, the rest replan's request
+        and collection, and the restart.
+        """
+        d = Decision()
+        pause = self._pause
+        assert pause is not None
+        if loc.found and loc.com_m is not None:
+            self.estimator.observe(t_s, loc.com_m, loc.link_angles_rad, offset_rad)
+            stop = self._contact(t_s)
+            if stop is not None:
+                d.stop, d.detail = "contact", stop
+                return d
+        if pose is not None and in_goal(self.world, pose[:2]):
+            d.arrived = True
+            return d
+        if pause.drift is not None:
+            if not pause.drift.done():
+                return d
+            gap = float(pause.drift.result())
+            pause.drift = None
+            pause.drift_gap_m = gap
+            self.events[-1]["drift_gap_m"] = round(gap, 4) if math.isfinite(gap) else None
+            d.recorded = True
+            if not gap > self.lookahead_margin_m:
+                return self._end_pause(d, (
+                    f"the twin drifts the stopped body within {max(gap, 0.0) * 1000:.0f} mm of an "
+                    f"obstacle or wall (its outline, less the current's drift allowance; "
+                    f"limit {self.lookahead_margin_m * 1000:.0f} mm)"))
+        if pause.drift_gap_m is None:
+            return d
+        job = pause.job
+        if job is None and pause.pending is None:
+            if t_s < pause.t_halt_s + self.rest_settle_s - 1e-9:
+                return d
+            est = self.estimator.estimate()
+            if est is None:
+                return d
+            self._request_rest(t_s, est)
+            return d
+        if job is not None:
+            if not job.future.done():
+                return d
+            outcome, state, wall_s, cpu, extra, done, start_step = job.future.result()
+            wall = done - job.wall_request_s
+            if t_s - job.t_request_s < wall - 1e-9:
+                return d  # over sim://: the robot has not yet lived the planner's time
+            pause.job = None
+            job.t_start_s = start_step * self.planner.twin.dt_s
+            self.events.append(self._event("restart", "rest", job.t_request_s, job.t_start_s,
+                                           job.t_request_s + wall, state, outcome, wall, cpu,
+                                           extra))
+            self.events[-1]["budget_s"] = job.budget_s
+            self.events[-1]["restart"] = self.restarts + 1
+            self.events[-1]["t_halt_s"] = round(pause.t_halt_s, 3)
+            d.recorded = True
+            if not outcome.found:
+                return self._end_pause(d, f"the replan from rest failed: {outcome.message}")
+            if t_s > job.t_start_s + self.max_lead_s:
+                self.events[-1]["status"] = "stale"
+                return self._end_pause(d, (
+                    f"the replan from rest was ready at t = {t_s:.2f} s, {t_s - job.t_start_s:.2f} "
+                    f"s after the state it starts from ({outcome.message})"))
+            pause.outcome, pause.extra = outcome, extra
+            pause.pending = (job.t_start_s, list(outcome.plan.waypoints_m),
+                             outcome.plan.start_guide)
+        if pause.pending is not None and t_s >= pause.pending[0] - 1e-9:
+            return self._restart(t_s, d)
+        return d
+
+    def _request_rest(self, t_s: float, est: BodyEstimate) -> None:
+        """Submit the rest replan: from the stopped body's state predicted for its budget's end."""
+        pause = self._pause
+        assert pause is not None
+        dt = self.planner.twin.dt_s
+        period = self.planner.twin.restart_steps or 1
+        now_step = int(round(est.t_s / dt))
+        start_step = int(math.ceil((now_step + math.ceil(self.rest_budget_s / dt)) / period)
+                         ) * period
+        extra = self.current.value_m_s.copy() if self.estimate_current else np.zeros(2)
+        wall = time.monotonic()
+        deadline = Deadline(wall + self.rest_budget_s)
+        future = self._worker.submit(self._rest_replan, est, start_step, extra, deadline)
+        pause.job = _Job(future, t_s, wall, start_step * dt, "rest", math.inf,
+                         self.rest_budget_s, deadline)
+        log.info("replanning from rest at t = %.2f s, from the stopped body predicted for "
+                 "t = %.2f s", t_s, start_step * dt)
+
+    def _rest_replan(self, est: BodyEstimate, start_step: int, extra: FloatArray,
+                     deadline_s: SupportsFloat | None
+                     ) -> tuple[Outcome, FloatArray, float, float, FloatArray, float, int]:
+        """On the worker: the stopped body's state at ``start_step``, and a plan from it.
+
+        The planner first, then (its search exhausted or failed, time left) the goal approach's
+        planner, the recovery's and, from a start by the check's margin, the escape's: the tiers
+        of a replan, without the blocked-start retries (the body does not swim on) and the shift
+        repair (no route is left to shift).
+        """
+        wall0, cpu0 = time.perf_counter(), time.thread_time()
+        self._prepare_planner(extra)
+        planner = self.planner
+        twin = stopped_twin(planner.twin)
+        now = int(round(est.t_s / twin.dt_s))
+        states = drift(twin, est.state, est.t_s, max(start_step - now, 0) * twin.dt_s, 1)
+        state = states[min(max(start_step - now, 0), len(states) - 1)].copy()
+        guide = leg_start_guide(state, self.model.n_links, (0.0, 0.0))
+        outcome = planner.plan(state, start_step, guide=guide, deadline_s=deadline_s)
+        tiers = [("goal approach", lambda: self._goal_planner_in(extra)),
+                 ("recovery", lambda: self._planner_in("recovery", self.recovery_planner_for,
+                                                       extra))]
+        for name, make in tiers:
+            if (outcome.found or outcome.status in (*REFUSED_FROM_STATE, "out_of_time")
+                    or not _time_left(deadline_s)):
+                break
+            other = make()
+            if other is None:
+                continue
+            tried = other.plan(state, start_step, guide=guide, deadline_s=deadline_s)
+            if tried.found:
+                tried.message = f"{name}: {tried.message}"
+                outcome = tried
+            else:
+                outcome = dataclasses.replace(outcome, message=(
+                    f"{outcome.message}; with the {name}'s planner: {tried.message}"))
+        gap = self._escape_gap(state)
+        if (gap is not None and not outcome.found and outcome.status != "out_of_time"
+                and _time_left(deadline_s)):
+            escaped = self._escape(state, start_step, (0.0, 0.0), extra, gap, deadline_s)
+            outcome = escaped if escaped.found else dataclasses.replace(
+                outcome, message=f"{outcome.message}; {escaped.message}")
+        return (outcome, state, time.perf_counter() - wall0, time.thread_time() - cpu0,
+                self._planner_current.copy(), time.monotonic(), start_step)
+
+    def _restart(self, t_s: float, d: Decision) -> Decision:
+        """Swim again: the rest replan's waypoints, the gait back, the swimming rules afresh."""
+        pause = self._pause
+        assert pause is not None and pause.pending is not None and pause.outcome is not None
+        _, waypoints, guide = pause.pending
+        self.restarts += 1
+        self._pause = None
+        self.estimator.gait = self.gait
+        self.outcome = pause.outcome
+        self.path = corridor_path(pause.outcome.plan)
+        self.waypoints = list(waypoints)
+        if pause.extra is not None:
+            self._plan_current = pause.extra
+        self.failures = 0
+        self._next_try_s = -math.inf
+        self._last_gap = (-math.inf, None)
+        self._contact_at_s = math.inf
+        self._near_at_s = math.inf
+        self._next_lookahead_s = t_s
+        self._next_early_s = -math.inf
+        self._early_in_row = 0
+        self.current.drop()
+        self.events[-1]["t_switch_s"] = round(t_s, 3)
+        log.info("restart %d from rest at t = %.2f s: %d waypoints", self.restarts, t_s,
+                 len(waypoints))
+        d.waypoints, d.guide, d.restart, d.recorded = list(waypoints), guide, True, True
+        d.detail = f"restart {self.restarts} from rest at t = {t_s:.2f} s"
+        return d
+
+    def _end_pause(self, d: Decision, why: str) -> Decision:
+        """No restart: the run ends with ``no_safe_continuation``, naming the tried restart."""
+        pause = self._pause
+        assert pause is not None
+        d.stop = "no_safe_continuation"
+        d.detail = (f"{pause.detail}; restart {self.restarts + 1} of {self.max_restarts} from rest "
+                    f"(stopped at t = {pause.t_halt_s:.2f} s) not made: {why}")
+        d.recorded = True
+        return d
 
     # -- contact ---------------------------------------------------------------------------------
 

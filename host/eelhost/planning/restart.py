@@ -1,0 +1,115 @@
+"""A restart from rest: the stopped robot's drift in the twin (docs/planning.md, "A restart from rest").
+
+When the tank's replanner finds no swimming continuation (``no_safe_continuation``), the run need
+not end: the robot's gait is set to amplitude 0 (``SetGait`` with A = 0 while it stays running, so
+the gait's phase runs on and the offsets it is sent keep the firmware's link watchdog fed), its
+joints straighten, and the body coasts towards rest in the water. The twin swims that stopped body
+(:func:`stopped_twin`: the same robot, loop timing and current, the gait's amplitude and heading
+gain 0, so its offset is 0 as the firmware's while stopped) to say whether the drift stays clear
+(:func:`drift`), and a replan is then searched from the state it predicts for the restart, like a
+first plan from a body (nearly) at rest. :class:`eelhost.planning.replan.TankReplanner` runs the
+sequence; ``eelbot run --restarts`` bounds how often.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from eelhost.planning.geometry import FloatArray
+from eelhost.planning.twin import Twin
+from eelsim.control import Gait
+from eelsim.guidance import PURSUIT
+
+__all__ = ["DRIFT_AFTER_S", "RESTARTS", "REST_BUDGET_S", "REST_SETTLE_S", "drift",
+           "stopped_gait", "stopped_twin"]
+
+RESTARTS = 2
+"""Restarts from rest a run may make (``eelbot run --restarts``; docs/planning.md)."""
+
+REST_SETTLE_S = 0.5
+"""The robot's time from the stop to the rest replan's request: the joints are straight by then,
+and the camera's estimate of the straight, coasting body is what the replan starts from (a straight
+body coasts a long way: from 0.15 m/s it still glides at 0.09 m/s 4 s later in the twin)."""
+
+REST_BUDGET_S = 3.0
+"""The rest replan's wall-clock budget (the calm replans' 3 s): it starts from the state the twin
+predicts for when the budget ends, and the stopped robot waits meanwhile."""
+
+DRIFT_AFTER_S = 1.0
+"""The twin swims the stopped body from the stop to this long after the planned restart (the
+settle and the budget): the drift must stay clear until the new plan has had time to act."""
+
+
+STOPPED_AMPLITUDE_RAD = 1e-9
+"""The stopped twin's amplitude: 0 in effect (a scenario's amplitude must be positive)."""
+
+
+def stopped_gait(gait: Gait) -> Gait:
+    """The gait of a stopped robot: amplitude 0 and heading gain 0 (offset 0), same omega, beta.
+
+    Parameters
+    ----------
+    gait : Gait
+
+    Returns
+    -------
+    Gait
+    """
+    # the scenario's amplitude must be positive: 1e-9 rad swings the joints by nothing
+    return dataclasses.replace(gait, amplitude_rad=STOPPED_AMPLITUDE_RAD, k_theta=0.0)
+
+
+def stopped_twin(twin: Twin) -> Twin:
+    """``twin`` with the stopped gait and pure pursuit (whose gain is the gait's: 0).
+
+    The joints' references are 0 and the offset is 0, as the firmware's while its amplitude is 0
+    and its offset 0, so the run is the body's drift with its joints held straight.
+
+    Parameters
+    ----------
+    twin : Twin
+
+    Returns
+    -------
+    Twin
+    """
+    options = dataclasses.replace(twin.options, guidance=PURSUIT)
+    return Twin(twin.robot, twin.coefficients, stopped_gait(twin.gait), options,
+                twin.current_m_s, twin.acceptance_radius_m, twin.threads, twin.model)
+
+
+def drift(twin: Twin, state: FloatArray, t_s: float, duration_s: float,
+          stride: int = 3) -> FloatArray:
+    """The stopped body's states from ``state`` at ``t_s`` over ``duration_s``.
+
+    Parameters
+    ----------
+    twin : Twin
+        A stopped twin (:func:`stopped_twin`).
+    state : ndarray (2 N + 4,)
+        The body's state at ``t_s``.
+    t_s : float
+        The robot's time of ``state`` (the gait's phase; no effect at amplitude 0).
+    duration_s : float
+    stride : int
+        Steps between the states returned.
+
+    Returns
+    -------
+    ndarray, shape (S, 2 N + 4)
+        Sample s at ``t_s + s * stride * twin.dt_s``; only finite rows.
+    """
+    now = int(round(t_s / twin.dt_s))
+    n = twin.n_links
+    heading = float(np.mean(state[:n]))
+    com = np.asarray(state[n : n + 2], dtype=float)
+    # a waypoint no drift reaches: the run must not end at it (the gain is 0: it steers nothing)
+    far = com + 1.0e3 * np.array([math.cos(heading), math.sin(heading)])
+    runs = twin.run([[(float(far[0]), float(far[1]))]], duration_s + 2 * twin.dt_s,
+                    states=np.asarray(state, dtype=float)[None], start_steps=[now],
+                    stride=stride)
+    states = runs.states[0]
+    return np.asarray(states[np.isfinite(states[:, 0])], dtype=float)

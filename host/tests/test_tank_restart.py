@@ -1,0 +1,197 @@
+"""A restart from rest (docs/planning.md, "A restart from rest"): pause, drift, replan, swim again."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from eelhost.field.recorder import read_commands_csv
+from eelhost.field.runloop import RunConfig
+from eelhost.field.session import TakeNotes
+from eelhost.field.take import TakeRequest, run_take
+from eelhost.planning.planner import Outcome, Planner
+from eelhost.planning.replan import Decision, TankReplanner
+from eelhost.planning.restart import drift, stopped_twin
+from eelhost.planning.search import Plan
+from eelhost.planning.uncertainty import default_model
+from eelhost.planning.world import parse_world
+from eelhost.vision.localise import Localisation
+from eelsim.robot import load_robot
+from eelsim.scenario import PATH_GAIT
+
+ROBOT = load_robot()
+MODEL = default_model(ROBOT)
+N = ROBOT.n_links
+
+OPEN = {
+    "name": "open",
+    "tank": {"size_m": [2.0, 2.0]},
+    "start": {"position_m": [0.6, 1.0], "heading_deg": 0.0},
+    "goal": {"position_m": [1.3, 1.0], "radius_m": 0.2},
+    "current": {"speed_m_s": 0.0, "direction_deg": 0.0},
+    "obstacles": [{"kind": "circle", "centre_m": [1.4, 0.25], "radius_m": 0.1}],
+}
+
+
+def pose_at(t_s: float, com, heading: float = 0.0) -> Localisation:
+    """A localisation of the straight body at ``com``."""
+    theta = np.full(N, heading)
+    return Localisation(t_s, "ok", np.asarray(com, float), heading, theta, np.zeros((N, 2)),
+                        (True,) * N, (), 0.0, "")
+
+
+class Blocked(TankReplanner):
+    """A replanner whose every swimming replan is refused from its start (no continuation)."""
+
+    def _replan(self, est, left, start_step, extra, guide=None,  # noqa: ANN001, ANN202
+                deadline_s=None):  # noqa: ANN001
+        plan = Plan(False, "blocked_start", "failed (blocked_start)")
+        return (Outcome(plan, "blocked_start", plan.message), est.state, 0.0, 0.0, np.zeros(2),
+                time.monotonic(), start_step)
+
+
+@pytest.fixture(scope="module")
+def open_plan():
+    planner = Planner(parse_world(OPEN, "open"), ROBOT, MODEL)
+    outcome = planner.plan()
+    assert outcome.found, outcome.message
+    return planner, outcome
+
+
+def test_a_robot_without_a_swimming_continuation_pauses_drifts_replans_from_rest_and_restarts(
+        open_plan):
+    planner, outcome = open_plan
+    nav = Blocked(lambda extra: planner, planner, outcome, PATH_GAIT, lookahead_s=0.0,
+                  max_restarts=1)
+    decisions: list[tuple[float, Decision]] = []
+    try:
+        # the body sits 0.4 m off the planned corridor (a replan at once, refused); after the
+        # restart it is seen 0.8 m off the new plan's corridor (refused again)
+        com = (0.8, 1.4)
+        for k in range(int(12.0 * 30)):
+            t = k / 30
+            d = nav.on_frame(t, pose_at(t, com), np.array([*com, 0.0]), 0, 0.0)
+            if d.restart:
+                com = (0.8, 0.6)
+            decisions.append((t, d))
+            nav.pace(t)
+            if d.stop is not None:
+                break
+            nav._worker.submit(lambda: None).result()  # the worker's jobs are done
+            nav._side.submit(lambda: None).result()
+    finally:
+        nav.close()
+    paused = [t for t, d in decisions if d.pause]
+    restarted = [(t, d) for t, d in decisions if d.restart]
+    assert len(paused) == 1 and paused[0] < 0.5  # the refused replan paused the robot at once
+    assert len(restarted) == 1
+    t_restart, d = restarted[0]
+    assert d.waypoints and d.waypoints[-1] == outcome.plan.waypoints_m[-1]  # the goal again
+    assert t_restart >= paused[0] + nav.rest_settle_s + nav.rest_budget_s - 0.1
+    # after the restart the swimming replan is refused again, and no restart is left
+    t_end, last = decisions[-1]
+    assert last.stop == "no_safe_continuation" and t_end > t_restart
+    assert nav.restarts == 1
+    kinds = [e["kind"] for e in nav.events]
+    assert kinds.count("halt") == 1 and kinds.count("restart") == 1
+    halt = next(e for e in nav.events if e["kind"] == "halt")
+    restart = next(e for e in nav.events if e["kind"] == "restart")
+    assert halt["drift_gap_m"] > 0.1 and len(halt["start_state"]) == 2 * N + 4
+    assert restart["status"] == "found" and restart["t_switch_s"] == pytest.approx(t_restart)
+    assert restart["t_start_s"] <= restart["t_switch_s"] and restart["start_state"]
+    assert nav.record()["restarts"] == 1
+
+
+def test_a_drift_predicted_to_touch_ends_the_run_as_before(open_plan):
+    planner, outcome = open_plan
+    nav = Blocked(lambda extra: planner, planner, outcome, PATH_GAIT, lookahead_s=0.0,
+                  max_restarts=2)
+    try:
+        stop = None
+        for k in range(90):
+            t = k / 30
+            # the body swims 0.3 m/s towards the wall 0.1 m ahead of its nose
+            x = 1.45 + 0.3 * t
+            d = nav.on_frame(t, pose_at(t, (x, 1.0)), np.array([x, 1.0, 0.0]), 0, 0.0)
+            nav.pace(t)
+            if d.stop is not None:
+                stop = d
+                break
+            nav._worker.submit(lambda: None).result()
+            nav._side.submit(lambda: None).result()
+    finally:
+        nav.close()
+    assert stop is not None and stop.stop == "no_safe_continuation"
+    assert "restart 1 of 2 from rest" in stop.detail and "drifts the stopped body" in stop.detail
+    assert nav.restarts == 0
+
+
+def test_the_stopped_twin_coasts_slower_with_its_joints_straight(open_plan):
+    planner, _ = open_plan
+    twin = stopped_twin(planner.twin)
+    state = np.zeros(2 * N + 4)
+    state[N : N + 2] = (1.0, 1.0)
+    state[N + 2 : 2 * N + 2] = 0.5 * np.sin(np.arange(N))  # bent joints moving
+    state[2 * N + 2] = 0.15  # 0.15 m/s forward
+    states = drift(twin, state, 6.0, 4.0)
+    speed = np.hypot(states[:, 2 * N + 2], states[:, 2 * N + 3])
+    assert np.all(np.diff(speed[::10]) < 0.0) and speed[-1] < 0.7 * speed[0]
+    assert np.ptp(states[-1, :N]) < 0.05  # the links in line
+
+
+class PauseThenRestart:
+    """A navigator that pauses the gait at ``t_pause`` and restarts it at ``t_restart``."""
+
+    replans = 0
+
+    def __init__(self, t_pause: float, t_restart: float, waypoints) -> None:  # noqa: ANN001
+        self.t_pause, self.t_restart, self.waypoints = t_pause, t_restart, waypoints
+        self.state = "swimming"
+
+    def on_frame(self, t_s, loc, pose, target, offset_rad, guide=None):  # noqa: ANN001, ANN201
+        if self.state == "swimming" and t_s >= self.t_pause:
+            self.state = "paused"
+            return Decision(pause=True)
+        if self.state == "paused" and t_s >= self.t_restart:
+            self.state = "restarted"
+            return Decision(waypoints=self.waypoints, restart=True)
+        return Decision()
+
+    def pace(self, t_s):  # noqa: ANN001, ANN201
+        pass
+
+    def close(self):  # noqa: ANN201
+        pass
+
+    def record(self):  # noqa: ANN201
+        return {}
+
+
+def test_the_watchdog_stays_fed_and_no_failsafe_fires_while_the_gait_is_paused(tmp_path):
+    waypoints = [(1.5, 0.0), (2.5, 0.0)]
+    # paused longer than the firmware's 1 s link timeout
+    nav = PauseThenRestart(0.3, 1.6, waypoints)
+    config = RunConfig(PATH_GAIT, waypoints, duration_s=1.9)
+    stem = tmp_path / "pause"
+    request = TakeRequest(ROBOT, config, str(stem), TakeNotes("sim://?speed=0"),
+                          "synthetic:clean", navigator=nav)
+    result = run_take(request)
+    out = result.outcome
+    assert out.reason == "duration" and out.failsafe_reports == 0
+    sent = [r for r in read_commands_csv(f"{stem}.commands.csv") if r["event"] == "sent"]
+    gaits = [(float(r["t_s"]), r["fields"]["amplitude_rad"]) for r in sent
+             if r["message"] == "SetGait"]
+    assert [a for _, a in gaits] == pytest.approx(
+        [PATH_GAIT.amplitude_rad, 0.0, PATH_GAIT.amplitude_rad])
+    t_pause, t_restart = gaits[1][0], gaits[2][0]
+    assert 0.3 <= t_pause < 0.4 and 1.6 <= t_restart < 1.7
+    offsets = [(float(r["t_s"]), r["fields"]["offset_rad"]) for r in sent
+               if r["message"] == "SetOffset"]
+    during = [(t, o) for t, o in offsets if t_pause <= t < t_restart]
+    assert all(o == 0.0 for _, o in during)
+    times = [t for t, _ in during]
+    assert len(times) >= 4 and np.diff(times).max() < 0.35  # the watchdog (1 s) is fed
+    assert not any(r["message"] in ("Stop", "Start") for r in sent
+                   if t_pause <= float(r["t_s"]) < t_restart)
