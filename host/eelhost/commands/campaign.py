@@ -175,7 +175,7 @@ def run(args: argparse.Namespace) -> int:
         refuse_overwrite(stem, force=True)  # not done: a partial take is run again
         request = TakeRequest(robot, config, stem, notes, args.camera, args.calibration,
                               markers.layout, args.speed)
-        result = run_take(request, view_opener(args), announce=lambda msg: print(msg, flush=True),
+        result = run_take(request, view_opener(args, current=current), announce=lambda msg: print(msg, flush=True),
                           stop_flag=stopped)
         ran += 1
         out = result.outcome

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import functools
+import math
 import os
 import time
 from pathlib import Path
@@ -37,8 +38,8 @@ from eelhost.progress import phase
 from eelhost.vision.markerfile import load_marker_file
 from eelhost.web.liveview import LiveView
 from eelsim.control import Gait
-from eelsim.guidance import GUIDANCE_LAWS, PURSUIT
-from eelsim.robot import load_robot
+from eelsim.guidance import GUIDANCE_LAWS, PURSUIT, GuidanceLaw
+from eelsim.robot import Robot, load_robot
 
 
 @COMMANDS.add("run", "steer the robot along waypoints from the camera, and record the run")
@@ -139,8 +140,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     b.add_argument("--seed", type=SEED, default=BENCH_SEED,
                    help=f"first benchmark world's seed ({BENCH_SEED})")
     b.add_argument("--check-unknown-current", type=NON_NEGATIVE, metavar="M_S",
-                   help="with --bench: the unknown current the planner's check allows for "
-                   "(default: the planner's, 0.02 m/s); the water still has up to 0.02 m/s")
+                   help="with --plan or --bench: the unknown current the planner's check "
+                   "allows for, as eelbot plan's --unknown-current (default: the planner's, "
+                   "0.02 m/s); a --bench world's water still has up to 0.02 m/s")
     b.add_argument("--write", nargs="?", const="docs/planning.md", metavar="FILE",
                    help="with --bench, also rewrite its section of FILE (bare: docs/planning.md)")
     p.set_defaults(run=run)
@@ -160,9 +162,24 @@ def add_take_options(p: argparse.ArgumentParser) -> None:
                    help="port of the live view on 127.0.0.1 (8765; 0: any free port)")
 
 
-def view_opener(args: argparse.Namespace) -> ViewOpener | None:
-    """The live view a take opens (``--view-port``), or None with ``--no-view``."""
-    return None if args.no_view else functools.partial(LiveView, port=args.view_port)
+def view_opener(args: argparse.Namespace, twin: Robot | None = None,
+                current: tuple[float, float] | None = None) -> ViewOpener | None:
+    """The live view a take opens (``--view-port``), or None with ``--no-view``.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The command's options.
+    twin : Robot, optional
+        The robot its prediction swims (a planned run's model), default the robot file's.
+    current : (float, float), optional
+        The current its prediction swims in, as (speed m/s, direction deg towards).
+    """
+    if args.no_view:
+        return None
+    speed, towards = current if current is not None else (0.0, 0.0)
+    flow = (speed * math.cos(math.radians(towards)), speed * math.sin(math.radians(towards)))
+    return functools.partial(LiveView, port=args.view_port, twin=twin, current_m_s=flow)
 
 
 BENCH_SEED = 5000
@@ -179,6 +196,18 @@ def exit_status(reason: str) -> int:
     if reason in STOPPED_ON_PURPOSE:
         return EXIT_OK
     return EXIT_CONTACT if reason == "contact" else EXIT_NOT_REACHED
+
+
+def _planner_options(args: argparse.Namespace, law: GuidanceLaw) -> dict:
+    """The planner's options of ``eelbot run --plan`` and ``--bench``.
+
+    The guidance law, and the check's unknown current when ``--check-unknown-current`` is given
+    (else the planner's default).
+    """
+    options: dict = {"guidance": law}
+    if args.check_unknown_current is not None:
+        options["unknown_current_m_s"] = args.check_unknown_current
+    return options
 
 
 def _gait(values: list[float], k_theta: float) -> Gait:
@@ -220,6 +249,7 @@ def run(args: argparse.Namespace) -> int:
     uri = args.link
     law = guidance_law(args.guidance)
     start_guide = None
+    view_twin, view_current = None, current
     if args.plan is not None:
         from eelhost.commands.plan import world_from_name
         from eelhost.planning.tank import plan_for_run
@@ -238,7 +268,7 @@ def run(args: argparse.Namespace) -> int:
         with phase(f"plan {world.name}: search and check in the twin"):
             planned = plan_for_run(world, robot, args.link, gait, coefficients=model,
                                    acceptance_radius_m=args.radius, swimmer=swimmer,
-                                   planner_options={"guidance": law},
+                                   planner_options=_planner_options(args, law),
                                    replan_budget_s=args.replan_budget or None,
                                    calm_budget_s=args.calm_budget or None,
                                    early_margin_m=args.early_margin or None,
@@ -249,6 +279,10 @@ def run(args: argparse.Namespace) -> int:
         waypoints, navigator, uri = planned.waypoints_m, planned.navigator, planned.uri
         start_guide = planned.start_guide
         view = TankView.covering(world.tank.size_m)
+        # the live view predicts with the planner's model, in the current the planner knows
+        tank_world = model.in_tank(world)
+        view_twin = model.robot_for(robot)
+        view_current = (tank_world.current.speed_m_s, tank_world.current.direction_deg)
     else:
         waypoints = args.waypoints
         gait = _gait(args.gait, args.k_theta)
@@ -265,7 +299,8 @@ def run(args: argparse.Namespace) -> int:
     request = TakeRequest(robot, config, args.out, notes, args.camera, args.calibration,
                           markers.layout, args.speed, navigator, view)
     with rejected_as("--waypoints/--gait/--radius/--duration", SCENARIO_OPTIONS):
-        result = run_take(request, view_opener(args), announce=lambda msg: print(msg, flush=True))
+        result = run_take(request, view_opener(args, view_twin, view_current),
+                          announce=lambda msg: print(msg, flush=True))
     out = result.outcome
     print(
         f"{out.reason}: {out.detail}; {out.waypoints_reached}/{len(waypoints)} waypoints, "
@@ -308,9 +343,7 @@ def _bench(args: argparse.Namespace) -> int:
                 flush=True)
             bar.update(1)
 
-        options: dict = {"guidance": guidance_law(args.guidance)}
-        if args.check_unknown_current is not None:
-            options["unknown_current_m_s"] = args.check_unknown_current
+        options = _planner_options(args, guidance_law(args.guidance))
         results = run_closed_loop_bench(robot, model, seeds, out, show, options,
                                         model.swimmer_for(robot), args.replan_budget or None,
                                         calm_budget_s=args.calm_budget or None,

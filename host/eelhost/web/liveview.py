@@ -18,7 +18,11 @@ and serves at ``http://127.0.0.1:<port>/``:
 
 The prediction is the twin's closed loop over the next ``horizon_s`` from the latest filtered pose,
 straight and at rest there (the camera gives no joint rates), steering to the waypoints not yet
-reached; it runs in a background thread at most once per ``predict_every_s`` of wall time. It is
+reached: those the run loop steers to now (:attr:`FrameReport.waypoints_m`, so a replan's new
+waypoints are drawn and predicted as soon as the robot steers to them). It is swum by the model
+the run plans with (``eelbot run --plan --coefficients-file``: the fitted law, joints and straight
+set, in the world's current plus the tank's fitted one; docs/planning.md, "The live view of a
+planned run"), else by the robot file's robot in the current the operator declared. It runs in a background thread at most once per ``predict_every_s`` of wall time. It is
 swum by the batched kernel (:func:`eelsim.batch.run_spec`, one run on one thread), which agrees
 with the reference closed loop to rounding and runs without Python's global lock: the reference
 loop took about 5 s of processor time per prediction, held the lock the run loop needs, and
@@ -71,15 +75,20 @@ class LiveView:
     calibration : Calibration
         Metres <-> pixels, to draw world things on the frame.
     robot : Robot
-        The twin of the prediction.
+        The robot file's robot (its body length places the path's start at the head).
     config : RunConfig
-        The gait, waypoints and acceptance radius.
+        The gait, the first waypoints and the acceptance radius.
     port : int
         Port on 127.0.0.1 (0: any free one).
     horizon_s, predict_every_s : float
         Length of the predicted path, and how often it is recomputed (wall time). 20 s by
         default: the robot swims about a body length in 6 s, so a shorter path would lie under
         its own body.
+    twin : Robot, optional
+        The robot the prediction swims, when it is not ``robot``: the fitted model's robot
+        (law, joint model, fitted joint parameters, straight set) of a planned run.
+    current_m_s : (float, float)
+        The current the prediction swims in, m/s (what the run knows of the water).
 
     Attributes
     ----------
@@ -88,9 +97,12 @@ class LiveView:
     """
 
     def __init__(self, calibration: Calibration, robot: Robot, config: RunConfig, port: int = 0,
-                 horizon_s: float = 20.0, predict_every_s: float = 1.0) -> None:
+                 horizon_s: float = 20.0, predict_every_s: float = 1.0,
+                 twin: Robot | None = None,
+                 current_m_s: tuple[float, float] = (0.0, 0.0)) -> None:
         self.calibration = calibration
-        self.robot = robot
+        self.robot = twin if twin is not None else robot
+        self.current_m_s = (float(current_m_s[0]), float(current_m_s[1]))
         self.config = config
         self.horizon_s = horizon_s
         self.predict_every_s = predict_every_s
@@ -101,14 +113,16 @@ class LiveView:
         self._predicted_m: FloatArray = np.zeros((0, 2))
         self._closed = threading.Event()
         self._wake = threading.Event()
-        self._circles = [self._circle_px(w) for w in config.waypoints_m]
+        # the waypoints steered to now (a replan changes them)
+        self._waypoints_m = [(float(x), float(y)) for x, y in config.waypoints_m]
+        self._circles = [self._circle_px(w) for w in self._waypoints_m]
         self._head_m = robot.body_length_m() / 2.0  # the path is drawn from about the head on
         self._scale = self._scale_bar()
         self.on_stop: Callable[[str], None] | None = None
         self.stop_requests = 0
         # load (or compile) the twin's kernel now, before the robot is started, not in the run
         log.info("live view: loading the twin's kernel for the prediction")
-        self.predict(np.zeros(3), 0)
+        self.predict(np.zeros(3), 0, self._waypoints_m)
         self.server = LocalServer(
             {"/": self._page, "/state.json": self._state, "/frame.jpg": self._frame},
             post={"/stop": self._stop}, port=port,
@@ -116,6 +130,12 @@ class LiveView:
         self._predictor = threading.Thread(target=self._predict_loop, name="eelbot-predict",
                                            daemon=True)
         self._predictor.start()
+
+    @property
+    def waypoints_m(self) -> list[tuple[float, float]]:
+        """The waypoints drawn and predicted: those the run loop steers to now."""
+        with self._lock:
+            return list(self._waypoints_m)
 
     @property
     def url(self) -> str:
@@ -126,6 +146,12 @@ class LiveView:
         """Take one frame's report (called by the run loop for every frame; cheap)."""
         with self._lock:
             self._report = report
+            steered = (None if report.waypoints_m is None
+                       else [(float(x), float(y)) for x, y in report.waypoints_m])
+            if steered is not None and steered != self._waypoints_m:
+                # a replan's waypoints: drawn (and predicted) from this frame on
+                self._waypoints_m = steered
+                self._circles = [self._circle_px(w) for w in self._waypoints_m]
             self._frame_id += 1
             if report.filtered_pose is not None:
                 x, y = float(report.filtered_pose[0]), float(report.filtered_pose[1])
@@ -182,12 +208,12 @@ class LiveView:
         with self._lock:
             report, frame_id = self._report, self._frame_id
             track, predicted = list(self._track), self._predicted_m
+            points, circles = self._waypoints_m, self._circles
         width, height = self.calibration.image_size_px
         target = report.target_index if report else 0
         waypoints = [
             {"centre": self._px([w])[0], "circle": circle, "reached": i < target}
-            for i, (w, circle) in enumerate(zip(self.config.waypoints_m, self._circles,
-                                                strict=True))
+            for i, (w, circle) in enumerate(zip(points, circles, strict=True))
         ]
         markers = []
         status = "waiting for the first frame"
@@ -235,17 +261,28 @@ class LiveView:
             if self._closed.is_set() or time.monotonic() - last < self.predict_every_s:
                 continue
             with self._lock:
-                report = self._report
+                report, points = self._report, self._waypoints_m
             if report is None or report.filtered_pose is None:
                 continue
             last = time.monotonic()
             try:
-                self._predicted_m = self.predict(report.filtered_pose, report.target_index)
+                self._predicted_m = self.predict(report.filtered_pose, report.target_index,
+                                                 points)
             except Exception:  # noqa: BLE001 (a failed prediction must not end the run)
                 log.exception("the live view's prediction failed")
 
-    def predict(self, pose: FloatArray, target_index: int) -> FloatArray:
+    def predict(self, pose: FloatArray, target_index: int,
+                waypoints_m: list[tuple[float, float]] | None = None) -> FloatArray:
         """The twin's centre-of-mass path over the horizon from ``pose`` (x, y, heading).
+
+        Parameters
+        ----------
+        pose : ndarray (3,)
+            Filtered x, y (m) and heading (rad) the path starts from.
+        target_index : int
+            The waypoint being steered to.
+        waypoints_m : list of (float, float), optional
+            The waypoints steered to now (default: the run's first ones).
 
         Returns
         -------
@@ -253,10 +290,14 @@ class LiveView:
             Positions every ``PREDICTION_SAMPLE_S`` (0.1 s), from the pose on, until the twin
             reaches the last waypoint or the horizon ends.
         """
-        remaining = self.config.waypoints_m[target_index:] or self.config.waypoints_m[-1:]
+        points = list(self.config.waypoints_m if waypoints_m is None else waypoints_m)
+        remaining = points[target_index:] or points[-1:]
         g = self.config.gait
+        vx, vy = self.current_m_s
         scenario = Scenario.swimming(
             g, name="live-view prediction", waypoints_m=list(remaining),
+            current_speed_m_s=math.hypot(vx, vy),
+            current_direction_deg=math.degrees(math.atan2(vy, vx)),
             acceptance_radius_m=self.config.acceptance_radius_m, duration_s=self.horizon_s,
             start_position_m=(float(pose[0]), float(pose[1])),
             start_heading_deg=math.degrees(float(pose[2])),
