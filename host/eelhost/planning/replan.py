@@ -868,6 +868,9 @@ class TankReplanner:
         restart is an event of the record (``kind`` ``halt`` and ``restart``; docs/planning.md,
         "A restart from rest"). 0 (the default here): off.
     rest_settle_s, rest_budget_s : float
+    rest_escape_planner_for : callable, optional
+        The escape's planner for the rest replans only (without ``escape_planner_for``): a
+        coasting body inside the check's margin plans its escape from there.
     """
 
     def __init__(
@@ -903,8 +906,10 @@ class TankReplanner:
         max_restarts: int = 0,
         rest_settle_s: float = REST_SETTLE_S,
         rest_budget_s: float = REST_BUDGET_S,
+        rest_escape_planner_for: Callable[[FloatArray], Planner] | None = None,
     ) -> None:
         self.gait = gait
+        self.rest_escape_planner_for = rest_escape_planner_for
         self.max_restarts = max(int(max_restarts), 0)
         self.rest_settle_s = rest_settle_s
         self.rest_budget_s = rest_budget_s
@@ -1438,15 +1443,22 @@ class TankReplanner:
         states = drift(twin, est.state, est.t_s, max(start_step - now, 0) * twin.dt_s, 1)
         state = states[min(max(start_step - now, 0), len(states) - 1)].copy()
         guide = leg_start_guide(state, self.model.n_links, (0.0, 0.0))
+        make = self.escape_planner_for or self.rest_escape_planner_for
+        gap = self._escape_gap(state, make)
+        if gap is not None and gap <= planner.check_margin_m:
+            # inside the check's margin: every plan's check fails at its first sample
+            outcome = self._escape(state, start_step, (0.0, 0.0), extra, gap, deadline_s, make)
+            return (outcome, state, time.perf_counter() - wall0, time.thread_time() - cpu0,
+                    self._planner_current.copy(), time.monotonic(), start_step)
         outcome = planner.plan(state, start_step, guide=guide, deadline_s=deadline_s)
         tiers = [("goal approach", lambda: self._goal_planner_in(extra)),
                  ("recovery", lambda: self._planner_in("recovery", self.recovery_planner_for,
                                                        extra))]
-        for name, make in tiers:
+        for name, build in tiers:
             if (outcome.found or outcome.status in (*REFUSED_FROM_STATE, "out_of_time")
                     or not _time_left(deadline_s)):
                 break
-            other = make()
+            other = build()
             if other is None:
                 continue
             tried = other.plan(state, start_step, guide=guide, deadline_s=deadline_s)
@@ -1456,10 +1468,9 @@ class TankReplanner:
             else:
                 outcome = dataclasses.replace(outcome, message=(
                     f"{outcome.message}; with the {name}'s planner: {tried.message}"))
-        gap = self._escape_gap(state)
         if (gap is not None and not outcome.found and outcome.status != "out_of_time"
                 and _time_left(deadline_s)):
-            escaped = self._escape(state, start_step, (0.0, 0.0), extra, gap, deadline_s)
+            escaped = self._escape(state, start_step, (0.0, 0.0), extra, gap, deadline_s, make)
             outcome = escaped if escaped.found else dataclasses.replace(
                 outcome, message=f"{outcome.message}; {escaped.message}")
         return (outcome, state, time.perf_counter() - wall0, time.thread_time() - cpu0,
@@ -1802,14 +1813,15 @@ class TankReplanner:
         return (outcome, state, time.perf_counter() - wall0, time.thread_time() - cpu0,
                 self._planner_current.copy(), time.monotonic(), start_step)
 
-    def _escape_gap(self, state: FloatArray) -> float | None:
+    def _escape_gap(self, state: FloatArray,
+                    make: Callable[[FloatArray], Planner] | None = None) -> float | None:
         """The start's capsule gap when an escape may plan from it, else None.
 
         An escape is for a start inside the check's margin or within
         :data:`ESCAPE_TOLERANCE_M` of it, and more than :data:`ESCAPE_FLOOR_M` clear (docs/planning.md,
         "An escape from inside the margin").
         """
-        if self.escape_planner_for is None:
+        if (make or self.escape_planner_for) is None:
             return None
         gap = float(body_clearance_m(self.world, self.planner.clearance, self.model,
                                      np.asarray(state, dtype=float)[None])[0])
@@ -1818,7 +1830,8 @@ class TankReplanner:
         return gap
 
     def _escape(self, state: FloatArray, start_step: int, integral: tuple[float, float],
-                extra: FloatArray, gap: float, deadline_s: SupportsFloat | None) -> Outcome:
+                extra: FloatArray, gap: float, deadline_s: SupportsFloat | None,
+                make: Callable[[FloatArray], Planner] | None = None) -> Outcome:
         """On the worker: the escape's plan from a start ``gap`` clear, judged with the ramp.
 
         The escape's planner (``escape_planner_for``: the recovery's actions and bounded search,
@@ -1828,7 +1841,7 @@ class TankReplanner:
         :func:`escape_margin_m` from everything at every step (docs/planning.md, "An escape from
         inside the margin").
         """
-        escape = self._planner_in("escape", self.escape_planner_for, extra)
+        escape = self._planner_in("escape", make or self.escape_planner_for, extra)
         if escape is None or not _time_left(deadline_s):
             why = "no escape planner" if escape is None else "no time left"
             status = "exhausted" if escape is None else "out_of_time"

@@ -29,16 +29,16 @@ __all__ = ["DRIFT_AFTER_S", "RESTARTS", "REST_BUDGET_S", "REST_SETTLE_S", "drift
 RESTARTS = 2
 """Restarts from rest a run may make (``eelbot run --restarts``; docs/planning.md)."""
 
-REST_SETTLE_S = 0.5
+REST_SETTLE_S = 0.3
 """The robot's time from the stop to the rest replan's request: the joints are straight by then,
 and the camera's estimate of the straight, coasting body is what the replan starts from (a straight
 body coasts a long way: from 0.15 m/s it still glides at 0.09 m/s 4 s later in the twin)."""
 
-REST_BUDGET_S = 3.0
-"""The rest replan's wall-clock budget (the calm replans' 3 s): it starts from the state the twin
+REST_BUDGET_S = 2.0
+"""The rest replan's wall-clock budget (the early replans' 2 s): it starts from the state the twin
 predicts for when the budget ends, and the stopped robot waits meanwhile."""
 
-DRIFT_AFTER_S = 1.0
+DRIFT_AFTER_S = 0.5
 """The twin swims the stopped body from the stop to this long after the planned restart (the
 settle and the budget): the drift must stay clear until the new plan has had time to act."""
 

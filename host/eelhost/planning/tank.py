@@ -195,7 +195,8 @@ def plan_for_run(
                               calm_budget_s=calm_budget_s,
                               early_margin_m=early_margin_m,
                               early_budget_s=early_budget_s,
-                              escape_planner_for=tiers.escape_planner_for if escape else None)
+                              escape_planner_for=tiers.escape_planner_for if escape else None,
+                              rest_escape_planner_for=tiers.escape_planner_for)
     return RunPlan(outcome.plan.waypoints_m, navigator, sim_uri_for_world(uri, world), outcome,
                    planner.options.guidance, outcome.plan.start_guide)
 
