@@ -29,7 +29,7 @@ OPEN = {
     "name": "open",
     "tank": {"size_m": [2.0, 2.0]},
     "start": {"position_m": [0.6, 1.0], "heading_deg": 0.0},
-    "goal": {"position_m": [1.3, 1.0], "radius_m": 0.2},
+    "goal": {"position_m": [1.15, 1.0], "radius_m": 0.2},
     "current": {"speed_m_s": 0.0, "direction_deg": 0.0},
     "obstacles": [{"kind": "circle", "centre_m": [1.4, 0.25], "radius_m": 0.1}],
 }
@@ -172,8 +172,8 @@ class PauseThenRestart:
 def test_the_watchdog_stays_fed_and_no_failsafe_fires_while_the_gait_is_paused(tmp_path):
     waypoints = [(1.5, 0.0), (2.5, 0.0)]
     # paused longer than the firmware's 1 s link timeout
-    nav = PauseThenRestart(0.3, 1.6, waypoints)
-    config = RunConfig(PATH_GAIT, waypoints, duration_s=1.9)
+    nav = PauseThenRestart(0.2, 1.4, waypoints)
+    config = RunConfig(PATH_GAIT, waypoints, duration_s=1.6)
     stem = tmp_path / "pause"
     request = TakeRequest(ROBOT, config, str(stem), TakeNotes("sim://?speed=0"),
                           "synthetic:clean", navigator=nav)
@@ -186,7 +186,7 @@ def test_the_watchdog_stays_fed_and_no_failsafe_fires_while_the_gait_is_paused(t
     assert [a for _, a in gaits] == pytest.approx(
         [PATH_GAIT.amplitude_rad, 0.0, PATH_GAIT.amplitude_rad])
     t_pause, t_restart = gaits[1][0], gaits[2][0]
-    assert 0.3 <= t_pause < 0.4 and 1.6 <= t_restart < 1.7
+    assert 0.2 <= t_pause < 0.3 and 1.4 <= t_restart < 1.5
     offsets = [(float(r["t_s"]), r["fields"]["offset_rad"]) for r in sent
                if r["message"] == "SetOffset"]
     during = [(t, o) for t, o in offsets if t_pause <= t < t_restart]
