@@ -40,6 +40,7 @@ from eelhost.planning.geometry import FloatArray, point_segment_distance
 from eelhost.planning.planner import SCREEN_DRAWS, Outcome, Planner
 from eelhost.planning.restart import (
     DRIFT_AFTER_S,
+    REST_BUDGET_MAX_S,
     REST_BUDGET_S,
     REST_SETTLE_S,
     drift,
@@ -703,6 +704,7 @@ class _Pause:
     drift: Future | None = None  # the twin's drift of the stopped body (the side worker)
     drift_wall_s: float = 0.0
     drift_gap_m: float | None = None  # the drift's smallest outline gap less the allowance
+    budget_s: float = 0.0  # the rest replan's budget: as long as the drift stays clear
     job: _Job | None = None  # the rest replan
     outcome: Outcome | None = None  # its plan, once found
     extra: FloatArray | None = None  # the extra current it was searched in
@@ -867,7 +869,9 @@ class TankReplanner:
         replan fails, the run ends with ``no_safe_continuation`` as without it. Each pause and
         restart is an event of the record (``kind`` ``halt`` and ``restart``; docs/planning.md,
         "A restart from rest"). 0 (the default here): off.
-    rest_settle_s, rest_budget_s : float
+    rest_settle_s, rest_budget_s, rest_budget_max_s : float
+        The pause before the rest replan is asked for, and its budget: the longest up to
+        ``rest_budget_max_s`` whose restart the drift keeps clear (at least ``rest_budget_s``).
     rest_escape_planner_for : callable, optional
         The escape's planner for the rest replans only (without ``escape_planner_for``): a
         coasting body inside the check's margin plans its escape from there.
@@ -906,6 +910,7 @@ class TankReplanner:
         max_restarts: int = 0,
         rest_settle_s: float = REST_SETTLE_S,
         rest_budget_s: float = REST_BUDGET_S,
+        rest_budget_max_s: float = REST_BUDGET_MAX_S,
         rest_escape_planner_for: Callable[[FloatArray], Planner] | None = None,
     ) -> None:
         self.gait = gait
@@ -913,6 +918,7 @@ class TankReplanner:
         self.max_restarts = max(int(max_restarts), 0)
         self.rest_settle_s = rest_settle_s
         self.rest_budget_s = rest_budget_s
+        self.rest_budget_max_s = rest_budget_max_s
         self.restarts = 0  # restarts from rest made (docs/planning.md, "A restart from rest")
         self._pause: _Pause | None = None
         self.planner_for = planner_for
@@ -1314,25 +1320,33 @@ class TankReplanner:
         return Decision(pause=True, recorded=True, detail=(
             f"stopped swimming at t = {t_s:.2f} s for restart {self.restarts + 1} from rest"))
 
-    def _drift_gap(self, est: BodyEstimate, extra: FloatArray) -> float:
-        """On the side worker: the stopped body's drift's smallest outline gap, less the allowance.
+    def _drift_gap(self, est: BodyEstimate, extra: FloatArray) -> tuple[float, float]:
+        """On the side worker: the stopped body's drift's gap, and how long the pause may last.
 
         The twin swims the stopped body (:func:`eelhost.planning.restart.stopped_twin`) from the
-        estimate until :data:`DRIFT_AFTER_S` after the planned restart, in the estimated current;
-        its outline's gap at each
-        moment is less the drift the current estimate's uncertainty allows by then, as the
-        look-ahead's.
+        estimate in the estimated current; its outline's gap at each moment is less the drift the
+        current estimate's uncertainty allows by then, as the look-ahead's. Returns the smallest
+        such gap until :data:`DRIFT_AFTER_S` after a restart with the least budget
+        (``rest_budget_s``), and the rest replan's budget: the longest, up to
+        ``rest_budget_max_s``, whose restart the drift keeps clear of the look-ahead's margin
+        until :data:`DRIFT_AFTER_S` after it.
         """
         twin = stopped_twin(self._twin_in(extra))
         stride = 3
-        horizon = self.rest_settle_s + self.rest_budget_s + DRIFT_AFTER_S
+        horizon = self.rest_settle_s + max(self.rest_budget_s, self.rest_budget_max_s) + DRIFT_AFTER_S
         states = drift(twin, est.state, est.t_s, horizon, stride)
         if not len(states):
-            return -math.inf
+            return -math.inf, self.rest_budget_s
         outline = outline_clearance_m(self.world, self.model, states)
         ahead = np.arange(len(outline), dtype=np.float64) * (stride * twin.dt_s)
         allowance = drift_allowance_m(current_spread_m_s(self.current.history), ahead)
-        return float(np.min(np.subtract(outline, allowance)))
+        gap = np.subtract(outline, allowance)
+        least = ahead <= self.rest_settle_s + self.rest_budget_s + DRIFT_AFTER_S + 1e-9
+        near = np.flatnonzero(gap <= self.lookahead_margin_m)
+        clear_s = float(ahead[near[0]]) if near.size else horizon
+        budget = min(max(self.rest_budget_s, self.rest_budget_max_s),
+                     clear_s - self.rest_settle_s - DRIFT_AFTER_S)
+        return float(np.min(gap[least])), max(budget, self.rest_budget_s)
 
     def _paused_frame(self, t_s: float, loc: Localisation, pose: FloatArray | None,
                       offset_rad: float) -> Decision:
@@ -1356,10 +1370,11 @@ class TankReplanner:
         if pause.drift is not None:
             if not pause.drift.done():
                 return d
-            gap = float(pause.drift.result())
+            gap, pause.budget_s = pause.drift.result()
             pause.drift = None
             pause.drift_gap_m = gap
             self.events[-1]["drift_gap_m"] = round(gap, 4) if math.isfinite(gap) else None
+            self.events[-1]["rest_budget_s"] = round(pause.budget_s, 3)
             d.recorded = True
             if not gap > self.lookahead_margin_m:
                 return self._end_pause(d, (
@@ -1414,14 +1429,14 @@ class TankReplanner:
         dt = self.planner.twin.dt_s
         period = self.planner.twin.restart_steps or 1
         now_step = int(round(est.t_s / dt))
-        start_step = int(math.ceil((now_step + math.ceil(self.rest_budget_s / dt)) / period)
+        start_step = int(math.ceil((now_step + math.ceil(pause.budget_s / dt)) / period)
                          ) * period
         extra = self.current.value_m_s.copy() if self.estimate_current else np.zeros(2)
         wall = time.monotonic()
-        deadline = Deadline(wall + self.rest_budget_s)
+        deadline = Deadline(wall + pause.budget_s)
         future = self._worker.submit(self._rest_replan, est, start_step, extra, deadline)
         pause.job = _Job(future, t_s, wall, start_step * dt, "rest", math.inf,
-                         self.rest_budget_s, deadline)
+                         pause.budget_s, deadline)
         log.info("replanning from rest at t = %.2f s, from the stopped body predicted for "
                  "t = %.2f s", t_s, start_step * dt)
 
