@@ -49,6 +49,7 @@ from eelhost.estimation.joint_fit import joint_model_name
 from eelhost.estimation.methods import FitSettings
 from eelhost.estimation.optimise import FitResult
 from eelhost.estimation.pipeline import fit_motion
+from eelhost.estimation.shared_joints import share_joints
 from eelhost.estimation.space import ParameterSpace
 from eelhost.estimation.steering import steering_check
 from eelhost.estimation.tank_current import share_tank_current
@@ -160,6 +161,8 @@ def _fit_and_validate(ds: Dataset, plant: Plant | None, settings: FitSettings,
     # one current for the tank from both motions, as the report does (estimation/tank_current.py)
     chosen.fits, chosen.evaluators, out["tank_current"] = share_tank_current(
         chosen.fits, chosen.evaluators, say)
+    # one set of joint parameters for the robot (estimation/shared_joints.py)
+    chosen.fits, out["joints_from"] = share_joints(chosen.fits, chosen.evaluators, say)
     out["fits"] = chosen.fits
     out["own"] = chosen.robot_file_fits or chosen.fits
     out["model"] = chosen.model

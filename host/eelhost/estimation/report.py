@@ -28,6 +28,7 @@ from eelhost.estimation.pipeline import fit_motion
 from eelhost.estimation.runs import ALIGN_S
 from eelhost.estimation.selection import recommend
 from eelhost.estimation.selection import table_markdown as comparison_markdown
+from eelhost.estimation.shared_joints import share_joints
 from eelhost.estimation.space import ParameterSpace
 from eelhost.estimation.speeds import speed_errors, speeds_markdown
 from eelhost.estimation.steering import steering_check
@@ -136,6 +137,9 @@ def run_report(
     with phase("the tank's current from every training experiment", simulations_counter()):
         chosen.fits, chosen.evaluators, tank = share_tank_current(chosen.fits,
                                                                   chosen.evaluators, say)
+    # one set of joint parameters for the robot (estimation/shared_joints.py)
+    with phase("one set of joint parameters for both motions", simulations_counter()):
+        chosen.fits, _ = share_joints(chosen.fits, chosen.evaluators, say)
     fits = chosen.fits
     extra: dict = {"model": chosen.model, "uncertainty": {}, "identifiability": {},
                    "simulations": {}, "seconds": seconds, "warnings": []}
