@@ -34,6 +34,7 @@ from eelhost.field.take import TakeRequest, ViewOpener, refuse_overwrite, run_ta
 from eelhost.files import check_output_stem
 from eelhost.link.uri import parse_link_uri
 from eelhost.planning.replan import CALM_REPLAN_BUDGET_S, EARLY_MARGIN_M
+from eelhost.planning.restart import RESTARTS
 from eelhost.progress import phase
 from eelhost.vision.markerfile import load_marker_file
 from eelhost.web.liveview import LiveView
@@ -108,11 +109,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    "ramps from the start's gap to the full margin over 4 s (off by default: "
                    "no such start on its development seeds; docs/planning.md, \"An escape from "
                    "inside the margin\")")
-    p.add_argument("--restarts", type=int, default=0, metavar="N",
+    p.add_argument("--restarts", type=int, default=RESTARTS, metavar="N",
                    help="with --plan or --bench: where no safe swimming continuation is left, "
-                   "stop the gait, let the robot drift to rest and restart on a plan from rest, "
-                   "at most N times per run (0: off, the default; docs/planning.md, \"A restart "
-                   "from rest\")")
+                   "stop the gait (amplitude 0), let the robot drift towards rest and restart on "
+                   f"a plan from rest, at most N times per run ({RESTARTS}, the default: on its "
+                   "development seeds it reached 2 more goals with no contact; 0: off; "
+                   "docs/planning.md, \"A restart from rest\")")
     p.add_argument("--guidance", choices=GUIDANCE_LAWS.names(), default=PURSUIT.name,
                    help="the line-of-sight law that steers the robot: pursuit (the paper's pure "
                    "pursuit of each waypoint, default) or ilos (integral line-of-sight along each "
@@ -361,7 +363,7 @@ def _bench(args: argparse.Namespace) -> int:
                   if args.calm_budget != CALM_REPLAN_BUDGET_S else "")
                + (f" --early-margin {args.early_margin:g}" if args.early_margin else "")
                + (" --escape" if args.escape else "")
-               + (f" --restarts {args.restarts}" if args.restarts else ""))
+               + (f" --restarts {args.restarts}" if args.restarts != RESTARTS else ""))
     lines = summary_lines(results)
     block = [BENCH_BEGIN, f"Command: `{command}`", "",
              f"- machine: {cpu_model()}, {os.cpu_count()} cores visible (shared with other "
