@@ -31,7 +31,10 @@ control period, as the twin's control update does. The law is written into the t
 With a navigator (``eelbot run --plan``: :class:`eelhost.planning.replan.TankReplanner`) every
 frame also goes to it after step 2; it may hand over new waypoints (a replan that is ready), end
 the run in the goal, or stop the robot (``contact``: its estimated body touches an obstacle;
-``no_safe_continuation``). The planner runs beside this loop, so steps 1-4 go on at the camera's
+``no_safe_continuation``), or pause the gait for a restart from rest (SetGait with amplitude 0,
+the offset 0 at every control period so the watchdog stays fed, then SetGait with the gait's
+amplitude and the new plan's waypoints: docs/planning.md, "A restart from rest"). The planner
+runs beside this loop, so steps 1-4 go on at the camera's
 rate while it thinks; after each frame the navigator may hold the loop back so that a virtual
 robot's clock does not run ahead of the planner's wall time (:meth:`Navigator.pace`). Every plan
 and replan is rewritten into the take's metadata (``source.planning``) as it happens. Telemetry
