@@ -1046,12 +1046,35 @@ class TankReplanner:
         -------
         Decision
         """
+        ended = self._observe(t_s, loc, pose, offset_rad)
+        if ended is not None:
+            return ended
         if self._pause is not None:
             return self._paused_frame(t_s, loc, pose, offset_rad)
         d = self._swimming_frame(t_s, loc, pose, target, offset_rad, guide)
         if d.stop == "no_safe_continuation" and self.restarts < self.max_restarts:
             return self._halt(t_s, d)
         return d
+
+    def _observe(self, t_s: float, loc: Localisation, pose: FloatArray | None,
+                 offset_rad: float) -> Decision | None:
+        """Feed the frame's body to the estimate; the decision when it ends the run, else None.
+
+        Swimming or paused alike: a contact of the estimated body stops the run ("An honest
+        outcome"), and the filtered pose in the goal disc arrives.
+        """
+        if loc.found and loc.com_m is not None:
+            self.estimator.observe(t_s, loc.com_m, loc.link_angles_rad, offset_rad)
+            stop = self._contact(t_s)
+            if stop is not None:
+                d = Decision()
+                d.stop, d.detail = "contact", stop
+                return d
+        if pose is not None and in_goal(self.world, pose[:2]):
+            d = Decision()
+            d.arrived = True
+            return d
+        return None
 
     def _swimming_frame(self, t_s: float, loc: Localisation, pose: FloatArray | None,
                         target: int, offset_rad: float, guide: Guide | None = None) -> Decision:
@@ -1080,15 +1103,6 @@ class TankReplanner:
         """
         d = Decision()
         self._guide = guide
-        if loc.found and loc.com_m is not None:
-            self.estimator.observe(t_s, loc.com_m, loc.link_angles_rad, offset_rad)
-            stop = self._contact(t_s)
-            if stop is not None:
-                d.stop, d.detail = "contact", stop
-                return d
-        if pose is not None and in_goal(self.world, pose[:2]):
-            d.arrived = True
-            return d
         d.recorded |= self._collect(t_s, d)
         if d.stop is not None:
             return d
@@ -1352,21 +1366,12 @@ class TankReplanner:
                       offset_rad: float) -> Decision:
         """Take one frame while the stopped robot drifts (:meth:`on_frame`).
 
-        Contact and goal as while swimming; then the drift's verdict, the rest replan's request
-        and collection, and the restart.
+        After :meth:`_observe` (contact and goal, as while swimming): the drift's verdict, the
+        rest replan's request and collection, and the restart.
         """
         d = Decision()
         pause = self._pause
         assert pause is not None
-        if loc.found and loc.com_m is not None:
-            self.estimator.observe(t_s, loc.com_m, loc.link_angles_rad, offset_rad)
-            stop = self._contact(t_s)
-            if stop is not None:
-                d.stop, d.detail = "contact", stop
-                return d
-        if pose is not None and in_goal(self.world, pose[:2]):
-            d.arrived = True
-            return d
         if pause.drift is not None:
             if not pause.drift.done():
                 return d
