@@ -1040,7 +1040,9 @@ class TankReplanner:
         offset_rad : float
             The offset the robot steers with.
         guide : (x, y, I_x, I_y), optional
-            The run loop's guidance state.
+            The run loop's guidance state (:meth:`eelsim.guidance.Guidance.state`): the twin's
+            runs from this frame's estimate start with it (none: a leg from the estimate's
+            centre of mass, no integral).
 
         Returns
         -------
@@ -1078,29 +1080,7 @@ class TankReplanner:
 
     def _swimming_frame(self, t_s: float, loc: Localisation, pose: FloatArray | None,
                         target: int, offset_rad: float, guide: Guide | None = None) -> Decision:
-        """Take one frame while the robot swims (:meth:`on_frame`).
-
-        Parameters
-        ----------
-        t_s : float
-            Frame time since the gait started.
-        loc : Localisation
-            The frame's localisation (link angles and centre of mass when found).
-        pose : ndarray (3,) or None
-            The guidance's filtered pose.
-        target : int
-            Index of the waypoint being steered to in the waypoints last handed over.
-        offset_rad : float
-            The offset the robot steers with.
-        guide : (x, y, I_x, I_y), optional
-            The run loop's guidance state (:meth:`eelsim.guidance.Guidance.state`): the twin's
-            runs from this frame's estimate start with it (none: a leg from the estimate's
-            centre of mass, no integral).
-
-        Returns
-        -------
-        Decision
-        """
+        """Take one frame while the robot swims (:meth:`on_frame`, whose parameters these are)."""
         d = Decision()
         self._guide = guide
         d.recorded |= self._collect(t_s, d)
