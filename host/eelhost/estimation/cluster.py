@@ -164,9 +164,15 @@ class ClusterMap:
         cluster benchmark got almost no work (docs/benchmarks.md, section 5).
         """
         workers = sorted(self.client.scheduler_info().get("workers", {}))
+        if not workers:
+            # none connected as seen from here (one may be registering, or the scheduler's
+            # report lags under load): the scheduler places the jobs itself; Dask refuses
+            # allow_other_workers without workers (ValueError, seen in a loaded fresh clone)
+            return self.client.gather([self.client.submit(function, job, pure=False)
+                                       for job in jobs])
         futures = [
             self.client.submit(function, job, pure=False, allow_other_workers=True,
-                               workers=[workers[i % len(workers)]] if workers else None)
+                               workers=[workers[i % len(workers)]])
             for i, job in enumerate(jobs)
         ]
         return self.client.gather(futures)
