@@ -914,7 +914,8 @@ class TankReplanner:
         rest_escape_planner_for: Callable[[FloatArray], Planner] | None = None,
     ) -> None:
         self.gait = gait
-        self.rest_escape_planner_for = rest_escape_planner_for
+        # the rest replans' escape: the swimming one's when there is one
+        self.rest_escape_planner_for = escape_planner_for or rest_escape_planner_for
         self.max_restarts = max(int(max_restarts), 0)
         self.rest_settle_s = rest_settle_s
         self.rest_budget_s = rest_budget_s
@@ -1033,6 +1034,7 @@ class TankReplanner:
         t_s : float
             Frame time since the gait started.
         loc : Localisation
+            The frame's localisation (link angles and centre of mass when found).
         pose : ndarray (3,) or None
             The guidance's filtered pose.
         target : int
@@ -1443,7 +1445,7 @@ class TankReplanner:
         states = drift(twin, est.state, est.t_s, max(start_step - now, 0) * twin.dt_s, 1)
         state = states[min(max(start_step - now, 0), len(states) - 1)].copy()
         guide = leg_start_guide(state, self.model.n_links, (0.0, 0.0))
-        make = self.escape_planner_for or self.rest_escape_planner_for
+        make = self.rest_escape_planner_for
         gap = self._escape_gap(state, make)
         if gap is not None and gap <= planner.check_margin_m:
             # inside the check's margin: every plan's check fails at its first sample
@@ -1484,12 +1486,9 @@ class TankReplanner:
         self.restarts += 1
         self._pause = None
         self.estimator.gait = self.gait
-        self.outcome = pause.outcome
-        self.path = corridor_path(pause.outcome.plan)
+        assert pause.extra is not None  # set with the outcome
+        self._take_plan(pause.outcome, pause.extra)
         self.waypoints = list(waypoints)
-        if pause.extra is not None:
-            self._plan_current = pause.extra
-        self.failures = 0
         self._next_try_s = -math.inf
         self._last_gap = (-math.inf, None)
         self._contact_at_s = math.inf
@@ -1504,6 +1503,14 @@ class TankReplanner:
         d.waypoints, d.guide, d.restart, d.recorded = list(waypoints), guide, True, True
         d.detail = f"restart {self.restarts} from rest at t = {t_s:.2f} s"
         return d
+
+    def _take_plan(self, outcome: Outcome, extra: FloatArray) -> None:
+        """A found replan becomes the present plan: its corridor and current; no failures yet."""
+        self.failures = 0
+        self._plan_current = extra
+        self._urgent_after_cut = None  # it judged the old plan; the new one is judged anew
+        self.outcome = outcome
+        self.path = corridor_path(outcome.plan)
 
     def _end_pause(self, d: Decision, why: str) -> Decision:
         """No restart: the run ends with ``no_safe_continuation``, naming the tried restart."""
@@ -1989,11 +1996,7 @@ class TankReplanner:
             self._next_early_s = t_s + EARLY_BACKOFF_S * 2 ** min(self._early_in_row, 2)
             self._early_in_row += 1
         if outcome.found:
-            self.failures = 0
-            self._plan_current = extra
-            self._urgent_after_cut = None  # it judged the old plan; the new one is judged anew
-            self.outcome = outcome
-            self.path = corridor_path(outcome.plan)
+            self._take_plan(outcome, extra)
             self._pending = (job.t_start_s, list(outcome.plan.waypoints_m),
                              outcome.plan.start_guide)
             log.info("replanned at t = %.2f s (%.2f s wall): %s", t_s, wall, outcome.message)
