@@ -58,11 +58,11 @@ def test_a_planned_runs_view_swims_the_fitted_robot_in_the_worlds_and_fitted_cur
     assert view.waypoints and all(w == first for w in view.waypoints)
 
 
-def test_run_plan_hands_check_unknown_current_to_the_planner(tmp_path, monkeypatch):
+def test_run_plan_hands_check_unknown_current_and_restarts_to_the_planner(tmp_path, monkeypatch):
     seen: dict = {}
 
     def planned(*args, **kwargs):  # noqa: ANN002, ANN003
-        seen.update(kwargs["planner_options"])
+        seen.update(kwargs["planner_options"], restarts=kwargs["restarts"])
         raise ValueError("stop here: the options are what this test reads")
 
     monkeypatch.setattr(tank, "plan_for_run", planned)
@@ -70,3 +70,11 @@ def test_run_plan_hands_check_unknown_current_to_the_planner(tmp_path, monkeypat
         main(["run", "--link", "sim://?speed=0", "--plan", "tank_5_obstacles",
               "--check-unknown-current", "0.01", "--no-view", "--out", str(tmp_path / "x")])
     assert seen["unknown_current_m_s"] == 0.01
+    assert seen["restarts"] == 2  # the restart from rest is on by default
+
+
+def test_a_negative_restart_count_is_refused_naming_the_option(tmp_path, capsys):
+    code = main(["run", "--link", "sim://?speed=0", "--plan", "tank_5_obstacles",
+                 "--restarts", "-1", "--no-view", "--out", str(tmp_path / "x")])
+    assert code == 2
+    assert "--restarts" in capsys.readouterr().err

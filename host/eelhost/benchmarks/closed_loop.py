@@ -331,14 +331,13 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
         planned = plan_for_run(world, robot, uri, gait, model, planner_options=planner_options,
                                swimmer=swimmer, replan_budget_s=replan_budget_s,
                                calm_budget_s=calm_budget_s, early_margin_m=early_margin_m,
-                               escape=escape)
+                               escape=escape, restarts=restarts)
     except PlanRefused as err:
         return WorldResult(seed, False, err.status, detail=str(err), water=water,
                            plan_wall_s=time.perf_counter() - wall0,
                            plan_cpu_s=time.process_time() - cpu0, guidance=law)
     plan_wall, plan_cpu = time.perf_counter() - wall0, time.process_time() - cpu0
     nav = planned.navigator
-    nav.max_restarts = restarts
     cost = planned.outcome.plan.cost_s
     # the run loop steers with the law the plan was searched and checked with, from its start
     config = RunConfig(gait, planned.waypoints_m, duration_s=2.0 * cost + 30.0,

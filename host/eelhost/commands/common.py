@@ -140,6 +140,7 @@ POSITIVE = number(above=0.0)
 NON_NEGATIVE = number(minimum=0.0)
 FINITE = number()
 COUNT = number(int, minimum=1)
+COUNT_OR_NONE = number(int, minimum=0)  # a count where 0 turns the thing off
 SEED = number(int, minimum=0)
 PORT = number(int, minimum=0, maximum=65535)
 

@@ -12,6 +12,7 @@ from pathlib import Path
 from eelhost.commands import COMMANDS
 from eelhost.commands.common import (
     COUNT,
+    COUNT_OR_NONE,
     FINITE,
     NON_NEGATIVE,
     PORT,
@@ -109,7 +110,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    "ramps from the start's gap to the full margin over 4 s (off by default: "
                    "no such start on its development seeds; docs/planning.md, \"An escape from "
                    "inside the margin\")")
-    p.add_argument("--restarts", type=int, default=RESTARTS, metavar="N",
+    p.add_argument("--restarts", type=COUNT_OR_NONE, default=RESTARTS, metavar="N",
                    help="with --plan or --bench: where no safe swimming continuation is left, "
                    "stop the gait (amplitude 0), let the robot drift towards rest and restart on "
                    f"a plan from rest, at most N times per run ({RESTARTS}, the default: on its "
@@ -274,8 +275,7 @@ def run(args: argparse.Namespace) -> int:
                                    replan_budget_s=args.replan_budget or None,
                                    calm_budget_s=args.calm_budget or None,
                                    early_margin_m=args.early_margin or None,
-                                   escape=args.escape)
-        planned.navigator.max_restarts = max(args.restarts, 0)
+                                   escape=args.escape, restarts=args.restarts)
         print(planned.outcome.message)
         print(f"coefficients: {model.describe()}")
         waypoints, navigator, uri = planned.waypoints_m, planned.navigator, planned.uri

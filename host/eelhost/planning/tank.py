@@ -125,6 +125,7 @@ def plan_for_run(
     early_margin_m: float | None = None,
     early_budget_s: float | None = EARLY_BUDGET_S,
     escape: bool = False,
+    restarts: int = 0,
 ) -> RunPlan:
     """Plan in a world for ``eelbot run --plan`` (module docstring).
 
@@ -165,6 +166,9 @@ def plan_for_run(
         Replans from a start inside the check's margin use the escape (``TankReplanner``'s
         ``escape_planner_for``; docs/planning.md, "An escape from inside the margin"); off by
         default (``eelbot run --escape``).
+    restarts : int
+        Restarts from rest a run may make (``TankReplanner``'s ``max_restarts``; docs/planning.md,
+        "A restart from rest"); 0: off (``eelbot run --restarts`` gives 2).
 
     Returns
     -------
@@ -196,7 +200,8 @@ def plan_for_run(
                               early_margin_m=early_margin_m,
                               early_budget_s=early_budget_s,
                               escape_planner_for=tiers.escape_planner_for if escape else None,
-                              rest_escape_planner_for=tiers.escape_planner_for)
+                              rest_escape_planner_for=tiers.escape_planner_for,
+                              max_restarts=restarts)
     return RunPlan(outcome.plan.waypoints_m, navigator, sim_uri_for_world(uri, world), outcome,
                    planner.options.guidance, outcome.plan.start_guide)
 
