@@ -11,6 +11,7 @@ import pytest
 from eelhost.benchmarks.closed_loop import (
     WorldResult,
     calm_and_early,
+    coast_clearance_m,
     estimate_error_mm,
     run_closed_loop_bench,
     summary_lines,
@@ -20,7 +21,7 @@ from eelhost.benchmarks.closed_loop import (
 from eelhost.planning.body import link_endpoints
 from eelhost.planning.uncertainty import default_model
 from eelhost.planning.world import parse_world
-from eelhost.xil.virtual_robot import DT_US
+from eelhost.xil.virtual_robot import DT_US, VirtualRobot
 from eelsim.dynamics import straight_state
 from eelsim.model import SwimmerModel
 from eelsim.robot import load_robot
@@ -144,3 +145,29 @@ def test_the_estimate_error_compares_each_frame_with_the_plants_step_at_its_time
                                                       reached=True, estimate_error_mm=got)])
                 if "body estimate" in s)
     assert "largest in any frame 5 mm" in line
+
+
+def test_a_stopped_body_carried_by_the_water_is_caught_in_the_coast_after_the_take():
+    # a robot that never swims (no Start), 0.1 m/s of current towards the disc: the take's
+    # trace ends clear, the coast after it reaches the disc, and the gap shrinks all along
+    robot = VirtualRobot(ROBOT, start_position_m=(1.0, 1.0), current_m_s=(0.1, 0.0))
+    robot.trace = []
+    robot.advance_to(200_000)
+    before = true_clearance_m(WORLD, robot.model, np.asarray(robot.trace))
+    coast = coast_clearance_m(WORLD, robot, duration_s=3.0)
+    assert before.min() > 0.0 and coast[0] == pytest.approx(before[-1])
+    assert len(coast) == round(3.0e6 / DT_US) + 1
+    assert coast.min() < 0.0 and np.all(np.diff(coast[: int(np.argmin(coast))]) <= 1e-9)
+
+
+def test_the_summary_names_a_contact_in_the_coast_after_the_stop():
+    runs = [WorldResult(1, True, "found", "arrived", reached=True, min_clearance_m=0.05,
+                        coast_clearance_m=-0.004, coast_contact=True),
+            WorldResult(2, True, "found", "arrived", reached=True, min_clearance_m=0.05,
+                        coast_clearance_m=0.03)]
+    text = "\n".join(summary_lines(runs))
+    assert "contacts in the 3 s coast after the stop (the robot stopped, gliding): 1 of 2 runs " \
+           "(seeds 1); smallest clearance -4 mm" in text
+    assert "seed 1: arrived (true body 50 mm clear; touched in the coast after the stop)" in text
+    old = WorldResult(3, True, "found", "arrived", reached=True, min_clearance_m=0.05)
+    assert "coast" not in "\n".join(summary_lines([old]))  # results written before it

@@ -15,7 +15,9 @@ docs/planning.md ("Closed-loop benchmark") is the long form. For each world of
    world's seed;
 3. the run is judged from the virtual robot's true state at every physics step, with geometry
    written here, independently of the planner's (:func:`true_clearance_m`: each link a stadium
-   of its own length and width, shapely's exact distances to the discs, polygons and walls).
+   of its own length and width, shapely's exact distances to the discs, polygons and walls),
+   on for :data:`COAST_AUDIT_S` after the take has ended, the robot stopped and gliding
+   (:func:`coast_clearance_m`).
 
 Results go to ``<out>/results.jsonl`` one world per line as each finishes, so a killed benchmark
 resumes where it stopped.
@@ -51,7 +53,7 @@ from eelhost.planning.uncertainty import CoefficientModel
 from eelhost.planning.world import CircleObstacle, World
 from eelhost.planning.worlds import generate_world
 from eelhost.vision.synthetic import TankView
-from eelhost.xil.virtual_robot import DT_US
+from eelhost.xil.virtual_robot import DT_US, VirtualRobot
 from eelsim.control import Gait
 from eelsim.model import SwimmerModel
 from eelsim.robot import Robot
@@ -61,6 +63,12 @@ log = logging.getLogger(__name__)
 
 UNKNOWN_CURRENT_M_S = 0.02
 """Largest speed of the current the planner is not told of."""
+
+COAST_AUDIT_S = 3.0
+"""How long the body is swum on after the take ends, its gait stopped, for the contact audit.
+
+Why: the take ends when the firmware acknowledges the final Stop, but the body still glides and
+the water carries it (docs/planning.md, "Closed-loop benchmark": the coast after the stop)."""
 
 
 @dataclass
@@ -130,6 +138,11 @@ class WorldResult:
     restarts, pauses : int
         Restarts from rest made, and pauses (stops of the gait for one) (docs/planning.md, "A
         restart from rest"; 0 in results written before it).
+    coast_clearance_m : float or None
+        Smallest true gap over the :data:`COAST_AUDIT_S` after the take's end, the robot stopped
+        and gliding (None in results written before it).
+    coast_contact : bool
+        The true body overlapped an obstacle or wall in that coast.
     """
 
     seed: int
@@ -166,6 +179,8 @@ class WorldResult:
     early_cut: int = 0
     restarts: int = 0
     pauses: int = 0
+    coast_clearance_m: float | None = None
+    coast_contact: bool = False
 
 
 def calm_and_early(replans: list[dict], replan_budget_s: float | None
@@ -355,6 +370,7 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
     assert vr is not None and vr.trace is not None
     trace = np.asarray(vr.trace)
     clear = true_clearance_m(world, vr.model, trace)
+    coast = coast_clearance_m(world, vr)
     estimate_error = estimate_error_mm(vr.model, nav.estimator.history, trace)
     if record_to is not None:
         record_to.parent.mkdir(parents=True, exist_ok=True)
@@ -377,7 +393,34 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
         len(calm), sum(e["status"] == "found" for e in calm),
         sum("cut_for" in e for e in calm), len(early), sum(e["status"] == "found" for e in early),
         sum("cut_for" in e for e in early), nav.restarts,
-        sum(e["kind"] == "halt" for e in nav.events))
+        sum(e["kind"] == "halt" for e in nav.events), float(coast.min()), bool(coast.min() < 0.0))
+
+
+def coast_clearance_m(world: World, robot: VirtualRobot,
+                      duration_s: float = COAST_AUDIT_S) -> FloatArray:
+    """The true body's gap while it glides on for ``duration_s`` after the take has ended.
+
+    The take's trace ends with the final Stop's acknowledgement; the plant and the firmware (in
+    its stopped state, the link closed) are stepped on here, so a body that glides or drifts
+    into an obstacle after a deliberate stop is caught by the same independent geometry.
+
+    Parameters
+    ----------
+    world : World
+    robot : VirtualRobot
+        The take's virtual robot, with its trace on.
+    duration_s : float
+
+    Returns
+    -------
+    ndarray
+        The gap at every physics step of the coast (at least the take's last state's).
+    """
+    assert robot.trace is not None
+    done = len(robot.trace)
+    robot.advance_to(robot.now_us + round(duration_s * 1e6))
+    states = np.asarray(robot.trace[max(done - 1, 0):])
+    return true_clearance_m(world, robot.model, states)
 
 
 def estimate_error_mm(model: SwimmerModel, history: list[tuple[float, FloatArray]] | None,
@@ -526,6 +569,14 @@ def summary_lines(results: list[WorldResult]) -> list[str]:
                      f"median over {len(errors)} runs: {med['p50_mm']:.0f}, {med['p95_mm']:.0f} "
                      f"and {med['max_mm']:.0f} mm; largest in any frame "
                      f"{max(e['max_mm'] for e in errors):.0f} mm")
+    coasted = [r for r in planned if r.coast_clearance_m is not None]
+    if coasted:
+        touched = [r for r in coasted if r.coast_contact]
+        lines.append(f"- body contacts in the {COAST_AUDIT_S:g} s coast after the stop (the "
+                     f"robot stopped, gliding): {len(touched)} of {len(coasted)} runs"
+                     + (f" (seeds {', '.join(str(r.seed) for r in touched)})" if touched else "")
+                     + f"; smallest clearance "
+                     f"{min(r.coast_clearance_m or 0.0 for r in coasted) * 1000:.0f} mm")
     failsafe = [r for r in planned if r.failsafe_reports]
     lines.append(f"- runs with the firmware in FAILSAFE: {len(failsafe)}")
     ends = Counter(r.reason for r in planned)
@@ -586,11 +637,12 @@ def summary_lines(results: list[WorldResult]) -> list[str]:
     cpu = [r.plan_cpu_s for r in results]
     lines.append(f"- first plan, processor time: median {statistics.median(cpu):.2f} s; wall "
                  f"time median {statistics.median(r.plan_wall_s for r in results):.2f} s")
-    failures = [r for r in planned if not r.reached or r.contact]
+    failures = [r for r in planned if not r.reached or r.contact or r.coast_contact]
     if failures:
         lines.append("- every failure:")
         lines += [f"  - seed {r.seed}: {r.reason} (true body "
                   + (f"{-(r.min_clearance_m or 0.0) * 1000:.0f} mm into an obstacle or wall"
                      if r.contact else f"{(r.min_clearance_m or 0.0) * 1000:.0f} mm clear")
+                  + ("; touched in the coast after the stop" if r.coast_contact else "")
                   + f"): {r.detail}" for r in failures]
     return lines
