@@ -64,11 +64,16 @@ log = logging.getLogger(__name__)
 UNKNOWN_CURRENT_M_S = 0.02
 """Largest speed of the current the planner is not told of."""
 
-COAST_AUDIT_S = 3.0
-"""How long the body is swum on after the take ends, its gait stopped, for the contact audit.
+COAST_AUDIT_S = 30.0
+"""Longest the body is swum on after the take ends, its gait stopped, for the contact audit.
 
-Why: the take ends when the firmware acknowledges the final Stop, but the body still glides and
-the water carries it (docs/planning.md, "Closed-loop benchmark": the coast after the stop)."""
+Why: the take ends when the firmware acknowledges the final Stop, but a straight body glides a
+long way and the water carries it (docs/planning.md, "Closed-loop benchmark": the coast)."""
+
+COAST_REST_M_S = 0.02
+"""The coast ends once the body's centre of mass moves slower than this through the water: the
+glide is over, and what carries the body on is the current (the unknown current's bound)."""
+
 
 
 @dataclass
@@ -143,6 +148,8 @@ class WorldResult:
         and gliding (None in results written before it).
     coast_contact : bool
         The true body overlapped an obstacle or wall in that coast.
+    coast_s : float
+        How long the coast lasted (:func:`coast_clearance_m`; 0 in results written before it).
     """
 
     seed: int
@@ -181,6 +188,7 @@ class WorldResult:
     pauses: int = 0
     coast_clearance_m: float | None = None
     coast_contact: bool = False
+    coast_s: float = 0.0
 
 
 def calm_and_early(replans: list[dict], replan_budget_s: float | None
@@ -393,32 +401,43 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
         len(calm), sum(e["status"] == "found" for e in calm),
         sum("cut_for" in e for e in calm), len(early), sum(e["status"] == "found" for e in early),
         sum("cut_for" in e for e in early), nav.restarts,
-        sum(e["kind"] == "halt" for e in nav.events), float(coast.min()), bool(coast.min() < 0.0))
+        sum(e["kind"] == "halt" for e in nav.events), float(coast.min()), bool(coast.min() < 0.0),
+        (len(coast) - 1) * DT_US * 1e-6)
 
 
 def coast_clearance_m(world: World, robot: VirtualRobot,
-                      duration_s: float = COAST_AUDIT_S) -> FloatArray:
-    """The true body's gap while it glides on for ``duration_s`` after the take has ended.
+                      longest_s: float = COAST_AUDIT_S,
+                      rest_m_s: float = COAST_REST_M_S) -> FloatArray:
+    """The true body's gap while it glides on after the take has ended.
 
     The take's trace ends with the final Stop's acknowledgement; the plant and the firmware (in
-    its stopped state, the link closed) are stepped on here, so a body that glides or drifts
-    into an obstacle after a deliberate stop is caught by the same independent geometry.
+    its stopped state, the link closed) are stepped on here, a second at a time, until the
+    centre of mass moves slower than ``rest_m_s`` through the water or ``longest_s`` has passed,
+    so a body that glides into an obstacle after a deliberate stop is caught by the same
+    independent geometry.
 
     Parameters
     ----------
     world : World
     robot : VirtualRobot
         The take's virtual robot, with its trace on.
-    duration_s : float
+    longest_s : float
+    rest_m_s : float
 
     Returns
     -------
     ndarray
-        The gap at every physics step of the coast (at least the take's last state's).
+        The gap at every physics step of the coast (the take's last state's first).
     """
     assert robot.trace is not None
     done = len(robot.trace)
-    robot.advance_to(robot.now_us + round(duration_s * 1e6))
+    n = robot.model.n_links
+    end_us = robot.now_us + round(longest_s * 1e6)
+    while robot.now_us < end_us:
+        robot.advance_to(min(robot.now_us + 1_000_000, end_us))
+        velocity = np.asarray(robot.trace[-1][2 * n + 2 : 2 * n + 4]) - robot.current_m_s
+        if float(np.hypot(*velocity)) < rest_m_s:
+            break
     states = np.asarray(robot.trace[max(done - 1, 0):])
     return true_clearance_m(world, robot.model, states)
 
@@ -572,11 +591,14 @@ def summary_lines(results: list[WorldResult]) -> list[str]:
     coasted = [r for r in planned if r.coast_clearance_m is not None]
     if coasted:
         touched = [r for r in coasted if r.coast_contact]
-        lines.append(f"- body contacts in the {COAST_AUDIT_S:g} s coast after the stop (the "
-                     f"robot stopped, gliding): {len(touched)} of {len(coasted)} runs"
+        lines.append(f"- body contacts in the coast after the stop (the robot stopped, gliding "
+                     f"until slower than {COAST_REST_M_S:g} m/s through the water, at most "
+                     f"{COAST_AUDIT_S:g} s): {len(touched)} of {len(coasted)} runs"
                      + (f" (seeds {', '.join(str(r.seed) for r in touched)})" if touched else "")
                      + f"; smallest clearance "
-                     f"{min(r.coast_clearance_m or 0.0 for r in coasted) * 1000:.0f} mm")
+                     f"{min(r.coast_clearance_m or 0.0 for r in coasted) * 1000:.0f} mm; the "
+                     f"coast lasted {statistics.median(r.coast_s for r in coasted):.0f} s "
+                     f"(median), {max(r.coast_s for r in coasted):.0f} s at most")
     failsafe = [r for r in planned if r.failsafe_reports]
     lines.append(f"- runs with the firmware in FAILSAFE: {len(failsafe)}")
     ends = Counter(r.reason for r in planned)
