@@ -41,7 +41,7 @@ import numpy as np
 import shapely
 
 from eelhost.errors import UserError
-from eelhost.field.runloop import RunConfig
+from eelhost.field.runloop import BRAKE_S, RunConfig
 from eelhost.field.session import TakeNotes
 from eelhost.field.take import TakeRequest, run_take
 from eelhost.planning.geometry import FloatArray
@@ -303,7 +303,7 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
               record_to: Path | None = None,
               calm_budget_s: float | None = CALM_REPLAN_BUDGET_S,
               early_margin_m: float | None = None, escape: bool = False,
-              restarts: int = 0) -> WorldResult:
+              restarts: int = 0, brake_s: float = BRAKE_S) -> WorldResult:
     """Plan one generated world and swim the plan over ``sim://`` (module docstring).
 
     Parameters
@@ -334,6 +334,8 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
     restarts : int
         Restarts from rest a run may make (``TankReplanner``'s ``max_restarts``;
         docs/planning.md, "A restart from rest").
+    brake_s : float
+        The brake before the final Stop (``RunConfig.brake_s``; 0: none).
 
     Returns
     -------
@@ -363,7 +365,7 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
     nav = planned.navigator
     cost = planned.outcome.plan.cost_s
     # the run loop steers with the law the plan was searched and checked with, from its start
-    config = RunConfig(gait, planned.waypoints_m, duration_s=2.0 * cost + 30.0,
+    config = RunConfig(gait, planned.waypoints_m, duration_s=2.0 * cost + 30.0, brake_s=brake_s,
                        guidance=planned.guidance, start_guide=planned.start_guide)
     nav.estimator.history = []  # every frame's estimated body, for its error against the truth
     with tempfile.TemporaryDirectory() as tmp:
@@ -486,6 +488,7 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
                           early_margin_m: float | None = None,
                           escape: bool = False,
                           restarts: int = 0,
+                          brake_s: float = BRAKE_S,
                           ) -> list[WorldResult]:
     """Run the benchmark over ``seeds``, resuming from ``<out>/results.jsonl``.
 
@@ -513,6 +516,8 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
         The escape (:func:`run_world`).
     restarts : int
         Restarts from rest per run (:func:`run_world`).
+    brake_s : float
+        The brake before each run's final Stop (:func:`run_world`).
 
     Returns
     -------
@@ -549,7 +554,7 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
                           swimmer=swimmer, replan_budget_s=replan_budget_s,
                           record_to=out / "planning" / f"{seed}.json",
                           calm_budget_s=calm_budget_s, early_margin_m=early_margin_m,
-                          escape=escape, restarts=restarts)
+                          escape=escape, restarts=restarts, brake_s=brake_s)
             with path.open("a") as f:
                 f.write(json.dumps(asdict(r)) + "\n")
         results.append(r)

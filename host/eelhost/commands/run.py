@@ -29,7 +29,7 @@ from eelhost.commands.link_options import add_link_options, resolve_link_options
 from eelhost.commands.plan import add_coefficient_model_option, guidance_law
 from eelhost.errors import EXIT_CONTACT, EXIT_NOT_REACHED, EXIT_OK
 from eelhost.field.recorder import MOTIONS
-from eelhost.field.runloop import RunConfig
+from eelhost.field.runloop import BRAKE_AMPLITUDE_RAD, BRAKE_S, RunConfig
 from eelhost.field.session import TakeNotes
 from eelhost.field.take import TakeRequest, ViewOpener, refuse_overwrite, run_take
 from eelhost.files import check_output_stem
@@ -116,6 +116,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    f"a plan from rest, at most N times per run ({RESTARTS}, the default: on its "
                    "development seeds it reached 2 more goals with no contact; 0: off; "
                    "docs/planning.md, \"A restart from rest\")")
+    p.add_argument("--brake", type=NON_NEGATIVE, default=None, metavar="S",
+                   help="before the final Stop, freeze the body in a deep S (the gait's "
+                   f"amplitude {BRAKE_AMPLITUDE_RAD:g} rad, omega 0) for S seconds, the watchdog fed, so that it does "
+                   f"not glide on straight (default {BRAKE_S:g} s with --plan or --bench, 0 "
+                   "otherwise; 0: Stop at once; docs/planning.md, \"The brake before the Stop\")")
     p.add_argument("--guidance", choices=GUIDANCE_LAWS.names(), default=PURSUIT.name,
                    help="the line-of-sight law that steers the robot: pursuit (the paper's pure "
                    "pursuit of each waypoint, default) or ilos (integral line-of-sight along each "
@@ -213,6 +218,13 @@ def _planner_options(args: argparse.Namespace, law: GuidanceLaw) -> dict:
     return options
 
 
+def _brake_s(args: argparse.Namespace) -> float:
+    """``--brake``, or its default: :data:`BRAKE_S` for a planned run or the bench, else 0."""
+    if args.brake is not None:
+        return float(args.brake)
+    return BRAKE_S if (args.plan is not None or args.bench) else 0.0
+
+
 def _gait(values: list[float], k_theta: float) -> Gait:
     """The gait of ``--gait`` (checked against the robot's ranges when parsed), beta 1.04 rad."""
     beta = values[2] if len(values) == 3 else 1.04
@@ -296,6 +308,7 @@ def run(args: argparse.Namespace) -> int:
         duration_s=args.duration,
         guidance=law,
         start_guide=start_guide,
+        brake_s=_brake_s(args),
     )
     notes = TakeNotes(uri, args.robot_file, args.motion, current, args.note)
     request = TakeRequest(robot, config, args.out, notes, args.camera, args.calibration,
@@ -350,7 +363,8 @@ def _bench(args: argparse.Namespace) -> int:
                                         model.swimmer_for(robot), args.replan_budget or None,
                                         calm_budget_s=args.calm_budget or None,
                                         early_margin_m=args.early_margin or None,
-                                        escape=args.escape, restarts=max(args.restarts, 0))
+                                        escape=args.escape, restarts=max(args.restarts, 0),
+                                        brake_s=_brake_s(args))
     command = (f"nice eelbot run --bench --worlds {args.worlds} --seed {args.seed}"
                + ("" if args.check_unknown_current is None
                   else f" --check-unknown-current {args.check_unknown_current:g}")
@@ -363,7 +377,8 @@ def _bench(args: argparse.Namespace) -> int:
                   if args.calm_budget != CALM_REPLAN_BUDGET_S else "")
                + (f" --early-margin {args.early_margin:g}" if args.early_margin else "")
                + (" --escape" if args.escape else "")
-               + (f" --restarts {args.restarts}" if args.restarts != RESTARTS else ""))
+               + (f" --restarts {args.restarts}" if args.restarts != RESTARTS else "")
+               + (f" --brake {args.brake:g}" if args.brake is not None else ""))
     lines = summary_lines(results)
     block = [BENCH_BEGIN, f"Command: `{command}`", "",
              f"- machine: {cpu_model()}, {os.cpu_count()} cores visible (shared with other "

@@ -47,7 +47,11 @@ the robot follows the plan with the controller the planner swam (docs/planning.m
 and replanning").
 
 Whatever ends the loop, even an exception, Stop is sent and waited for (with resends) for up to
-``stop_timeout_s``, and the recording is closed with the outcome.
+``stop_timeout_s``, and the recording is closed with the outcome. With ``brake_s`` (planned runs:
+:data:`BRAKE_S`), Stop is preceded by a brake: SetGait with amplitude :data:`BRAKE_AMPLITUDE_RAD`
+and omega 0 freezes the body in a deep S, and SetOffset(0) every control period keeps the
+watchdog fed for ``brake_s``, so that the robot does not glide on straight after a deliberate stop
+(docs/planning.md, "The brake before the Stop"). Not after ``link_lost`` or an error.
 """
 
 from __future__ import annotations
@@ -76,6 +80,21 @@ __all__ = ["Decision", "FrameReport", "Navigator", "RunConfig", "RunLoop", "RunO
 
 OFFSET_LIMIT_RAD = 1.0  # SetOffset's range
 EPS_S = 1e-9
+
+BRAKE_S = 3.0
+"""How long a planned run brakes before its final Stop (``RunConfig.brake_s``).
+
+Why: a straight body glides far (the twin: let go at 0.08 m/s it still moves at 0.054 m/s 3 s
+later, and has glided 0.47 m when it falls under 0.02 m/s). Frozen in the brake's S over
+``sim://`` it is at 0.002-0.011 m/s 3 s after the brake began, by the gait's phase
+(docs/planning.md, "The brake before the Stop")."""
+
+BRAKE_AMPLITUDE_RAD = 1.5
+"""The brake's gait amplitude (SetGait's largest): joint j held at A (N - j)/(N + 1) sin(phase +
+j beta) with omega 0, at most 1.07 rad for six links, inside the references' 1.2 rad clamp."""
+
+NO_BRAKE_AFTER = ("link_lost", "error")
+"""Ends after which the brake is not tried: the robot does not hear it, or the host is failing."""
 
 GuideState = tuple[float, float, float, float]
 """The guidance's own state: the present leg's start (x, y), m, and the ILOS integral, s."""
@@ -151,6 +170,9 @@ class RunConfig:
         Stop after this long (None: no limit).
     stop_timeout_s : float
         How long to keep trying to get the final Stop acknowledged.
+    brake_s : float
+        Before the final Stop, hold the body in the brake's frozen S this long (0: Stop at
+        once, as the paper's runs; planned runs :data:`BRAKE_S`).
     amplitude_rate_rad_s, beta_rate_rad_s, offset_rate_rad_s : float
         SetGait's slew limits (0 = no limit, as the twin).
     guidance : GuidanceLaw
@@ -171,6 +193,7 @@ class RunConfig:
     link_timeout_s: float = 1.0
     duration_s: float | None = None
     stop_timeout_s: float = 1.0
+    brake_s: float = 0.0
     amplitude_rate_rad_s: float = 0.0
     beta_rate_rad_s: float = 0.0
     offset_rate_rad_s: float = 0.0
@@ -203,6 +226,8 @@ class RunOutcome:
         Telemetry messages that reported the robot in FAILSAFE.
     stop_outcome : str
         What became of the final Stop: ``ack``, ``refused``, ``lost``, ``pending``.
+    braked_s : float
+        How long the robot was braked before the Stop (0: no brake).
     events : list of LinkEvent
         Every link event of the run.
     """
@@ -216,6 +241,7 @@ class RunOutcome:
     offsets_sent: int = 0
     failsafe_reports: int = 0
     stop_outcome: str = ""
+    braked_s: float = 0.0
     events: list[LinkEvent] = field(default_factory=list)
 
     def as_dict(self) -> dict:
@@ -230,6 +256,7 @@ class RunOutcome:
             "offsets_sent": self.offsets_sent,
             "failsafe_reports": self.failsafe_reports,
             "stop": self.stop_outcome,
+            "braked_s": self.braked_s,
         }
 
 
@@ -377,15 +404,15 @@ class RunLoop:
         if self.recorder is not None:
             self.recorder.command(event.t_s - self._t_start, event)
 
-    def _set_gait(self, amplitude_rad: float) -> None:
-        """SetGait with the run's omega, beta and slew rates and this amplitude (acknowledged)."""
+    def _set_gait(self, amplitude_rad: float, beta_rad: float | None = None) -> None:
+        """SetGait with the run's omega and slew rates, this amplitude, the run's beta or this one."""
         c = self.config
         g = c.gait
         self.link.send(
             protocol.SetGait(
                 amplitude_rad,
                 g.omega_rad_s,
-                g.beta_rad,
+                g.beta_rad if beta_rad is None else beta_rad,
                 c.amplitude_rate_rad_s,
                 c.beta_rate_rad_s,
                 c.offset_rate_rad_s,
@@ -425,6 +452,8 @@ class RunLoop:
             raise
         finally:
             out.waypoints_reached = self.target
+            if self.config.brake_s > 0.0 and out.reason not in NO_BRAKE_AFTER:
+                out.braked_s = self._brake()
             out.stop_outcome = self._stop_robot()
             if self.navigator is not None:
                 self.navigator.close()
@@ -463,9 +492,7 @@ class RunLoop:
             polled_before, polled = self._last_poll_s, self.clock.now() - self._t_start
             self._last_poll_s = polled
             for msg in self.link.poll():
-                if (isinstance(msg, protocol.Telemetry)
-                        and msg.state == protocol.State.FAILSAFE):
-                    out.failsafe_reports += 1
+                self._count_failsafe(msg)
                 if isinstance(msg, protocol.Telemetry) and self.navigator is not None:
                     # the joint angles and gait phase for the state estimate (optional method)
                     on_telemetry = getattr(self.navigator, "on_telemetry", None)
@@ -522,7 +549,14 @@ class RunLoop:
             self._paused = True
             self.pauses += 1
             log.info("gait paused at t = %.2f s: %s", t, decision.detail)
-            self._set_gait(0.0)
+            # a navigator's paused gait (the reversed wave that brakes or backs the body out;
+            # docs/planning.md, "A restart from rest"), else amplitude 0
+            paused = getattr(decision, "pause_gait", None)
+            if paused is None:
+                self._set_gait(0.0)
+            else:
+                self._set_gait(paused.amplitude_rad if paused.amplitude_rad > 1e-6 else 0.0,
+                               paused.beta_rad)
             self._offset_rad = 0.0
             self.link.send(protocol.SetOffset(0.0))
             self.outcome.offsets_sent += 1
@@ -567,6 +601,35 @@ class RunLoop:
         else:
             return False
         return True
+
+    def _count_failsafe(self, msg: object) -> None:
+        """Count a Telemetry that reports the robot in FAILSAFE (``failsafe_reports``)."""
+        if isinstance(msg, protocol.Telemetry) and msg.state == protocol.State.FAILSAFE:
+            self.outcome.failsafe_reports += 1
+
+    def _brake(self) -> float:
+        """Freeze the body in a deep S (omega 0) for ``brake_s``, the watchdog fed; time braked.
+
+        A second Ctrl-C during the brake ends it at once: the Stop still follows.
+        """
+        c = self.config
+        t0 = self.clock.now()
+        try:
+            self.link.send(protocol.SetGait(BRAKE_AMPLITUDE_RAD, 0.0, c.gait.beta_rad,
+                                            c.amplitude_rate_rad_s, c.beta_rate_rad_s,
+                                            c.offset_rate_rad_s), want_ack=True)
+            end, due = t0 + c.brake_s, t0
+            while self.clock.now() < end - EPS_S:
+                if self.clock.now() >= due - EPS_S:
+                    self.link.send(protocol.SetOffset(0.0))  # feeds the watchdog
+                    self.outcome.offsets_sent += 1
+                    due += c.control_period_s
+                self.clock.wait_until(min(due, end))
+                for msg in self.link.poll():
+                    self._count_failsafe(msg)
+        except KeyboardInterrupt:
+            log.warning("the brake was interrupted; stopping at once")
+        return self.clock.now() - t0
 
     def _stop_robot(self) -> str:
         """Send Stop and keep polling (the link resends) until it is answered or time runs out."""
