@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import threading
 import time
 
 import numpy as np
@@ -13,7 +14,7 @@ from eelhost.field.session import TakeNotes
 from eelhost.field.take import TakeRequest, run_take
 from eelhost.planning.planner import Outcome, Planner
 from eelhost.planning.replan import Decision, TankReplanner
-from eelhost.planning.restart import drift, stopped_twin
+from eelhost.planning.restart import backing_gait, drift, stopped_twin
 from eelhost.planning.search import Plan
 from eelhost.planning.uncertainty import default_model
 from eelhost.planning.world import parse_world
@@ -195,3 +196,94 @@ def test_the_watchdog_stays_fed_and_no_failsafe_fires_while_the_gait_is_paused(t
     assert len(times) >= 4 and np.diff(times).max() < 0.35  # the watchdog (1 s) is fed
     assert not any(r["message"] in ("Stop", "Start") for r in sent
                    if t_pause <= float(r["t_s"]) < t_restart)
+
+
+class FirstRestFails(Blocked):
+    """A :class:`Blocked` replanner whose first replan from rest finds nothing."""
+
+    rest_calls = 0
+
+    def _rest_replan(self, est, start_step, extra, deadline_s, recheck=False):  # noqa: ANN001, ANN202
+        self.rest_calls += 1
+        if self.rest_calls == 1:
+            plan = Plan(False, "exhausted", "search exhausted after 1 expansions")
+            return (Outcome(plan, "exhausted", plan.message), est.state, 0.0, 0.0, np.zeros(2),
+                    time.monotonic(), start_step)
+        return super()._rest_replan(est, start_step, extra, deadline_s, recheck)
+
+
+def test_a_failed_replan_from_rest_is_tried_again_later_in_the_pause(open_plan):
+    planner, outcome = open_plan
+    nav = FirstRestFails(lambda extra: planner, planner, outcome, PATH_GAIT, lookahead_s=0.0,
+                         max_restarts=1, rest_tries=2)
+    restarted = None
+    try:
+        com = (0.8, 1.4)  # 0.4 m off the corridor: a replan at once, refused
+        for k in range(int(14.0 * 30)):
+            t = k / 30
+            d = nav.on_frame(t, pose_at(t, com), np.array([*com, 0.0]), 0, 0.0)
+            nav.pace(t)
+            assert d.stop is None, d.detail
+            if d.restart:
+                restarted = t
+                break
+            nav._worker.submit(lambda: None).result()
+            nav._side.submit(lambda: None).result()
+    finally:
+        nav.close()
+    assert restarted is not None and nav.restarts == 1 and nav.rest_calls == 2
+    tries = [e for e in nav.events if e["kind"] == "restart"]
+    assert [e["status"] for e in tries] == ["exhausted", "found"]
+    assert [e["try"] for e in tries] == [1, 2]
+    assert tries[1]["t_request_s"] >= tries[0]["t_ready_s"] + nav.rest_retry_s - 0.05
+
+
+class LateRest(Blocked):
+    """A :class:`Blocked` replanner whose replan from rest does not come back until released."""
+
+    def __init__(self, *args, **kwargs) -> None:  # noqa: ANN002, ANN003
+        super().__init__(*args, **kwargs)
+        self.release = threading.Event()
+
+    def _rest_replan(self, est, start_step, extra, deadline_s, recheck=False):  # noqa: ANN001, ANN202
+        self.release.wait(10.0)
+        plan = Plan(False, "out_of_time", "the search ran out of time")
+        return (Outcome(plan, "out_of_time", plan.message), est.state, 0.0, 0.0, np.zeros(2),
+                time.monotonic(), start_step)
+
+
+def test_a_replan_from_rest_not_back_by_its_start_ends_the_pause(open_plan):
+    planner, outcome = open_plan
+    nav = LateRest(lambda extra: planner, planner, outcome, PATH_GAIT, lookahead_s=0.0,
+                   max_restarts=1, rest_budget_s=0.5, rest_budget_max_s=0.5)
+    stop = None
+    try:
+        com = (0.8, 1.4)
+        for k in range(int(10.0 * 30)):
+            t = k / 30
+            d = nav.on_frame(t, pose_at(t, com), np.array([*com, 0.0]), 0, 0.0)
+            nav.pace(t)
+            if d.stop is not None:
+                stop = (t, d)
+                break
+            nav._side.submit(lambda: None).result()
+    finally:
+        nav.release.set()
+        nav.close()
+    assert stop is not None
+    t_stop, d = stop
+    assert d.stop == "no_safe_continuation" and "was not back" in d.detail
+    halt = next(e for e in nav.events if e["kind"] == "halt")
+    # the paused robot waits no longer than the plan could be used: its start and the lead
+    assert t_stop <= halt["t_s"] + nav.rest_settle_s + halt["rest_budget_s"] + nav.max_lead_s + 0.2
+
+
+def test_the_reversed_wave_brakes_the_coasting_body(open_plan):
+    planner, _ = open_plan
+    state = np.zeros(2 * N + 4)
+    state[N : N + 2] = (1.0, 1.0)
+    state[2 * N + 2] = 0.15  # 0.15 m/s forward, straight
+    coasting = drift(stopped_twin(planner.twin), state, 6.0, 3.0)
+    backing = drift(stopped_twin(planner.twin, backing_gait(PATH_GAIT, 0.87)), state, 6.0, 3.0)
+    assert backing_gait(PATH_GAIT, 0.87).beta_rad == -PATH_GAIT.beta_rad
+    assert backing[-1, N] - 1.0 < 0.5 * (coasting[-1, N] - 1.0)  # it glides less than half as far

@@ -42,7 +42,11 @@ from eelhost.planning.restart import (
     DRIFT_AFTER_S,
     REST_BUDGET_MAX_S,
     REST_BUDGET_S,
+    REST_PAUSE_MAX_S,
+    REST_RETRY_S,
     REST_SETTLE_S,
+    REST_TRIES,
+    backing_gait,
     drift,
     stopped_gait,
     stopped_twin,
@@ -682,7 +686,11 @@ class Decision:
         Stop the gait (amplitude 0, offset 0) but keep the run: the robot drifts to rest while
         a restart is planned (docs/planning.md, "A restart from rest").
     restart : bool
-        With ``waypoints``: swim again (the gait's amplitude back) and steer to them.
+        With ``waypoints``: swim again (the gait's amplitude and beta back) and steer to them.
+    pause_gait : Gait or None
+        With ``pause``: the gait to pause with (its amplitude and beta; offset 0), e.g. the
+        reversed wave of ``TankReplanner(rest_backing_rad=)``; None or an amplitude of 0 in
+        effect: amplitude 0.
     """
 
     waypoints: list[tuple[float, float]] | None = None
@@ -693,6 +701,7 @@ class Decision:
     recorded: bool = False
     pause: bool = False
     restart: bool = False
+    pause_gait: Gait | None = None
 
 
 @dataclass
@@ -709,6 +718,9 @@ class _Pause:
     outcome: Outcome | None = None  # its plan, once found
     extra: FloatArray | None = None  # the extra current it was searched in
     pending: tuple[float, list[tuple[float, float]], Guide | None] | None = None
+    clear_s: float = 0.0  # from the stop until the drift comes within the margin (its horizon: never)
+    tries: int = 0  # rest replans asked for in this pause
+    t_next_s: float = -math.inf  # the robot's time the next rest replan may be asked for
 
 
 @dataclass
@@ -875,6 +887,18 @@ class TankReplanner:
     rest_escape_planner_for : callable, optional
         The escape's planner for the rest replans only (without ``escape_planner_for``): a
         coasting body inside the check's margin plans its escape from there.
+    rest_tries : int
+        Rest replans a pause may ask for (:data:`eelhost.planning.restart.REST_TRIES`, 1): after
+        a failed one, another ``rest_retry_s`` later from the body then, while the stop's drift
+        stays clear for its least budget (docs/planning.md, "A restart from rest"). A rest
+        replan not back :attr:`max_lead_s` after the state it starts from ends the pause.
+    rest_retry_s : float
+    rest_backing_rad : float or None
+        Pause with the travelling wave reversed at this amplitude (offset 0), which brakes the
+        coasting body or backs it out, instead of amplitude 0
+        (:func:`eelhost.planning.restart.backing_gait`); the drift and the rest replan's start
+        are swum with it. None (the default): amplitude 0. Developed, not on by default: on
+        development seed 27215 a pause at 0.87 rad ended in a contact.
     """
 
     def __init__(
@@ -912,6 +936,9 @@ class TankReplanner:
         rest_budget_s: float = REST_BUDGET_S,
         rest_budget_max_s: float = REST_BUDGET_MAX_S,
         rest_escape_planner_for: Callable[[FloatArray], Planner] | None = None,
+        rest_tries: int = REST_TRIES,
+        rest_retry_s: float = REST_RETRY_S,
+        rest_backing_rad: float | None = None,
     ) -> None:
         self.gait = gait
         # the rest replans' escape: the swimming one's when there is one
@@ -920,6 +947,9 @@ class TankReplanner:
         self.rest_settle_s = rest_settle_s
         self.rest_budget_s = rest_budget_s
         self.rest_budget_max_s = rest_budget_max_s
+        self.rest_tries = max(int(rest_tries), 1)
+        self.rest_retry_s = rest_retry_s
+        self.rest_backing_rad = rest_backing_rad
         self.restarts = 0  # restarts from rest made (docs/planning.md, "A restart from rest")
         self._pause: _Pause | None = None
         self.planner_for = planner_for
@@ -1299,8 +1329,9 @@ class TankReplanner:
         self._retry_now = False
         self._urgent_after_cut = None
         self.current.drop()
-        # frames without fresh telemetry take the stopped gait's reference (straight joints)
-        self.estimator.gait = stopped_gait(self.gait)
+        # frames without fresh telemetry take the paused gait's reference (straight joints, or
+        # the reversed wave's)
+        self.estimator.gait = self._paused_gait()
         extra = self.current.value_m_s.copy() if self.estimate_current else np.zeros(2)
         pause = _Pause(t_s, d.detail)
         pause.drift_wall_s = time.monotonic()
@@ -1313,10 +1344,16 @@ class TankReplanner:
         log.warning("no safe continuation at t = %.2f s: the robot stops swimming and drifts; "
                     "restart %d of %d from rest (%s)", t_s, self.restarts + 1,
                     self.max_restarts, d.detail)
-        return Decision(pause=True, recorded=True, detail=(
+        return Decision(pause=True, recorded=True, pause_gait=self.estimator.gait, detail=(
             f"stopped swimming at t = {t_s:.2f} s for restart {self.restarts + 1} from rest"))
 
-    def _drift_gap(self, est: BodyEstimate, extra: FloatArray) -> tuple[float, float]:
+    def _paused_gait(self) -> Gait:
+        """The gait while paused: amplitude 0, or the reversed wave (``rest_backing_rad``)."""
+        if self.rest_backing_rad is None:
+            return stopped_gait(self.gait)
+        return backing_gait(self.gait, self.rest_backing_rad)
+
+    def _drift_gap(self, est: BodyEstimate, extra: FloatArray) -> tuple[float, float, float]:
         """On the side worker: the stopped body's drift's gap, and how long the pause may last.
 
         The twin swims the stopped body (:func:`eelhost.planning.restart.stopped_twin`) from the
@@ -1325,14 +1362,18 @@ class TankReplanner:
         such gap until :data:`DRIFT_AFTER_S` after a restart with the least budget
         (``rest_budget_s``), and the rest replan's budget: the longest, up to
         ``rest_budget_max_s``, whose restart the drift keeps clear of the look-ahead's margin
-        until :data:`DRIFT_AFTER_S` after it.
+        until :data:`DRIFT_AFTER_S` after it; and how long after the stop the drift stays clear
+        (the horizon, at least :data:`REST_PAUSE_MAX_S` with retries, when it never comes near),
+        which bounds the later tries (``rest_tries``).
         """
-        twin = stopped_twin(self._twin_in(extra))
+        twin = stopped_twin(self._twin_in(extra), self._paused_gait())
         stride = 3
         horizon = self.rest_settle_s + max(self.rest_budget_s, self.rest_budget_max_s) + DRIFT_AFTER_S
+        if self.rest_tries > 1:
+            horizon = max(horizon, REST_PAUSE_MAX_S + DRIFT_AFTER_S)
         states = drift(twin, est.state, est.t_s, horizon, stride)
         if not len(states):
-            return -math.inf, self.rest_budget_s
+            return -math.inf, self.rest_budget_s, 0.0
         outline = outline_clearance_m(self.world, self.model, states)
         ahead = np.arange(len(outline), dtype=np.float64) * (stride * twin.dt_s)
         allowance = drift_allowance_m(current_spread_m_s(self.current.history), ahead)
@@ -1342,7 +1383,7 @@ class TankReplanner:
         clear_s = float(ahead[near[0]]) if near.size else horizon
         budget = min(max(self.rest_budget_s, self.rest_budget_max_s),
                      clear_s - self.rest_settle_s - DRIFT_AFTER_S)
-        return float(np.min(gap[least])), max(budget, self.rest_budget_s)
+        return float(np.min(gap[least])), max(budget, self.rest_budget_s), clear_s
 
     def _paused_frame(self, t_s: float, loc: Localisation, pose: FloatArray | None,
                       offset_rad: float) -> Decision:
@@ -1357,7 +1398,7 @@ class TankReplanner:
         if pause.drift is not None:
             if not pause.drift.done():
                 return d
-            gap, pause.budget_s = pause.drift.result()
+            gap, pause.budget_s, pause.clear_s = pause.drift.result()
             pause.drift = None
             pause.drift_gap_m = gap
             self.events[-1]["drift_gap_m"] = round(gap, 4) if math.isfinite(gap) else None
@@ -1372,7 +1413,7 @@ class TankReplanner:
             return d
         job = pause.job
         if job is None and pause.pending is None:
-            if t_s < pause.t_halt_s + self.rest_settle_s - 1e-9:
+            if t_s < max(pause.t_halt_s + self.rest_settle_s, pause.t_next_s) - 1e-9:
                 return d
             est = self.estimator.estimate()
             if est is None:
@@ -1380,12 +1421,24 @@ class TankReplanner:
             self._request_rest(t_s, est)
             return d
         if job is not None:
-            if not job.future.done():
+            late = t_s > job.t_start_s + self.max_lead_s + 1e-9
+            if late and job.deadline is not None:
+                # past the start it plans from: a plan would be stale, and the drift was judged
+                # only until DRIFT_AFTER_S after it (a loaded machine's rest replan overran
+                # its budget and the paused body drifted on into contact, development seed 27224)
+                job.deadline.cut_to(time.monotonic())
+            if not job.future.done() or t_s - job.t_request_s < (
+                    job.future.result()[5] - job.wall_request_s) - 1e-9:
+                # not back, or over sim:// the robot has not yet lived the planner's time
+                if late:
+                    pause.job = None
+                    return self._end_pause(d, (
+                        f"the replan from rest asked for at t = {job.t_request_s:.2f} s was not "
+                        f"back by t = {t_s:.2f} s, {t_s - job.t_start_s:.2f} s after the state "
+                        f"it starts from"))
                 return d
             outcome, state, wall_s, cpu, extra, done, start_step = job.future.result()
             wall = done - job.wall_request_s
-            if t_s - job.t_request_s < wall - 1e-9:
-                return d  # over sim://: the robot has not yet lived the planner's time
             pause.job = None
             job.t_start_s = start_step * self.planner.twin.dt_s
             self.events.append(self._event("restart", "rest", job.t_request_s, job.t_start_s,
@@ -1395,7 +1448,10 @@ class TankReplanner:
             self.events[-1]["restart"] = self.restarts + 1
             self.events[-1]["t_halt_s"] = round(pause.t_halt_s, 3)
             d.recorded = True
+            self.events[-1]["try"] = pause.tries
             if not outcome.found:
+                if self._rest_retry(t_s, pause):
+                    return d
                 return self._end_pause(d, f"the replan from rest failed: {outcome.message}")
             if t_s > job.t_start_s + self.max_lead_s:
                 self.events[-1]["status"] = "stale"
@@ -1421,29 +1477,61 @@ class TankReplanner:
         extra = self.current.value_m_s.copy() if self.estimate_current else np.zeros(2)
         wall = time.monotonic()
         deadline = Deadline(wall + pause.budget_s)
-        future = self._worker.submit(self._rest_replan, est, start_step, extra, deadline)
+        pause.tries += 1
+        future = self._worker.submit(self._rest_replan, est, start_step, extra, deadline,
+                                     pause.tries > 1)
         pause.job = _Job(future, t_s, wall, start_step * dt, "rest", math.inf,
                          pause.budget_s, deadline)
         log.info("replanning from rest at t = %.2f s, from the stopped body predicted for "
                  "t = %.2f s", t_s, start_step * dt)
 
+    def _rest_retry(self, t_s: float, pause: _Pause) -> bool:
+        """After a failed rest replan: whether another is tried later in the same pause.
+
+        While tries are left (``rest_tries``), the next is asked for ``rest_retry_s`` from now,
+        from the body then (slower, elsewhere), with the longest budget whose restart the stop's
+        drift keeps clear until :data:`DRIFT_AFTER_S` after it; at least ``rest_budget_s``, else
+        none (docs/planning.md, "A restart from rest").
+        """
+        if pause.tries >= self.rest_tries:
+            return False
+        t_next = t_s + self.rest_retry_s
+        budget = min(max(self.rest_budget_s, self.rest_budget_max_s),
+                     pause.t_halt_s + pause.clear_s - DRIFT_AFTER_S - t_next)
+        if budget < self.rest_budget_s - 1e-9:
+            return False
+        pause.t_next_s, pause.budget_s = t_next, budget
+        log.info("the replan from rest failed at t = %.2f s; try %d of %d from t = %.2f s", t_s,
+                 pause.tries + 1, self.rest_tries, t_next)
+        return True
+
     def _rest_replan(self, est: BodyEstimate, start_step: int, extra: FloatArray,
-                     deadline_s: SupportsFloat | None
+                     deadline_s: SupportsFloat | None, recheck: bool = False
                      ) -> tuple[Outcome, FloatArray, float, float, FloatArray, float, int]:
         """On the worker: the stopped body's state at ``start_step``, and a plan from it.
 
         The planner first, then (its search exhausted or failed, time left) the goal approach's
         planner, the recovery's and, from a start by the check's margin, the escape's: the tiers
         of a replan, without the blocked-start retries (the body does not swim on) and the shift
-        repair (no route is left to shift).
+        repair (no route is left to shift). A later try (``recheck``) first judges the drift
+        from the estimate to the start: within the look-ahead's margin, it is refused.
         """
         wall0, cpu0 = time.perf_counter(), time.thread_time()
         self._prepare_planner(extra)
         planner = self.planner
-        twin = stopped_twin(planner.twin)
+        twin = stopped_twin(planner.twin, self._paused_gait())
         now = int(round(est.t_s / twin.dt_s))
         states = drift(twin, est.state, est.t_s, max(start_step - now, 0) * twin.dt_s, 1)
         state = states[min(max(start_step - now, 0), len(states) - 1)].copy()
+        if recheck and len(states):
+            near = float(np.min(outline_clearance_m(self.world, self.model, states)))
+            if not near > self.lookahead_margin_m:
+                why = (f"the stopped body drifts within {max(near, 0.0) * 1000:.0f} mm before "
+                       f"the restart")
+                refused = Outcome(Plan(False, "blocked_start", why), "blocked_start", why)
+                return (refused, state, time.perf_counter() - wall0,
+                        time.thread_time() - cpu0, self._planner_current.copy(),
+                        time.monotonic(), start_step)
         guide = leg_start_guide(state, self.model.n_links, (0.0, 0.0))
         make = self.rest_escape_planner_for
         gap = self._escape_gap(state, make)

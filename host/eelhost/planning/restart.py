@@ -23,8 +23,8 @@ from eelhost.planning.twin import Twin
 from eelsim.control import Gait
 from eelsim.guidance import PURSUIT
 
-__all__ = ["DRIFT_AFTER_S", "RESTARTS", "REST_BUDGET_MAX_S", "REST_BUDGET_S", "REST_SETTLE_S", "drift",
-           "stopped_gait", "stopped_twin"]
+__all__ = ["DRIFT_AFTER_S", "RESTARTS", "backing_gait", "REST_BUDGET_MAX_S", "REST_BUDGET_S", "REST_PAUSE_MAX_S",
+           "REST_RETRY_S", "REST_SETTLE_S", "REST_TRIES", "drift", "stopped_gait", "stopped_twin"]
 
 RESTARTS = 2
 """Restarts from rest a run may make (``eelbot run --restarts``; docs/planning.md)."""
@@ -41,6 +41,17 @@ predicts for when the budget ends, and the stopped robot waits meanwhile."""
 REST_BUDGET_MAX_S = 5.0
 """The rest replan's longest budget: where the drift stays clear that long (a loaded machine's
 rest replans ran out of time in 2 s on development seed 25022, the body 110 mm clear)."""
+
+REST_TRIES = 1
+"""Rest replans a pause may ask for: after a failed one, another later in the pause from the body
+then, while the drift stays clear (``TankReplanner(rest_tries=)``; docs/planning.md)."""
+
+REST_RETRY_S = 0.5
+"""The robot's time from a failed rest replan to the next try's request."""
+
+REST_PAUSE_MAX_S = 10.0
+"""With retries, the stop's drift is swum at least this long (plus :data:`DRIFT_AFTER_S`): the
+latest restart a later try may plan for."""
 
 DRIFT_AFTER_S = 0.5
 """The twin swims the stopped body from the stop to this long after the planned restart (the
@@ -66,7 +77,28 @@ def stopped_gait(gait: Gait) -> Gait:
     return dataclasses.replace(gait, amplitude_rad=STOPPED_AMPLITUDE_RAD, k_theta=0.0)
 
 
-def stopped_twin(twin: Twin) -> Twin:
+def backing_gait(gait: Gait, amplitude_rad: float) -> Gait:
+    """The gait of a robot backing (or braking): the travelling wave reversed, offset 0.
+
+    The same omega, beta negated (the wave runs from the tail to the head and pushes the body
+    backwards: the firmware takes any beta in [-pi, pi], ``SetGait``), amplitude
+    ``amplitude_rad``, heading gain 0. In the twin a small amplitude brakes the coasting body
+    and a large one backs it out (docs/planning.md, "A restart from rest").
+
+    Parameters
+    ----------
+    gait : Gait
+    amplitude_rad : float
+
+    Returns
+    -------
+    Gait
+    """
+    return dataclasses.replace(gait, amplitude_rad=max(amplitude_rad, STOPPED_AMPLITUDE_RAD),
+                               beta_rad=-gait.beta_rad, k_theta=0.0)
+
+
+def stopped_twin(twin: Twin, gait: Gait | None = None) -> Twin:
     """``twin`` with the stopped gait and pure pursuit (whose gain is the gait's: 0).
 
     The joints' references are 0 and the offset is 0, as the firmware's while its amplitude is 0
@@ -75,13 +107,17 @@ def stopped_twin(twin: Twin) -> Twin:
     Parameters
     ----------
     twin : Twin
+    gait : Gait, optional
+        The paused gait (its heading gain 0), e.g. :func:`backing_gait`; default
+        :func:`stopped_gait` of the twin's.
 
     Returns
     -------
     Twin
     """
     options = dataclasses.replace(twin.options, guidance=PURSUIT)
-    return Twin(twin.robot, twin.coefficients, stopped_gait(twin.gait), options,
+    paused = stopped_gait(twin.gait) if gait is None else gait
+    return Twin(twin.robot, twin.coefficients, paused, options,
                 twin.current_m_s, twin.acceptance_radius_m, twin.threads, twin.model)
 
 
