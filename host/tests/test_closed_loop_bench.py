@@ -177,13 +177,14 @@ def test_the_coast_lasts_while_the_stopped_body_glides_through_the_water():
     assert speeds[-1 - round(1.0e6 / DT_US)] >= 0.06  # a second earlier it still glided faster
 
 
-def test_the_summary_names_a_contact_in_the_coast_after_the_stop():
+def test_the_summary_names_a_contact_while_the_robot_stops():
     runs = [WorldResult(1, True, "found", "arrived", reached=True, min_clearance_m=0.05,
                         coast_clearance_m=-0.004, coast_contact=True),
             WorldResult(2, True, "found", "arrived", reached=True, min_clearance_m=0.05,
                         coast_clearance_m=0.03)]
     text = "\n".join(summary_lines(runs))
-    assert "1 of 2 runs (seeds 1); smallest clearance -4 mm; the coast lasted" in text
-    assert "seed 1: arrived (true body 50 mm clear; touched in the coast after the stop)" in text
+    assert "1 of 2 runs (seeds 1); smallest clearance -4 mm; the glide after the Stop lasted" \
+        in text
+    assert "seed 1: arrived (true body 50 mm clear; touched while stopping, 4 mm deep)" in text
     old = WorldResult(3, True, "found", "arrived", reached=True, min_clearance_m=0.05)
     assert "coast" not in "\n".join(summary_lines([old]))  # results written before it

@@ -33,6 +33,7 @@ def test_a_braked_robot_is_nearly_still_at_its_stop_and_never_fails_safe(tmp_pat
                   Localiser(cam.calibration(), ROBOT), ROBOT, config, rec).run()
     assert out.reason == "duration" and out.braked_s == pytest.approx(1.2, abs=0.05)
     assert out.failsafe_reports == 0 and out.stop_outcome == "ack"
+    assert out.braked_s <= out.stopping_s < out.braked_s + 0.2  # the brake, then Stop's answer
     assert robot.status()["state"] == protocol.State.IDLE
     events = read_commands_csv(tmp_path / "brake.commands.csv")
     assert not [r for r in events if r["event"].startswith("refused")]  # omega 0, A 1.5: taken

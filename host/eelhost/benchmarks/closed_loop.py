@@ -144,12 +144,14 @@ class WorldResult:
         Restarts from rest made, and pauses (stops of the gait for one) (docs/planning.md, "A
         restart from rest"; 0 in results written before it).
     coast_clearance_m : float or None
-        Smallest true gap over the :data:`COAST_AUDIT_S` after the take's end, the robot stopped
-        and gliding (None in results written before it).
+        Smallest true gap while the robot stops: from the run loop's decision to stop, through
+        the brake and the glide after the Stop (:func:`coast_clearance_m`), None in results
+        written before it. ``min_clearance_m`` and ``contact`` are then the swimming run's, up
+        to that decision (before session 16 they ran to the Stop's answer).
     coast_contact : bool
-        The true body overlapped an obstacle or wall in that coast.
+        The true body overlapped an obstacle or wall while stopping.
     coast_s : float
-        How long the coast lasted (:func:`coast_clearance_m`; 0 in results written before it).
+        How long the glide after the Stop lasted (0 in results written before it).
     """
 
     seed: int
@@ -378,9 +380,16 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
         raise KeyboardInterrupt(f"{', '.join(result.signals)} received")
     vr = result.virtual_robot
     assert vr is not None and vr.trace is not None
-    trace = np.asarray(vr.trace)
+    # the swimming run ends where the loop decided to stop; the brake and the Stop's answer after
+    # it belong to the stop, judged with the glide after it
+    taken = len(vr.trace)
+    decided = max(taken - round(out.stopping_s / (DT_US * 1e-6)), 1)
+    trace = np.asarray(vr.trace[:decided])
     clear = true_clearance_m(world, vr.model, trace)
-    coast = coast_clearance_m(world, vr)
+    glide = coast_clearance_m(world, vr)
+    coast_s = (len(vr.trace) - taken) * DT_US * 1e-6
+    stopping = np.concatenate([true_clearance_m(world, vr.model, np.asarray(vr.trace[decided:taken]))
+                               if taken > decided else np.zeros(0), glide])
     estimate_error = estimate_error_mm(vr.model, nav.estimator.history, trace)
     if record_to is not None:
         record_to.parent.mkdir(parents=True, exist_ok=True)
@@ -403,8 +412,7 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
         len(calm), sum(e["status"] == "found" for e in calm),
         sum("cut_for" in e for e in calm), len(early), sum(e["status"] == "found" for e in early),
         sum("cut_for" in e for e in early), nav.restarts,
-        sum(e["kind"] == "halt" for e in nav.events), float(coast.min()), bool(coast.min() < 0.0),
-        (len(coast) - 1) * DT_US * 1e-6)
+        sum(e["kind"] == "halt" for e in nav.events), float(stopping.min()), bool(stopping.min() < 0.0), coast_s)
 
 
 def coast_clearance_m(world: World, robot: VirtualRobot,
@@ -596,13 +604,14 @@ def summary_lines(results: list[WorldResult]) -> list[str]:
     coasted = [r for r in planned if r.coast_clearance_m is not None]
     if coasted:
         touched = [r for r in coasted if r.coast_contact]
-        lines.append(f"- body contacts in the coast after the stop (the robot stopped, gliding "
-                     f"until slower than {COAST_REST_M_S:g} m/s through the water, at most "
-                     f"{COAST_AUDIT_S:g} s): {len(touched)} of {len(coasted)} runs"
+        lines.append(f"- body contacts while stopping (from the decision to stop, through the "
+                     f"brake and the glide after the Stop until slower than {COAST_REST_M_S:g} "
+                     f"m/s through the water, at most {COAST_AUDIT_S:g} s): {len(touched)} of "
+                     f"{len(coasted)} runs"
                      + (f" (seeds {', '.join(str(r.seed) for r in touched)})" if touched else "")
                      + f"; smallest clearance "
                      f"{min(r.coast_clearance_m or 0.0 for r in coasted) * 1000:.0f} mm; the "
-                     f"coast lasted {statistics.median(r.coast_s for r in coasted):.0f} s "
+                     f"glide after the Stop lasted {statistics.median(r.coast_s for r in coasted):.0f} s "
                      f"(median), {max(r.coast_s for r in coasted):.0f} s at most")
     failsafe = [r for r in planned if r.failsafe_reports]
     lines.append(f"- runs with the firmware in FAILSAFE: {len(failsafe)}")
@@ -670,6 +679,7 @@ def summary_lines(results: list[WorldResult]) -> list[str]:
         lines += [f"  - seed {r.seed}: {r.reason} (true body "
                   + (f"{-(r.min_clearance_m or 0.0) * 1000:.0f} mm into an obstacle or wall"
                      if r.contact else f"{(r.min_clearance_m or 0.0) * 1000:.0f} mm clear")
-                  + ("; touched in the coast after the stop" if r.coast_contact else "")
+                  + (f"; touched while stopping, {-(r.coast_clearance_m or 0.0) * 1000:.0f} mm "
+                     "deep" if r.coast_contact else "")
                   + f"): {r.detail}" for r in failures]
     return lines

@@ -228,6 +228,9 @@ class RunOutcome:
         What became of the final Stop: ``ack``, ``refused``, ``lost``, ``pending``.
     braked_s : float
         How long the robot was braked before the Stop (0: no brake).
+    stopping_s : float
+        The clock's time from the loop's end (the decision to stop) to the Stop's answer, the
+        brake included.
     events : list of LinkEvent
         Every link event of the run.
     """
@@ -242,6 +245,7 @@ class RunOutcome:
     failsafe_reports: int = 0
     stop_outcome: str = ""
     braked_s: float = 0.0
+    stopping_s: float = 0.0
     events: list[LinkEvent] = field(default_factory=list)
 
     def as_dict(self) -> dict:
@@ -452,9 +456,11 @@ class RunLoop:
             raise
         finally:
             out.waypoints_reached = self.target
+            decided = self.clock.now()
             if self.config.brake_s > 0.0 and out.reason not in NO_BRAKE_AFTER:
                 out.braked_s = self._brake()
             out.stop_outcome = self._stop_robot()
+            out.stopping_s = self.clock.now() - decided
             if self.navigator is not None:
                 self.navigator.close()
                 self._record_planning()
