@@ -8,7 +8,12 @@ import numpy as np
 import pytest
 
 from eelhost.cli import main
-from eelhost.planning.planner import Planner
+from eelhost.planning.planner import (
+    SOFT_MARGIN_BASE_M,
+    SOFT_MARGIN_DRIFT_S,
+    SOFT_MARGIN_FLOOR_M,
+    Planner,
+)
 from eelhost.planning.search import in_goal
 from eelhost.planning.uncertainty import CoefficientModel, default_model
 from eelhost.planning.world import WorldError, load_world, parse_world
@@ -220,6 +225,16 @@ def test_the_soft_margin_costs_time_only_under_the_preferred_clearance():
     # NaN samples (after a run's end) cost nothing
     assert search.soft_cost_s(np.full(10, np.nan), 3) == 0.0
     assert Planner(open_tank(), ROBOT, MODEL, soft_margin=False).settings.clearance_cost == 0.0
+
+
+def test_the_soft_margin_keeps_its_floor_of_room_when_no_unknown_current_is_checked():
+    # the coefficients alone still stray the check's runs: the preferred room never falls
+    # under SOFT_MARGIN_FLOOR_M (docs/planning.md, "Session 16's development figures")
+    calm = Planner(open_tank(), ROBOT, MODEL, unknown_current_m_s=0.0).settings
+    assert calm.preferred_clearance_m == pytest.approx(calm.margin_m + SOFT_MARGIN_FLOOR_M)
+    drifting = Planner(open_tank(), ROBOT, MODEL, unknown_current_m_s=0.02).settings
+    assert drifting.preferred_clearance_m == pytest.approx(
+        drifting.margin_m + SOFT_MARGIN_BASE_M + SOFT_MARGIN_DRIFT_S * 0.02)
 
 
 def test_the_soft_margin_keeps_the_plan_further_from_an_obstacle_beside_the_direct_line():

@@ -167,6 +167,16 @@ SOFT_MARGIN_DRIFT_S = 6.0
 """The soft margin's room per unit of unknown current, s (m per m/s): how far the robot strays
 from the search's run in the check's currents (docs/planning.md, "The search")."""
 
+SOFT_MARGIN_FLOOR_M = 0.06
+"""The soft margin's least room over the hard margin, m, whatever the unknown current's bound:
+the preferred clearance is the hard margin plus the larger of this and
+``SOFT_MARGIN_BASE_M + SOFT_MARGIN_DRIFT_S * bound`` (it binds below 0.005 m/s, so the default
+0.02 m/s keeps its 200 mm). With the coefficients alone (``eelbot run --bench
+--check-unknown-current 0``) the check's draws came within its margin on legs the search had
+swum a median 72 mm clear (centre line; development seeds 27000-27059), where 30 mm of preferred
+room left most failing first plans short by a few millimetres (docs/planning.md, "Session 16's
+development figures: plan share")."""
+
 SOFT_MARGIN_COST = 3.0
 """The soft margin's cost, s per s swum, of a body point at the hard margin."""
 
@@ -448,7 +458,8 @@ class Planner:
     soft_margin : bool
         Give the search a soft margin (``SearchSettings.preferred_clearance_m``), unless
         ``settings`` sets its own: the hard margin plus :data:`SOFT_MARGIN_BASE_M` plus
-        :data:`SOFT_MARGIN_DRIFT_S` times the unknown current, at :data:`SOFT_MARGIN_COST`.
+        :data:`SOFT_MARGIN_DRIFT_S` times the unknown current, at least
+        :data:`SOFT_MARGIN_FLOOR_M`, at :data:`SOFT_MARGIN_COST`.
     swimmer : SwimmerModel, optional
         The model of the robot the planner swims, built once by the command
         (:meth:`eelhost.planning.uncertainty.CoefficientModel.swimmer_for`) and handed on to the
@@ -540,8 +551,9 @@ class Planner:
             # the searched run in the water the check draws, where the world leaves it
             self.settings = dataclasses.replace(
                 self.settings, clearance_cost=SOFT_MARGIN_COST,
-                preferred_clearance_m=margin + SOFT_MARGIN_BASE_M
-                + SOFT_MARGIN_DRIFT_S * self.unknown_current_m_s)
+                preferred_clearance_m=margin + max(
+                    SOFT_MARGIN_FLOOR_M,
+                    SOFT_MARGIN_BASE_M + SOFT_MARGIN_DRIFT_S * self.unknown_current_m_s))
         if robust_search:
             self.settings = dataclasses.replace(
                 self.settings, robust_current_m_s=self.unknown_current_m_s,
