@@ -320,7 +320,8 @@ def run(args: argparse.Namespace) -> int:
     print(
         f"{out.reason}: {out.detail}; {out.waypoints_reached}/{len(waypoints)} waypoints, "
         f"{out.frames_with_pose}/{out.frames} frames with a pose, {out.offsets_sent} offsets, "
-        f"Stop {out.stop_outcome}"
+        + (f"braked {out.braked_s:.1f} s, " if out.braked_s else "")
+        + f"Stop {out.stop_outcome}"
     )
     if result.virtual and result.wall_s > 0:
         print(f"simulated {out.t_end_s:.1f} s in {result.wall_s:.1f} s "
