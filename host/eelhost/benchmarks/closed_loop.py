@@ -15,9 +15,9 @@ docs/planning.md ("Closed-loop benchmark") is the long form. For each world of
    world's seed;
 3. the run is judged from the virtual robot's true state at every physics step, with geometry
    written here, independently of the planner's (:func:`true_clearance_m`: each link a stadium
-   of its own length and width, shapely's exact distances to the discs, polygons and walls),
-   on for :data:`COAST_AUDIT_S` after the take has ended, the robot stopped and gliding
-   (:func:`coast_clearance_m`).
+   of its own length and width, shapely's exact distances to the discs, polygons and walls):
+   the swimming run up to the run loop's decision to stop, and apart from it the stop (the
+   brake, the Stop's answer, and the glide after the take, :func:`glide_on`).
 
 Results go to ``<out>/results.jsonl`` one world per line as each finishes, so a killed benchmark
 resumes where it stopped.
@@ -73,7 +73,6 @@ long way and the water carries it (docs/planning.md, "Closed-loop benchmark": th
 COAST_REST_M_S = 0.02
 """The coast ends once the body's centre of mass moves slower than this through the water: the
 glide is over, and what carries the body on is the current (the unknown current's bound)."""
-
 
 
 @dataclass
@@ -145,7 +144,7 @@ class WorldResult:
         restart from rest"; 0 in results written before it).
     coast_clearance_m : float or None
         Smallest true gap while the robot stops: from the run loop's decision to stop, through
-        the brake and the glide after the Stop (:func:`coast_clearance_m`), None in results
+        the brake and the glide after the Stop (:func:`glide_on`), None in results
         written before it. ``min_clearance_m`` and ``contact`` are then the swimming run's, up
         to that decision (before session 16 they ran to the Stop's answer).
     coast_contact : bool
@@ -381,15 +380,14 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
     vr = result.virtual_robot
     assert vr is not None and vr.trace is not None
     # the swimming run ends where the loop decided to stop; the brake and the Stop's answer after
-    # it belong to the stop, judged with the glide after it
+    # it belong to the stop, judged with the glide after the take
     taken = len(vr.trace)
     decided = max(taken - round(out.stopping_s / (DT_US * 1e-6)), 1)
-    trace = np.asarray(vr.trace[:decided])
-    clear = true_clearance_m(world, vr.model, trace)
-    glide = coast_clearance_m(world, vr)
+    glide_on(vr)
     coast_s = (len(vr.trace) - taken) * DT_US * 1e-6
-    stopping = np.concatenate([true_clearance_m(world, vr.model, np.asarray(vr.trace[decided:taken]))
-                               if taken > decided else np.zeros(0), glide])
+    states = np.asarray(vr.trace)
+    gaps = true_clearance_m(world, vr.model, states)
+    trace, clear, stopping = states[:decided], gaps[:decided], gaps[decided - 1 :]
     estimate_error = estimate_error_mm(vr.model, nav.estimator.history, trace)
     if record_to is not None:
         record_to.parent.mkdir(parents=True, exist_ok=True)
@@ -412,35 +410,28 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
         len(calm), sum(e["status"] == "found" for e in calm),
         sum("cut_for" in e for e in calm), len(early), sum(e["status"] == "found" for e in early),
         sum("cut_for" in e for e in early), nav.restarts,
-        sum(e["kind"] == "halt" for e in nav.events), float(stopping.min()), bool(stopping.min() < 0.0), coast_s)
+        sum(e["kind"] == "halt" for e in nav.events), float(stopping.min()),
+        bool(stopping.min() < 0.0), coast_s)
 
 
-def coast_clearance_m(world: World, robot: VirtualRobot,
-                      longest_s: float = COAST_AUDIT_S,
-                      rest_m_s: float = COAST_REST_M_S) -> FloatArray:
-    """The true body's gap while it glides on after the take has ended.
+def glide_on(robot: VirtualRobot, longest_s: float = COAST_AUDIT_S,
+             rest_m_s: float = COAST_REST_M_S) -> None:
+    """Step the stopped robot on after its take, its trace kept, while the body still glides.
 
-    The take's trace ends with the final Stop's acknowledgement; the plant and the firmware (in
-    its stopped state, the link closed) are stepped on here, a second at a time, until the
-    centre of mass moves slower than ``rest_m_s`` through the water or ``longest_s`` has passed,
-    so a body that glides into an obstacle after a deliberate stop is caught by the same
-    independent geometry.
+    The take's trace ends with the final Stop's answer; the plant and the firmware (in its
+    stopped state, the link closed) are stepped on here, a second at a time, until the centre of
+    mass moves slower than ``rest_m_s`` through the water or ``longest_s`` has passed, so that a
+    body that glides into an obstacle after a deliberate stop is judged by the same independent
+    geometry (:func:`true_clearance_m` over the trace).
 
     Parameters
     ----------
-    world : World
     robot : VirtualRobot
         The take's virtual robot, with its trace on.
     longest_s : float
     rest_m_s : float
-
-    Returns
-    -------
-    ndarray
-        The gap at every physics step of the coast (the take's last state's first).
     """
     assert robot.trace is not None
-    done = len(robot.trace)
     n = robot.model.n_links
     end_us = robot.now_us + round(longest_s * 1e6)
     while robot.now_us < end_us:
@@ -448,8 +439,6 @@ def coast_clearance_m(world: World, robot: VirtualRobot,
         velocity = np.asarray(robot.trace[-1][2 * n + 2 : 2 * n + 4]) - robot.current_m_s
         if float(np.hypot(*velocity)) < rest_m_s:
             break
-    states = np.asarray(robot.trace[max(done - 1, 0):])
-    return true_clearance_m(world, robot.model, states)
 
 
 def estimate_error_mm(model: SwimmerModel, history: list[tuple[float, FloatArray]] | None,

@@ -110,8 +110,8 @@ class Decision(Protocol):
     arrived: bool
     recorded: bool
     # optional (a navigator's Decision may lack them): ``pause`` stops the gait (SetGait with
-    # amplitude 0) and keeps the run; ``restart`` with waypoints sets the gait's amplitude back
-    # (docs/planning.md, "A restart from rest")
+    # amplitude 0, or ``pause_gait``'s amplitude and beta) and keeps the run; ``restart`` with
+    # waypoints sets the gait's amplitude and beta back (docs/planning.md, "A restart from rest")
 
 
 class Navigator(Protocol):
