@@ -364,7 +364,7 @@ def _bench(args: argparse.Namespace) -> int:
                                         model.swimmer_for(robot), args.replan_budget or None,
                                         calm_budget_s=args.calm_budget or None,
                                         early_margin_m=args.early_margin or None,
-                                        escape=args.escape, restarts=max(args.restarts, 0),
+                                        escape=args.escape, restarts=args.restarts,
                                         brake_s=_brake_s(args))
     command = (f"nice eelbot run --bench --worlds {args.worlds} --seed {args.seed}"
                + ("" if args.check_unknown_current is None
