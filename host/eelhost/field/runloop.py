@@ -556,7 +556,8 @@ class RunLoop:
             self.pauses += 1
             log.info("gait paused at t = %.2f s: %s", t, decision.detail)
             # a navigator's paused gait (the reversed wave that brakes or backs the body out;
-            # docs/planning.md, "A restart from rest"), else amplitude 0
+            # docs/planning.md, "A restart from rest"), else amplitude 0; the twin's stopped gait
+            # carries a 1e-9 rad stand-in amplitude (its scenarios need one), sent as 0
             paused = getattr(decision, "pause_gait", None)
             if paused is None:
                 self._set_gait(0.0)
