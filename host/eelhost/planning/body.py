@@ -32,9 +32,13 @@ def link_endpoints(model: SwimmerModel, states: FloatArray) -> FloatArray:
     xc = states[:, n : n + 1] + c @ g.T  # link centres, as eelsim.dynamics.link_positions
     yc = states[:, n + 1 : n + 2] + s @ g.T
     lh = model.half_length_m
-    x = np.concatenate([xc[:, :1] - lh[0] * c[:, :1], xc + lh * c], axis=1)
-    y = np.concatenate([yc[:, :1] - lh[0] * s[:, :1], yc + lh * s], axis=1)
-    return np.stack([x, y], axis=-1)
+    # written in place rather than joined and stacked: the same sums, without the temporaries
+    out = np.empty((len(states), n + 1, 2))
+    out[:, 0, 0] = xc[:, 0] - lh[0] * c[:, 0]
+    out[:, 0, 1] = yc[:, 0] - lh[0] * s[:, 0]
+    out[:, 1:, 0] = xc + lh * c
+    out[:, 1:, 1] = yc + lh * s
+    return out
 
 
 def body_points(model: SwimmerModel, states: FloatArray, per_link: int = 2) -> FloatArray:
@@ -56,11 +60,20 @@ def body_points(model: SwimmerModel, states: FloatArray, per_link: int = 2) -> F
     ends = link_endpoints(model, states)
     if per_link <= 1:
         return ends
-    a, b = ends[:, :-1], ends[:, 1:]
-    f = np.arange(per_link) / per_link
-    inner = a[:, :, None, :] + f[None, None, :, None] * (b - a)[:, :, None, :]
-    k = len(states)
-    return np.concatenate([inner.reshape(k, -1, 2), ends[:, -1:]], axis=1)
+    k, links = len(states), ends.shape[1] - 1
+    a = ends[:, :-1]
+    step = ends[:, 1:] - a
+    # point j of a link is a + (j / per_link) (b - a), as np.arange(per_link) / per_link gives
+    # it, written into its place: the same values in half the processor time of broadcasting
+    # and joining them (the search's inner loop; docs/planning.md, "The check's processor time")
+    out = np.empty((k, links * per_link + 1, 2))
+    inner = out[:, :-1].reshape(k, links, per_link, 2)
+    inner[:, :, 0] = a
+    for j in range(1, per_link):
+        np.multiply(step, j / per_link, out=inner[:, :, j])
+        inner[:, :, j] += a
+    out[:, -1] = ends[:, -1]
+    return out
 
 
 def point_spacing_m(model: SwimmerModel, per_link: int = 2) -> float:

@@ -40,6 +40,7 @@ its judging is unchanged. :meth:`CoefficientModel.water_draws` gives the draws, 
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -289,16 +290,42 @@ def region_draw(rng: np.random.Generator, cov: FloatArray,
     -------
     ndarray, shape (k,)
     """
-    values, vectors = np.linalg.eigh(np.asarray(cov, dtype=float))
-    scale = np.sqrt(np.clip(values, 0.0, None))
-    dims = int(np.count_nonzero(scale > 0))
-    if dims == 0:
-        return np.zeros(len(values))
-    limit = chi2.ppf(level, dims)
+    cov = np.asarray(cov, dtype=float)
+    vectors, scale, limit = _region_basis(cov.tobytes(), cov.shape, float(level))
+    if limit is None:
+        return np.zeros(len(scale))
     while True:
-        z = rng.standard_normal(len(values)) * (scale > 0)
+        z = rng.standard_normal(len(scale)) * (scale > 0)
         if z @ z <= limit:
             return np.asarray(vectors @ (scale * z), dtype=float)
+
+
+@functools.lru_cache(maxsize=64)
+def _region_basis(cov_bytes: bytes, shape: tuple[int, ...], level: float
+                  ) -> tuple[FloatArray, FloatArray, float | None]:
+    """The eigenvectors, standard deviations and chi-squared limit of :func:`region_draw`.
+
+    Kept per covariance: a check's draws ask for the same two or three covariances hundreds of
+    times, and the decomposition and ``chi2.ppf`` cost far more than the draw itself (on
+    development seeds 28600-28609 they were most of the water draws' processor time,
+    docs/planning.md "The check's processor time"). The same values as computed afresh: the
+    decomposition of the same bytes is deterministic.
+
+    Returns
+    -------
+    vectors : ndarray, shape (k, k)
+    scale : ndarray, shape (k,)
+    limit : float or None
+        None when every variance is 0.
+    """
+    cov = np.frombuffer(cov_bytes, dtype=float).reshape(shape)
+    values, vectors = np.linalg.eigh(cov)
+    scale = np.sqrt(np.clip(values, 0.0, None))
+    dims = int(np.count_nonzero(scale > 0))
+    limit = None if dims == 0 else float(chi2.ppf(level, dims))
+    vectors.setflags(write=False)
+    scale.setflags(write=False)
+    return vectors, scale, limit
 
 
 def clopper_pearson(failures: int, draws: int, level: float = 0.95) -> tuple[float, float]:
