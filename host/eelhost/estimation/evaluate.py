@@ -45,6 +45,7 @@ from eelhost.estimation.runs import (
     PreparedExperiment,
     Simulated,
     SimulationBackend,
+    declared_clock_bound_s,
     prepare,
 )
 from eelhost.estimation.space import ParameterSpace
@@ -122,6 +123,12 @@ class Evaluator:
         Clip the PD joints' torques to the servos' torque-speed line in every run (the loop's
         option, :func:`prepare`); default off, as the estimator's models assume. A joint model
         with the line in its own law (``pd_limited``) has it either way.
+    clock_prior : bool or None
+        Where ``align_s`` is 0: compare each recording at its clock offset profiled within the
+        bound it declares, the offsets' mean held at 0 (the zero-mean prior,
+        :func:`eelhost.estimation.clock.centred_offsets`; docs/estimation.md, "The training
+        clocks: a zero-mean prior"). None: ``clock.FIT_CLOCK_PRIOR``. With ``align_s`` > 0
+        the offsets are profiled each on its own, as before.
     """
 
     def __init__(
@@ -137,12 +144,17 @@ class Evaluator:
         map_function: Callable | None = None,
         space: ParameterSpace | None = None,
         servo_limits: bool = False,
+        clock_prior: bool | None = None,
     ) -> None:
+        from eelhost.estimation import clock  # clock imports validate, which imports this
+
         if not experiments:
             raise EstimationError("no experiments to evaluate on")
         self.space = space or ParameterSpace.for_robot(robot)
         self.robot = self.space.model_robot(robot)
         self.n_samples, self.align_s, self.observe = n_samples, align_s, observe
+        prior = clock.FIT_CLOCK_PRIOR if clock_prior is None else clock_prior
+        self.clock_prior = bool(prior) and align_s <= 0.0
         self.servo_limits = servo_limits
         self.prepared = self.prepare_like(experiments)
         self.weight = weight
@@ -169,8 +181,9 @@ class Evaluator:
 
     def prepare_like(self, experiments: Sequence[Experiment]) -> list[PreparedExperiment]:
         """Experiments prepared as this evaluator prepares its own (samples, clock search)."""
-        return [prepare(e, self.n_samples, align_s=self.align_s, observe=self.observe,
-                        servo_limits=self.servo_limits)
+        return [prepare(e, self.n_samples,
+                        align_s=declared_clock_bound_s(e) if self.clock_prior else self.align_s,
+                        observe=self.observe, servo_limits=self.servo_limits)
                 for e in experiments]
 
     def simulate(self, parameters: np.ndarray) -> Simulated:
@@ -257,8 +270,12 @@ class Evaluator:
         c, e = sim.failure.shape
         counted = sim.counted_failure(prepared)
         out = np.empty((c, e))
+        held = self._prior_recordings(sim, prepared)
         for j, p in enumerate(prepared):
-            err = self.aligned_errors(p, sim.positions_m[:, j]).min(axis=1)
+            if held is None:
+                err = self.aligned_errors(p, sim.positions_m[:, j]).min(axis=1)
+            else:
+                err = trajectory_error(p.times_s, held[j], sim.positions_m[:, j], self.weight)
             for i in range(c):
                 f = Failure(int(counted[i, j]))
                 out[i, j] = (
@@ -275,6 +292,23 @@ class Evaluator:
         return trajectory_error(
             p.times_s, p.shifted_positions_m, sim_positions_m[:, None], self.weight
         )
+
+    def _prior_recordings(
+        self, sim: Simulated, prepared: Sequence[PreparedExperiment]
+    ) -> list[np.ndarray] | None:
+        """Each recording at each candidate's offsets under the clock prior, (C, n, 2) each.
+
+        None without the prior: each candidate is then compared at each recording's own best
+        offset (a flat profile within ``align_s``; just the recorded clock for 0).
+        """
+        if not self.clock_prior:
+            return None
+        from eelhost.estimation.clock import centred_offsets, shifted_recording
+
+        grids = [self.aligned_errors(p, sim.positions_m[:, j]) for j, p in enumerate(prepared)]
+        offsets = centred_offsets(grids, [p.shifts_s for p in prepared])
+        return [shifted_recording(p.shifted_positions_m, p.shifts_s, offsets[:, j])
+                for j, p in enumerate(prepared)]
 
     def best_shift(self, p: PreparedExperiment, sim_positions_m: np.ndarray) -> np.ndarray:
         """The clock offset that fits each simulation best, shape (C,)."""
@@ -296,11 +330,15 @@ class Evaluator:
         prepared = self.prepared if prepared is None else prepared
         counted = sim.counted_failure(prepared)
         blocks = []
+        held = self._prior_recordings(sim, prepared)
         for j, p in enumerate(prepared):
             simp = sim.positions_m[:, j]
-            # each candidate is compared with the recording at its own best clock offset
-            idx = np.argmin(np.nan_to_num(self.aligned_errors(p, simp), nan=np.inf), axis=1)
-            exp = p.shifted_positions_m[idx]
+            if held is None:
+                # each candidate is compared with the recording at its own best clock offset
+                idx = np.argmin(np.nan_to_num(self.aligned_errors(p, simp), nan=np.inf), axis=1)
+                exp = p.shifted_positions_m[idx]
+            else:
+                exp = held[j]
             dv = sampled_velocity(p.times_s, simp) - sampled_velocity(p.times_s, exp)
             block = np.concatenate([simp - exp, self.weight * dv], axis=1)
             block[counted[:, j] != int(Failure.NONE)] = np.nan
