@@ -11,7 +11,8 @@ docs/planning.md ("The planner") is the long form. :meth:`Planner.plan`:
    tank is refused when the world is read (:class:`eelhost.planning.world.WorldError`).
 2. **Search** (:class:`eelhost.planning.search.Search`): every leg swum in the twin from the state
    the previous one left, with the straight coefficients for straight legs and the turning ones
-   for turns.
+   for turns. When the first search from the world's start is ``exhausted`` (a cramped start),
+   a second one offers its first legs turns of up to 120 degrees (:data:`CRAMPED_ACTIONS`).
 3. **Check**: the plan is swum in the twin leg by leg as the search swam it
    (:func:`eelhost.planning.check.swim_legs`), with the fits as fitted and in ``draws`` draws
    of the water (:meth:`eelhost.planning.uncertainty.CoefficientModel.water_draws`: every
@@ -61,7 +62,7 @@ from eelhost.planning.execute import Swim
 from eelhost.planning.field import GoalDistance, clearance_field, signed_clearance
 from eelhost.planning.geometry import FloatArray
 from eelhost.planning.memo import BoundedCache
-from eelhost.planning.search import Guide, Plan, Search, SearchSettings, SwimCost
+from eelhost.planning.search import Actions, Guide, Plan, Search, SearchSettings, SwimCost
 from eelhost.planning.twin import Twin
 from eelhost.planning.uncertainty import (
     DEFAULT_UNKNOWN_CURRENT_M_S,
@@ -185,6 +186,24 @@ CHECK_OVER_SEARCH = 4.0
 cost this many times a run-step of the search's swims, measured in the same call (the check
 samples every physics step and measures the exact clearance of every state; docs/planning.md,
 "The planning call's deadline")."""
+
+CRAMPED_ACTIONS = Actions(distances_m=(0.3, 0.5),
+                          bearings_deg=(-120.0, -90.0, -60.0, -30.0, 0.0, 30.0, 60.0, 90.0, 120.0))
+"""The first plan's fallback from a cramped start (docs/planning.md, "A wider turn from a cramped
+start"): when the search from the world's start is ``exhausted``, a second search runs whose
+first legs take this action set, the planner's legs plus turns of 90 and 120 degrees (the
+recovery replan's, docs/planning.md "The recovery replan"), so that a robot started towards an
+obstacle may turn away before its head, 0.3 m ahead of its centre of mass, comes near it; its
+later legs take the planner's actions (wider turns there too planned one world more of 16 on
+the development seeds, for a median processor time half a second higher). The margin, the
+repairs and the check are the plain search's."""
+
+CRAMPED_EXPANSIONS = 100
+"""The fallback from a cramped start runs only when the plain search was exhausted within this
+many expansions (a sixth of its 600): a start hemmed in, not a world searched through. On the
+development seeds 28500-28799 the worlds it planned had been exhausted after 36-84 expansions;
+the 10 of 54 exhausted after 109-529 took 1.3-9.0 s of processor time each with the fallback
+and got no plan (docs/planning.md, "A wider turn from a cramped start")."""
 
 LEG_TIME_FACTOR = 1.6
 """A leg's time limit per metre, as a multiple of the time the robot needs against the current."""
@@ -498,6 +517,7 @@ class Planner:
         check_margin_m: float = CHECK_MARGIN_M,
         repair_draws: int | None = None,
         raise_on_repair: bool = True,
+        cramped_start: bool = True,
     ) -> None:
         world = coefficients.in_tank(world)
         robot = coefficients.robot_for(robot)
@@ -571,6 +591,28 @@ class Planner:
         # straight-line speed; a heuristic speed too low only makes the search greedier
         self.search = Search(world, self.twin, self.settings, self.clearance, route,
                              1.3 * fastest + world.current.speed_m_s)
+        self.cramped_start = bool(cramped_start)
+        self._route = route
+        self._ground_speed_m_s = 1.3 * fastest + world.current.speed_m_s
+        self._cramped_search: Search | None = None
+
+    def cramped_search(self) -> Search:
+        """The search whose first legs take the cramped start's wider turns (:data:`CRAMPED_ACTIONS`).
+
+        Its own search object (its memo is keyed by action index, which the two action sets
+        number differently), sharing the twin, the maps and the clock; built when first needed.
+
+        Returns
+        -------
+        Search
+        """
+        if self._cramped_search is None:
+            settings = dataclasses.replace(self.settings, start_actions=CRAMPED_ACTIONS)
+            self._cramped_search = Search(self.world, self.twin, settings, self.clearance,
+                                          self._route, self._ground_speed_m_s)
+        self._cramped_search.clock = self.search.clock
+        return self._cramped_search
+
     @property
     def clock(self) -> Callable[[], float]:
         """The clock a deadline is read on (``time.monotonic``; a test's fake one)."""
@@ -770,6 +812,7 @@ class Planner:
         expected = self.expected_steps(state)
         free_path = self._free_path_steps(state)
         self.search.clear_raised()  # a margin raised by an earlier call's repairs is not this one's
+        search = self.search
         for attempt in range(self.repairs + 1):
             # a repaired plan's check swims its own, larger count of draws (REPAIR_DRAWS_FACTOR);
             # with a deadline, as many as its predicted time leaves the search room for
@@ -777,10 +820,25 @@ class Planner:
                                        DEADLINE_DRAWS_MIN if attempt == 0 else self.draws)
                      if self.check else 0)
             reserve = ((lambda c=count: self.check_time_s(expected, c)) if self.check else None)
-            plan = self.search.plan(banned, start_state=state, start_step=step, guide=guide,
-                                    deadline_s=deadline_s, reserve_s=reserve)
+            plan = search.plan(banned, start_state=state, start_step=step, guide=guide,
+                               deadline_s=deadline_s, reserve_s=reserve)
             total += plan.planning_time_s
             searching += plan.planning_time_s
+            if (attempt == 0 and state is None and self.cramped_start
+                    and plan.status == "exhausted" and plan.expansions <= CRAMPED_EXPANSIONS):
+                # the first plan from a cramped start: search again, its first legs with turns
+                # of up to 120 degrees (docs/planning.md, "A wider turn from a cramped start");
+                # the repairs go on in that search, the margin and the check are the same
+                search = self.cramped_search()
+                search.clear_raised()
+                first = plan
+                plan = search.plan(banned, start_state=state, start_step=step, guide=guide,
+                                   deadline_s=deadline_s, reserve_s=reserve)
+                total += plan.planning_time_s
+                searching += plan.planning_time_s
+                log.info("cramped start, wider turns: %s", plan.message)
+                if not plan.found:
+                    plan = first
             if plan.found and free_path > 0:
                 self.plan_lengths.record((plan.legs[-1].end_step - step) / free_path)
             if not plan.found and attempt > 0:
@@ -834,7 +892,7 @@ class Planner:
             banned.add((leg.parent_key, leg.action))
             if self.raise_on_repair:
                 for xy, extra in self.failure_sites(checks, bad):
-                    self.search.raise_margin(xy, extra)
+                    search.raise_margin(xy, extra)
             log.info("plan failed its check in %d runs (e.g. %s: %s); banning leg to (%.2f, %.2f)",
                      len(bad), bad[0].label, self.verdict(bad[0]), *leg.waypoint_m)
         msg = (f"check failed: after {self.repairs} repairs the plan still fails in the twin with "

@@ -240,6 +240,10 @@ class SearchSettings:
         grows linearly from the start's clearance less 10 mm (also under the half width) to
         ``margin_m`` over this many seconds of the plan from its start, on whatever leg it lies,
         so the plan may stay inside the margin for a bounded time but must regain it by then.
+    start_actions : Actions or None
+        The action set of the legs from the search's start (its root node); later legs take
+        ``actions``. None: ``actions`` throughout (the planner's fallback from a cramped start
+        sets wider turns here, docs/planning.md "A wider turn from a cramped start").
     """
 
     actions: Actions = Actions()
@@ -259,6 +263,7 @@ class SearchSettings:
     preferred_clearance_m: float = 0.0
     clearance_cost: float = 0.0
     start_ramp_s: float = 0.0
+    start_actions: Actions | None = None
 
 
 @dataclass
@@ -458,7 +463,6 @@ class Search:
         Action ``GOAL`` is the leg to the goal's centre, offered within reach of it.
         """
         s = self.settings
-        legs = s.actions.legs
         w, h = self.world.tank.size_m
         goal = self.world.goal.position_m
         reach = max(s.actions.distances_m) + self.world.goal.radius_m
@@ -466,7 +470,9 @@ class Search:
         for pos, node in enumerate(nodes):
             origin = (node.waypoint if node.waypoint is not None
                       else (float(node.state[self.n]), float(node.state[self.n + 1])))
-            for a, (d, b) in enumerate(legs):
+            actions = (s.start_actions if node.waypoint is None and s.start_actions is not None
+                       else s.actions)
+            for a, (d, b) in enumerate(actions.legs):
                 psi = node.psi + math.radians(b)
                 wp = (origin[0] + d * math.cos(psi), origin[1] + d * math.sin(psi))
                 if 0 < wp[0] < w and 0 < wp[1] < h:
