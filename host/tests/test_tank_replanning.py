@@ -32,6 +32,7 @@ from eelhost.planning.replan import (
     CALM_REPLAN_BUDGET_S,
     ESCAPE_FLOOR_M,
     ESCAPE_RAMP_S,
+    STOP_ALLOWANCE_S,
     Ahead,
     Decision,
     TankReplanner,
@@ -594,16 +595,21 @@ def contact_ahead_replanner(status: str, contact_in_s: float):
     return ContactAhead
 
 
-@pytest.mark.parametrize(("contact_in_s", "budget_s", "retried"), [
-    (10.0, 1.0, True),  # contact far ahead: time for another replan before it
-    (1.0, 1.0, False),  # contact nearer than a replan's budget, grace and lead: stop
-    (10.0, None, False),  # no budget, so no bound on when a retry would come back: stop
+@pytest.mark.parametrize(("contact_in_s", "budget_s", "allowance_s", "retried"), [
+    (10.0, 1.0, STOP_ALLOWANCE_S, True),  # contact far ahead: time for another replan before it
+    (1.0, 1.0, STOP_ALLOWANCE_S, False),  # nearer than a replan's budget, grace and lead: stop
+    # time for a replan's 1.8 s but not for a stop after it too (seed 28056): stop now, while
+    # the brake has room; without the stop's allowance it was retried
+    (2.5, 1.0, STOP_ALLOWANCE_S, False),
+    (2.5, 1.0, 0.0, True),
+    (10.0, None, STOP_ALLOWANCE_S, False),  # no budget, no bound on a retry's return: stop
 ])
 def test_a_failed_replan_is_retried_at_once_only_while_the_contact_ahead_leaves_time_for_it(
-        open_plan, contact_in_s, budget_s, retried):
+        open_plan, contact_in_s, budget_s, allowance_s, retried):
     planner, outcome = open_plan
     nav = contact_ahead_replanner("exhausted", contact_in_s)(
-        lambda extra: planner, planner, outcome, PATH_GAIT, replan_budget_s=budget_s)
+        lambda extra: planner, planner, outcome, PATH_GAIT, replan_budget_s=budget_s,
+        stop_allowance_s=allowance_s)
     t_stop, d = drive_and_close(nav, 8.0)
     assert d is not None and d.stop == "no_safe_continuation"
     assert "into an obstacle or wall within" in d.detail and ", first in " in d.detail  # when
@@ -756,7 +762,7 @@ def test_the_back_off_yields_to_a_lookahead_that_puts_the_capsule_near_before_a_
             nav._side.submit(lambda: None).result()
     finally:
         nav.close()
-    need = nav._retry_need_s()
+    need = nav._retry_need_s() + nav.stop_allowance_s  # a stop keeps its room
     gaps = np.diff(nav.requests)
     if near_in_s + nav.lookahead_every_s < nav.backoff_s + need:
         # the capsule comes near before a replan after the 1 s back-off could steer: every

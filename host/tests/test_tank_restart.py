@@ -84,20 +84,30 @@ def test_a_robot_without_a_swimming_continuation_pauses_drifts_replans_from_rest
             nav._side.submit(lambda: None).result()
     finally:
         nav.close()
-    paused = [t for t, d in decisions if d.pause]
+    paused = [(t, d) for t, d in decisions if d.pause]
     restarted = [(t, d) for t, d in decisions if d.restart]
-    assert len(paused) == 1 and paused[0] < 0.5  # the refused replan paused the robot at once
+    assert paused[0][0] < 0.5  # the refused replan paused the robot at once: braked
+    assert paused[0][1].pause_gait.amplitude_rad == pytest.approx(1.5)
+    halt = next(e for e in nav.events if e["kind"] == "halt")
+    # then once more: the brake's end (amplitude 0, the gait's omega) at its time, a whole gait
+    # period on, and the restart only after the joints straightened
+    assert len(paused) == 2 and paused[1][0] == pytest.approx(halt["brake_until_s"], abs=1 / 30)
+    assert halt["brake_until_s"] - halt["t_s"] == pytest.approx(
+        2 * np.pi / PATH_GAIT.omega_rad_s * np.ceil(2.0 * PATH_GAIT.omega_rad_s / (2 * np.pi)),
+        abs=2e-3)
+    ended = paused[1][1].pause_gait
+    assert ended.amplitude_rad < 1e-6 and ended.omega_rad_s == PATH_GAIT.omega_rad_s
     assert len(restarted) == 1
     t_restart, d = restarted[0]
     assert d.waypoints and d.waypoints[-1] == outcome.plan.waypoints_m[-1]  # the goal again
-    assert t_restart >= paused[0] + nav.rest_settle_s + nav.rest_budget_s - 0.1
+    assert t_restart >= paused[0][0] + nav.rest_settle_s + nav.rest_budget_s - 0.1
+    assert t_restart >= halt["brake_until_s"] + nav.rest_settle_s - 1e-6
     # after the restart the swimming replan is refused again, and no restart is left
     t_end, last = decisions[-1]
     assert last.stop == "no_safe_continuation" and t_end > t_restart
     assert nav.restarts == 1
     kinds = [e["kind"] for e in nav.events]
     assert kinds.count("halt") == 1 and kinds.count("restart") == 1
-    halt = next(e for e in nav.events if e["kind"] == "halt")
     restart = next(e for e in nav.events if e["kind"] == "restart")
     assert halt["drift_gap_m"] > 0.1 and len(halt["start_state"]) == 2 * N + 4
     assert restart["status"] == "found" and restart["t_switch_s"] == pytest.approx(t_restart)
@@ -203,13 +213,14 @@ class FirstRestFails(Blocked):
 
     rest_calls = 0
 
-    def _rest_replan(self, est, start_step, extra, deadline_s, recheck=False):  # noqa: ANN001, ANN202
+    def _rest_replan(self, est, start_step, extra, deadline_s, recheck=False,  # noqa: ANN001, ANN202
+                     pause=None):  # noqa: ANN001
         self.rest_calls += 1
         if self.rest_calls == 1:
             plan = Plan(False, "exhausted", "search exhausted after 1 expansions")
             return (Outcome(plan, "exhausted", plan.message), est.state, 0.0, 0.0, np.zeros(2),
                     time.monotonic(), start_step)
-        return super()._rest_replan(est, start_step, extra, deadline_s, recheck)
+        return super()._rest_replan(est, start_step, extra, deadline_s, recheck, pause)
 
 
 def test_a_failed_replan_from_rest_is_tried_again_later_in_the_pause(open_plan):
@@ -245,7 +256,8 @@ class LateRest(Blocked):
         super().__init__(*args, **kwargs)
         self.release = threading.Event()
 
-    def _rest_replan(self, est, start_step, extra, deadline_s, recheck=False):  # noqa: ANN001, ANN202
+    def _rest_replan(self, est, start_step, extra, deadline_s, recheck=False,  # noqa: ANN001, ANN202
+                     pause=None):  # noqa: ANN001
         self.release.wait(10.0)
         plan = Plan(False, "out_of_time", "the search ran out of time")
         return (Outcome(plan, "out_of_time", plan.message), est.state, 0.0, 0.0, np.zeros(2),
@@ -275,7 +287,9 @@ def test_a_replan_from_rest_not_back_by_its_start_ends_the_pause(open_plan):
     assert d.stop == "no_safe_continuation" and "was not back" in d.detail
     halt = next(e for e in nav.events if e["kind"] == "halt")
     # the paused robot waits no longer than the plan could be used: its start and the lead
-    assert t_stop <= halt["t_s"] + nav.rest_settle_s + halt["rest_budget_s"] + nav.max_lead_s + 0.2
+    start = max(halt["t_s"] + halt["rest_budget_s"], halt["brake_until_s"]) + nav.rest_settle_s
+    period = planner.twin.restart_steps * planner.twin.dt_s  # restarts keep the loop's cadence
+    assert t_stop <= np.ceil(start / period) * period + nav.max_lead_s + 0.1
 
 
 def test_the_reversed_wave_brakes_the_coasting_body(open_plan):

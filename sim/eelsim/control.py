@@ -4,7 +4,8 @@ The twin runs them inside its closed loop, the host's real-time loop calls the s
 the firmware's C++ core implements the gait and PD laws identically (its tests compare to these).
 docs/model.md section 4:
 
-- gait:  alpha_j(t) = A_j sin(omega t + beta_j) + gamma,
+- gait:  alpha_j(t) = A_j sin(omega t + phi_0 + beta_j) + gamma (phi_0: ``Gait.phase_rad``, 0 from
+         the Start),
          A_j = A (N - j)/(N + 1),  beta_j = (j-1) beta
 - PD:    u_j = k_p (alpha_j - phi_j) + k_d (alpha_dot_j - phi_dot_j)
 - LOS:   theta_ref = atan2(y_g - p_y, x_g - p_x)
@@ -39,12 +40,52 @@ class Gait:
         Phase shift between neighbouring joints.
     k_theta : float
         Gain of the proportional heading controller (rad of offset per rad of heading error).
+    phase_rad : float
+        The gait's phase at t = 0: 0 for a gait swum from the Start (the firmware restarts its
+        phase there). A braked robot's gait (omega 0 at the firmware) holds the phase it froze
+        at: docs/planning.md, "The brake in the pause".
     """
 
     amplitude_rad: float
     omega_rad_s: float
     beta_rad: float = 1.04
     k_theta: float = 0.1
+    phase_rad: float = 0.0
+
+
+BRAKE_AMPLITUDE_RAD = 1.5
+"""The brake's gait amplitude (SetGait's largest): with omega 0 joint j is held at
+A (N - j)/(N + 1) sin(phase + (j - 1) beta), at most 1.07 rad for six links, inside the references'
+1.2 rad clamp; the deep S's drag stops a gliding body within a few seconds (docs/planning.md,
+"The brake before the Stop")."""
+
+FROZEN_OMEGA_RAD_S = 1e-9
+"""A braked gait's omega in the twin: 0 in effect (the firmware is sent 0; a scenario's omega must
+be positive)."""
+
+
+def braked_gait(gait: Gait, t_s: float, amplitude_rad: float = BRAKE_AMPLITUDE_RAD) -> Gait:
+    """The gait of a robot braked at ``t_s``: a deep S frozen at the phase it had then.
+
+    SetGait with omega 0 stops the firmware's phase where it is (the phase is continuous when
+    omega changes, docs/firmware.md) and ``amplitude_rad`` bends the body into that phase's S.
+    The twin swims it as a gait of (nearly) zero omega whose ``phase_rad`` is the frozen phase.
+
+    Parameters
+    ----------
+    gait : Gait
+        The gait swum until the brake.
+    t_s : float
+        When the brake reaches the robot, s since the gait started.
+    amplitude_rad : float
+
+    Returns
+    -------
+    Gait
+        Heading gain 0 (the offset is held at 0 while braked).
+    """
+    frozen = math.remainder(gait.omega_rad_s * t_s + gait.phase_rad, 2.0 * math.pi)
+    return Gait(amplitude_rad, FROZEN_OMEGA_RAD_S, gait.beta_rad, 0.0, frozen)
 
 
 def wrap_angle(angle_rad: ArrayLike) -> FloatArray | float:
@@ -112,7 +153,7 @@ def gait_reference(
     alpha_dot_rad_s : ndarray, shape (N-1,)
     """
     amp = joint_amplitudes(gait.amplitude_rad, n_links)
-    phase = gait.omega_rad_s * t_s + np.arange(n_links - 1) * gait.beta_rad
+    phase = gait.omega_rad_s * t_s + gait.phase_rad + np.arange(n_links - 1) * gait.beta_rad
     alpha = amp * np.sin(phase) + offset_rad
     alpha_dot = amp * gait.omega_rad_s * np.cos(phase)
     return alpha, alpha_dot

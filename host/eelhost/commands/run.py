@@ -29,7 +29,7 @@ from eelhost.commands.link_options import add_link_options, resolve_link_options
 from eelhost.commands.plan import add_coefficient_model_option, guidance_law
 from eelhost.errors import EXIT_CONTACT, EXIT_NOT_REACHED, EXIT_OK
 from eelhost.field.recorder import MOTIONS
-from eelhost.field.runloop import BRAKE_AMPLITUDE_RAD, BRAKE_S, RunConfig
+from eelhost.field.runloop import BRAKE_S, RunConfig
 from eelhost.field.session import TakeNotes
 from eelhost.field.take import TakeRequest, ViewOpener, refuse_overwrite, run_take
 from eelhost.files import check_output_stem
@@ -39,7 +39,7 @@ from eelhost.planning.restart import RESTARTS
 from eelhost.progress import phase
 from eelhost.vision.markerfile import load_marker_file
 from eelhost.web.liveview import LiveView
-from eelsim.control import Gait
+from eelsim.control import BRAKE_AMPLITUDE_RAD, Gait
 from eelsim.guidance import GUIDANCE_LAWS, PURSUIT, GuidanceLaw
 from eelsim.robot import Robot, load_robot
 

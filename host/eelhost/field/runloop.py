@@ -69,7 +69,7 @@ from eelhost.field.recorder import Recorder
 from eelhost.link.base import Clock, Link, LinkEvent
 from eelhost.vision.localise import Localisation, Localiser
 from eelhost.wire import protocol
-from eelsim.control import Gait
+from eelsim.control import BRAKE_AMPLITUDE_RAD, Gait
 from eelsim.guidance import PURSUIT, Guidance, GuidanceLaw
 from eelsim.joints import pd_gains
 from eelsim.robot import Robot
@@ -89,9 +89,6 @@ later, and has glided 0.47 m when it falls under 0.02 m/s). Frozen in the brake'
 ``sim://`` it is at 0.002-0.011 m/s 3 s after the brake began, by the gait's phase
 (docs/planning.md, "The brake before the Stop")."""
 
-BRAKE_AMPLITUDE_RAD = 1.5
-"""The brake's gait amplitude (SetGait's largest): joint j held at A (N - j)/(N + 1) sin(phase +
-j beta) with omega 0, at most 1.07 rad for six links, inside the references' 1.2 rad clamp."""
 
 NO_BRAKE_AFTER = ("link_lost", "error")
 """Ends after which the brake is not tried: the robot does not hear it, or the host is failing."""
@@ -408,14 +405,15 @@ class RunLoop:
         if self.recorder is not None:
             self.recorder.command(event.t_s - self._t_start, event)
 
-    def _set_gait(self, amplitude_rad: float, beta_rad: float | None = None) -> None:
-        """SetGait with the run's omega and slew rates, this amplitude, the run's beta or this one."""
+    def _set_gait(self, amplitude_rad: float, beta_rad: float | None = None,
+                  omega_rad_s: float | None = None) -> None:
+        """SetGait with the run's slew rates, this amplitude, the run's beta and omega or these."""
         c = self.config
         g = c.gait
         self.link.send(
             protocol.SetGait(
                 amplitude_rad,
-                g.omega_rad_s,
+                g.omega_rad_s if omega_rad_s is None else omega_rad_s,
                 g.beta_rad if beta_rad is None else beta_rad,
                 c.amplitude_rate_rad_s,
                 c.beta_rate_rad_s,
@@ -551,19 +549,23 @@ class RunLoop:
             self._goal_reached = True
         elif getattr(decision, "pause", False):
             # stop swimming but keep the run: the gait's amplitude to 0 (the phase runs on, the
-            # robot stays running), the offset to 0 now and at every control period after
+            # robot stays running), the offset to 0 now and at every control period after; a
+            # pause while paused changes the paused gait only (a brake's end)
+            if not self._paused:
+                self.pauses += 1
+                log.info("gait paused at t = %.2f s: %s", t, decision.detail)
             self._paused = True
-            self.pauses += 1
-            log.info("gait paused at t = %.2f s: %s", t, decision.detail)
-            # a navigator's paused gait (the reversed wave that brakes or backs the body out;
-            # docs/planning.md, "A restart from rest"), else amplitude 0; the twin's stopped gait
-            # carries a 1e-9 rad stand-in amplitude (its scenarios need one), sent as 0
+            # a navigator's paused gait (the brake's frozen S, or the reversed wave that brakes
+            # or backs the body out; docs/planning.md, "A restart from rest"), else amplitude 0;
+            # the twin's stopped gait carries a 1e-9 rad stand-in amplitude and the brake's a
+            # 1e-9 rad/s stand-in omega (its scenarios need them), sent as 0
             paused = getattr(decision, "pause_gait", None)
             if paused is None:
                 self._set_gait(0.0)
             else:
                 self._set_gait(paused.amplitude_rad if paused.amplitude_rad > 1e-6 else 0.0,
-                               paused.beta_rad)
+                               paused.beta_rad,
+                               paused.omega_rad_s if paused.omega_rad_s > 1e-6 else 0.0)
             self._offset_rad = 0.0
             self.link.send(protocol.SetOffset(0.0))
             self.outcome.offsets_sent += 1

@@ -39,6 +39,7 @@ from eelhost.planning.execute import Swim, body_clearance_m, swim
 from eelhost.planning.geometry import FloatArray, point_segment_distance
 from eelhost.planning.planner import SCREEN_DRAWS, Outcome, Planner
 from eelhost.planning.restart import (
+    BRAKE_HOLD_S,
     DRIFT_AFTER_S,
     REST_BUDGET_MAX_S,
     REST_BUDGET_S,
@@ -48,8 +49,10 @@ from eelhost.planning.restart import (
     REST_TRIES,
     backing_gait,
     drift,
+    paused_drift,
     stopped_gait,
     stopped_twin,
+    unbrake_time,
 )
 from eelhost.planning.search import (
     Guide,
@@ -70,7 +73,7 @@ from eelhost.planning.twin import Twin
 from eelhost.planning.world import World
 from eelhost.vision.localise import Localisation
 from eelhost.wire import protocol
-from eelsim.control import Gait
+from eelsim.control import Gait, braked_gait
 from eelsim.fluid import FluidCoefficients
 from eelsim.model import SwimmerModel
 
@@ -352,6 +355,14 @@ SHIFT_PREFERENCE_M = 0.01
 
 SHIFT_GRACE_S = 0.5
 """How far past the replan's budget the shift repair may start a check (docs/planning.md)."""
+
+STOP_ALLOWANCE_S = 1.0
+"""The robot's time kept ahead of a predicted contact for a stop when a replan then fails: the
+brake (docs/planning.md, "The brake in the pause") stops a body swimming 0.05-0.12 m/s within
+0.02-0.07 m in the twin, which it swims in under 1 s. A failed replan is retried, or a late one
+waited for, only while the contact is this much further ahead than the replan needs; on seed
+28056 a retry asked for 2.0 s before the contact failed and the stop that followed, 0.7 s before
+it, braked into the obstacle (docs/planning.md, "Decided while the brake has room")."""
 
 SHIFT_MARGIN_M = 0.01
 """The capsule's smallest gap a shifted (or kept) route must swim in the estimated water before
@@ -721,6 +732,9 @@ class _Pause:
     clear_s: float = 0.0  # from the stop until the drift comes within the margin (its horizon: never)
     tries: int = 0  # rest replans asked for in this pause
     t_next_s: float = -math.inf  # the robot's time the next rest replan may be asked for
+    braked: Gait | None = None  # the brake's frozen gait, while the pause brakes first
+    t_unbrake_s: float = -math.inf  # when the brake ends (the joints straighten)
+    unbraked: bool = False  # the brake's end was sent
 
 
 @dataclass
@@ -839,6 +853,9 @@ class TankReplanner:
         contact is far enough ahead for another replan to steer before it
         (:meth:`_retry_need_s`); a replan in flight past its start is likewise waited for while
         it can still come back in time (docs/planning.md, "Retried before contact").
+    stop_allowance_s : float
+        The time kept beyond that for a stop, should the replan fail
+        (:data:`STOP_ALLOWANCE_S`; 0: none, as before session 17).
     calm_budget_s : float or None
         With a ``replan_budget_s``: the budget of a replan asked for in a moved current estimate
         (``current_estimate``, the look-ahead clear), when longer; it starts from the state
@@ -899,6 +916,12 @@ class TankReplanner:
         (:func:`eelhost.planning.restart.backing_gait`); the drift and the rest replan's start
         are swum with it. None (the default): amplitude 0. Developed, not on by default: on
         development seed 27215 a pause at 0.87 rad ended in a contact.
+    rest_brake_s : float or None
+        The pause first brakes (:func:`eelsim.control.braked_gait`: the body frozen in a deep S,
+        omega 0) for at least this long, until a whole gait period
+        (:func:`eelhost.planning.restart.unbrake_time`), and then straightens (amplitude 0);
+        the drift and the rest replan's start are swum so (docs/planning.md, "The brake in the
+        pause"). None: amplitude 0 at once. Ignored with ``rest_backing_rad``.
     """
 
     def __init__(
@@ -926,6 +949,7 @@ class TankReplanner:
         replan_budget_s: float | None = None,
         shift_repair: bool = True,
         retry_before_contact: bool = True,
+        stop_allowance_s: float = STOP_ALLOWANCE_S,
         calm_budget_s: float | None = None,
         early_margin_m: float | None = None,
         early_horizon_s: float = EARLY_HORIZON_S,
@@ -939,6 +963,7 @@ class TankReplanner:
         rest_tries: int = REST_TRIES,
         rest_retry_s: float = REST_RETRY_S,
         rest_backing_rad: float | None = None,
+        rest_brake_s: float | None = BRAKE_HOLD_S,
     ) -> None:
         self.gait = gait
         # the rest replans' escape: the swimming one's when there is one
@@ -950,6 +975,7 @@ class TankReplanner:
         self.rest_tries = max(int(rest_tries), 1)
         self.rest_retry_s = rest_retry_s
         self.rest_backing_rad = rest_backing_rad
+        self.rest_brake_s = None if rest_backing_rad is not None else rest_brake_s
         self.restarts = 0  # restarts from rest made (docs/planning.md, "A restart from rest")
         self._pause: _Pause | None = None
         self.planner_for = planner_for
@@ -984,6 +1010,7 @@ class TankReplanner:
         self._early_in_row = 0  # early replans since the plan was last swum clear of its margin
         self.shift_repair = shift_repair
         self.retry_before_contact = retry_before_contact
+        self.stop_allowance_s = stop_allowance_s
         self.retries_before_contact = 0  # replans asked for instead of a stop (the record's)
         # the robot's time of the first contact the latest look-ahead predicts (inf: none)
         self._contact_at_s = math.inf
@@ -1217,7 +1244,8 @@ class TankReplanner:
                 and (self._early_held_up(job) if early_job
                      else t_s > job.t_start_s + 1e-9 or self._calm_holds_up(job, t_s))
                 and not (t_s <= job.due_s
-                         and self._danger_at_s() - max(job.due_s, t_s) >= self.lead_s)):
+                         and self._danger_at_s() - max(job.due_s, t_s)
+                         >= self.lead_s + self.stop_allowance_s)):
             # the replan is late (past its start) and the twin swims the present plan into
             # contact meanwhile: on a loaded machine replans took minutes of wall time, and the
             # robot swam on into an obstacle before they came back (it is waited for only while
@@ -1329,18 +1357,25 @@ class TankReplanner:
         self._retry_now = False
         self._urgent_after_cut = None
         self.current.drop()
-        # frames without fresh telemetry take the paused gait's reference (straight joints, or
-        # the reversed wave's)
-        self.estimator.gait = self._paused_gait()
-        extra = self.current.value_m_s.copy() if self.estimate_current else np.zeros(2)
         pause = _Pause(t_s, d.detail)
+        if self.rest_brake_s is not None:
+            # the brake reaches the robot about when this frame's decision does: the phase it
+            # freezes is the gait's then (the same latency delays its end, which cancels)
+            pause.braked = braked_gait(self.gait, t_s)
+            pause.t_unbrake_s = unbrake_time(self.gait, t_s, self.rest_brake_s)
+        # frames without fresh telemetry take the paused gait's reference (the brake's S,
+        # straight joints, or the reversed wave's)
+        self.estimator.gait = pause.braked or self._paused_gait()
+        extra = self.current.value_m_s.copy() if self.estimate_current else np.zeros(2)
         pause.drift_wall_s = time.monotonic()
-        pause.drift = self._side.submit(self._drift_gap, est, extra)
+        pause.drift = self._side.submit(self._drift_gap, est, extra, pause)
         self._pause = pause
         self.events.append({
             "kind": "halt", "reason": "no_safe_continuation", "t_s": round(t_s, 3),
             "restart": self.restarts + 1, "detail": d.detail,
             "start_state": [round(float(v), 5) for v in est.state]})
+        if pause.braked is not None:
+            self.events[-1]["brake_until_s"] = round(pause.t_unbrake_s, 3)
         log.warning("no safe continuation at t = %.2f s: the robot stops swimming and drifts; "
                     "restart %d of %d from rest (%s)", t_s, self.restarts + 1,
                     self.max_restarts, d.detail)
@@ -1348,12 +1383,22 @@ class TankReplanner:
             f"stopped swimming at t = {t_s:.2f} s for restart {self.restarts + 1} from rest"))
 
     def _paused_gait(self) -> Gait:
-        """The gait while paused: amplitude 0, or the reversed wave (``rest_backing_rad``)."""
+        """The gait while paused after any brake: amplitude 0, or the reversed wave."""
         if self.rest_backing_rad is None:
             return stopped_gait(self.gait)
         return backing_gait(self.gait, self.rest_backing_rad)
 
-    def _drift_gap(self, est: BodyEstimate, extra: FloatArray) -> tuple[float, float, float]:
+    def _pause_drift(self, base: Twin, pause: _Pause, state: FloatArray, t_s: float,
+                     duration_s: float, stride: int) -> FloatArray:
+        """The paused body's states from ``state`` at ``t_s``: braked, then as :meth:`_paused_gait`."""
+        after = stopped_twin(base, self._paused_gait())
+        if pause.braked is None or t_s >= pause.t_unbrake_s:
+            return drift(after, state, t_s, duration_s, stride)
+        return paused_drift(stopped_twin(base, pause.braked), after, state, t_s,
+                            pause.t_unbrake_s, duration_s, stride)
+
+    def _drift_gap(self, est: BodyEstimate, extra: FloatArray, pause: _Pause
+                   ) -> tuple[float, float, float]:
         """On the side worker: the stopped body's drift's gap, and how long the pause may last.
 
         The twin swims the stopped body (:func:`eelhost.planning.restart.stopped_twin`) from the
@@ -1364,21 +1409,28 @@ class TankReplanner:
         ``rest_budget_max_s``, whose restart the drift keeps clear of the look-ahead's margin
         until :data:`DRIFT_AFTER_S` after it; and how long after the stop the drift stays clear
         (the horizon, at least :data:`REST_PAUSE_MAX_S` with retries, when it never comes near),
-        which bounds the later tries (``rest_tries``).
+        which bounds the later tries (``rest_tries``). A braked pause's earliest restart is
+        :attr:`rest_settle_s` after its brake's end (:meth:`_request_rest`).
         """
-        twin = stopped_twin(self._twin_in(extra), self._paused_gait())
+        base = self._twin_in(extra)
         stride = 3
         horizon = self.rest_settle_s + max(self.rest_budget_s, self.rest_budget_max_s) + DRIFT_AFTER_S
         if self.rest_tries > 1:
             horizon = max(horizon, REST_PAUSE_MAX_S + DRIFT_AFTER_S)
-        states = drift(twin, est.state, est.t_s, horizon, stride)
+        if pause.braked is not None:  # the earliest restart follows the brake's end
+            horizon = max(horizon, pause.t_unbrake_s - est.t_s + self.rest_settle_s
+                          + DRIFT_AFTER_S)
+        states = self._pause_drift(base, pause, est.state, est.t_s, horizon, stride)
         if not len(states):
             return -math.inf, self.rest_budget_s, 0.0
         outline = outline_clearance_m(self.world, self.model, states)
-        ahead = np.arange(len(outline), dtype=np.float64) * (stride * twin.dt_s)
+        ahead = np.arange(len(outline), dtype=np.float64) * (stride * base.dt_s)
         allowance = drift_allowance_m(current_spread_m_s(self.current.history), ahead)
         gap = np.subtract(outline, allowance)
-        least = ahead <= self.rest_settle_s + self.rest_budget_s + DRIFT_AFTER_S + 1e-9
+        earliest = self.rest_settle_s + self.rest_budget_s  # the earliest restart, from now
+        if pause.braked is not None:
+            earliest = max(earliest, pause.t_unbrake_s - est.t_s + self.rest_settle_s)
+        least = ahead <= earliest + DRIFT_AFTER_S + 1e-9
         near = np.flatnonzero(gap <= self.lookahead_margin_m)
         clear_s = float(ahead[near[0]]) if near.size else horizon
         budget = min(max(self.rest_budget_s, self.rest_budget_max_s),
@@ -1395,6 +1447,14 @@ class TankReplanner:
         d = Decision()
         pause = self._pause
         assert pause is not None
+        if pause.braked is not None and not pause.unbraked and t_s >= pause.t_unbrake_s - 1e-9:
+            # the brake ends a whole gait period on: amplitude 0 at the gait's omega, whose
+            # phase runs on from the frozen one, which is the twin's omega t here
+            pause.unbraked = True
+            self.estimator.gait = self._paused_gait()
+            d.pause, d.pause_gait, d.recorded = True, self.estimator.gait, True
+            self.events[-1].setdefault("brake_ended_s", round(t_s, 3))
+            log.info("the pause's brake ends at t = %.2f s", t_s)
         if pause.drift is not None:
             if not pause.drift.done():
                 return d
@@ -1472,14 +1532,16 @@ class TankReplanner:
         dt = self.planner.twin.dt_s
         period = self.planner.twin.restart_steps or 1
         now_step = int(round(est.t_s / dt))
-        start_step = int(math.ceil((now_step + math.ceil(pause.budget_s / dt)) / period)
-                         ) * period
+        first = now_step + math.ceil(pause.budget_s / dt)
+        if pause.braked is not None:  # the joints straighten before the restart
+            first = max(first, math.ceil((pause.t_unbrake_s + self.rest_settle_s) / dt - 1e-9))
+        start_step = int(math.ceil(first / period)) * period
         extra = self.current.value_m_s.copy() if self.estimate_current else np.zeros(2)
         wall = time.monotonic()
         deadline = Deadline(wall + pause.budget_s)
         pause.tries += 1
         future = self._worker.submit(self._rest_replan, est, start_step, extra, deadline,
-                                     pause.tries > 1)
+                                     pause.tries > 1, pause)
         pause.job = _Job(future, t_s, wall, start_step * dt, "rest", math.inf,
                          pause.budget_s, deadline)
         log.info("replanning from rest at t = %.2f s, from the stopped body predicted for "
@@ -1506,7 +1568,8 @@ class TankReplanner:
         return True
 
     def _rest_replan(self, est: BodyEstimate, start_step: int, extra: FloatArray,
-                     deadline_s: SupportsFloat | None, recheck: bool = False
+                     deadline_s: SupportsFloat | None, recheck: bool = False,
+                     pause: _Pause | None = None
                      ) -> tuple[Outcome, FloatArray, float, float, FloatArray, float, int]:
         """On the worker: the stopped body's state at ``start_step``, and a plan from it.
 
@@ -1519,9 +1582,9 @@ class TankReplanner:
         wall0, cpu0 = time.perf_counter(), time.thread_time()
         self._prepare_planner(extra)
         planner = self.planner
-        twin = stopped_twin(planner.twin, self._paused_gait())
-        now = int(round(est.t_s / twin.dt_s))
-        states = drift(twin, est.state, est.t_s, max(start_step - now, 0) * twin.dt_s, 1)
+        now = int(round(est.t_s / planner.twin.dt_s))
+        states = self._pause_drift(planner.twin, pause or _Pause(est.t_s, ""), est.state, est.t_s,
+                                   max(start_step - now, 0) * planner.twin.dt_s, 1)
         state = states[min(max(start_step - now, 0), len(states) - 1)].copy()
         if recheck and len(states):
             near = float(np.min(outline_clearance_m(self.world, self.model, states)))
@@ -1589,6 +1652,7 @@ class TankReplanner:
         log.info("restart %d from rest at t = %.2f s: %d waypoints", self.restarts, t_s,
                  len(waypoints))
         d.waypoints, d.guide, d.restart, d.recorded = list(waypoints), guide, True, True
+        d.pause, d.pause_gait = False, None  # the restart's gait supersedes a brake's end
         d.detail = f"restart {self.restarts} from rest at t = {t_s:.2f} s"
         return d
 
@@ -1636,10 +1700,11 @@ class TankReplanner:
         """A failed replan may be followed at once by another instead of a stop.
 
         It may while failures are left and the predicted contact is far enough ahead for
-        another replan to steer before it (:meth:`_retry_need_s`).
+        another replan to steer before it (:meth:`_retry_need_s`), with room left for a stop
+        should that one fail too (:attr:`stop_allowance_s`).
         """
         return (self.failures < self.max_failures
-                and self._danger_at_s() - t_s >= self._retry_need_s())
+                and self._danger_at_s() - t_s >= self._retry_need_s() + self.stop_allowance_s)
 
     def _backoff_yields(self, t_s: float, busy: bool) -> bool:
         """A back-off after a failed replan gives way to a replan (or a stop) now.
@@ -1651,7 +1716,8 @@ class TankReplanner:
         replan whatever the look-ahead said (seed 12041's contact, docs/planning.md).
         """
         return (self.failures > 0 and not busy and t_s < self._next_try_s
-                and self._near_at_s < self._next_try_s + self._retry_need_s())
+                and self._near_at_s < (self._next_try_s + self._retry_need_s()
+                                       + self.stop_allowance_s))
 
     def _retry_need_s(self) -> float:
         """The robot's time a replan asked for now may take before its plan steers, at most.

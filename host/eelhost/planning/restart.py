@@ -9,6 +9,11 @@ gain 0, so its offset is 0 as the firmware's while stopped) to say whether the d
 (:func:`drift`), and a replan is then searched from the state it predicts for the restart, like a
 first plan from a body (nearly) at rest. :class:`eelhost.planning.replan.TankReplanner` runs the
 sequence; ``eelbot run --restarts`` bounds how often.
+
+A straight body glides far, so by default the pause first brakes: the body is frozen in a deep S
+(:func:`eelsim.control.braked_gait`, omega 0) until :func:`unbrake_time`, a whole number of gait
+periods on, and only then straightens; :func:`paused_drift` swims both (docs/planning.md, "The
+brake in the pause").
 """
 
 from __future__ import annotations
@@ -23,7 +28,7 @@ from eelhost.planning.twin import Twin
 from eelsim.control import Gait
 from eelsim.guidance import PURSUIT
 
-__all__ = ["DRIFT_AFTER_S", "RESTARTS", "backing_gait", "REST_BUDGET_MAX_S", "REST_BUDGET_S", "REST_PAUSE_MAX_S",
+__all__ = ["BRAKE_HOLD_S", "DRIFT_AFTER_S", "RESTARTS", "backing_gait", "paused_drift", "unbrake_time", "REST_BUDGET_MAX_S", "REST_BUDGET_S", "REST_PAUSE_MAX_S",
            "REST_RETRY_S", "REST_SETTLE_S", "REST_TRIES", "drift", "stopped_gait", "stopped_twin"]
 
 RESTARTS = 2
@@ -56,6 +61,14 @@ latest restart a later try may plan for."""
 DRIFT_AFTER_S = 0.5
 """The twin swims the stopped body from the stop to this long after the planned restart (the
 settle and the budget): the drift must stay clear until the new plan has had time to act."""
+
+
+BRAKE_HOLD_S = 2.0
+"""The least time a pause holds the brake (the body frozen in a deep S: a coasting body's speed
+falls from 0.05-0.08 m/s to about 0.01 m/s in 2-3 s over ``sim://``) before its joints straighten
+for the restart. The brake ends a whole number of gait periods after it began
+(:func:`unbrake_time`), so that the firmware's phase, frozen meanwhile, resumes where the twin's
+own phase (omega t) is: docs/planning.md, "The brake in the pause"."""
 
 
 STOPPED_AMPLITUDE_RAD = 1e-9
@@ -153,3 +166,63 @@ def drift(twin: Twin, state: FloatArray, t_s: float, duration_s: float,
                     stride=stride)
     states = runs.states[0]
     return np.asarray(states[np.isfinite(states[:, 0])], dtype=float)
+
+
+def unbrake_time(gait: Gait, t_brake_s: float, hold_s: float = BRAKE_HOLD_S) -> float:
+    """When a brake begun at ``t_brake_s`` ends: the first whole gait period at least ``hold_s`` on.
+
+    The brake freezes the firmware's phase at omega t_b (:func:`eelsim.control.braked_gait`);
+    SetGait with amplitude 0 and the gait's omega a whole number k of periods 2 pi / omega later
+    lets it run on from there, which is omega t again modulo 2 pi: the twin's gait from the
+    restart on needs no phase of its own.
+
+    Parameters
+    ----------
+    gait : Gait
+        The swimming gait (its omega).
+    t_brake_s : float
+        When the brake began (the frame time its SetGait was sent for).
+    hold_s : float
+
+    Returns
+    -------
+    float
+        t_brake_s + k 2 pi / omega with k >= 1 the least for which k 2 pi / omega >= hold_s.
+    """
+    period = 2.0 * math.pi / gait.omega_rad_s
+    return t_brake_s + max(math.ceil(hold_s / period - 1e-9), 1) * period
+
+
+def paused_drift(braked: Twin, stopped: Twin, state: FloatArray, t_s: float,
+                 t_unbrake_s: float, duration_s: float, stride: int = 3) -> FloatArray:
+    """A paused body's states: braked until ``t_unbrake_s``, then stopped (joints straight).
+
+    Parameters
+    ----------
+    braked, stopped : Twin
+        The paused robot before and after the brake ends (:func:`stopped_twin` with
+        :func:`eelsim.control.braked_gait`, and with :func:`stopped_gait`).
+    state : ndarray (2 N + 4,)
+        The body's state at ``t_s``.
+    t_s, t_unbrake_s, duration_s : float
+    stride : int
+        Steps between the states returned.
+
+    Returns
+    -------
+    ndarray, shape (S, 2 N + 4)
+        Sample s at ``t_s + s * stride * dt`` (as :func:`drift`); only finite rows.
+    """
+    dt = braked.dt_s
+    held = max(int(round((t_unbrake_s - t_s) / dt)), 0)
+    total = int(round(duration_s / dt))
+    if held >= total:
+        return drift(braked, state, t_s, duration_s, stride)
+    if held == 0:
+        return drift(stopped, state, t_s, duration_s, stride)
+    first = drift(braked, state, t_s, held * dt, 1)
+    if len(first) <= held:
+        return first[::stride]
+    rest = drift(stopped, first[held], t_s + held * dt, (total - held) * dt, 1)
+    # the stopped twin starts at the unbraked step: its phase omega t is the firmware's there
+    return np.concatenate([first[:held], rest])[::stride]
