@@ -4,9 +4,10 @@ docs/planning.md, "The check's processor time": the check's judge screens states
 end points before the reference's quarter points and exact geometry
 (:func:`eelhost.planning.check.judged_clearance_m` against
 :func:`eelhost.planning.execute.body_clearance_m`), the water draws keep each covariance's
-decomposition (:func:`eelhost.planning.uncertainty.region_draw`) and the body's points are
-written in place (:func:`eelhost.planning.body.body_points`). Each is compared here with the
-reference it replaces.
+decomposition (:func:`eelhost.planning.uncertainty.region_draw`), the body's points are
+written in place (:func:`eelhost.planning.body.body_points`) and the point-to-segment distances
+are summed by components (:func:`eelhost.planning.geometry.point_segment_distance`). Each is
+compared here with the reference it replaces.
 """
 
 from __future__ import annotations
@@ -16,9 +17,12 @@ import pytest
 from scipy.stats import chi2
 
 from eelhost.planning import check
+from eelhost.planning import field as field_module
+from eelhost.planning import world as world_module
 from eelhost.planning.body import body_points, link_endpoints
 from eelhost.planning.execute import body_clearance_m
-from eelhost.planning.field import clearance_field
+from eelhost.planning.field import clearance_field, signed_clearance
+from eelhost.planning.geometry import point_segment_distance
 from eelhost.planning.planner import CHECK_MARGIN_M, Planner
 from eelhost.planning.uncertainty import REGION_LEVEL, default_model, region_draw
 from eelhost.planning.world import load_world
@@ -158,3 +162,40 @@ def test_body_points_written_in_place_are_the_broadcast_ones_bit_for_bit(per_lin
                           reference_body_points(SWIMMER, states, per_link))
     assert np.array_equal(link_endpoints(SWIMMER, states),
                           reference_body_points(SWIMMER, states, 1))
+
+
+def reference_point_segment_distance(points, a, b):
+    """point_segment_distance as it was: products summed over the last axis."""
+    ab = b - a
+    ap = points[..., :, None, :] - a[..., None, :, :]
+    denom = np.sum(ab * ab, axis=-1)[..., None, :]
+    safe = np.where(denom > 0, denom, 1.0)
+    t = np.clip(np.sum(ap * ab[..., None, :, :], axis=-1) / safe, 0.0, 1.0)
+    t = np.where(denom > 0, t, 0.0)
+    gap = ap - t[..., None] * ab[..., None, :, :]
+    return np.sqrt(np.sum(gap * gap, axis=-1))
+
+
+def test_point_segment_distance_by_components_is_the_summed_one_bit_for_bit(monkeypatch):
+    rng = np.random.default_rng(2)
+    a = rng.uniform(0.0, 3.0, (40, 7, 2))
+    b = a + rng.normal(0.0, 0.1, a.shape)
+    b[:, 3] = a[:, 3]  # degenerate segments, as hull padding
+    pts = rng.uniform(0.0, 3.0, (40, 9, 2))
+    centre = np.array([1.2, 0.7])
+    # the shapes the world's and the field's callers pass
+    for args in ((pts, a, b), (centre[None, None], a, b), (pts[0], a[0], b[0]),
+                 (pts[:1], a, b)):
+        assert np.array_equal(point_segment_distance(*args),
+                              reference_point_segment_distance(*args))
+    # and the signed clearance the field is built from, and the exact body clearance
+    world = generate_world(28504)
+    where = rng.uniform([-0.1, -0.1], [3.1, 2.1], (20000, 2))
+    states = swims_into_things(world, rng, paths=4)
+    fast = (signed_clearance(world, where),
+            [world.body_clearance(link_endpoints(SWIMMER, s)) for s in states])
+    monkeypatch.setattr(field_module, "point_segment_distance", reference_point_segment_distance)
+    monkeypatch.setattr(world_module, "point_segment_distance", reference_point_segment_distance)
+    assert np.array_equal(fast[0], signed_clearance(world, where))
+    for got, s in zip(fast[1], states, strict=True):
+        assert np.array_equal(got, world.body_clearance(link_endpoints(SWIMMER, s)))

@@ -31,15 +31,22 @@ def point_segment_distance(points: FloatArray, a: FloatArray, b: FloatArray) -> 
     -------
     ndarray, shape (..., P, S)
     """
-    ab = b - a
-    ap = points[..., :, None, :] - a[..., None, :, :]
-    denom = np.sum(ab * ab, axis=-1)[..., None, :]
+    # by components: x x' + y y' is what summing the products over the last axis of two gives,
+    # bit for bit, without the reductions over a length-2 axis (half the processor time of the
+    # clearance field's build; docs/planning.md, "The check's processor time")
+    points, a, b = np.asarray(points), np.asarray(a), np.asarray(b)
+    abx, aby = (b - a)[..., 0], (b - a)[..., 1]
+    apx = points[..., :, None, 0] - a[..., None, :, 0]
+    apy = points[..., :, None, 1] - a[..., None, :, 1]
+    denom = (abx * abx + aby * aby)[..., None, :]
     # degenerate segments (a == b, e.g. hull padding) fall back to the distance to a
     safe = np.where(denom > 0, denom, 1.0)
-    t = np.clip(np.sum(ap * ab[..., None, :, :], axis=-1) / safe, 0.0, 1.0)
+    abx, aby = abx[..., None, :], aby[..., None, :]
+    t = np.clip((apx * abx + apy * aby) / safe, 0.0, 1.0)
     t = np.where(denom > 0, t, 0.0)
-    gap = ap - t[..., None] * ab[..., None, :, :]
-    return np.sqrt(np.sum(gap * gap, axis=-1))
+    gx = apx - t * abx
+    gy = apy - t * aby
+    return np.sqrt(gx * gx + gy * gy)
 
 
 def segments_cross(a1: FloatArray, a2: FloatArray, b1: FloatArray, b2: FloatArray) -> FloatArray:
