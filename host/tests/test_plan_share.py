@@ -21,10 +21,10 @@ plan that passes its check."""
 
 def test_a_cramped_start_is_planned_with_wider_turns_and_the_full_margin():
     world = generate_world(CRAMPED_SEED)
-    plain = Planner(world, ROBOT, MODEL, unknown_current_m_s=0.0, seed=CRAMPED_SEED,
-                    cramped_start=False).plan()
+    plain = Planner(world, ROBOT, MODEL, unknown_current_m_s=0.0, seed=CRAMPED_SEED).plan()
     assert plain.status == "exhausted"
-    planner = Planner(world, ROBOT, MODEL, unknown_current_m_s=0.0, seed=CRAMPED_SEED)
+    planner = Planner(world, ROBOT, MODEL, unknown_current_m_s=0.0, seed=CRAMPED_SEED,
+                      cramped_start=True)
     outcome = planner.plan()
     assert outcome.status == "found"
     widest = max(abs(b) for b in Actions().bearings_deg)
@@ -49,7 +49,7 @@ def test_a_start_the_plain_search_plans_from_gets_the_same_plan():
         "current": {"speed_m_s": 0.0, "direction_deg": 0.0},
         "obstacles": [{"kind": "circle", "centre_m": [1.45, 1.0], "radius_m": 0.1}],
     })
-    with_fallback = Planner(world, ROBOT, MODEL, check=False)
+    with_fallback = Planner(world, ROBOT, MODEL, check=False, cramped_start=True)
     found = with_fallback.plan()
     without = Planner(world, ROBOT, MODEL, check=False, cramped_start=False).plan()
     assert found.status == without.status == "found"
@@ -59,7 +59,8 @@ def test_a_start_the_plain_search_plans_from_gets_the_same_plan():
 
 def test_a_replan_from_a_given_state_gets_no_fallback():
     world = generate_world(CRAMPED_SEED)
-    planner = Planner(world, ROBOT, MODEL, unknown_current_m_s=0.0, check=False)
+    planner = Planner(world, ROBOT, MODEL, unknown_current_m_s=0.0, check=False,
+                      cramped_start=True)
     outcome = planner.plan(planner.search.twin_start_state())
     assert outcome.status == "exhausted"
     assert planner._cramped_search is None

@@ -11,8 +11,9 @@ docs/planning.md ("The planner") is the long form. :meth:`Planner.plan`:
    tank is refused when the world is read (:class:`eelhost.planning.world.WorldError`).
 2. **Search** (:class:`eelhost.planning.search.Search`): every leg swum in the twin from the state
    the previous one left, with the straight coefficients for straight legs and the turning ones
-   for turns. When the first search from the world's start is ``exhausted`` (a cramped start),
-   a second one offers its first legs turns of up to 120 degrees (:data:`CRAMPED_ACTIONS`).
+   for turns. With ``cramped_start`` (off by default), when the first search from the world's
+   start is ``exhausted`` (a cramped start), a second one offers its first legs turns of up to
+   120 degrees (:data:`CRAMPED_ACTIONS`).
 3. **Check**: the plan is swum in the twin leg by leg as the search swam it
    (:func:`eelhost.planning.check.swim_legs`), with the fits as fitted and in ``draws`` draws
    of the water (:meth:`eelhost.planning.uncertainty.CoefficientModel.water_draws`: every
@@ -190,7 +191,8 @@ samples every physics step and measures the exact clearance of every state; docs
 CRAMPED_ACTIONS = Actions(distances_m=(0.3, 0.5),
                           bearings_deg=(-120.0, -90.0, -60.0, -30.0, 0.0, 30.0, 60.0, 90.0, 120.0))
 """The first plan's fallback from a cramped start (docs/planning.md, "A wider turn from a cramped
-start"): when the search from the world's start is ``exhausted``, a second search runs whose
+start"; ``Planner(cramped_start=True)``, off by default): when the search from the world's
+start is ``exhausted``, a second search runs whose
 first legs take this action set, the planner's legs plus turns of 90 and 120 degrees (the
 recovery replan's, docs/planning.md "The recovery replan"), so that a robot started towards an
 obstacle may turn away before its head, 0.3 m ahead of its centre of mass, comes near it; its
@@ -494,6 +496,12 @@ class Planner:
         A repair also raises the search's margin where the failing check runs came too close
         (:meth:`failure_sites`, :meth:`Search.raise_margin`), besides banning the leg most of
         them failed on; False: the ban alone, as until session 14.
+    cramped_start : bool
+        When the first search from the world's start is ``exhausted`` within
+        :data:`CRAMPED_EXPANSIONS` expansions, search again with wider turns on the first legs
+        (:data:`CRAMPED_ACTIONS`). Off by default: on development seeds 28500-29499 it planned
+        14 more worlds of 1000, and one of those 14 plans touched in the bench's fresh draws
+        (docs/planning.md, "A wider turn from a cramped start").
     """
 
     def __init__(
@@ -517,7 +525,7 @@ class Planner:
         check_margin_m: float = CHECK_MARGIN_M,
         repair_draws: int | None = None,
         raise_on_repair: bool = True,
-        cramped_start: bool = True,
+        cramped_start: bool = False,
     ) -> None:
         world = coefficients.in_tank(world)
         robot = coefficients.robot_for(robot)
