@@ -92,6 +92,7 @@ def test_a_robot_without_a_swimming_continuation_pauses_drifts_replans_from_rest
     # then once more: the brake's end (amplitude 0, the gait's omega) at its time, a whole gait
     # period on, and the restart only after the joints straightened
     assert len(paused) == 2 and paused[1][0] == pytest.approx(halt["brake_until_s"], abs=1 / 30)
+    assert halt["brake_ended_s"] == pytest.approx(paused[1][0], abs=1e-3)  # on the halt's record
     assert halt["brake_until_s"] - halt["t_s"] == pytest.approx(
         2 * np.pi / PATH_GAIT.omega_rad_s * np.ceil(2.0 * PATH_GAIT.omega_rad_s / (2 * np.pi)),
         abs=2e-3)

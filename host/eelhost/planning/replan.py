@@ -735,6 +735,7 @@ class _Pause:
     braked: Gait | None = None  # the brake's frozen gait, while the pause brakes first
     t_unbrake_s: float = -math.inf  # when the brake ends (the joints straighten)
     unbraked: bool = False  # the brake's end was sent
+    halt_event: dict[str, Any] = field(default_factory=dict)  # its record (the take's events)
 
 
 @dataclass
@@ -1374,8 +1375,9 @@ class TankReplanner:
             "kind": "halt", "reason": "no_safe_continuation", "t_s": round(t_s, 3),
             "restart": self.restarts + 1, "detail": d.detail,
             "start_state": [round(float(v), 5) for v in est.state]})
+        pause.halt_event = self.events[-1]
         if pause.braked is not None:
-            self.events[-1]["brake_until_s"] = round(pause.t_unbrake_s, 3)
+            pause.halt_event["brake_until_s"] = round(pause.t_unbrake_s, 3)
         log.warning("no safe continuation at t = %.2f s: the robot stops swimming and drifts; "
                     "restart %d of %d from rest (%s)", t_s, self.restarts + 1,
                     self.max_restarts, d.detail)
@@ -1453,7 +1455,7 @@ class TankReplanner:
             pause.unbraked = True
             self.estimator.gait = self._paused_gait()
             d.pause, d.pause_gait, d.recorded = True, self.estimator.gait, True
-            self.events[-1].setdefault("brake_ended_s", round(t_s, 3))
+            pause.halt_event["brake_ended_s"] = round(t_s, 3)
             log.info("the pause's brake ends at t = %.2f s", t_s)
         if pause.drift is not None:
             if not pause.drift.done():
