@@ -601,20 +601,22 @@ def blow_up_hint(robot: Robot, model: SwimmerModel, dt_s: float) -> str:
     if robot.joint_model is not PD:
         return ""
     # the hint is the robot's own (its file's coefficients either way): a planner packs a batch
-    # every few milliseconds with the same robot, and the stable step took a third of the packing
-    key = (robot.model_dump_json(), float(dt_s))
-    hint = _BLOW_UP_HINTS.get(key)
-    if hint is None:
-        own = model if model.coefficients == robot.hydrodynamics else SwimmerModel.from_robot(robot)
-        hint = stiffness_hint(robot.joints, PD.largest_stable_step_s(robot.joints, own), dt_s)
-        if len(_BLOW_UP_HINTS) >= 64:
-            _BLOW_UP_HINTS.clear()
-        _BLOW_UP_HINTS[key] = hint
+    # every few milliseconds with the same robot object, and the stable step took a third of
+    # the packing. Robots are frozen, and the entry holds the robot, so its id is not reused
+    key = (id(robot), float(dt_s))
+    known = _BLOW_UP_HINTS.get(key)
+    if known is not None and known[0] is robot:
+        return known[1]
+    own = model if model.coefficients == robot.hydrodynamics else SwimmerModel.from_robot(robot)
+    hint = stiffness_hint(robot.joints, PD.largest_stable_step_s(robot.joints, own), dt_s)
+    if len(_BLOW_UP_HINTS) >= 64:
+        _BLOW_UP_HINTS.clear()
+    _BLOW_UP_HINTS[key] = (robot, hint)
     return hint
 
 
-_BLOW_UP_HINTS: dict[tuple[str, float], str] = {}
-""":func:`blow_up_hint`'s words by robot (its JSON) and step."""
+_BLOW_UP_HINTS: dict[tuple[int, float], tuple[Robot, str]] = {}
+""":func:`blow_up_hint`'s words by robot (the frozen object itself) and step."""
 
 
 def _step_start(
