@@ -356,6 +356,17 @@ SHIFT_PREFERENCE_M = 0.01
 SHIFT_GRACE_S = 0.5
 """How far past the replan's budget the shift repair may start a check (docs/planning.md)."""
 
+FLEE_BEARINGS_DEG = (0.0, 30.0, -30.0, 60.0, -60.0, 90.0, -90.0, 120.0, -120.0, 150.0, -150.0, 180.0)
+"""The flee's headings, relative to the paused body's (docs/planning.md, "The flee")."""
+
+FLEE_SWIM_S = 3.0
+"""How long the twin swims each flee (the look-ahead's horizon); the swimming rules take over
+after it, with a replan towards the goal once the robot leaves the flee's corridor."""
+
+FLEE_REACH_M = 2.0
+"""How far ahead of the body each flee's waypoint lies: beyond what it swims in
+:data:`FLEE_SWIM_S`, so that pure pursuit holds a bearing and the waypoint is never reached."""
+
 STOP_ALLOWANCE_S = 1.0
 """The robot's time kept ahead of a predicted contact for a stop when a replan then fails: the
 brake (docs/planning.md, "The brake in the pause") stops a body swimming 0.05-0.12 m/s within
@@ -738,6 +749,17 @@ class _Pause:
     halt_event: dict[str, Any] = field(default_factory=dict)  # its record (the take's events)
 
 
+class _Flee(NamedTuple):
+    """A swim away from a body that would drift into something (:meth:`TankReplanner._flee`)."""
+
+    start_step: int
+    waypoint_m: tuple[float, float]
+    bearing_deg: float  # relative to the body's heading at the start
+    gap_m: float  # its smallest outline gap, less the current estimate's drift allowance
+    com_m: FloatArray  # its centre of mass while swimming
+    guide: Guide
+
+
 @dataclass
 class _Job:
     """A replan running beside the loop."""
@@ -857,6 +879,12 @@ class TankReplanner:
     stop_allowance_s : float
         The time kept beyond that for a stop, should the replan fail
         (:data:`STOP_ALLOWANCE_S`; 0: none, as before session 17).
+    flee : bool
+        Where the robot would pause (``no_safe_continuation`` with restarts left) and the twin
+        carries the stopped body within the look-ahead's margin (a current towards an
+        obstacle), swim away instead: of the twin's swims at :data:`FLEE_BEARINGS_DEG` from the
+        body, the clearest, when it keeps the margin (:meth:`_flee`; docs/planning.md, "The
+        flee"). It counts as a restart.
     calm_budget_s : float or None
         With a ``replan_budget_s``: the budget of a replan asked for in a moved current estimate
         (``current_estimate``, the look-ahead clear), when longer; it starts from the state
@@ -951,6 +979,7 @@ class TankReplanner:
         shift_repair: bool = True,
         retry_before_contact: bool = True,
         stop_allowance_s: float = STOP_ALLOWANCE_S,
+        flee: bool = True,
         calm_budget_s: float | None = None,
         early_margin_m: float | None = None,
         early_horizon_s: float = EARLY_HORIZON_S,
@@ -1012,6 +1041,7 @@ class TankReplanner:
         self.shift_repair = shift_repair
         self.retry_before_contact = retry_before_contact
         self.stop_allowance_s = stop_allowance_s
+        self.flee = flee
         self.retries_before_contact = 0  # replans asked for instead of a stop (the record's)
         # the robot's time of the first contact the latest look-ahead predicts (inf: none)
         self._contact_at_s = math.inf
@@ -1364,12 +1394,24 @@ class TankReplanner:
             # freezes is the gait's then (the same latency delays its end, which cancels)
             pause.braked = braked_gait(self.gait, t_s)
             pause.t_unbrake_s = unbrake_time(self.gait, t_s, self.rest_brake_s)
+        extra = self.current.value_m_s.copy() if self.estimate_current else np.zeros(2)
+        pause.drift_wall_s = time.monotonic()
+        if self.flee:
+            # the drift's verdict at once (a few twin runs, tens of milliseconds): where the water
+            # carries the stopped body into something, swim away instead (docs/planning.md,
+            # "The flee"); the robot is still swimming, so the flee needs no restart of the gait
+            verdict = self._drift_gap(est, extra, pause)
+            if not verdict[0] > self.lookahead_margin_m:
+                flee = self._flee(est, extra)
+                if flee is not None:
+                    return self._take_flee(t_s, est, extra, flee, verdict[0])
+            pause.drift = Future()
+            pause.drift.set_result(verdict)
+        else:
+            pause.drift = self._side.submit(self._drift_gap, est, extra, pause)
         # frames without fresh telemetry take the paused gait's reference (the brake's S,
         # straight joints, or the reversed wave's)
         self.estimator.gait = pause.braked or self._paused_gait()
-        extra = self.current.value_m_s.copy() if self.estimate_current else np.zeros(2)
-        pause.drift_wall_s = time.monotonic()
-        pause.drift = self._side.submit(self._drift_gap, est, extra, pause)
         self._pause = pause
         self.events.append({
             "kind": "halt", "reason": "no_safe_continuation", "t_s": round(t_s, 3),
@@ -1438,6 +1480,81 @@ class TankReplanner:
         budget = min(max(self.rest_budget_s, self.rest_budget_max_s),
                      clear_s - self.rest_settle_s - DRIFT_AFTER_S)
         return float(np.min(gap[least])), max(budget, self.rest_budget_s), clear_s
+
+    def _flee(self, est: BodyEstimate, extra: FloatArray) -> _Flee | None:
+        """The clearest swim away from the body, if one keeps the look-ahead's margin.
+
+        From the estimate, the robot swimming on (its gait and phase run on: no brake, no
+        restart), the gait towards a waypoint :data:`FLEE_REACH_M` ahead at each bearing of
+        :data:`FLEE_BEARINGS_DEG` from the body's heading, for :data:`FLEE_SWIM_S`, in the
+        estimated water; each judged as the drift is (the outline's gap less the current
+        estimate's drift allowance). The best when it keeps the margin, else None
+        (docs/planning.md, "The flee").
+        """
+        base = self._twin_in(extra)
+        dt = base.dt_s
+        n = self.model.n_links
+        now = int(round(est.t_s / dt))
+        heading = float(np.mean(est.state[:n]))
+        com = est.state[n : n + 2]
+        guide = leg_start_guide(est.state, n, (0.0, 0.0))
+        targets = [(float(com[0] + FLEE_REACH_M * math.cos(heading + math.radians(b))),
+                    float(com[1] + FLEE_REACH_M * math.sin(heading + math.radians(b))))
+                   for b in FLEE_BEARINGS_DEG]
+        k = len(targets)
+        stride = 3
+        runs = base.run([[w] for w in targets], FLEE_SWIM_S,
+                        states=np.repeat(np.asarray(est.state, dtype=float)[None], k, 0),
+                        start_steps=[now] * k, stride=stride,
+                        guidance=[guide] * k if _guidance_arg(base, guide) is not None else None)
+        spread = current_spread_m_s(self.current.history)
+        best: _Flee | None = None
+        for j in range(k):
+            swum = runs.states[j]
+            swum = swum[np.isfinite(swum[:, 0])]
+            if len(swum) < 2:
+                continue
+            ahead = np.arange(len(swum), dtype=np.float64) * (stride * dt)
+            gap = float(np.min(outline_clearance_m(self.world, self.model, swum)
+                               - drift_allowance_m(spread, ahead)))
+            if best is None or gap > best.gap_m:
+                best = _Flee(now, targets[j], FLEE_BEARINGS_DEG[j], gap,
+                             swum[:, n : n + 2].copy(), guide)
+        if best is None or not best.gap_m > self.lookahead_margin_m:
+            log.info("no flee keeps the margin from the body at t = %.2f s (best %s)", est.t_s,
+                     "none" if best is None else f"{best.gap_m * 1000:.0f} mm")
+            return None
+        return best
+
+    def _take_flee(self, t_s: float, est: BodyEstimate, extra: FloatArray, flee: _Flee,
+                   drift_gap_m: float) -> Decision:
+        """Swim away now: the flee's waypoint, a one-leg plan of the twin's swim as its corridor.
+
+        Counted as a restart (:attr:`max_restarts`); the swimming rules start afresh.
+        """
+        dt = self.planner.twin.dt_s
+        leg = Leg(flee.waypoint_m, FLEE_REACH_M, flee.bearing_deg, flee.start_step,
+                  flee.start_step + int(round(FLEE_SWIM_S / dt)), flee.com_m, flee.gap_m)
+        why = (f"the stopped body would drift within {max(drift_gap_m, 0.0) * 1000:.0f} mm of an "
+               f"obstacle or wall; flee at {flee.bearing_deg:+.0f} deg from the heading, "
+               f"{flee.gap_m * 1000:.0f} mm clear in the twin")
+        outcome = Outcome(Plan(True, "flee", why, legs=[leg], start_guide=flee.guide), "flee", why)
+        event = self._event("replan", "flee", t_s, est.t_s, t_s, est.state, outcome, 0.0,
+                            math.nan, extra)
+        event.update({"waypoints_m": [[round(flee.waypoint_m[0], 4), round(flee.waypoint_m[1], 4)]],
+                      "flee_gap_m": round(flee.gap_m, 4), "drift_gap_m": round(drift_gap_m, 4),
+                      "restart": self.restarts + 1, "t_switch_s": round(t_s, 3)})
+        self.events.append(event)
+        self.restarts += 1
+        self._take_plan(outcome, extra)
+        self.waypoints = [flee.waypoint_m]
+        self.replans += 1
+        self._afresh(t_s)
+        log.warning("no safe continuation at t = %.2f s and %s: restart %d of %d", t_s, why,
+                    self.restarts, self.max_restarts)
+        d = Decision(waypoints=[flee.waypoint_m], guide=flee.guide, recorded=True)
+        d.detail = f"flee at t = {t_s:.2f} s: {why}"
+        return d
 
     def _paused_frame(self, t_s: float, loc: Localisation, pose: FloatArray | None,
                       offset_rad: float) -> Decision:
@@ -1642,6 +1759,17 @@ class TankReplanner:
         assert pause.extra is not None  # set with the outcome
         self._take_plan(pause.outcome, pause.extra)
         self.waypoints = list(waypoints)
+        self._afresh(t_s)
+        self.events[-1]["t_switch_s"] = round(t_s, 3)
+        log.info("restart %d from rest at t = %.2f s: %d waypoints", self.restarts, t_s,
+                 len(waypoints))
+        d.waypoints, d.guide, d.restart, d.recorded = list(waypoints), guide, True, True
+        d.pause, d.pause_gait = False, None  # the restart's gait supersedes a brake's end
+        d.detail = f"restart {self.restarts} from rest at t = {t_s:.2f} s"
+        return d
+
+    def _afresh(self, t_s: float) -> None:
+        """The swimming rules from the start: no try held back, no verdict, a look-ahead now."""
         self._next_try_s = -math.inf
         self._last_gap = (-math.inf, None)
         self._contact_at_s = math.inf
@@ -1650,13 +1778,6 @@ class TankReplanner:
         self._next_early_s = -math.inf
         self._early_in_row = 0
         self.current.drop()
-        self.events[-1]["t_switch_s"] = round(t_s, 3)
-        log.info("restart %d from rest at t = %.2f s: %d waypoints", self.restarts, t_s,
-                 len(waypoints))
-        d.waypoints, d.guide, d.restart, d.recorded = list(waypoints), guide, True, True
-        d.pause, d.pause_gait = False, None  # the restart's gait supersedes a brake's end
-        d.detail = f"restart {self.restarts} from rest at t = {t_s:.2f} s"
-        return d
 
     def _take_plan(self, outcome: Outcome, extra: FloatArray) -> None:
         """A found replan becomes the present plan: its corridor and current; no failures yet."""
