@@ -116,6 +116,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    f"a plan from rest, at most N times per run ({RESTARTS}, the default: on its "
                    "development seeds it reached 2 more goals with no contact; 0: off; "
                    "docs/planning.md, \"A restart from rest\")")
+    p.add_argument("--no-flee", dest="flee", action="store_false",
+                   help="with --plan or --bench: where the stop's drift would touch an obstacle "
+                   "(a current towards it), stop anyway instead of swimming away (the flee, on "
+                   "by default; it takes one of --restarts; docs/planning.md, \"The flee\")")
     p.add_argument("--brake", type=NON_NEGATIVE, default=None, metavar="S",
                    help="before the final Stop, freeze the body in a deep S (the gait's "
                    f"amplitude {BRAKE_AMPLITUDE_RAD:g} rad, omega 0) for S seconds, the watchdog fed, so that it does "
@@ -287,7 +291,8 @@ def run(args: argparse.Namespace) -> int:
                                    replan_budget_s=args.replan_budget or None,
                                    calm_budget_s=args.calm_budget or None,
                                    early_margin_m=args.early_margin or None,
-                                   escape=args.escape, restarts=args.restarts)
+                                   escape=args.escape, restarts=args.restarts,
+                                   flee=args.flee)
         print(planned.outcome.message)
         print(f"coefficients: {model.describe()}")
         waypoints, navigator, uri = planned.waypoints_m, planned.navigator, planned.uri
@@ -365,7 +370,7 @@ def _bench(args: argparse.Namespace) -> int:
                                         calm_budget_s=args.calm_budget or None,
                                         early_margin_m=args.early_margin or None,
                                         escape=args.escape, restarts=args.restarts,
-                                        brake_s=_brake_s(args))
+                                        brake_s=_brake_s(args), flee=args.flee)
     command = (f"nice eelbot run --bench --worlds {args.worlds} --seed {args.seed}"
                + ("" if args.check_unknown_current is None
                   else f" --check-unknown-current {args.check_unknown_current:g}")
@@ -379,6 +384,7 @@ def _bench(args: argparse.Namespace) -> int:
                + (f" --early-margin {args.early_margin:g}" if args.early_margin else "")
                + (" --escape" if args.escape else "")
                + (f" --restarts {args.restarts}" if args.restarts != RESTARTS else "")
+               + ("" if args.flee else " --no-flee")
                + (f" --brake {args.brake:g}" if args.brake is not None else ""))
     lines = summary_lines(results)
     block = [BENCH_BEGIN, f"Command: `{command}`", "",

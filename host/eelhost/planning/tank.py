@@ -126,6 +126,7 @@ def plan_for_run(
     early_budget_s: float | None = EARLY_BUDGET_S,
     escape: bool = False,
     restarts: int = 0,
+    flee: bool = True,
 ) -> RunPlan:
     """Plan in a world for ``eelbot run --plan`` (module docstring).
 
@@ -169,6 +170,9 @@ def plan_for_run(
     restarts : int
         Restarts from rest a run may make (``TankReplanner``'s ``max_restarts``; docs/planning.md,
         "A restart from rest"); 0: off (``eelbot run --restarts`` gives 2).
+    flee : bool
+        Swim away where a stop's drift would touch (``TankReplanner``'s ``flee``;
+        docs/planning.md, "The flee"); it takes a restart, so it needs ``restarts``.
 
     Returns
     -------
@@ -201,7 +205,7 @@ def plan_for_run(
                               early_budget_s=early_budget_s,
                               escape_planner_for=tiers.escape_planner_for if escape else None,
                               rest_escape_planner_for=tiers.escape_planner_for,
-                              max_restarts=restarts)
+                              max_restarts=restarts, flee=flee)
     return RunPlan(outcome.plan.waypoints_m, navigator, sim_uri_for_world(uri, world), outcome,
                    planner.options.guidance, outcome.plan.start_guide)
 
