@@ -341,6 +341,6 @@ def test_a_stop_the_current_would_carry_into_a_wall_becomes_a_flee_away_from_it(
         assert not any(dd.pause for _, dd in decisions)
         assert d.waypoints[0][0] < com[0] + 1e-6  # not on towards the wall
         fled = nav.events[-1]
-        assert fled["kind"] == "replan" and fled["reason"] == "flee"
+        assert fled["kind"] == "flee" and fled["reason"] == "flee"
         assert fled["drift_gap_m"] <= nav.lookahead_margin_m < fled["flee_gap_m"]
         assert nav.restarts == 1 and nav._pause is None

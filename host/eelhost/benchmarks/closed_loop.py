@@ -304,7 +304,7 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
               record_to: Path | None = None,
               calm_budget_s: float | None = CALM_REPLAN_BUDGET_S,
               early_margin_m: float | None = None, escape: bool = False,
-              restarts: int = 0, brake_s: float = BRAKE_S, flee: bool = True) -> WorldResult:
+              restarts: int = 0, brake_s: float = BRAKE_S, flee: bool = False) -> WorldResult:
     """Plan one generated world and swim the plan over ``sim://`` (module docstring).
 
     Parameters
@@ -488,7 +488,7 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
                           escape: bool = False,
                           restarts: int = 0,
                           brake_s: float = BRAKE_S,
-                          flee: bool = True,
+                          flee: bool = False,
                           ) -> list[WorldResult]:
     """Run the benchmark over ``seeds``, resuming from ``<out>/results.jsonl``.
 

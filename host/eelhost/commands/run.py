@@ -116,10 +116,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    f"a plan from rest, at most N times per run ({RESTARTS}, the default: on its "
                    "development seeds it reached 2 more goals with no contact; 0: off; "
                    "docs/planning.md, \"A restart from rest\")")
-    p.add_argument("--no-flee", dest="flee", action="store_false",
+    p.add_argument("--flee", action="store_true",
                    help="with --plan or --bench: where the stop's drift would touch an obstacle "
-                   "(a current towards it), stop anyway instead of swimming away (the flee, on "
-                   "by default; it takes one of --restarts; docs/planning.md, \"The flee\")")
+                   "(a current towards it), swim away instead of stopping (it takes one of "
+                   "--restarts; off by default: on unseen seeds it changed no count of contacts "
+                   "while stopping; docs/planning.md, \"The flee\")")
     p.add_argument("--brake", type=NON_NEGATIVE, default=None, metavar="S",
                    help="before the final Stop, freeze the body in a deep S (the gait's "
                    f"amplitude {BRAKE_AMPLITUDE_RAD:g} rad, omega 0) for S seconds, the watchdog fed, so that it does "
@@ -384,7 +385,7 @@ def _bench(args: argparse.Namespace) -> int:
                + (f" --early-margin {args.early_margin:g}" if args.early_margin else "")
                + (" --escape" if args.escape else "")
                + (f" --restarts {args.restarts}" if args.restarts != RESTARTS else "")
-               + ("" if args.flee else " --no-flee")
+               + (" --flee" if args.flee else "")
                + (f" --brake {args.brake:g}" if args.brake is not None else ""))
     lines = summary_lines(results)
     block = [BENCH_BEGIN, f"Command: `{command}`", "",

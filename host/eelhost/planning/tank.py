@@ -126,7 +126,7 @@ def plan_for_run(
     early_budget_s: float | None = EARLY_BUDGET_S,
     escape: bool = False,
     restarts: int = 0,
-    flee: bool = True,
+    flee: bool = False,
 ) -> RunPlan:
     """Plan in a world for ``eelbot run --plan`` (module docstring).
 
