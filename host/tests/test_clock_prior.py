@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from eelhost.data.virtual_tank import TABLE3, TankSettings, record_experiment
-from eelhost.estimation.clock import centred_offsets, shifted_recording
+from eelhost.estimation.clock_prior import centred_offsets, shifted_recording
 from eelhost.estimation.evaluate import Evaluator
 from eelhost.estimation.runs import ALIGN_S, clock_shifts
 from eelhost.estimation.space import ParameterSpace

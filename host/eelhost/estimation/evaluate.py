@@ -34,6 +34,7 @@ import numpy as np
 
 from eelhost.data.experiments import Experiment
 from eelhost.errors import UserError
+from eelhost.estimation.clock_prior import FIT_CLOCK_PRIOR, centred_offsets, shifted_recording
 from eelhost.estimation.fitness import (
     N_SAMPLES_FIT,
     VELOCITY_WEIGHT,
@@ -126,8 +127,8 @@ class Evaluator:
     clock_prior : bool or None
         Where ``align_s`` is 0: compare each recording at its clock offset profiled within the
         bound it declares, the offsets' mean held at 0 (the zero-mean prior,
-        :func:`eelhost.estimation.clock.centred_offsets`; docs/estimation.md, "The training
-        clocks: a zero-mean prior"). None: ``clock.FIT_CLOCK_PRIOR``. With ``align_s`` > 0
+        :func:`eelhost.estimation.clock_prior.centred_offsets`; docs/estimation.md, "The training
+        clocks: a zero-mean prior"). None: ``clock_prior.FIT_CLOCK_PRIOR``. With ``align_s`` > 0
         the offsets are profiled each on its own, as before.
     """
 
@@ -146,14 +147,13 @@ class Evaluator:
         servo_limits: bool = False,
         clock_prior: bool | None = None,
     ) -> None:
-        from eelhost.estimation import clock  # clock imports validate, which imports this
 
         if not experiments:
             raise EstimationError("no experiments to evaluate on")
         self.space = space or ParameterSpace.for_robot(robot)
         self.robot = self.space.model_robot(robot)
         self.n_samples, self.align_s, self.observe = n_samples, align_s, observe
-        prior = clock.FIT_CLOCK_PRIOR if clock_prior is None else clock_prior
+        prior = FIT_CLOCK_PRIOR if clock_prior is None else clock_prior
         self.clock_prior = bool(prior) and align_s <= 0.0
         self.servo_limits = servo_limits
         self.prepared = self.prepare_like(experiments)
@@ -303,7 +303,6 @@ class Evaluator:
         """
         if not self.clock_prior:
             return None
-        from eelhost.estimation.clock import centred_offsets, shifted_recording
 
         grids = [self.aligned_errors(p, sim.positions_m[:, j]) for j, p in enumerate(prepared)]
         offsets = centred_offsets(grids, [p.shifts_s for p in prepared])
