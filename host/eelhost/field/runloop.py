@@ -89,7 +89,6 @@ later, and has glided 0.47 m when it falls under 0.02 m/s). Frozen in the brake'
 ``sim://`` it is at 0.002-0.011 m/s 3 s after the brake began, by the gait's phase
 (docs/planning.md, "The brake before the Stop")."""
 
-
 NO_BRAKE_AFTER = ("link_lost", "error")
 """Ends after which the brake is not tried: the robot does not hear it, or the host is failing."""
 
@@ -624,9 +623,7 @@ class RunLoop:
         c = self.config
         t0 = self.clock.now()
         try:
-            self.link.send(protocol.SetGait(BRAKE_AMPLITUDE_RAD, 0.0, c.gait.beta_rad,
-                                            c.amplitude_rate_rad_s, c.beta_rate_rad_s,
-                                            c.offset_rate_rad_s), want_ack=True)
+            self._set_gait(BRAKE_AMPLITUDE_RAD, omega_rad_s=0.0)
             end, due = t0 + c.brake_s, t0
             while self.clock.now() < end - EPS_S:
                 if self.clock.now() >= due - EPS_S:

@@ -1437,10 +1437,15 @@ class TankReplanner:
                      duration_s: float, stride: int) -> FloatArray:
         """The paused body's states from ``state`` at ``t_s``: braked, then as :meth:`_paused_gait`."""
         after = stopped_twin(base, self._paused_gait())
-        if pause.braked is None or t_s >= pause.t_unbrake_s:
+        if pause.braked is None:
             return drift(after, state, t_s, duration_s, stride)
         return paused_drift(stopped_twin(base, pause.braked), after, state, t_s,
                             pause.t_unbrake_s, duration_s, stride)
+
+    def _restart_floor_s(self, pause: _Pause) -> float:
+        """The earliest restart a braked pause allows: its joints straight after the brake's end."""
+        return (pause.t_unbrake_s + self.rest_settle_s if pause.braked is not None
+                else -math.inf)
 
     def _drift_gap(self, est: BodyEstimate, extra: FloatArray, pause: _Pause
                    ) -> tuple[float, float, float]:
@@ -1462,9 +1467,10 @@ class TankReplanner:
         horizon = self.rest_settle_s + max(self.rest_budget_s, self.rest_budget_max_s) + DRIFT_AFTER_S
         if self.rest_tries > 1:
             horizon = max(horizon, REST_PAUSE_MAX_S + DRIFT_AFTER_S)
-        if pause.braked is not None:  # the earliest restart follows the brake's end
-            horizon = max(horizon, pause.t_unbrake_s - est.t_s + self.rest_settle_s
-                          + DRIFT_AFTER_S)
+        # the earliest restart, from now: the least budget's, or after a brake's end
+        earliest = max(self.rest_settle_s + self.rest_budget_s,
+                       self._restart_floor_s(pause) - est.t_s)
+        horizon = max(horizon, earliest + DRIFT_AFTER_S)
         states = self._pause_drift(base, pause, est.state, est.t_s, horizon, stride)
         if not len(states):
             return -math.inf, self.rest_budget_s, 0.0
@@ -1472,9 +1478,6 @@ class TankReplanner:
         ahead = np.arange(len(outline), dtype=np.float64) * (stride * base.dt_s)
         allowance = drift_allowance_m(current_spread_m_s(self.current.history), ahead)
         gap = np.subtract(outline, allowance)
-        earliest = self.rest_settle_s + self.rest_budget_s  # the earliest restart, from now
-        if pause.braked is not None:
-            earliest = max(earliest, pause.t_unbrake_s - est.t_s + self.rest_settle_s)
         least = ahead <= earliest + DRIFT_AFTER_S + 1e-9
         near = np.flatnonzero(gap <= self.lookahead_margin_m)
         clear_s = float(ahead[near[0]]) if near.size else horizon
@@ -1654,8 +1657,9 @@ class TankReplanner:
         period = self.planner.twin.restart_steps or 1
         now_step = int(round(est.t_s / dt))
         first = now_step + math.ceil(pause.budget_s / dt)
-        if pause.braked is not None:  # the joints straighten before the restart
-            first = max(first, math.ceil((pause.t_unbrake_s + self.rest_settle_s) / dt - 1e-9))
+        floor = self._restart_floor_s(pause)
+        if math.isfinite(floor):  # the joints straighten before the restart
+            first = max(first, math.ceil(floor / dt - 1e-9))
         start_step = int(math.ceil(first / period)) * period
         extra = self.current.value_m_s.copy() if self.estimate_current else np.zeros(2)
         wall = time.monotonic()
@@ -1689,8 +1693,7 @@ class TankReplanner:
         return True
 
     def _rest_replan(self, est: BodyEstimate, start_step: int, extra: FloatArray,
-                     deadline_s: SupportsFloat | None, recheck: bool = False,
-                     pause: _Pause | None = None
+                     deadline_s: SupportsFloat | None, recheck: bool, pause: _Pause
                      ) -> tuple[Outcome, FloatArray, float, float, FloatArray, float, int]:
         """On the worker: the stopped body's state at ``start_step``, and a plan from it.
 
@@ -1704,7 +1707,7 @@ class TankReplanner:
         self._prepare_planner(extra)
         planner = self.planner
         now = int(round(est.t_s / planner.twin.dt_s))
-        states = self._pause_drift(planner.twin, pause or _Pause(est.t_s, ""), est.state, est.t_s,
+        states = self._pause_drift(planner.twin, pause, est.state, est.t_s,
                                    max(start_step - now, 0) * planner.twin.dt_s, 1)
         state = states[min(max(start_step - now, 0), len(states) - 1)].copy()
         if recheck and len(states):

@@ -282,20 +282,19 @@ class Twin:
         if states is not None:
             changes["initial_state"] = np.asarray(states, dtype=float).reshape(r, -1).copy()
         g = self.gait
-        if start_steps is not None or g.phase_rad != 0.0:
+        t0 = (np.zeros(r) if start_steps is None
+              else np.asarray(start_steps, dtype=float) * self.dt_s)
+        if np.any(t0 != 0) or g.phase_rad != 0.0:
             # the kernel's gait phase is omega t + (j - 1) beta from its own t = 0: a run started
             # later, or a gait with a phase of its own (a braked robot's frozen one), carries the
             # difference in the per-joint phase rows
-            t0 = (np.zeros(r) if start_steps is None
-                  else np.asarray(start_steps, dtype=float) * self.dt_s)
-            if np.any(t0 != 0) or g.phase_rad != 0.0:
-                params = spec.params.copy()
-                n = self.n_links
-                phase = (np.arange(n - 1)[None, :] * g.beta_rad
-                         + g.omega_rad_s * t0[:, None] + g.phase_rad)
-                params[:, self._rows("cos_beta", n - 1)] = np.cos(phase)
-                params[:, self._rows("sin_beta", n - 1)] = np.sin(phase)
-                changes["params"] = params
+            params = spec.params.copy()
+            n = self.n_links
+            phase = (np.arange(n - 1)[None, :] * g.beta_rad
+                     + g.omega_rad_s * t0[:, None] + g.phase_rad)
+            params[:, self._rows("cos_beta", n - 1)] = np.cos(phase)
+            params[:, self._rows("sin_beta", n - 1)] = np.sin(phase)
+            changes["params"] = params
         if guidance is not None:
             changes["guidance_state"] = np.asarray(guidance, dtype=float).reshape(r, 4).copy()
         if changes:
