@@ -117,10 +117,10 @@ def test_a_robot_without_a_swimming_continuation_pauses_drifts_replans_from_rest
 
 
 def test_a_drift_predicted_to_touch_ends_the_run_as_before(open_plan):
-    # without the flee (the next test's): the pause's drift touches, the run stops
+    # without the harbour (test_harbour.py's): the pause's drift touches, the run stops
     planner, outcome = open_plan
     nav = Blocked(lambda extra: planner, planner, outcome, PATH_GAIT, lookahead_s=0.0,
-                  max_restarts=2, flee=False)
+                  max_restarts=2, harbour=False)
     try:
         stop = None
         for k in range(90):
@@ -303,44 +303,3 @@ def test_the_reversed_wave_brakes_the_coasting_body(open_plan):
     backing = drift(stopped_twin(planner.twin, backing_gait(PATH_GAIT, 0.87)), state, 6.0, 3.0)
     assert backing_gait(PATH_GAIT, 0.87).beta_rad == -PATH_GAIT.beta_rad
     assert backing[-1, N] - 1.0 < 0.5 * (coasting[-1, N] - 1.0)  # it glides less than half as far
-
-
-def test_a_stop_the_current_would_carry_into_a_wall_becomes_a_flee_away_from_it():
-    # a 0.05 m/s current towards +x and the body near the wall it flows to: stopped and braked,
-    # it drifts into the margin within its first seconds (the stop would touch); of the twin's
-    # swims away, one keeps clear, and the robot swims it instead of pausing
-    world = parse_world({**OPEN, "current": {"speed_m_s": 0.05, "direction_deg": 0.0},
-                         "obstacles": []}, "stream")
-    planner = Planner(world, ROBOT, MODEL)
-    outcome = planner.plan()
-    assert outcome.found, outcome.message
-    com = (1.62, 1.0)
-    for flee in (True, False):
-        nav = Blocked(lambda extra: planner, planner, outcome, PATH_GAIT, lookahead_s=0.0,
-                      max_restarts=1, flee=flee)
-        decisions: list[tuple[float, Decision]] = []
-        try:
-            for k in range(int(4.0 * 30)):
-                t = k / 30
-                d = nav.on_frame(t, pose_at(t, com), np.array([*com, 0.0]), 0, 0.0)
-                decisions.append((t, d))
-                nav.pace(t)
-                if d.stop is not None or d.waypoints:
-                    break
-                nav._side.submit(lambda: None).result()
-        finally:
-            nav.close()
-        t_end, d = decisions[-1]
-        if not flee:  # as before: paused, the drift touches, and the run ends with the stop
-            halt = next(e for e in nav.events if e["kind"] == "halt")
-            assert halt["drift_gap_m"] <= nav.lookahead_margin_m
-            assert d.stop == "no_safe_continuation" and "drifts the stopped body" in d.detail
-            continue
-        # at the first refused replan, no pause: a new waypoint away from the wall at once
-        assert t_end < 0.5 and d.waypoints and d.stop is None and not d.pause
-        assert not any(dd.pause for _, dd in decisions)
-        assert d.waypoints[0][0] < com[0] + 1e-6  # not on towards the wall
-        fled = nav.events[-1]
-        assert fled["kind"] == "flee" and fled["reason"] == "flee"
-        assert fled["drift_gap_m"] <= nav.lookahead_margin_m < fled["flee_gap_m"]
-        assert nav.restarts == 1 and nav._pause is None

@@ -304,7 +304,7 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
               record_to: Path | None = None,
               calm_budget_s: float | None = CALM_REPLAN_BUDGET_S,
               early_margin_m: float | None = None, escape: bool = False,
-              restarts: int = 0, brake_s: float = BRAKE_S, flee: bool = False) -> WorldResult:
+              restarts: int = 0, brake_s: float = BRAKE_S, harbour: bool = True) -> WorldResult:
     """Plan one generated world and swim the plan over ``sim://`` (module docstring).
 
     Parameters
@@ -359,7 +359,8 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
         planned = plan_for_run(world, robot, uri, gait, model, planner_options=planner_options,
                                swimmer=swimmer, replan_budget_s=replan_budget_s,
                                calm_budget_s=calm_budget_s, early_margin_m=early_margin_m,
-                               escape=escape, restarts=restarts, flee=flee)
+                               escape=escape, restarts=restarts, harbour=harbour,
+                               stop_brake_s=brake_s)
     except PlanRefused as err:
         return WorldResult(seed, False, err.status, detail=str(err), water=water,
                            plan_wall_s=time.perf_counter() - wall0,
@@ -488,7 +489,7 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
                           escape: bool = False,
                           restarts: int = 0,
                           brake_s: float = BRAKE_S,
-                          flee: bool = False,
+                          harbour: bool = True,
                           ) -> list[WorldResult]:
     """Run the benchmark over ``seeds``, resuming from ``<out>/results.jsonl``.
 
@@ -518,8 +519,8 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
         Restarts from rest per run (:func:`run_world`).
     brake_s : float
         The brake before each run's final Stop (:func:`run_world`).
-    flee : bool
-        The flee (:func:`run_world`).
+    harbour : bool
+        The harbour before a stop (:func:`run_world`).
 
     Returns
     -------
@@ -556,7 +557,7 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
                           swimmer=swimmer, replan_budget_s=replan_budget_s,
                           record_to=out / "planning" / f"{seed}.json",
                           calm_budget_s=calm_budget_s, early_margin_m=early_margin_m,
-                          escape=escape, restarts=restarts, brake_s=brake_s, flee=flee)
+                          escape=escape, restarts=restarts, brake_s=brake_s, harbour=harbour)
             with path.open("a") as f:
                 f.write(json.dumps(asdict(r)) + "\n")
         results.append(r)

@@ -116,11 +116,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    f"a plan from rest, at most N times per run ({RESTARTS}, the default: on its "
                    "development seeds it reached 2 more goals with no contact; 0: off; "
                    "docs/planning.md, \"A restart from rest\")")
-    p.add_argument("--flee", action="store_true",
-                   help="with --plan or --bench: where the stop's drift would touch an obstacle "
-                   "(a current towards it), swim away instead of stopping (it takes one of "
-                   "--restarts; off by default: on unseen seeds it changed no count of contacts "
-                   "while stopping; docs/planning.md, \"The flee\")")
+    p.add_argument("--no-harbour", dest="harbour", action="store_false",
+                   help="with --plan or --bench: stop where the stop is decided, even where the "
+                   "twin drifts the stopping body into an obstacle (by default the robot first "
+                   "swims a short harbour swim to where the stop stays clear; docs/planning.md, "
+                   "\"The harbour\")")
     p.add_argument("--brake", type=NON_NEGATIVE, default=None, metavar="S",
                    help="before the final Stop, freeze the body in a deep S (the gait's "
                    f"amplitude {BRAKE_AMPLITUDE_RAD:g} rad, omega 0) for S seconds, the watchdog fed, so that it does "
@@ -293,7 +293,7 @@ def run(args: argparse.Namespace) -> int:
                                    calm_budget_s=args.calm_budget or None,
                                    early_margin_m=args.early_margin or None,
                                    escape=args.escape, restarts=args.restarts,
-                                   flee=args.flee)
+                                   harbour=args.harbour, stop_brake_s=_brake_s(args))
         print(planned.outcome.message)
         print(f"coefficients: {model.describe()}")
         waypoints, navigator, uri = planned.waypoints_m, planned.navigator, planned.uri
@@ -371,7 +371,7 @@ def _bench(args: argparse.Namespace) -> int:
                                         calm_budget_s=args.calm_budget or None,
                                         early_margin_m=args.early_margin or None,
                                         escape=args.escape, restarts=args.restarts,
-                                        brake_s=_brake_s(args), flee=args.flee)
+                                        brake_s=_brake_s(args), harbour=args.harbour)
     command = (f"nice eelbot run --bench --worlds {args.worlds} --seed {args.seed}"
                + ("" if args.check_unknown_current is None
                   else f" --check-unknown-current {args.check_unknown_current:g}")
@@ -385,7 +385,7 @@ def _bench(args: argparse.Namespace) -> int:
                + (f" --early-margin {args.early_margin:g}" if args.early_margin else "")
                + (" --escape" if args.escape else "")
                + (f" --restarts {args.restarts}" if args.restarts != RESTARTS else "")
-               + (" --flee" if args.flee else "")
+               + ("" if args.harbour else " --no-harbour")
                + (f" --brake {args.brake:g}" if args.brake is not None else ""))
     lines = summary_lines(results)
     block = [BENCH_BEGIN, f"Command: `{command}`", "",

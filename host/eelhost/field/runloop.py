@@ -361,6 +361,7 @@ class RunLoop:
         self.navigator = navigator
         self.replans = 0
         self._goal_reached = False
+        self._goal_detail = ""  # the navigator's word on the arrival (a harbour swim before it)
         # the navigator paused the gait (amplitude 0): offsets of 0 go on feeding the watchdog
         self._paused = False
         self.pauses = 0
@@ -546,6 +547,7 @@ class RunLoop:
             self.request_stop(decision.stop, decision.detail)
         elif decision.arrived:
             self._goal_reached = True
+            self._goal_detail = getattr(decision, "detail", "")
         elif getattr(decision, "pause", False):
             # stop swimming but keep the run: the gait's amplitude to 0 (the phase runs on, the
             # robot stays running), the offset to 0 now and at every control period after; a
@@ -594,7 +596,8 @@ class RunLoop:
             out.reason, out.detail = self._stop_request, self._stop_detail
         elif self._goal_reached:
             out.reason = "arrived"
-            out.detail = f"in the planned goal disc ({self.replans} replans)"
+            out.detail = f"in the planned goal disc ({self.replans} replans)" + (
+                f", {self._goal_detail}" if self._goal_detail else "")
         elif self.guidance.arrived:
             out.reason, out.detail = "arrived", f"reached all {len(c.waypoints_m)} waypoints"
         elif last_pose_t is not None and t - last_pose_t > c.lost_after_s:

@@ -37,6 +37,14 @@ from eelhost.planning.check import water_twin
 from eelhost.planning.deadline import Deadline
 from eelhost.planning.execute import Swim, body_clearance_m, swim
 from eelhost.planning.geometry import FloatArray, point_segment_distance
+from eelhost.planning.harbour import (
+    FINAL_GLIDE_S,
+    HARBOUR_CUSHION_M,
+    HARBOUR_REACH_M,
+    Harbour,
+    StopWindow,
+    find_harbour,
+)
 from eelhost.planning.planner import SCREEN_DRAWS, Outcome, Planner
 from eelhost.planning.restart import (
     BRAKE_HOLD_S,
@@ -356,16 +364,9 @@ SHIFT_PREFERENCE_M = 0.01
 SHIFT_GRACE_S = 0.5
 """How far past the replan's budget the shift repair may start a check (docs/planning.md)."""
 
-FLEE_BEARINGS_DEG = (0.0, 30.0, -30.0, 60.0, -60.0, 90.0, -90.0, 120.0, -120.0, 150.0, -150.0, 180.0)
-"""The flee's headings, relative to the paused body's (docs/planning.md, "The flee")."""
-
-FLEE_SWIM_S = 3.0
-"""How long the twin swims each flee (the look-ahead's horizon); the swimming rules take over
-after it, with a replan towards the goal once the robot leaves the flee's corridor."""
-
-FLEE_REACH_M = 2.0
-"""How far ahead of the body each flee's waypoint lies: beyond what it swims in
-:data:`FLEE_SWIM_S`, so that pure pursuit holds a bearing and the waypoint is never reached."""
+STOP_BRAKE_S = 3.0
+"""The run loop's brake before its final Stop with ``--plan`` (``eelhost.field.runloop.BRAKE_S``,
+which ``eelbot run`` passes as ``stop_brake_s``): how the harbour swims a final stop."""
 
 STOP_ALLOWANCE_S = 1.0
 """The robot's time kept ahead of a predicted contact for a stop when a replan then fails: the
@@ -749,15 +750,13 @@ class _Pause:
     halt_event: dict[str, Any] = field(default_factory=dict)  # its record (the take's events)
 
 
-class _Flee(NamedTuple):
-    """A swim away from a body that would drift into something (:meth:`TankReplanner._flee`)."""
+class _HarbourSwim(NamedTuple):
+    """A harbour swim under way (:meth:`TankReplanner._take_harbour`)."""
 
-    start_step: int
-    waypoint_m: tuple[float, float]
-    bearing_deg: float  # relative to the body's heading at the start
-    gap_m: float  # its smallest outline gap, less the current estimate's drift allowance
-    com_m: FloatArray  # its centre of mass while swimming
-    guide: Guide
+    t_end_s: float  # the robot's time its stop is due
+    kind: str  # the stop it precedes: ``arrived``, ``pause`` or ``stop``
+    detail: str  # that stop's reason
+    event: dict[str, Any]  # its record
 
 
 @dataclass
@@ -879,13 +878,16 @@ class TankReplanner:
     stop_allowance_s : float
         The time kept beyond that for a stop, should the replan fail
         (:data:`STOP_ALLOWANCE_S`; 0: none, as before session 17).
-    flee : bool
-        Where the robot would pause (``no_safe_continuation`` with restarts left) and the twin
-        carries the stopped body within the look-ahead's margin (a current towards an
-        obstacle), swim away instead: of the twin's swims at :data:`FLEE_BEARINGS_DEG` from the
-        body, the clearest, when it keeps the margin (:meth:`_flee`; docs/planning.md, "The
-        flee"). It counts as a restart. Off by default: on unseen seeds 32000-32099 it
-        changed no count of contacts while stopping (13 of 51 runs with and without it).
+    harbour : bool
+        Before a stop whose drift the twin predicts within the look-ahead's margin (at the goal,
+        or where no safe continuation exists, a pause or the final stop), swim to where the
+        stop stays clear first: the nearest of the twin's harbour swims
+        (:func:`eelhost.planning.harbour.find_harbour`) whose swim and stop keep the margin
+        plus :data:`~eelhost.planning.harbour.HARBOUR_CUSHION_M`, and stop at its end
+        (docs/planning.md, "The harbour"). On by default.
+    stop_brake_s : float
+        The run loop's brake before its final Stop (:data:`STOP_BRAKE_S`), as the harbour swims
+        a final stop.
     calm_budget_s : float or None
         With a ``replan_budget_s``: the budget of a replan asked for in a moved current estimate
         (``current_estimate``, the look-ahead clear), when longer; it starts from the state
@@ -980,7 +982,8 @@ class TankReplanner:
         shift_repair: bool = True,
         retry_before_contact: bool = True,
         stop_allowance_s: float = STOP_ALLOWANCE_S,
-        flee: bool = False,
+        harbour: bool = True,
+        stop_brake_s: float = STOP_BRAKE_S,
         calm_budget_s: float | None = None,
         early_margin_m: float | None = None,
         early_horizon_s: float = EARLY_HORIZON_S,
@@ -1042,7 +1045,10 @@ class TankReplanner:
         self.shift_repair = shift_repair
         self.retry_before_contact = retry_before_contact
         self.stop_allowance_s = stop_allowance_s
-        self.flee = flee
+        self.harbour = harbour
+        self.stop_brake_s = stop_brake_s
+        self._harbour: _HarbourSwim | None = None  # the harbour swum now
+        self._harbour_spent = False  # a harbour was swum since the last plan: the next stop stands
         self.retries_before_contact = 0  # replans asked for instead of a stop (the record's)
         # the robot's time of the first contact the latest look-ahead predicts (inf: none)
         self._contact_at_s = math.inf
@@ -1140,13 +1146,24 @@ class TankReplanner:
         Decision
         """
         ended = self._observe(t_s, loc, pose, offset_rad)
+        if self._harbour is not None:
+            # the harbour's stop was judged with its swim: the goal waits for its end
+            return ended if ended is not None and ended.stop is not None else (
+                self._harbour_frame(t_s))
         if ended is not None:
+            if ended.arrived and self._pause is None:
+                return self._stop_safely(t_s, "arrived", "arrived in the goal disc") or ended
             return ended
         if self._pause is not None:
             return self._paused_frame(t_s, loc, pose, offset_rad)
         d = self._swimming_frame(t_s, loc, pose, target, offset_rad, guide)
-        if d.stop == "no_safe_continuation" and self.restarts < self.max_restarts:
-            return self._halt(t_s, d)
+        if d.stop == "no_safe_continuation":
+            pausing = self.restarts < self.max_restarts
+            harbour = self._stop_safely(t_s, "pause" if pausing else "stop", d.detail)
+            if harbour is not None:
+                return harbour
+            if pausing:
+                return self._halt(t_s, d)
         return d
 
     def _observe(self, t_s: float, loc: Localisation, pose: FloatArray | None,
@@ -1379,16 +1396,7 @@ class TankReplanner:
         est = self.estimator.estimate()
         if est is None:
             return d
-        job = self._job
-        if job is not None and job.deadline is not None:
-            job.deadline.cut_to(time.monotonic())  # the worker comes back at its next batch
-        self._job = None
-        self._pending = None
-        self._lookahead = None
-        self._whole_job = None
-        self._retry_now = False
-        self._urgent_after_cut = None
-        self.current.drop()
+        self._drop_work()
         pause = _Pause(t_s, d.detail)
         if self.rest_brake_s is not None:
             # the brake reaches the robot about when this frame's decision does: the phase it
@@ -1397,19 +1405,7 @@ class TankReplanner:
             pause.t_unbrake_s = unbrake_time(self.gait, t_s, self.rest_brake_s)
         extra = self.current.value_m_s.copy() if self.estimate_current else np.zeros(2)
         pause.drift_wall_s = time.monotonic()
-        if self.flee:
-            # the drift's verdict at once (a few twin runs, tens of milliseconds): where the water
-            # carries the stopped body into something, swim away instead (docs/planning.md,
-            # "The flee"); the robot is still swimming, so the flee needs no restart of the gait
-            verdict = self._drift_gap(est, extra, pause)
-            if not verdict[0] > self.lookahead_margin_m:
-                flee = self._flee(est, extra)
-                if flee is not None:
-                    return self._take_flee(t_s, est, extra, flee, verdict[0])
-            pause.drift = Future()
-            pause.drift.set_result(verdict)
-        else:
-            pause.drift = self._side.submit(self._drift_gap, est, extra, pause)
+        pause.drift = self._side.submit(self._drift_gap, est, extra, pause)
         # frames without fresh telemetry take the paused gait's reference (the brake's S,
         # straight joints, or the reversed wave's)
         self.estimator.gait = pause.braked or self._paused_gait()
@@ -1485,81 +1481,122 @@ class TankReplanner:
                      clear_s - self.rest_settle_s - DRIFT_AFTER_S)
         return float(np.min(gap[least])), max(budget, self.rest_budget_s), clear_s
 
-    def _flee(self, est: BodyEstimate, extra: FloatArray) -> _Flee | None:
-        """The clearest swim away from the body, if one keeps the look-ahead's margin.
+    def _stop_window(self, kind: str) -> StopWindow:
+        """How the twin swims a stop of ``kind`` (``pause``, else the run's final stop)."""
+        if kind == "pause":
+            # the pause's brake (a whole number of gait periods), then straight until a rest
+            # replan with the least budget has had time to act (as :meth:`_drift_gap`'s)
+            hold = self.rest_brake_s or 0.0
+            return StopWindow(
+                lambda t: unbrake_time(self.gait, t, hold) if self.rest_brake_s else t,
+                self.rest_settle_s + self.rest_budget_s + DRIFT_AFTER_S)
+        return StopWindow(lambda t: t + self.stop_brake_s, FINAL_GLIDE_S)
 
-        From the estimate, the robot swimming on (its gait and phase run on: no brake, no
-        restart), the gait towards a waypoint :data:`FLEE_REACH_M` ahead at each bearing of
-        :data:`FLEE_BEARINGS_DEG` from the body's heading, for :data:`FLEE_SWIM_S`, in the
-        estimated water; each judged as the drift is (the outline's gap less the current
-        estimate's drift allowance). The best when it keeps the margin, else None
-        (docs/planning.md, "The flee").
+    def _stop_safely(self, t_s: float, kind: str, detail: str) -> Decision | None:
+        """A harbour swim before the stop of ``kind``, or None: the stop goes on as decided.
+
+        The twin swims the stop decided now and the harbour candidates from the estimate in the
+        estimated water (:func:`eelhost.planning.harbour.find_harbour`). When the stop at once
+        keeps the look-ahead's margin, or no harbour keeps the margin and the cushion, the stop
+        stands (docs/planning.md, "The harbour").
         """
-        base = self._twin_in(extra)
-        dt = base.dt_s
-        n = self.model.n_links
-        now = int(round(est.t_s / dt))
-        heading = float(np.mean(est.state[:n]))
-        com = est.state[n : n + 2]
-        guide = leg_start_guide(est.state, n, (0.0, 0.0))
-        targets = [(float(com[0] + FLEE_REACH_M * math.cos(heading + math.radians(b))),
-                    float(com[1] + FLEE_REACH_M * math.sin(heading + math.radians(b))))
-                   for b in FLEE_BEARINGS_DEG]
-        k = len(targets)
-        stride = 3
-        runs = base.run([[w] for w in targets], FLEE_SWIM_S,
-                        states=np.repeat(np.asarray(est.state, dtype=float)[None], k, 0),
-                        start_steps=[now] * k, stride=stride,
-                        guidance=[guide] * k if _guidance_arg(base, guide) is not None else None)
-        spread = current_spread_m_s(self.current.history)
-        best: _Flee | None = None
-        for j in range(k):
-            swum = runs.states[j]
-            swum = swum[np.isfinite(swum[:, 0])]
-            if len(swum) < 2:
-                continue
-            ahead = np.arange(len(swum), dtype=np.float64) * (stride * dt)
-            gap = float(np.min(outline_clearance_m(self.world, self.model, swum)
-                               - drift_allowance_m(spread, ahead)))
-            if best is None or gap > best.gap_m:
-                best = _Flee(now, targets[j], FLEE_BEARINGS_DEG[j], gap,
-                             swum[:, n : n + 2].copy(), guide)
-        if best is None or not best.gap_m > self.lookahead_margin_m:
-            log.info("no flee keeps the margin from the body at t = %.2f s (best %s)", est.t_s,
-                     "none" if best is None else f"{best.gap_m * 1000:.0f} mm")
+        if not self.harbour or self._harbour_spent:
             return None
-        return best
+        est = self.estimator.estimate()
+        if est is None:
+            return None
+        extra = self.current.value_m_s.copy() if self.estimate_current else np.zeros(2)
+        base = self._twin_in(extra)
+        spread = current_spread_m_s(self.current.history)
 
-    def _take_flee(self, t_s: float, est: BodyEstimate, extra: FloatArray, flee: _Flee,
-                   drift_gap_m: float) -> Decision:
-        """Swim away now: the flee's waypoint, a one-leg plan of the twin's swim as its corridor.
+        def gap_of(states: FloatArray, ahead_s: FloatArray) -> FloatArray:
+            return np.subtract(outline_clearance_m(self.world, self.model, states),
+                               drift_allowance_m(spread, ahead_s))
 
-        Counted as a restart (:attr:`max_restarts`); the swimming rules start afresh.
+        wall = time.monotonic()
+        at_once, harbour = find_harbour(base, self.gait, est.state, est.t_s,
+                                        self._stop_window(kind), gap_of,
+                                        self.lookahead_margin_m + HARBOUR_CUSHION_M)
+        wall = time.monotonic() - wall
+        if at_once.gap_m > self.lookahead_margin_m:
+            return None
+        if harbour is None:
+            log.warning("at t = %.2f s the stop (%s) drifts within %.0f mm of an obstacle or "
+                        "wall and no harbour swim keeps %.0f mm: stopping here", t_s, kind,
+                        max(at_once.gap_m, 0.0) * 1000,
+                        (self.lookahead_margin_m + HARBOUR_CUSHION_M) * 1000)
+            self.events.append({"kind": "harbour", "reason": kind, "t_request_s": round(t_s, 3),
+                                "status": "none", "stop_gap_m": _rounded(at_once.gap_m),
+                                "wall_s": round(wall, 4)})
+            return None
+        return self._take_harbour(t_s, est, extra, kind, detail, at_once, harbour, wall)
+
+    def _take_harbour(self, t_s: float, est: BodyEstimate, extra: FloatArray, kind: str,
+                      detail: str, at_once: Harbour, harbour: Harbour, wall_s: float) -> Decision:
+        """Swim the harbour now: its waypoint, a one-leg plan of the twin's swim as its corridor.
+
+        Replans and look-aheads stop: the harbour was judged with its stop, which comes at its
+        end (:meth:`_harbour_frame`).
         """
         dt = self.planner.twin.dt_s
-        leg = Leg(flee.waypoint_m, FLEE_REACH_M, flee.bearing_deg, flee.start_step,
-                  flee.start_step + int(round(FLEE_SWIM_S / dt)), flee.com_m, flee.gap_m)
-        why = (f"the stopped body would drift within {max(drift_gap_m, 0.0) * 1000:.0f} mm of an "
-               f"obstacle or wall; flee at {flee.bearing_deg:+.0f} deg from the heading, "
-               f"{flee.gap_m * 1000:.0f} mm clear in the twin")
-        outcome = Outcome(Plan(True, "flee", why, legs=[leg], start_guide=flee.guide), "flee", why)
-        # its own kind: not a replan (nothing was searched or checked), counted as a restart
-        event = self._event("flee", "flee", t_s, est.t_s, t_s, est.state, outcome, 0.0,
+        self._drop_work()
+        leg = Leg(harbour.waypoint_m, HARBOUR_REACH_M, harbour.bearing_deg, harbour.start_step,
+                  harbour.start_step + int(round(harbour.swim_s / dt)), harbour.com_m,
+                  harbour.gap_m)
+        why = (f"stopping at once would drift within {max(at_once.gap_m, 0.0) * 1000:.0f} mm of "
+               f"an obstacle or wall; a harbour {harbour.swim_s:.1f} s at "
+               f"{harbour.bearing_deg:+.0f} deg from the heading, its swim and stop "
+               f"{harbour.gap_m * 1000:.0f} mm clear in the twin")
+        outcome = Outcome(Plan(True, "harbour", why, legs=[leg], start_guide=harbour.guide),
+                          "harbour", why)
+        event = self._event("harbour", kind, t_s, est.t_s, t_s, est.state, outcome, wall_s,
                             math.nan, extra)
-        event.update({"waypoints_m": [[round(flee.waypoint_m[0], 4), round(flee.waypoint_m[1], 4)]],
-                      "flee_gap_m": round(flee.gap_m, 4), "drift_gap_m": round(drift_gap_m, 4),
-                      "restart": self.restarts + 1, "t_switch_s": round(t_s, 3)})
+        event.update({"waypoints_m": [[round(harbour.waypoint_m[0], 4),
+                                       round(harbour.waypoint_m[1], 4)]],
+                      "swim_s": round(harbour.swim_s, 3), "gap_m": round(harbour.gap_m, 4),
+                      "swim_gap_m": _rounded(harbour.swim_gap_m),
+                      "stop_gap_m": round(harbour.stop_gap_m, 4),
+                      "at_once_gap_m": _rounded(at_once.gap_m),
+                      "t_switch_s": round(t_s, 3), "detail": detail})
         self.events.append(event)
-        self.restarts += 1
         self._take_plan(outcome, extra)
-        self.waypoints = [flee.waypoint_m]
-        self.replans += 1
-        self._afresh(t_s)
-        log.warning("no safe continuation at t = %.2f s and %s: restart %d of %d", t_s, why,
-                    self.restarts, self.max_restarts)
-        d = Decision(waypoints=[flee.waypoint_m], guide=flee.guide, recorded=True)
-        d.detail = f"flee at t = {t_s:.2f} s: {why}"
+        self.waypoints = [harbour.waypoint_m]
+        self._harbour = _HarbourSwim(t_s + harbour.swim_s, kind, detail, event)
+        self._harbour_spent = True
+        log.warning("at t = %.2f s (%s): %s", t_s, kind, why)
+        d = Decision(waypoints=[harbour.waypoint_m], guide=harbour.guide, recorded=True)
+        d.detail = f"harbour at t = {t_s:.2f} s: {why}"
         return d
+
+    def _harbour_frame(self, t_s: float) -> Decision:
+        """Take one frame of a harbour swim: swim on, and at its end the stop it precedes."""
+        swim = self._harbour
+        assert swim is not None
+        if t_s < swim.t_end_s - 1e-9:
+            return Decision()
+        self._harbour = None
+        swim.event["t_end_s"] = round(t_s, 3)
+        if swim.kind == "arrived":
+            return Decision(arrived=True, recorded=True,
+                            detail=f"then a harbour swim of {swim.event['swim_s']:.1f} s")
+        d = Decision(stop="no_safe_continuation", recorded=True, detail=(
+            f"{swim.detail}; stopped after a harbour swim of {swim.event['swim_s']:.1f} s"))
+        if swim.kind == "pause":
+            return self._halt(t_s, d)
+        return d
+
+    def _drop_work(self) -> None:
+        """Cut any replan short and forget every verdict: the robot swims no plan of the search."""
+        job = self._job
+        if job is not None and job.deadline is not None:
+            job.deadline.cut_to(time.monotonic())  # the worker comes back at its next batch
+        self._job = None
+        self._pending = None
+        self._lookahead = None
+        self._whole_job = None
+        self._retry_now = False
+        self._urgent_after_cut = None
+        self.current.drop()
 
     def _paused_frame(self, t_s: float, loc: Localisation, pose: FloatArray | None,
                       offset_rad: float) -> Decision:
@@ -1760,6 +1797,7 @@ class TankReplanner:
         _, waypoints, guide = pause.pending
         self.restarts += 1
         self._pause = None
+        self._harbour_spent = False  # a new plan: its stop may swim a harbour again
         self.estimator.gait = self.gait
         assert pause.extra is not None  # set with the outcome
         self._take_plan(pause.outcome, pause.extra)
@@ -2579,6 +2617,11 @@ class TankReplanner:
             "current_m_s": [round(float(world_current[0] + extra[0]), 4),
                             round(float(world_current[1] + extra[1]), 4)],
         }
+
+
+def _rounded(value: float, digits: int = 4) -> float | None:
+    """A figure for the record: rounded, None when not finite (JSON has no inf)."""
+    return round(value, digits) if math.isfinite(value) else None
 
 
 def _guidance_arg(twin: Twin, guide: Guide | None) -> list[Guide] | None:

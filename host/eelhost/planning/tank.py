@@ -28,6 +28,7 @@ from eelhost.planning.replan import (
     ESCAPE_RAMP_S,
     GOAL_APPROACH_CLEARANCE_M,
     REPLAN_BUDGET_S,
+    STOP_BRAKE_S,
     TankReplanner,
 )
 from eelhost.planning.search import Actions, SearchSettings
@@ -126,7 +127,8 @@ def plan_for_run(
     early_budget_s: float | None = EARLY_BUDGET_S,
     escape: bool = False,
     restarts: int = 0,
-    flee: bool = False,
+    harbour: bool = True,
+    stop_brake_s: float = STOP_BRAKE_S,
 ) -> RunPlan:
     """Plan in a world for ``eelbot run --plan`` (module docstring).
 
@@ -170,9 +172,11 @@ def plan_for_run(
     restarts : int
         Restarts from rest a run may make (``TankReplanner``'s ``max_restarts``; docs/planning.md,
         "A restart from rest"); 0: off (``eelbot run --restarts`` gives 2).
-    flee : bool
-        Swim away where a stop's drift would touch (``TankReplanner``'s ``flee``;
-        docs/planning.md, "The flee"); it takes a restart, so it needs ``restarts``.
+    harbour : bool
+        Before a stop whose drift would touch, swim to where it stays clear
+        (``TankReplanner``'s ``harbour``; docs/planning.md, "The harbour"); on by default.
+    stop_brake_s : float
+        The run loop's brake before its final Stop (``TankReplanner``'s ``stop_brake_s``).
 
     Returns
     -------
@@ -205,7 +209,8 @@ def plan_for_run(
                               early_budget_s=early_budget_s,
                               escape_planner_for=tiers.escape_planner_for if escape else None,
                               rest_escape_planner_for=tiers.escape_planner_for,
-                              max_restarts=restarts, flee=flee)
+                              max_restarts=restarts, harbour=harbour,
+                              stop_brake_s=stop_brake_s)
     return RunPlan(outcome.plan.waypoints_m, navigator, sim_uri_for_world(uri, world), outcome,
                    planner.options.guidance, outcome.plan.start_guide)
 

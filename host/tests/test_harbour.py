@@ -1,0 +1,183 @@
+"""The harbour (docs/planning.md, "The harbour"): a stop the current would carry into something
+is made after a short swim to where it stays clear, at the goal and where no continuation exists."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from eelhost.planning.audit import body_gaps_m
+from eelhost.planning.harbour import (
+    FINAL_GLIDE_S,
+    HARBOUR_CUSHION_M,
+    HARBOUR_SWIMS_S,
+    StopWindow,
+    find_harbour,
+    stop_states,
+)
+from eelhost.planning.planner import Planner
+from eelhost.planning.replan import STOP_BRAKE_S, Decision, outline_clearance_m
+from eelhost.planning.restart import paused_drift, stopped_twin
+from eelhost.planning.world import parse_world
+from eelsim.control import braked_gait
+from eelsim.scenario import PATH_GAIT
+from test_tank_restart import MODEL, N, ROBOT, Blocked, pose_at
+
+
+def disc_world(current_m_s: float) -> dict:
+    """A disc 0.55 m downstream of the goal's centre, the current flowing towards it."""
+    return {
+        "name": "disc",
+        "tank": {"size_m": [3.0, 2.0]},
+        "start": {"position_m": [0.6, 1.0], "heading_deg": 0.0},
+        "goal": {"position_m": [1.3, 1.0], "radius_m": 0.2},
+        "current": {"speed_m_s": current_m_s, "direction_deg": 0.0},
+        "obstacles": [{"kind": "circle", "centre_m": [1.85, 1.0], "radius_m": 0.15}],
+    }
+
+
+@pytest.fixture(scope="module")
+def disc_plan():
+    world = parse_world(disc_world(0.03), "disc")
+    planner = Planner(world, ROBOT, MODEL)
+    outcome = planner.plan()
+    assert outcome.found, outcome.message
+    return world, planner, outcome
+
+
+def body_at(x_m: float, u_m_s: float) -> np.ndarray:
+    """The straight body along +x with its centre of mass at (x, 1), moving at ``u`` along x."""
+    state = np.zeros(2 * N + 4)
+    state[N : N + 2] = (x_m, 1.0)
+    state[2 * N + 2] = u_m_s
+    return state
+
+
+FINAL = StopWindow(lambda t: t + STOP_BRAKE_S, FINAL_GLIDE_S)
+
+
+def test_the_stop_is_swum_as_the_brake_then_the_straight_glide_as_the_pause_s_drift_swims_it(
+        disc_plan):
+    # the batched stops of several bodies against restart.paused_drift (one body, the braked
+    # run then the straight one, written for the pause): the same motion
+    _world, planner, _ = disc_plan
+    twin = planner.twin
+    starts = np.stack([body_at(1.0, 0.1), body_at(1.2, 0.03)])
+    t_s = 6.0
+    batched = stop_states(twin, PATH_GAIT, starts, t_s, FINAL, 3)
+    for j, start in enumerate(starts):
+        one = paused_drift(stopped_twin(twin, braked_gait(PATH_GAIT, t_s)), stopped_twin(twin),
+                           start, t_s, t_s + STOP_BRAKE_S, STOP_BRAKE_S + FINAL_GLIDE_S, 3)
+        rows = min(len(one), len(batched[j]))
+        assert rows > 0.9 * (STOP_BRAKE_S + FINAL_GLIDE_S) / (3 * twin.dt_s)
+        assert np.allclose(batched[j, :rows, N : N + 2], one[:rows, N : N + 2], atol=2e-3)
+    # braked, the body slows: its speed through the water at the brake's end is below a third
+    # of where it started (0.1 m/s forward; the water moves at 0.03 m/s along x)
+    braked_end = batched[0, int(round(STOP_BRAKE_S / (3 * twin.dt_s)))]
+    assert abs(braked_end[2 * N + 2] - 0.03) < 0.1 / 3
+
+
+def test_a_harbour_keeps_its_swim_and_its_stop_clear_by_geometry_written_apart(disc_plan):
+    world, planner, _ = disc_plan
+    twin = planner.twin
+    state = body_at(1.3, 0.03)  # carried by the water towards the disc, its nose 0.23 m from it
+    t_s = 6.0
+
+    def gap_of(states: np.ndarray, ahead_s: np.ndarray) -> np.ndarray:
+        return outline_clearance_m(world, twin.model, states)
+
+    at_once, harbour = find_harbour(twin, PATH_GAIT, state, t_s, FINAL, gap_of, 0.02)
+    assert at_once.swim_s == 0.0 and at_once.gap_m < 0.01  # stopping here drifts into the disc
+    assert harbour is not None and harbour.swim_s in HARBOUR_SWIMS_S
+    assert harbour.gap_m > 0.02 and harbour.gap_m == min(harbour.swim_gap_m, harbour.stop_gap_m)
+    # swum again, the stop by the pause's code, and judged by the audit's shapely centre line
+    dt = twin.dt_s
+    swim = twin.run([[harbour.waypoint_m]], harbour.swim_s + 2 * dt, states=state[None],
+                    start_steps=[harbour.start_step], stride=1).states[0]
+    end_step = int(round(harbour.swim_s / dt))
+    swum = swim[: end_step + 1]
+    assert np.all(np.isfinite(swum[:, 0]))
+    t_end = t_s + end_step * dt
+    stop = paused_drift(stopped_twin(twin, braked_gait(PATH_GAIT, t_end)), stopped_twin(twin),
+                        swum[-1], t_end, t_end + STOP_BRAKE_S, STOP_BRAKE_S + FINAL_GLIDE_S, 3)
+    assert len(stop) > 0.9 * (STOP_BRAKE_S + FINAL_GLIDE_S) / (3 * dt)
+    assert float(np.min(body_gaps_m(world, MODEL.swimmer_for(ROBOT), swum[::3]))) > 0.01
+    assert float(np.min(body_gaps_m(world, MODEL.swimmer_for(ROBOT), stop))) > 0.01
+    # and the stop straight after arriving there, swum the same way, would touch
+    now = paused_drift(stopped_twin(twin, braked_gait(PATH_GAIT, t_s)), stopped_twin(twin),
+                       state, t_s, t_s + STOP_BRAKE_S, STOP_BRAKE_S + FINAL_GLIDE_S, 3)
+    assert float(np.min(body_gaps_m(world, MODEL.swimmer_for(ROBOT), now))) < 0.01
+
+
+def run_frames(nav, com, seconds: float, until=lambda d: d.stop is not None, blind_s=0.0):
+    """Frames of the body seen still at ``com`` (the water carries it: it holds its place).
+
+    For the first ``blind_s`` the guidance has no filtered pose (the estimate gathers frames).
+    """
+    decisions: list[tuple[float, Decision]] = []
+    try:
+        for k in range(int(seconds * 30)):
+            t = k / 30
+            pose = None if t < blind_s else np.array([*com, 0.0])
+            d = nav.on_frame(t, pose_at(t, com), pose, 0, 0.0)
+            decisions.append((t, d))
+            nav.pace(t)
+            if until(d):
+                break
+            nav._worker.submit(lambda: None).result()
+            nav._side.submit(lambda: None).result()
+    finally:
+        nav.close()
+    return decisions
+
+
+def test_an_arrival_the_current_would_carry_into_an_obstacle_swims_a_harbour_then_arrives(
+        disc_plan):
+    _world, planner, outcome = disc_plan
+    com = (1.3, 1.0)  # in the goal disc
+    for harbour in (True, False):
+        nav = Blocked(lambda extra: planner, planner, outcome, PATH_GAIT, lookahead_s=0.0,
+                      harbour=harbour)
+        decisions = run_frames(nav, com, 6.0, until=lambda d: d.arrived or d.stop is not None,
+                               blind_s=0.5)
+        t_end, last = decisions[-1]
+        assert last.arrived and last.stop is None
+        first_t, first = next((t, d) for t, d in decisions if t >= 0.5)
+        if not harbour:  # as before: arrived at the first frame seen in the disc
+            assert t_end == first_t and not any(d.waypoints for _, d in decisions)
+            continue
+        assert first.waypoints and not first.arrived  # a harbour swim instead of the arrival
+        event = next(e for e in nav.events if e["kind"] == "harbour")
+        assert event["reason"] == "arrived" and event["swim_s"] in HARBOUR_SWIMS_S
+        assert event["at_once_gap_m"] <= nav.lookahead_margin_m
+        assert event["gap_m"] > nav.lookahead_margin_m + HARBOUR_CUSHION_M
+        # the goal waits for the harbour's end, and the record says so
+        assert t_end == pytest.approx(first_t + event["swim_s"], abs=1 / 30 + 1e-9)
+        assert "harbour" in last.detail and event["t_end_s"] == pytest.approx(t_end)
+        assert not any(d.arrived for _, d in decisions[:-1])
+
+
+def test_where_no_continuation_exists_the_harbour_comes_before_the_pause_or_the_final_stop():
+    # the goal up the tank, the body seen 0.75 m off the plan's corridor in the disc's stream:
+    # every replan is refused, and the stop it leads to would drift into the disc
+    world = parse_world({**disc_world(0.03), "goal": {"position_m": [0.6, 1.6], "radius_m": 0.2},
+                         "start": {"position_m": [0.6, 0.9], "heading_deg": 90.0}}, "up")
+    planner = Planner(world, ROBOT, MODEL)
+    outcome = planner.plan()
+    assert outcome.found, outcome.message
+    for restarts in (1, 0):
+        nav = Blocked(lambda extra: planner, planner, outcome, PATH_GAIT, lookahead_s=0.0,
+                      max_restarts=restarts)
+        decisions = run_frames(nav, (1.35, 1.0), 8.0,
+                               until=lambda d: d.stop is not None or d.pause)
+        event = next(e for e in nav.events if e["kind"] == "harbour")
+        t_end, last = decisions[-1]
+        assert event["reason"] == ("pause" if restarts else "stop")
+        t_harbour = next(t for t, d in decisions if d.waypoints)  # at the refused replan
+        assert t_harbour < 0.5 and event["t_request_s"] == pytest.approx(t_harbour)
+        assert t_end == pytest.approx(t_harbour + event["swim_s"], abs=1 / 30 + 1e-9)
+        if restarts:
+            assert last.pause and nav._pause is not None  # then the pause, as before
+            assert nav.events[-1]["kind"] == "halt" and "harbour swim" in nav.events[-1]["detail"]
+        else:
+            assert last.stop == "no_safe_continuation" and "harbour swim" in last.detail
