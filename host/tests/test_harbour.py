@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from test_tank_restart import MODEL, ROBOT, Blocked, N, pose_at
 
 from eelhost.planning.audit import body_gaps_m
 from eelhost.planning.harbour import (
@@ -18,10 +19,10 @@ from eelhost.planning.harbour import (
 from eelhost.planning.planner import Planner
 from eelhost.planning.replan import STOP_BRAKE_S, Decision, outline_clearance_m
 from eelhost.planning.restart import paused_drift, stopped_twin
+from eelhost.planning.twin import Twin
 from eelhost.planning.world import parse_world
 from eelsim.control import braked_gait
 from eelsim.scenario import PATH_GAIT
-from test_tank_restart import MODEL, N, ROBOT, Blocked, pose_at
 
 
 def disc_world(current_m_s: float) -> dict:
@@ -181,3 +182,32 @@ def test_where_no_continuation_exists_the_harbour_comes_before_the_pause_or_the_
             assert nav.events[-1]["kind"] == "halt" and "harbour swim" in nav.events[-1]["detail"]
         else:
             assert last.stop == "no_safe_continuation" and "harbour swim" in last.detail
+
+
+def test_a_body_braked_in_a_hard_turn_drifts_whole_in_the_twin():
+    # swum 3 s round towards its tail in a 0.05 m/s stream, the body is braked mid-turn: its
+    # brake's S overshoots the joints' mechanical limit by millimetres of a radian, a flag that
+    # ended the drift's run after 0.1 s; the stopped twin swims the whole stop
+    world = parse_world({**disc_world(0.05), "obstacles": []}, "stream")
+    twin = Planner(world, ROBOT, MODEL).twin
+    dt = twin.dt_s
+    state = body_at(1.5, 0.05)
+    start = int(round(6.0 / dt))
+    swum = twin.run([[(-0.5, 1.0)]], 3.0 + 2 * dt, states=state[None], start_steps=[start],
+                    stride=1).states[0]
+    turning = swum[int(round(3.0 / dt))]
+    t_s = (start + int(round(3.0 / dt))) * dt
+    stop = stop_states(twin, PATH_GAIT, turning[None], t_s, FINAL, 3)[0]
+    assert np.all(np.isfinite(stop[:, 0]))
+    assert len(stop) >= (STOP_BRAKE_S + FINAL_GLIDE_S) / (3 * dt)
+    # with the robot's own limit, the braked run is flagged and ends early
+    limited = stopped_twin(twin, braked_gait(PATH_GAIT, t_s))
+    limited = Twin(twin.robot, limited.coefficients, limited.gait, limited.options,
+                   limited.current_m_s, limited.acceptance_radius_m, limited.threads,
+                   limited.model)
+    heading = float(np.mean(turning[:N]))
+    far = (turning[N] + 1e3 * np.cos(heading), turning[N + 1] + 1e3 * np.sin(heading))
+    runs = limited.run([[far]], STOP_BRAKE_S, states=turning[None],
+                       start_steps=[int(round(t_s / dt))], stride=3)
+    assert "beyond its limit" in runs.reasons[0]
+    assert stopped_twin(twin).robot.joints.limit_rad > np.pi - 1e-12
