@@ -151,6 +151,11 @@ class WorldResult:
         The true body overlapped an obstacle or wall while stopping.
     coast_s : float
         How long the glide after the Stop lasted (0 in results written before it).
+    harbours : list of str
+        The stops a harbour swim came before (``arrived``, ``pause``, ``stop``; docs/planning.md,
+        "The harbour"), one per swim.
+    harbourless : int
+        Stops the twin drifted within the margin for which no harbour swim kept it.
     """
 
     seed: int
@@ -190,6 +195,8 @@ class WorldResult:
     coast_clearance_m: float | None = None
     coast_contact: bool = False
     coast_s: float = 0.0
+    harbours: list[str] = field(default_factory=list)
+    harbourless: int = 0
 
 
 def calm_and_early(replans: list[dict], replan_budget_s: float | None
@@ -414,7 +421,9 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
         sum("cut_for" in e for e in calm), len(early), sum(e["status"] == "found" for e in early),
         sum("cut_for" in e for e in early), nav.restarts,
         sum(e["kind"] == "halt" for e in nav.events), float(stopping.min()),
-        bool(stopping.min() < 0.0), coast_s)
+        bool(stopping.min() < 0.0), coast_s,
+        [e["reason"] for e in nav.events if e["kind"] == "harbour" and e["status"] == "harbour"],
+        sum(e["kind"] == "harbour" and e["status"] == "none" for e in nav.events))
 
 
 def glide_on(robot: VirtualRobot, longest_s: float = COAST_AUDIT_S,
@@ -652,6 +661,15 @@ def summary_lines(results: list[WorldResult]) -> list[str]:
         lines.append(f"- pauses for a restart from rest: {sum(r.pauses for r in paused)} in "
                      f"{len(paused)} runs, restarts made {sum(r.restarts for r in paused)}; "
                      f"{sum(r.reached for r in paused)} of these runs reached the goal")
+    harboured = [r for r in planned if r.harbours or r.harbourless]
+    if harboured:
+        kinds = Counter(k for r in harboured for k in r.harbours)
+        lines.append(f"- harbour swims before a stop the twin drifted within the margin: "
+                     f"{sum(len(r.harbours) for r in harboured)} in {len(harboured)} runs ("
+                     + ", ".join(f"{k} {v}" for k, v in sorted(kinds.items()))
+                     + f"); none found for {sum(r.harbourless for r in harboured)} stops; "
+                     f"{sum(r.coast_contact for r in harboured)} of these runs touched while "
+                     "stopping")
     cpus = [c for r in planned for c in r.replan_cpu_s]
     if cpus:
         lines.append(f"- replans' processor time: median {statistics.median(cpus):.2f} s, "

@@ -368,6 +368,10 @@ STOP_BRAKE_S = 3.0
 """The run loop's brake before its final Stop with ``--plan`` (``eelhost.field.runloop.BRAKE_S``,
 which ``eelbot run`` passes as ``stop_brake_s``): how the harbour swims a final stop."""
 
+HARBOURS_PER_PLAN = 2
+"""Harbour swims a plan's stops may take: at the end of one, the stop is judged again from where
+the robot is, and a second swim may follow (docs/planning.md, "The harbour")."""
+
 STOP_ALLOWANCE_S = 1.0
 """The robot's time kept ahead of a predicted contact for a stop when a replan then fails: the
 brake (docs/planning.md, "The brake in the pause") stops a body swimming 0.05-0.12 m/s within
@@ -1048,7 +1052,7 @@ class TankReplanner:
         self.harbour = harbour
         self.stop_brake_s = stop_brake_s
         self._harbour: _HarbourSwim | None = None  # the harbour swum now
-        self._harbour_spent = False  # a harbour was swum since the last plan: the next stop stands
+        self._harbours_swum = 0  # since the last plan: at HARBOURS_PER_PLAN the next stop stands
         self.retries_before_contact = 0  # replans asked for instead of a stop (the record's)
         # the robot's time of the first contact the latest look-ahead predicts (inf: none)
         self._contact_at_s = math.inf
@@ -1500,7 +1504,7 @@ class TankReplanner:
         keeps the look-ahead's margin, or no harbour keeps the margin and the cushion, the stop
         stands (docs/planning.md, "The harbour").
         """
-        if not self.harbour or self._harbour_spent:
+        if not self.harbour or self._harbours_swum >= HARBOURS_PER_PLAN:
             return None
         est = self.estimator.estimate()
         if est is None:
@@ -1562,7 +1566,7 @@ class TankReplanner:
         self._take_plan(outcome, extra)
         self.waypoints = [harbour.waypoint_m]
         self._harbour = _HarbourSwim(t_s + harbour.swim_s, kind, detail, event)
-        self._harbour_spent = True
+        self._harbours_swum += 1
         log.warning("at t = %.2f s (%s): %s", t_s, kind, why)
         d = Decision(waypoints=[harbour.waypoint_m], guide=harbour.guide, recorded=True)
         d.detail = f"harbour at t = {t_s:.2f} s: {why}"
@@ -1576,6 +1580,11 @@ class TankReplanner:
             return Decision()
         self._harbour = None
         swim.event["t_end_s"] = round(t_s, 3)
+        # judged again from where the robot is: the water it swam may not be the twin's (a
+        # harbour's stop judged 143 mm clear was 5 mm clear at its end, development seed 33005)
+        again = self._stop_safely(t_s, swim.kind, swim.detail)
+        if again is not None:
+            return again
         if swim.kind == "arrived":
             return Decision(arrived=True, recorded=True,
                             detail=f"then a harbour swim of {swim.event['swim_s']:.1f} s")
@@ -1797,7 +1806,7 @@ class TankReplanner:
         _, waypoints, guide = pause.pending
         self.restarts += 1
         self._pause = None
-        self._harbour_spent = False  # a new plan: its stop may swim a harbour again
+        self._harbours_swum = 0  # a new plan: its stops may swim harbours again
         self.estimator.gait = self.gait
         assert pause.extra is not None  # set with the outcome
         self._take_plan(pause.outcome, pause.extra)
