@@ -225,3 +225,37 @@ def test_a_body_braked_in_a_hard_turn_drifts_whole_in_the_twin():
                        start_steps=[int(round(t_s / dt))], stride=3)
     assert "beyond its limit" in runs.reasons[0]
     assert stopped_twin(twin).robot.joints.limit_rad > np.pi - 1e-12
+
+
+def test_a_pause_s_rest_budget_leaves_the_final_stop_room_in_the_drift():
+    # the stopped body drifts towards the disc and comes within the margin some seconds on: the
+    # rest replan's budget ends early enough that, should it fail, the final stop's brake and
+    # glide after it still keep clear; without a final brake the budget is longer
+    world = parse_world({**disc_world(0.03), "goal": {"position_m": [0.6, 1.6], "radius_m": 0.2},
+                         "start": {"position_m": [0.6, 0.9], "heading_deg": 90.0}}, "up")
+    planner = Planner(world, ROBOT, MODEL)
+    outcome = planner.plan()
+    budgets = {}
+    for brake_s in (STOP_BRAKE_S, 0.0):
+        nav = Blocked(lambda extra: planner, planner, outcome, PATH_GAIT, lookahead_s=0.0,
+                      max_restarts=1, harbour=False, stop_brake_s=brake_s,
+                      rest_budget_max_s=8.0)
+        try:
+            for k in range(30):
+                t = k / 30
+                d = nav.on_frame(t, pose_at(t, (1.1, 1.0)), np.array([1.1, 1.0, 0.0]), 0, 0.0)
+                if d.pause:
+                    break
+                nav._worker.submit(lambda: None).result()
+            pause = nav._pause
+            assert pause is not None and pause.drift is not None
+            gap, budget, clear_s = pause.drift.result()
+        finally:
+            nav.close()
+        assert gap > nav.lookahead_margin_m  # the pause is clear at first
+        if brake_s:  # and the drift comes within the margin within the horizon
+            assert clear_s < nav.rest_settle_s + 8.0 + brake_s + FINAL_GLIDE_S - 0.5
+        assert budget == pytest.approx(max(nav.rest_budget_s, min(
+            8.0, clear_s - nav.rest_settle_s - max(0.5, brake_s + FINAL_GLIDE_S))), abs=1e-9)
+        budgets[brake_s] = budget
+    assert budgets[STOP_BRAKE_S] < budgets[0.0] - 1.0

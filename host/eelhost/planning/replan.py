@@ -1457,14 +1457,20 @@ class TankReplanner:
         such gap until :data:`DRIFT_AFTER_S` after a restart with the least budget
         (``rest_budget_s``), and the rest replan's budget: the longest, up to
         ``rest_budget_max_s``, whose restart the drift keeps clear of the look-ahead's margin
-        until :data:`DRIFT_AFTER_S` after it; and how long after the stop the drift stays clear
+        until :data:`DRIFT_AFTER_S` after it, and should the rest replan fail, through the final
+        stop's brake and glide after it (``stop_brake_s`` and
+        :data:`~eelhost.planning.harbour.FINAL_GLIDE_S`); and how long after the stop the drift stays clear
         (the horizon, at least :data:`REST_PAUSE_MAX_S` with retries, when it never comes near),
         which bounds the later tries (``rest_tries``). A braked pause's earliest restart is
         :attr:`rest_settle_s` after its brake's end (:meth:`_request_rest`).
         """
         base = self._twin_in(extra)
         stride = 3
-        horizon = self.rest_settle_s + max(self.rest_budget_s, self.rest_budget_max_s) + DRIFT_AFTER_S
+        # a failed rest replan ends the run with the final stop then: the drift must stay clear
+        # through it too (development seed 33033: a 5 s budget, the replan out of time, and the
+        # final stop after it touched 20 mm deep; docs/planning.md, "The harbour")
+        after = max(DRIFT_AFTER_S, self.stop_brake_s + FINAL_GLIDE_S)
+        horizon = self.rest_settle_s + max(self.rest_budget_s, self.rest_budget_max_s) + after
         if self.rest_tries > 1:
             horizon = max(horizon, REST_PAUSE_MAX_S + DRIFT_AFTER_S)
         # the earliest restart, from now: the least budget's, or after a brake's end
@@ -1482,7 +1488,7 @@ class TankReplanner:
         near = np.flatnonzero(gap <= self.lookahead_margin_m)
         clear_s = float(ahead[near[0]]) if near.size else horizon
         budget = min(max(self.rest_budget_s, self.rest_budget_max_s),
-                     clear_s - self.rest_settle_s - DRIFT_AFTER_S)
+                     clear_s - self.rest_settle_s - after)
         return float(np.min(gap[least])), max(budget, self.rest_budget_s), clear_s
 
     def _stop_window(self, kind: str) -> StopWindow:
