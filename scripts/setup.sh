@@ -46,5 +46,19 @@ fi
 # candidates), compiled into the on-disk cache two at a time (20-30 s each the first time, under
 # a second once cached), so that the main job does not pay for them; the stage compiled by the C
 # compiler when there is one, else by numba. The test command warms the tests' own variants.
-.venv/bin/python scripts/warm_kernels.py main 2 | sed -u 's/^kernels:/setup: kernel/'
+# Loading thirty cached kernels to check them takes seconds of every run; a stamp in the kernel
+# cache folder (so that emptying the folder voids it) records what they were built from: the
+# twin's and the host's sources (the generator, the laws and joint models it reads), the
+# installed packages, the compiler and the CPU. The stamp matching, nothing is loaded.
+cache=${EELSIM_KERNEL_CACHE:-sim/eelsim/batch/__pycache__/batch_kernels}
+kstamp="$cache/.eelbot-main-warm"
+kwant=$( { find sim/eelsim host/eelhost scripts/warm_kernels.py -name '*.py' -print0 | sort -z \
+             | xargs -0 cat; cat "$stamp"; .venv/bin/python --version; cc --version 2>/dev/null;
+           grep -m1 '^flags' /proc/cpuinfo 2>/dev/null; } | sha256sum | cut -c1-16)
+if [ -f "$kstamp" ] && [ "$(cat "$kstamp")" = "$kwant" ]; then
+  echo "setup: kernels ready (cached; $kstamp)"
+else
+  .venv/bin/python scripts/warm_kernels.py main 2 | sed -u 's/^kernels:/setup: kernel/'
+  if [ -d "$cache" ]; then echo "$kwant" > "$kstamp"; fi
+fi
 echo "setup: ready ($root/.venv)"
