@@ -3,6 +3,8 @@ is made after a short swim to where it stays clear, at the goal and where no con
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import pytest
 from test_tank_restart import MODEL, ROBOT, Blocked, N, pose_at
@@ -16,7 +18,7 @@ from eelhost.planning.harbour import (
     find_harbour,
     stop_states,
 )
-from eelhost.planning.planner import Planner
+from eelhost.planning.planner import Outcome, Planner
 from eelhost.planning.replan import (
     HARBOURS_PER_PLAN,
     STOP_BRAKE_S,
@@ -24,6 +26,7 @@ from eelhost.planning.replan import (
     outline_clearance_m,
 )
 from eelhost.planning.restart import paused_drift, stopped_twin
+from eelhost.planning.search import Plan
 from eelhost.planning.twin import Twin
 from eelhost.planning.world import parse_world
 from eelsim.control import braked_gait
@@ -259,3 +262,49 @@ def test_a_pause_s_rest_budget_leaves_the_final_stop_room_in_the_drift():
             8.0, clear_s - nav.rest_settle_s - max(0.5, brake_s + FINAL_GLIDE_S))), abs=1e-9)
         budgets[brake_s] = budget
     assert budgets[STOP_BRAKE_S] < budgets[0.0] - 1.0
+
+
+class PausedThenRefused(Blocked):
+    """A pause judged clear whose rest replan fails at once; no harbour before the pause itself.
+
+    It isolates the final stop after a failed pause (the halt's own harbour is the tests' above).
+    """
+
+    def _stop_safely(self, t_s, kind, detail, gait=None):  # noqa: ANN001, ANN202
+        return None if kind == "pause" else super()._stop_safely(t_s, kind, detail, gait)
+
+    def _drift_gap(self, est, extra, pause):  # noqa: ANN001, ANN202
+        return 1.0, self.rest_budget_s, 30.0
+
+    def _rest_replan(self, est, start_step, extra, deadline_s, recheck, pause):  # noqa: ANN001, ANN202
+        plan = Plan(False, "exhausted", "no plan (exhausted)")
+        return (Outcome(plan, "exhausted", plan.message), est.state, 0.0, 0.0, np.zeros(2),
+                time.monotonic(), start_step)
+
+
+def test_a_final_stop_after_a_failed_pause_swims_a_harbour_from_the_brake_s_frozen_phase():
+    world = parse_world({**disc_world(0.03), "goal": {"position_m": [0.6, 1.6], "radius_m": 0.2},
+                         "start": {"position_m": [0.6, 0.9], "heading_deg": 90.0}}, "up")
+    planner = Planner(world, ROBOT, MODEL)
+    outcome = planner.plan()
+    nav = PausedThenRefused(lambda extra: planner, planner, outcome, PATH_GAIT, lookahead_s=0.0,
+                            max_restarts=1)
+    decisions = run_frames(nav, (1.35, 1.0), 8.0)
+    paused = [t for t, d in decisions if d.pause]
+    restarted = [(t, d) for t, d in decisions if d.restart]
+    assert paused and len(restarted) == 1
+    t_restart, d = restarted[0]
+    halt = next(e for e in nav.events if e["kind"] == "halt")
+    assert t_restart < halt["brake_until_s"]  # the rest replan failed while braked
+    assert d.waypoints and d.stop is None
+    event = next(e for e in nav.events if e["kind"] == "harbour")
+    assert event["reason"] == "stop" and event["t_request_s"] == pytest.approx(t_restart, abs=1e-3)
+    # the harbour swims the gait on from the phase the brake froze (the firmware's)
+    braked = braked_gait(PATH_GAIT, paused[0])
+    resumed = nav.estimator.gait
+    lead = resumed.phase_rad + PATH_GAIT.omega_rad_s * t_restart - braked.phase_rad
+    assert abs(np.remainder(lead + np.pi, 2 * np.pi) - np.pi) < 1e-9
+    assert resumed.amplitude_rad == PATH_GAIT.amplitude_rad
+    t_end, last = decisions[-1]
+    assert last.stop == "no_safe_continuation" and "harbour swim" in last.detail
+    assert t_end >= t_restart + event["swim_s"] - 1e-9

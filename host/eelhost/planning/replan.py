@@ -761,6 +761,7 @@ class _HarbourSwim(NamedTuple):
     kind: str  # the stop it precedes: ``arrived``, ``pause`` or ``stop``
     detail: str  # that stop's reason
     event: dict[str, Any]  # its record
+    gait: Gait  # the gait it swims (a braked pause's resumes from its frozen phase)
 
 
 @dataclass
@@ -1502,21 +1503,24 @@ class TankReplanner:
                 self.rest_settle_s + self.rest_budget_s + DRIFT_AFTER_S)
         return StopWindow(lambda t: t + self.stop_brake_s, FINAL_GLIDE_S)
 
-    def _stop_safely(self, t_s: float, kind: str, detail: str) -> Decision | None:
+    def _stop_safely(self, t_s: float, kind: str, detail: str, gait: Gait | None = None
+                     ) -> Decision | None:
         """A harbour swim before the stop of ``kind``, or None: the stop goes on as decided.
 
         The twin swims the stop decided now and the harbour candidates from the estimate in the
         estimated water (:func:`eelhost.planning.harbour.find_harbour`). When the stop at once
         keeps the look-ahead's margin, or no harbour keeps the margin and the cushion, the stop
-        stands (docs/planning.md, "The harbour").
+        stands (docs/planning.md, "The harbour"). ``gait``: the gait the harbour swims (default
+        the run's; a braked pause's resumes from its frozen phase).
         """
+        gait = gait or self.gait
         if not self.harbour or self._harbours_swum >= HARBOURS_PER_PLAN:
             return None
         est = self.estimator.estimate()
         if est is None:
             return None
         extra = self.current.value_m_s.copy() if self.estimate_current else np.zeros(2)
-        base = self._twin_in(extra)
+        base = self._twin_in(extra, gait)
         spread = current_spread_m_s(self.current.history)
 
         def gap_of(states: FloatArray, ahead_s: FloatArray) -> FloatArray:
@@ -1524,7 +1528,7 @@ class TankReplanner:
                                drift_allowance_m(spread, ahead_s))
 
         wall = time.monotonic()
-        at_once, harbour = find_harbour(base, self.gait, est.state, est.t_s,
+        at_once, harbour = find_harbour(base, gait, est.state, est.t_s,
                                         self._stop_window(kind), gap_of,
                                         self.lookahead_margin_m + HARBOUR_CUSHION_M)
         wall = time.monotonic() - wall
@@ -1539,10 +1543,12 @@ class TankReplanner:
                                 "status": "none", "stop_gap_m": _rounded(at_once.gap_m),
                                 "wall_s": round(wall, 4)})
             return None
-        return self._take_harbour(t_s, est, extra, kind, detail, at_once, harbour, wall)
+        self.estimator.gait = gait  # the harbour's frames swim it
+        return self._take_harbour(t_s, est, extra, kind, detail, at_once, harbour, wall, gait)
 
     def _take_harbour(self, t_s: float, est: BodyEstimate, extra: FloatArray, kind: str,
-                      detail: str, at_once: Harbour, harbour: Harbour, wall_s: float) -> Decision:
+                      detail: str, at_once: Harbour, harbour: Harbour, wall_s: float,
+                      gait: Gait) -> Decision:
         """Swim the harbour now: its waypoint, a one-leg plan of the twin's swim as its corridor.
 
         Replans and look-aheads stop: the harbour was judged with its stop, which comes at its
@@ -1571,7 +1577,7 @@ class TankReplanner:
         self.events.append(event)
         self._take_plan(outcome, extra)
         self.waypoints = [harbour.waypoint_m]
-        self._harbour = _HarbourSwim(t_s + harbour.swim_s, kind, detail, event)
+        self._harbour = _HarbourSwim(t_s + harbour.swim_s, kind, detail, event, gait)
         self._harbours_swum += 1
         log.warning("at t = %.2f s (%s): %s", t_s, kind, why)
         d = Decision(waypoints=[harbour.waypoint_m], guide=harbour.guide, recorded=True)
@@ -1588,7 +1594,7 @@ class TankReplanner:
         swim.event["t_end_s"] = round(t_s, 3)
         # judged again from where the robot is: the water it swam may not be the twin's (a
         # harbour's stop judged 143 mm clear was 5 mm clear at its end, development seed 33005)
-        again = self._stop_safely(t_s, swim.kind, swim.detail)
+        again = self._stop_safely(t_s, swim.kind, swim.detail, swim.gait)
         if again is not None:
             return again
         if swim.kind == "arrived":
@@ -1641,7 +1647,7 @@ class TankReplanner:
             self.events[-1]["rest_budget_s"] = round(pause.budget_s, 3)
             d.recorded = True
             if not gap > self.lookahead_margin_m:
-                return self._end_pause(d, (
+                return self._end_pause(t_s, d, (
                     f"the twin drifts the stopped body within {max(gap, 0.0) * 1000:.0f} mm of an "
                     f"obstacle or wall (its outline, less the current's drift allowance; "
                     f"limit {self.lookahead_margin_m * 1000:.0f} mm)"))
@@ -1668,7 +1674,7 @@ class TankReplanner:
                 # not back, or over sim:// the robot has not yet lived the planner's time
                 if late:
                     pause.job = None
-                    return self._end_pause(d, (
+                    return self._end_pause(t_s, d, (
                         f"the replan from rest asked for at t = {job.t_request_s:.2f} s was not "
                         f"back by t = {t_s:.2f} s, {t_s - job.t_start_s:.2f} s after the state "
                         f"it starts from"))
@@ -1688,10 +1694,10 @@ class TankReplanner:
             if not outcome.found:
                 if self._rest_retry(t_s, pause):
                     return d
-                return self._end_pause(d, f"the replan from rest failed: {outcome.message}")
+                return self._end_pause(t_s, d, f"the replan from rest failed: {outcome.message}")
             if t_s > job.t_start_s + self.max_lead_s:
                 self.events[-1]["status"] = "stale"
-                return self._end_pause(d, (
+                return self._end_pause(t_s, d, (
                     f"the replan from rest was ready at t = {t_s:.2f} s, {t_s - job.t_start_s:.2f} "
                     f"s after the state it starts from ({outcome.message})"))
             pause.outcome, pause.extra = outcome, extra
@@ -1845,15 +1851,33 @@ class TankReplanner:
         self.outcome = outcome
         self.path = corridor_path(outcome.plan)
 
-    def _end_pause(self, d: Decision, why: str) -> Decision:
-        """No restart: the run ends with ``no_safe_continuation``, naming the tried restart."""
+    def _end_pause(self, t_s: float, d: Decision, why: str) -> Decision:
+        """No restart: the run ends with ``no_safe_continuation``, naming the tried restart.
+
+        A final stop whose drift the twin predicts within the margin is made after a harbour
+        swim, the gait swum again for it; during the brake the firmware's phase is frozen and
+        resumes from there, so the harbour swims the gait with that phase (docs/planning.md,
+        "The harbour").
+        """
         pause = self._pause
         assert pause is not None
         d.stop = "no_safe_continuation"
         d.detail = (f"{pause.detail}; restart {self.restarts + 1} of {self.max_restarts} from rest "
                     f"(stopped at t = {pause.t_halt_s:.2f} s) not made: {why}")
         d.recorded = True
-        return d
+        gait = self.gait
+        if pause.braked is not None and not pause.unbraked:
+            # the phase resumes where the brake froze it: omega (t - t_s) + frozen
+            gait = dataclasses.replace(self.gait, phase_rad=pause.braked.phase_rad
+                                       - self.gait.omega_rad_s * t_s)
+        harbour = self._stop_safely(t_s, "stop", d.detail, gait)
+        if harbour is None:
+            return d
+        if pause.job is not None and pause.job.deadline is not None:
+            pause.job.deadline.cut_to(time.monotonic())
+        self._pause = None
+        harbour.restart = True
+        return harbour
 
     # -- contact ---------------------------------------------------------------------------------
 
@@ -2480,12 +2504,12 @@ class TankReplanner:
         near_s = (now + int(within[0]) * stride) * twin.dt_s if within.size else math.inf
         return Ahead(float(outline.min()), float(capsule.min()), contact, near_s, bare)
 
-    def _twin_in(self, extra: FloatArray) -> Twin:
-        """The planner's twin in the world's current plus the estimate ``extra``."""
+    def _twin_in(self, extra: FloatArray, gait: Gait | None = None) -> Twin:
+        """The planner's twin in the world's current plus the estimate ``extra`` (and ``gait``)."""
         planner, planner_extra = self._planned  # one read: the replan thread may swap it
         twin = planner.twin
         current = np.add(planner.world.current_m_s, extra - planner_extra)
-        return Twin(twin.robot, twin.coefficients, twin.gait, twin.options,
+        return Twin(twin.robot, twin.coefficients, gait or twin.gait, twin.options,
                     (float(current[0]), float(current[1])), twin.acceptance_radius_m, twin.threads,
                     twin.model)
 
