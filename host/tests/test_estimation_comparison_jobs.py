@@ -39,3 +39,22 @@ def test_the_comparison_in_two_worker_processes_scores_exactly_as_the_serial_run
         assert b.simulations == a.simulations > 0
     # the workers' runs reach this process's count (the progress line's sims=)
     assert spread_runs == serial_runs == sum(c.simulations for c in serial)
+
+
+@pytest.mark.slow
+def test_the_reports_bootstraps_in_worker_processes_are_the_serial_runs(tmp_path):
+    # each fit's identifiability and bootstrap run as one task per fit (estimation/report.py):
+    # in two worker processes they must give the serial run's intervals, bit for bit
+    import json
+
+    from eelhost.estimation.report import run_report
+
+    dataset = load_dataset(BUNDLED_DATASET)
+    data = {}
+    for jobs in (1, 2):
+        run_report(dataset, tmp_path / str(jobs), settings=replace(SMALL, jobs=jobs),
+                   bootstrap_replicates=2, compare_models=False)
+        data[jobs] = json.loads((tmp_path / str(jobs) / "coefficients.json").read_text())
+    for key in ("uncertainty", "identifiability", "prediction_band", "fits"):
+        assert data[2][key] == data[1][key]
+    assert set(data[1]["uncertainty"]) == {"straight", "turning"}

@@ -47,8 +47,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="report the robot file's model even when the comparison recommends "
                    "another (default: fit the recommended model and report its fits)")
     p.add_argument("--jobs", type=number(int, minimum=1), default=None, metavar="N",
-                   help="worker processes of the comparison's independent fits (default: one "
-                   "per core; 1: none). The scores are the same for every N")
+                   help="worker processes of the comparison's independent fits and of the "
+                   "chosen model's fits and bootstraps, one per motion (default: one per core; "
+                   "1: none). The results are the same for every N")
     add_fit_options(p)
     p.set_defaults(run=run)
 

@@ -37,6 +37,10 @@ log = logging.getLogger(__name__)
 Fit = Callable[[str, "ParameterSpace | None", "np.ndarray | None"], tuple[FitResult, Evaluator]]
 """(motion, space or None for the robot file's model, start or None) -> (result, evaluator)."""
 
+FitMany = Callable[[Sequence[tuple[str, "ParameterSpace | None", "np.ndarray | None"]]],
+                   list[tuple[FitResult, Evaluator]]]
+"""Several :data:`Fit` asks at once (the report's runs them in worker processes), in order."""
+
 
 @dataclass
 class ChosenFits:
@@ -81,6 +85,7 @@ def fit_and_choose(
     say: Callable[[str], None] | None = None,
     laws: Sequence[str] | None = None,
     joint_models: Sequence[str] | None = None,
+    fit_many: FitMany | None = None,
 ) -> ChosenFits:
     """Compare the candidate models, then fit the recommended one with the full method.
 
@@ -113,6 +118,9 @@ def fit_and_choose(
     joint_models : sequence of str, optional
         The joint models it tries (default: those offered by default and the robot file's,
         ``eelsim.joints.default_grid_models``).
+    fit_many : callable, optional
+        Makes several independent fits at once, e.g. the straight and turning fits side by
+        side (default: ``fit`` on each in turn).
 
     Returns
     -------
@@ -128,7 +136,7 @@ def fit_and_choose(
     own = ParameterSpace.for_robot(dataset.robot, current=settings.fit_current)
     separate = [m for m in motions if m != "joint"]
     if not (compare and separate):
-        return _fit_all(fit, motions, None, None)
+        return _fit_all(fit, fit_many, motions, None, None)
     with phase(f"cross-validation of the candidate models ({', '.join(separate)})",
                simulations_counter()):
         comparison = cross_validate(dataset, separate, settings, laws=laws, say=say,
@@ -136,16 +144,16 @@ def fit_and_choose(
     choice = recommend(comparison)
     if choice is None or choice.space is None:
         say("every candidate model failed its cross-validation: the robot file's model is fitted")
-        return replace(_fit_all(fit, motions, None, None), comparison=comparison)
+        return replace(_fit_all(fit, fit_many, motions, None, None), comparison=comparison)
     say(f"recommended model: {choice.model}")
     kept = next((c for c in comparison if c.model == own.model_name), None)
     if choice.model == own.model_name or not adopt:
         # the robot file's model: fitted with the full method (the comparison's fit of it kept
         # where lower; with --keep-model, also when another model is recommended)
-        return replace(_fit_all(fit, motions, None, kept), comparison=comparison)
+        return replace(_fit_all(fit, fit_many, motions, None, kept), comparison=comparison)
     say(f"the recommended model {choice.model} is not the robot file's ({own.model_name}): "
         "fitting it")
-    chosen = _fit_all(fit, ["joint"] if choice.one_set else list(motions), choice.space, choice)
+    chosen = _fit_all(fit, fit_many, ["joint"] if choice.one_set else list(motions), choice.space, choice)
     chosen.comparison = comparison
     if kept is not None and not kept.failed:
         # the robot file's model as the comparison fitted it (from its own starts; the screen's
@@ -156,18 +164,21 @@ def fit_and_choose(
             m: FitResult(how, own, v, kept.fitness[m],
                          [(0, kept.fitness[m], kept.simulations)]) for m, v in kept.values.items()}
     else:
-        chosen.robot_file_fits = _fit_all(fit, motions, None, None).fits
+        chosen.robot_file_fits = _fit_all(fit, fit_many, motions, None, None).fits
     return chosen
 
 
-def _fit_all(fit: Fit, motions: Sequence[str], space: ParameterSpace | None,
-             choice: CandidateScore | None) -> ChosenFits:
-    """Each motion fitted with the full method, the comparison's fit kept where lower."""
+def _fit_all(fit: Fit, fit_many: FitMany | None, motions: Sequence[str],
+             space: ParameterSpace | None, choice: CandidateScore | None) -> ChosenFits:
+    """Each motion fitted with the full method, the comparison's fit kept where lower.
+
+    The motions' fits are independent: ``fit_many`` (when given) makes them at once.
+    """
+    asks = [(m, space, choice.values.get(m) if choice is not None else None) for m in motions]
+    done = fit_many(asks) if fit_many is not None else [fit(*ask) for ask in asks]
     fits: dict[str, FitResult] = {}
     evaluators: dict[str, Evaluator] = {}
-    for motion in motions:
-        start = choice.values.get(motion) if choice is not None else None
-        res, evaluators[motion] = fit(motion, space, start)
+    for motion, (res, evaluators[motion]) in zip(motions, done, strict=True):
         fits[motion] = _lower(res, choice, motion) if choice is not None else res
     return ChosenFits(fits, evaluators)
 

@@ -20,13 +20,13 @@ from eelhost.estimation.clock import clock_check
 from eelhost.estimation.coefficients_file import write_coefficients
 from eelhost.estimation.diagnostics import fit_warnings
 from eelhost.estimation.evaluate import Evaluator, simulations_counter
-from eelhost.estimation.identify import identifiability
+from eelhost.estimation.identify import Identifiability, identifiability
 from eelhost.estimation.methods import FitSettings
 from eelhost.estimation.neighbours import SANE_FACTOR
 from eelhost.estimation.optimise import FitResult
 from eelhost.estimation.pipeline import fit_motion
 from eelhost.estimation.runs import ALIGN_S
-from eelhost.estimation.selection import recommend
+from eelhost.estimation.selection import Workers, recommend
 from eelhost.estimation.selection import table_markdown as comparison_markdown
 from eelhost.estimation.shared_joints import share_joints
 from eelhost.estimation.space import ParameterSpace
@@ -115,6 +115,14 @@ def run_report(
     out.mkdir(parents=True, exist_ok=True)
     seconds: dict[str, float] = {}
 
+    def said(motion: str, res: FitResult) -> None:
+        say(
+            f"{motion}, {res.space.model_name}: {res.method} fitness {res.fitness:.4f} after "
+            f"{res.simulations} simulations: "
+            + ", ".join(f"{n} {v:.4g}" for n, v in res.space.as_dict(res.values).items())
+            + (f" (ambient current {res.model.current_text()})" if res.space.current else "")
+        )
+
     def fit(motion: str, space: ParameterSpace | None,
             start: np.ndarray | None) -> tuple[FitResult, Evaluator]:
         t0 = time.perf_counter()
@@ -123,16 +131,31 @@ def run_report(
         res, ev = fit_motion(dataset, motion, settings, checkpoint_dir=out, resume=resume,
                              progress=prog, space=space, start=start)
         seconds[motion] = seconds.get(motion, 0.0) + time.perf_counter() - t0
-        say(
-            f"{motion}, {res.space.model_name}: {res.method} fitness {res.fitness:.4f} after "
-            f"{res.simulations} simulations: "
-            + ", ".join(f"{n} {v:.4g}" for n, v in res.space.as_dict(res.values).items())
-            + (f" (ambient current {res.model.current_text()})" if res.space.current else "")
-        )
+        said(motion, res)
         return res, ev
 
+    def fit_many(asks: Sequence[tuple[str, ParameterSpace | None, np.ndarray | None]],
+                 ) -> list[tuple[FitResult, Evaluator]]:
+        # the motions' fits are independent: one per worker process (their generations'
+        # progress is not shown then, only the stage's); each fit is the one made here
+        # (docs/estimation_benchmarks.md, "Session 18: the main job's time")
+        workers = Workers(settings.jobs, len(asks))
+        if workers.jobs < 2:
+            return [fit(*ask) for ask in asks]
+        names = ", ".join(m for m, _, _ in asks)
+        counted = simulations_counter()
+        with phase(f"fits ({names})", counted) as shown, workers:
+            done = workers.map(_fit_task, [(dataset, m, settings, out, resume, space, start)
+                                           for m, space, start in asks])
+            shown.set_postfix(**counted())  # the last task's runs, back after the last refresh
+        for (motion, _, _), (res, _, took) in zip(asks, done, strict=True):
+            seconds[motion] = seconds.get(motion, 0.0) + took
+            said(motion, res)
+        return [(res, ev) for res, ev, _ in done]
+
     chosen = fit_and_choose(dataset, motions, settings, compare_models, adopt_recommended,
-                            fit=fit, say=say, laws=laws, joint_models=joint_models)
+                            fit=fit, say=say, laws=laws, joint_models=joint_models,
+                            fit_many=fit_many)
     # one current for the tank, from both motions' experiments (estimation/tank_current.py)
     with phase("the tank's current from every training experiment", simulations_counter()):
         chosen.fits, chosen.evaluators, tank = share_tank_current(chosen.fits,
@@ -146,29 +169,30 @@ def run_report(
     if tank is not None:
         extra["tank_current"] = tank.to_json()
     boots: dict[str, BootstrapResult] = {}
-    for motion, res in fits.items():
-        ev = chosen.evaluators[motion]
-        t0 = time.perf_counter()
+    # each fit's identifiability and bootstrap are independent of the others': one task per fit
+    # in the comparison's worker processes, one per core, so that both cores work (a fit's
+    # refits alone kept the second core idle for most of the bootstrap: much of it is
+    # single-threaded Python, and its small batches fill one of numba's blocks;
+    # docs/estimation_benchmarks.md, "Session 18: the main job's time"); the results are those
+    # of the serial run (the kernel's runs do not depend on the thread count)
+    tasks = [(chosen.evaluators[m], r.values, r.fitness, bootstrap_replicates, settings.seed,
+              [o.values for n, o in fits.items() if n != m and o.space.names == r.space.names])
+             for m, r in fits.items()]
+    what = (f"bootstrap of the {', '.join(fits)} fits ({bootstrap_replicates} refits each)"
+            if bootstrap_replicates > 0 else f"identifiability of the {', '.join(fits)} fits")
+    counted = simulations_counter()
+    with phase(what, counted) as shown, Workers(settings.jobs, len(tasks)) as workers:
+        done = workers.map(_uncertainty, tasks)
+        shown.set_postfix(**counted())  # the last task's runs, back after the last refresh
+    for (motion, res), (ident, boot, took) in zip(fits.items(), done, strict=True):
         extra["simulations"][motion] = res.simulations
-        with phase(f"identifiability of the {motion} fit", simulations_counter()):
-            ident = identifiability(ev, res.values)
         extra["identifiability"][motion] = ident.to_json()
-        boot = None
-        if bootstrap_replicates > 0:
-            with phase(f"bootstrap of the {motion} fit ({bootstrap_replicates} refits)",
-                       simulations_counter()):
-                boot = parametric_bootstrap(ev, res.values, res.fitness, bootstrap_replicates,
-                                            seed=settings.seed,
-                                            unidentified=ident.unidentified(),
-                                            linear_std=ident.std_error,
-                                            starts=[r.values for m, r in fits.items()
-                                                    if m != motion
-                                                    and r.space.names == res.space.names])
+        if boot is not None:
             extra["uncertainty"][motion] = boot.to_json()
             boots[motion] = boot
             say(f"{motion}: noise floor {boot.noise_floor:.4f}, fitness / noise floor {boot.excess:.1f}")
         extra["warnings"] += fit_warnings(motion, res.space, res.values, boot)
-        seconds[motion] = seconds.get(motion, 0.0) + time.perf_counter() - t0
+        seconds[motion] = seconds.get(motion, 0.0) + took
     comparison = chosen.comparison
     choice = recommend(comparison) if comparison else None
     if comparison:
@@ -264,6 +288,39 @@ def run_report(
     atomic_write(report, text)  # whole or not at all (eelhost.files)
     say(f"wrote {report}")
     return report
+
+
+def _fit_task(
+    dataset: Dataset, motion: str, settings: FitSettings, out: Path, resume: bool,
+    space: ParameterSpace | None, start: np.ndarray | None,
+) -> tuple[FitResult, Evaluator, float]:
+    """One fit with the full method (its checkpoint in ``out``), and the seconds it took.
+
+    A task of :class:`eelhost.estimation.selection.Workers`.
+    """
+    t0 = time.perf_counter()
+    res, ev = fit_motion(dataset, motion, settings, checkpoint_dir=out, resume=resume,
+                         space=space, start=start)
+    return res, ev, time.perf_counter() - t0
+
+
+def _uncertainty(
+    ev: Evaluator, values: np.ndarray, fitness: float, replicates: int, seed: int,
+    starts: list[np.ndarray],
+) -> tuple[Identifiability, BootstrapResult | None, float]:
+    """One fit's identifiability and bootstrap (``replicates`` 0: none), and the seconds taken.
+
+    ``starts``: the other fits of the same space, where the bootstrap looks for other valleys.
+    A task of :class:`eelhost.estimation.selection.Workers`.
+    """
+    t0 = time.perf_counter()
+    ident = identifiability(ev, values)
+    boot = None
+    if replicates > 0:
+        boot = parametric_bootstrap(ev, values, fitness, replicates, seed=seed,
+                                    unidentified=ident.unidentified(),
+                                    linear_std=ident.std_error, starts=starts)
+    return ident, boot, time.perf_counter() - t0
 
 
 def _bands_text(bands: list[PredictionBand], coverage: dict[str, float], bl_m: float) -> str:

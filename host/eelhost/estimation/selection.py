@@ -552,7 +552,7 @@ def cross_validate(
            for i, s in enumerate(spaces) for m in motions}
     screen_scores: dict[int, CandidateScore] = {}
     screen_fits: dict[tuple[int, str], _Fitted] = {}
-    with _Workers(settings.jobs, len(evs)) as workers:
+    with Workers(settings.jobs, len(evs)) as workers:
         alive = list(range(len(spaces)))
         if screen_budget > 0 and len(spaces) > survivors:
             screen_fits, screen_scores = _screen(workers, spaces, evs, motions, settings.seed,
@@ -717,7 +717,7 @@ def _add_to_score(
 
 
 def _screen(
-    workers: _Workers, spaces: Sequence[ParameterSpace],
+    workers: Workers, spaces: Sequence[ParameterSpace],
     evs: dict[tuple[int, str], Evaluator], motions: Sequence[str], seed: int, budget: int,
     screened: Mapping[tuple[int, str], _Fitted] | None = None,
     keys: Sequence[tuple[int, str]] | None = None,
@@ -766,7 +766,7 @@ def _screen_stage(
 
 
 def _full(
-    workers: _Workers, spaces: Sequence[ParameterSpace],
+    workers: Workers, spaces: Sequence[ParameterSpace],
     evs: dict[tuple[int, str], Evaluator], motions: Sequence[str], alive: Sequence[int],
     screened: Mapping[tuple[int, str], _Fitted], seed: int, iterations: int,
     fold_iterations: int, budget: int, seed_offset: int,
@@ -1002,7 +1002,7 @@ def _final_stage(
 
 
 def _final(
-    workers: _Workers, spaces: Sequence[ParameterSpace],
+    workers: Workers, spaces: Sequence[ParameterSpace],
     evs: dict[tuple[int, str], Evaluator], full: dict[int, CandidateScore],
     iterations: int, fold_iterations: int, count: int = FINALISTS,
 ) -> None:
@@ -1058,12 +1058,13 @@ def _worker_init() -> None:
 _POOLS: dict[int, ProcessPoolExecutor] = {}  # by size, kept for the next comparison
 
 
-class _Workers:
+class Workers:
     """The comparison's independent fits in ``jobs`` worker processes, or in this one.
 
+    The report runs its fits' bootstraps in them too (:mod:`eelhost.estimation.report`).
     The workers are spawned, not forked: numba's OpenMP layer cannot run in a child forked
     from a process that has used it. Spawning and loading the kernels takes seconds, so a
-    pool is kept for the process's next comparison (the workers end with the process). Results
+    pool is kept for the process's next use (the workers end with the process). Results
     come back in the order of the tasks, and every task's closed-loop runs are added to this
     process's count (progress) as it comes back.
     """
@@ -1072,13 +1073,13 @@ class _Workers:
         self.jobs = min(default_jobs() if jobs is None else int(jobs), tasks)
         self.pool: ProcessPoolExecutor | None = None
 
-    def __enter__(self) -> _Workers:
+    def __enter__(self) -> Workers:
         if self.jobs > 1:
             if self.jobs not in _POOLS:
                 _POOLS[self.jobs] = ProcessPoolExecutor(
                     self.jobs, mp.get_context("spawn"), initializer=_worker_init)
             self.pool = _POOLS[self.jobs]
-            log.info("model comparison: %d worker processes", self.jobs)
+            log.info("%d worker processes", self.jobs)
         return self
 
     def __exit__(self, kind: type[BaseException] | None, *exc: object) -> None:
