@@ -95,7 +95,11 @@ def test_a_harbour_keeps_its_swim_and_its_stop_clear_by_geometry_written_apart(d
     def gap_of(states: np.ndarray, ahead_s: np.ndarray) -> np.ndarray:
         return outline_clearance_m(world, twin.model, states)
 
-    at_once, harbour = find_harbour(twin, PATH_GAIT, state, t_s, FINAL, gap_of, 0.02)
+    at_once, harbour, clearest = find_harbour(twin, PATH_GAIT, state, t_s, FINAL, gap_of, 0.02)
+    # asked for more than any swim keeps: none, and the clearest of all is at least as clear
+    _, none, clearest_all = find_harbour(twin, PATH_GAIT, state, t_s, FINAL, gap_of, 1.0)
+    assert none is None and clearest_all is not None and clearest is not None
+    assert clearest_all.gap_m >= clearest.gap_m >= harbour.gap_m  # type: ignore[union-attr]
     assert at_once.swim_s == 0.0 and at_once.gap_m < 0.01  # stopping here drifts into the disc
     assert harbour is not None and harbour.swim_s in HARBOUR_SWIMS_S
     assert harbour.gap_m > 0.02 and harbour.gap_m == min(harbour.swim_gap_m, harbour.stop_gap_m)
@@ -308,3 +312,21 @@ def test_a_final_stop_after_a_failed_pause_swims_a_harbour_from_the_brake_s_froz
     t_end, last = decisions[-1]
     assert last.stop == "no_safe_continuation" and "harbour swim" in last.detail
     assert t_end >= t_restart + event["swim_s"] - 1e-9
+
+
+def test_where_no_harbour_keeps_the_margin_the_clearest_is_swum_when_predicted_clear(
+        disc_plan, monkeypatch):
+    # a cushion no swim keeps: the stop here drifts into the disc, the clearest swim does not,
+    # and it is swum as the lesser risk (marked within the margin)
+    import eelhost.planning.replan as replan
+
+    monkeypatch.setattr(replan, "HARBOUR_CUSHION_M", 1.0)
+    _world, planner, outcome = disc_plan
+    nav = Blocked(lambda extra: planner, planner, outcome, PATH_GAIT, lookahead_s=0.0)
+    decisions = run_frames(nav, (1.3, 1.0), 3.0, until=lambda d: bool(d.waypoints),
+                           blind_s=0.5)
+    assert decisions[-1][1].waypoints
+    event = next(e for e in nav.events if e["kind"] == "harbour")
+    assert event["within_margin"] and event["status"] == "harbour"
+    assert event["gap_m"] > 0.0
+    assert event["gap_m"] >= event["at_once_gap_m"] + replan.HARBOUR_GAIN_M

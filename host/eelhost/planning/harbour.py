@@ -153,8 +153,8 @@ def find_harbour(twin: Twin, gait: Gait, state: FloatArray, t_s: float, window: 
                  gap_of: Callable[[FloatArray, FloatArray], FloatArray], need_m: float,
                  bearings_deg: tuple[float, ...] = HARBOUR_BEARINGS_DEG,
                  swims_s: tuple[float, ...] = HARBOUR_SWIMS_S, stride: int = 3
-                 ) -> tuple[Harbour, Harbour | None]:
-    """The stop at once, and the nearest harbour whose swim and stop keep ``need_m``.
+                 ) -> tuple[Harbour, Harbour | None, Harbour | None]:
+    """The stop at once, the nearest harbour whose swim and stop keep ``need_m``, the clearest.
 
     Parameters
     ----------
@@ -177,9 +177,10 @@ def find_harbour(twin: Twin, gait: Gait, state: FloatArray, t_s: float, window: 
 
     Returns
     -------
-    (Harbour, Harbour or None)
-        The stop at once (``swim_s`` 0), and of the swims whose gap exceeds ``need_m`` the
-        shortest, the clearest among those (None when none does).
+    (Harbour, Harbour or None, Harbour or None)
+        The stop at once (``swim_s`` 0); of the swims whose gap exceeds ``need_m`` the
+        shortest, the clearest among those (None when none does); and the clearest swim of those
+        judged (all of them when none keeps ``need_m``; None when every run failed).
     """
     dt = twin.dt_s
     n = twin.n_links
@@ -209,6 +210,7 @@ def find_harbour(twin: Twin, gait: Gait, state: FloatArray, t_s: float, window: 
                     states=np.repeat(state[None], k, 0), start_steps=[now] * k, stride=stride,
                     guidance=[guide] * k if twin.options.guidance.integral else None)
     best: Harbour | None = None
+    clearest: Harbour | None = None
     for swim_s in sorted(swims_s):
         last = int(round(swim_s / (stride * dt)))
         swum = runs.states[:, : last + 1]
@@ -227,9 +229,11 @@ def find_harbour(twin: Twin, gait: Gait, state: FloatArray, t_s: float, window: 
             swim_gap = judged(swum[j], 0.0)
             stop_gap = judged(stops[j], last * stride * dt)
             gap = min(swim_gap, stop_gap)
-            if gap > need_m and (best is None or gap > best.gap_m):
-                best = Harbour(now, targets[j], bearings_deg[j], last * stride * dt, gap,
-                               swim_gap, stop_gap, swum[j, :, n : n + 2].copy(), guide)
+            if clearest is None or gap > clearest.gap_m:
+                clearest = Harbour(now, targets[j], bearings_deg[j], last * stride * dt, gap,
+                                   swim_gap, stop_gap, swum[j, :, n : n + 2].copy(), guide)
+                if gap > need_m and (best is None or gap > best.gap_m):
+                    best = clearest
         if best is not None:
             break
-    return at_once, best
+    return at_once, best, clearest

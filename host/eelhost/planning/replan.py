@@ -368,6 +368,10 @@ STOP_BRAKE_S = 3.0
 """The run loop's brake before its final Stop with ``--plan`` (``eelhost.field.runloop.BRAKE_S``,
 which ``eelbot run`` passes as ``stop_brake_s``): how the harbour swims a final stop."""
 
+HARBOUR_GAIN_M = 0.02
+"""Where no harbour keeps the margin, the clearest is still swum when the twin predicts it clear
+and at least this much clearer than the stop where it was decided (docs/planning.md)."""
+
 HARBOURS_PER_PLAN = 2
 """Harbour swims a plan's stops may take: at the end of one, the stop is judged again from where
 the robot is, and a second swim may follow (docs/planning.md, "The harbour")."""
@@ -1528,12 +1532,17 @@ class TankReplanner:
                                drift_allowance_m(spread, ahead_s))
 
         wall = time.monotonic()
-        at_once, harbour = find_harbour(base, gait, est.state, est.t_s,
-                                        self._stop_window(kind), gap_of,
-                                        self.lookahead_margin_m + HARBOUR_CUSHION_M)
+        at_once, harbour, clearest = find_harbour(base, gait, est.state, est.t_s,
+                                                  self._stop_window(kind), gap_of,
+                                                  self.lookahead_margin_m + HARBOUR_CUSHION_M)
         wall = time.monotonic() - wall
         if at_once.gap_m > self.lookahead_margin_m:
             return None
+        if (harbour is None and clearest is not None and clearest.gap_m > 0.0
+                and clearest.gap_m >= at_once.gap_m + HARBOUR_GAIN_M):
+            # none keeps the margin, but one is predicted clear where the stop here is not: the
+            # lesser risk (development seed 33050: the stop here 37 mm deep in the twin)
+            harbour = clearest
         if harbour is None:
             log.warning("at t = %.2f s the stop (%s) drifts within %.0f mm of an obstacle or "
                         "wall and no harbour swim keeps %.0f mm: stopping here", t_s, kind,
@@ -1573,6 +1582,8 @@ class TankReplanner:
                       "swim_gap_m": _rounded(harbour.swim_gap_m),
                       "stop_gap_m": round(harbour.stop_gap_m, 4),
                       "at_once_gap_m": _rounded(at_once.gap_m),
+                      "within_margin": bool(harbour.gap_m <= self.lookahead_margin_m
+                                            + HARBOUR_CUSHION_M),
                       "t_switch_s": round(t_s, 3), "detail": detail})
         self.events.append(event)
         self._take_plan(outcome, extra)
