@@ -344,8 +344,8 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
         docs/planning.md, "A restart from rest").
     brake_s : float
         The brake before the final Stop (``RunConfig.brake_s``; 0: none).
-    flee : bool
-        Swim away where a stop's drift would touch (:func:`eelhost.planning.tank.plan_for_run`).
+    harbour : bool
+        Swim to where a stop stays clear before it (:func:`eelhost.planning.tank.plan_for_run`).
 
     Returns
     -------

@@ -1464,8 +1464,8 @@ class TankReplanner:
         ``rest_budget_max_s``, whose restart the drift keeps clear of the look-ahead's margin
         until :data:`DRIFT_AFTER_S` after it, and should the rest replan fail, through the final
         stop's brake and glide after it (``stop_brake_s`` and
-        :data:`~eelhost.planning.harbour.FINAL_GLIDE_S`); and how long after the stop the drift stays clear
-        (the horizon, at least :data:`REST_PAUSE_MAX_S` with retries, when it never comes near),
+        :data:`~eelhost.planning.harbour.FINAL_GLIDE_S`); and how long after the stop the
+        drift stays clear (the horizon, at least :data:`REST_PAUSE_MAX_S` with retries, when it never comes near),
         which bounds the later tries (``rest_tries``). A braked pause's earliest restart is
         :attr:`rest_settle_s` after its brake's end (:meth:`_request_rest`).
         """
