@@ -192,3 +192,20 @@ def test_the_summary_names_a_contact_while_the_robot_stops():
     assert "seed 1: arrived (true body 50 mm clear; touched while stopping, 4 mm deep)" in text
     old = WorldResult(3, True, "found", "arrived", reached=True, min_clearance_m=0.05)
     assert "coast" not in "\n".join(summary_lines([old]))  # results written before it
+
+
+def test_the_summary_splits_the_plan_share_and_the_goal_by_the_world_s_own_current():
+    from eelhost.planning.worlds import generate_world
+
+    seeds = list(range(600, 640))  # only their worlds are generated here
+    speeds = {s: generate_world(s).current.speed_m_s for s in seeds}
+    slow = [s for s in seeds if speeds[s] < 0.02][:2]
+    fast = [s for s in seeds if speeds[s] >= 0.04][:1]
+    assert len(slow) == 2 and len(fast) == 1
+    results = [WorldResult(slow[0], True, "found", "arrived", reached=True, min_clearance_m=0.05),
+               WorldResult(slow[1], False, "exhausted"),
+               WorldResult(fast[0], True, "found", "no_safe_continuation", min_clearance_m=0.04)]
+    line = next(x for x in summary_lines(results) if x.startswith("- by the world's own"))
+    assert line == ("- by the world's own current: 0-0.02 m/s: planned 1 of 2, goal 1 of 1; "
+                    "0.02-0.04 m/s: planned 0 of 0, goal 0 of 0; "
+                    "from 0.04 m/s: planned 1 of 1, goal 0 of 1")

@@ -575,13 +575,33 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
     return results
 
 
+CURRENT_BANDS_M_S = (0.02, 0.04)
+"""The world's own current's bands the summary splits the plan share and the goal by: the share
+falls with the current (development seeds 30500-30799: 92 %, 55 % and 31 %; docs/planning.md)."""
+
+
+def by_current_line(results: list[WorldResult]) -> str:
+    """Plan share and goal reached per band of the world's own current (``CURRENT_BANDS_M_S``)."""
+    edges = (0.0, *CURRENT_BANDS_M_S, math.inf)
+    speeds = [generate_world(r.seed).current.speed_m_s for r in results]
+    parts = []
+    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
+        band = [r for r, v in zip(results, speeds, strict=True) if lo <= v < hi]
+        planned = [r for r in band if r.planned]
+        name = f"{lo:g}-{hi:g} m/s" if math.isfinite(hi) else f"from {lo:g} m/s"
+        parts.append(f"{name}: planned {len(planned)} of {len(band)}, goal "
+                     f"{sum(r.reached for r in planned)} of {len(planned)}")
+    return "- by the world's own current: " + "; ".join(parts)
+
+
 def summary_lines(results: list[WorldResult]) -> list[str]:
     """The benchmark's figures, as markdown list items."""
     planned = [r for r in results if r.planned]
     lines = [f"- worlds: {len(results)}; with a checked plan: {len(planned)} "
              f"({100 * len(planned) / max(len(results), 1):.0f} %); without: "
              + ", ".join(f"{k} {v}" for k, v in sorted(Counter(
-                 r.status for r in results if not r.planned).items()))]
+                 r.status for r in results if not r.planned).items())),
+             by_current_line(results)]
     if not planned:
         return lines
     reached = sum(r.reached for r in planned)
