@@ -116,11 +116,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    f"a plan from rest, at most N times per run ({RESTARTS}, the default: on its "
                    "development seeds it reached 2 more goals with no contact; 0: off; "
                    "docs/planning.md, \"A restart from rest\")")
-    p.add_argument("--no-harbour", dest="harbour", action="store_false",
-                   help="with --plan or --bench: stop where the stop is decided, even where the "
-                   "twin drifts the stopping body into an obstacle (by default the robot first "
-                   "swims a short harbour swim to where the stop stays clear; docs/planning.md, "
-                   "\"The harbour\")")
+    p.add_argument("--harbour", action=argparse.BooleanOptionalAction, default=True,
+                   help="with --plan or --bench: before a stop the twin drifts into an obstacle "
+                   "(a current towards it), first swim a short harbour swim to where the stop "
+                   "stays clear (default: %(default)s; --no-harbour: stop where the stop is "
+                   "decided; docs/planning.md, \"The harbour\")")
     p.add_argument("--brake", type=NON_NEGATIVE, default=None, metavar="S",
                    help="before the final Stop, freeze the body in a deep S (the gait's "
                    f"amplitude {BRAKE_AMPLITUDE_RAD:g} rad, omega 0) for S seconds, the watchdog fed, so that it does "
