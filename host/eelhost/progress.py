@@ -274,7 +274,8 @@ def phase(desc: str, status: Callable[[], dict[str, Any]] | None = None,
     desc : str
         The stage (``"cross-validation of 6 candidate models"``).
     status : callable, optional
-        Called at each refresh; its values are shown after the time (``sims=1200``).
+        Called at each refresh and once more for the closing line; its values are shown after
+        the time (``sims=1200``).
     tick_s : float
         Seconds between refreshes.
 
@@ -302,4 +303,8 @@ def phase(desc: str, status: Callable[[], dict[str, Any]] | None = None,
     finally:
         stop.set()
         thread.join()  # no refresh after the last line
+        if status is not None:
+            # the closing line's values: the last work may have come back after the last tick
+            # (the comparison's said 227 331 simulations of its table's 227 981)
+            shown.set_postfix(**status())
         shown.close()

@@ -125,3 +125,18 @@ def test_a_phase_without_counts_still_says_every_few_seconds_how_long_it_has_tak
     assert len(lines) >= 3 and all("cross-validation:" in line for line in lines)
     assert "for " in lines[0] and "sims 7" in lines[0]
     assert "done in" in lines[-1] and "\x1b" not in stream.getvalue()
+
+
+def test_a_phase_s_closing_line_counts_the_work_done_after_its_last_refresh(monkeypatch):
+    import time as _time
+
+    monkeypatch.setattr(progress, "PLAIN_INTERVAL_S", 0.1)
+    progress.set_mode("plain")
+    stream = io.StringIO()
+    monkeypatch.setattr(progress.sys, "stderr", stream)
+    done = {"sims": 0}
+    with progress.phase("fits", lambda: dict(done), tick_s=10.0):  # no refresh in the stage
+        _time.sleep(0.2)
+        done["sims"] = 42  # the last task came back after the last refresh
+    last = stream.getvalue().splitlines()[-1]
+    assert "done in" in last and "sims 42" in last

@@ -137,14 +137,10 @@ def fit_and_choose(
     separate = [m for m in motions if m != "joint"]
     if not (compare and separate):
         return _fit_all(fit, fit_many, motions, None, None)
-    counted = simulations_counter()
     with phase(f"cross-validation of the candidate models ({', '.join(separate)})",
-               counted) as shown:
+               simulations_counter()):
         comparison = cross_validate(dataset, separate, settings, laws=laws, say=say,
                                     joint_models=joint_models)
-        # the closing line's count: the display refreshes once a second, and the last tasks'
-        # runs come back after its last refresh (the bundled report's said 227 331 of 227 981)
-        shown.set_postfix(**counted())
     choice = recommend(comparison)
     if choice is None or choice.space is None:
         say("every candidate model failed its cross-validation: the robot file's model is fitted")

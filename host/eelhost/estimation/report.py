@@ -143,11 +143,9 @@ def run_report(
         if workers.jobs < 2:
             return [fit(*ask) for ask in asks]
         names = ", ".join(m for m, _, _ in asks)
-        counted = simulations_counter()
-        with phase(f"fits ({names})", counted) as shown, workers:
+        with phase(f"fits ({names})", simulations_counter()), workers:
             done = workers.map(_fit_task, [(dataset, m, settings, out, resume, space, start)
                                            for m, space, start in asks])
-            shown.set_postfix(**counted())  # the last task's runs, back after the last refresh
         for (motion, _, _), (res, _, took) in zip(asks, done, strict=True):
             seconds[motion] = seconds.get(motion, 0.0) + took
             said(motion, res)
@@ -180,10 +178,8 @@ def run_report(
              for m, r in fits.items()]
     what = (f"bootstrap of the {', '.join(fits)} fits ({bootstrap_replicates} refits each)"
             if bootstrap_replicates > 0 else f"identifiability of the {', '.join(fits)} fits")
-    counted = simulations_counter()
-    with phase(what, counted) as shown, Workers(settings.jobs, len(tasks)) as workers:
+    with phase(what, simulations_counter()), Workers(settings.jobs, len(tasks)) as workers:
         done = workers.map(_uncertainty, tasks)
-        shown.set_postfix(**counted())  # the last task's runs, back after the last refresh
     for (motion, res), (ident, boot, took) in zip(fits.items(), done, strict=True):
         extra["simulations"][motion] = res.simulations
         extra["identifiability"][motion] = ident.to_json()
