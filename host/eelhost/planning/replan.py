@@ -1501,9 +1501,9 @@ class TankReplanner:
         if kind == "pause":
             # the pause's brake (a whole number of gait periods), then straight until a rest
             # replan with the least budget has had time to act (as :meth:`_drift_gap`'s)
-            hold = self.rest_brake_s or 0.0
+            hold = self.rest_brake_s
             return StopWindow(
-                lambda t: unbrake_time(self.gait, t, hold) if self.rest_brake_s else t,
+                (lambda t: t) if hold is None else (lambda t: unbrake_time(self.gait, t, hold)),
                 self.rest_settle_s + self.rest_budget_s + DRIFT_AFTER_S)
         return StopWindow(lambda t: t + self.stop_brake_s, FINAL_GLIDE_S)
 
