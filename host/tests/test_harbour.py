@@ -330,3 +330,10 @@ def test_where_no_harbour_keeps_the_margin_the_clearest_is_swum_when_predicted_c
     assert event["within_margin"] and event["status"] == "harbour"
     assert event["gap_m"] > 0.0
     assert event["gap_m"] >= event["at_once_gap_m"] + replan.HARBOUR_GAIN_M
+
+
+def test_the_replanner_s_final_brake_is_the_run_loop_s():
+    # the planning layer may not import the run loop: its default is the same figure, kept so
+    from eelhost.field.runloop import BRAKE_S
+
+    assert STOP_BRAKE_S == BRAKE_S
