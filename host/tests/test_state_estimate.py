@@ -161,6 +161,24 @@ def test_stale_and_garbled_telemetry_is_ignored_with_a_logged_reason(caplog):
     assert tel.add(3.45, telemetry_at(run, 3.42), 3.42)
 
 
+def test_an_idle_robot_before_its_first_running_sample_is_no_warning_but_one_that_stops_is(caplog):
+    # every run begins with the robot idle until its Start is taken: a warning there would
+    # alarm the user at every run; a robot that stops running once it ran is news
+    run = twin_run()
+    tel = TelemetryJoints(MODEL, PATH_GAIT)
+    caplog.set_level(logging.DEBUG, logger="eelhost.planning.state_estimate")
+    assert not tel.add(0.01, telemetry_at(run, 0.0, state=protocol.State.IDLE, time_us=0))
+    first = [r for r in caplog.records if "not_running" in r.getMessage()]
+    assert len(first) == 1 and first[0].levelno == logging.DEBUG
+    assert "IDLE" in first[0].getMessage() and tel.ignored == {"not_running": 1}
+    caplog.clear()
+    fresh = TelemetryJoints(MODEL, PATH_GAIT)
+    feed(fresh, run, 0.5, 2.0)
+    assert not fresh.add(2.14, telemetry_at(run, 2.1, state=protocol.State.FAILSAFE), 2.11)
+    stopped = [r for r in caplog.records if "not_running" in r.getMessage()]
+    assert len(stopped) == 1 and stopped[0].levelno == logging.WARNING
+    assert "FAILSAFE" in stopped[0].getMessage()
+
 def test_the_gaits_reference_fills_links_the_camera_did_not_read_with_the_tapered_amplitude():
     run = twin_run()
     est = BodyStateEstimator(MODEL, PATH_GAIT)

@@ -223,6 +223,14 @@ def gait_link_angles(model: SwimmerModel, gait: Gait, t_s: float, heading_rad: f
     return links_from_joints(alpha, heading_rad)
 
 
+def _state_name(state: int) -> str:
+    """A Telemetry's robot state by its name (the number when the protocol has none)."""
+    try:
+        return protocol.State(state).name
+    except ValueError:
+        return str(state)
+
+
 @dataclass(frozen=True)
 class JointSample:
     """One accepted Telemetry, on the host's clock.
@@ -338,10 +346,11 @@ class TelemetryJoints:
         self._last_robot_s = -math.inf
         self._stale_logged = False
 
-    def _ignore(self, reason: str, detail: str) -> None:
+    def _ignore(self, reason: str, detail: str, expected: bool = False) -> None:
+        """Count a sample not taken; the first of each reason is a warning unless ``expected``."""
         first = reason not in self.ignored
         self.ignored[reason] = self.ignored.get(reason, 0) + 1
-        (log.warning if first else log.debug)(
+        (log.warning if first and not expected else log.debug)(
             "telemetry ignored for the state estimate (%s): %s", reason, detail)
 
     def _robot_time_s(self, time_us: int) -> float:
@@ -369,7 +378,11 @@ class TelemetryJoints:
             Whether it was accepted.
         """
         if msg.state != protocol.State.RUNNING:
-            self._ignore("not_running", f"robot state {msg.state} at time_us {msg.time_us}")
+            # before the first running sample the robot has not yet started its gait: every run
+            # begins so, which is no news; once it has run, a robot that stops running is
+            self._ignore("not_running", f"robot state {_state_name(msg.state)} at time_us "
+                         f"{msg.time_us}",
+                         expected=self.taken == 0)
             return False
         alpha = np.asarray(msg.alpha_rad, dtype=float)
         phi_mrad = np.asarray(msg.phi_mrad, dtype=float)
