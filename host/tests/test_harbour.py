@@ -198,11 +198,18 @@ def test_where_no_continuation_exists_the_harbour_comes_before_the_pause_or_the_
         assert len(events) == HARBOURS_PER_PLAN
         assert t_end == pytest.approx(t_harbour + sum(e["swim_s"] for e in events),
                                       abs=2 / 30 + 1e-9)
+        # the line eelbot run prints says what the replanner did (it said "replans: 0")
+        tally = nav.tally()
+        refused = sum(e["kind"] == "replan" and e["status"] != "found" for e in nav.events)
+        assert refused >= 1 and tally.startswith(f"0 switched in, {refused} failed (")
+        assert tally.endswith(f"{HARBOURS_PER_PLAN} harbour swims")
         if restarts:
             assert last.pause and nav._pause is not None  # then the pause, as before
             assert nav.events[-1]["kind"] == "halt" and "harbour swim" in nav.events[-1]["detail"]
+            assert "1 pause, 0 of 1 restarts from rest made" in tally
         else:
             assert last.stop == "no_safe_continuation" and "harbour swim" in last.detail
+            assert "pause" not in tally
 
 
 def test_a_body_braked_in_a_hard_turn_drifts_whole_in_the_twin():

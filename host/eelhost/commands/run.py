@@ -333,7 +333,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"simulated {out.t_end_s:.1f} s in {result.wall_s:.1f} s "
               f"({out.t_end_s / result.wall_s:.1f}x real time)")
     if navigator is not None:
-        print(f"replans: {result.replans}")
+        print(f"replans: {navigator.tally()}")
         if out.failsafe_reports:
             print(f"the robot reported FAILSAFE {out.failsafe_reports} times")
     print("wrote " + ", ".join(str(path) for path in result.paths))

@@ -26,6 +26,7 @@ import dataclasses
 import logging
 import math
 import time
+from collections import Counter
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor, wait
 from dataclasses import dataclass, field
@@ -1392,6 +1393,28 @@ class TankReplanner:
                 "early_margin_m": self.early_margin_m,
                 "current_estimate": self.current.history,
                 "state_estimate": self.estimator.summary()}
+
+    def tally(self) -> str:
+        """The take's planning in one line: replans switched in and failed, pauses, harbours.
+
+        A run that printed only the replans switched in said "0" after failed replans, a pause
+        and a harbour swim; the user reads here what the replanner did.
+        """
+        replans = [e for e in self.events if e["kind"] == "replan"]
+        failed = Counter(e["status"] for e in replans if e["status"] != "found")
+        parts = [f"{len(replans) - sum(failed.values())} switched in"]
+        if failed:
+            parts.append(f"{sum(failed.values())} failed ("
+                         + ", ".join(f"{n} {status}" for status, n in sorted(failed.items()))
+                         + ")")
+        pauses = sum(e["kind"] == "halt" for e in self.events)
+        if pauses:
+            parts.append(f"{pauses} pause{'s' if pauses > 1 else ''}, {self.restarts} of "
+                         f"{self.max_restarts} restarts from rest made")
+        harbours = sum(e["kind"] == "harbour" and e["status"] == "harbour" for e in self.events)
+        if harbours:
+            parts.append(f"{harbours} harbour swim{'s' if harbours > 1 else ''}")
+        return ", ".join(parts)
 
     # -- a restart from rest (docs/planning.md, "A restart from rest") -----------------------------
 
