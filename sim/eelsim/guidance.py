@@ -223,7 +223,8 @@ class GuidanceLaw:
             return (f"integral line-of-sight along each leg (look-ahead {self.lookahead_m:g} m, "
                     f"integral gain {self.integral_gain:g} m/s{gain})")
         if self.feed_forward:
-            water = ("current and speed not yet given" if self.needs_water else
+            water = ("the planner gives it the known current and the robot's speed"
+                     if self.needs_water else
                      f"current ({self.current_m_s[0]:.4f}, {self.current_m_s[1]:.4f}) m/s, "
                      f"speed {self.speed_m_s:.4f} m/s")
             return (f"pure pursuit aimed off by the known current ({water}, crab sine at most "
