@@ -50,6 +50,7 @@ from eelhost.vision.localise import Localisation
 from eelhost.vision.synthetic import TankView
 from eelhost.wire import protocol
 from eelsim.closed_loop import LoopOptions, simulate_closed_loop
+from eelsim.guidance import PURSUIT, Guidance, GuidanceLaw
 from eelsim.model import SwimmerModel
 from eelsim.robot import load_robot
 from eelsim.scenario import PATH_GAIT, Scenario
@@ -1051,6 +1052,62 @@ def test_the_benchmark_refuses_to_resume_worlds_run_with_another_guidance_law(tm
     err = capsys.readouterr().err
     assert status == 2
     assert "another guidance law than ilos" in err and "results.jsonl" in err
+
+
+def test_a_feed_forward_plan_is_steered_and_replanned_with_the_law_the_planner_filled_in(tmp_path):
+    # issue 28: pursuit_ff aims off by the current the planner knows; the planner fills in that
+    # current and the robot's speed, and the run loop and every replan must use that very law
+    world = parse_world({**OPEN, "current": {"speed_m_s": 0.03, "direction_deg": 90.0}}, "open")
+    planned = plan_for_run(world, ROBOT, "sim://?speed=0&current=0.03,90", PATH_GAIT, MODEL,
+                           planner_options={"guidance": GuidanceLaw("pursuit_ff")})
+    law, planner = planned.guidance, planned.navigator.planner
+    assert law.feed_forward and not law.needs_water
+    assert law.current_m_s == pytest.approx(MODEL.in_tank(world).current_m_s, abs=1e-12)
+    assert law.current_m_s[1] == pytest.approx(0.03, abs=1e-9)
+    assert law.speed_m_s == planner.swimming_speed_m_s > 0.05
+    assert planner.options.guidance == law == planner.twin.options.guidance
+    # a replan's planner in an estimated extra current plans with the same law (the known
+    # current, not the estimate: the loop keeps steering with the first plan's law)
+    replanner = planned.navigator.planner_for(np.array([0.01, -0.02]))
+    assert replanner.options.guidance == law
+    assert replanner.world.current_m_s != pytest.approx(world.current_m_s)
+    # the run loop given the planned law sends the feed-forward's offsets, not pursuit's
+    first = [(1.6, 1.0)]
+    config = RunConfig(PATH_GAIT, first, duration_s=5.0, guidance=law)
+    stem = tmp_path / "ff"
+    request = TakeRequest(ROBOT, config, str(stem),
+                          TakeNotes("sim://?speed=0&current=0.03,90&start=0.6,1.0,0"),
+                          "synthetic:clean")
+    run_take(request)
+    frames = np.loadtxt(f"{stem}.csv", delimiter=",", skiprows=1, ndmin=2)[:, :4]
+    sent = [r for r in read_commands_csv(f"{stem}.commands.csv")
+            if r["event"] == "sent" and r["message"] == "SetOffset"][1:]  # after Start's 0
+    assert len(sent) >= 10
+
+    def replay(with_law: GuidanceLaw) -> list[float]:
+        g = Guidance(first, 0.15, PATH_GAIT.k_theta, 5, offset_limit_rad=1.0, law=with_law)
+        out, f = [], 0
+        for r in sent:
+            while f < len(frames) and frames[f][0] <= r["t_s"] + 1e-4:
+                g.observe(*(float(v) for v in frames[f]))
+                f += 1
+            out.append(g.offset())
+        return out
+
+    got = [r["fields"]["offset_rad"] for r in sent]
+    assert np.allclose(got, replay(law), atol=1e-5)
+    assert not np.allclose(got, replay(PURSUIT), atol=1e-2)
+    meta = json.loads(open(f"{stem}.json").read())
+    assert meta["source"]["guidance"]["law"] == "pursuit_ff"
+    assert meta["source"]["guidance"]["current_m_s"] == list(law.current_m_s)
+    assert meta["source"]["guidance"]["speed_m_s"] == law.speed_m_s
+
+
+def test_run_refuses_the_feed_forward_without_a_planner(capsys):
+    status = main(["run", "--link", "sim://", "--waypoints", "1,0", "--gait", "0.4,6.28",
+                   "--guidance", "pursuit_ff", "--out", "/nonexistent/x"])
+    assert status == 2
+    assert "--guidance pursuit_ff: only with --plan or --bench" in capsys.readouterr().err
 
 
 WALL_AHEAD = {

@@ -32,6 +32,14 @@ against it):
      law while the waypoint is more than Delta ahead; nearer, it aims at the waypoint offset by
      -sigma y_i n_k, and past it back at it, so that a waypoint whose acceptance circle the body
      missed is turned back to (an infinite line would lead it away for ever).
+   - ``pursuit_ff``, pure pursuit with a feed-forward of the known current (a crab angle): with
+     d the unit vector from the filtered position to the current waypoint, n = (-d_y, d_x) its
+     left normal, c the known current and U the robot's still-water speed,
+     theta_ref = atan2(d_y, d_x) + asin(clip(-(c . n) / U, -s_max, s_max)): the heading whose
+     water-relative velocity U h plus c points along d. Where c is zero it is ``pursuit``
+     itself, to the bit. The current and U are the law's own (:meth:`GuidanceLaw.with_water`:
+     the planner fills them in from the world it knows and its twin's straight run), never the
+     water's unknown part.
 
 Time is an argument: the object keeps no clock, so the same code runs in simulated time and in
 wall time.
@@ -39,6 +47,7 @@ wall time.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -80,6 +89,28 @@ def _steer_ilos(guidance: Guidance, waypoint: FloatArray) -> float:
     return guidance.k_theta * float(wrap_angle(theta_ref - float(pose[2])))
 
 
+@GUIDANCE_LAWS.add("pursuit_ff", "pure pursuit aimed off by the known current (a crab angle)")
+def _steer_pursuit_ff(guidance: Guidance, waypoint: FloatArray) -> float:
+    pose = guidance.filtered_pose
+    assert pose is not None  # steered only after a pose
+    law = guidance.law
+    theta_ref = feed_forward_reference(pose[:2], waypoint, law.current_m_s, law.speed_m_s,
+                                       law.crab_limit)
+    if theta_ref is None:  # no current: the paper's pursuit, to the bit
+        return heading_offset(pose[:2], float(pose[2]), waypoint, guidance.k_theta)
+    return guidance.k_theta * float(wrap_angle(theta_ref - float(pose[2])))
+
+
+CRAB_LIMIT = 0.8
+"""s_max, the largest sine of the feed-forward's crab angle (53 degrees; docs/model.md section 4).
+
+The planner refuses a current at least the robot's speed, but a cross current near it would turn
+the body almost square to its leg, where its own speed along the leg, U sqrt(1 - s^2), is
+nearly nothing and a small error in U or c turns the crab into swimming backwards. At 0.8 the
+body keeps 0.6 U along its leg; the worlds' currents (at most 0.06 m/s against 0.086 m/s, a
+sine of 0.7) never reach it."""
+
+
 @dataclass(frozen=True)
 class GuidanceLaw:
     """Which line-of-sight law turns the filtered pose into theta_ref (module docstring).
@@ -87,7 +118,7 @@ class GuidanceLaw:
     Attributes
     ----------
     name : str
-        ``"pursuit"`` (the paper's, the default) or ``"ilos"``.
+        ``"pursuit"`` (the paper's, the default), ``"ilos"`` or ``"pursuit_ff"``.
     lookahead_m : float
         Delta, the look-ahead distance along the leg, m (ILOS only).
     integral_gain : float
@@ -97,18 +128,29 @@ class GuidanceLaw:
     heading_gain : float or None
         k_theta, rad of offset per rad of heading error, used instead of the gait's (the heading
         controller is the host's, like the law); ``None`` keeps the gait's.
+    current_m_s : (float, float)
+        c, the known current the law aims off by, m/s, world frame (``pursuit_ff`` only).
+    speed_m_s : float
+        U, the robot's still-water swimming speed, m/s (``pursuit_ff`` only); 0: not yet known,
+        to be filled in with the current by :meth:`with_water` (the planner does).
+    crab_limit : float
+        s_max, the largest sine of the crab angle (``pursuit_ff`` only; :data:`CRAB_LIMIT`).
 
     Raises
     ------
     ValueError
-        An unknown name, a look-ahead that is not positive or a negative gain (ILOS), or a
-        heading gain that is not positive.
+        An unknown name, a look-ahead that is not positive or a negative gain (ILOS), a
+        heading gain that is not positive, or (``pursuit_ff``) a current that is not finite, a
+        negative speed or a crab limit outside (0, 1].
     """
 
     name: str = "pursuit"
     lookahead_m: float = 0.4
     integral_gain: float = 0.04
     heading_gain: float | None = None
+    current_m_s: tuple[float, float] = (0.0, 0.0)
+    speed_m_s: float = 0.0
+    crab_limit: float = CRAB_LIMIT
 
     def __post_init__(self) -> None:
         if self.heading_gain is not None and not (math.isfinite(self.heading_gain)
@@ -121,11 +163,57 @@ class GuidanceLaw:
                 raise ValueError(f"ILOS look-ahead must be positive, got {self.lookahead_m}")
             if not (math.isfinite(self.integral_gain) and self.integral_gain >= 0):
                 raise ValueError(f"ILOS integral gain must be 0 or more, got {self.integral_gain}")
+        if self.feed_forward:
+            if not all(math.isfinite(float(v)) for v in self.current_m_s):
+                raise ValueError(f"feed-forward current must be finite, got {self.current_m_s}")
+            if not (math.isfinite(self.speed_m_s) and self.speed_m_s >= 0):
+                raise ValueError(f"feed-forward speed must be 0 or more, got {self.speed_m_s}")
+            if not 0 < self.crab_limit <= 1:
+                raise ValueError(f"crab limit must be in (0, 1], got {self.crab_limit}")
 
     @property
     def integral(self) -> bool:
         """Whether the law has an integral state (ILOS)."""
         return self.name == "ilos"
+
+    @property
+    def feed_forward(self) -> bool:
+        """Whether the law aims off by a known current (``pursuit_ff``)."""
+        return self.name == "pursuit_ff"
+
+    @property
+    def needs_water(self) -> bool:
+        """A feed-forward law whose speed U is not yet known (:meth:`with_water` fills it in)."""
+        return self.feed_forward and self.speed_m_s == 0.0
+
+    def with_water(self, current_m_s: Sequence[float], speed_m_s: float) -> GuidanceLaw:
+        """The law with the known current and the robot's still-water speed filled in.
+
+        Parameters
+        ----------
+        current_m_s : (vx, vy)
+            The current the planner knows, m/s (the world's, with a fitted tank's), never the
+            water's unknown part.
+        speed_m_s : float
+            U, the robot's steady straight speed in still water, m/s (positive).
+
+        Returns
+        -------
+        GuidanceLaw
+            Itself for a law without feed-forward.
+
+        Raises
+        ------
+        ValueError
+            A speed that is not positive.
+        """
+        if not self.feed_forward:
+            return self
+        if not (math.isfinite(speed_m_s) and speed_m_s > 0):
+            raise ValueError(f"feed-forward speed must be positive, got {speed_m_s}")
+        return dataclasses.replace(self, current_m_s=(float(current_m_s[0]),
+                                                      float(current_m_s[1])),
+                                   speed_m_s=float(speed_m_s))
 
     def describe(self) -> str:
         """One line: the law and its gains."""
@@ -134,6 +222,13 @@ class GuidanceLaw:
         if self.integral:
             return (f"integral line-of-sight along each leg (look-ahead {self.lookahead_m:g} m, "
                     f"integral gain {self.integral_gain:g} m/s{gain})")
+        if self.feed_forward:
+            water = ("the planner gives it the known current and the robot's speed"
+                     if self.needs_water else
+                     f"current ({self.current_m_s[0]:.4f}, {self.current_m_s[1]:.4f}) m/s, "
+                     f"speed {self.speed_m_s:.4f} m/s")
+            return (f"pure pursuit aimed off by the known current ({water}, crab sine at most "
+                    f"{self.crab_limit:g}{gain})")
         return f"the paper's pure pursuit of each waypoint{gain}"
 
     def gain(self, k_theta: float) -> float:
@@ -143,6 +238,51 @@ class GuidanceLaw:
 
 PURSUIT = GuidanceLaw()
 """The paper's pure pursuit towards the current waypoint."""
+
+
+def feed_forward_reference(
+    position_m: Sequence[float] | FloatArray,
+    waypoint_m: Sequence[float] | FloatArray,
+    current_m_s: Sequence[float],
+    speed_m_s: float,
+    crab_limit: float,
+) -> float | None:
+    """``pursuit_ff``'s reference heading: the pursuit's aim turned by the crab angle.
+
+    Parameters
+    ----------
+    position_m, waypoint_m : (x, y)
+        The filtered centre of mass and the current waypoint.
+    current_m_s : (vx, vy)
+        c, the known current, m/s.
+    speed_m_s : float
+        U, the robot's still-water speed, m/s.
+    crab_limit : float
+        s_max: the crab angle's sine is clipped to +-this.
+
+    Returns
+    -------
+    float or None
+        atan2(d) + asin(clip(-(c . n) / U, -s_max, s_max)), rad; ``None`` where there is no
+        current (or the waypoint is reached to the bit): then the law is pure pursuit itself.
+
+    Raises
+    ------
+    ValueError
+        A current but no positive speed (the law's water was never filled in).
+    """
+    cx, cy = float(current_m_s[0]), float(current_m_s[1])
+    dx = float(waypoint_m[0]) - float(position_m[0])
+    dy = float(waypoint_m[1]) - float(position_m[1])
+    dist = math.sqrt(dx * dx + dy * dy)
+    if (cx == 0.0 and cy == 0.0) or dist == 0.0:
+        return None
+    if not speed_m_s > 0:
+        raise ValueError("pursuit_ff: the robot's speed is not given (GuidanceLaw.with_water)")
+    # c . n with n = (-d_y, d_x) / |d|; the sine of the crab angle that cancels it
+    sine = -(cy * dx - cx * dy) / dist / speed_m_s
+    sine = min(max(sine, -crab_limit), crab_limit)
+    return math.atan2(dy, dx) + math.asin(sine)
 
 
 def ilos_reference(
@@ -218,7 +358,8 @@ class Guidance:
     Raises
     ------
     ValueError
-        No waypoint, a radius or window that is not positive, or a limit that is not positive.
+        No waypoint, a radius or window that is not positive, a limit that is not positive, or a
+        feed-forward law with a current but no speed.
     """
 
     def __init__(
@@ -251,6 +392,8 @@ class Guidance:
         self._target = 0
         self._arrival_s: float | None = None
         self._offset = 0.0
+        if law.needs_water and law.current_m_s != (0.0, 0.0):
+            raise ValueError("pursuit_ff: the robot's speed is not given (GuidanceLaw.with_water)")
         if law.integral and not control_period_s > 0:
             raise ValueError(f"control period must be positive, got {control_period_s}")
         self.law = law

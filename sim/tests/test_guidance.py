@@ -255,3 +255,97 @@ def test_batched_kernel_runs_ilos_as_the_reference_does_and_samples_its_integral
             assert np.isnan(res.arrival_time_s[run])
         else:
             assert res.arrival_time_s[run] == pytest.approx(r.arrival_time_s, abs=1e-9)
+
+
+# -- pure pursuit with the known current's feed-forward (docs/model.md section 4) --------------
+
+def _ff(current_m_s=(0.0, 0.0), speed_m_s=0.086, **kw):
+    return GuidanceLaw("pursuit_ff", **kw).with_water(current_m_s, speed_m_s)
+
+
+def _bits(x: float) -> bytes:
+    return np.float64(x).tobytes()
+
+
+def test_feed_forward_without_current_is_pure_pursuit_to_the_bit(kernel):
+    rng = np.random.default_rng(7)
+    guide_pursuit = np.zeros(9)
+    guide_ff = np.array([2.0, 0.4, 0.04, 0.3, 0.0, 0.0, 0.0, 0.086, 0.8])
+    lane_guide = np.zeros((4, 1))
+    waypoints = np.zeros((1, 1, 2))
+    for k in range(300):
+        x, y, wx, wy = rng.uniform(-2, 2, 4)
+        heading = float(rng.choice(EDGES)) if k < len(EDGES) else float(rng.uniform(-9, 9))
+        if k % 7 == 0:  # on the waypoint, and along the axes where atan2 meets its signed zeros
+            wx, wy = (x, y) if k % 2 else (x, -0.0)
+        pursuit = Guidance([(wx, wy)], 1e-9, 0.37, median_window=1)
+        ff = Guidance([(wx, wy)], 1e-9, 0.37, median_window=1, law=_ff())
+        for g in (pursuit, ff):
+            g.observe(0.0, x, y, heading)
+        assert _bits(ff.offset()) == _bits(pursuit.offset()), (x, y, wx, wy, heading)
+        waypoints[0, 0] = (wx, wy)
+        args = (x, y, heading, 0, 0, 0, waypoints, 1, 0.37)
+        assert _bits(kernel._guidance_offset(*args, guide_ff, lane_guide)) == _bits(
+            kernel._guidance_offset(*args, guide_pursuit, lane_guide)) == _bits(pursuit.offset())
+
+
+def test_feed_forward_aims_into_the_cross_current_by_the_crab_angle():
+    # leg along +x, current 0.03 m/s to the left (+y), U 0.06 m/s: head 30 degrees right so that
+    # U h + c points along the leg; the along-leg part of the current changes nothing
+    g = Guidance([(1.0, 0.0)], 0.15, 1.0, median_window=1,
+                 law=_ff((0.02, 0.03), 0.06))
+    g.observe(0.0, 0.0, 0.0, 0.0)
+    theta_ref = g.offset()  # k_theta 1, heading 0
+    assert theta_ref == pytest.approx(-math.asin(0.5))
+    assert 0.06 * math.sin(theta_ref) + 0.03 == pytest.approx(0)  # no ground speed across the leg
+    # a cross current of U would square the body to its leg: the sine is clipped at s_max
+    strong = Guidance([(1.0, 0.0)], 0.15, 1.0, median_window=1, law=_ff((0.0, -0.06), 0.06))
+    strong.observe(0.0, 0.0, 0.0, 0.0)
+    assert strong.offset() == pytest.approx(math.asin(0.8))
+
+
+def test_a_feed_forward_law_is_refused_without_its_speed_or_with_a_bad_crab_limit():
+    with pytest.raises(ValueError, match="crab limit"):
+        GuidanceLaw("pursuit_ff", crab_limit=1.5)
+    with pytest.raises(ValueError, match="speed"):
+        GuidanceLaw("pursuit_ff").with_water((0.0, 0.02), 0.0)
+    unfilled = GuidanceLaw("pursuit_ff", current_m_s=(0.0, 0.02))
+    assert unfilled.needs_water
+    with pytest.raises(ValueError, match="speed is not given"):
+        Guidance([(1.0, 0.0)], 0.15, 1.0, law=unfilled)
+    assert GuidanceLaw("ilos").with_water((0.0, 0.02), 0.08) == GuidanceLaw("ilos")
+
+
+@pytest.mark.slow
+def test_feed_forward_keeps_the_body_nearer_its_leg_than_pure_pursuit_in_a_cross_current(robot):
+    # 0.02 m/s across a 1.6 m leg (the robot swims 0.086 m/s): pure pursuit bows 0.21 m
+    # downstream, the feed-forward 0.09 m (most of it the start from rest), and arrives sooner
+    n = robot.n_links
+    ref, _ = _cross_current_run(robot, PURSUIT)
+    ff, _ = _cross_current_run(robot, _ff((0.0, 0.02)))
+    assert ref.failure == Failure.NONE and ff.failure == Failure.NONE
+    off_pursuit = np.abs(ref.states[:, n + 1]).max()
+    off_ff = np.abs(ff.states[:, n + 1]).max()
+    assert off_ff < 0.6 * off_pursuit, (off_ff, off_pursuit)
+    assert ff.arrival_time_s is not None and ref.arrival_time_s is not None
+    assert ff.arrival_time_s < ref.arrival_time_s
+
+
+@pytest.mark.slow
+def test_batched_kernel_runs_the_feed_forward_as_the_reference_does(robot):
+    law = _ff((0.01, 0.03), 0.086, heading_gain=0.8)
+    _, s = _cross_current_run(robot, law)
+    s1 = s.model_copy(update={"current_speed_m_s": math.hypot(0.01, 0.03),
+                              "current_direction_deg": math.degrees(math.atan2(0.03, 0.01))})
+    s2 = s.model_copy(update={"waypoints_m": [(0.5, 0.1), (1.0, -0.2), (1.6, 0.0)],
+                              "current_direction_deg": 120.0})  # a water the law is not told of
+    refs = [simulate_closed_loop(robot, sc, LoopOptions(guidance=law)) for sc in (s1, s2)]
+    spec = BatchSpec.build(robot, [s1, s2], None, LoopOptions(guidance=law), 0)
+    k = max(len(r.t_s) for r in refs)
+    res = run_spec(spec, sample_steps=np.arange(k), threads=1)
+    for run, r in enumerate(refs):
+        m = len(r.t_s)
+        assert np.allclose(res.states[run, :m], r.states, rtol=0, atol=1e-9 * np.maximum(
+            1.0, np.abs(r.states)).max())
+        assert r.arrival_time_s is not None
+        assert res.arrival_time_s[run] == pytest.approx(r.arrival_time_s, abs=1e-9)

@@ -137,4 +137,4 @@ def test_every_extension_point_is_a_registry_of_its_own_group():
     groups = {r.group for r in (FLUID_LAWS, JOINT_MODELS, GUIDANCE_LAWS)}
     assert groups == {"eelbot.fluid_laws", "eelbot.joint_models", None}
     assert {"morison", "galilean_lift"} <= set(FLUID_LAWS) and {"pd", "servo"} <= set(JOINT_MODELS)
-    assert GUIDANCE_LAWS.names() == ("pursuit", "ilos")
+    assert GUIDANCE_LAWS.names() == ("pursuit", "ilos", "pursuit_ff")

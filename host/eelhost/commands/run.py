@@ -128,9 +128,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    "otherwise; 0: Stop at once; docs/planning.md, \"The brake before the Stop\")")
     p.add_argument("--guidance", choices=GUIDANCE_LAWS.names(), default=PURSUIT.name,
                    help="the line-of-sight law that steers the robot: pursuit (the paper's pure "
-                   "pursuit of each waypoint, default) or ilos (integral line-of-sight along each "
-                   "leg with the planner's gains); with --plan or --bench the planner searches "
-                   "and checks with the same law (docs/planning.md, \"The guidance\")")
+                   "pursuit of each waypoint, default), ilos (integral line-of-sight along each "
+                   "leg with the planner's gains) or pursuit_ff (pure pursuit aimed off by the "
+                   "current the planner knows; with --plan or --bench only); with --plan or "
+                   "--bench the planner searches and checks with the same law (docs/planning.md, "
+                   "\"The guidance\")")
     p.add_argument("--duration", type=POSITIVE, help="stop after this long, s (default: no limit)")
     p.add_argument("--motion", choices=MOTIONS, default="auto",
                    help="what the take is, for a dataset: straight, turning, path, or auto "
@@ -261,6 +263,9 @@ def run(args: argparse.Namespace) -> int:
         raise OptionError("--gait: required with --waypoints")
     if args.coefficients_file is not None and args.plan is None:
         raise OptionError("--coefficients-file: only with --plan (the planner's model)")
+    if args.plan is None and guidance_law(args.guidance).feed_forward:
+        raise OptionError(f"--guidance {args.guidance}: only with --plan or --bench (the planner "
+                          "gives it the known current and the robot's speed)")
     current = current_option(args.current, args.link.startswith("sim:"))
     check_output_stem(args.out)  # a read-only folder or a file is said before the link opens
     refuse_overwrite(args.out, args.force)
@@ -298,6 +303,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"coefficients: {model.describe()}")
         waypoints, navigator, uri = planned.waypoints_m, planned.navigator, planned.uri
         start_guide = planned.start_guide
+        law = planned.guidance  # as the planner filled it in (a feed-forward's water)
         view = TankView.covering(world.tank.size_m)
         # the live view predicts with the planner's model, in the current the planner knows
         tank_world = model.in_tank(world)

@@ -477,6 +477,8 @@ class RunLoop:
                 "heading_gain": law.gain(c.gait.k_theta),
                 "lookahead_m": law.lookahead_m if law.integral else None,
                 "integral_gain_m_s": law.integral_gain if law.integral else None,
+                "current_m_s": list(law.current_m_s) if law.feed_forward else None,
+                "speed_m_s": law.speed_m_s if law.feed_forward else None,
                 "control_period_s": c.control_period_s,
                 "start_guide": None if c.start_guide is None else list(c.start_guide)}
 

@@ -475,7 +475,10 @@ class Planner:
     guidance : GuidanceLaw
         The robot's guidance law, for the search and the check (default the paper's pure
         pursuit; :data:`PLANNING_GUIDANCE` is the integral line-of-sight law). It replaces the
-        one of ``options``.
+        one of ``options``. A feed-forward law (``pursuit_ff``) not yet given its water is
+        given this world's known current and :attr:`swimming_speed_m_s`
+        (``GuidanceLaw.with_water``); ``options.guidance`` is the law filled in, which the run
+        loop and every replan's planner must use.
     soft_margin : bool
         Give the search a soft margin (``SearchSettings.preferred_clearance_m``), unless
         ``settings`` sets its own: the hard margin plus :data:`SOFT_MARGIN_BASE_M` plus
@@ -560,10 +563,19 @@ class Planner:
                              f"{robot.n_links}")
         self.model = swimmer if swimmer is not None else coefficients.swimmer_for(robot)
         self.body_half_width_m = float(self.model.half_axis_horizontal_m.max())
-        speeds = [swimming_speed_m_s(robot, c, gait, self.options, self.model)
+        # the still-water speed with the pursuit a feed-forward law is in still water (a law
+        # given its current would crab in the speed's still-water run)
+        still = (dataclasses.replace(self.options, guidance=GuidanceLaw(
+            heading_gain=guidance.heading_gain)) if guidance.feed_forward else self.options)
+        speeds = [swimming_speed_m_s(robot, c, gait, still, self.model)
                   for c in coefficients.sets]
         self.swimming_speed_m_s = min(speeds)
         fastest = max(speeds)
+        if guidance.needs_water:
+            # the feed-forward's water: the current this planner knows (the world's and a fitted
+            # tank's, never the unknown part) and the slowest fit's speed (docs/model.md section 4)
+            self.options = dataclasses.replace(self.options, guidance=guidance.with_water(
+                world.current_m_s, self.swimming_speed_m_s))
         base = settings or SearchSettings()
         # the body's half width and the world's clearance, never less than the settings ask
         margin = max(base.margin_m, self.body_half_width_m + world.clearance_m)

@@ -191,6 +191,9 @@ def plan_for_run(
     options = {**(planner_options or {}),
                "swimmer": swimmer if swimmer is not None else model.swimmer_for(robot)}
     planner = Planner(world, robot, model, gait, **options)
+    # the law as the planner filled it in (a feed-forward's known current and speed): every
+    # replan's planner plans with the law the run loop steers with
+    options["guidance"] = planner.options.guidance
 
     tiers = replan_planners(planner, world, robot, model, gait, options)
     if abs(planner.twin.acceptance_radius_m - acceptance_radius_m) > 1e-9:

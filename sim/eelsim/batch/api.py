@@ -291,14 +291,25 @@ def guidance_settings(options: LoopOptions) -> FloatArray:
 
     Returns
     -------
-    ndarray, shape (5,)
-        Law (0 pure pursuit, 1 ILOS), look-ahead, integral gain, control period, and the law's
-        heading gain (0: each run's k_theta).
+    ndarray, shape (9,)
+        Law (0 pure pursuit, 1 ILOS, 2 pure pursuit with the known current's feed-forward),
+        look-ahead, integral gain, control period, the law's heading gain (0: each run's
+        k_theta), and the feed-forward's current (x, y), m/s, speed U, m/s, and crab limit.
+
+    Raises
+    ------
+    ValueError
+        A feed-forward law with a current but no speed (``GuidanceLaw.with_water``).
     """
     law = options.guidance
-    return np.array([1.0 if law.integral else 0.0, law.lookahead_m, law.integral_gain,
+    if law.needs_water and law.current_m_s != (0.0, 0.0):
+        raise ValueError("pursuit_ff: the robot's speed is not given (GuidanceLaw.with_water)")
+    code = 1.0 if law.integral else 2.0 if law.feed_forward else 0.0
+    return np.array([code, law.lookahead_m, law.integral_gain,
                      options.timing.control_period_s,
-                     0.0 if law.heading_gain is None else law.heading_gain])
+                     0.0 if law.heading_gain is None else law.heading_gain,
+                     float(law.current_m_s[0]), float(law.current_m_s[1]), law.speed_m_s,
+                     law.crab_limit])
 
 
 def run_batch(

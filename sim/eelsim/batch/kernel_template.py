@@ -188,9 +188,11 @@ def _guidance_offset(px, py, heading, r, run, target, waypoints, n_waypoints, k_
                      lane_guide):
     """guidance.Guidance.offset for lane r at a control update, the ILOS integral advanced.
 
-    ``guide`` is LoopSettings.guidance (law: 0 pursuit, 1 ILOS; look-ahead; integral gain;
-    control period; the law's heading gain, 0: the run's k_theta); ``lane_guide`` holds each lane's first-leg start (rows 0, 1) and integral
-    vector (rows 2, 3). Same expressions, in the same order, as ``guidance.ilos_reference``.
+    ``guide`` is LoopSettings.guidance (law: 0 pursuit, 1 ILOS, 2 pursuit with the current's
+    feed-forward; look-ahead; integral gain; control period; the law's heading gain, 0: the
+    run's k_theta; the feed-forward's current x, y, speed U and crab limit); ``lane_guide`` holds
+    each lane's first-leg start (rows 0, 1) and integral vector (rows 2, 3). Same expressions, in
+    the same order, as ``guidance.ilos_reference`` and ``guidance.feed_forward_reference``.
     """
     if guide[4] > 0.0:
         k_theta = guide[4]
@@ -199,6 +201,17 @@ def _guidance_offset(px, py, heading, r, run, target, waypoints, n_waypoints, k_
     wy = waypoints[run, w, 1]
     if guide[0] == 0.0:
         return _heading_offset(px, py, heading, wx, wy, k_theta)
+    if guide[0] == 2.0:
+        cx = guide[5]
+        cy = guide[6]
+        dx = wx - px
+        dy = wy - py
+        dist = math.sqrt(dx * dx + dy * dy)
+        if (cx == 0.0 and cy == 0.0) or dist == 0.0:
+            return _heading_offset(px, py, heading, wx, wy, k_theta)
+        sine = -(cy * dx - cx * dy) / dist / guide[7]
+        sine = min(max(sine, -guide[8]), guide[8])
+        return k_theta * _wrap_angle(math.atan2(dy, dx) + math.asin(sine) - heading)
     if w > 0:
         x0 = waypoints[run, w - 1, 0]
         y0 = waypoints[run, w - 1, 1]

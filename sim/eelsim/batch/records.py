@@ -91,10 +91,11 @@ class LoopSettings(NamedTuple):
         Keep every step's state.
     sample_steps : ndarray of int
         Sorted unique steps at which states are sampled.
-    guidance : ndarray, shape (5,)
-        The guidance law (``eelsim.guidance.GuidanceLaw``): 0 pure pursuit or 1 ILOS, the
-        look-ahead, the integral gain, the control period the integral advances by, and the
-        law's heading gain (0: each run's own k_theta).
+    guidance : ndarray, shape (9,)
+        The guidance law (``eelsim.guidance.GuidanceLaw``): 0 pure pursuit, 1 ILOS or 2 pure
+        pursuit with the known current's feed-forward, the look-ahead, the integral gain, the
+        control period the integral advances by, the law's heading gain (0: each run's own
+        k_theta), and the feed-forward's current (x, y), speed U and crab limit.
     """
 
     dt: float
