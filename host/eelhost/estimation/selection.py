@@ -33,6 +33,16 @@ CMA-ES search, from the candidate's screening fit, and from the best of every ca
 screening fit carried over (the screened-out ones' too). Those dropped are shown with the
 screen's figures, marked, and never recommended.
 
+**The middle rung.** A survivor that passes only as a family's or joint model's best (not among
+the screen's best few, :func:`best_few`; :func:`middle_rung`) is the second rung of successive
+halving: it first gets a medium budget (:func:`_middle_stage`: a :data:`MIDDLE_BUDGET` CMA-ES
+search seeded as the full one, from the full search's starts, polished, its current fitted and
+its folds refitted as the screen's), run beside the others' own searches in the same barrier.
+It goes on to the full search only when its middle-rung mean held-out error comes within
+:data:`SURVIVOR_FACTOR` of the lowest of the screen's and the middle rung's (or its middle rung
+failed: :func:`past_middle_rung`); otherwise it stops there, shown with the middle rung's
+figures, marked, and never recommended (docs/estimation.md, "Model comparison").
+
 **Joint models that join after the screen.** A joint model that is not offered by default but
 ``offered_after_screen`` (the PD loop on the servo's torque-speed line, ``pd_limited``) joins the
 default grid after the screen with every base law of the grid (a law without its lift) and the
@@ -123,6 +133,7 @@ SCREEN_FOLD_ITERATIONS = 2  # and of a screening fold's refit
 SURVIVORS = 4  # at most this many candidates pass the screen to the full search
 SURVIVOR_FACTOR = 2.0  # and only those within this factor of the screen's best mean held-out error
 FAMILY_FACTOR = 4.0  # a law family's best passes too when within this factor of the screen's best
+MIDDLE_BUDGET = SEARCH_BUDGET // 2  # CMA-ES candidates of the middle rung's search, per fit
 # a term the other model lacks starts switched off (a lift variant's lift and drag rise)
 # and the torque-speed line of a joint model that has one (pd_limited) at its bounds' far end,
 # where the gaits never reach it: the plain PD loop
@@ -208,6 +219,11 @@ class CandidateScore:
         Per fit, how far its predictions of the gaits between its training gaits leave the
         speeds the recordings bracket (:func:`eelhost.estimation.neighbours.neighbour_excursion`:
         1 inside; absent for a screened-out candidate).
+    middle_rung : bool
+        Whether the candidate, passed by the screen only as a family's or joint model's best,
+        stopped at the middle rung (:func:`past_middle_rung`): its figures are then the middle
+        rung's (a medium search, the screen's polish and folds); ``screened_out`` is set too, so
+        it is never recommended nor compared as a full fit.
     """
 
     model: str
@@ -220,6 +236,7 @@ class CandidateScore:
     failed: str | None = None
     screened_out: bool = False
     between: dict[str, float] = field(default_factory=dict)
+    middle_rung: bool = False
 
     @property
     def excursion(self) -> float:
@@ -487,6 +504,7 @@ def cross_validate(
     screen_budget: int = SCREEN_BUDGET,
     survivors: int = SURVIVORS,
     final: int = FINALISTS,
+    middle_budget: int = MIDDLE_BUDGET,
 ) -> list[CandidateScore]:
     """Leave-one-gait-out cross-validation of the candidate models (module docstring).
 
@@ -523,12 +541,17 @@ def cross_validate(
     final : int
         How many of the best fully searched candidates are refitted from more starts before
         the choice (:func:`finalists`; 0: none).
+    middle_budget : int
+        CMA-ES candidates of the middle rung's search, per fit, for a candidate the screen
+        passes only as a family's or joint model's best (:func:`middle_rung`; 0: no middle
+        rung, every survivor gets the full search).
 
     Returns
     -------
     list of CandidateScore
         The grid's candidates in order (those the screen dropped with the screen's figures and
-        ``screened_out``), then the one-set ones.
+        ``screened_out``, those stopped at the middle rung with its figures, ``screened_out``
+        and ``middle_rung``), then the one-set ones.
 
     Raises
     ------
@@ -552,8 +575,10 @@ def cross_validate(
            for i, s in enumerate(spaces) for m in motions}
     screen_scores: dict[int, CandidateScore] = {}
     screen_fits: dict[tuple[int, str], _Fitted] = {}
+    middle: dict[int, CandidateScore] = {}
     with Workers(settings.jobs, len(evs)) as workers:
         alive = list(range(len(spaces)))
+        trial: list[int] = []
         if screen_budget > 0 and len(spaces) > survivors:
             screen_fits, screen_scores = _screen(workers, spaces, evs, motions, settings.seed,
                                                  screen_budget)
@@ -583,14 +608,23 @@ def cross_validate(
                                      grid_size, survivors, set(joining))
             log.info("model comparison: %d of %d candidates pass the screen", len(alive),
                      len(spaces))
-        full = _full(workers, spaces, evs, motions, alive, screen_fits, settings.seed,
-                     iterations, fold_iterations, budget, seed_offset=1 if screen_fits else 0)
+            if middle_budget > 0:
+                trial = middle_rung([screen_scores[i] for i in range(len(spaces))],
+                                    grid_size, survivors, set(joining))
+        full, middle = _full(workers, spaces, evs, motions, alive, screen_fits, settings.seed,
+                             iterations, fold_iterations, budget,
+                             seed_offset=1 if screen_fits else 0, trial=trial,
+                             middle_budget=middle_budget,
+                             screened_scores=[screen_scores[i] for i in sorted(screen_scores)])
         if final > 0:
             _final(workers, spaces, evs, full, iterations, fold_iterations, final)
     scores = []
     for i in range(len(spaces)):
         if i in full:
             score = full[i]
+        elif i in middle:
+            score = middle[i]
+            score.screened_out = score.middle_rung = True
         else:
             score = screen_scores[i]
             score.screened_out = True
@@ -634,12 +668,11 @@ def pass_screen(scores: Sequence[CandidateScore], survivors: int = SURVIVORS,
     where the full one does not). A joint model in ``joined`` (one that joined after the screen
     with a few laws) has no joint model's best passed: its candidates pass on their errors.
     """
-    ran = sorted((i for i, c in enumerate(scores) if np.isfinite(c.mean_held_out)),
-                 key=lambda i: scores[i].mean_held_out)
+    ran = [i for i, c in enumerate(scores) if np.isfinite(c.mean_held_out)]
     if not ran:
         return list(range(len(scores)))
-    best = scores[ran[0]].mean_held_out
-    passed = {i for i in ran[:survivors] if scores[i].mean_held_out <= factor * best}
+    best = min(scores[i].mean_held_out for i in ran)
+    passed = set(best_few(scores, survivors, factor))
     joints: dict[str, int] = {}
     laws: dict[str, int] = {}
     for i in sorted(range(len(scores)), key=lambda i: screen_rank(scores[i])):
@@ -651,6 +684,55 @@ def pass_screen(scores: Sequence[CandidateScore], survivors: int = SURVIVORS,
     passed |= set(joints.values())
     passed |= {i for i in laws.values() if scores[i].mean_held_out <= family_factor * best}
     return sorted(passed)
+
+
+def best_few(scores: Sequence[CandidateScore], survivors: int = SURVIVORS,
+             factor: float = SURVIVOR_FACTOR) -> list[int]:
+    """The screen's best few: the ``survivors`` lowest mean held-out errors within ``factor``.
+
+    Their positions in ``scores``, in order; every position when every candidate failed (a
+    short search may fail where the full one does not). The rest of :func:`pass_screen`'s
+    survivors pass only as a family's or joint model's best.
+    """
+    ran = sorted((i for i, c in enumerate(scores) if np.isfinite(c.mean_held_out)),
+                 key=lambda i: scores[i].mean_held_out)
+    if not ran:
+        return list(range(len(scores)))
+    best = scores[ran[0]].mean_held_out
+    return sorted(i for i in ran[:survivors] if scores[i].mean_held_out <= factor * best)
+
+
+def middle_rung(scores: Sequence[CandidateScore], grid_size: int,
+                survivors: int = SURVIVORS, joined: set[str] | frozenset[str] = frozenset(),
+                ) -> list[int]:
+    """The screen's survivors that get the middle rung before the full search, in order.
+
+    Those that :func:`screen_survivors` passes only as a family's or joint model's best: not
+    among the :func:`best_few` of the grid (the first ``grid_size`` scores) for a grid
+    candidate, nor of all the scores for a candidate that joined after the screen (module
+    docstring, "The middle rung").
+    """
+    passed = screen_survivors(scores, grid_size, survivors, joined)
+    sure = set(best_few(list(scores[:grid_size]), survivors))
+    sure |= {i for i in best_few(list(scores), survivors) if i >= grid_size}
+    return [i for i in passed if i not in sure]
+
+
+def past_middle_rung(middle: Mapping[int, CandidateScore], screened: Sequence[CandidateScore],
+                     factor: float = SURVIVOR_FACTOR) -> list[int]:
+    """Which candidates of the middle rung go on to the full search: their positions, in order.
+
+    Those whose middle-rung mean held-out error (``middle``, by position) is within ``factor``
+    of the lowest of the screen's (``screened``) and the middle rung's, the same factor the
+    screen's best few pass by; and those whose middle rung failed (a penalty is not an error:
+    the full search decides). The screen's errors come from shorter fits than the middle
+    rung's, so the comparison leans towards letting a candidate on.
+    """
+    errors = [c.mean_held_out for c in (*screened, *middle.values())]
+    best = min((e for e in errors if np.isfinite(e)), default=np.inf)
+    return sorted(i for i, c in middle.items()
+                  if not np.isfinite(c.mean_held_out) or not np.isfinite(best)
+                  or c.mean_held_out <= factor * best)
 
 
 def screen_survivors(scores: Sequence[CandidateScore], grid_size: int,
@@ -769,9 +851,16 @@ def _full(
     workers: Workers, spaces: Sequence[ParameterSpace],
     evs: dict[tuple[int, str], Evaluator], motions: Sequence[str], alive: Sequence[int],
     screened: Mapping[tuple[int, str], _Fitted], seed: int, iterations: int,
-    fold_iterations: int, budget: int, seed_offset: int,
-) -> dict[int, CandidateScore]:
+    fold_iterations: int, budget: int, seed_offset: int, trial: Sequence[int] = (),
+    middle_budget: int = MIDDLE_BUDGET, screened_scores: Sequence[CandidateScore] = (),
+) -> tuple[dict[int, CandidateScore], dict[int, CandidateScore]]:
     """The full comparison of the candidates ``alive`` (module docstring), by grid position.
+
+    Those of them in ``trial`` first get the middle rung (:func:`_middle_stage`, its search of
+    ``middle_budget`` candidates seeded as the full one), in the same barrier as the others'
+    own searches; only those :func:`past_middle_rung` lets on (against ``screened_scores``, the
+    screen's) then get their own searches, and join the rest. Returns the full scores and the
+    scores of those stopped at the middle rung, by grid position.
 
     Every candidate in still water from its own starts (a search seeded ``seed + seed_offset``,
     and its screening fit where it has one), then from every other candidate's best fit so far
@@ -781,7 +870,8 @@ def _full(
     its evaluator and gives it back with its counts, so every fit is the one the serial run
     makes.
     """
-    keys = [(i, m) for i in alive for m in motions]
+    trial = [i for i in alive if i in set(trial)]
+    alive = [i for i in alive if i not in set(trial)]
 
     def screened_starts(i: int, m: str) -> tuple[list[np.ndarray], list[np.ndarray]]:
         # the candidate's own screening fit (a warm start), and every other screening fit
@@ -795,11 +885,38 @@ def _full(
                   if (o, n) != (i, m) and (o, n) in screened]
         return others, [screened[(i, m)].values[0]]
 
-    done = workers.map(_still_stage, [
-        (evs[k], seed + seed_offset, iterations, budget, *screened_starts(*k)) for k in keys])
+    def own_searches(ks: Sequence[tuple[int, str]]) -> list[tuple[Any, ...]]:
+        return [(_still_stage, (evs[k], seed + seed_offset, iterations, budget,
+                                *screened_starts(*k))) for k in ks]
+
+    # the middle rung runs beside the sure survivors' own searches, in the same barrier: where
+    # it stops every candidate it tries, the comparison has no more barriers than before
+    keys = [(i, m) for i in alive for m in motions]
+    tried = [(i, m) for i in trial for m in motions]
+    done = workers.map(_run, own_searches(keys) + [
+        (_middle_stage, (evs[k], seed + seed_offset, middle_budget, *screened_starts(*k)))
+        for k in tried])
     still: dict[tuple[int, str], _Fitted] = {}
-    for k, (own, ev) in zip(keys, done, strict=True):
+    for k, (own, ev) in zip(keys, done[:len(keys)], strict=True):
         still[k], evs[k] = own, ev
+    middle: dict[int, CandidateScore] = {}
+    for (i, m), (fitted, (held, why), ev) in zip(tried, done[len(keys):], strict=True):
+        evs[(i, m)] = ev
+        _add_to_score(middle, spaces, motions, i, m, fitted, held,
+                      why and f"middle rung: {why}", ev)
+    going_on = past_middle_rung(middle, screened_scores, SURVIVOR_FACTOR)
+    for i in trial:
+        c = middle[i]
+        log.info("model comparison: %s, middle rung: mean held-out error %s: %s", c.model,
+                 f"{c.mean_held_out:.4f}" if np.isfinite(c.mean_held_out) else "failed",
+                 "goes on to the full search" if i in going_on else "stops there")
+    if going_on:
+        late = [(i, m) for i in going_on for m in motions]
+        for k, (own, ev) in zip(late, workers.map(_run, own_searches(late)), strict=True):
+            still[k], evs[k] = own, ev
+        alive = sorted(alive + going_on)
+        keys = [(i, m) for i in alive for m in motions]
+    middle = {i: c for i, c in middle.items() if i not in going_on}
     # the carried-over starts of a motion's candidate read the fits of the same motion's
     # candidates before it in this stage, so each motion is one task; the other motions' fits
     # of this stage's first step (every candidate's, this one's too) are starts as well
@@ -821,7 +938,28 @@ def _full(
     for (i, m), (fitted, (held, why), between, ev) in zip(keys, scored, strict=True):
         evs[(i, m)] = ev
         _add_to_score(scores, spaces, motions, i, m, fitted, held, why, ev, between)
-    return scores
+    return scores, middle
+
+
+def _run(task: Callable[..., Any], args: tuple[Any, ...]) -> Any:
+    """``task(*args)``: lets one barrier of :class:`Workers` hold tasks of different stages."""
+    return task(*args)
+
+
+def _middle_stage(
+    ev: Evaluator, seed: int, budget: int, extra_starts: Sequence[np.ndarray] = (),
+    warm: Sequence[np.ndarray] = (),
+) -> tuple[_Fitted, tuple[np.ndarray, str | None], Evaluator]:
+    """A candidate's middle rung: a medium search, then its current and folds as the screen's.
+
+    From the full search's starts (its own CMA-ES search of ``budget`` candidates, its
+    screening fit, the best carried-over screening fit), each polished ``SCREEN_ITERATIONS``
+    times, the current likewise, the folds ``SCREEN_FOLD_ITERATIONS`` times (module docstring,
+    "The middle rung").
+    """
+    still = multi_start_fit(ev, seed, extra_starts, SCREEN_ITERATIONS, budget, warm)
+    fitted = _with_current(ev, still, SCREEN_ITERATIONS, SCREEN_ITERATIONS)
+    return fitted, _folds(ev, fitted, SCREEN_FOLD_ITERATIONS), ev
 
 
 def default_jobs() -> int:
@@ -1143,7 +1281,9 @@ def _said(score: CandidateScore, say: Callable[[str], None] | None) -> None:
     if score.between and not score.failed:
         text += f", between training gaits x{score.excursion:.2f}" + (
             "" if score.sane else " (not sane)")
-    if score.screened_out:
+    if score.middle_rung:
+        text = f"stopped at the middle rung ({text})"
+    elif score.screened_out:
         text = f"screened out ({text})"
     log.info("%s: %s", score.model, text)
     if say:
@@ -1191,9 +1331,10 @@ def table_markdown(scores: Sequence[CandidateScore]) -> str:
             " | simulations |")
     lines = [head, "|---|---|" + "---|" * len(motions) + "---|---|---|---|"]
     for i, c in enumerate(scores):
-        mark = " (recommended)" if c is choice else " (screened out)" if c.screened_out else ""
+        mark = (" (recommended)" if c is choice else " (stopped at the middle rung)"
+                if c.middle_rung else " (screened out)" if c.screened_out else "")
         fitness = " | ".join(_fitness_cell(c, m, ratios.get(i, {})) for m in motions)
-        screen = " (screen)" if c.screened_out else ""
+        screen = " (middle rung)" if c.middle_rung else " (screen)" if c.screened_out else ""
         held = (f"failed ({c.failed}) | failed" if c.failed
                 else f"{c.mean_held_out:.4f}{screen} | {c.worst_held_out:.4f}{screen}")
         between = ("-" if not c.between else f"x{c.excursion:.2f}"
