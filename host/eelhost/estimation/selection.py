@@ -504,7 +504,7 @@ def cross_validate(
     screen_budget: int = SCREEN_BUDGET,
     survivors: int = SURVIVORS,
     final: int = FINALISTS,
-    middle_budget: int = MIDDLE_BUDGET,
+    middle_budget: int | None = None,
 ) -> list[CandidateScore]:
     """Leave-one-gait-out cross-validation of the candidate models (module docstring).
 
@@ -541,10 +541,11 @@ def cross_validate(
     final : int
         How many of the best fully searched candidates are refitted from more starts before
         the choice (:func:`finalists`; 0: none).
-    middle_budget : int
+    middle_budget : int, optional
         CMA-ES candidates of the middle rung's search, per fit, for a candidate the screen
         passes only as a family's or joint model's best (:func:`middle_rung`; 0: no middle
-        rung, every survivor gets the full search).
+        rung, every survivor gets the full search). Default: the same share of ``budget`` as
+        :data:`MIDDLE_BUDGET` of :data:`SEARCH_BUDGET` (half).
 
     Returns
     -------
@@ -559,6 +560,8 @@ def cross_validate(
         When a fit has fewer than two training experiments.
     """
     motions = list(fits)
+    if middle_budget is None:
+        middle_budget = budget * MIDDLE_BUDGET // SEARCH_BUDGET
     laws = list(laws) if laws is not None else default_laws()
     for motion in motions:
         if len(training_experiments(dataset, motion)) < 2:
