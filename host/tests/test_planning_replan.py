@@ -3,6 +3,8 @@ has the tank's replanner in detail)."""
 
 from __future__ import annotations
 
+import json
+
 import pytest
 
 from eelhost.cli import main
@@ -72,6 +74,10 @@ def test_run_plan_over_sim_replans_in_an_unknown_current_and_arrives(tmp_path, c
     assert "arrived: in the planned goal disc" in out
     replans = int(out.split("replans: ")[1].split()[0])
     assert replans >= 1
+    # a planned run steers by default with the pursuit aimed off by the known current, given
+    # the planner's current and speed (docs/planning.md, "The guidance")
+    guidance = json.loads((tmp_path / "run.json").read_text())["source"]["guidance"]
+    assert guidance["law"] == "pursuit_ff" and guidance["speed_m_s"] > 0.05
 
 
 def test_run_needs_waypoints_or_a_plan(tmp_path, capsys):

@@ -33,6 +33,8 @@ def test_a_take_records_everything_a_dataset_needs(tmp_path, capsys):
     assert exp.camera["fps"] == pytest.approx(30.0) and exp.camera["fps_nominal"] == 30.0
     assert exp.camera["pixel_m"] == pytest.approx(0.0038, rel=0.01)
     run = exp.source["run"]
+    # a waypoint run has no planner to give a feed-forward its current: the paper's pursuit
+    assert exp.source["guidance"]["law"] == "pursuit"
     assert run["note"] == "water 21 C"
     assert run["gains"] == {"k_theta": 0.37}
     assert run["joints"]["model"] == "pd"

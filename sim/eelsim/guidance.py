@@ -72,7 +72,7 @@ Closed to plug-ins (no entry-point group): the batched kernel carries every law'
 there together."""
 
 
-@GUIDANCE_LAWS.add("pursuit", "the paper's pure pursuit of each waypoint (default)")
+@GUIDANCE_LAWS.add("pursuit", "the paper's pure pursuit of each waypoint (the Guidance object's default)")
 def _steer_pursuit(guidance: Guidance, waypoint: FloatArray) -> float:
     pose = guidance.filtered_pose
     assert pose is not None  # steered only after a pose
