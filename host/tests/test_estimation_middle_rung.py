@@ -73,6 +73,12 @@ def test_the_table_says_which_candidates_stopped_at_the_middle_rung_and_never_re
     assert ("| pd x resistive_lift (stopped at the middle rung) | 4 | 0.1000 | 0.0200 (middle "
             "rung) | 0.0300 (middle rung) |") in table
     assert "screened out" not in table and "(screen)" not in table
+    # and the estimate-bench's line of the candidates says so too, not "screened out"
+    from eelhost.benchmarks.estimator_accuracy import _model_line
+
+    line = _model_line({"comparison": [stopped, full], "adopted": False, "model": full.model})
+    assert "pd x resistive_lift 0.0200 (stopped at the middle rung)" in line
+    assert "screened out" not in line
 
 
 def _rung(ds, middle_budget=12):

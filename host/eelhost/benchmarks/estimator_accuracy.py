@@ -228,7 +228,9 @@ def _model_line(result: dict[str, Any]) -> str:
     if not comparison:
         return f"Fitted model: {result['model']} (the robot file's; no comparison)."
     scores = ", ".join(f"{c.model} " + ("failed" if c.failed else f"{c.mean_held_out:.4f}")
-                       + (" (screened out)" if c.screened_out else "") for c in comparison)
+                       + (" (stopped at the middle rung)" if c.middle_rung
+                          else " (screened out)" if c.screened_out else "")
+                       for c in comparison)
     if result["adopted"]:
         return (f"Fitted model: **{result['model']}**, recommended by the leave-one-gait-out "
                 f"comparison over the robot file's {result['own']['straight'].space.model_name} "

@@ -158,8 +158,9 @@ def fit_and_choose(
     if kept is not None and not kept.failed:
         # the robot file's model as the comparison fitted it (from its own starts; the screen's
         # short fits when the screen dropped it, and named so)
-        how = "multi-start (comparison's screen)" if kept.screened_out else \
-            "multi-start (comparison)"
+        how = ("multi-start (comparison's middle rung)" if kept.middle_rung
+               else "multi-start (comparison's screen)" if kept.screened_out
+               else "multi-start (comparison)")
         chosen.robot_file_fits = {
             m: FitResult(how, own, v, kept.fitness[m],
                          [(0, kept.fitness[m], kept.simulations)]) for m, v in kept.values.items()}

@@ -198,6 +198,7 @@ def run_report(
             "candidates": {c.model: {"parameters": c.parameters, "fitness": c.fitness,
                                      "held_out": {m: v.tolist() for m, v in c.held_out.items()},
                                      "failed": c.failed, "screened_out": c.screened_out,
+                                     "middle_rung": c.middle_rung,
                                      "between_training_gaits": {
                                          m: v if np.isfinite(v) else None
                                          for m, v in c.between.items()}}
@@ -274,7 +275,11 @@ def run_report(
             f" x{SANE_FACTOR:g}: not sane, not recommended while a sane candidate ran)."
             + (" Every candidate was first screened with a short search; those marked screened "
                "out were dropped there, and their figures are the screen's."
-               if any(c.screened_out for c in comparison) else ""),
+               if any(c.screened_out for c in comparison) else "")
+            + (" Those marked stopped at the middle rung passed the screen only as their "
+               "family's or joint model's best and were dropped after a medium search; their "
+               "figures are that search's."
+               if any(c.middle_rung for c in comparison) else ""),
             "",
             comparison_markdown(comparison),
             "",
