@@ -132,8 +132,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    "leg with the planner's gains) or pursuit_ff (pure pursuit aimed off by the "
                    "current the planner knows; with --plan or --bench only); with --plan or "
                    "--bench the planner searches and checks with the same law (default: "
-                   f"{PLANNED_GUIDANCE} with --plan or --bench, {PURSUIT.name} otherwise; "
-                   "docs/planning.md, \"The guidance\")")
+                   + (PURSUIT.name if PLANNED_GUIDANCE == PURSUIT.name else
+                      f"{PLANNED_GUIDANCE} with --plan or --bench, {PURSUIT.name} otherwise")
+                   + "; docs/planning.md, \"The guidance\")")
     p.add_argument("--duration", type=POSITIVE, help="stop after this long, s (default: no limit)")
     p.add_argument("--motion", choices=MOTIONS, default="auto",
                    help="what the take is, for a dataset: straight, turning, path, or auto "
