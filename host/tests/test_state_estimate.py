@@ -172,9 +172,9 @@ def test_an_idle_robot_before_its_first_running_sample_is_no_warning_but_one_tha
     assert len(first) == 1 and first[0].levelno == logging.DEBUG
     assert "IDLE" in first[0].getMessage() and tel.ignored == {"not_running": 1}
     caplog.clear()
-    fresh = TelemetryJoints(MODEL, PATH_GAIT)
-    feed(fresh, run, 0.5, 2.0)
-    assert not fresh.add(2.14, telemetry_at(run, 2.1, state=protocol.State.FAILSAFE), 2.11)
+    # the same robot, once it ran: the idle samples before did not use up the warning
+    feed(tel, run, 0.5, 2.0)
+    assert not tel.add(2.14, telemetry_at(run, 2.1, state=protocol.State.FAILSAFE), 2.11)
     stopped = [r for r in caplog.records if "not_running" in r.getMessage()]
     assert len(stopped) == 1 and stopped[0].levelno == logging.WARNING
     assert "FAILSAFE" in stopped[0].getMessage()

@@ -337,6 +337,7 @@ class TelemetryJoints:
         self.lag = np.arange(self.n_joints) * gait.beta_rad
         self.latest: JointSample | None = None
         self.ignored: dict[str, int] = {}
+        self._warned: set[str] = set()  # reasons already warned about (later ones at debug)
         self.taken = 0
         # (latest, earliest) offset t_host - t_robot each sample allows
         self._bounds: deque[tuple[float, float]] = deque(maxlen=max(int(clock_window), 1))
@@ -347,10 +348,12 @@ class TelemetryJoints:
         self._stale_logged = False
 
     def _ignore(self, reason: str, detail: str, expected: bool = False) -> None:
-        """Count a sample not taken; the first of each reason is a warning unless ``expected``."""
-        first = reason not in self.ignored
+        """Count a sample not taken; the first unexpected one of each reason is a warning."""
         self.ignored[reason] = self.ignored.get(reason, 0) + 1
-        (log.warning if first and not expected else log.debug)(
+        warn = not expected and reason not in self._warned
+        if warn:
+            self._warned.add(reason)
+        (log.warning if warn else log.debug)(
             "telemetry ignored for the state estimate (%s): %s", reason, detail)
 
     def _robot_time_s(self, time_us: int) -> float:
@@ -379,7 +382,7 @@ class TelemetryJoints:
         """
         if msg.state != protocol.State.RUNNING:
             # before the first running sample the robot has not yet started its gait: every run
-            # begins so, which is no news; once it has run, a robot that stops running is
+            # begins so, which is no news; once it has run, a robot that stops running is news
             self._ignore("not_running", f"robot state {_state_name(msg.state)} at time_us "
                          f"{msg.time_us}",
                          expected=self.taken == 0)
