@@ -8,7 +8,6 @@ import json
 import pytest
 
 from eelhost.cli import main
-from eelhost.commands.plan import PLANNED_GUIDANCE
 from eelhost.planning.planner import Planner
 from eelhost.planning.replan import execute_with_replanning
 from eelhost.planning.tank import sim_uri_for_world
@@ -75,10 +74,10 @@ def test_run_plan_over_sim_replans_in_an_unknown_current_and_arrives(tmp_path, c
     assert "arrived: in the planned goal disc" in out
     replans = int(out.split("replans: ")[1].split()[0])
     assert replans >= 1
-    # a planned run steers by default with the planned runs' law (docs/planning.md, "The
-    # guidance"), and the take says which
+    # a planned run steers by default with the paper's pursuit (pursuit_ff loses the bundled
+    # tank_5_obstacles: docs/planning.md, "The guidance"), and the take says which
     guidance = json.loads((tmp_path / "run.json").read_text())["source"]["guidance"]
-    assert guidance["law"] == PLANNED_GUIDANCE
+    assert guidance["law"] == "pursuit"
 
 
 def test_run_needs_waypoints_or_a_plan(tmp_path, capsys):

@@ -56,12 +56,6 @@ from eelsim.robot import Robot
 REFUSALS = ("blocked_start", "current_too_strong", "goal_blocked", "unreachable")
 """Planner statuses the command reports as refusals (exit 2)."""
 
-PLANNED_GUIDANCE = PURSUIT.name
-"""The guidance law of every planned run, ``eelbot plan`` and ``eelbot run --plan/--bench`` alike,
-unless ``--guidance`` names another: the paper's pure pursuit. ``pursuit_ff`` planned 62 unseen
-benchmark worlds against its 48, but no plan of the bundled ``tank_5_obstacles`` (docs/planning.md,
-"The guidance"), so it is not the default yet."""
-
 BENCH_BEGIN = "<!-- bench: begin (written by eelbot plan --bench) -->"
 BENCH_END = "<!-- bench: end -->"
 
@@ -135,7 +129,7 @@ def add_check_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--robust-search", action="store_true",
                    help="also swim every leg of the search in the unknown current (fewer plans "
                    "fail their check, about 4 times the search's time)")
-    p.add_argument("--guidance", choices=GUIDANCE_LAWS.names(), default=PLANNED_GUIDANCE,
+    p.add_argument("--guidance", choices=GUIDANCE_LAWS.names(), default=PURSUIT.name,
                    help="the robot's guidance law for the search and the check (default: "
                    "%(default)s): "
                    + "; ".join(f"{name}: {text}" for name, text in GUIDANCE_LAWS.descriptions().items())
@@ -329,7 +323,7 @@ def _bench(args: argparse.Namespace, robot: Robot, model: CoefficientModel,
                + (f" --jobs {args.jobs}" if args.jobs > 1 else "")
                + (f" --unknown-current {args.unknown_current:g}"
                   if args.unknown_current != DEFAULT_UNKNOWN_CURRENT_M_S else "")
-               + (f" --guidance {args.guidance}" if args.guidance != PLANNED_GUIDANCE else "")
+               + (f" --guidance {args.guidance}" if args.guidance != PURSUIT.name else "")
                + (f" --budget {args.budget:g}" if args.budget is not None else "")
                + (f" --check-margin {args.check_margin:g}"
                   if args.check_margin != CHECK_MARGIN_M else ""))

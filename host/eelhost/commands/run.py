@@ -26,7 +26,7 @@ from eelhost.commands.common import (
     waypoints,
 )
 from eelhost.commands.link_options import add_link_options, resolve_link_options
-from eelhost.commands.plan import PLANNED_GUIDANCE, add_coefficient_model_option, guidance_law
+from eelhost.commands.plan import add_coefficient_model_option, guidance_law
 from eelhost.errors import EXIT_CONTACT, EXIT_NOT_REACHED, EXIT_OK
 from eelhost.field.recorder import MOTIONS
 from eelhost.field.runloop import BRAKE_S, RunConfig
@@ -126,15 +126,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    f"amplitude {BRAKE_AMPLITUDE_RAD:g} rad, omega 0) for S seconds, the watchdog fed, so that it does "
                    f"not glide on straight (default {BRAKE_S:g} s with --plan or --bench, 0 "
                    "otherwise; 0: Stop at once; docs/planning.md, \"The brake before the Stop\")")
-    p.add_argument("--guidance", choices=GUIDANCE_LAWS.names(), default=None,
+    p.add_argument("--guidance", choices=GUIDANCE_LAWS.names(), default=PURSUIT.name,
                    help="the line-of-sight law that steers the robot: pursuit (the paper's pure "
                    "pursuit of each waypoint), ilos (integral line-of-sight along each "
                    "leg with the planner's gains) or pursuit_ff (pure pursuit aimed off by the "
                    "current the planner knows; with --plan or --bench only); with --plan or "
                    "--bench the planner searches and checks with the same law (default: "
-                   + (PURSUIT.name if PLANNED_GUIDANCE == PURSUIT.name else
-                      f"{PLANNED_GUIDANCE} with --plan or --bench, {PURSUIT.name} otherwise")
-                   + "; docs/planning.md, \"The guidance\")")
+                   "%(default)s; docs/planning.md, \"The guidance\")")
     p.add_argument("--duration", type=POSITIVE, help="stop after this long, s (default: no limit)")
     p.add_argument("--motion", choices=MOTIONS, default="auto",
                    help="what the take is, for a dataset: straight, turning, path, or auto "
@@ -252,9 +250,6 @@ def current_option(value: list[float] | None, virtual: bool) -> tuple[float, flo
 def run(args: argparse.Namespace) -> int:
     """Run the subcommand."""
     resolve_link_options(args, required=None if args.bench else "to run")
-    if args.guidance is None:  # a planned run steers with the planner's default law
-        args.guidance = (PLANNED_GUIDANCE if args.plan is not None or args.bench
-                         else PURSUIT.name)
     if args.bench:
         return _bench(args)
     if args.out is None:
@@ -388,7 +383,7 @@ def _bench(args: argparse.Namespace) -> int:
                   else f" --check-unknown-current {args.check_unknown_current:g}")
                + (f" --coefficients-file {args.coefficients_file}" if args.coefficients_file
                   else "")
-               + (f" --guidance {args.guidance}" if args.guidance != PLANNED_GUIDANCE else "")
+               + (f" --guidance {args.guidance}" if args.guidance != PURSUIT.name else "")
                + (f" --replan-budget {args.replan_budget:g}" if args.replan_budget != 1.0
                   else "")
                + (f" --calm-budget {args.calm_budget:g}"
