@@ -75,3 +75,17 @@ def test_choose_without_bands_is_a_usage_error(capsys):
 
     assert cli.main(["estimate-bench", "--choose", "--tanks", "steady_current"]) == 2
     assert "--choose: goes with --bands" in capsys.readouterr().err
+
+
+def test_the_bench_table_gives_a_one_set_models_fitness_in_every_motions_row():
+    # a one-set model has a single fit under "joint"; its rows printed nan until session 20
+    from types import SimpleNamespace
+
+    from eelhost.benchmarks.estimator_accuracy import _fitness_text
+
+    one_set = {"joint": SimpleNamespace(fitness=0.0123)}
+    assert _fitness_text(one_set, "straight") == "0.0123 (one set)"
+    assert _fitness_text(one_set, "path") == "0.0123 (one set)"
+    separate = {"straight": SimpleNamespace(fitness=0.02), "turning": SimpleNamespace(fitness=0.03)}
+    assert _fitness_text(separate, "turning") == "0.0300"
+    assert _fitness_text(separate, "path") == "-"

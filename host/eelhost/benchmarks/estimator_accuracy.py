@@ -202,6 +202,20 @@ def _fit_and_validate(ds: Dataset, plant: Plant | None, settings: FitSettings,
     return out
 
 
+def _fitness_text(fits: dict[str, Any], motion: str) -> str:
+    """The fitness column of ``motion``'s row: its own fit's, or the one set's for every motion.
+
+    A one-set model (docs/estimation.md, "One set for every motion") has one fit,
+    under ``"joint"``, scored on the experiments of every motion; each row shows that fitness,
+    marked, rather than no number (the table printed ``nan`` for it until session 20).
+    """
+    if motion in fits:
+        return f"{fits[motion].fitness:.4f}"
+    if "joint" in fits:
+        return f"{fits['joint'].fitness:.4f} (one set)"
+    return "-"
+
+
 def _target(motion: str, floor: float = float("nan")) -> float:
     """The target of a motion: 0.03 BL, or 1.2 times the plant's floor where that is higher."""
     return float(np.fmax(TARGET_WORST_EX[motion], FLOOR_FACTOR * floor))
@@ -451,10 +465,9 @@ def estimator_report(
             "|---|---|---|---|---|---|---|",
         ]
         for m, (a, b) in r["worst_ex"].items():
-            fit = r["fits"].get(m)
             itself = r["plant_worst_ex"].get(m, float("nan"))
             lines.append(
-                f"| {m} | {fit.fitness if fit else float('nan'):.4f} | {ex_text(a)} | {ex_text(b)} | "
+                f"| {m} | {_fitness_text(r['fits'], m)} | {ex_text(a)} | {ex_text(b)} | "
                 + (f"{itself:.4f}" if np.isfinite(itself) else "not measured")
                 + f" | <= {_target(m, itself):.4f} ({_met(a, m, itself)}) | "
                 f"{PAPER_WORST_EX[m]} |"
