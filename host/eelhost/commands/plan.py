@@ -345,11 +345,9 @@ def _bench(args: argparse.Namespace, robot: Robot, model: CoefficientModel,
         print(f"{k + 1:3d} {r.name}: {r.status} {r.planning_time_s:.2f} s "
               f"(cpu {r.cpu_time_s:.2f} s){extra}", flush=True)
 
-    if args.guidance == AUTO_GUIDANCE:
-        raise OptionError(f"--guidance {AUTO_GUIDANCE}: not with --bench (the planning benchmark "
-                          "runs one law; eelbot run --bench runs auto)")
-    guidance = guidance_law(args.guidance)
-    options = LoopOptions(guidance=guidance)  # the coverage's runs steer with the same law
+    guidance = guidance_choice(args.guidance)
+    # the coverage's runs steer with the same law (auto: the law it tries first)
+    options = LoopOptions(guidance=laws_of(guidance)[0])
     summary = run_bench(robot, model, args.worlds, args.seed, args.threads, progress,
                         max(args.jobs, 1), args.unknown_current, guidance, swimmer,
                         args.budget, args.check_margin)
@@ -382,7 +380,7 @@ def _bench(args: argparse.Namespace, robot: Robot, model: CoefficientModel,
         f"{REPAIR_DRAWS_FACTOR} times as many; every run "
         f"{args.check_margin * 1000:g} mm clear of everything); the fresh "
         "draws below keep 8 directions 45 degrees apart",
-        f"- guidance: {guidance.describe()}",
+        f"- guidance: {describe_guidance(args.guidance)}",
         *lines,
         BENCH_END,
     ]

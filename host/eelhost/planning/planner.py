@@ -1143,6 +1143,7 @@ def laws_of(choice: GuidanceChoice) -> tuple[GuidanceLaw, ...]:
 
 
 def plan_with_laws(make: Callable[[GuidanceLaw], Planner], laws: tuple[GuidanceLaw, ...],
+                   call: Callable[[Planner], Outcome] | None = None,
                    ) -> tuple[Planner, Outcome]:
     """Plan with each law in turn until one finds a plan that passes its check.
 
@@ -1158,6 +1159,9 @@ def plan_with_laws(make: Callable[[GuidanceLaw], Planner], laws: tuple[GuidanceL
         The planner for a law (the same world, robot, model and options otherwise).
     laws : tuple of GuidanceLaw
         At least one.
+    call : callable, optional
+        The planning call with a made planner (the planning benchmark's, with its deadline);
+        default ``planner.plan()``.
 
     Returns
     -------
@@ -1173,7 +1177,7 @@ def plan_with_laws(make: Callable[[GuidanceLaw], Planner], laws: tuple[GuidanceL
     earlier_s = earlier_search_s = 0.0
     for k, law in enumerate(laws):
         planner = make(law)
-        outcome = planner.plan()
+        outcome = planner.plan() if call is None else call(planner)
         outcome.laws_tried = list(tried)
         outcome.planning_time_s += earlier_s
         outcome.search_time_s += earlier_search_s
