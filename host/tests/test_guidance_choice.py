@@ -127,10 +127,10 @@ def test_the_run_steers_and_records_with_the_law_its_plan_was_found_with(tank5_a
     assert plans[0]["laws_tried"][0]["law"] == "pursuit_ff"
 
 
-def test_plan_command_chooses_the_law_by_default_and_writes_it(tmp_path, capsys):
+def test_plan_command_with_auto_writes_the_law_it_chose(tmp_path, capsys):
     out = tmp_path / "plan"
-    assert main(["plan", "tank_5_obstacles", "--unknown-current", "0", "--draws", "8",
-                 "--out", str(out)]) == 0
+    assert main(["plan", "tank_5_obstacles", "--guidance", "auto", "--unknown-current", "0",
+                 "--draws", "8", "--out", str(out)]) == 0
     printed = capsys.readouterr().out
     assert "guidance: the paper's pure pursuit" in printed
     plan = json.loads((out / "plan.json").read_text())
@@ -138,15 +138,8 @@ def test_plan_command_chooses_the_law_by_default_and_writes_it(tmp_path, capsys)
     assert [t["law"] for t in plan["laws_tried"]] == ["pursuit_ff"]
 
 
-def test_a_waypoint_run_with_the_default_auto_steers_with_pure_pursuit(tmp_path, capsys):
-    # auto chooses by the plan; a waypoint run has none, and steers with pure pursuit
-    stem = tmp_path / "take"
-    assert main(["run", "--link", "sim://?speed=0", "--waypoints", "1,0", "--gait", "0.87,3.9",
-                 "--no-view", "--camera", "synthetic:clean", "--duration", "1",
-                 "--out", str(stem)]) == 0
-    meta = json.loads(open(f"{stem}.json").read())
-    assert meta["source"]["guidance"]["law"] == "pursuit"
-    # pursuit_ff has no planner to give it its water
-    assert main(["run", "--link", "sim://", "--waypoints", "1,0", "--gait", "0.4,6.28",
-                 "--guidance", "pursuit_ff", "--out", str(tmp_path / "ff")]) == 2
-    assert "--guidance pursuit_ff: only with --plan or --bench" in capsys.readouterr().err
+def test_waypoint_runs_refuse_auto(capsys):
+    status = main(["run", "--link", "sim://", "--waypoints", "1,0", "--gait", "0.4,6.28",
+                   "--guidance", "auto", "--out", "/nonexistent/x"])
+    assert status == 2
+    assert "--guidance auto: only with --plan or --bench" in capsys.readouterr().err

@@ -142,7 +142,7 @@ def add_check_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--robust-search", action="store_true",
                    help="also swim every leg of the search in the unknown current (fewer plans "
                    "fail their check, about 4 times the search's time)")
-    p.add_argument("--guidance", choices=GUIDANCE_CHOICES, default=AUTO_GUIDANCE,
+    p.add_argument("--guidance", choices=GUIDANCE_CHOICES, default=PURSUIT.name,
                    help="the robot's guidance law for the search and the check (default: "
                    "%(default)s): "
                    + "; ".join(f"{name}: {text}" for name, text in GUIDANCE_LAWS.descriptions().items())
@@ -362,7 +362,7 @@ def _bench(args: argparse.Namespace, robot: Robot, model: CoefficientModel,
                + (f" --jobs {args.jobs}" if args.jobs > 1 else "")
                + (f" --unknown-current {args.unknown_current:g}"
                   if args.unknown_current != DEFAULT_UNKNOWN_CURRENT_M_S else "")
-               + (f" --guidance {args.guidance}" if args.guidance != AUTO_GUIDANCE else "")
+               + (f" --guidance {args.guidance}" if args.guidance != PURSUIT.name else "")
                + (f" --budget {args.budget:g}" if args.budget is not None else "")
                + (f" --check-margin {args.check_margin:g}"
                   if args.check_margin != CHECK_MARGIN_M else ""))

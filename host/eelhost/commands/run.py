@@ -134,13 +134,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    f"amplitude {BRAKE_AMPLITUDE_RAD:g} rad, omega 0) for S seconds, the watchdog fed, so that it does "
                    f"not glide on straight (default {BRAKE_S:g} s with --plan or --bench, 0 "
                    "otherwise; 0: Stop at once; docs/planning.md, \"The brake before the Stop\")")
-    p.add_argument("--guidance", choices=GUIDANCE_CHOICES, default=AUTO_GUIDANCE,
+    p.add_argument("--guidance", choices=GUIDANCE_CHOICES, default=PURSUIT.name,
                    help="the line-of-sight law that steers the robot: pursuit (the paper's pure "
                    "pursuit of each waypoint), ilos (integral line-of-sight along each "
                    "leg with the planner's gains), pursuit_ff (pure pursuit aimed off by the "
                    "current the planner knows; with --plan or --bench only) or auto (with --plan "
-                   "or --bench: " + AUTO_HELP + "; a waypoint run, without a plan, steers with "
-                   "pursuit); with --plan or "
+                   "or --bench only: " + AUTO_HELP + "); with --plan or "
                    "--bench the planner searches and checks with the same law (default: "
                    "%(default)s; docs/planning.md, \"The guidance\")")
     p.add_argument("--duration", type=POSITIVE, help="stop after this long, s (default: no limit)")
@@ -273,8 +272,10 @@ def run(args: argparse.Namespace) -> int:
         raise OptionError("--gait: required with --waypoints")
     if args.coefficients_file is not None and args.plan is None:
         raise OptionError("--coefficients-file: only with --plan (the planner's model)")
-    if (args.plan is None and args.guidance != AUTO_GUIDANCE
-            and guidance_law(args.guidance).feed_forward):
+    if args.plan is None and args.guidance == AUTO_GUIDANCE:
+        raise OptionError(f"--guidance {AUTO_GUIDANCE}: only with --plan or --bench (the planner "
+                          "chooses the law per plan)")
+    if args.plan is None and guidance_law(args.guidance).feed_forward:
         raise OptionError(f"--guidance {args.guidance}: only with --plan or --bench (the planner "
                           "gives it the known current and the robot's speed)")
     current = current_option(args.current, args.link.startswith("sim:"))
@@ -283,8 +284,7 @@ def run(args: argparse.Namespace) -> int:
     navigator = None
     view = None
     uri = args.link
-    # with --plan the plan's law replaces it (auto: the law the plan was found with); a waypoint
-    # run has no plan to choose by, and auto steers it with pure pursuit, the law auto ends with
+    # with --plan the plan's law replaces it (auto: the law the plan was found with)
     law = PURSUIT if args.guidance == AUTO_GUIDANCE else guidance_law(args.guidance)
     start_guide = None
     view_twin, view_current = None, current
@@ -397,7 +397,7 @@ def _bench(args: argparse.Namespace) -> int:
                   else f" --check-unknown-current {args.check_unknown_current:g}")
                + (f" --coefficients-file {args.coefficients_file}" if args.coefficients_file
                   else "")
-               + (f" --guidance {args.guidance}" if args.guidance != AUTO_GUIDANCE else "")
+               + (f" --guidance {args.guidance}" if args.guidance != PURSUIT.name else "")
                + (f" --replan-budget {args.replan_budget:g}" if args.replan_budget != 1.0
                   else "")
                + (f" --calm-budget {args.calm_budget:g}"
