@@ -186,6 +186,8 @@ def test_the_take_records_every_plan_and_replan(slow_take):
         assert len(p["current_m_s"]) == 2
         assert p["budget_s"] == 120.0
     assert planning["replan_budget_s"] == 120.0 and plans[0]["budget_s"] is None
+    # every plan and replan says the law it was searched with: the run's (pure pursuit)
+    assert all(p["guidance"] == "pursuit" for p in plans)
     # the current estimate (0.05 m/s towards +y, unknown to the planner) is recorded; its
     # accuracy is tested without threads in test_state_estimate.py
     windows = planning["current_estimate"]

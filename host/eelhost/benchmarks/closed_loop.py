@@ -45,7 +45,7 @@ from eelhost.field.runloop import BRAKE_S, RunConfig
 from eelhost.field.session import TakeNotes
 from eelhost.field.take import TakeRequest, run_take
 from eelhost.planning.geometry import FloatArray
-from eelhost.planning.planner import PlanRefused
+from eelhost.planning.planner import AUTO_GUIDANCE, PlanRefused
 from eelhost.planning.replan import CALM_REPLAN_BUDGET_S, REPLAN_BUDGET_S
 from eelhost.planning.state_estimate import body_error_m, error_summary_mm
 from eelhost.planning.tank import plan_for_run
@@ -114,7 +114,8 @@ class WorldResult:
     water : dict
         The virtual robot's coefficients and unknown current.
     guidance : str
-        The guidance law of the planner and the run loop (``pursuit`` or ``ilos``).
+        The guidance law of the planner and the run loop (``pursuit``, ``ilos``,
+        ``pursuit_ff``), or ``auto``: the law chosen per plan (``plan_guidance``).
     failed_replan_statuses : list of str
         The status of each failed replan (``out_of_time``: its budget ran out first).
     replan_budget_s : float or None
@@ -156,6 +157,9 @@ class WorldResult:
         "The harbour"), one per swim.
     harbourless : int
         Stops the twin drifted within the margin for which no harbour swim kept it.
+    plan_guidance : str or None
+        The law the first plan was searched and checked with, which the run and its replans
+        steered with (None: no plan, or a result from before session 20).
     """
 
     seed: int
@@ -197,6 +201,7 @@ class WorldResult:
     coast_s: float = 0.0
     harbours: list[str] = field(default_factory=list)
     harbourless: int = 0
+    plan_guidance: str | None = None
 
 
 def calm_and_early(replans: list[dict], replan_budget_s: float | None
@@ -423,7 +428,8 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
         sum(e["kind"] == "halt" for e in nav.events), float(stopping.min()),
         bool(stopping.min() < 0.0), coast_s,
         [e["reason"] for e in nav.events if e["kind"] == "harbour" and e["status"] == "harbour"],
-        sum(e["kind"] == "harbour" and e["status"] == "none" for e in nav.events))
+        sum(e["kind"] == "harbour" and e["status"] == "none" for e in nav.events),
+        planned.guidance.name)
 
 
 def glide_on(robot: VirtualRobot, longest_s: float = COAST_AUDIT_S,
@@ -483,8 +489,13 @@ def estimate_error_mm(model: SwimmerModel, history: list[tuple[float, FloatArray
 
 
 def _law_name(planner_options: dict[str, Any] | None) -> str:
-    """The name of the guidance law the planner options give (pure pursuit by default)."""
+    """The name of the guidance law the planner options give (pure pursuit by default).
+
+    ``auto`` for laws tried in turn (the guidance chosen per plan).
+    """
     law = (planner_options or {}).get("guidance")
+    if isinstance(law, tuple):  # the laws tried in turn: the guidance chosen per plan
+        return AUTO_GUIDANCE
     return "pursuit" if law is None else str(law.name)
 
 

@@ -31,13 +31,18 @@ from eelhost.files import atomic_write, check_output_folder
 from eelhost.machine import cpu_model
 from eelhost.planning.coverage import action_coverage
 from eelhost.planning.planner import (
+    AUTO_GUIDANCE,
+    AUTO_LAWS,
     CHECK_DRAWS,
     CHECK_MARGIN_M,
     PLANNING_GUIDANCE,
     REPAIR_DRAWS_FACTOR,
+    GuidanceChoice,
     Outcome,
     Planner,
     PlanRefused,
+    laws_of,
+    plan_with_laws,
 )
 from eelhost.planning.uncertainty import (
     DEFAULT_UNKNOWN_CURRENT_M_S,
@@ -52,6 +57,14 @@ from eelsim.closed_loop import LoopOptions
 from eelsim.guidance import GUIDANCE_LAWS, PURSUIT, GuidanceLaw
 from eelsim.model import SwimmerModel
 from eelsim.robot import Robot
+
+GUIDANCE_CHOICES = [*GUIDANCE_LAWS.names(), AUTO_GUIDANCE]
+"""``--guidance``'s choices: each law, or ``auto`` (:data:`AUTO_HELP`)."""
+
+AUTO_HELP = (f"plan with {' then '.join(law.name for law in AUTO_LAWS)} where the one before "
+             "finds no checked plan, and steer and replan with the plan's law (docs/planning.md, "
+             "\"A guidance law chosen per plan\")")
+"""What ``--guidance auto`` does, for the help and the benchmarks' figures."""
 
 REFUSALS = ("blocked_start", "current_too_strong", "goal_blocked", "unreachable")
 """Planner statuses the command reports as refusals (exit 2)."""
@@ -129,10 +142,11 @@ def add_check_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--robust-search", action="store_true",
                    help="also swim every leg of the search in the unknown current (fewer plans "
                    "fail their check, about 4 times the search's time)")
-    p.add_argument("--guidance", choices=GUIDANCE_LAWS.names(), default=PURSUIT.name,
+    p.add_argument("--guidance", choices=GUIDANCE_CHOICES, default=PURSUIT.name,
                    help="the robot's guidance law for the search and the check (default: "
                    "%(default)s): "
                    + "; ".join(f"{name}: {text}" for name, text in GUIDANCE_LAWS.descriptions().items())
+                   + f"; {AUTO_GUIDANCE}: {AUTO_HELP}"
                    + f" ({PLANNING_GUIDANCE.name} has the planner's stiffer heading gain; a plan "
                    "is followed with the law it was checked with: eelbot run --plan WORLD "
                    "--guidance ...; docs/planning.md, \"The guidance\")")
@@ -175,12 +189,24 @@ def planner_options(args: argparse.Namespace) -> dict:
             "seed": getattr(args, "check_seed", 0),
             "check_margin_m": getattr(args, "check_margin", CHECK_MARGIN_M),
             "robust_search": getattr(args, "robust_search", False),
-            "guidance": guidance_law(getattr(args, "guidance", PURSUIT.name))}
+            "guidance": guidance_choice(getattr(args, "guidance", PURSUIT.name))}
 
 
 def guidance_law(name: str) -> GuidanceLaw:
     """The planner's guidance law by name: ILOS with the planner's gains, or pure pursuit."""
     return PLANNING_GUIDANCE if name == PLANNING_GUIDANCE.name else GuidanceLaw(name)
+
+
+def guidance_choice(name: str) -> GuidanceChoice:
+    """The planner's ``guidance`` for ``--guidance``: one law, or ``auto``'s laws in turn."""
+    return AUTO_LAWS if name == AUTO_GUIDANCE else guidance_law(name)
+
+
+def describe_guidance(name: str) -> str:
+    """One line on ``--guidance``'s choice, for a benchmark's figures."""
+    if name == AUTO_GUIDANCE:
+        return f"{AUTO_GUIDANCE}: " + AUTO_HELP
+    return guidance_law(name).describe()
 
 
 def coefficient_model(args: argparse.Namespace, robot: Robot) -> CoefficientModel:
@@ -213,6 +239,9 @@ def plan_json(world: World, outcome: Outcome) -> dict:
         "simulations": plan.simulations,
         "planning_time_s": outcome.planning_time_s,
         "repairs": outcome.repairs,
+        # the law the plan was searched and checked with, and those tried before it (auto)
+        "guidance": outcome.guidance,
+        "laws_tried": outcome.laws_tried,
         "check": _check_json(outcome),
         "waypoints_m": plan.waypoints_m if outcome.found else [],
         "legs": [
@@ -264,10 +293,16 @@ def run(args: argparse.Namespace) -> int:
         raise OptionError("give a WORLD (or --bench)")
     world = world_from_name(args.world)
     out = check_output_folder(args.out)  # before the search, not after it
-    planner = Planner(world, robot, model, threads=args.threads, swimmer=swimmer,
-                      **planner_options(args))
+    options = planner_options(args)
+    laws = laws_of(options.pop("guidance"))
+
+    def planner_with(law: GuidanceLaw) -> Planner:
+        return Planner(world, robot, model, threads=args.threads, swimmer=swimmer,
+                       guidance=law, **options)
+
     with phase(f"plan {world.name}: search and check in the twin"):
-        outcome = planner.plan()
+        # with auto, the laws in turn until one's plan passes its check (docs/planning.md)
+        planner, outcome = plan_with_laws(planner_with, laws)
     atomic_write(out / "plan.json", json.dumps(plan_json(world, outcome), indent=1))
     if outcome.status in REFUSALS:
         raise PlanRefused(outcome.status, f"{world.name}: {outcome.message}")
@@ -276,6 +311,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"  {k + 1:2d}. {leg.distance_m:.2f} m at {leg.bearing_deg:+4.0f} deg -> waypoint "
               f"({leg.waypoint_m[0]:.2f}, {leg.waypoint_m[1]:.2f}) m"
               + (" (goal)" if leg.goal else ""))
+    print(f"guidance: {planner.options.guidance.describe()}"
+          + (f" (chosen: {', '.join(t['law'] + ' ' + t['status'] for t in outcome.laws_tried)})"
+             if outcome.laws_tried else ""))
     print(f"coefficients: {model.describe()}")
     coverage = action_coverage(planner.robot, model, planner.world.current.speed_m_s,
                                planner.settings, swimmer=swimmer)
@@ -307,8 +345,9 @@ def _bench(args: argparse.Namespace, robot: Robot, model: CoefficientModel,
         print(f"{k + 1:3d} {r.name}: {r.status} {r.planning_time_s:.2f} s "
               f"(cpu {r.cpu_time_s:.2f} s){extra}", flush=True)
 
-    guidance = guidance_law(args.guidance)
-    options = LoopOptions(guidance=guidance)  # the coverage's runs steer with the same law
+    guidance = guidance_choice(args.guidance)
+    # the coverage's runs steer with the same law (auto: the law it tries first)
+    options = LoopOptions(guidance=laws_of(guidance)[0])
     summary = run_bench(robot, model, args.worlds, args.seed, args.threads, progress,
                         max(args.jobs, 1), args.unknown_current, guidance, swimmer,
                         args.budget, args.check_margin)
@@ -341,7 +380,7 @@ def _bench(args: argparse.Namespace, robot: Robot, model: CoefficientModel,
         f"{REPAIR_DRAWS_FACTOR} times as many; every run "
         f"{args.check_margin * 1000:g} mm clear of everything); the fresh "
         "draws below keep 8 directions 45 degrees apart",
-        f"- guidance: {guidance.describe()}",
+        f"- guidance: {describe_guidance(args.guidance)}",
         *lines,
         BENCH_END,
     ]

@@ -26,7 +26,14 @@ from eelhost.commands.common import (
     waypoints,
 )
 from eelhost.commands.link_options import add_link_options, resolve_link_options
-from eelhost.commands.plan import add_coefficient_model_option, guidance_law
+from eelhost.commands.plan import (
+    AUTO_HELP,
+    GUIDANCE_CHOICES,
+    add_coefficient_model_option,
+    describe_guidance,
+    guidance_choice,
+    guidance_law,
+)
 from eelhost.errors import EXIT_CONTACT, EXIT_NOT_REACHED, EXIT_OK
 from eelhost.field.recorder import MOTIONS
 from eelhost.field.runloop import BRAKE_S, RunConfig
@@ -34,13 +41,14 @@ from eelhost.field.session import TakeNotes
 from eelhost.field.take import TakeRequest, ViewOpener, refuse_overwrite, run_take
 from eelhost.files import check_output_stem
 from eelhost.link.uri import parse_link_uri
+from eelhost.planning.planner import AUTO_GUIDANCE
 from eelhost.planning.replan import CALM_REPLAN_BUDGET_S, EARLY_MARGIN_M
 from eelhost.planning.restart import RESTARTS
 from eelhost.progress import phase
 from eelhost.vision.markerfile import load_marker_file
 from eelhost.web.liveview import LiveView
 from eelsim.control import BRAKE_AMPLITUDE_RAD, Gait
-from eelsim.guidance import GUIDANCE_LAWS, PURSUIT, GuidanceLaw
+from eelsim.guidance import PURSUIT
 from eelsim.robot import Robot, load_robot
 
 
@@ -126,11 +134,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    f"amplitude {BRAKE_AMPLITUDE_RAD:g} rad, omega 0) for S seconds, the watchdog fed, so that it does "
                    f"not glide on straight (default {BRAKE_S:g} s with --plan or --bench, 0 "
                    "otherwise; 0: Stop at once; docs/planning.md, \"The brake before the Stop\")")
-    p.add_argument("--guidance", choices=GUIDANCE_LAWS.names(), default=PURSUIT.name,
+    p.add_argument("--guidance", choices=GUIDANCE_CHOICES, default=PURSUIT.name,
                    help="the line-of-sight law that steers the robot: pursuit (the paper's pure "
                    "pursuit of each waypoint), ilos (integral line-of-sight along each "
-                   "leg with the planner's gains) or pursuit_ff (pure pursuit aimed off by the "
-                   "current the planner knows; with --plan or --bench only); with --plan or "
+                   "leg with the planner's gains), pursuit_ff (pure pursuit aimed off by the "
+                   "current the planner knows; with --plan or --bench only) or auto (with --plan "
+                   "or --bench only: " + AUTO_HELP + "); with --plan or "
                    "--bench the planner searches and checks with the same law (default: "
                    "%(default)s; docs/planning.md, \"The guidance\")")
     p.add_argument("--duration", type=POSITIVE, help="stop after this long, s (default: no limit)")
@@ -213,13 +222,13 @@ def exit_status(reason: str) -> int:
     return EXIT_CONTACT if reason == "contact" else EXIT_NOT_REACHED
 
 
-def _planner_options(args: argparse.Namespace, law: GuidanceLaw) -> dict:
+def _planner_options(args: argparse.Namespace) -> dict:
     """The planner's options of ``eelbot run --plan`` and ``--bench``.
 
-    The guidance law, and the check's unknown current when ``--check-unknown-current`` is given
-    (else the planner's default).
+    The guidance law (``auto``: the laws tried in turn), and the check's unknown current when
+    ``--check-unknown-current`` is given (else the planner's default).
     """
-    options: dict = {"guidance": law}
+    options: dict = {"guidance": guidance_choice(args.guidance)}
     if args.check_unknown_current is not None:
         options["unknown_current_m_s"] = args.check_unknown_current
     return options
@@ -263,6 +272,9 @@ def run(args: argparse.Namespace) -> int:
         raise OptionError("--gait: required with --waypoints")
     if args.coefficients_file is not None and args.plan is None:
         raise OptionError("--coefficients-file: only with --plan (the planner's model)")
+    if args.plan is None and args.guidance == AUTO_GUIDANCE:
+        raise OptionError(f"--guidance {AUTO_GUIDANCE}: only with --plan or --bench (the planner "
+                          "chooses the law per plan)")
     if args.plan is None and guidance_law(args.guidance).feed_forward:
         raise OptionError(f"--guidance {args.guidance}: only with --plan or --bench (the planner "
                           "gives it the known current and the robot's speed)")
@@ -272,7 +284,8 @@ def run(args: argparse.Namespace) -> int:
     navigator = None
     view = None
     uri = args.link
-    law = guidance_law(args.guidance)
+    # with --plan the plan's law replaces it (auto: the law the plan was found with)
+    law = PURSUIT if args.guidance == AUTO_GUIDANCE else guidance_law(args.guidance)
     start_guide = None
     view_twin, view_current = None, current
     if args.plan is not None:
@@ -293,13 +306,14 @@ def run(args: argparse.Namespace) -> int:
         with phase(f"plan {world.name}: search and check in the twin"):
             planned = plan_for_run(world, robot, args.link, gait, coefficients=model,
                                    acceptance_radius_m=args.radius, swimmer=swimmer,
-                                   planner_options=_planner_options(args, law),
+                                   planner_options=_planner_options(args),
                                    replan_budget_s=args.replan_budget or None,
                                    calm_budget_s=args.calm_budget or None,
                                    early_margin_m=args.early_margin or None,
                                    escape=args.escape, restarts=args.restarts,
                                    harbour=args.harbour, stop_brake_s=_brake_s(args))
         print(planned.outcome.message)
+        print(f"guidance: {planned.guidance.describe()}")
         print(f"coefficients: {model.describe()}")
         waypoints, navigator, uri = planned.waypoints_m, planned.navigator, planned.uri
         start_guide = planned.start_guide
@@ -371,7 +385,7 @@ def _bench(args: argparse.Namespace) -> int:
                 flush=True)
             bar.update(1)
 
-        options = _planner_options(args, guidance_law(args.guidance))
+        options = _planner_options(args)
         results = run_closed_loop_bench(robot, model, seeds, out, show, options,
                                         model.swimmer_for(robot), args.replan_budget or None,
                                         calm_budget_s=args.calm_budget or None,
@@ -400,7 +414,7 @@ def _bench(args: argparse.Namespace) -> int:
              + (f" after reading {resumed} worlds' results back from {done_file}" if resumed
                 else ""),
              f"- coefficients of the planner: {model.describe()}",
-             f"- guidance (planner and run loop): {guidance_law(args.guidance).describe()}",
+             f"- guidance (planner and run loop): {describe_guidance(args.guidance)}",
              *lines, BENCH_END]
     print("\n".join(lines))
     if args.write:

@@ -27,7 +27,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from eelhost.planning.audit import body_gaps_m
-from eelhost.planning.planner import CHECK_MARGIN_M, Planner
+from eelhost.planning.planner import (
+    CHECK_MARGIN_M,
+    GuidanceChoice,
+    Outcome,
+    Planner,
+    laws_of,
+    plan_with_laws,
+)
 from eelhost.planning.uncertainty import (
     DEFAULT_UNKNOWN_CURRENT_M_S,
     LATTICE,
@@ -181,7 +188,7 @@ class BenchSummary:
 def bench_world(world: World, robot: Robot, coefficients: CoefficientModel, seed: int,
                 threads: int | None = 1,
                 unknown_current_m_s: float = DEFAULT_UNKNOWN_CURRENT_M_S,
-                guidance: GuidanceLaw = PURSUIT,
+                guidance: GuidanceChoice = PURSUIT,
                 swimmer: SwimmerModel | None = None,
                 budget_s: float | None = None,
                 check_margin_m: float = CHECK_MARGIN_M) -> WorldResult:
@@ -198,8 +205,9 @@ def bench_world(world: World, robot: Robot, coefficients: CoefficientModel, seed
     threads : int or None
     unknown_current_m_s : float
         The unknown current's bound, for the check and the bench's draws.
-    guidance : GuidanceLaw
-        The robot's guidance law (the planner's, and the bench's runs').
+    guidance : GuidanceLaw or tuple of GuidanceLaw
+        The robot's guidance law (the planner's, and the bench's runs'); a tuple: the laws
+        tried in turn (``planner.plan_with_laws``), the bench's runs steering with the plan's.
     swimmer : SwimmerModel, optional
         The model of the robot the planner swims, built once by the command
         (:meth:`CoefficientModel.swimmer_for`; built here when not given).
@@ -215,11 +223,21 @@ def bench_world(world: World, robot: Robot, coefficients: CoefficientModel, seed
     WorldResult
     """
     t0, c0 = time.perf_counter(), time.process_time()
-    planner = Planner(world, robot, coefficients, threads=threads, seed=seed,
-                      unknown_current_m_s=unknown_current_m_s, guidance=guidance,
-                      swimmer=swimmer, check_margin_m=check_margin_m)
-    deadline = None if budget_s is None else time.monotonic() + budget_s
-    outcome = planner.plan(deadline_s=deadline)
+    deadline: float | None = None
+
+    def make(law: GuidanceLaw) -> Planner:
+        nonlocal deadline
+        made = Planner(world, robot, coefficients, threads=threads, seed=seed,
+                       unknown_current_m_s=unknown_current_m_s, guidance=law,
+                       swimmer=swimmer, check_margin_m=check_margin_m)
+        if deadline is None and budget_s is not None:  # one deadline for every law tried
+            deadline = time.monotonic() + budget_s
+        return made
+
+    def call(made: Planner) -> Outcome:
+        return made.plan(deadline_s=deadline)
+
+    planner, outcome = plan_with_laws(make, laws_of(guidance), call)
     done = time.monotonic()
     elapsed = time.perf_counter() - t0  # the planner's set-up (clearance and goal maps) too
     result = WorldResult(world.name, outcome.status, outcome.message, elapsed,
@@ -244,7 +262,7 @@ def bench_world(world: World, robot: Robot, coefficients: CoefficientModel, seed
 
 
 def _warm_up(robot: Robot, coefficients: CoefficientModel, seed: int,
-             threads: int | None, unknown_current_m_s: float, guidance: GuidanceLaw,
+             threads: int | None, unknown_current_m_s: float, guidance: GuidanceChoice,
              swimmer: SwimmerModel | None = None,
              check_margin_m: float = CHECK_MARGIN_M) -> None:
     """Load the batched kernel, measure the swimming speed and the check's cost (not timed)."""
@@ -253,7 +271,7 @@ def _warm_up(robot: Robot, coefficients: CoefficientModel, seed: int,
 
 
 def _one(robot: Robot, coefficients: CoefficientModel, seed: int,
-         threads: int | None, unknown_current_m_s: float, guidance: GuidanceLaw,
+         threads: int | None, unknown_current_m_s: float, guidance: GuidanceChoice,
          swimmer: SwimmerModel | None = None, budget_s: float | None = None,
          check_margin_m: float = CHECK_MARGIN_M) -> WorldResult:
     return bench_world(generate_world(seed), robot, coefficients, seed, threads,
@@ -269,7 +287,7 @@ def run_bench(
     progress: Callable[[int, WorldResult], None] | None = None,
     jobs: int = 1,
     unknown_current_m_s: float = DEFAULT_UNKNOWN_CURRENT_M_S,
-    guidance: GuidanceLaw = PURSUIT,
+    guidance: GuidanceChoice = PURSUIT,
     swimmer: SwimmerModel | None = None,
     budget_s: float | None = None,
     check_margin_m: float = CHECK_MARGIN_M,
@@ -290,8 +308,8 @@ def run_bench(
         on one core, so its time is what one plan takes on an otherwise idle core).
     unknown_current_m_s : float
         The unknown current's bound (the check's and the bench's draws).
-    guidance : GuidanceLaw
-        The robot's guidance law.
+    guidance : GuidanceLaw or tuple of GuidanceLaw
+        The robot's guidance law, or the laws tried in turn (:func:`bench_world`).
     swimmer : SwimmerModel, optional
         The model of the robot the planner swims, built once by the command and handed to
         every world's planner (built here once when not given; each process has its copy).

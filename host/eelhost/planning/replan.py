@@ -2689,6 +2689,10 @@ class TankReplanner:
                             if outcome.found and outcome.plan.start_guide is not None else None),
             "current_m_s": [round(float(world_current[0] + extra[0]), 4),
                             round(float(world_current[1] + extra[1]), 4)],
+            # the law the plan was searched and checked with (the planner's; an outcome made
+            # here, a harbour's or a shift repair's, swims the running plan's law)
+            "guidance": outcome.guidance or self.planner.options.guidance.name,
+            **({"laws_tried": outcome.laws_tried} if outcome.laws_tried else {}),
         }
 
 

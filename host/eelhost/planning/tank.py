@@ -20,7 +20,7 @@ from typing import Any
 from urllib.parse import parse_qsl, urlencode, urlsplit
 
 from eelhost.planning.geometry import FloatArray
-from eelhost.planning.planner import Outcome, Planner, PlanRefused
+from eelhost.planning.planner import Outcome, Planner, PlanRefused, laws_of, plan_with_laws
 from eelhost.planning.replan import (
     CALM_REPLAN_BUDGET_S,
     EARLY_BUDGET_S,
@@ -147,6 +147,9 @@ def plan_for_run(
     planner_options : dict, optional
         More keyword arguments of :class:`Planner` (the benchmark's ``unknown_current_m_s``,
         ``guidance``: the law the robot steers with), for the first plan and every replan.
+        ``guidance`` may be a tuple of laws (``planner.AUTO_LAWS``): the first plan is searched
+        with each in turn until one passes its check (``planner.plan_with_laws``), and the run
+        and every replan keep that one (``RunPlan.guidance``).
     swimmer : SwimmerModel, optional
         The model of the robot the planner swims, built once by the command
         (:meth:`CoefficientModel.swimmer_for`; built here when not given) and handed to the
@@ -190,19 +193,26 @@ def plan_for_run(
     model = coefficients or default_model(robot)
     options = {**(planner_options or {}),
                "swimmer": swimmer if swimmer is not None else model.swimmer_for(robot)}
-    planner = Planner(world, robot, model, gait, **options)
-    # the law as the planner filled it in (a feed-forward's known current and speed): every
-    # replan's planner plans with the law the run loop steers with
-    options["guidance"] = planner.options.guidance
+    laws = laws_of(options.pop("guidance", PURSUIT))
 
-    tiers = replan_planners(planner, world, robot, model, gait, options)
-    if abs(planner.twin.acceptance_radius_m - acceptance_radius_m) > 1e-9:
-        raise PlanRefused("acceptance_radius",
-                          f"--radius {acceptance_radius_m:g}: the planner swims with "
-                          f"{planner.twin.acceptance_radius_m:g} m")
-    outcome = planner.plan()
+    def planner_with(law: GuidanceLaw) -> Planner:
+        made = Planner(world, robot, model, gait, guidance=law, **options)
+        if abs(made.twin.acceptance_radius_m - acceptance_radius_m) > 1e-9:
+            raise PlanRefused("acceptance_radius",
+                              f"--radius {acceptance_radius_m:g}: the planner swims with "
+                              f"{made.twin.acceptance_radius_m:g} m")
+        return made
+
+    # the guidance chosen per plan when several laws are given (docs/planning.md, "A guidance
+    # law chosen per plan"): the first whose plan passes its check
+    planner, outcome = plan_with_laws(planner_with, laws)
+    # the law of the plan, as the planner filled it in (a feed-forward's known current and
+    # speed): every replan's planner plans with the law the run loop steers with, and no replan
+    # changes it (the twin's predictions from the running plan are made with that law)
+    options["guidance"] = planner.options.guidance
     if not outcome.found:
         raise NoPlanFound(outcome.status, f"{world.name}: {outcome.message}")
+    tiers = replan_planners(planner, world, robot, model, gait, options)
     navigator = TankReplanner(tiers.planner_for, planner, outcome, gait,
                               goal_planner_for=tiers.goal_planner_for,
                               recovery_planner_for=tiers.recovery_planner_for,
