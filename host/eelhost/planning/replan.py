@@ -45,6 +45,7 @@ from eelhost.planning.harbour import (
     Harbour,
     StopWindow,
     find_harbour,
+    stop_gap_m,
 )
 from eelhost.planning.planner import SCREEN_DRAWS, Outcome, Planner
 from eelhost.planning.restart import (
@@ -376,6 +377,17 @@ and at least this much clearer than the stop where it was decided (docs/planning
 HARBOURS_PER_PLAN = 2
 """Harbour swims a plan's stops may take: at the end of one, the stop is judged again from where
 the robot is, and a second swim may follow (docs/planning.md, "The harbour")."""
+
+HOLD_CHECK_S = 0.5
+"""While the robot holds on its present plan, the stop and the harbours are judged again this
+often (on the frame's thread, as the harbour's first search): a harbour found then is swum, a
+stop the twin swims clear is made (docs/planning.md, "The hold")."""
+
+HOLD_RETRY_S = 0.5
+"""While the robot holds, a failed replan is asked for again after this long."""
+
+HOLD_MAX_S = 20.0
+"""The longest a plan's hold lasts, from its first frame; then the stop it put off is made."""
 
 STOP_ALLOWANCE_S = 1.0
 """The robot's time kept ahead of a predicted contact for a stop when a replan then fails: the
@@ -759,6 +771,16 @@ class _Pause:
     halt_event: dict[str, Any] = field(default_factory=dict)  # its record (the take's events)
 
 
+@dataclass
+class _Hold:
+    """The robot swimming its present plan on instead of a stop predicted worse (:meth:`TankReplanner._hold_on`)."""
+
+    t_start_s: float  # the robot's time of its first frame
+    next_check_s: float  # when the stop and the harbours are judged again
+    stop_gap_m: float  # the stop at once's gap at the last check
+    event: dict[str, Any]  # its record
+
+
 class _HarbourSwim(NamedTuple):
     """A harbour swim under way (:meth:`TankReplanner._take_harbour`)."""
 
@@ -895,6 +917,11 @@ class TankReplanner:
         (:func:`eelhost.planning.harbour.find_harbour`) whose swim and stop keep the margin
         plus :data:`~eelhost.planning.harbour.HARBOUR_CUSHION_M`, and stop at its end
         (docs/planning.md, "The harbour"). On by default.
+    hold : bool
+        Where no safe continuation exists and the stop would drift within the margin with no
+        harbour found, keep swimming the present plan while the twin swims it clearer than the
+        stop, replanning and judging the stop and the harbours again until one is safe
+        (:meth:`_hold_on`; docs/planning.md, "The hold"). On by default.
     stop_brake_s : float
         The run loop's brake before its final Stop (:data:`STOP_BRAKE_S`), as the harbour swims
         a final stop.
@@ -993,6 +1020,7 @@ class TankReplanner:
         retry_before_contact: bool = True,
         stop_allowance_s: float = STOP_ALLOWANCE_S,
         harbour: bool = True,
+        hold: bool = True,
         stop_brake_s: float = STOP_BRAKE_S,
         calm_budget_s: float | None = None,
         early_margin_m: float | None = None,
@@ -1059,6 +1087,10 @@ class TankReplanner:
         self.stop_brake_s = stop_brake_s
         self._harbour: _HarbourSwim | None = None  # the harbour swum now
         self._harbours_swum = 0  # since the last plan: at HARBOURS_PER_PLAN the next stop stands
+        self.hold = hold
+        self._hold: _Hold | None = None  # the hold on the present plan, while it lasts
+        self._held_s = 0.0  # the present plan's holds' time so far (HOLD_MAX_S bounds it)
+        self._stop_judged: tuple[float, float] = (-math.inf, math.nan)  # (t, the stop's gap)
         self.retries_before_contact = 0  # replans asked for instead of a stop (the record's)
         # the robot's time of the first contact the latest look-ahead predicts (inf: none)
         self._contact_at_s = math.inf
@@ -1161,6 +1193,7 @@ class TankReplanner:
             return ended if ended is not None and ended.stop is not None else (
                 self._harbour_frame(t_s))
         if ended is not None:
+            self._end_hold(t_s, ended.stop or "arrived")
             if ended.arrived and self._pause is None:
                 return self._stop_safely(t_s, "arrived", "arrived in the goal disc") or ended
             return ended
@@ -1169,11 +1202,23 @@ class TankReplanner:
         d = self._swimming_frame(t_s, loc, pose, target, offset_rad, guide)
         if d.stop == "no_safe_continuation":
             pausing = self.restarts < self.max_restarts
-            harbour = self._stop_safely(t_s, "pause" if pausing else "stop", d.detail)
+            kind = "pause" if pausing else "stop"
+            if self._held(t_s):
+                return Decision()  # the hold goes on until its next check
+            harbour = self._stop_safely(t_s, kind, d.detail)
             if harbour is not None:
+                self._end_hold(t_s, "harbour")
                 return harbour
+            held = self._hold_on(t_s, kind, d.detail)
+            if held is not None:
+                return held
+            self._end_hold(t_s, "stopped")
             if pausing:
                 return self._halt(t_s, d)
+        elif self._hold is not None and (d.waypoints is not None or self._present_plan_clear(t_s)):
+            self._end_hold(t_s, "replanned" if d.waypoints is not None else "clear")
+        if d.waypoints is not None:
+            self._held_s = 0.0  # a new plan: it may hold as long again
         return d
 
     def _observe(self, t_s: float, loc: Localisation, pose: FloatArray | None,
@@ -1211,7 +1256,7 @@ class TankReplanner:
             self.current.drop()  # the prediction of a window spans no switch of waypoints
             self._lookahead = None  # it followed the old waypoints
             self._whole_job = None
-            self.events[-1]["t_switch_s"] = round(t_s, 3)
+            self._last_replan()["t_switch_s"] = round(t_s, 3)
             self.replans += 1
             d.recorded = True
             return d
@@ -1264,7 +1309,7 @@ class TankReplanner:
             d.stop = "no_safe_continuation"
             d.detail = (f"at t = {t_s:.2f} s the twin swims the present plan "
                         f"{self._verdict_text(t_s)} and "
-                        f"the last replan failed: {self.events[-1]['message']}")
+                        f"the last replan failed: {self._last_replan()['message']}")
             return d
         elif (predicted and self._backoff_yields(t_s, busy)
               and (self.failures < self.max_failures or not self._present_plan_safe(t_s))):
@@ -1285,7 +1330,7 @@ class TankReplanner:
                     f"{self.lookahead_margin_m * 1000:.0f} mm of an obstacle or wall (with the "
                     f"current estimate's drift allowance) at t = {self._near_at_s:.2f} s, "
                     f"before a replan after the back-off could steer, and {self.failures} "
-                    f"replans failed in a row: {self.events[-1]['message']}")
+                    f"replans failed in a row: {self._last_replan()['message']}")
                 return d
         job = self._job
         if job is not None and self._cuttable(job) and job.cut_for is None and (
@@ -1395,7 +1440,7 @@ class TankReplanner:
                 "state_estimate": self.estimator.summary()}
 
     def tally(self) -> str:
-        """The take's planning in one line: replans switched in and failed, pauses, harbours.
+        """The take's planning in one line: replans switched in and failed, pauses, harbours, holds.
 
         A run that printed only the replans switched in said "0" after failed replans, a pause
         and a harbour swim; the user reads here what the replanner did.
@@ -1414,6 +1459,11 @@ class TankReplanner:
         harbours = sum(e["kind"] == "harbour" and e["status"] == "harbour" for e in self.events)
         if harbours:
             parts.append(f"{harbours} harbour swim{'s' if harbours > 1 else ''}")
+        holds = [e for e in self.events if e["kind"] == "hold"]
+        if holds:
+            held = sum(e.get("t_end_s", e.get("t_last_s", e["t_s"])) - e["t_s"] for e in holds)
+            parts.append(f"{len(holds)} hold{'s' if len(holds) > 1 else ''} on the plan "
+                         f"({held:.1f} s)")
         return ", ".join(parts)
 
     # -- a restart from rest (docs/planning.md, "A restart from rest") -----------------------------
@@ -1559,6 +1609,7 @@ class TankReplanner:
                                                   self._stop_window(kind), gap_of,
                                                   self.lookahead_margin_m + HARBOUR_CUSHION_M)
         wall = time.monotonic() - wall
+        self._stop_judged = (t_s, at_once.gap_m)
         if at_once.gap_m > self.lookahead_margin_m:
             return None
         if (harbour is None and clearest is not None and clearest.gap_m > 0.0
@@ -1577,6 +1628,122 @@ class TankReplanner:
             return None
         self.estimator.gait = gait  # the harbour's frames swim it
         return self._take_harbour(t_s, est, extra, kind, detail, at_once, harbour, wall, gait)
+
+    def _last_replan(self) -> dict[str, Any]:
+        """The latest replan's event (a hold's event may have come after it)."""
+        return next((e for e in reversed(self.events) if e["kind"] == "replan"), self.events[-1])
+
+    def _held(self, t_s: float) -> bool:
+        """Within a hold, before its next check, with the present plan still the lesser risk.
+
+        A stop decided then is put off without judging the harbours again (they are judged every
+        :data:`HOLD_CHECK_S`); a failed replan is asked for again :data:`HOLD_RETRY_S` later.
+        """
+        hold = self._hold
+        if hold is None or t_s >= hold.next_check_s - 1e-9 or not self._plan_beats_stop(
+                t_s, hold.stop_gap_m):
+            return False
+        self._retry_while_holding(t_s)
+        return True
+
+    def _plan_beats_stop(self, t_s: float, stop_gap_m: float) -> bool:
+        """The last look-ahead, at most 1.5 s old, swims the present plan as the lesser risk.
+
+        The plan clear where the stop touches, or clearer than the stop by
+        :data:`HARBOUR_GAIN_M` (the harbour's own rule for the lesser risk). Both gaps are the
+        body's outline less the current estimate's drift allowance in the estimated water, the
+        plan's over the look-ahead's horizon, the stop's over its brake and glide; an outline
+        overlaps by at most a link's half width, so a deep stop and a grazing one can read
+        alike, and a stop that touches at all counts against a plan that does not.
+        """
+        t_gap, gap = self._last_gap
+        return (gap is not None and t_s - t_gap <= 1.5
+                and (gap > 0.0 >= stop_gap_m or gap >= stop_gap_m + HARBOUR_GAIN_M))
+
+    def _present_plan_clear(self, t_s: float) -> bool:
+        """The last look-ahead, at most 1.5 s old, swims the present plan clear of the margin."""
+        t_gap, gap = self._last_gap
+        return gap is not None and t_s - t_gap <= 1.5 and gap >= self.lookahead_margin_m
+
+    def _retry_while_holding(self, t_s: float) -> None:
+        """Ask for a replan at the next idle frame, :data:`HOLD_RETRY_S` after the last ask."""
+        if not self._retry_now:
+            self._retry_now = True
+            self._next_try_s = max(self._next_try_s, t_s + HOLD_RETRY_S)
+
+    def _hold_on(self, t_s: float, kind: str, detail: str) -> Decision | None:
+        """Swim the present plan on instead of a stop the twin swims into something, or None.
+
+        The stop at once (``kind``: ``pause`` or ``stop``) is judged in the estimated water as
+        the harbour judges it (:meth:`_stop_safely`; judged here when the harbours were not).
+        When it comes within the look-ahead's margin, no harbour was found, and the last
+        look-ahead swims the present plan clearer than the stop by :data:`HARBOUR_GAIN_M`, the
+        robot keeps swimming it, its gait and offsets at the control rate, replanning with a
+        back-off of :data:`HOLD_RETRY_S`; the stop and the harbours are judged again every
+        :data:`HOLD_CHECK_S`, and the hold ends with a plan, a harbour, a stop the twin swims
+        clear, when the plan is no longer the lesser risk, or after :data:`HOLD_MAX_S`
+        (docs/planning.md, "The hold").
+        """
+        if not self.hold:
+            return None
+        if self._stop_judged[0] == t_s:
+            stop_gap = self._stop_judged[1]
+        else:  # the harbours were not judged (none left to this plan): the stop alone
+            est = self.estimator.estimate()
+            if est is None:
+                return None
+            extra = self.current.value_m_s.copy() if self.estimate_current else np.zeros(2)
+            spread = current_spread_m_s(self.current.history)
+
+            def gap_of(states: FloatArray, ahead_s: FloatArray) -> FloatArray:
+                return np.subtract(outline_clearance_m(self.world, self.model, states),
+                                   drift_allowance_m(spread, ahead_s))
+
+            stop_gap = stop_gap_m(self._twin_in(extra), self.gait, est.state, est.t_s,
+                                  self._stop_window(kind), gap_of)
+            self._stop_judged = (t_s, stop_gap)
+        hold = self._hold
+        held_s = self._held_s + (0.0 if hold is None else t_s - hold.t_start_s)
+        if (stop_gap > self.lookahead_margin_m or held_s >= HOLD_MAX_S
+                or not self._plan_beats_stop(t_s, stop_gap)):
+            return None
+        plan_gap = self._last_gap[1]
+        assert plan_gap is not None  # _plan_beats_stop holds
+        if (self.events and self.events[-1]["kind"] == "harbour"
+                and self.events[-1]["status"] == "none"
+                and self.events[-1]["t_request_s"] == round(t_s, 3)):
+            # while holding, a harbour that was not found is the hold's check, not a stop
+            self.events.pop()
+        if hold is None:
+            event = {"kind": "hold", "reason": kind, "t_s": round(t_s, 3),
+                     "stop_gap_m": _rounded(stop_gap), "plan_gap_m": _rounded(plan_gap),
+                     "checks": 1, "detail": detail}
+            self.events.append(event)
+            self._hold = hold = _Hold(t_s, t_s + HOLD_CHECK_S, stop_gap, event)
+            log.warning("at t = %.2f s the stop (%s) drifts within %.0f mm of an obstacle or wall "
+                        "and no harbour keeps the margin; the twin swims the present plan %.0f mm "
+                        "clear: holding on it and replanning (%s)", t_s, kind,
+                        max(stop_gap, 0.0) * 1000, plan_gap * 1000, detail)
+        else:
+            hold.next_check_s = t_s + HOLD_CHECK_S
+            hold.stop_gap_m = stop_gap
+            hold.event["checks"] += 1
+            hold.event["t_last_s"] = round(t_s, 3)
+        self._retry_while_holding(t_s)
+        return Decision(recorded=hold.event["checks"] == 1, detail=(
+            f"holding on the present plan at t = {t_s:.2f} s: the stop drifts "
+            f"{stop_gap * 1000:.0f} mm from an obstacle or wall in the twin, the plan "
+            f"{plan_gap * 1000:.0f} mm"))
+
+    def _end_hold(self, t_s: float, why: str) -> None:
+        """End the hold, if one is on, recording how (``harbour``, ``stopped``, ...)."""
+        hold = self._hold
+        if hold is None:
+            return
+        self._hold = None
+        self._held_s += t_s - hold.t_start_s
+        hold.event["t_end_s"] = round(t_s, 3)
+        hold.event["ended"] = why
 
     def _take_harbour(self, t_s: float, est: BodyEstimate, extra: FloatArray, kind: str,
                       detail: str, at_once: Harbour, harbour: Harbour, wall_s: float,
@@ -1853,6 +2020,7 @@ class TankReplanner:
         self.restarts += 1
         self._pause = None
         self._harbours_swum = 0  # a new plan: its stops may swim harbours again
+        self._held_s = 0.0  # and hold again
         self.estimator.gait = self.gait
         assert pause.extra is not None  # set with the outcome
         self._take_plan(pause.outcome, pause.extra)
