@@ -617,6 +617,12 @@ class Ahead(NamedTuple):
         replan horizon without an early margin; nan: not swum, the early margin then reads
         ``capsule_m``): under the early margin, an early replan is asked for
         (docs/planning.md, "An earlier replan").
+    stop_now_m, stop_later_m : float
+        Where the capsule comes within the margin: the smallest gap of the stop decided at the
+        estimate (the pause's while restarts are left, else the final stop's), and of the stop
+        decided after swimming the present plan on for as long as a retried replan needs, as
+        the harbour judges a stop (:func:`eelhost.planning.harbour.stop_gap_m`); nan: not
+        judged (docs/planning.md, "Stopped while the stop keeps clear").
     """
 
     outline_m: float
@@ -624,6 +630,8 @@ class Ahead(NamedTuple):
     contact_s: float = math.inf
     near_s: float = math.inf
     bare_m: float = math.nan
+    stop_now_m: float = math.nan
+    stop_later_m: float = math.nan
 
 
 def early_gap_m(judged: tuple[float, ...]) -> float:
@@ -919,9 +927,14 @@ class TankReplanner:
         (docs/planning.md, "The harbour"). On by default.
     hold : bool
         Where no safe continuation exists and the stop would drift within the margin with no
-        harbour found, keep swimming the present plan while the twin swims it clearer than the
-        stop, replanning and judging the stop and the harbours again until one is safe
+        harbour found, keep swimming the present plan while the twin swims it clear where the
+        stop touches, replanning and judging the stop and the harbours again until one is safe
         (:meth:`_hold_on`; docs/planning.md, "The hold"). On by default.
+    stop_in_reach : bool
+        After a failed replan, where the look-ahead swims the present plan within the margin
+        and the stop the twin swims clear now would come within it after the time another
+        replan needs, stop now (docs/planning.md, "Stopped while the stop keeps clear"). On
+        by default.
     stop_brake_s : float
         The run loop's brake before its final Stop (:data:`STOP_BRAKE_S`), as the harbour swims
         a final stop.
@@ -1021,6 +1034,7 @@ class TankReplanner:
         stop_allowance_s: float = STOP_ALLOWANCE_S,
         harbour: bool = True,
         hold: bool = True,
+        stop_in_reach: bool = True,
         stop_brake_s: float = STOP_BRAKE_S,
         calm_budget_s: float | None = None,
         early_margin_m: float | None = None,
@@ -1088,6 +1102,7 @@ class TankReplanner:
         self._harbour: _HarbourSwim | None = None  # the harbour swum now
         self._harbours_swum = 0  # since the last plan: at HARBOURS_PER_PLAN the next stop stands
         self.hold = hold
+        self.stop_in_reach = stop_in_reach
         self._hold: _Hold | None = None  # the hold on the present plan, while it lasts
         self._held_s = 0.0  # the present plan's holds' time so far (HOLD_MAX_S bounds it)
         self._stop_judged: tuple[float, float] = (-math.inf, math.nan)  # (t, the stop's gap)
@@ -1288,6 +1303,22 @@ class TankReplanner:
                  and early_gap_m(judged) < self.early_margin_m)
         if judged is not None and not early and not predicted:
             self._early_in_row = 0  # clear of the early margin: the next early need is new
+        if (predicted and self.failures > 0 and judged is not None
+                and self._stop_slips_away(judged)):
+            # a replan failed, the present plan swims within the margin, and the stop the twin
+            # swims clear now would drift within it after a retry: stop while it keeps clear
+            # (docs/planning.md, "Stopped while the stop keeps clear")
+            d.stop = "no_safe_continuation"
+            d.detail = (f"at t = {t_s:.2f} s the twin swims the present plan "
+                        f"{self._verdict_text(t_s)} after a failed replan "
+                        f"({self._last_replan()['message']}); a stop now keeps "
+                        f"{judged[5] * 1000:.0f} mm in the twin, and "
+                        f"{judged[6] * 1000:.0f} mm after the {self._retry_need_s():.1f} s "
+                        "another replan needs: stopped while it keeps clear")
+            self.events.append({"kind": "stop_in_reach", "t_s": round(t_s, 3),
+                                "stop_now_m": _rounded(judged[5]),
+                                "stop_later_m": _rounded(judged[6])})
+            return d
         gap = self._last_gap[1]
         retry = yielded = False
         # the outline within the margin counts as contact for the stops: the twin's outline
@@ -1629,6 +1660,14 @@ class TankReplanner:
         self.estimator.gait = gait  # the harbour's frames swim it
         return self._take_harbour(t_s, est, extra, kind, detail, at_once, harbour, wall, gait)
 
+    def _stop_slips_away(self, judged: tuple[float, ...]) -> bool:
+        """A look-ahead's stop keeps the margin and the cushion now, and not after a retry."""
+        if len(judged) < 7 or math.isnan(judged[5]):
+            return False
+        later = judged[6]
+        return (judged[5] > self.lookahead_margin_m + HARBOUR_CUSHION_M
+                and (math.isnan(later) or later <= self.lookahead_margin_m))
+
     def _last_replan(self) -> dict[str, Any]:
         """The latest replan's event (a hold's event may have come after it)."""
         return next((e for e in reversed(self.events) if e["kind"] == "replan"), self.events[-1])
@@ -1647,18 +1686,17 @@ class TankReplanner:
         return True
 
     def _plan_beats_stop(self, t_s: float, stop_gap_m: float) -> bool:
-        """The last look-ahead, at most 1.5 s old, swims the present plan as the lesser risk.
+        """The last look-ahead, at most 1.5 s old, swims the present plan clear where the stop touches.
 
-        The plan clear where the stop touches, or clearer than the stop by
-        :data:`HARBOUR_GAIN_M` (the harbour's own rule for the lesser risk). Both gaps are the
-        body's outline less the current estimate's drift allowance in the estimated water, the
-        plan's over the look-ahead's horizon, the stop's over its brake and glide; an outline
-        overlaps by at most a link's half width, so a deep stop and a grazing one can read
-        alike, and a stop that touches at all counts against a plan that does not.
+        The plan's gap is the body's outline over the look-ahead's horizon, the stop's the
+        outline less the current estimate's drift allowance over its brake and glide. Only
+        contact against no contact: an outline overlaps by at most a link's half width, so
+        depths read alike, and a plan swum into contact is never held on to (swum on in the
+        twin past such a verdict, the present plans of the stops that touched on unseen seeds
+        36000-36099 went 7-37 mm into something within 3-6 s; docs/planning.md, "The hold").
         """
         t_gap, gap = self._last_gap
-        return (gap is not None and t_s - t_gap <= 1.5
-                and (gap > 0.0 >= stop_gap_m or gap >= stop_gap_m + HARBOUR_GAIN_M))
+        return gap is not None and t_s - t_gap <= 1.5 and gap > 0.0 >= stop_gap_m
 
     def _present_plan_clear(self, t_s: float) -> bool:
         """The last look-ahead, at most 1.5 s old, swims the present plan clear of the margin."""
@@ -1677,8 +1715,8 @@ class TankReplanner:
         The stop at once (``kind``: ``pause`` or ``stop``) is judged in the estimated water as
         the harbour judges it (:meth:`_stop_safely`; judged here when the harbours were not).
         When it comes within the look-ahead's margin, no harbour was found, and the last
-        look-ahead swims the present plan clearer than the stop by :data:`HARBOUR_GAIN_M`, the
-        robot keeps swimming it, its gait and offsets at the control rate, replanning with a
+        look-ahead swims the present plan clear of contact where the stop touches, the robot
+        keeps swimming it, its gait and offsets at the control rate, replanning with a
         back-off of :data:`HOLD_RETRY_S`; the stop and the harbours are judged again every
         :data:`HOLD_CHECK_S`, and the hold ends with a plan, a harbour, a stop the twin swims
         clear, when the plan is no longer the lesser risk, or after :data:`HOLD_MAX_S`
@@ -2704,7 +2742,37 @@ class TankReplanner:
                 current_spread_m_s(self.current.history), ahead_s))
         within = np.flatnonzero(capsule < self.lookahead_margin_m)
         near_s = (now + int(within[0]) * stride) * twin.dt_s if within.size else math.inf
-        return Ahead(float(outline.min()), float(capsule.min()), contact, near_s, bare)
+        stop_now = stop_later = math.nan
+        if guard and within.size and self.stop_in_reach:
+            stop_now, stop_later = self._stops_ahead(twin, est, states, stride)
+        return Ahead(float(outline.min()), float(capsule.min()), contact, near_s, bare,
+                     stop_now, stop_later)
+
+    def _stops_ahead(self, twin: Twin, est: BodyEstimate, states: FloatArray, stride: int
+                     ) -> tuple[float, float]:
+        """The stop decided now and after a retried replan's need on the present plan: gaps.
+
+        ``states``: the look-ahead's run of the present plan from ``est`` (every ``stride``
+        steps). The stop is the pause's while restarts are left, else the final stop's, swum
+        and judged as the harbour's (:meth:`_stop_safely`). The later one is nan when the run
+        ends first (the goal).
+        """
+        kind = "pause" if self.restarts < self.max_restarts else "stop"
+        spread = current_spread_m_s(self.current.history)
+
+        def gap_of(run: FloatArray, ahead_s: FloatArray) -> FloatArray:
+            return np.subtract(outline_clearance_m(self.world, self.model, run),
+                               drift_allowance_m(spread, ahead_s))
+
+        window = self._stop_window(kind)
+        now = stop_gap_m(twin, self.gait, est.state, est.t_s, window, gap_of, stride)
+        reach = min(self._retry_need_s(), self.lookahead_s)
+        k = int(round(reach / (stride * twin.dt_s)))
+        if k >= len(states):
+            return now, math.nan
+        later = stop_gap_m(twin, self.gait, states[k], est.t_s + k * stride * twin.dt_s, window,
+                           gap_of, stride)
+        return now, later
 
     def _twin_in(self, extra: FloatArray, gait: Gait | None = None) -> Twin:
         """The planner's twin in the world's current plus the estimate ``extra`` (and ``gait``)."""
