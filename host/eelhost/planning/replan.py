@@ -1106,6 +1106,8 @@ class TankReplanner:
         self._hold: _Hold | None = None  # the hold on the present plan, while it lasts
         self._held_s = 0.0  # the present plan's holds' time so far (HOLD_MAX_S bounds it)
         self._stop_judged: tuple[float, float] = (-math.inf, math.nan)  # (t, the stop's gap)
+        # the latest look-ahead's stops: (its estimate's time, the stop then, after a retry)
+        self._stops: tuple[float, float, float] = (-math.inf, math.nan, math.nan)
         self.retries_before_contact = 0  # replans asked for instead of a stop (the record's)
         # the robot's time of the first contact the latest look-ahead predicts (inf: none)
         self._contact_at_s = math.inf
@@ -1303,21 +1305,7 @@ class TankReplanner:
                  and early_gap_m(judged) < self.early_margin_m)
         if judged is not None and not early and not predicted:
             self._early_in_row = 0  # clear of the early margin: the next early need is new
-        if (predicted and self.failures > 0 and judged is not None
-                and self._stop_slips_away(judged)):
-            # a replan failed, the present plan swims within the margin, and the stop the twin
-            # swims clear now would drift within it after a retry: stop while it keeps clear
-            # (docs/planning.md, "Stopped while the stop keeps clear")
-            d.stop = "no_safe_continuation"
-            d.detail = (f"at t = {t_s:.2f} s the twin swims the present plan "
-                        f"{self._verdict_text(t_s)} after a failed replan "
-                        f"({self._last_replan()['message']}); a stop now keeps "
-                        f"{judged[5] * 1000:.0f} mm in the twin, and "
-                        f"{judged[6] * 1000:.0f} mm after the {self._retry_need_s():.1f} s "
-                        "another replan needs: stopped while it keeps clear")
-            self.events.append({"kind": "stop_in_reach", "t_s": round(t_s, 3),
-                                "stop_now_m": _rounded(judged[5]),
-                                "stop_later_m": _rounded(judged[6])})
+        if predicted and self.failures > 0 and self._stop_slips_away(t_s, d):
             return d
         gap = self._last_gap[1]
         retry = yielded = False
@@ -1660,13 +1648,38 @@ class TankReplanner:
         self.estimator.gait = gait  # the harbour's frames swim it
         return self._take_harbour(t_s, est, extra, kind, detail, at_once, harbour, wall, gait)
 
-    def _stop_slips_away(self, judged: tuple[float, ...]) -> bool:
-        """A look-ahead's stop keeps the margin and the cushion now, and not after a retry."""
-        if len(judged) < 7 or math.isnan(judged[5]):
+    def _stop_slips_away(self, t_s: float, d: Decision) -> bool:
+        """Stop now (``d``) if the latest look-ahead's stop keeps clear now and not after a retry.
+
+        After a failed replan, with the present plan within the margin: the look-ahead, at most
+        1.5 s old, swam the stop decided at its estimate clear by the margin and the cushion
+        (:data:`~eelhost.planning.harbour.HARBOUR_CUSHION_M`), and the stop decided after the
+        time another replan needs (:meth:`_retry_need_s`) within the margin. The robot then
+        stops while the stop keeps clear, instead of retrying (docs/planning.md, "Stopped while
+        the stop keeps clear").
+        """
+        from_s, now_m, later_m = self._stops
+        if (not self.stop_in_reach or t_s - from_s > 1.5 or math.isnan(now_m)
+                or now_m <= self.lookahead_margin_m + HARBOUR_CUSHION_M
+                or later_m > self.lookahead_margin_m):
             return False
-        later = judged[6]
-        return (judged[5] > self.lookahead_margin_m + HARBOUR_CUSHION_M
-                and (math.isnan(later) or later <= self.lookahead_margin_m))
+        d.stop = "no_safe_continuation"
+        gap = self._last_gap[1]
+        d.detail = (f"at t = {t_s:.2f} s the twin swims the present plan within the look-ahead's "
+                    f"{self.lookahead_margin_m * 1000:.0f} mm margin"
+                    + ("" if gap is None else f" (its outline {gap * 1000:.0f} mm)")
+                    + " after a failed replan "
+                    f"({self._last_replan()['message']}); a stop keeps {now_m * 1000:.0f} mm in "
+                    f"the twin at t = {from_s:.2f} s, and "
+                    + ("the goal comes first" if math.isnan(later_m)
+                       else f"{later_m * 1000:.0f} mm after the {self._retry_need_s():.1f} s "
+                       "another replan needs")
+                    + ": stopped while it keeps clear")
+        self.events.append({"kind": "stop_in_reach", "t_s": round(t_s, 3),
+                            "t_judged_s": round(from_s, 3), "stop_now_m": _rounded(now_m),
+                            "stop_later_m": _rounded(later_m)})
+        log.warning("%s", d.detail)
+        return True
 
     def _last_replan(self) -> dict[str, Any]:
         """The latest replan's event (a hold's event may have come after it)."""
@@ -2620,6 +2633,8 @@ class TankReplanner:
         self.failures += 1
         if judged is not None:
             self._adopt(judged, job.t_request_s, t_s)
+        if self._present_plan_hits(t_s) and self._stop_slips_away(t_s, d):
+            return True  # stopped while the stop keeps clear, instead of a retry
         if self._present_plan_hits(t_s) and self._may_retry(t_s):
             # the present plan swims into contact (or within the margin), but far enough ahead
             # for another replan to steer before it: replan again at once (docs/planning.md,
@@ -2817,6 +2832,8 @@ class TankReplanner:
                       from_s, self._last_gap[0])
             return
         self._last_gap = (from_s, None if judged is None else judged[0])
+        self._stops = ((from_s, float(judged[5]), float(judged[6]))
+                       if judged is not None and len(judged) > 6 else (from_s, math.nan, math.nan))
         self._contact_at_s = math.inf if judged is None else contact_time_s(judged, t_s)
         self._near_at_s = (math.inf if judged is None
                            else near_time_s(judged, t_s, self.lookahead_margin_m))
