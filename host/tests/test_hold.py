@@ -82,7 +82,7 @@ def test_a_stop_the_current_would_carry_into_a_disc_is_put_off_while_the_plan_sw
     clear_5mm = ahead_of(lambda t: 0.005)  # under the look-ahead's 10 mm, but clear
     # without the hold: stopped at the first refused replan (no harbour, to isolate the hold)
     nav = clear_5mm(lambda extra: planner, planner, outcome, PATH_GAIT, harbour=False,
-                    hold=False)
+                    hold_plan=False)
     decisions = drive(nav, still, 4.0)
     assert decisions[-1][1].stop == "no_safe_continuation" and decisions[-1][0] < 2.0
     # with it: the robot swims on, replanning with a back-off, the stop judged again

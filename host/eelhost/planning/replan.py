@@ -925,7 +925,7 @@ class TankReplanner:
         (:func:`eelhost.planning.harbour.find_harbour`) whose swim and stop keep the margin
         plus :data:`~eelhost.planning.harbour.HARBOUR_CUSHION_M`, and stop at its end
         (docs/planning.md, "The harbour"). On by default.
-    hold : bool
+    hold_plan : bool
         Where no safe continuation exists and the stop would drift within the margin with no
         harbour found, keep swimming the present plan while the twin swims it clear where the
         stop touches, replanning and judging the stop and the harbours again until one is safe
@@ -1033,7 +1033,7 @@ class TankReplanner:
         retry_before_contact: bool = True,
         stop_allowance_s: float = STOP_ALLOWANCE_S,
         harbour: bool = True,
-        hold: bool = True,
+        hold_plan: bool = True,
         stop_in_reach: bool = True,
         stop_brake_s: float = STOP_BRAKE_S,
         calm_budget_s: float | None = None,
@@ -1101,7 +1101,7 @@ class TankReplanner:
         self.stop_brake_s = stop_brake_s
         self._harbour: _HarbourSwim | None = None  # the harbour swum now
         self._harbours_swum = 0  # since the last plan: at HARBOURS_PER_PLAN the next stop stands
-        self.hold = hold
+        self.hold_plan = hold_plan
         self.stop_in_reach = stop_in_reach
         self._hold: _Hold | None = None  # the hold on the present plan, while it lasts
         self._held_s = 0.0  # the present plan's holds' time so far (HOLD_MAX_S bounds it)
@@ -1735,7 +1735,7 @@ class TankReplanner:
         clear, when the plan is no longer the lesser risk, or after :data:`HOLD_MAX_S`
         (docs/planning.md, "The hold").
         """
-        if not self.hold:
+        if not self.hold_plan:
             return None
         if self._stop_judged[0] == t_s:
             stop_gap = self._stop_judged[1]
