@@ -104,8 +104,8 @@ def test_a_stop_the_current_would_carry_into_a_disc_is_put_off_while_the_plan_sw
 
 def test_the_hold_ends_in_the_stop_once_the_plan_is_no_longer_the_lesser_risk(up_plan):
     _world, planner, outcome = up_plan
-    # the plan swum 5 mm clear, then from 2 s 15 mm into something (the stop is no deeper
-    # in the outline's reckoning than a link's half width and the allowance: not 20 mm worse)
+    # the plan swum 5 mm clear, then from 2 s 15 mm into something: a plan swum into contact
+    # is never held on to
     worse = ahead_of(lambda t: 0.005 if t < 2.0 else -0.015)
     nav = worse(lambda extra: planner, planner, outcome, PATH_GAIT, harbour=False)
     decisions = drive(nav, still, 6.0)
