@@ -31,7 +31,7 @@ from eelhost.planning.twin import Twin
 from eelsim.control import Gait, braked_gait
 
 __all__ = ["HARBOUR_BEARINGS_DEG", "HARBOUR_CUSHION_M", "HARBOUR_REACH_M", "HARBOUR_SWIMS_S",
-           "FINAL_GLIDE_S", "Harbour", "StopWindow", "find_harbour", "stop_states"]
+           "FINAL_GLIDE_S", "Harbour", "StopWindow", "find_harbour", "stop_gap_m", "stop_states"]
 
 HARBOUR_BEARINGS_DEG = (0.0, 30.0, -30.0, 60.0, -60.0, 90.0, -90.0, 120.0, -120.0, 150.0,
                         -150.0, 180.0)
@@ -147,6 +147,29 @@ def stop_states(twin: Twin, gait: Gait, states: FloatArray, t_s: float, window: 
     elif held > 0:
         parts.append(start[:, None])
     return np.concatenate(parts, axis=1) if parts else start[:, None]
+
+
+def stop_gap_m(twin: Twin, gait: Gait, state: FloatArray, t_s: float, window: StopWindow,
+               gap_of: Callable[[FloatArray, FloatArray], FloatArray], stride: int = 3) -> float:
+    """The smallest gap of the stop decided at ``t_s``, as :func:`find_harbour` judges it.
+
+    The stop at once alone, without the harbour swims: what the hold compares the present plan
+    with while it swims on (docs/planning.md, "The hold"). -inf when the twin's run ended early.
+
+    Parameters
+    ----------
+    twin, gait, state, t_s, window, gap_of, stride
+        As :func:`find_harbour`'s.
+
+    Returns
+    -------
+    float
+    """
+    run = stop_states(twin, gait, np.asarray(state, dtype=float)[None], t_s, window, stride)[0]
+    if not np.isfinite(run[:, 0]).all():
+        return -math.inf
+    ahead = np.arange(len(run), dtype=np.float64) * (stride * twin.dt_s)
+    return float(np.min(gap_of(run, ahead)))
 
 
 def find_harbour(twin: Twin, gait: Gait, state: FloatArray, t_s: float, window: StopWindow,

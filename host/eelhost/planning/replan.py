@@ -45,6 +45,7 @@ from eelhost.planning.harbour import (
     Harbour,
     StopWindow,
     find_harbour,
+    stop_gap_m,
 )
 from eelhost.planning.planner import SCREEN_DRAWS, Outcome, Planner
 from eelhost.planning.restart import (
@@ -377,6 +378,17 @@ HARBOURS_PER_PLAN = 2
 """Harbour swims a plan's stops may take: at the end of one, the stop is judged again from where
 the robot is, and a second swim may follow (docs/planning.md, "The harbour")."""
 
+HOLD_CHECK_S = 0.5
+"""While the robot holds on its present plan, the stop and the harbours are judged again this
+often (on the frame's thread, as the harbour's first search): a harbour found then is swum, a
+stop the twin swims clear is made (docs/planning.md, "The hold")."""
+
+HOLD_RETRY_S = 0.5
+"""While the robot holds, a failed replan is asked for again after this long."""
+
+HOLD_MAX_S = 20.0
+"""The longest a plan's hold lasts, from its first frame; then the stop it put off is made."""
+
 STOP_ALLOWANCE_S = 1.0
 """The robot's time kept ahead of a predicted contact for a stop when a replan then fails: the
 brake (docs/planning.md, "The brake in the pause") stops a body swimming 0.05-0.12 m/s within
@@ -605,6 +617,12 @@ class Ahead(NamedTuple):
         replan horizon without an early margin; nan: not swum, the early margin then reads
         ``capsule_m``): under the early margin, an early replan is asked for
         (docs/planning.md, "An earlier replan").
+    stop_now_m, stop_later_m : float
+        Where the capsule comes within the margin: the smallest gap of the stop decided at the
+        estimate (the pause's while restarts are left, else the final stop's), and of the stop
+        decided after swimming the present plan on for as long as a retried replan needs, as
+        the harbour judges a stop (:func:`eelhost.planning.harbour.stop_gap_m`); nan: not
+        judged (docs/planning.md, "Stopped while the stop keeps clear").
     """
 
     outline_m: float
@@ -612,6 +630,8 @@ class Ahead(NamedTuple):
     contact_s: float = math.inf
     near_s: float = math.inf
     bare_m: float = math.nan
+    stop_now_m: float = math.nan
+    stop_later_m: float = math.nan
 
 
 def early_gap_m(judged: tuple[float, ...]) -> float:
@@ -759,6 +779,16 @@ class _Pause:
     halt_event: dict[str, Any] = field(default_factory=dict)  # its record (the take's events)
 
 
+@dataclass
+class _Hold:
+    """The robot swimming its present plan on instead of a stop predicted worse (:meth:`TankReplanner._hold_on`)."""
+
+    t_start_s: float  # the robot's time of its first frame
+    next_check_s: float  # when the stop and the harbours are judged again
+    stop_gap_m: float  # the stop at once's gap at the last check
+    event: dict[str, Any]  # its record
+
+
 class _HarbourSwim(NamedTuple):
     """A harbour swim under way (:meth:`TankReplanner._take_harbour`)."""
 
@@ -895,6 +925,16 @@ class TankReplanner:
         (:func:`eelhost.planning.harbour.find_harbour`) whose swim and stop keep the margin
         plus :data:`~eelhost.planning.harbour.HARBOUR_CUSHION_M`, and stop at its end
         (docs/planning.md, "The harbour"). On by default.
+    hold_plan : bool
+        Where no safe continuation exists and the stop would drift within the margin with no
+        harbour found, keep swimming the present plan while the twin swims it clear where the
+        stop touches, replanning and judging the stop and the harbours again until one is safe
+        (:meth:`_hold_on`; docs/planning.md, "The hold"). On by default.
+    stop_in_reach : bool
+        After a failed replan, where the look-ahead swims the present plan within the margin
+        and the stop the twin swims clear now would come within it after the time another
+        replan needs, stop now (docs/planning.md, "Stopped while the stop keeps clear"). On
+        by default.
     stop_brake_s : float
         The run loop's brake before its final Stop (:data:`STOP_BRAKE_S`), as the harbour swims
         a final stop.
@@ -993,6 +1033,8 @@ class TankReplanner:
         retry_before_contact: bool = True,
         stop_allowance_s: float = STOP_ALLOWANCE_S,
         harbour: bool = True,
+        hold_plan: bool = True,
+        stop_in_reach: bool = True,
         stop_brake_s: float = STOP_BRAKE_S,
         calm_budget_s: float | None = None,
         early_margin_m: float | None = None,
@@ -1059,6 +1101,13 @@ class TankReplanner:
         self.stop_brake_s = stop_brake_s
         self._harbour: _HarbourSwim | None = None  # the harbour swum now
         self._harbours_swum = 0  # since the last plan: at HARBOURS_PER_PLAN the next stop stands
+        self.hold_plan = hold_plan
+        self.stop_in_reach = stop_in_reach
+        self._hold: _Hold | None = None  # the hold on the present plan, while it lasts
+        self._held_s = 0.0  # the present plan's holds' time so far (HOLD_MAX_S bounds it)
+        self._stop_judged: tuple[float, float] = (-math.inf, math.nan)  # (t, the stop's gap)
+        # the latest look-ahead's stops: (its estimate's time, the stop then, after a retry)
+        self._stops: tuple[float, float, float] = (-math.inf, math.nan, math.nan)
         self.retries_before_contact = 0  # replans asked for instead of a stop (the record's)
         # the robot's time of the first contact the latest look-ahead predicts (inf: none)
         self._contact_at_s = math.inf
@@ -1161,6 +1210,7 @@ class TankReplanner:
             return ended if ended is not None and ended.stop is not None else (
                 self._harbour_frame(t_s))
         if ended is not None:
+            self._end_hold(t_s, ended.stop or "arrived")
             if ended.arrived and self._pause is None:
                 return self._stop_safely(t_s, "arrived", "arrived in the goal disc") or ended
             return ended
@@ -1169,11 +1219,23 @@ class TankReplanner:
         d = self._swimming_frame(t_s, loc, pose, target, offset_rad, guide)
         if d.stop == "no_safe_continuation":
             pausing = self.restarts < self.max_restarts
-            harbour = self._stop_safely(t_s, "pause" if pausing else "stop", d.detail)
+            kind = "pause" if pausing else "stop"
+            if self._held(t_s):
+                return Decision()  # the hold goes on until its next check
+            harbour = self._stop_safely(t_s, kind, d.detail)
             if harbour is not None:
+                self._end_hold(t_s, "harbour")
                 return harbour
+            held = self._hold_on(t_s, kind, d.detail)
+            if held is not None:
+                return held
+            self._end_hold(t_s, "stopped")
             if pausing:
                 return self._halt(t_s, d)
+        elif self._hold is not None and (d.waypoints is not None or self._present_plan_clear(t_s)):
+            self._end_hold(t_s, "replanned" if d.waypoints is not None else "clear")
+        if d.waypoints is not None:
+            self._held_s = 0.0  # a new plan: it may hold as long again
         return d
 
     def _observe(self, t_s: float, loc: Localisation, pose: FloatArray | None,
@@ -1211,7 +1273,7 @@ class TankReplanner:
             self.current.drop()  # the prediction of a window spans no switch of waypoints
             self._lookahead = None  # it followed the old waypoints
             self._whole_job = None
-            self.events[-1]["t_switch_s"] = round(t_s, 3)
+            self._last_replan()["t_switch_s"] = round(t_s, 3)
             self.replans += 1
             d.recorded = True
             return d
@@ -1243,6 +1305,8 @@ class TankReplanner:
                  and early_gap_m(judged) < self.early_margin_m)
         if judged is not None and not early and not predicted:
             self._early_in_row = 0  # clear of the early margin: the next early need is new
+        if predicted and self.failures > 0 and self._stop_slips_away(t_s, d):
+            return d
         gap = self._last_gap[1]
         retry = yielded = False
         # the outline within the margin counts as contact for the stops: the twin's outline
@@ -1264,7 +1328,7 @@ class TankReplanner:
             d.stop = "no_safe_continuation"
             d.detail = (f"at t = {t_s:.2f} s the twin swims the present plan "
                         f"{self._verdict_text(t_s)} and "
-                        f"the last replan failed: {self.events[-1]['message']}")
+                        f"the last replan failed: {self._last_replan()['message']}")
             return d
         elif (predicted and self._backoff_yields(t_s, busy)
               and (self.failures < self.max_failures or not self._present_plan_safe(t_s))):
@@ -1285,7 +1349,7 @@ class TankReplanner:
                     f"{self.lookahead_margin_m * 1000:.0f} mm of an obstacle or wall (with the "
                     f"current estimate's drift allowance) at t = {self._near_at_s:.2f} s, "
                     f"before a replan after the back-off could steer, and {self.failures} "
-                    f"replans failed in a row: {self.events[-1]['message']}")
+                    f"replans failed in a row: {self._last_replan()['message']}")
                 return d
         job = self._job
         if job is not None and self._cuttable(job) and job.cut_for is None and (
@@ -1395,7 +1459,7 @@ class TankReplanner:
                 "state_estimate": self.estimator.summary()}
 
     def tally(self) -> str:
-        """The take's planning in one line: replans switched in and failed, pauses, harbours.
+        """The take's planning in one line: replans switched in and failed, pauses, harbours, holds.
 
         A run that printed only the replans switched in said "0" after failed replans, a pause
         and a harbour swim; the user reads here what the replanner did.
@@ -1414,6 +1478,11 @@ class TankReplanner:
         harbours = sum(e["kind"] == "harbour" and e["status"] == "harbour" for e in self.events)
         if harbours:
             parts.append(f"{harbours} harbour swim{'s' if harbours > 1 else ''}")
+        holds = [e for e in self.events if e["kind"] == "hold"]
+        if holds:
+            held = sum(e.get("t_end_s", e.get("t_last_s", e["t_s"])) - e["t_s"] for e in holds)
+            parts.append(f"{len(holds)} hold{'s' if len(holds) > 1 else ''} on the plan "
+                         f"({held:.1f} s)")
         return ", ".join(parts)
 
     # -- a restart from rest (docs/planning.md, "A restart from rest") -----------------------------
@@ -1559,6 +1628,7 @@ class TankReplanner:
                                                   self._stop_window(kind), gap_of,
                                                   self.lookahead_margin_m + HARBOUR_CUSHION_M)
         wall = time.monotonic() - wall
+        self._stop_judged = (t_s, at_once.gap_m)
         if at_once.gap_m > self.lookahead_margin_m:
             return None
         if (harbour is None and clearest is not None and clearest.gap_m > 0.0
@@ -1577,6 +1647,154 @@ class TankReplanner:
             return None
         self.estimator.gait = gait  # the harbour's frames swim it
         return self._take_harbour(t_s, est, extra, kind, detail, at_once, harbour, wall, gait)
+
+    def _stop_slips_away(self, t_s: float, d: Decision) -> bool:
+        """Stop now (``d``) if the latest look-ahead's stop keeps clear now and not after a retry.
+
+        After a failed replan, with the present plan within the margin: the look-ahead, at most
+        1.5 s old, swam the stop decided at its estimate clear by the margin and the cushion
+        (:data:`~eelhost.planning.harbour.HARBOUR_CUSHION_M`), and the stop decided after the
+        time another replan needs (:meth:`_retry_need_s`) within the margin. The robot then
+        stops while the stop keeps clear, instead of retrying (docs/planning.md, "Stopped while
+        the stop keeps clear").
+        """
+        from_s, now_m, later_m = self._stops
+        if (not self.stop_in_reach or t_s - from_s > 1.5 or math.isnan(now_m)
+                or now_m <= self.lookahead_margin_m + HARBOUR_CUSHION_M
+                or later_m > self.lookahead_margin_m):
+            return False
+        d.stop = "no_safe_continuation"
+        gap = self._last_gap[1]
+        d.detail = (f"at t = {t_s:.2f} s the twin swims the present plan within the look-ahead's "
+                    f"{self.lookahead_margin_m * 1000:.0f} mm margin"
+                    + ("" if gap is None else f" (its outline {gap * 1000:.0f} mm)")
+                    + " after a failed replan "
+                    f"({self._last_replan()['message']}); a stop keeps {now_m * 1000:.0f} mm in "
+                    f"the twin at t = {from_s:.2f} s, and "
+                    + ("the goal comes first" if math.isnan(later_m)
+                       else f"{later_m * 1000:.0f} mm after the {self._retry_need_s():.1f} s "
+                       "another replan needs")
+                    + ": stopped while it keeps clear")
+        self.events.append({"kind": "stop_in_reach", "t_s": round(t_s, 3),
+                            "t_judged_s": round(from_s, 3), "stop_now_m": _rounded(now_m),
+                            "stop_later_m": _rounded(later_m)})
+        log.warning("%s", d.detail)
+        return True
+
+    def _last_replan(self) -> dict[str, Any]:
+        """The latest replan's event (a hold's event may have come after it)."""
+        return next((e for e in reversed(self.events) if e["kind"] == "replan"), self.events[-1])
+
+    def _held(self, t_s: float) -> bool:
+        """Within a hold, before its next check, with the present plan still the lesser risk.
+
+        A stop decided then is put off without judging the harbours again (they are judged every
+        :data:`HOLD_CHECK_S`); a failed replan is asked for again :data:`HOLD_RETRY_S` later.
+        """
+        hold = self._hold
+        if hold is None or t_s >= hold.next_check_s - 1e-9 or not self._plan_beats_stop(
+                t_s, hold.stop_gap_m):
+            return False
+        self._retry_while_holding(t_s)
+        return True
+
+    def _plan_beats_stop(self, t_s: float, stop_gap_m: float) -> bool:
+        """The last look-ahead, at most 1.5 s old, swims the present plan clear where the stop touches.
+
+        The plan's gap is the body's outline over the look-ahead's horizon, the stop's the
+        outline less the current estimate's drift allowance over its brake and glide. Only
+        contact against no contact: an outline overlaps by at most a link's half width, so
+        depths read alike, and a plan swum into contact is never held on to (swum on in the
+        twin past such a verdict, the present plans of the stops that touched on unseen seeds
+        36000-36099 went 7-37 mm into something within 3-6 s; docs/planning.md, "The hold").
+        """
+        t_gap, gap = self._last_gap
+        return gap is not None and t_s - t_gap <= 1.5 and gap > 0.0 >= stop_gap_m
+
+    def _present_plan_clear(self, t_s: float) -> bool:
+        """The last look-ahead, at most 1.5 s old, swims the present plan clear of the margin."""
+        t_gap, gap = self._last_gap
+        return gap is not None and t_s - t_gap <= 1.5 and gap >= self.lookahead_margin_m
+
+    def _retry_while_holding(self, t_s: float) -> None:
+        """Ask for a replan at the next idle frame, :data:`HOLD_RETRY_S` after the last ask."""
+        if not self._retry_now:
+            self._retry_now = True
+            self._next_try_s = max(self._next_try_s, t_s + HOLD_RETRY_S)
+
+    def _hold_on(self, t_s: float, kind: str, detail: str) -> Decision | None:
+        """Swim the present plan on instead of a stop the twin swims into something, or None.
+
+        The stop at once (``kind``: ``pause`` or ``stop``) is judged in the estimated water as
+        the harbour judges it (:meth:`_stop_safely`; judged here when the harbours were not).
+        When it comes within the look-ahead's margin, no harbour was found, and the last
+        look-ahead swims the present plan clear of contact where the stop touches, the robot
+        keeps swimming it, its gait and offsets at the control rate, replanning with a
+        back-off of :data:`HOLD_RETRY_S`; the stop and the harbours are judged again every
+        :data:`HOLD_CHECK_S`, and the hold ends with a plan, a harbour, a stop the twin swims
+        clear, when the plan is no longer the lesser risk, or after :data:`HOLD_MAX_S`
+        (docs/planning.md, "The hold").
+        """
+        if not self.hold_plan:
+            return None
+        if self._stop_judged[0] == t_s:
+            stop_gap = self._stop_judged[1]
+        else:  # the harbours were not judged (none left to this plan): the stop alone
+            est = self.estimator.estimate()
+            if est is None:
+                return None
+            extra = self.current.value_m_s.copy() if self.estimate_current else np.zeros(2)
+            spread = current_spread_m_s(self.current.history)
+
+            def gap_of(states: FloatArray, ahead_s: FloatArray) -> FloatArray:
+                return np.subtract(outline_clearance_m(self.world, self.model, states),
+                                   drift_allowance_m(spread, ahead_s))
+
+            stop_gap = stop_gap_m(self._twin_in(extra), self.gait, est.state, est.t_s,
+                                  self._stop_window(kind), gap_of)
+            self._stop_judged = (t_s, stop_gap)
+        hold = self._hold
+        held_s = self._held_s + (0.0 if hold is None else t_s - hold.t_start_s)
+        if (stop_gap > self.lookahead_margin_m or held_s >= HOLD_MAX_S
+                or not self._plan_beats_stop(t_s, stop_gap)):
+            return None
+        plan_gap = self._last_gap[1]
+        assert plan_gap is not None  # _plan_beats_stop holds
+        if (self.events and self.events[-1]["kind"] == "harbour"
+                and self.events[-1]["status"] == "none"
+                and self.events[-1]["t_request_s"] == round(t_s, 3)):
+            # while holding, a harbour that was not found is the hold's check, not a stop
+            self.events.pop()
+        if hold is None:
+            event = {"kind": "hold", "reason": kind, "t_s": round(t_s, 3),
+                     "stop_gap_m": _rounded(stop_gap), "plan_gap_m": _rounded(plan_gap),
+                     "checks": 1, "detail": detail}
+            self.events.append(event)
+            self._hold = hold = _Hold(t_s, t_s + HOLD_CHECK_S, stop_gap, event)
+            log.warning("at t = %.2f s the stop (%s) drifts within %.0f mm of an obstacle or wall "
+                        "and no harbour keeps the margin; the twin swims the present plan %.0f mm "
+                        "clear: holding on it and replanning (%s)", t_s, kind,
+                        max(stop_gap, 0.0) * 1000, plan_gap * 1000, detail)
+        else:
+            hold.next_check_s = t_s + HOLD_CHECK_S
+            hold.stop_gap_m = stop_gap
+            hold.event["checks"] += 1
+            hold.event["t_last_s"] = round(t_s, 3)
+        self._retry_while_holding(t_s)
+        return Decision(recorded=hold.event["checks"] == 1, detail=(
+            f"holding on the present plan at t = {t_s:.2f} s: the stop drifts "
+            f"{stop_gap * 1000:.0f} mm from an obstacle or wall in the twin, the plan "
+            f"{plan_gap * 1000:.0f} mm"))
+
+    def _end_hold(self, t_s: float, why: str) -> None:
+        """End the hold, if one is on, recording how (``harbour``, ``stopped``, ...)."""
+        hold = self._hold
+        if hold is None:
+            return
+        self._hold = None
+        self._held_s += t_s - hold.t_start_s
+        hold.event["t_end_s"] = round(t_s, 3)
+        hold.event["ended"] = why
 
     def _take_harbour(self, t_s: float, est: BodyEstimate, extra: FloatArray, kind: str,
                       detail: str, at_once: Harbour, harbour: Harbour, wall_s: float,
@@ -1853,6 +2071,7 @@ class TankReplanner:
         self.restarts += 1
         self._pause = None
         self._harbours_swum = 0  # a new plan: its stops may swim harbours again
+        self._held_s = 0.0  # and hold again
         self.estimator.gait = self.gait
         assert pause.extra is not None  # set with the outcome
         self._take_plan(pause.outcome, pause.extra)
@@ -2414,6 +2633,8 @@ class TankReplanner:
         self.failures += 1
         if judged is not None:
             self._adopt(judged, job.t_request_s, t_s)
+        if self._present_plan_hits(t_s) and self._stop_slips_away(t_s, d):
+            return True  # stopped while the stop keeps clear, instead of a retry
         if self._present_plan_hits(t_s) and self._may_retry(t_s):
             # the present plan swims into contact (or within the margin), but far enough ahead
             # for another replan to steer before it: replan again at once (docs/planning.md,
@@ -2536,7 +2757,37 @@ class TankReplanner:
                 current_spread_m_s(self.current.history), ahead_s))
         within = np.flatnonzero(capsule < self.lookahead_margin_m)
         near_s = (now + int(within[0]) * stride) * twin.dt_s if within.size else math.inf
-        return Ahead(float(outline.min()), float(capsule.min()), contact, near_s, bare)
+        stop_now = stop_later = math.nan
+        if guard and within.size and self.stop_in_reach:
+            stop_now, stop_later = self._stops_ahead(twin, est, states, stride)
+        return Ahead(float(outline.min()), float(capsule.min()), contact, near_s, bare,
+                     stop_now, stop_later)
+
+    def _stops_ahead(self, twin: Twin, est: BodyEstimate, states: FloatArray, stride: int
+                     ) -> tuple[float, float]:
+        """The stop decided now and after a retried replan's need on the present plan: gaps.
+
+        ``states``: the look-ahead's run of the present plan from ``est`` (every ``stride``
+        steps). The stop is the pause's while restarts are left, else the final stop's, swum
+        and judged as the harbour's (:meth:`_stop_safely`). The later one is nan when the run
+        ends first (the goal).
+        """
+        kind = "pause" if self.restarts < self.max_restarts else "stop"
+        spread = current_spread_m_s(self.current.history)
+
+        def gap_of(run: FloatArray, ahead_s: FloatArray) -> FloatArray:
+            return np.subtract(outline_clearance_m(self.world, self.model, run),
+                               drift_allowance_m(spread, ahead_s))
+
+        window = self._stop_window(kind)
+        now = stop_gap_m(twin, self.gait, est.state, est.t_s, window, gap_of, stride)
+        reach = min(self._retry_need_s(), self.lookahead_s)
+        k = int(round(reach / (stride * twin.dt_s)))
+        if k >= len(states):
+            return now, math.nan
+        later = stop_gap_m(twin, self.gait, states[k], est.t_s + k * stride * twin.dt_s, window,
+                           gap_of, stride)
+        return now, later
 
     def _twin_in(self, extra: FloatArray, gait: Gait | None = None) -> Twin:
         """The planner's twin in the world's current plus the estimate ``extra`` (and ``gait``)."""
@@ -2581,6 +2832,8 @@ class TankReplanner:
                       from_s, self._last_gap[0])
             return
         self._last_gap = (from_s, None if judged is None else judged[0])
+        self._stops = ((from_s, float(judged[5]), float(judged[6]))
+                       if judged is not None and len(judged) > 6 else (from_s, math.nan, math.nan))
         self._contact_at_s = math.inf if judged is None else contact_time_s(judged, t_s)
         self._near_at_s = (math.inf if judged is None
                            else near_time_s(judged, t_s, self.lookahead_margin_m))
