@@ -12,6 +12,7 @@ import json
 
 import numpy as np
 import pytest
+from test_tank_replanning import OPEN
 
 from eelhost.cli import main
 from eelhost.field.recorder import read_commands_csv
@@ -31,15 +32,8 @@ ROBOT = load_robot()
 MODEL = default_model(ROBOT)
 AUTO = {"guidance": AUTO_LAWS, "unknown_current_m_s": 0.0, "draws": 8}
 
-CROSS_CURRENT = {
-    "name": "open",
-    "tank": {"size_m": [3.0, 2.0]},
-    "start": {"position_m": [0.6, 1.0], "heading_deg": 0.0},
-    "goal": {"position_m": [2.1, 1.0], "radius_m": 0.2},
-    "current": {"speed_m_s": 0.03, "direction_deg": 90.0},
-    "obstacles": [{"kind": "circle", "centre_m": [1.4, 0.25], "radius_m": 0.1}],
-}
-
+# the open world of the replanning tests in a cross current
+CROSS_CURRENT = {**OPEN, "current": {"speed_m_s": 0.03, "direction_deg": 90.0}}
 
 @pytest.fixture(scope="module")
 def tank5_auto() -> RunPlan:

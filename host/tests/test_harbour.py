@@ -45,6 +45,12 @@ def disc_world(current_m_s: float) -> dict:
     }
 
 
+def up_world():
+    """The disc world with the goal up the tank: the disc downstream of a body beside the plan."""
+    return parse_world({**disc_world(0.03), "goal": {"position_m": [0.6, 1.6], "radius_m": 0.2},
+                        "start": {"position_m": [0.6, 0.9], "heading_deg": 90.0}}, "up")
+
+
 @pytest.fixture(scope="module")
 def disc_plan():
     world = parse_world(disc_world(0.03), "disc")
@@ -179,8 +185,7 @@ def test_an_arrival_the_current_would_carry_into_an_obstacle_swims_a_harbour_the
 def test_where_no_continuation_exists_the_harbour_comes_before_the_pause_or_the_final_stop():
     # the goal up the tank, the body seen 0.75 m off the plan's corridor in the disc's stream:
     # every replan is refused, and the stop it leads to would drift into the disc
-    world = parse_world({**disc_world(0.03), "goal": {"position_m": [0.6, 1.6], "radius_m": 0.2},
-                         "start": {"position_m": [0.6, 0.9], "heading_deg": 90.0}}, "up")
+    world = up_world()
     planner = Planner(world, ROBOT, MODEL)
     outcome = planner.plan()
     assert outcome.found, outcome.message
@@ -245,8 +250,7 @@ def test_a_pause_s_rest_budget_leaves_the_final_stop_room_in_the_drift():
     # the stopped body drifts towards the disc and comes within the margin some seconds on: the
     # rest replan's budget ends early enough that, should it fail, the final stop's brake and
     # glide after it still keep clear; without a final brake the budget is longer
-    world = parse_world({**disc_world(0.03), "goal": {"position_m": [0.6, 1.6], "radius_m": 0.2},
-                         "start": {"position_m": [0.6, 0.9], "heading_deg": 90.0}}, "up")
+    world = up_world()
     planner = Planner(world, ROBOT, MODEL)
     outcome = planner.plan()
     budgets = {}
@@ -294,8 +298,7 @@ class PausedThenRefused(Blocked):
 
 
 def test_a_final_stop_after_a_failed_pause_swims_a_harbour_from_the_brake_s_frozen_phase():
-    world = parse_world({**disc_world(0.03), "goal": {"position_m": [0.6, 1.6], "radius_m": 0.2},
-                         "start": {"position_m": [0.6, 0.9], "heading_deg": 90.0}}, "up")
+    world = up_world()
     planner = Planner(world, ROBOT, MODEL)
     outcome = planner.plan()
     nav = PausedThenRefused(lambda extra: planner, planner, outcome, PATH_GAIT, lookahead_s=0.0,

@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 import pytest
-from test_harbour import disc_world
+from test_harbour import up_world
 from test_tank_restart import MODEL, ROBOT, Blocked, N, pose_at
 
 from eelhost.planning.audit import body_gaps_m
@@ -22,7 +22,6 @@ from eelhost.planning.replan import (
     Decision,
 )
 from eelhost.planning.restart import paused_drift, stopped_twin
-from eelhost.planning.world import parse_world
 from eelsim.control import braked_gait
 from eelsim.scenario import PATH_GAIT
 
@@ -32,8 +31,7 @@ FPS = 30
 @pytest.fixture(scope="module")
 def up_plan():
     """The goal up the tank; the disc downstream of where the body will be seen."""
-    world = parse_world({**disc_world(0.03), "goal": {"position_m": [0.6, 1.6], "radius_m": 0.2},
-                         "start": {"position_m": [0.6, 0.9], "heading_deg": 90.0}}, "up")
+    world = up_world()
     planner = Planner(world, ROBOT, MODEL)
     outcome = planner.plan()
     assert outcome.found, outcome.message
