@@ -12,7 +12,7 @@ import json
 
 import numpy as np
 import pytest
-from test_tank_replanning import OPEN
+from test_tank_replanning import OPEN, offsets_by_hand
 
 from eelhost.cli import main
 from eelhost.field.recorder import read_commands_csv
@@ -24,7 +24,7 @@ from eelhost.planning.tank import RunPlan, plan_for_run
 from eelhost.planning.uncertainty import default_model
 from eelhost.planning.world import load_world, parse_world
 from eelhost.vision.synthetic import TankView
-from eelsim.guidance import PURSUIT, Guidance, GuidanceLaw
+from eelsim.guidance import PURSUIT
 from eelsim.robot import load_robot
 from eelsim.scenario import PATH_GAIT
 
@@ -76,20 +76,6 @@ def test_a_world_pursuit_ff_plans_keeps_pursuit_ff():
     assert nav.events[0]["guidance"] == "pursuit_ff" and "laws_tried" not in nav.events[0]
 
 
-def _offsets_by_hand(frames: np.ndarray, sent: list[dict], waypoints: list, law: GuidanceLaw,
-                     start: tuple[float, float]) -> list[float]:
-    """The offsets ``law`` gives for the take's measured poses at each SetOffset's time."""
-    g = Guidance(waypoints, 0.15, PATH_GAIT.k_theta, 5, offset_limit_rad=OFFSET_LIMIT_RAD,
-                 law=law, leg_start_m=start)
-    out, f = [], 0
-    for r in sent:
-        while f < len(frames) and frames[f][0] <= r["t_s"] + 1e-4:
-            g.observe(*(float(v) for v in frames[f]))
-            f += 1
-        out.append(g.offset())
-    return out
-
-
 def test_the_run_steers_and_records_with_the_law_its_plan_was_found_with(tank5_auto, tmp_path):
     planned = tank5_auto
     config = RunConfig(PATH_GAIT, planned.waypoints_m, duration_s=3.0,
@@ -108,13 +94,13 @@ def test_the_run_steers_and_records_with_the_law_its_plan_was_found_with(tank5_a
     start = planned.start_guide
     assert start is not None
     got = [r["fields"]["offset_rad"] for r in sent]
-    assert np.allclose(got, _offsets_by_hand(frames, sent, planned.waypoints_m, PURSUIT,
-                                             start[:2]), atol=1e-5)
+    assert np.allclose(got, offsets_by_hand(frames, sent, planned.waypoints_m, PURSUIT, start[:2],
+                                            OFFSET_LIMIT_RAD), atol=1e-5)
     # pursuit_ff in the world's known current would have steered otherwise
     nav = planned.navigator
     ff = AUTO_LAWS[0].with_water(nav.world.current_m_s, nav.planner.swimming_speed_m_s)
-    assert not np.allclose(got, _offsets_by_hand(frames, sent, planned.waypoints_m, ff,
-                                                 start[:2]), atol=1e-2)
+    assert not np.allclose(got, offsets_by_hand(frames, sent, planned.waypoints_m, ff, start[:2],
+                                                OFFSET_LIMIT_RAD), atol=1e-2)
     # the take records the law it steered with and the law of every plan
     assert meta["source"]["guidance"]["law"] == "pursuit"
     assert all(p["guidance"] == "pursuit" for p in plans)

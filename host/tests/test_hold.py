@@ -8,8 +8,8 @@ import math
 
 import numpy as np
 import pytest
-from test_harbour import up_world
-from test_tank_restart import MODEL, ROBOT, Blocked, N, pose_at
+from test_harbour import run_frames, up_world
+from test_tank_restart import MODEL, ROBOT, Blocked, N
 
 from eelhost.planning.audit import body_gaps_m
 from eelhost.planning.harbour import FINAL_GLIDE_S
@@ -24,8 +24,6 @@ from eelhost.planning.replan import (
 from eelhost.planning.restart import paused_drift, stopped_twin
 from eelsim.control import braked_gait
 from eelsim.scenario import PATH_GAIT
-
-FPS = 30
 
 
 @pytest.fixture(scope="module")
@@ -52,21 +50,7 @@ def ahead_of(outline_m):  # noqa: ANN001, ANN201
 
 def drive(nav, com_at, seconds: float) -> list[tuple[float, Decision]]:  # noqa: ANN001
     """Frames of the straight body seen at ``com_at(t)`` until a stop, a pause or ``seconds``."""
-    decisions: list[tuple[float, Decision]] = []
-    try:
-        for k in range(int(seconds * FPS)):
-            t = k / FPS
-            com = com_at(t)
-            d = nav.on_frame(t, pose_at(t, com), np.array([*com, 0.0]), 0, 0.0)
-            decisions.append((t, d))
-            nav.pace(t)
-            if d.stop is not None or d.pause:
-                break
-            nav._worker.submit(lambda: None).result()
-            nav._side.submit(lambda: None).result()
-    finally:
-        nav.close()
-    return decisions
+    return run_frames(nav, com_at, seconds, until=lambda d: d.stop is not None or d.pause)
 
 
 def still(t_s: float) -> tuple[float, float]:

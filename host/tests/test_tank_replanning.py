@@ -70,6 +70,25 @@ OPEN = {
 }
 
 
+def offsets_by_hand(frames: np.ndarray, sent: list[dict], waypoints: list, law: GuidanceLaw,
+                    start: tuple[float, float] | None = None, offset_limit_rad: float = 1.0,
+                    ) -> list[float]:
+    """The offsets ``law`` gives for a take's measured poses at each SetOffset's time.
+
+    ``frames``: the take's (t, x, y, theta) rows; ``sent``: its SetOffset commands; the guidance
+    from ``start`` (default the first pose seen) over ``waypoints``.
+    """
+    g = Guidance(waypoints, 0.15, PATH_GAIT.k_theta, 5, offset_limit_rad=offset_limit_rad,
+                 law=law, leg_start_m=start)
+    out, f = [], 0
+    for r in sent:
+        while f < len(frames) and frames[f][0] <= r["t_s"] + 1e-4:
+            g.observe(*(float(v) for v in frames[f]))
+            f += 1
+        out.append(g.offset())
+    return out
+
+
 def swimming_state(t_s: float = 6.0):
     """A state of the robot swimming a path: bent, moving, mid-stroke; and its run."""
     sc = Scenario.swimming(PATH_GAIT, name="swim", waypoints_m=[(2.5, 1.3)], duration_s=t_s + 0.5,
@@ -1087,14 +1106,7 @@ def test_a_feed_forward_plan_is_steered_and_replanned_with_the_law_the_planner_f
     assert len(sent) >= 10
 
     def replay(with_law: GuidanceLaw) -> list[float]:
-        g = Guidance(first, 0.15, PATH_GAIT.k_theta, 5, offset_limit_rad=1.0, law=with_law)
-        out, f = [], 0
-        for r in sent:
-            while f < len(frames) and frames[f][0] <= r["t_s"] + 1e-4:
-                g.observe(*(float(v) for v in frames[f]))
-                f += 1
-            out.append(g.offset())
-        return out
+        return offsets_by_hand(frames, sent, first, with_law, offset_limit_rad=1.0)
 
     got = [r["fields"]["offset_rad"] for r in sent]
     assert np.allclose(got, replay(law), atol=1e-5)
