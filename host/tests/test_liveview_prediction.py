@@ -9,6 +9,7 @@ from eelhost.vision.localise import Localiser
 from eelhost.vision.synthetic import SyntheticCamera
 from eelhost.web.liveview import PREDICTION_SAMPLE_S, LiveView
 from eelsim.closed_loop import LoopOptions, simulate_closed_loop
+from eelsim.guidance import PURSUIT, GuidanceLaw
 from eelsim.robot import SERVO_ROBOT, load_robot
 from eelsim.scenario import load_scenario
 
@@ -17,7 +18,7 @@ PATH1 = load_scenario("path1")
 
 
 def _reference_path(view: LiveView, pose, target_index: int, waypoints, robot=ROBOT,
-                    current=(0.0, 0.0)) -> np.ndarray:
+                    current=(0.0, 0.0), law=PURSUIT) -> np.ndarray:
     """The reference closed loop (eelsim.closed_loop) swum from ``pose`` as the view asks."""
     g = view.config.gait
     scenario = PATH1.model_copy(update={
@@ -26,7 +27,7 @@ def _reference_path(view: LiveView, pose, target_index: int, waypoints, robot=RO
         "beta_rad": g.beta_rad, "k_theta": g.k_theta, "waypoints_m": waypoints[target_index:],
         "acceptance_radius_m": view.config.acceptance_radius_m, "duration_s": view.horizon_s,
         "start_position_m": (pose[0], pose[1]), "start_heading_deg": np.degrees(pose[2])})
-    run = simulate_closed_loop(robot, scenario, LoopOptions(stop_at_goal=True))
+    run = simulate_closed_loop(robot, scenario, LoopOptions(stop_at_goal=True, guidance=law))
     every = round(PREDICTION_SAMPLE_S / (run.t_s[1] - run.t_s[0]))
     n = robot.n_links
     return run.states[::every, n:n + 2]
@@ -66,6 +67,25 @@ def test_a_planned_runs_view_predicts_with_the_planners_robot_in_the_known_curre
         assert np.allclose(predicted, expected, rtol=0.0, atol=1e-9)
         robot_files = _reference_path(view, pose, 0, waypoints)
         assert np.max(np.hypot(*(predicted - robot_files).T)) > 0.02  # not the robot file's
+    finally:
+        view.close()
+
+
+def test_the_view_predicts_with_the_runs_guidance_law_not_pure_pursuit():
+    # a plan found with pursuit_ff (eelbot run --plan --guidance pursuit_ff or auto): the run
+    # loop steers with that law filled in with the planner's known current, and so does the view
+    waypoints = [(0.9, 0.3), (1.6, 0.9)]
+    law = GuidanceLaw("pursuit_ff").with_water((0.0, -0.03), 0.086)
+    view = LiveView(SyntheticCamera(ROBOT).calibration(), ROBOT,
+                    RunConfig(PATH1.gait, waypoints, guidance=law), horizon_s=4.0,
+                    predict_every_s=60.0, current_m_s=(0.0, -0.03))
+    try:
+        pose = np.asarray((0.2, 0.1, 0.3))
+        predicted = view.predict(pose, 0)
+        expected = _reference_path(view, pose, 0, waypoints, current=(0.03, -90.0), law=law)
+        assert np.allclose(predicted, expected, rtol=0.0, atol=1e-9)
+        pursuit = _reference_path(view, pose, 0, waypoints, current=(0.03, -90.0))
+        assert np.max(np.hypot(*(predicted - pursuit).T)) > 0.005  # not pure pursuit's path
     finally:
         view.close()
 

@@ -302,7 +302,10 @@ class LiveView:
             start_position_m=(float(pose[0]), float(pose[1])),
             start_heading_deg=math.degrees(float(pose[2])),
         )
-        options = LoopOptions(stop_at_goal=True)
+        # the run loop's own guidance law (a plan's, e.g. pursuit_ff with the planner's known
+        # current): the path drawn is the one the robot is steered along (docs/planning.md, "The
+        # live view of a planned run")
+        options = LoopOptions(stop_at_goal=True, guidance=self.config.guidance)
         spec = BatchSpec.build(self.robot, [scenario], None, options)
         every = max(1, round(PREDICTION_SAMPLE_S / options.timing.dt_s))
         steps = np.arange(0, int(spec.total_steps.max()) + 1, every)
