@@ -1617,15 +1617,9 @@ class TankReplanner:
             return None
         extra = self.current.value_m_s.copy() if self.estimate_current else np.zeros(2)
         base = self._twin_in(extra, gait)
-        spread = current_spread_m_s(self.current.history)
-
-        def gap_of(states: FloatArray, ahead_s: FloatArray) -> FloatArray:
-            return np.subtract(outline_clearance_m(self.world, self.model, states),
-                               drift_allowance_m(spread, ahead_s))
-
         wall = time.monotonic()
         at_once, harbour, clearest = find_harbour(base, gait, est.state, est.t_s,
-                                                  self._stop_window(kind), gap_of,
+                                                  self._stop_window(kind), self._stop_gaps(),
                                                   self.lookahead_margin_m + HARBOUR_CUSHION_M)
         wall = time.monotonic() - wall
         self._stop_judged = (t_s, at_once.gap_m)
@@ -1744,14 +1738,8 @@ class TankReplanner:
             if est is None:
                 return None
             extra = self.current.value_m_s.copy() if self.estimate_current else np.zeros(2)
-            spread = current_spread_m_s(self.current.history)
-
-            def gap_of(states: FloatArray, ahead_s: FloatArray) -> FloatArray:
-                return np.subtract(outline_clearance_m(self.world, self.model, states),
-                                   drift_allowance_m(spread, ahead_s))
-
             stop_gap = stop_gap_m(self._twin_in(extra), self.gait, est.state, est.t_s,
-                                  self._stop_window(kind), gap_of)
+                                  self._stop_window(kind), self._stop_gaps())
             self._stop_judged = (t_s, stop_gap)
         hold = self._hold
         held_s = self._held_s + (0.0 if hold is None else t_s - hold.t_start_s)
@@ -2773,12 +2761,7 @@ class TankReplanner:
         ends first (the goal).
         """
         kind = "pause" if self.restarts < self.max_restarts else "stop"
-        spread = current_spread_m_s(self.current.history)
-
-        def gap_of(run: FloatArray, ahead_s: FloatArray) -> FloatArray:
-            return np.subtract(outline_clearance_m(self.world, self.model, run),
-                               drift_allowance_m(spread, ahead_s))
-
+        gap_of = self._stop_gaps()
         window = self._stop_window(kind)
         now = stop_gap_m(twin, self.gait, est.state, est.t_s, window, gap_of, stride)
         reach = min(self._retry_need_s(), self.lookahead_s)
@@ -2788,6 +2771,21 @@ class TankReplanner:
         later = stop_gap_m(twin, self.gait, states[k], est.t_s + k * stride * twin.dt_s, window,
                            gap_of, stride)
         return now, later
+
+    def _stop_gaps(self) -> Callable[[FloatArray, FloatArray], FloatArray]:
+        """How a stop's samples are judged: the body outline's gap less the current's drift.
+
+        The outline's gap to obstacles and walls, less the drift the current estimate's spread
+        allows by each sample's time ahead (docs/planning.md, "The harbour"); the one judgement
+        of the harbour's candidates, the hold's stop and the look-ahead's two stops.
+        """
+        spread = current_spread_m_s(self.current.history)
+
+        def gap_of(states: FloatArray, ahead_s: FloatArray) -> FloatArray:
+            return np.subtract(outline_clearance_m(self.world, self.model, states),
+                               drift_allowance_m(spread, ahead_s))
+
+        return gap_of
 
     def _twin_in(self, extra: FloatArray, gait: Gait | None = None) -> Twin:
         """The planner's twin in the world's current plus the estimate ``extra`` (and ``gait``)."""
