@@ -166,9 +166,18 @@ def stop_gap_m(twin: Twin, gait: Gait, state: FloatArray, t_s: float, window: St
     float
     """
     run = stop_states(twin, gait, np.asarray(state, dtype=float)[None], t_s, window, stride)[0]
+    return _judged_gap_m(run, 0.0, stride * twin.dt_s, gap_of)
+
+
+def _judged_gap_m(run: FloatArray, offset_s: float, sample_s: float,
+                 gap_of: Callable[[FloatArray, FloatArray], FloatArray]) -> float:
+    """The smallest gap ``gap_of`` gives a run sampled every ``sample_s``, ``offset_s`` ahead.
+
+    -inf for a run that ended early (a failure flag): no stop or harbour is judged from it.
+    """
     if not np.isfinite(run[:, 0]).all():
         return -math.inf
-    ahead = np.arange(len(run), dtype=np.float64) * (stride * twin.dt_s)
+    ahead = offset_s + np.arange(len(run), dtype=np.float64) * sample_s
     return float(np.min(gap_of(run, ahead)))
 
 
@@ -213,14 +222,9 @@ def find_harbour(twin: Twin, gait: Gait, state: FloatArray, t_s: float, window: 
     com = state[n : n + 2]
 
     def judged(run: FloatArray, offset_s: float) -> float:
-        ok = np.isfinite(run[:, 0])
-        if not ok.all():  # a run that ended early (a failure flag) is no harbour
-            return -math.inf
-        ahead = offset_s + np.arange(len(run), dtype=np.float64) * (stride * dt)
-        return float(np.min(gap_of(run, ahead)))
+        return _judged_gap_m(run, offset_s, stride * dt, gap_of)
 
-    stop_now = stop_states(twin, gait, state[None], t_s, window, stride)[0]
-    at_once_gap = judged(stop_now, 0.0)
+    at_once_gap = stop_gap_m(twin, gait, state, t_s, window, gap_of, stride)
     at_once = Harbour(now, (float(com[0]), float(com[1])), math.nan, 0.0, at_once_gap, math.inf,
                       at_once_gap, com[None].copy(), guide)
     heading = float(np.mean(state[:n]))
