@@ -1,4 +1,4 @@
-"""How far the check's runs stray beyond the body the search swept (docs/planning.md, "A geometric ceiling").
+"""How far the check's runs stray beyond the body the search swept (docs/planning_history.md, "A geometric ceiling").
 
 For each world: the search's first plan (the check off), swum leg by leg as the check swims it
 with the fits as fitted (the searched run) and in the check's draws of the water

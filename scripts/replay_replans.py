@@ -1,6 +1,6 @@
 """Replay a closed-loop benchmark's replans offline through the planner.
 
-docs/planning.md, "Session 10's development figures: the replans' search".
+docs/planning_history.md, "Session 10's development figures: the replans' search".
 
 Reads ``<out>/planning/<seed>.json`` of ``eelbot run --bench --out <out>`` (each replan's start
 state, start time, water and outcome) and plans again from every replan start that failed at the

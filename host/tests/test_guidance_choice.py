@@ -1,4 +1,4 @@
-"""The guidance law chosen per plan (``--guidance auto``; docs/planning.md, "A guidance law chosen
+"""The guidance law chosen per plan (``--guidance auto``; docs/planning_history.md, "A guidance law chosen
 per plan"): plan with pursuit_ff and, where it finds no checked plan, with pure pursuit; the plan
 carries its law, and the run loop, every replan and the take use that law.
 

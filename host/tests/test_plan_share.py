@@ -1,5 +1,5 @@
 """The first plan's fallback from a cramped start: wider first turns when the search is
-exhausted (docs/planning.md, "A wider turn from a cramped start")."""
+exhausted (docs/planning_history.md, "A wider turn from a cramped start")."""
 
 from __future__ import annotations
 

@@ -229,7 +229,7 @@ def test_the_soft_margin_costs_time_only_under_the_preferred_clearance():
 
 def test_the_soft_margin_keeps_its_floor_of_room_when_no_unknown_current_is_checked():
     # the coefficients alone still stray the check's runs: the preferred room never falls
-    # under SOFT_MARGIN_FLOOR_M (docs/planning.md, "Session 16's development figures")
+    # under SOFT_MARGIN_FLOOR_M (docs/planning_history.md, "Session 16's development figures")
     calm = Planner(open_tank(), ROBOT, MODEL, unknown_current_m_s=0.0).settings
     assert calm.preferred_clearance_m == pytest.approx(calm.margin_m + SOFT_MARGIN_FLOOR_M)
     drifting = Planner(open_tank(), ROBOT, MODEL, unknown_current_m_s=0.02).settings

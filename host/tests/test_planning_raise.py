@@ -1,4 +1,4 @@
-"""A repair raises the search's margin where the check failed (docs/planning.md, "A repair with
+"""A repair raises the search's margin where the check failed (docs/planning_history.md, "A repair with
 the margin raised where the check failed")."""
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """A geometric ceiling on the plan share: how much room the widest route of a world leaves.
 
-docs/planning.md, "Targets of issue 28 (the planner's)", "A geometric ceiling", is the long form.
+docs/planning_history.md, "Targets of issue 28 (the planner's)", "A geometric ceiling", is the long form.
 Written apart from the planner (its own distance field, from shapely's exact geometry, and its
 own route search), so that it says what any planner could reach, not what this one does.
 

@@ -27,7 +27,7 @@ docs/planning.md ("The planner") is the long form. :meth:`Planner.plan`:
 4. **Repair**: the leg most check runs failed on (the leg being swum at the first contact, or
    the last leg when the goal was missed) is banned and the search runs again (it keeps what it
    swam), with its margin raised where the failing runs came too close (:meth:`Planner.failure_sites`,
-   :meth:`eelhost.planning.search.Search.raise_margin`; docs/planning.md, "A repair with the
+   :meth:`eelhost.planning.search.Search.raise_margin`; docs/planning_history.md, "A repair with the
    margin raised where the check failed"); after ``repairs`` attempts the plan is refused with
    the reason of the last failure.
    Each searched plan is checked over its own draws, fresh and independent of the draws that
@@ -103,7 +103,7 @@ from everything, not merely clear of it. A plan whose worst draw came within a f
 contact is one whose collision probability sits near its stated bound: on development seeds
 12000-12299 (ILOS) 12 of the 28 plans that passed 0-30 mm clear touched in 60 further fresh
 draws (24 of 1680 runs), and 3 of them in the benchmark's 8; of the 29 clearer ones 2, both
-repaired plans (docs/planning.md, "Targets of issue 28 (the planner's)", "Session 8's
+repaired plans (docs/planning_history.md, "Targets of issue 28 (the planner's)", "Session 8's
 development figures"). Coming within the margin counts as the run failing; so 0 such runs in n draws
 bound the probability of coming within the margin, and with it the (smaller) probability of
 contact, by the same Clopper-Pearson interval."""
@@ -134,8 +134,8 @@ call's deadline")."""
 SCREEN_DRAWS = 4
 """Draws swum first; a plan that fails one is repaired without swimming the others. The verdict
 does not depend on it (every draw must pass), only what a failing plan costs: the plans that fail
-their check fail about 40 % of the draws at the default bound (docs/planning.md, "Targets of
-issue 28 (the planner's)"), so 4 draws catch most of them; 4 instead of 12 cut the median
+their check fail about 40 % of the draws at the default bound (docs/planning_history.md,
+"Targets of issue 28 (the planner's)"), so 4 draws catch most of them; 4 instead of 12 cut the median
 processor time on development worlds by a tenth to a fifth with the same statuses (the leg a
 repair bans is chosen among the failing runs swum, so it can differ)."""
 
@@ -169,7 +169,7 @@ guidance law chosen per plan")."""
 
 AUTO_LAWS: tuple[GuidanceLaw, ...] = (GuidanceLaw("pursuit_ff"), PURSUIT)
 """The laws ``auto`` tries, in order: pure pursuit aimed off by the known current, which planned
-62 of 100 unseen worlds to pure pursuit's 48 (seeds 36000-36099, docs/planning.md, "The known
+62 of 100 unseen worlds to pure pursuit's 48 (seeds 36000-36099, docs/planning_history.md, "The known
 current fed forward into the pursuit"), then pure pursuit, which plans some worlds the first does
 not (tank_5_obstacles among them)."""
 
@@ -195,7 +195,7 @@ the preferred clearance is the hard margin plus the larger of this and
 0.02 m/s keeps its 200 mm). With the coefficients alone (``eelbot run --bench
 --check-unknown-current 0``) the check's draws came within its margin on legs the search had
 swum a median 72 mm clear (centre line; development seeds 27000-27059), where 30 mm of preferred
-room left most failing first plans short by a few millimetres (docs/planning.md, "Session 16's
+room left most failing first plans short by a few millimetres (docs/planning_history.md, "Session 16's
 development figures: plan share")."""
 
 SOFT_MARGIN_COST = 3.0
@@ -209,7 +209,7 @@ samples every physics step and measures the exact clearance of every state; docs
 
 CRAMPED_ACTIONS = Actions(distances_m=(0.3, 0.5),
                           bearings_deg=(-120.0, -90.0, -60.0, -30.0, 0.0, 30.0, 60.0, 90.0, 120.0))
-"""The first plan's fallback from a cramped start (docs/planning.md, "A wider turn from a cramped
+"""The first plan's fallback from a cramped start (docs/planning_history.md, "A wider turn from a cramped
 start"; ``Planner(cramped_start=True)``, off by default): when the search from the world's
 start is ``exhausted``, a second search runs whose
 first legs take this action set, the planner's legs plus turns of 90 and 120 degrees (the
@@ -224,7 +224,7 @@ CRAMPED_EXPANSIONS = 100
 many expansions (a sixth of its 600): a start hemmed in, not a world searched through. On the
 development seeds 28500-28799 the worlds it planned had been exhausted after 36-84 expansions;
 the 10 of 54 exhausted after 109-529 took 1.3-9.0 s of processor time each with the fallback
-and got no plan (docs/planning.md, "A wider turn from a cramped start")."""
+and got no plan (docs/planning_history.md, "A wider turn from a cramped start")."""
 
 LEG_TIME_FACTOR = 1.6
 """A leg's time limit per metre, as a multiple of the time the robot needs against the current."""
@@ -531,7 +531,7 @@ class Planner:
         :data:`CRAMPED_EXPANSIONS` expansions, search again with wider turns on the first legs
         (:data:`CRAMPED_ACTIONS`). Off by default: on development seeds 28500-29499 it planned
         14 more worlds of 1000, and one of those 14 plans touched in the bench's fresh draws
-        (docs/planning.md, "A wider turn from a cramped start").
+        (docs/planning_history.md, "A wider turn from a cramped start").
     """
 
     def __init__(
@@ -882,7 +882,7 @@ class Planner:
             if (attempt == 0 and state is None and self.cramped_start
                     and plan.status == "exhausted" and plan.expansions <= CRAMPED_EXPANSIONS):
                 # the first plan from a cramped start: search again, its first legs with turns
-                # of up to 120 degrees (docs/planning.md, "A wider turn from a cramped start");
+                # of up to 120 degrees (docs/planning_history.md, "A wider turn from a cramped start");
                 # the repairs go on in that search, the margin and the check are the same
                 search = self.cramped_search()
                 search.clear_raised()
@@ -966,7 +966,7 @@ class Planner:
         own run (the first of ``runs``) kept near that point, plus what the failing run lacked
         (the check's margin less g), plus :data:`RAISE_SAFETY_M`, less the search's hard margin;
         so the next plan must keep, near that point, what this one kept and what the failing
-        draw lost there (docs/planning.md, "A repair with the margin raised where the check
+        draw lost there (docs/planning_history.md, "A repair with the margin raised where the check
         failed"). At most :data:`RAISE_MAX_M`.
 
         Parameters
@@ -1147,7 +1147,7 @@ def plan_with_laws(make: Callable[[GuidanceLaw], Planner], laws: tuple[GuidanceL
                    ) -> tuple[Planner, Outcome]:
     """Plan with each law in turn until one finds a plan that passes its check.
 
-    The guidance chosen per plan (docs/planning.md, "A guidance law chosen per plan"): a law is
+    The guidance chosen per plan (docs/planning_history.md, "A guidance law chosen per plan"): a law is
     searched and checked only where the ones before it found no plan, so a world the first law
     plans costs what it did; a refusal no law changes (:data:`LAW_FREE_REFUSALS`) ends the
     tries. The plan carries the law it was searched and checked with (``Outcome.guidance``,

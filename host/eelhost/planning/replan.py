@@ -296,7 +296,7 @@ manoeuvre swam into the obstacle (docs/planning.md, "Calm replans get more time"
 EARLY_MARGIN_M = 0.03
 """The early margin developed (``TankReplanner(early_margin_m=)``; ``eelbot run --early-margin
 0.03``; off by default: on unseen seeds 23050-23099 it reached 18 goals of 28 against 19 without
-it, docs/planning.md, "Measured on seeds 23000-23099"): a
+it, docs/planning_history.md, "Measured on seeds 23000-23099"): a
 look-ahead that swims the planner's capsule within this much of an obstacle or wall (its bare
 gap, without the drift allowance) within the early horizon (:data:`EARLY_HORIZON_S`), but not
 within the look-ahead's own margin, asks for an early replan (``early_margin``) while the body

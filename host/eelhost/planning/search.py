@@ -243,7 +243,7 @@ class SearchSettings:
     start_actions : Actions or None
         The action set of the legs from the search's start (its root node); later legs take
         ``actions``. None: ``actions`` throughout (the planner's fallback from a cramped start
-        sets wider turns here, docs/planning.md "A wider turn from a cramped start").
+        sets wider turns here, docs/planning_history.md "A wider turn from a cramped start").
     """
 
     actions: Actions = Actions()
@@ -643,7 +643,7 @@ class Search:
     def raise_margin(self, xy: tuple[float, float], extra_m: float) -> None:
         """Keep every body point near ``xy`` ``extra_m`` further from everything, from now on.
 
-        The planner's repair after a failed check (docs/planning.md, "Targets of issue 28 (the
+        The planner's repair after a failed check (docs/planning_history.md, "Targets of issue 28 (the
         planner's)", "A repair with the margin raised where the check failed"): within
         :data:`RAISE_INNER_M` of ``xy`` the body's clearance counts ``extra_m`` less (the hard
         margin and the soft margin's cost alike), falling linearly to nothing at

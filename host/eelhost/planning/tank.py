@@ -203,7 +203,7 @@ def plan_for_run(
                               f"{made.twin.acceptance_radius_m:g} m")
         return made
 
-    # the guidance chosen per plan when several laws are given (docs/planning.md, "A guidance
+    # the guidance chosen per plan when several laws are given (docs/planning_history.md, "A guidance
     # law chosen per plan"): the first whose plan passes its check
     planner, outcome = plan_with_laws(planner_with, laws)
     # the law of the plan, as the planner filled it in (a feed-forward's known current and
