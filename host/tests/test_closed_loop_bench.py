@@ -209,3 +209,17 @@ def test_the_summary_splits_the_plan_share_and_the_goal_by_the_world_s_own_curre
     assert line == ("- by the world's own current: 0-0.02 m/s: planned 1 of 2, goal 1 of 1; "
                     "0.02-0.04 m/s: planned 0 of 0, goal 0 of 0; "
                     "from 0.04 m/s: planned 1 of 1, goal 0 of 1")
+
+
+def test_the_summary_counts_corridor_replans_answered_within_a_second_and_names_the_late_ones():
+    # issue 28's target: a replan ready within 1 s of the robot leaving the corridor
+    old = WorldResult(1, True, "found", "arrived", reached=True)
+    quick = WorldResult(2, True, "found", "arrived", reached=True,
+                        corridor_ready_s=[0.4, 1.0], corridor_cpu_s=[0.2, 0.3])
+    late = WorldResult(3, True, "found", "arrived", reached=True,
+                       corridor_ready_s=[1.54], corridor_cpu_s=[None])
+    line = next(x for x in summary_lines([old, quick, late]) if "leaving the corridor" in x)
+    assert "2 of 3" in line and "1.54 s" in line and "?" in line
+    assert not any("leaving the corridor" in x for x in summary_lines([old]))
+    quiet = next(x for x in summary_lines([quick]) if "leaving the corridor" in x)
+    assert "2 of 2" in quiet and "late" not in quiet
