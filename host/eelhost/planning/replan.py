@@ -1891,6 +1891,8 @@ class TankReplanner:
         if stop_gap > self.lookahead_margin_m:
             return None
         if best is None:
+            if self._hold is not None:
+                return None  # the hold's check: recorded with the hold, not at every check
             self.events.append({"kind": "station", "reason": kind, "t_s": round(t_s, 3),
                                 "status": "none", "stop_gap_m": _rounded(stop_gap),
                                 "clearest_gap_m": (None if clearest is None
@@ -2277,6 +2279,7 @@ class TankReplanner:
         self._pause = None
         self._harbours_swum = 0  # a new plan: its stops may swim harbours again
         self._held_s = 0.0  # and hold again
+        self._stationed_s = 0.0  # and hold station again
         self.estimator.gait = self.gait
         assert pause.extra is not None  # set with the outcome
         self._take_plan(pause.outcome, pause.extra)
