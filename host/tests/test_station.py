@@ -12,7 +12,7 @@ import math
 import numpy as np
 import pytest
 from test_harbour import FINAL, run_frames
-from test_tank_restart import MODEL, OPEN, ROBOT, Blocked, N
+from test_tank_restart import MODEL, OPEN, ROBOT, Blocked, N, pose_at
 
 from eelhost.field.recorder import read_commands_csv
 from eelhost.field.runloop import RunConfig
@@ -21,7 +21,13 @@ from eelhost.field.take import TakeRequest, run_take
 from eelhost.planning.audit import body_gaps_m
 from eelhost.planning.harbour import FINAL_GLIDE_S, stop_gap_m
 from eelhost.planning.planner import Planner
-from eelhost.planning.replan import STATION_RETRY_S, STOP_BRAKE_S, outline_clearance_m
+from eelhost.planning.replan import (
+    STATION_RETRY_S,
+    STOP_BRAKE_S,
+    Decision,
+    TankReplanner,
+    outline_clearance_m,
+)
 from eelhost.planning.restart import paused_drift, stopped_twin
 from eelhost.planning.station import STATION_HORIZON_S, find_station
 from eelhost.planning.tank import sim_uri_for_world
@@ -104,6 +110,59 @@ def test_still_water_the_stop_keeps_clear_and_no_station_is_held():
         assert not [e for e in nav.events if e["kind"] == "station"]
         endings[station] = t_end
     assert endings[True] == endings[False]  # stopped at the same frame either way
+
+
+def upstream_frames(nav: TankReplanner, com_at, seconds: float) -> list[tuple[float, Decision]]:  # noqa: ANN001
+    """Frames of the straight body headed upstream seen at ``com_at(t)``, until an arrival or a stop."""
+    decisions: list[tuple[float, Decision]] = []
+    try:
+        for k in range(int(seconds * 30)):
+            t = k / 30
+            seen = com_at(t)
+            pose = None if t < 0.5 else np.array([*seen, math.pi])
+            d = nav.on_frame(t, pose_at(t, seen, math.pi), pose, 0, 0.0)
+            decisions.append((t, d))
+            nav.pace(t)
+            if d.arrived or d.stop is not None:
+                break
+            nav._worker.submit(lambda: None).result()
+            nav._side.submit(lambda: None).result()
+    finally:
+        nav.close()
+    return decisions
+
+
+def test_an_arrival_the_stream_would_carry_into_the_wall_holds_station_then_arrives():
+    # the goal by the end wall: the body arrives there headed upstream, its tail 80 mm from the
+    # wall; seen swimming upstream at 0.05 m/s from 1 s, as the station swim would take it
+    world = parse_world({**stream_world(0.045), "start": {"position_m": [1.6, 1.0],
+                                                          "heading_deg": 0.0},
+                         "goal": {"position_m": [2.6, 1.0], "radius_m": 0.2}}, "wall goal")
+    planner = Planner(world, ROBOT, MODEL, check=False)  # a plan to be in the goal disc by
+    outcome = planner.plan()
+    assert outcome.found, outcome.message
+
+    def com_at(t_s: float) -> tuple[float, float]:
+        return (2.6 - 0.05 * max(t_s - 1.0, 0.0), 1.0)
+
+    for station in (False, True):
+        nav = Blocked(lambda extra: planner, planner, outcome, PATH_GAIT, lookahead_s=0.0,
+                      harbour=False, station_keeping=station)
+        decisions = upstream_frames(nav, com_at, 12.0)
+        t_end, last = decisions[-1]
+        assert last.arrived and last.stop is None
+        first_t, first = next((t, d) for t, d in decisions if t >= 0.5)
+        if not station:  # arrived at the first frame seen in the disc
+            assert t_end == first_t
+            continue
+        assert first.waypoints and not first.arrived  # holding station instead of the arrival
+        st = next(e for e in nav.events if e["kind"] == "station")
+        assert st["reason"] == "arrived" and st["status"] == "held"
+        assert st["stop_gap_m"] <= nav.lookahead_margin_m < st["gap_m"]
+        # it arrives once the twin swims the stop clear from where the body is seen
+        assert st["ended"] == "stopped" and t_end >= first_t + 0.5 - 1e-9  # a check later
+        assert nav._stop_judged[1] > nav.lookahead_margin_m
+        assert not [e for e in nav.events if e["kind"] == "replan"]  # arrived: none asked
 
 
 @pytest.mark.slow

@@ -806,7 +806,7 @@ class _Station:
 
     t_start_s: float  # the robot's time of its first frame
     next_check_s: float  # when the stop and the station swim are judged again
-    kind: str  # the stop it puts off: ``pause`` or ``stop``
+    kind: str  # the stop it puts off: ``pause``, ``stop`` or ``arrived``
     detail: str  # that stop's reason
     waypoint_m: tuple[float, float]  # the upstream waypoint steered to
     event: dict[str, Any]  # its record
@@ -955,9 +955,9 @@ class TankReplanner:
         stop touches, replanning and judging the stop and the harbours again until one is safe
         (:meth:`_hold_on`; docs/planning.md, "The hold"). On by default.
     station_keeping : bool
-        Where the stop decided (``no_safe_continuation``: the pause or the final stop) would
-        drift within the margin with no harbour found and no hold on the plan, swim into the
-        current instead when the twin swims that clear over
+        Where the stop decided (``no_safe_continuation``: the pause or the final stop, before
+        the hold; or the arrival's) would drift within the margin with no harbour found, swim
+        into the current instead when the twin swims that clear over
         :data:`~eelhost.planning.station.STATION_HORIZON_S` (:meth:`_station_on`), replanning
         every :data:`STATION_RETRY_S` and judging the stop and the swim again every
         :data:`~eelhost.planning.station.STATION_CHECK_S`, until a plan, a stop the twin swims
@@ -1246,11 +1246,18 @@ class TankReplanner:
             # the harbour's stop was judged with its swim: the goal waits for its end
             return ended if ended is not None and ended.stop is not None else (
                 self._harbour_frame(t_s))
+        if self._station is not None and self._station.kind == "arrived":
+            # arrived, and holding station until the stop keeps clear: only contact ends it
+            if ended is not None and ended.stop is not None:
+                self._end_station(t_s, ended.stop)
+                return ended
+            return self._station_frame(t_s, guide)
         if ended is not None:
             self._end_hold(t_s, ended.stop or "arrived")
             self._end_station(t_s, ended.stop or "arrived")
             if ended.arrived and self._pause is None:
-                return self._stop_safely(t_s, "arrived", "arrived in the goal disc") or ended
+                return (self._stop_safely(t_s, "arrived", "arrived in the goal disc")
+                        or self._station_on(t_s, "arrived", "arrived in the goal disc") or ended)
             return ended
         if self._pause is not None:
             return self._paused_frame(t_s, loc, pose, offset_rad)
@@ -1876,11 +1883,12 @@ class TankReplanner:
     def _station_on(self, t_s: float, kind: str, detail: str) -> Decision | None:
         """Swim into the current instead of a stop the twin drifts into something, or None.
 
-        The last tier before a ``no_safe_continuation`` stop (``kind``: ``pause`` or ``stop``),
-        after the harbour and the hold: when the stop at once comes within the look-ahead's
-        margin and a station swim keeps the margin and the cushion over its horizon, the robot
-        steers to that swim's upstream waypoint, its gait and offsets at the control rate; the
-        frames after are :meth:`_station_frame`'s.
+        A tier before a ``no_safe_continuation`` stop (``kind``: ``pause`` or ``stop``), after
+        the harbour and before the hold, and before the arrival's stop (``arrived``) after the
+        harbour: when the stop at once comes within the look-ahead's margin and a station swim
+        keeps the margin and the cushion over its horizon, the robot steers to that swim's
+        waypoint, its gait and offsets at the control rate; the frames after are
+        :meth:`_station_frame`'s (an arrival's ask for no replan, and end in the arrival).
         """
         if not self.station_keeping or self._stationed_s >= STATION_MAX_S:
             return None
@@ -1898,6 +1906,8 @@ class TankReplanner:
                                 "clearest_gap_m": (None if clearest is None
                                                    else _rounded(clearest.gap_m))})
             return None
+        if kind == "arrived":
+            self._drop_work()  # arrived: no plan is wanted, only the stop's room
         # the look-ahead and the windows followed the old waypoints; a replan in flight goes on
         self._lookahead = None
         self._whole_job = None
@@ -1912,7 +1922,7 @@ class TankReplanner:
         self._station = _Station(t_s, t_s + STATION_CHECK_S, kind, detail, best.waypoint_m, event)
         self.waypoints = [best.waypoint_m]
         log.warning("at t = %.2f s the stop (%s) drifts within %.0f mm of an obstacle or wall and "
-                    "no harbour keeps the margin: holding station, %+.0f deg from the %s, "
+                    "no harbour keeps the margin: holding station, %+.0f deg from %s, "
                     "%.0f mm clear in the twin (%s)", t_s, kind, max(stop_gap, 0.0) * 1000,
                     best.bearing_deg, best.frame, best.gap_m * 1000, detail)
         return Decision(waypoints=[best.waypoint_m], guide=best.guide, recorded=True, detail=(
@@ -1934,7 +1944,8 @@ class TankReplanner:
         assert st is not None
         self._guide = guide
         d = Decision()
-        d.recorded |= self._collect(t_s, d)
+        if st.kind != "arrived":  # arrived: no replan
+            d.recorded |= self._collect(t_s, d)
         d.stop = None  # a failed replan while holding station is asked for again, not a stop
         self._retry_now = False
         if self._pending is not None and t_s >= self._pending[0] - 1e-9:
@@ -1970,14 +1981,17 @@ class TankReplanner:
                     self.waypoints = [best.waypoint_m]
                     d.waypoints, d.guide = [best.waypoint_m], best.guide
         est = self.estimator.estimate()
-        if (est is not None and self._job is None and self._pending is None
-                and t_s >= st.t_asked_s + STATION_RETRY_S - 1e-9):
+        if (est is not None and st.kind != "arrived" and self._job is None
+                and self._pending is None and t_s >= st.t_asked_s + STATION_RETRY_S - 1e-9):
             st.t_asked_s = t_s
             self._request(t_s, est, list(self.waypoints), "station")
         return d
 
     def _station_stop(self, t_s: float, why: str, stop_gap: float) -> Decision:
-        """End the station with the stop it put off (``why``: how it ended), as decided then."""
+        """End the station with the stop it put off (``why``: how it ended), as decided then.
+
+        An arrival's station ends in the arrival (the run loop's final stop).
+        """
         st = self._station
         assert st is not None
         self._end_station(t_s, why)
@@ -1989,6 +2003,10 @@ class TankReplanner:
             f"{st.detail}; held station {t_s - st.t_start_s:.1f} s, then stopped: {text} "
             f"(the stop {stop_gap * 1000:.0f} mm from an obstacle or wall in the twin)"))
         log.warning("station ended at t = %.2f s: %s", t_s, text)
+        if st.kind == "arrived":
+            return Decision(arrived=True, recorded=True, detail=(
+                f"then held station {t_s - st.t_start_s:.1f} s: {text} (the stop "
+                f"{stop_gap * 1000:.0f} mm from an obstacle or wall in the twin)"))
         if st.kind == "pause":
             return self._halt(t_s, d)
         return d
