@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 import pytest
-from test_harbour import FINAL, run_frames
+from test_harbour import FINAL, disc_world, run_frames
 from test_tank_restart import MODEL, OPEN, ROBOT, Blocked, N, pose_at
 
 from eelhost.field.recorder import read_commands_csv
@@ -205,3 +205,22 @@ def test_over_sim_a_run_that_would_stop_holds_station_without_failsafe(tmp_path)
     assert out.reason == "no_safe_continuation", out.detail
     assert st["ended"] == "stopped"
     assert result.virtual_robot is not None
+
+
+def test_at_a_harbour_s_end_with_the_stop_still_drifting_in_the_station_is_held():
+    # test_harbour's refused replan in a 0.03 m/s stream towards a disc, the body seen still:
+    # the harbour is swum, and at its end the stop drifts into the disc again; with the
+    # harbours used up, the robot holds station there instead of stopping
+    world = parse_world(disc_world(0.03), "disc")
+    planner = Planner(world, ROBOT, MODEL)
+    outcome = planner.plan()
+    assert outcome.found, outcome.message
+    nav = Blocked(lambda extra: planner, planner, outcome, PATH_GAIT, lookahead_s=0.0)
+    decisions = run_frames(nav, (1.35, 1.0), 8.0, until=lambda d: d.stop is not None or d.pause)
+    harbours = [e for e in nav.events if e["kind"] == "harbour" and e["status"] == "harbour"]
+    stations = [e for e in nav.events if e["kind"] == "station" and e["status"] == "held"]
+    assert harbours and stations
+    assert stations[0]["t_s"] == pytest.approx(harbours[-1]["t_end_s"])
+    assert stations[0]["stop_gap_m"] <= nav.lookahead_margin_m < stations[0]["gap_m"]
+    at = next(d for t, d in decisions if t == pytest.approx(stations[0]["t_s"]))
+    assert at.waypoints and at.stop is None and not at.pause

@@ -2074,6 +2074,13 @@ class TankReplanner:
         again = self._stop_safely(t_s, swim.kind, swim.detail, swim.gait)
         if again is not None:
             return again
+        if swim.gait is self.gait:
+            # the stop still drifts within the margin with no harbour left: hold station, as
+            # where the stop was decided (docs/planning.md, "Holding station (session 21)"); not
+            # on a braked pause's resumed phase, which the twin's station swims do not have
+            stationed = self._station_on(t_s, swim.kind, swim.detail)
+            if stationed is not None:
+                return stationed
         if swim.kind == "arrived":
             return Decision(arrived=True, recorded=True,
                             detail=f"then a harbour swim of {swim.event['swim_s']:.1f} s")
