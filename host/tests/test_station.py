@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 import pytest
-from test_harbour import FINAL, disc_world, run_frames
+from test_harbour import FINAL, disc_world, run_frames, up_world
 from test_tank_restart import MODEL, OPEN, ROBOT, Blocked, N, pose_at
 
 from eelhost.field.recorder import read_commands_csv
@@ -220,7 +220,37 @@ def test_at_a_harbour_s_end_with_the_stop_still_drifting_in_the_station_is_held(
     harbours = [e for e in nav.events if e["kind"] == "harbour" and e["status"] == "harbour"]
     stations = [e for e in nav.events if e["kind"] == "station" and e["status"] == "held"]
     assert harbours and stations
-    assert stations[0]["t_s"] == pytest.approx(harbours[-1]["t_end_s"])
+    assert stations[0]["t_s"] == pytest.approx(harbours[-1]["t_end_s"], abs=1e-3)
     assert stations[0]["stop_gap_m"] <= nav.lookahead_margin_m < stations[0]["gap_m"]
     at = next(d for t, d in decisions if t == pytest.approx(stations[0]["t_s"]))
     assert at.waypoints and at.stop is None and not at.pause
+
+
+def test_after_a_failed_pause_the_final_stop_that_drifts_in_holds_station_swimming_again():
+    # a pause without the brake (amplitude 0 at once) in the stream towards the disc, the body
+    # seen still 60 mm from it, the goal up the tank: the pause's drift keeps clear, its rest
+    # replan is refused, and the final stop would drift into the disc; with no harbour, the
+    # gait is swum again to hold station
+    planner = Planner(up_world(), ROBOT, MODEL)
+    outcome = planner.plan()
+    assert outcome.found, outcome.message
+
+    class StationAfterThePause(Blocked):  # the station is first judged after the pause
+        def _halt(self, t_s, d):  # noqa: ANN001, ANN202
+            paused = super()._halt(t_s, d)
+            self.station_keeping = True
+            return paused
+
+    nav = StationAfterThePause(lambda extra: planner, planner, outcome, PATH_GAIT,
+                               lookahead_s=0.0, max_restarts=1, harbour=False,
+                               rest_brake_s=None, station_keeping=False)
+    decisions = run_frames(nav, (1.30, 1.0), 8.0, until=lambda d: d.stop is not None
+                           or d.restart)
+    t_end, last = decisions[-1]
+    assert any(d.pause for _, d in decisions)  # paused first
+    assert last.restart and last.waypoints and last.stop is None
+    st = next(e for e in nav.events if e["kind"] == "station")
+    assert st["status"] == "held" and st["reason"] == "stop"
+    assert st["t_s"] == pytest.approx(t_end, abs=1e-3)
+    assert st["stop_gap_m"] <= nav.lookahead_margin_m < st["gap_m"]
+    assert nav._pause is None and nav.estimator.gait is nav.gait

@@ -2343,7 +2343,8 @@ class TankReplanner:
         A final stop whose drift the twin predicts within the margin is made after a harbour
         swim, the gait swum again for it; during the brake the firmware's phase is frozen and
         resumes from there, so the harbour swims the gait with that phase (docs/planning.md,
-        "The harbour").
+        "The harbour"). With no harbour and the brake over, the robot holds station instead,
+        the gait swum again (:meth:`_station_on`).
         """
         pause = self._pause
         assert pause is not None
@@ -2357,6 +2358,13 @@ class TankReplanner:
             gait = dataclasses.replace(self.gait, phase_rad=pause.braked.phase_rad
                                        - self.gait.omega_rad_s * t_s)
         harbour = self._stop_safely(t_s, "stop", d.detail, gait)
+        if harbour is None and gait is self.gait:
+            # no harbour: hold station, the gait swum again (not on the brake's resumed phase,
+            # which the station's swims do not have; docs/planning.md, "Holding station
+            # (session 21)")
+            harbour = self._station_on(t_s, "stop", d.detail)
+            if harbour is not None:
+                self.estimator.gait = self.gait
         if harbour is None:
             return d
         if pause.job is not None and pause.job.deadline is not None:
