@@ -2,7 +2,8 @@
 exists and the stop would drift into something, the robot swims into the current while the twin
 swims that clear, replanning, instead of stopping; not where the stop keeps clear.
 
-The harbour is off in the replanner's tests, to isolate the station (a harbour swim of 4.5 s
+Holding station is an option (``station_keeping``, off by default); the tests turn it on. The
+harbour is off in most of the replanner's tests, to isolate the station (a harbour swim of 4.5 s
 and the stop after it may also keep clear of a wall the current flows to)."""
 
 from __future__ import annotations
@@ -176,7 +177,7 @@ def test_over_sim_a_run_that_would_stop_holds_station_without_failsafe(tmp_path)
     uri = sim_uri_for_world("sim://?speed=0&start=2.6,1.0,180", world)
     # the look-ahead off: nothing keeps the present plan, so the first refused replan stops
     nav = Blocked(lambda extra: planner, planner, outcome, PATH_GAIT, harbour=False,
-                  lookahead_s=0.0, replan_budget_s=1.0)
+                  lookahead_s=0.0, replan_budget_s=1.0, station_keeping=True)
     config = RunConfig(PATH_GAIT, list(outcome.plan.waypoints_m), duration_s=20.0)
     stem = tmp_path / "station"
     request = TakeRequest(ROBOT, config, str(stem), TakeNotes(uri), "synthetic:clean",
@@ -215,7 +216,8 @@ def test_at_a_harbour_s_end_with_the_stop_still_drifting_in_the_station_is_held(
     planner = Planner(world, ROBOT, MODEL)
     outcome = planner.plan()
     assert outcome.found, outcome.message
-    nav = Blocked(lambda extra: planner, planner, outcome, PATH_GAIT, lookahead_s=0.0)
+    nav = Blocked(lambda extra: planner, planner, outcome, PATH_GAIT, lookahead_s=0.0,
+                  station_keeping=True)
     decisions = run_frames(nav, (1.35, 1.0), 8.0, until=lambda d: d.stop is not None or d.pause)
     harbours = [e for e in nav.events if e["kind"] == "harbour" and e["status"] == "harbour"]
     stations = [e for e in nav.events if e["kind"] == "station" and e["status"] == "held"]

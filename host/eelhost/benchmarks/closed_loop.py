@@ -321,7 +321,7 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
               calm_budget_s: float | None = CALM_REPLAN_BUDGET_S,
               early_margin_m: float | None = None, escape: bool = False,
               restarts: int = 0, brake_s: float = BRAKE_S, harbour: bool = True,
-              station: bool = True) -> WorldResult:
+              station: bool = False) -> WorldResult:
     """Plan one generated world and swim the plan over ``sim://`` (module docstring).
 
     Parameters
@@ -519,7 +519,7 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
                           restarts: int = 0,
                           brake_s: float = BRAKE_S,
                           harbour: bool = True,
-                          station: bool = True,
+                          station: bool = False,
                           ) -> list[WorldResult]:
     """Run the benchmark over ``seeds``, resuming from ``<out>/results.jsonl``.
 

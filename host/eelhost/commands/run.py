@@ -129,12 +129,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    "(a current towards it), first swim a short harbour swim to where the stop "
                    "stays clear (default: %(default)s; --no-harbour: stop where the stop is "
                    "decided; docs/planning.md, \"The harbour\")")
-    p.add_argument("--station", action=argparse.BooleanOptionalAction, default=True,
-                   help="with --plan or --bench: where no safe continuation is left and the "
-                   "stop would drift into an obstacle with no harbour, swim into the current "
-                   "(holding station) while the twin swims that clear, replanning, until a "
-                   "plan or a clear stop (default: %(default)s; --no-station: stop where the "
-                   "stop is decided; docs/planning.md, \"Holding station (session 21)\")")
+    p.add_argument("--station", action=argparse.BooleanOptionalAction, default=False,
+                   help="with --plan or --bench: where the stop (no safe continuation, a "
+                   "failed pause, a harbour's end, the arrival) would drift into an obstacle "
+                   "with no harbour, swim into the current (holding station) while the twin "
+                   "swims that clear, replanning, until a plan or a clear stop (default: "
+                   "%(default)s: on development seeds 39000-39099 no such stop had a station "
+                   "swim either; docs/planning.md, \"Holding station (session 21)\")")
     p.add_argument("--brake", type=NON_NEGATIVE, default=None, metavar="S",
                    help="before the final Stop, freeze the body in a deep S (the gait's "
                    f"amplitude {BRAKE_AMPLITUDE_RAD:g} rad, omega 0) for S seconds, the watchdog fed, so that it does "
@@ -414,7 +415,7 @@ def _bench(args: argparse.Namespace) -> int:
                + (" --escape" if args.escape else "")
                + (f" --restarts {args.restarts}" if args.restarts != RESTARTS else "")
                + ("" if args.harbour else " --no-harbour")
-               + ("" if args.station else " --no-station")
+               + (" --station" if args.station else "")
                + (f" --brake {args.brake:g}" if args.brake is not None else ""))
     lines = summary_lines(results)
     block = [BENCH_BEGIN, f"Command: `{command}`", "",

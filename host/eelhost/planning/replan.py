@@ -962,7 +962,8 @@ class TankReplanner:
         every :data:`STATION_RETRY_S` and judging the stop and the swim again every
         :data:`~eelhost.planning.station.STATION_CHECK_S`, until a plan, a stop the twin swims
         clear, no station swim, or :data:`~eelhost.planning.station.STATION_MAX_S`
-        (docs/planning.md, "Holding station (session 21)").
+        (docs/planning.md, "Holding station (session 21)"). Off by default: on development
+        seeds 39000-39099 no stop that drifted in had a station swim either.
     stop_in_reach : bool
         After a failed replan, where the look-ahead swims the present plan within the margin
         and the stop the twin swims clear now would come within it after the time another
@@ -1067,7 +1068,7 @@ class TankReplanner:
         stop_allowance_s: float = STOP_ALLOWANCE_S,
         harbour: bool = True,
         hold_plan: bool = True,
-        station_keeping: bool = True,
+        station_keeping: bool = False,
         stop_in_reach: bool = True,
         stop_brake_s: float = STOP_BRAKE_S,
         calm_budget_s: float | None = None,

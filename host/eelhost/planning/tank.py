@@ -129,7 +129,7 @@ def plan_for_run(
     restarts: int = 0,
     harbour: bool = True,
     stop_brake_s: float = STOP_BRAKE_S,
-    station: bool = True,
+    station: bool = False,
 ) -> RunPlan:
     """Plan in a world for ``eelbot run --plan`` (module docstring).
 
@@ -184,7 +184,7 @@ def plan_for_run(
     station : bool
         Where the stop would drift into something and no harbour or hold is left, swim into the
         current instead (``TankReplanner``'s ``station_keeping``; docs/planning.md, "Holding
-        station (session 21)"); on by default.
+        station (session 21)"); off by default (``eelbot run --station``).
 
     Returns
     -------
