@@ -158,8 +158,10 @@ def test_an_arrival_the_current_would_carry_into_an_obstacle_swims_a_harbour_the
     _world, planner, outcome = disc_plan
     com = (1.3, 1.0)  # in the goal disc
     for harbour in (True, False):
+        # holding station off: without the harbour it would hold station before the arrival
+        # (test_station.py)
         nav = Blocked(lambda extra: planner, planner, outcome, PATH_GAIT, lookahead_s=0.0,
-                      harbour=harbour)
+                      harbour=harbour, station_keeping=False)
         decisions = run_frames(nav, com, 6.0, until=lambda d: d.arrived or d.stop is not None,
                                blind_s=0.5)
         t_end, last = decisions[-1]
@@ -193,8 +195,9 @@ def test_where_no_continuation_exists_the_harbour_comes_before_the_pause_or_the_
     outcome = planner.plan()
     assert outcome.found, outcome.message
     for restarts in (1, 0):
+        # holding station off: at a harbour's end it would hold station (test_station.py)
         nav = Blocked(lambda extra: planner, planner, outcome, PATH_GAIT, lookahead_s=0.0,
-                      max_restarts=restarts)
+                      max_restarts=restarts, station_keeping=False)
         decisions = run_frames(nav, (1.35, 1.0), 8.0,
                                until=lambda d: d.stop is not None or d.pause)
         events = [e for e in nav.events if e["kind"] == "harbour"]

@@ -1,6 +1,8 @@
 """The hold (docs/planning.md, "The hold"): where no safe continuation exists and the stop would
 drift into something with no harbour found, the robot swims its present plan on while the twin
-swims it clearer than the stop, replanning, until a plan, a harbour or a clear stop exists."""
+swims it clearer than the stop, replanning, until a plan, a harbour or a clear stop exists. The
+harbour and holding station (docs/planning.md, "Holding station (session 21)") are off here, to
+isolate the hold."""
 
 from __future__ import annotations
 
@@ -64,11 +66,12 @@ def test_a_stop_the_current_would_carry_into_a_disc_is_put_off_while_the_plan_sw
     clear_5mm = ahead_of(lambda t: 0.005)  # under the look-ahead's 10 mm, but clear
     # without the hold: stopped at the first refused replan (no harbour, to isolate the hold)
     nav = clear_5mm(lambda extra: planner, planner, outcome, PATH_GAIT, harbour=False,
-                    hold_plan=False)
+                    station_keeping=False, hold_plan=False)
     decisions = drive(nav, still, 4.0)
     assert decisions[-1][1].stop == "no_safe_continuation" and decisions[-1][0] < 2.0
     # with it: the robot swims on, replanning with a back-off, the stop judged again
-    nav = clear_5mm(lambda extra: planner, planner, outcome, PATH_GAIT, harbour=False)
+    nav = clear_5mm(lambda extra: planner, planner, outcome, PATH_GAIT, harbour=False,
+                    station_keeping=False)
     decisions = drive(nav, still, 4.0)
     assert not any(d.stop or d.pause for _, d in decisions)
     holds = [e for e in nav.events if e["kind"] == "hold"]
@@ -89,7 +92,8 @@ def test_the_hold_ends_in_the_stop_once_the_plan_is_no_longer_the_lesser_risk(up
     # the plan swum 5 mm clear, then from 2 s 15 mm into something: a plan swum into contact
     # is never held on to
     worse = ahead_of(lambda t: 0.005 if t < 2.0 else -0.015)
-    nav = worse(lambda extra: planner, planner, outcome, PATH_GAIT, harbour=False)
+    nav = worse(lambda extra: planner, planner, outcome, PATH_GAIT, harbour=False,
+                    station_keeping=False)
     decisions = drive(nav, still, 6.0)
     t_end, last = decisions[-1]
     assert last.stop == "no_safe_continuation"
@@ -107,7 +111,7 @@ def test_the_hold_ends_in_a_stop_the_twin_swims_clear_and_so_does_geometry_writt
         return (1.36, 1.0 + 0.1 * max(t_s - 1.0, 0.0))
 
     nav = ahead_of(lambda t: 0.005)(lambda extra: planner, planner, outcome, PATH_GAIT,
-                                    harbour=False)
+                                    harbour=False, station_keeping=False)
     estimates = []
     original = nav.estimator.estimate
 

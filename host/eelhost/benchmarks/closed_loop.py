@@ -157,6 +157,9 @@ class WorldResult:
         "The harbour"), one per swim.
     harbourless : int
         Stops the twin drifted within the margin for which no harbour swim kept it.
+    stations : int
+        Stations held instead of such a stop (docs/planning.md, "Holding station (session
+        21)"; 0 in results written before it).
     plan_guidance : str or None
         The law the first plan was searched and checked with, which the run and its replans
         steered with (None: no plan, or a result from before session 20).
@@ -207,6 +210,7 @@ class WorldResult:
     harbours: list[str] = field(default_factory=list)
     harbourless: int = 0
     plan_guidance: str | None = None
+    stations: int = 0
     corridor_ready_s: list[float] | None = None
     corridor_cpu_s: list[float | None] | None = None
 
@@ -323,7 +327,8 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
               record_to: Path | None = None,
               calm_budget_s: float | None = CALM_REPLAN_BUDGET_S,
               early_margin_m: float | None = None, escape: bool = False,
-              restarts: int = 0, brake_s: float = BRAKE_S, harbour: bool = True) -> WorldResult:
+              restarts: int = 0, brake_s: float = BRAKE_S, harbour: bool = True,
+              station: bool = False) -> WorldResult:
     """Plan one generated world and swim the plan over ``sim://`` (module docstring).
 
     Parameters
@@ -358,6 +363,9 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
         The brake before the final Stop (``RunConfig.brake_s``; 0: none).
     harbour : bool
         Swim to where a stop stays clear before it (:func:`eelhost.planning.tank.plan_for_run`).
+    station : bool
+        Hold station instead of a stop the current carries into something
+        (:func:`eelhost.planning.tank.plan_for_run`).
 
     Returns
     -------
@@ -379,7 +387,7 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
                                swimmer=swimmer, replan_budget_s=replan_budget_s,
                                calm_budget_s=calm_budget_s, early_margin_m=early_margin_m,
                                escape=escape, restarts=restarts, harbour=harbour,
-                               stop_brake_s=brake_s)
+                               stop_brake_s=brake_s, station=station)
     except PlanRefused as err:
         return WorldResult(seed, False, err.status, detail=str(err), water=water,
                            plan_wall_s=time.perf_counter() - wall0,
@@ -439,6 +447,7 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
         [e["reason"] for e in nav.events if e["kind"] == "harbour" and e["status"] == "harbour"],
         sum(e["kind"] == "harbour" and e["status"] == "none" for e in nav.events),
         planned.guidance.name,
+        sum(e["kind"] == "station" and e["status"] == "held" for e in nav.events),
         corridor_ready_s=[e["t_ready_s"] - e["t_request_s"] for e in corridor],
         corridor_cpu_s=[e["cpu_s"] for e in corridor])
 
@@ -521,6 +530,7 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
                           restarts: int = 0,
                           brake_s: float = BRAKE_S,
                           harbour: bool = True,
+                          station: bool = False,
                           ) -> list[WorldResult]:
     """Run the benchmark over ``seeds``, resuming from ``<out>/results.jsonl``.
 
@@ -552,6 +562,8 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
         The brake before each run's final Stop (:func:`run_world`).
     harbour : bool
         The harbour before a stop (:func:`run_world`).
+    station : bool
+        Holding station instead of a stop that drifts into something (:func:`run_world`).
 
     Returns
     -------
@@ -588,7 +600,8 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
                           swimmer=swimmer, replan_budget_s=replan_budget_s,
                           record_to=out / "planning" / f"{seed}.json",
                           calm_budget_s=calm_budget_s, early_margin_m=early_margin_m,
-                          escape=escape, restarts=restarts, brake_s=brake_s, harbour=harbour)
+                          escape=escape, restarts=restarts, brake_s=brake_s, harbour=harbour,
+                          station=station)
             with path.open("a") as f:
                 f.write(json.dumps(asdict(r)) + "\n")
         results.append(r)
@@ -743,6 +756,12 @@ def summary_lines(results: list[WorldResult]) -> list[str]:
                      + f"); none found for {sum(r.harbourless for r in harboured)} stops; "
                      f"{sum(r.coast_contact for r in harboured)} of these runs touched while "
                      "stopping")
+    stationed = [r for r in planned if r.stations]
+    if stationed:
+        lines.append(f"- stations held instead of a stop the twin drifted within the margin: "
+                     f"{sum(r.stations for r in stationed)} in {len(stationed)} runs; "
+                     f"{sum(r.reached for r in stationed)} of these runs reached the goal, "
+                     f"{sum(r.coast_contact for r in stationed)} touched while stopping")
     cpus = [c for r in planned for c in r.replan_cpu_s]
     if cpus:
         lines.append(f"- replans' processor time: median {statistics.median(cpus):.2f} s, "

@@ -129,6 +129,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    "(a current towards it), first swim a short harbour swim to where the stop "
                    "stays clear (default: %(default)s; --no-harbour: stop where the stop is "
                    "decided; docs/planning.md, \"The harbour\")")
+    p.add_argument("--station", action=argparse.BooleanOptionalAction, default=False,
+                   help="with --plan or --bench: where the stop (no safe continuation, a "
+                   "failed pause, a harbour's end, the arrival) would drift into an obstacle "
+                   "with no harbour, swim into the current (holding station) while the twin "
+                   "swims that clear, replanning, until a plan or a clear stop (default: "
+                   "%(default)s: on development seeds 39000-39099 no such stop had a station "
+                   "swim either; docs/planning.md, \"Holding station (session 21)\")")
     p.add_argument("--brake", type=NON_NEGATIVE, default=None, metavar="S",
                    help="before the final Stop, freeze the body in a deep S (the gait's "
                    f"amplitude {BRAKE_AMPLITUDE_RAD:g} rad, omega 0) for S seconds, the watchdog fed, so that it does "
@@ -311,7 +318,8 @@ def run(args: argparse.Namespace) -> int:
                                    calm_budget_s=args.calm_budget or None,
                                    early_margin_m=args.early_margin or None,
                                    escape=args.escape, restarts=args.restarts,
-                                   harbour=args.harbour, stop_brake_s=_brake_s(args))
+                                   harbour=args.harbour, stop_brake_s=_brake_s(args),
+                                   station=args.station)
         print(planned.outcome.message)
         print(f"guidance: {planned.guidance.describe()}")
         print(f"coefficients: {model.describe()}")
@@ -391,7 +399,8 @@ def _bench(args: argparse.Namespace) -> int:
                                         calm_budget_s=args.calm_budget or None,
                                         early_margin_m=args.early_margin or None,
                                         escape=args.escape, restarts=args.restarts,
-                                        brake_s=_brake_s(args), harbour=args.harbour)
+                                        brake_s=_brake_s(args), harbour=args.harbour,
+                                        station=args.station)
     command = (f"nice eelbot run --bench --worlds {args.worlds} --seed {args.seed}"
                + ("" if args.check_unknown_current is None
                   else f" --check-unknown-current {args.check_unknown_current:g}")
@@ -406,6 +415,7 @@ def _bench(args: argparse.Namespace) -> int:
                + (" --escape" if args.escape else "")
                + (f" --restarts {args.restarts}" if args.restarts != RESTARTS else "")
                + ("" if args.harbour else " --no-harbour")
+               + (" --station" if args.station else "")
                + (f" --brake {args.brake:g}" if args.brake is not None else ""))
     lines = summary_lines(results)
     block = [BENCH_BEGIN, f"Command: `{command}`", "",

@@ -79,6 +79,13 @@ from eelhost.planning.state_estimate import (
     CurrentEstimator,
     CurrentWindow,
 )
+from eelhost.planning.station import (
+    STATION_CHECK_S,
+    STATION_MAX_S,
+    STATION_REACH_M,
+    Station,
+    find_station,
+)
 from eelhost.planning.twin import Twin
 from eelhost.planning.world import World
 from eelhost.vision.localise import Localisation
@@ -388,6 +395,10 @@ HOLD_RETRY_S = 0.5
 
 HOLD_MAX_S = 20.0
 """The longest a plan's hold lasts, from its first frame; then the stop it put off is made."""
+
+STATION_RETRY_S = 0.5
+"""While holding station, a replan is asked for again this long after the last was asked
+(docs/planning.md, "Holding station (session 21)")."""
 
 STOP_ALLOWANCE_S = 1.0
 """The robot's time kept ahead of a predicted contact for a stop when a replan then fails: the
@@ -789,6 +800,19 @@ class _Hold:
     event: dict[str, Any]  # its record
 
 
+@dataclass
+class _Station:
+    """The robot holding station: swimming into the current instead of a stop (:meth:`TankReplanner._station_on`)."""
+
+    t_start_s: float  # the robot's time of its first frame
+    next_check_s: float  # when the stop and the station swim are judged again
+    kind: str  # the stop it puts off: ``pause``, ``stop`` or ``arrived``
+    detail: str  # that stop's reason
+    waypoint_m: tuple[float, float]  # the upstream waypoint steered to
+    event: dict[str, Any]  # its record
+    t_asked_s: float = -math.inf  # when the latest replan was asked for while holding station
+
+
 class _HarbourSwim(NamedTuple):
     """A harbour swim under way (:meth:`TankReplanner._take_harbour`)."""
 
@@ -930,6 +954,16 @@ class TankReplanner:
         harbour found, keep swimming the present plan while the twin swims it clear where the
         stop touches, replanning and judging the stop and the harbours again until one is safe
         (:meth:`_hold_on`; docs/planning.md, "The hold"). On by default.
+    station_keeping : bool
+        Where the stop decided (``no_safe_continuation``: the pause or the final stop, before
+        the hold; or the arrival's) would drift within the margin with no harbour found, swim
+        into the current instead when the twin swims that clear over
+        :data:`~eelhost.planning.station.STATION_HORIZON_S` (:meth:`_station_on`), replanning
+        every :data:`STATION_RETRY_S` and judging the stop and the swim again every
+        :data:`~eelhost.planning.station.STATION_CHECK_S`, until a plan, a stop the twin swims
+        clear, no station swim, or :data:`~eelhost.planning.station.STATION_MAX_S`
+        (docs/planning.md, "Holding station (session 21)"). Off by default: on development
+        seeds 39000-39099 no stop that drifted in had a station swim either.
     stop_in_reach : bool
         After a failed replan, where the look-ahead swims the present plan within the margin
         and the stop the twin swims clear now would come within it after the time another
@@ -1034,6 +1068,7 @@ class TankReplanner:
         stop_allowance_s: float = STOP_ALLOWANCE_S,
         harbour: bool = True,
         hold_plan: bool = True,
+        station_keeping: bool = False,
         stop_in_reach: bool = True,
         stop_brake_s: float = STOP_BRAKE_S,
         calm_budget_s: float | None = None,
@@ -1102,6 +1137,9 @@ class TankReplanner:
         self._harbour: _HarbourSwim | None = None  # the harbour swum now
         self._harbours_swum = 0  # since the last plan: at HARBOURS_PER_PLAN the next stop stands
         self.hold_plan = hold_plan
+        self.station_keeping = station_keeping
+        self._station: _Station | None = None  # the station held now
+        self._stationed_s = 0.0  # the present plan's stations' time so far (STATION_MAX_S)
         self.stop_in_reach = stop_in_reach
         self._hold: _Hold | None = None  # the hold on the present plan, while it lasts
         self._held_s = 0.0  # the present plan's holds' time so far (HOLD_MAX_S bounds it)
@@ -1209,13 +1247,23 @@ class TankReplanner:
             # the harbour's stop was judged with its swim: the goal waits for its end
             return ended if ended is not None and ended.stop is not None else (
                 self._harbour_frame(t_s))
+        if self._station is not None and self._station.kind == "arrived":
+            # arrived, and holding station until the stop keeps clear: only contact ends it
+            if ended is not None and ended.stop is not None:
+                self._end_station(t_s, ended.stop)
+                return ended
+            return self._station_frame(t_s, guide)
         if ended is not None:
             self._end_hold(t_s, ended.stop or "arrived")
+            self._end_station(t_s, ended.stop or "arrived")
             if ended.arrived and self._pause is None:
-                return self._stop_safely(t_s, "arrived", "arrived in the goal disc") or ended
+                return (self._stop_safely(t_s, "arrived", "arrived in the goal disc")
+                        or self._station_on(t_s, "arrived", "arrived in the goal disc") or ended)
             return ended
         if self._pause is not None:
             return self._paused_frame(t_s, loc, pose, offset_rad)
+        if self._station is not None:
+            return self._station_frame(t_s, guide)
         d = self._swimming_frame(t_s, loc, pose, target, offset_rad, guide)
         if d.stop == "no_safe_continuation":
             pausing = self.restarts < self.max_restarts
@@ -1226,6 +1274,13 @@ class TankReplanner:
             if harbour is not None:
                 self._end_hold(t_s, "harbour")
                 return harbour
+            # a swim the twin keeps clear by the margin over the station's horizon before a
+            # plan swum clear of contact over the look-ahead's (docs/planning.md, "Holding
+            # station (session 21)")
+            stationed = self._station_on(t_s, kind, d.detail)
+            if stationed is not None:
+                self._end_hold(t_s, "station")
+                return stationed
             held = self._hold_on(t_s, kind, d.detail)
             if held is not None:
                 return held
@@ -1236,6 +1291,7 @@ class TankReplanner:
             self._end_hold(t_s, "replanned" if d.waypoints is not None else "clear")
         if d.waypoints is not None:
             self._held_s = 0.0  # a new plan: it may hold as long again
+            self._stationed_s = 0.0  # and hold station
         return d
 
     def _observe(self, t_s: float, loc: Localisation, pose: FloatArray | None,
@@ -1483,6 +1539,11 @@ class TankReplanner:
             held = sum(e.get("t_end_s", e.get("t_last_s", e["t_s"])) - e["t_s"] for e in holds)
             parts.append(f"{len(holds)} hold{'s' if len(holds) > 1 else ''} on the plan "
                          f"({held:.1f} s)")
+        stations = [e for e in self.events if e["kind"] == "station" and e["status"] == "held"]
+        if stations:
+            kept = sum(e.get("t_end_s", e.get("t_last_s", e["t_s"])) - e["t_s"] for e in stations)
+            parts.append(f"{len(stations)} station{'s' if len(stations) > 1 else ''} held "
+                         f"({kept:.1f} s)")
         return ", ".join(parts)
 
     # -- a restart from rest (docs/planning.md, "A restart from rest") -----------------------------
@@ -1653,7 +1714,8 @@ class TankReplanner:
         the stop keeps clear").
         """
         from_s, now_m, later_m = self._stops
-        if (not self.stop_in_reach or t_s - from_s > 1.5 or math.isnan(now_m)
+        if (not self.stop_in_reach or self._station is not None or t_s - from_s > 1.5
+                or math.isnan(now_m)
                 or now_m <= self.lookahead_margin_m + HARBOUR_CUSHION_M
                 or later_m > self.lookahead_margin_m):
             return False
@@ -1784,6 +1846,182 @@ class TankReplanner:
         hold.event["t_end_s"] = round(t_s, 3)
         hold.event["ended"] = why
 
+    # -- holding station (docs/planning.md, "Holding station (session 21)") -------------------
+
+    def _station_current(self, extra: FloatArray) -> tuple[float, float]:
+        """The current the body swims in: the world's (the planner's) and the estimate ``extra``."""
+        planner, planner_extra = self._planned
+        current = np.add(planner.world.current_m_s, extra - planner_extra)
+        return (float(current[0]), float(current[1]))
+
+    def _judge_station(self, t_s: float, kind: str) -> tuple[float, Station | None,
+                                                               Station | None] | None:
+        """The stop at once's gap and the station swims from the estimate, or None without one.
+
+        The stop is judged as the harbour judges it (``kind``: ``pause`` or ``stop``; reused
+        when the harbours were judged at ``t_s``), the swims by
+        :func:`~eelhost.planning.station.find_station` with the same judgement, needing the
+        look-ahead's margin and the harbour's cushion.
+        """
+        est = self.estimator.estimate()
+        if est is None:
+            return None
+        extra = self.current.value_m_s.copy() if self.estimate_current else np.zeros(2)
+        twin = self._twin_in(extra)
+        if self._stop_judged[0] == t_s:
+            stop_gap = self._stop_judged[1]
+        else:
+            stop_gap = stop_gap_m(twin, self.gait, est.state, est.t_s, self._stop_window(kind),
+                                  self._stop_gaps())
+            self._stop_judged = (t_s, stop_gap)
+        if stop_gap > self.lookahead_margin_m:
+            return stop_gap, None, None
+        best, clearest = find_station(twin, est.state, est.t_s, self._station_current(extra),
+                                      self._stop_gaps(),
+                                      self.lookahead_margin_m + HARBOUR_CUSHION_M)
+        return stop_gap, best, clearest
+
+    def _station_on(self, t_s: float, kind: str, detail: str) -> Decision | None:
+        """Swim into the current instead of a stop the twin drifts into something, or None.
+
+        A tier before a ``no_safe_continuation`` stop (``kind``: ``pause`` or ``stop``), after
+        the harbour and before the hold, and before the arrival's stop (``arrived``) after the
+        harbour: when the stop at once comes within the look-ahead's margin and a station swim
+        keeps the margin and the cushion over its horizon, the robot steers to that swim's
+        waypoint, its gait and offsets at the control rate; the frames after are
+        :meth:`_station_frame`'s (an arrival's ask for no replan, and end in the arrival).
+        """
+        if not self.station_keeping or self._stationed_s >= STATION_MAX_S:
+            return None
+        judged = self._judge_station(t_s, kind)
+        if judged is None:
+            return None
+        stop_gap, best, clearest = judged
+        if stop_gap > self.lookahead_margin_m:
+            return None
+        if best is None:
+            if self._hold is not None:
+                return None  # the hold's check: recorded with the hold, not at every check
+            self.events.append({"kind": "station", "reason": kind, "t_s": round(t_s, 3),
+                                "status": "none", "stop_gap_m": _rounded(stop_gap),
+                                "clearest_gap_m": (None if clearest is None
+                                                   else _rounded(clearest.gap_m))})
+            return None
+        if kind == "arrived":
+            self._drop_work()  # arrived: no plan is wanted, only the stop's room
+        # the look-ahead and the windows followed the old waypoints; a replan in flight goes on
+        self._lookahead = None
+        self._whole_job = None
+        self.current.drop()
+        self._retry_now = False
+        event = {"kind": "station", "reason": kind, "t_s": round(t_s, 3), "status": "held",
+                 "bearing_deg": best.bearing_deg, "from": best.frame, "gait": "the run's",
+                 "waypoint_m": [round(best.waypoint_m[0], 4), round(best.waypoint_m[1], 4)],
+                 "gap_m": _rounded(best.gap_m), "drift_m": _rounded(best.drift_m),
+                 "stop_gap_m": _rounded(stop_gap), "checks": 1, "switches": 0, "detail": detail}
+        self.events.append(event)
+        self._station = _Station(t_s, t_s + STATION_CHECK_S, kind, detail, best.waypoint_m, event)
+        self.waypoints = [best.waypoint_m]
+        log.warning("at t = %.2f s the stop (%s) drifts within %.0f mm of an obstacle or wall and "
+                    "no harbour keeps the margin: holding station, %+.0f deg from %s, "
+                    "%.0f mm clear in the twin (%s)", t_s, kind, max(stop_gap, 0.0) * 1000,
+                    best.bearing_deg, best.frame, best.gap_m * 1000, detail)
+        return Decision(waypoints=[best.waypoint_m], guide=best.guide, recorded=True, detail=(
+            f"holding station at t = {t_s:.2f} s: the stop drifts {stop_gap * 1000:.0f} mm "
+            f"from an obstacle or wall in the twin, the swim into the current "
+            f"{best.gap_m * 1000:.0f} mm"))
+
+    def _station_frame(self, t_s: float, guide: Guide | None) -> Decision:
+        """Take one frame while holding station: replan, judge again, end in a plan or a stop.
+
+        A replan is asked for :data:`STATION_RETRY_S` after the last was asked (a failure is
+        not a stop here); a plan found is switched in. Every
+        :data:`~eelhost.planning.station.STATION_CHECK_S` the stop at once is judged again (made
+        when the twin swims it clear) and the station swims (the best one steered to when its
+        waypoint moved); with none, or after :data:`~eelhost.planning.station.STATION_MAX_S`
+        of the plan's stations, the stop is made.
+        """
+        st = self._station
+        assert st is not None
+        self._guide = guide
+        d = Decision()
+        if st.kind != "arrived":  # arrived: no replan
+            d.recorded |= self._collect(t_s, d)
+        d.stop = None  # a failed replan while holding station is asked for again, not a stop
+        self._retry_now = False
+        if self._pending is not None and t_s >= self._pending[0] - 1e-9:
+            d.waypoints, d.guide = self._pending[1], self._pending[2]
+            self.waypoints = list(d.waypoints)
+            self._pending = None
+            self.current.drop()
+            self._last_replan()["t_switch_s"] = round(t_s, 3)
+            self.replans += 1
+            d.recorded = True
+            self._end_station(t_s, "replanned")
+            self._stationed_s = 0.0  # a new plan: it may hold and hold station again
+            self._held_s = 0.0
+            return d
+        if t_s >= st.next_check_s - 1e-9:
+            st.next_check_s = t_s + STATION_CHECK_S
+            st.event["checks"] += 1
+            st.event["t_last_s"] = round(t_s, 3)
+            judged = self._judge_station(t_s, st.kind)
+            if judged is not None:
+                stop_gap, best, _ = judged
+                over = self._stationed_s + t_s - st.t_start_s >= STATION_MAX_S
+                why = ("stopped" if stop_gap > self.lookahead_margin_m
+                       else "max_time" if over else "none" if best is None else "")
+                if why:
+                    return self._station_stop(t_s, why, stop_gap)
+                assert best is not None
+                st.event["gap_m"] = _rounded(best.gap_m)
+                if math.dist(best.waypoint_m, st.waypoint_m) > 0.1 * STATION_REACH_M:
+                    # the water or the body turned: steer the swim judged now, from here
+                    st.waypoint_m = best.waypoint_m
+                    st.event["switches"] += 1
+                    self.waypoints = [best.waypoint_m]
+                    d.waypoints, d.guide = [best.waypoint_m], best.guide
+        est = self.estimator.estimate()
+        if (est is not None and st.kind != "arrived" and self._job is None
+                and self._pending is None and t_s >= st.t_asked_s + STATION_RETRY_S - 1e-9):
+            st.t_asked_s = t_s
+            self._request(t_s, est, list(self.waypoints), "station")
+        return d
+
+    def _station_stop(self, t_s: float, why: str, stop_gap: float) -> Decision:
+        """End the station with the stop it put off (``why``: how it ended), as decided then.
+
+        An arrival's station ends in the arrival (the run loop's final stop).
+        """
+        st = self._station
+        assert st is not None
+        self._end_station(t_s, why)
+        self._drop_work()
+        text = {"stopped": "the stop now keeps clear in the twin",
+                "max_time": f"held for the longest a plan may ({STATION_MAX_S:.0f} s)",
+                "none": "no station swim keeps clear any longer"}[why]
+        d = Decision(stop="no_safe_continuation", recorded=True, detail=(
+            f"{st.detail}; held station {t_s - st.t_start_s:.1f} s, then stopped: {text} "
+            f"(the stop {stop_gap * 1000:.0f} mm from an obstacle or wall in the twin)"))
+        log.warning("station ended at t = %.2f s: %s", t_s, text)
+        if st.kind == "arrived":
+            return Decision(arrived=True, recorded=True, detail=(
+                f"then held station {t_s - st.t_start_s:.1f} s: {text} (the stop "
+                f"{stop_gap * 1000:.0f} mm from an obstacle or wall in the twin)"))
+        if st.kind == "pause":
+            return self._halt(t_s, d)
+        return d
+
+    def _end_station(self, t_s: float, why: str) -> None:
+        """End the station, if one is held, recording how (``replanned``, ``stopped``, ...)."""
+        st = self._station
+        if st is None:
+            return
+        self._station = None
+        self._stationed_s += t_s - st.t_start_s
+        st.event["t_end_s"] = round(t_s, 3)
+        st.event["ended"] = why
+
     def _take_harbour(self, t_s: float, est: BodyEstimate, extra: FloatArray, kind: str,
                       detail: str, at_once: Harbour, harbour: Harbour, wall_s: float,
                       gait: Gait) -> Decision:
@@ -1837,6 +2075,13 @@ class TankReplanner:
         again = self._stop_safely(t_s, swim.kind, swim.detail, swim.gait)
         if again is not None:
             return again
+        if swim.gait is self.gait:
+            # the stop still drifts within the margin with no harbour left: hold station, as
+            # where the stop was decided (docs/planning.md, "Holding station (session 21)"); not
+            # on a braked pause's resumed phase, which the twin's station swims do not have
+            stationed = self._station_on(t_s, swim.kind, swim.detail)
+            if stationed is not None:
+                return stationed
         if swim.kind == "arrived":
             return Decision(arrived=True, recorded=True,
                             detail=f"then a harbour swim of {swim.event['swim_s']:.1f} s")
@@ -2060,6 +2305,7 @@ class TankReplanner:
         self._pause = None
         self._harbours_swum = 0  # a new plan: its stops may swim harbours again
         self._held_s = 0.0  # and hold again
+        self._stationed_s = 0.0  # and hold station again
         self.estimator.gait = self.gait
         assert pause.extra is not None  # set with the outcome
         self._take_plan(pause.outcome, pause.extra)
@@ -2098,7 +2344,8 @@ class TankReplanner:
         A final stop whose drift the twin predicts within the margin is made after a harbour
         swim, the gait swum again for it; during the brake the firmware's phase is frozen and
         resumes from there, so the harbour swims the gait with that phase (docs/planning.md,
-        "The harbour").
+        "The harbour"). With no harbour and the brake over, the robot holds station instead,
+        the gait swum again (:meth:`_station_on`).
         """
         pause = self._pause
         assert pause is not None
@@ -2112,6 +2359,13 @@ class TankReplanner:
             gait = dataclasses.replace(self.gait, phase_rad=pause.braked.phase_rad
                                        - self.gait.omega_rad_s * t_s)
         harbour = self._stop_safely(t_s, "stop", d.detail, gait)
+        if harbour is None and gait is self.gait:
+            # no harbour: hold station, the gait swum again (not on the brake's resumed phase,
+            # which the station's swims do not have; docs/planning.md, "Holding station
+            # (session 21)")
+            harbour = self._station_on(t_s, "stop", d.detail)
+            if harbour is not None:
+                self.estimator.gait = self.gait
         if harbour is None:
             return d
         if pause.job is not None and pause.job.deadline is not None:

@@ -129,6 +129,7 @@ def plan_for_run(
     restarts: int = 0,
     harbour: bool = True,
     stop_brake_s: float = STOP_BRAKE_S,
+    station: bool = False,
 ) -> RunPlan:
     """Plan in a world for ``eelbot run --plan`` (module docstring).
 
@@ -180,6 +181,10 @@ def plan_for_run(
         (``TankReplanner``'s ``harbour``; docs/planning.md, "The harbour"); on by default.
     stop_brake_s : float
         The run loop's brake before its final Stop (``TankReplanner``'s ``stop_brake_s``).
+    station : bool
+        Where the stop would drift into something and no harbour or hold is left, swim into the
+        current instead (``TankReplanner``'s ``station_keeping``; docs/planning.md, "Holding
+        station (session 21)"); off by default (``eelbot run --station``).
 
     Returns
     -------
@@ -223,7 +228,7 @@ def plan_for_run(
                               escape_planner_for=tiers.escape_planner_for if escape else None,
                               rest_escape_planner_for=tiers.escape_planner_for,
                               max_restarts=restarts, harbour=harbour,
-                              stop_brake_s=stop_brake_s)
+                              stop_brake_s=stop_brake_s, station_keeping=station)
     return RunPlan(outcome.plan.waypoints_m, navigator, sim_uri_for_world(uri, world), outcome,
                    planner.options.guidance, outcome.plan.start_guide)
 

@@ -1,0 +1,153 @@
+"""Holding station: swimming into the current instead of a stop it would carry into something.
+
+A stopped robot rests in the water, not in the tank (docs/planning.md, "The harbour"): in a
+current of 0.02-0.06 m/s towards a near obstacle its brake and glide carry it into it, and where
+no harbour swim leaves a clear stop the robot was stopped anyway. The robot swims about 0.09 m/s:
+headed into the current it makes headway, or holds its place, where stopped it drifts.
+:func:`find_station` swims such swims in the twin from the body's estimated state, the robot
+swimming on (its gait and phase run on, no restart), each towards a waypoint
+:data:`STATION_REACH_M` upstream of the body at a bearing of :data:`STATION_BEARINGS_DEG` from
+straight upstream (crabbing across the current trades headway for holding the place), or of
+:data:`STATION_HEADING_BEARINGS_DEG` from the body's heading (where it cannot turn upstream),
+for :data:`STATION_HORIZON_S`. A swim is judged as the harbour's (the caller's ``gap_of``: the
+body's outline less the current estimate's drift allowance) over the whole horizon, and of those
+keeping the caller's need the one carried least downstream wins (its centre of mass's
+displacement along the current at the horizon's end: headway counts negative), the clearest
+among equals (docs/planning.md, "Holding station (session 21)").
+
+This module swims and judges; :class:`eelhost.planning.replan.TankReplanner` decides when to
+ask, carries the swim out and judges it again every :data:`STATION_CHECK_S`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import NamedTuple
+
+import numpy as np
+
+from eelhost.planning.geometry import FloatArray
+from eelhost.planning.search import Guide, leg_start_guide
+from eelhost.planning.twin import Twin
+
+__all__ = ["STATION_BEARINGS_DEG", "STATION_CHECK_S", "STATION_HEADING_BEARINGS_DEG", "STATION_HORIZON_S", "STATION_MAX_S",
+           "STATION_MIN_CURRENT_M_S", "STATION_REACH_M", "Station", "find_station"]
+
+STATION_BEARINGS_DEG = (0.0, 30.0, -30.0, 60.0, -60.0)
+"""The station swims' bearings, relative to straight upstream (into the current)."""
+
+STATION_HEADING_BEARINGS_DEG = (0.0, 45.0, -45.0, 90.0, -90.0, 135.0, -135.0, 180.0)
+"""More station swims' bearings, relative to the body's heading: a body headed downstream beside
+an obstacle cannot turn upstream without sweeping into it, and in a weak current the body's own
+glide, not the water, carries a stop into what it swims beside."""
+
+STATION_HORIZON_S = 8.0
+"""How long each station swim is judged in the twin: the robot's time to the next check is
+0.5 s (:data:`STATION_CHECK_S`), so the swim judged keeps clear far beyond it, as long as a stop
+(3 s of brake and 2 s of glide) and a replan's budget after it."""
+
+STATION_REACH_M = 2.0
+"""How far upstream of the body each swim's waypoint lies: beyond what it swims (at most about
+0.1 m/s of headway), so that the guidance holds a bearing and the waypoint is never reached."""
+
+STATION_CHECK_S = 0.5
+"""While holding station the stop and the swim are judged again this often (as the hold's)."""
+
+STATION_MAX_S = 25.0
+"""The longest a plan's station lasts, from its first frame; then the stop it put off is made."""
+
+STATION_MIN_CURRENT_M_S = 0.005
+"""Below this current (the world's and the estimate's together) there is no upstream to head
+into, and a stop drifts a few millimetres: no station is swum."""
+
+
+class Station(NamedTuple):
+    """A swim into the current judged in the twin (:func:`find_station`)."""
+
+    start_step: int
+    waypoint_m: tuple[float, float]
+    bearing_deg: float  # relative to straight upstream, or to the heading (``frame``)
+    frame: str  # ``upstream`` or ``heading``
+    gap_m: float  # the smallest gap over the horizon
+    drift_m: float  # the centre of mass's displacement along the current at the horizon's end
+    com_m: FloatArray  # the centre of mass while swimming (the corridor)
+    guide: Guide
+
+
+def find_station(twin: Twin, state: FloatArray, t_s: float, current_m_s: tuple[float, float],
+                 gap_of: Callable[[FloatArray, FloatArray], FloatArray], need_m: float,
+                 bearings_deg: tuple[float, ...] = STATION_BEARINGS_DEG,
+                 heading_bearings_deg: tuple[float, ...] = STATION_HEADING_BEARINGS_DEG,
+                 horizon_s: float = STATION_HORIZON_S, stride: int = 3
+                 ) -> tuple[Station | None, Station | None]:
+    """The station swim keeping ``need_m`` carried least downstream, and the clearest swim.
+
+    Parameters
+    ----------
+    twin : Twin
+        The twin in the estimated water, swimming the run's gait.
+    state : ndarray (2 N + 4,)
+        The body's estimated state at ``t_s``.
+    t_s : float
+        The robot's time of ``state``.
+    current_m_s : (vx, vy)
+        The current the body swims in (the world's and the estimate's): upstream is against it.
+    gap_of : callable
+        ``gap_of(states (S, 2 N + 4), ahead_s (S,))``: the gap each sample keeps, ``ahead_s``
+        after ``t_s`` (the caller's outline less its drift allowance, as a stop's).
+    need_m : float
+        The gap a station swim must keep over the horizon.
+    bearings_deg : tuple of float
+        Bearings from straight upstream.
+    heading_bearings_deg : tuple of float
+        Bearings from the body's heading.
+    horizon_s : float
+    stride : int
+
+    Returns
+    -------
+    (Station or None, Station or None)
+        Of the swims whose gap exceeds ``need_m``, the one whose centre of mass ends least far
+        downstream (None when none does, or in a current under
+        :data:`STATION_MIN_CURRENT_M_S`); the clearest of all judged (None when no run swam the
+        whole horizon).
+    """
+    speed = math.hypot(*current_m_s)
+    if speed < STATION_MIN_CURRENT_M_S:
+        return None, None
+    dt = twin.dt_s
+    n = twin.n_links
+    now = int(round(t_s / dt))
+    state = np.asarray(state, dtype=float)
+    guide = leg_start_guide(state, n, (0.0, 0.0))
+    com = state[n : n + 2]
+    along = np.array(current_m_s, dtype=float) / speed  # downstream, unit
+    upstream = math.atan2(-along[1], -along[0])
+    heading = float(np.mean(state[:n]))
+    aims = ([(b, "upstream", upstream + math.radians(b)) for b in bearings_deg]
+            + [(b, "heading", heading + math.radians(b)) for b in heading_bearings_deg])
+    targets = [(float(com[0] + STATION_REACH_M * math.cos(a)),
+                float(com[1] + STATION_REACH_M * math.sin(a))) for _, _, a in aims]
+    k = len(targets)
+    last = int(round(horizon_s / (stride * dt)))
+    runs = twin.run([[w] for w in targets], horizon_s + 2 * dt,
+                    states=np.repeat(state[None], k, 0), start_steps=[now] * k, stride=stride,
+                    guidance=[guide] * k if twin.options.guidance.integral else None)
+    ahead = np.arange(last + 1, dtype=np.float64) * (stride * dt)
+    best: Station | None = None
+    clearest: Station | None = None
+    for j in range(k):
+        swum = runs.states[j, : last + 1]
+        if swum.shape[0] < last + 1 or not np.isfinite(swum[:, 0]).all():
+            continue  # ended early (a failure flag): not judged
+        gap = float(np.min(gap_of(swum, ahead)))
+        drift = float(np.dot(swum[-1, n : n + 2] - com, along))
+        got = Station(now, targets[j], aims[j][0], aims[j][1], gap, drift,
+                      swum[:, n : n + 2].copy(), guide)
+        if clearest is None or gap > clearest.gap_m:
+            clearest = got
+        if gap > need_m and (best is None or drift < best.drift_m - 1e-3
+                             or (abs(drift - best.drift_m) <= 1e-3 and gap > best.gap_m)):
+            best = got
+    return best, clearest
