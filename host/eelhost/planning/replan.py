@@ -811,6 +811,7 @@ class _Station:
     waypoint_m: tuple[float, float]  # the upstream waypoint steered to
     event: dict[str, Any]  # its record
     t_asked_s: float = -math.inf  # when the latest replan was asked for while holding station
+    in_reach: bool = False  # instead of a stop while it keeps clear (:meth:`TankReplanner._stop_slips_away`)
 
 
 class _HarbourSwim(NamedTuple):
@@ -1146,6 +1147,7 @@ class TankReplanner:
         self._stop_judged: tuple[float, float] = (-math.inf, math.nan)  # (t, the stop's gap)
         # the latest look-ahead's stops: (its estimate's time, the stop then, after a retry)
         self._stops: tuple[float, float, float] = (-math.inf, math.nan, math.nan)
+        self._in_reach: dict[str, Any] | None = None  # this frame's stop_in_reach event, if any
         self.retries_before_contact = 0  # replans asked for instead of a stop (the record's)
         # the robot's time of the first contact the latest look-ahead predicts (inf: none)
         self._contact_at_s = math.inf
@@ -1264,6 +1266,7 @@ class TankReplanner:
             return self._paused_frame(t_s, loc, pose, offset_rad)
         if self._station is not None:
             return self._station_frame(t_s, guide)
+        self._in_reach = None
         d = self._swimming_frame(t_s, loc, pose, target, offset_rad, guide)
         if d.stop == "no_safe_continuation":
             pausing = self.restarts < self.max_restarts
@@ -1278,6 +1281,10 @@ class TankReplanner:
             # plan swum clear of contact over the look-ahead's (docs/planning.md, "Holding
             # station (session 21)")
             stationed = self._station_on(t_s, kind, d.detail)
+            if stationed is None and self._in_reach is not None:
+                # the stop keeps clear now and not after a retry: a station swim kept clear
+                # keeps replanning instead (docs/planning.md, "Holding station (session 21)")
+                stationed = self._station_on(t_s, kind, d.detail, in_reach=self._in_reach)
             if stationed is not None:
                 self._end_hold(t_s, "station")
                 return stationed
@@ -1542,8 +1549,10 @@ class TankReplanner:
         stations = [e for e in self.events if e["kind"] == "station" and e["status"] == "held"]
         if stations:
             kept = sum(e.get("t_end_s", e.get("t_last_s", e["t_s"])) - e["t_s"] for e in stations)
+            in_reach = sum(bool(e.get("stop_in_reach")) for e in stations)
             parts.append(f"{len(stations)} station{'s' if len(stations) > 1 else ''} held "
-                         f"({kept:.1f} s)")
+                         f"({kept:.1f} s" + (f", {in_reach} instead of a stop while clear"
+                                             if in_reach else "") + ")")
         return ", ".join(parts)
 
     # -- a restart from rest (docs/planning.md, "A restart from rest") -----------------------------
@@ -1731,9 +1740,10 @@ class TankReplanner:
                        else f"{later_m * 1000:.0f} mm after the {self._retry_need_s():.1f} s "
                        "another replan needs")
                     + ": stopped while it keeps clear")
-        self.events.append({"kind": "stop_in_reach", "t_s": round(t_s, 3),
-                            "t_judged_s": round(from_s, 3), "stop_now_m": _rounded(now_m),
-                            "stop_later_m": _rounded(later_m)})
+        self._in_reach = {"kind": "stop_in_reach", "t_s": round(t_s, 3),
+                          "t_judged_s": round(from_s, 3), "stop_now_m": _rounded(now_m),
+                          "stop_later_m": _rounded(later_m)}
+        self.events.append(self._in_reach)
         log.warning("%s", d.detail)
         return True
 
@@ -1854,14 +1864,15 @@ class TankReplanner:
         current = np.add(planner.world.current_m_s, extra - planner_extra)
         return (float(current[0]), float(current[1]))
 
-    def _judge_station(self, t_s: float, kind: str) -> tuple[float, Station | None,
-                                                               Station | None] | None:
+    def _judge_station(self, t_s: float, kind: str, always: bool = False
+                       ) -> tuple[float, Station | None, Station | None] | None:
         """The stop at once's gap and the station swims from the estimate, or None without one.
 
         The stop is judged as the harbour judges it (``kind``: ``pause`` or ``stop``; reused
         when the harbours were judged at ``t_s``), the swims by
         :func:`~eelhost.planning.station.find_station` with the same judgement, needing the
-        look-ahead's margin and the harbour's cushion.
+        look-ahead's margin and the harbour's cushion: only when the stop comes within the
+        margin, or ``always`` (a station instead of a stop while it keeps clear).
         """
         est = self.estimator.estimate()
         if est is None:
@@ -1874,14 +1885,15 @@ class TankReplanner:
             stop_gap = stop_gap_m(twin, self.gait, est.state, est.t_s, self._stop_window(kind),
                                   self._stop_gaps())
             self._stop_judged = (t_s, stop_gap)
-        if stop_gap > self.lookahead_margin_m:
+        if stop_gap > self.lookahead_margin_m and not always:
             return stop_gap, None, None
         best, clearest = find_station(twin, est.state, est.t_s, self._station_current(extra),
                                       self._stop_gaps(),
                                       self.lookahead_margin_m + HARBOUR_CUSHION_M)
         return stop_gap, best, clearest
 
-    def _station_on(self, t_s: float, kind: str, detail: str) -> Decision | None:
+    def _station_on(self, t_s: float, kind: str, detail: str,
+                    in_reach: dict[str, Any] | None = None) -> Decision | None:
         """Swim into the current instead of a stop the twin drifts into something, or None.
 
         A tier before a ``no_safe_continuation`` stop (``kind``: ``pause`` or ``stop``), after
@@ -1890,14 +1902,19 @@ class TankReplanner:
         keeps the margin and the cushion over its horizon, the robot steers to that swim's
         waypoint, its gait and offsets at the control rate; the frames after are
         :meth:`_station_frame`'s (an arrival's ask for no replan, and end in the arrival).
+
+        ``in_reach``: the ``stop_in_reach`` event of a stop made while it keeps clear
+        (:meth:`_stop_slips_away`): the station swims are judged whatever the stop's gap, and
+        one keeping the margin and the cushion is held instead, replanning, until it no longer
+        keeps clear, its time bound, or a plan (docs/planning.md, "Holding station (session 21)").
         """
         if not self.station_keeping or self._stationed_s >= STATION_MAX_S:
             return None
-        judged = self._judge_station(t_s, kind)
+        judged = self._judge_station(t_s, kind, always=in_reach is not None)
         if judged is None:
             return None
         stop_gap, best, clearest = judged
-        if stop_gap > self.lookahead_margin_m:
+        if stop_gap > self.lookahead_margin_m and in_reach is None:
             return None
         if best is None:
             if self._hold is not None:
@@ -1905,7 +1922,8 @@ class TankReplanner:
             self.events.append({"kind": "station", "reason": kind, "t_s": round(t_s, 3),
                                 "status": "none", "stop_gap_m": _rounded(stop_gap),
                                 "clearest_gap_m": (None if clearest is None
-                                                   else _rounded(clearest.gap_m))})
+                                                   else _rounded(clearest.gap_m)),
+                                "stop_in_reach": in_reach is not None})
             return None
         if kind == "arrived":
             self._drop_work()  # arrived: no plan is wanted, only the stop's room
@@ -1918,9 +1936,20 @@ class TankReplanner:
                  "bearing_deg": best.bearing_deg, "from": best.frame, "gait": "the run's",
                  "waypoint_m": [round(best.waypoint_m[0], 4), round(best.waypoint_m[1], 4)],
                  "gap_m": _rounded(best.gap_m), "drift_m": _rounded(best.drift_m),
-                 "stop_gap_m": _rounded(stop_gap), "checks": 1, "switches": 0, "detail": detail}
+                 "stop_gap_m": _rounded(stop_gap), "checks": 1, "switches": 0, "detail": detail,
+                 "stop_in_reach": in_reach is not None}
         self.events.append(event)
-        self._station = _Station(t_s, t_s + STATION_CHECK_S, kind, detail, best.waypoint_m, event)
+        self._station = _Station(t_s, t_s + STATION_CHECK_S, kind, detail, best.waypoint_m, event,
+                                 in_reach=in_reach is not None)
+        if in_reach is not None:
+            in_reach["station"] = True  # put off: the station holds instead
+            log.warning("at t = %.2f s a stop keeps clear and not after a retry: holding "
+                        "station instead, %+.0f deg from %s, %.0f mm clear in the twin",
+                        t_s, best.bearing_deg, best.frame, best.gap_m * 1000)
+            return Decision(waypoints=[best.waypoint_m], guide=best.guide, recorded=True, detail=(
+                f"holding station at t = {t_s:.2f} s instead of a stop while it keeps clear "
+                f"({stop_gap * 1000:.0f} mm in the twin): the swim into the current "
+                f"{best.gap_m * 1000:.0f} mm, replanning"))
         self.waypoints = [best.waypoint_m]
         log.warning("at t = %.2f s the stop (%s) drifts within %.0f mm of an obstacle or wall and "
                     "no harbour keeps the margin: holding station, %+.0f deg from %s, "
@@ -1965,12 +1994,16 @@ class TankReplanner:
             st.next_check_s = t_s + STATION_CHECK_S
             st.event["checks"] += 1
             st.event["t_last_s"] = round(t_s, 3)
-            judged = self._judge_station(t_s, st.kind)
+            judged = self._judge_station(t_s, st.kind, always=st.in_reach)
             if judged is not None:
                 stop_gap, best, _ = judged
                 over = self._stationed_s + t_s - st.t_start_s >= STATION_MAX_S
-                why = ("stopped" if stop_gap > self.lookahead_margin_m
-                       else "max_time" if over else "none" if best is None else "")
+                # instead of a stop while it keeps clear: the station holds while its swim keeps
+                # clear, the stop made the moment it no longer does
+                why = ("max_time" if over else "none" if best is None else "")
+                if not st.in_reach and stop_gap > self.lookahead_margin_m:
+                    why = "stopped"
+
                 if why:
                     return self._station_stop(t_s, why, stop_gap)
                 assert best is not None
