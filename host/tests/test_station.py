@@ -13,6 +13,7 @@ import math
 import numpy as np
 import pytest
 from test_harbour import FINAL, disc_world, run_frames, up_world
+from test_tank_replanning import drive_and_close, open_plan  # noqa: F401 (open_plan: the fixture)
 from test_tank_restart import MODEL, OPEN, ROBOT, Blocked, N, pose_at
 
 from eelhost.field.recorder import read_commands_csv
@@ -30,7 +31,7 @@ from eelhost.planning.replan import (
     outline_clearance_m,
 )
 from eelhost.planning.restart import paused_drift, stopped_twin
-from eelhost.planning.station import STATION_HORIZON_S, find_station
+from eelhost.planning.station import STATION_HORIZON_S, Station, find_station
 from eelhost.planning.tank import sim_uri_for_world
 from eelhost.planning.world import parse_world
 from eelhost.vision.synthetic import TankView
@@ -256,3 +257,54 @@ def test_after_a_failed_pause_the_final_stop_that_drifts_in_holds_station_swimmi
     assert st["t_s"] == pytest.approx(t_end, abs=1e-3)
     assert st["stop_gap_m"] <= nav.lookahead_margin_m < st["gap_m"]
     assert nav._pause is None and nav.estimator.gait is nav.gait
+
+
+def in_reach_station(clear_until_s: float):  # noqa: ANN201
+    """test_stop_in_reach's failing replanner whose stop keeps 50 mm now and none after a retry
+    (the stop-while-clear rule stops), and whose station swims keep 50 mm clear until
+    ``clear_until_s`` and none after (the twin's judgement stood in for)."""
+    from test_stop_in_reach import stops_ahead
+
+    class InReach(stops_ahead(0.05, 0.0)):  # type: ignore[misc]
+        def _judge_station(self, t_s, kind, always=False):  # noqa: ANN001, ANN202
+            if not always:
+                return None  # only the station instead of a stop while clear is looked at
+            swim = Station(0, (0.2, 1.0), 0.0, "upstream", 0.05, -0.01, np.zeros((1, 2)),
+                           (0.0, 0.0, 0.0, 0.0))
+            return 0.05, (swim if t_s < clear_until_s else None), swim
+
+    return InReach
+
+
+@pytest.mark.parametrize(("station", "clear_until_s"), [
+    (True, 4.0),  # a station swim keeps clear for a while: held, replanning, then the stop
+    (True, 0.0),  # none keeps clear: the stop as before
+    (False, 4.0),  # the option off: the stop as before
+])
+def test_where_the_stop_while_clear_rule_stops_a_clear_station_swim_is_held_replanning(
+        open_plan, station, clear_until_s):  # noqa: F811
+    planner, outcome = open_plan
+    nav = in_reach_station(clear_until_s)(lambda extra: planner, planner, outcome, PATH_GAIT,
+                                          replan_budget_s=1.0, station_keeping=station)
+    t_stop, d = drive_and_close(nav, 10.0)
+    assert d is not None and d.stop == "no_safe_continuation"
+    assert "stopped while it keeps clear" in d.detail  # the stop-while-clear detail either way
+    in_reach = [e for e in nav.events if e["kind"] == "stop_in_reach"]
+    held = [e for e in nav.events if e["kind"] == "station" and e["status"] == "held"]
+    assert len(in_reach) == 1
+    if not (station and clear_until_s > 0.0):
+        assert not held and len(nav.requests) == 1  # stopped at the rule's frame, no retry
+        assert in_reach[0]["t_s"] == pytest.approx(t_stop, abs=1e-3)
+        assert "station" not in in_reach[0]
+        return
+    st = held[0]
+    assert st["stop_in_reach"] and in_reach[0]["station"]
+    assert st["t_s"] == pytest.approx(in_reach[0]["t_s"], abs=1e-3)
+    # held until the check after the station swim stopped keeping clear, then the stop
+    assert st["ended"] == "none" and t_stop >= clear_until_s - 1e-9 > st["t_s"]
+    assert t_stop < clear_until_s + STATION_RETRY_S + 0.1
+    # meanwhile replans were asked for, each at least 0.5 s after the last; none stopped it
+    asked = [e["t_request_s"] for e in nav.events
+             if e["kind"] == "replan" and e["reason"] == "station"]
+    assert len(asked) >= 2 and min(np.diff(asked)) >= STATION_RETRY_S - 1e-9
+    assert "instead of a stop while clear" in nav.tally()
