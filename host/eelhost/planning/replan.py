@@ -964,7 +964,10 @@ class TankReplanner:
         :data:`~eelhost.planning.station.STATION_CHECK_S`, until a plan, a stop the twin swims
         clear, no station swim, or :data:`~eelhost.planning.station.STATION_MAX_S`
         (docs/planning.md, "Holding station (session 21)"). Off by default: on development
-        seeds 39000-39099 no stop that drifted in had a station swim either.
+        seeds 39000-39099 no stop that drifted in had a station swim either. Also where
+        ``stop_in_reach`` would stop while the stop keeps clear: a station swim kept clear is
+        held instead, replanning, until no swim keeps clear (then that stop), its time bound
+        or a plan (held once on 39000-39049, no goal won).
     stop_in_reach : bool
         After a failed replan, where the look-ahead swims the present plan within the margin
         and the stop the twin swims clear now would come within it after the time another
