@@ -29,23 +29,26 @@ shorter fits. **No family is dropped for lack of search**: every joint model's b
 passes too (:func:`screen_rank`: one whose short search failed, when all of that joint model's
 did), and so does every law family's best (a law with or without its lift, :func:`family`)
 within :data:`FAMILY_FACTOR` of the best. **A lift variant passes with its base**
-(:func:`lift_variants`): it nests its base (its lift and drag rise off, :data:`ABSENT`, are the
-base's law), its screening restart may start from its base's own screening search with them off, and yet
-its screen error may be several times its base's: the short fits and the two-iteration folds
-have not found its lift (on ``no_added_mass`` seed 44, ``servo x linear_quadratic_lift`` was
-screened out at 0.6951 m beside its base's full search at 0.3163 m, where on seed 31 it had met
-every target). So whenever a base passes, its variant passes too, to the middle rung unless it
-is among the best few on its own (docs/estimation.md, "Model comparison"); the reverse does not
-hold (the base does not nest the variant). The survivors' full search starts warm: from its own
+(:func:`lift_variants`): it nests its base (its lift, drag rise and stall off, :data:`ABSENT`,
+are the base's law), and its restart may start from its base's own screening search with them
+off, yet its screen error may be several times its base's: the restart runs beside the base's
+(so it cannot start from the base's restarted fit) and the held-out error comes from
+two-iteration refits of each fold, in which its extra coefficients move (on ``no_added_mass``
+seed 44, ``servo x linear_quadratic_lift`` was screened out at 0.6951 m beside its base's full
+search at 0.3163 m, where on seed 31 it had met every target). So whenever a candidate passes,
+its variant passes too, to the middle rung unless it is among the best few on its own
+(docs/estimation.md, "Model comparison"); the reverse does not hold (the base does not nest
+the variant). The survivors' full search starts warm: from its own
 CMA-ES search, from the candidate's screening fit, and from the best of every candidate's
 screening fit carried over (the screened-out ones' too). Those dropped are shown with the
 screen's figures, marked, and never recommended.
 
 **The middle rung.** A survivor that passes only as a family's or joint model's best, or with
-its base (not among the screen's best few, :func:`best_few`; :func:`middle_rung`) is the second rung of successive
-halving: it first gets a medium budget (:func:`_middle_stage`: a :data:`MIDDLE_BUDGET` CMA-ES
-search seeded as the full one, from the full search's starts, polished, its current fitted and
-its folds refitted as the screen's), run beside the others' own searches in the same barrier.
+its base (not among the screen's best few, :func:`best_few`; :func:`middle_rung`) is the second
+rung of successive halving: it first gets a medium budget (:func:`_middle_stage`: a
+:data:`MIDDLE_BUDGET` CMA-ES search seeded as the full one, from the full search's starts,
+polished, its current fitted and its folds refitted as the screen's), run beside the others'
+own searches in the same barrier.
 It goes on to the full search only when its middle-rung mean held-out error comes within
 :data:`SURVIVOR_FACTOR` of the lowest of the screen's and the middle rung's (or its middle rung
 failed: :func:`past_middle_rung`); otherwise it stops there, shown with the middle rung's
@@ -744,9 +747,8 @@ def middle_rung(scores: Sequence[CandidateScore], grid_size: int,
 
     Those that :func:`screen_survivors` passes only as a family's or joint model's best, or as
     a passing base's lift variant (:func:`lift_variants`): not among the :func:`best_few` of the
-    grid (the first ``grid_size`` scores) for a grid
-    candidate, nor of all the scores for a candidate that joined after the screen (module
-    docstring, "The middle rung").
+    grid (the first ``grid_size`` scores) for a grid candidate, nor of all the scores for a
+    candidate that joined after the screen (module docstring, "The middle rung").
     """
     passed = screen_survivors(scores, grid_size, survivors, joined)
     sure = set(best_few(list(scores[:grid_size]), survivors))
