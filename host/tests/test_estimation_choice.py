@@ -12,7 +12,9 @@ import pytest
 from eelhost.data.experiments import load_dataset, manifest_text, write_experiment, write_manifest
 from eelhost.data.plants import PLANTS
 from eelhost.data.virtual_tank import record_experiment
+from eelhost.estimation.evaluate import Evaluator
 from eelhost.estimation.methods import FitSettings
+from eelhost.estimation.pipeline import training_experiments
 from eelhost.estimation.selection import (
     CandidateScore,
     candidate_spaces,
@@ -20,6 +22,7 @@ from eelhost.estimation.selection import (
     cross_validate,
     default_laws,
     family,
+    multi_start_fit,
     pass_screen,
     recommend,
     screen_rank,
@@ -90,6 +93,26 @@ def test_a_lift_variant_starts_from_its_base_laws_fit_with_the_lift_switched_off
     np.testing.assert_array_equal(start[:-3], fitted)
     # the default grid tries every candidate law with and without its lift
     assert {"morison_lift", "morison", "resistive_lift"} <= set(default_laws())
+
+
+def test_a_lift_variants_screening_restart_from_its_base_fit_ends_at_or_below_the_bases_fitness(
+    tmp_path
+):
+    # the screen's restart (selection._screen_stage) polishes the best carried-over start: its
+    # base's fit with the lift off is one and scores exactly the base's fitness, so the
+    # variant's screening fit is never worse than its base's own
+    ds = _small_tank(tmp_path, "no_added_mass", "paper_robot.toml")
+    base, lift = candidate_spaces(ds, ["morison", "morison_lift"], False, ["pd"])
+    experiments = training_experiments(ds, "straight")
+    evs = [Evaluator(ds.robot, experiments, space=s) for s in (base, lift)]
+    fitted = base.bounds[:, 0] + 0.4 * (base.bounds[:, 1] - base.bounds[:, 0])
+    start = carry_over(base.as_dict(fitted), lift, lift.bounds.mean(axis=1))
+    base_fitness = evs[0].fitness(fitted[None])[0]
+    assert evs[1].fitness(start[None])[0] == pytest.approx(base_fitness, rel=1e-9)
+    # beside a worse start (the middle of the bounds: strong lift) the base's is polished
+    restart = multi_start_fit(evs[1], 0, [lift.bounds.mean(axis=1), start], iterations=1,
+                              budget=0)
+    assert restart.fitness[0] <= base_fitness
 
 
 def test_every_joint_model_is_tried_with_every_law_in_the_same_order_from_either_robot_file(

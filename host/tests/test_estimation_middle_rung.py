@@ -50,6 +50,22 @@ def test_only_the_candidates_passed_as_a_familys_or_joint_models_best_get_the_mi
     assert middle_rung([GRID[5], GRID[6]], 2) == []
 
 
+def test_a_lift_variant_screened_far_worse_than_its_passing_base_passes_with_it_to_the_middle_rung():
+    # servo x linear_quadratic_lift nests servo x linear_quadratic (lift off), so the screen's
+    # short fits scoring it four times worse say only that its lift is not found yet: it passes
+    # with its base, first to the middle rung; morison_lift's base does not pass, nor does it
+    grid = [_cand("servo x lighthill_lift", [0.2, 0.2]), _cand("servo x linear_quadratic", [0.3, 0.3]),
+            _cand("servo x linear_quadratic_lift", [1.2, 1.2]), _cand("servo x morison", [1.4, 1.6]),
+            _cand("servo x morison_lift", [1.8, 1.8])]
+    assert selection.lift_variants(grid) == {1: 2, 3: 4}
+    assert selection.pass_screen(grid, survivors=2, factor=2.0, family_factor=0.0) == [0, 1, 2]
+    assert middle_rung(grid, len(grid), survivors=2) == [2]
+    # without its base among the survivors the variant is judged on its own screen error
+    assert selection.pass_screen(grid[:1] + grid[2:], survivors=1, family_factor=0.0) == [0]
+    # a one-set candidate is not a separate-set base's variant
+    assert selection.lift_variants([grid[1], replace(grid[2], model=grid[2].model + ", one set")]) == {}
+
+
 def test_a_candidate_far_off_at_the_middle_rung_stops_and_one_within_the_factor_goes_on():
     screened = GRID[:5]  # the screen's best: pd x galilean, 0.1
     middle = {3: _cand("pd x resistive_lift", [0.25, 0.35]),  # 0.30: over twice 0.1
