@@ -713,9 +713,20 @@ def lift_variants(scores: Sequence[CandidateScore]) -> dict[int, int]:
     sets (:func:`model_parts`): it nests its base (lift and drag rise off, :data:`ABSENT`), so
     the base's fit is one of its fits and it passes the screen with its base (module
     docstring, "The screen").
+
+    Parameters
+    ----------
+    scores : sequence of CandidateScore
+        The screened candidates, named ``<joint> x <law>`` (with the one-set suffix or not).
+
+    Returns
+    -------
+    dict of int to int
+        For each candidate without lift whose variant is among ``scores``: its position there
+        mapped to the variant's.
     """
     where = {(model_parts(c.model), c.model.endswith(ONE_SET)): i for i, c in enumerate(scores)}
-    out = {}
+    out: dict[int, int] = {}
     for i, c in enumerate(scores):
         joint, law = model_parts(c.model)
         variant = where.get(((joint, f"{law}_lift"), c.model.endswith(ONE_SET)))
