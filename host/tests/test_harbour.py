@@ -128,11 +128,13 @@ def test_a_harbour_keeps_its_swim_and_its_stop_clear_by_geometry_written_apart(d
     assert float(np.min(body_gaps_m(world, MODEL.swimmer_for(ROBOT), now))) < 0.01
 
 
-def run_frames(nav, com, seconds: float, until=lambda d: d.stop is not None, blind_s=0.0):
+def run_frames(nav, com, seconds: float, until=lambda d: d.stop is not None, blind_s=0.0,
+               heading_rad=0.0):
     """Frames of the body seen still at ``com`` (the water carries it: it holds its place).
 
-    ``com`` may be a function of the time instead: the body seen there. For the first
-    ``blind_s`` the guidance has no filtered pose (the estimate gathers frames).
+    ``com`` may be a function of the time instead: the body seen there, straight and headed
+    ``heading_rad``. For the first ``blind_s`` the guidance has no filtered pose (the estimate
+    gathers frames).
     """
     com_at = com if callable(com) else (lambda _t: com)
     decisions: list[tuple[float, Decision]] = []
@@ -140,8 +142,8 @@ def run_frames(nav, com, seconds: float, until=lambda d: d.stop is not None, bli
         for k in range(int(seconds * 30)):
             t = k / 30
             seen = com_at(t)
-            pose = None if t < blind_s else np.array([*seen, 0.0])
-            d = nav.on_frame(t, pose_at(t, seen), pose, 0, 0.0)
+            pose = None if t < blind_s else np.array([*seen, heading_rad])
+            d = nav.on_frame(t, pose_at(t, seen, heading_rad), pose, 0, 0.0)
             decisions.append((t, d))
             nav.pace(t)
             if until(d):

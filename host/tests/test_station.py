@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from test_harbour import FINAL, disc_world, run_frames, up_world
 from test_tank_replanning import drive_and_close, open_plan  # noqa: F401 (open_plan: the fixture)
-from test_tank_restart import MODEL, OPEN, ROBOT, Blocked, N, pose_at
+from test_tank_restart import MODEL, OPEN, ROBOT, Blocked, N
 
 from eelhost.field.recorder import read_commands_csv
 from eelhost.field.runloop import RunConfig
@@ -26,8 +26,6 @@ from eelhost.planning.planner import Planner
 from eelhost.planning.replan import (
     STATION_RETRY_S,
     STOP_BRAKE_S,
-    Decision,
-    TankReplanner,
     outline_clearance_m,
 )
 from eelhost.planning.restart import paused_drift, stopped_twin
@@ -114,26 +112,6 @@ def test_still_water_the_stop_keeps_clear_and_no_station_is_held():
     assert endings[True] == endings[False]  # stopped at the same frame either way
 
 
-def upstream_frames(nav: TankReplanner, com_at, seconds: float) -> list[tuple[float, Decision]]:  # noqa: ANN001
-    """Frames of the straight body headed upstream seen at ``com_at(t)``, until an arrival or a stop."""
-    decisions: list[tuple[float, Decision]] = []
-    try:
-        for k in range(int(seconds * 30)):
-            t = k / 30
-            seen = com_at(t)
-            pose = None if t < 0.5 else np.array([*seen, math.pi])
-            d = nav.on_frame(t, pose_at(t, seen, math.pi), pose, 0, 0.0)
-            decisions.append((t, d))
-            nav.pace(t)
-            if d.arrived or d.stop is not None:
-                break
-            nav._worker.submit(lambda: None).result()
-            nav._side.submit(lambda: None).result()
-    finally:
-        nav.close()
-    return decisions
-
-
 def test_an_arrival_the_stream_would_carry_into_the_wall_holds_station_then_arrives():
     # the goal by the end wall: the body arrives there headed upstream, its tail 80 mm from the
     # wall; seen swimming upstream at 0.05 m/s from 1 s, as the station swim would take it
@@ -150,7 +128,9 @@ def test_an_arrival_the_stream_would_carry_into_the_wall_holds_station_then_arri
     for station in (False, True):
         nav = Blocked(lambda extra: planner, planner, outcome, PATH_GAIT, lookahead_s=0.0,
                       harbour=False, station_keeping=station)
-        decisions = upstream_frames(nav, com_at, 12.0)
+        # the straight body headed upstream, until an arrival or a stop
+        decisions = run_frames(nav, com_at, 12.0, until=lambda d: d.arrived or d.stop is not None,
+                               blind_s=0.5, heading_rad=math.pi)
         t_end, last = decisions[-1]
         assert last.arrived and last.stop is None
         first_t, first = next((t, d) for t, d in decisions if t >= 0.5)
