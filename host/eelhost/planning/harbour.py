@@ -31,7 +31,8 @@ from eelhost.planning.twin import Twin
 from eelsim.control import Gait, braked_gait
 
 __all__ = ["HARBOUR_BEARINGS_DEG", "HARBOUR_CUSHION_M", "HARBOUR_REACH_M", "HARBOUR_SWIMS_S",
-           "FINAL_GLIDE_S", "Harbour", "StopWindow", "find_harbour", "stop_gap_m", "stop_states"]
+           "FINAL_GLIDE_S", "Harbour", "StopWindow", "SwimStart", "find_harbour", "stop_gap_m",
+           "stop_states", "swim_start"]
 
 HARBOUR_BEARINGS_DEG = (0.0, 30.0, -30.0, 60.0, -60.0, 90.0, -90.0, 120.0, -120.0, 150.0,
                         -150.0, 180.0)
@@ -181,6 +182,40 @@ def _judged_gap_m(run: FloatArray, offset_s: float, sample_s: float,
     return float(np.min(gap_of(run, ahead)))
 
 
+class SwimStart(NamedTuple):
+    """Where a swim judged from the body's state begins (a harbour's or a station's)."""
+
+    now: int
+    """The twin's step at the swim's start."""
+    state: FloatArray
+    """The body's state, as floats."""
+    guide: Guide
+    """The guidance's start: a fresh leg from the body."""
+    com: FloatArray
+    """The centre of mass, m (a view into ``state``)."""
+
+
+def swim_start(twin: Twin, state: FloatArray, t_s: float) -> SwimStart:
+    """The start of swims from ``state`` at ``t_s``, as the harbour's and the station's begin.
+
+    Parameters
+    ----------
+    twin : Twin
+    state : ndarray, shape (2 N + 4,)
+        The body's state.
+    t_s : float
+        The robot's time of the state, s.
+
+    Returns
+    -------
+    SwimStart
+    """
+    n = twin.n_links
+    state = np.asarray(state, dtype=float)
+    return SwimStart(int(round(t_s / twin.dt_s)), state, leg_start_guide(state, n, (0.0, 0.0)),
+                     state[n : n + 2])
+
+
 def find_harbour(twin: Twin, gait: Gait, state: FloatArray, t_s: float, window: StopWindow,
                  gap_of: Callable[[FloatArray, FloatArray], FloatArray], need_m: float,
                  bearings_deg: tuple[float, ...] = HARBOUR_BEARINGS_DEG,
@@ -214,12 +249,8 @@ def find_harbour(twin: Twin, gait: Gait, state: FloatArray, t_s: float, window: 
         shortest, the clearest among those (None when none does); and the clearest swim of those
         judged (all of them when none keeps ``need_m``; None when every run failed).
     """
-    dt = twin.dt_s
-    n = twin.n_links
-    now = int(round(t_s / dt))
-    state = np.asarray(state, dtype=float)
-    guide = leg_start_guide(state, n, (0.0, 0.0))
-    com = state[n : n + 2]
+    dt, n = twin.dt_s, twin.n_links
+    now, state, guide, com = swim_start(twin, state, t_s)
 
     def judged(run: FloatArray, offset_s: float) -> float:
         return _judged_gap_m(run, offset_s, stride * dt, gap_of)

@@ -28,7 +28,8 @@ from typing import NamedTuple
 import numpy as np
 
 from eelhost.planning.geometry import FloatArray
-from eelhost.planning.search import Guide, leg_start_guide
+from eelhost.planning.harbour import swim_start
+from eelhost.planning.search import Guide
 from eelhost.planning.twin import Twin
 
 __all__ = ["STATION_BEARINGS_DEG", "STATION_CHECK_S", "STATION_HEADING_BEARINGS_DEG", "STATION_HORIZON_S", "STATION_MAX_S",
@@ -116,12 +117,8 @@ def find_station(twin: Twin, state: FloatArray, t_s: float, current_m_s: tuple[f
     speed = math.hypot(*current_m_s)
     if speed < STATION_MIN_CURRENT_M_S:
         return None, None
-    dt = twin.dt_s
-    n = twin.n_links
-    now = int(round(t_s / dt))
-    state = np.asarray(state, dtype=float)
-    guide = leg_start_guide(state, n, (0.0, 0.0))
-    com = state[n : n + 2]
+    dt, n = twin.dt_s, twin.n_links
+    now, state, guide, com = swim_start(twin, state, t_s)
     along = np.array(current_m_s, dtype=float) / speed  # downstream, unit
     upstream = math.atan2(-along[1], -along[0])
     heading = float(np.mean(state[:n]))
