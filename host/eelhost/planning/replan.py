@@ -1332,16 +1332,7 @@ class TankReplanner:
         d.recorded |= self._collect(t_s, d)
         if d.stop is not None:
             return d
-        if self._pending is not None and t_s >= self._pending[0] - 1e-9:
-            d.waypoints, d.guide = self._pending[1], self._pending[2]
-            self.waypoints = list(d.waypoints)
-            self._pending = None
-            self.current.drop()  # the prediction of a window spans no switch of waypoints
-            self._lookahead = None  # it followed the old waypoints
-            self._whole_job = None
-            self._last_replan()["t_switch_s"] = round(t_s, 3)
-            self.replans += 1
-            d.recorded = True
+        if self._switch_in(t_s, d):
             return d
         est = self.estimator.estimate()
         if est is None or pose is None:
@@ -1882,17 +1873,17 @@ class TankReplanner:
             return None
         extra = self.current.value_m_s.copy() if self.estimate_current else np.zeros(2)
         twin = self._twin_in(extra)
+        gap_of = self._stop_gaps()
         if self._stop_judged[0] == t_s:
             stop_gap = self._stop_judged[1]
         else:
             stop_gap = stop_gap_m(twin, self.gait, est.state, est.t_s, self._stop_window(kind),
-                                  self._stop_gaps())
+                                  gap_of)
             self._stop_judged = (t_s, stop_gap)
         if stop_gap > self.lookahead_margin_m and not always:
             return stop_gap, None, None
         best, clearest = find_station(twin, est.state, est.t_s, self._station_current(extra),
-                                      self._stop_gaps(),
-                                      self.lookahead_margin_m + HARBOUR_CUSHION_M)
+                                      gap_of, self.lookahead_margin_m + HARBOUR_CUSHION_M)
         return stop_gap, best, clearest
 
     def _station_on(self, t_s: float, kind: str, detail: str,
@@ -1981,14 +1972,7 @@ class TankReplanner:
             d.recorded |= self._collect(t_s, d)
         d.stop = None  # a failed replan while holding station is asked for again, not a stop
         self._retry_now = False
-        if self._pending is not None and t_s >= self._pending[0] - 1e-9:
-            d.waypoints, d.guide = self._pending[1], self._pending[2]
-            self.waypoints = list(d.waypoints)
-            self._pending = None
-            self.current.drop()
-            self._last_replan()["t_switch_s"] = round(t_s, 3)
-            self.replans += 1
-            d.recorded = True
+        if self._switch_in(t_s, d):
             self._end_station(t_s, "replanned")
             self._stationed_s = 0.0  # a new plan: it may hold and hold station again
             self._held_s = 0.0
@@ -2002,11 +1986,10 @@ class TankReplanner:
                 stop_gap, best, _ = judged
                 over = self._stationed_s + t_s - st.t_start_s >= STATION_MAX_S
                 # instead of a stop while it keeps clear: the station holds while its swim keeps
-                # clear, the stop made the moment it no longer does
-                why = ("max_time" if over else "none" if best is None else "")
-                if not st.in_reach and stop_gap > self.lookahead_margin_m:
-                    why = "stopped"
-
+                # clear, the stop made the moment it no longer does (never for the stop's room)
+                stop_clear = not st.in_reach and stop_gap > self.lookahead_margin_m
+                why = ("stopped" if stop_clear else "max_time" if over
+                       else "none" if best is None else "")
                 if why:
                     return self._station_stop(t_s, why, stop_gap)
                 assert best is not None
@@ -2126,6 +2109,24 @@ class TankReplanner:
         if swim.kind == "pause":
             return self._halt(t_s, d)
         return d
+
+    def _switch_in(self, t_s: float, d: Decision) -> bool:
+        """Switch in the replan that is ready by ``t_s`` into ``d``, if one is; True if so.
+
+        The one switch of a found replan's waypoints, while swimming and while holding station.
+        """
+        if self._pending is None or t_s < self._pending[0] - 1e-9:
+            return False
+        d.waypoints, d.guide = self._pending[1], self._pending[2]
+        self.waypoints = list(d.waypoints)
+        self._pending = None
+        self.current.drop()  # the prediction of a window spans no switch of waypoints
+        self._lookahead = None  # it followed the old waypoints
+        self._whole_job = None
+        self._last_replan()["t_switch_s"] = round(t_s, 3)
+        self.replans += 1
+        d.recorded = True
+        return True
 
     def _drop_work(self) -> None:
         """Cut any replan short and forget every verdict: the robot swims no plan of the search."""

@@ -182,8 +182,8 @@ def plan_for_run(
     stop_brake_s : float
         The run loop's brake before its final Stop (``TankReplanner``'s ``stop_brake_s``).
     station : bool
-        Where the stop would drift into something and no harbour or hold is left, swim into the
-        current instead (``TankReplanner``'s ``station_keeping``; docs/planning.md, "Holding
+        Where the stop would drift into something and no harbour keeps clear, swim into the
+        current instead (before the hold) (``TankReplanner``'s ``station_keeping``; docs/planning.md, "Holding
         station (session 21)"); off by default (``eelbot run --station``).
 
     Returns
