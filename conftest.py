@@ -6,6 +6,10 @@ lists those two folders before the run and fails the run if anything new is in t
 naming the files, so a test that forgets its ``--out`` is found at once (it had left
 ``out/validate`` in every clone).
 
+A second session fixture fails the run when a test compiled a batched-kernel variant that
+``scripts/warm_kernels.py tests`` does not list: the test command compiles that list beforehand,
+two at a time, and a variant missing from it costs 20-50 s inside a test (from a fresh clone).
+
 It also offers the plug-in tests (of sim/ and host/) one way to install a toy package as pip
 would (:func:`install_distribution`) and to have registries load their plug-ins again
 (:func:`registries_afresh`).
@@ -13,6 +17,8 @@ would (:func:`install_distribution`) and to have registries load their plug-ins 
 
 from __future__ import annotations
 
+import importlib.util
+import sys
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -44,6 +50,30 @@ def the_run_leaves_the_clone_clean():
         pytest.fail(f"the tests left {len(left)} paths in the clone: {', '.join(left[:6])}"
                     f"{' ...' if len(left) > 6 else ''} (write to tmp_path, give --out)",
                     pytrace=False)
+
+
+@pytest.fixture(scope="session", autouse=True)
+def every_kernel_the_tests_compiled_was_compiled_beforehand():
+    """Fail the run when a test loaded a kernel variant that the tests' warm list lacks.
+
+    The kernels this process loaded are the loader's keys (``eelsim.batch.loading``); those of
+    a fluid law or joint model a test defines itself are left out (``warm_kernels.unlisted``).
+    Kernels compiled in a subprocess a test starts are not seen here.
+    """
+    yield
+    loading = sys.modules.get("eelsim.batch.loading")
+    if loading is None or not loading._KERNELS:
+        return
+    spec = importlib.util.spec_from_file_location("warm_kernels",
+                                                  REPO / "scripts" / "warm_kernels.py")
+    assert spec is not None and spec.loader is not None
+    warm = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(warm)
+    missing = warm.unlisted(loading._KERNELS)
+    if missing:
+        pytest.fail(f"tests compiled {len(missing)} kernel variants that scripts/warm_kernels.py "
+                    f"tests does not list (N, lanes, stage, law, joints): {missing}; add them "
+                    "there, so that the test command compiles them beforehand", pytrace=False)
 
 
 InstallDistribution = Callable[..., Path]
