@@ -4,7 +4,7 @@ Each variant (links x fluid law x joint model x stage) takes 20-60 s to compile 
 The main job needs thirty (its fits, and the model comparison's candidates: five laws and
 their lift variants, with either joint model, and with the PD loop on the servo line, which joins
 the comparison after its screen with the laws the screen ranks best), the test suite
-twenty-two (twelve of them also the main job's), both read from the registries
+twenty-three (thirteen of them also the main job's), both read from the registries
 (:func:`variant_lists`); compiled one after another inside the command that needs them they were
 most of its time from a fresh clone. Compiled here in parallel into the cache
 (``eelsim.batch.kernel_cache_dir``), the command loads each in under a second. A variant missing
@@ -61,10 +61,11 @@ def variant_lists() -> dict[str, list[Variant]]:
     tests: list[Variant] = [(n, "c", DEFAULT_FLUID_LAW, robot) for n in (3, 6, 8)
                             for robot in ROBOTS]
     tests += [(6, "c", law, PAPER) for law in bases]
-    # the servo-joint tests of the Galilean-consistent laws, the lift law's literature test, and
-    # a lift variant's screening restart from its base's fit
-    # (host/tests/test_estimation_choice.py)
-    tests += [(6, "c", law, SERVO) for law in ("galilean", "linear_quadratic")]
+    # the servo-joint tests of the Galilean-consistent laws, the middle rung's comparison
+    # (host/tests/test_estimation_middle_rung.py: three laws with either joint model, in worker
+    # processes), the lift law's literature test, and a lift variant's screening restart from its
+    # base's fit (host/tests/test_estimation_choice.py)
+    tests += [(6, "c", law, SERVO) for law in ("galilean", "linear_quadratic", "resistive")]
     tests += [(6, "c", law, PAPER) for law in ("lighthill_lift", "morison_lift")]
     # the choice from either robot file (host/tests/test_estimation_choice.py): two laws, so the
     # PD loop on the servo line joins with both
