@@ -18,7 +18,6 @@ would (:func:`install_distribution`) and to have registries load their plug-ins 
 from __future__ import annotations
 
 import importlib.util
-import sys
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -54,22 +53,29 @@ def the_run_leaves_the_clone_clean():
 
 @pytest.fixture(scope="session", autouse=True)
 def every_kernel_the_tests_compiled_was_compiled_beforehand():
-    """Fail the run when a test loaded a kernel variant that the tests' warm list lacks.
+    """Fail the run when a test compiled a kernel variant that the tests' warm list lacks.
 
-    The kernels this process loaded are the loader's keys (``eelsim.batch.loading``); those of
-    a fluid law or joint model a test defines itself are left out (``warm_kernels.unlisted``).
-    Kernels compiled in a subprocess a test starts are not seen here.
+    Seen two ways: the kernels this process loaded (the loader's keys, ``eelsim.batch.loading``),
+    and the kernel modules new in the kernel cache folder since the session began, which is how
+    the kernels compiled in a subprocess a test starts (a comparison's worker processes, a
+    command) show. Those of a fluid law or joint model a test defines itself are left out
+    (``warm_kernels.unlisted``). With a cache folder shared with other work running at the same
+    time, a module that work compiled meanwhile would be counted too.
     """
+    from eelsim.batch.loading import kernel_cache_dir
+
+    folder = kernel_cache_dir()
+    before = {p.stem for p in folder.glob("n*_l*.py")}
     yield
-    loading = sys.modules.get("eelsim.batch.loading")
-    if loading is None or not loading._KERNELS:
-        return
+    from eelsim.batch import loading
+
     spec = importlib.util.spec_from_file_location("warm_kernels",
                                                   REPO / "scripts" / "warm_kernels.py")
     assert spec is not None and spec.loader is not None
     warm = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(warm)
-    missing = warm.unlisted(loading._KERNELS)
+    new = {p.stem for p in folder.glob("n*_l*.py")} - before
+    missing = warm.unlisted(set(loading._KERNELS) | warm.module_keys(new))
     if missing:
         pytest.fail(f"tests compiled {len(missing)} kernel variants that scripts/warm_kernels.py "
                     f"tests does not list (N, lanes, stage, law, joints): {missing}; add them "

@@ -100,6 +100,30 @@ def kernel_keys(name: str) -> set[tuple[int, int, str, str, str]]:
     return keys
 
 
+def module_keys(names: Iterable[str]) -> set[tuple[int, int, str, str, str]]:
+    """The loader keys of kernel modules named as ``eelsim.batch.loading`` names their files.
+
+    ``n{N}_l{lanes}_{stage}_{law}`` with ``_{joint model}`` after it unless the model is the
+    default; a name of another form is skipped.
+    """
+    import re
+
+    from eelsim.joints import DEFAULT_JOINT_MODEL, JOINT_MODELS
+
+    suffixes = sorted((m for m in JOINT_MODELS.names() if m != DEFAULT_JOINT_MODEL), key=len,
+                      reverse=True)
+    keys = set()
+    for name in names:
+        match = re.fullmatch(r"n(\d+)_l(\d+)_(c|numba)_(\w+)", name)
+        if match is None:
+            continue
+        n, lanes, stage, rest = match.groups()
+        model = next((m for m in suffixes if rest.endswith(f"_{m}")), DEFAULT_JOINT_MODEL)
+        law = rest if model == DEFAULT_JOINT_MODEL else rest[: -len(model) - 1]
+        keys.add((int(n), int(lanes), stage, law, model))
+    return keys
+
+
 def unlisted(loaded: Iterable[tuple[int, int, str, str, str]],
              name: str = "tests") -> list[tuple[int, int, str, str, str]]:
     """The kernels in ``loaded`` (loader keys) that list ``name`` does not compile beforehand.

@@ -57,3 +57,11 @@ def test_setup_takes_a_kernel_set_and_refuses_another_word():
                           capture_output=True, text=True, timeout=60)
     assert done.returncode == 0, done.stderr
     assert ".venv" not in done.stdout and "kernel" not in done.stdout
+
+
+def test_a_kernel_modules_file_name_gives_its_loader_key():
+    keys = _warm_kernels().module_keys(["n6_l16_c_morison", "n6_l16_c_resistive_lift_servo",
+                                        "n8_l16_numba_linear_quadratic_pd_limited",
+                                        "eelsim_c_0f67ea4968ec8d8d", "n6_l16_c_morison.tmp12"])
+    assert keys == {(6, 16, "c", "morison", "pd"), (6, 16, "c", "resistive_lift", "servo"),
+                    (8, 16, "numba", "linear_quadratic", "pd_limited")}
