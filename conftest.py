@@ -6,6 +6,10 @@ lists those two folders before the run and fails the run if anything new is in t
 naming the files, so a test that forgets its ``--out`` is found at once (it had left
 ``out/validate`` in every clone).
 
+A second session fixture fails the run when a test compiled a batched-kernel variant that
+``scripts/warm_kernels.py tests`` does not list: the test command compiles that list beforehand,
+two at a time, and a variant missing from it costs 20-50 s inside a test (from a fresh clone).
+
 It also offers the plug-in tests (of sim/ and host/) one way to install a toy package as pip
 would (:func:`install_distribution`) and to have registries load their plug-ins again
 (:func:`registries_afresh`).
@@ -13,6 +17,7 @@ would (:func:`install_distribution`) and to have registries load their plug-ins 
 
 from __future__ import annotations
 
+import importlib.util
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -44,6 +49,37 @@ def the_run_leaves_the_clone_clean():
         pytest.fail(f"the tests left {len(left)} paths in the clone: {', '.join(left[:6])}"
                     f"{' ...' if len(left) > 6 else ''} (write to tmp_path, give --out)",
                     pytrace=False)
+
+
+@pytest.fixture(scope="session", autouse=True)
+def every_kernel_the_tests_compiled_was_compiled_beforehand():
+    """Fail the run when a test compiled a kernel variant that the tests' warm list lacks.
+
+    Seen two ways: the kernels this process loaded (the loader's keys, ``eelsim.batch.loading``),
+    and the kernel modules new in the kernel cache folder since the session began, which is how
+    the kernels compiled in a subprocess a test starts (a comparison's worker processes, a
+    command) show. Those of a fluid law or joint model a test defines itself are left out
+    (``warm_kernels.unlisted``). With a cache folder shared with other work running at the same
+    time, a module that work compiled meanwhile would be counted too.
+    """
+    from eelsim.batch.loading import kernel_cache_dir
+
+    folder = kernel_cache_dir()
+    before = {p.stem for p in folder.glob("n*_l*.py")}
+    yield
+    from eelsim.batch import loading
+
+    spec = importlib.util.spec_from_file_location("warm_kernels",
+                                                  REPO / "scripts" / "warm_kernels.py")
+    assert spec is not None and spec.loader is not None
+    warm = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(warm)
+    new = {p.stem for p in folder.glob("n*_l*.py")} - before
+    missing = warm.unlisted(set(loading._KERNELS) | warm.module_keys(new))
+    if missing:
+        pytest.fail(f"tests compiled {len(missing)} kernel variants that scripts/warm_kernels.py "
+                    f"tests does not list (N, lanes, stage, law, joints): {missing}; add them "
+                    "there, so that the test command compiles them beforehand", pytrace=False)
 
 
 InstallDistribution = Callable[..., Path]

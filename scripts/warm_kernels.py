@@ -3,22 +3,25 @@
 Each variant (links x fluid law x joint model x stage) takes 20-60 s to compile on first use.
 The main job needs thirty (its fits, and the model comparison's candidates: five laws and
 their lift variants, with either joint model, and with the PD loop on the servo line, which joins
-the comparison after its screen with the laws the screen ranks best), the test suite sixteen, both read from the
-registries (:func:`variant_lists`); compiled one after
-another inside the command that needs them they were most of its
-time from a fresh clone. Compiled here in parallel into the cache
+the comparison after its screen with the laws the screen ranks best), the test suite
+twenty-three (thirteen of them also the main job's), both read from the registries
+(:func:`variant_lists`); compiled one after another inside the command that needs them they were
+most of its time from a fresh clone. Compiled here in parallel into the cache
 (``eelsim.batch.kernel_cache_dir``), the command loads each in under a second. A variant missing
-from a list is still compiled by the code that needs it: the lists only save time.
+from a list is still compiled by the code that needs it: the lists only save time (and the test
+suite fails when a test compiled one its list lacks: conftest.py, :func:`unlisted`).
 
-    python scripts/warm_kernels.py main [JOBS]     # scripts/setup.sh: the main job's
-    python scripts/warm_kernels.py tests [JOBS]    # scripts/test.sh: the test suite's
+    python scripts/warm_kernels.py main [JOBS]     # scripts/setup.sh main (scripts/main.sh)
+    python scripts/warm_kernels.py tests [JOBS]    # scripts/setup.sh tests (scripts/test.sh)
 """
 
 from __future__ import annotations
 
 import sys
 import time
+from collections.abc import Iterable
 from concurrent.futures import ProcessPoolExecutor
+from typing import Any
 
 Variant = tuple[int, str | None, str, str]
 """(links, stage or None for the machine's default, fluid law, bundled robot file or joint model).
@@ -58,9 +61,12 @@ def variant_lists() -> dict[str, list[Variant]]:
     tests: list[Variant] = [(n, "c", DEFAULT_FLUID_LAW, robot) for n in (3, 6, 8)
                             for robot in ROBOTS]
     tests += [(6, "c", law, PAPER) for law in bases]
-    # the servo-joint tests of the Galilean-consistent laws, and the lift law's literature test
-    tests += [(6, "c", law, SERVO) for law in ("galilean", "linear_quadratic")]
-    tests += [(6, "c", "lighthill_lift", PAPER)]
+    # the servo-joint tests of the Galilean-consistent laws, the middle rung's comparison
+    # (host/tests/test_estimation_middle_rung.py: three laws with either joint model, in worker
+    # processes), the lift law's literature test, and a lift variant's screening restart from its
+    # base's fit (host/tests/test_estimation_choice.py)
+    tests += [(6, "c", law, SERVO) for law in ("galilean", "linear_quadratic", "resistive")]
+    tests += [(6, "c", law, PAPER) for law in ("lighthill_lift", "morison_lift")]
     # the choice from either robot file (host/tests/test_estimation_choice.py): two laws, so the
     # PD loop on the servo line joins with both
     tests += [(6, "c", law, "pd_limited") for law in ("linear_quadratic", "morison")]
@@ -70,6 +76,74 @@ def variant_lists() -> dict[str, list[Variant]]:
     tests += [(6, "c", law, PAPER if law == "reynolds" else SERVO) for law in plant_laws]
     tests += [(6, "numba", DEFAULT_FLUID_LAW, robot) for robot in ROBOTS]
     return {"main": main, "tests": tests}
+
+
+def kernel_keys(name: str) -> set[tuple[int, int, str, str, str]]:
+    """List ``name``'s variants as the kernel loader keys them on this machine.
+
+    The key is ``eelsim.batch.loading``'s: (N, lanes, stage, fluid law, joint model), the stage
+    resolved as :func:`_warm` resolves it (numba when there is no C compiler) and the lanes the
+    default, which is what every variant here is compiled with.
+    """
+    from eelsim.batch import stage_backend
+    from eelsim.batch.loading import DEFAULT_LANES
+    from eelsim.joints import joint_model_of
+    from eelsim.robot import load_robot
+
+    models = {robot: joint_model_of(load_robot(robot).joints).name for robot in ROBOTS}
+    keys = set()
+    for n, stage, law, robot in variant_lists()[name]:
+        stage = stage or stage_backend()
+        if stage == "c" and stage_backend() != "c":
+            stage = "numba"
+        keys.add((n, DEFAULT_LANES, stage, law, models.get(robot, robot)))
+    return keys
+
+
+def module_keys(names: Iterable[str]) -> set[tuple[int, int, str, str, str]]:
+    """The loader keys of kernel modules named as ``eelsim.batch.loading`` names their files.
+
+    ``n{N}_l{lanes}_{stage}_{law}`` with ``_{joint model}`` after it unless the model is the
+    default; a name of another form is skipped.
+    """
+    import re
+
+    from eelsim.joints import DEFAULT_JOINT_MODEL, JOINT_MODELS
+
+    suffixes = sorted((m for m in JOINT_MODELS.names() if m != DEFAULT_JOINT_MODEL), key=len,
+                      reverse=True)
+    keys = set()
+    for name in names:
+        match = re.fullmatch(r"n(\d+)_l(\d+)_(c|numba)_(\w+)", name)
+        if match is None:
+            continue
+        n, lanes, stage, rest = match.groups()
+        model = next((m for m in suffixes if rest.endswith(f"_{m}")), DEFAULT_JOINT_MODEL)
+        law = rest if model == DEFAULT_JOINT_MODEL else rest[: -len(model) - 1]
+        keys.add((int(n), int(lanes), stage, law, model))
+    return keys
+
+
+def unlisted(loaded: Iterable[tuple[int, int, str, str, str]],
+             name: str = "tests") -> list[tuple[int, int, str, str, str]]:
+    """The kernels in ``loaded`` (loader keys) that list ``name`` does not compile beforehand.
+
+    A kernel of a fluid law or joint model that the twin and the host do not register themselves
+    (one a test defines, or a plug-in a test installs) is left out: no list can name it.
+    """
+    from eelsim.fluid import FLUID_LAWS
+    from eelsim.joints import JOINT_MODELS
+
+    def ours(registry: Any, entry: str) -> bool:
+        try:
+            module = getattr(registry[entry], "__module__", None) or ""
+        except KeyError:  # gone again: a test's own, unregistered after it
+            return False
+        return module.startswith(("eelsim.", "eelhost."))
+
+    listed = kernel_keys(name)
+    return sorted(key for key in set(loaded) if key not in listed
+                  and ours(FLUID_LAWS, key[3]) and ours(JOINT_MODELS, key[4]))
 
 
 def _warm(variant: Variant) -> str:
@@ -111,11 +185,14 @@ def main() -> int:
     if len(sys.argv) < 2 or sys.argv[1] not in ("main", "tests"):
         print("usage: warm_kernels.py main|tests [JOBS]", file=sys.stderr)
         return 2
-    variants = variant_lists()[sys.argv[1]]
+    variants = list(dict.fromkeys(variant_lists()[sys.argv[1]]))
+    # the longest first (the numba stage's, about 50 s each; then by N), so that the last to end
+    # is a short one and neither process waits long for the other at the end
+    variants.sort(key=lambda v: (v[1] == "numba", v[0]), reverse=True)
     jobs = int(sys.argv[2]) if len(sys.argv) > 2 else 2
     start = time.perf_counter()
     with ProcessPoolExecutor(max_workers=jobs) as pool:
-        for line in pool.map(_warm, list(dict.fromkeys(variants))):
+        for line in pool.map(_warm, variants):
             print(f"kernels: {line}", flush=True)
     print(f"kernels: {len(variants)} variants ready in {time.perf_counter() - start:.0f} s")
     return 0

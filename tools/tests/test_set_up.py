@@ -1,0 +1,67 @@
+"""The set-up's kernel sets (scripts/setup.sh, scripts/warm_kernels.py)."""
+
+import importlib.util
+import subprocess
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def _warm_kernels():
+    spec = importlib.util.spec_from_file_location("warm_kernels",
+                                                  REPO / "scripts" / "warm_kernels.py")
+    assert spec is not None and spec.loader is not None
+    warm = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(warm)
+    return warm
+
+
+def test_the_tests_list_is_keyed_as_the_loader_keys_kernels():
+    from eelsim.batch import stage_backend
+    from eelsim.batch.loading import DEFAULT_LANES
+
+    keys = _warm_kernels().kernel_keys("tests")
+    stage = stage_backend()
+    # the robot files stand for their joint models, a joint model's name for itself
+    assert (6, DEFAULT_LANES, stage, "morison", "pd") in keys
+    assert (6, DEFAULT_LANES, stage, "morison", "servo") in keys
+    assert (6, DEFAULT_LANES, stage, "morison", "pd_limited") in keys
+    assert (3, DEFAULT_LANES, stage, "morison", "servo") in keys
+    assert (6, DEFAULT_LANES, "numba", "morison", "pd") in keys
+    assert {key[1] for key in keys} == {DEFAULT_LANES}
+
+
+def test_a_kernel_the_tests_list_lacks_is_named_unless_no_list_could_name_it():
+    from eelsim.batch import stage_backend
+    from eelsim.batch.loading import DEFAULT_LANES
+
+    warm = _warm_kernels()
+    stage = stage_backend()
+    listed = (6, DEFAULT_LANES, stage, "morison", "pd")
+    lacking = (4, DEFAULT_LANES, stage, "morison", "pd")
+    other_lanes = (6, 8, stage, "morison", "pd")
+    main_only = (6, DEFAULT_LANES, stage, "resistive_lift", "servo")
+    a_tests_own_law = (6, DEFAULT_LANES, stage, "a_law_no_registry_has", "pd")
+    assert warm.unlisted([listed, lacking, other_lanes, main_only, a_tests_own_law]) == sorted(
+        [lacking, other_lanes, main_only])
+    assert warm.unlisted([main_only], "main") == []
+
+
+def test_setup_takes_a_kernel_set_and_refuses_another_word():
+    done = subprocess.run(["bash", "scripts/setup.sh", "everything"], cwd=REPO,
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2
+    assert "usage: scripts/setup.sh [main|tests|system]" in done.stderr
+    # `system`: the system packages only, nothing of the Python environment or the kernels
+    done = subprocess.run(["bash", "scripts/setup.sh", "system"], cwd=REPO,
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert ".venv" not in done.stdout and "kernel" not in done.stdout
+
+
+def test_a_kernel_modules_file_name_gives_its_loader_key():
+    keys = _warm_kernels().module_keys(["n6_l16_c_morison", "n6_l16_c_resistive_lift_servo",
+                                        "n8_l16_numba_linear_quadratic_pd_limited",
+                                        "eelsim_c_0f67ea4968ec8d8d", "n6_l16_c_morison.tmp12"])
+    assert keys == {(6, 16, "c", "morison", "pd"), (6, 16, "c", "resistive_lift", "servo"),
+                    (8, 16, "numba", "linear_quadratic", "pd_limited")}
