@@ -174,6 +174,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="with --plan or --bench: the unknown current the planner's check "
                    "allows for, as eelbot plan's --unknown-current (default: the planner's, "
                    "0.02 m/s); a --bench world's water still has up to 0.02 m/s")
+    b.add_argument("--no-arrival-stop-check", dest="arrival_stop", action="store_false",
+                   help="with --plan or --bench: the planner's check ends each run where it "
+                   "enters the goal disc (default: judged on through the arrival's stop, its "
+                   "brake and glide, as eelbot plan's)")
     b.add_argument("--write", nargs="?", const="docs/planning.md", metavar="FILE",
                    help="with --bench, also rewrite its section of FILE (bare: docs/planning.md)")
     p.set_defaults(run=run)
@@ -236,6 +240,8 @@ def _planner_options(args: argparse.Namespace) -> dict:
     ``--check-unknown-current`` is given (else the planner's default).
     """
     options: dict = {"guidance": guidance_choice(args.guidance)}
+    if not args.arrival_stop:
+        options["arrival_stop"] = False
     if args.check_unknown_current is not None:
         options["unknown_current_m_s"] = args.check_unknown_current
     return options
@@ -402,6 +408,7 @@ def _bench(args: argparse.Namespace) -> int:
                                         brake_s=_brake_s(args), harbour=args.harbour,
                                         station=args.station)
     command = (f"nice eelbot run --bench --worlds {args.worlds} --seed {args.seed}"
+               + ("" if args.arrival_stop else " --no-arrival-stop-check")
                + ("" if args.check_unknown_current is None
                   else f" --check-unknown-current {args.check_unknown_current:g}")
                + (f" --coefficients-file {args.coefficients_file}" if args.coefficients_file
