@@ -139,11 +139,12 @@ def add_check_options(p: argparse.ArgumentParser) -> None:
                    help="every check run must keep the body this far from everything (default "
                    f"{CHECK_MARGIN_M} m: plans checked merely clear touched in fresh draws; 0 "
                    "for clear alone; docs/planning.md, \"The planner\")")
-    p.add_argument("--no-arrival-stop-check", dest="arrival_stop", action="store_false",
-                   help="end each check run where it enters the goal disc (default: each run "
-                   "that arrives is judged on through the tank's stop there, its 3 s brake and "
-                   "the glide after it, with the check's margin; docs/planning.md, \"The "
-                   "arrival's stop in the check\")")
+    p.add_argument("--arrival-stop-check", dest="arrival_stop",
+                   action=argparse.BooleanOptionalAction, default=True,
+                   help="judge each check run that arrives on through the tank's stop there, "
+                   "its 3 s brake and the glide after it, with the check's margin (default: "
+                   "%(default)s; --no-arrival-stop-check: the run ends where it enters the goal "
+                   "disc; docs/planning.md, \"The arrival's stop in the check\")")
     p.add_argument("--robust-search", action="store_true",
                    help="also swim every leg of the search in the unknown current (fewer plans "
                    "fail their check, about 4 times the search's time)")

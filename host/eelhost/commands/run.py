@@ -174,10 +174,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="with --plan or --bench: the unknown current the planner's check "
                    "allows for, as eelbot plan's --unknown-current (default: the planner's, "
                    "0.02 m/s); a --bench world's water still has up to 0.02 m/s")
-    b.add_argument("--no-arrival-stop-check", dest="arrival_stop", action="store_false",
-                   help="with --plan or --bench: the planner's check ends each run where it "
-                   "enters the goal disc (default: judged on through the arrival's stop, its "
-                   "brake and glide, as eelbot plan's)")
+    b.add_argument("--arrival-stop-check", dest="arrival_stop",
+                   action=argparse.BooleanOptionalAction, default=True,
+                   help="with --plan or --bench: the planner's check judges each run that "
+                   "arrives on through the arrival's stop, its brake and glide, as eelbot "
+                   "plan's (default: %(default)s; --no-arrival-stop-check: the run ends where "
+                   "it enters the goal disc)")
     b.add_argument("--write", nargs="?", const="docs/planning.md", metavar="FILE",
                    help="with --bench, also rewrite its section of FILE (bare: docs/planning.md)")
     p.set_defaults(run=run)
