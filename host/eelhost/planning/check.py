@@ -294,9 +294,10 @@ def swim_legs(
                 steps[i] += cut
                 still.append(i)
         live = still
-    stops = _arrival_stops(runner, currents, pieces, reached, arrived_at, arrival_stop)
-    if stops is not None:
-        run_steps += int(stops.size // stops.shape[-1]) * ARRIVAL_STOP_STRIDE
+    stop_steps: list[int] = []
+    stops = _arrival_stops(runner, currents, pieces, reached, arrived_at, arrival_stop,
+                           stop_steps)
+    run_steps += sum(stop_steps)
     out = []
     goal = np.asarray(world.goal.position_m)
     t0 = start_step * twin.dt_s
@@ -348,12 +349,14 @@ def arrival_stop_s(window: StopWindow) -> float:
 
 def _arrival_stops(runner: Twin, currents: Sequence[tuple[float, float]],
                    pieces: Sequence[Sequence[FloatArray]], reached: npt.NDArray[np.bool_],
-                   arrived_at: npt.NDArray[np.int64], window: StopWindow | None) -> FloatArray | None:
+                   arrived_at: npt.NDArray[np.int64], window: StopWindow | None,
+                   swum: list[int]) -> FloatArray | None:
     """Every arriving run's stop from its first state in the goal disc, in its own water.
 
     The stop the tank's replanner judges before its final stop
     (:func:`eelhost.planning.harbour.stop_states`: the brake's frozen S, then the straight
-    body), swum in one batch per part with each water's straight set and current.
+    body), swum in one batch per part with each water's straight set and current; the
+    run-steps swum are appended to ``swum`` (the check's cost).
 
     Returns
     -------
@@ -366,7 +369,7 @@ def _arrival_stops(runner: Twin, currents: Sequence[tuple[float, float]],
     starts = np.stack([pieces[int(i)][-1][-1] for i in rows])
     times = arrived_at[rows].astype(np.float64) * runner.dt_s
     got = stop_states(runner, runner.gait, starts, times, window, ARRIVAL_STOP_STRIDE, coefficient_index=[2 * int(i) for i in rows],
-                      currents=[currents[int(i)] for i in rows])
+                      currents=[currents[int(i)] for i in rows], swum=swum)
     out = np.full((len(reached), *got.shape[1:]), np.nan)
     out[rows] = got
     return out

@@ -90,7 +90,8 @@ class Harbour(NamedTuple):
 def stop_states(twin: Twin, gait: Gait, states: FloatArray, t_s: float | FloatArray,
                 window: StopWindow, stride: int,
                 coefficient_index: Sequence[int] | None = None,
-                currents: Sequence[tuple[float, float]] | None = None) -> FloatArray:
+                currents: Sequence[tuple[float, float]] | None = None,
+                swum: list[int] | None = None) -> FloatArray:
     """The stops of bodies in ``states`` decided at ``t_s``: braked, then straight.
 
     Parameters
@@ -112,6 +113,9 @@ def stop_states(twin: Twin, gait: Gait, states: FloatArray, t_s: float | FloatAr
         Per body, the twin's coefficient set (default the first).
     currents : sequence of (vx, vy), optional
         Per body, the water's current (default the twin's).
+    swum : list of int, optional
+        Where the run-steps the twin swam are appended (a swim cost's measure, as
+        :class:`eelhost.planning.search.SwimCost` counts them).
 
     Returns
     -------
@@ -143,6 +147,8 @@ def stop_states(twin: Twin, gait: Gait, states: FloatArray, t_s: float | FloatAr
         runs = braked.run(far, (held + 2) * dt, states=start, start_steps=nows,
                           stride=stride, coefficient_index=index, currents=water,
                           phase_rad=[braked_gait(gait, float(t)).phase_rad for t in times])
+        if swum is not None:
+            swum.append(int(np.sum(runs.final_step + 1)))
         first = runs.states[:, : held // stride + 1]
         if first.shape[1] < held // stride + 1:
             pad = np.full((k, held // stride + 1 - first.shape[1], first.shape[2]), np.nan)
@@ -160,6 +166,8 @@ def stop_states(twin: Twin, gait: Gait, states: FloatArray, t_s: float | FloatAr
                                 stride=stride,
                                 coefficient_index=None if index is None else [index[j] for j in rows],
                                 currents=None if water is None else [water[j] for j in rows])
+            if swum is not None:
+                swum.append(int(np.sum(runs.final_step + 1)))
             got = runs.states[:, : after // stride + 1]
             rest[ok, : got.shape[1]] = got
         parts.append(rest)
