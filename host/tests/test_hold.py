@@ -32,7 +32,7 @@ from eelsim.scenario import PATH_GAIT
 def up_plan():
     """The goal up the tank; the disc downstream of where the body will be seen."""
     world = up_world()
-    planner = Planner(world, ROBOT, MODEL)
+    planner = Planner(world, ROBOT, MODEL, arrival_stop=False)
     outcome = planner.plan()
     assert outcome.found, outcome.message
     return world, planner, outcome

@@ -60,7 +60,7 @@ def upstream_body(x_m: float) -> np.ndarray:
 @pytest.fixture(scope="module")
 def stream():
     world = parse_world(stream_world(0.045), "stream")
-    planner = Planner(world, ROBOT, MODEL)
+    planner = Planner(world, ROBOT, MODEL, arrival_stop=False)
     outcome = planner.plan()
     assert outcome.found, outcome.message
     return world, planner, outcome
@@ -152,7 +152,7 @@ def test_over_sim_a_run_that_would_stop_holds_station_without_failsafe(tmp_path)
     # the plan starts at (1.6, 1); the robot is put at (2.6, 1) headed upstream, its tail 80 mm
     # from the wall the 0.045 m/s stream flows to: off the plan's corridor, its replans refused
     world = parse_world(stream_world(0.045), "stream")
-    planner = Planner(world, ROBOT, MODEL)
+    planner = Planner(world, ROBOT, MODEL, arrival_stop=False)
     outcome = planner.plan()
     assert outcome.found, outcome.message
     uri = sim_uri_for_world("sim://?speed=0&start=2.6,1.0,180", world)
@@ -194,7 +194,7 @@ def test_at_a_harbour_s_end_with_the_stop_still_drifting_in_the_station_is_held(
     # the harbour is swum, and at its end the stop drifts into the disc again; with the
     # harbours used up, the robot holds station there instead of stopping
     world = parse_world(disc_world(0.03), "disc")
-    planner = Planner(world, ROBOT, MODEL)
+    planner = Planner(world, ROBOT, MODEL, arrival_stop=False)
     outcome = planner.plan()
     assert outcome.found, outcome.message
     nav = Blocked(lambda extra: planner, planner, outcome, PATH_GAIT, lookahead_s=0.0,
@@ -214,7 +214,7 @@ def test_after_a_failed_pause_the_final_stop_that_drifts_in_holds_station_swimmi
     # seen still 60 mm from it, the goal up the tank: the pause's drift keeps clear, its rest
     # replan is refused, and the final stop would drift into the disc; with no harbour, the
     # gait is swum again to hold station
-    planner = Planner(up_world(), ROBOT, MODEL)
+    planner = Planner(up_world(), ROBOT, MODEL, arrival_stop=False)
     outcome = planner.plan()
     assert outcome.found, outcome.message
 

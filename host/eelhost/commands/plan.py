@@ -139,6 +139,12 @@ def add_check_options(p: argparse.ArgumentParser) -> None:
                    help="every check run must keep the body this far from everything (default "
                    f"{CHECK_MARGIN_M} m: plans checked merely clear touched in fresh draws; 0 "
                    "for clear alone; docs/planning.md, \"The planner\")")
+    p.add_argument("--arrival-stop-check", dest="arrival_stop",
+                   action=argparse.BooleanOptionalAction, default=True,
+                   help="judge each check run that arrives on through the tank's stop there, "
+                   "its 3 s brake and the glide after it, with the check's margin (default: "
+                   "%(default)s; --no-arrival-stop-check: the run ends where it enters the goal "
+                   "disc; docs/planning.md, \"The arrival's stop in the check\")")
     p.add_argument("--robust-search", action="store_true",
                    help="also swim every leg of the search in the unknown current (fewer plans "
                    "fail their check, about 4 times the search's time)")
@@ -189,6 +195,7 @@ def planner_options(args: argparse.Namespace) -> dict:
             "seed": getattr(args, "check_seed", 0),
             "check_margin_m": getattr(args, "check_margin", CHECK_MARGIN_M),
             "robust_search": getattr(args, "robust_search", False),
+            "arrival_stop": getattr(args, "arrival_stop", True),
             "guidance": guidance_choice(getattr(args, "guidance", PURSUIT.name))}
 
 
@@ -350,7 +357,7 @@ def _bench(args: argparse.Namespace, robot: Robot, model: CoefficientModel,
     options = LoopOptions(guidance=laws_of(guidance)[0])
     summary = run_bench(robot, model, args.worlds, args.seed, args.threads, progress,
                         max(args.jobs, 1), args.unknown_current, guidance, swimmer,
-                        args.budget, args.check_margin)
+                        args.budget, args.check_margin, args.arrival_stop)
     lines = summary.lines()
     lines += ["- action coverage (successful actions per current direction relative to the "
               "heading):"]

@@ -174,6 +174,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="with --plan or --bench: the unknown current the planner's check "
                    "allows for, as eelbot plan's --unknown-current (default: the planner's, "
                    "0.02 m/s); a --bench world's water still has up to 0.02 m/s")
+    b.add_argument("--arrival-stop-check", dest="arrival_stop",
+                   action=argparse.BooleanOptionalAction, default=True,
+                   help="with --plan or --bench: the planner's check judges each run that "
+                   "arrives on through the arrival's stop, its brake and glide, as eelbot "
+                   "plan's (default: %(default)s; --no-arrival-stop-check: the run ends where "
+                   "it enters the goal disc)")
     b.add_argument("--write", nargs="?", const="docs/planning.md", metavar="FILE",
                    help="with --bench, also rewrite its section of FILE (bare: docs/planning.md)")
     p.set_defaults(run=run)
@@ -236,6 +242,8 @@ def _planner_options(args: argparse.Namespace) -> dict:
     ``--check-unknown-current`` is given (else the planner's default).
     """
     options: dict = {"guidance": guidance_choice(args.guidance)}
+    if not args.arrival_stop:
+        options["arrival_stop"] = False
     if args.check_unknown_current is not None:
         options["unknown_current_m_s"] = args.check_unknown_current
     return options
@@ -402,6 +410,7 @@ def _bench(args: argparse.Namespace) -> int:
                                         brake_s=_brake_s(args), harbour=args.harbour,
                                         station=args.station)
     command = (f"nice eelbot run --bench --worlds {args.worlds} --seed {args.seed}"
+               + ("" if args.arrival_stop else " --no-arrival-stop-check")
                + ("" if args.check_unknown_current is None
                   else f" --check-unknown-current {args.check_unknown_current:g}")
                + (f" --coefficients-file {args.coefficients_file}" if args.coefficients_file

@@ -191,7 +191,8 @@ def bench_world(world: World, robot: Robot, coefficients: CoefficientModel, seed
                 guidance: GuidanceChoice = PURSUIT,
                 swimmer: SwimmerModel | None = None,
                 budget_s: float | None = None,
-                check_margin_m: float = CHECK_MARGIN_M) -> WorldResult:
+                check_margin_m: float = CHECK_MARGIN_M,
+                arrival_stop: bool = True) -> WorldResult:
     """Plan in one world and swim the plan in fresh draws of the water (module docstring).
 
     Parameters
@@ -217,6 +218,9 @@ def bench_world(world: World, robot: Robot, coefficients: CoefficientModel, seed
     check_margin_m : float
         The check's margin (:data:`eelhost.planning.planner.CHECK_MARGIN_M`); the fresh draws
         are judged by contact alone, whatever it is.
+    arrival_stop : bool
+        The planner's check judges the arrival's stop (:class:`Planner`'s ``arrival_stop``); the
+        fresh draws swim it either way.
 
     Returns
     -------
@@ -229,7 +233,8 @@ def bench_world(world: World, robot: Robot, coefficients: CoefficientModel, seed
         nonlocal deadline
         made = Planner(world, robot, coefficients, threads=threads, seed=seed,
                        unknown_current_m_s=unknown_current_m_s, guidance=law,
-                       swimmer=swimmer, check_margin_m=check_margin_m)
+                       swimmer=swimmer, check_margin_m=check_margin_m,
+                       arrival_stop=arrival_stop)
         if deadline is None and budget_s is not None:  # one deadline for every law tried
             deadline = time.monotonic() + budget_s
         return made
@@ -249,7 +254,9 @@ def bench_world(world: World, robot: Robot, coefficients: CoefficientModel, seed
     # the fresh draws keep the lattice of directions the benchmark has always judged with
     draws = coefficients.water_draws(np.random.default_rng(seed + AUDIT_SEED_OFFSET),
                                      BENCH_DRAWS, unknown_current_m_s, LATTICE)
-    runs = planner.swim_waters(outcome.plan, draws)
+    # judged through the arrival's stop whether or not the check was (docs/planning.md, "The
+    # arrival's stop in the check")
+    runs = planner.swim_waters(outcome.plan, draws, through_stop=True)
     gaps = [float(body_gaps_m(planner.world, planner.model, r.states).min()) for r in runs]
     result.reached = all(r.reached for r in runs)
     result.collision = min(gaps) <= 0.0
@@ -264,18 +271,19 @@ def bench_world(world: World, robot: Robot, coefficients: CoefficientModel, seed
 def _warm_up(robot: Robot, coefficients: CoefficientModel, seed: int,
              threads: int | None, unknown_current_m_s: float, guidance: GuidanceChoice,
              swimmer: SwimmerModel | None = None,
-             check_margin_m: float = CHECK_MARGIN_M) -> None:
+             check_margin_m: float = CHECK_MARGIN_M, arrival_stop: bool = True) -> None:
     """Load the batched kernel, measure the swimming speed and the check's cost (not timed)."""
     bench_world(generate_world(seed), robot, coefficients, seed, threads, unknown_current_m_s,
-                guidance, swimmer, check_margin_m=check_margin_m)
+                guidance, swimmer, check_margin_m=check_margin_m, arrival_stop=arrival_stop)
 
 
 def _one(robot: Robot, coefficients: CoefficientModel, seed: int,
          threads: int | None, unknown_current_m_s: float, guidance: GuidanceChoice,
          swimmer: SwimmerModel | None = None, budget_s: float | None = None,
-         check_margin_m: float = CHECK_MARGIN_M) -> WorldResult:
+         check_margin_m: float = CHECK_MARGIN_M, arrival_stop: bool = True) -> WorldResult:
     return bench_world(generate_world(seed), robot, coefficients, seed, threads,
-                       unknown_current_m_s, guidance, swimmer, budget_s, check_margin_m)
+                       unknown_current_m_s, guidance, swimmer, budget_s, check_margin_m,
+                       arrival_stop)
 
 
 def run_bench(
@@ -291,6 +299,7 @@ def run_bench(
     swimmer: SwimmerModel | None = None,
     budget_s: float | None = None,
     check_margin_m: float = CHECK_MARGIN_M,
+    arrival_stop: bool = True,
 ) -> BenchSummary:
     """Run the benchmark over ``count`` generated worlds (seeds ``seed`` .. ``seed + count - 1``).
 
@@ -318,6 +327,8 @@ def run_bench(
         (:func:`bench_world`). Default: none.
     check_margin_m : float
         The check's margin (:func:`bench_world`).
+    arrival_stop : bool
+        The planner's check judges the arrival's stop (:class:`Planner`'s ``arrival_stop``).
 
     Returns
     -------
@@ -329,10 +340,10 @@ def run_bench(
         swimmer = coefficients.swimmer_for(robot)
     if jobs <= 1:
         _warm_up(robot, coefficients, seed + count, threads, unknown_current_m_s, guidance,
-                 swimmer, check_margin_m)
+                 swimmer, check_margin_m, arrival_stop)
         results: Iterable[WorldResult] = (_one(robot, coefficients, s, threads,
                                                unknown_current_m_s, guidance, swimmer,
-                                               budget_s, check_margin_m)
+                                               budget_s, check_margin_m, arrival_stop)
                                           for s in seeds)
         _collect(summary, results, progress)
         return summary
@@ -341,9 +352,10 @@ def run_bench(
                              initializer=_warm_up,
                              initargs=(robot, coefficients, seed + count, threads,
                                        unknown_current_m_s, guidance, swimmer,
-                                       check_margin_m)) as pool:
+                                       check_margin_m, arrival_stop)) as pool:
         results = pool.map(_one, *zip(*[(robot, coefficients, s, threads, unknown_current_m_s,
-                                         guidance, swimmer, budget_s, check_margin_m)
+                                         guidance, swimmer, budget_s, check_margin_m,
+                                         arrival_stop)
                                         for s in seeds],
                                       strict=True))
         _collect(summary, results, progress)

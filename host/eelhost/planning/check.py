@@ -32,17 +32,23 @@ from collections.abc import Callable, Sequence
 from typing import SupportsFloat
 
 import numpy as np
+import numpy.typing as npt
 
 from eelhost.planning.body import link_endpoints
 from eelhost.planning.execute import Swim, _body_clearance
 from eelhost.planning.field import ClearanceField
 from eelhost.planning.geometry import FloatArray
+from eelhost.planning.harbour import StopWindow, stop_states
 from eelhost.planning.search import Guide, Plan, SwimCost, goal_mask, leg_start_guide
 from eelhost.planning.twin import Twin
 from eelhost.planning.uncertainty import WaterDraw
 from eelhost.planning.world import World
 from eelsim.dynamics import straight_state
 from eelsim.model import SwimmerModel
+
+ARRIVAL_STOP_STRIDE = 3
+"""Physics steps between the judged samples of an arrival's stop (the harbour's stride: a body
+drifting at under 0.1 m/s moves under 0.3 mm between them)."""
 
 LEG_TIME_FACTOR = 3.0
 """A check run's time limit for a leg, as a multiple of the time the search's run took."""
@@ -153,6 +159,7 @@ def swim_legs(
     clock: Callable[[], float] = time.monotonic,
     cost: SwimCost | None = None,
     margin_m: float = 0.0,
+    arrival_stop: StopWindow | None = None,
 ) -> list[Swim]:
     """Swim a plan leg by leg in each water and judge each run (module docstring).
 
@@ -189,6 +196,14 @@ def swim_legs(
         The check's margin, m: a run that reaches the goal without contact but whose body comes
         within this of anything gets ``failed_leg``, the leg of its first such step (default 0:
         only contact and a missed goal).
+    arrival_stop : StopWindow, optional
+        The stop the tank makes on arriving (the final Stop's brake and the glide after it):
+        each run that reaches the goal swims it on from its first state in the goal disc, in
+        its own water (its straight set and current), and is judged through it as through its
+        legs; its states are appended to the run's (every :data:`ARRIVAL_STOP_STRIDE` steps),
+        and a stop that touches or comes within the margin fails the run on the last leg
+        (docs/planning.md, "The arrival's stop in the check"). Default: none (the run ends in
+        the goal disc).
 
     Returns
     -------
@@ -223,6 +238,7 @@ def swim_legs(
     reached = np.zeros(r, dtype=bool)
     missed_leg: list[int | None] = [None] * r
     reasons = [""] * r
+    arrived_at = np.zeros(r, dtype=np.int64)
     last = len(plan.legs) - 1
     for k, leg in enumerate(plan.legs):
         if not live:
@@ -230,8 +246,11 @@ def swim_legs(
         wps = [leg.waypoint_m] if k == 0 else [plan.legs[k - 1].waypoint_m, leg.waypoint_m]
         took = max(leg.end_step - leg.start_step, period) * twin.dt_s
         if deadline_s is not None:
-            # the leg's batch as the search swam it, in every live water
-            need = cost.predict_s(len(live) * took / twin.dt_s) or 0.0
+            # the leg's batch as the search swam it, in every live water (the last with the
+            # arrival's stop after it)
+            extra = (arrival_stop_s(arrival_stop) if k == last and arrival_stop is not None
+                     else 0.0)
+            need = cost.predict_s(len(live) * (took + extra) / twin.dt_s) or 0.0
             if clock() + need > float(deadline_s):
                 raise CheckOutOfTime(
                     f"the check stopped at its deadline before leg {k + 1} of "
@@ -255,6 +274,7 @@ def swim_legs(
                 inside = np.flatnonzero(goal_mask(world, path[:, n : n + 2]))
                 cut = int(inside[0]) + 1 if inside.size else end + 1
                 reached[i] = bool(inside.size)
+                arrived_at[i] = int(steps[i]) + cut - 1
             else:
                 arrival = int(runs.arrival_step[j])
                 restart = ((arrival - warm) // period) * period
@@ -274,11 +294,29 @@ def swim_legs(
                 steps[i] += cut
                 still.append(i)
         live = still
+    stop_steps: list[int] = []
+    stops = _arrival_stops(runner, currents, pieces, reached, arrived_at, arrival_stop,
+                           stop_steps)
+    run_steps += sum(stop_steps)
     out = []
     goal = np.asarray(world.goal.position_m)
     t0 = start_step * twin.dt_s
     for i, w in enumerate(waters):
         run_states = np.concatenate(pieces[i])
+        swum = len(run_states)
+        times = t0 + np.arange(swum) * twin.dt_s
+        if stops is not None and reached[i]:
+            stop = stops[i]
+            ended = not np.isfinite(stop[:, 0]).all()
+            stop = stop[np.isfinite(stop[:, 0])]
+            if ended:
+                # the twin ended the stop early (a flag): nothing after it is judged
+                missed_leg[i], reasons[i] = last, "the arrival's stop ended early in the twin"
+                reached[i] = False
+            run_states = np.concatenate([run_states, stop[1:]])
+            times = np.concatenate([times, times[-1] + np.arange(1, len(stop))
+                                    * ARRIVAL_STOP_STRIDE * twin.dt_s])
+            leg_of[i] += [last] * (len(stop) - 1)
         com = run_states[:, n : n + 2]
         clear = judged_clearance_m(world, clearance, model, run_states, margin_m)
         touching = np.flatnonzero(clear <= 0.0)
@@ -290,15 +328,48 @@ def swim_legs(
         out.append(Swim(
             label=w.label,
             reached=bool(reached[i]),
-            goal_time_s=t0 + (len(run_states) - 1) * twin.dt_s if reached[i] else None,
+            goal_time_s=t0 + (swum - 1) * twin.dt_s if reached[i] else None,
             collision_free=first is None,
             min_clearance_m=float(clear.min()),
-            first_collision_s=None if first is None else t0 + first * twin.dt_s,
+            first_collision_s=None if first is None else float(times[first]),
             goal_distance_m=float(np.hypot(*(com - goal).T).min()),
             failed_leg=failed,
             reason=reasons[i],
-            t_s=np.asarray(t0 + np.arange(len(run_states)) * twin.dt_s, dtype=np.float64),
+            t_s=np.asarray(times, dtype=np.float64),
             states=run_states,
         ))
     cost.record(run_steps, clock() - started)
+    return out
+
+
+def arrival_stop_s(window: StopWindow) -> float:
+    """How long an arrival's stop is swum: its brake and the glide after it, s."""
+    return float(window.unbrake(0.0)) + float(window.after_s)
+
+
+def _arrival_stops(runner: Twin, currents: Sequence[tuple[float, float]],
+                   pieces: Sequence[Sequence[FloatArray]], reached: npt.NDArray[np.bool_],
+                   arrived_at: npt.NDArray[np.int64], window: StopWindow | None,
+                   swum: list[int]) -> FloatArray | None:
+    """Every arriving run's stop from its first state in the goal disc, in its own water.
+
+    The stop the tank's replanner judges before its final stop
+    (:func:`eelhost.planning.harbour.stop_states`: the brake's frozen S, then the straight
+    body), swum in one batch per part with each water's straight set and current; the
+    run-steps swum are appended to ``swum`` (the check's cost).
+
+    Returns
+    -------
+    ndarray, shape (R, S, 2 N + 4), or None
+        Row i is NaN for a run that did not arrive; None without a window or an arrival.
+    """
+    rows = np.flatnonzero(reached)
+    if window is None or not rows.size:
+        return None
+    starts = np.stack([pieces[int(i)][-1][-1] for i in rows])
+    times = arrived_at[rows].astype(np.float64) * runner.dt_s
+    got = stop_states(runner, runner.gait, starts, times, window, ARRIVAL_STOP_STRIDE, coefficient_index=[2 * int(i) for i in rows],
+                      currents=[currents[int(i)] for i in rows], swum=swum)
+    out = np.full((len(reached), *got.shape[1:]), np.nan)
+    out[rows] = got
     return out

@@ -19,7 +19,7 @@ and carries the harbour out.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import NamedTuple
 
 import numpy as np
@@ -87,8 +87,11 @@ class Harbour(NamedTuple):
     guide: Guide
 
 
-def stop_states(twin: Twin, gait: Gait, states: FloatArray, t_s: float, window: StopWindow,
-                stride: int) -> FloatArray:
+def stop_states(twin: Twin, gait: Gait, states: FloatArray, t_s: float | FloatArray,
+                window: StopWindow, stride: int,
+                coefficient_index: Sequence[int] | None = None,
+                currents: Sequence[tuple[float, float]] | None = None,
+                swum: list[int] | None = None) -> FloatArray:
     """The stops of bodies in ``states`` decided at ``t_s``: braked, then straight.
 
     Parameters
@@ -99,10 +102,20 @@ def stop_states(twin: Twin, gait: Gait, states: FloatArray, t_s: float, window: 
         The swimming gait (the brake freezes its phase at ``t_s``).
     states : ndarray, shape (K, 2 N + 4)
         The bodies at ``t_s``.
-    t_s : float
+    t_s : float or ndarray, shape (K,)
+        When the stops are decided (one time, or one per body: the planner's check swims each
+        run's arrival stop from its own arrival; each brake lasts as long as the first body's:
+        ``window.unbrake`` is then a fixed delay, as the final stop's).
     window : StopWindow
     stride : int
         Steps between the samples returned.
+    coefficient_index : sequence of int, optional
+        Per body, the twin's coefficient set (default the first).
+    currents : sequence of (vx, vy), optional
+        Per body, the water's current (default the twin's).
+    swum : list of int, optional
+        Where the run-steps the twin swam are appended (a swim cost's measure, as
+        :class:`eelhost.planning.search.SwimCost` counts them).
 
     Returns
     -------
@@ -112,11 +125,14 @@ def stop_states(twin: Twin, gait: Gait, states: FloatArray, t_s: float, window: 
     dt = twin.dt_s
     n = twin.n_links
     k = len(states)
-    t_unbrake = window.unbrake(t_s)
-    held = max(int(round((t_unbrake - t_s) / dt)), 0)
+    times = np.broadcast_to(np.asarray(t_s, dtype=float), (k,))
+    t_unbrake = window.unbrake(float(times[0]))
+    held = max(int(round((t_unbrake - float(times[0])) / dt)), 0)
     held -= held % stride  # the straight part starts on a sample
     after = int(round(window.after_s / dt))
-    now = int(round(t_s / dt))
+    nows = [int(round(t / dt)) for t in times]
+    index = None if coefficient_index is None else list(coefficient_index)
+    water = None if currents is None else list(currents)
     heading = np.mean(states[:, :n], axis=1)
     com = states[:, n : n + 2]
     # waypoints no drift reaches (the heading gain is 0: they steer nothing)
@@ -125,9 +141,14 @@ def stop_states(twin: Twin, gait: Gait, states: FloatArray, t_s: float, window: 
     parts = []
     start = np.asarray(states, dtype=float)
     if held > 0:
-        braked = stopped_twin(twin, braked_gait(gait, t_s))
-        runs = braked.run(far, (held + 2) * dt, states=start, start_steps=[now] * k,
-                          stride=stride)
+        # each body's brake freezes the gait's phase at its own decision (one batch: the frozen
+        # phases are per run)
+        braked = stopped_twin(twin, braked_gait(gait, float(times[0])))
+        runs = braked.run(far, (held + 2) * dt, states=start, start_steps=nows,
+                          stride=stride, coefficient_index=index, currents=water,
+                          phase_rad=[braked_gait(gait, float(t)).phase_rad for t in times])
+        if swum is not None:
+            swum.append(int(np.sum(runs.final_step + 1)))
         first = runs.states[:, : held // stride + 1]
         if first.shape[1] < held // stride + 1:
             pad = np.full((k, held // stride + 1 - first.shape[1], first.shape[2]), np.nan)
@@ -139,9 +160,14 @@ def stop_states(twin: Twin, gait: Gait, states: FloatArray, t_s: float, window: 
         rest = np.full((k, after // stride + 1, start.shape[1]), np.nan)
         if ok.any():
             straight = stopped_twin(twin)
-            runs = straight.run([far[j] for j in np.flatnonzero(ok)], (after + 2) * dt,
-                                states=start[ok], start_steps=[now + held] * int(ok.sum()),
-                                stride=stride)
+            rows = np.flatnonzero(ok)
+            runs = straight.run([far[j] for j in rows], (after + 2) * dt,
+                                states=start[ok], start_steps=[nows[j] + held for j in rows],
+                                stride=stride,
+                                coefficient_index=None if index is None else [index[j] for j in rows],
+                                currents=None if water is None else [water[j] for j in rows])
+            if swum is not None:
+                swum.append(int(np.sum(runs.final_step + 1)))
             got = runs.states[:, : after // stride + 1]
             rest[ok, : got.shape[1]] = got
         parts.append(rest)

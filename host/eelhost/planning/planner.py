@@ -58,10 +58,11 @@ import numpy as np
 
 from eelhost.errors import UserError
 from eelhost.planning.body import body_points
-from eelhost.planning.check import CHECK_COST, CheckOutOfTime, swim_legs
+from eelhost.planning.check import ARRIVAL_STOP_STRIDE, CHECK_COST, CheckOutOfTime, swim_legs
 from eelhost.planning.execute import Swim
 from eelhost.planning.field import GoalDistance, clearance_field, signed_clearance
 from eelhost.planning.geometry import FloatArray
+from eelhost.planning.harbour import FINAL_GLIDE_S, StopWindow, stop_states
 from eelhost.planning.memo import BoundedCache
 from eelhost.planning.search import Actions, Guide, Plan, Search, SearchSettings, SwimCost
 from eelhost.planning.twin import Twin
@@ -258,6 +259,17 @@ class PlanLengths:
 
 PLAN_LENGTHS = PlanLengths()
 """The process's record of found plans' lengths, shared by every planner (replans' too)."""
+
+
+ARRIVAL_BRAKE_S = 3.0
+"""The brake before the run loop's final Stop with ``--plan`` and ``--bench``
+(``eelhost.field.runloop.BRAKE_S``, the replanner's ``STOP_BRAKE_S``; a test holds them equal):
+how the check swims the stop on arriving (docs/planning.md, "The arrival's stop in the check")."""
+
+
+def _after_arrival_brake(t_s: float) -> float:
+    """When the arrival's brake ends for a stop decided at ``t_s`` (:data:`ARRIVAL_BRAKE_S`)."""
+    return t_s + ARRIVAL_BRAKE_S
 
 
 def run_failed(run: Swim, margin_m: float = 0.0) -> bool:
@@ -532,6 +544,12 @@ class Planner:
         (:data:`CRAMPED_ACTIONS`). Off by default: on development seeds 28500-29499 it planned
         14 more worlds of 1000, and one of those 14 plans touched in the bench's fresh draws
         (docs/planning_history.md, "A wider turn from a cramped start").
+    arrival_stop : bool
+        Judge every check run that reaches the goal through the stop the tank makes on arriving
+        (:data:`ARRIVAL_BRAKE_S` of brake, then the straight body's glide,
+        :data:`eelhost.planning.harbour.FINAL_GLIDE_S`), in that run's own water, with the
+        check's margin (docs/planning.md, "The arrival's stop in the check"); False: the run
+        ends where it enters the goal disc, as until session 22.
     """
 
     def __init__(
@@ -556,6 +574,7 @@ class Planner:
         repair_draws: int | None = None,
         raise_on_repair: bool = True,
         cramped_start: bool = False,
+        arrival_stop: bool = True,
     ) -> None:
         world = coefficients.in_tank(world)
         robot = coefficients.robot_for(robot)
@@ -579,6 +598,10 @@ class Planner:
         if not check_margin_m >= 0.0:
             raise ValueError(f"check_margin_m: expected at least 0 m, got {check_margin_m!r}")
         self.check_margin_m = float(check_margin_m)
+        self.arrival_stop: StopWindow | None = (
+            StopWindow(_after_arrival_brake, FINAL_GLIDE_S) if arrival_stop else None)
+        """How the check swims each arriving run's stop (None: not swum)."""
+        self._stops: dict[tuple[bytes, int], FloatArray] = {}
         self.check_cost: SwimCost = CHECK_COST
         """The check's measured cost the deadline keeps free (:data:`check.CHECK_COST`, the
         process's, by default)."""
@@ -638,10 +661,43 @@ class Planner:
         # straight-line speed; a heuristic speed too low only makes the search greedier
         self.search = Search(world, self.twin, self.settings, self.clearance, route,
                              1.3 * fastest + world.current.speed_m_s)
+        if self.arrival_stop is not None:
+            self.search.goal_stop = self.arrival_stop_states
+            # the search's stop keeps the check's margin (its measure is the centre line's, so
+            # the half width on top), in the known water: the check then judges it in the draws
+            # (docs/planning.md, "The arrival's stop in the check")
+            self.search.goal_stop_margin_m = max(self.settings.margin_m,
+                                                 self.body_half_width_m + self.check_margin_m)
         self.cramped_start = bool(cramped_start)
         self._route = route
         self._ground_speed_m_s = 1.3 * fastest + world.current.speed_m_s
         self._cramped_search: Search | None = None
+
+    def arrival_stop_states(self, state: FloatArray, step: int) -> FloatArray:
+        """The arrival's stop from ``state`` at ``step`` in the known water, as the check swims it.
+
+        The twin's straight fit in the world's current (the search's water), the stop of
+        :attr:`arrival_stop` (:func:`eelhost.planning.harbour.stop_states`), sampled every
+        :data:`eelhost.planning.check.ARRIVAL_STOP_STRIDE` steps; the search's goal test
+        (:attr:`Search.goal_stop`). The same state and step give the same stop: kept per planner.
+
+        Parameters
+        ----------
+        state : ndarray, shape (2 N + 4,)
+        step : int
+
+        Returns
+        -------
+        ndarray, shape (S, 2 N + 4)
+        """
+        window = self.arrival_stop or StopWindow(_after_arrival_brake, FINAL_GLIDE_S)
+        key = (np.asarray(state, dtype=float).tobytes(), int(step))
+        if key not in self._stops:
+            self._stops[key] = stop_states(self.twin, self.twin.gait,
+                                           np.asarray(state, dtype=float)[None],
+                                           step * self.twin.dt_s, window,
+                                           ARRIVAL_STOP_STRIDE)[0]
+        return self._stops[key]
 
     def cramped_search(self) -> Search:
         """The search whose first legs take the cramped start's wider turns (:data:`CRAMPED_ACTIONS`).
@@ -658,6 +714,8 @@ class Planner:
             self._cramped_search = Search(self.world, self.twin, settings, self.clearance,
                                           self._route, self._ground_speed_m_s)
         self._cramped_search.clock = self.search.clock
+        self._cramped_search.goal_stop = self.search.goal_stop
+        self._cramped_search.goal_stop_margin_m = self.search.goal_stop_margin_m
         return self._cramped_search
 
     @property
@@ -1058,7 +1116,8 @@ class Planner:
         return self._waters[attempt]
 
     def swim_waters(self, plan: Plan, waters: list[WaterDraw], state: FloatArray | None = None,
-                    step: int = 0, deadline_s: SupportsFloat | None = None) -> list[Swim]:
+                    step: int = 0, deadline_s: SupportsFloat | None = None,
+                    through_stop: bool | None = None) -> list[Swim]:
         """Swim a plan leg by leg in each water, as the search swam it, and judge each run.
 
         Parameters
@@ -1071,15 +1130,23 @@ class Planner:
         deadline_s : float, optional
             A time on :attr:`clock` (:func:`eelhost.planning.check.swim_legs`; it raises
             :class:`eelhost.planning.check.CheckOutOfTime` when it stops there).
+        through_stop : bool, optional
+            Swim each arriving run on through the arrival's stop (True), or end it in the goal
+            disc (False); default the planner's :attr:`arrival_stop` (the bench's fresh draws
+            swim it whatever the check did, so both arms are judged alike).
 
         Returns
         -------
         list of Swim
         """
+        window = self.arrival_stop
+        if through_stop is not None:
+            window = StopWindow(_after_arrival_brake, FINAL_GLIDE_S) if through_stop else None
         legs = [self.search.leg_coefficients(leg.goal, leg.bearing_deg) for leg in plan.legs]
         return swim_legs(self.world, plan, self.twin, self.model, waters, legs, self.clearance,
                          state, step, deadline_s=deadline_s, clock=self.clock,
-                         cost=self.check_cost, margin_m=self.check_margin_m)
+                         cost=self.check_cost, margin_m=self.check_margin_m,
+                         arrival_stop=window)
 
     def check_plan(self, plan: Plan, state: FloatArray | None = None, step: int = 0,
                    waters: list[WaterDraw] | None = None, deadline_s: SupportsFloat | None = None

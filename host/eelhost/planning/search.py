@@ -445,6 +445,14 @@ class Search:
         # extra m); the memo keys of the children swum while some were set (clear_raised)
         self._raised = np.zeros((0, 3))
         self._memo_raised: set[tuple] = set()
+        self.goal_stop: Callable[[FloatArray, int], FloatArray] | None = None
+        """The arrival's stop from a goal node's state and step: its samples, shape (S, 2 N + 4)
+        (the planner's, :meth:`eelhost.planning.planner.Planner.arrival_stop_states`); a goal
+        node whose stop comes within the margin is passed over. None: the goal test ends in the
+        disc."""
+        self.goal_stop_margin_m: float | None = None
+        """The clearance (the search's measure) the arrival's stop must keep; None: the hard
+        margin, as the legs."""
 
     # -- pieces ----------------------------------------------------------------------------------
 
@@ -607,14 +615,20 @@ class Search:
 
         NaN after a run's end; less the field's and the point sampling's error.
         """
+        r, k, _ = runs.states.shape
+        return self.state_clearances(runs.states.reshape(r * k, -1)).reshape(r, k)
+
+    def state_clearances(self, flat: FloatArray) -> FloatArray:
+        """:meth:`_clearances` of states, shape (K, 2 N + 4) to (K,); NaN where a state is NaN.
+
+        The measure the search's margin applies to (the arrival's stop in the goal test too,
+        :attr:`goal_stop`).
+        """
         n = self.n
-        states = runs.states
-        r, k, _ = states.shape
-        flat = states.reshape(r * k, -1)
         live = np.flatnonzero(np.isfinite(flat[:, 0]))
-        out = np.full(r * k, np.nan)
+        out = np.full(len(flat), np.nan)
         if not live.size:
-            return out.reshape(r, k)
+            return out
         # every body point is within reach_m of the centre of mass: where the centre of mass is
         # far enough from everything, that bound is all the search needs (and is what it keeps)
         far = self.clearance(flat[live, n : n + 2]) - self.clearance.error_m - self.reach_m
@@ -629,7 +643,7 @@ class Search:
             part = near[lo : lo + CLEARANCE_CHUNK]
             pts = body_points(self.model, flat[part], self.settings.per_link)
             out[part] = (self.clearance(pts) - self.raised_m(pts)).min(axis=1) - self._slack_m
-        return out.reshape(r, k)
+        return out
 
     def raised_m(self, points: FloatArray) -> FloatArray:
         """How much the margin is raised at ``points`` (:meth:`raise_margin`), m; shape (...)."""
@@ -754,6 +768,21 @@ class Search:
                      parent.g + restart * self.twin.dt_s + soft, -1, leg, self._key(wp, psi),
                      guide=guide)
 
+    def _stop_clear(self, node: _Node) -> bool:
+        """The arrival's stop from a goal node keeps the search's margin (:attr:`goal_stop`).
+
+        True without :attr:`goal_stop`; False for a stop the twin ended early. Judged with the
+        search's own measure and margin, as its legs (docs/planning.md, "The arrival's stop in
+        the check").
+        """
+        if self.goal_stop is None:
+            return True
+        stop = self.goal_stop(node.state, node.step)
+        if not np.isfinite(stop[:, 0]).all():
+            return False
+        floor = self.settings.margin_m if self.goal_stop_margin_m is None else self.goal_stop_margin_m
+        return bool(np.all(self.state_clearances(stop) >= floor))
+
     def _margin(self, parent: _Node, samples: int, stride: int) -> FloatArray:
         """The margin each of a leg's ``samples`` keeps (:attr:`SearchSettings.start_ramp_s`)."""
         s = self.settings
@@ -873,10 +902,12 @@ class Search:
                 _, _, ni = heapq.heappop(heap)
                 node = nodes[ni]
                 if node.goal:
-                    if not batch:
+                    if batch:
+                        heapq.heappush(heap, (node.g, -1, ni))  # pop it after this batch
+                    elif self._stop_clear(node):
                         found = ni
                     else:
-                        heapq.heappush(heap, (node.g, -1, ni))  # pop it after this batch
+                        continue  # its arrival's stop comes within the margin: search on
                     break
                 if node.key in closed:
                     continue

@@ -236,6 +236,7 @@ class Twin:
         starts: Sequence[tuple[float, float, float]] | None = None,
         currents: Sequence[tuple[float, float]] | None = None,
         guidance: Sequence[Sequence[float]] | None = None,
+        phase_rad: Sequence[float] | None = None,
     ) -> Runs:
         """Run R closed-loop manoeuvres at once.
 
@@ -263,6 +264,10 @@ class Twin:
             where the leg to its first waypoint starts and the ILOS integral vector, as the run
             it continues left them (:meth:`Runs.guidance_state`). Default: the first leg from
             the first filtered pose, the integral zero. Only the ILOS law reads it.
+        phase_rad : sequence of R floats, optional
+            Each run's gait phase in place of the gait's own ``phase_rad`` (the braked robots of
+            the planner's arrival stops, each frozen at its own phase; docs/planning.md, "The
+            arrival's stop in the check"). Default: the gait's for every run.
 
         Returns
         -------
@@ -284,14 +289,16 @@ class Twin:
         g = self.gait
         t0 = (np.zeros(r) if start_steps is None
               else np.asarray(start_steps, dtype=float) * self.dt_s)
-        if np.any(t0 != 0) or g.phase_rad != 0.0:
+        own = (np.full(r, g.phase_rad) if phase_rad is None
+               else np.asarray(phase_rad, dtype=float))
+        if np.any(t0 != 0) or np.any(own != 0.0):
             # the kernel's gait phase is omega t + (j - 1) beta from its own t = 0: a run started
             # later, or a gait with a phase of its own (a braked robot's frozen one), carries the
             # difference in the per-joint phase rows
             params = spec.params.copy()
             n = self.n_links
             phase = (np.arange(n - 1)[None, :] * g.beta_rad
-                     + g.omega_rad_s * t0[:, None] + g.phase_rad)
+                     + g.omega_rad_s * t0[:, None] + own[:, None])
             params[:, self._rows("cos_beta", n - 1)] = np.cos(phase)
             params[:, self._rows("sin_beta", n - 1)] = np.sin(phase)
             changes["params"] = params
