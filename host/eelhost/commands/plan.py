@@ -73,6 +73,23 @@ BENCH_BEGIN = "<!-- bench: begin (written by eelbot plan --bench) -->"
 BENCH_END = "<!-- bench: end -->"
 
 
+def add_arrival_stop_option(p: argparse.ArgumentParser, when: str = "") -> None:
+    """Add ``--arrival-stop-check/--no-arrival-stop-check`` (``eelbot plan``'s and ``run``'s).
+
+    Parameters
+    ----------
+    p : argparse.ArgumentParser
+    when : str
+        Where the option applies, put before its help (``run``'s: "with --plan or --bench: ").
+    """
+    p.add_argument("--arrival-stop-check", dest="arrival_stop",
+                   action=argparse.BooleanOptionalAction, default=True,
+                   help=f"{when}the planner's check judges each run that arrives on through the "
+                   "tank's stop there, its 3 s brake and the glide after it, with the check's "
+                   "margin (default: %(default)s; --no-arrival-stop-check: the run ends where it "
+                   "enters the goal disc; docs/planning.md, \"The arrival's stop in the check\")")
+
+
 @COMMANDS.add("plan", "plan a path the twin swims without collision, or benchmark the planner")
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register the subcommand."""
@@ -139,12 +156,7 @@ def add_check_options(p: argparse.ArgumentParser) -> None:
                    help="every check run must keep the body this far from everything (default "
                    f"{CHECK_MARGIN_M} m: plans checked merely clear touched in fresh draws; 0 "
                    "for clear alone; docs/planning.md, \"The planner\")")
-    p.add_argument("--arrival-stop-check", dest="arrival_stop",
-                   action=argparse.BooleanOptionalAction, default=True,
-                   help="judge each check run that arrives on through the tank's stop there, "
-                   "its 3 s brake and the glide after it, with the check's margin (default: "
-                   "%(default)s; --no-arrival-stop-check: the run ends where it enters the goal "
-                   "disc; docs/planning.md, \"The arrival's stop in the check\")")
+    add_arrival_stop_option(p)
     p.add_argument("--robust-search", action="store_true",
                    help="also swim every leg of the search in the unknown current (fewer plans "
                    "fail their check, about 4 times the search's time)")

@@ -29,6 +29,7 @@ from eelhost.commands.link_options import add_link_options, resolve_link_options
 from eelhost.commands.plan import (
     AUTO_HELP,
     GUIDANCE_CHOICES,
+    add_arrival_stop_option,
     add_coefficient_model_option,
     describe_guidance,
     guidance_choice,
@@ -174,12 +175,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="with --plan or --bench: the unknown current the planner's check "
                    "allows for, as eelbot plan's --unknown-current (default: the planner's, "
                    "0.02 m/s); a --bench world's water still has up to 0.02 m/s")
-    b.add_argument("--arrival-stop-check", dest="arrival_stop",
-                   action=argparse.BooleanOptionalAction, default=True,
-                   help="with --plan or --bench: the planner's check judges each run that "
-                   "arrives on through the arrival's stop, its brake and glide, as eelbot "
-                   "plan's (default: %(default)s; --no-arrival-stop-check: the run ends where "
-                   "it enters the goal disc)")
+    add_arrival_stop_option(b, "with --plan or --bench: ")
     b.add_argument("--write", nargs="?", const="docs/planning.md", metavar="FILE",
                    help="with --bench, also rewrite its section of FILE (bare: docs/planning.md)")
     p.set_defaults(run=run)
