@@ -368,7 +368,9 @@ def _arrival_stops(runner: Twin, currents: Sequence[tuple[float, float]],
         return None
     starts = np.stack([pieces[int(i)][-1][-1] for i in rows])
     times = arrived_at[rows].astype(np.float64) * runner.dt_s
-    got = stop_states(runner, runner.gait, starts, times, window, ARRIVAL_STOP_STRIDE, coefficient_index=[2 * int(i) for i in rows],
+    # each water's straight set (:func:`water_twin`: index 2 i): a stopped body does not turn
+    got = stop_states(runner, runner.gait, starts, times, window, ARRIVAL_STOP_STRIDE,
+                      coefficient_index=[2 * int(i) for i in rows],
                       currents=[currents[int(i)] for i in rows], swum=swum)
     out = np.full((len(reached), *got.shape[1:]), np.nan)
     out[rows] = got

@@ -272,6 +272,14 @@ def _after_arrival_brake(t_s: float) -> float:
     return t_s + ARRIVAL_BRAKE_S
 
 
+ARRIVAL_STOP = StopWindow(_after_arrival_brake, FINAL_GLIDE_S)
+"""The stop the tank makes on arriving, as the check and the search swim it: the brake, then
+the straight body's glide (docs/planning.md, "The arrival's stop in the check")."""
+
+ARRIVAL_STOPS_KEPT = 256
+"""The search's arrival stops a planner keeps, by state and step (one per goal node popped)."""
+
+
 def run_failed(run: Swim, margin_m: float = 0.0) -> bool:
     """A check run that fails: contact, the goal missed, or the body within ``margin_m``.
 
@@ -598,10 +606,9 @@ class Planner:
         if not check_margin_m >= 0.0:
             raise ValueError(f"check_margin_m: expected at least 0 m, got {check_margin_m!r}")
         self.check_margin_m = float(check_margin_m)
-        self.arrival_stop: StopWindow | None = (
-            StopWindow(_after_arrival_brake, FINAL_GLIDE_S) if arrival_stop else None)
+        self.arrival_stop: StopWindow | None = ARRIVAL_STOP if arrival_stop else None
         """How the check swims each arriving run's stop (None: not swum)."""
-        self._stops: dict[tuple[bytes, int], FloatArray] = {}
+        self._stops: BoundedCache[FloatArray] = BoundedCache(ARRIVAL_STOPS_KEPT)
         self.check_cost: SwimCost = CHECK_COST
         """The check's measured cost the deadline keeps free (:data:`check.CHECK_COST`, the
         process's, by default)."""
@@ -690,14 +697,11 @@ class Planner:
         -------
         ndarray, shape (S, 2 N + 4)
         """
-        window = self.arrival_stop or StopWindow(_after_arrival_brake, FINAL_GLIDE_S)
-        key = (np.asarray(state, dtype=float).tobytes(), int(step))
-        if key not in self._stops:
-            self._stops[key] = stop_states(self.twin, self.twin.gait,
-                                           np.asarray(state, dtype=float)[None],
-                                           step * self.twin.dt_s, window,
-                                           ARRIVAL_STOP_STRIDE)[0]
-        return self._stops[key]
+        body = np.asarray(state, dtype=float)
+        return self._stops.get(
+            (body.tobytes(), int(step)),
+            lambda: stop_states(self.twin, self.twin.gait, body[None], step * self.twin.dt_s,
+                                ARRIVAL_STOP, ARRIVAL_STOP_STRIDE)[0])
 
     def cramped_search(self) -> Search:
         """The search whose first legs take the cramped start's wider turns (:data:`CRAMPED_ACTIONS`).
@@ -1141,7 +1145,7 @@ class Planner:
         """
         window = self.arrival_stop
         if through_stop is not None:
-            window = StopWindow(_after_arrival_brake, FINAL_GLIDE_S) if through_stop else None
+            window = ARRIVAL_STOP if through_stop else None
         legs = [self.search.leg_coefficients(leg.goal, leg.bearing_deg) for leg in plan.legs]
         return swim_legs(self.world, plan, self.twin, self.model, waters, legs, self.clearance,
                          state, step, deadline_s=deadline_s, clock=self.clock,
