@@ -101,7 +101,7 @@ def kernel_keys(name: str) -> set[tuple[int, int, str, str, str]]:
 
 
 def module_keys(names: Iterable[str]) -> set[tuple[int, int, str, str, str]]:
-    """The loader keys of kernel modules named as ``eelsim.batch.loading`` names their files.
+    """The loader keys of kernel modules named by ``eelsim.batch.loading.kernel_module_name``.
 
     ``n{N}_l{lanes}_{stage}_{law}`` with ``_{joint model}`` after it unless the model is the
     default; a name of another form is skipped.

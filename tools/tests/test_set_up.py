@@ -65,3 +65,13 @@ def test_a_kernel_modules_file_name_gives_its_loader_key():
                                         "eelsim_c_0f67ea4968ec8d8d", "n6_l16_c_morison.tmp12"])
     assert keys == {(6, 16, "c", "morison", "pd"), (6, 16, "c", "resistive_lift", "servo"),
                     (8, 16, "numba", "linear_quadratic", "pd_limited")}
+
+
+def test_every_listed_kernels_module_name_reads_back_as_its_key():
+    """The warm script's file-name reader is the inverse of the loader's naming."""
+    from eelsim.batch.loading import kernel_module_name
+
+    warm = _warm_kernels()
+    keys = warm.kernel_keys("tests") | warm.kernel_keys("main")
+    for key in keys:
+        assert warm.module_keys([kernel_module_name(*key)]) == {key}

@@ -175,6 +175,26 @@ def load_kernel_source(name: str, source: str) -> ModuleType:
     return importlib.import_module(full)
 
 
+def kernel_module_name(n_links: int, lanes: int, stage: str, law: str, joints: str) -> str:
+    """The name of a kernel variant's module and of its source file in :func:`kernel_cache_dir`.
+
+    ``n{N}_l{lanes}_{stage}_{law}``, then ``_{joints}`` unless the joint model is the default
+    (the default model's modules keep the names they had before joint models).
+
+    Parameters
+    ----------
+    n_links, lanes : int
+    stage, law, joints : str
+        The compiled stage (``c`` or ``numba``), the fluid law's and the joint model's names.
+
+    Returns
+    -------
+    str
+    """
+    suffix = "" if joints == DEFAULT_JOINT_MODEL else f"_{joints}"
+    return f"n{n_links}_l{lanes}_{stage}_{law}{suffix}"
+
+
 def kernel_module(n_links: int, lanes: int = DEFAULT_LANES, stage: str | None = None,
                   law: FluidLaw | str | None = None,
                   joints: JointModel | str | None = None) -> ModuleType:
@@ -219,9 +239,7 @@ def kernel_module(n_links: int, lanes: int = DEFAULT_LANES, stage: str | None = 
         warnings.warn(f"the batched kernel's C stage is unavailable, numba compiles it: {exc}",
                       RuntimeWarning, stacklevel=2)
         return kernel_module(n_links, lanes, "numba", fluid, model)
-    # (the default joint model's modules keep the names they had before joint models)
-    suffix = "" if model.name == DEFAULT_JOINT_MODEL else f"_{model.name}"
-    module = load_kernel_source(f"n{n_links}_l{lanes}_{chosen}_{fluid.name}{suffix}", source)
+    module = load_kernel_source(kernel_module_name(*key), source)
     _KERNELS[key] = module
     return module
 
