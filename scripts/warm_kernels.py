@@ -1,7 +1,9 @@
 """Compile batched-kernel variants into the kernel disk cache, two at a time.
 
-Each variant (links x fluid law x joint model x stage) takes 20-60 s to compile on first use.
-The main job needs thirty (its fits, and the model comparison's candidates: five laws and
+A variant is links x fluid law x joint model x stage. The first of the C stage's variants with N
+links takes about 30 s to compile on first use (numba compiles the driver, which every C variant
+with N links shares: ``eelsim.batch.loading.driver_module``), each further one 2-3 s (its C
+library), a numba-stage variant about 50 s (a whole module of its own). The main job needs thirty (its fits, and the model comparison's candidates: five laws and
 their lift variants, with either joint model, and with the PD loop on the servo line, which joins
 the comparison after its screen with the laws the screen ranks best), the test suite
 twenty-three (thirteen of them also the main job's), both read from the registries
@@ -180,20 +182,45 @@ def _warm_joint_model(n: int, stage: str, law: str, model: str) -> float:
     return time.perf_counter() - start
 
 
+def _rounds(variants: list[Variant]) -> list[list[Variant]]:
+    """The variants in two rounds: first the long compiles, then the rest.
+
+    The C stage's variants of one N share one driver, which numba compiles once (about 30 s;
+    ``eelsim.batch.loading.driver_module``); each of them alone is then its C library (2-3 s).
+    So the first round compiles one C variant per N (its driver) and the numba stage's (about
+    50 s each, a whole module each), the longest first, so that the last to end is a short one;
+    the second round the other C variants, whose drivers are then cached (two processes would
+    otherwise compile the same driver side by side).
+    """
+    from eelsim.batch import stage_backend
+
+    def stage(v: Variant) -> str:
+        chosen = v[1] or stage_backend()
+        return "numba" if chosen == "c" and stage_backend() != "c" else chosen
+
+    first: list[Variant] = []
+    drivers: set[int] = set()
+    for v in variants:
+        if stage(v) == "numba" or v[0] not in drivers:
+            first.append(v)
+            if stage(v) == "c":
+                drivers.add(v[0])
+    first.sort(key=lambda v: (stage(v) == "numba", v[0]), reverse=True)
+    return [first, [v for v in variants if v not in first]]
+
+
 def main() -> int:
     """Compile the named list's variants, JOBS processes at a time; a line per variant."""
     if len(sys.argv) < 2 or sys.argv[1] not in ("main", "tests"):
         print("usage: warm_kernels.py main|tests [JOBS]", file=sys.stderr)
         return 2
     variants = list(dict.fromkeys(variant_lists()[sys.argv[1]]))
-    # the longest first (the numba stage's, about 50 s each; then by N), so that the last to end
-    # is a short one and neither process waits long for the other at the end
-    variants.sort(key=lambda v: (v[1] == "numba", v[0]), reverse=True)
     jobs = int(sys.argv[2]) if len(sys.argv) > 2 else 2
     start = time.perf_counter()
     with ProcessPoolExecutor(max_workers=jobs) as pool:
-        for line in pool.map(_warm, variants):
-            print(f"kernels: {line}", flush=True)
+        for batch in _rounds(variants):
+            for line in pool.map(_warm, batch):
+                print(f"kernels: {line}", flush=True)
     print(f"kernels: {len(variants)} variants ready in {time.perf_counter() - start:.0f} s")
     return 0
 
