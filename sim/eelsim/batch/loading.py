@@ -12,6 +12,13 @@ Why a file and not closures: numba's disk cache keys compiled code on a function
 lanes must have constant bounds to vectorise), so each (N, lanes, ...) needs its own module
 text. The file is rewritten only when its text changes, so a second process finds the cache
 valid and loads in about half a second instead of compiling for a minute.
+
+With the C stage, all the generated functions are C (``C_FUNCTIONS``) and the numba code is the
+driver alone, the same for every fluid law and joint model: it is one more module,
+``driver_n{N}_l{lanes}_c`` (:func:`driver_module`), compiled and cached once per (N, lanes); a C
+variant's module holds its constants, its library's binding, and a ``run_blocks`` that runs the
+driver with the variant's rows and function addresses (:func:`bind_driver`). A new fluid law or
+joint model then costs its C compile (2-3 s), not numba's of the driver (about 30 s).
 """
 
 from __future__ import annotations
