@@ -209,6 +209,31 @@ def _rounds(variants: list[Variant]) -> list[list[Variant]]:
     return [first, [v for v in variants if v not in first]]
 
 
+def _c_library(variant: Variant) -> None:
+    """Compile a variant's C library (gcc; eelsim.batch.c_stage.build), or nothing without C.
+
+    The library is keyed on its C text, so the variant's own turn finds it; any failure is left
+    to that turn to report.
+    """
+    import eelhost.data  # noqa: F401  (registers the plant-only fluid laws, e.g. "foil")
+    from eelsim.batch import c_stage, codegen, loading
+    from eelsim.fluid import get_fluid_law
+    from eelsim.joints import get_joint_model, joint_model_of
+    from eelsim.robot import load_robot
+
+    n, _, law, robot = variant
+    if loading.stage_backend() != "c":
+        return
+    model = joint_model_of(load_robot(robot).joints).name if robot in ROBOTS else robot
+    layout = codegen.make_layout(n, loading.DEFAULT_LANES, get_fluid_law(law),
+                                 get_joint_model(model))
+    try:
+        c_stage.build(codegen.generate_stage_source(layout), loading.C_FUNCTIONS,
+                      loading.kernel_cache_dir())
+    except c_stage.CStageError:
+        pass
+
+
 def main() -> int:
     """Compile the named list's variants, JOBS processes at a time; a line per variant."""
     if len(sys.argv) < 2 or sys.argv[1] not in ("main", "tests"):
@@ -217,10 +242,18 @@ def main() -> int:
     variants = list(dict.fromkeys(variant_lists()[sys.argv[1]]))
     jobs = int(sys.argv[2]) if len(sys.argv) > 2 else 2
     start = time.perf_counter()
+    first, rest = _rounds(variants)
     with ProcessPoolExecutor(max_workers=jobs) as pool:
-        for batch in _rounds(variants):
-            for line in pool.map(_warm, batch):
-                print(f"kernels: {line}", flush=True)
+        long_ones = [pool.submit(_warm, v) for v in first]
+        # queued behind the long compiles: a process that is free while a driver still compiles
+        # compiles the C libraries of the second round (gcc only), which then only load
+        libraries = [pool.submit(_c_library, v) for v in rest if v[1] != "numba"]
+        for future in long_ones:
+            print(f"kernels: {future.result()}", flush=True)
+        for library in libraries:
+            library.result()
+        for line in pool.map(_warm, rest):
+            print(f"kernels: {line}", flush=True)
     print(f"kernels: {len(variants)} variants ready in {time.perf_counter() - start:.0f} s")
     return 0
 
