@@ -92,3 +92,19 @@ def test_the_first_round_compiles_each_driver_once_and_the_second_the_rest(monke
         assert sorted(v[0] for v in c_first) == sorted({v[0] for v in variants if v[1] != "numba"})
         assert all(v[1] != "numba" for v in rest)
         assert [v[1] == "numba" for v in first] == sorted(v[1] == "numba" for v in first)[::-1]
+
+
+def test_a_library_built_ahead_is_the_one_its_variant_then_loads(tmp_path, monkeypatch):
+    from eelsim.batch import loading
+    from eelsim.fluid import get_fluid_law
+    from eelsim.joints import get_joint_model
+
+    monkeypatch.setenv(loading.CACHE_ENV, str(tmp_path))
+    warm = _warm_kernels()
+    warm._c_library((6, "c", "galilean", "servo_robot.toml"))
+    built = sorted(tmp_path.glob("*.so"))
+    assert len(built) == 1
+    text = loading.kernel_source(6, loading.DEFAULT_LANES, "c", get_fluid_law("galilean"),
+                                 get_joint_model("servo"))
+    assert sorted(tmp_path.glob("*.so")) == built  # found, not compiled again
+    assert str(built[0]) in text
