@@ -5,7 +5,10 @@ This file is valid Python and is read as text: ``eelsim.batch.loading`` appends 
 codes, from ``eelsim.batch.codegen``) and writes the result to the kernel cache folder, where it is
 imported as ``eelsim.batch.kernels.<name>`` and numba compiles and caches it. The placeholders
 below are redefined by that later text before anything is compiled; importing this file on its
-own is useless.
+own is useless. When the generated functions are compiled as C, numba compiles this text once per
+(N, lanes) with only the constants that are the same for every fluid law and joint model
+(``loading.driver_module``): the rest arrives at run time in ``variant`` (below), and each
+variant's module runs that shared driver.
 
 What runs here, for a block of ``LANES`` runs advancing in lock step (one physics step at a time,
 so the time, the camera frame schedule and the sample steps are shared; runs that stopped are
