@@ -61,8 +61,9 @@ fi
 # 4. The twin's batched kernels of the set asked for (scripts/warm_kernels.py): `main`, the main
 # job's (its fits and the model comparison's candidates), or `tests`, the test suite's (the test
 # command needs only those: compiling the main job's thirty too cost it about five minutes),
-# compiled into the on-disk cache two at a time (20-50 s each the first time, under a second once
-# cached), so that the command does not pay for them; the stage compiled by the C compiler when
+# compiled into the on-disk cache two at a time (the first C variant of an N about 30 s: its
+# driver, which the others of that N share; they 2-3 s each; the numba stage's about 50 s; under
+# a second once cached), so that the command does not pay for them; the stage compiled by the C compiler when
 # there is one, else by numba. Loading a set's cached kernels to check them takes seconds of every
 # run; a stamp per set in the kernel cache folder (so that emptying the folder voids it) records
 # what they were built from: the twin's and the host's sources (the generator, the laws and joint

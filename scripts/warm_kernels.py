@@ -1,7 +1,9 @@
 """Compile batched-kernel variants into the kernel disk cache, two at a time.
 
-Each variant (links x fluid law x joint model x stage) takes 20-60 s to compile on first use.
-The main job needs thirty (its fits, and the model comparison's candidates: five laws and
+A variant is links x fluid law x joint model x stage. The first of the C stage's variants with N
+links takes about 30 s to compile on first use (numba compiles the driver, which every C variant
+with N links shares: ``eelsim.batch.loading.driver_module``), each further one 2-3 s (its C
+library), a numba-stage variant about 50 s (a whole module of its own). The main job needs thirty (its fits, and the model comparison's candidates: five laws and
 their lift variants, with either joint model, and with the PD loop on the servo line, which joins
 the comparison after its screen with the laws the screen ranks best), the test suite
 twenty-three (thirteen of them also the main job's), both read from the registries
@@ -180,19 +182,77 @@ def _warm_joint_model(n: int, stage: str, law: str, model: str) -> float:
     return time.perf_counter() - start
 
 
+def _rounds(variants: list[Variant]) -> list[list[Variant]]:
+    """The variants in two rounds: first the long compiles, then the rest.
+
+    The C stage's variants of one N share one driver, which numba compiles once (about 30 s;
+    ``eelsim.batch.loading.driver_module``); each of them alone is then its C library (2-3 s).
+    So the first round compiles one C variant per N (its driver) and the numba stage's (about
+    50 s each, a whole module each), the longest first, so that the last to end is a short one;
+    the second round the other C variants, whose drivers are then cached (two processes would
+    otherwise compile the same driver side by side).
+    """
+    from eelsim.batch import stage_backend
+
+    def stage(v: Variant) -> str:
+        chosen = v[1] or stage_backend()
+        return "numba" if chosen == "c" and stage_backend() != "c" else chosen
+
+    first: list[Variant] = []
+    drivers: set[int] = set()
+    for v in variants:
+        if stage(v) == "numba" or v[0] not in drivers:
+            first.append(v)
+            if stage(v) == "c":
+                drivers.add(v[0])
+    first.sort(key=lambda v: (stage(v) == "numba", v[0]), reverse=True)
+    return [first, [v for v in variants if v not in first]]
+
+
+def _c_library(variant: Variant) -> None:
+    """Compile a variant's C library (gcc; eelsim.batch.c_stage.build), or nothing without C.
+
+    The library is keyed on its C text, so the variant's own turn finds it; any failure is left
+    to that turn to report.
+    """
+    import eelhost.data  # noqa: F401  (registers the plant-only fluid laws, e.g. "foil")
+    from eelsim.batch import c_stage, codegen, loading
+    from eelsim.fluid import get_fluid_law
+    from eelsim.joints import get_joint_model, joint_model_of
+    from eelsim.robot import load_robot
+
+    n, _, law, robot = variant
+    if loading.stage_backend() != "c":
+        return
+    model = joint_model_of(load_robot(robot).joints).name if robot in ROBOTS else robot
+    layout = codegen.make_layout(n, loading.DEFAULT_LANES, get_fluid_law(law),
+                                 get_joint_model(model))
+    try:
+        c_stage.build(codegen.generate_stage_source(layout), loading.C_FUNCTIONS,
+                      loading.kernel_cache_dir())
+    except c_stage.CStageError:
+        pass
+
+
 def main() -> int:
     """Compile the named list's variants, JOBS processes at a time; a line per variant."""
     if len(sys.argv) < 2 or sys.argv[1] not in ("main", "tests"):
         print("usage: warm_kernels.py main|tests [JOBS]", file=sys.stderr)
         return 2
     variants = list(dict.fromkeys(variant_lists()[sys.argv[1]]))
-    # the longest first (the numba stage's, about 50 s each; then by N), so that the last to end
-    # is a short one and neither process waits long for the other at the end
-    variants.sort(key=lambda v: (v[1] == "numba", v[0]), reverse=True)
     jobs = int(sys.argv[2]) if len(sys.argv) > 2 else 2
     start = time.perf_counter()
+    first, rest = _rounds(variants)
     with ProcessPoolExecutor(max_workers=jobs) as pool:
-        for line in pool.map(_warm, variants):
+        long_ones = [pool.submit(_warm, v) for v in first]
+        # queued behind the long compiles: a process that is free while a driver still compiles
+        # compiles the C libraries of the second round (gcc only), which then only load
+        libraries = [pool.submit(_c_library, v) for v in rest if v[1] != "numba"]
+        for future in long_ones:
+            print(f"kernels: {future.result()}", flush=True)
+        for library in libraries:
+            library.result()
+        for line in pool.map(_warm, rest):
             print(f"kernels: {line}", flush=True)
     print(f"kernels: {len(variants)} variants ready in {time.perf_counter() - start:.0f} s")
     return 0

@@ -38,7 +38,7 @@ import numba
 import numpy as np
 
 from eelsim import batch
-from eelsim.batch import c_stage, codegen, loading
+from eelsim.batch import c_stage, codegen
 from eelsim.joints import JOINT_MODELS, get_joint_model
 
 _LABEL = re.compile(r"^(\.?[\w.$]+):")
@@ -94,7 +94,7 @@ def stage_assembly(n_links: int, lanes: int, stage: str) -> str:
     """
     if stage == "c":
         source = codegen.generate_stage_source(codegen.make_layout(n_links, lanes))
-        library, _ = c_stage.build(source, loading.C_FUNCTIONS, batch.kernel_cache_dir())
+        library, _ = c_stage.build(source, ("_stage",), batch.kernel_cache_dir())  # the stage alone
         compiler = c_stage.find_compiler() or "cc"
         flags = [f for f in c_stage.compile_flags(compiler) if f not in ("-shared", "-fPIC")]
         return subprocess.run([compiler, *flags, "-S", "-o", "-",

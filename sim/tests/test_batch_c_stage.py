@@ -194,3 +194,27 @@ def test_the_avx512_tuning_is_added_only_on_an_avx512_cpu_the_compiler_does_not_
     if tuned:  # the tuning right after -march=native, which it refines
         at = flags.index("-march=native")
         assert flags[at + 1 : at + 3] == c_stage.AVX512_TUNING
+
+
+def test_c_variants_with_as_many_links_share_one_driver_that_reads_no_law_of_its_own():
+    morison = batch.kernel_module(6, batch.DEFAULT_LANES, "c", "morison")
+    quadratic = batch.kernel_module(6, batch.DEFAULT_LANES, "c", "linear_quadratic")
+    assert morison._DRIVER is quadratic._DRIVER  # one driver, compiled once
+    driver = morison._DRIVER
+    assert driver.__name__.endswith(loading.driver_module_name(6, batch.DEFAULT_LANES))
+    # nothing of a law or joint model in it: those rows arrive with each variant's call
+    for name in ("FLUID_LAW", "JOINT_MODEL", "WORK_ROWS", "W_INERTIA", "W_LIMIT"):
+        assert name not in vars(driver), name
+    at = morison.V_WORK_ROWS  # (the template's indices, the same in every module)
+    assert morison._VARIANT[at] == morison.WORK_ROWS
+    assert quadratic._VARIANT[at] == quadratic.WORK_ROWS
+    assert morison.WORK_ROWS != quadratic.WORK_ROWS  # the laws' own rows differ
+    functions = slice(morison.V_STAGE, None)
+    assert (morison._VARIANT[functions] != quadratic._VARIANT[functions]).all()  # own libraries
+
+
+def test_a_variant_whose_layout_moved_a_row_the_driver_reads_is_refused():
+    module = batch.kernel_module(6, batch.DEFAULT_LANES, "c", "morison")
+    namespace = dict(vars(module), W_MU=module.W_MU + 1)  # a law's row put before mu
+    with pytest.raises(RuntimeError, match="the variant's W_MU = .* differs from the driver's"):
+        loading.bind_driver(namespace, "unused.so", {})

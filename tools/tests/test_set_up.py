@@ -75,3 +75,36 @@ def test_every_listed_kernels_module_name_reads_back_as_its_key():
     keys = warm.kernel_keys("tests") | warm.kernel_keys("main")
     for key in keys:
         assert warm.module_keys([kernel_module_name(*key)]) == {key}
+
+
+def test_the_first_round_compiles_each_driver_once_and_the_second_the_rest(monkeypatch):
+    from eelsim.batch import loading
+
+    warm = _warm_kernels()
+    monkeypatch.setattr(loading, "_C_UNAVAILABLE", [])  # the C stage, whatever this machine has
+    monkeypatch.setattr(loading.c_stage, "find_compiler", lambda: "cc")
+    for name in ("main", "tests"):
+        variants = list(dict.fromkeys(warm.variant_lists()[name]))
+        first, rest = warm._rounds(variants)
+        assert sorted(first + rest, key=repr) == sorted(variants, key=repr)  # each once
+        c_first = [v for v in first if v[1] != "numba"]
+        # one C variant per N in the first round (its driver), none of an N whose driver waits
+        assert sorted(v[0] for v in c_first) == sorted({v[0] for v in variants if v[1] != "numba"})
+        assert all(v[1] != "numba" for v in rest)
+        assert [v[1] == "numba" for v in first] == sorted(v[1] == "numba" for v in first)[::-1]
+
+
+def test_a_library_built_ahead_is_the_one_its_variant_then_loads(tmp_path, monkeypatch):
+    from eelsim.batch import loading
+    from eelsim.fluid import get_fluid_law
+    from eelsim.joints import get_joint_model
+
+    monkeypatch.setenv(loading.CACHE_ENV, str(tmp_path))
+    warm = _warm_kernels()
+    warm._c_library((6, "c", "galilean", "servo_robot.toml"))
+    built = sorted(tmp_path.glob("*.so"))
+    assert len(built) == 1
+    text = loading.kernel_source(6, loading.DEFAULT_LANES, "c", get_fluid_law("galilean"),
+                                 get_joint_model("servo"))
+    assert sorted(tmp_path.glob("*.so")) == built  # found, not compiled again
+    assert str(built[0]) in text

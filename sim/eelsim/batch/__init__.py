@@ -42,9 +42,11 @@ come from an O(N) articulated-body recursion rather than the dense mass matrix, 
 the finiteness checks and the condition-number bound at control updates are generated code too.
 Blocks are spread over the cores by numba's threads, each taking the next block from a shared
 counter when it finishes one (longest blocks first, so that the cores end together). The kernel
-module is generated once per (N, lanes, stage, fluid law) and compiled once: numba caches it on
-disk (next to the package in ``__pycache__``, or in ``$EELSIM_KERNEL_CACHE``) for every later
-process.
+module is generated once per (N, lanes, stage, fluid law, joint model) and compiled once: numba
+caches it on disk (next to the package in ``__pycache__``, or in ``$EELSIM_KERNEL_CACHE``) for
+every later process. With the C stage, the numba part (the driver) is one module per (N, lanes)
+that every fluid law and joint model shares (``loading.driver_module``): a variant is then its C
+library, compiled in 2-3 s, and the driver's 30 s are paid once per N.
 
 The generated RK4 stage (about 85 % of a step) is by default translated to C and compiled by the
 machine's C compiler (``eelsim.batch.c_stage``), whose schedule of its long straight-line loops

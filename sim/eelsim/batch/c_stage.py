@@ -380,3 +380,42 @@ def binding_source(library: Path, symbols: dict[str, str], source: str) -> str:
             "",
         ]
     return "\n".join(lines)
+
+
+def pointer_call_source(source: str, functions: tuple[str, ...]) -> str:
+    """Python text defining ``_call<name>(fn, work, ...)``: the C function at address ``fn``.
+
+    One per generated function, for the driver module (``eelsim.batch.loading.driver_module``),
+    which redefines the template's direct calls with these: the address is an argument, so one
+    compiled driver serves every variant's library (and numba's disk cache of it stays valid). The arguments are
+    converted as :func:`translate` declares them: flags to int64, other scalars to float64. The
+    intrinsic's code is ``kernel_template._pointer_call``.
+
+    Parameters
+    ----------
+    source : str
+        A generated Python text (for the functions' argument lists, the same for every law).
+    functions : tuple of str
+        Names of the generated functions.
+
+    Returns
+    -------
+    str
+    """
+    args = {name: [a.arg for a in node.args.args] for name, node in _functions(source).items()}
+    lines = ["", "", "# ---- the generated functions' C code, called by address "
+             "(eelsim.batch.c_stage)"]
+    for name in functions:
+        names = args[name]
+        c_types = ["types.int64" if a in _FLAG_ARGS else "types.float64" for a in names[1:]]
+        listed = "".join(f"{t}, " for t in c_types)
+        params = ", ".join(["fn", *names])
+        lines += [
+            "",
+            "",
+            "@intrinsic",
+            f"def _call{name}(typingctx, {params}):",
+            f'    """{name} of the generated part: the C function at address ``fn``."""',
+            f"    return _pointer_call(({listed}), {params})",
+        ]
+    return "\n".join(lines) + "\n"

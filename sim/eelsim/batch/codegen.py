@@ -1144,6 +1144,53 @@ def _cond_body(layout: Layout) -> list[str]:
     return e.lines
 
 
+DRIVER_WORK_ROWS = ("y", "x", "acc", "xn", "gamma", "geometry", "mass", "mu")
+"""The rows of ``work`` the driver (``kernel_template``) reads by name: all before the fluid law's and
+the joint model's own rows (:func:`make_layout`), so the same for every law and model."""
+
+
+def _constants(layout: Layout) -> list[str]:
+    """The generated module's constants (thresholds, codes, N, lanes, rows), one line each."""
+    consts = [f"ILL_CONDITION_THRESHOLD = {ILL_CONDITION_THRESHOLD!r}",
+              f"DIVERGENCE_RATE = {float(DIVERGENCE_RATE)!r}"]
+    consts += [f"FAIL_{code.name} = {int(code)}" for code in Failure]
+    consts += [f"REASON_{code.name} = {int(code)}" for code in Reason]
+    consts += [f"FLUID_LAW = {layout.law.name!r}", f"JOINT_MODEL = {layout.joints.name!r}"]
+    consts += [f"N_LINKS = {layout.n_links}", f"LANES = {layout.lanes}",
+              f"ROTATE_LIMIT = {_ROTATE_LIMIT!r}", f"RESYNC_STEPS = {_RESYNC_STEPS}",
+              f"WORK_ROWS = {layout.work_rows}", f"OUT_ROWS = {layout.out_rows}"]
+    consts += [f"W_{k.upper()} = {v}" for k, v in layout.work.items()]
+    consts += [f"O_{k.upper()} = {v}" for k, v in layout.out.items()]
+    return consts
+
+
+def driver_constants(n_links: int, lanes: int) -> str:
+    """The constants of the driver module for N links and ``lanes``: those not of a law or model.
+
+    The driver module (``eelsim.batch.loading.driver_module``) is the template with these and no
+    generated functions: it serves every fluid law and joint model (what differs arrives at run
+    time). Which constants those are: thresholds, codes, N, lanes, every row of ``out``, and the
+    rows of ``work`` in :data:`DRIVER_WORK_ROWS`.
+
+    Parameters
+    ----------
+    n_links, lanes : int
+        N and the runs per block.
+
+    Returns
+    -------
+    str
+        Python text, one assignment a line.
+    """
+    layout = make_layout(n_links, lanes)
+    keep = {f"W_{row.upper()}" for row in DRIVER_WORK_ROWS}
+    lines = [c for c in _constants(layout) if not c.startswith(("W_", "WORK_ROWS", "FLUID_LAW",
+                                                                 "JOINT_MODEL"))
+             or c.split(" =")[0] in keep]
+    head = f"# ---- the driver's constants for N = {n_links}, {lanes} lanes (eelsim.batch.codegen)"
+    return "\n".join(["", "", head, *lines, ""])
+
+
 def generate_stage_source(layout: Layout) -> str:
     """Source of the generated functions and row constants of the kernel module.
 
@@ -1168,16 +1215,7 @@ def generate_stage_source(layout: Layout) -> str:
     str
         Python source defining ``_stage``, to be appended to the kernel module's text.
     """
-    consts = [f"ILL_CONDITION_THRESHOLD = {ILL_CONDITION_THRESHOLD!r}",
-              f"DIVERGENCE_RATE = {float(DIVERGENCE_RATE)!r}"]
-    consts += [f"FAIL_{code.name} = {int(code)}" for code in Failure]
-    consts += [f"REASON_{code.name} = {int(code)}" for code in Reason]
-    consts += [f"FLUID_LAW = {layout.law.name!r}", f"JOINT_MODEL = {layout.joints.name!r}"]
-    consts += [f"N_LINKS = {layout.n_links}", f"LANES = {layout.lanes}",
-              f"ROTATE_LIMIT = {_ROTATE_LIMIT!r}", f"RESYNC_STEPS = {_RESYNC_STEPS}",
-              f"WORK_ROWS = {layout.work_rows}", f"OUT_ROWS = {layout.out_rows}"]
-    consts += [f"W_{k.upper()} = {v}" for k, v in layout.work.items()]
-    consts += [f"O_{k.upper()} = {v}" for k, v in layout.out.items()]
+    consts = _constants(layout)
     head = [
         "",
         "",

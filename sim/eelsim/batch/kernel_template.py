@@ -5,7 +5,10 @@ This file is valid Python and is read as text: ``eelsim.batch.loading`` appends 
 codes, from ``eelsim.batch.codegen``) and writes the result to the kernel cache folder, where it is
 imported as ``eelsim.batch.kernels.<name>`` and numba compiles and caches it. The placeholders
 below are redefined by that later text before anything is compiled; importing this file on its
-own is useless.
+own is useless. When the generated functions are compiled as C, numba compiles this text once per
+(N, lanes) with only the constants that are the same for every fluid law and joint model
+(``loading.driver_module``): the rest arrives at run time in ``variant`` (below), and each
+variant's module runs that shared driver.
 
 What runs here, for a block of ``LANES`` runs advancing in lock step (one physics step at a time,
 so the time, the camera frame schedule and the sample steps are shared; runs that stopped are
@@ -131,9 +134,8 @@ REASON_NONE = REASON_TOO_SLOW = REASON_NOT_FINITE = REASON_NOT_POSITIVE_DEFINITE
 REASON_CONDITION_NUMBER = REASON_JOINT_LIMIT = REASON_LINKS_INTERSECT = REASON_DIVERGED = 0
 N_LINKS = 2
 LANES = 16
-WORK_ROWS = OUT_ROWS = 1
-W_Y = W_X = W_ACC = W_XN = W_GAMMA = W_GEOMETRY = W_HALF_LENGTH = W_LIMIT = 0
-W_MASS = W_MU = W_INERTIA = W_TORQUE_LIMIT = W_TORQUE_SLOPE = 0
+OUT_ROWS = 1
+W_Y = W_X = W_ACC = W_XN = W_GAMMA = W_GEOMETRY = W_MASS = W_MU = 0
 O_BAD_PIVOT = O_SIN = O_COS = O_NEAR = O_X_BAD = O_FASTEST = O_XN_BAD = O_COND_BOUND = 0
 O_TORQUE = O_TORQUE_RATIO = O_SATURATED = 0
 O_OFFSET = O_KEEP = O_LIVE = O_STEP_VERDICT = 0
@@ -151,6 +153,62 @@ def _screen(work):  # pragma: no cover - replaced
 
 def _cond_bound(work):  # pragma: no cover - replaced
     raise RuntimeError("eelsim.batch.kernel_template is a template; use eelsim.batch")
+
+
+# ---- what the driver learns of the variant at run time (eelsim.batch.loading.driver_module)
+# The driver reads only rows that are the same for every fluid law and joint model (the names
+# above; the law's and the joint model's own rows come after them), so that one compiled driver
+# per (N, lanes) serves every variant. The rest arrives in ``variant``, an int64 array: where
+# out's rows start, the offsets in a run's parameters of the inertia and half-length rows, the
+# joint limit's row, and the addresses of the C functions of the variant's stage, screen and
+# condition bound (0 when they are compiled by numba in the same module).
+V_WORK_ROWS, V_INERTIA, V_HALF_LENGTH, V_LIMIT, V_STAGE, V_SCREEN, V_COND_BOUND = range(7)
+
+
+def _variant(stage_fn=0, screen_fn=0, cond_fn=0):
+    """The module's ``variant`` array: the generated part's rows, the C functions' addresses."""
+    g = globals()
+    return np.array([g["WORK_ROWS"], g["W_INERTIA"] - W_GEOMETRY, g["W_HALF_LENGTH"] - W_GEOMETRY,
+                     g["W_LIMIT"], stage_fn, screen_fn, cond_fn], np.int64)
+
+
+def _pointer_call(c_types, fn, work, *scalars):
+    """An intrinsic's signature and code calling the C function at address ``fn``.
+
+    Its arguments: ``work``'s data, then ``scalars`` converted to ``c_types`` (int64 or float64).
+    The address is an argument, not a symbol, so the compiled driver does not depend on which
+    variant's library it calls, and numba's disk cache of it serves all of them.
+    """
+    sig = types.void(fn, work, *scalars)
+
+    def codegen(context, builder, signature, args):
+        data = context.make_array(signature.args[1])(context, builder, args[1]).data
+        values = [data] + [context.cast(builder, value, ty, c)
+                           for value, ty, c in zip(args[2:], signature.args[2:], c_types, strict=True)]
+        fnty = llvm_ir.FunctionType(llvm_ir.VoidType(),
+                                    [data.type] + [context.get_value_type(c) for c in c_types])
+        builder.call(builder.inttoptr(args[0], fnty.as_pointer()), values)
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+# The driver's calls of the generated functions: here straight to the numba-compiled ones of the
+# same module (the ``fn`` address unused); the driver module (eelsim.batch.loading) redefines
+# them as calls through the address (eelsim.batch.c_stage.pointer_call_source).
+@_njit(**_NO_REFCOUNT)
+def _call_stage(fn, work, t_s, a, wk, first, last, sixth, rotate, advance, plain):
+    _stage(work, t_s, a, wk, first, last, sixth, rotate, advance, plain)
+
+
+@_njit(**_NO_REFCOUNT)
+def _call_screen(fn, work):
+    _screen(work)
+
+
+@_njit(**_NO_REFCOUNT)
+def _call_cond_bound(fn, work):
+    _cond_bound(work)
 
 
 # ---- scalar helpers (per lane, not in the hot loop) ----
@@ -306,7 +364,7 @@ def _jacobi_condition(m):
 
 
 @numba.njit(cache=True)
-def _mass_matrix_condition(x, par, n, m, lo, inv, s, c, jx, jy):
+def _mass_matrix_condition(x, par, n, m, lo, inv, s, c, jx, jy, inertia_at):
     """Condition number of M(x) when it may be above the threshold, else a cheap upper bound.
 
     The scalar path, for the rare lanes whose vectorised bound (``_cond_bound``) is not far
@@ -316,7 +374,8 @@ def _mass_matrix_condition(x, par, n, m, lo, inv, s, c, jx, jy):
     Frobenius norm of L^-1 from the Cholesky factor. When that bound is far below the threshold
     (every physical state: cond is about 1e3-1e4) the run is fine and the bound is returned; only
     otherwise are the eigenvalues computed. The array arguments after ``n`` are scratch space
-    (allocations here would cost more than the arithmetic).
+    (allocations here would cost more than the arithmetic); ``inertia_at``: where the inertia
+    rows start in ``par``.
     """
     nq = n + 2
     m[:, :] = 0.0
@@ -344,7 +403,7 @@ def _mass_matrix_condition(x, par, n, m, lo, inv, s, c, jx, jy):
             for k in range(nq):
                 m[i, k] += jx[i] * (a11 * jx[k] + a12 * jy[k]) + jy[i] * (a12 * jx[k] + a22 * jy[k])
     for i in range(n):
-        m[i, i] += par[W_INERTIA - W_GEOMETRY + i]
+        m[i, i] += par[inertia_at + i]
     trace = 0.0
     for i in range(nq):
         trace += m[i, i]
@@ -408,8 +467,11 @@ def _segments_intersect(p1x, p1y, p2x, p2y, q1x, q1y, q2x, q2y):
 
 
 @numba.njit(cache=True)
-def _self_collision(x, par, n, limit, info):
-    """flags.self_collision in its order; returns a reason code and fills ``info`` (i, k, value)."""
+def _self_collision(x, par, n, limit, info, half_at):
+    """flags.self_collision in its order; returns a reason code and fills ``info`` (i, k, value).
+
+    ``half_at``: where the half-length rows start in ``par``.
+    """
     for j in range(n - 1):
         phi = x[j + 1] - x[j]
         if abs(phi) > limit:
@@ -427,7 +489,7 @@ def _self_collision(x, par, n, limit, info):
             cy += g * math.sin(x[k])
         xs[i] = x[n] + cx
         ys[i] = x[n + 1] + cy
-        h = par[W_HALF_LENGTH - W_GEOMETRY + i]
+        h = par[half_at + i]
         tx[i] = h * math.cos(x[i])
         ty[i] = h * math.sin(x[i])
     for i in range(n):
@@ -666,7 +728,7 @@ def _gather(work, base, r, ns, dest):
 
 
 @_njit(**_NO_REFCOUNT)
-def _start_lanes(first, runs, work, fate, control, targets):
+def _start_lanes(first, runs, work, out, fate, control, targets):
     """Load the block's runs into its lanes: parameters, initial state, schedules, first waypoint.
 
     Lanes past the last run hold the block's first run again (never committed: not alive), so
@@ -679,7 +741,7 @@ def _start_lanes(first, runs, work, fate, control, targets):
     plain = True
     for r in range(LANES):
         fate.alive[r] = first + r < n_runs
-        work[(WORK_ROWS + O_LIVE) * LANES + r] = 1.0 if fate.alive[r] else 0.0
+        out[O_LIVE * LANES + r] = 1.0 if fate.alive[r] else 0.0
         run = order[first + r] if first + r < n_runs else order[first]
         fate.run[r] = run
         for p in range(params.shape[1]):
@@ -757,14 +819,16 @@ def _record_states(step, sample, sampled, record_full, work, fate, states_out, f
 
 
 @numba.njit(cache=True)
-def _check_state(step, t, work, out, params, stop_at_goal, fate, is_update, arrival, scratch):
+def _check_state(step, t, work, out, params, stop_at_goal, fate, is_update, arrival, scratch,
+                 variant):
     """closed_loop._check of x for the live lanes, in its order, and the stop rules.
 
     Non-finite, diverging, the condition number at control updates, the joint limit and link
     intersection: the first that fires stops the lane with its reason. The vectorised bound (row
     cond_bound) settles every physical state; the exact condition number (the scalar path) is
     computed only near the threshold, the exact self-collision test only for lanes the screen
-    flagged. A lane that passes stops when its time is up or it is at its goal.
+    flagged. A lane that passes stops when its time is up or it is at its goal. ``variant``: the
+    variant's rows (V_INERTIA, V_HALF_LENGTH, V_LIMIT).
     """
     n = N_LINKS
     ns = 2 * n + 4
@@ -783,13 +847,14 @@ def _check_state(step, t, work, out, params, stop_at_goal, fate, is_update, arri
                 cond = _mass_matrix_condition(_gather(work, W_X, r, ns, scratch.state),
                                               params[run], n, scratch.m, scratch.lo,
                                               scratch.inv, scratch.s, scratch.c, scratch.jx,
-                                              scratch.jy)
+                                              scratch.jy, variant[V_INERTIA])
             if not cond < ILL_CONDITION_THRESHOLD:
                 code = REASON_CONDITION_NUMBER
                 fate.reason_value[r] = cond
         if code == REASON_NONE and out[O_NEAR * LANES + r] != 0.0:
             code = _self_collision(_gather(work, W_X, r, ns, scratch.state), params[run], n,
-                                   work[W_LIMIT * LANES + r], scratch.info)
+                                   work[variant[V_LIMIT] * LANES + r], scratch.info,
+                                   variant[V_HALF_LENGTH])
             if code != REASON_NONE:
                 fate.reason_index[r, 0] = int(scratch.info[0])
                 fate.reason_index[r, 1] = int(scratch.info[1])
@@ -849,7 +914,7 @@ def _next_due(alive, update_at, pending_at):
 
 
 @_njit(**_NO_REFCOUNT)
-def _rk4_stage(work, st, step, t, dt, plain):
+def _rk4_stage(work, st, step, t, dt, plain, stage_fn):
     """RK4 stage ``st`` of the step at ``t`` for every lane (the generated ``_stage``).
 
     Its own function, without reference counts: called from _run_block's stage loop directly,
@@ -857,7 +922,8 @@ def _rk4_stage(work, st, step, t, dt, plain):
     four calls of every step (an atomic add each).
     """
     t_s, a, wk, may_rotate = _stage_settings(st, step, t, dt)
-    _stage(work, t_s, a, wk, st == 0, st == 3, dt / 6.0, may_rotate, st == 1 or st == 3, plain)
+    _call_stage(stage_fn, work, t_s, a, wk, st == 0, st == 3, dt / 6.0, may_rotate,
+                st == 1 or st == 3, plain)
 
 
 @_njit(**_NO_REFCOUNT)
@@ -901,20 +967,20 @@ def _camera_frames(step, frame, dt, frames, work, runs, pixel, window, fate, cam
 
 
 @_njit(**_NO_REFCOUNT)
-def _commit_kept(work):
-    """The kept lanes' new state xn becomes x, a select per lane (row keep of out, in work).
+def _commit_kept(work, out):
+    """The kept lanes' new state xn becomes x, a select per lane (row keep of ``out``).
 
     For the steps on which some lane stops; otherwise _run_block copies the rows whole.
     """
     for row in range(2 * N_LINKS + 4):
         for r in range(LANES):
             i = row * LANES + r
-            keep = work[(WORK_ROWS + O_KEEP) * LANES + r]
+            keep = out[O_KEEP * LANES + r]
             work[W_X * LANES + i] = work[W_XN * LANES + i] if keep != 0.0 else work[W_X * LANES + i]
 
 
 @_njit(**_NO_REFCOUNT)
-def _write_outputs(first, dt, work, runs, outputs, fate, targets):
+def _write_outputs(first, dt, work, out, runs, outputs, fate, targets):
     """Copy each run's answers from its lane into the outputs.
 
     A run that neither failed nor arrived is too slow (reason index: the waypoint it was heading
@@ -941,8 +1007,8 @@ def _write_outputs(first, dt, work, runs, outputs, fate, targets):
             outputs.final_state[run, row] = work[(W_X + row) * LANES + r]
         outputs.final_step[run] = fate.final_step[r]
         outputs.target[run] = targets.reached[r]
-        outputs.torque_ratio[run] = work[(WORK_ROWS + O_TORQUE_RATIO) * LANES + r]
-        outputs.saturated[run] = int(work[(WORK_ROWS + O_SATURATED) * LANES + r])
+        outputs.torque_ratio[run] = out[O_TORQUE_RATIO * LANES + r]
+        outputs.saturated[run] = int(out[O_SATURATED * LANES + r])
         outputs.distance[run] = _distance_left(work[(W_X + N_LINKS) * LANES + r],
                                                work[(W_X + N_LINKS + 1) * LANES + r],
                                                runs.waypoints[run], runs.n_waypoints[run],
@@ -950,7 +1016,7 @@ def _write_outputs(first, dt, work, runs, outputs, fate, targets):
 
 
 @numba.njit(cache=True)
-def _run_block(block, runs, frames, loop, outputs):
+def _run_block(block, runs, frames, loop, outputs, variant):
     """Run block ``block`` (runs ``runs.order[block * LANES ...]``) to its end (module docstring).
 
     ``runs``, ``frames``, ``loop`` and ``outputs`` are the records of ``eelsim.batch.records``.
@@ -958,14 +1024,19 @@ def _run_block(block, runs, frames, loop, outputs):
     generated code reads and writes them with constant offsets; everything per lane and per step
     that does not vectorise (control updates, checks, camera) reads single numbers from there.
     Each step is the sequence of the module docstring; the per-lane work is in the pieces above.
+    ``variant``: what the driver learns of the variant at run time (V_WORK_ROWS ...).
     """
     dt, pixel, window, stop_at_goal, pending_size, record_full, sample_steps, guide = loop
     n = N_LINKS
     ns = 2 * n + 4
     first = block * LANES
     # one buffer: the rows of work, then those of out (the generated code indexes it whole)
-    work = _zeros_on_cache_lines((WORK_ROWS + OUT_ROWS) * LANES)
-    out = work[WORK_ROWS * LANES :]
+    work_rows = variant[V_WORK_ROWS]
+    stage_fn = variant[V_STAGE]
+    screen_fn = variant[V_SCREEN]
+    cond_fn = variant[V_COND_BOUND]
+    work = _zeros_on_cache_lines((work_rows + OUT_ROWS) * LANES)
+    out = work[work_rows * LANES :]
     # the lanes' records; the arrays that every step's loops read are named once here (taking
     # them out of a record inside the loop would count a reference each time)
     alive = np.zeros(LANES, np.bool_)
@@ -995,7 +1066,7 @@ def _run_block(block, runs, frames, loop, outputs):
     scratch = CheckScratch(np.empty(ns), np.zeros(3), np.empty((n + 2, n + 2)),
                            np.empty((n + 2, n + 2)), np.empty((n + 2, n + 2)), np.empty(n),
                            np.empty(n), np.empty(n + 2), np.empty(n + 2))
-    plain = _start_lanes(first, runs, work, fate, control, targets)
+    plain = _start_lanes(first, runs, work, out, fate, control, targets)
     # the frame at t = 0 sees the initial pose (fraction 0 of the first step; the xn rows are
     # still zero)
     _frame_poses(work, 0.0, dt, seen_x, seen_y, seen_heading)
@@ -1047,11 +1118,11 @@ def _run_block(block, runs, frames, loop, outputs):
             work[W_Y * LANES + i] = work[W_X * LANES + i]
         for st in range(4):
             # (the stage itself turns rotate off unless every live lane moved little)
-            _rk4_stage(work, st, step, t, dt, plain)
+            _rk4_stage(work, st, step, t, dt, plain, stage_fn)
             if st == 0:
-                _screen(work)
+                _call_screen(screen_fn, work)
                 if any_update:
-                    _cond_bound(work)
+                    _call_cond_bound(cond_fn, work)
                 # the lanes that fail a check or stop here (most steps: none), counted by a
                 # loop that vectorises; the checks run only for them
                 flagged = 0
@@ -1067,7 +1138,7 @@ def _run_block(block, runs, frames, loop, outputs):
                     flagged += alive[r] & stops
                 if flagged > 0:
                     _check_state(step, t, work, out, runs.params, stop_at_goal, fate, is_update,
-                                 arrival, scratch)
+                                 arrival, scratch, variant)
                     live = _count_live(alive)
         # the pivot and finiteness of the new state: the last stage wrote row keep and the
         # block's verdict (some live lane failed; some lane does not commit)
@@ -1084,16 +1155,16 @@ def _run_block(block, runs, frames, loop, outputs):
             for i in range(ns * LANES):
                 work[W_X * LANES + i] = work[W_XN * LANES + i]
         else:
-            _commit_kept(work)
+            _commit_kept(work, out)
         if any_update:  # the flags of this step's updates, for the checks above
             for r in range(LANES):
                 is_update[r] = False
         step += 1
-    _write_outputs(first, dt, work, runs, outputs, fate, targets)
+    _write_outputs(first, dt, work, out, runs, outputs, fate, targets)
 
 
 @numba.njit(cache=True, parallel=True)
-def run_blocks(runs, frames, loop, outputs, threads):
+def _run_blocks(runs, frames, loop, outputs, threads, variant):
     """Run every block of LANES runs on ``threads`` threads, each taking the next block when free.
 
     Block b runs ``runs.order[b * LANES : (b + 1) * LANES]``: the caller orders the runs so that
@@ -1106,5 +1177,14 @@ def run_blocks(runs, frames, loop, outputs, threads):
     for _ in numba.prange(max(1, min(threads, n_blocks))):
         block = _next_block(counter)
         while block < n_blocks:
-            _run_block(block, runs, frames, loop, outputs)
+            _run_block(block, runs, frames, loop, outputs, variant)
             block = _next_block(counter)
+
+
+def run_blocks(runs, frames, loop, outputs, threads):
+    """Run every block (:func:`_run_blocks`) with this module's generated functions.
+
+    A module whose stage is compiled as C redefines this to run the shared driver module with
+    its library's functions (eelsim.batch.loading).
+    """
+    _run_blocks(runs, frames, loop, outputs, threads, _variant())

@@ -12,10 +12,18 @@ Why a file and not closures: numba's disk cache keys compiled code on a function
 lanes must have constant bounds to vectorise), so each (N, lanes, ...) needs its own module
 text. The file is rewritten only when its text changes, so a second process finds the cache
 valid and loads in about half a second instead of compiling for a minute.
+
+With the C stage, all the generated functions are C (``C_FUNCTIONS``) and the numba code is the
+driver alone, the same for every fluid law and joint model: it is one more module,
+``driver_n{N}_l{lanes}_c`` (:func:`driver_module`), compiled and cached once per (N, lanes); a C
+variant's module holds its constants, its library's binding, and a ``run_blocks`` that runs the
+driver with the variant's rows and function addresses (:func:`bind_driver`). A new fluid law or
+joint model then costs its C compile (2-3 s), not numba's of the driver (about 30 s).
 """
 
 from __future__ import annotations
 
+import ctypes
 import importlib
 import logging
 import os
@@ -39,13 +47,16 @@ blocks waste more work on runs that stopped early while others in the block cont
 STAGE_ENV = "EELSIM_STAGE"
 """Environment variable choosing how the generated stage is compiled: ``c``, ``numba`` or ``auto``."""
 STAGES = ("auto", "c", "numba")
-C_FUNCTIONS = ("_stage",)
-"""The generated functions compiled as C when the stage is ``"c"``."""
+C_FUNCTIONS = ("_stage", "_screen", "_cond_bound")
+"""The generated functions compiled as C when the stage is ``"c"``: all of them, so that the numba
+code of a C variant is the driver alone, compiled once per (N, lanes) (:func:`driver_module`)."""
 CACHE_ENV = "EELSIM_KERNEL_CACHE"
 """Environment variable naming the kernel cache folder (:func:`kernel_cache_dir`)."""
 KERNELS_PACKAGE = "eelsim.batch.kernels"
 
 _KERNELS: dict[tuple[int, int, str, str, str], ModuleType] = {}
+_DRIVERS: dict[tuple[str, int, int], ModuleType] = {}  # (cache folder, N, lanes)
+_LIBRARIES: dict[str, ctypes.CDLL] = {}  # the C libraries whose addresses drivers were given
 _C_UNAVAILABLE: list[str] = []  # why "auto" fell back to numba (said once per process)
 
 
@@ -135,7 +146,114 @@ def kernel_source(n_links: int, lanes: int, stage: str = "numba",
     if stage == "numba":
         return template + generated
     library, symbols = c_stage.build(generated, C_FUNCTIONS, kernel_cache_dir())
-    return template + generated + c_stage.binding_source(library, symbols, generated)
+    return (template + generated + c_stage.binding_source(library, symbols, generated)
+            + _driver_binding(library, symbols))
+
+
+def _driver_binding(library: Path, symbols: dict[str, str]) -> str:
+    """Python text making a C variant's ``run_blocks`` run the shared driver with its library."""
+    return "\n".join([
+        "",
+        "",
+        "# ---- the driver: one compiled module per (N, lanes) for every fluid law and joint model",
+        "# (eelsim.batch.loading.driver_module), given this library's functions by address",
+        "from eelsim.batch.loading import bind_driver as _bind_driver",
+        "",
+        f"_DRIVER, _VARIANT = _bind_driver(globals(), {str(library)!r}, {symbols!r})",
+        "",
+        "",
+        "def run_blocks(runs, frames, loop, outputs, threads):",
+        '    """Run every block: the shared driver with this variant\'s rows and C functions."""',
+        "    _DRIVER._run_blocks(runs, frames, loop, outputs, threads, _VARIANT)",
+        "",
+    ])
+
+
+def driver_module_name(n_links: int, lanes: int) -> str:
+    """The name of the driver module for N links and ``lanes`` (not of the form of a variant's).
+
+    Parameters
+    ----------
+    n_links, lanes : int
+
+    Returns
+    -------
+    str
+    """
+    return f"driver_n{n_links}_l{lanes}_c"
+
+
+def driver_module(n_links: int, lanes: int) -> ModuleType:
+    """The driver of every C variant with N links and ``lanes``: compiled once, cached on disk.
+
+    Why: numba's compile of the driver is almost all of a variant's cold compile (about 28 of
+    31 s; the C compiler takes about 2 s: docs/benchmarks.md, "Compile time of the batched
+    kernel"), and the driver is the same code for every fluid law and joint model. Its module is
+    the template with the constants of :func:`codegen.driver_constants` and calls of the
+    generated functions through the addresses that each variant passes in (``variant``, see
+    ``kernel_template``), so numba compiles and caches it once per (N, lanes), and one process
+    runs any number of variants with it.
+
+    Parameters
+    ----------
+    n_links, lanes : int
+        N and the runs per block.
+
+    Returns
+    -------
+    module
+    """
+    folder = kernel_cache_dir()
+    key = (str(folder), n_links, lanes)
+    if key not in _DRIVERS:
+        template = (Path(__file__).parent / "kernel_template.py").read_text()
+        # the generated functions' argument lists, the same for every law and model
+        generated = codegen.generate_stage_source(codegen.make_layout(n_links, lanes))
+        source = (template + codegen.driver_constants(n_links, lanes)
+                  + c_stage.pointer_call_source(generated, C_FUNCTIONS))
+        _DRIVERS[key] = load_kernel_source(driver_module_name(n_links, lanes), source)
+    return _DRIVERS[key]
+
+
+def bind_driver(namespace: dict[str, object], library: str,
+                symbols: dict[str, str]) -> tuple[ModuleType, object]:
+    """The driver module for a C variant's module and the ``variant`` array the driver runs it by.
+
+    Called by the variant's module text (:func:`kernel_source`) as it is imported.
+
+    Parameters
+    ----------
+    namespace : dict
+        The variant module's globals (its constants and the template's ``_variant``).
+    library : str
+        The variant's C library.
+    symbols : dict
+        Generated function name -> C symbol, for each of :data:`C_FUNCTIONS`.
+
+    Returns
+    -------
+    (module, ndarray)
+        The driver module and the int64 array of ``kernel_template._variant``.
+
+    Raises
+    ------
+    RuntimeError
+        When a constant the driver was compiled with differs in the variant (a layout in which a
+        law's or joint model's rows come before a row the driver reads).
+    """
+    n_links, lanes = int(namespace["N_LINKS"]), int(namespace["LANES"])  # type: ignore[call-overload]
+    driver = driver_module(n_links, lanes)
+    for name, value in vars(driver).items():
+        if name.isupper() and name in namespace and namespace[name] != value:
+            raise RuntimeError(f"the variant's {name} = {namespace[name]} differs from the "
+                               f"driver's {value}: a row the driver reads moved")
+    if library not in _LIBRARIES:
+        _LIBRARIES[library] = ctypes.CDLL(library)
+    lib = _LIBRARIES[library]
+    addresses = [ctypes.cast(getattr(lib, symbols[name]), ctypes.c_void_p).value
+                 for name in C_FUNCTIONS]
+    make = namespace["_variant"]
+    return driver, make(*addresses)  # type: ignore[operator]
 
 
 def load_kernel_source(name: str, source: str) -> ModuleType:
