@@ -87,6 +87,26 @@ def test_translated_subset_computes_what_python_computes_with_nan_inf_and_signed
     assert (work == 7.0).all()
 
 
+@needs_cc
+def test_a_library_built_before_is_found_from_the_python_text_without_translating_again(
+        tmp_path, monkeypatch):
+    first = c_stage.build(_SUBSET, ("_probe",), tmp_path)
+
+    def no_translation(*args, **kwargs):
+        raise AssertionError("translated again although the library exists")
+
+    with monkeypatch.context() as patch:
+        patch.setattr(c_stage, "c_source", no_translation)
+        assert c_stage.build(_SUBSET, ("_probe",), tmp_path) == first
+        # another Python text is not the same library: it is translated (and refused here)
+        with pytest.raises(AssertionError, match="translated again"):
+            c_stage.build(_SUBSET.replace("2.0", "3.0"), ("_probe",), tmp_path)
+    # an index whose library is gone is not trusted: the library is built again
+    first[0].unlink()
+    again = c_stage.build(_SUBSET, ("_probe",), tmp_path)
+    assert again == first and again[0].exists()
+
+
 def test_the_translator_refuses_a_construct_outside_the_subset_naming_its_line():
     source = "def _f(work):\n    for r in range(4):\n        work[r] = work[r] ** 2\n"
     with pytest.raises(c_stage.CStageError, match=r"line 3: no C for 'work\[r\] \*\* 2'"):

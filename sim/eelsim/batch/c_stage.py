@@ -277,7 +277,9 @@ def build(source: str, functions: tuple[str, ...], folder: Path,
     """Translate ``functions`` of the generated ``source`` to C and compile them to a library.
 
     The library (and its C text, for reading) is written to ``folder`` under a name made from a
-    hash of the C text, the compiler, its flags and the host CPU; an existing one is reused.
+    hash of the C text, the compiler, its flags and the host CPU; an existing one is reused. A
+    small index file beside it names the library for a hash of the Python text (and of this
+    module's translator), so that a later process finds it without translating again.
 
     Parameters
     ----------
@@ -303,6 +305,13 @@ def build(source: str, functions: tuple[str, ...], folder: Path,
     compiler = compiler or find_compiler()
     if compiler is None:
         raise CStageError("no C compiler found (set CC, or install gcc)")
+    # a library built before is found from the Python text without translating it again: the
+    # translation of a variant's three functions took most of a cached load (docs/durations.md,
+    # session 23), and every process that runs the kernel loads its variants
+    index = folder / f"eelsim_src_{_source_key(source, functions, compiler)}.stem"
+    known = _known_library(index, functions)
+    if known is not None:
+        return known
     marker = "STAGE_SYMBOL_"
     text = c_source(source, functions, marker)
     # compile_flags follows from the compiler and the CPU, both in the key, and asks the
@@ -314,6 +323,7 @@ def build(source: str, functions: tuple[str, ...], folder: Path,
     text = text.replace(marker, stem)
     library = folder / f"{stem}.so"
     if library.exists():
+        _write_index(index, stem)
         return library, symbols
     folder.mkdir(parents=True, exist_ok=True)
     logger.info("compiling the kernel's C stage with %s into %s", compiler, library)
@@ -336,7 +346,43 @@ def build(source: str, functions: tuple[str, ...], folder: Path,
         errors = done.stderr.strip().replace(str(own_c), str(c_path))
         raise CStageError(f"C compiler {compiler!r} failed on {c_path}:\n{errors}")
     os.replace(partial, library)
+    _write_index(index, stem)
     return library, symbols
+
+
+def _source_key(source: str, functions: tuple[str, ...], compiler: str) -> str:
+    """A hash of everything the C library follows from, short of translating to C.
+
+    The C text is a function of the generated Python text, the functions chosen and this module's
+    translator, so the translator's own source is in the key: a change to it builds anew. The
+    compiler, its flag rules and the host CPU are in it as in the C text's key (:func:`build`).
+    """
+    digest = hashlib.sha256(Path(__file__).read_bytes())
+    for part in (source, *functions, compiler, *C_FLAGS, *AVX512_TUNING, _host_cpu()):
+        digest.update(b"\0" + part.encode())
+    return digest.hexdigest()[:16]
+
+
+def _known_library(index: Path, functions: tuple[str, ...]) -> tuple[Path, dict[str, str]] | None:
+    """The library an index file names, with its symbols, when both exist; else None."""
+    try:
+        stem = index.read_text().strip()
+    except OSError:
+        return None
+    library = index.parent / f"{stem}.so"
+    if not stem.startswith("eelsim_c_") or not library.exists():
+        return None
+    return library, {f: f"{stem}{f}" for f in functions}
+
+
+def _write_index(index: Path, stem: str) -> None:
+    """Name the library ``stem`` for the Python text of ``index`` (atomic: write, then rename)."""
+    partial = index.with_name(f"{index.name}.tmp{os.getpid()}")
+    try:
+        partial.write_text(stem + "\n")
+        os.replace(partial, index)
+    except OSError:  # a read-only cache folder: the library is still found from its C text
+        partial.unlink(missing_ok=True)
 
 
 def binding_source(library: Path, symbols: dict[str, str], source: str) -> str:
