@@ -80,6 +80,23 @@ def variant_lists() -> dict[str, list[Variant]]:
     return {"main": main, "tests": tests}
 
 
+def _stage(variant: Variant) -> str:
+    """The stage a variant compiles here: its own, else the machine's; numba without a C compiler."""
+    from eelsim.batch import stage_backend
+
+    stage = variant[1] or stage_backend()
+    return "numba" if stage == "c" and stage_backend() != "c" else stage
+
+
+def _joint_model(variant: Variant) -> str:
+    """A variant's joint model: a bundled robot file's, or the one it names."""
+    from eelsim.joints import joint_model_of
+    from eelsim.robot import load_robot
+
+    robot = variant[3]
+    return joint_model_of(load_robot(robot).joints).name if robot in ROBOTS else robot
+
+
 def kernel_keys(name: str) -> set[tuple[int, int, str, str, str]]:
     """List ``name``'s variants as the kernel loader keys them on this machine.
 
@@ -87,19 +104,9 @@ def kernel_keys(name: str) -> set[tuple[int, int, str, str, str]]:
     resolved as :func:`_warm` resolves it (numba when there is no C compiler) and the lanes the
     default, which is what every variant here is compiled with.
     """
-    from eelsim.batch import stage_backend
     from eelsim.batch.loading import DEFAULT_LANES
-    from eelsim.joints import joint_model_of
-    from eelsim.robot import load_robot
 
-    models = {robot: joint_model_of(load_robot(robot).joints).name for robot in ROBOTS}
-    keys = set()
-    for n, stage, law, robot in variant_lists()[name]:
-        stage = stage or stage_backend()
-        if stage == "c" and stage_backend() != "c":
-            stage = "numba"
-        keys.add((n, DEFAULT_LANES, stage, law, models.get(robot, robot)))
-    return keys
+    return {(v[0], DEFAULT_LANES, _stage(v), v[2], _joint_model(v)) for v in variant_lists()[name]}
 
 
 def module_keys(names: Iterable[str]) -> set[tuple[int, int, str, str, str]]:
@@ -150,12 +157,10 @@ def unlisted(loaded: Iterable[tuple[int, int, str, str, str]],
 
 def _warm(variant: Variant) -> str:
     import eelhost.data  # noqa: F401  (registers the plant-only fluid laws, e.g. "foil")
-    from eelsim.batch import stage_backend, warm_up
+    from eelsim.batch import warm_up
 
-    n, stage, law, robot = variant
-    stage = stage or stage_backend()
-    if stage == "c" and stage_backend() != "c":
-        stage = "numba"  # no C compiler here: the numba stage is what runs
+    n, _, law, robot = variant
+    stage = _stage(variant)  # without a C compiler the numba stage is what runs
     if robot in ROBOTS:
         seconds = warm_up(n_links=n, stage=stage, law=law, robot_file=robot)
     else:
@@ -192,44 +197,33 @@ def _rounds(variants: list[Variant]) -> list[list[Variant]]:
     the second round the other C variants, whose drivers are then cached (two processes would
     otherwise compile the same driver side by side).
     """
-    from eelsim.batch import stage_backend
-
-    def stage(v: Variant) -> str:
-        chosen = v[1] or stage_backend()
-        return "numba" if chosen == "c" and stage_backend() != "c" else chosen
-
     first: list[Variant] = []
     drivers: set[int] = set()
     for v in variants:
-        if stage(v) == "numba" or v[0] not in drivers:
+        if _stage(v) == "numba" or v[0] not in drivers:
             first.append(v)
-            if stage(v) == "c":
+            if _stage(v) == "c":
                 drivers.add(v[0])
-    first.sort(key=lambda v: (stage(v) == "numba", v[0]), reverse=True)
+    first.sort(key=lambda v: (_stage(v) == "numba", v[0]), reverse=True)
     return [first, [v for v in variants if v not in first]]
 
 
 def _c_library(variant: Variant) -> None:
-    """Compile a variant's C library (gcc; eelsim.batch.c_stage.build), or nothing without C.
+    """Compile a variant's C library (gcc), or nothing without C: the loader's own text does it.
 
-    The library is keyed on its C text, so the variant's own turn finds it; any failure is left
-    to that turn to report.
+    ``eelsim.batch.loading.kernel_source`` builds the library its module binds (keyed on the
+    generated text, so the variant's own turn finds it); any failure is left to that turn to report.
     """
     import eelhost.data  # noqa: F401  (registers the plant-only fluid laws, e.g. "foil")
-    from eelsim.batch import c_stage, codegen, loading
+    from eelsim.batch import c_stage, loading
     from eelsim.fluid import get_fluid_law
-    from eelsim.joints import get_joint_model, joint_model_of
-    from eelsim.robot import load_robot
+    from eelsim.joints import get_joint_model
 
-    n, _, law, robot = variant
-    if loading.stage_backend() != "c":
+    if _stage(variant) != "c":
         return
-    model = joint_model_of(load_robot(robot).joints).name if robot in ROBOTS else robot
-    layout = codegen.make_layout(n, loading.DEFAULT_LANES, get_fluid_law(law),
-                                 get_joint_model(model))
     try:
-        c_stage.build(codegen.generate_stage_source(layout), loading.C_FUNCTIONS,
-                      loading.kernel_cache_dir())
+        loading.kernel_source(variant[0], loading.DEFAULT_LANES, "c", get_fluid_law(variant[2]),
+                              get_joint_model(_joint_model(variant)))
     except c_stage.CStageError:
         pass
 
@@ -247,7 +241,7 @@ def main() -> int:
         long_ones = [pool.submit(_warm, v) for v in first]
         # queued behind the long compiles: a process that is free while a driver still compiles
         # compiles the C libraries of the second round (gcc only), which then only load
-        libraries = [pool.submit(_c_library, v) for v in rest if v[1] != "numba"]
+        libraries = [pool.submit(_c_library, v) for v in rest]
         for future in long_ones:
             print(f"kernels: {future.result()}", flush=True)
         for library in libraries:
