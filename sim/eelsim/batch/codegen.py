@@ -1149,19 +1149,28 @@ DRIVER_WORK_ROWS = ("y", "x", "acc", "xn", "gamma", "geometry", "mass", "mu")
 the joint model's own rows (:func:`make_layout`), so the same for every law and model."""
 
 
-def _constants(layout: Layout) -> list[str]:
-    """The generated module's constants (thresholds, codes, N, lanes, rows), one line each."""
-    consts = [f"ILL_CONDITION_THRESHOLD = {ILL_CONDITION_THRESHOLD!r}",
-              f"DIVERGENCE_RATE = {float(DIVERGENCE_RATE)!r}"]
-    consts += [f"FAIL_{code.name} = {int(code)}" for code in Failure]
-    consts += [f"REASON_{code.name} = {int(code)}" for code in Reason]
-    consts += [f"FLUID_LAW = {layout.law.name!r}", f"JOINT_MODEL = {layout.joints.name!r}"]
-    consts += [f"N_LINKS = {layout.n_links}", f"LANES = {layout.lanes}",
-              f"ROTATE_LIMIT = {_ROTATE_LIMIT!r}", f"RESYNC_STEPS = {_RESYNC_STEPS}",
-              f"WORK_ROWS = {layout.work_rows}", f"OUT_ROWS = {layout.out_rows}"]
-    consts += [f"W_{k.upper()} = {v}" for k, v in layout.work.items()]
-    consts += [f"O_{k.upper()} = {v}" for k, v in layout.out.items()]
+def _constants(layout: Layout) -> dict[str, object]:
+    """The generated module's constants (thresholds, codes, N, lanes, rows) by name, in order."""
+    consts: dict[str, object] = {"ILL_CONDITION_THRESHOLD": ILL_CONDITION_THRESHOLD,
+                                 "DIVERGENCE_RATE": float(DIVERGENCE_RATE)}
+    consts |= {f"FAIL_{code.name}": int(code) for code in Failure}
+    consts |= {f"REASON_{code.name}": int(code) for code in Reason}
+    consts |= {"FLUID_LAW": layout.law.name, "JOINT_MODEL": layout.joints.name,
+               "N_LINKS": layout.n_links, "LANES": layout.lanes, "ROTATE_LIMIT": _ROTATE_LIMIT,
+               "RESYNC_STEPS": _RESYNC_STEPS, "WORK_ROWS": layout.work_rows,
+               "OUT_ROWS": layout.out_rows}
+    consts |= {f"W_{k.upper()}": v for k, v in layout.work.items()}
+    consts |= {f"O_{k.upper()}": v for k, v in layout.out.items()}
     return consts
+
+
+# the constants that move with the fluid law or the joint model (the driver gets none of them)
+_VARIANT_CONSTANTS = ("FLUID_LAW", "JOINT_MODEL", "WORK_ROWS")
+
+
+def _assignments(consts: dict[str, object]) -> list[str]:
+    """One Python assignment a constant."""
+    return [f"{name} = {value!r}" for name, value in consts.items()]
 
 
 def driver_constants(n_links: int, lanes: int) -> str:
@@ -1182,11 +1191,10 @@ def driver_constants(n_links: int, lanes: int) -> str:
     str
         Python text, one assignment a line.
     """
-    layout = make_layout(n_links, lanes)
     keep = {f"W_{row.upper()}" for row in DRIVER_WORK_ROWS}
-    lines = [c for c in _constants(layout) if not c.startswith(("W_", "WORK_ROWS", "FLUID_LAW",
-                                                                 "JOINT_MODEL"))
-             or c.split(" =")[0] in keep]
+    lines = _assignments({name: value for name, value in _constants(make_layout(n_links, lanes))
+                          .items() if name not in _VARIANT_CONSTANTS
+                          and (not name.startswith("W_") or name in keep)})
     head = f"# ---- the driver's constants for N = {n_links}, {lanes} lanes (eelsim.batch.codegen)"
     return "\n".join(["", "", head, *lines, ""])
 
@@ -1215,7 +1223,7 @@ def generate_stage_source(layout: Layout) -> str:
     str
         Python source defining ``_stage``, to be appended to the kernel module's text.
     """
-    consts = _constants(layout)
+    consts = _assignments(_constants(layout))
     head = [
         "",
         "",
