@@ -357,10 +357,16 @@ def _source_key(source: str, functions: tuple[str, ...], compiler: str) -> str:
     translator, so the translator's own source is in the key: a change to it builds anew. The
     compiler, its flag rules and the host CPU are in it as in the C text's key (:func:`build`).
     """
-    digest = hashlib.sha256(Path(__file__).read_bytes())
+    digest = _translator_digest().copy()
     for part in (source, *functions, compiler, *C_FLAGS, *AVX512_TUNING, _host_cpu()):
         digest.update(b"\0" + part.encode())
     return digest.hexdigest()[:16]
+
+
+@functools.cache
+def _translator_digest() -> hashlib._Hash:
+    """The hash of this module's source, read once per process (every kernel load asks)."""
+    return hashlib.sha256(Path(__file__).read_bytes())
 
 
 def _known_library(index: Path, functions: tuple[str, ...]) -> tuple[Path, dict[str, str]] | None:
