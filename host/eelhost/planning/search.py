@@ -384,8 +384,8 @@ class _Judged:
     Attributes
     ----------
     samples : ndarray, shape (S, 2 N + 4)
-        The leg's samples the margin applies to (a view of the batch's run, which the child's
-        own state and centre-of-mass track already keep).
+        The leg's samples the margin applies to: the child's own copy, of which its state and
+        its leg's centre-of-mass track are views.
     margin_m : float or ndarray, shape (S,)
         The margin each sample keeps (:meth:`Search._margin`).
     soft_end : int
@@ -642,7 +642,7 @@ class Search:
                 kids[j] = None
                 continue
             origin = _leg_origin(parent[r], parent[r].particles[q][2])
-            states[j].append((runs.states[r, sample], step,
+            states[j].append((runs.states[r, sample].copy(), step,
                               runs.guidance_state(r, sample, origin)))
         for j in kept:
             kid = kids[j]
@@ -787,13 +787,16 @@ class Search:
             if np.any(clear[: at + 1] < margin[: at + 1]):
                 return None
             step = parent.step + at * stride
-            leg = Leg(wp, d, bearing, parent.step, step, com[: at + 1], c, True, parent.key,
-                      action)
+            # the child's own copy of its samples: a view would keep the whole batch's buffer
+            # (every run, sized for the longest time limit) alive as long as the memo
+            own = samples[: at + 1].copy()
+            leg = Leg(wp, d, bearing, parent.step, step, own[:, self.n : self.n + 2], c, True,
+                      parent.key, action)
             soft = self.soft_cost_s(clear[: at + 1], stride)
             base = parent.g + (step - parent.step) * self.twin.dt_s
-            return _Node(wp, psi, samples[at], step, base + soft, -1, leg, self._key(wp, psi),
-                         goal=True, judged=_Judged(samples[: at + 1], self._kept_margin(
-                             margin, at + 1), at + 1, base, stride))
+            return _Node(wp, psi, own[at], step, base + soft, -1, leg, self._key(wp, psi),
+                         goal=True, judged=_Judged(own, self._kept_margin(margin, at + 1),
+                                                   at + 1, base, stride))
         if runs.reasons[j] or runs.arrival_step[j] < 0:
             return None
         c = float(np.min(clear[: last + 1]))
@@ -812,14 +815,15 @@ class Search:
             if not np.any(near < r):
                 return None
         step = parent.step + restart
-        leg = Leg(wp, d, bearing, parent.step, parent.step + arrival, com, c, False, parent.key,
-                  action)
+        own = samples.copy()  # not a view of the batch's buffer (above)
+        leg = Leg(wp, d, bearing, parent.step, parent.step + arrival, own[:, self.n : self.n + 2],
+                  c, False, parent.key, action)
         guide = runs.guidance_state(j, restart // stride, _leg_origin(parent, parent.guide))
         soft = self.soft_cost_s(clear[: restart // stride + 1], stride)
         base = parent.g + restart * self.twin.dt_s
-        return _Node(wp, psi, samples[restart // stride], step, base + soft, -1, leg,
+        return _Node(wp, psi, own[restart // stride], step, base + soft, -1, leg,
                      self._key(wp, psi), guide=guide,
-                     judged=_Judged(samples, self._kept_margin(margin, last + 1),
+                     judged=_Judged(own, self._kept_margin(margin, last + 1),
                                     restart // stride + 1, base, stride))
 
     def _kept_margin(self, margin: FloatArray, samples: int) -> float | FloatArray:
