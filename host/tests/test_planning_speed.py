@@ -169,3 +169,18 @@ def test_the_carried_judge_gives_the_reference_verdict_on_fast_swims(margin_m):
             kinds.add("touched" if ref.min() <= 0.0 else
                       "near" if ref.min() <= margin_m else "clear")
     assert {"touched", "clear"} <= kinds
+
+
+def test_the_raise_measured_only_near_its_sites_is_the_raise_measured_everywhere():
+    search = Planner(tank([DISC]), ROBOT, MODEL, check=False).search
+    rng = np.random.default_rng(2403)
+    states = np.zeros((3000, 2 * N + 4))
+    states[:, :N] = rng.uniform(-np.pi, np.pi, (3000, N))
+    states[:, N : N + 2] = rng.uniform([0.0, 0.0], [3.0, 2.0], (3000, 2))
+    pts = body_points(search.model, states, search.settings.per_link)
+    for site, extra in (((1.0, 1.0), 0.05), ((1.3, 0.9), 0.12), ((2.5, 0.2), 0.03)):
+        search.raise_margin(site, extra)
+        near = search._raised_near(states[:, N : N + 2], pts)
+        everywhere = search.raised_m(pts)
+        assert np.array_equal(near, everywhere)
+        assert np.any(everywhere > 0) and np.any(everywhere == 0)
