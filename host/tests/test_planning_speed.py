@@ -184,3 +184,42 @@ def test_the_raise_measured_only_near_its_sites_is_the_raise_measured_everywhere
         everywhere = search.raised_m(pts)
         assert np.array_equal(near, everywhere)
         assert np.any(everywhere > 0) and np.any(everywhere == 0)
+
+
+def glides_into_things(world, rng, paths=10):
+    """A straight body gliding 5-20 mm a step without turning (its ends move as far as its
+    centre of mass, so the motion bound is tight and the field's slope alone makes the carried
+    bound hold), many into a wall or an obstacle."""
+    w, h = world.tank.size_m
+    out = []
+    for _ in range(paths):
+        start = rng.uniform([0.3, 0.3], [w - 0.3, h - 0.3])
+        heading = rng.uniform(0.0, 2.0 * np.pi)
+        steps = int(rng.integers(20, 200))
+        t = np.arange(steps)[:, None]
+        states = np.zeros((steps, 2 * N + 4))
+        states[:, :N] = heading
+        states[:, N : N + 2] = start + rng.uniform(0.005, 0.02) * t * np.array(
+            [np.cos(heading), np.sin(heading)])
+        out.append(states)
+    return out
+
+
+def test_the_carried_bound_is_never_above_the_reference_s_own_bound():
+    # the reference's lower bound at every state (its quarter points), against the bound the
+    # judge carries from the anchors: fast, turning swims, in the open water and at the walls
+    rng = np.random.default_rng(2404)
+    half_link = float(SWIMMER.half_length_m.max())
+    carried = 0
+    for seed in (45003, 45004):
+        world = generate_world(seed)
+        field = clearance_field(world)
+        for states in [*swims_fast_into_things(world, rng, paths=20),
+                       *glides_into_things(world, rng, paths=20)]:
+            bound, ceiling = check.carried_lower_m(field, SWIMMER, states)
+            own = (check._quarter_values(field, link_endpoints(SWIMMER, states))
+                   - field.error_m - half_link / 4.0)
+            assert np.all(bound <= own)
+            assert ceiling >= float(own.min()) + 2 * field.error_m + half_link / 4.0 - 1e-12
+            carried += int(np.sum(bound < own))
+    assert carried  # the states between the anchors carry a bound below their own

@@ -34,8 +34,8 @@ from typing import SupportsFloat
 import numpy as np
 import numpy.typing as npt
 
-from eelhost.planning.body import link_endpoints
-from eelhost.planning.execute import Swim, _body_clearance
+from eelhost.planning.body import link_endpoints, reach_m
+from eelhost.planning.execute import Swim
 from eelhost.planning.field import ClearanceField
 from eelhost.planning.geometry import FloatArray
 from eelhost.planning.harbour import StopWindow, stop_states
@@ -67,9 +67,14 @@ SCREEN_TOLERANCE_M = 1e-9
 
 FIELD_LIPSCHITZ = 1.0 + math.sqrt(2.0)
 """How much the clearance field's interpolant (:class:`eelhost.planning.field.ClearanceField`)
-changes at most per metre a point moves: the bilinear interpolant of grid values of a 1-Lipschitz
-distance changes by at most 1 per metre along each axis of a cell (sqrt 2 in any direction), and
-outside the grid the distance beyond it (1) is taken off the clipped point's value."""
+changes at most per metre a point moves, anywhere: the bilinear interpolant of grid values of a
+1-Lipschitz distance changes by at most 1 per metre along each axis of a cell (sqrt 2 in any
+direction, :data:`GRID_LIPSCHITZ`), and outside the grid the distance beyond it (1) is taken off
+the clipped point's value."""
+
+GRID_LIPSCHITZ = math.sqrt(2.0)
+"""The same within the field's grid (a convex rectangle: a point moving between two points in it
+stays in it)."""
 
 CARRY_STRIDE = 8
 """Every this many states of a check run (and its last) the judge measures the body at its quarter
@@ -135,9 +140,10 @@ def judged_clearance_m(world: World, field: ClearanceField, model: SwimmerModel,
     :data:`CARRY_STRIDE`-th state (an anchor) and the run's last are measured so: the
     reference's lower bound there, ``L = min f - e - h / 4`` (``f`` the field at the quarter
     points, ``e`` its error, ``h`` half a link). A state between two anchors carries the larger
-    of their bounds less :data:`FIELD_LIPSCHITZ` times how far any link end moved since
-    (:func:`end_motion_bound_m`; a quarter point moves no further than its link's ends), which
-    is never above its own ``L``. The smallest upper bound over the anchors (``min f + e``) is at
+    of their bounds less the field's slope (:data:`GRID_LIPSCHITZ` where both states' bodies
+    are inside the field's grid, else :data:`FIELD_LIPSCHITZ`) times how far any link end moved
+    since (:func:`end_motion_bound_m`; a quarter point moves no further than its link's ends),
+    which is never above its own ``L``. The smallest upper bound over the anchors (``min f + e``) is at
     least the reference's smallest, so a state whose carried bound is above it, above the
     contact distance and above the margin is none the reference computes exactly, flags, or
     takes its minimum from; every other state gets the reference's own value (its quarter
@@ -158,29 +164,123 @@ def judged_clearance_m(world: World, field: ClearanceField, model: SwimmerModel,
     """
     half_link = float(model.half_length_m.max())
     half_width = float(model.half_axis_horizontal_m.max())
+    if not len(states):
+        return np.zeros(0)
+    bound, ceiling = carried_lower_m(field, model, states)
+    rows = np.flatnonzero(bound <= max(ceiling, half_width, margin_m + half_width))
+    out = bound
+    out[rows] = _exact_where_it_matters(world, field, link_endpoints(model, states[rows]),
+                                        half_link, half_width, margin_m)
+    return out - half_width
+
+
+def carried_lower_m(field: ClearanceField, model: SwimmerModel,
+                    states: FloatArray) -> tuple[FloatArray, float]:
+    """A lower bound of the reference's quarter-point bound at every state, and a ceiling.
+
+    :func:`judged_clearance_m`'s screen: the reference's lower bound ``L = min f - e - h / 4``
+    measured at every :data:`CARRY_STRIDE`-th state and the last (the anchors), carried to the
+    states between from the nearer-bounding of the two anchors either side, less the field's
+    slope times how far a link end can have moved (:func:`end_motion_bound_m`).
+
+    Parameters
+    ----------
+    field : ClearanceField
+    model : SwimmerModel
+    states : ndarray, shape (K, 2 N + 4), K >= 1
+
+    Returns
+    -------
+    ndarray, shape (K,)
+        At most the reference's ``L`` at every state (equal to it at the anchors), m of the
+        centre line's clearance.
+    float
+        The anchors' smallest upper bound ``min f + e``: at least the reference's smallest.
+    """
+    half_link = float(model.half_length_m.max())
     e = field.error_m
     k = len(states)
-    if k == 0:
-        return np.zeros(0)
     anchors = np.unique(np.r_[np.arange(0, k, CARRY_STRIDE), k - 1])
     anchor_values = _quarter_values(field, link_endpoints(model, states[anchors]))
     lower = anchor_values - e - half_link / 4.0
     # each state's anchor at or before it and the next one (the run's last for the tail)
     before = np.minimum(np.arange(k) // CARRY_STRIDE, len(anchors) - 1)
     after = np.minimum(before + 1, len(anchors) - 1)
-    from_before = lower[before] - FIELD_LIPSCHITZ * end_motion_bound_m(
+    # a state whose every body point is inside the grid (its centre of mass more than the
+    # body's reach from the grid's edges): between two such, the interpolant's own slope
+    n = model.n_links
+    reach = reach_m(model) + 1e-3
+    x, y = states[:, n], states[:, n + 1]
+    inside = ((x > reach) & (x < (field.nx - 1) * field.cell_m - reach)
+              & (y > reach) & (y < (field.ny - 1) * field.cell_m - reach))
+    within = inside[anchors]
+
+    def slope(side: npt.NDArray[np.intp]) -> FloatArray:
+        return np.where(inside & within[side], GRID_LIPSCHITZ, FIELD_LIPSCHITZ)
+
+    from_before = lower[before] - slope(before) * end_motion_bound_m(
         model, states, states[anchors[before]])
-    from_after = lower[after] - FIELD_LIPSCHITZ * end_motion_bound_m(
+    from_after = lower[after] - slope(after) * end_motion_bound_m(
         model, states, states[anchors[after]])
     bound = np.maximum(from_before, from_after) - SCREEN_TOLERANCE_M
     bound[anchors] = lower
-    # the reference's smallest upper bound is at most the anchors' smallest (min f + e)
-    ceiling = float(anchor_values.min()) + e
-    rows = np.flatnonzero(bound <= max(ceiling, half_width, margin_m + half_width))
-    out = bound
-    out[rows] = _body_clearance(world, field, link_endpoints(model, states[rows]), half_link,
-                                half_width)
-    return out - half_width
+    return bound, float(anchor_values.min()) + e
+
+
+EXACT_CHUNK = 64
+"""States measured exactly at once while :func:`_exact_where_it_matters` looks for the smallest."""
+
+
+def _exact_where_it_matters(world: World, field: ClearanceField, ends: FloatArray,
+                            half_link: float, half_width: float, margin_m: float) -> FloatArray:
+    """The reference's clearance of the centre line where a verdict reads it, else its bound.
+
+    :func:`eelhost.planning.execute._body_clearance` (its quarter points' lower bound
+    ``L``, the exact geometry where ``L`` is at most the smallest upper bound ``U`` or the
+    contact distance), except that of the states it measures exactly whose ``L`` is above the
+    margin (so that neither contact nor the margin can be theirs) only those are measured that
+    may still hold the smallest value: in order of ``L``, until ``L`` is above the smallest
+    value measured. The others keep ``L``, above that smallest value and above the margin.
+
+    Parameters
+    ----------
+    world : World
+    field : ClearanceField
+    ends : ndarray, shape (K, N + 1, 2)
+        Link end points.
+    half_link, half_width : float
+        Half the longest link and the body's half width, m.
+    margin_m : float
+        The check's margin over the half width, m.
+
+    Returns
+    -------
+    ndarray, shape (K,)
+        The centre line's clearance (the half width not taken off).
+    """
+    values = _quarter_values(field, ends)
+    if not len(values):
+        return values
+    upper = values + field.error_m
+    lower = values - field.error_m - half_link / 4.0
+    out = lower.copy()
+    need = lower <= max(float(upper.min()), half_width)
+    must = np.flatnonzero(need & (lower <= margin_m + half_width))
+    best = math.inf
+    for lo in range(0, must.size, 500):
+        part = must[lo : lo + 500]
+        out[part] = world.body_clearance(ends[part])
+        best = min(best, float(out[part].min()))
+    rest = np.flatnonzero(need & (lower > margin_m + half_width))
+    rest = rest[np.argsort(lower[rest], kind="stable")]
+    for lo in range(0, rest.size, EXACT_CHUNK):
+        part = rest[lo : lo + EXACT_CHUNK]
+        part = part[lower[part] <= best]
+        if not part.size:
+            break
+        out[part] = world.body_clearance(ends[part])
+        best = min(best, float(out[part].min()))
+    return out
 
 
 def water_twin(twin: Twin, waters: Sequence[WaterDraw]
