@@ -97,11 +97,13 @@ def test_a_raise_that_refuses_a_swum_child_refuses_it_when_judged_again():
 
 def test_a_planning_call_with_repairs_returns_the_same_whether_raised_children_are_swum_or_judged():
     # a generated world whose first plan fails its check and is repaired with raised margins
-    # (development seed 45003: four repairs, check_failed, at session 24's base)
-    world = generate_world(45003)
+    # (development seed 45049: planned after four repairs at session 24's base; judged again
+    # with the cost its children had from their parent when first swum, not the parent's cost
+    # now, it was planned after two, another plan)
+    world = generate_world(45049)
     got = {}
     for rejudge in (False, True):
-        planner = Planner(world, ROBOT, MODEL, seed=45003, unknown_current_m_s=0.0,
+        planner = Planner(world, ROBOT, MODEL, seed=45049, unknown_current_m_s=0.0,
                           swimmer=SWIMMER)
         planner.search.rejudge = rejudge
         out = planner.plan()

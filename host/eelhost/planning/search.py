@@ -390,8 +390,8 @@ class _Judged:
         The margin each sample keeps (:meth:`Search._margin`).
     soft_end : int
         The soft margin's cost is summed over the first this many samples.
-    base_g : float
-        The child's cost without the soft margin's (its parent's plus the time swum), s.
+    swum_s : float
+        The time the child adds to its parent's cost besides the soft margin's, s.
     stride : int
         Physics steps between the samples.
     """
@@ -399,7 +399,7 @@ class _Judged:
     samples: FloatArray
     margin_m: float | FloatArray
     soft_end: int
-    base_g: float
+    swum_s: float
     stride: int
 
 
@@ -827,10 +827,11 @@ class Search:
             leg = Leg(wp, d, bearing, parent.step, step, own[:, self.n : self.n + 2], c, True,
                       parent.key, action)
             soft = self.soft_cost_s(clear[: at + 1], stride)
-            base = parent.g + (step - parent.step) * self.twin.dt_s
-            return _Node(wp, psi, own[at], step, base + soft, -1, leg, self._key(wp, psi),
-                         goal=True, judged=_Judged(own, self._kept_margin(margin, at + 1),
-                                                   at + 1, base, stride))
+            swum = (step - parent.step) * self.twin.dt_s
+            return _Node(wp, psi, own[at], step, parent.g + swum + soft, -1, leg,
+                         self._key(wp, psi), goal=True,
+                         judged=_Judged(own, self._kept_margin(margin, at + 1), at + 1, swum,
+                                        stride))
         if runs.reasons[j] or runs.arrival_step[j] < 0:
             return None
         c = float(np.min(clear[: last + 1]))
@@ -854,11 +855,11 @@ class Search:
                   c, False, parent.key, action)
         guide = runs.guidance_state(j, restart // stride, _leg_origin(parent, parent.guide))
         soft = self.soft_cost_s(clear[: restart // stride + 1], stride)
-        base = parent.g + restart * self.twin.dt_s
-        return _Node(wp, psi, own[restart // stride], step, base + soft, -1, leg,
+        swum = restart * self.twin.dt_s
+        return _Node(wp, psi, own[restart // stride], step, parent.g + swum + soft, -1, leg,
                      self._key(wp, psi), guide=guide,
                      judged=_Judged(own, self._kept_margin(margin, last + 1),
-                                    restart // stride + 1, base, stride))
+                                    restart // stride + 1, swum, stride))
 
     def _kept_margin(self, margin: FloatArray, samples: int) -> float | FloatArray:
         """A child's margin as :class:`_Judged` keeps it: one number when it is flat."""
@@ -866,13 +867,13 @@ class Search:
             return float(margin[0])
         return margin[:samples].copy()
 
-    def _judged_again(self, child: _Node | None) -> _Node | None:
-        """A kept child judged again from its samples with the margin raised now.
+    def _judged_again(self, parent: _Node, child: _Node | None) -> _Node | None:
+        """A kept child of ``parent`` judged again from its samples with the margin raised now.
 
-        What swimming its leg again would give (the twin's run is the same; only the
-        clearances change): None when a sample is now inside the margin, else the child with
-        its leg's smallest clearance and its soft margin's cost recomputed (docs/planning.md,
-        "Swum once, judged again").
+        What swimming its leg again from ``parent`` would give (the twin's run is the same;
+        only the clearances change): None when a sample is now inside the margin, else the
+        child with its leg's smallest clearance, its soft margin's cost and its cost from the
+        parent's as it is now recomputed (docs/planning.md, "Swum once, judged again").
         """
         if child is None or child.judged is None or child.leg is None:
             return None
@@ -882,8 +883,9 @@ class Search:
             return None
         leg = dataclasses.replace(child.leg, min_clearance_m=float(np.min(clear)))
         soft = self.soft_cost_s(clear[: info.soft_end], info.stride)
-        return _Node(child.waypoint, child.psi, child.state, child.step, info.base_g + soft, -1,
-                     leg, child.key, child.goal, child.particles, child.guide, info)
+        return _Node(child.waypoint, child.psi, child.state, child.step,
+                     parent.g + info.swum_s + soft, -1, leg, child.key, child.goal,
+                     child.particles, child.guide, info)
 
     def _stop_clear(self, node: _Node) -> bool:
         """The arrival's stop from a goal node keeps the search's margin (:attr:`goal_stop`).
@@ -1111,7 +1113,8 @@ class Search:
         for k, ni in enumerate(ids):
             key = self._path_key(ni, batch_nodes[k])
             if key in self._stale:
-                self._memo[key] = [(a, self._judged_again(c)) for a, c in self._memo[key]]
+                self._memo[key] = [(a, self._judged_again(batch_nodes[k], c))
+                                   for a, c in self._memo[key]]
                 self._stale.discard(key)
                 self._memo_raised.add(key)  # judged with a raised margin: not past clear_raised
         out = []
