@@ -225,3 +225,38 @@ def test_the_carried_bound_is_never_above_the_reference_s_own_bound():
             assert ceiling >= float(own.min()) + 2 * field.error_m + half_link / 4.0 - 1e-12
             carried += int(np.sum(bound < own))
     assert carried  # the states between the anchors carry a bound below their own
+
+
+def test_a_body_clearance_told_a_bound_is_the_one_measured_against_every_obstacle():
+    # paths into and through obstacles and walls, each step told the field's bound (negative
+    # inside an obstacle): the same distances as without it, and as the field left out
+    rng = np.random.default_rng(2405)
+    touched = 0
+    for seed in (45000, 45005, 45011):
+        world = generate_world(seed)
+        field = clearance_field(world)
+        for states in [*swims_fast_into_things(world, rng), *glides_into_things(world, rng)]:
+            ends = link_endpoints(SWIMMER, states)
+            upper = check._quarter_values(field, ends) + field.error_m
+            told = world.body_clearance(ends, upper)
+            assert np.array_equal(told, world.body_clearance(ends))
+            assert np.all(told <= np.maximum(upper, 0.0) + 1e-12)
+            touched += int(np.sum(told == 0.0))
+    assert touched
+
+
+def test_the_field_read_in_place_is_the_field_read_apart():
+    # ClearanceField.__call__ writes its grid coordinates into place: the values of dividing,
+    # clipping and joining them apart, inside the grid and beyond it
+    from scipy.ndimage import map_coordinates
+
+    field = clearance_field(generate_world(45001))
+    rng = np.random.default_rng(2406)
+    for shape in [(400, 13, 2), (7, 2), (2,)]:
+        p = rng.uniform([-0.3, -0.3], [3.4, 2.4], shape)
+        u, v = p[..., 0] / field.cell_m, p[..., 1] / field.cell_m
+        uc, vc = np.clip(u, 0.0, field.nx - 1.0), np.clip(v, 0.0, field.ny - 1.0)
+        apart = map_coordinates(field.values, [uc.ravel(), vc.ravel()], order=1,
+                                prefilter=False, mode="nearest").reshape(u.shape)
+        apart = apart - np.hypot(u - uc, v - vc) * field.cell_m
+        assert np.array_equal(field(p), apart)

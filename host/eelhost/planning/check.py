@@ -227,8 +227,10 @@ def carried_lower_m(field: ClearanceField, model: SwimmerModel,
     return bound, float(anchor_values.min()) + e
 
 
-EXACT_CHUNK = 64
-"""States measured exactly at once while :func:`_exact_where_it_matters` looks for the smallest."""
+EXACT_CHUNK = 256
+"""States measured exactly at once while :func:`_exact_where_it_matters` looks for the smallest
+(each call of :meth:`eelhost.planning.world.World.body_clearance` costs a fixed part per obstacle:
+64 at once took a fifth more of the judging's time on 45001's check runs than 256)."""
 
 
 def _exact_where_it_matters(world: World, field: ClearanceField, ends: FloatArray,
@@ -269,7 +271,7 @@ def _exact_where_it_matters(world: World, field: ClearanceField, ends: FloatArra
     best = math.inf
     for lo in range(0, must.size, 500):
         part = must[lo : lo + 500]
-        out[part] = world.body_clearance(ends[part])
+        out[part] = world.body_clearance(ends[part], upper[part])
         best = min(best, float(out[part].min()))
     rest = np.flatnonzero(need & (lower > margin_m + half_width))
     rest = rest[np.argsort(lower[rest], kind="stable")]
@@ -278,7 +280,7 @@ def _exact_where_it_matters(world: World, field: ClearanceField, ends: FloatArra
         part = part[lower[part] <= best]
         if not part.size:
             break
-        out[part] = world.body_clearance(ends[part])
+        out[part] = world.body_clearance(ends[part], upper[part])
         best = min(best, float(out[part].min()))
     return out
 
