@@ -26,6 +26,12 @@ def link_endpoints(model: SwimmerModel, states: FloatArray) -> FloatArray:
     ndarray, shape (K, N + 1, 2)
     """
     n = model.n_links
+    if len(states) == 1:
+        # a single state through the matrix product's many-row path, as among others: a
+        # one-row product takes another path whose last bits can differ, and a state's points
+        # must not depend on what it is computed with (docs/planning.md, "Swum once, judged
+        # again")
+        return link_endpoints(model, np.repeat(states, 2, axis=0))[:1]
     theta = states[:, :n]
     c, s = np.cos(theta), np.sin(theta)
     g = model.geometry

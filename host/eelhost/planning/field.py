@@ -99,15 +99,25 @@ class ClearanceField:
         ndarray, shape (...)
         """
         p = np.asarray(points, dtype=float)
-        u = p[..., 0] / self.cell_m
-        v = p[..., 1] / self.cell_m
-        uc = np.clip(u, 0.0, self.nx - 1.0)
-        vc = np.clip(v, 0.0, self.ny - 1.0)
+        shape = p.shape[:-1]
+        # the grid coordinates written straight into the rows map_coordinates reads (the same
+        # values as dividing and clipping apart, without joining them afterwards)
+        coords = np.empty((2, int(np.prod(shape))))
+        np.divide(p[..., 0].reshape(-1), self.cell_m, out=coords[0])
+        np.divide(p[..., 1].reshape(-1), self.cell_m, out=coords[1])
+        beyond = ((coords[0] < 0.0) | (coords[0] > self.nx - 1.0)
+                  | (coords[1] < 0.0) | (coords[1] > self.ny - 1.0))
+        off = np.flatnonzero(beyond)
+        u, v = coords[0, off], coords[1, off]  # copies: the points beyond the grid
+        np.clip(coords[0], 0.0, self.nx - 1.0, out=coords[0])
+        np.clip(coords[1], 0.0, self.ny - 1.0, out=coords[1])
         # bilinear (order 1, no prefilter) interpolation of the node values
-        val = map_coordinates(self.values, [uc.ravel(), vc.ravel()], order=1, prefilter=False,
-                              mode="nearest").reshape(u.shape)
-        outside = np.hypot(u - uc, v - vc) * self.cell_m
-        return val - outside
+        val = map_coordinates(self.values, coords, order=1, prefilter=False, mode="nearest")
+        if off.size:
+            # beyond the grid: the nearest edge value, less the distance beyond it (inside,
+            # that distance is 0 and taking it off changes nothing)
+            val[off] -= np.hypot(u - coords[0, off], v - coords[1, off]) * self.cell_m
+        return val.reshape(shape)
 
 
 FIELD_CACHE_SIZE = 16

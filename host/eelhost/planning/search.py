@@ -30,6 +30,7 @@ docs/planning.md ("The search") is the long form. In short:
 
 from __future__ import annotations
 
+import dataclasses
 import heapq
 import math
 import time
@@ -372,6 +373,36 @@ def leg_start_guide(state: FloatArray, n_links: int,
             float(integral_s[1]))
 
 
+@dataclass(frozen=True)
+class _Judged:
+    """What a kept child's verdict was judged from, to judge it again without swimming it.
+
+    A raised margin (:meth:`Search.raise_margin`) changes only the clearances of a leg's
+    samples, not its run: the child is judged again from the same samples (docs/planning.md,
+    "Swum once, judged again").
+
+    Attributes
+    ----------
+    samples : ndarray, shape (S, 2 N + 4)
+        The leg's samples the margin applies to: the child's own copy, of which its state and
+        its leg's centre-of-mass track are views.
+    margin_m : float or ndarray, shape (S,)
+        The margin each sample keeps (:meth:`Search._margin`).
+    soft_end : int
+        The soft margin's cost is summed over the first this many samples.
+    swum_s : float
+        The time the child adds to its parent's cost besides the soft margin's, s.
+    stride : int
+        Physics steps between the samples.
+    """
+
+    samples: FloatArray
+    margin_m: float | FloatArray
+    soft_end: int
+    swum_s: float
+    stride: int
+
+
 @dataclass
 class _Node:
     waypoint: tuple[float, float] | None  # None: the start, at rest
@@ -389,6 +420,8 @@ class _Node:
     # the guidance's state at ``step``: where the leg to ``waypoint`` starts and the ILOS
     # integral (Twin.run's ``guidance``), so a child's run continues the uninterrupted one
     guide: Guide = (math.nan, math.nan, 0.0, 0.0)
+    # what a kept child was judged from (raise_margin judges it again from the same samples)
+    judged: _Judged | None = None
 
 
 class Search:
@@ -445,6 +478,12 @@ class Search:
         # extra m); the memo keys of the children swum while some were set (clear_raised)
         self._raised = np.zeros((0, 3))
         self._memo_raised: set[tuple] = set()
+        # memo keys whose children a raise came near: judged again when next expanded
+        self._stale: set[tuple] = set()
+        self.rejudge = True
+        """After :meth:`raise_margin`, judge the memo's children near it again from their
+        samples (True), or swim them again (False, as until session 24): the same children
+        either way (docs/planning.md, "Swum once, judged again")."""
         self.goal_stop: Callable[[FloatArray, int], FloatArray] | None = None
         """The arrival's stop from a goal node's state and step: its samples, shape (S, 2 N + 4)
         (the planner's, :meth:`eelhost.planning.planner.Planner.arrival_stop_states`); a goal
@@ -603,7 +642,7 @@ class Search:
                 kids[j] = None
                 continue
             origin = _leg_origin(parent[r], parent[r].particles[q][2])
-            states[j].append((runs.states[r, sample], step,
+            states[j].append((runs.states[r, sample].copy(), step,
                               runs.guidance_state(r, sample, origin)))
         for j in kept:
             kid = kids[j]
@@ -642,7 +681,41 @@ class Search:
         for lo in range(0, near.size, CLEARANCE_CHUNK):
             part = near[lo : lo + CLEARANCE_CHUNK]
             pts = body_points(self.model, flat[part], self.settings.per_link)
-            out[part] = (self.clearance(pts) - self.raised_m(pts)).min(axis=1) - self._slack_m
+            value = self.clearance(pts)
+            if len(self._raised):
+                value -= self._raised_near(flat[part, n : n + 2], pts)
+            out[part] = value.min(axis=1) - self._slack_m
+        return out
+
+    def _raised_near(self, com: FloatArray, points: FloatArray) -> FloatArray:
+        """:meth:`raised_m` of each state's body points, computed only where it can be above 0.
+
+        A state whose centre of mass is beyond :data:`RAISE_OUTER_M` plus the body's reach of a
+        raise's site has every point beyond :data:`RAISE_OUTER_M` of it, where the raise is 0:
+        the same values as :meth:`raised_m`, without measuring every point against every site.
+
+        Parameters
+        ----------
+        com : ndarray, shape (K, 2)
+            The states' centres of mass.
+        points : ndarray, shape (K, P, 2)
+            Their body points.
+
+        Returns
+        -------
+        ndarray, shape (K, P)
+        """
+        out = np.zeros(points.shape[:-1])
+        # a millimetre over the reach: no rounding puts a point of a state left out inside
+        reach = RAISE_OUTER_M + self.reach_m + 1e-3
+        for x, y, extra in self._raised:
+            rows = np.flatnonzero(np.hypot(com[:, 0] - x, com[:, 1] - y) < reach)
+            if not rows.size:
+                continue
+            near = points[rows]
+            d = np.hypot(near[..., 0] - x, near[..., 1] - y)
+            ramp = np.clip((RAISE_OUTER_M - d) / (RAISE_OUTER_M - RAISE_INNER_M), 0.0, 1.0)
+            out[rows] = np.maximum(out[rows], extra * ramp)
         return out
 
     def raised_m(self, points: FloatArray) -> FloatArray:
@@ -680,10 +753,21 @@ class Search:
                     if any(c is not None and c.leg is not None and np.min(np.hypot(
                         c.leg.com_m[:, 0] - xy[0], c.leg.com_m[:, 1] - xy[1])) < near
                         for _, c in kids)]:
-            del self._memo[key]
+            if self.rejudge and not self.settings.robust_current_m_s > 0 and all(
+                    c is None or c.judged is not None for _, c in self._memo[key]):
+                # judged again from the same samples when next reached (_expand), not swum
+                # again: the same children (docs/planning.md, "Swum once, judged again")
+                self._stale.add(key)
+            else:
+                # the robust search's extra waters are judged with the raised margin too
+                del self._memo[key]
+                self._stale.discard(key)
 
     def clear_raised(self) -> None:
         """Undo every :meth:`raise_margin` (a new planning call starts without them)."""
+        # an entry waiting to be judged again was judged without the raises since (the ones
+        # judged with some are in _memo_raised): as it is, it holds without any
+        self._stale.clear()
         if not len(self._raised):
             return
         self._raised = np.zeros((0, 3))
@@ -737,11 +821,17 @@ class Search:
             if np.any(clear[: at + 1] < margin[: at + 1]):
                 return None
             step = parent.step + at * stride
-            leg = Leg(wp, d, bearing, parent.step, step, com[: at + 1], c, True, parent.key,
-                      action)
+            # the child's own copy of its samples: a view would keep the whole batch's buffer
+            # (every run, sized for the longest time limit) alive as long as the memo
+            own = samples[: at + 1].copy()
+            leg = Leg(wp, d, bearing, parent.step, step, own[:, self.n : self.n + 2], c, True,
+                      parent.key, action)
             soft = self.soft_cost_s(clear[: at + 1], stride)
-            return _Node(wp, psi, samples[at], step, parent.g + (step - parent.step)
-                         * self.twin.dt_s + soft, -1, leg, self._key(wp, psi), goal=True)
+            swum = (step - parent.step) * self.twin.dt_s
+            return _Node(wp, psi, own[at], step, parent.g + swum + soft, -1, leg,
+                         self._key(wp, psi), goal=True,
+                         judged=_Judged(own, self._kept_margin(margin, at + 1), at + 1, swum,
+                                        stride))
         if runs.reasons[j] or runs.arrival_step[j] < 0:
             return None
         c = float(np.min(clear[: last + 1]))
@@ -760,13 +850,42 @@ class Search:
             if not np.any(near < r):
                 return None
         step = parent.step + restart
-        leg = Leg(wp, d, bearing, parent.step, parent.step + arrival, com, c, False, parent.key,
-                  action)
+        own = samples.copy()  # not a view of the batch's buffer (above)
+        leg = Leg(wp, d, bearing, parent.step, parent.step + arrival, own[:, self.n : self.n + 2],
+                  c, False, parent.key, action)
         guide = runs.guidance_state(j, restart // stride, _leg_origin(parent, parent.guide))
         soft = self.soft_cost_s(clear[: restart // stride + 1], stride)
-        return _Node(wp, psi, samples[restart // stride], step,
-                     parent.g + restart * self.twin.dt_s + soft, -1, leg, self._key(wp, psi),
-                     guide=guide)
+        swum = restart * self.twin.dt_s
+        return _Node(wp, psi, own[restart // stride], step, parent.g + swum + soft, -1, leg,
+                     self._key(wp, psi), guide=guide,
+                     judged=_Judged(own, self._kept_margin(margin, last + 1),
+                                    restart // stride + 1, swum, stride))
+
+    def _kept_margin(self, margin: FloatArray, samples: int) -> float | FloatArray:
+        """A child's margin as :class:`_Judged` keeps it: one number when it is flat."""
+        if self.settings.start_ramp_s <= 0:
+            return float(margin[0])
+        return margin[:samples].copy()
+
+    def _judged_again(self, parent: _Node, child: _Node | None) -> _Node | None:
+        """A kept child of ``parent`` judged again from its samples with the margin raised now.
+
+        What swimming its leg again from ``parent`` would give (the twin's run is the same;
+        only the clearances change): None when a sample is now inside the margin, else the
+        child with its leg's smallest clearance, its soft margin's cost and its cost from the
+        parent's as it is now recomputed (docs/planning.md, "Swum once, judged again").
+        """
+        if child is None or child.judged is None or child.leg is None:
+            return None
+        info = child.judged
+        clear = self.state_clearances(info.samples)
+        if np.any(clear < info.margin_m):
+            return None
+        leg = dataclasses.replace(child.leg, min_clearance_m=float(np.min(clear)))
+        soft = self.soft_cost_s(clear[: info.soft_end], info.stride)
+        return _Node(child.waypoint, child.psi, child.state, child.step,
+                     parent.g + info.swum_s + soft, -1, leg, child.key, child.goal,
+                     child.particles, child.guide, info)
 
     def _stop_clear(self, node: _Node) -> bool:
         """The arrival's stop from a goal node keeps the search's margin (:attr:`goal_stop`).
@@ -991,6 +1110,13 @@ class Search:
                 self._memo[self._path_key(ids[k], batch_nodes[k])] = kids
                 if len(self._raised):  # swum with a raised margin: not kept past clear_raised
                     self._memo_raised.add(self._path_key(ids[k], batch_nodes[k]))
+        for k, ni in enumerate(ids):
+            key = self._path_key(ni, batch_nodes[k])
+            if key in self._stale:
+                self._memo[key] = [(a, self._judged_again(batch_nodes[k], c))
+                                   for a, c in self._memo[key]]
+                self._stale.discard(key)
+                self._memo_raised.add(key)  # judged with a raised margin: not past clear_raised
         out = []
         for k, ni in enumerate(ids):
             kids = self._memo[self._path_key(ni, batch_nodes[k])]
@@ -1016,4 +1142,4 @@ def _leg_origin(node: _Node, guide: Guide) -> tuple[float, float]:
 
 def _copy(node: _Node) -> _Node:
     return _Node(node.waypoint, node.psi, node.state, node.step, node.g, -1, node.leg, node.key,
-                 node.goal, node.particles, node.guide)
+                 node.goal, node.particles, node.guide, node.judged)

@@ -65,6 +65,12 @@ EXAMPLES = ("tank_5_obstacles",)
 MIN_POLYGON_AREA_M2 = 1e-6
 """A polygon obstacle enclosing less (1 mm^2) is refused as degenerate."""
 
+BOX_TOLERANCE_M = 1e-9
+""":meth:`World.body_clearance` leaves an obstacle out of a step only when the step's bounding
+box is further from it than this over the smallest distance so far, m: room for rounding, so
+that no step's value differs from measuring every obstacle (docs/planning.md, "The planner's
+processor time (session 24)")."""
+
 
 class WorldError(UserError, ValueError):
     """An invalid or unreadable world file."""
@@ -331,7 +337,8 @@ class World(_Strict):
         return best
 
 
-    def body_clearance(self, polylines: FloatArray) -> FloatArray:
+    def body_clearance(self, polylines: FloatArray,
+                       at_most: FloatArray | None = None) -> FloatArray:
         """Exact distance from each polyline to the nearest obstacle or wall (0 when touching).
 
         The executor's check of the robot's centre line at every step of a run.
@@ -340,6 +347,10 @@ class World(_Strict):
         ----------
         polylines : ndarray, shape (K, P, 2)
             K polylines of P points (e.g. the link end points at K steps).
+        at_most : ndarray, shape (K,), optional
+            A bound each distance is known not to exceed (the check's field bound): an
+            obstacle whose bounding box is further from a polyline's is not measured. Only the
+            time depends on it, never a value.
 
         Returns
         -------
@@ -348,18 +359,36 @@ class World(_Strict):
         pts = np.asarray(polylines, dtype=float)
         w, h = self.tank.size_m
         x, y = pts[..., 0], pts[..., 1]
-        best = np.maximum(0.0, np.minimum.reduce(
-            [x.min(axis=1), w - x.max(axis=1), y.min(axis=1), h - y.max(axis=1)]))
+        x_lo, x_hi, y_lo, y_hi = x.min(axis=1), x.max(axis=1), y.min(axis=1), y.max(axis=1)
+        best = np.maximum(0.0, np.minimum.reduce([x_lo, w - x_hi, y_lo, h - y_hi]))
         a, b = pts[:, :-1], pts[:, 1:]
+
+        def beyond(lo: FloatArray, hi: FloatArray) -> FloatArray:
+            # how far each polyline's bounding box is from the box lo-hi: no point of the
+            # polyline is nearer to anything in that box (a step whose obstacle is further
+            # than its smallest distance so far is not measured: the same values)
+            return np.hypot(np.maximum(np.maximum(lo[0] - x_hi, x_lo - hi[0]), 0.0),
+                            np.maximum(np.maximum(lo[1] - y_hi, y_lo - hi[1]), 0.0))
+
+        # a distance is never below 0 (a bound below it, inside an obstacle, bounds nothing)
+        cap = best if at_most is None else np.minimum(best, np.maximum(at_most, 0.0))
         for c, r in self._circles:
-            d = point_segment_distance(c[None, None], a, b)[:, 0].min(axis=1) - r
-            best = np.minimum(best, np.maximum(d, 0.0))
+            rows = np.flatnonzero(beyond(c, c) - r <= np.minimum(best, cap) + BOX_TOLERANCE_M)
+            if not rows.size:
+                continue
+            d = point_segment_distance(c[None, None], a[rows], b[rows])[:, 0].min(axis=1) - r
+            best[rows] = np.minimum(best[rows], np.maximum(d, 0.0))
         for poly in self._polygons:
-            # only steps that its bounding circle leaves a chance to come closer than so far
+            # only steps that its bounding box and circle leave a chance to come closer than so
+            # far
+            near = np.flatnonzero(beyond(poly.min(axis=0), poly.max(axis=0))
+                                  <= np.minimum(best, cap) + BOX_TOLERANCE_M)
+            if not near.size:
+                continue
             centre = poly.mean(axis=0)
             radius = float(np.hypot(*(poly - centre).T).max())
-            gap = np.hypot(pts[..., 0] - centre[0], pts[..., 1] - centre[1]).min(axis=1)
-            rows = np.flatnonzero(gap - radius < best)
+            gap = np.hypot(pts[near, :, 0] - centre[0], pts[near, :, 1] - centre[1]).min(axis=1)
+            rows = near[gap - radius < best[near]]
             if not rows.size:
                 continue
             pa, pb, pp = a[rows], b[rows], pts[rows]
