@@ -83,9 +83,11 @@ from eelhost.planning.station import (
     LEAST_BAD_GAIN_M,
     LEAST_BAD_HORIZON_S,
     LEAST_BAD_MAX_S,
+    LEAST_BAD_STEP_M,
     STATION_CHECK_S,
     STATION_MAX_S,
     STATION_REACH_M,
+    LeastBad,
     Station,
     find_least_bad,
     find_station,
@@ -1986,12 +1988,13 @@ class TankReplanner:
     # -- the least-bad swim (docs/planning.md, "The least-bad swim (session 24)") ----------------
 
     def _judge_least_bad(self, t_s: float, kind: str
-                         ) -> tuple[float, Station | None, None] | None:
-        """The stop at once's gap and the clearest short swim from the estimate, or None without one.
+                         ) -> tuple[float, LeastBad | None] | None:
+        """The stop at once's gap and the least-bad swim from the estimate, or None without one.
 
         The stop is judged as :meth:`_judge_station` judges it (reused when judged at ``t_s``);
-        the swims by :func:`~eelhost.planning.station.find_least_bad` only when the stop comes
-        within the look-ahead's margin.
+        the swims by :func:`~eelhost.planning.station.find_least_bad` (each swim over its short
+        horizon and the stop of ``kind`` a check into it) only when the stop comes within the
+        look-ahead's margin.
         """
         est = self.estimator.estimate()
         if est is None:
@@ -2006,17 +2009,21 @@ class TankReplanner:
                                   gap_of)
             self._stop_judged = (t_s, stop_gap)
         if stop_gap > self.lookahead_margin_m:
-            return stop_gap, None, None
-        swim = find_least_bad(twin, est.state, est.t_s, self._station_current(extra), gap_of)
-        return stop_gap, swim, None
+            return stop_gap, None
+        least = find_least_bad(twin, self.gait, est.state, est.t_s,
+                               self._station_current(extra), gap_of, self._stop_window(kind))
+        return stop_gap, least
 
-    def _beats_stop(self, swim: Station, stop_gap_m: float) -> bool:
-        """The swim keeps :data:`~eelhost.planning.station.LEAST_BAD_GAIN_M` more than the stop and contact.
+    @staticmethod
+    def _beats_stop(least: LeastBad | None, stop_gap_m: float) -> bool:
+        """The stop a check into the swim is clearer than ``stop_gap_m`` by :data:`~eelhost.planning.station.LEAST_BAD_STEP_M`.
 
-        Only a swim the twin keeps clear of contact over its horizon is swum: a stop into
-        something is counted apart from the swimming run's contacts, a swim into it is not.
+        The swim itself keeps :data:`~eelhost.planning.station.LEAST_BAD_GAIN_M` over its
+        horizon (:func:`~eelhost.planning.station.find_least_bad`): only a swim the twin keeps
+        clear of contact is swum, and only towards a better stop.
         """
-        return swim.gap_m > max(stop_gap_m, 0.0) + LEAST_BAD_GAIN_M
+        return (least is not None and least.swim.gap_m > LEAST_BAD_GAIN_M
+                and least.stop_gap_m > stop_gap_m + LEAST_BAD_STEP_M)
 
     def _least_bad_on(self, t_s: float, kind: str, detail: str) -> Decision | None:
         """Swim the clearest short swim instead of a stop the twin drifts into something, or None.
@@ -2035,14 +2042,17 @@ class TankReplanner:
         judged = self._judge_least_bad(t_s, kind)
         if judged is None:
             return None
-        stop_gap, swim, _ = judged
+        stop_gap, least = judged
         if stop_gap > self.lookahead_margin_m:
             return None
-        if swim is None or not self._beats_stop(swim, stop_gap):
-            self.events.append({"kind": "least_bad", "reason": kind, "t_s": round(t_s, 3),
-                                "status": "none", "stop_gap_m": _rounded(stop_gap),
-                                "clearest_gap_m": None if swim is None else _rounded(swim.gap_m)})
+        if least is None or not self._beats_stop(least, stop_gap):
+            self.events.append({
+                "kind": "least_bad", "reason": kind, "t_s": round(t_s, 3), "status": "none",
+                "stop_gap_m": _rounded(stop_gap),
+                "swim_gap_m": None if least is None else _rounded(least.swim.gap_m),
+                "next_stop_gap_m": None if least is None else _rounded(least.stop_gap_m)})
             return None
+        swim = least.swim
         # the look-ahead and the windows followed the old waypoints; a replan in flight goes on
         self._lookahead = None
         self._whole_job = None
@@ -2052,19 +2062,41 @@ class TankReplanner:
                  "bearing_deg": swim.bearing_deg, "from": swim.frame,
                  "waypoint_m": [round(swim.waypoint_m[0], 4), round(swim.waypoint_m[1], 4)],
                  "gap_m": _rounded(swim.gap_m), "stop_gap_m": _rounded(stop_gap),
-                 "horizon_s": LEAST_BAD_HORIZON_S, "checks": 1, "switches": 0, "detail": detail}
+                 "next_stop_gap_m": _rounded(least.stop_gap_m), "horizon_s": LEAST_BAD_HORIZON_S,
+                 "checks": 1, "switches": 0, "detail": detail,
+                 "judged": [[round(t_s, 3), _rounded(stop_gap), _rounded(swim.gap_m),
+                             _rounded(least.stop_gap_m)]]}
         self.events.append(event)
         self._station = _Station(t_s, t_s + STATION_CHECK_S, kind, detail, swim.waypoint_m, event,
                                  least_bad=True)
         self.waypoints = [swim.waypoint_m]
         log.warning("at t = %.2f s the stop (%s) drifts %.0f mm from an obstacle or wall in the "
                     "twin with no harbour, station or hold: swimming %+.0f deg from %s, %.0f mm "
-                    "clear over %.0f s in the twin (%s)", t_s, kind, stop_gap * 1000,
-                    swim.bearing_deg, swim.frame, swim.gap_m * 1000, LEAST_BAD_HORIZON_S, detail)
+                    "clear over %.0f s in the twin, its stop a check on %.0f mm (%s)", t_s, kind,
+                    stop_gap * 1000, swim.bearing_deg, swim.frame, swim.gap_m * 1000,
+                    LEAST_BAD_HORIZON_S, least.stop_gap_m * 1000, detail)
         return Decision(waypoints=[swim.waypoint_m], guide=swim.guide, recorded=True, detail=(
             f"the least-bad swim at t = {t_s:.2f} s: the stop drifts {stop_gap * 1000:.0f} mm "
             f"from an obstacle or wall in the twin, the swim {swim.gap_m * 1000:.0f} mm over "
-            f"{LEAST_BAD_HORIZON_S:.0f} s"))
+            f"{LEAST_BAD_HORIZON_S:.0f} s and its stop a check on {least.stop_gap_m * 1000:.0f} "
+            "mm"))
+
+    def _least_bad_check(self, t_s: float, st: _Station) -> tuple[float, Station | None] | None:
+        """A least-bad swim's check: the stop's gap, and the swim to steer (None: no swim beats it).
+
+        Each check's stop, swim and its stop a check on are recorded in the event's ``judged``.
+        """
+        judged = self._judge_least_bad(t_s, st.kind)
+        if judged is None:
+            return None
+        stop_gap, least = judged
+        st.event["judged"].append([
+            round(t_s, 3), _rounded(stop_gap),
+            None if least is None else _rounded(least.swim.gap_m),
+            None if least is None else _rounded(least.stop_gap_m)])
+        if least is None or not self._beats_stop(least, stop_gap):
+            return stop_gap, None  # no swim beats the stop any more: the stop
+        return stop_gap, least.swim
 
     def _station_frame(self, t_s: float, guide: Guide | None) -> Decision:
         """Take one frame while holding station: replan, judge again, end in a plan or a stop.
@@ -2093,17 +2125,19 @@ class TankReplanner:
             st.next_check_s = t_s + STATION_CHECK_S
             st.event["checks"] += 1
             st.event["t_last_s"] = round(t_s, 3)
-            judged = (self._judge_least_bad(t_s, st.kind) if st.least_bad
-                      else self._judge_station(t_s, st.kind, always=st.in_reach))
+            judged: tuple[float, Station | None] | None
+            if st.least_bad:
+                judged = self._least_bad_check(t_s, st)
+            else:
+                station = self._judge_station(t_s, st.kind, always=st.in_reach)
+                judged = None if station is None else station[:2]
             if judged is not None:
-                stop_gap, best, _ = judged
+                stop_gap, best = judged
                 over = self._stationed_s + t_s - st.t_start_s >= (
                     LEAST_BAD_MAX_S if st.least_bad else STATION_MAX_S)
                 # instead of a stop while it keeps clear: the station holds while its swim keeps
                 # clear, the stop made the moment it no longer does (never for the stop's room)
                 stop_clear = not st.in_reach and stop_gap > self.lookahead_margin_m
-                if st.least_bad and best is not None and not self._beats_stop(best, stop_gap):
-                    best = None  # no swim beats the stop any more: the stop
                 why = ("stopped" if stop_clear else "max_time" if over
                        else "none" if best is None else "")
                 if why:

@@ -28,13 +28,14 @@ from typing import NamedTuple
 import numpy as np
 
 from eelhost.planning.geometry import FloatArray
-from eelhost.planning.harbour import swim_start
+from eelhost.planning.harbour import StopWindow, stop_states, swim_start
 from eelhost.planning.search import Guide
 from eelhost.planning.twin import Twin
+from eelsim.control import Gait
 
-__all__ = ["LEAST_BAD_GAIN_M", "LEAST_BAD_HORIZON_S", "LEAST_BAD_MAX_S", "STATION_BEARINGS_DEG",
+__all__ = ["LEAST_BAD_GAIN_M", "LEAST_BAD_HORIZON_S", "LEAST_BAD_MAX_S", "LEAST_BAD_STEP_M", "STATION_BEARINGS_DEG",
            "STATION_CHECK_S", "STATION_HEADING_BEARINGS_DEG", "STATION_HORIZON_S", "STATION_MAX_S",
-           "STATION_MIN_CURRENT_M_S", "STATION_REACH_M", "Station", "find_least_bad",
+           "STATION_MIN_CURRENT_M_S", "STATION_REACH_M", "LeastBad", "Station", "find_least_bad",
            "find_station"]
 
 STATION_BEARINGS_DEG = (0.0, 30.0, -30.0, 60.0, -60.0)
@@ -72,8 +73,12 @@ unseen seeds 38000-38099 its best swims kept 45-62 mm over 3 s and none kept cle
 (docs/planning.md, "Holding station (session 21)")."""
 
 LEAST_BAD_GAIN_M = 0.01
-"""How much clearer than the stop (and than contact) a least-bad swim must be over its horizon:
-the look-ahead's margin, as the estimate moves on while the robot swims it."""
+"""The gap a least-bad swim must keep over its horizon: the look-ahead's margin (the estimate
+moves on while the robot swims it)."""
+
+LEAST_BAD_STEP_M = 0.002
+"""How much clearer than the stop judged now the stop a check into a least-bad swim must be: a
+few estimates' noise, so that a swim that does not better the stop ends in it."""
 
 LEAST_BAD_MAX_S = 15.0
 """The longest a plan's stations and least-bad swims last together; then the stop is made."""
@@ -90,6 +95,19 @@ class Station(NamedTuple):
     drift_m: float  # the centre of mass's displacement along the current at the horizon's end
     com_m: FloatArray  # the centre of mass while swimming (the corridor)
     guide: Guide
+
+
+def _aims(state: FloatArray, n: int, com: FloatArray, current_m_s: tuple[float, float],
+          bearings_deg: tuple[float, ...], heading_bearings_deg: tuple[float, ...]
+          ) -> tuple[list[tuple[float, str, float]], list[tuple[float, float]]]:
+    """The station swims' aims (bearing, frame, direction in rad) and their waypoints."""
+    upstream = math.atan2(-current_m_s[1], -current_m_s[0])
+    heading = float(np.mean(state[:n]))
+    aims = ([(b, "upstream", upstream + math.radians(b)) for b in bearings_deg]
+            + [(b, "heading", heading + math.radians(b)) for b in heading_bearings_deg])
+    targets = [(float(com[0] + STATION_REACH_M * math.cos(a)),
+                float(com[1] + STATION_REACH_M * math.sin(a))) for _, _, a in aims]
+    return aims, targets
 
 
 def find_station(twin: Twin, state: FloatArray, t_s: float, current_m_s: tuple[float, float],
@@ -136,12 +154,7 @@ def find_station(twin: Twin, state: FloatArray, t_s: float, current_m_s: tuple[f
     dt, n = twin.dt_s, twin.n_links
     now, state, guide, com = swim_start(twin, state, t_s)
     along = np.array(current_m_s, dtype=float) / speed  # downstream, unit
-    upstream = math.atan2(-along[1], -along[0])
-    heading = float(np.mean(state[:n]))
-    aims = ([(b, "upstream", upstream + math.radians(b)) for b in bearings_deg]
-            + [(b, "heading", heading + math.radians(b)) for b in heading_bearings_deg])
-    targets = [(float(com[0] + STATION_REACH_M * math.cos(a)),
-                float(com[1] + STATION_REACH_M * math.sin(a))) for _, _, a in aims]
+    aims, targets = _aims(state, n, com, current_m_s, bearings_deg, heading_bearings_deg)
     k = len(targets)
     last = int(round(horizon_s / (stride * dt)))
     runs = twin.run([[w] for w in targets], horizon_s + 2 * dt,
@@ -166,20 +179,34 @@ def find_station(twin: Twin, state: FloatArray, t_s: float, current_m_s: tuple[f
     return best, clearest
 
 
-def find_least_bad(twin: Twin, state: FloatArray, t_s: float, current_m_s: tuple[float, float],
-                   gap_of: Callable[[FloatArray, FloatArray], FloatArray],
-                   horizon_s: float = LEAST_BAD_HORIZON_S) -> Station | None:
-    """The station candidate whose smallest gap over a short horizon is largest.
 
-    The swims are :func:`find_station`'s (13 aims, the run's gait and phase swum on), judged over
-    ``horizon_s`` only: where no swim keeps clear over the station's horizon, the clearest over a
-    few seconds is swum instead of a stop predicted worse, and judged again from the next estimate
-    (docs/planning.md, "The least-bad swim (session 24)").
+class LeastBad(NamedTuple):
+    """A station candidate judged as a least-bad swim (:func:`find_least_bad`)."""
+
+    swim: Station  # its ``gap_m`` the smallest gap over the short horizon
+    stop_gap_m: float  # the stop decided a check into the swim (-inf: its run ended early)
+
+
+def find_least_bad(twin: Twin, gait: Gait, state: FloatArray, t_s: float,
+                   current_m_s: tuple[float, float],
+                   gap_of: Callable[[FloatArray, FloatArray], FloatArray], window: StopWindow,
+                   need_m: float = LEAST_BAD_GAIN_M, horizon_s: float = LEAST_BAD_HORIZON_S,
+                   lead_s: float = STATION_CHECK_S, stride: int = 3) -> LeastBad | None:
+    """Of the station candidates swum clear by ``need_m``, the one whose next stop is clearest.
+
+    The swims are :func:`find_station`'s (13 aims, the run's gait and phase swum on), each judged
+    over ``horizon_s`` only, and the stop decided ``lead_s`` into it (the next check) swum from
+    its state there as ``window`` says: the robot swims a candidate until the next check, where
+    it can always stop with that stop's gap, so the stop it finally makes is no worse than the
+    stop judged now when the swim's is better (docs/planning.md, "The least-bad swim (session
+    24)").
 
     Parameters
     ----------
     twin : Twin
-        The twin in the estimated water, swimming the run's gait.
+        The twin in the estimated water, swimming ``gait``.
+    gait : Gait
+        The swimming gait (a stop's brake freezes its phase).
     state : ndarray (2 N + 4,)
         The body's estimated state at ``t_s``.
     t_s : float
@@ -188,15 +215,56 @@ def find_least_bad(twin: Twin, state: FloatArray, t_s: float, current_m_s: tuple
         The current the body swims in (the world's and the estimate's).
     gap_of : callable
         ``gap_of(states (S, 2 N + 4), ahead_s (S,))``, as :func:`find_station`'s.
+    window : StopWindow
+        How the stop is swum (the pause's or the final stop's).
+    need_m : float
+        The gap a swim must keep over ``horizon_s``.
     horizon_s : float
         How long each swim is judged.
+    lead_s : float
+        How far into the swim its stop is decided.
+    stride : int
 
     Returns
     -------
-    Station or None
-        The clearest swim over ``horizon_s`` (its ``gap_m`` the smallest gap over it); None in a
-        current under :data:`STATION_MIN_CURRENT_M_S` or when no run swam the whole horizon.
+    LeastBad or None
+        Of the swims keeping ``need_m``, the one whose smaller of its stop's gap and its own is
+        largest; None in a current under :data:`STATION_MIN_CURRENT_M_S` or when no swim keeps
+        ``need_m`` over the whole horizon.
     """
-    _, clearest = find_station(twin, state, t_s, current_m_s, gap_of, math.inf,
-                               horizon_s=horizon_s)
-    return clearest
+    speed = math.hypot(*current_m_s)
+    if speed < STATION_MIN_CURRENT_M_S:
+        return None
+    dt, n = twin.dt_s, twin.n_links
+    now, state, guide, com = swim_start(twin, state, t_s)
+    aims, targets = _aims(state, n, com, current_m_s, STATION_BEARINGS_DEG,
+                          STATION_HEADING_BEARINGS_DEG)
+    k = len(targets)
+    last = int(round(horizon_s / (stride * dt)))
+    lead = min(max(int(round(lead_s / (stride * dt))), 1), last)
+    runs = twin.run([[w] for w in targets], horizon_s + 2 * dt,
+                    states=np.repeat(state[None], k, 0), start_steps=[now] * k, stride=stride,
+                    guidance=[guide] * k if twin.options.guidance.integral else None)
+    ahead = np.arange(last + 1, dtype=np.float64) * (stride * dt)
+    clear: list[Station] = []
+    for j in range(k):
+        swum = runs.states[j, : last + 1]
+        if swum.shape[0] < last + 1 or not np.isfinite(swum[:, 0]).all():
+            continue  # ended early (a failure flag): not judged
+        gap = float(np.min(gap_of(swum, ahead)))
+        if gap > need_m:
+            clear.append(Station(now, targets[j], aims[j][0], aims[j][1], gap, math.nan,
+                                 swum[:, n : n + 2].copy(), guide))
+    if not clear:
+        return None
+    at = np.stack([runs.states[targets.index(c.waypoint_m), lead] for c in clear])
+    stops = stop_states(twin, gait, at, t_s + float(ahead[lead]), window, stride)
+    best: LeastBad | None = None
+    for c, stop in zip(clear, stops, strict=True):
+        judged = ahead[lead] + np.arange(len(stop), dtype=np.float64) * (stride * dt)
+        stop_gap = (float(np.min(gap_of(stop, judged))) if np.isfinite(stop[:, 0]).all()
+                    else -math.inf)
+        got = LeastBad(c, stop_gap)
+        if best is None or min(stop_gap, c.gap_m) > min(best.stop_gap_m, best.swim.gap_m):
+            best = got
+    return best
