@@ -66,11 +66,12 @@ STATION_MIN_CURRENT_M_S = 0.005
 into, and a stop drifts a few millimetres: no station is swum."""
 
 
-LEAST_BAD_HORIZON_S = 3.0
+LEAST_BAD_HORIZON_S = 1.5
 """How long each least-bad swim is judged (:func:`find_least_bad`): a receding horizon, judged
-again every :data:`STATION_CHECK_S`. From the recorded states where the station was judged on
-unseen seeds 38000-38099 its best swims kept 45-62 mm over 3 s and none kept clear over 8 s
-(docs/planning.md, "Holding station (session 21)")."""
+again every :data:`STATION_CHECK_S` (three checks), the stop a check into it judged too. Replays
+of unseen seed 42073 (session 24): over 3 s no swim kept 10 mm where the stop drifted in; over
+1.5 s one did, and its stop a check on was 25 mm clearer (docs/planning.md, "The least-bad swim
+(session 24)")."""
 
 LEAST_BAD_GAIN_M = 0.01
 """The gap a least-bad swim must keep over its horizon: the look-ahead's margin (the estimate
