@@ -85,7 +85,7 @@ def test_a_short_swim_clear_of_the_wall_leaves_a_better_stop_than_the_stream_s(s
 def judged_as(stop_until_s: float, swim_until_s: float):  # noqa: ANN201
     """A replanner whose every replan is refused, the twin's judgement stood in for: the stop
     20 mm deep until ``stop_until_s`` and 50 mm clear after; a swim 30 mm clear whose stop a
-    check on is 10 mm deep (better than the stop now) until ``swim_until_s``, and 20 mm deep
+    check on is 0 mm (20 mm better than the stop now) until ``swim_until_s``, and 20 mm deep
     (no better) after."""
 
     class Judged(Blocked):
@@ -94,7 +94,7 @@ def judged_as(stop_until_s: float, swim_until_s: float):  # noqa: ANN201
             swim = Station(0, (0.2, 1.4), 0.0, "upstream", 0.03, math.nan, np.zeros((1, 2)),
                            (0.0, 0.0, 0.0, 0.0))
             self._stop_judged = (t_s, stop)
-            return stop, LeastBad(swim, -0.01 if t_s < swim_until_s else -0.02)
+            return stop, LeastBad(swim, 0.0 if t_s < swim_until_s else -0.02)
 
     return Judged
 
@@ -130,7 +130,7 @@ def test_a_refused_replan_whose_stop_drifts_in_swims_the_least_bad_swim_until_th
     sw = swims[0]
     assert sw["t_s"] == pytest.approx(refused[0]["t_ready_s"], abs=0.1)  # instead of the stop
     assert sw["stop_gap_m"] == pytest.approx(-0.02) and sw["gap_m"] == pytest.approx(0.03)
-    assert sw["next_stop_gap_m"] == pytest.approx(-0.01)
+    assert sw["next_stop_gap_m"] == pytest.approx(0.0)
     assert len(sw["judged"]) == sw["checks"]  # every check recorded
     # the frames in between swam its waypoint: no stop, no pause
     during = [d for t, d in decisions if sw["t_s"] - 1e-9 <= t < t_end]
