@@ -1,7 +1,7 @@
 """The least-bad swim (docs/planning.md, "The least-bad swim (session 24)"): where the stop decided
 would drift into something and no harbour, station or hold keeps clear, the robot swims the
-station candidate the twin keeps clear over a few seconds whose stop a check on is clearest,
-while that stop beats the stop now, judged again every check, replanning, and stops once the twin
+station candidate the twin keeps clear over a few seconds whose stops along it are clearest,
+while such a stop beats the stop now, judged again every check, replanning, and stops once the twin
 swims the stop clear.
 
 The least-bad swim is an option (``least_bad``, off by default); the tests turn it on, with
@@ -28,6 +28,7 @@ from eelhost.planning.replan import STATION_RETRY_S, outline_clearance_m
 from eelhost.planning.station import (
     LEAST_BAD_GAIN_M,
     LEAST_BAD_HORIZON_S,
+    LEAST_BAD_LEADS_S,
     LEAST_BAD_STEP_M,
     STATION_CHECK_S,
     LeastBad,
@@ -64,12 +65,15 @@ def test_a_short_swim_clear_of_the_wall_leaves_a_better_stop_than_the_stream_s(s
     assert least is not None
     swim = least.swim
     assert swim.gap_m > LEAST_BAD_GAIN_M and least.stop_gap_m > stop + LEAST_BAD_STEP_M
-    # the stop a check into it, swum apart with the batch's stop of that one body
-    n_check = int(round(STATION_CHECK_S / (3 * twin.dt_s)))
-    at = twin.run([[swim.waypoint_m]], STATION_CHECK_S + 2 * twin.dt_s, states=state[None],
-                  start_steps=[int(round(t_s / twin.dt_s))], stride=3).states[0, n_check]
-    again = stop_gap_m(twin, PATH_GAIT, at, t_s + n_check * 3 * twin.dt_s, FINAL, gap_of)
-    assert again == pytest.approx(least.stop_gap_m, abs=2e-3)
+    # its stops along it, swum apart one at a time: the clearest is the one it was chosen for
+    swum = twin.run([[swim.waypoint_m]], LEAST_BAD_HORIZON_S + 2 * twin.dt_s, states=state[None],
+                    start_steps=[int(round(t_s / twin.dt_s))], stride=3).states[0]
+    stops = []
+    for lead_s in LEAST_BAD_LEADS_S:
+        i = int(round(lead_s / (3 * twin.dt_s)))
+        stops.append(stop_gap_m(twin, PATH_GAIT, swum[i], t_s + i * 3 * twin.dt_s, FINAL,
+                                gap_of))
+    assert max(stops) == pytest.approx(least.stop_gap_m, abs=2e-3)
     # swum again from its waypoint and judged by the audit's shapely centre line
     # (planning/audit.py), not the outline it was chosen by: clear over its horizon
     runs = twin.run([[swim.waypoint_m]], LEAST_BAD_HORIZON_S, states=state[None],
@@ -84,8 +88,8 @@ def test_a_short_swim_clear_of_the_wall_leaves_a_better_stop_than_the_stream_s(s
 
 def judged_as(stop_until_s: float, swim_until_s: float):  # noqa: ANN201
     """A replanner whose every replan is refused, the twin's judgement stood in for: the stop
-    20 mm deep until ``stop_until_s`` and 50 mm clear after; a swim 30 mm clear whose stop a
-    check on is 0 mm (20 mm better than the stop now) until ``swim_until_s``, and 20 mm deep
+    20 mm deep until ``stop_until_s`` and 50 mm clear after; a swim 30 mm clear whose clearest
+    stop is 0 mm (20 mm better than the stop now) until ``swim_until_s``, and 20 mm deep
     (no better) after."""
 
     class Judged(Blocked):
@@ -130,7 +134,7 @@ def test_a_refused_replan_whose_stop_drifts_in_swims_the_least_bad_swim_until_th
     sw = swims[0]
     assert sw["t_s"] == pytest.approx(refused[0]["t_ready_s"], abs=0.1)  # instead of the stop
     assert sw["stop_gap_m"] == pytest.approx(-0.02) and sw["gap_m"] == pytest.approx(0.03)
-    assert sw["next_stop_gap_m"] == pytest.approx(0.0)
+    assert sw["swim_stop_gap_m"] == pytest.approx(0.0)
     assert len(sw["judged"]) == sw["checks"]  # every check recorded
     # the frames in between swam its waypoint: no stop, no pause
     during = [d for t, d in decisions if sw["t_s"] - 1e-9 <= t < t_end]
@@ -184,7 +188,7 @@ def test_over_sim_a_stop_the_stream_carries_into_the_wall_swims_and_stops_once_c
     sw = swims[0]
     assert sw["stop_gap_m"] <= nav.lookahead_margin_m
     assert sw["gap_m"] > LEAST_BAD_GAIN_M
-    assert sw["next_stop_gap_m"] > sw["stop_gap_m"] + LEAST_BAD_STEP_M
+    assert sw["swim_stop_gap_m"] > sw["stop_gap_m"] + LEAST_BAD_STEP_M
     t_end = sw.get("t_end_s", out.t_end_s)
     assert t_end - sw["t_s"] >= STATION_CHECK_S - 1e-9  # swum, not stopped at once
     # meanwhile offsets at the control rate, and replans asked for at least 0.5 s apart

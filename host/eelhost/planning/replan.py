@@ -1993,7 +1993,7 @@ class TankReplanner:
 
         The stop is judged as :meth:`_judge_station` judges it (reused when judged at ``t_s``);
         the swims by :func:`~eelhost.planning.station.find_least_bad` (each swim over its short
-        horizon and the stop of ``kind`` a check into it) only when the stop comes within the
+        horizon and the stops of ``kind`` decided along it) only when the stop comes within the
         look-ahead's margin.
         """
         est = self.estimator.estimate()
@@ -2016,7 +2016,7 @@ class TankReplanner:
 
     @staticmethod
     def _beats_stop(least: LeastBad | None, stop_gap_m: float) -> bool:
-        """The stop a check into the swim is clearer than ``stop_gap_m`` by :data:`~eelhost.planning.station.LEAST_BAD_STEP_M`.
+        """The swim's clearest stop beats ``stop_gap_m`` by :data:`~eelhost.planning.station.LEAST_BAD_STEP_M`.
 
         The swim itself keeps :data:`~eelhost.planning.station.LEAST_BAD_GAIN_M` over its
         horizon (:func:`~eelhost.planning.station.find_least_bad`): only a swim the twin keeps
@@ -2050,7 +2050,7 @@ class TankReplanner:
                 "kind": "least_bad", "reason": kind, "t_s": round(t_s, 3), "status": "none",
                 "stop_gap_m": _rounded(stop_gap),
                 "swim_gap_m": None if least is None else _rounded(least.swim.gap_m),
-                "next_stop_gap_m": None if least is None else _rounded(least.stop_gap_m)})
+                "swim_stop_gap_m": None if least is None else _rounded(least.stop_gap_m)})
             return None
         swim = least.swim
         # the look-ahead and the windows followed the old waypoints; a replan in flight goes on
@@ -2062,7 +2062,7 @@ class TankReplanner:
                  "bearing_deg": swim.bearing_deg, "from": swim.frame,
                  "waypoint_m": [round(swim.waypoint_m[0], 4), round(swim.waypoint_m[1], 4)],
                  "gap_m": _rounded(swim.gap_m), "stop_gap_m": _rounded(stop_gap),
-                 "next_stop_gap_m": _rounded(least.stop_gap_m), "horizon_s": LEAST_BAD_HORIZON_S,
+                 "swim_stop_gap_m": _rounded(least.stop_gap_m), "horizon_s": LEAST_BAD_HORIZON_S,
                  "checks": 1, "switches": 0, "detail": detail,
                  "judged": [[round(t_s, 3), _rounded(stop_gap), _rounded(swim.gap_m),
                              _rounded(least.stop_gap_m)]]}
@@ -2072,19 +2072,18 @@ class TankReplanner:
         self.waypoints = [swim.waypoint_m]
         log.warning("at t = %.2f s the stop (%s) drifts %.0f mm from an obstacle or wall in the "
                     "twin with no harbour, station or hold: swimming %+.0f deg from %s, %.0f mm "
-                    "clear over %.0f s in the twin, its stop a check on %.0f mm (%s)", t_s, kind,
+                    "clear over %.1f s in the twin, a stop along it %.0f mm (%s)", t_s, kind,
                     stop_gap * 1000, swim.bearing_deg, swim.frame, swim.gap_m * 1000,
                     LEAST_BAD_HORIZON_S, least.stop_gap_m * 1000, detail)
         return Decision(waypoints=[swim.waypoint_m], guide=swim.guide, recorded=True, detail=(
             f"the least-bad swim at t = {t_s:.2f} s: the stop drifts {stop_gap * 1000:.0f} mm "
             f"from an obstacle or wall in the twin, the swim {swim.gap_m * 1000:.0f} mm over "
-            f"{LEAST_BAD_HORIZON_S:.0f} s and its stop a check on {least.stop_gap_m * 1000:.0f} "
-            "mm"))
+            f"{LEAST_BAD_HORIZON_S:.1f} s and a stop along it {least.stop_gap_m * 1000:.0f} mm"))
 
     def _least_bad_check(self, t_s: float, st: _Station) -> tuple[float, Station | None] | None:
         """A least-bad swim's check: the stop's gap, and the swim to steer (None: no swim beats it).
 
-        Each check's stop, swim and its stop a check on are recorded in the event's ``judged``.
+        Each check's stop, swim and the swim's clearest stop are recorded in the event's ``judged``.
         """
         judged = self._judge_least_bad(t_s, st.kind)
         if judged is None:
