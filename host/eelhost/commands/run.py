@@ -140,10 +140,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--least-bad", action=argparse.BooleanOptionalAction, default=False,
                    help="with --plan or --bench: where the stop (no safe continuation, a "
                    "failed pause, a harbour's end) would drift into an obstacle with no "
-                   "harbour, station or hold, swim the swim the twin keeps clearest over 3 s "
-                   "while it beats the stop, judged again every 0.5 s, replanning, until a "
-                   "plan or a clear stop (default: %(default)s; docs/planning.md, \"The "
-                   "least-bad swim (session 24)\")")
+                   "harbour, station or hold, swim a short swim the twin keeps clear for 1.5 s "
+                   "towards a stop 10 mm clearer, judged again every 0.5 s, replanning, until "
+                   "a plan or a clear stop (default: %(default)s: in replays it made no stop "
+                   "shallower but one; docs/planning.md, \"The least-bad swim (session 24)\")")
     p.add_argument("--brake", type=NON_NEGATIVE, default=None, metavar="S",
                    help="before the final Stop, freeze the body in a deep S (the gait's "
                    f"amplitude {BRAKE_AMPLITUDE_RAD:g} rad, omega 0) for S seconds, the watchdog fed, so that it does "

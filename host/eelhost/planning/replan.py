@@ -979,13 +979,16 @@ class TankReplanner:
         Where the stop decided (``no_safe_continuation``: the pause or the final stop, after the
         harbour, the station and the hold; at a harbour's end; the final stop after a failed
         pause once its brake is over) would drift within the margin, swim the station candidate
-        the twin keeps clearest over :data:`~eelhost.planning.station.LEAST_BAD_HORIZON_S` when
-        it beats the stop and contact by :data:`~eelhost.planning.station.LEAST_BAD_GAIN_M`,
-        instead of the stop (:meth:`_least_bad_on`): judged again every
+        the twin keeps :data:`~eelhost.planning.station.LEAST_BAD_GAIN_M` clear over
+        :data:`~eelhost.planning.station.LEAST_BAD_HORIZON_S` whose stops along it are
+        clearest, when one of those beats the stop now by
+        :data:`~eelhost.planning.station.LEAST_BAD_STEP_M`, instead of the stop
+        (:meth:`_least_bad_on`): judged again every
         :data:`~eelhost.planning.station.STATION_CHECK_S` from the estimate, replanning as the
         station does, until a plan, a stop the twin swims clear (made then), no swim beating the
         stop, or :data:`~eelhost.planning.station.LEAST_BAD_MAX_S` (docs/planning.md, "The
-        least-bad swim (session 24)"). Off by default.
+        least-bad swim (session 24)"). Off by default: in replays of the unseen stops it acted
+        rarely and made no stop shallower beyond the runs' variance but one.
     stop_in_reach : bool
         After a failed replan, where the look-ahead swims the present plan within the margin
         and the stop the twin swims clear now would come within it after the time another
@@ -1314,8 +1317,8 @@ class TankReplanner:
             held = self._hold_on(t_s, kind, d.detail)
             if held is not None:
                 return held
-            # no harbour, station or hold: the swim the twin keeps clearest for a few seconds,
-            # where it beats the stop (docs/planning.md, "The least-bad swim (session 24)")
+            # no harbour, station or hold: a short swim towards a better stop, judged again each
+            # check (docs/planning.md, "The least-bad swim (session 24)")
             least = self._least_bad_on(t_s, kind, d.detail)
             if least is not None:
                 self._end_hold(t_s, "least_bad")
@@ -2026,13 +2029,14 @@ class TankReplanner:
                 and least.stop_gap_m > stop_gap_m + LEAST_BAD_STEP_M)
 
     def _least_bad_on(self, t_s: float, kind: str, detail: str) -> Decision | None:
-        """Swim the clearest short swim instead of a stop the twin drifts into something, or None.
+        """Swim towards a better stop instead of a stop the twin drifts into something, or None.
 
         The last tier before a ``no_safe_continuation`` stop (``kind``: ``pause`` or ``stop``),
         after the harbour, the station and the hold: when the stop at once comes within the
-        look-ahead's margin and the station candidate the twin keeps clearest over
-        :data:`~eelhost.planning.station.LEAST_BAD_HORIZON_S` beats it
-        (:meth:`_beats_stop`), the robot steers to that swim's waypoint, its gait and offsets at
+        look-ahead's margin and the least-bad swim
+        (:func:`~eelhost.planning.station.find_least_bad`: clear over
+        :data:`~eelhost.planning.station.LEAST_BAD_HORIZON_S`, its stops along it the clearest)
+        beats it (:meth:`_beats_stop`), the robot steers to that swim's waypoint, its gait and offsets at
         the control rate; the frames after are :meth:`_station_frame`'s, judged again every
         :data:`~eelhost.planning.station.STATION_CHECK_S` (docs/planning.md, "The least-bad swim
         (session 24)").

@@ -187,8 +187,8 @@ def plan_for_run(
         current instead (before the hold) (``TankReplanner``'s ``station_keeping``; docs/planning.md, "Holding
         station (session 21)"); off by default (``eelbot run --station``).
     least_bad : bool
-        Where the stop would drift into something with no harbour, station or hold, swim the
-        clearest short swim while it beats the stop (``TankReplanner``'s ``least_bad``;
+        Where the stop would drift into something with no harbour, station or hold, swim a
+        short swim towards a better stop while there is one (``TankReplanner``'s ``least_bad``;
         docs/planning.md, "The least-bad swim (session 24)"); off by default
         (``eelbot run --least-bad``).
 
