@@ -4,8 +4,8 @@ station candidate the twin keeps clear over a few seconds whose stops along it a
 while such a stop beats the stop now, judged again every check, replanning, and stops once the twin
 swims the stop clear.
 
-The least-bad swim is an option (``least_bad``, off by default); the tests turn it on, with
-holding station off (its own option, off by default)."""
+The least-bad swim is on by default (``least_bad``); the tests name it on or off, with holding
+station off (its own option, off by default)."""
 
 from __future__ import annotations
 

@@ -335,7 +335,7 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
               calm_budget_s: float | None = CALM_REPLAN_BUDGET_S,
               early_margin_m: float | None = None, escape: bool = False,
               restarts: int = 0, brake_s: float = BRAKE_S, harbour: bool = True,
-              station: bool = False, least_bad: bool = False) -> WorldResult:
+              station: bool = False, least_bad: bool = True) -> WorldResult:
     """Plan one generated world and swim the plan over ``sim://`` (module docstring).
 
     Parameters
@@ -375,7 +375,7 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
         (:func:`eelhost.planning.tank.plan_for_run`).
     least_bad : bool
         Swim the least-bad swim instead of a stop the current carries into something, while it
-        beats the stop (:func:`eelhost.planning.tank.plan_for_run`).
+        beats the stop (:func:`eelhost.planning.tank.plan_for_run`); on by default.
 
     Returns
     -------
@@ -544,7 +544,7 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
                           brake_s: float = BRAKE_S,
                           harbour: bool = True,
                           station: bool = False,
-                          least_bad: bool = False,
+                          least_bad: bool = True,
                           ) -> list[WorldResult]:
     """Run the benchmark over ``seeds``, resuming from ``<out>/results.jsonl``.
 

@@ -137,13 +137,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    "swims that clear, replanning, until a plan or a clear stop (default: "
                    "%(default)s: on development seeds 39000-39099 no such stop had a station "
                    "swim either; docs/planning.md, \"Holding station (session 21)\")")
-    p.add_argument("--least-bad", action=argparse.BooleanOptionalAction, default=False,
+    p.add_argument("--least-bad", action=argparse.BooleanOptionalAction, default=True,
                    help="with --plan or --bench: where the stop (no safe continuation, a "
                    "failed pause, a harbour's end) would drift into an obstacle with no "
                    "harbour, station or hold, swim a short swim the twin keeps clear for 1.5 s "
                    "towards a stop 10 mm clearer, judged again every 0.5 s, replanning, until "
-                   "a plan or a clear stop (default: %(default)s: in replays it made no stop "
-                   "shallower but one; docs/planning.md, \"The least-bad swim (session 24)\")")
+                   "a plan or a clear stop (default: %(default)s; --no-least-bad: the stop as "
+                   "decided; docs/planning.md, \"The least-bad swim (session 24)\")")
     p.add_argument("--brake", type=NON_NEGATIVE, default=None, metavar="S",
                    help="before the final Stop, freeze the body in a deep S (the gait's "
                    f"amplitude {BRAKE_AMPLITUDE_RAD:g} rad, omega 0) for S seconds, the watchdog fed, so that it does "
@@ -428,7 +428,7 @@ def _bench(args: argparse.Namespace) -> int:
                + (f" --restarts {args.restarts}" if args.restarts != RESTARTS else "")
                + ("" if args.harbour else " --no-harbour")
                + (" --station" if args.station else "")
-               + (" --least-bad" if args.least_bad else "")
+               + ("" if args.least_bad else " --no-least-bad")
                + (f" --brake {args.brake:g}" if args.brake is not None else ""))
     lines = summary_lines(results)
     block = [BENCH_BEGIN, f"Command: `{command}`", "",

@@ -987,8 +987,9 @@ class TankReplanner:
         :data:`~eelhost.planning.station.STATION_CHECK_S` from the estimate, replanning as the
         station does, until a plan, a stop the twin swims clear (made then), no swim beating the
         stop, or :data:`~eelhost.planning.station.LEAST_BAD_MAX_S` (docs/planning.md, "The
-        least-bad swim (session 24)"). Off by default: in replays of the unseen stops it acted
-        rarely and made no stop shallower beyond the runs' variance but one.
+        least-bad swim (session 24)"). On by default: on development seeds 45250-45299 it
+        turned 45278's stop contact into a goal, and replayed, unseen 40082's stop contact into
+        a clear stop three times of three, adding no contact while swimming.
     stop_in_reach : bool
         After a failed replan, where the look-ahead swims the present plan within the margin
         and the stop the twin swims clear now would come within it after the time another
@@ -1094,7 +1095,7 @@ class TankReplanner:
         harbour: bool = True,
         hold_plan: bool = True,
         station_keeping: bool = False,
-        least_bad: bool = False,
+        least_bad: bool = True,
         stop_in_reach: bool = True,
         stop_brake_s: float = STOP_BRAKE_S,
         calm_budget_s: float | None = None,

@@ -130,7 +130,7 @@ def plan_for_run(
     harbour: bool = True,
     stop_brake_s: float = STOP_BRAKE_S,
     station: bool = False,
-    least_bad: bool = False,
+    least_bad: bool = True,
 ) -> RunPlan:
     """Plan in a world for ``eelbot run --plan`` (module docstring).
 
@@ -189,8 +189,8 @@ def plan_for_run(
     least_bad : bool
         Where the stop would drift into something with no harbour, station or hold, swim a
         short swim towards a better stop while there is one (``TankReplanner``'s ``least_bad``;
-        docs/planning.md, "The least-bad swim (session 24)"); off by default
-        (``eelbot run --least-bad``).
+        docs/planning.md, "The least-bad swim (session 24)"); on by default
+        (``eelbot run --no-least-bad``: off).
 
     Returns
     -------
