@@ -223,3 +223,16 @@ def test_the_summary_counts_corridor_replans_answered_within_a_second_and_names_
     assert not any("leaving the corridor" in x for x in summary_lines([old]))
     quiet = next(x for x in summary_lines([quick]) if "leaving the corridor" in x)
     assert "2 of 2" in quiet and "late" not in quiet
+
+
+def test_the_summary_counts_least_bad_swims_and_what_the_runs_judged_for_them_did():
+    runs = [WorldResult(1, True, "found", "no_safe_continuation", min_clearance_m=0.03,
+                        coast_clearance_m=0.02, least_bad=2),
+            WorldResult(2, True, "found", "no_safe_continuation", min_clearance_m=0.03,
+                        coast_clearance_m=-0.005, coast_contact=True, least_bad_none=1),
+            WorldResult(3, True, "found", "arrived", reached=True, min_clearance_m=0.05)]
+    text = "\n".join(summary_lines(runs))
+    assert ("least-bad swims instead of a stop the twin drifted within the margin: 2 in 1 runs, "
+            "none beating the stop 1 times; of the 2 runs judged, 0 reached the goal, 0 touched "
+            "while swimming, 1 while stopping") in text
+    assert "least-bad" not in "\n".join(summary_lines(runs[2:]))  # none judged, no line

@@ -200,9 +200,10 @@ def test_where_no_continuation_exists_the_harbour_comes_before_the_pause_or_the_
     outcome = planner.plan()
     assert outcome.found, outcome.message
     for restarts in (1, 0):
-        # holding station off: at a harbour's end it would hold station (test_station.py)
+        # holding station and the least-bad swim off: at a harbour's end either would swim
+        # (test_station.py, test_least_bad.py)
         nav = Blocked(lambda extra: planner, planner, outcome, PATH_GAIT, lookahead_s=0.0,
-                      max_restarts=restarts, station_keeping=False)
+                      max_restarts=restarts, station_keeping=False, least_bad=False)
         decisions = run_frames(nav, (1.35, 1.0), 8.0,
                                until=lambda d: d.stop is not None or d.pause)
         events = [e for e in nav.events if e["kind"] == "harbour"]
@@ -312,8 +313,9 @@ def test_a_final_stop_after_a_failed_pause_swims_a_harbour_from_the_brake_s_froz
     world = up_world()
     planner = Planner(world, ROBOT, MODEL, arrival_stop=False)
     outcome = planner.plan()
+    # the least-bad swim off: after the harbour, the final stop would swim it (test_least_bad.py)
     nav = PausedThenRefused(lambda extra: planner, planner, outcome, PATH_GAIT, lookahead_s=0.0,
-                            max_restarts=1)
+                            max_restarts=1, least_bad=False)
     decisions = run_frames(nav, (1.35, 1.0), 8.0)
     paused = [t for t, d in decisions if d.pause]
     restarted = [(t, d) for t, d in decisions if d.restart]

@@ -64,14 +64,15 @@ def test_a_stop_the_current_would_carry_into_a_disc_is_put_off_while_the_plan_sw
         up_plan):
     _world, planner, outcome = up_plan
     clear_5mm = ahead_of(lambda t: 0.005)  # under the look-ahead's 10 mm, but clear
-    # without the hold: stopped at the first refused replan (no harbour, to isolate the hold)
+    # without the hold: stopped at the first refused replan (no harbour, station or least-bad
+    # swim, to isolate the hold)
     nav = clear_5mm(lambda extra: planner, planner, outcome, PATH_GAIT, harbour=False,
-                    station_keeping=False, hold_plan=False)
+                    station_keeping=False, hold_plan=False, least_bad=False)
     decisions = drive(nav, still, 4.0)
     assert decisions[-1][1].stop == "no_safe_continuation" and decisions[-1][0] < 2.0
     # with it: the robot swims on, replanning with a back-off, the stop judged again
     nav = clear_5mm(lambda extra: planner, planner, outcome, PATH_GAIT, harbour=False,
-                    station_keeping=False)
+                    station_keeping=False, least_bad=False)
     decisions = drive(nav, still, 4.0)
     assert not any(d.stop or d.pause for _, d in decisions)
     holds = [e for e in nav.events if e["kind"] == "hold"]
@@ -93,7 +94,7 @@ def test_the_hold_ends_in_the_stop_once_the_plan_is_no_longer_the_lesser_risk(up
     # is never held on to
     worse = ahead_of(lambda t: 0.005 if t < 2.0 else -0.015)
     nav = worse(lambda extra: planner, planner, outcome, PATH_GAIT, harbour=False,
-                    station_keeping=False)
+                    station_keeping=False, least_bad=False)
     decisions = drive(nav, still, 6.0)
     t_end, last = decisions[-1]
     assert last.stop == "no_safe_continuation"
@@ -111,7 +112,7 @@ def test_the_hold_ends_in_a_stop_the_twin_swims_clear_and_so_does_geometry_writt
         return (1.36, 1.0 + 0.1 * max(t_s - 1.0, 0.0))
 
     nav = ahead_of(lambda t: 0.005)(lambda extra: planner, planner, outcome, PATH_GAIT,
-                                    harbour=False, station_keeping=False)
+                                    harbour=False, station_keeping=False, least_bad=False)
     estimates = []
     original = nav.estimator.estimate
 

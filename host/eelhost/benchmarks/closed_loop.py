@@ -160,6 +160,11 @@ class WorldResult:
     stations : int
         Stations held instead of such a stop (docs/planning.md, "Holding station (session
         21)"; 0 in results written before it).
+    least_bad : int
+        Least-bad swims instead of such a stop (docs/planning.md, "The least-bad swim (session
+        24)"; 0 in results written before it).
+    least_bad_none : int
+        Stops the least-bad swim was judged for and no swim beat.
     plan_guidance : str or None
         The law the first plan was searched and checked with, which the run and its replans
         steered with (None: no plan, or a result from before session 20).
@@ -213,6 +218,8 @@ class WorldResult:
     stations: int = 0
     corridor_ready_s: list[float] | None = None
     corridor_cpu_s: list[float | None] | None = None
+    least_bad: int = 0
+    least_bad_none: int = 0
 
 
 def calm_and_early(replans: list[dict], replan_budget_s: float | None
@@ -328,7 +335,7 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
               calm_budget_s: float | None = CALM_REPLAN_BUDGET_S,
               early_margin_m: float | None = None, escape: bool = False,
               restarts: int = 0, brake_s: float = BRAKE_S, harbour: bool = True,
-              station: bool = False) -> WorldResult:
+              station: bool = False, least_bad: bool = True) -> WorldResult:
     """Plan one generated world and swim the plan over ``sim://`` (module docstring).
 
     Parameters
@@ -366,6 +373,9 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
     station : bool
         Hold station instead of a stop the current carries into something
         (:func:`eelhost.planning.tank.plan_for_run`).
+    least_bad : bool
+        Swim the least-bad swim instead of a stop the current carries into something, while it
+        beats the stop (:func:`eelhost.planning.tank.plan_for_run`); on by default.
 
     Returns
     -------
@@ -387,7 +397,7 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
                                swimmer=swimmer, replan_budget_s=replan_budget_s,
                                calm_budget_s=calm_budget_s, early_margin_m=early_margin_m,
                                escape=escape, restarts=restarts, harbour=harbour,
-                               stop_brake_s=brake_s, station=station)
+                               stop_brake_s=brake_s, station=station, least_bad=least_bad)
     except PlanRefused as err:
         return WorldResult(seed, False, err.status, detail=str(err), water=water,
                            plan_wall_s=time.perf_counter() - wall0,
@@ -449,7 +459,10 @@ def run_world(seed: int, robot: Robot, model: CoefficientModel, gait: Gait = PAT
         planned.guidance.name,
         sum(e["kind"] == "station" and e["status"] == "held" for e in nav.events),
         corridor_ready_s=[e["t_ready_s"] - e["t_request_s"] for e in corridor],
-        corridor_cpu_s=[e["cpu_s"] for e in corridor])
+        corridor_cpu_s=[e["cpu_s"] for e in corridor],
+        least_bad=sum(e["kind"] == "least_bad" and e["status"] == "swum" for e in nav.events),
+        least_bad_none=sum(e["kind"] == "least_bad" and e["status"] == "none"
+                           for e in nav.events))
 
 
 def glide_on(robot: VirtualRobot, longest_s: float = COAST_AUDIT_S,
@@ -531,6 +544,7 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
                           brake_s: float = BRAKE_S,
                           harbour: bool = True,
                           station: bool = False,
+                          least_bad: bool = True,
                           ) -> list[WorldResult]:
     """Run the benchmark over ``seeds``, resuming from ``<out>/results.jsonl``.
 
@@ -564,6 +578,8 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
         The harbour before a stop (:func:`run_world`).
     station : bool
         Holding station instead of a stop that drifts into something (:func:`run_world`).
+    least_bad : bool
+        The least-bad swim instead of a stop that drifts into something (:func:`run_world`).
 
     Returns
     -------
@@ -601,7 +617,7 @@ def run_closed_loop_bench(robot: Robot, model: CoefficientModel, seeds: range, o
                           record_to=out / "planning" / f"{seed}.json",
                           calm_budget_s=calm_budget_s, early_margin_m=early_margin_m,
                           escape=escape, restarts=restarts, brake_s=brake_s, harbour=harbour,
-                          station=station)
+                          station=station, least_bad=least_bad)
             with path.open("a") as f:
                 f.write(json.dumps(asdict(r)) + "\n")
         results.append(r)
@@ -762,6 +778,14 @@ def summary_lines(results: list[WorldResult]) -> list[str]:
                      f"{sum(r.stations for r in stationed)} in {len(stationed)} runs; "
                      f"{sum(r.reached for r in stationed)} of these runs reached the goal, "
                      f"{sum(r.coast_contact for r in stationed)} touched while stopping")
+    swum = [r for r in planned if r.least_bad or r.least_bad_none]
+    if swum:
+        lines.append(f"- least-bad swims instead of a stop the twin drifted within the margin: "
+                     f"{sum(r.least_bad for r in swum)} in {sum(bool(r.least_bad) for r in swum)} "
+                     f"runs, none beating the stop {sum(r.least_bad_none for r in swum)} times; "
+                     f"of the {len(swum)} runs judged, {sum(r.reached for r in swum)} reached "
+                     f"the goal, {sum(r.contact for r in swum)} touched while swimming, "
+                     f"{sum(r.coast_contact for r in swum)} while stopping")
     cpus = [c for r in planned for c in r.replan_cpu_s]
     if cpus:
         lines.append(f"- replans' processor time: median {statistics.median(cpus):.2f} s, "

@@ -137,6 +137,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    "swims that clear, replanning, until a plan or a clear stop (default: "
                    "%(default)s: on development seeds 39000-39099 no such stop had a station "
                    "swim either; docs/planning.md, \"Holding station (session 21)\")")
+    p.add_argument("--least-bad", action=argparse.BooleanOptionalAction, default=True,
+                   help="with --plan or --bench: where the stop (no safe continuation, a "
+                   "failed pause, a harbour's end) would drift into an obstacle with no "
+                   "harbour, station or hold, swim a short swim the twin keeps clear for 1.5 s "
+                   "towards a stop 10 mm clearer, judged again every 0.5 s, replanning, until "
+                   "a plan or a clear stop (default: %(default)s; --no-least-bad: the stop as "
+                   "decided; docs/planning.md, \"The least-bad swim (session 24)\")")
     p.add_argument("--brake", type=NON_NEGATIVE, default=None, metavar="S",
                    help="before the final Stop, freeze the body in a deep S (the gait's "
                    f"amplitude {BRAKE_AMPLITUDE_RAD:g} rad, omega 0) for S seconds, the watchdog fed, so that it does "
@@ -323,7 +330,7 @@ def run(args: argparse.Namespace) -> int:
                                    early_margin_m=args.early_margin or None,
                                    escape=args.escape, restarts=args.restarts,
                                    harbour=args.harbour, stop_brake_s=_brake_s(args),
-                                   station=args.station)
+                                   station=args.station, least_bad=args.least_bad)
         print(planned.outcome.message)
         print(f"guidance: {planned.guidance.describe()}")
         print(f"coefficients: {model.describe()}")
@@ -404,7 +411,7 @@ def _bench(args: argparse.Namespace) -> int:
                                         early_margin_m=args.early_margin or None,
                                         escape=args.escape, restarts=args.restarts,
                                         brake_s=_brake_s(args), harbour=args.harbour,
-                                        station=args.station)
+                                        station=args.station, least_bad=args.least_bad)
     command = (f"nice eelbot run --bench --worlds {args.worlds} --seed {args.seed}"
                + ("" if args.arrival_stop else " --no-arrival-stop-check")
                + ("" if args.check_unknown_current is None
@@ -421,6 +428,7 @@ def _bench(args: argparse.Namespace) -> int:
                + (f" --restarts {args.restarts}" if args.restarts != RESTARTS else "")
                + ("" if args.harbour else " --no-harbour")
                + (" --station" if args.station else "")
+               + ("" if args.least_bad else " --no-least-bad")
                + (f" --brake {args.brake:g}" if args.brake is not None else ""))
     lines = summary_lines(results)
     block = [BENCH_BEGIN, f"Command: `{command}`", "",

@@ -80,10 +80,16 @@ from eelhost.planning.state_estimate import (
     CurrentWindow,
 )
 from eelhost.planning.station import (
+    LEAST_BAD_GAIN_M,
+    LEAST_BAD_HORIZON_S,
+    LEAST_BAD_MAX_S,
+    LEAST_BAD_STEP_M,
     STATION_CHECK_S,
     STATION_MAX_S,
     STATION_REACH_M,
+    LeastBad,
     Station,
+    find_least_bad,
     find_station,
 )
 from eelhost.planning.twin import Twin
@@ -812,6 +818,7 @@ class _Station:
     event: dict[str, Any]  # its record
     t_asked_s: float = -math.inf  # when the latest replan was asked for while holding station
     in_reach: bool = False  # instead of a stop while it keeps clear (:meth:`TankReplanner._stop_slips_away`)
+    least_bad: bool = False  # the least-bad swim, not a station (:meth:`TankReplanner._least_bad_on`)
 
 
 class _HarbourSwim(NamedTuple):
@@ -968,6 +975,21 @@ class TankReplanner:
         ``stop_in_reach`` would stop while the stop keeps clear: a station swim kept clear is
         held instead, replanning, until no swim keeps clear (then that stop), its time bound
         or a plan (held once on 39000-39049, no goal won).
+    least_bad : bool
+        Where the stop decided (``no_safe_continuation``: the pause or the final stop, after the
+        harbour, the station and the hold; at a harbour's end; the final stop after a failed
+        pause once its brake is over) would drift within the margin, swim the station candidate
+        the twin keeps :data:`~eelhost.planning.station.LEAST_BAD_GAIN_M` clear over
+        :data:`~eelhost.planning.station.LEAST_BAD_HORIZON_S` whose stops along it are
+        clearest, when one of those beats the stop now by
+        :data:`~eelhost.planning.station.LEAST_BAD_STEP_M`, instead of the stop
+        (:meth:`_least_bad_on`): judged again every
+        :data:`~eelhost.planning.station.STATION_CHECK_S` from the estimate, replanning as the
+        station does, until a plan, a stop the twin swims clear (made then), no swim beating the
+        stop, or :data:`~eelhost.planning.station.LEAST_BAD_MAX_S` (docs/planning.md, "The
+        least-bad swim (session 24)"). On by default: on development seeds 45250-45299 it
+        turned 45278's stop contact into a goal, and replayed, unseen 40082's stop contact into
+        a clear stop three times of three, adding no contact while swimming.
     stop_in_reach : bool
         After a failed replan, where the look-ahead swims the present plan within the margin
         and the stop the twin swims clear now would come within it after the time another
@@ -1073,6 +1095,7 @@ class TankReplanner:
         harbour: bool = True,
         hold_plan: bool = True,
         station_keeping: bool = False,
+        least_bad: bool = True,
         stop_in_reach: bool = True,
         stop_brake_s: float = STOP_BRAKE_S,
         calm_budget_s: float | None = None,
@@ -1142,6 +1165,7 @@ class TankReplanner:
         self._harbours_swum = 0  # since the last plan: at HARBOURS_PER_PLAN the next stop stands
         self.hold_plan = hold_plan
         self.station_keeping = station_keeping
+        self.least_bad = least_bad
         self._station: _Station | None = None  # the station held now
         self._stationed_s = 0.0  # the present plan's stations' time so far (STATION_MAX_S)
         self.stop_in_reach = stop_in_reach
@@ -1294,6 +1318,12 @@ class TankReplanner:
             held = self._hold_on(t_s, kind, d.detail)
             if held is not None:
                 return held
+            # no harbour, station or hold: a short swim towards a better stop, judged again each
+            # check (docs/planning.md, "The least-bad swim (session 24)")
+            least = self._least_bad_on(t_s, kind, d.detail)
+            if least is not None:
+                self._end_hold(t_s, "least_bad")
+                return least
             self._end_hold(t_s, "stopped")
             if pausing:
                 return self._halt(t_s, d)
@@ -1547,6 +1577,11 @@ class TankReplanner:
             parts.append(f"{len(stations)} station{'s' if len(stations) > 1 else ''} held "
                          f"({kept:.1f} s" + (f", {in_reach} instead of a stop while clear"
                                              if in_reach else "") + ")")
+        swims = [e for e in self.events if e["kind"] == "least_bad" and e["status"] == "swum"]
+        if swims:
+            kept = sum(e.get("t_end_s", e.get("t_last_s", e["t_s"])) - e["t_s"] for e in swims)
+            parts.append(f"{len(swims)} least-bad swim{'s' if len(swims) > 1 else ''} "
+                         f"({kept:.1f} s)")
         return ", ".join(parts)
 
     # -- a restart from rest (docs/planning.md, "A restart from rest") -----------------------------
@@ -1954,6 +1989,119 @@ class TankReplanner:
             f"from an obstacle or wall in the twin, the swim into the current "
             f"{best.gap_m * 1000:.0f} mm"))
 
+    # -- the least-bad swim (docs/planning.md, "The least-bad swim (session 24)") ----------------
+
+    def _judge_least_bad(self, t_s: float, kind: str
+                         ) -> tuple[float, LeastBad | None] | None:
+        """The stop at once's gap and the least-bad swim from the estimate, or None without one.
+
+        The stop is judged as :meth:`_judge_station` judges it (reused when judged at ``t_s``);
+        the swims by :func:`~eelhost.planning.station.find_least_bad` (each swim over its short
+        horizon and the stops of ``kind`` decided along it) only when the stop comes within the
+        look-ahead's margin.
+        """
+        est = self.estimator.estimate()
+        if est is None:
+            return None
+        extra = self.current.value_m_s.copy() if self.estimate_current else np.zeros(2)
+        twin = self._twin_in(extra)
+        gap_of = self._stop_gaps()
+        if self._stop_judged[0] == t_s:
+            stop_gap = self._stop_judged[1]
+        else:
+            stop_gap = stop_gap_m(twin, self.gait, est.state, est.t_s, self._stop_window(kind),
+                                  gap_of)
+            self._stop_judged = (t_s, stop_gap)
+        if stop_gap > self.lookahead_margin_m:
+            return stop_gap, None
+        least = find_least_bad(twin, self.gait, est.state, est.t_s,
+                               self._station_current(extra), gap_of, self._stop_window(kind))
+        return stop_gap, least
+
+    @staticmethod
+    def _beats_stop(least: LeastBad | None, stop_gap_m: float) -> bool:
+        """The swim's clearest stop beats ``stop_gap_m`` by :data:`~eelhost.planning.station.LEAST_BAD_STEP_M`.
+
+        The swim itself keeps :data:`~eelhost.planning.station.LEAST_BAD_GAIN_M` over its
+        horizon (:func:`~eelhost.planning.station.find_least_bad`): only a swim the twin keeps
+        clear of contact is swum, and only towards a better stop.
+        """
+        return (least is not None and least.swim.gap_m > LEAST_BAD_GAIN_M
+                and least.stop_gap_m > stop_gap_m + LEAST_BAD_STEP_M)
+
+    def _least_bad_on(self, t_s: float, kind: str, detail: str) -> Decision | None:
+        """Swim towards a better stop instead of a stop the twin drifts into something, or None.
+
+        The last tier before a ``no_safe_continuation`` stop (``kind``: ``pause`` or ``stop``),
+        after the harbour, the station and the hold: when the stop at once comes within the
+        look-ahead's margin and the least-bad swim
+        (:func:`~eelhost.planning.station.find_least_bad`: clear over
+        :data:`~eelhost.planning.station.LEAST_BAD_HORIZON_S`, its stops along it the clearest)
+        beats it (:meth:`_beats_stop`), the robot steers to that swim's waypoint, its gait and offsets at
+        the control rate; the frames after are :meth:`_station_frame`'s, judged again every
+        :data:`~eelhost.planning.station.STATION_CHECK_S` (docs/planning.md, "The least-bad swim
+        (session 24)").
+        """
+        if not self.least_bad or kind == "arrived" or self._stationed_s >= LEAST_BAD_MAX_S:
+            return None
+        judged = self._judge_least_bad(t_s, kind)
+        if judged is None:
+            return None
+        stop_gap, least = judged
+        if stop_gap > self.lookahead_margin_m:
+            return None
+        if least is None or not self._beats_stop(least, stop_gap):
+            self.events.append({
+                "kind": "least_bad", "reason": kind, "t_s": round(t_s, 3), "status": "none",
+                "stop_gap_m": _rounded(stop_gap),
+                "swim_gap_m": None if least is None else _rounded(least.swim.gap_m),
+                "swim_stop_gap_m": None if least is None else _rounded(least.stop_gap_m)})
+            return None
+        swim = least.swim
+        # the look-ahead and the windows followed the old waypoints; a replan in flight goes on
+        self._lookahead = None
+        self._whole_job = None
+        self.current.drop()
+        self._retry_now = False
+        event = {"kind": "least_bad", "reason": kind, "t_s": round(t_s, 3), "status": "swum",
+                 "bearing_deg": swim.bearing_deg, "from": swim.frame,
+                 "waypoint_m": [round(swim.waypoint_m[0], 4), round(swim.waypoint_m[1], 4)],
+                 "gap_m": _rounded(swim.gap_m), "stop_gap_m": _rounded(stop_gap),
+                 "swim_stop_gap_m": _rounded(least.stop_gap_m), "horizon_s": LEAST_BAD_HORIZON_S,
+                 "checks": 1, "switches": 0, "detail": detail,
+                 "judged": [[round(t_s, 3), _rounded(stop_gap), _rounded(swim.gap_m),
+                             _rounded(least.stop_gap_m)]]}
+        self.events.append(event)
+        self._station = _Station(t_s, t_s + STATION_CHECK_S, kind, detail, swim.waypoint_m, event,
+                                 least_bad=True)
+        self.waypoints = [swim.waypoint_m]
+        log.warning("at t = %.2f s the stop (%s) drifts %.0f mm from an obstacle or wall in the "
+                    "twin with no harbour, station or hold: swimming %+.0f deg from %s, %.0f mm "
+                    "clear over %.1f s in the twin, a stop along it %.0f mm (%s)", t_s, kind,
+                    stop_gap * 1000, swim.bearing_deg, swim.frame, swim.gap_m * 1000,
+                    LEAST_BAD_HORIZON_S, least.stop_gap_m * 1000, detail)
+        return Decision(waypoints=[swim.waypoint_m], guide=swim.guide, recorded=True, detail=(
+            f"the least-bad swim at t = {t_s:.2f} s: the stop drifts {stop_gap * 1000:.0f} mm "
+            f"from an obstacle or wall in the twin, the swim {swim.gap_m * 1000:.0f} mm over "
+            f"{LEAST_BAD_HORIZON_S:.1f} s and a stop along it {least.stop_gap_m * 1000:.0f} mm"))
+
+    def _least_bad_check(self, t_s: float, st: _Station) -> tuple[float, Station | None] | None:
+        """A least-bad swim's check: the stop's gap, and the swim to steer (None: no swim beats it).
+
+        Each check's stop, swim and the swim's clearest stop are recorded in the event's ``judged``.
+        """
+        judged = self._judge_least_bad(t_s, st.kind)
+        if judged is None:
+            return None
+        stop_gap, least = judged
+        st.event["judged"].append([
+            round(t_s, 3), _rounded(stop_gap),
+            None if least is None else _rounded(least.swim.gap_m),
+            None if least is None else _rounded(least.stop_gap_m)])
+        if least is None or not self._beats_stop(least, stop_gap):
+            return stop_gap, None  # no swim beats the stop any more: the stop
+        return stop_gap, least.swim
+
     def _station_frame(self, t_s: float, guide: Guide | None) -> Decision:
         """Take one frame while holding station: replan, judge again, end in a plan or a stop.
 
@@ -1981,10 +2129,16 @@ class TankReplanner:
             st.next_check_s = t_s + STATION_CHECK_S
             st.event["checks"] += 1
             st.event["t_last_s"] = round(t_s, 3)
-            judged = self._judge_station(t_s, st.kind, always=st.in_reach)
+            judged: tuple[float, Station | None] | None
+            if st.least_bad:
+                judged = self._least_bad_check(t_s, st)
+            else:
+                station = self._judge_station(t_s, st.kind, always=st.in_reach)
+                judged = None if station is None else station[:2]
             if judged is not None:
-                stop_gap, best, _ = judged
-                over = self._stationed_s + t_s - st.t_start_s >= STATION_MAX_S
+                stop_gap, best = judged
+                over = self._stationed_s + t_s - st.t_start_s >= (
+                    LEAST_BAD_MAX_S if st.least_bad else STATION_MAX_S)
                 # instead of a stop while it keeps clear: the station holds while its swim keeps
                 # clear, the stop made the moment it no longer does (never for the stop's room)
                 stop_clear = not st.in_reach and stop_gap > self.lookahead_margin_m
@@ -2004,7 +2158,7 @@ class TankReplanner:
         if (est is not None and st.kind != "arrived" and self._job is None
                 and self._pending is None and t_s >= st.t_asked_s + STATION_RETRY_S - 1e-9):
             st.t_asked_s = t_s
-            self._request(t_s, est, list(self.waypoints), "station")
+            self._request(t_s, est, list(self.waypoints), "least_bad" if st.least_bad else "station")
         return d
 
     def _station_stop(self, t_s: float, why: str, stop_gap: float) -> Decision:
@@ -2016,11 +2170,14 @@ class TankReplanner:
         assert st is not None
         self._end_station(t_s, why)
         self._drop_work()
+        held = "swam the least-bad swim" if st.least_bad else "held station"
         text = {"stopped": "the stop now keeps clear in the twin",
-                "max_time": f"held for the longest a plan may ({STATION_MAX_S:.0f} s)",
-                "none": "no station swim keeps clear any longer"}[why]
+                "max_time": ("swum for the longest a plan may "
+                             f"({LEAST_BAD_MAX_S if st.least_bad else STATION_MAX_S:.0f} s)"),
+                "none": ("no swim beats the stop any longer" if st.least_bad
+                         else "no station swim keeps clear any longer")}[why]
         d = Decision(stop="no_safe_continuation", recorded=True, detail=(
-            f"{st.detail}; held station {t_s - st.t_start_s:.1f} s, then stopped: {text} "
+            f"{st.detail}; {held} {t_s - st.t_start_s:.1f} s, then stopped: {text} "
             f"(the stop {stop_gap * 1000:.0f} mm from an obstacle or wall in the twin)"))
         log.warning("station ended at t = %.2f s: %s", t_s, text)
         if st.kind == "arrived":
@@ -2098,7 +2255,8 @@ class TankReplanner:
             # the stop still drifts within the margin with no harbour left: hold station, as
             # where the stop was decided (docs/planning.md, "Holding station (session 21)"); not
             # on a braked pause's resumed phase, which the twin's station swims do not have
-            stationed = self._station_on(t_s, swim.kind, swim.detail)
+            stationed = (self._station_on(t_s, swim.kind, swim.detail)
+                         or self._least_bad_on(t_s, swim.kind, swim.detail))
             if stationed is not None:
                 return stationed
         if swim.kind == "arrived":
@@ -2400,7 +2558,8 @@ class TankReplanner:
             # no harbour: hold station, the gait swum again (not on the brake's resumed phase,
             # which the station's swims do not have; docs/planning.md, "Holding station
             # (session 21)")
-            harbour = self._station_on(t_s, "stop", d.detail)
+            harbour = (self._station_on(t_s, "stop", d.detail)
+                       or self._least_bad_on(t_s, "stop", d.detail))
             if harbour is not None:
                 self.estimator.gait = self.gait
         if harbour is None:

@@ -130,6 +130,7 @@ def plan_for_run(
     harbour: bool = True,
     stop_brake_s: float = STOP_BRAKE_S,
     station: bool = False,
+    least_bad: bool = True,
 ) -> RunPlan:
     """Plan in a world for ``eelbot run --plan`` (module docstring).
 
@@ -185,6 +186,11 @@ def plan_for_run(
         Where the stop would drift into something and no harbour keeps clear, swim into the
         current instead (before the hold) (``TankReplanner``'s ``station_keeping``; docs/planning.md, "Holding
         station (session 21)"); off by default (``eelbot run --station``).
+    least_bad : bool
+        Where the stop would drift into something with no harbour, station or hold, swim a
+        short swim towards a better stop while there is one (``TankReplanner``'s ``least_bad``;
+        docs/planning.md, "The least-bad swim (session 24)"); on by default
+        (``eelbot run --no-least-bad``: off).
 
     Returns
     -------
@@ -228,7 +234,8 @@ def plan_for_run(
                               escape_planner_for=tiers.escape_planner_for if escape else None,
                               rest_escape_planner_for=tiers.escape_planner_for,
                               max_restarts=restarts, harbour=harbour,
-                              stop_brake_s=stop_brake_s, station_keeping=station)
+                              stop_brake_s=stop_brake_s, station_keeping=station,
+                              least_bad=least_bad)
     return RunPlan(outcome.plan.waypoints_m, navigator, sim_uri_for_world(uri, world), outcome,
                    planner.options.guidance, outcome.plan.start_guide)
 
