@@ -1893,15 +1893,14 @@ class TankReplanner:
         current = np.add(planner.world.current_m_s, extra - planner_extra)
         return (float(current[0]), float(current[1]))
 
-    def _judge_station(self, t_s: float, kind: str, always: bool = False
-                       ) -> tuple[float, Station | None, Station | None] | None:
-        """The stop at once's gap and the station swims from the estimate, or None without one.
+    def _stop_now(self, t_s: float, kind: str) -> tuple[
+            BodyEstimate, FloatArray, Twin, Callable[[FloatArray, FloatArray], FloatArray],
+            float] | None:
+        """The estimate, the estimated current, its twin, the stop's judge and the stop's gap now.
 
-        The stop is judged as the harbour judges it (``kind``: ``pause`` or ``stop``; reused
-        when the harbours were judged at ``t_s``), the swims by
-        :func:`~eelhost.planning.station.find_station` with the same judgement, needing the
-        look-ahead's margin and the harbour's cushion: only when the stop comes within the
-        margin, or ``always`` (a station instead of a stop while it keeps clear).
+        What the station and the least-bad swim judge their swims against: the stop at once
+        (``kind``: ``pause`` or ``stop``) swum from the estimate as the harbour swims it, its gap
+        reused when it was judged at ``t_s`` already. None without an estimate.
         """
         est = self.estimator.estimate()
         if est is None:
@@ -1915,6 +1914,22 @@ class TankReplanner:
             stop_gap = stop_gap_m(twin, self.gait, est.state, est.t_s, self._stop_window(kind),
                                   gap_of)
             self._stop_judged = (t_s, stop_gap)
+        return est, extra, twin, gap_of, stop_gap
+
+    def _judge_station(self, t_s: float, kind: str, always: bool = False
+                       ) -> tuple[float, Station | None, Station | None] | None:
+        """The stop at once's gap and the station swims from the estimate, or None without one.
+
+        The stop is judged as the harbour judges it (``kind``: ``pause`` or ``stop``; reused
+        when the harbours were judged at ``t_s``), the swims by
+        :func:`~eelhost.planning.station.find_station` with the same judgement, needing the
+        look-ahead's margin and the harbour's cushion: only when the stop comes within the
+        margin, or ``always`` (a station instead of a stop while it keeps clear).
+        """
+        judged = self._stop_now(t_s, kind)
+        if judged is None:
+            return None
+        est, extra, twin, gap_of, stop_gap = judged
         if stop_gap > self.lookahead_margin_m and not always:
             return stop_gap, None, None
         best, clearest = find_station(twin, est.state, est.t_s, self._station_current(extra),
@@ -2000,18 +2015,10 @@ class TankReplanner:
         horizon and the stops of ``kind`` decided along it) only when the stop comes within the
         look-ahead's margin.
         """
-        est = self.estimator.estimate()
-        if est is None:
+        judged = self._stop_now(t_s, kind)
+        if judged is None:
             return None
-        extra = self.current.value_m_s.copy() if self.estimate_current else np.zeros(2)
-        twin = self._twin_in(extra)
-        gap_of = self._stop_gaps()
-        if self._stop_judged[0] == t_s:
-            stop_gap = self._stop_judged[1]
-        else:
-            stop_gap = stop_gap_m(twin, self.gait, est.state, est.t_s, self._stop_window(kind),
-                                  gap_of)
-            self._stop_judged = (t_s, stop_gap)
+        est, extra, twin, gap_of, stop_gap = judged
         if stop_gap > self.lookahead_margin_m:
             return stop_gap, None
         least = find_least_bad(twin, self.gait, est.state, est.t_s,
