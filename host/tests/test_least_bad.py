@@ -14,13 +14,11 @@ import math
 import numpy as np
 import pytest
 from test_harbour import FINAL, run_frames
-from test_station import stream_world, upstream_body
+from test_station import stream_world, upstream_body, wall_stream_take
 from test_tank_restart import MODEL, OPEN, ROBOT, Blocked, N
 
 from eelhost.field.recorder import read_commands_csv
-from eelhost.field.runloop import RunConfig
-from eelhost.field.session import TakeNotes
-from eelhost.field.take import TakeRequest, run_take
+from eelhost.field.take import run_take
 from eelhost.planning.audit import body_gaps_m
 from eelhost.planning.harbour import stop_gap_m
 from eelhost.planning.planner import Planner
@@ -35,9 +33,7 @@ from eelhost.planning.station import (
     Station,
     find_least_bad,
 )
-from eelhost.planning.tank import sim_uri_for_world
 from eelhost.planning.world import parse_world
-from eelhost.vision.synthetic import TankView
 from eelsim.scenario import PATH_GAIT
 
 
@@ -166,20 +162,9 @@ def test_still_water_the_stop_keeps_clear_and_no_least_bad_swim_is_judged(open_p
 
 @pytest.mark.slow
 def test_over_sim_a_stop_the_stream_carries_into_the_wall_swims_and_stops_once_clear(tmp_path):
-    # the plan starts at (1.6, 1); the robot is put at (2.6, 1) headed upstream, its tail 80 mm
-    # from the wall the 0.045 m/s stream flows to: off the plan's corridor, its replans refused
-    world = parse_world(stream_world(0.045), "stream")
-    planner = Planner(world, ROBOT, MODEL, arrival_stop=False)
-    outcome = planner.plan()
-    assert outcome.found, outcome.message
-    uri = sim_uri_for_world("sim://?speed=0&start=2.6,1.0,180", world)
-    nav = Blocked(lambda extra: planner, planner, outcome, PATH_GAIT, harbour=False,
-                  lookahead_s=0.0, replan_budget_s=1.0, least_bad=True)
-    config = RunConfig(PATH_GAIT, list(outcome.plan.waypoints_m), duration_s=20.0)
+    # test_station's robot by the wall in the stream, its replans refused
     stem = tmp_path / "least_bad"
-    request = TakeRequest(ROBOT, config, str(stem), TakeNotes(uri), "synthetic:clean",
-                          navigator=nav, camera_view=TankView.covering((3.0, 2.0)),
-                          trace_plant=True)
+    nav, request, world = wall_stream_take(stem, trace_plant=True, least_bad=True)
     result = run_take(request)
     out = result.outcome
     assert out.failsafe_reports == 0

@@ -9,6 +9,8 @@ and the stop after it may also keep clear of a wall the current flows to)."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -31,7 +33,7 @@ from eelhost.planning.replan import (
 from eelhost.planning.restart import paused_drift, stopped_twin
 from eelhost.planning.station import STATION_HORIZON_S, Station, find_station
 from eelhost.planning.tank import sim_uri_for_world
-from eelhost.planning.world import parse_world
+from eelhost.planning.world import World, parse_world
 from eelhost.vision.synthetic import TankView
 from eelsim.control import braked_gait
 from eelsim.scenario import PATH_GAIT
@@ -147,22 +149,33 @@ def test_an_arrival_the_stream_would_carry_into_the_wall_holds_station_then_arri
         assert not [e for e in nav.events if e["kind"] == "replan"]  # arrived: none asked
 
 
-@pytest.mark.slow
-def test_over_sim_a_run_that_would_stop_holds_station_without_failsafe(tmp_path):
-    # the plan starts at (1.6, 1); the robot is put at (2.6, 1) headed upstream, its tail 80 mm
-    # from the wall the 0.045 m/s stream flows to: off the plan's corridor, its replans refused
+def wall_stream_take(stem: Path, trace_plant: bool = False,
+                     **options: Any) -> tuple[Blocked, TakeRequest, World]:
+    """A take over ``sim://`` whose every replan is refused, the robot by a wall in a stream.
+
+    The plan starts at (1.6, 1); the robot is put at (2.6, 1) headed upstream, its tail 80 mm
+    from the wall the 0.045 m/s stream flows to: off the plan's corridor. The look-ahead is
+    off, so nothing keeps the present plan and the first refused replan decides a stop; the
+    harbour is off. ``options`` go to the replanner (the tier under test).
+    """
     world = parse_world(stream_world(0.045), "stream")
     planner = Planner(world, ROBOT, MODEL, arrival_stop=False)
     outcome = planner.plan()
     assert outcome.found, outcome.message
     uri = sim_uri_for_world("sim://?speed=0&start=2.6,1.0,180", world)
-    # the look-ahead off: nothing keeps the present plan, so the first refused replan stops
     nav = Blocked(lambda extra: planner, planner, outcome, PATH_GAIT, harbour=False,
-                  lookahead_s=0.0, replan_budget_s=1.0, station_keeping=True)
+                  lookahead_s=0.0, replan_budget_s=1.0, **options)
     config = RunConfig(PATH_GAIT, list(outcome.plan.waypoints_m), duration_s=20.0)
-    stem = tmp_path / "station"
     request = TakeRequest(ROBOT, config, str(stem), TakeNotes(uri), "synthetic:clean",
-                          navigator=nav, camera_view=TankView.covering((3.0, 2.0)))
+                          navigator=nav, camera_view=TankView.covering((3.0, 2.0)),
+                          trace_plant=trace_plant)
+    return nav, request, world
+
+
+@pytest.mark.slow
+def test_over_sim_a_run_that_would_stop_holds_station_without_failsafe(tmp_path):
+    stem = tmp_path / "station"
+    nav, request, _ = wall_stream_take(stem, station_keeping=True)
     result = run_take(request)
     out = result.outcome
     assert out.failsafe_reports == 0
