@@ -14,7 +14,7 @@ import math
 import numpy as np
 import pytest
 from test_harbour import FINAL, run_frames
-from test_station import stream_world, upstream_body, wall_stream_take
+from test_station import stream_plan, upstream_body, wall_stream_take
 from test_tank_restart import MODEL, OPEN, ROBOT, Blocked, N
 
 from eelhost.field.recorder import read_commands_csv
@@ -39,11 +39,7 @@ from eelsim.scenario import PATH_GAIT
 
 @pytest.fixture(scope="module")
 def stream():
-    world = parse_world(stream_world(0.045), "stream")
-    planner = Planner(world, ROBOT, MODEL, arrival_stop=False)
-    outcome = planner.plan()
-    assert outcome.found, outcome.message
-    return world, planner, outcome
+    return stream_plan()
 
 
 def test_a_short_swim_clear_of_the_wall_leaves_a_better_stop_than_the_stream_s(stream):

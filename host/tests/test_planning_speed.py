@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from test_planning_raise import DISC, tank
 
 from eelhost.planning import check
 from eelhost.planning.body import body_points, link_endpoints
@@ -19,7 +20,6 @@ from eelhost.planning.execute import body_clearance_m
 from eelhost.planning.field import clearance_field
 from eelhost.planning.planner import CHECK_MARGIN_M, Planner
 from eelhost.planning.uncertainty import default_model
-from eelhost.planning.world import parse_world
 from eelhost.planning.worlds import generate_world
 from eelsim.robot import load_robot
 
@@ -27,18 +27,6 @@ ROBOT = load_robot()
 MODEL = default_model(ROBOT)
 SWIMMER = MODEL.swimmer_for(ROBOT)
 N = ROBOT.n_links
-DISC = {"kind": "circle", "centre_m": [1.25, 1.05], "radius_m": 0.1}
-
-
-def tank(obstacles=()):
-    return parse_world({
-        "name": "open",
-        "tank": {"size_m": [3.0, 2.0]},
-        "start": {"position_m": [0.7, 1.0], "heading_deg": 0.0},
-        "goal": {"position_m": [2.2, 1.0], "radius_m": 0.2},
-        "current": {"speed_m_s": 0.0, "direction_deg": 0.0},
-        "obstacles": list(obstacles),
-    })
 
 
 def nearest_site(planner, plan):

@@ -59,13 +59,18 @@ def upstream_body(x_m: float) -> np.ndarray:
     return state
 
 
-@pytest.fixture(scope="module")
-def stream():
+def stream_plan() -> tuple[World, Planner, Any]:
+    """The 0.045 m/s stream towards the end wall: its world, planner and plan from the start."""
     world = parse_world(stream_world(0.045), "stream")
     planner = Planner(world, ROBOT, MODEL, arrival_stop=False)
     outcome = planner.plan()
     assert outcome.found, outcome.message
     return world, planner, outcome
+
+
+@pytest.fixture(scope="module")
+def stream():
+    return stream_plan()
 
 
 def test_in_a_current_towards_a_wall_the_stop_touches_and_the_station_swim_keeps_clear(stream):
