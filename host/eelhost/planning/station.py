@@ -30,7 +30,7 @@ import numpy as np
 from eelhost.planning.geometry import FloatArray
 from eelhost.planning.harbour import StopWindow, stop_states, swim_start
 from eelhost.planning.search import Guide
-from eelhost.planning.twin import Twin
+from eelhost.planning.twin import Runs, Twin
 from eelsim.control import Gait
 
 __all__ = ["LEAST_BAD_GAIN_M", "LEAST_BAD_HORIZON_S", "LEAST_BAD_LEADS_S", "LEAST_BAD_MAX_S",
@@ -106,17 +106,60 @@ class Station(NamedTuple):
     guide: Guide
 
 
-def _aims(state: FloatArray, n: int, com: FloatArray, current_m_s: tuple[float, float],
-          bearings_deg: tuple[float, ...], heading_bearings_deg: tuple[float, ...]
-          ) -> tuple[list[tuple[float, str, float]], list[tuple[float, float]]]:
-    """The station swims' aims (bearing, frame, direction in rad) and their waypoints."""
-    upstream = math.atan2(-current_m_s[1], -current_m_s[0])
+class _Swims(NamedTuple):
+    """The station candidates swum from one estimate (:func:`_swim_candidates`)."""
+
+    judged: list[tuple[int, Station]]  # (run index, the swim) of every run swum whole
+    runs: Runs  # the twin's runs, one per aim
+    ahead_s: FloatArray  # each kept sample's time after the estimate, s
+
+
+def _swim_candidates(twin: Twin, state: FloatArray, t_s: float,
+                     current_m_s: tuple[float, float],
+                     gap_of: Callable[[FloatArray, FloatArray], FloatArray],
+                     bearings_deg: tuple[float, ...], heading_bearings_deg: tuple[float, ...],
+                     horizon_s: float, stride: int) -> _Swims | None:
+    """Swim every station aim for ``horizon_s`` in one batch and judge each run's gap.
+
+    The aims: pure pursuit of a waypoint :data:`STATION_REACH_M` away at ``bearings_deg`` from
+    straight upstream and at ``heading_bearings_deg`` from the body's heading, the run's gait
+    and phase swum on. A run that ended early (a failure flag) is not judged. Each swim's
+    ``drift_m`` is its centre of mass's displacement downstream after ``horizon_s``.
+    :func:`find_station` and :func:`find_least_bad` choose among the same swims.
+
+    Returns
+    -------
+    _Swims or None
+        None in a current under :data:`STATION_MIN_CURRENT_M_S` (still water: no candidate).
+    """
+    speed = math.hypot(*current_m_s)
+    if speed < STATION_MIN_CURRENT_M_S:
+        return None
+    dt, n = twin.dt_s, twin.n_links
+    now, state, guide, com = swim_start(twin, state, t_s)
+    along = np.array(current_m_s, dtype=float) / speed  # downstream, unit
+    upstream = math.atan2(-along[1], -along[0])
     heading = float(np.mean(state[:n]))
     aims = ([(b, "upstream", upstream + math.radians(b)) for b in bearings_deg]
             + [(b, "heading", heading + math.radians(b)) for b in heading_bearings_deg])
     targets = [(float(com[0] + STATION_REACH_M * math.cos(a)),
                 float(com[1] + STATION_REACH_M * math.sin(a))) for _, _, a in aims]
-    return aims, targets
+    k = len(targets)
+    last = int(round(horizon_s / (stride * dt)))
+    runs = twin.run([[w] for w in targets], horizon_s + 2 * dt,
+                    states=np.repeat(state[None], k, 0), start_steps=[now] * k, stride=stride,
+                    guidance=[guide] * k if twin.options.guidance.integral else None)
+    ahead = np.arange(last + 1, dtype=np.float64) * (stride * dt)
+    judged = []
+    for j in range(k):
+        swum = runs.states[j, : last + 1]
+        if swum.shape[0] < last + 1 or not np.isfinite(swum[:, 0]).all():
+            continue  # ended early (a failure flag): not judged
+        gap = float(np.min(gap_of(swum, ahead)))
+        drift = float(np.dot(swum[-1, n : n + 2] - com, along))
+        judged.append((j, Station(now, targets[j], aims[j][0], aims[j][1], gap, drift,
+                                  swum[:, n : n + 2].copy(), guide)))
+    return _Swims(judged, runs, ahead)
 
 
 def find_station(twin: Twin, state: FloatArray, t_s: float, current_m_s: tuple[float, float],
@@ -157,36 +200,20 @@ def find_station(twin: Twin, state: FloatArray, t_s: float, current_m_s: tuple[f
         :data:`STATION_MIN_CURRENT_M_S`); the clearest of all judged (None when no run swam the
         whole horizon).
     """
-    speed = math.hypot(*current_m_s)
-    if speed < STATION_MIN_CURRENT_M_S:
+    swims = _swim_candidates(twin, state, t_s, current_m_s, gap_of, bearings_deg,
+                             heading_bearings_deg, horizon_s, stride)
+    if swims is None:
         return None, None
-    dt, n = twin.dt_s, twin.n_links
-    now, state, guide, com = swim_start(twin, state, t_s)
-    along = np.array(current_m_s, dtype=float) / speed  # downstream, unit
-    aims, targets = _aims(state, n, com, current_m_s, bearings_deg, heading_bearings_deg)
-    k = len(targets)
-    last = int(round(horizon_s / (stride * dt)))
-    runs = twin.run([[w] for w in targets], horizon_s + 2 * dt,
-                    states=np.repeat(state[None], k, 0), start_steps=[now] * k, stride=stride,
-                    guidance=[guide] * k if twin.options.guidance.integral else None)
-    ahead = np.arange(last + 1, dtype=np.float64) * (stride * dt)
     best: Station | None = None
     clearest: Station | None = None
-    for j in range(k):
-        swum = runs.states[j, : last + 1]
-        if swum.shape[0] < last + 1 or not np.isfinite(swum[:, 0]).all():
-            continue  # ended early (a failure flag): not judged
-        gap = float(np.min(gap_of(swum, ahead)))
-        drift = float(np.dot(swum[-1, n : n + 2] - com, along))
-        got = Station(now, targets[j], aims[j][0], aims[j][1], gap, drift,
-                      swum[:, n : n + 2].copy(), guide)
+    for _, got in swims.judged:
+        gap, drift = got.gap_m, got.drift_m
         if clearest is None or gap > clearest.gap_m:
             clearest = got
         if gap > need_m and (best is None or drift < best.drift_m - 1e-3
                              or (abs(drift - best.drift_m) <= 1e-3 and gap > best.gap_m)):
             best = got
     return best, clearest
-
 
 
 class LeastBad(NamedTuple):
@@ -241,29 +268,14 @@ def find_least_bad(twin: Twin, gait: Gait, state: FloatArray, t_s: float,
         ``stop_gap_m`` that stop's gap); None in a current under
         :data:`STATION_MIN_CURRENT_M_S` or when no swim keeps ``need_m`` over the whole horizon.
     """
-    speed = math.hypot(*current_m_s)
-    if speed < STATION_MIN_CURRENT_M_S:
+    swims = _swim_candidates(twin, state, t_s, current_m_s, gap_of, STATION_BEARINGS_DEG,
+                             STATION_HEADING_BEARINGS_DEG, horizon_s, stride)
+    if swims is None:
         return None
-    dt, n = twin.dt_s, twin.n_links
-    now, state, guide, com = swim_start(twin, state, t_s)
-    aims, targets = _aims(state, n, com, current_m_s, STATION_BEARINGS_DEG,
-                          STATION_HEADING_BEARINGS_DEG)
-    k = len(targets)
-    last = int(round(horizon_s / (stride * dt)))
+    runs, ahead = swims.runs, swims.ahead_s
+    last, dt = len(ahead) - 1, twin.dt_s
     leads = sorted({min(max(int(round(lead / (stride * dt))), 1), last) for lead in leads_s})
-    runs = twin.run([[w] for w in targets], horizon_s + 2 * dt,
-                    states=np.repeat(state[None], k, 0), start_steps=[now] * k, stride=stride,
-                    guidance=[guide] * k if twin.options.guidance.integral else None)
-    ahead = np.arange(last + 1, dtype=np.float64) * (stride * dt)
-    clear: list[tuple[int, Station]] = []
-    for j in range(k):
-        swum = runs.states[j, : last + 1]
-        if swum.shape[0] < last + 1 or not np.isfinite(swum[:, 0]).all():
-            continue  # ended early (a failure flag): not judged
-        gap = float(np.min(gap_of(swum, ahead)))
-        if gap > need_m:
-            clear.append((j, Station(now, targets[j], aims[j][0], aims[j][1], gap, math.nan,
-                                     swum[:, n : n + 2].copy(), guide)))
+    clear = [(j, swim) for j, swim in swims.judged if swim.gap_m > need_m]
     if not clear:
         return None
     rows = [j for j, _ in clear]
