@@ -16,7 +16,7 @@ from test_planning_raise import DISC, tank
 
 from eelhost.planning import check
 from eelhost.planning.body import body_points, link_endpoints
-from eelhost.planning.execute import body_clearance_m
+from eelhost.planning.execute import body_clearance_m, quarter_point_values
 from eelhost.planning.field import clearance_field
 from eelhost.planning.planner import CHECK_MARGIN_M, Planner
 from eelhost.planning.uncertainty import default_model
@@ -207,7 +207,7 @@ def test_the_carried_bound_is_never_above_the_reference_s_own_bound():
         for states in [*swims_fast_into_things(world, rng, paths=20),
                        *glides_into_things(world, rng, paths=20)]:
             bound, ceiling = check.carried_lower_m(field, SWIMMER, states)
-            own = (check._quarter_values(field, link_endpoints(SWIMMER, states))
+            own = (quarter_point_values(field, link_endpoints(SWIMMER, states))
                    - field.error_m - half_link / 4.0)
             assert np.all(bound <= own)
             assert ceiling >= float(own.min()) + 2 * field.error_m + half_link / 4.0 - 1e-12
@@ -225,7 +225,7 @@ def test_a_body_clearance_told_a_bound_is_the_one_measured_against_every_obstacl
         field = clearance_field(world)
         for states in [*swims_fast_into_things(world, rng), *glides_into_things(world, rng)]:
             ends = link_endpoints(SWIMMER, states)
-            upper = check._quarter_values(field, ends) + field.error_m
+            upper = quarter_point_values(field, ends) + field.error_m
             told = world.body_clearance(ends, upper)
             assert np.array_equal(told, world.body_clearance(ends))
             assert np.all(told <= np.maximum(upper, 0.0) + 1e-12)

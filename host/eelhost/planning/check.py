@@ -35,7 +35,7 @@ import numpy as np
 import numpy.typing as npt
 
 from eelhost.planning.body import link_endpoints, reach_m
-from eelhost.planning.execute import Swim
+from eelhost.planning.execute import Swim, quarter_point_values
 from eelhost.planning.field import ClearanceField
 from eelhost.planning.geometry import FloatArray
 from eelhost.planning.harbour import StopWindow, stop_states
@@ -115,15 +115,6 @@ def end_motion_bound_m(model: SwimmerModel, states: FloatArray, anchors: FloatAr
     return np.asarray(moved + (turn @ weights.T).max(axis=1), dtype=float)
 
 
-def _quarter_values(field: ClearanceField, ends: FloatArray) -> FloatArray:
-    """The field's smallest value over each state's quarter points of every link (as the reference)."""
-    a, b = ends[:, :-1], ends[:, 1:]
-    f = np.arange(4)[None, None, :, None] / 4.0
-    pts = np.concatenate([(a[:, :, None] + f * (b - a)[:, :, None]).reshape(len(ends), -1, 2),
-                          ends[:, -1:]], axis=1)
-    return np.asarray(field(pts).min(axis=1), dtype=float)
-
-
 def judged_clearance_m(world: World, field: ClearanceField, model: SwimmerModel,
                        states: FloatArray, margin_m: float = 0.0) -> FloatArray:
     """The body's clearance at every state where a check run's verdict can depend on it.
@@ -201,7 +192,7 @@ def carried_lower_m(field: ClearanceField, model: SwimmerModel,
     e = field.error_m
     k = len(states)
     anchors = np.unique(np.r_[np.arange(0, k, CARRY_STRIDE), k - 1])
-    anchor_values = _quarter_values(field, link_endpoints(model, states[anchors]))
+    anchor_values = quarter_point_values(field, link_endpoints(model, states[anchors]))
     lower = anchor_values - e - half_link / 4.0
     # each state's anchor at or before it and the next one (the run's last for the tail)
     before = np.minimum(np.arange(k) // CARRY_STRIDE, len(anchors) - 1)
@@ -260,7 +251,7 @@ def _exact_where_it_matters(world: World, field: ClearanceField, ends: FloatArra
     ndarray, shape (K,)
         The centre line's clearance (the half width not taken off).
     """
-    values = _quarter_values(field, ends)
+    values = quarter_point_values(field, ends)
     if not len(values):
         return values
     upper = values + field.error_m

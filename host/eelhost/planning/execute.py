@@ -243,6 +243,30 @@ def body_clearance_m(
     return _body_clearance(world, field, ends, half_link, half_width + exact_within_m) - half_width
 
 
+def quarter_point_values(field: ClearanceField, ends: FloatArray) -> FloatArray:
+    """The field's smallest value over every link's quarter points, per state.
+
+    A link is never closer than its nearest quarter point less an eighth of its length, so
+    this less the field's error and a quarter of a half link bounds the centre line's clearance
+    from below (:func:`_body_clearance`; the check's judge, :mod:`eelhost.planning.check`).
+
+    Parameters
+    ----------
+    field : ClearanceField
+    ends : ndarray, shape (K, N + 1, 2)
+        Link end points.
+
+    Returns
+    -------
+    ndarray, shape (K,)
+    """
+    a, b = ends[:, :-1], ends[:, 1:]
+    f = np.arange(4)[None, None, :, None] / 4.0
+    pts = np.concatenate([(a[:, :, None] + f * (b - a)[:, :, None]).reshape(len(ends), -1, 2),
+                          ends[:, -1:]], axis=1)
+    return np.asarray(field(pts).min(axis=1), dtype=float)
+
+
 def _body_clearance(
     world: World, field: ClearanceField, ends: FloatArray, half_link_m: float, contact_m: float
 ) -> FloatArray:
@@ -255,12 +279,7 @@ def _body_clearance(
     the body's reach of contact and the smallest upper bound keep that lower bound, which is
     then not the smallest value and changes no verdict.
     """
-    # points every quarter link: a link is never closer than its nearest point less an eighth
-    a, b = ends[:, :-1], ends[:, 1:]
-    f = np.arange(4)[None, None, :, None] / 4.0
-    pts = np.concatenate([(a[:, :, None] + f * (b - a)[:, :, None]).reshape(len(ends), -1, 2),
-                          ends[:, -1:]], axis=1)
-    values = field(pts).min(axis=1)
+    values = quarter_point_values(field, ends)
     upper = values + field.error_m
     lower = values - field.error_m - half_link_m / 4.0
     need = lower <= max(float(upper.min()), contact_m)
