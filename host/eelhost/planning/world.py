@@ -371,7 +371,7 @@ class World(_Strict):
                             np.maximum(np.maximum(lo[1] - y_hi, y_lo - hi[1]), 0.0))
 
         # a distance is never below 0 (a bound below it, inside an obstacle, bounds nothing)
-        cap = best if at_most is None else np.minimum(best, np.maximum(at_most, 0.0))
+        cap = math.inf if at_most is None else np.maximum(at_most, 0.0)
         for c, r in self._circles:
             rows = np.flatnonzero(beyond(c, c) - r <= np.minimum(best, cap) + BOX_TOLERANCE_M)
             if not rows.size:
